@@ -1,3 +1,6 @@
+//! duolando-core: `#![no_std]`, no-alloc inference for the Duolando
+//! dance-accompaniment model. Every buffer lives in caller-provided memory.
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
-//! duolando-core
+
+pub mod config;
