@@ -1,0 +1,80 @@
+//! Borrowed, validated views of the weight tensors inside a `.duo` file.
+//!
+//! A `TensorRef` never owns memory: `data` points into the model bytes
+//! (mmap, `include_bytes!`, an engine asset). The format decoder guarantees,
+//! before a `TensorRef` is handed out, that `data.len()` equals
+//! `dtype.bytes_for(numel)`, that `data` starts at a 64-byte aligned offset
+//! of the file, and that the shape matches the schema for the config.
+
+/// Element type of a stored tensor. Discriminants are the on-disk codes
+/// (docs/FORMAT.md); codes not listed are rejected by the decoder.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum DType {
+    /// IEEE-754 binary32, little-endian.
+    F32 = 0,
+    /// IEEE-754 binary16, little-endian.
+    F16 = 1,
+    /// int8 weights in blocks of 32 along the last axis, one f16 scale per
+    /// block stored before the block's 32 values (34 bytes per block; Q8_0-like).
+    /// Reserved for the quantization issue: the v1 decoder rejects it until a
+    /// kernel exists.
+    Q8Block32 = 2,
+}
+
+impl DType {
+    pub fn from_code(code: u8) -> Option<DType> {
+        match code {
+            0 => Some(DType::F32),
+            1 => Some(DType::F16),
+            2 => Some(DType::Q8Block32),
+            _ => None,
+        }
+    }
+    /// Bytes needed for `numel` elements whose last axis has `row` elements;
+    /// None on overflow or when `row` does not divide into whole blocks.
+    pub fn bytes_for(self, numel: usize, row: usize) -> Option<usize> {
+        match self {
+            DType::F32 => numel.checked_mul(4),
+            DType::F16 => numel.checked_mul(2),
+            DType::Q8Block32 => {
+                if row == 0 || row % 32 != 0 || numel % row != 0 {
+                    return None;
+                }
+                (numel / 32).checked_mul(34)
+            }
+        }
+    }
+}
+
+/// Maximum tensor rank stored in a `.duo` file.
+pub const MAX_RANK: usize = 4;
+
+/// A view of one weight tensor. Shape is row-major, PyTorch order
+/// (e.g. `Linear.weight` is `(out, in)`, `Conv1d.weight` is `(out, in, k)`).
+#[derive(Clone, Copy, Debug)]
+pub struct TensorRef<'a> {
+    pub dtype: DType,
+    pub rank: u8,
+    /// Dimensions; entries past `rank` are 1.
+    pub shape: [u32; MAX_RANK],
+    /// Raw little-endian payload, 64-byte aligned within the file.
+    pub data: &'a [u8],
+}
+
+impl<'a> TensorRef<'a> {
+    pub fn dims(&self) -> &[u32] {
+        &self.shape[..self.rank as usize]
+    }
+    pub fn numel(&self) -> usize {
+        self.dims().iter().map(|&d| d as usize).product()
+    }
+    /// The payload as f32 when the dtype is F32 and `data` is 4-byte aligned
+    /// in memory (true for any model buffer that is itself 64-byte aligned).
+    pub fn as_f32(&self) -> Option<&'a [f32]> {
+        if self.dtype != DType::F32 {
+            return None;
+        }
+        bytemuck::try_cast_slice(self.data).ok()
+    }
+}
