@@ -1,1 +1,12 @@
+//! duolando: the std side of the Duolando engine — model files, the
+//! converter from the original checkpoints, audio features, motion I/O and
+//! export, the viewer, and the `duolando` CLI.
 
+pub mod audio;
+pub mod convert;
+pub mod duo_writer;
+pub mod export;
+pub mod music;
+pub mod skeleton;
+pub mod synth;
+pub mod viewer;

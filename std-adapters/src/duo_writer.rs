@@ -1,0 +1,1 @@
+//! duo_writer (being written)
