@@ -3,6 +3,7 @@
 //! export, the viewer, and the `duolando` CLI.
 
 pub mod audio;
+pub mod cli;
 pub mod convert;
 pub mod duo_writer;
 pub mod export;

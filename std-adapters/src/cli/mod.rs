@@ -1,0 +1,57 @@
+//! The `duolando` command line: one file per subcommand under `cli/`.
+//!
+//! Adding a subcommand `foo` is two lines in the [`commands!`] list below
+//! (a doc line and `Foo => foo,`) plus the file `cli/foo.rs`, which must
+//! provide:
+//!
+//! ```ignore
+//! #[derive(clap::Args, Debug)]
+//! pub struct Args { /* flags */ }
+//! pub fn run(args: Args) -> anyhow::Result<()>;
+//! ```
+//!
+//! Errors bubble up as `anyhow::Error`; `main` prints the whole chain and
+//! exits with status 1.
+
+use clap::{Parser, Subcommand};
+
+/// Declares the subcommand modules, the [`Command`] enum and its dispatcher
+/// from one list, so that a new subcommand cannot be half-registered.
+macro_rules! commands {
+    ($( $(#[$doc:meta])* $variant:ident => $module:ident ),* $(,)?) => {
+        $( pub mod $module; )*
+
+        /// Every `duolando` subcommand.
+        #[derive(Subcommand, Debug)]
+        pub enum Command {
+            $( $(#[$doc])* $variant($module::Args), )*
+        }
+
+        impl Command {
+            /// Runs the chosen subcommand.
+            pub fn run(self) -> anyhow::Result<()> {
+                match self {
+                    $( Command::$variant(args) => $module::run(args), )*
+                }
+            }
+        }
+    };
+}
+
+commands! {
+    /// Convert the original PyTorch checkpoints (as safetensors) and YAML to a `.duo` model.
+    Convert => convert,
+}
+
+/// `duolando <command> [flags]`.
+#[derive(Parser, Debug)]
+#[command(name = "duolando", version, about = "Real-time Duolando dance accompaniment")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Parses `std::env::args` and runs the chosen subcommand.
+pub fn run() -> anyhow::Result<()> {
+    Cli::parse().command.run()
+}
