@@ -8,6 +8,7 @@ pub mod convert;
 pub mod duo_writer;
 pub mod export;
 pub mod music;
+pub mod npy;
 pub mod skeleton;
 pub mod synth;
 pub mod viewer;
