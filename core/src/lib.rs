@@ -4,4 +4,10 @@
 #![forbid(unsafe_code)]
 
 pub mod config;
+pub mod limits;
+pub mod presets;
+pub mod schema;
 pub mod tensor;
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,273 @@
+//! Config validation: every size a `.duo` header may carry is checked here
+//! once, before any weight is bound or any arena is planned, so that every
+//! later product of dimensions fits comfortably in `usize` (even on 32-bit
+//! targets) and the engine's assumptions (head split, stream count, the
+//! vocabulary quirk of the original heads) hold.
+//!
+//! The caps are generous for the published model (n_embd 768, width 512,
+//! depth 3, 12 layers) and for the sibling models of DESIGN.md §7.
+
+use crate::config::{GptConfig, LatConfig, ModelConfig, Part, VqConfig};
+
+/// Largest transformer width (`n_embd`).
+pub const MAX_EMBD: u32 = 4096;
+/// Most attention heads.
+pub const MAX_HEADS: u32 = 64;
+/// Most blocks in the GPT base or head stack.
+pub const MAX_GPT_LAYERS: u32 = 32;
+/// Most blocks in one LAT.
+pub const MAX_LAT_LAYERS: u32 = 16;
+/// Largest `block_size` (tokens per stream in the window).
+pub const MAX_BLOCK_SIZE: u32 = 256;
+/// Largest look-ahead in tokens.
+pub const MAX_LOOK_FORWARD: u32 = 256;
+/// Largest music feature width (`n_music`).
+pub const MAX_MUSIC_DIM: u32 = 4096;
+/// Largest LAT downsample rate (input rows per output token).
+pub const MAX_DOWNSAMPLE: u32 = 16;
+/// Largest vocabulary / codebook.
+pub const MAX_VOCAB: u32 = 65536;
+/// Largest VQ-VAE conv width, inner residual width and codebook row width.
+pub const MAX_WIDTH: u32 = 4096;
+/// Most residual blocks per Resnet1D.
+pub const MAX_DEPTH: u32 = 8;
+/// Most strided stages per VQ-VAE.
+pub const MAX_DOWN_T: u32 = 4;
+/// Largest stride of a strided stage.
+pub const MAX_STRIDE: u32 = 8;
+/// Largest dilation of any residual conv (`growth^(depth-1)`).
+pub const MAX_DILATION: u32 = 4096;
+/// Largest `music_motion_rate`.
+pub const MAX_MUSIC_MOTION_RATE: u32 = 64;
+/// Streams of the coordinated attention the engine implements (Duolando).
+pub const DUOLANDO_STREAMS: u32 = 10;
+
+/// Which VQ-VAE a config field belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VqWhich {
+    Part(Part),
+    Transl,
+}
+
+/// A field of [`VqConfig`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VqField {
+    InChannels,
+    RotChannels,
+    Width,
+    Depth,
+    DilationGrowthRate,
+    DownT,
+    StrideT,
+    EmbWidth,
+    LBins,
+    MConv,
+    /// `stride_t ^ down_t` (frames per token).
+    Hop,
+    /// `growth ^ (depth - 1)`.
+    MaxDilation,
+}
+
+/// Which LAT a config field belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LatWhich {
+    Music,
+    Leader,
+}
+
+/// A field of [`LatConfig`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LatField {
+    NIn,
+    NLayer,
+    NHead,
+    DownsampleRate,
+}
+
+/// The config field a [`ConfigError`] is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConfigField {
+    NEmbd,
+    NHead,
+    NLayerBase,
+    NLayerHead,
+    BlockSize,
+    LookForward,
+    /// `vocab[i]`, i in stream order up, down, lhand, rhand, transl.
+    Vocab(u8),
+    NStreams,
+    FinalLn,
+    MusicMotionRate,
+    Lat(LatWhich, LatField),
+    Vq(VqWhich, VqField),
+}
+
+/// Why a [`ModelConfig`] was rejected. Values are the offending numbers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConfigError {
+    /// A size that must be positive is 0.
+    Zero { field: ConfigField },
+    /// A size above its cap.
+    TooLarge { field: ConfigField, value: u32, max: u32 },
+    /// A size below its minimum.
+    TooSmall { field: ConfigField, value: u32, min: u32 },
+    /// `value` must be a multiple of `divisor` (e.g. n_embd of n_head).
+    NotDivisible { field: ConfigField, value: u32, divisor: u32 },
+    /// `value` must equal `expected` (e.g. vocab == l_bins of its VQ-VAE,
+    /// in_channels == 3 x part joints).
+    Mismatch { field: ConfigField, value: u32, expected: u32 },
+    /// A value the engine does not implement (e.g. a final LayerNorm, an
+    /// odd stride, a stream count other than 10).
+    Unsupported { field: ConfigField, value: u32 },
+}
+
+fn range(field: ConfigField, value: u32, min: u32, max: u32) -> Result<(), ConfigError> {
+    if value == 0 && min > 0 {
+        return Err(ConfigError::Zero { field });
+    }
+    if value < min {
+        return Err(ConfigError::TooSmall { field, value, min });
+    }
+    if value > max {
+        return Err(ConfigError::TooLarge { field, value, max });
+    }
+    Ok(())
+}
+
+fn equal(field: ConfigField, value: u32, expected: u32) -> Result<(), ConfigError> {
+    if value != expected {
+        return Err(ConfigError::Mismatch { field, value, expected });
+    }
+    Ok(())
+}
+
+fn divisible(field: ConfigField, value: u32, divisor: u32) -> Result<(), ConfigError> {
+    if divisor == 0 || value % divisor != 0 {
+        return Err(ConfigError::NotDivisible { field, value, divisor });
+    }
+    Ok(())
+}
+
+impl VqConfig {
+    /// Checks one VQ-VAE config; `in_channels`/`rot_channels` are compared
+    /// with the caller's expectation (3 x joints / 9 x joints of the part).
+    fn validate(&self, which: VqWhich, in_ch: u32, rot_ch: u32) -> Result<(), ConfigError> {
+        let f = |v| ConfigField::Vq(which, v);
+        equal(f(VqField::InChannels), self.in_channels, in_ch)?;
+        equal(f(VqField::RotChannels), self.rot_channels, rot_ch)?;
+        range(f(VqField::Width), self.width, 1, MAX_WIDTH)?;
+        range(f(VqField::Depth), self.depth, 1, MAX_DEPTH)?;
+        range(f(VqField::DilationGrowthRate), self.dilation_growth_rate, 1, MAX_DILATION)?;
+        range(f(VqField::DownT), self.down_t, 1, MAX_DOWN_T)?;
+        range(f(VqField::StrideT), self.stride_t, 2, MAX_STRIDE)?;
+        // Conv(k=2s, s, p=s/2) maps L frames to exactly L/s only for even s.
+        if self.stride_t % 2 != 0 {
+            return Err(ConfigError::Unsupported { field: f(VqField::StrideT), value: self.stride_t });
+        }
+        range(f(VqField::EmbWidth), self.emb_width, 1, MAX_WIDTH)?;
+        range(f(VqField::LBins), self.l_bins, 1, MAX_VOCAB)?;
+        range(f(VqField::MConv), self.m_conv_den, 1, MAX_WIDTH)?;
+        let inner = self.res_inner().unwrap_or(u32::MAX);
+        range(f(VqField::MConv), inner, 1, MAX_WIDTH)?;
+        let dil = self
+            .dilation_growth_rate
+            .checked_pow(self.depth - 1)
+            .unwrap_or(u32::MAX);
+        range(f(VqField::MaxDilation), dil, 1, MAX_DILATION)?;
+        let hop = self.hop().unwrap_or(u32::MAX);
+        range(f(VqField::Hop), hop, 2, MAX_DOWNSAMPLE * MAX_DOWNSAMPLE)?;
+        Ok(())
+    }
+}
+
+impl LatConfig {
+    fn validate(&self, which: LatWhich, n_embd: u32) -> Result<(), ConfigError> {
+        let f = |v| ConfigField::Lat(which, v);
+        range(f(LatField::NIn), self.n_in, 1, MAX_MUSIC_DIM)?;
+        range(f(LatField::NLayer), self.n_layer, 1, MAX_LAT_LAYERS)?;
+        range(f(LatField::NHead), self.n_head, 1, MAX_HEADS)?;
+        divisible(ConfigField::NEmbd, n_embd, self.n_head)?;
+        range(f(LatField::DownsampleRate), self.downsample_rate, 1, MAX_DOWNSAMPLE)?;
+        Ok(())
+    }
+}
+
+impl GptConfig {
+    fn validate(&self) -> Result<(), ConfigError> {
+        range(ConfigField::NEmbd, self.n_embd, 1, MAX_EMBD)?;
+        range(ConfigField::NHead, self.n_head, 1, MAX_HEADS)?;
+        divisible(ConfigField::NEmbd, self.n_embd, self.n_head)?;
+        range(ConfigField::NLayerBase, self.n_layer_base, 1, MAX_GPT_LAYERS)?;
+        range(ConfigField::NLayerHead, self.n_layer_head, 1, MAX_GPT_LAYERS)?;
+        // The follower context is block_size - 1 tokens: at least one.
+        range(ConfigField::BlockSize, self.block_size, 2, MAX_BLOCK_SIZE)?;
+        // The original drops the last `look_forward` LAT rows with
+        // `x[:, :-look_forward]`, which is empty for 0: at least one.
+        range(ConfigField::LookForward, self.look_forward, 1, MAX_LOOK_FORWARD)?;
+        for (i, &v) in self.vocab.iter().enumerate() {
+            range(ConfigField::Vocab(i as u8), v, 1, MAX_VOCAB)?;
+        }
+        // Quirks of the original heads and tables: head_lhand has
+        // vocab_up rows, head_rhand vocab_down rows, and follower
+        // right-hand tokens index the LEFT-hand embedding table. Every
+        // produced token must index every table it reaches.
+        equal(ConfigField::Vocab(2), self.vocab[2], self.vocab[0])?;
+        equal(ConfigField::Vocab(3), self.vocab[3], self.vocab[1])?;
+        if self.vocab[1] > self.vocab[2] {
+            return Err(ConfigError::TooLarge {
+                field: ConfigField::Vocab(1),
+                value: self.vocab[1],
+                max: self.vocab[2],
+            });
+        }
+        if self.n_streams != DUOLANDO_STREAMS {
+            return Err(ConfigError::Unsupported { field: ConfigField::NStreams, value: self.n_streams });
+        }
+        if self.final_ln {
+            return Err(ConfigError::Unsupported { field: ConfigField::FinalLn, value: 1 });
+        }
+        self.music.validate(LatWhich::Music, self.n_embd)?;
+        self.leader.validate(LatWhich::Leader, self.n_embd)?;
+        // Leader LATs read token embeddings, one row per token.
+        equal(ConfigField::Lat(LatWhich::Leader, LatField::NIn), self.leader.n_in, self.n_embd)?;
+        equal(ConfigField::Lat(LatWhich::Leader, LatField::DownsampleRate), self.leader.downsample_rate, 1)?;
+        Ok(())
+    }
+}
+
+impl ModelConfig {
+    /// Checks every size and cross-constraint the engine relies on. The
+    /// `.duo` decoder calls this before trusting a header; [`crate::model`]
+    /// and every `*_scratch_bytes` assume it passed.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.gpt.validate()?;
+        for (i, part) in Part::ALL.iter().enumerate() {
+            let joints = part.joints().len() as u32;
+            self.parts[i].validate(VqWhich::Part(*part), 3 * joints, 9 * joints)?;
+            equal(ConfigField::Vocab(i as u8), self.gpt.vocab[i], self.parts[i].l_bins)?;
+        }
+        self.transl.validate(VqWhich::Transl, 3, 0)?;
+        equal(ConfigField::Vocab(4), self.gpt.vocab[4], self.transl.l_bins)?;
+        // Every stream advances one token per `hop` frames, and the music
+        // LAT folds `downsample_rate` frames into one token: all equal.
+        let hop = self.parts[0].hop().unwrap_or(0);
+        for (i, part) in Part::ALL.iter().enumerate() {
+            let h = self.parts[i].hop().unwrap_or(0);
+            equal(ConfigField::Vq(VqWhich::Part(*part), VqField::Hop), h, hop)?;
+        }
+        equal(ConfigField::Vq(VqWhich::Transl, VqField::Hop), self.transl.hop().unwrap_or(0), hop)?;
+        equal(
+            ConfigField::Lat(LatWhich::Music, LatField::DownsampleRate),
+            self.gpt.music.downsample_rate,
+            hop,
+        )?;
+        range(ConfigField::MusicMotionRate, self.music_motion_rate, 1, MAX_MUSIC_MOTION_RATE)?;
+        Ok(())
+    }
+
+    /// Frames per token (the common `hop` of every VQ-VAE; valid after
+    /// [`ModelConfig::validate`]).
+    pub fn hop(&self) -> usize {
+        self.parts[0].hop().unwrap_or(1) as usize
+    }
+}

@@ -1,0 +1,5 @@
+//! Unit tests of the core (kernels against naive references, motion
+//! normalisation round trips, schema and config validation, arena
+//! accounting). Integration tests against ONNX/tract live in `tests/`.
+
+mod schema_config;
