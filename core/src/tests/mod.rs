@@ -2,4 +2,6 @@
 //! normalisation round trips, schema and config validation, arena
 //! accounting). Integration tests against ONNX/tract live in `tests/`.
 
+mod arena;
+mod kernels;
 mod schema_config;

@@ -1,0 +1,106 @@
+//! Masked multi-head scaled dot-product attention over explicit query and
+//! key/value row sets, so the same kernel serves the exact window (all
+//! rows), the last-position shortcut and, later, a streaming session
+//! (new queries against a cached key range).
+
+use super::weights::dot;
+
+/// Which keys a query may see. Row indices are relative to the `q` and
+/// `k`/`v` slices handed to [`attention`]; positions are derived by the mask.
+pub trait Mask {
+    fn allowed(&self, qi: usize, kj: usize) -> bool;
+}
+
+/// The LAT band (`get_subsequent_mask` in the original): query at
+/// position `q_pos0 + qi` sees key at `k_pos0 + kj` iff `|qpos - kpos| <= radius`.
+#[derive(Clone, Copy, Debug)]
+pub struct BandMask {
+    pub radius: usize,
+    pub q_pos0: usize,
+    pub k_pos0: usize,
+}
+
+impl Mask for BandMask {
+    #[inline]
+    fn allowed(&self, qi: usize, kj: usize) -> bool {
+        (self.q_pos0 + qi).abs_diff(self.k_pos0 + kj) <= self.radius
+    }
+}
+
+/// The coordinated-attention mask: streams laid out one after another,
+/// `t_q` query rows and `t_k` key rows per stream; a query at in-stream
+/// position `q_pos0 + qi % t_q` sees every key (any stream) whose
+/// in-stream position `kj % t_k` is not later (lower-triangular `t x t`
+/// tiled `streams x streams`).
+#[derive(Clone, Copy, Debug)]
+pub struct TiledCausalMask {
+    pub t_q: usize,
+    pub t_k: usize,
+    pub q_pos0: usize,
+}
+
+impl Mask for TiledCausalMask {
+    #[inline]
+    fn allowed(&self, qi: usize, kj: usize) -> bool {
+        kj % self.t_k <= self.q_pos0 + qi % self.t_q
+    }
+}
+
+/// `out = softmax(mask(q k^T / sqrt(hd))) v`, per head. `q`: (nq, C);
+/// `k`, `v`: (nk, C); `out`: (nq, C); `scores`: >= nk scratch; `C = n_head
+/// * hd`. Masked keys are skipped (= -inf before softmax). A query that
+/// sees no key gets zeros (cannot happen with the model's masks).
+pub fn attention<M: Mask>(
+    q: &[f32],
+    k: &[f32],
+    v: &[f32],
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    scores: &mut [f32],
+    out: &mut [f32],
+) {
+    if c == 0 || n_head == 0 {
+        return;
+    }
+    let hd = c / n_head;
+    let nq = (q.len() / c).min(out.len() / c);
+    let nk = (k.len() / c).min(v.len() / c).min(scores.len());
+    let scale = 1.0 / libm::sqrtf(hd as f32);
+    for qi in 0..nq {
+        for h in 0..n_head {
+            let qh = &q[qi * c + h * hd..qi * c + (h + 1) * hd];
+            let mut max = f32::NEG_INFINITY;
+            for kj in 0..nk {
+                if mask.allowed(qi, kj) {
+                    let s = dot(qh, &k[kj * c + h * hd..kj * c + (h + 1) * hd]) * scale;
+                    scores[kj] = s;
+                    max = max.max(s);
+                }
+            }
+            let oh = &mut out[qi * c + h * hd..qi * c + (h + 1) * hd];
+            oh.fill(0.0);
+            let mut sum = 0.0f32;
+            for kj in 0..nk {
+                if mask.allowed(qi, kj) {
+                    let e = libm::expf(scores[kj] - max);
+                    scores[kj] = e;
+                    sum += e;
+                }
+            }
+            if sum == 0.0 {
+                continue;
+            }
+            let inv = 1.0 / sum;
+            for kj in 0..nk {
+                if mask.allowed(qi, kj) {
+                    let p = scores[kj] * inv;
+                    let vh = &v[kj * c + h * hd..kj * c + (h + 1) * hd];
+                    for (o, x) in oh.iter_mut().zip(vh) {
+                        *o += p * x;
+                    }
+                }
+            }
+        }
+    }
+}

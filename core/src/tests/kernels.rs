@@ -1,0 +1,213 @@
+//! Kernels against naive references (f64 loops written from the PyTorch
+//! definitions). Tolerance: relative to the magnitude of the terms.
+use crate::kernels::*;
+
+/// Named tolerance: f32 kernels vs f64 references on O(1) data.
+const CLOSE: f64 = 1e-5;
+
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f32 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((self.0 >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+    }
+    fn vec(&mut self, n: usize) -> Vec<f32> {
+        (0..n).map(|_| self.next()).collect()
+    }
+}
+
+fn assert_close(got: &[f32], want: &[f64], tol: f64) {
+    assert_eq!(got.len(), want.len());
+    let scale = want.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        assert!(((*g as f64) - w).abs() <= tol * scale, "at {i}: {g} vs {w}");
+    }
+}
+
+fn mat(d: &[f32], rows: usize, cols: usize) -> Matrix<'_> {
+    Matrix::F32(F32Rows::new(d, rows, cols).unwrap())
+}
+
+#[test]
+fn linear_matches_naive() {
+    let mut r = Lcg(1);
+    for &(n, i, o) in &[(1, 1, 1), (3, 17, 70), (33, 64, 130), (5, 9, 3)] {
+        let (x, w, b) = (r.vec(n * i), r.vec(o * i), r.vec(o));
+        let mut y = vec![0.0; n * o];
+        linear(&x, &mat(&w, o, i), Some(&b), &mut y);
+        let mut want = vec![0.0f64; n * o];
+        for a in 0..n {
+            for c in 0..o {
+                want[a * o + c] = b[c] as f64 + (0..i).map(|k| x[a * i + k] as f64 * w[c * i + k] as f64).sum::<f64>();
+            }
+        }
+        assert_close(&y, &want, CLOSE);
+        // x W
+        let mut z = vec![0.0; n * i];
+        let xo = r.vec(n * o);
+        linear_xw(&xo, &mat(&w, o, i), &mut z);
+        let mut want = vec![0.0f64; n * i];
+        for a in 0..n {
+            for k in 0..i {
+                want[a * i + k] = (0..o).map(|c| xo[a * o + c] as f64 * w[c * i + k] as f64).sum();
+            }
+        }
+        assert_close(&z, &want, CLOSE);
+    }
+}
+
+#[test]
+fn layernorm_and_gelu() {
+    let mut r = Lcg(2);
+    let (x, w, b) = (r.vec(3 * 10), r.vec(10), r.vec(10));
+    let mut y = vec![0.0; 30];
+    layernorm(&x, &w, &b, &mut y);
+    let mut want = vec![0.0f64; 30];
+    for row in 0..3 {
+        let xr: Vec<f64> = x[row * 10..row * 10 + 10].iter().map(|&v| v as f64).collect();
+        let m = xr.iter().sum::<f64>() / 10.0;
+        let var = xr.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / 10.0;
+        for i in 0..10 {
+            want[row * 10 + i] = (xr[i] - m) / (var + 1e-5).sqrt() * w[i] as f64 + b[i] as f64;
+        }
+    }
+    assert_close(&y, &want, CLOSE);
+    // GELU(1) = 0.8413447 * 1, GELU(-1) = -0.1586553, exact-erf values.
+    let mut g = [1.0f32, -1.0, 0.0, 3.0];
+    gelu_inplace(&mut g);
+    assert_close(&g, &[0.8413447460685429, -0.15865525393145707, 0.0, 2.995950070189245], 1e-6);
+}
+
+fn naive_conv(x: &[f32], t_in: usize, ci: usize, w: &[f32], b: &[f32], co: usize, g: ConvGeom, t_out: usize) -> Vec<f64> {
+    let mut y = vec![0.0f64; t_out * co];
+    for t in 0..t_out {
+        for o in 0..co {
+            let mut s = b[o] as f64;
+            for c in 0..ci {
+                for j in 0..g.kernel {
+                    let p = (t * g.stride + j * g.dilation) as isize - g.pad as isize;
+                    if p >= 0 && (p as usize) < t_in {
+                        s += w[(o * ci + c) * g.kernel + j] as f64 * x[p as usize * ci + c] as f64;
+                    }
+                }
+            }
+            y[t * co + o] = s;
+        }
+    }
+    y
+}
+
+#[test]
+fn conv1d_matches_naive() {
+    let mut r = Lcg(3);
+    let geoms = [
+        ConvGeom { kernel: 4, stride: 2, pad: 1, dilation: 1 },
+        ConvGeom { kernel: 3, stride: 1, pad: 1, dilation: 1 },
+        ConvGeom { kernel: 3, stride: 1, pad: 9, dilation: 9 },
+        ConvGeom { kernel: 1, stride: 1, pad: 0, dilation: 1 },
+        ConvGeom { kernel: 3, stride: 1, pad: 0, dilation: 2 },
+    ];
+    for g in geoms {
+        for &(t_in, ci, co) in &[(4usize, 3usize, 5usize), (70, 7, 6), (64, 16, 16)] {
+            let t_out = match g.out_len(t_in) {
+                Some(t) => t,
+                None => continue,
+            };
+            let (x, w, b) = (r.vec(t_in * ci), r.vec(co * ci * g.kernel), r.vec(co));
+            let mut y = vec![0.0; t_out * co];
+            let mut col = vec![0.0; conv1d_col_len(ci, g.kernel)];
+            conv1d(&x, ci, &mat(&w, co, ci * g.kernel), &b, g, &mut y, &mut col);
+            assert_close(&y, &naive_conv(&x, t_in, ci, &w, &b, co, g, t_out), CLOSE);
+        }
+    }
+}
+
+#[test]
+fn conv_transpose_matches_naive() {
+    let mut r = Lcg(4);
+    for &(s, t_in, ci, co) in &[(2usize, 1usize, 3usize, 4usize), (2, 40, 8, 5), (4, 9, 3, 3)] {
+        let (k, p) = (2 * s, s / 2);
+        let t_out = (t_in - 1) * s + k - 2 * p;
+        assert_eq!(t_out, t_in * s);
+        let (x, w, b) = (r.vec(t_in * ci), r.vec(ci * co * k), r.vec(co));
+        let mut y = vec![0.0; t_out * co];
+        let mut z = vec![0.0; convt_z_len(co, k)];
+        conv_transpose1d(&x, &mat(&w, ci, co * k), &b, k, s, p, &mut y, &mut z);
+        let mut want = vec![0.0f64; t_out * co];
+        for t in 0..t_out {
+            for o in 0..co {
+                want[t * co + o] = b[o] as f64;
+            }
+        }
+        for i in 0..t_in {
+            for j in 0..k {
+                let t = (i * s + j) as isize - p as isize;
+                if t < 0 || t as usize >= t_out {
+                    continue;
+                }
+                for o in 0..co {
+                    for c in 0..ci {
+                        want[t as usize * co + o] += x[i * ci + c] as f64 * w[(c * co + o) * k + j] as f64;
+                    }
+                }
+            }
+        }
+        assert_close(&y, &want, CLOSE);
+    }
+}
+
+fn naive_attention(q: &[f32], k: &[f32], v: &[f32], c: usize, nh: usize, allowed: &dyn Fn(usize, usize) -> bool) -> Vec<f64> {
+    let hd = c / nh;
+    let (nq, nk) = (q.len() / c, k.len() / c);
+    let mut out = vec![0.0f64; nq * c];
+    for i in 0..nq {
+        for h in 0..nh {
+            let s: Vec<f64> = (0..nk)
+                .map(|j| {
+                    if allowed(i, j) {
+                        (0..hd).map(|d| q[i * c + h * hd + d] as f64 * k[j * c + h * hd + d] as f64).sum::<f64>() / (hd as f64).sqrt()
+                    } else {
+                        f64::NEG_INFINITY
+                    }
+                })
+                .collect();
+            let m = s.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+            let e: Vec<f64> = s.iter().map(|v| (v - m).exp()).collect();
+            let z: f64 = e.iter().sum();
+            for d in 0..hd {
+                out[i * c + h * hd + d] = (0..nk).map(|j| e[j] / z * v[j * c + h * hd + d] as f64).sum();
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn attention_band_and_tiled_causal() {
+    let mut r = Lcg(5);
+    let (c, nh) = (12, 3);
+    // Band over 20 rows, radius 4.
+    let n = 20;
+    let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
+    let mut out = vec![0.0; n * c];
+    let mut scores = vec![0.0; n];
+    let band = BandMask { radius: 4, q_pos0: 0, k_pos0: 0 };
+    attention(&q, &k, &v, c, nh, &band, &mut scores, &mut out);
+    assert_close(&out, &naive_attention(&q, &k, &v, c, nh, &|i, j| i.abs_diff(j) <= 4), CLOSE);
+    // Tiled causal: 10 streams of t = 3.
+    let t = 3;
+    let n = 10 * t;
+    let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
+    let mut out = vec![0.0; n * c];
+    let mut scores = vec![0.0; n];
+    let m = TiledCausalMask { t_q: t, t_k: t, q_pos0: 0 };
+    attention(&q, &k, &v, c, nh, &m, &mut scores, &mut out);
+    let want = naive_attention(&q, &k, &v, c, nh, &|i, j| j % t <= i % t);
+    assert_close(&out, &want, CLOSE);
+    // Only the last position of stream 7 as a query (the logits shortcut).
+    let qi = 7 * t + t - 1;
+    let mut one = vec![0.0; c];
+    let last = TiledCausalMask { t_q: 1, t_k: t, q_pos0: t - 1 };
+    attention(&q[qi * c..(qi + 1) * c], &k, &v, c, nh, &last, &mut scores, &mut one);
+    assert_close(&one, &want[qi * c..(qi + 1) * c], CLOSE);
+}
