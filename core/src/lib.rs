@@ -3,7 +3,10 @@
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 
+pub mod arena;
 pub mod config;
+pub mod kernels;
+pub mod format;
 pub mod limits;
 pub mod presets;
 pub mod schema;

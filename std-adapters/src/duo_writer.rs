@@ -1,1 +1,158 @@
-//! duo_writer (being written)
+//! Writing `.duo` files (docs/FORMAT.md). The writer sorts tensors by name,
+//! lays payloads out 64-byte aligned in that order, encodes the postcard
+//! header, and checks the result with the core decoder before returning it,
+//! so a file it returns is one the engine accepts.
+
+use std::fmt;
+use std::path::Path;
+
+use duolando_core::config::ModelConfig;
+use duolando_core::format::{align_up, ALIGN, MAGIC, PREFIX_LEN, VERSION};
+use duolando_core::tensor::DType;
+use serde::Serialize;
+
+use crate::model_file::{AlignedBytes, ModelFile, ModelFileError};
+
+/// Storage type chosen for a tensor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StoreAs {
+    F32,
+    /// Rounded to nearest from f32 (`half::f16::from_f32`).
+    F16,
+}
+
+/// One tensor to write: a `.duo` name, a row-major shape, f32 values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tensor {
+    pub name: String,
+    pub shape: Vec<u32>,
+    pub values: Vec<f32>,
+    pub store_as: StoreAs,
+}
+
+/// One tensor-table entry exactly as encoded (see `format::TensorEntry`).
+/// Public so tests can build deliberately broken tables with [`assemble`].
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct HeaderEntry {
+    pub name: String,
+    pub dtype: u8,
+    pub shape: Vec<u32>,
+    pub offset: u64,
+    pub nbytes: u64,
+}
+
+/// The postcard header: the config, then the tensor table (varint count +
+/// entries). Field order is the byte order.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Header {
+    pub config: ModelConfig,
+    pub tensors: Vec<HeaderEntry>,
+}
+
+/// Why a set of tensors could not be written.
+#[derive(Debug)]
+pub enum WriteError {
+    /// `values.len()` differs from the product of `shape`.
+    ValueCount { name: String, shape: Vec<u32>, expected: u64, found: usize },
+    /// Two tensors with the same name.
+    Duplicate { name: String },
+    /// The header could not be encoded.
+    Encode(postcard::Error),
+    /// The written bytes did not pass the decoder (a config/schema mismatch:
+    /// the detail names the tensor and the expected vs found shape).
+    Rejected(ModelFileError),
+    Io { path: String, source: std::io::Error },
+}
+
+impl fmt::Display for WriteError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            WriteError::ValueCount { name, shape, expected, found } => {
+                write!(f, "tensor '{name}': shape {shape:?} needs {expected} values, got {found}")
+            }
+            WriteError::Duplicate { name } => write!(f, "tensor '{name}' given twice"),
+            WriteError::Encode(e) => write!(f, "cannot encode the .duo header: {e}"),
+            WriteError::Rejected(e) => write!(f, "the written model does not validate: {e}"),
+            WriteError::Io { path, source } => write!(f, "{path}: {source}"),
+        }
+    }
+}
+
+impl std::error::Error for WriteError {}
+
+/// Prefix + header + zero padding + `data` (which must already hold the
+/// payloads at the offsets the entries name, padded to 64). No checks: this
+/// is the raw layout step, public for tests that need malformed files.
+pub fn assemble(header: &Header, data: &[u8]) -> Result<Vec<u8>, WriteError> {
+    let header_bytes = postcard::to_stdvec(header).map_err(WriteError::Encode)?;
+    assemble_raw(&header_bytes, data)
+}
+
+/// [`assemble`] with already-encoded header bytes.
+pub fn assemble_raw(header_bytes: &[u8], data: &[u8]) -> Result<Vec<u8>, WriteError> {
+    let header_end = (PREFIX_LEN + header_bytes.len()) as u64;
+    let data_start = align_up(header_end).unwrap_or(header_end) as usize;
+    let mut out = Vec::with_capacity(data_start + data.len());
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&0u32.to_le_bytes());
+    out.extend_from_slice(&(header_bytes.len() as u64).to_le_bytes());
+    out.extend_from_slice(header_bytes);
+    out.resize(data_start, 0);
+    out.extend_from_slice(data);
+    Ok(out)
+}
+
+/// Encodes `tensors` (any order) under `config` into `.duo` bytes and
+/// validates them with `DuoFile::parse` (schema and shapes included).
+pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, WriteError> {
+    let mut order: Vec<&Tensor> = tensors.iter().collect();
+    order.sort_by(|a, b| a.name.as_bytes().cmp(b.name.as_bytes()));
+    for pair in order.windows(2) {
+        if pair[0].name == pair[1].name {
+            return Err(WriteError::Duplicate { name: pair[0].name.clone() });
+        }
+    }
+    let mut entries = Vec::with_capacity(order.len());
+    let mut data: Vec<u8> = Vec::new();
+    for t in &order {
+        let expected = t.shape.iter().map(|&d| d as u64).product::<u64>();
+        if expected != t.values.len() as u64 {
+            return Err(WriteError::ValueCount {
+                name: t.name.clone(),
+                shape: t.shape.clone(),
+                expected,
+                found: t.values.len(),
+            });
+        }
+        let offset = data.len() as u64;
+        let dtype = match t.store_as {
+            StoreAs::F32 => {
+                data.extend(t.values.iter().flat_map(|v| v.to_le_bytes()));
+                DType::F32
+            }
+            StoreAs::F16 => {
+                data.extend(t.values.iter().flat_map(|&v| half::f16::from_f32(v).to_le_bytes()));
+                DType::F16
+            }
+        };
+        let nbytes = data.len() as u64 - offset;
+        data.resize(data.len().next_multiple_of(ALIGN), 0);
+        entries.push(HeaderEntry { name: t.name.clone(), dtype: dtype as u8, shape: t.shape.clone(), offset, nbytes });
+    }
+    let bytes = assemble(&Header { config: *config, tensors: entries }, &data)?;
+    ModelFile::from_aligned(AlignedBytes::copy_from(&bytes), "<written model>").map_err(WriteError::Rejected)?;
+    Ok(bytes)
+}
+
+/// [`write_duo`], then writes the bytes to `path` (via a temporary file in
+/// the same directory, renamed into place, so a failed write leaves no
+/// half-written model behind).
+pub fn write_duo_to_path(config: &ModelConfig, tensors: &[Tensor], path: &Path) -> Result<(), WriteError> {
+    let bytes = write_duo(config, tensors)?;
+    let io = |source| WriteError::Io { path: path.display().to_string(), source };
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".partial");
+    std::fs::write(&tmp, &bytes).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(io)
+}

@@ -7,6 +7,7 @@ pub mod cli;
 pub mod convert;
 pub mod duo_writer;
 pub mod export;
+pub mod model_file;
 pub mod music;
 pub mod npy;
 pub mod skeleton;

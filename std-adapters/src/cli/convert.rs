@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use crate::duo_writer::StoreAs;
+
 /// Flags of `duolando convert`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -33,8 +35,18 @@ pub enum WeightType {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    anyhow::bail!(
-        "convert: not wired yet (args: {:?}); the converter lands shortly",
-        args
-    )
+    let store_as = match args.dtype {
+        WeightType::F32 => StoreAs::F32,
+        WeightType::F16 => StoreAs::F16,
+    };
+    let report = crate::convert::convert_files(&args.config, &args.gpt, &args.vqvae, &args.transl, store_as, &args.out)?;
+    println!(
+        "wrote {} ({} tensors, {} bytes; skipped {} unused source tensors, {} attention masks checked)",
+        args.out.display(),
+        report.written,
+        report.bytes,
+        report.skipped,
+        report.masks_checked
+    );
+    Ok(())
 }

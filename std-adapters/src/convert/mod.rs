@@ -1,1 +1,187 @@
-//! convert (being written)
+//! The converter from the ORIGINAL training artifacts to `.duo`
+//! (`duolando convert`; rules in docs/FORMAT.md §6).
+//!
+//! Inputs: the follower-GPT YAML (original key structure, any sizes) and
+//! three safetensors files holding the original `state_dict`s (GPT2nt,
+//! SepVQVAEXM, translation VQVAE; made from the `.pt` checkpoints by
+//! `tools/pt_to_safetensors.py`). The schema (`duolando_core::schema`)
+//! drives everything: each required `.duo` tensor is pulled from its
+//! component's file by its original name, shape-checked and upcast to f32;
+//! leftovers must be known-unused (`skipped`), else the conversion fails.
+//!
+//! - `yaml`: duplicate-key tolerant YAML (as PyYAML reads the originals).
+//! - `config`: YAML -> `ModelConfig`.
+//! - `source`: safetensors, `module.` prefix, dtype upcast.
+//! - `skipped`: tensors that are not stored, and the mask checks.
+//! - `error`: `ConvertError`.
+
+pub mod config;
+pub mod error;
+pub mod skipped;
+pub mod source;
+pub mod yaml;
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use duolando_core::config::ModelConfig;
+use duolando_core::schema::{for_each_tensor, SchemaError, TensorSpec};
+
+pub use config::{load_config, parse_config};
+pub use error::ConvertError;
+use skipped::{check_mask, classify, Component, Skip};
+use source::Source;
+
+use crate::duo_writer::{write_duo, StoreAs, Tensor};
+
+/// The three source checkpoints, as bytes with the paths they came from.
+pub struct Sources<'a> {
+    pub gpt: (&'a Path, &'a [u8]),
+    pub vqvae: (&'a Path, &'a [u8]),
+    pub transl: (&'a Path, &'a [u8]),
+}
+
+/// What a conversion did (printed by the CLI).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Report {
+    /// Tensors written to the `.duo`.
+    pub written: usize,
+    /// Source tensors skipped as unused (masks included).
+    pub skipped: usize,
+    /// Attention masks whose values were checked.
+    pub masks_checked: usize,
+    /// Bytes of the `.duo`.
+    pub bytes: usize,
+}
+
+impl From<SchemaError> for ConvertError {
+    fn from(e: SchemaError) -> ConvertError {
+        ConvertError::ConfigKey {
+            path: PathBuf::from("<schema>"),
+            key: String::from("(tensor name)"),
+            problem: format!("{e:?}"),
+        }
+    }
+}
+
+/// Pulls every schema tensor of `cfg` out of the sources (checked, upcast
+/// to f32, stored as `store_as`) and verifies nothing unknown is left over.
+pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: StoreAs) -> Result<(Vec<Tensor>, Report), ConvertError> {
+    let parsed = [
+        Source::parse(sources.gpt.0, sources.gpt.1)?,
+        Source::parse(sources.vqvae.0, sources.vqvae.1)?,
+        Source::parse(sources.transl.0, sources.transl.1)?,
+    ];
+    let mut used: [BTreeSet<String>; 3] = Default::default();
+    let mut tensors = Vec::new();
+    for_each_tensor::<ConvertError>(cfg, &mut |spec: &TensorSpec| {
+        let duo_name = spec.name.as_str();
+        let (c, rest) = Component::ALL
+            .iter()
+            .enumerate()
+            .find_map(|(i, c)| duo_name.strip_prefix(c.prefix()).map(|r| (i, r)))
+            .ok_or_else(|| ConvertError::ConfigKey {
+                path: PathBuf::from("<schema>"),
+                key: duo_name.to_string(),
+                problem: String::from("schema name without a gpt./motion./transl. prefix"),
+            })?;
+        let src = &parsed[c];
+        let values = src.f32_values(rest, duo_name, spec.dims())?;
+        if let Some((index, &value)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(ConvertError::NonFinite { path: src.path.clone(), tensor: rest.to_string(), index, value });
+        }
+        used[c].insert(rest.to_string());
+        tensors.push(Tensor { name: duo_name.to_string(), shape: spec.dims().to_vec(), values, store_as });
+        Ok(())
+    })?;
+    let mut report = Report { written: tensors.len(), ..Report::default() };
+    for (c, component) in Component::ALL.iter().enumerate() {
+        let src = &parsed[c];
+        let mut extra = Vec::new();
+        for name in src.tensors.keys().filter(|n| !used[c].contains(*n)) {
+            match classify(*component, name) {
+                Some(Skip::Mask(kind)) => {
+                    check_mask(src, name, kind, cfg)?;
+                    report.masks_checked += 1;
+                    report.skipped += 1;
+                }
+                Some(Skip::Unused) => report.skipped += 1,
+                None => extra.push(name.clone()),
+            }
+        }
+        if !extra.is_empty() {
+            return Err(ConvertError::Extra { path: src.path.clone(), tensors: extra });
+        }
+    }
+    Ok((tensors, report))
+}
+
+/// The whole conversion in memory: YAML text (labelled by `config.0`) +
+/// three safetensors -> `.duo` bytes.
+pub fn convert_bytes(config: (&Path, &str), sources: &Sources<'_>, store_as: StoreAs) -> Result<(Vec<u8>, Report), ConvertError> {
+    let cfg = parse_config(config.0, config.1)?;
+    convert_with_config(&cfg, sources, store_as, Path::new("<memory>"))
+}
+
+/// [`convert_bytes`] with an already mapped config; `label` names the output in errors.
+pub fn convert_with_config(
+    cfg: &ModelConfig,
+    sources: &Sources<'_>,
+    store_as: StoreAs,
+    label: &Path,
+) -> Result<(Vec<u8>, Report), ConvertError> {
+    let (tensors, mut report) = collect_tensors(cfg, sources, store_as)?;
+    let bytes = write_duo(cfg, &tensors).map_err(|source| ConvertError::Write { path: label.into(), source })?;
+    report.bytes = bytes.len();
+    Ok((bytes, report))
+}
+
+/// Converts files on disk and writes `out` (via a temporary file, renamed
+/// into place).
+pub fn convert_files(
+    config: &Path,
+    gpt: &Path,
+    vqvae: &Path,
+    transl: &Path,
+    store_as: StoreAs,
+    out: &Path,
+) -> Result<Report, ConvertError> {
+    let cfg = load_config(config)?;
+    let (m_gpt, m_vq, m_tr) = (map(gpt)?, map(vqvae)?, map(transl)?);
+    let sources = Sources { gpt: (gpt, &m_gpt), vqvae: (vqvae, &m_vq), transl: (transl, &m_tr) };
+    let (bytes, report) = convert_with_config(&cfg, &sources, store_as, out)?;
+    let io = |source| ConvertError::Io { path: out.into(), source };
+    let mut tmp = out.as_os_str().to_owned();
+    tmp.push(".partial");
+    std::fs::write(&tmp, &bytes).map_err(io)?;
+    std::fs::rename(&tmp, out).map_err(io)?;
+    Ok(report)
+}
+
+/// Read-only map of a source file (an empty file maps to nothing).
+fn map(path: &Path) -> Result<Mapped, ConvertError> {
+    let io = |source| ConvertError::Io { path: path.into(), source };
+    let file = std::fs::File::open(path).map_err(io)?;
+    if file.metadata().map_err(io)?.len() == 0 {
+        return Ok(Mapped::Empty);
+    }
+    // SAFETY: read-only map of an input file we do not modify; the caller
+    // must not modify it during conversion (the usual mmap contract).
+    let m = unsafe { memmap2::Mmap::map(&file) }.map_err(io)?;
+    Ok(Mapped::Map(m))
+}
+
+enum Mapped {
+    Empty,
+    Map(memmap2::Mmap),
+}
+
+impl std::ops::Deref for Mapped {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            Mapped::Empty => &[],
+            Mapped::Map(m) => m,
+        }
+    }
+}

@@ -1,0 +1,220 @@
+//! [`DuoFile`]: a validated, zero-copy view of a whole `.duo` buffer.
+
+use super::prefix::Prefix;
+use super::table::{decode_entry, Cursor, TensorEntry};
+use super::{align_up, schema_check, FormatError, HeaderField, MAX_TENSORS, PREFIX_LEN};
+use crate::config::ModelConfig;
+use crate::tensor::{DType, TensorRef};
+
+/// A `.duo` buffer that passed every rule of docs/FORMAT.md.
+///
+/// Borrowed from the caller's bytes (mmap, `include_bytes!`, an engine
+/// asset); `Copy`, no allocation. Thread rule: `Send + Sync` like the slice.
+#[derive(Clone, Copy, Debug)]
+pub struct DuoFile<'a> {
+    prefix: Prefix,
+    config: ModelConfig,
+    /// Header bytes holding the tensor entries (after the config and count).
+    table: &'a [u8],
+    count: u32,
+    /// The data section: from `prefix.data_start` to the end of the buffer.
+    data: &'a [u8],
+}
+
+impl<'a> DuoFile<'a> {
+    /// Validates `bytes` completely (prefix, header, table, offsets, config,
+    /// schema). Never panics and never allocates, whatever `bytes` holds.
+    /// `bytes` must start on a 64-byte boundary in memory.
+    pub fn parse(bytes: &'a [u8]) -> Result<DuoFile<'a>, FormatError> {
+        let prefix = Prefix::parse(bytes)?;
+        // Prefix::parse proved data_start <= bytes.len(), so these fit usize.
+        let header_end = PREFIX_LEN + prefix.header_len as usize;
+        let data_start = prefix.data_start as usize;
+        let header = bytes.get(PREFIX_LEN..header_end).unwrap_or(&[]);
+        let padding = bytes.get(header_end..data_start).unwrap_or(&[]);
+        if let Some(i) = padding.iter().position(|&b| b != 0) {
+            return Err(FormatError::NonZeroPadding { offset: (header_end + i) as u64 });
+        }
+        let data = bytes.get(data_start..).unwrap_or(&[]);
+        let data_len = data.len() as u64;
+
+        let mut cur = Cursor::new(header);
+        let config: ModelConfig = cur.take(HeaderField::Config)?;
+        config.validate().map_err(FormatError::InvalidConfig)?;
+        let count: u64 = cur.take(HeaderField::TensorCount)?;
+        if count > MAX_TENSORS as u64 {
+            return Err(FormatError::TooManyTensors { count, max: MAX_TENSORS });
+        }
+        let count = count as u32;
+        let table = cur.rest;
+
+        let mut prev: Option<TensorEntry<'a>> = None;
+        let mut prev_end: u64 = 0;
+        for index in 0..count {
+            let e = decode_entry(&mut cur, index)?;
+            if let Some(p) = prev {
+                match e.name.as_bytes().cmp(p.name.as_bytes()) {
+                    core::cmp::Ordering::Equal => {
+                        return Err(FormatError::DuplicateTensor { index, previous: index - 1 })
+                    }
+                    core::cmp::Ordering::Less => return Err(FormatError::UnsortedTable { index }),
+                    core::cmp::Ordering::Greater => {}
+                }
+            }
+            if e.offset % super::ALIGN as u64 != 0 {
+                return Err(FormatError::UnalignedOffset { index, offset: e.offset });
+            }
+            if index > 0 && e.offset < prev_end {
+                return Err(FormatError::Overlap { index, previous: index - 1 });
+            }
+            let end = e.offset.checked_add(e.nbytes).ok_or(FormatError::SizeOverflow { index })?;
+            if end > data_len {
+                return Err(FormatError::DataOutOfRange { index, end, data_len });
+            }
+            if e.dtype == DType::Q8Block32 {
+                check_q8_scales(payload(data, &e), index)?;
+            }
+            prev_end = end;
+            prev = Some(e);
+        }
+        if !cur.rest.is_empty() {
+            return Err(FormatError::TrailingHeaderBytes { count: cur.rest.len() });
+        }
+        // The data section ends at the last payload padded to 64 bytes.
+        let expected_len = align_up(prev_end).unwrap_or(u64::MAX);
+        if data_len > expected_len {
+            return Err(FormatError::TrailingData { expected_len, data_len });
+        }
+        if data_len < expected_len {
+            return Err(FormatError::DataOutOfRange {
+                index: count.saturating_sub(1),
+                end: expected_len,
+                data_len,
+            });
+        }
+
+        let file = DuoFile { prefix, config, table, count, data };
+        schema_check::check(&file)?;
+        Ok(file)
+    }
+
+    /// The model configuration (already validated).
+    pub fn config(&self) -> &ModelConfig {
+        &self.config
+    }
+
+    /// The decoded fixed prefix and section boundaries.
+    pub fn prefix(&self) -> Prefix {
+        self.prefix
+    }
+
+    /// Number of tensors in the table.
+    pub fn len(&self) -> usize {
+        self.count as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// Every table entry, in table (= name, = data) order.
+    pub fn tensors(&self) -> Tensors<'a> {
+        Tensors { cur: Cursor::new(self.table), index: 0, count: self.count }
+    }
+
+    /// The entry and payload of the tensor called `name` (a linear scan
+    /// over the sorted table, stopping early).
+    pub fn tensor(&self, name: &str) -> Result<TensorRef<'a>, FormatError> {
+        self.entry(name).map(|e| self.view(&e))
+    }
+
+    /// The table entry called `name`.
+    pub fn entry(&self, name: &str) -> Result<TensorEntry<'a>, FormatError> {
+        self.find(name).map(|(_, e)| e).ok_or(FormatError::NotFound)
+    }
+
+    /// The table index and entry called `name`.
+    pub fn find(&self, name: &str) -> Option<(u32, TensorEntry<'a>)> {
+        for (i, e) in self.tensors().enumerate() {
+            match e.name.cmp(name) {
+                core::cmp::Ordering::Equal => return Some((i as u32, e)),
+                core::cmp::Ordering::Greater => return None,
+                core::cmp::Ordering::Less => {}
+            }
+        }
+        None
+    }
+
+    /// The payload view of a validated entry of this file.
+    pub fn view(&self, e: &TensorEntry<'a>) -> TensorRef<'a> {
+        TensorRef { dtype: e.dtype, rank: e.rank, shape: e.shape, data: payload(self.data, e) }
+    }
+
+    /// The first f32/f16 weight that is NaN or infinite, as (table index,
+    /// element index). Not part of `parse` (it reads every byte of the
+    /// file); the converter runs it, and hosts may (docs/FORMAT.md §NaN).
+    pub fn first_non_finite(&self) -> Option<(u32, u64)> {
+        for (index, e) in self.tensors().enumerate() {
+            let bytes = payload(self.data, &e);
+            let bad = match e.dtype {
+                DType::F32 => bytes
+                    .chunks_exact(4)
+                    .position(|c| !f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite()),
+                DType::F16 => bytes
+                    .chunks_exact(2)
+                    .position(|c| !half::f16::from_le_bytes([c[0], c[1]]).is_finite()),
+                // Scales were checked by parse; int8 values are always finite.
+                DType::Q8Block32 => None,
+            };
+            if let Some(i) = bad {
+                return Some((index as u32, i as u64));
+            }
+        }
+        None
+    }
+}
+
+/// The payload of an entry whose range was validated against `data`
+/// (an empty slice if it somehow was not: never a panic).
+fn payload<'a>(data: &'a [u8], e: &TensorEntry<'_>) -> &'a [u8] {
+    let start = usize::try_from(e.offset).ok();
+    let end = start.and_then(|s| usize::try_from(e.nbytes).ok().and_then(|n| s.checked_add(n)));
+    match (start, end) {
+        (Some(s), Some(t)) => data.get(s..t).unwrap_or(&[]),
+        _ => &[],
+    }
+}
+
+/// Q8Block32 payloads are 34-byte blocks: an f16 scale, then 32 int8 values.
+fn check_q8_scales(bytes: &[u8], index: u32) -> Result<(), FormatError> {
+    for (block, chunk) in bytes.chunks_exact(34).enumerate() {
+        let scale = half::f16::from_le_bytes([chunk[0], chunk[1]]);
+        if !scale.is_finite() {
+            return Err(FormatError::NonFiniteScale { index, block: block as u64 });
+        }
+    }
+    Ok(())
+}
+
+/// Iterator over the table entries of a [`DuoFile`].
+pub struct Tensors<'a> {
+    cur: Cursor<'a>,
+    index: u32,
+    count: u32,
+}
+
+impl<'a> Iterator for Tensors<'a> {
+    type Item = TensorEntry<'a>;
+    fn next(&mut self) -> Option<TensorEntry<'a>> {
+        if self.index >= self.count {
+            return None;
+        }
+        let e = decode_entry(&mut self.cur, self.index).ok()?;
+        self.index += 1;
+        Some(e)
+    }
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let n = (self.count - self.index) as usize;
+        (n, Some(n))
+    }
+}
