@@ -1,0 +1,110 @@
+//! Retargeting raw joint positions onto the rig: world positions -> local
+//! rotations (an approximation; see docs/SKELETON.md).
+//!
+//! Joints are visited parent before child. For each joint `j` the world
+//! rotation `G[j]` is chosen from the directions towards its children,
+//! measured from `j`'s *reconstructed* position (so residuals do not
+//! accumulate down a chain):
+//! - one child (or a chain joint): the swing — the smallest rotation that
+//!   takes `G[parent] offset[child]` onto the observed direction — applied
+//!   on top of `G[parent]`. Twist about the bone is inherited from the
+//!   parent (zero local twist); positions do not depend on it.
+//! - several children (pelvis, spine3, head, wrists): the primary child
+//!   (spine1, neck, jaw, middle1) is matched exactly by a swing, then the
+//!   twist about that bone is the angle that best aligns the other
+//!   children (least squares in the plane perpendicular to the bone).
+//! - leaves (feet, eyes, finger tips): local rotation identity.
+
+use super::math::{cross, dot, mat_mul, mat_vec, norm, normalize_or, scale, sub, axis_angle, swing, Mat3, Vec3, IDENTITY};
+use super::{children, parent, Skeleton, JOINTS};
+
+/// The child whose direction is matched exactly at a branching joint.
+pub fn primary_child(j: usize) -> Option<usize> {
+    match j {
+        0 => Some(3),
+        9 => Some(12),
+        15 => Some(22),
+        20 => Some(28),
+        21 => Some(43),
+        _ => children(j).next(),
+    }
+}
+
+/// Local rotations (55) whose FK on `skel` with root `positions[0]`
+/// reproduces `positions` as closely as the rig's bone lengths allow.
+pub fn retarget(skel: &Skeleton, positions: &[Vec3; JOINTS]) -> [Mat3; JOINTS] {
+    let mut world = [IDENTITY; JOINTS];
+    let mut local = [IDENTITY; JOINTS];
+    let mut recon = [[0.0f32; 3]; JOINTS]; // (55, 3) reconstructed positions
+    recon[0] = positions[0];
+    for j in 0..JOINTS {
+        let base = match parent(j) {
+            Some(p) => {
+                recon[j] = super::math::add(recon[p], mat_vec(&world[p], skel.offsets[j]));
+                world[p]
+            }
+            None => IDENTITY,
+        };
+        let g = match primary_child(j) {
+            None => base,
+            Some(c) => {
+                let rest_dir = normalize_or(mat_vec(&base, skel.offsets[c]), [0.0, 1.0, 0.0]);
+                let obs = sub(positions[c], recon[j]);
+                let obs_dir = normalize_or(obs, rest_dir);
+                let g = mat_mul(&swing(rest_dir, obs_dir), &base);
+                let others: Vec<usize> = children(j).filter(|&k| k != c).collect();
+                if others.is_empty() {
+                    g
+                } else {
+                    let angle = best_twist(&g, skel, obs_dir, &others, positions, recon[j]);
+                    mat_mul(&axis_angle(obs_dir, angle), &g)
+                }
+            }
+        };
+        world[j] = g;
+        local[j] = mat_mul(&super::math::transpose(&base), &g);
+    }
+    local
+}
+
+/// The twist angle about `axis` that best aligns `g offset[k]` with the
+/// observed `positions[k] - origin` for the secondary children `ks`.
+fn best_twist(g: &Mat3, skel: &Skeleton, axis: Vec3, ks: &[usize], positions: &[Vec3; JOINTS], origin: Vec3) -> f32 {
+    let (mut s, mut c) = (0.0f32, 0.0f32);
+    for &k in ks {
+        let u = mat_vec(g, skel.offsets[k]);
+        let v = sub(positions[k], origin);
+        let up = sub(u, scale(axis, dot(u, axis)));
+        let vp = sub(v, scale(axis, dot(v, axis)));
+        if norm(up) < 1e-6 || norm(vp) < 1e-6 {
+            continue;
+        }
+        s += dot(cross(up, vp), axis);
+        c += dot(up, vp);
+    }
+    if s == 0.0 && c == 0.0 {
+        0.0
+    } else {
+        s.atan2(c)
+    }
+}
+
+/// A rig whose bone directions are `template`'s and whose bone lengths are
+/// the mean lengths measured in `clip` ((T, 55, 3) positions), so that FK
+/// of retargeted rotations reproduces the clip's joints. Bones that are
+/// degenerate in the clip keep the template length.
+pub fn measure_skeleton(template: &Skeleton, clip: &[[Vec3; JOINTS]]) -> Skeleton {
+    let mut out = *template;
+    if clip.is_empty() {
+        return out;
+    }
+    for j in 1..JOINTS {
+        let p = parent(j).unwrap_or(0);
+        let mean: f32 = clip.iter().map(|f| norm(sub(f[j], f[p]))).sum::<f32>() / clip.len() as f32;
+        let len = norm(template.offsets[j]);
+        if mean.is_finite() && mean > 1e-5 && len > 1e-9 {
+            out.offsets[j] = scale(template.offsets[j], mean / len);
+        }
+    }
+    out
+}
