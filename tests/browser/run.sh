@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Headless-Chromium test of the viewer page (docs/VIEWER.md). Called by .ci/run.
+#
+#   tests/browser/run.sh                       # install what is missing, build the fixture page, test it
+#   VIEWER_SHOT=docs/viewer.png tests/browser/run.sh   # also write the README screenshot
+#   CHROMIUM=/path/to/chromium tests/browser/run.sh    # another Chromium binary
+#
+# Installs Debian's chromium (apt) when $CHROMIUM (default /usr/bin/chromium) is
+# absent, and playwright-core from the committed package-lock.json (npm ci; no
+# browser download). Exits non-zero on any failure.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(cd "$here/../.." && pwd)"
+start=$(date +%s)
+say() { echo "[browser $(( $(date +%s) - start ))s] $*"; }
+
+export CHROMIUM="${CHROMIUM:-/usr/bin/chromium}"
+sudo_() { if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi; }
+apt_install() {
+  say "apt-get install -y $*"
+  sudo_ apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive sudo_ apt-get install -y -qq "$@" >/dev/null
+}
+if [ ! -x "$CHROMIUM" ]; then
+  [ "$CHROMIUM" = /usr/bin/chromium ] || { echo "CHROMIUM=$CHROMIUM is not executable" >&2; exit 1; }
+  apt_install chromium
+fi
+command -v node >/dev/null && command -v npm >/dev/null || apt_install nodejs npm
+say "$("$CHROMIUM" --version 2>/dev/null | head -n1), node $(node --version)"
+
+# playwright-core only (drives an existing Chromium; never downloads a browser).
+export PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1
+if ! cmp -s "$here/package-lock.json" "$here/node_modules/.package-lock.json.ci" 2>/dev/null \
+   || [ ! -d "$here/node_modules/playwright-core" ]; then
+  say "npm ci"
+  (cd "$here" && npm ci --no-audit --no-fund --loglevel=error)
+  cp "$here/package-lock.json" "$here/node_modules/.package-lock.json.ci"
+fi
+
+tmp="$(mktemp -d)"
+trap 'rm -rf "$tmp"' EXIT
+frames=300
+say "building the fixture page"
+(cd "$root" && cargo run -q -p duolando --example viewer_fixture -- "$tmp/page" --frames "$frames")
+
+say "testing $tmp/page/index.html in headless Chromium"
+shot=()
+if [ -n "${VIEWER_SHOT:-}" ]; then
+  case "$VIEWER_SHOT" in /*) ;; *) VIEWER_SHOT="$root/$VIEWER_SHOT" ;; esac
+  shot=(--shot "$VIEWER_SHOT")
+fi
+node "$here/viewer_test.mjs" --page "$tmp/page/index.html" --frames "$frames" --audio "${shot[@]}"
+say "done"
