@@ -229,7 +229,9 @@ try {
     await sleep(1500);
     await page.click("#play");
     await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
-    await page.locator("main").screenshot({ path: opt.shot });
+    const hb = await page.locator("header").boundingBox(), mb = await page.locator("main").boundingBox();
+    const x = Math.min(hb.x, mb.x), right = Math.max(hb.x + hb.width, mb.x + mb.width);
+    await page.screenshot({ path: opt.shot, clip: { x, y: hb.y, width: right - x, height: mb.y + mb.height - hb.y } });
     console.log(`screenshot: ${opt.shot}`);
   }
 
