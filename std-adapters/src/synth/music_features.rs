@@ -85,9 +85,10 @@ pub fn synthetic_features(plan: &Plan, frames: usize, rng: &mut Rng) -> Vec<f32>
 }
 
 fn add_pulse(env: &mut [f32], at: f32, amp: f32, tau: f32) {
-    let start = (at * FPS).ceil().max(0.0) as usize;
+    // Quantized to the frame grid like the beat one-hot (round to nearest).
+    let start = (at * FPS).round().max(0.0) as usize;
     for (t, v) in env.iter_mut().enumerate().skip(start) {
-        let dt = t as f32 / FPS - at;
+        let dt = (t - start) as f32 / FPS;
         if dt > 6.0 * tau {
             break;
         }

@@ -1,0 +1,1 @@
+//! glb / bvh / npy export round trips (filled in below).

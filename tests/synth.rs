@@ -1,0 +1,8 @@
+//! Skeleton maths and procedural duet synthesis: FK/IK round trips,
+//! rotation conversions, nearest-rotation properties, synth determinism
+//! and plausibility.
+
+#[path = "synth/skeleton.rs"]
+mod skeleton;
+#[path = "synth/plausibility.rs"]
+mod plausibility;
