@@ -41,6 +41,8 @@ macro_rules! commands {
 commands! {
     /// Convert the original PyTorch checkpoints (as safetensors) and YAML to a `.duo` model.
     Convert => convert,
+    /// Write a procedural duet dataset in the original DD100 layout.
+    Synth => synth,
 }
 
 /// `duolando <command> [flags]`.
