@@ -1,0 +1,682 @@
+//! The corrupt-file catalogue (issue #6 item 2): one named test per
+//! rejection rule of docs/FORMAT.md §5, each asserting the SPECIFIC
+//! `FormatError` variant, built by mutating a valid small model that the
+//! writer produced from seeded random weights; plus a property test that
+//! random mutations and truncations never panic.
+//!
+//! Run: `cargo test -p duolando-tests --test corrupt_files`.
+
+use duolando::duo_writer::{assemble, assemble_raw, write_duo, Header, HeaderEntry, StoreAs, Tensor};
+use duolando::model_file::{AlignedBytes, ModelFile, ModelFileError};
+use duolando_core::config::{GptConfig, LatConfig, ModelConfig, Part, VqConfig};
+use duolando_core::format::{
+    schema_tensor, DuoFile, FormatError, HeaderField, Shape, MAX_DIM, MAX_HEADER_LEN, MAX_NAME_LEN, MAX_TENSORS,
+};
+use duolando_core::limits::{ConfigError, ConfigField};
+use duolando_core::schema::{for_each_tensor, tensor_count, SchemaError, TensorSpec};
+use duolando_core::tensor::DType;
+use proptest::prelude::*;
+
+// ---------------------------------------------------------------- builders
+
+/// The smallest config `ModelConfig::validate` accepts with every stream,
+/// part and decoder present (~600 tensors, ~60 KB).
+fn tiny_config() -> ModelConfig {
+    let vq = |p: Option<Part>| {
+        let j = p.map_or(1, |p| p.joints().len() as u32);
+        VqConfig {
+            in_channels: 3 * j,
+            rot_channels: if p.is_some() { 9 * j } else { 0 },
+            width: 8,
+            depth: 2,
+            dilation_growth_rate: 3,
+            down_t: 2,
+            stride_t: 2,
+            emb_width: 8,
+            l_bins: 16,
+            m_conv_num: 1,
+            m_conv_den: 1,
+        }
+    };
+    ModelConfig {
+        gpt: GptConfig {
+            n_embd: 8,
+            n_head: 2,
+            n_layer_base: 1,
+            n_layer_head: 1,
+            block_size: 4,
+            look_forward: 2,
+            vocab: [16; 5],
+            music: LatConfig { n_in: 6, n_layer: 1, n_head: 2, downsample_rate: 4 },
+            leader: LatConfig { n_in: 8, n_layer: 1, n_head: 2, downsample_rate: 1 },
+            n_streams: 10,
+            final_ln: false,
+        },
+        parts: [vq(Some(Part::Up)), vq(Some(Part::Down)), vq(Some(Part::LHand)), vq(Some(Part::RHand))],
+        transl: vq(None),
+        music_motion_rate: 4,
+    }
+}
+
+/// Seeded weights for every schema tensor of `cfg` (xorshift, in [-1, 1)).
+fn seeded_tensors(cfg: &ModelConfig, seed: u64, store_as: StoreAs) -> Vec<Tensor> {
+    let mut state = seed | 1;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+    };
+    let mut out = Vec::new();
+    for_each_tensor::<SchemaError>(cfg, &mut |spec: &TensorSpec| {
+        let n: usize = spec.dims().iter().map(|&d| d as usize).product();
+        out.push(Tensor {
+            name: spec.name.as_str().to_string(),
+            shape: spec.dims().to_vec(),
+            values: (0..n).map(|_| next()).collect(),
+            store_as,
+        });
+        Ok(())
+    })
+    .expect("schema names fit");
+    out
+}
+
+/// A valid file from the writer (built once, cloned per test case).
+fn valid_bytes() -> Vec<u8> {
+    static VALID: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    VALID
+        .get_or_init(|| {
+            let cfg = tiny_config();
+            write_duo(&cfg, &seeded_tensors(&cfg, 7, StoreAs::F32)).expect("the writer accepts a schema-complete model")
+        })
+        .clone()
+}
+
+/// A valid file taken apart: header (config + entries) and data section.
+struct Parts {
+    header: Header,
+    data: Vec<u8>,
+}
+
+fn take_apart(bytes: &[u8]) -> Parts {
+    let aligned = AlignedBytes::copy_from(bytes);
+    let duo = DuoFile::parse(aligned.as_bytes()).expect("valid input");
+    let tensors = duo
+        .tensors()
+        .map(|e| HeaderEntry {
+            name: e.name.to_string(),
+            dtype: e.dtype as u8,
+            shape: e.dims().to_vec(),
+            offset: e.offset,
+            nbytes: e.nbytes,
+        })
+        .collect();
+    let data = bytes[duo.prefix().data_start as usize..].to_vec();
+    Parts { header: Header { config: *duo.config(), tensors }, data }
+}
+
+fn valid_parts() -> Parts {
+    take_apart(&valid_bytes())
+}
+
+fn rebuild(p: &Parts) -> Vec<u8> {
+    assemble(&p.header, &p.data).expect("encodes")
+}
+
+/// Lays payloads out again in table order (64-aligned), fixing offsets
+/// and byte lengths, for mutations that change a payload's size.
+fn relayout(header: &mut Header, payloads: &[Vec<u8>]) -> Vec<u8> {
+    let mut data = Vec::new();
+    for (e, p) in header.tensors.iter_mut().zip(payloads) {
+        e.offset = data.len() as u64;
+        e.nbytes = p.len() as u64;
+        data.extend_from_slice(p);
+        data.resize(data.len().next_multiple_of(64), 0);
+    }
+    data
+}
+
+fn payloads(p: &Parts) -> Vec<Vec<u8>> {
+    p.header
+        .tensors
+        .iter()
+        .map(|e| p.data[e.offset as usize..(e.offset + e.nbytes) as usize].to_vec())
+        .collect()
+}
+
+/// Parses from a 64-byte aligned copy.
+fn parse(bytes: &[u8]) -> Result<(), FormatError> {
+    let aligned = AlignedBytes::copy_from(bytes);
+    DuoFile::parse(aligned.as_bytes()).map(|_| ())
+}
+
+fn index_of(p: &Parts, pred: impl Fn(&HeaderEntry) -> bool) -> usize {
+    p.header.tensors.iter().position(pred).expect("such a tensor exists in the tiny model")
+}
+
+fn set_u32(bytes: &mut [u8], at: usize, v: u32) {
+    bytes[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+
+fn set_u64(bytes: &mut [u8], at: usize, v: u64) {
+    bytes[at..at + 8].copy_from_slice(&v.to_le_bytes());
+}
+
+// ------------------------------------------------------- the valid baseline
+
+#[test]
+fn valid_file_parses_and_round_trips_values() {
+    let cfg = tiny_config();
+    let tensors = seeded_tensors(&cfg, 7, StoreAs::F32);
+    let bytes = write_duo(&cfg, &tensors).unwrap();
+    let aligned = AlignedBytes::copy_from(&bytes);
+    let duo = DuoFile::parse(aligned.as_bytes()).unwrap();
+    assert_eq!(*duo.config(), cfg);
+    assert_eq!(duo.len(), tensor_count(&cfg));
+    assert_eq!(duo.tensors().count(), tensors.len());
+    for t in &tensors {
+        let view = duo.tensor(&t.name).unwrap();
+        assert_eq!(view.dims(), &t.shape[..], "{}", t.name);
+        assert_eq!(view.data.as_ptr() as usize % 64, 0, "{} payload aligned in memory", t.name);
+        assert_eq!(view.as_f32().unwrap(), &t.values[..], "{}", t.name);
+    }
+    assert_eq!(duo.tensor("gpt.no_such_tensor").unwrap_err(), FormatError::NotFound);
+    assert_eq!(duo.first_non_finite(), None);
+}
+
+#[test]
+fn valid_f16_file_parses_with_rounded_values() {
+    let cfg = tiny_config();
+    let tensors = seeded_tensors(&cfg, 11, StoreAs::F16);
+    let bytes = write_duo(&cfg, &tensors).unwrap();
+    let aligned = AlignedBytes::copy_from(&bytes);
+    let duo = DuoFile::parse(aligned.as_bytes()).unwrap();
+    let t = &tensors[0];
+    let view = duo.tensor(&t.name).unwrap();
+    assert_eq!(view.dtype, DType::F16);
+    let got: Vec<f32> = view.data.chunks_exact(2).map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32()).collect();
+    let want: Vec<f32> = t.values.iter().map(|&v| half::f16::from_f32(v).to_f32()).collect();
+    assert_eq!(got, want);
+}
+
+#[test]
+fn committed_fixture_models_open_mapped() {
+    for m in ["tiny", "tiny2"] {
+        let path = duolando_tests::fixture(&format!("{m}/model.duo"));
+        let mf = ModelFile::open(&path).unwrap_or_else(|e| panic!("{e}"));
+        assert!(mf.is_mapped());
+        let duo = mf.duo().unwrap();
+        assert_eq!(duo.len(), tensor_count(duo.config()));
+    }
+}
+
+#[test]
+fn first_non_finite_finds_a_nan_weight() {
+    let mut p = valid_parts();
+    let i = 3;
+    let at = p.header.tensors[i].offset as usize + 4;
+    p.data[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    let bytes = rebuild(&p);
+    let aligned = AlignedBytes::copy_from(&bytes);
+    let duo = DuoFile::parse(aligned.as_bytes()).expect("f32 weights are not scanned by parse");
+    assert_eq!(duo.first_non_finite(), Some((i as u32, 1)));
+}
+
+// ------------------------------------------------ one test per rejection
+
+#[test]
+fn rejects_misaligned_buffer() {
+    let bytes = valid_bytes();
+    let mut shifted = vec![0u8];
+    shifted.extend_from_slice(&bytes);
+    let aligned = AlignedBytes::copy_from(&shifted);
+    let err = DuoFile::parse(&aligned.as_bytes()[1..]).unwrap_err();
+    assert_eq!(err, FormatError::MisalignedBuffer { addr_mod_64: 1 });
+}
+
+#[test]
+fn rejects_buffer_shorter_than_prefix() {
+    let bytes = valid_bytes();
+    assert_eq!(parse(&bytes[..23]), Err(FormatError::TooShort { len: 23 }));
+    assert_eq!(parse(&[]), Err(FormatError::TooShort { len: 0 }));
+}
+
+#[test]
+fn rejects_bad_magic() {
+    let mut bytes = valid_bytes();
+    bytes[1] = b'X';
+    assert!(matches!(parse(&bytes), Err(FormatError::BadMagic { found }) if found[1] == b'X'));
+}
+
+#[test]
+fn rejects_future_version() {
+    let mut bytes = valid_bytes();
+    set_u32(&mut bytes, 8, 2);
+    assert_eq!(parse(&bytes), Err(FormatError::UnsupportedVersion { found: 2, supported: 1 }));
+}
+
+#[test]
+fn rejects_unknown_flags() {
+    let mut bytes = valid_bytes();
+    set_u32(&mut bytes, 12, 0x10);
+    assert_eq!(parse(&bytes), Err(FormatError::UnknownFlags { flags: 0x10 }));
+}
+
+#[test]
+fn rejects_header_length_over_cap() {
+    let mut bytes = valid_bytes();
+    set_u64(&mut bytes, 16, MAX_HEADER_LEN + 1);
+    assert_eq!(parse(&bytes), Err(FormatError::HeaderTooLarge { header_len: MAX_HEADER_LEN + 1, max: MAX_HEADER_LEN }));
+    set_u64(&mut bytes, 16, u64::MAX);
+    assert!(matches!(parse(&bytes), Err(FormatError::HeaderTooLarge { .. })));
+}
+
+#[test]
+fn rejects_header_length_past_end() {
+    let mut bytes = valid_bytes();
+    let len = bytes.len() as u64;
+    set_u64(&mut bytes, 16, len);
+    assert!(matches!(parse(&bytes), Err(FormatError::HeaderPastEnd { file_len, .. }) if file_len == len));
+}
+
+#[test]
+fn rejects_non_zero_padding() {
+    let bytes = valid_bytes();
+    let header_end = 24 + u64::from_le_bytes(bytes[16..24].try_into().unwrap()) as usize;
+    let data_start = header_end.next_multiple_of(64);
+    assert!(data_start > header_end, "the tiny model's header leaves padding");
+    let mut bad = bytes.clone();
+    bad[data_start - 1] = 1;
+    assert_eq!(parse(&bad), Err(FormatError::NonZeroPadding { offset: data_start as u64 - 1 }));
+}
+
+#[test]
+fn rejects_truncated_config() {
+    let p = valid_parts();
+    let header = postcard::to_stdvec(&p.header).unwrap();
+    let bytes = assemble_raw(&header[..5], &[]).unwrap();
+    assert_eq!(parse(&bytes), Err(FormatError::MalformedHeader { field: HeaderField::Config, offset: 0 }));
+}
+
+#[test]
+fn rejects_config_over_the_caps() {
+    // An n_embd that would make the arena enormous.
+    let mut p = valid_parts();
+    p.header.config.gpt.n_embd = 1 << 20;
+    assert!(matches!(
+        parse(&rebuild(&p)),
+        Err(FormatError::InvalidConfig(ConfigError::TooLarge { field: ConfigField::NEmbd, value, .. })) if value == 1 << 20
+    ));
+    // A layer count over the cap.
+    let mut p = valid_parts();
+    p.header.config.gpt.n_layer_base = 100_000;
+    assert!(matches!(
+        parse(&rebuild(&p)),
+        Err(FormatError::InvalidConfig(ConfigError::TooLarge { field: ConfigField::NLayerBase, .. }))
+    ));
+}
+
+#[test]
+fn rejects_inconsistent_config() {
+    let mut p = valid_parts();
+    p.header.config.gpt.n_head = 3; // 8 % 3 != 0
+    assert!(matches!(
+        parse(&rebuild(&p)),
+        Err(FormatError::InvalidConfig(ConfigError::NotDivisible { field: ConfigField::NEmbd, .. }))
+    ));
+}
+
+#[test]
+fn rejects_tensor_count_over_cap() {
+    let p = valid_parts();
+    let header = postcard::to_stdvec(&(p.header.config, MAX_TENSORS as u64 + 1)).unwrap();
+    let bytes = assemble_raw(&header, &[]).unwrap();
+    assert_eq!(parse(&bytes), Err(FormatError::TooManyTensors { count: MAX_TENSORS as u64 + 1, max: MAX_TENSORS }));
+}
+
+#[test]
+fn rejects_table_running_past_header() {
+    let p = valid_parts();
+    let header = postcard::to_stdvec(&p.header).unwrap();
+    let cut = header.len() - 3; // inside the last entry's varints
+    let bytes = assemble_raw(&header[..cut], &p.data).unwrap();
+    assert!(matches!(parse(&bytes), Err(FormatError::MalformedHeader { field: HeaderField::Offset | HeaderField::ByteLen, .. })));
+}
+
+#[test]
+fn rejects_invalid_utf8_name() {
+    let p = valid_parts();
+    let mut header = postcard::to_stdvec(&p.header).unwrap();
+    let first = p.header.tensors[0].name.as_bytes();
+    let at = header.windows(first.len()).position(|w| w == first).unwrap();
+    header[at] = 0xFF;
+    let bytes = assemble_raw(&header, &p.data).unwrap();
+    assert!(matches!(parse(&bytes), Err(FormatError::MalformedHeader { field: HeaderField::Name, .. })));
+}
+
+#[test]
+fn rejects_trailing_header_bytes() {
+    let p = valid_parts();
+    let mut header = postcard::to_stdvec(&p.header).unwrap();
+    header.push(0);
+    let bytes = assemble_raw(&header, &p.data).unwrap();
+    assert_eq!(parse(&bytes), Err(FormatError::TrailingHeaderBytes { count: 1 }));
+}
+
+#[test]
+fn rejects_empty_name() {
+    let mut p = valid_parts();
+    p.header.tensors[0].name.clear();
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::EmptyName { index: 0 }));
+}
+
+#[test]
+fn rejects_name_over_cap() {
+    let mut p = valid_parts();
+    p.header.tensors[0].name = "a".repeat(MAX_NAME_LEN + 1);
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::NameTooLong { index: 0, len: MAX_NAME_LEN + 1, max: MAX_NAME_LEN })
+    );
+}
+
+#[test]
+fn rejects_unsorted_table() {
+    let mut p = valid_parts();
+    let (a, b) = (p.header.tensors[0].name.clone(), p.header.tensors[1].name.clone());
+    p.header.tensors[0].name = b;
+    p.header.tensors[1].name = a;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::UnsortedTable { index: 1 }));
+}
+
+#[test]
+fn rejects_duplicate_tensor() {
+    let mut p = valid_parts();
+    p.header.tensors[1].name = p.header.tensors[0].name.clone();
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::DuplicateTensor { index: 1, previous: 0 }));
+}
+
+#[test]
+fn rejects_unknown_dtype_code() {
+    let mut p = valid_parts();
+    p.header.tensors[2].dtype = 7;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::UnknownDtype { index: 2, code: 7 }));
+}
+
+#[test]
+fn rejects_rank_zero_and_rank_over_cap() {
+    let mut p = valid_parts();
+    p.header.tensors[2].shape = vec![];
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::BadRank { index: 2, rank: 0 }));
+    p.header.tensors[2].shape = vec![1; 5];
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::BadRank { index: 2, rank: 5 }));
+}
+
+#[test]
+fn rejects_zero_and_oversized_dims() {
+    let mut p = valid_parts();
+    p.header.tensors[2].shape = vec![4, 0];
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::DimOutOfRange { index: 2, axis: 1, dim: 0 }));
+    p.header.tensors[2].shape = vec![MAX_DIM + 1];
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::DimOutOfRange { index: 2, axis: 0, dim: MAX_DIM + 1 }));
+}
+
+#[test]
+fn rejects_dims_whose_product_overflows() {
+    let mut p = valid_parts();
+    p.header.tensors[2].shape = vec![MAX_DIM; 4]; // 2^96 elements
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::SizeOverflow { index: 2 }));
+}
+
+#[test]
+fn rejects_byte_length_not_matching_dtype_and_shape() {
+    let mut p = valid_parts();
+    let e = &mut p.header.tensors[2];
+    let expected = e.nbytes;
+    e.nbytes += 4;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::ByteLenMismatch { index: 2, expected, found: expected + 4 }));
+}
+
+#[test]
+fn rejects_unaligned_offset() {
+    let mut p = valid_parts();
+    let last = p.header.tensors.len() - 1;
+    p.header.tensors[last].offset += 4;
+    let offset = p.header.tensors[last].offset;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::UnalignedOffset { index: last as u32, offset }));
+}
+
+#[test]
+fn rejects_overlapping_tensors() {
+    let mut p = valid_parts();
+    p.header.tensors[1].offset = p.header.tensors[0].offset;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::Overlap { index: 1, previous: 0 }));
+}
+
+#[test]
+fn rejects_out_of_range_offset() {
+    let mut p = valid_parts();
+    let last = p.header.tensors.len() - 1;
+    let data_len = p.data.len() as u64;
+    p.header.tensors[last].offset = data_len + 64;
+    let end = data_len + 64 + p.header.tensors[last].nbytes;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::DataOutOfRange { index: last as u32, end, data_len }));
+}
+
+#[test]
+fn rejects_offset_plus_length_overflow() {
+    let mut p = valid_parts();
+    let last = p.header.tensors.len() - 1;
+    p.header.tensors[last].offset = u64::MAX & !63;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::SizeOverflow { index: last as u32 }));
+}
+
+#[test]
+fn rejects_truncated_data() {
+    let bytes = valid_bytes();
+    let p = take_apart(&bytes);
+    let last = p.header.tensors.len() as u32 - 1;
+    let cut = &bytes[..bytes.len() - 100];
+    assert!(matches!(parse(cut), Err(FormatError::DataOutOfRange { index, .. }) if index == last));
+}
+
+#[test]
+fn rejects_trailing_data() {
+    let mut bytes = valid_bytes();
+    let data_len_before = take_apart(&bytes).data.len() as u64;
+    bytes.extend_from_slice(&[0u8; 64]);
+    assert_eq!(
+        parse(&bytes),
+        Err(FormatError::TrailingData { expected_len: data_len_before, data_len: data_len_before + 64 })
+    );
+}
+
+#[test]
+fn rejects_missing_tensor() {
+    let mut p = valid_parts();
+    let removed = p.header.tensors.remove(0);
+    let err = parse(&rebuild(&p)).unwrap_err();
+    let FormatError::MissingTensor { schema_index } = err else { panic!("expected MissingTensor, got {err:?}") };
+    let spec = schema_tensor(&p.header.config, schema_index).unwrap();
+    assert_eq!(spec.name.as_str(), removed.name);
+}
+
+#[test]
+fn rejects_unknown_tensor() {
+    let mut p = valid_parts();
+    let offset = p.data.len() as u64;
+    p.data.extend_from_slice(&[0u8; 64]);
+    p.header.tensors.push(HeaderEntry { name: "zzz.extra".into(), dtype: 0, shape: vec![4], offset, nbytes: 16 });
+    let index = p.header.tensors.len() as u32 - 1;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::UnknownTensor { index }));
+}
+
+#[test]
+fn rejects_shape_not_matching_the_config() {
+    let mut p = valid_parts();
+    let i = index_of(&p, |e| e.shape.len() == 2 && e.shape[0] != e.shape[1]);
+    let found = vec![p.header.tensors[i].shape[1], p.header.tensors[i].shape[0]];
+    let expected = p.header.tensors[i].shape.clone();
+    p.header.tensors[i].shape = found.clone(); // same element count, transposed
+    let shape = |d: &[u32]| {
+        let mut dims = [1u32; 4];
+        dims[..d.len()].copy_from_slice(d);
+        Shape { rank: d.len() as u8, dims }
+    };
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::ShapeMismatch { index: i as u32, expected: shape(&expected), found: shape(&found) })
+    );
+}
+
+/// A model with one tensor re-encoded as Q8Block32 (last dim 32): the
+/// `mlp.2` weight `(n_embd, 4*n_embd)` = (8, 32), 8 blocks.
+fn with_q8_tensor(scale: half::f16) -> (Vec<u8>, u32) {
+    let mut p = valid_parts();
+    let mut pay = payloads(&p);
+    let i = index_of(&p, |e| e.shape == [8, 32]);
+    let mut q = Vec::new();
+    for block in 0..8u8 {
+        q.extend_from_slice(&scale.to_le_bytes());
+        q.extend((0..32u8).map(|v| v.wrapping_mul(block)));
+    }
+    pay[i] = q;
+    p.header.tensors[i].dtype = DType::Q8Block32 as u8;
+    let data = relayout(&mut p.header, &pay);
+    (assemble(&p.header, &data).unwrap(), i as u32)
+}
+
+#[test]
+fn accepts_q8_tensor_with_finite_scales() {
+    let (bytes, i) = with_q8_tensor(half::f16::from_f32(0.01));
+    let aligned = AlignedBytes::copy_from(&bytes);
+    let duo = DuoFile::parse(aligned.as_bytes()).unwrap();
+    let e = duo.tensors().nth(i as usize).unwrap();
+    assert_eq!((e.dtype, e.nbytes), (DType::Q8Block32, 8 * 34));
+}
+
+#[test]
+fn rejects_nan_or_infinite_quantization_scale() {
+    for scale in [half::f16::NAN, half::f16::INFINITY, half::f16::NEG_INFINITY] {
+        let (bytes, i) = with_q8_tensor(scale);
+        assert_eq!(parse(&bytes), Err(FormatError::NonFiniteScale { index: i, block: 0 }));
+    }
+}
+
+#[test]
+fn rejects_q8_shape_not_in_whole_blocks() {
+    let mut p = valid_parts();
+    let i = index_of(&p, |e| e.shape == [8, 8]);
+    p.header.tensors[i].dtype = DType::Q8Block32 as u8;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::SizeOverflow { index: i as u32 }));
+}
+
+// ------------------------------------------------------ std-side messages
+
+#[test]
+fn std_message_names_file_tensor_and_shapes() {
+    let mut p = valid_parts();
+    let i = index_of(&p, |e| e.shape.len() == 2 && e.shape[0] != e.shape[1]);
+    let name = p.header.tensors[i].name.clone();
+    let s = p.header.tensors[i].shape.clone();
+    p.header.tensors[i].shape = vec![s[1], s[0]];
+    let err = ModelFile::from_bytes(rebuild(&p)).err().expect("rejected");
+    assert!(matches!(err, ModelFileError::Format { error: FormatError::ShapeMismatch { .. }, .. }));
+    let msg = err.to_string();
+    assert!(msg.contains("<memory>"), "{msg}");
+    assert!(msg.contains(&name), "{msg}");
+    assert!(msg.contains(&format!("[{}, {}]", s[1], s[0])) && msg.contains(&format!("[{}, {}]", s[0], s[1])), "{msg}");
+}
+
+#[test]
+fn std_message_names_missing_tensor() {
+    let mut p = valid_parts();
+    let removed = p.header.tensors.remove(0);
+    let msg = ModelFile::from_bytes(rebuild(&p)).err().expect("rejected").to_string();
+    assert!(msg.contains(&removed.name), "{msg}");
+}
+
+#[test]
+fn open_names_the_path_of_a_corrupt_file() {
+    let mut bytes = valid_bytes();
+    bytes[0] = 0;
+    let path = std::env::temp_dir().join(format!("duolando-corrupt-{}.duo", std::process::id()));
+    std::fs::write(&path, &bytes).unwrap();
+    let msg = ModelFile::open(&path).err().expect("rejected").to_string();
+    std::fs::remove_file(&path).ok();
+    assert!(msg.contains(&path.display().to_string()) && msg.contains("magic"), "{msg}");
+}
+
+// --------------------------------------------------------- never panics
+
+/// One random edit of a valid file.
+#[derive(Clone, Debug)]
+enum Mutation {
+    /// XOR `mask` into the byte at `pos` (mod length).
+    Flip { pos: usize, mask: u8 },
+    /// Keep only the first `len` bytes (mod length).
+    Truncate { len: usize },
+    /// Overwrite 8 bytes at `pos` with a little-endian u64 (a length/offset).
+    Word { pos: usize, value: u64 },
+}
+
+fn mutation() -> impl Strategy<Value = Mutation> {
+    prop_oneof![
+        4 => (any::<usize>(), 1u8..=255).prop_map(|(pos, mask)| Mutation::Flip { pos, mask }),
+        1 => any::<usize>().prop_map(|len| Mutation::Truncate { len }),
+        2 => (any::<usize>(), any::<u64>()).prop_map(|(pos, value)| Mutation::Word { pos, value }),
+    ]
+}
+
+fn apply(bytes: &mut Vec<u8>, m: &Mutation, header_end: usize) {
+    // Bias positions towards the prefix and header, where the structure is.
+    let n = bytes.len();
+    let pick = |pos: usize| if pos % 4 == 0 { pos % n } else { pos % header_end.clamp(1, n) };
+    match *m {
+        Mutation::Flip { pos, mask } => {
+            let at = pick(pos);
+            bytes[at] ^= mask;
+        }
+        Mutation::Truncate { len } => bytes.truncate(len % (n + 1)),
+        Mutation::Word { pos, value } => {
+            let at = pick(pos).min(n.saturating_sub(8));
+            let end = (at + 8).min(n);
+            bytes[at..end].copy_from_slice(&value.to_le_bytes()[..end - at]);
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+
+    #[test]
+    fn mutated_files_never_panic(muts in proptest::collection::vec(mutation(), 1..6)) {
+        let valid = valid_bytes();
+        let header_end = 24 + u64::from_le_bytes(valid[16..24].try_into().unwrap()) as usize;
+        let mut bytes = valid.clone();
+        for m in &muts {
+            if bytes.is_empty() { break; }
+            apply(&mut bytes, m, header_end);
+        }
+        let aligned = AlignedBytes::copy_from(&bytes);
+        if let Ok(duo) = DuoFile::parse(aligned.as_bytes()) {
+            // Whatever passed must be fully usable.
+            for e in duo.tensors() {
+                let t = duo.tensor(e.name).unwrap();
+                prop_assert_eq!(t.data.len() as u64, e.nbytes);
+            }
+        }
+        // The std side must not panic either (message building included).
+        let _ = ModelFile::from_bytes(bytes).map_err(|e| e.to_string());
+    }
+
+    #[test]
+    fn random_bytes_after_a_valid_prefix_never_panic(tail in proptest::collection::vec(any::<u8>(), 0..2048)) {
+        let valid = valid_bytes();
+        let mut bytes = valid[..24].to_vec();
+        bytes.extend_from_slice(&tail);
+        let _ = parse(&bytes);
+        let _ = ModelFile::from_bytes(bytes).map_err(|e| e.to_string());
+    }
+}
