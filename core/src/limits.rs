@@ -14,9 +14,9 @@ pub const MAX_EMBD: u32 = 4096;
 /// Most attention heads.
 pub const MAX_HEADS: u32 = 64;
 /// Most blocks in the GPT base or head stack.
-pub const MAX_GPT_LAYERS: u32 = 32;
+pub const MAX_GPT_LAYERS: u32 = 24;
 /// Most blocks in one LAT.
-pub const MAX_LAT_LAYERS: u32 = 16;
+pub const MAX_LAT_LAYERS: u32 = 8;
 /// Largest `block_size` (tokens per stream in the window).
 pub const MAX_BLOCK_SIZE: u32 = 256;
 /// Largest look-ahead in tokens.

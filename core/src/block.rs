@@ -1,0 +1,113 @@
+//! The pre-LN transformer block shared by the LATs (`MusicBlock`, band
+//! mask) and the coordinated attention (`Block`, tiled causal mask):
+//! `x += proj(attn(ln1 x)); x += mlp.2(gelu(mlp.0(ln2 x)))`.
+
+use crate::arena::{ArenaError, Carve};
+use crate::kernels::{attention, gelu_inplace, layernorm, linear, Mask};
+use crate::model::{BlockW, Linear};
+
+/// Working memory of one block over at most `rows` rows of width `c`.
+pub struct BlockScratch<'s> {
+    /// (rows, C) LayerNorm output, then projection output.
+    pub ln: &'s mut [f32],
+    /// (rows, C) each.
+    pub q: &'s mut [f32],
+    pub k: &'s mut [f32],
+    pub v: &'s mut [f32],
+    /// (rows, C) attention output, then MLP output.
+    pub att: &'s mut [f32],
+    /// (rows, 4C) MLP hidden.
+    pub hid: &'s mut [f32],
+    /// (rows) attention scores of one query.
+    pub scores: &'s mut [f32],
+    pub rows: usize,
+}
+
+impl<'s> BlockScratch<'s> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, c: usize) -> Result<Self, ArenaError> {
+        let rc = rows.checked_mul(c).ok_or(ArenaError::Overflow)?;
+        Ok(BlockScratch {
+            ln: a.f32(rc)?,
+            q: a.f32(rc)?,
+            k: a.f32(rc)?,
+            v: a.f32(rc)?,
+            att: a.f32(rc)?,
+            hid: a.f32(rc.checked_mul(4).ok_or(ArenaError::Overflow)?)?,
+            scores: a.f32(rows)?,
+            rows,
+        })
+    }
+}
+
+fn lin(x: &[f32], l: &Linear<'_>, y: &mut [f32]) {
+    linear(x, &l.w, l.b, y);
+}
+
+fn add(x: &mut [f32], y: &[f32]) {
+    for (a, b) in x.iter_mut().zip(y) {
+        *a += b;
+    }
+}
+
+/// One block over all rows of `x` (n, C) in place; `n <= s.rows` (callers
+/// size the scratch). `mask` relates query row i to key row j of `x`.
+pub fn block_forward<M: Mask>(w: &BlockW<'_>, x: &mut [f32], c: usize, n_head: usize, mask: &M, s: &mut BlockScratch<'_>) {
+    let nc = x.len();
+    let n = nc / c;
+    let (ln, q, k, v, att) = (&mut s.ln[..nc], &mut s.q[..nc], &mut s.k[..nc], &mut s.v[..nc], &mut s.att[..nc]);
+    layernorm(x, w.ln1.w, w.ln1.b, ln);
+    lin(ln, &w.query, q);
+    lin(ln, &w.key, k);
+    lin(ln, &w.value, v);
+    attention(q, k, v, c, n_head, mask, &mut s.scores[..n], att);
+    lin(att, &w.proj, ln);
+    add(x, ln);
+    mlp(w, x, ln, &mut s.hid[..4 * nc], att);
+}
+
+/// `x += mlp.2(gelu(mlp.0(ln2 x)))` with `ln`, `out`: like `x`; `hid`: 4x.
+fn mlp(w: &BlockW<'_>, x: &mut [f32], ln: &mut [f32], hid: &mut [f32], out: &mut [f32]) {
+    layernorm(x, w.ln2.w, w.ln2.b, ln);
+    lin(ln, &w.fc, hid);
+    gelu_inplace(hid);
+    lin(hid, &w.fc_out, out);
+    add(x, out);
+}
+
+/// The block's output for selected query rows only (keys and values from
+/// every row of `x` (n, C)): `out` (rows.len(), C). `mask` relates query
+/// `i` (index into `rows`) to key row `j` of `x`. Used for the last GPT
+/// layer, where only the last position of each follower stream is read.
+pub fn block_forward_rows<M: Mask>(
+    w: &BlockW<'_>,
+    x: &[f32],
+    rows: &[usize],
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    s: &mut BlockScratch<'_>,
+    out: &mut [f32],
+) {
+    let nc = x.len();
+    let n = nc / c;
+    let r = rows.len();
+    let rc = r * c;
+    let (ln, q, k, v, att) = (&mut s.ln[..nc], &mut s.q[..rc], &mut s.k[..nc], &mut s.v[..nc], &mut s.att[..nc]);
+    layernorm(x, w.ln1.w, w.ln1.b, ln);
+    lin(ln, &w.key, k);
+    lin(ln, &w.value, v);
+    // Gather the selected rows of ln1(x) and of x.
+    for (i, &row) in rows.iter().enumerate() {
+        let (a, b) = (row * c, (row + 1) * c);
+        att[i * c..(i + 1) * c].copy_from_slice(&ln[a..b]);
+        out[i * c..(i + 1) * c].copy_from_slice(&x[a..b]);
+    }
+    lin(&att[..rc], &w.query, q);
+    let att_sel = &mut att[..rc];
+    attention(q, k, v, c, n_head, mask, &mut s.scores[..n], att_sel);
+    let proj = &mut ln[..rc];
+    lin(att_sel, &w.proj, proj);
+    add(&mut out[..rc], proj);
+    // q is free again: it takes the MLP output.
+    mlp(w, &mut out[..rc], &mut ln[..rc], &mut s.hid[..4 * rc], q);
+}

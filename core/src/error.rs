@@ -1,0 +1,70 @@
+//! The engine's error type: enums with numeric context, no strings.
+
+use crate::arena::ArenaError;
+use crate::model::BindError;
+
+/// A caller buffer or input whose length is wrong.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Buffer {
+    LeaderPos3d,
+    Music,
+    SeedFrames,
+    Tokens,
+    FollowerPos3d,
+    FollowerRotmat,
+    Logits,
+    Features,
+    Codes,
+    Pose,
+    Output,
+    LeaderTokens,
+    FollowerTokens,
+}
+
+/// Everything the inference functions can reject.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Error {
+    /// Scratch memory too small (ask `*_scratch_bytes`).
+    Arena(ArenaError),
+    Bind(BindError),
+    /// `buffer` has `len` elements where `expected` were required.
+    Length { buffer: Buffer, len: usize, expected: usize },
+    /// `buffer` length is not a whole number of rows of `row` elements.
+    Ragged { buffer: Buffer, len: usize, row: usize },
+    /// Too few frames: `frames` given, at least `min` needed.
+    TooShort { buffer: Buffer, frames: usize, min: usize },
+    /// A token outside its vocabulary (`stream` 0..4 = up, down, lhand, rhand, transl).
+    Token { stream: u8, token: u32, vocab: u32 },
+    /// A window context outside `1..=max`.
+    Context { c: usize, max: usize },
+    /// A non-finite input value (NaN or infinity) at flat index `index`.
+    NonFinite { buffer: Buffer, index: usize },
+}
+
+impl From<ArenaError> for Error {
+    fn from(e: ArenaError) -> Self {
+        Error::Arena(e)
+    }
+}
+
+impl From<BindError> for Error {
+    fn from(e: BindError) -> Self {
+        Error::Bind(e)
+    }
+}
+
+/// `Ok` if `len == expected`, else a [`Error::Length`].
+pub fn check_len(buffer: Buffer, len: usize, expected: usize) -> Result<(), Error> {
+    if len != expected {
+        return Err(Error::Length { buffer, len, expected });
+    }
+    Ok(())
+}
+
+/// `Ok` if `len >= expected`, else a [`Error::Length`].
+pub fn check_at_least(buffer: Buffer, len: usize, expected: usize) -> Result<(), Error> {
+    if len < expected {
+        return Err(Error::Length { buffer, len, expected });
+    }
+    Ok(())
+}
