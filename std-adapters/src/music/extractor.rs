@@ -1,0 +1,149 @@
+//! The offline pipeline: samples at 15360 Hz -> (T, 54) features, the
+//! original `signal_to_feature` step by step.
+
+use super::beat::beat_track;
+use super::cqt::{chroma_from_cqt, CqtBank, BINS_PER_OCTAVE};
+use super::hpss::hpss;
+use super::mel::MelBank;
+use super::mfcc::{delta3, power_to_db_in_place, Dct, N_MFCC};
+use super::onset::{onset_strength, ONSET_FMAX, ONSET_MELS};
+use super::stft::{Stft, C32};
+use super::tempo::tempo;
+use super::tuning::estimate_tuning;
+use super::{Features, MusicError, FEATURE_DIM, HOP, MIN_SAMPLES, N_FFT, N_MELS, SAMPLE_RATE};
+
+/// Precomputed plans and banks, reusable across songs (immutable, `Sync`).
+pub struct Extractor {
+    pub(crate) stft: Stft,
+    /// 128 mels up to 7680 Hz (the MFCC spectrogram).
+    pub(crate) mel: MelBank,
+    /// 128 mels up to 11025 Hz (the onset spectrogram, librosa 0.8.1).
+    pub(crate) onset_mel: MelBank,
+    /// 20 x 128 orthonormal DCT-II.
+    pub(crate) dct: Dct,
+}
+
+impl Default for Extractor {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Intermediate results of one run, for tests and diagnostics.
+pub struct Parts {
+    /// (T, 20)
+    pub mfcc: Vec<f32>,
+    /// (T, 20)
+    pub delta: Vec<f32>,
+    /// (T, 12)
+    pub chroma: Vec<f32>,
+    /// (T,)
+    pub onset: Vec<f32>,
+    /// beat frames
+    pub beats: Vec<usize>,
+    pub tempo_bpm: f64,
+    /// estimated tuning in fractions of a 1/36-octave bin
+    pub tuning: f64,
+    /// harmonic and percussive signals (len,)
+    pub harmonic: Vec<f32>,
+    pub percussive: Vec<f32>,
+}
+
+impl Extractor {
+    pub fn new() -> Self {
+        let sr = SAMPLE_RATE as f64;
+        Self {
+            stft: Stft::hann(N_FFT, HOP),
+            mel: MelBank::new(sr, N_FFT, N_MELS, 0.0, sr / 2.0),
+            onset_mel: MelBank::new(sr, N_FFT, ONSET_MELS, 0.0, ONSET_FMAX),
+            dct: Dct::new(N_MELS, N_MFCC),
+        }
+    }
+
+    /// Checks length and finiteness.
+    pub fn validate(y: &[f32]) -> Result<(), MusicError> {
+        if y.len() < MIN_SAMPLES {
+            return Err(MusicError::TooShort { got: y.len(), needed: MIN_SAMPLES });
+        }
+        if let Some((index, &value)) = y.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(MusicError::NonFinite { index, value });
+        }
+        Ok(())
+    }
+
+    /// The 54-d features of `y` (mono, 15360 Hz).
+    pub fn features(&self, y: &[f32]) -> Result<Features, MusicError> {
+        let p = self.parts(y)?;
+        Ok(assemble(&p))
+    }
+
+    /// Every group separately.
+    pub fn parts(&self, y: &[f32]) -> Result<Parts, MusicError> {
+        Self::validate(y)?;
+        let nb = self.stft.n_bins();
+        let mut d: Vec<C32> = Vec::new(); // (T, 1025)
+        self.stft.forward(y, &mut d);
+        let t = d.len() / nb;
+
+        // MFCC of power_to_db(mel, ref=max)
+        let power: Vec<f32> = d.iter().map(|c| c.norm() * c.norm()).collect(); // (T, 1025)
+        let mut mel = vec![0.0f32; t * N_MELS]; // (T, 128)
+        for (p, m) in power.chunks_exact(nb).zip(mel.chunks_exact_mut(N_MELS)) {
+            self.mel.apply(p, m);
+        }
+        let reference = mel.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        power_to_db_in_place(&mut mel, reference);
+        let mut mfcc = vec![0.0f32; t * N_MFCC]; // (T, 20)
+        for (m, o) in mel.chunks_exact(N_MELS).zip(mfcc.chunks_exact_mut(N_MFCC)) {
+            self.dct.apply(m, o);
+        }
+        let mut delta = vec![0.0f32; t * N_MFCC]; // (T, 20)
+        delta3(&mfcc, N_MFCC, &mut delta);
+        drop(power);
+
+        // HPSS
+        let (mut harmonic, mut percussive) = (Vec::new(), Vec::new());
+        hpss(&self.stft, &d, y.len(), &mut harmonic, &mut percussive);
+
+        // chroma_cqt of the harmonic part (tuning estimated on it)
+        self.stft.forward(&harmonic, &mut d);
+        let mag: Vec<f32> = d.iter().map(|c| c.norm()).collect(); // (T, 1025)
+        let tuning = estimate_tuning(&mag, N_FFT, SAMPLE_RATE as f64, BINS_PER_OCTAVE);
+        drop(mag);
+        let bank = CqtBank::new(SAMPLE_RATE as f64, tuning)?;
+        let mut cqt = Vec::new(); // (T, 252)
+        bank.magnitude(&harmonic, HOP, &mut cqt);
+        let mut chroma = Vec::new(); // (T, 12)
+        chroma_from_cqt(&cqt, &mut chroma);
+
+        // onset strength and beats of the percussive part
+        self.stft.forward(&percussive, &mut d);
+        let power: Vec<f32> = d.iter().map(|c| c.norm() * c.norm()).collect();
+        let mut onset = Vec::new(); // (T,)
+        onset_strength(&power, nb, &self.onset_mel, &mut onset);
+        let frame_rate = SAMPLE_RATE as f64 / HOP as f64;
+        let tempo_bpm = if onset.iter().any(|&v| v != 0.0) { tempo(&onset, frame_rate) } else { 0.0 };
+        let beats = beat_track(&onset, frame_rate, tempo_bpm);
+        Ok(Parts { mfcc, delta, chroma, onset, beats, tempo_bpm, tuning, harmonic, percussive })
+    }
+}
+
+/// Concatenates the groups into (T, 54) rows: mfcc 20, delta 20, chroma 12, onset 1, beat 1.
+pub fn assemble(p: &Parts) -> Features {
+    let t = p.onset.len();
+    let mut data = vec![0.0f32; t * FEATURE_DIM];
+    for (i, row) in data.chunks_exact_mut(FEATURE_DIM).enumerate() {
+        row[..20].copy_from_slice(&p.mfcc[i * 20..(i + 1) * 20]);
+        row[20..40].copy_from_slice(&p.delta[i * 20..(i + 1) * 20]);
+        if (i + 1) * 12 <= p.chroma.len() {
+            row[40..52].copy_from_slice(&p.chroma[i * 12..(i + 1) * 12]);
+        }
+        row[52] = p.onset[i];
+    }
+    for &b in &p.beats {
+        if b < t {
+            data[b * FEATURE_DIM + 53] = 1.0;
+        }
+    }
+    Features { frames: t, data, tempo_bpm: p.tempo_bpm }
+}

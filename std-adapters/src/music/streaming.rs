@@ -1,0 +1,2 @@
+//! Streaming music features (being written).
+pub struct Streaming;
