@@ -27,6 +27,9 @@
 //!
 //! See docs/VIEWER.md for the page's controls and its headless-browser test.
 
+// `len % n != 0` rather than `is_multiple_of` (stable since 1.87; MSRV is 1.80).
+#![allow(clippy::manual_is_multiple_of)]
+
 use std::fmt::Write as _;
 use std::io;
 use std::path::{Path, PathBuf};
