@@ -1,0 +1,176 @@
+//! glTF 2.0 binary (.glb) export: each dancer is a skin-less node
+//! hierarchy of the SMPL-X joint tree under a group node named after the
+//! dancer. Joint nodes are named `<dancer>_<joint>` (unique), carry the
+//! rest offsets as translations, and are animated by one animation
+//! ("dance"): a LINEAR rotation channel (quaternion x, y, z, w) per joint
+//! and a translation channel on the pelvis. Metres, y up, 30 fps.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use serde_json::{json, Value};
+
+use super::Motion;
+use crate::skeleton::math::unflatten;
+use crate::skeleton::rotation::quat_from_mat;
+use crate::skeleton::{children, JOINTS, JOINT_NAMES, ROT_DIM};
+
+const GLB_MAGIC: u32 = 0x4654_6C67; // "glTF"
+const CHUNK_JSON: u32 = 0x4E4F_534A; // "JSON"
+const CHUNK_BIN: u32 = 0x004E_4942; // "BIN\0"
+const FLOAT: u32 = 5126;
+
+/// Nodes per dancer: the group node plus 55 joints.
+pub const NODES_PER_DANCER: usize = JOINTS + 1;
+
+/// Per-joint quaternions (x, y, z, w) over the clip, sign-continuous so that
+/// linear/slerp interpolation between frames takes the short way.
+fn quaternions(m: &Motion) -> Vec<[f32; 4]> {
+    let mut q = vec![[0.0f32; 4]; JOINTS * m.frames]; // (55, T, 4), joint-major
+    for j in 0..JOINTS {
+        let mut prev = [0.0f32, 0.0, 0.0, 1.0];
+        for t in 0..m.frames {
+            let r = unflatten(&m.rotmats[t * ROT_DIM + 9 * j..t * ROT_DIM + 9 * j + 9]);
+            let mut cur = quat_from_mat(&r);
+            if cur.iter().zip(prev.iter()).map(|(a, b)| a * b).sum::<f32>() < 0.0 {
+                cur = cur.map(|v| -v);
+            }
+            q[j * m.frames + t] = cur;
+            prev = cur;
+        }
+    }
+    q
+}
+
+fn push_f32s(bin: &mut Vec<u8>, vals: impl IntoIterator<Item = f32>) {
+    for v in vals {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// Builds the .glb bytes for `dancers` (name, motion); all must have the
+/// same number of frames.
+pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
+    let Some((_, first)) = dancers.first() else { bail!("glb export: no dancers given") };
+    let frames = first.frames;
+    if let Some((n, m)) = dancers.iter().find(|(_, m)| m.frames != frames) {
+        bail!("glb export: dancer {n} has {} frames, expected {frames} like the first", m.frames);
+    }
+    if !(fps > 0.0) {
+        bail!("glb export: fps must be positive, got {fps}");
+    }
+    let mut bin = Vec::new();
+    let mut views: Vec<Value> = Vec::new();
+    let mut accessors: Vec<Value> = Vec::new();
+    let mut nodes: Vec<Value> = Vec::new();
+    let mut samplers: Vec<Value> = Vec::new();
+    let mut channels: Vec<Value> = Vec::new();
+
+    // Keyframe times (T,), accessor 0 with the min/max the spec requires.
+    let times: Vec<f32> = (0..frames).map(|t| t as f32 / fps).collect();
+    views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": 4 * frames}));
+    push_f32s(&mut bin, times.iter().copied());
+    accessors.push(json!({"bufferView": 0, "componentType": FLOAT, "count": frames, "type": "SCALAR",
+        "min": [times[0]], "max": [times[frames - 1]]}));
+
+    let mut scene_nodes = Vec::new();
+    for (d, (name, m)) in dancers.iter().enumerate() {
+        let base = d * NODES_PER_DANCER;
+        scene_nodes.push(base);
+        nodes.push(json!({"name": name, "children": [base + 1]}));
+        let quats = quaternions(m);
+        for j in 0..JOINTS {
+            let mut node = json!({"name": format!("{name}_{}", JOINT_NAMES[j])});
+            let kids: Vec<usize> = children(j).map(|c| base + 1 + c).collect();
+            if !kids.is_empty() {
+                node["children"] = json!(kids);
+            }
+            let tr = if j == 0 { [m.roots[0], m.roots[1], m.roots[2]] } else { m.skeleton.offsets[j] };
+            node["translation"] = json!(tr);
+            node["rotation"] = json!(quats[j * frames]);
+            nodes.push(node);
+        }
+        // Root translation (T, 3).
+        let view = views.len();
+        views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": 12 * frames}));
+        push_f32s(&mut bin, m.roots.iter().copied());
+        let acc = accessors.len();
+        accessors.push(json!({"bufferView": view, "componentType": FLOAT, "count": frames, "type": "VEC3"}));
+        samplers.push(json!({"input": 0, "output": acc, "interpolation": "LINEAR"}));
+        channels.push(json!({"sampler": samplers.len() - 1, "target": {"node": base + 1, "path": "translation"}}));
+        // Rotations (55, T, 4) in one view, one accessor per joint.
+        let view = views.len();
+        views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": 16 * frames * JOINTS}));
+        push_f32s(&mut bin, quats.iter().flatten().copied());
+        for j in 0..JOINTS {
+            let acc = accessors.len();
+            accessors.push(json!({"bufferView": view, "byteOffset": 16 * frames * j, "componentType": FLOAT,
+                "count": frames, "type": "VEC4"}));
+            samplers.push(json!({"input": 0, "output": acc, "interpolation": "LINEAR"}));
+            channels.push(json!({"sampler": samplers.len() - 1, "target": {"node": base + 1 + j, "path": "rotation"}}));
+        }
+    }
+    let doc = json!({
+        "asset": {"version": "2.0", "generator": "duolando export::glb"},
+        "scene": 0,
+        "scenes": [{"name": "duet", "nodes": scene_nodes}],
+        "nodes": nodes,
+        "animations": [{"name": "dance", "samplers": samplers, "channels": channels}],
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [{"byteLength": bin.len()}],
+        "extras": {"fps": fps, "units": "metres", "up": "+y", "skeleton": "SMPL-X 55 joints"},
+    });
+    let mut json_bytes = serde_json::to_vec(&doc)?;
+    while json_bytes.len() % 4 != 0 {
+        json_bytes.push(b' ');
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json_bytes.len() + 8 + bin.len();
+    let total32 = u32::try_from(total).context("glb export: file larger than 4 GiB")?;
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(&GLB_MAGIC.to_le_bytes());
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&total32.to_le_bytes());
+    out.extend_from_slice(&(json_bytes.len() as u32).to_le_bytes());
+    out.extend_from_slice(&CHUNK_JSON.to_le_bytes());
+    out.extend_from_slice(&json_bytes);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
+    out.extend_from_slice(&bin);
+    Ok(out)
+}
+
+/// Writes `dancers` to a .glb file.
+pub fn write(path: &Path, dancers: &[(&str, &Motion)], fps: f32) -> Result<()> {
+    let bytes = to_bytes(dancers, fps).with_context(|| format!("cannot export {}", path.display()))?;
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// The two chunks of a .glb file, checked: (JSON document, BIN payload).
+pub fn parse(bytes: &[u8], what: &str) -> Result<(Value, Vec<u8>)> {
+    let word = |o: usize| -> Result<u32> {
+        let b = bytes.get(o..o + 4).with_context(|| format!("{what}: truncated glb at byte {o}"))?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    if word(0)? != GLB_MAGIC || word(4)? != 2 {
+        bail!("{what}: not a glTF 2.0 binary (bad magic or version)");
+    }
+    if word(8)? as usize != bytes.len() {
+        bail!("{what}: header length {} but the file has {} bytes", word(8)?, bytes.len());
+    }
+    let json_len = word(12)? as usize;
+    if word(16)? != CHUNK_JSON || json_len % 4 != 0 {
+        bail!("{what}: first chunk must be JSON with a length multiple of 4");
+    }
+    let json_end = 20usize.checked_add(json_len).filter(|&e| e <= bytes.len()).with_context(|| format!("{what}: JSON chunk overruns the file"))?;
+    let doc: Value = serde_json::from_slice(&bytes[20..json_end]).with_context(|| format!("{what}: JSON chunk is not valid JSON"))?;
+    let bin_len = word(json_end)? as usize;
+    if word(json_end + 4)? != CHUNK_BIN || bin_len % 4 != 0 {
+        bail!("{what}: second chunk must be BIN with a length multiple of 4");
+    }
+    let bin_end = (json_end + 8).checked_add(bin_len).filter(|&e| e == bytes.len()).with_context(|| format!("{what}: BIN chunk length does not match the file"))?;
+    Ok((doc, bytes[json_end + 8..bin_end].to_vec()))
+}
