@@ -203,7 +203,9 @@ fn bad_inputs_are_named_errors() {
 #[test]
 fn write_all_writes_the_export_set() {
     let (l, f) = motions();
-    let dir = std::env::temp_dir().join(format!("duo-export-{}", std::process::id()));
+    // DUO_KEEP_EXPORT=DIR keeps the files (e.g. for gltf-validator).
+    let keep = std::env::var_os("DUO_KEEP_EXPORT").map(std::path::PathBuf::from);
+    let dir = keep.clone().unwrap_or_else(|| std::env::temp_dir().join(format!("duo-export-{}", std::process::id())));
     let files = write_all(&dir, Some(&l), &f).unwrap();
     let names: Vec<String> = files.iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
     for want in ["follower.glb", "leader.bvh", "follower.bvh", "leader_pos3d.npy", "follower_rotmat.npy"] {
@@ -214,5 +216,7 @@ fn write_all_writes_the_export_set() {
     assert_eq!(pos.data, f.positions);
     let rot = duolando::npy::read_f32_2d(&dir.join("leader_rotmat.npy"), Some(ROT_DIM), "rot").unwrap();
     assert_eq!(rot.data, l.rotmats);
-    std::fs::remove_dir_all(&dir).ok();
+    if keep.is_none() {
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }
