@@ -119,3 +119,10 @@ pub fn window_logits(model: &Model<'_>, win: &Window<'_>, s: &mut GptScratch<'_>
     }
     Ok(())
 }
+
+/// [`window_logits`] with byte scratch (>= [`scratch_bytes`]`(cfg, win.c)`).
+pub fn step_logits(model: &Model<'_>, win: &Window<'_>, scratch: &mut [u8], logits: &mut [f32]) -> Result<(), Error> {
+    let mut a = crate::arena::Arena::new(scratch);
+    let mut s = GptScratch::carve(&mut a, &model.cfg, win.c)?;
+    window_logits(model, win, &mut s, logits)
+}

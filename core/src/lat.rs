@@ -9,11 +9,12 @@
 //! The band is relative to the rows given (the original slices its mask
 //! `[:L, :L]`), so a window's LAT output depends on where the window starts.
 
-use crate::arena::{ArenaError, Carve};
+use crate::arena::{Arena, ArenaError, Carve, Planner};
+use crate::config::{ModelConfig, Part};
 use crate::block::{block_forward, BlockScratch};
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::{linear, BandMask, Matrix};
-use crate::model::LatW;
+use crate::model::{LatW, Model};
 
 /// What a LAT reads.
 #[derive(Clone, Copy)]
@@ -105,4 +106,48 @@ pub fn lat_forward(
     // (n, C) viewed as (n/ds, ds*C); only the first n/ds - look_forward rows are kept.
     linear(&x[..rows * ds * c], &w.downsample.w, w.downsample.b, out);
     Ok(rows)
+}
+
+/// Input rows a LAT reads for context `c`: `(c + look_forward) * ds`.
+pub fn input_rows(cfg: &ModelConfig, lat: &crate::config::LatConfig, c: usize) -> Option<usize> {
+    c.checked_add(cfg.gpt.look_forward as usize)?.checked_mul(lat.downsample_rate as usize)
+}
+
+fn carve_standalone<'s, A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, c: usize) -> Result<(LatScratch<'s>, BlockScratch<'s>), ArenaError> {
+    let rows = input_rows(cfg, &cfg.gpt.music, c)
+        .ok_or(ArenaError::Overflow)?
+        .max(input_rows(cfg, &cfg.gpt.leader, c).ok_or(ArenaError::Overflow)?);
+    let e = cfg.gpt.n_embd as usize;
+    Ok((LatScratch::carve(a, rows, e)?, BlockScratch::carve(a, rows, e)?))
+}
+
+/// Scratch bytes of [`music_lat`] / [`leader_lat`] for context `c` (any base address).
+pub fn scratch_bytes(cfg: &ModelConfig, c: usize) -> Option<usize> {
+    let mut p = Planner::new();
+    carve_standalone(&mut p, cfg, c).ok()?;
+    p.total_for_any_base()
+}
+
+/// The music LAT alone: `music` ((c + lf) * ds, n_music) -> `out` (c, C).
+/// Returns c. `scratch` >= [`scratch_bytes`]`(cfg, c)`.
+pub fn music_lat(model: &Model<'_>, music: &[f32], scratch: &mut [u8], out: &mut [f32]) -> Result<usize, Error> {
+    let cfg = &model.cfg;
+    let (e, lf) = (cfg.gpt.n_embd as usize, cfg.gpt.look_forward as usize);
+    let c = out.len() / e.max(1);
+    let mut a = Arena::new(scratch);
+    let (mut s, mut b) = carve_standalone(&mut a, cfg, c)?;
+    lat_forward(&model.gpt.music, e, lf, LatInput::Features(music), &mut s, &mut b, out)
+}
+
+/// A leader LAT alone, including its `tok_emb_<part>` lookup: `tokens`
+/// (c + lf) -> `out` (c, C). Returns c.
+pub fn leader_lat(model: &Model<'_>, part: Part, tokens: &[u32], scratch: &mut [u8], out: &mut [f32]) -> Result<usize, Error> {
+    let cfg = &model.cfg;
+    let (e, lf) = (cfg.gpt.n_embd as usize, cfg.gpt.look_forward as usize);
+    let c = out.len() / e.max(1);
+    let mut a = Arena::new(scratch);
+    let (mut s, mut b) = carve_standalone(&mut a, cfg, c)?;
+    let p = part as usize;
+    let input = LatInput::Tokens { tokens, table: &model.gpt.tok_emb[p], stream: p as u8 };
+    lat_forward(&model.gpt.leaders[p], e, lf, input, &mut s, &mut b, out)
 }

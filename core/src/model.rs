@@ -388,3 +388,13 @@ impl<'a> Model<'a> {
         Model::bind(file.config(), file)
     }
 }
+
+impl<'a> Model<'a> {
+    /// The VQ-VAE of a body part or of the translation.
+    pub fn vq(&self, which: crate::limits::VqWhich) -> &VqW<'a> {
+        match which {
+            crate::limits::VqWhich::Part(p) => &self.parts[p as usize],
+            crate::limits::VqWhich::Transl => &self.transl,
+        }
+    }
+}

@@ -5,7 +5,10 @@
 use crate::conv_stack::{conv, resnet, ConvScratch};
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::conv_transpose1d;
-use crate::model::{DecoderW, VqW};
+use crate::arena::{Arena, Planner};
+use crate::config::ModelConfig;
+use crate::limits::VqWhich;
+use crate::model::{DecoderW, Model, VqW};
 use crate::quantizer::dequantise;
 
 /// Which decoder of a VQ-VAE to run.
@@ -46,4 +49,24 @@ pub fn decode(vq: &VqW<'_>, which: Output, codes: &[u32], stream: u8, s: &mut Co
     }
     conv(&dec.out, &src[..len * dec.out.c_in], out, s.col);
     Ok(())
+}
+
+/// Scratch bytes of [`decode_codes`] for `n_codes` codes (any base address).
+pub fn scratch_bytes(cfg: &ModelConfig, n_codes: usize) -> Option<usize> {
+    let mut p = Planner::new();
+    ConvScratch::carve(&mut p, cfg, n_codes.checked_mul(cfg.hop())?).ok()?;
+    p.total_for_any_base()
+}
+
+/// One VQ-VAE decoder with byte scratch: `codes` (N) -> `out` (N * hop,
+/// channels of `output`).
+pub fn decode_codes(model: &Model<'_>, which: VqWhich, output: Output, codes: &[u32], scratch: &mut [u8], out: &mut [f32]) -> Result<(), Error> {
+    let vq = model.vq(which);
+    let stream = match which {
+        VqWhich::Part(p) => p as u8,
+        VqWhich::Transl => 4,
+    };
+    let mut a = Arena::new(scratch);
+    let mut s = ConvScratch::carve(&mut a, &model.cfg, codes.len().saturating_mul(model.cfg.hop()))?;
+    decode(vq, output, codes, stream, &mut s, out)
 }

@@ -4,7 +4,10 @@
 
 use crate::conv_stack::{conv, resnet, ConvScratch};
 use crate::error::{check_len, Buffer, Error};
-use crate::model::VqW;
+use crate::arena::{Arena, Planner};
+use crate::config::ModelConfig;
+use crate::limits::VqWhich;
+use crate::model::{Model, VqW};
 use crate::quantizer::quantise;
 
 /// Pre-quantisation features of `x` (T, in_channels) into `feat`
@@ -52,4 +55,22 @@ pub fn encode(vq: &VqW<'_>, x: &[f32], s: &mut ConvScratch<'_>, feat: &mut [f32]
     check_len(Buffer::Codes, codes.len(), n)?;
     let emb = vq.cfg.emb_width as usize;
     quantise(&vq.codebook, feat, codes, &mut s.r[..emb], s.kk)
+}
+
+/// Scratch bytes of [`encode_part`] over `frames` frames (any base address).
+pub fn scratch_bytes(cfg: &ModelConfig, frames: usize) -> Option<usize> {
+    let mut p = Planner::new();
+    ConvScratch::carve(&mut p, cfg, frames).ok()?;
+    p.total_for_any_base()
+}
+
+/// One VQ-VAE encoder + quantiser with byte scratch: `x` (T, in_channels)
+/// as given (the pipeline's first-joint zeroing is NOT applied here; see
+/// [`crate::motion::gather_part`]) -> `feat` (T/hop, emb), `codes` (T/hop).
+pub fn encode_part(model: &Model<'_>, which: VqWhich, x: &[f32], scratch: &mut [u8], feat: &mut [f32], codes: &mut [u32]) -> Result<(), Error> {
+    let vq = model.vq(which);
+    let frames = x.len() / (vq.cfg.in_channels as usize).max(1);
+    let mut a = Arena::new(scratch);
+    let mut s = ConvScratch::carve(&mut a, &model.cfg, frames)?;
+    encode(vq, x, &mut s, feat, codes)
 }

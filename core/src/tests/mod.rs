@@ -4,4 +4,6 @@
 
 mod arena;
 mod kernels;
+mod engine;
+mod motion_sampler;
 mod schema_config;
