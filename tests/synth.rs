@@ -6,3 +6,5 @@
 mod skeleton;
 #[path = "synth/plausibility.rs"]
 mod plausibility;
+#[path = "synth/dataset.rs"]
+mod dataset;

@@ -7,8 +7,9 @@
 //! DIR/music/feature/{train,test}/<Genre>_<CC>_<TT>.npy     (T, 54)
 //! DIR/takes.json, DIR/README.md
 //! ```
-//! `_00` is the follower and `_01` the leader, as in DD100. Choreographies
-//! whose index is a multiple of 5 go to `test` (the original split rule).
+//! `_00` is the follower and `_01` the leader, as in DD100. `<CC>` numbers
+//! choreographies across genres; those with `<CC>` a multiple of 5 go to
+//! `test` (the original split rule applied to the name).
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -55,7 +56,9 @@ pub fn plan_takes(minutes: f32, seed: u64) -> Vec<TakeEntry> {
     while total < target {
         choreo += 1;
         let genre = Genre::ALL[(choreo - 1) % Genre::ALL.len()];
-        let index = (choreo - 1) / Genre::ALL.len() + 1;
+        // The choreography number is global (genres rotate), so the original
+        // split rule on the name's second field gives a test set at any size.
+        let index = choreo;
         let seconds = rng.range(20.0, 45.0).min((target - total).max(8.0)).round();
         let choreo_seed = rng.next_u64();
         let takes = if rng.chance(0.5) { 2 } else { 1 };
