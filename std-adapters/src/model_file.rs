@@ -71,7 +71,7 @@ impl ModelFile {
             // SAFETY: read-only map; the file is not modified by us, and the
             // documented contract forbids others from modifying it meanwhile.
             let map = unsafe { memmap2::Mmap::map(&file) }.map_err(io)?;
-            if map.as_ptr() as usize % 64 == 0 {
+            if (map.as_ptr() as usize) & 63 == 0 {
                 Storage::Mapped(map)
             } else {
                 Storage::Owned(AlignedBytes::copy_from(&map))
