@@ -17,8 +17,8 @@ pub enum DType {
     F16 = 1,
     /// int8 weights in blocks of 32 along the last axis, one f16 scale per
     /// block stored before the block's 32 values (34 bytes per block; Q8_0-like).
-    /// Reserved for the quantization issue: the v1 decoder rejects it until a
-    /// kernel exists.
+    /// The v1 decoder validates it (layout, finite scales; docs/FORMAT.md §4);
+    /// the engine refuses it until the quantization issue adds a kernel.
     Q8Block32 = 2,
 }
 
