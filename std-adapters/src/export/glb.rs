@@ -56,7 +56,7 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
     if let Some((n, m)) = dancers.iter().find(|(_, m)| m.frames != frames) {
         bail!("glb export: dancer {n} has {} frames, expected {frames} like the first", m.frames);
     }
-    if !(fps > 0.0) {
+    if fps.is_nan() || fps <= 0.0 {
         bail!("glb export: fps must be positive, got {fps}");
     }
     let mut bin = Vec::new();

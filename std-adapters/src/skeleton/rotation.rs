@@ -32,7 +32,7 @@ pub fn quat_from_mat(m: &Mat3) -> Quat {
 /// The rotation matrix of a quaternion (normalized first).
 pub fn mat_from_quat(q: Quat) -> Mat3 {
     let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    if !(n > 1e-12) {
+    if n.is_nan() || n <= 1e-12 {
         return IDENTITY;
     }
     let [x, y, z, w] = [q[0] / n, q[1] / n, q[2] / n, q[3] / n];
