@@ -1,0 +1,461 @@
+"""S, the streaming semantics of Duolando (docs/STREAMING.md), as a full-sequence reference.
+
+Everything here is computed the obvious way, over whole sequences, with no caches: a leader
+code is the code of an encoder run on a truncated prefix, a LAT output is one row of a
+masked full-sequence LAT, a GPT step is one full window forward, a follower frame is one
+frame of a decoder run on a truncated token prefix. A streaming session (KV caches, LAT
+rings, streaming convolutions) must reproduce these values; docs/STREAMING.md says how.
+`StreamingSession` at the end of this file is such an incremental implementation, in
+Python, used only to prove that the definition can be computed incrementally.
+
+Time base (docs/STREAMING.md §1): frame f at 30 fps; token q covers frames [4q, 4q+4).
+Step k (k = 0, 1, ...) predicts follower token k+1 from follower tokens <= k.
+"""
+import math
+from dataclasses import dataclass, replace
+from typing import Optional
+
+import numpy as np
+import torch
+
+from .pipeline import (MUSIC_MOTION_RATE, N_JOINTS, TRANSL_SCALE, Margins, denormalise_pos3d,
+                       normalise_pos3d, prepare, window_context)
+from .vqvae import PARTS
+
+RATE = MUSIC_MOTION_RATE  # frames per token
+
+
+# ----------------------------------------------------------------------------------------------
+# Configuration
+# ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class StreamConfig:
+    """The latency budget and window policy of S (docs/STREAMING.md §2).
+
+    lookahead       a: leader look-ahead tokens, 0..=look_forward (first LAT layer only).
+    enc_future      e: encoder future context, tokens, 0..=enc_future_max (code q is computed
+                    from leader frames [0, 4(q+1+e))).
+    dec_future      d: decoder future context, tokens, 0..=dec_future_max (frames of token q
+                    are decoded from follower tokens [0, q+d]).
+    shift           s: chunked GPT window (the original sample(shift=s)), 1..=block_size-1.
+    music_lookahead music look-ahead tokens, 0..=look_forward; None = look_forward (music is
+                    known ahead: a track).
+    lat_past        past band of every LAT layer in LAT input units; None = look_forward*ds
+                    (the original band).
+    """
+    lookahead: int
+    enc_future: int
+    dec_future: int
+    shift: int
+    music_lookahead: Optional[int] = None
+    lat_past: Optional[int] = None
+    lat_split: str = "first"   # study only: "first" (S) or "even" (look-ahead split over layers)
+    lat_clip: str = "none"     # study only: "none" (S) or "window" (LAT inputs cut at the window start)
+
+    def futures(self, lat_cfg, a):
+        """Per-layer look-ahead in LAT input units: S puts all of it in the first layer."""
+        ds, n = lat_cfg.downsample_rate, lat_cfg.n_layer
+        if self.lat_split == "first":
+            return [a * ds] + [0] * (n - 1)
+        base = [(a // n + (1 if i < a % n else 0)) * ds for i in range(n)]
+        return base
+
+    def music_a(self, gpt):
+        return gpt.look_forward if self.music_lookahead is None else self.music_lookahead
+
+    def past(self, lat_cfg):
+        return lat_cfg.look_forward * lat_cfg.downsample_rate if self.lat_past is None else self.lat_past * lat_cfg.downsample_rate
+
+    def validate(self, gpt, vqvae, transl_vqvae):
+        lf, m = gpt.look_forward, gpt.block_size - 1
+        emax = max(enc_future_max(vqvae.part(p).hps) for p in PARTS)
+        dmax = max(max(dec_future_max(vqvae.part(p).hps) for p in PARTS), dec_future_max(transl_vqvae.hps))
+        checks = [(0 <= self.lookahead <= lf, f"lookahead {self.lookahead} not in 0..={lf}"),
+                  (0 <= self.enc_future <= emax, f"enc_future {self.enc_future} not in 0..={emax}"),
+                  (0 <= self.dec_future <= dmax, f"dec_future {self.dec_future} not in 0..={dmax}"),
+                  (1 <= self.shift <= m, f"shift {self.shift} not in 1..={m}"),
+                  (0 <= self.music_a(gpt) <= lf, f"music_lookahead {self.music_lookahead} not in 0..={lf}"),
+                  (self.lat_past is None or 0 <= self.lat_past <= lf, f"lat_past {self.lat_past} not in 0..={lf}")]
+        for ok, msg in checks:
+            if not ok:
+                raise ValueError(msg)
+
+
+def default_config(gpt, vqvae, transl_vqvae):
+    """Largest budget (closest to R): a = look_forward, e = e_max, d = d_max; s = 22 for the
+    original block size 30 (scaled for smaller models: s = round(22/29 * (block_size-1)))."""
+    m = gpt.block_size - 1
+    return StreamConfig(lookahead=gpt.look_forward,
+                        enc_future=max(enc_future_max(vqvae.part(p).hps) for p in PARTS),
+                        dec_future=max(max(dec_future_max(vqvae.part(p).hps) for p in PARTS),
+                                       dec_future_max(transl_vqvae.hps)),
+                        shift=max(1, min(m, round(22 * m / 29))))
+
+
+def minimum_config(gpt, shift):
+    """Smallest budget: no leader look-ahead, no encoder or decoder future context."""
+    return StreamConfig(lookahead=0, enc_future=0, dec_future=0, shift=shift)
+
+
+# ----------------------------------------------------------------------------------------------
+# Receptive fields of the conv stacks (interval arithmetic, exact)
+# ----------------------------------------------------------------------------------------------
+
+def _conv_in(lo, hi, k, s, p, d=1):
+    """Input interval read by conv outputs [lo, hi]: out t reads [t*s - p, t*s - p + d*(k-1)]."""
+    return lo * s - p, hi * s - p + d * (k - 1)
+
+
+def _convt_in(lo, hi, k, s, p):
+    """Input interval read by transposed-conv outputs [lo, hi]: input i writes outputs
+    [i*s - p, i*s - p + k - 1]."""
+    return math.ceil((lo + p - (k - 1)) / s), (hi + p) // s
+
+
+def _res_in(lo, hi, dils):
+    for dil in dils:
+        lo, hi = lo - dil, hi + dil  # k3, dilation dil, pad dil (+ identity, + 1x1)
+    return lo, hi
+
+
+def encoder_cone(hps, q):
+    """Frames [lo, hi] that pre-quantisation feature q depends on (original padding)."""
+    s, down = hps.strides_t[0], hps.downs_t[0]
+    dils = [hps.dilation_growth_rate ** i for i in range(hps.depth)]
+    lo, hi = _conv_in(q, q, 3, 1, 1)                  # final Conv1d k3 p1
+    for _ in range(down):
+        lo, hi = _res_in(lo, hi, dils[::-1])          # Resnet1D (order irrelevant for the cone)
+        lo, hi = _conv_in(lo, hi, 2 * s, s, s // 2)   # Conv1d k=2s stride s pad s//2
+    return lo, hi
+
+
+def decoder_cone(hps, f):
+    """Tokens [lo, hi] that decoded frame f depends on."""
+    s, down = hps.strides_t[0], hps.downs_t[0]
+    dils = [hps.dilation_growth_rate ** i for i in range(hps.depth)]
+    lo, hi = _conv_in(f, f, 3, 1, 1)                  # out Conv1d k3 p1
+    for _ in range(down):
+        lo, hi = _convt_in(lo, hi, 2 * s, s, s // 2)  # ConvTranspose1d k=2s stride s pad s//2
+        lo, hi = _res_in(lo, hi, dils)
+    return _conv_in(lo, hi, 3, 1, 1)                  # first Conv1d k3 p1
+
+
+def enc_future_max(hps):
+    """Smallest e such that code q computed from frames [0, 4(q+1+e)) equals the
+    full-sequence code (the whole receptive field is inside the prefix)."""
+    q = 10_000
+    _, hi = encoder_cone(hps, q)
+    return max(0, math.ceil((hi + 1 - RATE * (q + 1)) / RATE))
+
+
+def dec_future_max(hps):
+    """Smallest d such that frames of token q decoded from tokens [0, q+d] equal the
+    full-sequence decode."""
+    q = 10_000
+    return max(max(decoder_cone(hps, RATE * q + r)[1] for r in range(RATE)) - q, 0)
+
+
+# ----------------------------------------------------------------------------------------------
+# Latency and availability (docs/STREAMING.md §4)
+# ----------------------------------------------------------------------------------------------
+
+def n_steps(cfg, gpt, t4):
+    """Steps S runs on T4 frames: step k needs leader code k+a (frames < 4(k+a+1+e)) and music
+    LAT token k (music frames < 4(k+2+a_m)). No end-of-stream handling: a step runs only when
+    every input it needs exists."""
+    q = t4 // RATE
+    return max(0, min(q - cfg.lookahead - cfg.enc_future, q - 1 - cfg.music_a(gpt)))
+
+
+def step_ready_frame(cfg, k):
+    """Index of the leader frame after whose push step k can run (music preloaded)."""
+    return RATE * (k + cfg.lookahead + cfg.enc_future + 1) - 1
+
+
+def frame_ready_frame(cfg, f):
+    """Index of the leader frame after whose push follower frame f is ready: its token's
+    frames need tokens <= f//4 + d (known after step f//4 + d - 1) and the leader root at f."""
+    q = f // RATE
+    return max(f, RATE * (q + cfg.lookahead + cfg.enc_future + cfg.dec_future) - 1)
+
+
+def latency_frames(cfg):
+    """max over f of frame_ready_frame(f) - f = max(0, 4(a+e+d) - 1)."""
+    return max(0, RATE * (cfg.lookahead + cfg.enc_future + cfg.dec_future) - 1)
+
+
+# ----------------------------------------------------------------------------------------------
+# Top-k sampling with an explicit RNG (docs/STREAMING.md §3.6)
+# ----------------------------------------------------------------------------------------------
+
+MASK64 = (1 << 64) - 1
+
+
+class SplitMix64:
+    """splitmix64 (Steele, Lea, Flood 2014): state += 0x9E3779B97F4A7C15; z = state;
+    z = (z ^ z>>30) * 0xBF58476D1CE4E5B9; z = (z ^ z>>27) * 0x94D049BB133111EB; z ^ z>>31.
+    All arithmetic mod 2^64."""
+
+    def __init__(self, seed):
+        self.state = int(seed) & MASK64
+
+    def next_u64(self):
+        self.state = (self.state + 0x9E3779B97F4A7C15) & MASK64
+        z = self.state
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & MASK64
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & MASK64
+        return z ^ (z >> 31)
+
+    def below(self, k):
+        """r in [0, k): r = ((next_u64() >> 32) * k) >> 32 (one draw, no rejection)."""
+        return ((self.next_u64() >> 32) * k) >> 32
+
+
+def topk_set(logits, k):
+    """The k token ids with the largest logits (ties: the lower id ranks first), returned in
+    ASCENDING id order. logits: 1-D tensor."""
+    order = sorted(range(logits.shape[0]), key=lambda i: (-float(logits[i]), i))
+    return sorted(order[:k])
+
+
+def choose(logits, topk, rng):
+    """Greedy (topk None): argmax, lower id on ties, no draw. Top-k: one draw r = rng.below(k),
+    pick the r-th id of the top-k set in ascending id order (uniform over the top-k set, like
+    the original GPT2nt.samplek)."""
+    if topk is None:
+        return int(torch.argmax(logits))
+    return topk_set(logits, topk)[rng.below(topk)]
+
+
+# ----------------------------------------------------------------------------------------------
+# The modules under S
+# ----------------------------------------------------------------------------------------------
+
+def stream_codes(part_vae, x, n_codes, enc_future, margins=None, zero_first_joint=True):
+    """S encoder: code q = nearest code of feature q of the encoder run on x[:, :min(T, 4(q+1+e))]
+    (zero padding at that prefix end, as at a sequence end). x (1, T, C), T % 4 == 0.
+    Returns (1, n_codes) int64."""
+    x = x.clone()
+    if zero_first_joint:
+        x[:, :, :part_vae.hps.joint_channel] = 0
+    t = x.shape[1]
+    block = part_vae.bottleneck.level_blocks[0]
+    codes = []
+    for q in range(n_codes):
+        n = min(t, RATE * (q + 1 + enc_future))
+        feat = part_vae.features(x[:, :n])[:, :, q:q + 1]  # (1, emb, 1)
+        if margins is not None:
+            margins.vq(block, feat)
+        codes.append(block.encode(feat)[0, 0])
+    return torch.stack(codes).view(1, -1)
+
+
+def lat_masks(n, past, futures):
+    """Per-layer (n, n) 0/1 masks of the S LAT: in layer l, query p sees keys p' with
+    max(0, p - past) <= p' <= p + futures[l]. S: futures = (F, 0, ..., 0)."""
+    i = torch.arange(n)[:, None]
+    j = torch.arange(n)[None, :]
+    return [((j >= i - past) & (j <= i + fut)).float() for fut in futures]
+
+
+def run_lat(lat, x, past, first_future, futures=None):
+    """S LAT over a whole input sequence x (1, N*ds, n_in) -> (1, N, E): the original blocks
+    with the S masks, then the ds-frame concat + downsample Linear. Row j is final once input
+    position (j+1)*ds - 1 + sum(futures) exists. futures None = (first_future, 0, ..., 0)."""
+    ds = lat.cfg.downsample_rate
+    n = x.shape[1]
+    if futures is None:
+        futures = [first_future] + [0] * (len(lat.blocks) - 1)
+    h = lat.cond_emb(x)
+    for blk, mask in zip(lat.blocks, lat_masks(n, past, futures)):
+        h = h + blk.attn.attend(blk.ln1(h), mask)
+        h = h + blk.mlp(blk.ln2(h))
+    b, l, c = h.shape
+    return lat.downsample(h.reshape(b, l // ds, c * ds))
+
+
+LEADER_LATS = ("leader_up_trans", "leader_down_trans", "leader_lhand_trans", "leader_rhand_trans")
+LEADER_EMBS = ("tok_emb_up", "tok_emb_down", "tok_emb_lhand", "tok_emb_rhand")
+FOLLOWER_EMBS = ("tok_emb_up", "tok_emb_down", "tok_emb_lhand", "tok_emb_lhand", "tok_emb_transl")  # rhand quirk
+
+
+def conditions(gpt, cfg, cond_music, leader_codes, n_cond, left=0):
+    """The 5 frozen condition streams (music, L_up, L_down, L_lh, L_rh), each (1, n_cond, E)
+    (rows < left are zero: never used). cond_music (1, >= 4(n_cond + a_m), 54) = music from
+    frame 4; leader_codes 4 x (1, >= n_cond + a). LAT inputs before token `left` are cut off
+    (left > 0 only for the lat_clip="window" variant)."""
+    ml = gpt.music_trans
+    a_m = cfg.music_a(gpt)
+    rows = n_cond - left
+    mus = cond_music[:, RATE * left:RATE * (n_cond + a_m)]  # music positions rows need
+    out = [run_lat(ml, mus, cfg.past(ml.cfg), RATE * a_m, cfg.futures(ml.cfg, a_m))[:, :rows]]
+    for lat_name, emb_name, codes in zip(LEADER_LATS, LEADER_EMBS, leader_codes):
+        lat = getattr(gpt, lat_name)
+        toks = codes[:, left:n_cond + cfg.lookahead]
+        out.append(run_lat(lat, getattr(gpt, emb_name)(toks), cfg.past(lat.cfg), cfg.lookahead,
+                           cfg.futures(lat.cfg, cfg.lookahead))[:, :rows])
+    if left:
+        out = [torch.cat([o.new_zeros(1, left, o.shape[2]), o], dim=1) for o in out]
+    return out
+
+
+def window_logits(gpt, conds, hist, lo, hi):
+    """One GPT window over token positions [lo, hi): streams = 5 frozen conditions + 5 follower
+    token embeddings, position rows s*block_size + (j - lo). Logits of the 5 heads at the last
+    position, (5, V)."""
+    streams = [c[:, lo:hi] for c in conds]
+    streams += [getattr(gpt, e)(hist[:, lo:hi, i]) for i, e in enumerate(FOLLOWER_EMBS)]
+    logits = gpt.gpt_head(gpt.gpt_base(streams))
+    return torch.stack([lg[0, -1] for lg in logits])
+
+
+def stream_decode(vqvae, transl_vqvae, tokens, dec_future, n_frames):
+    """S decoders: frames [4q, 4q+4) = those frames of the decoders run on tokens[:q+d+1]
+    (zero padding at that prefix end). tokens (N, 5) -> pos (n_frames, 165) normalised layout,
+    rot (n_frames, 495), transl (n_frames, 3)."""
+    n_tok = tokens.shape[0]
+    pos, rot, tr = [], [], []
+    for q in range(n_frames // RATE):
+        hi = min(n_tok, q + dec_future + 1)
+        zs = tuple(tokens[None, :hi, i] for i in range(4))
+        p, r = vqvae.decode(zs)
+        t = transl_vqvae.decode(tokens[None, :hi, 4])
+        sl = slice(RATE * q, RATE * (q + 1))
+        pos.append(p[0, sl])
+        rot.append(r[0, sl])
+        tr.append(t[0, sl])
+    cat = lambda xs, w: torch.cat(xs) if xs else torch.zeros(0, w)  # noqa: E731
+    return cat(pos, 165), cat(rot, 495), cat(tr, 3)
+
+
+def to_world(pos, transl, l_root):
+    """Follower joints in the leader's input coordinates (same rule as R)."""
+    n = pos.shape[0]
+    pos = pos.clone()
+    pos[:, :3] = (l_root[:n] - l_root[:1]) + transl / TRANSL_SCALE
+    pos = denormalise_pos3d(pos)
+    return pos + l_root[:1].repeat(1, N_JOINTS)
+
+
+# ----------------------------------------------------------------------------------------------
+# The S rollout
+# ----------------------------------------------------------------------------------------------
+
+class DecisionMargins(Margins):
+    """Margins plus the top-k boundary margin (k-th minus (k+1)-th logit, relative)."""
+    topk_rel: float = float("inf")
+
+    def boundary(self, lg, k):
+        top = torch.topk(lg.double(), k + 1).values
+        gap = float(top[k - 1] - top[k]) / float(lg.abs().max())
+        self.topk_rel = min(self.topk_rel, gap)
+        if gap < self.logit_floor:
+            from .pipeline import MarginTooSmall
+            raise MarginTooSmall(f"top-k boundary margin {gap:.3g} < {self.logit_floor}")
+
+
+@torch.no_grad()
+def s_rollout(gpt, cfg, codes, cond_music, hist0, n_k, forced=None, topk=None, rng_seed=0, margins=None):
+    """The GPT part of S on token-level inputs: n_k steps of the chunked window over frozen
+    conditions. codes 4 x (1, >= n_k + a) S leader codes; cond_music (1, >= 4(n_k + a_m), 54)
+    (music from frame 4); hist0 (5,) seed; forced (n >= n_k + 1, 5) or None.
+    Returns (tokens (n_k+1, 5), pred (n_k, 5), context list, window_lo list)."""
+    m = gpt.block_size - 1
+    hist = torch.as_tensor(hist0, dtype=torch.long).view(1, 1, 5)
+    rng = SplitMix64(rng_seed)
+    conds, conds_lo = None, None
+    preds, ctxs, los = [], [], []
+    for k in range(n_k):
+        c = window_context(k, m, cfg.shift)
+        lo = k + 1 - c
+        if conds is None or (cfg.lat_clip == "window" and lo != conds_lo):
+            left = lo if cfg.lat_clip == "window" else 0
+            conds, conds_lo = conditions(gpt, cfg, cond_music, codes, n_k, left), lo
+        lg = window_logits(gpt, conds, hist, lo, k + 1)
+        step = []
+        for h in range(5):
+            if margins is not None:
+                if topk is None:
+                    margins.logits(lg[h])
+                else:
+                    margins.boundary(lg[h], topk)
+            step.append(choose(lg[h], topk, rng))
+        nxt = torch.tensor(step, dtype=torch.long)
+        preds.append(nxt)
+        ctxs.append(c)
+        los.append(lo)
+        app = forced[k + 1] if forced is not None else nxt
+        hist = torch.cat([hist, app.view(1, 1, 5)], dim=1)
+    pred = torch.stack(preds) if preds else torch.zeros(0, 5, dtype=torch.long)
+    return hist[0], pred, ctxs, los
+
+
+@torch.no_grad()
+def generate_streaming(gpt, vqvae, transl_vqvae, leader, music, cfg, seed_tokens=None,
+                       follower_start=None, forced=None, topk=None, rng_seed=0, margins=None):
+    """Full-sequence reference of S.
+
+    leader (T, 165) raw world joints, music (>= T, 54); the seed as in R (exactly one of
+    seed_tokens (5,), follower_start (F, 165)); or forced (n, 5) int: forced-history mode, the
+    follower history at step k is forced[0..=k] (forced[0] is the seed), S's choice at step k
+    is reported in `pred` but never enters the history.
+    topk None = greedy; else uniform over the top-k set with SplitMix64(rng_seed), 5 draws per
+    step in head order (up, down, lhand, rhand, transl).
+
+    Returns dict (torch tensors unless noted):
+      tokens (K_S+1, 5)    history: row 0 seed, row k+1 = token appended by step k
+      pred (K_S, 5)        S's choice at step k (== tokens[k+1] unless forced)
+      leader_tokens (Q, 4) S leader codes for q < K_S + a (-1 beyond: never computed)
+      follower_pos3d (N, 165), follower_rotmat (N, 495), N = 4*(K_S + 1 - d) frames
+      step_ready (K_S,), frame_ready (N,) int64: leader frame indices (see *_ready_frame)
+      context (K_S,), window_lo (K_S,) int64: GPT window per step
+      K (int), T4 (int), latency_frames (int)
+    """
+    cfg.validate(gpt, vqvae, transl_vqvae)
+    if forced is not None:
+        forced = torch.as_tensor(np.asarray(forced), dtype=torch.long)
+        if forced.ndim != 2 or forced.shape[1] != 5 or forced.shape[0] < 1:
+            raise ValueError(f"forced must be (n >= 1, 5), got {tuple(forced.shape)}")
+        if seed_tokens is not None or follower_start is not None:
+            raise ValueError("forced mode takes its seed from forced[0]")
+        seed_tokens = forced[0].numpy()
+    _, xs, music_t, l_root, t4 = prepare(gpt, vqvae, transl_vqvae, leader, music, seed_tokens,
+                                         follower_start, margins)
+    leader_t = torch.as_tensor(np.asarray(leader), dtype=music_t.dtype)[:t4]
+    n_k = n_steps(cfg, gpt, t4)
+    if forced is not None:
+        n_k = min(n_k, forced.shape[0] - 1)
+    q_all = t4 // RATE
+
+    # Leader codes under S (truncated-prefix encoder), only those some step needs.
+    l_norm = normalise_pos3d(leader_t)
+    l_norm[:, :3] = 0
+    n_codes = n_k + cfg.lookahead if n_k > 0 else 0
+    codes = tuple(stream_codes(vqvae.part(p), vqvae.split(l_norm[None], p), n_codes, cfg.enc_future, margins)
+                  for p in PARTS)
+
+    hist0 = torch.cat([x.view(1) for x in xs]).to(torch.long)
+    tokens, pred, ctxs, los = s_rollout(gpt, cfg, codes, music_t[RATE:][None], hist0, n_k, forced,
+                                        topk, rng_seed, margins)
+
+    n_frames = RATE * max(0, n_k + 1 - cfg.dec_future)
+    pos, rot, tr = stream_decode(vqvae, transl_vqvae, tokens, cfg.dec_future, n_frames)
+    pos = to_world(pos, tr, l_root)
+    lt = torch.full((q_all, 4), -1, dtype=torch.long)
+    if n_codes:
+        lt[:n_codes] = torch.cat(codes, dim=0).t()
+    return {
+        "tokens": tokens,
+        "pred": pred,
+        "leader_tokens": lt,
+        "follower_pos3d": pos,
+        "follower_rotmat": rot,
+        "step_ready": torch.tensor([step_ready_frame(cfg, k) for k in range(n_k)], dtype=torch.long),
+        "frame_ready": torch.tensor([frame_ready_frame(cfg, f) for f in range(n_frames)], dtype=torch.long),
+        "context": torch.tensor(ctxs, dtype=torch.long),
+        "window_lo": torch.tensor(los, dtype=torch.long),
+        "K": n_k,
+        "T4": t4,
+        "latency_frames": latency_frames(cfg),
+    }
