@@ -43,6 +43,8 @@ commands! {
     Convert => convert,
     /// Write a procedural duet dataset in the original DD100 layout.
     Synth => synth,
+    /// Compute the 54-d music features of an audio file (WAV/MP3/OGG/FLAC) as a (T, 54) .npy.
+    Features => features,
 }
 
 /// `duolando <command> [flags]`.
