@@ -79,6 +79,13 @@ impl Extractor {
 
     /// Every group separately.
     pub fn parts(&self, y: &[f32]) -> Result<Parts, MusicError> {
+        self.parts_with_reference(y, |window_max| window_max)
+    }
+
+    /// As [`Extractor::parts`], with the dB reference of the MFCC spectrogram
+    /// chosen by `reference(max mel power of y)` (offline: that max itself;
+    /// streaming: a running max).
+    pub fn parts_with_reference(&self, y: &[f32], mut reference: impl FnMut(f32) -> f32) -> Result<Parts, MusicError> {
         Self::validate(y)?;
         let nb = self.stft.n_bins();
         let mut d: Vec<C32> = Vec::new(); // (T, 1025)
@@ -91,7 +98,7 @@ impl Extractor {
         for (p, m) in power.chunks_exact(nb).zip(mel.chunks_exact_mut(N_MELS)) {
             self.mel.apply(p, m);
         }
-        let reference = mel.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        let reference = reference(mel.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)));
         power_to_db_in_place(&mut mel, reference);
         let mut mfcc = vec![0.0f32; t * N_MFCC]; // (T, 20)
         for (m, o) in mel.chunks_exact(N_MELS).zip(mfcc.chunks_exact_mut(N_MFCC)) {

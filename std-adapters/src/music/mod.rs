@@ -27,7 +27,7 @@ pub mod tuning;
 
 pub use error::MusicError;
 pub use extractor::Extractor;
-pub use streaming::Streaming;
+pub use streaming::{Streaming, StreamingConfig};
 
 /// Sample rate the features are defined at.
 pub const SAMPLE_RATE: u32 = 15360;
