@@ -48,8 +48,8 @@ pub fn decode(path: &Path) -> Result<Decoded, AudioError> {
 
 fn decode_wav(path: &Path) -> Result<Decoded, AudioError> {
     let wav_err = |e: hound::Error| match e {
-        hound::Error::IoError(source) if source.kind() == std::io::ErrorKind::NotFound => {
-            AudioError::Io { path: path.to_path_buf(), source }
+        hound::Error::IoError(error) if error.kind() == std::io::ErrorKind::NotFound => {
+            AudioError::Io { path: path.to_path_buf(), error }
         }
         other => AudioError::Wav { path: path.to_path_buf(), reason: other.to_string() },
     };
@@ -76,7 +76,7 @@ fn decode_wav(path: &Path) -> Result<Decoded, AudioError> {
 
 fn decode_symphonia(path: &Path) -> Result<Decoded, AudioError> {
     let fmt_err = |e: SymError| AudioError::Format { path: path.to_path_buf(), reason: e.to_string() };
-    let file = File::open(path).map_err(|source| AudioError::Io { path: path.to_path_buf(), source })?;
+    let file = File::open(path).map_err(|error| AudioError::Io { path: path.to_path_buf(), error })?;
     let mss = MediaSourceStream::new(Box::new(file), Default::default());
     let mut hint = Hint::new();
     if let Some(ext) = path.extension().and_then(|e| e.to_str()) {

@@ -7,8 +7,8 @@ use thiserror::Error;
 /// Why an audio file could not be loaded.
 #[derive(Debug, Error)]
 pub enum AudioError {
-    #[error("{path}: cannot read file: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: cannot read file: {error}")]
+    Io { path: PathBuf, error: std::io::Error },
     #[error("{path}: not a readable WAV file (expected RIFF/WAVE PCM or float): {reason}")]
     Wav { path: PathBuf, reason: String },
     #[error("{path}: not a decodable audio file (expected WAV, MP3, OGG Vorbis or FLAC): {reason}")]
