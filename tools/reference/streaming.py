@@ -459,3 +459,392 @@ def generate_streaming(gpt, vqvae, transl_vqvae, leader, music, cfg, seed_tokens
         "T4": t4,
         "latency_frames": latency_frames(cfg),
     }
+
+
+# ----------------------------------------------------------------------------------------------
+# Incremental implementation (proof that S can be computed with caches; docs/STREAMING.md §5)
+# ----------------------------------------------------------------------------------------------
+# Written like a session: every module keeps only the state named in docs/STREAMING.md and
+# asserts that it never reads an older entry than its ring holds. Not optimised; used by
+# tools/streaming_study.py `incremental` to check it reproduces generate_streaming.
+
+class Ring:
+    """A fixed-capacity window over an append-only sequence of tensors: get(i) fails unless
+    i is among the last `cap` appended. Records the oldest age ever read (`max_age`)."""
+
+    def __init__(self, cap, name):
+        self.cap, self.name, self.items, self.n, self.max_age = cap, name, {}, 0, 0
+
+    def push(self, x):
+        self.items[self.n] = x
+        self.items.pop(self.n - self.cap, None)
+        self.n += 1
+
+    def get(self, i):
+        if not (self.n - self.cap <= i < self.n):
+            raise AssertionError(f"{self.name}: read {i} outside the last {self.cap} of {self.n}")
+        self.max_age = max(self.max_age, self.n - i)
+        return self.items[i]
+
+    def reset(self):
+        self.items, self.n = {}, 0
+
+
+class StreamConv:
+    """Truncated-prefix streaming of one conv stack (VQ encoder or decoder).
+
+    units: list of (kind, module, k, stride, pad, dil), kind in conv / res / convt; `ch` the
+    input channel count of each unit. Each unit keeps a ring of its SETTLED input columns (those
+    that no longer depend on the end-of-prefix zero padding); per `feed`, the unsettled tail of
+    every unit is recomputed from its ring plus the tail of the unit below, with zeros past the
+    current end (exactly what the full conv on the prefix computes)."""
+
+    def __init__(self, units, chans, caps, name):
+        self.units, self.chans = units, chans
+        self.rings = [Ring(c, f"{name}.unit{i}") for i, c in enumerate(caps)]
+        self.settled_out = [0] * len(units)  # settled output count per unit
+        self.tail_sizes = [0] * len(units)   # max recomputed (unsettled) outputs per feed
+
+    @staticmethod
+    def out_len(kind, n, k, s, p, d):
+        if kind == "convt":
+            return (n - 1) * s - 2 * p + k
+        return (n + 2 * p - d * (k - 1) - 1) // s + 1
+
+    @staticmethod
+    def last_in(kind, t, k, s, p, d):
+        """Largest input index output t reads."""
+        return (t + p) // s if kind == "convt" else t * s - p + d * (k - 1)
+
+    def apply(self, u, col, n_in, t0, t1):
+        """Outputs [t0, t1) of unit u given input columns col(i) (zero outside [0, n_in))."""
+        kind, mod, k, s, p, d = self.units[u]
+        if kind == "convt":
+            i0, i1 = math.ceil((t0 + p - (k - 1)) / s), (t1 - 1 + p) // s + 1
+        else:
+            i0, i1 = t0 * s - p, (t1 - 1) * s - p + d * (k - 1) + 1
+        zero = torch.zeros(self.chans[u])
+        x = torch.stack([col(i) if 0 <= i < n_in else zero for i in range(i0, i1)], dim=1)[None]
+        if kind == "conv":
+            y = torch.nn.functional.conv1d(x, mod.weight, mod.bias, s, 0, d)
+        elif kind == "res":
+            c1, c2 = mod.model[1], mod.model[3]
+            h = torch.nn.functional.conv1d(torch.relu(x), c1.weight, c1.bias, 1, 0, d)
+            y = x[:, :, d:d + h.shape[2]] + c2(torch.relu(h))
+        else:
+            y = torch.nn.functional.conv_transpose1d(x, mod.weight, mod.bias, s, 0)
+            off = t0 - (i0 * s - p)
+            y = y[:, :, off:off + (t1 - t0)]
+        return y[0]
+
+    def feed(self, cols):
+        """cols (C, n_new): settled input columns appended. Returns (n_out, settled_out,
+        col(t)) of the last unit for the current prefix (tail values valid until the next feed)."""
+        ring0 = self.rings[0]
+        for j in range(cols.shape[1]):
+            ring0.push(cols[:, j])
+        n_in = n_set_in = ring0.n
+        col = ring0.get
+        for u, (kind, _, k, s, p, d) in enumerate(self.units):
+            n_out = self.out_len(kind, n_in, k, s, p, d)
+            lo = self.settled_out[u]
+            t = lo
+            while t < n_out and self.last_in(kind, t, k, s, p, d) < n_set_in:
+                t += 1
+            new_set = t
+            vals = self.apply(u, col, n_in, lo, n_out) if n_out > lo else torch.zeros(self.chans[u], 0)
+            self.tail_sizes[u] = max(self.tail_sizes[u], n_out - new_set)
+            got = {j: vals[:, j - lo] for j in range(lo, n_out)}
+            if u + 1 < len(self.units):
+                nxt = self.rings[u + 1]
+                for j in range(lo, new_set):
+                    nxt.push(got[j])
+                col = (lambda r, tl: (lambda i: tl[i] if i in tl else r.get(i)))(nxt, got)
+            else:  # the stack output: a small ring of settled outputs plus the current tail
+                if not hasattr(self, "out_ring"):
+                    self.out_ring = Ring(8, "out")
+                for j in range(lo, new_set):
+                    self.out_ring.push(got[j])
+                col = (lambda r, tl: (lambda i: tl[i] if i in tl and i >= r.n else r.get(i)))(self.out_ring, got)
+            self.settled_out[u] = new_set
+            n_in, n_set_in = n_out, new_set
+        return n_in, n_set_in, col
+
+
+def encoder_units(part_vae):
+    blocks = part_vae.encoders[0].level_blocks[0].model
+    units = []
+    for lvl in blocks[:-1]:
+        c = lvl[0]
+        units.append(("conv", c, c.kernel_size[0], c.stride[0], c.padding[0], 1))
+        for r in lvl[1].model:
+            cv = r.model[1]
+            units.append(("res", r, 3, 1, cv.padding[0], cv.dilation[0]))
+    c = blocks[-1]
+    units.append(("conv", c, 3, 1, 1, 1))
+    return units
+
+
+def decoder_units(decoder):
+    blocks = decoder.level_blocks[0].model
+    c = blocks[0]
+    units = [("conv", c, 3, 1, 1, 1)]
+    for lvl in blocks[1:]:
+        for r in lvl[0].model:
+            cv = r.model[1]
+            units.append(("res", r, 3, 1, cv.padding[0], cv.dilation[0]))
+        t = lvl[1]
+        units.append(("convt", t, t.kernel_size[0], t.stride[0], t.padding[0], 1))
+    units.append(("conv", decoder.out, 3, 1, 1, 1))
+    return units
+
+
+def _attend(mod, q_rows, k_rows, v_rows):
+    """Multi-head attention of query rows (n, E) over key/value rows (m, E), all allowed."""
+    h = mod.n_head
+    n, e = q_rows.shape
+    q = q_rows.view(n, h, e // h).transpose(0, 1)            # (h, n, hs)
+    k = k_rows.view(-1, h, e // h).transpose(0, 1)           # (h, m, hs)
+    v = v_rows.view(-1, h, e // h).transpose(0, 1)
+    att = torch.softmax((q @ k.transpose(1, 2)) * (1.0 / math.sqrt(e // h)), dim=-1)
+    return mod.proj((att @ v).transpose(0, 1).reshape(n, e))
+
+
+class IncLat:
+    """Incremental S LAT: per layer a K/V ring (layer 1: past + 1 + F entries, others past + 1)
+    and, for layer 1, a ring of the F + 1 newest residual inputs; ds rows of the last layer are
+    concatenated into one output row."""
+
+    def __init__(self, lat, past, fut, name):
+        self.lat, self.past, self.fut, self.ds = lat, past, fut, lat.cfg.downsample_rate
+        n = len(lat.blocks)
+        self.kv = [Ring(past + 1 + (fut if l == 0 else 0), f"{name}.kv{l}") for l in range(n)]
+        self.h0 = Ring(fut + 1, f"{name}.h0")
+        self.last = Ring(self.ds, f"{name}.out")
+        self.rows = []  # output rows (the caller keeps what it needs in its own ring)
+
+    def push(self, x):
+        """x (n_in,) one LAT input position (a music frame or a leader token embedding)."""
+        blk0 = self.lat.blocks[0]
+        h0 = self.lat.cond_emb(x)
+        ln = blk0.ln1(h0)
+        self.kv[0].push((blk0.attn.key(ln), blk0.attn.value(ln)))
+        self.h0.push(h0)
+        p = self.h0.n - 1 - self.fut  # layer-1 output position now computable
+        if p < 0:
+            return
+        h = self.h0.get(p)
+        for l, blk in enumerate(self.lat.blocks):
+            if l > 0:
+                ln = blk.ln1(h)
+                self.kv[l].push((blk.attn.key(ln), blk.attn.value(ln)))
+            keys = range(max(0, p - self.past), p + (self.fut if l == 0 else 0) + 1)
+            kv = [self.kv[l].get(j) for j in keys]
+            q = blk.attn.query(blk.ln1(h))[None]
+            h = h + _attend(blk.attn, q, torch.stack([a for a, _ in kv]), torch.stack([b for _, b in kv]))[0]
+            h = h + blk.mlp(blk.ln2(h))
+        self.last.push(h)
+        if (p + 1) % self.ds == 0:
+            cat = torch.cat([self.last.get(p - self.ds + 1 + i) for i in range(self.ds)])
+            self.rows.append(self.lat.downsample(cat))
+
+
+class IncGpt:
+    """GPT with one K/V cache per layer (10 streams x block_size - 1 positions); a step whose
+    window start differs from the previous one re-prefills the whole window."""
+
+    def __init__(self, gpt):
+        self.gpt = gpt
+        self.blocks = list(gpt.gpt_base.blocks) + list(gpt.gpt_head.blocks)
+        self.m = gpt.block_size - 1
+        self.lo = None
+        self.cache = [[] for _ in self.blocks]  # per layer: list of (k (10, E), v (10, E)) per position
+        self.positions_computed = 0
+        self.max_positions_per_step = 0
+
+    def _position(self, x):
+        """x (10, E) the 10 stream inputs of the next window position -> (10, E) last hidden."""
+        for l, blk in enumerate(self.blocks):
+            ln = blk.ln1(x)
+            self.cache[l].append((blk.attn.key(ln), blk.attn.value(ln)))
+            if len(self.cache[l]) > self.m:
+                raise AssertionError("GPT cache over capacity")
+            ks = torch.cat([k for k, _ in self.cache[l]])
+            vs = torch.cat([v for _, v in self.cache[l]])
+            x = x + _attend(blk.attn, blk.attn.query(ln), ks, vs)
+            x = x + blk.mlp(blk.ln2(x))
+        return x
+
+    def step(self, lo, k, inputs):
+        """inputs(j, i) -> (10, E) stream inputs of token position j at window row i.
+        Returns logits (5, V) at token k."""
+        bs = self.gpt.block_size
+        pos = self.gpt.gpt_base.pos_emb[0]
+        if lo != self.lo:
+            self.lo, self.cache = lo, [[] for _ in self.blocks]
+            todo = range(lo, k + 1)
+        else:
+            todo = range(k, k + 1)
+        for j in todo:
+            i = j - lo
+            x = inputs(j) + torch.stack([pos[s * bs + i] for s in range(10)])
+            h = self._position(x)
+        self.positions_computed += len(todo)
+        self.max_positions_per_step = max(self.max_positions_per_step, len(todo))
+        g = self.gpt.gpt_head
+        heads = (g.head_up, g.head_down, g.head_lhand, g.head_rhand, g.head_transl)
+        return torch.stack([hd(h[5 + i]) for i, hd in enumerate(heads)])
+
+
+class StreamingSession:
+    """Incremental S session (Python model of the Rust one): push leader frames one by one,
+    music preloaded; follower frames come out as soon as they are ready."""
+
+    def __init__(self, gpt, vqvae, transl_vqvae, cfg, music, hist0, topk=None, rng_seed=0,
+                 forced=None, conv_caps=None):
+        self.g, self.vq, self.tr, self.cfg = gpt, vqvae, transl_vqvae, cfg
+        self.lf, self.m = gpt.look_forward, gpt.block_size - 1
+        self.cond_music = torch.as_tensor(np.asarray(music), dtype=torch.float32)[RATE:]
+        self.topk, self.rng, self.forced = topk, SplitMix64(rng_seed), forced
+        caps = conv_caps or {}
+        big = 1 << 30
+        self.enc = {p: StreamConv(encoder_units(vqvae.part(p)), self._chans(encoder_units(vqvae.part(p)), vqvae.part(p).hps.pos_channel),
+                                  caps.get("enc", [big] * 20), f"enc_{p}") for p in PARTS}
+        self.dec = {}
+        for p in PARTS:
+            for nm, d in (("pos", vqvae.part(p).decoders[0]), ("rot", vqvae.part(p).decoders_rot[0])):
+                u = decoder_units(d)
+                self.dec[(p, nm)] = StreamConv(u, self._chans(u, vqvae.part(p).hps.emb_width), caps.get("dec", [big] * 20), f"dec_{p}_{nm}")
+        u = decoder_units(transl_vqvae.decoders[0])
+        self.dec[("transl", "pos")] = StreamConv(u, self._chans(u, transl_vqvae.hps.emb_width), caps.get("dec", [big] * 20), "dec_transl")
+        a, am = cfg.lookahead, cfg.music_a(gpt)
+        self.music_lat = IncLat(gpt.music_trans, cfg.past(gpt.music_trans.cfg), RATE * am, "music_lat")
+        self.leader_lats = [IncLat(getattr(gpt, n), cfg.past(getattr(gpt, n).cfg), a, n) for n in LEADER_LATS]
+        self.music_fed = 0
+        self.gptc = IncGpt(gpt)
+        self.cond = [Ring(self.m, f"cond{s}") for s in range(5)]   # frozen condition rows
+        self.toks = Ring(self.m + 1, "tokens")                      # follower history
+        self.toks.push(torch.as_tensor(hist0, dtype=torch.long).view(5))
+        self.roots = Ring(latency_frames(cfg) + 8, "leader_root")
+        self.n_frames = 0      # leader frames pushed
+        self.n_codes = 0       # leader codes emitted
+        self.k = 0             # next step
+        self.dec_fed = 0       # tokens fed to the decoders
+        self.dec_out = {}      # decoder col functions of the last feed
+        self.emitted = 0       # follower frames emitted
+        self.l_root0 = None
+        self.tokens, self.preds, self.codes = [self.toks.get(0)], [], []
+        # decoded frames waiting for their leader root (at most latency + 4 frames)
+        self.pending_out = Ring(latency_frames(cfg) + 2 * RATE, "pending_out")
+        self._feed_decoders()
+
+    @staticmethod
+    def _chans(units, c_in):
+        out = []
+        for kind, mod, *_ in units:
+            out.append(c_in)
+            c_in = mod.model[3].out_channels if kind == "res" else mod.out_channels
+        return out
+
+    def _feed_decoders(self):
+        tok = self.toks.get(self.toks.n - 1)
+        for (p, nm), sc in self.dec.items():
+            if p == "transl":
+                z = self.tr.bottleneck.level_blocks[0].k[tok[4]]
+            else:
+                z = self.vq.part(p).bottleneck.level_blocks[0].k[tok[PARTS.index(p)]]
+            self.dec_out[(p, nm)] = sc.feed(z[:, None])
+        self.dec_fed += 1
+        q = self.dec_fed - 1 - self.cfg.dec_future  # token whose 4 frames are now final
+        if q < 0:
+            return
+        for f in range(RATE * q, RATE * (q + 1)):
+            pos = torch.zeros(55, 3)
+            rot = torch.zeros(55, 9)
+            for p in PARTS:
+                pos[PART_JOINTS_T[p]] = self.dec_out[(p, "pos")][2](f).view(-1, 3)
+                rot[PART_JOINTS_T[p]] = self.dec_out[(p, "rot")][2](f).view(-1, 9)
+            self.pending_out.push((pos.view(165), rot.view(495), self.dec_out[("transl", "pos")][2](f)))
+
+    def push_leader_frame(self, frame):
+        frame = torch.as_tensor(np.asarray(frame), dtype=torch.float32).view(1, 165)
+        if self.l_root0 is None:
+            self.l_root0 = frame[0, :3].clone()
+        self.roots.push(frame[0, :3].clone())
+        norm = normalise_pos3d(frame)
+        norm[:, :3] = 0
+        self.pending = getattr(self, "pending", []) + [norm]
+        self.n_frames += 1
+        if self.n_frames % RATE == 0:
+            block = torch.cat(self.pending)[None]  # (1, 4, 165)
+            self.pending = []
+            outs = {}
+            for p in PARTS:
+                x = self.vq.split(block, p)[0].clone()
+                x[:, :3] = 0
+                outs[p] = self.enc[p].feed(x.t())
+            q = self.n_frames // RATE - 1 - self.cfg.enc_future
+            if q >= 0:
+                code = []
+                for p in PARTS:
+                    _, _, col = outs[p]
+                    blk = self.vq.part(p).bottleneck.level_blocks[0]
+                    code.append(int(blk.encode(col(q)[None, :, None])[0, 0]))
+                self.codes.append(code)
+                for i, (lat, emb) in enumerate(zip(self.leader_lats, LEADER_EMBS)):
+                    lat.push(getattr(self.g, emb)(torch.tensor(code[i])))
+                self.n_codes += 1
+        self._run_steps()
+
+    def _music_rows(self, n):
+        while len(self.music_lat.rows) < n:
+            self.music_lat.push(self.cond_music[self.music_fed])
+            self.music_fed += 1
+
+    def _run_steps(self):
+        a = self.cfg.lookahead
+        while all(len(l.rows) > self.k for l in self.leader_lats):
+            k = self.k
+            if RATE * (k + 1 + self.cfg.music_a(self.g)) > self.cond_music.shape[0]:
+                return
+            self._music_rows(k + 1)
+            self.cond[0].push(self.music_lat.rows[k])
+            for s, lat in enumerate(self.leader_lats):
+                self.cond[s + 1].push(lat.rows[k])
+            c = window_context(k, self.m, self.cfg.shift)
+            lo = k + 1 - c
+            embs = FOLLOWER_EMBS
+
+            def inputs(j):
+                t = self.toks.get(j)
+                rows = [self.cond[s].get(j) for s in range(5)]
+                rows += [getattr(self.g, embs[i])(t[i]) for i in range(5)]
+                return torch.stack(rows)
+            lg = self.gptc.step(lo, k, inputs)
+            nxt = torch.tensor([choose(lg[h], self.topk, self.rng) for h in range(5)], dtype=torch.long)
+            self.preds.append(nxt)
+            app = torch.as_tensor(self.forced[k + 1]) if self.forced is not None else nxt
+            self.toks.push(app)
+            self.tokens.append(app)
+            self._feed_decoders()
+            self.k += 1
+            del a
+
+    def pull(self):
+        """Follower frames ready now: list of (f, pos (165,), rot (495,)). Frame f is ready when
+        its token's frames are final (token f//4 + d fed to the decoders) and leader frame f has
+        been pushed (its root)."""
+        out = []
+        while self.emitted < self.pending_out.n and self.emitted < self.n_frames:
+            f = self.emitted
+            pos, rot, tr = self.pending_out.get(f)
+            pos = pos.clone().view(1, 165)
+            pos[0, :3] = (self.roots.get(f) - self.l_root0) + tr / TRANSL_SCALE
+            pos = denormalise_pos3d(pos) + self.l_root0.repeat(N_JOINTS)
+            out.append((f, pos[0], rot))
+            self.emitted += 1
+        return out
+
+
+from .vqvae import PART_JOINTS as _PJ  # noqa: E402
+PART_JOINTS_T = {p: torch.tensor(v) for p, v in _PJ.items()}
