@@ -8,7 +8,9 @@
 //! orchestrated by [`exact`]. Weights: [`model`] (bound from a `.duo`
 //! file, names from [`schema`]). Memory: [`arena`]. Math: [`kernels`].
 #![cfg_attr(not(test), no_std)]
-#![forbid(unsafe_code)]
+// Unsafe code is denied everywhere except `kernels::simd` (intrinsics),
+// which allows it with a SAFETY comment on every block.
+#![deny(unsafe_code)]
 
 pub mod arena;
 pub mod block;

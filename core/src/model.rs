@@ -3,6 +3,12 @@
 //! validated at bind time (names from [`crate::schema`], shapes, dtypes,
 //! alignment). Immutable and `Sync`: many sessions share one model.
 //!
+//! Dtypes: weight matrices (Linear, Conv1d/ConvTranspose1d, token
+//! embeddings, codebooks, heads) bind as [`Matrix`] of any stored type
+//! (F32, F16, Q8Block32; one generic kernel path, `kernels::weights`);
+//! biases, LayerNorm parameters and `pos_emb` are added to activations
+//! as they are and must be F32 (they are <1% of the bytes).
+//!
 //! Structure mirrors the original modules: [`LatW`] (`MusicTrans`),
 //! [`BlockW`] (`MusicBlock` / `Block`), [`GptW`] (`GPT2nt`), [`VqW`]
 //! (one part of `SepVQVAEXM`, or the translation `VQVAE`).
@@ -10,7 +16,7 @@
 use heapless::Vec;
 
 use crate::config::{LatConfig, ModelConfig, Part, VqConfig};
-use crate::kernels::{ConvGeom, F32Rows, Matrix};
+use crate::kernels::{ConvGeom, F16Rows, F32Rows, Matrix, Q8Rows};
 use crate::limits::{ConfigError, MAX_DEPTH, MAX_DOWN_T, MAX_GPT_LAYERS, MAX_LAT_LAYERS};
 use crate::schema::{self, name, DecoderKind, SchemaError, TensorName};
 use crate::tensor::{DType, TensorRef};
@@ -28,7 +34,10 @@ pub enum BindError {
     Name(SchemaError),
     Missing { name: TensorName },
     Shape { name: TensorName, expected: [u32; 4], expected_rank: u8, found: [u32; 4], found_rank: u8 },
-    /// The stored dtype has no kernel yet (f32 only in format v1).
+    /// The stored dtype is not accepted for this tensor: vectors and tables
+    /// added as f32 (biases, LayerNorm, `pos_emb`) must be F32; weight
+    /// matrices may be F32, F16 or Q8Block32 (a Q8 matrix needs whole
+    /// blocks per row).
     DType { name: TensorName, dtype: DType },
     /// Payload not 4-byte aligned in memory (the model buffer must be).
     Misaligned { name: TensorName },
@@ -172,33 +181,46 @@ struct Binder<'s, S> {
 }
 
 impl<'a, S: TensorSource<'a>> Binder<'_, S> {
-    fn get(&self, n: TensorName, dims: &[u32]) -> Result<&'a [f32], BindError> {
-        let t = self.src.tensor(&n).ok_or_else(|| BindError::Missing { name: n.clone() })?;
+    /// The tensor `n`, checked to have exactly the shape `dims`.
+    fn tensor(&self, n: &TensorName, dims: &[u32]) -> Result<TensorRef<'a>, BindError> {
+        let t = self.src.tensor(n).ok_or_else(|| BindError::Missing { name: n.clone() })?;
         let mut expected = [1u32; 4];
         expected[..dims.len()].copy_from_slice(dims);
-        if t.rank as usize != dims.len() || t.dims() != dims {
+        let numel = dims.iter().map(|&d| d as usize).product::<usize>();
+        if t.rank as usize != dims.len() || t.dims() != dims || t.dtype.bytes_for(numel, *dims.last().unwrap_or(&1) as usize) != Some(t.data.len()) {
             return Err(BindError::Shape {
-                name: n,
+                name: n.clone(),
                 expected,
                 expected_rank: dims.len() as u8,
                 found: t.shape,
                 found_rank: t.rank,
             });
         }
+        Ok(t)
+    }
+    /// An f32 vector/table (biases, LayerNorm, `pos_emb`): f32 only.
+    fn get(&self, n: TensorName, dims: &[u32]) -> Result<&'a [f32], BindError> {
+        let t = self.tensor(&n, dims)?;
         if t.dtype != DType::F32 {
             return Err(BindError::DType { name: n, dtype: t.dtype });
         }
-        let data = t.as_f32().ok_or(BindError::Misaligned { name: n.clone() })?;
-        if data.len() != dims.iter().map(|&d| d as usize).product::<usize>() {
-            return Err(BindError::Shape { name: n, expected, expected_rank: dims.len() as u8, found: t.shape, found_rank: t.rank });
-        }
-        Ok(data)
+        t.as_f32().ok_or(BindError::Misaligned { name: n })
     }
+    /// A weight matrix viewed as (dims[0], product of the rest): any dtype
+    /// with a [`crate::kernels::RowMatrix`] impl (F32, F16, Q8Block32).
     fn matrix(&self, n: TensorName, dims: &[u32]) -> Result<Matrix<'a>, BindError> {
-        let data = self.get(n, dims)?;
+        let t = self.tensor(&n, dims)?;
         let rows = dims[0] as usize;
         let cols = dims[1..].iter().map(|&d| d as usize).product::<usize>();
-        F32Rows::new(data, rows, cols).map(Matrix::F32).ok_or(BindError::Capacity)
+        let m = match t.dtype {
+            DType::F32 => F32Rows::new(t.as_f32().ok_or(BindError::Misaligned { name: n.clone() })?, rows, cols).map(Matrix::F32),
+            DType::F16 => {
+                let bits: &'a [u16] = bytemuck::try_cast_slice(t.data).map_err(|_| BindError::Misaligned { name: n.clone() })?;
+                F16Rows::new(bits, rows, cols).map(Matrix::F16)
+            }
+            DType::Q8Block32 => Q8Rows::new(t.data, rows, cols).map(Matrix::Q8),
+        };
+        m.ok_or(BindError::DType { name: n, dtype: t.dtype })
     }
     fn linear(&self, prefix: &str, out: u32, inp: u32, bias: bool) -> Result<Linear<'a>, BindError> {
         let w = self.matrix(name(format_args!("{prefix}.weight"))?, &[out, inp])?;

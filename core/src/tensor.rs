@@ -18,7 +18,7 @@ pub enum DType {
     /// int8 weights in blocks of 32 along the last axis, one f16 scale per
     /// block stored before the block's 32 values (34 bytes per block; Q8_0-like).
     /// The v1 decoder validates it (layout, finite scales; docs/FORMAT.md §4);
-    /// the engine refuses it until the quantization issue adds a kernel.
+    /// `Model::bind` accepts it for weight matrices (`kernels::Q8Rows`).
     Q8Block32 = 2,
 }
 

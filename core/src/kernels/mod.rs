@@ -6,14 +6,16 @@
 //! once against [`RowMatrix`] ("a weight row dotted with / added to f32
 //! activations") and dispatched once per call through [`Matrix`], so f16 and
 //! int8 weights are a new `RowMatrix` impl plus one enum arm, not new
-//! kernels. SIMD twins slot in behind the same signatures (a later issue),
-//! each tested against the scalar version here.
+//! kernels. The innermost dot products are ISA-dispatched in [`simd`]
+//! (scalar reference twins + AVX2 / NEON variants, each tested against
+//! its twin).
 
 pub mod activation;
 pub mod attention;
 pub mod conv;
 pub mod linear;
 pub mod norm;
+pub mod simd;
 pub mod weights;
 
 pub use activation::{gelu_inplace, relu_inplace, relu_into};
@@ -21,4 +23,4 @@ pub use attention::{attention, BandMask, Mask, TiledCausalMask};
 pub use conv::{conv1d, conv1d_col_len, conv_transpose1d, convt_z_len, ConvGeom, CONV_TILE};
 pub use linear::{linear, linear_xw};
 pub use norm::{layernorm, LN_EPS};
-pub use weights::{dot, F32Rows, Matrix, RowMatrix};
+pub use weights::{dot, F16Rows, F32Rows, Matrix, Q8Rows, RowMatrix};

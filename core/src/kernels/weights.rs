@@ -1,41 +1,86 @@
 //! Weight matrices as rows: the one abstraction every weight-reading
 //! kernel is generic over.
+//!
+//! A kernel (`linear`, `linear_xw`, the quantizer, embedding lookups) is
+//! written once against [`RowMatrix`] and dispatched once per call through
+//! [`Matrix`] (one arm per stored dtype). Per weight type:
+//!
+//! | impl | stored | `dot` accumulation | activations |
+//! |---|---|---|---|
+//! | [`F32Rows`] | f32 | f32 | f32 as given |
+//! | [`F16Rows`] | IEEE binary16 | f32 (exact f16 -> f32) | f32 as given |
+//! | [`Q8Rows`] | blocks of 32: f16 scale + 32 i8 | i32 per block, f32 across blocks | quantised per block of 32 (f32 scale `max|x|/127`, round to nearest) once per row chunk ([`RowMatrix::prepare`]) |
+//!
+//! Quantising the activations per block (Q8_0 x Q8_0, as ggml) keeps the
+//! inner loop integer; the extra error is measured end to end
+//! (std-adapters/tests/quantized.rs and docs/FORMAT.md §4).
 
-/// A `(rows, cols)` weight matrix read row by row.
-///
-/// Implementations: [`F32Rows`] now; f16 and blocked int8 later (dequantise
-/// a row chunk, accumulate in f32 / i32). Callers guarantee `r < rows()`
-/// and slice lengths equal to `cols()`.
-pub trait RowMatrix {
-    fn rows(&self) -> usize;
-    fn cols(&self) -> usize;
-    /// `row(r) . x`.
-    fn dot(&self, r: usize, x: &[f32]) -> f32;
-    /// `y += a * row(r)`.
-    fn axpy(&self, r: usize, a: f32, y: &mut [f32]);
-    /// `out = row(r)` as f32 (embedding lookups, codebook rows).
-    fn row_into(&self, r: usize, out: &mut [f32]);
+use super::simd::{self, f16_to_f32, Q8_BLOCK, Q8_BLOCK_BYTES};
+
+/// Activation columns prepared at once by an int8 row matrix (stack buffer
+/// of `ACT_CHUNK` i8 + `ACT_CHUNK / 32` f32 scales: 1.1 KiB).
+pub const ACT_CHUNK: usize = 1024;
+
+/// Activations prepared for a weight type (see [`RowMatrix::prepare`]).
+pub trait PreparedAct {
+    fn new() -> Self;
 }
 
-/// Dot product with 8 independent accumulators (vectorisable; the
-/// summation order differs from a plain loop by rounding only).
+impl PreparedAct for () {
+    fn new() -> Self {}
+}
+
+/// Int8-quantised activations: (ACT_CHUNK) values, (ACT_CHUNK / 32) scales.
+pub struct Q8Act {
+    pub q: [i8; ACT_CHUNK],
+    pub d: [f32; ACT_CHUNK / Q8_BLOCK],
+}
+
+impl PreparedAct for Q8Act {
+    fn new() -> Self {
+        Q8Act { q: [0; ACT_CHUNK], d: [0.0; ACT_CHUNK / Q8_BLOCK] }
+    }
+}
+
+/// A `(rows, cols)` weight matrix read row by row. Callers guarantee
+/// `r < rows()` and slice lengths as documented per method.
+///
+/// Dot products run over column chunks of at most [`RowMatrix::CHUNK`]
+/// columns (a multiple of 32): the activation chunk is prepared once
+/// ([`RowMatrix::prepare`]: nothing for f32/f16, int8 quantisation for
+/// [`Q8Rows`]) and then dotted with many rows.
+pub trait RowMatrix {
+    /// Prepared activations of one chunk.
+    type Act: PreparedAct;
+    /// Columns per chunk (`usize::MAX`: one chunk, nothing prepared).
+    const CHUNK: usize;
+    fn rows(&self) -> usize;
+    fn cols(&self) -> usize;
+    /// Prepares `x` (a chunk starting at a multiple of `CHUNK`, at most
+    /// `CHUNK` long).
+    fn prepare(x: &[f32], act: &mut Self::Act);
+    /// `row(r)[c0 .. c0 + x.len()] . x`, with `act` from `prepare(x)`.
+    fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], act: &Self::Act) -> f32;
+    /// `y += a * row(r)` (`y`: cols).
+    fn axpy(&self, r: usize, a: f32, y: &mut [f32]);
+    /// `out = row(r)` as f32 (`out`: cols; embedding and codebook rows).
+    fn row_into(&self, r: usize, out: &mut [f32]);
+    /// `row(r) . x` (`x`: cols), chunk by chunk.
+    fn dot(&self, r: usize, x: &[f32]) -> f32 {
+        let mut act = Self::Act::new();
+        let mut sum = 0.0;
+        for (i, xc) in x.chunks(Self::CHUNK.min(x.len().max(1))).enumerate() {
+            Self::prepare(xc, &mut act);
+            sum += self.dot_chunk(r, i * Self::CHUNK, xc, &act);
+        }
+        sum
+    }
+}
+
+/// `a . b` over f32 (activations or f32 weights), ISA-dispatched.
 #[inline]
 pub fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
-    let mut acc = [0.0f32; 8];
-    let (ac, ar) = a.split_at(n - n % 8);
-    let (bc, br) = b.split_at(n - n % 8);
-    for (x, y) in ac.chunks_exact(8).zip(bc.chunks_exact(8)) {
-        for l in 0..8 {
-            acc[l] += x[l] * y[l];
-        }
-    }
-    let mut tail = 0.0f32;
-    for (x, y) in ar.iter().zip(br) {
-        tail += x * y;
-    }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+    simd::dot_f32(a, b)
 }
 
 /// Row-major f32 weights borrowed from the model bytes.
@@ -60,6 +105,8 @@ impl<'a> F32Rows<'a> {
 }
 
 impl RowMatrix for F32Rows<'_> {
+    type Act = ();
+    const CHUNK: usize = usize::MAX;
     fn rows(&self) -> usize {
         self.rows
     }
@@ -67,8 +114,10 @@ impl RowMatrix for F32Rows<'_> {
         self.cols
     }
     #[inline]
-    fn dot(&self, r: usize, x: &[f32]) -> f32 {
-        dot(self.row(r), x)
+    fn prepare(_: &[f32], _: &mut ()) {}
+    #[inline]
+    fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], _: &()) -> f32 {
+        simd::dot_f32(&self.row(r)[c0..], x)
     }
     #[inline]
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
@@ -81,34 +130,163 @@ impl RowMatrix for F32Rows<'_> {
     }
 }
 
-/// A weight matrix of any stored dtype; kernels match once per call and
-/// run their generic body. One arm per supported dtype.
+/// Row-major IEEE binary16 weights (bit patterns) borrowed from the model bytes.
+#[derive(Clone, Copy, Debug)]
+pub struct F16Rows<'a> {
+    data: &'a [u16],
+    rows: usize,
+    cols: usize,
+}
+
+impl<'a> F16Rows<'a> {
+    /// None unless `data.len() == rows * cols`.
+    pub fn new(data: &'a [u16], rows: usize, cols: usize) -> Option<Self> {
+        if rows.checked_mul(cols)? != data.len() {
+            return None;
+        }
+        Some(F16Rows { data, rows, cols })
+    }
+    fn row(&self, r: usize) -> &'a [u16] {
+        &self.data[r * self.cols..(r + 1) * self.cols]
+    }
+}
+
+impl RowMatrix for F16Rows<'_> {
+    type Act = ();
+    const CHUNK: usize = usize::MAX;
+    fn rows(&self) -> usize {
+        self.rows
+    }
+    fn cols(&self) -> usize {
+        self.cols
+    }
+    #[inline]
+    fn prepare(_: &[f32], _: &mut ()) {}
+    #[inline]
+    fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], _: &()) -> f32 {
+        simd::dot_f16(&self.row(r)[c0..], x)
+    }
+    fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
+        for (yi, &wi) in y.iter_mut().zip(self.row(r)) {
+            *yi += a * f16_to_f32(wi);
+        }
+    }
+    fn row_into(&self, r: usize, out: &mut [f32]) {
+        for (o, &w) in out.iter_mut().zip(self.row(r)) {
+            *o = f16_to_f32(w);
+        }
+    }
+}
+
+/// Row-major `DType::Q8Block32` weights: each row is `cols / 32` blocks of
+/// [f16 scale, 32 x i8]; value = scale * q.
+#[derive(Clone, Copy, Debug)]
+pub struct Q8Rows<'a> {
+    data: &'a [u8],
+    rows: usize,
+    cols: usize,
+}
+
+impl<'a> Q8Rows<'a> {
+    /// None unless `cols % 32 == 0` and `data.len() == rows * cols / 32 * 34`.
+    pub fn new(data: &'a [u8], rows: usize, cols: usize) -> Option<Self> {
+        if cols % Q8_BLOCK != 0 || rows.checked_mul(cols / Q8_BLOCK)?.checked_mul(Q8_BLOCK_BYTES)? != data.len() {
+            return None;
+        }
+        Some(Q8Rows { data, rows, cols })
+    }
+    fn row(&self, r: usize) -> &'a [u8] {
+        let rb = self.cols / Q8_BLOCK * Q8_BLOCK_BYTES;
+        &self.data[r * rb..(r + 1) * rb]
+    }
+    /// `f(column block start, scale, 32 quantised values)` for each block of row `r`.
+    fn for_blocks(&self, r: usize, mut f: impl FnMut(usize, f32, &[u8])) {
+        for (b, blk) in self.row(r).chunks_exact(Q8_BLOCK_BYTES).enumerate() {
+            f(b * Q8_BLOCK, f16_to_f32(u16::from_le_bytes([blk[0], blk[1]])), &blk[2..]);
+        }
+    }
+}
+
+impl RowMatrix for Q8Rows<'_> {
+    type Act = Q8Act;
+    const CHUNK: usize = ACT_CHUNK;
+    fn rows(&self) -> usize {
+        self.rows
+    }
+    fn cols(&self) -> usize {
+        self.cols
+    }
+    #[inline]
+    fn prepare(x: &[f32], act: &mut Q8Act) {
+        simd::quantise_q8(x, &mut act.q, &mut act.d);
+    }
+    #[inline]
+    fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], act: &Q8Act) -> f32 {
+        let b0 = c0 / Q8_BLOCK * Q8_BLOCK_BYTES;
+        let nb = x.len() / Q8_BLOCK;
+        let w = &self.row(r)[b0..b0 + nb * Q8_BLOCK_BYTES];
+        simd::dot_q8(w, &act.q[..nb * Q8_BLOCK], &act.d[..nb])
+    }
+    fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
+        self.for_blocks(r, |c, d, q| {
+            let s = a * d;
+            for (yi, &qi) in y[c..c + Q8_BLOCK].iter_mut().zip(q) {
+                *yi += s * (qi as i8 as f32);
+            }
+        });
+    }
+    fn row_into(&self, r: usize, out: &mut [f32]) {
+        self.for_blocks(r, |c, d, q| {
+            for (o, &qi) in out[c..c + Q8_BLOCK].iter_mut().zip(q) {
+                *o = d * (qi as i8 as f32);
+            }
+        });
+    }
+}
+
+/// A weight matrix of any stored dtype; kernels match once per call (with
+/// [`with_rows!`](crate::with_rows)) and run their generic body.
 #[derive(Clone, Copy, Debug)]
 pub enum Matrix<'a> {
     F32(F32Rows<'a>),
+    F16(F16Rows<'a>),
+    Q8(Q8Rows<'a>),
+}
+
+/// `with_rows!(matrix, m => expr)`: evaluates `expr` with `m` bound to the
+/// concrete [`RowMatrix`] of each arm (the single dispatch point).
+#[macro_export]
+macro_rules! with_rows {
+    ($mat:expr, $m:ident => $body:expr) => {
+        match $mat {
+            $crate::kernels::Matrix::F32($m) => $body,
+            $crate::kernels::Matrix::F16($m) => $body,
+            $crate::kernels::Matrix::Q8($m) => $body,
+        }
+    };
 }
 
 impl Matrix<'_> {
     pub fn rows(&self) -> usize {
-        match self {
-            Matrix::F32(m) => m.rows(),
-        }
+        crate::with_rows!(self, m => m.rows())
     }
     pub fn cols(&self) -> usize {
-        match self {
-            Matrix::F32(m) => m.cols(),
-        }
+        crate::with_rows!(self, m => m.cols())
     }
     /// `out = row(r)`; callers guarantee `r < rows()` and `out.len() == cols()`.
     pub fn row_into(&self, r: usize, out: &mut [f32]) {
-        match self {
-            Matrix::F32(m) => m.row_into(r, out),
-        }
+        crate::with_rows!(self, m => m.row_into(r, out))
     }
     /// `row(r) . x`.
     pub fn dot(&self, r: usize, x: &[f32]) -> f32 {
+        crate::with_rows!(self, m => m.dot(r, x))
+    }
+    /// Bytes of weight data (what one full pass over the matrix reads).
+    pub fn weight_bytes(&self) -> usize {
         match self {
-            Matrix::F32(m) => m.dot(r, x),
+            Matrix::F32(m) => m.rows * m.cols * 4,
+            Matrix::F16(m) => m.rows * m.cols * 2,
+            Matrix::Q8(m) => m.rows * m.cols / Q8_BLOCK * Q8_BLOCK_BYTES,
         }
     }
 }

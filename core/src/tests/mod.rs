@@ -7,3 +7,4 @@ mod kernels;
 mod engine;
 mod motion_sampler;
 mod schema_config;
+mod simd;

@@ -1,0 +1,239 @@
+//! Every SIMD kernel against its scalar twin (ggml-style named error
+//! limits, random lengths including every tail), the scalar twins against
+//! f64 references, the activation quantiser's error bound, and the generic
+//! `linear` over f16 / int8 matrices against naive references.
+#![allow(unsafe_code)]
+
+use crate::kernels::simd::{self, scalar, Q8_BLOCK, Q8_BLOCK_BYTES};
+use crate::kernels::*;
+
+/// SIMD vs scalar twin (f32 and f16 dots): |simd - scalar| <= limit * sum |a_i b_i|
+/// (only the summation order differs, plus FMA's single rounding).
+const SIMD_VS_SCALAR_DOT: f64 = 1e-6;
+/// SIMD vs scalar int8 dot: the per-block i32 sums are exact, only the f32
+/// sum across blocks is reordered: limit * sum_b |scale_b * isum_b|.
+const SIMD_VS_SCALAR_Q8: f64 = 1e-6;
+/// Scalar twins vs f64 over the same (already rounded) inputs.
+const SCALAR_VS_F64: f64 = 1e-6;
+
+struct Rng(u64);
+impl Rng {
+    fn u(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn f(&mut self) -> f32 {
+        (self.u() >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    }
+    fn vec(&mut self, n: usize) -> Vec<f32> {
+        (0..n).map(|_| self.f() * 3.0).collect()
+    }
+}
+
+/// Lengths: every residue mod 32 around the unroll sizes, plus random ones.
+fn lengths(r: &mut Rng) -> Vec<usize> {
+    let mut v: Vec<usize> = (0..=70).collect();
+    v.extend([255, 256, 257, 767, 768, 1023, 1024, 1025, 3072, 4099]);
+    v.extend((0..40).map(|_| (r.u() % 5000) as usize));
+    v
+}
+
+fn f16_bits(x: &[f32]) -> Vec<u16> {
+    x.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()
+}
+
+/// Quantises `w` (len multiple of 32) into stored Q8Block32 bytes, like the converter.
+fn q8_bytes(w: &[f32]) -> Vec<u8> {
+    let mut out = Vec::new();
+    for b in w.chunks_exact(Q8_BLOCK) {
+        let amax = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let d = half::f16::from_f32(amax / 127.0);
+        let inv = if d.to_f32() > 0.0 { 1.0 / d.to_f32() } else { 0.0 };
+        out.extend(d.to_le_bytes());
+        out.extend(b.iter().map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8));
+    }
+    out
+}
+
+fn abs_sum(a: &[f32], b: &[f32]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (*x as f64 * *y as f64).abs()).sum()
+}
+
+fn check_dot(name: &str, got: f32, want: f32, scale: f64, limit: f64, n: usize) {
+    let err = (got as f64 - want as f64).abs();
+    assert!(err <= limit * scale + 1e-30, "{name} n={n}: {got} vs {want}, err {err:e} > {limit:e} * {scale:e}");
+}
+
+/// The three kernels of one ISA, as plain fns (the caller checked the CPU).
+struct Variant {
+    name: &'static str,
+    dot_f32: fn(&[f32], &[f32]) -> f32,
+    dot_f16: fn(&[u16], &[f32]) -> f32,
+    dot_q8: fn(&[u8], &[i8], &[f32]) -> f32,
+}
+
+fn variants() -> Vec<Variant> {
+    #[allow(unused_mut)]
+    let mut v = Vec::new();
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("f16c") {
+        // SAFETY (all three): the CPU supports avx2, fma and f16c (checked above).
+        v.push(Variant {
+            name: "avx2",
+            dot_f32: |a, b| unsafe { simd::x86::dot_f32(a, b) },
+            dot_f16: |w, x| unsafe { simd::x86::dot_f16(w, x) },
+            dot_q8: |w, q, d| unsafe { simd::x86::dot_q8(w, q, d) },
+        });
+    }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    // SAFETY (all three): NEON is enabled for this build.
+    v.push(Variant {
+        name: "neon",
+        dot_f32: |a, b| unsafe { simd::neon::dot_f32(a, b) },
+        dot_f16: |w, x| unsafe { simd::neon::dot_f16(w, x) },
+        dot_q8: |w, q, d| unsafe { simd::neon::dot_q8(w, q, d) },
+    });
+    v
+}
+
+#[test]
+fn a_simd_variant_exists_where_expected() {
+    let names: Vec<&str> = variants().iter().map(|v| v.name).collect();
+    eprintln!("SIMD variants tested on this machine: {names:?}");
+    if cfg!(target_arch = "aarch64") {
+        assert_eq!(names, ["neon"]);
+    }
+}
+
+#[test]
+fn simd_f32_and_f16_dots_match_scalar_twins() {
+    let mut r = Rng(0x9e37_79b9_7f4a_7c15);
+    for v in variants() {
+        for n in lengths(&mut r) {
+            let (a, b) = (r.vec(n), r.vec(n));
+            let scale = abs_sum(&a, &b);
+            check_dot(&format!("{} dot_f32", v.name), (v.dot_f32)(&a, &b), scalar::dot_f32(&a, &b), scale, SIMD_VS_SCALAR_DOT, n);
+            let h = f16_bits(&a);
+            let hf: Vec<f32> = h.iter().map(|&x| simd::f16_to_f32(x)).collect();
+            let scale = abs_sum(&hf, &b);
+            check_dot(&format!("{} dot_f16", v.name), (v.dot_f16)(&h, &b), scalar::dot_f16(&h, &b), scale, SIMD_VS_SCALAR_DOT, n);
+        }
+    }
+}
+
+#[test]
+fn simd_f16_conversion_is_exact_for_every_bit_pattern() {
+    for v in variants() {
+        for h in 0..=u16::MAX {
+            // Eight lanes so the vector path (not the scalar tail) converts it.
+            let w = [h, 0, 0, 0, 0, 0, 0, 0];
+            let x = [1.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+            let got = (v.dot_f16)(&w, &x);
+            let want = simd::f16_to_f32(h);
+            assert!(got == want || (got.is_nan() && want.is_nan()), "{}: f16 {h:#06x} -> {got} (want {want})", v.name);
+        }
+    }
+}
+
+#[test]
+fn simd_q8_dot_matches_scalar_twin() {
+    let mut r = Rng(0x1234_5678_9abc_def1);
+    for v in variants() {
+        for nb in (0..=40).chain([96, 128]) {
+            let n = nb * Q8_BLOCK;
+            let w = q8_bytes(&r.vec(n));
+            let x = r.vec(n);
+            let (mut q, mut d) = (vec![0i8; n], vec![0f32; nb]);
+            simd::quantise_q8(&x, &mut q, &mut d);
+            let scale: f64 = (0..nb)
+                .map(|b| {
+                    let blk = &w[b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
+                    let isum: i64 = blk[2..].iter().zip(&q[b * 32..(b + 1) * 32]).map(|(&a, &c)| (a as i8 as i64) * c as i64).sum();
+                    (simd::f16_to_f32(u16::from_le_bytes([blk[0], blk[1]])) as f64 * d[b] as f64 * isum as f64).abs()
+                })
+                .sum();
+            check_dot(&format!("{} dot_q8", v.name), (v.dot_q8)(&w, &q, &d), scalar::dot_q8(&w, &q, &d), scale, SIMD_VS_SCALAR_Q8, n);
+        }
+        // Extremes: -128 weights (never written by the converter, legal in a
+        // file) against +-127 activations must not saturate.
+        let mut w = vec![0u8; Q8_BLOCK_BYTES];
+        w[..2].copy_from_slice(&half::f16::from_f32(1.0).to_le_bytes());
+        for (i, b) in w[2..].iter_mut().enumerate() {
+            *b = if i % 2 == 0 { 0x80 } else { 0x7f };
+        }
+        let q: Vec<i8> = (0..32).map(|i| if i % 2 == 0 { -127 } else { 127 }).collect();
+        let want = 16.0 * 128.0 * 127.0 + 16.0 * 127.0 * 127.0;
+        assert_eq!((v.dot_q8)(&w, &q, &[1.0]), want, "{}: extreme int8 values", v.name);
+        assert_eq!(scalar::dot_q8(&w, &q, &[1.0]), want);
+    }
+}
+
+#[test]
+fn scalar_twins_match_f64() {
+    let mut r = Rng(77);
+    for n in lengths(&mut r) {
+        let (a, b) = (r.vec(n), r.vec(n));
+        let exact: f64 = a.iter().zip(&b).map(|(x, y)| *x as f64 * *y as f64).sum();
+        let err = (scalar::dot_f32(&a, &b) as f64 - exact).abs();
+        assert!(err <= SCALAR_VS_F64 * abs_sum(&a, &b) + 1e-30, "dot_f32 n={n}: err {err:e}");
+        let h = f16_bits(&a);
+        let exact: f64 = h.iter().zip(&b).map(|(x, y)| simd::f16_to_f32(*x) as f64 * *y as f64).sum();
+        let err = (scalar::dot_f16(&h, &b) as f64 - exact).abs();
+        assert!(err <= SCALAR_VS_F64 * abs_sum(&a, &b) * 1.01 + 1e-30, "dot_f16 n={n}: err {err:e}");
+    }
+}
+
+#[test]
+fn activation_quantiser_error_is_half_a_step() {
+    let mut r = Rng(5);
+    let mut x = r.vec(32 * 50);
+    x[32..64].fill(0.0); // an all-zero block
+    x[64] = 1e30; // one huge value in a block
+    let (mut q, mut d) = (vec![0i8; x.len()], vec![0f32; 50]);
+    simd::quantise_q8(&x, &mut q, &mut d);
+    assert_eq!(d[1], 0.0);
+    assert!(q[32..64].iter().all(|&v| v == 0));
+    for (b, (xb, qb)) in x.chunks_exact(32).zip(q.chunks_exact(32)).enumerate() {
+        for (&xv, &qv) in xb.iter().zip(qb) {
+            assert!((-127..=127).contains(&qv));
+            let err = (xv - d[b] * qv as f32).abs();
+            assert!(err <= 0.5001 * d[b] + 1e-30 * xv.abs(), "block {b}: {xv} -> {qv} * {}", d[b]);
+        }
+    }
+}
+
+/// `linear` over F16 and Q8 matrices (the generic path, whichever ISA is
+/// selected) against f64 loops over the dequantised weights; for int8 the
+/// bound is the analytic activation-quantisation error sum_i |w_i| d_b / 2.
+#[test]
+fn linear_over_f16_and_q8_matches_naive() {
+    let mut r = Rng(99);
+    for &(n, i, o) in &[(1, 32, 1), (3, 64, 70), (7, 768, 33), (2, 2048, 5), (4, 3072, 9)] {
+        let (x, w, b) = (r.vec(n * i), r.vec(o * i), r.vec(o));
+        let h = f16_bits(&w);
+        let q8 = q8_bytes(&w);
+        let mats = [("f16", Matrix::F16(F16Rows::new(&h, o, i).unwrap())), ("q8", Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap()))];
+        for (name, m) in mats {
+            let mut y = vec![0.0; n * o];
+            linear(&x, &m, Some(&b), &mut y);
+            let mut row = vec![0.0; i];
+            for a in 0..n {
+                let xa = &x[a * i..(a + 1) * i];
+                let (mut xq, mut xd) = (vec![0i8; i], vec![0f32; i / 32]);
+                simd::quantise_q8(xa, &mut xq, &mut xd);
+                for c in 0..o {
+                    m.row_into(c, &mut row);
+                    let want: f64 = b[c] as f64 + row.iter().zip(xa).map(|(p, q)| *p as f64 * *q as f64).sum::<f64>();
+                    let mut bound = 1e-5 * (1.0 + abs_sum(&row, xa));
+                    if name == "q8" {
+                        bound += row.chunks(32).zip(&xd).map(|(wb, d)| wb.iter().map(|v| v.abs() as f64).sum::<f64>() * *d as f64 * 0.5).sum::<f64>();
+                    }
+                    let err = (y[a * o + c] as f64 - want).abs();
+                    assert!(err <= bound, "{name} ({n},{i},{o}) [{a},{c}]: {} vs {want}, err {err:e} > {bound:e}", y[a * o + c]);
+                }
+            }
+        }
+    }
+}
