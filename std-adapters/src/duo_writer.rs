@@ -19,6 +19,27 @@ pub enum StoreAs {
     F32,
     /// Rounded to nearest from f32 (`half::f16::from_f32`).
     F16,
+    /// `DType::Q8Block32` (see [`quantise_q8_block32`]); the last axis must
+    /// be a multiple of 32.
+    Q8Block32,
+}
+
+/// Quantises `values` (rows of the last axis, a multiple of 32) to
+/// `Q8Block32` bytes: per block of 32, scale `d = f16(max|v| / 127)` (round
+/// to nearest) and `q = clamp(round(v / d), -127, 127)` (0 when `d == 0`),
+/// stored as the 2 scale bytes then the 32 values. The scale used for
+/// rounding is the stored f16 one, so `d * q` is the nearest grid point.
+pub fn quantise_q8_block32(values: &[f32]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(values.len() / 32 * 34);
+    for b in values.chunks_exact(32) {
+        let amax = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let d = half::f16::from_f32(amax / 127.0);
+        let df = d.to_f32();
+        let inv = if df > 0.0 { 1.0 / df } else { 0.0 };
+        out.extend_from_slice(&d.to_le_bytes());
+        out.extend(b.iter().map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8));
+    }
+    out
 }
 
 /// One tensor to write: a `.duo` name, a row-major shape, f32 values.
@@ -54,6 +75,8 @@ pub struct Header {
 pub enum WriteError {
     /// `values.len()` differs from the product of `shape`.
     ValueCount { name: String, shape: Vec<u32>, expected: u64, found: usize },
+    /// `StoreAs::Q8Block32` on a tensor whose last axis is not a multiple of 32.
+    BlockShape { name: String, shape: Vec<u32> },
     /// Two tensors with the same name.
     Duplicate { name: String },
     /// The header could not be encoded.
@@ -69,6 +92,9 @@ impl fmt::Display for WriteError {
         match self {
             WriteError::ValueCount { name, shape, expected, found } => {
                 write!(f, "tensor '{name}': shape {shape:?} needs {expected} values, got {found}")
+            }
+            WriteError::BlockShape { name, shape } => {
+                write!(f, "tensor '{name}': shape {shape:?} cannot be stored as Q8Block32 (last axis not a multiple of 32)")
             }
             WriteError::Duplicate { name } => write!(f, "tensor '{name}' given twice"),
             WriteError::Encode(e) => write!(f, "cannot encode the .duo header: {e}"),
@@ -134,6 +160,14 @@ pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, Wr
             StoreAs::F16 => {
                 data.extend(t.values.iter().flat_map(|&v| half::f16::from_f32(v).to_le_bytes()));
                 DType::F16
+            }
+            StoreAs::Q8Block32 => {
+                let row = t.shape.last().copied().unwrap_or(0) as usize;
+                if row == 0 || row % 32 != 0 {
+                    return Err(WriteError::BlockShape { name: t.name.clone(), shape: t.shape.clone() });
+                }
+                data.extend(quantise_q8_block32(&t.values));
+                DType::Q8Block32
             }
         };
         let nbytes = data.len() as u64 - offset;

@@ -10,6 +10,7 @@ pub mod export;
 pub mod model_file;
 pub mod music;
 pub mod npy;
+pub mod simd;
 pub mod skeleton;
 pub mod synth;
 pub mod viewer;

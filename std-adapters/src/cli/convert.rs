@@ -32,12 +32,16 @@ pub struct Args {
 pub enum WeightType {
     F32,
     F16,
+    /// Linear weights, embeddings and heads as Q8Block32 (f16 scales), the
+    /// rest f16/f32 (docs/FORMAT.md §6).
+    Int8,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let store_as = match args.dtype {
         WeightType::F32 => StoreAs::F32,
         WeightType::F16 => StoreAs::F16,
+        WeightType::Int8 => StoreAs::Q8Block32,
     };
     let report = crate::convert::convert_files(&args.config, &args.gpt, &args.vqvae, &args.transl, store_as, &args.out)?;
     println!(

@@ -64,8 +64,29 @@ impl From<SchemaError> for ConvertError {
     }
 }
 
+/// How a tensor is stored when the model is converted for weight type
+/// `requested` (docs/FORMAT.md §6, "Weight types"):
+/// - vectors (biases, LayerNorm) and `pos_emb` stay F32: the engine adds
+///   them to activations as they are (<1% of the bytes);
+/// - `F16`: every other tensor (weight matrices, embeddings, codebooks) F16;
+/// - `Q8Block32`: Linear weights, token embeddings and GPT heads int8
+///   (their last axis is the input width, a multiple of 32); conv weights
+///   (last axis = kernel size 1/3/4, not blockable in format v1) and the VQ
+///   codebooks (nearest-neighbour encoding of the leader) F16.
+pub fn storage_for(requested: StoreAs, name: &str, dims: &[u32]) -> StoreAs {
+    if dims.len() < 2 || name.ends_with("pos_emb") || requested == StoreAs::F32 {
+        return StoreAs::F32;
+    }
+    match requested {
+        StoreAs::Q8Block32 if dims.last().is_some_and(|&d| d % 32 == 0) && !name.ends_with("bottleneck.level_blocks.0.k") => {
+            StoreAs::Q8Block32
+        }
+        _ => StoreAs::F16,
+    }
+}
+
 /// Pulls every schema tensor of `cfg` out of the sources (checked, upcast
-/// to f32, stored as `store_as`) and verifies nothing unknown is left over.
+/// to f32, stored as [`storage_for`]`(store_as, ..)`) and verifies nothing unknown is left over.
 pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: StoreAs) -> Result<(Vec<Tensor>, Report), ConvertError> {
     let parsed = [
         Source::parse(sources.gpt.0, sources.gpt.1)?,
@@ -91,7 +112,8 @@ pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: Store
             return Err(ConvertError::NonFinite { path: src.path.clone(), tensor: rest.to_string(), index, value });
         }
         used[c].insert(rest.to_string());
-        tensors.push(Tensor { name: duo_name.to_string(), shape: spec.dims().to_vec(), values, store_as });
+        let stored = storage_for(store_as, duo_name, spec.dims());
+        tensors.push(Tensor { name: duo_name.to_string(), shape: spec.dims().to_vec(), values, store_as: stored });
         Ok(())
     })?;
     let mut report = Report { written: tensors.len(), ..Report::default() };

@@ -1,0 +1,176 @@
+//! f16 and int8 models end to end: the fixture checkpoints
+//! (tests/fixtures/{tiny,tiny2}) converted in memory with `--dtype f16` and
+//! `--dtype int8`, rolled out in R mode on every rollout fixture, and
+//! compared with the f32 model (tokens, motion); the f32 model with the
+//! run-time selected SIMD kernels against the Python goldens.
+//!
+//! Run: `cargo test -p duolando --test quantized -- --nocapture` (prints the figures).
+
+use std::path::{Path, PathBuf};
+
+use duolando::convert::{convert_bytes, Sources};
+use duolando::duo_writer::StoreAs;
+use duolando::model_file::ModelFile;
+use duolando::npy::{read_f32_2d, read_i64_2d};
+use duolando_core::exact::{self, ExactInputs, ExactOutputs, Seed};
+use duolando_core::model::Model;
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures")
+}
+
+const ROLLOUTS: [&str; 5] = ["tiny_long", "tiny_short", "tiny_odd", "tiny2_frames", "tiny2_tokens"];
+
+fn convert(model: &str, store_as: StoreAs) -> ModelFile {
+    let dir = fixtures().join(model);
+    let read = |f: &str| std::fs::read(dir.join(f)).unwrap();
+    let (g, v, t) = (read("gpt.safetensors"), read("vqvae.safetensors"), read("transl.safetensors"));
+    let yaml = String::from_utf8(read("follower_gpt.yaml")).unwrap();
+    let (gp, vp, tp) = (dir.join("gpt.safetensors"), dir.join("vqvae.safetensors"), dir.join("transl.safetensors"));
+    let sources = Sources { gpt: (&gp, &g), vqvae: (&vp, &v), transl: (&tp, &t) };
+    let (bytes, _) = convert_bytes((&dir.join("follower_gpt.yaml"), &yaml), &sources, store_as).unwrap();
+    ModelFile::from_bytes(bytes).unwrap()
+}
+
+struct Run {
+    tokens: Vec<u32>,
+    leader_tokens: Vec<u32>,
+    pos: Vec<f32>,
+    rot: Vec<f32>,
+}
+
+fn rollout(file: &ModelFile, name: &str) -> Run {
+    let dir = fixtures().join(format!("rollout_{name}"));
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let leader = read_f32_2d(&dir.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
+    let music = read_f32_2d(&dir.join("music.npy"), None, "music").unwrap();
+    let start;
+    let seed = if dir.join("follower_start.npy").exists() {
+        start = read_f32_2d(&dir.join("follower_start.npy"), Some(165), "start").unwrap();
+        Seed::FollowerFrames(&start.data)
+    } else {
+        let s = read_i64_2d(&dir.join("seed_tokens.npy"), Some(5), "seed").unwrap();
+        Seed::Tokens([0, 1, 2, 3, 4].map(|i| s.data[i] as u32))
+    };
+    let shape = exact::output_shape(&model.cfg, leader.rows).unwrap();
+    let mut scratch = vec![0u8; exact::scratch_bytes(&model.cfg, leader.rows).unwrap()];
+    let mut run = Run {
+        tokens: vec![0; shape.token_rows * 5],
+        leader_tokens: vec![0; shape.leader_tokens * 4],
+        pos: vec![0.0; shape.frames_out * 165],
+        rot: vec![0.0; shape.frames_out * 495],
+    };
+    exact::generate(
+        &model,
+        &ExactInputs { leader_pos3d: &leader.data, music: &music.data, seed },
+        &mut scratch,
+        &mut ExactOutputs {
+            tokens: &mut run.tokens,
+            follower_pos3d: &mut run.pos,
+            follower_rotmat: &mut run.rot,
+            leader_tokens: Some(&mut run.leader_tokens),
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    run
+}
+
+fn model_of(rollout: &str) -> &'static str {
+    if rollout.starts_with("tiny2") {
+        "tiny2"
+    } else {
+        "tiny"
+    }
+}
+
+fn max_abs(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
+}
+
+/// Fraction of equal entries.
+fn agreement(a: &[u32], b: &[u32]) -> f64 {
+    a.iter().zip(b).filter(|(x, y)| x == y).count() as f64 / a.len() as f64
+}
+
+/// The f32 model under the SIMD kernels this CPU selects still reproduces
+/// the Python goldens token for token, motion within 1e-4 (the limit of
+/// tests/rollout_goldens.rs, which runs the scalar twins).
+#[test]
+fn f32_with_simd_kernels_matches_goldens() {
+    let isa = duolando::simd::init();
+    for name in ROLLOUTS {
+        let file = ModelFile::open(fixtures().join(model_of(name)).join("model.duo")).unwrap();
+        let run = rollout(&file, name);
+        let dir = fixtures().join(format!("rollout_{name}"));
+        let want = read_i64_2d(&dir.join("tokens.npy"), Some(5), "tokens").unwrap();
+        let got: Vec<i64> = run.tokens.iter().map(|&t| t as i64).collect();
+        assert_eq!(got, want.data, "{name} ({isa:?}): tokens");
+        let want_pos = read_f32_2d(&dir.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
+        let err = max_abs(&run.pos, &want_pos.data);
+        eprintln!("{name} f32 {isa:?}: tokens identical, max |pos err| {err:.2e} m");
+        assert!(err <= 1e-4, "{name}: pos err {err}");
+    }
+}
+
+/// Motion error limits vs the f32 model while the follower tokens agree
+/// (decoders in f16 in both the f16 and the int8 models; the error is the
+/// f16 rounding of the conv weights). Measured (avx2): f16 max |pos err|
+/// 4.14e-3 m, max |rot err| 6.41e-3 over the 5 rollouts; int8 (tiny_short,
+/// the one whose tokens all agree) 3.36e-3 m / 4.52e-3.
+const POS_LIMIT_M: f32 = 1e-2;
+const ROT_LIMIT: f32 = 2e-2;
+
+/// f16: every follower and leader token equal to the f32 model's (measured:
+/// 1.0 on all 5 rollouts), motion within the limits above.
+#[test]
+fn f16_tokens_identical_to_f32() {
+    duolando::simd::init();
+    compare(StoreAs::F16, 1.0);
+}
+
+/// int8 (Q8Block32 Linear/embedding/head weights, int8 activations per
+/// block): leader tokens identical (measured 1.0: codebooks and encoders
+/// are f16), follower tokens in a FREE-RUNNING rollout agree at least 0.45
+/// (measured min 0.520 tiny2_frames; 0.810 tiny_long, 1.000 tiny_short,
+/// 0.812 tiny_odd, 0.926 tiny2_tokens; once one token differs the rollouts
+/// follow different histories, so this is a lower bound on quality, not the
+/// 1-step agreement DESIGN.md §3 recommends, which needs forced histories);
+/// motion within the limits when all tokens agree.
+#[test]
+fn int8_agreement_and_motion_error_within_measured_limits() {
+    duolando::simd::init();
+    compare(StoreAs::Q8Block32, 0.45);
+}
+
+fn compare(store_as: StoreAs, min_agree: f64) {
+    for model in ["tiny", "tiny2"] {
+        let f32_file = convert(model, StoreAs::F32);
+        let q_file = convert(model, store_as);
+        eprintln!(
+            "{model}: f32 {} bytes, {store_as:?} {} bytes",
+            f32_file.bytes().len(),
+            q_file.bytes().len()
+        );
+        for name in ROLLOUTS.iter().filter(|n| model_of(n) == model) {
+            let a = rollout(&f32_file, name);
+            let b = rollout(&q_file, name);
+            let agree = agreement(&a.tokens, &b.tokens);
+            let lead = agreement(&a.leader_tokens, &b.leader_tokens);
+            let first = a.tokens.iter().zip(&b.tokens).position(|(x, y)| x != y);
+            let (pe, re) = (max_abs(&a.pos, &b.pos), max_abs(&a.rot, &b.rot));
+            eprintln!(
+                "{name} {store_as:?}: follower token agreement {agree:.4} (first diff at flat {first:?}, of {}), leader token agreement {lead:.4}, max |pos err| {pe:.3e} m, max |rot err| {re:.3e}",
+                a.tokens.len()
+            );
+            assert_eq!(lead, 1.0, "{name}: leader tokens");
+            assert!(agree >= min_agree, "{name}: agreement {agree} < {min_agree}");
+            if first.is_none() {
+                assert!(pe <= POS_LIMIT_M, "{name}: pos err {pe} > {POS_LIMIT_M}");
+                assert!(re <= ROT_LIMIT, "{name}: rot err {re} > {ROT_LIMIT}");
+            }
+        }
+    }
+}
