@@ -45,6 +45,8 @@ commands! {
     Synth => synth,
     /// Compute the 54-d music features of an audio file (WAV/MP3/OGG/FLAC) as a (T, 54) .npy.
     Features => features,
+    /// Speed of the engine on a full-size model built from seeded random weights (f32/f16/int8).
+    Bench => bench,
 }
 
 /// `duolando <command> [flags]`.

@@ -1,0 +1,288 @@
+//! `duolando bench`: speed of the engine on a FULL-size model (the
+//! published config, `presets::duolando_published()`) built in memory from
+//! seeded random weights, per weight type (f32, f16, int8 as
+//! `duolando convert` would store them). No files needed.
+//!
+//! Measured now: the R step (one full window of the GPT at the largest
+//! context, `block_size - 1` = 29 tokens per stream, music and leader LATs
+//! included; exactly what `exact::generate` runs per step) — median and
+//! p99 over repeated runs after warm-up, weight bytes the step reads, the
+//! achieved GB/s, and a memcpy bandwidth measured in the same run. The S
+//! step, batched sessions and the session arena need the streaming session
+//! (not built yet) and the tract ratio needs the full-size ONNX export; they
+//! are reported as null.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context};
+use duolando_core::gpt::{self, Window};
+use duolando_core::model::{BindError, Model, TensorSource};
+use duolando_core::presets::duolando_published;
+use duolando_core::schema::{for_each_tensor, SchemaError, TensorSpec};
+use duolando_core::tensor::{DType, TensorRef, MAX_RANK};
+
+use crate::convert::storage_for;
+use crate::duo_writer::{quantise_q8_block32, StoreAs};
+
+/// Flags of `duolando bench`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Timed R steps per weight type (after the warm-up).
+    #[arg(long, default_value_t = 7)]
+    pub runs: usize,
+    /// Untimed warm-up R steps per weight type.
+    #[arg(long, default_value_t = 1)]
+    pub warmup: usize,
+    /// Weight types to measure (comma separated: f32,f16,int8).
+    #[arg(long, value_delimiter = ',', default_values_t = vec![String::from("int8"), String::from("f16"), String::from("f32")])]
+    pub dtypes: Vec<String>,
+    /// Use the scalar reference kernels instead of the detected SIMD ones.
+    #[arg(long)]
+    pub scalar: bool,
+    /// Also write the figures as one flat JSON object.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Timing summary of repeated runs.
+#[derive(Clone, Copy, Debug)]
+struct Stats {
+    median_ms: f64,
+    p99_ms: f64,
+}
+
+fn stats(mut t: Vec<Duration>) -> Stats {
+    t.sort();
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    let n = t.len();
+    // p99 by nearest rank: with fewer than 100 runs it is the maximum.
+    let p99 = ((0.99 * n as f64).ceil() as usize).clamp(1, n) - 1;
+    Stats { median_ms: if n % 2 == 1 { ms(t[n / 2]) } else { 0.5 * (ms(t[n / 2 - 1]) + ms(t[n / 2])) }, p99_ms: ms(t[p99]) }
+}
+
+/// Single-thread memcpy bandwidth: bytes copied per second, 256 MiB buffers
+/// (far beyond the caches), median of 9 copies.
+fn memcpy_gbps() -> f64 {
+    let n = 256 << 20;
+    let src = vec![1u8; n];
+    let mut dst = vec![0u8; n];
+    dst.copy_from_slice(&src);
+    let mut t = Vec::new();
+    for _ in 0..9 {
+        let s = Instant::now();
+        dst.copy_from_slice(std::hint::black_box(&src));
+        t.push(s.elapsed());
+        std::hint::black_box(&dst);
+    }
+    n as f64 / (stats(t).median_ms * 1e-3) / 1e9
+}
+
+/// A full-size model's tensors, stored in one 64-byte aligned buffer.
+struct RandomModel {
+    buf: Vec<u64>,
+    /// name -> (dtype, shape, rank, byte range)
+    table: HashMap<String, (DType, [u32; MAX_RANK], u8, std::ops::Range<usize>)>,
+}
+
+/// xorshift64* uniform in [-1, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        let v = self.0.wrapping_mul(0x2545_f491_4f6c_dd1d);
+        (v >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+    }
+}
+
+impl RandomModel {
+    fn build(requested: StoreAs, seed: u64) -> anyhow::Result<RandomModel> {
+        let cfg = duolando_published();
+        let mut specs: Vec<TensorSpec> = Vec::new();
+        for_each_tensor::<SchemaError>(&cfg, &mut |s| {
+            specs.push(s.clone());
+            Ok(())
+        })
+        .map_err(|e| anyhow!("schema: {e:?}"))?;
+        let mut layout = Vec::new();
+        let mut off = 0usize;
+        for s in &specs {
+            let dims = s.dims();
+            let dtype = match storage_for(requested, &s.name, dims) {
+                StoreAs::F32 => DType::F32,
+                StoreAs::F16 => DType::F16,
+                StoreAs::Q8Block32 => DType::Q8Block32,
+            };
+            let numel: usize = dims.iter().map(|&d| d as usize).product();
+            let bytes = dtype.bytes_for(numel, *dims.last().unwrap_or(&1) as usize).ok_or_else(|| anyhow!("size of {}", s.name))?;
+            layout.push((dtype, off..off + bytes));
+            off = (off + bytes).next_multiple_of(64);
+        }
+        let mut buf = vec![0u64; off / 8 + 8];
+        // Start the tensor data at a 64-byte boundary of the allocation.
+        let base = (64 - (buf.as_ptr() as usize % 64)) % 64;
+        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut buf);
+        let mut rng = Rng(seed | 1);
+        let mut table = HashMap::new();
+        for (s, (dtype, range)) in specs.iter().zip(layout) {
+            let dims = s.dims();
+            let numel: usize = dims.iter().map(|&d| d as usize).product();
+            let name = s.name.as_str();
+            // Weights ~ U(-0.05, 0.05); LayerNorm weights 1, biases small.
+            let scale = if dims.len() == 1 { 0.01 } else { 0.05 };
+            let ln_weight = dims.len() == 1 && name.contains(".ln") && name.ends_with(".weight");
+            let values: Vec<f32> = (0..numel).map(|_| if ln_weight { 1.0 } else { rng.next() * scale }).collect();
+            let dst = &mut bytes[base + range.start..base + range.end];
+            match dtype {
+                DType::F32 => dst.copy_from_slice(bytemuck::cast_slice(&values)),
+                DType::F16 => {
+                    for (d, v) in dst.chunks_exact_mut(2).zip(&values) {
+                        d.copy_from_slice(&half::f16::from_f32(*v).to_le_bytes());
+                    }
+                }
+                DType::Q8Block32 => dst.copy_from_slice(&quantise_q8_block32(&values)),
+            }
+            table.insert(name.to_string(), (dtype, s.shape, s.rank, base + range.start..base + range.end));
+        }
+        Ok(RandomModel { buf, table })
+    }
+}
+
+impl<'a> TensorSource<'a> for &'a RandomModel {
+    fn tensor(&self, name: &str) -> Option<TensorRef<'a>> {
+        let (dtype, shape, rank, range) = self.table.get(name)?;
+        let bytes: &'a [u8] = bytemuck::cast_slice(&self.buf);
+        Some(TensorRef { dtype: *dtype, rank: *rank, shape: *shape, data: &bytes[range.clone()] })
+    }
+}
+
+/// Weight bytes one R step reads: every Linear of the LATs and of the
+/// coordinated-attention blocks, the 5 heads (matrices + f32 biases and
+/// LayerNorm), the embedding rows it looks up and the `pos_emb` rows.
+fn r_step_weight_bytes(m: &Model<'_>, c: usize) -> usize {
+    let lin = |l: &duolando_core::model::Linear<'_>| l.w.weight_bytes() + l.b.map_or(0, |b| b.len() * 4);
+    let block = |b: &duolando_core::model::BlockW<'_>| {
+        lin(&b.query) + lin(&b.key) + lin(&b.value) + lin(&b.proj) + lin(&b.fc) + lin(&b.fc_out) + 4 * 4 * b.ln1.w.len()
+    };
+    let lat = |l: &duolando_core::model::LatW<'_>| lin(&l.cond_emb) + lin(&l.downsample) + l.blocks.iter().map(block).sum::<usize>();
+    let g = &m.gpt;
+    let n_embd = m.cfg.gpt.n_embd as usize;
+    let lf = m.cfg.gpt.look_forward as usize;
+    let emb_row = |t: &duolando_core::kernels::Matrix<'_>| t.weight_bytes() / t.rows().max(1);
+    lat(&g.music)
+        + g.leaders.iter().map(lat).sum::<usize>()
+        + g.base.iter().chain(g.head.iter()).map(block).sum::<usize>()
+        + g.heads.iter().map(|h| h.weight_bytes()).sum::<usize>()
+        + g.tok_emb[..4].iter().map(|t| (c + lf) * emb_row(t)).sum::<usize>()
+        + 5 * c * emb_row(&g.tok_emb[0])
+        + 10 * c * n_embd * 4
+}
+
+struct DtypeResult {
+    name: &'static str,
+    r: Stats,
+    weight_bytes: usize,
+    gbps: f64,
+}
+
+fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Result<DtypeResult> {
+    let t0 = Instant::now();
+    let rm = RandomModel::build(store_as, 0x5eed_0000 ^ store_as as u64)?;
+    let model = Model::bind(&duolando_published(), &&rm).map_err(|e: BindError| anyhow!("bind: {e:?}"))?;
+    let cfg = &model.cfg;
+    let g = &cfg.gpt;
+    let c = gpt::max_context(cfg);
+    let lf = g.look_forward as usize;
+    let ds = g.music.downsample_rate as usize;
+    let mut rng = Rng(42);
+    let music: Vec<f32> = (0..(c + lf) * ds * g.music.n_in as usize).map(|_| rng.next()).collect();
+    let leader: Vec<Vec<u32>> =
+        (0..4).map(|p| (0..c + lf).map(|i| ((i * 37 + p * 11) % g.vocab[p] as usize) as u32).collect()).collect();
+    let follower: Vec<u32> = (0..c * 5).map(|i| ((i * 13) % g.vocab[i % 5] as usize) as u32).collect();
+    let win = Window { c, music: &music, leader: [&leader[0], &leader[1], &leader[2], &leader[3]], follower: &follower };
+    let mut scratch = vec![0u8; gpt::scratch_bytes(cfg, c).context("scratch size")?];
+    let mut logits = vec![0.0f32; gpt::logits_len(cfg)];
+    eprintln!("{name}: model built and bound in {:.1} s", t0.elapsed().as_secs_f64());
+    for _ in 0..args.warmup {
+        gpt::step_logits(&model, &win, &mut scratch, &mut logits).map_err(|e| anyhow!("{e:?}"))?;
+    }
+    let mut times = Vec::new();
+    for _ in 0..args.runs.max(1) {
+        let s = Instant::now();
+        gpt::step_logits(&model, &win, &mut scratch, &mut logits).map_err(|e| anyhow!("{e:?}"))?;
+        times.push(s.elapsed());
+    }
+    if !logits.iter().all(|v| v.is_finite()) {
+        return Err(anyhow!("{name}: non-finite logits"));
+    }
+    let r = stats(times);
+    let weight_bytes = r_step_weight_bytes(&model, c);
+    Ok(DtypeResult { name, r, weight_bytes, gbps: weight_bytes as f64 / (r.median_ms * 1e-3) / 1e9 })
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let isa = if args.scalar {
+        duolando_core::kernels::simd::force_scalar();
+        duolando_core::kernels::simd::Isa::Scalar
+    } else {
+        crate::simd::init()
+    };
+    let memcpy = memcpy_gbps();
+    println!("kernels: {isa:?}; threads: 1; memcpy bandwidth (1 thread, 256 MiB): {memcpy:.1} GB/s");
+    let mut results = Vec::new();
+    for d in &args.dtypes {
+        let (name, store_as) = match d.as_str() {
+            "f32" => ("f32", StoreAs::F32),
+            "f16" => ("f16", StoreAs::F16),
+            "int8" => ("int8", StoreAs::Q8Block32),
+            other => return Err(anyhow!("unknown dtype '{other}' (f32, f16, int8)")),
+        };
+        let r = bench_dtype(name, store_as, &args)?;
+        println!(
+            "R step {:>4} (29-token window, LATs incl.): median {:8.1} ms  p99 {:8.1} ms  p99/median {:.2}  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy)",
+            r.name,
+            r.r.median_ms,
+            r.r.p99_ms,
+            r.r.p99_ms / r.r.median_ms,
+            r.weight_bytes as f64 / 1e6,
+            r.gbps,
+            100.0 * r.gbps / memcpy
+        );
+        results.push(r);
+    }
+    println!("S step, batched sessions, session arena: not measured (the streaming session does not exist yet).");
+    println!("tract ratio: not measured (needs the full-size R-step ONNX from tools/reference; not exported yet).");
+    if let Some(path) = &args.json {
+        let mut j = serde_json::Map::new();
+        let null = serde_json::Value::Null;
+        for k in [
+            "s_step_ms_int8_t1",
+            "s_step_ms_f16_t1",
+            "s_step_ms_f32_t1",
+            "s_step_ms_int8_t2",
+            "tract_r_step_ms_t1",
+            "s_step_gbps_int8_t1",
+            "batch16_over_batch1_int8",
+            "arena_bytes_f16kv",
+            "r_step_ms_f32_t1",
+            "r_step_ms_f16_t1",
+            "r_step_ms_int8_t1",
+        ] {
+            j.insert(k.into(), null.clone());
+        }
+        j.insert("memcpy_gbps_t1".into(), memcpy.into());
+        j.insert("isa".into(), format!("{isa:?}").into());
+        for r in &results {
+            j.insert(format!("r_step_ms_{}_t1", r.name), r.r.median_ms.into());
+            j.insert(format!("r_step_p99_ms_{}_t1", r.name), r.r.p99_ms.into());
+            j.insert(format!("r_step_weight_bytes_{}", r.name), r.weight_bytes.into());
+            j.insert(format!("r_step_gbps_{}_t1", r.name), r.gbps.into());
+        }
+        std::fs::write(path, serde_json::to_string_pretty(&serde_json::Value::Object(j))?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
