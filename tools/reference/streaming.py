@@ -175,8 +175,11 @@ def step_ready_frame(cfg, k):
 
 def frame_ready_frame(cfg, f):
     """Index of the leader frame after whose push follower frame f is ready: its token's
-    frames need tokens <= f//4 + d (known after step f//4 + d - 1) and the leader root at f."""
+    frames need tokens <= f//4 + d (token j >= 1 is known after step j - 1, token 0 is the
+    seed) and the leader root at f. Music preloaded."""
     q = f // RATE
+    if q + cfg.dec_future == 0:  # token 0 is the seed, known before any leader frame
+        return f
     return max(f, RATE * (q + cfg.lookahead + cfg.enc_future + cfg.dec_future) - 1)
 
 
