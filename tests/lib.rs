@@ -48,24 +48,32 @@ pub fn max_errors(actual: &[f32], expected: &[f32]) -> (f32, f32) {
     (max_abs, max_abs / scale)
 }
 
-/// An ONNX graph loaded into tract (typed, decluttered), ready to run.
+/// An ONNX graph loaded into tract, ready to run.
 pub struct Onnx {
     plan: TypedRunnableModel<TypedModel>,
     pub path: PathBuf,
+    /// False when tract's optimizer refused the graph and it runs decluttered.
+    pub optimized: bool,
 }
 
 impl Onnx {
     pub fn load(path: &Path) -> Onnx {
-        let plan = tract_onnx::onnx()
+        let typed = tract_onnx::onnx()
             .model_for_path(path)
-            // Decluttered, not optimized: tract 0.21's codegen pass trips on a
-            // token-embedding table used by a Gather ("Versatile packing" of the
-            // const), and the reference need not be fast.
             .and_then(|m| m.into_typed())
             .and_then(|m| m.into_decluttered())
-            .and_then(|m| m.into_runnable())
             .unwrap_or_else(|e| panic!("tract cannot load {}: {e:?}", path.display()));
-        Onnx { plan, path: path.to_path_buf() }
+        // Optimized when tract can; tract 0.21's codegen trips on a token
+        // embedding table read by a Gather ("Versatile packing" of the const),
+        // so graphs with that pattern run decluttered (slower, same maths).
+        let (model, optimized) = match typed.clone().into_optimized() {
+            Ok(m) => (m, true),
+            Err(_) => (typed, false),
+        };
+        let plan = model
+            .into_runnable()
+            .unwrap_or_else(|e| panic!("tract cannot plan {}: {e:?}", path.display()));
+        Onnx { plan, path: path.to_path_buf(), optimized }
     }
 
     /// Runs the graph; inputs in declaration order.

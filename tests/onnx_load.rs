@@ -12,6 +12,7 @@ fn check_model(model: &str) -> usize {
     for entry in index.as_array().unwrap() {
         let file = entry["file"].as_str().unwrap();
         let onnx = Onnx::load(&dir.join(file));
+        eprintln!("{model}/{file}: optimized={}", onnx.optimized);
         let inputs = entry["inputs"]
             .as_array()
             .unwrap()
