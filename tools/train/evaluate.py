@@ -1,0 +1,166 @@
+#!/usr/bin/env python3
+"""Quality of the demo model on the held-out (test split) synthetic takes, with baselines.
+
+1. Teacher-forced token accuracy per follower stream over training-style windows (stride 4
+   tokens), against two trivial baselines: the most frequent train token of the stream, and
+   "repeat the previous token".
+2. R-mode greedy rollouts (tools/reference/pipeline.py generate_exact, the authors' eval
+   window; follower seeded from its first 4 frames) vs the true follower:
+   - follower root distance (mm, world, per frame, mean);
+   - mean joint position error (mm, world);
+   - foot skating ratio (the original utils/metric_footskating_dur.py: a frame counts when the
+     pelvis moves > 3 cm/frame horizontally while both ankles move < 1 cm/frame relative to
+     the pelvis; ratio over frame differences; our data is y-up, so the horizontal plane is xz);
+   - beat-echo degree BED (utils/metrics_duet.py: kinetic velocity = mean joint speed,
+     Gaussian smoothing sigma 5, motion beats = strict local minima; for every leader beat
+     exp(-d^2 / 18) with d the distance in frames to the nearest follower beat, averaged).
+   Baselines: root = leader root + the initial offset held constant; BED of a follower taken
+   from another test take (chance level); the true follower's own figures.
+"""
+import argparse
+import json
+import sys
+
+import numpy as np
+import torch
+
+from common import (Clock, RATE, build_models, load_checkpoint, load_split, setup_threads)
+from train_gpt import batch_windows, encode_split, n_windows, window
+from reference.pipeline import generate_exact
+
+STREAMS = ("up", "down", "lhand", "rhand", "transl")
+
+
+def gaussian_filter1d(x, sigma, truncate=4.0):
+    """scipy.ndimage.gaussian_filter on a 1-D array (mode 'reflect', truncate 4)."""
+    r = int(truncate * sigma + 0.5)
+    k = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma) ** 2)
+    k /= k.sum()
+    xp = np.pad(x, r, mode="symmetric")  # scipy 'reflect' = numpy 'symmetric'
+    return np.convolve(xp, k, mode="valid")
+
+
+def motion_beats(pos):
+    p = pos.reshape(-1, 55, 3)
+    vel = np.mean(np.linalg.norm(p[1:] - p[:-1], axis=2), axis=1)
+    v = gaussian_filter1d(vel, 5)
+    return np.where((v[1:-1] < v[:-2]) & (v[1:-1] < v[2:]))[0] + 1  # argrelextrema(np.less)
+
+
+def bed(leader, follower):
+    lb, fb = motion_beats(leader), motion_beats(follower)
+    if len(lb) == 0 or len(fb) == 0:
+        return 0.0
+    return float(np.mean([np.exp(-np.min((fb - b) ** 2) / 2 / 9) for b in lb]))
+
+
+def foot_skating(pos, up_axis=1):
+    p = pos.reshape(-1, 55, 3)
+    pelvis = p[:, 0].copy()
+    l, r = p[:, 7] - pelvis, p[:, 8] - pelvis
+    pelvis[:, up_axis] = 0
+    pv = np.linalg.norm(np.diff(pelvis, axis=0), axis=1)
+    lv = np.linalg.norm(np.diff(l, axis=0), axis=1)
+    rv = np.linalg.norm(np.diff(r, axis=0), axis=1)
+    n = len(pv)
+    dur = int(np.sum((pv[1:] > 0.03) & (lv[1:] < 0.01) & (rv[1:] < 0.01)))  # original loops i = 1..n-1
+    return dur, n
+
+
+@torch.no_grad()
+def token_accuracy(gpt, train_tt, test_tt, stride=4):
+    bs, lf = gpt.block_size, gpt.look_forward
+    freq = [torch.bincount(torch.cat([t["follower"][j] for t in train_tt]), minlength=gpt.cfg.vocab_size_up)
+            for j in range(5)]
+    mode = [int(f.argmax()) for f in freq]
+    hits = np.zeros(5); hits_last = np.zeros(5); base_mode = np.zeros(5); base_rep = np.zeros(5)
+    n = 0; n_last = 0
+    for tt in test_tt:
+        starts = list(range(0, n_windows(tt, bs, lf), stride))
+        for i in range(0, len(starts), 32):
+            fin, tgt, music, lead = batch_windows([window(tt, s, bs, lf) for s in starts[i:i + 32]])
+            logits = gpt(fin, music, lead)
+            for j in range(5):
+                pred = logits[j].argmax(-1)
+                hits[j] += float((pred == tgt[j]).sum())
+                hits_last[j] += float((pred[:, -1] == tgt[j][:, -1]).sum())
+                base_mode[j] += float((tgt[j] == mode[j]).sum())
+                base_rep[j] += float((fin[j] == tgt[j]).sum())
+            n += tgt[0].numel(); n_last += tgt[0].shape[0]
+    return {s: dict(model=hits[j] / n, model_full_context=hits_last[j] / n_last,
+                    most_frequent=base_mode[j] / n, repeat_previous=base_rep[j] / n)
+            for j, s in enumerate(STREAMS)} | {"n_tokens": n, "n_windows": n_last}
+
+
+def rollout_metrics(gpt, vq, tr, takes):
+    rows = []
+    outs = []
+    for tk in takes:
+        res = generate_exact(gpt, vq, tr, tk["leader"], tk["music"], follower_start=tk["follower"][:4])
+        pred = res["follower_pos3d"].numpy()
+        n = len(pred)
+        true, lead = tk["follower"][:n], tk["leader"][:n]
+        root_d = np.linalg.norm(pred[:, :3] - true[:, :3], axis=1).mean() * 1000
+        base = lead[:, :3] + (true[0, :3] - lead[0, :3])
+        base_d = np.linalg.norm(base - true[:, :3], axis=1).mean() * 1000
+        mpjpe = np.linalg.norm((pred - true).reshape(n, 55, 3), axis=2).mean() * 1000
+        outs.append(pred)
+        rows.append(dict(name=tk["name"], frames=n, root_mm=root_d, root_baseline_mm=base_d, mpjpe_mm=mpjpe,
+                         skate=foot_skating(pred), skate_true=foot_skating(true), skate_leader=foot_skating(lead),
+                         bed=bed(lead, pred), bed_true=bed(lead, true),
+                         token_agreement=float((res["tokens"][1:].numpy() ==
+                                                 true_tokens(vq, tr, tk, len(res["tokens"]))[1:]).mean())))
+    # chance BED: each leader against the true follower of the next test take
+    for i, r in enumerate(rows):
+        other = takes[(i + 1) % len(takes)]["follower"]
+        lead = takes[i]["leader"]
+        m = min(len(other), len(lead))
+        r["bed_other_take"] = bed(lead[:m], other[:m])
+    return rows, outs
+
+
+def true_tokens(vq, tr, tk, k):
+    from train_gpt import take_tokens
+    return take_tokens(vq, tr, tk)["follower"].t().numpy()[:k]
+
+
+def summarise(rows):
+    w = np.array([r["frames"] for r in rows], float)
+    avg = lambda key: float(np.average([r[key] for r in rows], weights=w))
+    sk = lambda key: sum(r[key][0] for r in rows) / sum(r[key][1] for r in rows)
+    return dict(root_mm=avg("root_mm"), root_baseline_mm=avg("root_baseline_mm"), mpjpe_mm=avg("mpjpe_mm"),
+                token_agreement_free_running=avg("token_agreement"),
+                skate_ratio=sk("skate"), skate_ratio_true_follower=sk("skate_true"),
+                skate_ratio_leader=sk("skate_leader"),
+                bed=float(np.mean([r["bed"] for r in rows])), bed_true_follower=float(np.mean([r["bed_true"] for r in rows])),
+                bed_other_take=float(np.mean([r["bed_other_take"] for r in rows])),
+                frames=int(w.sum()), takes=len(rows))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--ckpt", required=True, help="directory with motion_vqvae.pt, transl_vqvae.pt, follower_gpt.pt")
+    ap.add_argument("--json", required=True)
+    args = ap.parse_args(argv)
+    setup_threads()
+    clock = Clock()
+    gpt, vq, tr = build_models()
+    for m, f in ((gpt, "follower_gpt.pt"), (vq, "motion_vqvae.pt"), (tr, "transl_vqvae.pt")):
+        load_checkpoint(m, f"{args.ckpt}/{f}").eval()
+    test = load_split(args.data, "test")
+    train_tt = encode_split(vq, tr, load_split(args.data, "train"))
+    test_tt = encode_split(vq, tr, test)
+    acc = token_accuracy(gpt, train_tt, test_tt)
+    print(json.dumps(acc, indent=1), flush=True)
+    rows, _ = rollout_metrics(gpt, vq, tr, test)
+    summ = summarise(rows)
+    print(json.dumps(summ, indent=1), flush=True)
+    with open(args.json, "w") as f:
+        json.dump(dict(token_accuracy=acc, rollout=summ, per_take=rows), f, indent=1, default=float)
+    print(f"[eval] {clock}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

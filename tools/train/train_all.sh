@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Retrain the demo model from scratch and rebuild assets/demo.duo + the demo clip.
+#
+#   tools/train/train_all.sh            # from the repository root
+#
+# Environment (all optional): PY (python with torch, default /work/venv/bin/python),
+# WORK (scratch dir, default /tmp/duo_train), DATA (synthetic data dir, default /tmp/duo_synth),
+# MINUTES / SEED (synthetic data), VQ_STEPS / TR_STEPS / GPT_STEPS, EVAL=0 to skip evaluation.
+# Single-threaded (torch.set_num_threads(1)) under nice; see docs/DEMO_MODEL.md for timings.
+set -euo pipefail
+ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
+PY="${PY:-/work/venv/bin/python}"
+WORK="${WORK:-/tmp/duo_train}"
+DATA="${DATA:-/tmp/duo_synth}"
+MINUTES="${MINUTES:-20}"
+SEED="${SEED:-1}"
+BIN="$ROOT/target/release/duolando"
+T="$ROOT/tools/train"
+NICE="nice -n 10"
+mkdir -p "$WORK"
+
+(cd "$ROOT" && cargo build --release -p duolando)
+[ -d "$DATA/motion" ] || "$BIN" synth --minutes "$MINUTES" --seed "$SEED" --out "$DATA"
+
+cd "$T"
+$NICE "$PY" train_vqvae.py  --data "$DATA" --out "$WORK/motion_vqvae.pt" --steps "${VQ_STEPS:-500}" --batch 8
+$NICE "$PY" train_transl.py --data "$DATA" --out "$WORK/transl_vqvae.pt" --steps "${TR_STEPS:-1500}"
+$NICE "$PY" train_gpt.py    --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
+                            --out "$WORK/follower_gpt.pt" --steps "${GPT_STEPS:-700}" --batch 16
+$NICE "$PY" export.py --ckpt "$WORK" --out "$WORK/export" --data "$DATA" --assets "$ROOT/assets"
+"$BIN" convert --config "$WORK/export/follower_gpt.yaml" --gpt "$WORK/export/gpt.safetensors" \
+    --vqvae "$WORK/export/vqvae.safetensors" --transl "$WORK/export/transl.safetensors" \
+    --dtype f16 -o "$ROOT/assets/demo.duo"
+if [ "${EVAL:-1}" != 0 ]; then
+    $NICE "$PY" evaluate.py --data "$DATA" --ckpt "$WORK" --json "$WORK/eval.json"
+fi
+ls -l "$ROOT/assets"

@@ -1,0 +1,146 @@
+#!/usr/bin/env python3
+"""Stage 2: the follower GPT, supervised (original gpt2t.py `MCTall.train`, models/gpt2nt_woln.py).
+
+Windows as in the original training (data.train.interval 240, move 4, music_dance_rate 1):
+a window starts at frame i = 4s; with bs = block_size (30) and lf = look_forward (29):
+  follower input tokens  [s, s+bs)        (up, down, lhand, rhand, transl)
+  follower targets       [s+1, s+bs+1)    (teacher forcing)
+  leader tokens          [s, s+bs+lf)     (look-ahead)
+  music frames           [i+4, i+4+(bs+lf)*4)   (config music_len, from the move offset
+                                                 music_motion_rate = 4)
+Loss: the sum of the five cross-entropies (original GPT2nt.forward with targets).
+Tokens come from the frozen VQ-VAEs with the roots zeroed; transl tokens encode
+20 * (root_f - root_l). Deviation: every take is encoded ONCE over its whole length and the
+windows are sliced from the token sequences (the original encodes each 240-frame window on the
+fly); this is cheaper and is exactly how the R pipeline encodes the leader at inference.
+Dropout (original *_pdrop 0.1) is added as hooks on attention and MLP outputs and embeddings.
+"""
+import argparse
+import sys
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from common import (Clock, RATE, TRANSL_SCALE, build_models, load_checkpoint, load_split, normalised,
+                    save_checkpoint, setup_threads)
+from reference.pipeline import encode_motion, encode_transl
+
+
+@torch.no_grad()
+def take_tokens(vq, tr, tk):
+    """One take -> leader tokens (4, n), follower tokens (5, n), music (T, 54)."""
+    out = {}
+    for who in ("leader", "follower"):
+        norm = torch.from_numpy(normalised(tk[who]))
+        norm[:, :3] = 0
+        out[who] = torch.cat(encode_motion(vq, norm[None]), 0)  # (4, n)
+    rel = torch.from_numpy((tk["follower"][:, :3] - tk["leader"][:, :3]) * TRANSL_SCALE)
+    transl = encode_transl(tr, rel[None])  # (1, n)
+    return dict(name=tk["name"], leader=out["leader"], follower=torch.cat([out["follower"], transl], 0),
+                music=torch.from_numpy(tk["music"]))
+
+
+def encode_split(vq, tr, takes):
+    return [take_tokens(vq, tr, tk) for tk in takes]
+
+
+def window(tt, s, bs, lf):
+    """The training window starting at token s of one encoded take."""
+    i = s * RATE
+    return (tt["follower"][:, s:s + bs], tt["follower"][:, s + 1:s + bs + 1],
+            tt["leader"][:, s:s + bs + lf], tt["music"][i + RATE:i + RATE + (bs + lf) * RATE])
+
+
+def n_windows(tt, bs, lf):
+    """Number of valid starts: the window spans bs + lf + 1 tokens (240 frames at 30/29)."""
+    return tt["leader"].shape[1] - (bs + lf + 1) + 1
+
+
+def batch_windows(items):
+    fin = torch.stack([w[0] for w in items])      # (B, 5, bs)
+    tgt = torch.stack([w[1] for w in items])      # (B, 5, bs)
+    lead = torch.stack([w[2] for w in items])     # (B, 4, bs+lf)
+    music = torch.stack([w[3] for w in items])    # (B, (bs+lf)*4, 54)
+    return ([fin[:, j] for j in range(5)], [tgt[:, j] for j in range(5)], music,
+            [lead[:, j] for j in range(4)])
+
+
+def init_weights(gpt):
+    """Original GPT2nt._init_weights: Linear/Embedding N(0, 0.02), biases 0, LayerNorm 1/0;
+    position embeddings start at zero."""
+    for m in gpt.modules():
+        if isinstance(m, (nn.Linear, nn.Embedding)):
+            nn.init.normal_(m.weight, 0.0, 0.02)
+            if isinstance(m, nn.Linear) and m.bias is not None:
+                nn.init.zeros_(m.bias)
+        elif isinstance(m, nn.LayerNorm):
+            nn.init.ones_(m.weight)
+            nn.init.zeros_(m.bias)
+
+
+def add_dropout(gpt, p):
+    hooks = []
+    for name, m in gpt.named_modules():
+        if name.endswith(".attn") or name.endswith(".mlp") or name.startswith("tok_emb") or name.endswith("cond_emb"):
+            hooks.append(m.register_forward_hook(lambda mod, inp, out: F.dropout(out, p, training=mod.training)))
+    return hooks
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--vqvae", required=True)
+    ap.add_argument("--transl", required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--lr", type=float, default=1e-3)
+    ap.add_argument("--dropout", type=float, default=0.1)
+    ap.add_argument("--seed", type=int, default=44)
+    args = ap.parse_args(argv)
+    setup_threads()
+    torch.manual_seed(args.seed)
+    gpt, vq, tr = build_models()
+    load_checkpoint(vq, args.vqvae).eval()
+    load_checkpoint(tr, args.transl).eval()
+    clock = Clock()
+    train = encode_split(vq, tr, load_split(args.data, "train"))
+    print(f"[gpt] encoded {len(train)} train takes ({clock})", flush=True)
+    bs, lf = gpt.block_size, gpt.look_forward
+    starts = [(ti, s) for ti, tt in enumerate(train) for s in range(n_windows(tt, bs, lf))]
+    rng = np.random.default_rng(args.seed)
+    init_weights(gpt)
+    gpt.train()
+    add_dropout(gpt, args.dropout)
+    opt = torch.optim.AdamW(gpt.parameters(), lr=args.lr, betas=(0.9, 0.95), weight_decay=0.01)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=args.lr, total_steps=args.steps, pct_start=0.05)
+    n_params = sum(p.numel() for p in gpt.parameters())
+    print(f"[gpt] {n_params} parameters, {len(starts)} training windows", flush=True)
+    run = None
+    for step in range(1, args.steps + 1):
+        pick = rng.integers(len(starts), size=args.batch)
+        fin, tgt, music, lead = batch_windows([window(train[starts[j][0]], starts[j][1], bs, lf) for j in pick])
+        logits = gpt(fin, music, lead)
+        losses = [F.cross_entropy(lg.reshape(-1, lg.shape[-1]), t.reshape(-1)) for lg, t in zip(logits, tgt)]
+        loss = sum(losses)
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(gpt.parameters(), 1.0)
+        opt.step()
+        sched.step()
+        with torch.no_grad():
+            acc = [float((lg.argmax(-1) == t).float().mean()) for lg, t in zip(logits, tgt)]
+        run = np.array(acc) if run is None else 0.95 * run + 0.05 * np.array(acc)
+        if step % 100 == 0 or step == 1:
+            print(f"[gpt] step {step}/{args.steps} loss {float(loss):.3f} "
+                  f"train acc (ema) up/down/lh/rh/tr {' '.join(f'{a:.2f}' for a in run)} | {clock}", flush=True)
+    gpt.eval()
+    save_checkpoint(gpt, args.out)
+    print(f"[gpt] saved {args.out} ({clock})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
