@@ -69,10 +69,12 @@ def joint_err_mm(s_pos, r_pos):
 
 def compare(models, inputs, r, cfg):
     """The `duolando compare` figures for one S setting."""
+    from reference.streaming import DecisionMargins
     gpt, vq, tr = models
     seed = {k: inputs[k] for k in ("seed_tokens", "follower_start") if k in inputs}
-    forced = generate_streaming(gpt, vq, tr, inputs["leader_pos3d"], inputs["music"], cfg, forced=r["tokens"])
-    free = generate_streaming(gpt, vq, tr, inputs["leader_pos3d"], inputs["music"], cfg, **seed)
+    mg = DecisionMargins()
+    forced = generate_streaming(gpt, vq, tr, inputs["leader_pos3d"], inputs["music"], cfg, forced=r["tokens"], margins=mg)
+    free = generate_streaming(gpt, vq, tr, inputs["leader_pos3d"], inputs["music"], cfg, margins=mg, **seed)
     acc, per, n1 = one_step(forced["pred"], r["tokens"])
     fr, nf = free_run(free["tokens"], r["tokens"])
     me, mx, nj = joint_err_mm(free["follower_pos3d"], r["follower_pos3d"])
@@ -81,7 +83,9 @@ def compare(models, inputs, r, cfg):
     out.update({"free_run_agreement": fr, "mean_joint_err_mm": me, "max_joint_err_mm": mx,
                 "latency_frames": latency_frames(cfg), "one_step_steps": n1, "free_run_steps": nf,
                 "joint_err_frames": nj, "lookahead": cfg.lookahead, "enc_future": cfg.enc_future,
-                "dec_future": cfg.dec_future, "shift": cfg.shift})
+                "dec_future": cfg.dec_future, "shift": cfg.shift,
+                "min_logit_margin_rel": mg.logit_rel, "min_vq_margin_rel": mg.vq_rel,
+                "decisions_clear_floors": bool(mg.logit_rel >= LOGIT_FLOOR and mg.vq_rel >= VQ_FLOOR)})
     return out
 
 
@@ -232,7 +236,7 @@ def train_toy(steps, path):
 
 
 @torch.no_grad()
-def r_rollout(gpt, codes, cond_music, hist0, n_k, shift=None, forced=None):
+def r_rollout(gpt, codes, cond_music, hist0, n_k, shift=None, forced=None, logits_out=None):
     """R on token-level inputs (the window loop of pipeline.generate_exact / GPT2nt.sample):
     codes 4 x (1, N) leader codes, cond_music (1, 4N', 54) music from frame 4."""
     rate, lf, m = RATE, gpt.look_forward, gpt.block_size - 1
@@ -243,6 +247,8 @@ def r_rollout(gpt, codes, cond_music, hist0, n_k, shift=None, forced=None):
         lo, hi = k + 1 - c, k + 1 + lf
         logits = gpt([hist[:, lo:k + 1, i] for i in range(5)], cond_music[:, lo * rate:hi * rate],
                      [z[:, lo:hi] for z in codes])
+        if logits_out is not None:
+            logits_out.append(torch.stack([lg[0, -1] for lg in logits]))
         nxt = torch.stack([torch.argmax(lg[0, -1]) for lg in logits])
         preds.append(nxt)
         app = forced[k + 1] if forced is not None else nxt
@@ -253,14 +259,20 @@ def r_rollout(gpt, codes, cond_music, hist0, n_k, shift=None, forced=None):
 def toy_variants():
     lf = TOY["look_forward"]
     v = [("S default (s=22, F=(a,0,0), P=29)", StreamConfig(lf, 0, 0, 22))]
-    v += [(f"LAT only: F first, P={p} (s=29)", StreamConfig(lf, 0, 0, 29, lat_past=p)) for p in (29, 20, 14, 10)]
+    v += [(f"LAT only: F first, P={p} (s=29)", StreamConfig(lf, 0, 0, 29, lat_past=p)) for p in (29, 14)]
     v += [("LAT only: F split evenly (s=29)", StreamConfig(lf, 0, 0, 29, lat_split="even")),
           ("LAT only: inputs cut at window start (s=29)", StreamConfig(lf, 0, 0, 29, lat_clip="window"))]
     v += [(f"S s={s}", StreamConfig(lf, 0, 0, s)) for s in (8, 15, 27)]
-    v += [(f"S s=22, chunk-clipped LAT", StreamConfig(lf, 0, 0, 22, lat_clip="window"))]
     v += [(f"S s=22, a={a}", StreamConfig(a, 0, 0, 22)) for a in (12, 6, 0)]
-    v += [(f"S s=22, a={a}, even split", StreamConfig(a, 0, 0, 22, lat_split="even")) for a in (12, 6)]
+    v += [("S s=22, a=6, even split", StreamConfig(6, 0, 0, 22, lat_split="even"))]
     return v
+
+
+def tv(lg_a, lg_b):
+    """Mean total-variation distance between the next-token distributions of two logit lists."""
+    a = torch.softmax(torch.stack(lg_a), -1)
+    b = torch.softmax(torch.stack(lg_b), -1)
+    return 0.5 * (a - b).abs().sum(-1).mean().item()
 
 
 def run_toy(steps, n_eval, path):
@@ -281,8 +293,12 @@ def run_toy(steps, n_eval, path):
 
     r_out = []
     truth_r, truth_tf = [], []
+    r_logits = []
     for codes, cm, fol, n_k in evals:
         r_tok, _ = r_rollout(gpt, codes, cm, fol[0], n_k)
+        lgs = []
+        r_rollout(gpt, codes, cm, fol[0], n_k, forced=r_tok, logits_out=lgs)  # R's own logits
+        r_logits.append(lgs)
         _, r_tf = r_rollout(gpt, codes, cm, fol[0], n_k, forced=fol)  # teacher-forced on the truth
         r_out.append(r_tok)
         truth_r.append(acc(r_tok[1:], fol[1:n_k + 1]))
@@ -290,19 +306,24 @@ def run_toy(steps, n_eval, path):
     rows["R (reference)"] = {"vs_truth_free": float(np.mean(truth_r)), "vs_truth_teacher_forced": float(np.mean(truth_tf))}
     print(f"[toy] R: {rows['R (reference)']}", flush=True)
     for s in (15, 22, 27):
-        one, free = [], []
-        for (codes, cm, fol, n_k), r_tok in zip(evals, r_out):
-            _, p = r_rollout(gpt, codes, cm, fol[0], n_k, shift=s, forced=r_tok)
+        one, free, tvs = [], [], []
+        for (codes, cm, fol, n_k), r_tok, rl in zip(evals, r_out, r_logits):
+            lgs = []
+            _, p = r_rollout(gpt, codes, cm, fol[0], n_k, shift=s, forced=r_tok, logits_out=lgs)
             t, _ = r_rollout(gpt, codes, cm, fol[0], n_k, shift=s)
             one.append(acc(p, r_tok[1:]))
             free.append(acc(t[1:], r_tok[1:]))
-        rows[f"R windows chunked s={s} (exact LAT)"] = {"one_step": float(np.mean(one)), "free_run": float(np.mean(free))}
+            tvs.append(tv(lgs, rl))
+        rows[f"R windows chunked s={s} (exact LAT)"] = {"one_step": float(np.mean(one)), "free_run": float(np.mean(free)),
+                                                      "tv_to_R": float(np.mean(tvs))}
         print(f"[toy] chunk s={s}: {rows[f'R windows chunked s={s} (exact LAT)']}", flush=True)
     for name, cfg in toy_variants():
-        one, per, free, truth = [], [], [], []
-        for (codes, cm, fol, n_k), r_tok in zip(evals, r_out):
+        one, per, free, truth, tvs = [], [], [], [], []
+        for (codes, cm, fol, n_k), r_tok, rl in zip(evals, r_out, r_logits):
             nk = min(n_k, len(codes[0][0]) - cfg.lookahead, cm.shape[1] // 4 - cfg.music_a(gpt))
-            _, p, _, _ = s_rollout(gpt, cfg, codes, cm, fol[0], nk, forced=r_tok)
+            lgs = []
+            _, p, _, _ = s_rollout(gpt, cfg, codes, cm, fol[0], nk, forced=r_tok, logits_out=lgs)
+            tvs.append(tv(lgs, rl[:nk]))
             t, _, _, _ = s_rollout(gpt, cfg, codes, cm, fol[0], nk)
             eq = (p == r_tok[1:nk + 1]).float()
             one.append(eq.mean().item())
@@ -310,7 +331,8 @@ def run_toy(steps, n_eval, path):
             free.append(acc(t[1:], r_tok[1:nk + 1]))
             truth.append(acc(t[1:], fol[1:nk + 1]))
         rows[name] = {"one_step": float(np.mean(one)), "one_step_per_stream": np.mean(per, 0).round(3).tolist(),
-                      "free_run": float(np.mean(free)), "vs_truth_free": float(np.mean(truth))}
+                      "free_run": float(np.mean(free)), "vs_truth_free": float(np.mean(truth)),
+                      "tv_to_R": float(np.mean(tvs))}
         print(f"[toy] {name}: {rows[name]}", flush=True)
     return rows
 

@@ -359,10 +359,12 @@ class DecisionMargins(Margins):
 
 
 @torch.no_grad()
-def s_rollout(gpt, cfg, codes, cond_music, hist0, n_k, forced=None, topk=None, rng_seed=0, margins=None):
+def s_rollout(gpt, cfg, codes, cond_music, hist0, n_k, forced=None, topk=None, rng_seed=0, margins=None,
+              logits_out=None):
     """The GPT part of S on token-level inputs: n_k steps of the chunked window over frozen
     conditions. codes 4 x (1, >= n_k + a) S leader codes; cond_music (1, >= 4(n_k + a_m), 54)
-    (music from frame 4); hist0 (5,) seed; forced (n >= n_k + 1, 5) or None.
+    (music from frame 4); hist0 (5,) seed; forced (n >= n_k + 1, 5) or None; logits_out: a
+    list that receives the (5, V) logits of every step (study only).
     Returns (tokens (n_k+1, 5), pred (n_k, 5), context list, window_lo list)."""
     m = gpt.block_size - 1
     hist = torch.as_tensor(hist0, dtype=torch.long).view(1, 1, 5)
@@ -376,6 +378,8 @@ def s_rollout(gpt, cfg, codes, cond_music, hist0, n_k, forced=None, topk=None, r
             left = lo if cfg.lat_clip == "window" else 0
             conds, conds_lo = conditions(gpt, cfg, cond_music, codes, n_k, left), lo
         lg = window_logits(gpt, conds, hist, lo, k + 1)
+        if logits_out is not None:
+            logits_out.append(lg)
         step = []
         for h in range(5):
             if margins is not None:
