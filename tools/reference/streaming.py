@@ -809,7 +809,6 @@ class StreamingSession:
             self.music_fed += 1
 
     def _run_steps(self):
-        a = self.cfg.lookahead
         while all(len(l.rows) > self.k for l in self.leader_lats):
             k = self.k
             if RATE * (k + 1 + self.cfg.music_a(self.g)) > self.cond_music.shape[0]:
@@ -820,12 +819,11 @@ class StreamingSession:
                 self.cond[s + 1].push(lat.rows[k])
             c = window_context(k, self.m, self.cfg.shift)
             lo = k + 1 - c
-            embs = FOLLOWER_EMBS
 
-            def inputs(j):
+            def inputs(j):  # (10, E) stream inputs of token position j (without position rows)
                 t = self.toks.get(j)
                 rows = [self.cond[s].get(j) for s in range(5)]
-                rows += [getattr(self.g, embs[i])(t[i]) for i in range(5)]
+                rows += [getattr(self.g, FOLLOWER_EMBS[i])(t[i]) for i in range(5)]
                 return torch.stack(rows)
             lg = self.gptc.step(lo, k, inputs)
             nxt = torch.tensor([choose(lg[h], self.topk, self.rng) for h in range(5)], dtype=torch.long)
@@ -835,7 +833,6 @@ class StreamingSession:
             self.tokens.append(app)
             self._feed_decoders()
             self.k += 1
-            del a
 
     def pull(self):
         """Follower frames ready now: list of (f, pos (165,), rot (495,)). Frame f is ready when
