@@ -6,6 +6,7 @@ pub mod audio;
 pub mod cli;
 pub mod convert;
 pub mod duo_writer;
+pub mod engine_errors;
 pub mod export;
 pub mod model_file;
 pub mod music;

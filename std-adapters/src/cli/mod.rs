@@ -41,6 +41,8 @@ macro_rules! commands {
 commands! {
     /// Convert the original PyTorch checkpoints (as safetensors) and YAML to a `.duo` model.
     Convert => convert,
+    /// Generate the follower for a leader clip and music (npy in, npy out).
+    Generate => generate,
     /// Write a procedural duet dataset in the original DD100 layout.
     Synth => synth,
     /// Compute the 54-d music features of an audio file (WAV/MP3/OGG/FLAC) as a (T, 54) .npy.

@@ -1,0 +1,175 @@
+//! `duolando generate`: run the model over a whole leader clip and music
+//! track read from `.npy` files and write the follower as `.npy` files.
+//!
+//! `--mode exact` is R mode (docs/ARCHITECTURE.md): the authors' evaluation
+//! pipeline token for token (greedy).
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::ValueEnum;
+use duolando_core::config::{POSE_DIM, ROT_DIM};
+use duolando_core::exact::{self, ExactInputs, ExactOutputs, Seed};
+use duolando_core::model::Model;
+
+use crate::engine_errors::describe;
+use crate::model_file::ModelFile;
+use crate::npy::{read_f32_2d, write_f32, write_i64};
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum Mode {
+    /// R mode: the original evaluation pipeline, token for token.
+    Exact,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The `.duo` model.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Leader joint positions, (T, 165) float32, metres, SMPL-X order, 30 fps.
+    #[arg(long)]
+    pub leader: PathBuf,
+    /// Music features, (T, 54) float32 at 30 fps (`duolando features` makes them).
+    #[arg(long)]
+    pub music: PathBuf,
+    /// Seed tokens "up,down,lhand,rhand,transl".
+    #[arg(long, conflicts_with = "follower_start", required_unless_present = "follower_start")]
+    pub seed_tokens: Option<String>,
+    /// The follower's first frames, (F, 165) float32 (F >= 4; 4 as in the original eval).
+    #[arg(long)]
+    pub follower_start: Option<PathBuf>,
+    #[arg(long, value_enum, default_value = "exact")]
+    pub mode: Mode,
+    /// Output directory (created).
+    #[arg(long, short)]
+    pub out: PathBuf,
+}
+
+/// What [`generate_exact`] produced.
+pub struct Generated {
+    /// (K+1, 5) up, down, lhand, rhand, transl; row 0 = seed.
+    pub tokens: Vec<u32>,
+    /// (F, 165) world positions in the leader's input coordinates.
+    pub follower_pos3d: Vec<f32>,
+    /// (F, 495) raw rotation-decoder output.
+    pub follower_rotmat: Vec<f32>,
+    pub frames: usize,
+    pub token_rows: usize,
+}
+
+/// Parses "a,b,c,d,e" into five tokens.
+pub fn parse_seed_tokens(s: &str) -> Result<[u32; 5]> {
+    let v: Vec<&str> = s.split(',').map(str::trim).collect();
+    if v.len() != 5 {
+        bail!("--seed-tokens needs 5 comma-separated tokens (up,down,lhand,rhand,transl), got {}", v.len());
+    }
+    let mut out = [0u32; 5];
+    for (o, t) in out.iter_mut().zip(&v) {
+        *o = t.parse().with_context(|| format!("--seed-tokens: '{t}' is not a non-negative integer"))?;
+    }
+    Ok(out)
+}
+
+/// Runs R mode on in-memory inputs, with a progress bar on a terminal.
+pub fn generate_exact(model: &Model<'_>, leader: &[f32], music: &[f32], seed: Seed<'_>) -> Result<Generated> {
+    let cfg = &model.cfg;
+    let t = leader.len() / POSE_DIM;
+    let shape = exact::output_shape(cfg, t)
+        .with_context(|| format!("the leader clip has {t} frames; at least {} are needed", cfg.hop()))?;
+    let scratch_len = exact::scratch_bytes(cfg, t).context("the clip is too long for this model's scratch plan")?;
+    let mut scratch = vec![0u8; scratch_len];
+    let mut g = Generated {
+        tokens: vec![0; shape.token_rows * 5],
+        follower_pos3d: vec![0.0; shape.frames_out * POSE_DIM],
+        follower_rotmat: vec![0.0; shape.frames_out * ROT_DIM],
+        frames: shape.frames_out,
+        token_rows: shape.token_rows,
+    };
+    let bar = if std::io::stderr().is_terminal() && shape.steps > 0 {
+        let b = indicatif::ProgressBar::new(shape.steps as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} steps, {eta} left")
+                .expect("static template")
+                .progress_chars("=> "),
+        );
+        b.set_message("generating");
+        Some(b)
+    } else {
+        None
+    };
+    let result = exact::generate(
+        model,
+        &ExactInputs { leader_pos3d: leader, music, seed },
+        &mut scratch,
+        &mut ExactOutputs {
+            tokens: &mut g.tokens,
+            follower_pos3d: &mut g.follower_pos3d,
+            follower_rotmat: &mut g.follower_rotmat,
+            leader_tokens: None,
+        },
+        &mut |done, _| {
+            if let Some(b) = &bar {
+                b.set_position(done as u64);
+            }
+        },
+    );
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    result.map_err(|e| anyhow::anyhow!("generation failed: {}", describe(&e)))?;
+    Ok(g)
+}
+
+/// Writes `tokens.npy`, `follower_pos3d.npy`, `follower_rotmat.npy` into `dir`.
+pub fn write_outputs(dir: &Path, g: &Generated) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let tokens: Vec<i64> = g.tokens.iter().map(|&t| t as i64).collect();
+    write_i64(&dir.join("tokens.npy"), &tokens, &[g.token_rows, 5])?;
+    write_f32(&dir.join("follower_pos3d.npy"), &g.follower_pos3d, &[g.frames, POSE_DIM])?;
+    write_f32(&dir.join("follower_rotmat.npy"), &g.follower_rotmat, &[g.frames, ROT_DIM])?;
+    Ok(())
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let file = ModelFile::open(&args.model)?;
+    let duo = file.duo()?;
+    let model = Model::from_duo(&duo)
+        .map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", args.model.display()))?;
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let leader = read_f32_2d(&args.leader, Some(POSE_DIM), "leader joint positions (T, 165)")?;
+    let music = read_f32_2d(&args.music, Some(n_music), &format!("music features (T, {n_music})"))?;
+    let t4 = leader.rows / model.cfg.hop() * model.cfg.hop();
+    if music.rows < t4 {
+        bail!(
+            "{}: {} music frames for {} leader frames ({} used after truncation to a multiple of {}); both are 30 fps and must cover the same time",
+            args.music.display(),
+            music.rows,
+            leader.rows,
+            t4,
+            model.cfg.hop()
+        );
+    }
+    let start;
+    let seed = match (&args.seed_tokens, &args.follower_start) {
+        (Some(s), _) => Seed::Tokens(parse_seed_tokens(s)?),
+        (None, Some(p)) => {
+            start = read_f32_2d(p, Some(POSE_DIM), "follower start frames (F, 165)")?;
+            Seed::FollowerFrames(&start.data)
+        }
+        (None, None) => bail!("give --seed-tokens or --follower-start"),
+    };
+    let Mode::Exact = args.mode;
+    let started = std::time::Instant::now();
+    let g = generate_exact(&model, &leader.data, &music.data, seed)?;
+    write_outputs(&args.out, &g)?;
+    eprintln!(
+        "wrote {} follower frames ({} token rows) to {} in {:.1} s",
+        g.frames,
+        g.token_rows,
+        args.out.display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}

@@ -1,0 +1,49 @@
+//! Human-readable messages for core's numeric error enums (core builds no
+//! strings; the std side says what went wrong in words).
+
+use duolando_core::error::{Buffer, Error};
+
+/// What a [`Buffer`] is, in words a CLI user recognises.
+pub fn buffer_name(b: Buffer) -> &'static str {
+    match b {
+        Buffer::LeaderPos3d => "leader positions (T, 165)",
+        Buffer::Music => "music features (T, 54)",
+        Buffer::SeedFrames => "follower start frames (F, 165)",
+        Buffer::Tokens => "tokens",
+        Buffer::FollowerPos3d => "follower positions output",
+        Buffer::FollowerRotmat => "follower rotations output",
+        Buffer::Logits => "logits output",
+        Buffer::Features => "encoder features",
+        Buffer::Codes => "codes",
+        Buffer::Pose => "pose",
+        Buffer::Output => "output",
+        Buffer::LeaderTokens => "leader tokens",
+        Buffer::FollowerTokens => "follower tokens",
+    }
+}
+
+/// One sentence describing a core error.
+pub fn describe(e: &Error) -> String {
+    const STREAMS: [&str; 5] = ["up", "down", "lhand", "rhand", "transl"];
+    match e {
+        Error::Arena(a) => format!("scratch memory too small ({a:?})"),
+        Error::Bind(b) => format!("the model cannot be bound: {b:?}"),
+        Error::Length { buffer, len, expected } => {
+            format!("{} has {len} values, {expected} expected", buffer_name(*buffer))
+        }
+        Error::Ragged { buffer, len, row } => {
+            format!("{} has {len} values, not a whole number of rows of {row}", buffer_name(*buffer))
+        }
+        Error::TooShort { buffer, frames, min } => {
+            format!("{} has {frames} frames, at least {min} needed", buffer_name(*buffer))
+        }
+        Error::Token { stream, token, vocab } => format!(
+            "token {token} of stream {} is outside its vocabulary of {vocab}",
+            STREAMS.get(*stream as usize).copied().unwrap_or("?")
+        ),
+        Error::Context { c, max } => format!("window context {c} outside 1..={max}"),
+        Error::NonFinite { buffer, index } => {
+            format!("{} contains NaN or infinity at flat index {index}", buffer_name(*buffer))
+        }
+    }
+}
