@@ -517,7 +517,7 @@ def check_goldens():
                                      inp.get("seed_tokens"), inp.get("follower_start"))
             hist0 = torch.cat([x.view(1) for x in xs])
         kw = {"topk": smp[0], "rng_seed": smp[1]} if smp else {}
-        ss = StreamingSession(gpt, vq, tr, cfg, inp["music"], hist0, forced=forced, **kw)
+        ss = StreamingSession(gpt, vq, tr, cfg, inp["music"][:res["T4"]], hist0, forced=forced, **kw)
         frames, ready = [], []
         with torch.no_grad():
             for f in range(res["T4"]):
