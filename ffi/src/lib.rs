@@ -1,1 +1,44 @@
+//! duolando-ffi: the C ABI over duolando-core (`include/duolando.h`).
+//!
+//! Today it exposes the library version only; the Model/Session handles
+//! (`duo_model_*`, `duo_session_*`) come with the streaming session
+//! (issue #5). Every entry point catches panics: no unwinding crosses the
+//! C boundary.
 
+use std::ffi::c_char;
+use std::panic::catch_unwind;
+
+/// Major version, as in Cargo.toml (`DUOLANDO_VERSION_MAJOR` in the header).
+pub const VERSION_MAJOR: u32 = 0;
+/// Minor version (`DUOLANDO_VERSION_MINOR`).
+pub const VERSION_MINOR: u32 = 1;
+/// Patch version (`DUOLANDO_VERSION_PATCH`).
+pub const VERSION_PATCH: u32 = 0;
+
+static VERSION: &[u8] = concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes();
+
+/// The library version as a static NUL-terminated string ("0.1.0").
+/// Never NULL; the caller must not free it. Thread-safe.
+#[no_mangle]
+pub extern "C" fn duo_version() -> *const c_char {
+    catch_unwind(|| VERSION.as_ptr().cast::<c_char>()).unwrap_or(c"?".as_ptr())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn version_matches_cargo_toml() {
+        let s = unsafe { std::ffi::CStr::from_ptr(duo_version()) }.to_str().unwrap();
+        assert_eq!(s, env!("CARGO_PKG_VERSION"));
+        assert_eq!(s, format!("{VERSION_MAJOR}.{VERSION_MINOR}.{VERSION_PATCH}"));
+        let header = include_str!("../../include/duolando.h");
+        for (name, v) in [("MAJOR", VERSION_MAJOR), ("MINOR", VERSION_MINOR), ("PATCH", VERSION_PATCH)] {
+            assert!(
+                header.contains(&format!("#define DUOLANDO_VERSION_{name} {v}\n")),
+                "include/duolando.h: DUOLANDO_VERSION_{name} must be {v}"
+            );
+        }
+    }
+}
