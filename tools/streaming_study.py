@@ -12,7 +12,8 @@ Two parts:
             (one-step agreement under R's own history, free-running agreement).
 
     /work/venv/bin/python tools/streaming_study.py fixtures [--write]
-    /work/venv/bin/python tools/streaming_study.py toy [--steps 2500] [--threads 1]
+    /work/venv/bin/python tools/streaming_study.py toy [--steps 800] [--json out.json]
+    /work/venv/bin/python tools/streaming_study.py goldens | check
 
 Definitions (the same as `duolando compare`):
   one-step agreement  S runs in forced-history mode on R's own tokens; at step k, S's greedy
@@ -543,7 +544,7 @@ def main():
     f = sub.add_parser("fixtures")
     f.add_argument("--write", action="store_true")
     t = sub.add_parser("toy")
-    t.add_argument("--steps", type=int, default=2500)
+    t.add_argument("--steps", type=int, default=800)
     t.add_argument("--eval", type=int, default=6)
     t.add_argument("--model", default="/tmp/duolando_streaming_toy.pt")
     t.add_argument("--json")
