@@ -1,15 +1,20 @@
 #!/usr/bin/env python3
 """Measure S (streaming semantics, docs/STREAMING.md) against R (the authors' exact pipeline).
 
-Two parts:
+Subcommands:
   fixtures  S vs R on the committed tiny fixture models (random weights: the figures check the
             mechanism, they say nothing about quality), for several latency budgets and chunk
             shifts; writes tests/fixtures/streaming_compare/<model>.json (the figures the Rust
             `duolando compare` must reproduce) with --write.
   toy       trains a small GPT2nt (3 LAT layers, block 30, look-ahead 29, like the original) for
-            a few minutes on a synthetic leader/music -> follower token task with the authors'
-            windowed recipe, then measures S variants against R on held-out sequences
-            (one-step agreement under R's own history, free-running agreement).
+            800 steps (~8 min, one core) on a synthetic leader/music -> follower token task with
+            the authors' windowed recipe, then measures S variants against R on held-out
+            sequences (one-step agreement and next-token total-variation distance under R's own
+            history, free-running agreement).
+  goldens   writes tests/fixtures/streaming_*/ (the S goldens; contract in
+            tests/fixtures/README.md), after a robustness search over seeds.
+  check     re-runs every S golden with the full-sequence reference and with the incremental
+            Python session (frame by frame).
 
     /work/venv/bin/python tools/streaming_study.py fixtures [--write]
     /work/venv/bin/python tools/streaming_study.py toy [--steps 800] [--json out.json]
