@@ -106,3 +106,32 @@ fn bad_files_are_errors_that_name_the_file() {
         std::fs::remove_file(p).ok();
     }
 }
+
+/// MP3 (LAME 3.100, 128 kb/s CBR, made from the same 2 s stereo clip:
+/// `lame -b 128`), whose encoder delay and padding are recorded in the LAME
+/// tag. With gapless trimming the decoded clip has the source's length and
+/// no time shift; without it, ~1105 extra samples at 44.1 kHz would lead.
+#[test]
+fn mp3_is_trimmed_gaplessly_and_matches_the_source() {
+    let y = load_mono(dir().join("stereo_44k.mp3"), SAMPLE_RATE).expect("decode mp3");
+    let (_, want) = read_npy_f32(&dir().join("stereo_44k_mono_15360.npy"));
+    assert_eq!(y.len(), want.len(), "decoded MP3 length (encoder delay/padding not trimmed?)");
+    // The best alignment lag must be 0 (a leftover encoder delay would shift it by ~385 samples at 15360 Hz).
+    let corr = |lag: isize| -> f64 {
+        let mut s = 0f64;
+        for i in 0..want.len() as isize {
+            let j = i + lag;
+            if j >= 0 && (j as usize) < y.len() {
+                s += want[i as usize] as f64 * y[j as usize] as f64;
+            }
+        }
+        s
+    };
+    let best = (-600isize..=600).max_by(|&a, &b| corr(a).partial_cmp(&corr(b)).unwrap()).unwrap();
+    let rms_err = (y.iter().zip(&want).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
+    let rms = (want.iter().map(|a| (*a as f64).powi(2)).sum::<f64>() / want.len() as f64).sqrt();
+    eprintln!("mp3: best lag {best}, rms error {rms_err:.3e} vs signal rms {rms:.3e}");
+    assert_eq!(best, 0, "decoded MP3 is shifted by {best} samples");
+    // Lossy coding at 128 kb/s: error well below the signal (measured figure printed above).
+    assert!(rms_err < 0.1 * rms, "MP3 rms error {rms_err} vs signal rms {rms}");
+}
