@@ -1,0 +1,328 @@
+//! `duolando dance`: one command from a leader clip and music to a watchable
+//! result. Runs R mode (the authors' evaluation pipeline) and writes, into
+//! `--out DIR`, the browser viewer `index.html`, `follower.glb` (both
+//! dancers), `leader.bvh`, `follower.bvh`, npy arrays and `summary.json`.
+//! See docs/CLI.md for every flag, default and file.
+//!
+//! With no flags but `--out`, it dances the bundled demo clip with the
+//! bundled demo model (`assets/`, found under the current directory, then
+//! under the workspace the binary was compiled in).
+
+mod inputs;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use duolando_core::config::{ModelConfig, POSE_DIM, ROT_DIM};
+use duolando_core::exact::{self, Seed};
+use duolando_core::model::Model;
+use serde_json::json;
+
+use self::inputs::{Leader, Music};
+use crate::cli::generate::{generate_exact, parse_seed_tokens, Generated};
+use crate::export::{write_all, Motion};
+use crate::model_file::ModelFile;
+use crate::npy::{read_f32_2d, write_f32};
+use crate::viewer::{write_index_html, ViewerData};
+
+pub use inputs::{find_asset, face_to_face_start, COMPILED_ASSETS, DEFAULT_SEED_DISTANCE_M};
+
+/// Flags of `duolando dance`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Leader motion: (T, 165) float .npy (world joint positions, metres, 30 fps) or a 30 fps .bvh
+    /// with the SMPL-X joint names. Default: the bundled demo clip.
+    #[arg(long, requires = "music")]
+    pub leader: Option<PathBuf>,
+    /// Music: an audio file (WAV, MP3, OGG Vorbis, FLAC) or (T, 54) features .npy at 30 fps.
+    /// Default: the bundled demo clip's music.
+    #[arg(long, requires = "leader")]
+    pub music: Option<PathBuf>,
+    /// The `.duo` model. Default: assets/demo.duo.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// The follower's first frames, (F, 165) float .npy, F >= 4.
+    #[arg(long, conflicts_with = "seed_tokens")]
+    pub follower_start: Option<PathBuf>,
+    /// Seed tokens "up,down,lhand,rhand,transl" instead of start frames.
+    #[arg(long)]
+    pub seed_tokens: Option<String>,
+    /// Output directory (created; existing files of the same names are replaced).
+    #[arg(long, short)]
+    pub out: PathBuf,
+}
+
+/// A rig fit worse than this (metres) is pointed out on stderr.
+const FIT_WARN_M: f32 = 0.05;
+
+/// Prints a numbered stage line on stderr.
+fn stage(n: usize, what: &str) {
+    eprintln!("[{n}/5] {what}");
+}
+
+/// How the follower starts, with a line saying so.
+enum SeedChoice {
+    Tokens([u32; 5]),
+    Frames(Vec<f32>),
+}
+
+/// Picks the seed: --seed-tokens, --follower-start, the demo start (demo
+/// clip only), else [`face_to_face_start`]. Returns it and a description.
+fn choose_seed(args: &Args, demo: bool, leader: &Leader, cfg: &ModelConfig, model: &Path) -> Result<(SeedChoice, String)> {
+    let hop = cfg.hop();
+    if let Some(s) = &args.seed_tokens {
+        let t = parse_seed_tokens(s)?;
+        const NAMES: [&str; 5] = ["up", "down", "lhand", "rhand", "transl"];
+        for i in 0..5 {
+            if t[i] >= cfg.gpt.vocab[i] {
+                bail!(
+                    "--seed-tokens: the {} token {} is out of range for the model {} (vocabulary {}; expected 0..{})",
+                    NAMES[i],
+                    t[i],
+                    model.display(),
+                    cfg.gpt.vocab[i],
+                    cfg.gpt.vocab[i] - 1
+                );
+            }
+        }
+        return Ok((SeedChoice::Tokens(t), format!("tokens {s} (--seed-tokens)")));
+    }
+    let (path, why) = match &args.follower_start {
+        Some(p) => (p.clone(), "--follower-start"),
+        None if demo => (inputs::require_asset(inputs::DEMO_FOLLOWER_START, "follower start")?, "the demo's follower start"),
+        None => {
+            let how = format!(
+                "default: the leader's first {hop} frames turned 180 degrees about the vertical axis, face to face, {DEFAULT_SEED_DISTANCE_M} m in front of the leader \
+                 (pass --follower-start or --seed-tokens to choose)"
+            );
+            return Ok((SeedChoice::Frames(face_to_face_start(&leader.pos3d, hop)), how));
+        }
+    };
+    let a = read_f32_2d(&path, Some(POSE_DIM), "follower start frames (F, 165), metres")?;
+    if a.rows < hop || a.rows > leader.frames {
+        bail!(
+            "{}: {} follower start frames; expected between {hop} (one token) and {} (the leader's length)",
+            path.display(),
+            a.rows,
+            leader.frames
+        );
+    }
+    if a.data.iter().any(|v| !v.is_finite()) {
+        bail!("{}: follower start frames hold non-finite values; expected finite positions", path.display());
+    }
+    Ok((SeedChoice::Frames(a.data), format!("{} frames from {} ({why})", a.rows, path.display())))
+}
+
+/// Checks that the leader and music are long enough and cover each other.
+fn check_lengths(cfg: &ModelConfig, leader: &Leader, leader_path: &Path, music: &Music, music_path: &Path, model: &Path) -> Result<exact::OutputShape> {
+    let need = cfg.music_motion_rate as usize + cfg.gpt.music.downsample_rate as usize * (cfg.gpt.look_forward as usize + 1);
+    let shape = exact::output_shape(cfg, leader.frames).filter(|s| s.steps > 0);
+    let Some(shape) = shape else {
+        bail!(
+            "{}: the leader clip has {} frames ({:.1} s at 30 fps); the model {} needs at least {need} frames ({:.1} s)",
+            leader_path.display(),
+            leader.frames,
+            leader.frames as f64 / 30.0,
+            model.display(),
+            need as f64 / 30.0
+        );
+    };
+    if music.frames < shape.frames_in {
+        bail!(
+            "{}: the music has {} frames ({:.1} s at 30 fps) but the leader {} has {} ({} used); the music must cover the whole dance",
+            music_path.display(),
+            music.frames,
+            music.frames as f64 / 30.0,
+            leader_path.display(),
+            leader.frames,
+            shape.frames_in
+        );
+    }
+    Ok(shape)
+}
+
+/// Copies the audio next to the viewer as `music.<ext>`; returns the name.
+fn copy_audio(src: &Path, dir: &Path) -> Result<String> {
+    let ext: String = inputs::extension(src).chars().filter(char::is_ascii_alphanumeric).collect();
+    let name = if ext.is_empty() { "music".to_string() } else { format!("music.{ext}") };
+    let dst = dir.join(&name);
+    let same = std::fs::canonicalize(src).ok().zip(std::fs::canonicalize(&dst).ok()).is_some_and(|(a, b)| a == b);
+    if !same {
+        std::fs::copy(src, &dst).with_context(|| format!("cannot copy {} to {}", src.display(), dst.display()))?;
+    }
+    Ok(name)
+}
+
+/// Distinct token ids per stream (up, down, lhand, rhand, transl).
+fn distinct_tokens(g: &Generated) -> Vec<usize> {
+    (0..5)
+        .map(|c| {
+            let mut v: Vec<u32> = g.tokens.iter().skip(c).step_by(5).copied().collect();
+            v.sort_unstable();
+            v.dedup();
+            v.len()
+        })
+        .collect()
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let t_all = Instant::now();
+    let demo = args.leader.is_none();
+    let model_path = match &args.model {
+        Some(m) => m.clone(),
+        None => inputs::require_asset(inputs::DEMO_MODEL, "model")?,
+    };
+    let (leader_path, music_path) = match (&args.leader, &args.music) {
+        (Some(l), Some(m)) => (l.clone(), m.clone()),
+        _ => (
+            inputs::require_asset(inputs::DEMO_LEADER, "leader clip")?,
+            inputs::require_asset(inputs::DEMO_MUSIC, "music features")?,
+        ),
+    };
+
+    stage(1, &format!("model {}", model_path.display()));
+    let t = Instant::now();
+    let file = ModelFile::open(&model_path)?;
+    let duo = file.duo()?;
+    let model = Model::from_duo(&duo)
+        .map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", model_path.display()))?;
+    let cfg = model.cfg;
+    let t_model = t.elapsed().as_secs_f64();
+
+    stage(2, &format!("inputs: leader {}, music {}", leader_path.display(), music_path.display()));
+    let t = Instant::now();
+    let leader = inputs::load_leader(&leader_path)?;
+    let music = inputs::load_music(&music_path, cfg.gpt.music.n_in as usize, &model_path)?;
+    let shape = check_lengths(&cfg, &leader, &leader_path, &music, &music_path, &model_path)?;
+    let (seed, seed_text) = choose_seed(&args, demo, &leader, &cfg, &model_path)?;
+    eprintln!(
+        "      leader {} frames ({}), music {} frames{}; seed: {seed_text}",
+        leader.frames,
+        leader.source,
+        music.frames,
+        music.tempo_bpm.map(|b| format!(" (audio, {b:.1} BPM)")).unwrap_or_default()
+    );
+    let t_inputs = t.elapsed().as_secs_f64();
+
+    stage(3, &format!("generating {} steps (R mode, whole clip)", shape.steps));
+    let t = Instant::now();
+    let seed_ref = match &seed {
+        SeedChoice::Tokens(t) => Seed::Tokens(*t),
+        SeedChoice::Frames(f) => Seed::FollowerFrames(f),
+    };
+    let g = generate_exact(&model, &leader.pos3d, &music.features, seed_ref)?;
+    let t_generate = t.elapsed().as_secs_f64();
+
+    stage(4, "exporting glTF, BVH and npy");
+    let t = Instant::now();
+    let dir = &args.out;
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create the output directory {}", dir.display()))?;
+    // The duet is as long as the follower: the leader's last frames were
+    // look-ahead only (no follower token is generated for them).
+    let duet = g.frames.min(leader.frames);
+    let leader_duet = &leader.pos3d[..duet * POSE_DIM];
+    let leader_motion = Motion::from_positions(leader_duet, &format!("leader {}", leader_path.display()))?;
+    let follower_motion = Motion::from_decoded(&g.follower_pos3d, Some(&g.follower_rotmat), "generated follower")?;
+    write_all(dir, Some(&leader_motion), &follower_motion)?;
+    // The npy files hold the model's own outputs and the leader as given;
+    // the rotmat files hold the proper rotations the glb/bvh use.
+    write_f32(&dir.join("leader_pos3d.npy"), leader_duet, &[duet, POSE_DIM])?;
+    write_f32(&dir.join("follower_pos3d.npy"), &g.follower_pos3d, &[g.frames, POSE_DIM])?;
+    write_f32(&dir.join("follower_rotmat_raw.npy"), &g.follower_rotmat, &[g.frames, ROT_DIM])?;
+    let tokens: Vec<i64> = g.tokens.iter().map(|&t| t as i64).collect();
+    crate::npy::write_i64(&dir.join("tokens.npy"), &tokens, &[g.token_rows, 5])?;
+    for (who, m) in [("leader", &leader_motion), ("follower", &follower_motion)] {
+        if m.fit_error_m > FIT_WARN_M {
+            eprintln!(
+                "      note: the {who} in follower.glb / {who}.bvh is up to {:.2} m from its positions (the rig cannot follow them; \
+                 an untrained model or non-skeletal input); index.html and {who}_pos3d.npy show the positions themselves",
+                m.fit_error_m
+            );
+        }
+    }
+    let t_export = t.elapsed().as_secs_f64();
+
+    stage(5, "writing the viewer and summary");
+    let t = Instant::now();
+    let audio_name = music.audio.as_deref().map(|a| copy_audio(a, dir)).transpose()?;
+    let beats: Option<Vec<f32>> = (music.cols > crate::music::BEAT_COL).then(|| {
+        (0..duet)
+            .map(|f| if f < music.frames { music.features[f * music.cols + crate::music::BEAT_COL] } else { 0.0 })
+            .collect()
+    });
+    let title = format!(
+        "duolando: {} + {}",
+        leader_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
+        music_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default()
+    );
+    let page = write_index_html(
+        dir,
+        &ViewerData {
+            title: &title,
+            fps: 30.0,
+            leader_pos3d: leader_duet,
+            follower_pos3d: &g.follower_pos3d,
+            beats: beats.as_deref(),
+            tokens: Some(&g.tokens),
+            audio_file: audio_name.as_deref(),
+        },
+    )
+    .with_context(|| format!("cannot write the viewer into {}", dir.display()))?;
+    let t_viewer = t.elapsed().as_secs_f64();
+
+    let mut files = vec![
+        "index.html", "follower.glb", "leader.bvh", "follower.bvh", "leader_pos3d.npy", "leader_rotmat.npy",
+        "follower_pos3d.npy", "follower_rotmat.npy", "follower_rotmat_raw.npy", "tokens.npy", "summary.json",
+    ]
+    .into_iter()
+    .map(String::from)
+    .collect::<Vec<_>>();
+    files.extend(audio_name.clone());
+    let summary = json!({
+        "model": model_path.display().to_string(),
+        "mode": "exact (R)",
+        "fps": 30,
+        "leader": {
+            "file": leader_path.display().to_string(),
+            "source": leader.source,
+            "frames": leader.frames,
+            "frames_in_outputs": duet,
+        },
+        "music": {
+            "file": music_path.display().to_string(),
+            "frames": music.frames,
+            "audio": audio_name,
+            "tempo_bpm": music.tempo_bpm,
+        },
+        "seed": seed_text,
+        "frames_used": shape.frames_in,
+        "steps": shape.steps,
+        "token_rows": g.token_rows,
+        "follower_frames": g.frames,
+        "seconds": g.frames as f64 / 30.0,
+        "distinct_tokens": { "up_down_lhand_rhand_transl": distinct_tokens(&g) },
+        "fit_error_m": { "leader": leader_motion.fit_error_m, "follower": follower_motion.fit_error_m },
+        "timings_s": {
+            "model": t_model, "inputs": t_inputs, "generate": t_generate, "export": t_export, "viewer": t_viewer,
+            "total": t_all.elapsed().as_secs_f64(),
+        },
+        "files": files,
+    });
+    let summary_path = dir.join("summary.json");
+    std::fs::write(&summary_path, serde_json::to_string_pretty(&summary)? + "\n")
+        .with_context(|| format!("cannot write {}", summary_path.display()))?;
+
+    eprintln!(
+        "done in {:.1} s: {} follower frames ({:.1} s) from {} leader frames, {} token rows (generation {:.1} s)",
+        t_all.elapsed().as_secs_f64(),
+        g.frames,
+        g.frames as f64 / 30.0,
+        leader.frames,
+        g.token_rows,
+        t_generate
+    );
+    eprintln!("wrote {}: {}", dir.display(), files.join(", "));
+    eprintln!("open the viewer: {} (double-click it, or `xdg-open {0}` / `chromium {0}`)", page.display());
+    Ok(())
+}

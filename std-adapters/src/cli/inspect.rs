@@ -1,0 +1,233 @@
+//! `duolando inspect model.duo [--frames N] [--json]`: what a `.duo` model
+//! holds and what running it costs — the whole config, parameter count,
+//! file size, dtypes, tensor count, R-mode scratch for one minute of input,
+//! output frames for `--frames` input frames, and latency.
+//!
+//! Reads only the header and tensor table (the file is validated as a whole
+//! by [`ModelFile::open`]); no weights are touched.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use duolando_core::config::{LatConfig, ModelConfig, VqConfig};
+use duolando_core::exact;
+use duolando_core::tensor::DType;
+use serde_json::{json, Value};
+
+use crate::model_file::ModelFile;
+
+/// Frames per second of the model's motion and music.
+const FPS: usize = 30;
+/// Input frames of "one minute" for the scratch estimate.
+const ONE_MINUTE: usize = 60 * FPS;
+
+/// Flags of `duolando inspect`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The `.duo` model.
+    pub model: PathBuf,
+    /// Input frames (30 fps) to size the R-mode run for.
+    #[arg(long, default_value_t = ONE_MINUTE)]
+    pub frames: usize,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Stable lower-case name of a dtype.
+fn dtype_name(d: DType) -> &'static str {
+    match d {
+        DType::F32 => "f32",
+        DType::F16 => "f16",
+        DType::Q8Block32 => "q8_block32",
+    }
+}
+
+/// Tensor counts, parameters and payload bytes per dtype.
+#[derive(Default, Clone, Copy)]
+struct DtypeStats {
+    tensors: usize,
+    params: u64,
+    bytes: u64,
+}
+
+/// Everything `inspect` reports, as one JSON value (the text output is
+/// printed from the same value, so the two cannot disagree).
+pub fn report(model: &std::path::Path, frames: usize) -> Result<Value> {
+    let file_size = std::fs::metadata(model).with_context(|| format!("cannot read {}", model.display()))?.len();
+    let file = ModelFile::open(model)?;
+    let duo = file.duo()?;
+    let cfg = *duo.config();
+    let mut per: BTreeMap<&'static str, DtypeStats> = BTreeMap::new();
+    let mut params: u64 = 0;
+    for e in duo.tensors() {
+        let n: u64 = e.dims().iter().map(|&d| d as u64).product();
+        let s = per.entry(dtype_name(e.dtype)).or_default();
+        s.tensors += 1;
+        s.params += n;
+        s.bytes += e.nbytes;
+        params += n;
+    }
+    let dtypes: serde_json::Map<String, Value> = per
+        .iter()
+        .map(|(k, s)| (k.to_string(), json!({ "tensors": s.tensors, "params": s.params, "bytes": s.bytes })))
+        .collect();
+    let run = |t: usize| -> Value {
+        match exact::output_shape(&cfg, t) {
+            Some(sh) => json!({
+                "input_frames": t,
+                "frames_used": sh.frames_in,
+                "steps": sh.steps,
+                "token_rows": sh.token_rows,
+                "output_frames": sh.frames_out,
+                "scratch_bytes": exact::scratch_bytes(&cfg, t),
+            }),
+            None => json!({ "input_frames": t, "error": format!("fewer than {} frames (one token)", cfg.hop()) }),
+        }
+    };
+    let prefix = duo.prefix();
+    Ok(json!({
+        "model": model.display().to_string(),
+        "format_version": prefix.version,
+        "file_bytes": file_size,
+        "data_start": prefix.data_start,
+        "tensors": duo.len(),
+        "params": params,
+        "dtypes": dtypes,
+        "config": cfg,
+        "derived": {
+            "fps": FPS,
+            "frames_per_token": cfg.hop(),
+            "min_frames_for_one_step": min_frames(&cfg),
+        },
+        "r_mode": {
+            "one_minute": run(ONE_MINUTE),
+            "requested": run(frames),
+            "latency": "R mode is offline: it needs the whole leader clip and music before the first output frame",
+        },
+        "streaming": {
+            "latency": "not available yet (streaming session not built)",
+        },
+    }))
+}
+
+/// Smallest input that gives at least one generation step.
+fn min_frames(cfg: &ModelConfig) -> usize {
+    let ds = cfg.gpt.music.downsample_rate as usize;
+    cfg.music_motion_rate as usize + ds * (cfg.gpt.look_forward as usize + 1)
+}
+
+fn mib(b: u64) -> String {
+    format!("{:.2} MiB", b as f64 / (1024.0 * 1024.0))
+}
+
+fn vq_line(name: &str, v: &VqConfig) -> String {
+    format!(
+        "  vq {name:<6} in {} rot {} width {} depth {} growth {} down {}x stride {} emb {} bins {} m_conv {}/{}",
+        v.in_channels,
+        v.rot_channels,
+        v.width,
+        v.depth,
+        v.dilation_growth_rate,
+        v.down_t,
+        v.stride_t,
+        v.emb_width,
+        v.l_bins,
+        v.m_conv_num,
+        v.m_conv_den
+    )
+}
+
+fn lat_line(name: &str, l: &LatConfig) -> String {
+    format!("  lat {name:<6} n_in {} layers {} heads {} downsample {}", l.n_in, l.n_layer, l.n_head, l.downsample_rate)
+}
+
+fn run_lines(r: &Value) -> String {
+    match r.get("error") {
+        Some(e) => format!("{} input frames: {}", r["input_frames"], e.as_str().unwrap_or("")),
+        None => format!(
+            "{} input frames -> {} used, {} steps, {} token rows, {} output frames; scratch {}",
+            r["input_frames"],
+            r["frames_used"],
+            r["steps"],
+            r["token_rows"],
+            r["output_frames"],
+            r["scratch_bytes"].as_u64().map(mib).unwrap_or_else(|| "overflow".into())
+        ),
+    }
+}
+
+/// The human-readable form of [`report`].
+fn text(r: &Value, cfg: &ModelConfig) -> String {
+    let g = &cfg.gpt;
+    let mut s = String::new();
+    let mut line = |l: String| {
+        s.push_str(&l);
+        s.push('\n');
+    };
+    line(format!("{}", r["model"].as_str().unwrap_or("")));
+    line(format!(
+        "  file {} ({} bytes), format v{}, {} tensors, {} parameters",
+        mib(r["file_bytes"].as_u64().unwrap_or(0)),
+        r["file_bytes"],
+        r["format_version"],
+        r["tensors"],
+        r["params"]
+    ));
+    if let Some(d) = r["dtypes"].as_object() {
+        for (k, v) in d {
+            line(format!(
+                "  dtype {k:<10} {} tensors, {} params, {}",
+                v["tensors"],
+                v["params"],
+                mib(v["bytes"].as_u64().unwrap_or(0))
+            ));
+        }
+    }
+    line("config".into());
+    line(format!(
+        "  gpt n_embd {} heads {} base {} head {} block_size {} look_forward {} streams {} final_ln {}",
+        g.n_embd, g.n_head, g.n_layer_base, g.n_layer_head, g.block_size, g.look_forward, g.n_streams, g.final_ln
+    ));
+    line(format!("  vocab up/down/lhand/rhand/transl {:?}", g.vocab));
+    line(lat_line("music", &g.music));
+    line(lat_line("leader", &g.leader));
+    for (name, v) in ["up", "down", "lhand", "rhand"].iter().zip(&cfg.parts) {
+        line(vq_line(name, v));
+    }
+    line(vq_line("transl", &cfg.transl));
+    line(format!(
+        "  music_motion_rate {}, {} frames per token, >= {} input frames for one step",
+        cfg.music_motion_rate,
+        cfg.hop(),
+        min_frames(cfg)
+    ));
+    line("R mode (exact)".into());
+    line(format!("  1 min: {}", run_lines(&r["r_mode"]["one_minute"])));
+    line(format!("  --frames: {}", run_lines(&r["r_mode"]["requested"])));
+    line(format!("  latency: {}", r["r_mode"]["latency"].as_str().unwrap_or("")));
+    line(format!("streaming latency: {}", r["streaming"]["latency"].as_str().unwrap_or("")));
+    s
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let r = report(&args.model, args.frames)?;
+    let out = if args.json {
+        serde_json::to_string_pretty(&r)? + "\n"
+    } else {
+        let cfg: ModelConfig = serde_json::from_value(r["config"].clone()).context("internal: config round trip")?;
+        text(&r, &cfg)
+    };
+    print_stdout(&out)
+}
+
+/// Writes to stdout; a closed pipe (`| head`) is not an error.
+pub(crate) fn print_stdout(s: &str) -> Result<()> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    match o.write_all(s.as_bytes()).and_then(|_| o.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e).context("cannot write to stdout"),
+        _ => Ok(()),
+    }
+}
