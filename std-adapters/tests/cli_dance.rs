@@ -1,0 +1,283 @@
+//! `duolando dance` end to end through the binary on the tiny fixture model:
+//! every output file is written and well-formed, the tokens equal the R
+//! golden, BVH and audio inputs work, and bad inputs fail naming the file.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use duolando::export::{bvh, Motion};
+use duolando::npy::{read_f32_2d, read_i64_2d, write_f32};
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures")
+}
+
+fn model() -> PathBuf {
+    fixtures().join("tiny/model.duo")
+}
+
+fn roll() -> PathBuf {
+    fixtures().join("rollout_tiny_long")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("duo-dance-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+fn dance(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_duolando")).arg("dance").args(args).output().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs dance on the tiny model; `leader`/`music` override the rollout inputs.
+fn dance_tiny(out: &Path, leader: &Path, music: &Path, extra: &[&str]) -> Output {
+    let m = model();
+    let mut a = vec!["--model", p(&m), "--leader", p(leader), "--music", p(music), "--out", p(out)];
+    a.extend_from_slice(extra);
+    dance(&a)
+}
+
+/// Asserts failure with a message naming `file` and containing `expect`.
+fn assert_fails(o: &Output, file: &Path, expect: &str) {
+    let e = stderr(o);
+    assert!(!o.status.success(), "expected failure, got success: {e}");
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains(p(file)), "error does not name {}: {e}", file.display());
+    assert!(e.contains(expect), "error lacks '{expect}': {e}");
+    assert!(!e.contains("panicked"), "{e}");
+}
+
+/// Reads the 12-byte glb header and the JSON chunk.
+fn glb_json(path: &Path) -> serde_json::Value {
+    let b = std::fs::read(path).unwrap();
+    assert_eq!(&b[0..4], b"glTF");
+    assert_eq!(u32::from_le_bytes(b[4..8].try_into().unwrap()), 2, "glTF version");
+    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()) as usize, b.len(), "glb length field");
+    let json_len = u32::from_le_bytes(b[12..16].try_into().unwrap()) as usize;
+    assert_eq!(&b[16..20], b"JSON");
+    serde_json::from_slice(&b[20..20 + json_len]).unwrap()
+}
+
+#[test]
+fn dance_writes_every_file_and_matches_the_golden_tokens() {
+    let out = tmp("all");
+    let r = roll();
+    let start = r.join("follower_start.npy");
+    let o = dance_tiny(&out, &r.join("leader_pos3d.npy"), &r.join("music.npy"), &["--follower-start", p(&start)]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains("[5/5]") && e.contains("index.html"), "{e}");
+
+    // npy shapes; tokens equal the R golden (same inputs, same seed).
+    let tokens = read_i64_2d(&out.join("tokens.npy"), Some(5), "tokens").unwrap();
+    let golden = read_i64_2d(&r.join("tokens.npy"), Some(5), "tokens").unwrap();
+    assert_eq!(tokens, golden);
+    let frames = 4 * tokens.rows; // 484
+    for (name, cols) in [
+        ("follower_pos3d.npy", 165),
+        ("follower_rotmat.npy", 495),
+        ("follower_rotmat_raw.npy", 495),
+        ("leader_pos3d.npy", 165),
+        ("leader_rotmat.npy", 495),
+    ] {
+        let a = read_f32_2d(&out.join(name), Some(cols), name).unwrap();
+        assert_eq!(a.rows, frames, "{name}");
+    }
+    let fpos = read_f32_2d(&out.join("follower_pos3d.npy"), Some(165), "f").unwrap();
+    let gpos = read_f32_2d(&r.join("follower_pos3d.npy"), Some(165), "g").unwrap();
+    let err = fpos.data.iter().zip(&gpos.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(err <= 1e-4, "follower_pos3d vs golden: {err}");
+
+    // glb: both dancers, 55 joints each, one animation.
+    let g = glb_json(&out.join("follower.glb"));
+    let names: Vec<&str> = g["nodes"].as_array().unwrap().iter().filter_map(|n| n["name"].as_str()).collect();
+    assert!(names.contains(&"leader") && names.contains(&"follower"), "{names:?}");
+    assert!(names.contains(&"follower_pelvis") && names.contains(&"leader_right_wrist"));
+    assert_eq!(g["animations"].as_array().unwrap().len(), 1);
+
+    // BVH: 30 fps, the follower's frame count.
+    for name in ["leader.bvh", "follower.bvh"] {
+        let text = std::fs::read_to_string(out.join(name)).unwrap();
+        let clip = bvh::parse(&text, name).unwrap();
+        assert_eq!(clip.frames, frames, "{name}");
+        assert!((clip.frame_time - 1.0 / 30.0).abs() < 1e-6);
+        assert_eq!(clip.joints.len(), 55);
+    }
+
+    // The viewer page embeds the data: frames, tokens and the title.
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(html.contains("id=\"duolando-data\""), "no data block");
+    assert!(html.contains("leader_pos3d.npy + music.npy"), "title missing");
+    let data = html.split("id=\"duolando-data\">").nth(1).unwrap().split("</script>").next().unwrap();
+    let v: serde_json::Value = serde_json::from_str(data).unwrap();
+    let token_text = v.to_string();
+    assert!(token_text.contains(&golden.data[5..10].iter().map(|t| t.to_string()).collect::<Vec<_>>().join(",")));
+    assert!(!html.contains("<audio") || !html.contains("src=\"music"), "no audio was given");
+
+    // summary.json
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["follower_frames"], frames);
+    assert_eq!(s["token_rows"], tokens.rows);
+    assert_eq!(s["fps"], 30);
+    assert_eq!(s["leader"]["frames"], 600);
+    assert!(s["timings_s"]["generate"].as_f64().unwrap() > 0.0);
+    assert!(s["model"].as_str().unwrap().ends_with("model.duo"));
+    for f in s["files"].as_array().unwrap() {
+        assert!(out.join(f.as_str().unwrap()).is_file(), "{f}");
+    }
+}
+
+/// A 21 s mono WAV: clicks at 120 BPM over a quiet tone.
+fn write_wav(path: &Path) {
+    let sr = 22050u32;
+    let spec = hound::WavSpec { channels: 1, sample_rate: sr, bits_per_sample: 16, sample_format: hound::SampleFormat::Int };
+    let mut w = hound::WavWriter::create(path, spec).unwrap();
+    for i in 0..sr * 21 {
+        let t = i as f32 / sr as f32;
+        let beat = (t * 2.0).fract() < 0.02;
+        let v = 0.1 * (t * 440.0 * std::f32::consts::TAU).sin() + if beat { 0.6 } else { 0.0 };
+        w.write_sample((v * 20000.0) as i16).unwrap();
+    }
+    w.finalize().unwrap();
+}
+
+#[test]
+fn dance_with_audio_music_and_the_default_seed() {
+    let out = tmp("audio");
+    let wav = out.join("song.wav");
+    write_wav(&wav);
+    let o = dance_tiny(&out.join("out"), &roll().join("leader_pos3d.npy"), &wav, &[]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains("face to face"), "the default seed is printed: {e}");
+    let dir = out.join("out");
+    assert!(dir.join("music.wav").is_file(), "audio copied for the viewer");
+    let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
+    assert!(html.contains("music.wav"), "the page plays the audio");
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    assert!(s["music"]["tempo_bpm"].as_f64().unwrap() > 0.0);
+    assert_eq!(s["music"]["audio"], "music.wav");
+    assert!(s["seed"].as_str().unwrap().contains("face to face"));
+}
+
+#[test]
+fn dance_with_a_bvh_leader() {
+    let dir = tmp("bvh");
+    let take = duolando::synth::demo_take(3, 6.0);
+    let leader = dir.join("leader_in.bvh");
+    bvh::write(&leader, &Motion::from_track(&take.leader), 30.0, bvh::Units::Centimetres).unwrap();
+    let music = dir.join("music.npy");
+    write_f32(&music, &take.music, &[take.frames, 54]).unwrap();
+    let o = dance_tiny(&dir.join("out"), &leader, &music, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("out/summary.json")).unwrap()).unwrap();
+    assert_eq!(s["leader"]["source"], "bvh (centimetres)");
+    assert_eq!(s["leader"]["frames"], take.frames);
+    // The leader read back from BVH is the take's leader (cm text round-off).
+    let got = read_f32_2d(&dir.join("out/leader_pos3d.npy"), Some(165), "leader").unwrap();
+    let err = got.data.iter().zip(&take.leader.positions).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(err < 1e-3, "BVH leader vs take: {err} m");
+
+    // 60 fps BVH: rejected, naming the file and the expected frame time.
+    let fast = dir.join("leader_60fps.bvh");
+    let text = std::fs::read_to_string(&leader).unwrap().replace("Frame Time: 0.0333333", "Frame Time: 0.0166667");
+    std::fs::write(&fast, text).unwrap();
+    assert_fails(&dance_tiny(&dir.join("out2"), &fast, &music, &[]), &fast, "30 fps");
+}
+
+#[test]
+fn bad_inputs_fail_naming_the_file() {
+    let dir = tmp("bad");
+    let r = roll();
+    let leader = r.join("leader_pos3d.npy");
+    let music = r.join("music.npy");
+    let out = dir.join("out");
+
+    // Wrong leader shape.
+    let narrow = dir.join("leader_160.npy");
+    write_f32(&narrow, &vec![0.0; 600 * 160], &[600, 160]).unwrap();
+    assert_fails(&dance_tiny(&out, &narrow, &music, &[]), &narrow, "165");
+    // Wrong music shape (the model expects 54 columns).
+    let m53 = dir.join("music_53.npy");
+    write_f32(&m53, &vec![0.0; 600 * 53], &[600, 53]).unwrap();
+    assert_fails(&dance_tiny(&out, &leader, &m53, &[]), &m53, "54");
+    // Music shorter than the leader.
+    let short = dir.join("music_short.npy");
+    write_f32(&short, &vec![0.0; 300 * 54], &[300, 54]).unwrap();
+    assert_fails(&dance_tiny(&out, &leader, &short, &[]), &short, "cover");
+    // Leader too short for the model.
+    let tiny_clip = dir.join("leader_short.npy");
+    write_f32(&tiny_clip, &vec![0.0; 40 * 165], &[40, 165]).unwrap();
+    assert_fails(&dance_tiny(&out, &tiny_clip, &music, &[]), &tiny_clip, "at least");
+    // Non-finite leader value.
+    let nan = dir.join("leader_nan.npy");
+    let mut v = read_f32_2d(&leader, Some(165), "l").unwrap().data;
+    v[7 * 165 + 2] = f32::NAN;
+    write_f32(&nan, &v, &[600, 165]).unwrap();
+    assert_fails(&dance_tiny(&out, &nan, &music, &[]), &nan, "[7, 2]");
+    // Missing file.
+    let missing = dir.join("nope.npy");
+    assert_fails(&dance_tiny(&out, &leader, &missing, &[]), &missing, "cannot open");
+    // Unknown leader format.
+    let txt = dir.join("leader.txt");
+    std::fs::write(&txt, "hello").unwrap();
+    assert_fails(&dance_tiny(&out, &txt, &music, &[]), &txt, ".npy");
+    // Unreadable audio.
+    let garbage = dir.join("song.wav");
+    std::fs::write(&garbage, b"RIFF\x10\x00\x00\x00WAVEjunkjunkjunk").unwrap();
+    assert_fails(&dance_tiny(&out, &leader, &garbage, &[]), &garbage, "WAV");
+    let mp3 = dir.join("song.mp3");
+    std::fs::write(&mp3, vec![7u8; 4096]).unwrap();
+    assert_fails(&dance_tiny(&out, &leader, &mp3, &[]), &mp3, "audio");
+    // A BVH that is not SMPL-X.
+    let other = dir.join("other.bvh");
+    std::fs::write(
+        &other,
+        "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n \
+         End Site\n {\n  OFFSET 0 10 0\n }\n}\nMOTION\nFrames: 1\nFrame Time: 0.0333333\n0 0 0 0 0 0\n",
+    )
+    .unwrap();
+    assert_fails(&dance_tiny(&out, &other, &music, &[]), &other, "SMPL-X");
+    // Model mismatch: a seed token outside the tiny model's vocabulary (64).
+    assert_fails(&dance_tiny(&out, &leader, &music, &["--seed-tokens", "1,2,3,4,64"]), &model(), "vocabulary 64");
+    // Not a model.
+    let m = dance(&["--model", p(&music), "--leader", p(&leader), "--music", p(&music), "--out", p(&out)]);
+    assert_fails(&m, &music, "not a .duo file");
+    // Follower start of the wrong length.
+    let one = dir.join("start_1.npy");
+    write_f32(&one, &[0.0; 165], &[1, 165]).unwrap();
+    assert_fails(&dance_tiny(&out, &leader, &music, &["--follower-start", p(&one)]), &one, "follower start");
+    // Nothing was written by the failures.
+    assert!(!out.join("index.html").exists());
+}
+
+#[test]
+fn without_demo_assets_the_error_says_how_to_pass_inputs() {
+    let compiled = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/demo.duo");
+    if compiled.is_file() {
+        eprintln!("skipped: {} exists", compiled.display());
+        return;
+    }
+    let dir = tmp("nodemo");
+    let o = Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .current_dir(&dir)
+        .args(["dance", "--out", "x"])
+        .output()
+        .unwrap();
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("assets/demo.duo") && e.contains("missing") && e.contains("--model"), "{e}");
+    // Only one of --leader/--music is a usage error.
+    let o = dance(&["--leader", "a.npy", "--out", "x"]);
+    assert!(!o.status.success() && stderr(&o).contains("--music"), "{}", stderr(&o));
+}

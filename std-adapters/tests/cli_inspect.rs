@@ -1,0 +1,69 @@
+//! `duolando inspect` through the binary: the tiny fixture's config and
+//! sizes in text and JSON, and a named error for a file that is not a model.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn tiny() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/tiny/model.duo")
+}
+
+fn inspect(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_duolando")).arg("inspect").args(args).output().unwrap()
+}
+
+#[test]
+fn inspect_prints_the_tiny_config() {
+    let m = tiny();
+    let o = inspect(&[m.to_str().unwrap()]);
+    let s = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for want in [
+        "gpt n_embd 32 heads 4 base 2 head 2 block_size 30 look_forward 29",
+        "lat music  n_in 54",
+        "vq up     in 48 rot 144 width 16",
+        "dtype f32",
+        "parameters",
+        "R mode is offline",
+        "not available yet (streaming session not built)",
+    ] {
+        assert!(s.contains(want), "missing '{want}' in:\n{s}");
+    }
+}
+
+#[test]
+fn inspect_json_parses_and_agrees_with_the_file() {
+    let m = tiny();
+    let o = inspect(&[m.to_str().unwrap(), "--json", "--frames", "600"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["config"]["gpt"]["n_embd"], 32);
+    assert_eq!(v["config"]["gpt"]["vocab"], serde_json::json!([64, 64, 64, 64, 64]));
+    assert_eq!(v["file_bytes"], std::fs::metadata(&m).unwrap().len());
+    let tensors = v["tensors"].as_u64().unwrap();
+    assert!(tensors > 0);
+    let per: u64 = v["dtypes"].as_object().unwrap().values().map(|d| d["tensors"].as_u64().unwrap()).sum();
+    assert_eq!(per, tensors);
+    let params: u64 = v["dtypes"].as_object().unwrap().values().map(|d| d["params"].as_u64().unwrap()).sum();
+    assert_eq!(params, v["params"].as_u64().unwrap());
+    // 600 frames: the rollout_tiny_long golden has K = 120 steps, 484 frames.
+    let r = &v["r_mode"]["requested"];
+    assert_eq!((r["steps"].as_u64(), r["output_frames"].as_u64()), (Some(120), Some(484)));
+    assert!(v["r_mode"]["one_minute"]["scratch_bytes"].as_u64().unwrap() > 0);
+    assert_eq!(v["r_mode"]["one_minute"]["input_frames"], 1800);
+    assert!(v["streaming"]["latency"].as_str().unwrap().contains("not available yet"));
+}
+
+#[test]
+fn inspect_names_a_bad_file() {
+    let dir = std::env::temp_dir().join(format!("duo-inspect-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.duo");
+    std::fs::write(&bad, b"not a model at all, just some bytes to read").unwrap();
+    for path in [bad.clone(), dir.join("missing.duo")] {
+        let o = inspect(&[path.to_str().unwrap()]);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{e}");
+        assert!(e.contains(path.to_str().unwrap()) && !e.contains("panicked"), "{e}");
+    }
+}
