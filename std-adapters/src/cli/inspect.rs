@@ -166,7 +166,7 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
         s.push_str(&l);
         s.push('\n');
     };
-    line(format!("{}", r["model"].as_str().unwrap_or("")));
+    line(r["model"].as_str().unwrap_or("").to_string());
     line(format!(
         "  file {} ({} bytes), format v{}, {} tensors, {} parameters",
         mib(r["file_bytes"].as_u64().unwrap_or(0)),
