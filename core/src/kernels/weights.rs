@@ -15,10 +15,10 @@
 //! inner loop integer; the extra error is measured end to end
 //! (std-adapters/tests/quantized.rs and docs/FORMAT.md §4).
 
-use super::simd::{self, f16_to_f32, Q8_BLOCK, Q8_BLOCK_BYTES};
+use super::simd::{self, f16_to_f32, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 
 /// Activation columns prepared at once by an int8 row matrix (stack buffer
-/// of `ACT_CHUNK` i8 + `ACT_CHUNK / 32` f32 scales: 1.1 KiB).
+/// of `TM x ACT_CHUNK` i8 + `TM x ACT_CHUNK / 32` f32 scales: 4.5 KiB).
 pub const ACT_CHUNK: usize = 1024;
 
 /// Activations prepared for a weight type (see [`RowMatrix::prepare`]).
@@ -30,15 +30,16 @@ impl PreparedAct for () {
     fn new() -> Self {}
 }
 
-/// Int8-quantised activations: (ACT_CHUNK) values, (ACT_CHUNK / 32) scales.
+/// Int8-quantised activations of up to `TM` rows: (ACT_CHUNK) values and
+/// (ACT_CHUNK / 32) scales per row.
 pub struct Q8Act {
-    pub q: [i8; ACT_CHUNK],
-    pub d: [f32; ACT_CHUNK / Q8_BLOCK],
+    pub q: [[i8; ACT_CHUNK]; TM],
+    pub d: [[f32; ACT_CHUNK / Q8_BLOCK]; TM],
 }
 
 impl PreparedAct for Q8Act {
     fn new() -> Self {
-        Q8Act { q: [0; ACT_CHUNK], d: [0.0; ACT_CHUNK / Q8_BLOCK] }
+        Q8Act { q: [[0; ACT_CHUNK]; TM], d: [[0.0; ACT_CHUNK / Q8_BLOCK]; TM] }
     }
 }
 
@@ -46,9 +47,10 @@ impl PreparedAct for Q8Act {
 /// `r < rows()` and slice lengths as documented per method.
 ///
 /// Dot products run over column chunks of at most [`RowMatrix::CHUNK`]
-/// columns (a multiple of 32): the activation chunk is prepared once
-/// ([`RowMatrix::prepare`]: nothing for f32/f16, int8 quantisation for
-/// [`Q8Rows`]) and then dotted with many rows.
+/// columns (a multiple of 32): the activation chunks of up to `TM` rows are
+/// prepared once ([`RowMatrix::prepare`]: nothing for f32/f16, int8
+/// quantisation for [`Q8Rows`]) and then dotted with many weight rows, a
+/// `TM x TN` register tile at a time ([`RowMatrix::dot_tile`]).
 pub trait RowMatrix {
     /// Prepared activations of one chunk.
     type Act: PreparedAct;
@@ -56,11 +58,15 @@ pub trait RowMatrix {
     const CHUNK: usize;
     fn rows(&self) -> usize;
     fn cols(&self) -> usize;
-    /// Prepares `x` (a chunk starting at a multiple of `CHUNK`, at most
-    /// `CHUNK` long).
-    fn prepare(x: &[f32], act: &mut Self::Act);
-    /// `row(r)[c0 .. c0 + x.len()] . x`, with `act` from `prepare(x)`.
+    /// Prepares activation rows `x[m]` into row `m` of `act` (`x.len() <=
+    /// TM`; each a chunk starting at a multiple of `CHUNK`, at most `CHUNK`
+    /// long, all the same length).
+    fn prepare(x: &[&[f32]], act: &mut Self::Act);
+    /// `row(r)[c0 .. c0 + x.len()] . x`, with `act` from `prepare(&[x])`.
     fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], act: &Self::Act) -> f32;
+    /// `out[m][n] = row(o[n])[c0 .. c0 + len] . x[m]`, with `act` from
+    /// `prepare(&x)` (the register-blocked GEMM step; ISA-dispatched).
+    fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], act: &Self::Act) -> Tile;
     /// `y += a * row(r)` (`y`: cols).
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]);
     /// `out = row(r)` as f32 (`out`: cols; embedding and codebook rows).
@@ -70,7 +76,7 @@ pub trait RowMatrix {
         let mut act = Self::Act::new();
         let mut sum = 0.0;
         for (i, xc) in x.chunks(Self::CHUNK.min(x.len().max(1))).enumerate() {
-            Self::prepare(xc, &mut act);
+            Self::prepare(&[xc], &mut act);
             sum += self.dot_chunk(r, i * Self::CHUNK, xc, &act);
         }
         sum
@@ -114,10 +120,14 @@ impl RowMatrix for F32Rows<'_> {
         self.cols
     }
     #[inline]
-    fn prepare(_: &[f32], _: &mut ()) {}
+    fn prepare(_: &[&[f32]], _: &mut ()) {}
     #[inline]
     fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], _: &()) -> f32 {
         simd::dot_f32(&self.row(r)[c0..], x)
+    }
+    #[inline]
+    fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], _: &()) -> Tile {
+        simd::tile_f32(o.map(|r| &self.row(r)[c0..]), x)
     }
     #[inline]
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
@@ -161,10 +171,14 @@ impl RowMatrix for F16Rows<'_> {
         self.cols
     }
     #[inline]
-    fn prepare(_: &[f32], _: &mut ()) {}
+    fn prepare(_: &[&[f32]], _: &mut ()) {}
     #[inline]
     fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], _: &()) -> f32 {
         simd::dot_f16(&self.row(r)[c0..], x)
+    }
+    #[inline]
+    fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], _: &()) -> Tile {
+        simd::tile_f16(o.map(|r| &self.row(r)[c0..]), x)
     }
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
         for (yi, &wi) in y.iter_mut().zip(self.row(r)) {
@@ -217,15 +231,30 @@ impl RowMatrix for Q8Rows<'_> {
         self.cols
     }
     #[inline]
-    fn prepare(x: &[f32], act: &mut Q8Act) {
-        simd::quantise_q8(x, &mut act.q, &mut act.d);
+    fn prepare(x: &[&[f32]], act: &mut Q8Act) {
+        for ((xm, q), d) in x.iter().zip(&mut act.q).zip(&mut act.d) {
+            simd::quantise_q8(xm, q, d);
+        }
     }
     #[inline]
     fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], act: &Q8Act) -> f32 {
         let b0 = c0 / Q8_BLOCK * Q8_BLOCK_BYTES;
         let nb = x.len() / Q8_BLOCK;
         let w = &self.row(r)[b0..b0 + nb * Q8_BLOCK_BYTES];
-        simd::dot_q8(w, &act.q[..nb * Q8_BLOCK], &act.d[..nb])
+        simd::dot_q8(w, &act.q[0][..nb * Q8_BLOCK], &act.d[0][..nb])
+    }
+    #[inline]
+    fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], act: &Q8Act) -> Tile {
+        let b0 = c0 / Q8_BLOCK * Q8_BLOCK_BYTES;
+        let nb = x[0].len() / Q8_BLOCK;
+        let w = o.map(|r| &self.row(r)[b0..b0 + nb * Q8_BLOCK_BYTES]);
+        let mut m = 0;
+        let xq = [(); TM].map(|_| {
+            m += 1;
+            &act.q[m - 1][..nb * Q8_BLOCK]
+        });
+        let xd = act.d.each_ref().map(|d| &d[..nb]);
+        simd::tile_q8(w, xq, xd)
     }
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
         self.for_blocks(r, |c, d, q| {

@@ -4,7 +4,7 @@
 //! `linear` over f16 / int8 matrices against naive references.
 #![allow(unsafe_code)]
 
-use crate::kernels::simd::{self, scalar, Q8_BLOCK, Q8_BLOCK_BYTES};
+use crate::kernels::simd::{self, scalar, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 use crate::kernels::*;
 
 /// SIMD vs scalar twin (f32 and f16 dots): |simd - scalar| <= limit * sum |a_i b_i|
@@ -72,6 +72,9 @@ struct Variant {
     dot_f32: fn(&[f32], &[f32]) -> f32,
     dot_f16: fn(&[u16], &[f32]) -> f32,
     dot_q8: fn(&[u8], &[i8], &[f32]) -> f32,
+    tile_f32: fn([&[f32]; TN], [&[f32]; TM]) -> Tile,
+    tile_f16: fn([&[u16]; TN], [&[f32]; TM]) -> Tile,
+    tile_q8: fn([&[u8]; TN], [&[i8]; TM], [&[f32]; TM]) -> Tile,
 }
 
 fn variants() -> Vec<Variant> {
@@ -79,21 +82,28 @@ fn variants() -> Vec<Variant> {
     let mut v = Vec::new();
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("f16c") {
-        // SAFETY (all three): the CPU supports avx2, fma and f16c (checked above).
+        // SAFETY (all six): the CPU supports avx2, fma and f16c (checked above).
         v.push(Variant {
             name: "avx2",
             dot_f32: |a, b| unsafe { simd::x86::dot_f32(a, b) },
             dot_f16: |w, x| unsafe { simd::x86::dot_f16(w, x) },
             dot_q8: |w, q, d| unsafe { simd::x86::dot_q8(w, q, d) },
+            tile_f32: |w, x| unsafe { simd::x86::tile_f32(w, x) },
+            tile_f16: |w, x| unsafe { simd::x86::tile_f16(w, x) },
+            tile_q8: |w, q, d| unsafe { simd::x86::tile_q8(w, q, d) },
         });
     }
     #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
-    // SAFETY (all three): NEON is enabled for this build.
+    // SAFETY (all six): NEON is enabled for this build.
     v.push(Variant {
         name: "neon",
         dot_f32: |a, b| unsafe { simd::neon::dot_f32(a, b) },
         dot_f16: |w, x| unsafe { simd::neon::dot_f16(w, x) },
         dot_q8: |w, q, d| unsafe { simd::neon::dot_q8(w, q, d) },
+        // NEON tiles are pairwise NEON dots for now (no register blocking).
+        tile_f32: |w, x| unsafe { simd::neon::tile_f32(w, x) },
+        tile_f16: |w, x| unsafe { simd::neon::tile_f16(w, x) },
+        tile_q8: |w, q, d| unsafe { simd::neon::tile_q8(w, q, d) },
     });
     v
 }
@@ -231,6 +241,112 @@ fn linear_over_f16_and_q8_matches_naive() {
                         bound += row.chunks(32).zip(&xd).map(|(wb, d)| wb.iter().map(|v| v.abs() as f64).sum::<f64>() * *d as f64 * 0.5).sum::<f64>();
                     }
                     let err = (y[a * o + c] as f64 - want).abs();
+                    assert!(err <= bound, "{name} ({n},{i},{o}) [{a},{c}]: {} vs {want}, err {err:e} > {bound:e}", y[a * o + c]);
+                }
+            }
+        }
+    }
+}
+
+/// SIMD tile vs scalar tile twin, every entry: |simd - scalar| <= limit *
+/// sum |w_i x_i| (summation order and FMA rounding only).
+const SIMD_VS_SCALAR_TILE: f64 = 1e-6;
+/// SIMD int8 tile vs scalar twin: exact i32 (partial) block sums, reordered
+/// f32 sum across blocks and lanes: limit * sum_b |scale_b| sum_i |w_i x_i|.
+const SIMD_VS_SCALAR_TILE_Q8: f64 = 1e-6;
+
+/// Tiles over every column tail (k = 0..=70 and larger odd lengths), rows
+/// longer than the tile's shortest one (only the common prefix counts) and repeated rows
+/// (how `linear` pads row / output tails).
+#[test]
+fn simd_tiles_match_scalar_twins() {
+    let mut r = Rng(0xfeed_beef_1234_5678);
+    for v in variants() {
+        let mut ks: Vec<usize> = (0..=70).collect();
+        ks.extend([255, 257, 767, 768, 1024, 1031, 3072]);
+        for k in ks {
+            let ws: Vec<Vec<f32>> = (0..TN).map(|j| r.vec(k + j % 2)).collect();
+            let xs: Vec<Vec<f32>> = (0..TM).map(|m| r.vec(k + m)).collect();
+            let repeat = k % 3 == 0; // repeated last rows, as `linear` pads tails
+            let w: [&[f32]; TN] = std::array::from_fn(|j| if repeat && j > 0 { &ws[0][..] } else { &ws[j][..] });
+            let x: [&[f32]; TM] = std::array::from_fn(|m| if repeat && m > 1 { &xs[1][..] } else { &xs[m][..] });
+            let (got, want) = ((v.tile_f32)(w, x), scalar::tile_f32(w, x));
+            let hs: Vec<Vec<u16>> = ws.iter().map(|w| f16_bits(w)).collect();
+            let hw: [&[u16]; TN] = std::array::from_fn(|j| &hs[j][..]);
+            let (got16, want16) = ((v.tile_f16)(hw, x), scalar::tile_f16(hw, x));
+            for m in 0..TM {
+                for j in 0..TN {
+                    let scale = abs_sum(&w[j][..k], &x[m][..k]);
+                    check_dot(&format!("{} tile_f32 [{m}][{j}]", v.name), got[m][j], want[m][j], scale, SIMD_VS_SCALAR_TILE, k);
+                    assert_eq!(want[m][j], scalar::dot_f32(&w[j][..k], &x[m][..k]), "scalar tile_f32 is the pairwise twin");
+                    let hf: Vec<f32> = hw[j][..k].iter().map(|&b| simd::f16_to_f32(b)).collect();
+                    let scale = abs_sum(&hf, &x[m][..k]);
+                    check_dot(&format!("{} tile_f16 [{m}][{j}]", v.name), got16[m][j], want16[m][j], scale, SIMD_VS_SCALAR_TILE, k);
+                }
+            }
+        }
+        for nb in (0..=12).chain([24, 32, 96]) {
+            let n = nb * Q8_BLOCK;
+            let wb: Vec<Vec<u8>> = (0..TN).map(|_| q8_bytes(&r.vec(n))).collect();
+            let mut qs = vec![vec![0i8; n]; TM];
+            let mut ds = vec![vec![0f32; nb]; TM];
+            for m in 0..TM {
+                let mut x = r.vec(n);
+                if m == 3 && n > 0 {
+                    x[0] = 1e4; // one block with a large scale
+                }
+                simd::quantise_q8(&x, &mut qs[m], &mut ds[m]);
+            }
+            let w: [&[u8]; TN] = std::array::from_fn(|j| &wb[j][..]);
+            let q: [&[i8]; TM] = std::array::from_fn(|m| &qs[m][..]);
+            let d: [&[f32]; TM] = std::array::from_fn(|m| &ds[m][..]);
+            let (got, want) = ((v.tile_q8)(w, q, d), scalar::tile_q8(w, q, d));
+            for m in 0..TM {
+                for j in 0..TN {
+                    let scale: f64 = (0..nb)
+                        .map(|b| {
+                            let blk = &w[j][b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
+                            let isum: i64 = blk[2..].iter().zip(&q[m][b * 32..(b + 1) * 32]).map(|(&a, &c)| ((a as i8 as i64) * c as i64).abs()).sum();
+                            (simd::f16_to_f32(u16::from_le_bytes([blk[0], blk[1]])) as f64 * d[m][b] as f64 * isum as f64).abs()
+                        })
+                        .sum();
+                    check_dot(&format!("{} tile_q8 [{m}][{j}]", v.name), got[m][j], want[m][j], scale, SIMD_VS_SCALAR_TILE_Q8, n);
+                }
+            }
+        }
+    }
+}
+
+/// The tiled `linear` (whichever ISA is selected) on shapes with every
+/// row tail (n mod TM), output tail (out mod TN), column tail (in mod 8)
+/// and int8 chunk boundary (in > ACT_CHUNK), against per-row `Matrix::dot`
+/// (the untiled path): f32 and f16 agree to summation order, int8 exactly
+/// up to summation order too (same per-row quantisation).
+#[test]
+fn tiled_linear_matches_row_dots_on_all_tails() {
+    /// |tiled - row dot| <= limit * (1 + sum |w_i x_i|).
+    const TILED_VS_ROWS: f64 = 2e-6;
+    let mut r = Rng(4242);
+    let shapes = [(1, 1, 1), (1, 32, 1), (2, 7, 3), (3, 33, 5), (4, 64, 4), (5, 96, 7), (6, 768, 6), (9, 1056, 13), (13, 2080, 9), (8, 3072, 17)];
+    for &(n, i, o) in &shapes {
+        let (x, w, b) = (r.vec(n * i), r.vec(o * i), r.vec(o));
+        let h = f16_bits(&w);
+        let q8 = if i % 32 == 0 { Some(q8_bytes(&w)) } else { None };
+        let mut mats = vec![("f32", Matrix::F32(F32Rows::new(&w, o, i).unwrap())), ("f16", Matrix::F16(F16Rows::new(&h, o, i).unwrap()))];
+        if let Some(q) = &q8 {
+            mats.push(("q8", Matrix::Q8(Q8Rows::new(q, o, i).unwrap())));
+        }
+        for (name, m) in mats {
+            let mut y = vec![f32::NAN; n * o];
+            linear(&x, &m, Some(&b), &mut y);
+            let mut row = vec![0.0; i];
+            for a in 0..n {
+                let xa = &x[a * i..(a + 1) * i];
+                for c in 0..o {
+                    m.row_into(c, &mut row);
+                    let want = b[c] + m.dot(c, xa);
+                    let err = (y[a * o + c] as f64 - want as f64).abs();
+                    let bound = TILED_VS_ROWS * (1.0 + abs_sum(&row, xa));
                     assert!(err <= bound, "{name} ({n},{i},{o}) [{a},{c}]: {} vs {want}, err {err:e} > {bound:e}", y[a * o + c]);
                 }
             }

@@ -133,6 +133,7 @@ pub fn write_outputs(dir: &Path, g: &Generated) -> Result<()> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    crate::simd::init();
     let file = ModelFile::open(&args.model)?;
     let duo = file.duo()?;
     let model = Model::from_duo(&duo)

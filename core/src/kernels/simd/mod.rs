@@ -132,6 +132,71 @@ pub fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
     }
 }
 
+/// Activation rows per register tile (the `m` side of [`tile_f32`] & co.).
+pub const TM: usize = 4;
+/// Weight rows per register tile (the `n` side).
+pub const TN: usize = 4;
+
+/// A `TM x TN` tile of dot products: `out[m][n] = w[n] . x[m]`.
+pub type Tile = [[f32; TN]; TM];
+
+/// Every pair of a tile through a single-row dot (the scalar twins, and
+/// the NEON path until it has a register-blocked kernel).
+#[inline]
+pub(crate) fn pairwise(mut f: impl FnMut(usize, usize) -> f32) -> Tile {
+    let mut out = [[0.0; TN]; TM];
+    for (m, row) in out.iter_mut().enumerate() {
+        for (n, o) in row.iter_mut().enumerate() {
+            *o = f(m, n);
+        }
+    }
+    out
+}
+
+/// Register-blocked `x . w^T` tile with f32 weights: `out[m][n] = w[n] .
+/// x[m]` over the shortest slice length (see [`scalar::tile_f32`]).
+#[inline]
+pub fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 => unsafe { x86::tile_f32(w, x) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon => unsafe { neon::tile_f32(w, x) },
+        _ => scalar::tile_f32(w, x),
+    }
+}
+
+/// [`tile_f32`] with binary16 weights (converted once per tile step).
+#[inline]
+pub fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx2 implies f16c).
+        Isa::Avx2 => unsafe { x86::tile_f16(w, x) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon => unsafe { neon::tile_f16(w, x) },
+        _ => scalar::tile_f16(w, x),
+    }
+}
+
+/// [`tile_f32`] for blocked int8: `w[n]` stored Q8Block32 rows, `xq[m]` /
+/// `xd[m]` quantised activation rows ([`quantise_q8`]); see [`dot_q8`].
+#[inline]
+pub fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 => unsafe { x86::tile_q8(w, xq, xd) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon => unsafe { neon::tile_q8(w, xq, xd) },
+        _ => scalar::tile_q8(w, xq, xd),
+    }
+}
+
 /// Quantises activations for [`dot_q8`]: per block of 32, `d = max|x| /
 /// 127` (f32) and `q = round(x / d)` in [-127, 127] (0 when the block is
 /// all zeros). `x.len()` must be a multiple of 32 (a trailing partial

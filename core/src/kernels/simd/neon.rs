@@ -10,7 +10,8 @@
 
 use core::arch::aarch64::*;
 
-use super::{Q8_BLOCK, Q8_BLOCK_BYTES};
+use super::scalar::{common, common_blocks};
+use super::{pairwise, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 
 /// 4 binary16 values (low 16 bits of each u32 lane... as a u16x4) to f32x4.
 #[inline]
@@ -107,4 +108,38 @@ pub unsafe fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
         acc = vfmaq_n_f32(acc, vcvtq_f32_s32(s), d);
     }
     vaddvq_f32(acc)
+}
+
+/// Tile of pairwise NEON dots over the common row length (no register-
+/// blocked NEON kernel yet; same contract as [`super::scalar::tile_f32`]).
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
+    let k = common(&w, &x);
+    // SAFETY: NEON is available (this fn's contract).
+    pairwise(|m, n| unsafe { dot_f32(&w[n][..k], &x[m][..k]) })
+}
+
+/// Pairwise NEON tile with binary16 weights (see [`tile_f32`]).
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
+    let k = common(&w, &x);
+    // SAFETY: NEON is available (this fn's contract).
+    pairwise(|m, n| unsafe { dot_f16(&w[n][..k], &x[m][..k]) })
+}
+
+/// Pairwise NEON int8 tile (see [`tile_f32`]).
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
+    let nb = common_blocks(&w, &xq, &xd);
+    // SAFETY: NEON is available (this fn's contract).
+    pairwise(|m, n| unsafe { dot_q8(&w[n][..nb * Q8_BLOCK_BYTES], &xq[m][..nb * Q8_BLOCK], &xd[m][..nb]) })
 }

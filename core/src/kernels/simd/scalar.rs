@@ -2,7 +2,7 @@
 //! definition each SIMD variant is tested against, and the path taken on
 //! targets without a SIMD variant.
 
-use super::{f16_to_f32, Q8_BLOCK, Q8_BLOCK_BYTES};
+use super::{f16_to_f32, pairwise, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 
 /// `a . b` over `min(len)` with 8 independent accumulators (the summation
 /// order SIMD variants approximate; they differ by rounding only).
@@ -63,4 +63,41 @@ pub fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
         sum += (d * xd[b]) * isum as f32;
     }
     sum
+}
+
+/// The shortest row length of a tile (every pair is dotted over it).
+#[inline]
+pub(crate) fn common<A, B>(w: &[&[A]; TN], x: &[&[B]; TM]) -> usize {
+    let kw = w.iter().map(|r| r.len()).min().unwrap_or(0);
+    x.iter().map(|r| r.len()).min().unwrap_or(0).min(kw)
+}
+
+/// Tile twin of [`dot_f32`]: `out[m][n] = dot_f32(w[n][..k], x[m][..k])`
+/// with `k` the shortest row of the tile (the reference every tiled SIMD
+/// kernel is tested against).
+#[inline]
+pub fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
+    let k = common(&w, &x);
+    pairwise(|m, n| dot_f32(&w[n][..k], &x[m][..k]))
+}
+
+/// Tile twin of [`dot_f16`] (over the shortest row, as [`tile_f32`]).
+#[inline]
+pub fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
+    let k = common(&w, &x);
+    pairwise(|m, n| dot_f16(&w[n][..k], &x[m][..k]))
+}
+
+/// The fewest int8 blocks of any row of a tile.
+#[inline]
+pub(crate) fn common_blocks(w: &[&[u8]; TN], xq: &[&[i8]; TM], xd: &[&[f32]; TM]) -> usize {
+    let nbw = w.iter().map(|r| r.len() / Q8_BLOCK_BYTES).min().unwrap_or(0);
+    xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).min().unwrap_or(0).min(nbw)
+}
+
+/// Tile twin of [`dot_q8`] (over the fewest blocks of any row).
+#[inline]
+pub fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
+    let nb = common_blocks(&w, &xq, &xd);
+    pairwise(|m, n| dot_q8(&w[n][..nb * Q8_BLOCK_BYTES], &xq[m][..nb * Q8_BLOCK], &xd[m][..nb]))
 }

@@ -6,7 +6,11 @@
 
 use core::arch::x86_64::*;
 
-use super::{Q8_BLOCK, Q8_BLOCK_BYTES};
+use super::{Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
+
+// The tiled kernels walk the weight rows two at a time (8 f32 accumulators
+// for a 4x2 sub-tile, plus two weight and one activation register).
+const _: () = assert!(TN.is_multiple_of(2));
 
 /// Horizontal sum of 8 lanes.
 #[inline]
@@ -110,4 +114,145 @@ pub unsafe fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
         acc = _mm256_fmadd_ps(_mm256_set1_ps(d), _mm256_cvtepi32_ps(p32), acc);
     }
     hsum(acc)
+}
+
+/// The shortest of the tile's row lengths.
+#[inline]
+fn tile_len<A, B>(w: &[&[A]; TN], x: &[&[B]; TM]) -> usize {
+    let kw = w.iter().map(|r| r.len()).min().unwrap_or(0);
+    x.iter().map(|r| r.len()).min().unwrap_or(0).min(kw)
+}
+
+/// Register-blocked tile (see [`super::scalar::tile_f32`]): each 4x2
+/// sub-tile keeps 8 accumulators in registers, so every weight and
+/// activation vector loaded is used 2 or 4 times.
+///
+/// # Safety
+/// The CPU must support avx2 and fma.
+#[target_feature(enable = "avx2,fma")]
+pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
+    let k = tile_len(&w, &x);
+    let k8 = k - k % 8;
+    let mut out = [[0.0f32; TN]; TM];
+    for n0 in (0..TN).step_by(2) {
+        let (wa, wb) = (&w[n0][..k], &w[n0 + 1][..k]);
+        let mut acc = [[_mm256_setzero_ps(); 2]; TM];
+        let mut c = 0;
+        while c < k8 {
+            // SAFETY: c + 8 <= k8 <= k, and wa, wb and every x[m] hold at
+            // least k floats.
+            let (va, vb) = unsafe { (_mm256_loadu_ps(wa.as_ptr().add(c)), _mm256_loadu_ps(wb.as_ptr().add(c))) };
+            for (am, xm) in acc.iter_mut().zip(&x) {
+                // SAFETY: as above.
+                let xv = unsafe { _mm256_loadu_ps(xm.as_ptr().add(c)) };
+                am[0] = _mm256_fmadd_ps(xv, va, am[0]);
+                am[1] = _mm256_fmadd_ps(xv, vb, am[1]);
+            }
+            c += 8;
+        }
+        for (m, am) in acc.iter().enumerate() {
+            for (j, wr) in [wa, wb].into_iter().enumerate() {
+                let mut tail = 0.0f32;
+                for (a, b) in wr[k8..].iter().zip(&x[m][k8..k]) {
+                    tail += a * b;
+                }
+                out[m][n0 + j] = hsum(am[j]) + tail;
+            }
+        }
+    }
+    out
+}
+
+/// [`tile_f32`] with binary16 weights: each weight vector is converted
+/// (F16C) once per step and used for all `TM` activation rows.
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+#[target_feature(enable = "avx2,fma,f16c")]
+pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
+    let k = tile_len(&w, &x);
+    let k8 = k - k % 8;
+    let mut out = [[0.0f32; TN]; TM];
+    for n0 in (0..TN).step_by(2) {
+        let (wa, wb) = (&w[n0][..k], &w[n0 + 1][..k]);
+        let mut acc = [[_mm256_setzero_ps(); 2]; TM];
+        let mut c = 0;
+        while c < k8 {
+            // SAFETY: c + 8 <= k8 <= k: 8 u16 (one 128-bit load) of wa and wb in bounds.
+            let (va, vb) = unsafe {
+                (
+                    _mm256_cvtph_ps(_mm_loadu_si128(wa.as_ptr().add(c) as *const __m128i)),
+                    _mm256_cvtph_ps(_mm_loadu_si128(wb.as_ptr().add(c) as *const __m128i)),
+                )
+            };
+            for (am, xm) in acc.iter_mut().zip(&x) {
+                // SAFETY: every x[m] holds at least k floats.
+                let xv = unsafe { _mm256_loadu_ps(xm.as_ptr().add(c)) };
+                am[0] = _mm256_fmadd_ps(xv, va, am[0]);
+                am[1] = _mm256_fmadd_ps(xv, vb, am[1]);
+            }
+            c += 8;
+        }
+        for (m, am) in acc.iter().enumerate() {
+            for (j, wr) in [wa, wb].into_iter().enumerate() {
+                let mut tail = 0.0f32;
+                for (a, b) in wr[k8..].iter().zip(&x[m][k8..k]) {
+                    tail += super::f16_to_f32(*a) * b;
+                }
+                out[m][n0 + j] = hsum(am[j]) + tail;
+            }
+        }
+    }
+    out
+}
+
+/// One binary16 scale to f32 (F16C, exact).
+#[inline]
+#[target_feature(enable = "avx2,f16c")]
+unsafe fn f16_scale(blk: &[u8]) -> f32 {
+    _mm_cvtss_f32(_mm_cvtph_ps(_mm_cvtsi32_si128(u16::from_le_bytes([blk[0], blk[1]]) as i32)))
+}
+
+/// Blocked int8 tile (see [`dot_q8`]): per block of 32, each weight row is
+/// loaded and made unsigned once and used for all `TM` activation rows;
+/// the i32 block sums (maddubs + madd) are scaled into f32 accumulators.
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+#[target_feature(enable = "avx2,fma,f16c")]
+pub unsafe fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
+    let nbw = w.iter().map(|r| r.len() / Q8_BLOCK_BYTES).min().unwrap_or(0);
+    let nbx = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).min().unwrap_or(0);
+    let nb = nbw.min(nbx);
+    let ones = _mm256_set1_epi16(1);
+    let mut out = [[0.0f32; TN]; TM];
+    for n0 in (0..TN).step_by(2) {
+        let mut acc = [[_mm256_setzero_ps(); 2]; TM];
+        let blocks = w[n0].chunks_exact(Q8_BLOCK_BYTES).zip(w[n0 + 1].chunks_exact(Q8_BLOCK_BYTES)).take(nb);
+        for (b, (ba, bb)) in blocks.enumerate() {
+            let (da, db) = (f16_scale(ba), f16_scale(bb));
+            // SAFETY: ba[2..] and bb[2..] hold exactly 32 bytes each.
+            let (wa, wb) = unsafe {
+                (_mm256_loadu_si256(ba[2..].as_ptr() as *const __m256i), _mm256_loadu_si256(bb[2..].as_ptr() as *const __m256i))
+            };
+            // |w| (unsigned) x sign(w)*x (signed), as in `dot_q8`: no i16
+            // saturation since the quantiser keeps x in [-127, 127].
+            let (ua, ub) = (_mm256_sign_epi8(wa, wa), _mm256_sign_epi8(wb, wb));
+            for (m, am) in acc.iter_mut().enumerate() {
+                let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
+                let dx = xd[m][b];
+                // SAFETY: xs holds exactly 32 bytes.
+                let xv = unsafe { _mm256_loadu_si256(xs.as_ptr() as *const __m256i) };
+                let pa = _mm256_madd_epi16(_mm256_maddubs_epi16(ua, _mm256_sign_epi8(xv, wa)), ones);
+                let pb = _mm256_madd_epi16(_mm256_maddubs_epi16(ub, _mm256_sign_epi8(xv, wb)), ones);
+                am[0] = _mm256_fmadd_ps(_mm256_set1_ps(da * dx), _mm256_cvtepi32_ps(pa), am[0]);
+                am[1] = _mm256_fmadd_ps(_mm256_set1_ps(db * dx), _mm256_cvtepi32_ps(pb), am[1]);
+            }
+        }
+        for (m, am) in acc.iter().enumerate() {
+            out[m][n0] = hsum(am[0]);
+            out[m][n0 + 1] = hsum(am[1]);
+        }
+    }
+    out
 }
