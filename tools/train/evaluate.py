@@ -92,24 +92,48 @@ def token_accuracy(gpt, train_tt, test_tt, stride=4):
             for j, s in enumerate(STREAMS)} | {"n_tokens": n, "n_windows": n_last}
 
 
-def rollout_metrics(gpt, vq, tr, takes):
+def python_rollout(gpt, vq, tr):
+    def run(tk):
+        res = generate_exact(gpt, vq, tr, tk["leader"], tk["music"], follower_start=tk["follower"][:4])
+        return res["tokens"].numpy(), res["follower_pos3d"].numpy()
+    return run
+
+
+def rust_rollout(binary, duo):
+    """`duolando generate --mode exact` on the converted model (what ships)."""
+    import os
+    import subprocess
+    import tempfile
+
+    def run(tk):
+        with tempfile.TemporaryDirectory() as d:
+            for k, a in (("leader", tk["leader"]), ("music", tk["music"]), ("start", tk["follower"][:4])):
+                np.save(os.path.join(d, k + ".npy"), np.ascontiguousarray(a, dtype=np.float32))
+            subprocess.run([binary, "generate", "--mode", "exact", "--model", duo,
+                            "--leader", os.path.join(d, "leader.npy"), "--music", os.path.join(d, "music.npy"),
+                            "--follower-start", os.path.join(d, "start.npy"), "--out", os.path.join(d, "out")],
+                           check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            return (np.load(os.path.join(d, "out", "tokens.npy")),
+                    np.load(os.path.join(d, "out", "follower_pos3d.npy")))
+    return run
+
+
+def rollout_metrics(generate, vq, tr, takes):
     rows = []
     outs = []
     for tk in takes:
-        res = generate_exact(gpt, vq, tr, tk["leader"], tk["music"], follower_start=tk["follower"][:4])
-        pred = res["follower_pos3d"].numpy()
+        tokens, pred = generate(tk)
         n = len(pred)
         true, lead = tk["follower"][:n], tk["leader"][:n]
         root_d = np.linalg.norm(pred[:, :3] - true[:, :3], axis=1).mean() * 1000
         base = lead[:, :3] + (true[0, :3] - lead[0, :3])
         base_d = np.linalg.norm(base - true[:, :3], axis=1).mean() * 1000
         mpjpe = np.linalg.norm((pred - true).reshape(n, 55, 3), axis=2).mean() * 1000
-        outs.append(pred)
+        outs.append(tokens)
         rows.append(dict(name=tk["name"], frames=n, root_mm=root_d, root_baseline_mm=base_d, mpjpe_mm=mpjpe,
                          skate=foot_skating(pred), skate_true=foot_skating(true), skate_leader=foot_skating(lead),
                          bed=bed(lead, pred), bed_true=bed(lead, true),
-                         token_agreement=float((res["tokens"][1:].numpy() ==
-                                                 true_tokens(vq, tr, tk, len(res["tokens"]))[1:]).mean())))
+                         token_agreement=float((tokens[1:] == true_tokens(vq, tr, tk, len(tokens))[1:]).mean())))
     # chance BED: each leader against the true follower of the next test take
     for i, r in enumerate(rows):
         other = takes[(i + 1) % len(takes)]["follower"]
@@ -117,6 +141,33 @@ def rollout_metrics(gpt, vq, tr, takes):
         m = min(len(other), len(lead))
         r["bed_other_take"] = bed(lead[:m], other[:m])
     return rows, outs
+
+
+@torch.no_grad()
+def reconstruction(vq, tr, takes):
+    """VQ-VAE round trip on the test takes: mean joint error (mm) of the body (pelvis-relative,
+    hands de-normalised), codes used per part, translation error (mm)."""
+    from reference.pipeline import encode_motion, encode_transl, normalise_pos3d, denormalise_pos3d, TRANSL_SCALE
+    errs, terr, used = [], [], {p: set() for p in ("up", "down", "lhand", "rhand", "transl")}
+    for tk in takes:
+        for who in ("leader", "follower"):
+            norm = normalise_pos3d(torch.from_numpy(tk[who]))
+            norm[:, :3] = 0
+            codes = encode_motion(vq, norm[None])
+            for p, c in zip(("up", "down", "lhand", "rhand"), codes):
+                used[p] |= set(c.flatten().tolist())
+            pos, _ = vq.decode(codes)
+            pos = pos[0]
+            pos[:, :3] = 0
+            a, b = denormalise_pos3d(pos), denormalise_pos3d(norm)
+            errs.append(torch.linalg.norm((a - b).view(-1, 55, 3), dim=-1).mean().item())
+        rel = torch.from_numpy((tk["follower"][:, :3] - tk["leader"][:, :3]) * TRANSL_SCALE)
+        c = encode_transl(tr, rel[None])
+        used["transl"] |= set(c.flatten().tolist())
+        out = tr.decode(c)[0]
+        terr.append(torch.linalg.norm(out - rel, dim=-1).mean().item() / TRANSL_SCALE)
+    return dict(joint_mm=1000 * float(np.mean(errs)), transl_mm=1000 * float(np.mean(terr)),
+                codes_used={p: len(u) for p, u in used.items()})
 
 
 def true_tokens(vq, tr, tk, k):
@@ -142,22 +193,40 @@ def main(argv=None):
     ap.add_argument("--data", required=True)
     ap.add_argument("--ckpt", required=True, help="directory with motion_vqvae.pt, transl_vqvae.pt, follower_gpt.pt")
     ap.add_argument("--json", required=True)
+    ap.add_argument("--recon-only", action="store_true")
+    ap.add_argument("--duo", default=None, help="also roll out this .duo with the Rust CLI")
+    ap.add_argument("--bin", default="../../target/release/duolando")
     args = ap.parse_args(argv)
     setup_threads()
     clock = Clock()
     gpt, vq, tr = build_models()
     for m, f in ((gpt, "follower_gpt.pt"), (vq, "motion_vqvae.pt"), (tr, "transl_vqvae.pt")):
+        if args.recon_only and m is gpt:
+            continue
         load_checkpoint(m, f"{args.ckpt}/{f}").eval()
     test = load_split(args.data, "test")
+    if args.recon_only:
+        print(json.dumps(reconstruction(vq, tr, test)))
+        return 0
     train_tt = encode_split(vq, tr, load_split(args.data, "train"))
     test_tt = encode_split(vq, tr, test)
+    rec = reconstruction(vq, tr, test)
+    print(json.dumps(rec), flush=True)
     acc = token_accuracy(gpt, train_tt, test_tt)
     print(json.dumps(acc, indent=1), flush=True)
-    rows, _ = rollout_metrics(gpt, vq, tr, test)
+    rows, toks_py = rollout_metrics(python_rollout(gpt, vq, tr), vq, tr, test)
     summ = summarise(rows)
-    print(json.dumps(summ, indent=1), flush=True)
+    print("python f32 R:", json.dumps(summ, indent=1), flush=True)
+    result = dict(reconstruction=rec, token_accuracy=acc, rollout_python_f32=summ, per_take_python=rows)
+    if args.duo:
+        rows_rs, toks_rs = rollout_metrics(rust_rollout(args.bin, args.duo), vq, tr, test)
+        summ_rs = summarise(rows_rs)
+        same = [float(np.mean(a == b)) for a, b in zip(toks_py, toks_rs)]
+        summ_rs["token_agreement_with_python_f32"] = float(np.mean(same))
+        print("rust R (" + args.duo + "):", json.dumps(summ_rs, indent=1), flush=True)
+        result.update(rollout_rust=summ_rs, per_take_rust=rows_rs)
     with open(args.json, "w") as f:
-        json.dump(dict(token_accuracy=acc, rollout=summ, per_take=rows), f, indent=1, default=float)
+        json.dump(result, f, indent=1, default=float)
     print(f"[eval] {clock}")
     return 0
 

@@ -23,15 +23,15 @@ mkdir -p "$WORK"
 [ -d "$DATA/motion" ] || "$BIN" synth --minutes "$MINUTES" --seed "$SEED" --out "$DATA"
 
 cd "$T"
-$NICE "$PY" train_vqvae.py  --data "$DATA" --out "$WORK/motion_vqvae.pt" --steps "${VQ_STEPS:-500}" --batch 8
+$NICE "$PY" train_vqvae.py  --data "$DATA" --out "$WORK/motion_vqvae.pt" --steps "${VQ_STEPS:-1500}" --batch 8 --lr 6e-4
 $NICE "$PY" train_transl.py --data "$DATA" --out "$WORK/transl_vqvae.pt" --steps "${TR_STEPS:-1500}"
 $NICE "$PY" train_gpt.py    --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
-                            --out "$WORK/follower_gpt.pt" --steps "${GPT_STEPS:-700}" --batch 16
+                            --out "$WORK/follower_gpt.pt" --steps "${GPT_STEPS:-900}" --batch 16
 $NICE "$PY" export.py --ckpt "$WORK" --out "$WORK/export" --data "$DATA" --assets "$ROOT/assets"
 "$BIN" convert --config "$WORK/export/follower_gpt.yaml" --gpt "$WORK/export/gpt.safetensors" \
     --vqvae "$WORK/export/vqvae.safetensors" --transl "$WORK/export/transl.safetensors" \
     --dtype f16 -o "$ROOT/assets/demo.duo"
 if [ "${EVAL:-1}" != 0 ]; then
-    $NICE "$PY" evaluate.py --data "$DATA" --ckpt "$WORK" --json "$WORK/eval.json"
+    $NICE "$PY" evaluate.py --data "$DATA" --ckpt "$WORK" --json "$WORK/eval.json" --duo "$ROOT/assets/demo.duo" --bin "$BIN"
 fi
 ls -l "$ROOT/assets"

@@ -94,7 +94,7 @@ def main(argv=None):
     ap.add_argument("--vqvae", required=True)
     ap.add_argument("--transl", required=True)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--steps", type=int, default=900)
     ap.add_argument("--batch", type=int, default=16)
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--dropout", type=float, default=0.1)
