@@ -73,7 +73,11 @@ def token_accuracy(gpt, train_tt, test_tt, stride=4):
     freq = [torch.bincount(torch.cat([t["follower"][j] for t in train_tt]), minlength=gpt.cfg.vocab_size_up)
             for j in range(5)]
     mode = [int(f.argmax()) for f in freq]
+    tfreq = [torch.bincount(torch.cat([t["follower"][j] for t in test_tt]), minlength=gpt.cfg.vocab_size_up)
+             for j in range(5)]
+    tmode = [int(f.argmax()) for f in tfreq]  # oracle: the test set's own most frequent token
     hits = np.zeros(5); hits_last = np.zeros(5); base_mode = np.zeros(5); base_rep = np.zeros(5)
+    base_tmode = np.zeros(5)
     n = 0; n_last = 0
     for tt in test_tt:
         starts = list(range(0, n_windows(tt, bs, lf), stride))
@@ -85,10 +89,12 @@ def token_accuracy(gpt, train_tt, test_tt, stride=4):
                 hits[j] += float((pred == tgt[j]).sum())
                 hits_last[j] += float((pred[:, -1] == tgt[j][:, -1]).sum())
                 base_mode[j] += float((tgt[j] == mode[j]).sum())
+                base_tmode[j] += float((tgt[j] == tmode[j]).sum())
                 base_rep[j] += float((fin[j] == tgt[j]).sum())
             n += tgt[0].numel(); n_last += tgt[0].shape[0]
     return {s: dict(model=hits[j] / n, model_full_context=hits_last[j] / n_last,
-                    most_frequent=base_mode[j] / n, repeat_previous=base_rep[j] / n)
+                    most_frequent=base_mode[j] / n,
+                    most_frequent_test=base_tmode[j] / n, repeat_previous=base_rep[j] / n)
             for j, s in enumerate(STREAMS)} | {"n_tokens": n, "n_windows": n_last}
 
 

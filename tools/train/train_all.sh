@@ -5,7 +5,7 @@
 #
 # Environment (all optional): PY (python with torch, default /work/venv/bin/python),
 # WORK (scratch dir, default /tmp/duo_train), DATA (synthetic data dir, default /tmp/duo_synth),
-# MINUTES / SEED (synthetic data), VQ_STEPS / TR_STEPS / GPT_STEPS, EVAL=0 to skip evaluation.
+# MINUTES / SEED (synthetic data), VQ_STEPS / TR_STEPS / GPT_STEPS / GPT2_STEPS, EVAL=0 to skip evaluation.
 # Single-threaded (torch.set_num_threads(1)) under nice; see docs/DEMO_MODEL.md for timings.
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
@@ -26,7 +26,11 @@ cd "$T"
 $NICE "$PY" train_vqvae.py  --data "$DATA" --out "$WORK/motion_vqvae.pt" --steps "${VQ_STEPS:-1500}" --batch 8 --lr 6e-4
 $NICE "$PY" train_transl.py --data "$DATA" --out "$WORK/transl_vqvae.pt" --steps "${TR_STEPS:-1500}"
 $NICE "$PY" train_gpt.py    --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
-                            --out "$WORK/follower_gpt.pt" --steps "${GPT_STEPS:-900}" --batch 16
+                            --out "$WORK/follower_gpt_a.pt" --steps "${GPT_STEPS:-900}" --batch 16
+# second one-cycle run from the first (original `init_weight`), lower peak learning rate
+$NICE "$PY" train_gpt.py    --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
+                            --init "$WORK/follower_gpt_a.pt" --out "$WORK/follower_gpt.pt" \
+                            --steps "${GPT2_STEPS:-600}" --batch 16 --lr 5e-4
 $NICE "$PY" export.py --ckpt "$WORK" --out "$WORK/export" --data "$DATA" --assets "$ROOT/assets"
 "$BIN" convert --config "$WORK/export/follower_gpt.yaml" --gpt "$WORK/export/gpt.safetensors" \
     --vqvae "$WORK/export/vqvae.safetensors" --transl "$WORK/export/transl.safetensors" \

@@ -99,6 +99,7 @@ def main(argv=None):
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--dropout", type=float, default=0.1)
     ap.add_argument("--seed", type=int, default=44)
+    ap.add_argument("--init", default=None, help="continue from this GPT checkpoint (original init_weight)")
     args = ap.parse_args(argv)
     setup_threads()
     torch.manual_seed(args.seed)
@@ -112,6 +113,9 @@ def main(argv=None):
     starts = [(ti, s) for ti, tt in enumerate(train) for s in range(n_windows(tt, bs, lf))]
     rng = np.random.default_rng(args.seed)
     init_weights(gpt)
+    if args.init:
+        load_checkpoint(gpt, args.init)
+        rng = np.random.default_rng(args.seed + 1)
     gpt.train()
     add_dropout(gpt, args.dropout)
     opt = torch.optim.AdamW(gpt.parameters(), lr=args.lr, betas=(0.9, 0.95), weight_decay=0.01)
