@@ -13,7 +13,7 @@
 //!
 //! Quantising the activations per block (Q8_0 x Q8_0, as ggml) keeps the
 //! inner loop integer; the extra error is measured end to end
-//! (std-adapters/tests/quantized.rs and docs/FORMAT.md §4).
+//! (tests/quantized.rs and docs/FORMAT.md §4).
 
 use super::simd::{self, f16_to_f32, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 
@@ -89,28 +89,74 @@ pub fn dot(a: &[f32], b: &[f32]) -> f32 {
     simd::dot_f32(a, b)
 }
 
-/// Row-major f32 weights borrowed from the model bytes.
+/// The element of dense (unblocked) weight rows: f32, or f16 bit patterns
+/// (`u16`). The dtype difference of the dense path lives here and only here.
+pub trait DenseElem: Copy + 'static {
+    fn to_f32(self) -> f32;
+    /// `w . x` (ISA-dispatched).
+    fn dot(w: &[Self], x: &[f32]) -> f32;
+    /// The register-blocked tile `out[m][n] = w[n] . x[m]` (ISA-dispatched).
+    fn tile(w: [&[Self]; TN], x: [&[f32]; TM]) -> Tile;
+}
+
+impl DenseElem for f32 {
+    #[inline]
+    fn to_f32(self) -> f32 {
+        self
+    }
+    #[inline]
+    fn dot(w: &[f32], x: &[f32]) -> f32 {
+        simd::dot_f32(w, x)
+    }
+    #[inline]
+    fn tile(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
+        simd::tile_f32(w, x)
+    }
+}
+
+/// IEEE binary16 bit patterns.
+impl DenseElem for u16 {
+    #[inline]
+    fn to_f32(self) -> f32 {
+        f16_to_f32(self)
+    }
+    #[inline]
+    fn dot(w: &[u16], x: &[f32]) -> f32 {
+        simd::dot_f16(w, x)
+    }
+    #[inline]
+    fn tile(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
+        simd::tile_f16(w, x)
+    }
+}
+
+/// Row-major dense weights borrowed from the model bytes.
 #[derive(Clone, Copy, Debug)]
-pub struct F32Rows<'a> {
-    data: &'a [f32],
+pub struct DenseRows<'a, E> {
+    data: &'a [E],  // (rows, cols)
     rows: usize,
     cols: usize,
 }
 
-impl<'a> F32Rows<'a> {
+/// Row-major f32 weights.
+pub type F32Rows<'a> = DenseRows<'a, f32>;
+/// Row-major IEEE binary16 weights (bit patterns).
+pub type F16Rows<'a> = DenseRows<'a, u16>;
+
+impl<'a, E: DenseElem> DenseRows<'a, E> {
     /// None unless `data.len() == rows * cols`.
-    pub fn new(data: &'a [f32], rows: usize, cols: usize) -> Option<Self> {
+    pub fn new(data: &'a [E], rows: usize, cols: usize) -> Option<Self> {
         if rows.checked_mul(cols)? != data.len() {
             return None;
         }
-        Some(F32Rows { data, rows, cols })
+        Some(DenseRows { data, rows, cols })
     }
-    pub fn row(&self, r: usize) -> &'a [f32] {
+    pub fn row(&self, r: usize) -> &'a [E] {
         &self.data[r * self.cols..(r + 1) * self.cols]
     }
 }
 
-impl RowMatrix for F32Rows<'_> {
+impl<E: DenseElem> RowMatrix for DenseRows<'_, E> {
     type Act = ();
     const CHUNK: usize = usize::MAX;
     fn rows(&self) -> usize {
@@ -123,71 +169,21 @@ impl RowMatrix for F32Rows<'_> {
     fn prepare(_: &[&[f32]], _: &mut ()) {}
     #[inline]
     fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], _: &()) -> f32 {
-        simd::dot_f32(&self.row(r)[c0..], x)
+        E::dot(&self.row(r)[c0..], x)
     }
     #[inline]
     fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], _: &()) -> Tile {
-        simd::tile_f32(o.map(|r| &self.row(r)[c0..]), x)
+        E::tile(o.map(|r| &self.row(r)[c0..]), x)
     }
     #[inline]
-    fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
-        for (yi, wi) in y.iter_mut().zip(self.row(r)) {
-            *yi += a * wi;
-        }
-    }
-    fn row_into(&self, r: usize, out: &mut [f32]) {
-        out.copy_from_slice(self.row(r));
-    }
-}
-
-/// Row-major IEEE binary16 weights (bit patterns) borrowed from the model bytes.
-#[derive(Clone, Copy, Debug)]
-pub struct F16Rows<'a> {
-    data: &'a [u16],
-    rows: usize,
-    cols: usize,
-}
-
-impl<'a> F16Rows<'a> {
-    /// None unless `data.len() == rows * cols`.
-    pub fn new(data: &'a [u16], rows: usize, cols: usize) -> Option<Self> {
-        if rows.checked_mul(cols)? != data.len() {
-            return None;
-        }
-        Some(F16Rows { data, rows, cols })
-    }
-    fn row(&self, r: usize) -> &'a [u16] {
-        &self.data[r * self.cols..(r + 1) * self.cols]
-    }
-}
-
-impl RowMatrix for F16Rows<'_> {
-    type Act = ();
-    const CHUNK: usize = usize::MAX;
-    fn rows(&self) -> usize {
-        self.rows
-    }
-    fn cols(&self) -> usize {
-        self.cols
-    }
-    #[inline]
-    fn prepare(_: &[&[f32]], _: &mut ()) {}
-    #[inline]
-    fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], _: &()) -> f32 {
-        simd::dot_f16(&self.row(r)[c0..], x)
-    }
-    #[inline]
-    fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], _: &()) -> Tile {
-        simd::tile_f16(o.map(|r| &self.row(r)[c0..]), x)
-    }
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
         for (yi, &wi) in y.iter_mut().zip(self.row(r)) {
-            *yi += a * f16_to_f32(wi);
+            *yi += a * wi.to_f32();
         }
     }
     fn row_into(&self, r: usize, out: &mut [f32]) {
         for (o, &w) in out.iter_mut().zip(self.row(r)) {
-            *o = f16_to_f32(w);
+            *o = w.to_f32();
         }
     }
 }
