@@ -3,6 +3,10 @@
 
 use std::path::{Path, PathBuf};
 
+use duolando::model_file::ModelFile;
+use duolando::npy::{read_f32_2d, read_i64_2d};
+use duolando_core::exact::{self, ExactInputs, ExactOutputs, Seed};
+use duolando_core::model::Model;
 use tract_onnx::prelude::*;
 
 /// `tests/fixtures/`.
@@ -106,4 +110,72 @@ pub fn as_f32(t: &Tensor) -> Vec<f32> {
 /// Flat i64 contents of a tensor.
 pub fn as_i64(t: &Tensor) -> Vec<i64> {
     t.as_slice::<i64>().expect("i64 output").to_vec()
+}
+
+/// The outputs of one R-mode rollout.
+pub struct Rollout {
+    /// (K+1, 5)
+    pub tokens: Vec<u32>,
+    /// (T4/hop, 4)
+    pub leader_tokens: Vec<u32>,
+    /// (hop*(K+1), 165)
+    pub pos: Vec<f32>,
+    /// (hop*(K+1), 495)
+    pub rot: Vec<f32>,
+    /// Generation steps K.
+    pub steps: usize,
+    /// Times the progress callback ran.
+    pub progress_calls: usize,
+}
+
+/// The model (`tiny`, `tiny2`) a rollout fixture `rollout_<name>/` belongs to.
+pub fn rollout_model(name: &str) -> String {
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(fixture(&format!("rollout_{name}/meta.json"))).unwrap()).unwrap();
+    meta["model"].as_str().unwrap().to_string()
+}
+
+/// Runs R mode with `file` on the inputs of `tests/fixtures/rollout_<name>/`
+/// (seeded from `follower_start.npy` when present, else `seed_tokens.npy`).
+pub fn run_rollout(file: &ModelFile, name: &str) -> Rollout {
+    let dir = fixture(&format!("rollout_{name}"));
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let leader = read_f32_2d(&dir.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
+    let music = read_f32_2d(&dir.join("music.npy"), None, "music").unwrap();
+    let start;
+    let seed = if dir.join("follower_start.npy").exists() {
+        start = read_f32_2d(&dir.join("follower_start.npy"), Some(165), "follower start").unwrap();
+        Seed::FollowerFrames(&start.data)
+    } else {
+        let s = read_i64_2d(&dir.join("seed_tokens.npy"), Some(5), "seed").unwrap();
+        Seed::Tokens([0, 1, 2, 3, 4].map(|i| s.data[i] as u32))
+    };
+    let shape = exact::output_shape(&model.cfg, leader.rows).unwrap();
+    let mut scratch = vec![0u8; exact::scratch_bytes(&model.cfg, leader.rows).unwrap()];
+    let mut run = Rollout {
+        tokens: vec![0; shape.token_rows * 5],
+        leader_tokens: vec![0; shape.leader_tokens * 4],
+        pos: vec![0.0; shape.frames_out * 165],
+        rot: vec![0.0; shape.frames_out * 495],
+        steps: shape.steps,
+        progress_calls: 0,
+    };
+    let mut calls = 0;
+    let summary = exact::generate(
+        &model,
+        &ExactInputs { leader_pos3d: &leader.data, music: &music.data, seed },
+        &mut scratch,
+        &mut ExactOutputs {
+            tokens: &mut run.tokens,
+            follower_pos3d: &mut run.pos,
+            follower_rotmat: &mut run.rot,
+            leader_tokens: Some(&mut run.leader_tokens),
+        },
+        &mut |_, _| calls += 1,
+    )
+    .unwrap();
+    assert!(summary.scratch_used <= scratch.len());
+    run.progress_calls = calls;
+    run
 }

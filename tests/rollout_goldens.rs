@@ -4,65 +4,15 @@
 
 use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, read_i64_2d};
-use duolando_core::exact::{self, ExactInputs, ExactOutputs, Seed};
-use duolando_core::model::Model;
-use duolando_tests::{fixture, max_errors, Tol};
-
-struct Run {
-    tokens: Vec<u32>,
-    leader_tokens: Vec<u32>,
-    pos: Vec<f32>,
-    rot: Vec<f32>,
-}
-
-fn run_rollout(name: &str) -> (Run, std::path::PathBuf) {
-    let dir = fixture(&format!("rollout_{name}"));
-    let meta: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("meta.json")).unwrap()).unwrap();
-    let model_name = meta["model"].as_str().unwrap();
-    let file = ModelFile::open(fixture(&format!("{model_name}/model.duo"))).unwrap();
-    let duo = file.duo().unwrap();
-    let model = Model::from_duo(&duo).unwrap();
-    let leader = read_f32_2d(&dir.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
-    let music = read_f32_2d(&dir.join("music.npy"), None, "music").unwrap();
-    let start;
-    let seed = if dir.join("follower_start.npy").exists() {
-        start = read_f32_2d(&dir.join("follower_start.npy"), Some(165), "follower start").unwrap();
-        Seed::FollowerFrames(&start.data)
-    } else {
-        let s = read_i64_2d(&dir.join("seed_tokens.npy"), Some(5), "seed").unwrap();
-        Seed::Tokens([0, 1, 2, 3, 4].map(|i| s.data[i] as u32))
-    };
-    let shape = exact::output_shape(&model.cfg, leader.rows).unwrap();
-    assert_eq!(shape.steps as u64, meta["K"].as_u64().unwrap(), "K");
-    let mut scratch = vec![0u8; exact::scratch_bytes(&model.cfg, leader.rows).unwrap()];
-    let mut run = Run {
-        tokens: vec![0; shape.token_rows * 5],
-        leader_tokens: vec![0; shape.leader_tokens * 4],
-        pos: vec![0.0; shape.frames_out * 165],
-        rot: vec![0.0; shape.frames_out * 495],
-    };
-    let mut calls = 0;
-    let summary = exact::generate(
-        &model,
-        &ExactInputs { leader_pos3d: &leader.data, music: &music.data, seed },
-        &mut scratch,
-        &mut ExactOutputs {
-            tokens: &mut run.tokens,
-            follower_pos3d: &mut run.pos,
-            follower_rotmat: &mut run.rot,
-            leader_tokens: Some(&mut run.leader_tokens),
-        },
-        &mut |_, _| calls += 1,
-    )
-    .unwrap();
-    assert_eq!(calls, shape.steps, "progress called once per step");
-    assert!(summary.scratch_used <= scratch.len());
-    (run, dir)
-}
+use duolando_tests::{fixture, max_errors, rollout_model, run_rollout, Tol};
 
 fn check(name: &str) {
-    let (run, dir) = run_rollout(name);
+    let dir = fixture(&format!("rollout_{name}"));
+    let meta: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("meta.json")).unwrap()).unwrap();
+    let file = ModelFile::open(fixture(&format!("{}/model.duo", rollout_model(name)))).unwrap();
+    let run = run_rollout(&file, name);
+    assert_eq!(run.steps as u64, meta["K"].as_u64().unwrap(), "K");
+    assert_eq!(run.progress_calls, run.steps, "progress called once per step");
     let want_tokens = read_i64_2d(&dir.join("tokens.npy"), Some(5), "tokens").unwrap();
     let got: Vec<i64> = run.tokens.iter().map(|&t| t as i64).collect();
     let first_diff = got.iter().zip(&want_tokens.data).position(|(a, b)| a != b);

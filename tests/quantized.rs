@@ -4,19 +4,18 @@
 //! compared with the f32 model (tokens, motion); the f32 model with the
 //! run-time selected SIMD kernels against the Python goldens.
 //!
-//! Run: `cargo test -p duolando --test quantized -- --nocapture` (prints the figures).
+//! Run: `cargo test -p duolando-tests --test quantized -- --nocapture` (prints the figures).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use duolando::convert::{convert_bytes, Sources};
 use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, read_i64_2d};
-use duolando_core::exact::{self, ExactInputs, ExactOutputs, Seed};
-use duolando_core::model::Model;
+use duolando_tests::run_rollout as rollout;
 
 fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures")
+    duolando_tests::fixtures_dir()
 }
 
 const ROLLOUTS: [&str; 5] = ["tiny_long", "tiny_short", "tiny_odd", "tiny2_frames", "tiny2_tokens"];
@@ -30,51 +29,6 @@ fn convert(model: &str, store_as: StoreAs) -> ModelFile {
     let sources = Sources { gpt: (&gp, &g), vqvae: (&vp, &v), transl: (&tp, &t) };
     let (bytes, _) = convert_bytes((&dir.join("follower_gpt.yaml"), &yaml), &sources, store_as).unwrap();
     ModelFile::from_bytes(bytes).unwrap()
-}
-
-struct Run {
-    tokens: Vec<u32>,
-    leader_tokens: Vec<u32>,
-    pos: Vec<f32>,
-    rot: Vec<f32>,
-}
-
-fn rollout(file: &ModelFile, name: &str) -> Run {
-    let dir = fixtures().join(format!("rollout_{name}"));
-    let duo = file.duo().unwrap();
-    let model = Model::from_duo(&duo).unwrap();
-    let leader = read_f32_2d(&dir.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
-    let music = read_f32_2d(&dir.join("music.npy"), None, "music").unwrap();
-    let start;
-    let seed = if dir.join("follower_start.npy").exists() {
-        start = read_f32_2d(&dir.join("follower_start.npy"), Some(165), "start").unwrap();
-        Seed::FollowerFrames(&start.data)
-    } else {
-        let s = read_i64_2d(&dir.join("seed_tokens.npy"), Some(5), "seed").unwrap();
-        Seed::Tokens([0, 1, 2, 3, 4].map(|i| s.data[i] as u32))
-    };
-    let shape = exact::output_shape(&model.cfg, leader.rows).unwrap();
-    let mut scratch = vec![0u8; exact::scratch_bytes(&model.cfg, leader.rows).unwrap()];
-    let mut run = Run {
-        tokens: vec![0; shape.token_rows * 5],
-        leader_tokens: vec![0; shape.leader_tokens * 4],
-        pos: vec![0.0; shape.frames_out * 165],
-        rot: vec![0.0; shape.frames_out * 495],
-    };
-    exact::generate(
-        &model,
-        &ExactInputs { leader_pos3d: &leader.data, music: &music.data, seed },
-        &mut scratch,
-        &mut ExactOutputs {
-            tokens: &mut run.tokens,
-            follower_pos3d: &mut run.pos,
-            follower_rotmat: &mut run.rot,
-            leader_tokens: Some(&mut run.leader_tokens),
-        },
-        &mut |_, _| {},
-    )
-    .unwrap();
-    run
 }
 
 fn model_of(rollout: &str) -> &'static str {
