@@ -1,12 +1,23 @@
-//! duolando-ffi: the C ABI over duolando-core (`include/duolando.h`).
+//! duolando-ffi: the C ABI over duolando-core (`include/duolando.h`,
+//! documented in docs/C_API.md).
 //!
-//! Today it exposes the library version only; the Model/Session handles
-//! (`duo_model_*`, `duo_session_*`) come with the streaming session
-//! (issue #5). Every entry point catches panics: no unwinding crosses the
-//! C boundary.
+//! Objects: [`model`] (`duo_model`, immutable, shared by threads and
+//! sessions) and `session` (`duo_session`, one dancer, one thread at a
+//! time); [`frames`] (blittable frame structs, coordinate conversions);
+//! [`result`] (result codes, the thread-local last error, the panic
+//! boundary). Every entry point catches panics: no unwinding crosses the C
+//! boundary. Outputs are written only on success.
 
 use std::ffi::c_char;
 use std::panic::catch_unwind;
+
+pub mod frames;
+pub mod model;
+pub mod result;
+
+pub use frames::{DuoFollowerFrame, DuoLeaderFrame, DuoQuat, DuoVec3};
+pub use model::{DuoModel, DuoModelInfo};
+pub use result::DuoResult;
 
 /// Major version, as in Cargo.toml (`DUOLANDO_VERSION_MAJOR` in the header).
 pub const VERSION_MAJOR: u32 = 0;
