@@ -35,7 +35,7 @@ use crate::arena::{ArenaError, Carve};
 use crate::config::{ModelConfig, VqConfig};
 use crate::error::{Buffer, Error};
 use crate::kernels::{conv1d, conv1d_col_len, conv_transpose1d, convt_z_len, relu_inplace, ConvGeom, Matrix};
-use crate::limits::{MAX_DEPTH, MAX_DOWN_T};
+use crate::limits::{MAX_DEPTH, MAX_DILATION, MAX_DOWNSAMPLE, MAX_DOWN_T, MAX_STRIDE, MAX_WIDTH};
 use crate::model::{ConvTW, ConvW, DecoderW, EncoderW, ResBlockW};
 use crate::schema::dilation;
 
@@ -182,7 +182,17 @@ impl Geometry {
     pub fn new(cfg: &VqConfig, kind: StackKind) -> Option<Geometry> {
         let hop = cfg.hop()? as usize;
         let (s, w, emb) = (cfg.stride_t as usize, cfg.width as usize, cfg.emb_width as usize);
-        if cfg.depth > MAX_DEPTH || cfg.down_t > MAX_DOWN_T || cfg.depth == 0 || s < 2 || s % 2 != 0 {
+        // The engine's limits (crate::limits), so no index arithmetic can overflow.
+        let chans = [cfg.width, cfg.emb_width, cfg.in_channels, cfg.rot_channels, cfg.res_inner()?];
+        let max_dil = cfg.dilation_growth_rate.checked_pow(cfg.depth.saturating_sub(1))?;
+        if !(1..=MAX_DEPTH).contains(&cfg.depth)
+            || !(1..=MAX_DOWN_T).contains(&cfg.down_t)
+            || !(2..=MAX_STRIDE).contains(&cfg.stride_t)
+            || s % 2 != 0
+            || !(1..=MAX_DILATION).contains(&max_dil)
+            || chans.iter().any(|&c| c > MAX_WIDTH)
+            || hop > (MAX_DOWNSAMPLE * MAX_DOWNSAMPLE) as usize
+        {
             return None;
         }
         let mut units: Vec<Unit, MAX_UNITS> = Vec::new();
@@ -601,7 +611,9 @@ impl<'s> ColRing<'s> {
         }
         if self.cap > 0 {
             let s = (self.n % self.cap) * self.ch;
-            self.data[s..s + col.len()].copy_from_slice(col);
+            let len = self.data.len();
+            let slot = self.data.get_mut(s..s + col.len()).ok_or(Error::Length { buffer: Buffer::Features, len, expected: s + col.len() })?;
+            slot.copy_from_slice(col);
         }
         self.n += 1;
         Ok(())
@@ -614,7 +626,7 @@ impl<'s> ColRing<'s> {
             return Err(evicted(i, oldest, self.n));
         }
         let s = (i % self.cap) * self.ch;
-        Ok(&self.data[s..s + self.ch])
+        self.data.get(s..s + self.ch).ok_or(evicted(i, oldest, self.n))
     }
 }
 
@@ -1046,6 +1058,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Configs outside the engine's limits: no plan, an arena error, no panic.
+    #[test]
+    fn invalid_configs_are_refused() {
+        let p = duolando_published().parts[0];
+        let bad = [
+            VqConfig { depth: 0, ..p },
+            VqConfig { stride_t: 3, ..p },
+            VqConfig { width: u32::MAX, ..p },
+            VqConfig { dilation_growth_rate: u32::MAX, ..p },
+            VqConfig { down_t: 40, ..p },
+            VqConfig { m_conv_den: 0, ..p },
+        ];
+        for cfg in bad {
+            for kind in [StackKind::Encoder, StackKind::Decoder] {
+                assert_eq!(future_max(&cfg, kind), 0);
+                assert!(StackPlan::new(&cfg, kind, 3).is_none());
+                let mut pl = crate::arena::Planner::new();
+                assert!(StreamStack::carve(&mut pl, &cfg, kind, 3).is_err());
+            }
+        }
+        let mut pl = crate::arena::Planner::new();
+        assert!(StreamStack::carve(&mut pl, &p, StackKind::Decoder, usize::MAX).is_err());
     }
 
     /// Index arithmetic of the units against brute force over the kernel taps.

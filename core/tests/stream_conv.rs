@@ -355,6 +355,13 @@ fn errors_not_panics() {
     assert!(tiny_s.take().is_some(), "a 4 KiB arena cannot hold the published scratch");
     let mut p = Planner::new();
     let _ = StreamScratch::carve(&mut p, &m.cfg).unwrap();
+    // A stack carved by a Planner holds no memory: errors, no panic.
+    let mut pl = Planner::new();
+    let mut ghost = StreamStack::carve(&mut pl, cfg, StackKind::Encoder, lag).unwrap();
+    assert!(ghost.push(we, &x[..hop * c_in], &mut s).is_err());
+    let mut ghost_s = StreamScratch::carve(&mut pl, &m.cfg).unwrap();
+    assert!(enc.push(we, &x[..hop * c_in], &mut ghost_s).is_err());
+    assert!(enc.output(we, 39, 1, &mut ghost_s, &mut out).is_err(), "a tail needs scratch");
     // reset: back to zero, works again.
     enc.reset();
     assert_eq!((enc.pushed(), enc.len()), (0, 0));
@@ -473,5 +480,64 @@ fn other_geometries_equal_the_prefix_stacks() {
                 }
             }
         }
+    }
+}
+
+/// Bytes a session's conv streaming state takes for the published model
+/// (printed; the planner is exact), and time per push at full width.
+/// `cargo test --release -p duolando-core --test stream_conv -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn published_bytes_and_speed() {
+    let p = duolando_published();
+    let mut sp = Planner::new();
+    StreamScratch::carve(&mut sp, &p).unwrap();
+    eprintln!("published: shared scratch {} bytes", sp.bytes());
+    for lag in [0, 2, 22] {
+        for kind in [StackKind::Encoder, StackKind::Decoder] {
+            let mut pl = Planner::new();
+            StreamStack::carve(&mut pl, &p.parts[0], kind, lag).unwrap();
+            eprintln!("published: {kind:?} stack (up) lag {lag}: {} bytes", pl.bytes());
+        }
+    }
+    eprintln!("StreamStack struct: {} bytes", std::mem::size_of::<StreamStack<'static>>());
+    let mut mcfg = p;
+    mcfg.parts = [p.parts[0]; 4];
+    mcfg.transl = p.parts[0];
+    let vq = synth_vq(p.parts[0], 3);
+    let cfg = &vq.cfg;
+    let (hop, c_in, emb) = (cfg.hop().unwrap() as usize, cfg.in_channels as usize, cfg.emb_width as usize);
+    let mut mem = vec![0u8; 64 << 20];
+    let mut a = Arena::new(&mut mem);
+    let mut s = StreamScratch::carve(&mut a, &mcfg).unwrap();
+    let mut rng = Rng(1);
+    for lag in [22, 11, 0] {
+        let mut enc = StreamStack::carve(&mut a, cfg, StackKind::Encoder, lag).unwrap();
+        let mut dec = StreamStack::carve(&mut a, cfg, StackKind::Decoder, lag).unwrap();
+        let (we, wd) = (StackW::Encoder(&vq.encoder), StackW::Decoder(&vq.pos));
+        let x: Vec<f32> = (0..hop * c_in).map(|_| rng.sym()).collect();
+        let z: Vec<f32> = (0..emb).map(|_| rng.sym()).collect();
+        let (mut f, mut fr) = (vec![0f32; emb], vec![0f32; hop * c_in]);
+        let n = 200;
+        let (mut te, mut td) = (std::time::Duration::ZERO, std::time::Duration::ZERO);
+        for push in 1..=n {
+            let t0 = std::time::Instant::now();
+            enc.push(we, &x, &mut s).unwrap();
+            if push > lag {
+                enc.output(we, push - 1 - lag, 1, &mut s, &mut f).unwrap();
+            }
+            let t1 = std::time::Instant::now();
+            dec.push(wd, &z, &mut s).unwrap();
+            if push > lag {
+                dec.output(wd, hop * (push - 1 - lag), hop, &mut s, &mut fr).unwrap();
+            }
+            let t2 = std::time::Instant::now();
+            if push > 50 {
+                te += t1 - t0;
+                td += t2 - t1;
+            }
+        }
+        let k = (n - 50) as u32;
+        eprintln!("published width 512, lag {lag:2}: encoder {:?}/push+output, decoder {:?}/push+output", te / k, td / k);
     }
 }
