@@ -111,3 +111,30 @@ pub fn block_forward_rows<M: Mask>(
     // q is free again: it takes the MLP output.
     mlp(w, &mut out[..rc], &mut ln[..rc], &mut s.hid[..4 * rc], q);
 }
+
+/// Keys and values of rows `x` (n, C): `k`, `v` (n, C) = key/value(ln1 x).
+/// `ln`: >= n * C scratch. Used by the streaming session, whose caches
+/// hold every row's K/V once computed.
+pub fn block_kv(w: &BlockW<'_>, x: &[f32], ln: &mut [f32], k: &mut [f32], v: &mut [f32]) {
+    let ln = &mut ln[..x.len()];
+    layernorm(x, w.ln1.w, w.ln1.b, ln);
+    lin(ln, &w.key, k);
+    lin(ln, &w.value, v);
+}
+
+/// The rest of a block for new rows `x` (n, C) in place, given the keys
+/// and values they may attend to (`k`, `v`: (nk, C), already computed,
+/// including the new rows' own where `mask` allows):
+/// `x += proj(attn(query(ln1 x), k, v)); x += mlp(ln2 x)`.
+/// `mask` relates query row i of `x` to key row j of `k`.
+pub fn block_attend<M: Mask>(w: &BlockW<'_>, x: &mut [f32], k: &[f32], v: &[f32], c: usize, n_head: usize, mask: &M, s: &mut BlockScratch<'_>) {
+    let nc = x.len();
+    let nk = k.len() / c.max(1);
+    let (ln, q, att) = (&mut s.ln[..nc], &mut s.q[..nc], &mut s.att[..nc]);
+    layernorm(x, w.ln1.w, w.ln1.b, ln);
+    lin(ln, &w.query, q);
+    attention(q, k, v, c, n_head, mask, &mut s.scores[..nk], att);
+    lin(att, &w.proj, ln);
+    add(x, ln);
+    mlp(w, x, ln, &mut s.hid[..4 * nc], att);
+}

@@ -39,6 +39,18 @@ pub enum Error {
     Context { c: usize, max: usize },
     /// A non-finite input value (NaN or infinity) at flat index `index`.
     NonFinite { buffer: Buffer, index: usize },
+    /// A streaming-session setting outside `0..=max` (or `1..=max`).
+    Setting { setting: crate::session::Setting, value: u32, max: u32 },
+    /// A streaming session refused an input because its buffers are full
+    /// (follower frames not pulled, or music pushed too far ahead); the
+    /// session is unchanged: pull frames (or push leader frames) and retry.
+    Backlog { buffer: Buffer, held: usize, capacity: usize },
+    /// A streaming-session ring was read outside the rows it holds (an
+    /// engine bug: the sizes make this impossible; reported, never a panic).
+    Evicted { index: usize, oldest: usize, len: usize },
+    /// The operation does not fit the session's state (e.g. a music track
+    /// set after music frames were pushed).
+    State,
 }
 
 impl From<ArenaError> for Error {

@@ -334,6 +334,65 @@ pub fn generate(
     Ok(ExactSummary { shape: sh, scratch_used: peak })
 }
 
+/// Buffers of [`seed_tokens`] for `frames` seed frames.
+struct SeedPhase<'s> {
+    /// (hop, 165) normalised first frames.
+    norm: &'s mut [f32],
+    /// (frames, max(in_channels, 3)) one part's input / the relative translation.
+    part: &'s mut [f32],
+    /// (frames / hop, max emb) features.
+    feat: &'s mut [f32],
+    /// (frames / hop) codes.
+    codes: &'s mut [u32],
+    conv: ConvScratch<'s>,
+}
+
+impl<'s> SeedPhase<'s> {
+    fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, frames: usize) -> Result<Self, ArenaError> {
+        let (pos, _, emb) = widths(cfg);
+        let ov = ArenaError::Overflow;
+        let n = frames / cfg.hop().max(1);
+        Ok(SeedPhase {
+            norm: a.f32(cfg.hop().checked_mul(POSE_DIM).ok_or(ov)?)?,
+            part: a.f32(frames.checked_mul(pos.max(3)).ok_or(ov)?)?,
+            feat: a.f32(n.checked_mul(emb).ok_or(ov)?)?,
+            codes: a.u32(n)?,
+            conv: ConvScratch::carve(a, cfg, frames)?,
+        })
+    }
+}
+
+/// Scratch bytes of [`seed_tokens`] for `frames` seed frames (any base address).
+pub fn seed_scratch_bytes(cfg: &ModelConfig, frames: usize) -> Option<usize> {
+    let mut p = Planner::new();
+    SeedPhase::carve(&mut p, cfg, frames).ok()?;
+    p.total_for_any_base()
+}
+
+/// The seed tokens R derives from follower frames (module doc, step 3),
+/// for callers that seed a streaming session: body tokens from the first
+/// `hop` follower frames, the translation token from
+/// `20 * (follower root - leader root)` over every given frame.
+/// `follower`, `leader`: (F, 165) raw world joints over the same frames,
+/// `F` a positive multiple of hop (extra frames are ignored).
+pub fn seed_tokens(model: &Model<'_>, follower: &[f32], leader: &[f32], scratch: &mut [u8]) -> Result<[u32; 5], Error> {
+    let hop = model.cfg.hop();
+    let f = rows(Buffer::SeedFrames, follower, POSE_DIM)? / hop * hop;
+    if f < hop {
+        return Err(Error::TooShort { buffer: Buffer::SeedFrames, frames: f, min: hop });
+    }
+    let l = rows(Buffer::LeaderPos3d, leader, POSE_DIM)?;
+    if l < f {
+        return Err(Error::TooShort { buffer: Buffer::LeaderPos3d, frames: l, min: f });
+    }
+    let (follower, leader) = (&follower[..f * POSE_DIM], &leader[..f * POSE_DIM]);
+    check_finite(Buffer::SeedFrames, follower)?;
+    check_finite(Buffer::LeaderPos3d, leader)?;
+    let mut a = Arena::new(scratch);
+    let mut ph = SeedPhase::carve(&mut a, &model.cfg, f)?;
+    encode_seed(model, follower, leader, ph.norm, ph.part, ph.feat, ph.codes, &mut ph.conv)
+}
+
 /// Step 2 of the module doc: leader codes per part into `leader` (4, n_tok).
 #[allow(clippy::too_many_arguments)]
 fn encode_leader(

@@ -30,6 +30,7 @@ pub mod presets;
 pub mod quantizer;
 pub mod sampler;
 pub mod schema;
+pub mod session;
 pub mod stream_conv;
 pub mod tensor;
 pub mod vq_decoder;

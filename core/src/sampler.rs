@@ -81,3 +81,44 @@ pub fn top_k(logits: &[f32], k: usize, rng: &mut Rng) -> u32 {
     }
     idx[rng.below(n as u32) as usize]
 }
+
+/// S's top-k rule (docs/STREAMING.md §3.6): the `k` ids with the largest
+/// logits (the lower id ranks first on equal logits), taken in ASCENDING
+/// id order, and the `r`-th of them with `r = rng.below(k)`: exactly one
+/// draw, so the choice depends on set membership only. `k` is clamped to
+/// `1..=min(MAX_TOP_K, logits.len())`.
+pub fn top_k_by_id(logits: &[f32], k: usize, rng: &mut Rng) -> u32 {
+    let k = k.clamp(1, MAX_TOP_K).min(logits.len().max(1));
+    let mut idx = [0u32; MAX_TOP_K];
+    let mut n = 0usize;
+    for (i, &v) in logits.iter().enumerate() {
+        if v.is_nan() {
+            continue;
+        }
+        // Insertion into the top list, descending; an equal value ranks below (higher id).
+        let mut pos = n;
+        while pos > 0 && logits[idx[pos - 1] as usize] < v {
+            pos -= 1;
+        }
+        if pos >= k {
+            continue;
+        }
+        let end = if n < k { n } else { k - 1 };
+        let mut m = end;
+        while m > pos {
+            idx[m] = idx[m - 1];
+            m -= 1;
+        }
+        idx[pos] = i as u32;
+        if n < k {
+            n += 1;
+        }
+    }
+    let r = rng.below(k as u32) as usize;
+    if n == 0 {
+        return 0;
+    }
+    let set = &mut idx[..n];
+    set.sort_unstable();
+    set[r.min(n - 1)]
+}

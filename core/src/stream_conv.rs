@@ -595,8 +595,7 @@ struct ColRing<'s> {
 /// A ring read outside the columns it holds (the plan makes this
 /// impossible; reported as an error, never a panic).
 fn evicted(index: usize, oldest: usize, len: usize) -> Error {
-    let _ = oldest;
-    Error::Context { c: index, max: len }
+    Error::Evicted { index, oldest, len }
 }
 
 impl<'s> ColRing<'s> {
@@ -866,7 +865,7 @@ impl<'s> StreamStack<'s> {
     /// until [`StreamStack::reset`].
     pub fn push(&mut self, w: StackW<'_, '_>, cols: &[f32], s: &mut StreamScratch<'_>) -> Result<(), Error> {
         if self.broken {
-            return Err(Error::Length { buffer: self.in_buffer(), len: 0, expected: 0 });
+            return Err(Error::State);
         }
         let units = self.bind(w)?;
         let g = &self.plan.geometry;
@@ -934,7 +933,7 @@ impl<'s> StreamStack<'s> {
     /// prefix's output, or a column is older than the output ring holds.
     pub fn output(&self, w: StackW<'_, '_>, t: usize, n: usize, s: &mut StreamScratch<'_>, out: &mut [f32]) -> Result<(), Error> {
         if self.broken {
-            return Err(Error::Length { buffer: self.out_buffer(), len: 0, expected: 0 });
+            return Err(Error::State);
         }
         let units = self.bind(w)?;
         let g = &self.plan.geometry;

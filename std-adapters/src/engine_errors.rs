@@ -45,5 +45,35 @@ pub fn describe(e: &Error) -> String {
         Error::NonFinite { buffer, index } => {
             format!("{} contains NaN or infinity at flat index {index}", buffer_name(*buffer))
         }
+        Error::Setting { setting, value, max } => {
+            format!("session setting {} = {value} is outside its range (at most {max} for this model)", setting_name(*setting))
+        }
+        Error::Backlog { buffer, held, capacity } => format!(
+            "the session is full ({held} of {capacity} {} held): {}",
+            buffer_name(*buffer),
+            match buffer {
+                Buffer::Music => "push leader frames before more music, or music before more leader frames",
+                _ => "pull follower frames before pushing more leader frames",
+            }
+        ),
+        Error::Evicted { index, oldest, len } => format!(
+            "internal error: a session buffer was read at {index}, outside the rows it holds ({oldest}..{len}); please report this"
+        ),
+        Error::State => "the call does not fit the session's state (music track after music frames, forced history after the first frame, or a forced history whose first row is not the seed)".to_string(),
+    }
+}
+
+fn setting_name(s: duolando_core::session::Setting) -> &'static str {
+    use duolando_core::session::Setting::*;
+    match s {
+        Lookahead => "lookahead",
+        EncFuture => "enc_future",
+        DecFuture => "dec_future",
+        Shift => "shift",
+        MusicLookahead => "music_lookahead",
+        LatPast => "lat_past",
+        TopK => "topk",
+        PendingFrames => "pending_frames",
+        MusicBuffer => "music_buffer_frames",
     }
 }

@@ -12,6 +12,7 @@ pub mod model_file;
 pub mod music;
 pub mod npy;
 pub mod simd;
+pub mod streaming;
 pub mod skeleton;
 pub mod synth;
 pub mod viewer;

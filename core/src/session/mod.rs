@@ -1,0 +1,561 @@
+//! S: the streaming session (docs/STREAMING.md). One leader frame in per
+//! tick, follower frames out as soon as the latency budget allows, in
+//! fixed memory carved once from a caller arena, at a bounded cost per
+//! step.
+//!
+//! Data flow of one leader frame (one file per concept):
+//! normalise ([`crate::motion`]) -> every `hop` frames, the streaming VQ
+//! encoders ([`crate::stream_conv`]) + quantiser give leader code `q` ->
+//! the leader LATs ([`lat_stream`]) give condition row `q - a` -> when
+//! step `k`'s rows exist (and music row `k`, from the music LAT), the
+//! GPT over its chunked window with a K/V cache ([`gpt_cache`]) gives
+//! logits -> the sampler chooses follower token `k + 1` -> the streaming
+//! VQ decoders give the frames of token `k + 1 - d` -> frames wait for
+//! their leader root and are pulled with [`Session::pull_follower_frame`].
+//!
+//! Thread rule: a [`Model`] is immutable and `Sync` (share it between
+//! threads and sessions); a [`Session`] is used by one thread at a time
+//! (it is `Send`).
+
+pub mod config;
+pub mod gpt_cache;
+pub mod lat_stream;
+pub mod ring;
+mod state;
+
+pub use config::{dec_future_max, enc_future_max, window_context, Sampling, SessionConfig, Setting};
+
+use crate::arena::{Arena, Planner};
+use crate::config::{Part, POSE_DIM, ROT_DIM};
+use crate::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
+use crate::error::{check_len, Buffer, Error};
+use crate::gpt::head_rows;
+use crate::kernels::linear;
+use crate::model::Model;
+use crate::motion::{denormalise, gather_part, normalise, scatter_part};
+use crate::quantizer::nearest;
+use crate::sampler::{argmax, top_k_by_id, Rng};
+use crate::stream_conv::StackW;
+use state::{State, FRAME_WIDTH};
+
+/// Relative translation scale of the translation VQ-VAE (R's `* 20`).
+const TRANSL_SCALE: f32 = 20.0;
+
+/// One follower frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FollowerFrame {
+    /// Frame index (the leader frame of the same index is its partner).
+    pub index: u64,
+    /// (55, 3) joint world positions, metres, in the leader's input
+    /// coordinates (SMPL-X: right-handed, y-up).
+    pub positions: [f32; POSE_DIM],
+    /// (55, 3, 3) per-joint local rotation matrices, row-major, raw
+    /// decoder output (not re-orthogonalised).
+    pub rotations: [f32; ROT_DIM],
+    /// Root (pelvis) world position = `positions[0..3]`.
+    pub root: [f32; 3],
+}
+
+impl Default for FollowerFrame {
+    fn default() -> Self {
+        FollowerFrame { index: 0, positions: [0.0; POSE_DIM], rotations: [0.0; ROT_DIM], root: [0.0; 3] }
+    }
+}
+
+/// What step `k` did (for agreement measurements and tests).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StepReport {
+    pub k: usize,
+    /// GPT window length and start (token index) of the step.
+    pub context: usize,
+    pub window_lo: usize,
+    /// Window rows computed by this step (1, or the window at a re-prefill).
+    pub rows_computed: usize,
+    /// S's own choice per head (up, down, lhand, rhand, transl).
+    pub pred: [u32; 5],
+    /// Token appended to the history (= `pred` unless history is forced).
+    pub token: [u32; 5],
+}
+
+impl Model<'_> {
+    /// Arena bytes [`Session::new`] needs for `cfg` (for a buffer at any
+    /// address). Exact: the session carves this and nothing else.
+    pub fn session_bytes(&self, cfg: &SessionConfig) -> Result<usize, Error> {
+        check_config(self, cfg)?;
+        let mut p = Planner::new();
+        State::carve(&mut p, self, cfg)?;
+        p.total_for_any_base().ok_or(Error::Arena(crate::arena::ArenaError::Overflow))
+    }
+}
+
+fn check_config(model: &Model<'_>, cfg: &SessionConfig) -> Result<(), Error> {
+    cfg.check(&model.cfg).map_err(|(setting, value, max)| Error::Setting { setting, value, max })?;
+    gpt_cache::check_layout(model.cfg.gpt.n_streams as usize)
+}
+
+fn check_seed(model: &Model<'_>, seed: &[u32; 5]) -> Result<(), Error> {
+    let vocab = model.cfg.gpt.vocab;
+    for (j, &v) in seed.iter().enumerate() {
+        if v >= vocab[j] {
+            return Err(Error::Token { stream: j as u8, token: v, vocab: vocab[j] });
+        }
+    }
+    Ok(())
+}
+
+fn check_finite(buffer: Buffer, x: &[f32]) -> Result<(), Error> {
+    match x.iter().position(|v| !v.is_finite()) {
+        Some(index) => Err(Error::NonFinite { buffer, index }),
+        None => Ok(()),
+    }
+}
+
+/// A streaming session over one [`Model`]. All state lives in the arena
+/// given to [`Session::new`]; nothing allocates afterwards.
+pub struct Session<'a> {
+    model: &'a Model<'a>,
+    cfg: SessionConfig,
+    st: State<'a>,
+    seed: [u32; 5],
+    /// Forced follower history (n, 5): row 0 the seed, row k+1 appended by step k.
+    forced: Option<&'a [u32]>,
+    /// A preloaded music track (frames, n_music).
+    track: Option<&'a [f32]>,
+    rng: Rng,
+    /// Leader frames pushed.
+    frames: usize,
+    /// Music frames pushed (ring) or held (track).
+    music_frames: usize,
+    /// Leader codes emitted.
+    codes: usize,
+    last_code: Option<[u32; 4]>,
+    /// Next step.
+    k: usize,
+    last_step: Option<StepReport>,
+    /// Follower tokens fed to the decoders.
+    dec_fed: usize,
+    /// Follower frames decoded / pulled.
+    decoded: usize,
+    emitted: usize,
+    root0: [f32; 3],
+}
+
+impl<'a> Session<'a> {
+    /// A session of `model` in `arena` (>= [`Model::session_bytes`]),
+    /// seeded with follower tokens `seed` (up, down, lhand, rhand, transl;
+    /// from frames: [`crate::exact::seed_tokens`]).
+    pub fn new(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 5]) -> Result<Self, Error> {
+        check_config(model, cfg)?;
+        check_seed(model, &seed)?;
+        let mut a = Arena::new(arena);
+        let st = State::carve(&mut a, model, cfg)?;
+        let mut s = Session {
+            model,
+            cfg: *cfg,
+            st,
+            seed,
+            forced: None,
+            track: None,
+            rng: Rng(0),
+            frames: 0,
+            music_frames: 0,
+            codes: 0,
+            last_code: None,
+            k: 0,
+            last_step: None,
+            dec_fed: 0,
+            decoded: 0,
+            emitted: 0,
+            root0: [0.0; 3],
+        };
+        s.st.init_codebooks(model);
+        s.restart()?;
+        Ok(s)
+    }
+
+    /// Back to the start with a new seed (forced history and music track
+    /// are dropped). Nothing allocates.
+    pub fn reset(&mut self, seed: [u32; 5]) -> Result<(), Error> {
+        check_seed(self.model, &seed)?;
+        self.seed = seed;
+        self.forced = None;
+        self.track = None;
+        self.restart()
+    }
+
+    fn restart(&mut self) -> Result<(), Error> {
+        self.st.reset();
+        self.rng = Rng(match self.cfg.sampling {
+            Sampling::TopK { rng_seed, .. } => rng_seed,
+            Sampling::Greedy => 0,
+        });
+        self.frames = 0;
+        self.music_frames = 0;
+        self.codes = 0;
+        self.last_code = None;
+        self.k = 0;
+        self.last_step = None;
+        self.dec_fed = 0;
+        self.decoded = 0;
+        self.emitted = 0;
+        self.root0 = [0.0; 3];
+        let seed = self.seed;
+        self.st.toks.push(&seed)?;
+        self.feed_decoders(seed)
+    }
+
+    pub fn config(&self) -> &SessionConfig {
+        &self.cfg
+    }
+
+    /// Delay in frames between a leader frame and the follower frame of
+    /// the same index (music known ahead): `max(0, hop (a + e + d) - 1)`.
+    pub fn latency_frames(&self) -> u32 {
+        self.cfg.latency_frames(self.model.cfg.hop() as u32)
+    }
+
+    /// Leader frames pushed so far.
+    pub fn frames_pushed(&self) -> usize {
+        self.frames
+    }
+
+    /// Steps run so far (= follower tokens predicted).
+    pub fn steps(&self) -> usize {
+        self.k
+    }
+
+    /// The most recent step (at most one step runs per leader frame when
+    /// music is known ahead).
+    pub fn last_step(&self) -> Option<StepReport> {
+        self.last_step
+    }
+
+    /// Leader codes computed so far and the latest (up, down, lhand, rhand).
+    pub fn leader_codes(&self) -> (usize, Option<[u32; 4]>) {
+        (self.codes, self.last_code)
+    }
+
+    /// Forced-history mode (one-step agreement, seeding motion): `tokens`
+    /// (n, 5), row 0 must equal the seed; step `k` still computes and
+    /// reports its own choice, but appends `tokens[k + 1]`. Steps stop at
+    /// `n - 1`. Only before the first leader frame.
+    pub fn force_history(&mut self, tokens: &'a [u32]) -> Result<(), Error> {
+        if self.frames > 0 || self.k > 0 {
+            return Err(Error::State);
+        }
+        if tokens.len() < 5 || tokens.len() % 5 != 0 {
+            return Err(Error::Ragged { buffer: Buffer::Tokens, len: tokens.len(), row: 5 });
+        }
+        let vocab = self.model.cfg.gpt.vocab;
+        for (i, &t) in tokens.iter().enumerate() {
+            if t >= vocab[i % 5] {
+                return Err(Error::Token { stream: (i % 5) as u8, token: t, vocab: vocab[i % 5] });
+            }
+        }
+        if tokens[..5] != self.seed {
+            return Err(Error::State);
+        }
+        self.forced = Some(tokens);
+        Ok(())
+    }
+
+    /// Uses a whole music track (frames, n_music), known in advance, instead
+    /// of [`Session::push_music_frame`]. The session borrows it. Only before
+    /// any music frame was pushed.
+    pub fn set_music_track(&mut self, track: &'a [f32]) -> Result<(), Error> {
+        let n_music = self.model.cfg.gpt.music.n_in as usize;
+        if self.music_frames > 0 || self.track.is_some() {
+            return Err(Error::State);
+        }
+        if n_music == 0 || track.len() % n_music != 0 {
+            return Err(Error::Ragged { buffer: Buffer::Music, len: track.len(), row: n_music });
+        }
+        check_finite(Buffer::Music, track)?;
+        self.track = Some(track);
+        self.music_frames = track.len() / n_music;
+        self.run_steps()
+    }
+
+    /// Appends one music feature frame (n_music). Non-finite values are
+    /// rejected (`NonFinite`) and leave the session unchanged; so does a
+    /// full music buffer (`Backlog`: push leader frames first).
+    pub fn push_music_frame(&mut self, features: &[f32]) -> Result<(), Error> {
+        if self.track.is_some() {
+            return Err(Error::State);
+        }
+        check_len(Buffer::Music, features.len(), self.model.cfg.gpt.music.n_in as usize)?;
+        check_finite(Buffer::Music, features)?;
+        let mmr = self.model.cfg.music_motion_rate as usize;
+        let next_needed = self.st.music_lat.pushed() + mmr;
+        let held = self.music_frames.saturating_sub(next_needed);
+        let cap = self.st.music.capacity();
+        if held >= cap {
+            return Err(Error::Backlog { buffer: Buffer::Music, held, capacity: cap });
+        }
+        self.st.music.push(features)?;
+        self.music_frames += 1;
+        self.run_steps()
+    }
+
+    /// Appends one leader frame (165 floats: 55 joints x xyz, metres, world
+    /// coordinates, SMPL-X order). Non-finite values are rejected
+    /// (`NonFinite`) and leave the session unchanged (the caller may push
+    /// its last good frame instead); so does a full output buffer
+    /// (`Backlog`: pull follower frames first).
+    pub fn push_leader_frame(&mut self, pos3d: &[f32]) -> Result<(), Error> {
+        check_len(Buffer::LeaderPos3d, pos3d.len(), POSE_DIM)?;
+        check_finite(Buffer::LeaderPos3d, pos3d)?;
+        let held = self.frames - self.emitted;
+        let cap = self.latency_frames() as usize + 1 + self.cfg.pending_frames as usize;
+        if held >= cap {
+            return Err(Error::Backlog { buffer: Buffer::FollowerPos3d, held, capacity: cap });
+        }
+        let waiting = self.st.leader_lat[0].rows() - self.k;
+        if waiting >= self.st.cond_slack {
+            return Err(Error::Backlog { buffer: Buffer::Music, held: waiting, capacity: self.st.cond_slack });
+        }
+        if self.frames == 0 {
+            self.root0 = [pos3d[0], pos3d[1], pos3d[2]];
+        }
+        self.st.roots.push(&pos3d[..3])?;
+        let hop = self.model.cfg.hop();
+        let slot = self.frames % hop;
+        normalise(pos3d, &mut self.st.block[slot * POSE_DIM..(slot + 1) * POSE_DIM]);
+        self.frames += 1;
+        if slot + 1 == hop {
+            self.encode_token()?;
+        }
+        self.run_steps()
+    }
+
+    /// The `hop` buffered frames are complete: feed the encoders, and emit
+    /// leader code `q = tokens - 1 - e` into the leader LATs.
+    fn encode_token(&mut self) -> Result<(), Error> {
+        let model = self.model;
+        let hop = model.cfg.hop();
+        let st = &mut self.st;
+        // The pelvis channel is zeroed for encoding (R's leader input).
+        for f in 0..hop {
+            st.block[f * POSE_DIM..f * POSE_DIM + 3].fill(0.0);
+        }
+        for (p, part) in Part::ALL.iter().enumerate() {
+            let vq = &model.parts[p];
+            let w = vq.cfg.in_channels as usize;
+            let x = &mut st.part_in[..hop * w];
+            gather_part(*part, &st.block[..hop * POSE_DIM], x);
+            st.enc[p].push(StackW::Encoder(&vq.encoder), x, &mut st.conv)?;
+        }
+        let tokens = self.frames / hop;
+        let Some(q) = tokens.checked_sub(1 + self.cfg.enc_future as usize) else { return Ok(()) };
+        let mut code = [0u32; 4];
+        for (p, c) in code.iter_mut().enumerate() {
+            let vq = &model.parts[p];
+            let emb = vq.cfg.emb_width as usize;
+            let feat = &mut st.feat[..emb];
+            st.enc[p].output(StackW::Encoder(&vq.encoder), q, 1, &mut st.conv, feat)?;
+            *c = nearest(&vq.codebook, &st.kk[p * st.kk_stride..(p + 1) * st.kk_stride], feat);
+        }
+        self.codes += 1;
+        self.last_code = Some(code);
+        let g = &model.gpt;
+        let e = model.cfg.gpt.n_embd as usize;
+        for (p, &c) in code.iter().enumerate() {
+            // Leader part p is embedded with the follower table of the same part.
+            g.tok_emb[p].row_into(c as usize, &mut st.emb[..e]);
+            let (lat, row) = (&mut st.leader_lat[p], &mut st.row[..e]);
+            if lat.push(&g.leaders[p], &st.emb[..e], &mut st.lat, &mut st.block_scratch, row)? {
+                st.cond[1 + p].push(row)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs every step whose inputs exist.
+    fn run_steps(&mut self) -> Result<(), Error> {
+        loop {
+            let k = self.k;
+            if self.st.leader_lat[0].rows() <= k {
+                return Ok(());
+            }
+            if let Some(f) = self.forced {
+                if k + 1 >= f.len() / 5 {
+                    return Ok(());
+                }
+            }
+            if !self.music_row(k)? {
+                return Ok(());
+            }
+            self.step()?;
+        }
+    }
+
+    /// Makes music row `k` (feeds the music LAT); false if its frames are
+    /// not there yet.
+    fn music_row(&mut self, k: usize) -> Result<bool, Error> {
+        let model = self.model;
+        let n_music = model.cfg.gpt.music.n_in as usize;
+        let mmr = model.cfg.music_motion_rate as usize;
+        let e = model.cfg.gpt.n_embd as usize;
+        let st = &mut self.st;
+        while st.music_lat.rows() <= k {
+            let frame = st.music_lat.pushed() + mmr;
+            if frame >= self.music_frames {
+                return Ok(false);
+            }
+            let x = match self.track {
+                Some(t) => &t[frame * n_music..(frame + 1) * n_music],
+                None => st.music.row(frame)?,
+            };
+            let row = &mut st.row[..e];
+            if st.music_lat.push(&model.gpt.music, x, &mut st.lat, &mut st.block_scratch, row)? {
+                st.cond[0].push(row)?;
+            }
+        }
+        Ok(true)
+    }
+
+    /// Step `k`: GPT over its window, choose, append, decode.
+    fn step(&mut self) -> Result<(), Error> {
+        let model = self.model;
+        let g = &model.cfg.gpt;
+        let (e, bs) = (g.n_embd as usize, g.block_size as usize);
+        let streams = g.n_streams as usize;
+        let m = bs - 1;
+        let k = self.k;
+        let c = window_context(k, m, self.cfg.shift as usize);
+        let lo = k + 1 - c;
+        let st = &mut self.st;
+        let first = if st.gpt.window_start() == Some(lo) { k } else {
+            st.gpt.restart(lo);
+            lo
+        };
+        // (n, 10, C) inputs of window rows first..=k, position-major.
+        let n = k + 1 - first;
+        let x = &mut st.x[..n * streams * e];
+        for (r, j) in (first..=k).enumerate() {
+            let i = j - lo;
+            for s in 0..streams {
+                let dst = &mut x[(r * streams + s) * e..(r * streams + s + 1) * e];
+                if s < FIRST_FOLLOWER_STREAM {
+                    dst.copy_from_slice(st.cond[s].row(j)?);
+                } else {
+                    let f = s - FIRST_FOLLOWER_STREAM;
+                    let tok = st.toks.row(j)?[f];
+                    model.gpt.tok_emb[follower_table(f)].row_into(tok as usize, dst);
+                }
+                let pos = &model.gpt.pos_emb[(s * bs + i) * e..(s * bs + i + 1) * e];
+                for (a, b) in dst.iter_mut().zip(pos) {
+                    *a += b;
+                }
+            }
+        }
+        st.gpt.append(&model.gpt, g.n_head as usize, x, &mut st.block_scratch)?;
+        let last = &x[(n * streams - FOLLOWER_STREAMS) * e..];
+        let mut pred = [0u32; 5];
+        let mut off = 0;
+        for (j, rows) in head_rows(&model.cfg).iter().enumerate() {
+            let lg = &mut st.logits[off..off + rows];
+            linear(&last[j * e..(j + 1) * e], &model.gpt.heads[j], None, lg);
+            pred[j] = match self.cfg.sampling {
+                Sampling::Greedy => argmax(lg),
+                Sampling::TopK { k: tk, .. } => top_k_by_id(lg, tk as usize, &mut self.rng),
+            };
+            off += rows;
+        }
+        let token = match self.forced {
+            Some(f) => {
+                let mut t = [0u32; 5];
+                t.copy_from_slice(&f[(k + 1) * 5..(k + 2) * 5]);
+                t
+            }
+            None => pred,
+        };
+        st.toks.push(&token)?;
+        self.last_step = Some(StepReport { k, context: c, window_lo: lo, rows_computed: n, pred, token });
+        self.k += 1;
+        self.feed_decoders(token)
+    }
+
+    /// Feeds follower token `token` to the 9 decoders; once token `q + d`
+    /// is in, the `hop` frames of token `q` are final and wait for pulling.
+    fn feed_decoders(&mut self, token: [u32; 5]) -> Result<(), Error> {
+        let model = self.model;
+        let hop = model.cfg.hop();
+        let st = &mut self.st;
+        for p in 0..5 {
+            let vq = if p < 4 { &model.parts[p] } else { &model.transl };
+            let emb = vq.cfg.emb_width as usize;
+            let z = &mut st.feat[..emb];
+            crate::quantizer::dequantise(&vq.codebook, &token[p..p + 1], p as u8, z)?;
+            st.dec_pos[p].push(StackW::Decoder(&vq.pos), z, &mut st.conv)?;
+            if let (Some(rot), Some(stack)) = (vq.rot.as_ref(), st.dec_rot.get_mut(p).and_then(|s| s.as_mut())) {
+                stack.push(StackW::Decoder(rot), z, &mut st.conv)?;
+            }
+        }
+        self.dec_fed += 1;
+        let Some(q) = self.dec_fed.checked_sub(1 + self.cfg.dec_future as usize) else { return Ok(()) };
+        // (hop, FRAME_WIDTH) rows: normalised pose (165) | rotations (495) | translation (3).
+        let frames = &mut st.frames[..hop * FRAME_WIDTH];
+        frames.fill(0.0);
+        for (p, part) in Part::ALL.iter().enumerate() {
+            let vq = &model.parts[p];
+            let w = vq.cfg.in_channels as usize;
+            let out = &mut st.dec_out[..hop * w];
+            st.dec_pos[p].output(StackW::Decoder(&vq.pos), hop * q, hop, &mut st.conv, out)?;
+            for f in 0..hop {
+                scatter_part(*part, 3, &out[f * w..(f + 1) * w], &mut frames[f * FRAME_WIDTH..f * FRAME_WIDTH + POSE_DIM]);
+            }
+            if let (Some(rot), Some(stack)) = (vq.rot.as_ref(), st.dec_rot[p].as_mut()) {
+                let r = vq.cfg.rot_channels as usize;
+                let out = &mut st.dec_out[..hop * r];
+                stack.output(StackW::Decoder(rot), hop * q, hop, &mut st.conv, out)?;
+                for f in 0..hop {
+                    let dst = &mut frames[f * FRAME_WIDTH + POSE_DIM..f * FRAME_WIDTH + POSE_DIM + ROT_DIM];
+                    scatter_part(*part, 9, &out[f * r..(f + 1) * r], dst);
+                }
+            }
+        }
+        let tr = &mut st.dec_out[..hop * 3];
+        st.dec_pos[4].output(StackW::Decoder(&model.transl.pos), hop * q, hop, &mut st.conv, tr)?;
+        for f in 0..hop {
+            let base = f * FRAME_WIDTH + POSE_DIM + ROT_DIM;
+            frames[base..base + 3].copy_from_slice(&tr[f * 3..f * 3 + 3]);
+            st.pending.push(&frames[f * FRAME_WIDTH..(f + 1) * FRAME_WIDTH])?;
+        }
+        self.decoded += hop;
+        Ok(())
+    }
+
+    /// The next follower frame, if it is ready (decoded, and its leader
+    /// frame pushed): `Ok(true)` and `out` written; `Ok(false)` otherwise
+    /// (`out` untouched).
+    pub fn pull_follower_frame(&mut self, out: &mut FollowerFrame) -> Result<bool, Error> {
+        let f = self.emitted;
+        if f >= self.decoded || f >= self.frames {
+            return Ok(false);
+        }
+        let row = self.st.pending.row(f)?;
+        let root = self.st.roots.row(f)?;
+        let mut pos = [0.0f32; POSE_DIM];
+        pos.copy_from_slice(&row[..POSE_DIM]);
+        let tr = &row[POSE_DIM + ROT_DIM..POSE_DIM + ROT_DIM + 3];
+        for a in 0..3 {
+            pos[a] = (root[a] - self.root0[a]) + tr[a] / TRANSL_SCALE;
+        }
+        denormalise(&mut pos);
+        for (j, v) in pos.iter_mut().enumerate() {
+            *v += self.root0[j % 3];
+        }
+        out.index = f as u64;
+        out.rotations.copy_from_slice(&row[POSE_DIM..POSE_DIM + ROT_DIM]);
+        out.root = [pos[0], pos[1], pos[2]];
+        out.positions = pos;
+        self.emitted += 1;
+        Ok(true)
+    }
+
+    /// Follower frames pulled so far.
+    pub fn frames_pulled(&self) -> usize {
+        self.emitted
+    }
+}

@@ -1,0 +1,191 @@
+//! Every buffer of a session, carved once by ONE function (run with a
+//! [`Planner`](crate::arena::Planner) it gives `Model::session_bytes`, with
+//! an [`Arena`](crate::arena::Arena) the state itself).
+
+use crate::arena::{ArenaError, Carve};
+use crate::block::BlockScratch;
+use crate::config::{ModelConfig, POSE_DIM, ROT_DIM};
+use crate::error::Error;
+use crate::gpt::logits_len;
+use crate::model::Model;
+use crate::quantizer::codebook_norms;
+use crate::session::config::SessionConfig;
+use crate::session::gpt_cache::GptCache;
+use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
+use crate::session::ring::{RowRing, TokenRing};
+use crate::stream_conv::{StackKind, StreamScratch, StreamStack};
+
+/// Floats of one decoded follower frame waiting to be pulled:
+/// normalised pose (165) | rotation matrices (495) | translation (3).
+pub const FRAME_WIDTH: usize = POSE_DIM + ROT_DIM + 3;
+
+pub struct State<'s> {
+    // --- leader path ---
+    /// (hop, 165) normalised leader frames of the token being filled.
+    pub block: &'s mut [f32],
+    /// (hop, max in_channels) one part's encoder input.
+    pub part_in: &'s mut [f32],
+    /// Streaming encoders, one per part (up, down, lhand, rhand).
+    pub enc: [StreamStack<'s>; 4],
+    /// (4, kk_stride) squared codebook row norms per part.
+    pub kk: &'s mut [f32],
+    pub kk_stride: usize,
+    /// (max emb) one feature / one dequantised code.
+    pub feat: &'s mut [f32],
+    /// (C) one token embedding; (C) one LAT output row.
+    pub emb: &'s mut [f32],
+    pub row: &'s mut [f32],
+    pub leader_lat: [LatStream<'s>; 4],
+    // --- music path ---
+    pub music_lat: LatStream<'s>,
+    /// (music_buffer_frames, n_music) pushed music frames (plain ring).
+    pub music: RowRing<'s>,
+    // --- GPT ---
+    /// Frozen condition rows per stream (music, L_up, L_down, L_lh, L_rh):
+    /// (m + cond_slack, C) each (plain rings).
+    pub cond: [RowRing<'s>; 5],
+    /// Leader rows that may wait for music before leader pushes are refused.
+    pub cond_slack: usize,
+    /// (m + 1, 5) follower history.
+    pub toks: TokenRing<'s>,
+    pub gpt: GptCache<'s>,
+    /// (10 m, C) window rows being appended, position-major.
+    pub x: &'s mut [f32],
+    /// (sum of head rows) logits of one step.
+    pub logits: &'s mut [f32],
+    // --- decoders ---
+    /// Position decoders of the 4 parts and the translation decoder.
+    pub dec_pos: [StreamStack<'s>; 5],
+    /// Rotation decoders of the 4 parts (where the model has them).
+    pub dec_rot: [Option<StreamStack<'s>>; 4],
+    /// (hop, max(in, rot, 3)) one decoder's frames.
+    pub dec_out: &'s mut [f32],
+    /// (hop, FRAME_WIDTH) the frames of one token being assembled.
+    pub frames: &'s mut [f32],
+    /// (cap, FRAME_WIDTH) decoded frames waiting for their leader root / a pull.
+    pub pending: RowRing<'s>,
+    /// (cap, 3) leader roots of frames not yet pulled.
+    pub roots: RowRing<'s>,
+    // --- working memory shared by every module ---
+    pub conv: StreamScratch<'s>,
+    pub lat: LatStepScratch<'s>,
+    pub block_scratch: BlockScratch<'s>,
+}
+
+fn widths(cfg: &ModelConfig) -> (usize, usize, usize, usize) {
+    let (mut pos, mut rot, mut emb, mut bins) = (3usize, 0usize, 0usize, 0usize);
+    for vq in cfg.parts.iter().chain(core::iter::once(&cfg.transl)) {
+        pos = pos.max(vq.in_channels as usize);
+        rot = rot.max(vq.rot_channels as usize);
+        emb = emb.max(vq.emb_width as usize);
+        bins = bins.max(vq.l_bins as usize);
+    }
+    (pos, rot, emb, bins)
+}
+
+fn ov() -> ArenaError {
+    ArenaError::Overflow
+}
+
+impl<'s> State<'s> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, model: &Model<'_>, sc: &SessionConfig) -> Result<Self, Error> {
+        let cfg = &model.cfg;
+        let g = &cfg.gpt;
+        let hop = cfg.hop();
+        let c = g.n_embd as usize;
+        let m = (g.block_size as usize).checked_sub(1).ok_or(ov())?;
+        let streams = g.n_streams as usize;
+        let (pos, rot, emb, bins) = widths(cfg);
+        let (e, d) = (sc.enc_future as usize, sc.dec_future as usize);
+        let (la, am) = (sc.lookahead as usize, sc.music_lookahead as usize);
+        let lds = g.leader.downsample_rate as usize;
+        let mds = g.music.downsample_rate as usize;
+        let past = sc.lat_past as usize;
+
+        let enc = [0, 1, 2, 3].map(|p| StreamStack::carve(a, &cfg.parts[p], StackKind::Encoder, e));
+        let [e0, e1, e2, e3] = enc;
+        let enc = [e0?, e1?, e2?, e3?];
+        let lat_layers = |l: &crate::config::LatConfig| l.n_layer as usize;
+        let leader_lat = [0, 1, 2, 3].map(|_| LatStream::carve(a, lat_layers(&g.leader), lds, c, past * lds, la * lds));
+        let [l0, l1, l2, l3] = leader_lat;
+        let leader_lat = [l0?, l1?, l2?, l3?];
+        let music_lat = LatStream::carve(a, lat_layers(&g.music), mds, c, past * mds, am * mds)?;
+        let cond_slack = am + 10;
+        let cond_cap = m.checked_add(cond_slack).ok_or(ov())?;
+        let cond = [0, 1, 2, 3, 4].map(|_| RowRing::carve_plain(a, cond_cap, c));
+        let [c0, c1, c2, c3, c4] = cond;
+        let cond = [c0?, c1?, c2?, c3?, c4?];
+        let dec_pos = [0, 1, 2, 3, 4].map(|p| {
+            let vq = if p < 4 { &cfg.parts[p] } else { &cfg.transl };
+            StreamStack::carve(a, vq, StackKind::Decoder, d)
+        });
+        let [d0, d1, d2, d3, d4] = dec_pos;
+        let dec_pos = [d0?, d1?, d2?, d3?, d4?];
+        let dec_rot = [0, 1, 2, 3].map(|p| match model.parts[p].rot {
+            Some(_) => StreamStack::carve(a, &cfg.parts[p], StackKind::Decoder, d).map(Some),
+            None => Ok(None),
+        });
+        let [r0, r1, r2, r3] = dec_rot;
+        let dec_rot = [r0?, r1?, r2?, r3?];
+
+        let latency = sc.latency_frames(hop as u32) as usize;
+        let roots_cap = latency + 2 + sc.pending_frames as usize;
+        let keys = max_keys(past * mds, am * mds).max(max_keys(past * lds, la * lds));
+        Ok(State {
+            block: a.f32(hop.checked_mul(POSE_DIM).ok_or(ov())?)?,
+            part_in: a.f32(hop.checked_mul(pos).ok_or(ov())?)?,
+            enc,
+            kk: a.f32(4 * bins)?,
+            kk_stride: bins,
+            feat: a.f32(emb)?,
+            emb: a.f32(c)?,
+            row: a.f32(c)?,
+            leader_lat,
+            music_lat,
+            music: RowRing::carve_plain(a, sc.music_buffer_frames as usize, g.music.n_in as usize)?,
+            cond,
+            cond_slack,
+            toks: TokenRing::carve(a, m + 1, 5)?,
+            gpt: GptCache::carve(a, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c)?,
+            x: a.f32(streams.checked_mul(m).and_then(|v| v.checked_mul(c)).ok_or(ov())?)?,
+            logits: a.f32(logits_len(cfg))?,
+            dec_pos,
+            dec_rot,
+            dec_out: a.f32(hop.checked_mul(pos.max(rot)).ok_or(ov())?)?,
+            frames: a.f32(hop.checked_mul(FRAME_WIDTH).ok_or(ov())?)?,
+            pending: RowRing::carve_plain(a, roots_cap + 2 * hop, FRAME_WIDTH)?,
+            roots: RowRing::carve_plain(a, roots_cap, 3)?,
+            conv: StreamScratch::carve(a, cfg)?,
+            lat: LatStepScratch::carve(a, c, mds.max(lds))?,
+            block_scratch: BlockScratch::carve(a, (streams * m).max(keys), c)?,
+        })
+    }
+
+    /// Squared codebook norms of the 4 part codebooks (the quantiser's `|k|^2`).
+    pub fn init_codebooks(&mut self, model: &Model<'_>) {
+        for p in 0..4 {
+            let cb = &model.parts[p].codebook;
+            let (emb, bins) = (model.parts[p].cfg.emb_width as usize, cb.rows());
+            codebook_norms(cb, &mut self.feat[..emb], &mut self.kk[p * self.kk_stride..p * self.kk_stride + bins]);
+        }
+    }
+
+    /// Back to an empty session (no allocation).
+    pub fn reset(&mut self) {
+        for s in self.enc.iter_mut().chain(self.dec_pos.iter_mut()).chain(self.dec_rot.iter_mut().flatten()) {
+            s.reset();
+        }
+        for l in self.leader_lat.iter_mut() {
+            l.reset();
+        }
+        self.music_lat.reset();
+        self.music.clear();
+        for r in self.cond.iter_mut() {
+            r.clear();
+        }
+        self.toks.clear();
+        self.gpt.reset();
+        self.pending.clear();
+        self.roots.clear();
+    }
+}

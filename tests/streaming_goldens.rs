@@ -1,0 +1,124 @@
+//! S goldens: a session fed the leader frame by frame must reproduce the
+//! full-sequence Python reference of S (`tools/reference/streaming.py`,
+//! `generate_streaming`; contract in tests/fixtures/README.md "S goldens"):
+//! tokens (and forced-mode predictions) and leader codes identical, the
+//! step and frame readiness identical, positions/rotations within 1e-4.
+
+use duolando::model_file::ModelFile;
+use duolando::npy::{read_f32_2d, read_i64_2d};
+use duolando::streaming::run_streaming;
+use duolando_core::model::Model;
+use duolando_core::session::{Sampling, SessionConfig};
+use duolando_tests::{fixture, max_errors, Tol};
+use serde_json::Value;
+
+fn ints(dir: &std::path::Path, name: &str) -> Vec<i64> {
+    read_i64_2d(&dir.join(name), None, name).unwrap().data
+}
+
+fn as_i64<T: Copy + Into<i64>>(v: &[T]) -> Vec<i64> {
+    v.iter().map(|&x| x.into()).collect()
+}
+
+fn check(name: &str) {
+    let dir = fixture(&format!("streaming_{name}"));
+    // The generator writes Python's `Infinity` for "no top-k decision": not JSON.
+    let text = std::fs::read_to_string(dir.join("meta.json")).unwrap().replace("-Infinity", "null").replace("Infinity", "null");
+    let meta: Value = serde_json::from_str(&text).unwrap();
+    let file = ModelFile::open(fixture(&format!("{}/model.duo", meta["model"].as_str().unwrap()))).unwrap();
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let inputs = dir.join(meta["inputs"].as_str().unwrap());
+    let leader = read_f32_2d(&inputs.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
+    let music = read_f32_2d(&inputs.join("music.npy"), None, "music").unwrap();
+    let t4 = meta["T4"].as_u64().unwrap() as usize;
+    let c = &meta["config"];
+    let get = |k: &str| c[k].as_u64().unwrap() as u32;
+    let mut cfg = SessionConfig::with(&model.cfg, get("lookahead"), get("enc_future"), get("dec_future"), get("shift"));
+    cfg.music_lookahead = get("music_lookahead");
+    if let Some(tk) = meta["sampling"].get("topk") {
+        cfg.sampling = Sampling::TopK { k: tk.as_u64().unwrap() as u32, rng_seed: meta["sampling"]["rng_seed"].as_u64().unwrap() };
+    }
+    // The seed, in the contract's order of precedence.
+    let forced: Option<Vec<u32>> = meta["forced_file"].as_str().map(|f| ints(&dir, f).iter().map(|&t| t as u32).collect());
+    let seed: [u32; 5] = if let Some(f) = &forced {
+        f[..5].try_into().unwrap()
+    } else if dir.join("seed_tokens.npy").exists() {
+        ints(&dir, "seed_tokens.npy").iter().map(|&t| t as u32).collect::<Vec<_>>().try_into().unwrap()
+    } else if inputs.join("seed_tokens.npy").exists() {
+        ints(&inputs, "seed_tokens.npy").iter().map(|&t| t as u32).collect::<Vec<_>>().try_into().unwrap()
+    } else {
+        let start = read_f32_2d(&inputs.join("follower_start.npy"), Some(165), "start").unwrap();
+        let mut scratch = vec![0u8; duolando_core::exact::seed_scratch_bytes(&model.cfg, start.rows).unwrap()];
+        duolando_core::exact::seed_tokens(&model, &start.data, &leader.data, &mut scratch).unwrap()
+    };
+    let run = run_streaming(&model, &leader.data[..t4 * 165], &music.data, &cfg, seed, forced.as_deref(), &mut |_, _| {}).unwrap();
+
+    assert_eq!(run.latency_frames as u64, meta["latency_frames"].as_u64().unwrap(), "{name}: latency");
+    assert_eq!(run.steps() as u64, meta["K"].as_u64().unwrap(), "{name}: steps");
+    assert_eq!(as_i64(&run.tokens), ints(&dir, "tokens.npy"), "{name}: tokens");
+    if dir.join("pred.npy").exists() {
+        assert_eq!(as_i64(&run.pred), ints(&dir, "pred.npy"), "{name}: forced-mode predictions");
+    }
+    let want_codes = ints(&dir, "leader_tokens.npy");
+    assert!(run.leader_codes.len() >= want_codes.len(), "{name}: {} leader codes, golden has {}", run.leader_codes.len() / 4, want_codes.len() / 4);
+    assert_eq!(as_i64(&run.leader_codes[..want_codes.len()]), want_codes, "{name}: leader codes");
+    let usz = |v: &[usize]| v.iter().map(|&x| x as i64).collect::<Vec<_>>();
+    assert_eq!(usz(&run.step_ready), ints(&dir, "step_ready.npy"), "{name}: step readiness");
+    assert_eq!(usz(&run.context), ints(&dir, "context.npy"), "{name}: window context");
+    assert_eq!(usz(&run.window_lo), ints(&dir, "window_lo.npy"), "{name}: window start");
+    assert_eq!(usz(&run.frame_ready), ints(&dir, "frame_ready.npy"), "{name}: frame readiness");
+    let want_pos = read_f32_2d(&dir.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
+    assert_eq!(run.frames_out(), want_pos.rows, "{name}: follower frames");
+    let (pos_err, _) = max_errors(&run.pos, &want_pos.data);
+    let mut msg = format!("{name}: {} steps, {} frames, max |pos err| {pos_err:.2e} m", run.steps(), run.frames_out());
+    assert!(pos_err <= Tol::MotionAbs.limit(), "{msg}");
+    if dir.join("follower_rotmat.npy").exists() {
+        let want_rot = read_f32_2d(&dir.join("follower_rotmat.npy"), Some(495), "rot").unwrap();
+        let (rot_err, _) = max_errors(&run.rot, &want_rot.data);
+        msg += &format!(", max |rot err| {rot_err:.2e}");
+        assert!(rot_err <= Tol::MotionAbs.limit(), "{msg}");
+    }
+    let rows: usize = run.rows_computed.iter().sum();
+    eprintln!("{msg}; {:.2} GPT rows per step; arena {} bytes", rows as f64 / run.steps().max(1) as f64, run.arena_bytes);
+}
+
+#[test]
+fn tiny_default_budget() {
+    check("tiny_default");
+}
+
+#[test]
+fn tiny_long_run_low_latency() {
+    check("tiny_long_low");
+}
+
+#[test]
+fn tiny_forced_history() {
+    check("tiny_forced");
+}
+
+#[test]
+fn tiny_minimum_budget() {
+    check("tiny_minimum");
+}
+
+#[test]
+fn tiny_mid_budget_odd_length() {
+    check("tiny_mid_odd");
+}
+
+#[test]
+fn tiny_topk_seeded_from_frames() {
+    check("tiny_topk");
+}
+
+#[test]
+fn tiny2_default_budget() {
+    check("tiny2_default");
+}
+
+#[test]
+fn tiny2_sliding_window_topk() {
+    check("tiny2_sliding");
+}
