@@ -2,6 +2,7 @@
 //! converter from the original checkpoints, audio features, motion I/O and
 //! export, the viewer, and the `duolando` CLI.
 
+pub mod agreement;
 pub mod audio;
 pub mod cli;
 pub mod convert;

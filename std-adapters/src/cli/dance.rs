@@ -8,7 +8,7 @@
 //! bundled demo model (`assets/`, found under the current directory, then
 //! under the workspace the binary was compiled in).
 
-mod inputs;
+pub mod inputs;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -2,7 +2,9 @@
 //! track read from `.npy` files and write the follower as `.npy` files.
 //!
 //! `--mode exact` is R mode (docs/ARCHITECTURE.md): the authors' evaluation
-//! pipeline token for token (greedy).
+//! pipeline token for token (greedy). `--mode streaming` drives a streaming
+//! session frame by frame (S, docs/STREAMING.md) with the latency budget
+//! of `--preset` / `--lookahead` / ... and writes the same files.
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -12,15 +14,19 @@ use clap::ValueEnum;
 use duolando_core::config::{POSE_DIM, ROT_DIM};
 use duolando_core::exact::{self, ExactInputs, ExactOutputs, Seed};
 use duolando_core::model::Model;
+use duolando_core::session::SessionConfig;
 
 use crate::engine_errors::describe;
 use crate::model_file::ModelFile;
 use crate::npy::{read_f32_2d, write_f32, write_i64};
+use crate::streaming::run_streaming;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Mode {
     /// R mode: the original evaluation pipeline, token for token.
     Exact,
+    /// S mode: a streaming session fed frame by frame (fixed memory, bounded latency).
+    Streaming,
 }
 
 #[derive(clap::Args, Debug)]
@@ -42,6 +48,9 @@ pub struct Args {
     pub follower_start: Option<PathBuf>,
     #[arg(long, value_enum, default_value = "exact")]
     pub mode: Mode,
+    /// Streaming budget (with --mode streaming).
+    #[command(flatten)]
+    pub budget: crate::cli::budget::BudgetArgs,
     /// Output directory (created).
     #[arg(long, short)]
     pub out: PathBuf,
@@ -87,18 +96,7 @@ pub fn generate_exact(model: &Model<'_>, leader: &[f32], music: &[f32], seed: Se
         frames: shape.frames_out,
         token_rows: shape.token_rows,
     };
-    let bar = if std::io::stderr().is_terminal() && shape.steps > 0 {
-        let b = indicatif::ProgressBar::new(shape.steps as u64);
-        b.set_style(
-            indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} steps, {eta} left")
-                .expect("static template")
-                .progress_chars("=> "),
-        );
-        b.set_message("generating");
-        Some(b)
-    } else {
-        None
-    };
+    let bar = progress_bar(shape.steps as u64, "generating", "steps");
     let result = exact::generate(
         model,
         &ExactInputs { leader_pos3d: leader, music, seed },
@@ -120,6 +118,56 @@ pub fn generate_exact(model: &Model<'_>, leader: &[f32], music: &[f32], seed: Se
     }
     result.map_err(|e| anyhow::anyhow!("generation failed: {}", describe(&e)))?;
     Ok(g)
+}
+
+/// The seed tokens of `seed` (R's rule for follower frames, against `leader`).
+pub fn seed_tokens(model: &Model<'_>, seed: Seed<'_>, leader: &[f32]) -> Result<[u32; 5]> {
+    match seed {
+        Seed::Tokens(t) => Ok(t),
+        Seed::FollowerFrames(f) => {
+            let frames = f.len() / POSE_DIM;
+            let mut scratch = vec![0u8; exact::seed_scratch_bytes(&model.cfg, frames).context("seed frames too long")?];
+            exact::seed_tokens(model, f, leader, &mut scratch)
+                .map_err(|e| anyhow::anyhow!("the follower start frames cannot seed the model: {}", describe(&e)))
+        }
+    }
+}
+
+/// Runs S mode on in-memory inputs (a session fed frame by frame), with a
+/// progress bar on a terminal.
+pub fn generate_streaming(model: &Model<'_>, leader: &[f32], music: &[f32], sc: &SessionConfig, seed: [u32; 5]) -> Result<Generated> {
+    let t = leader.len() / POSE_DIM;
+    let bar = progress_bar(t as u64, "streaming", "frames");
+    let run = run_streaming(model, leader, music, sc, seed, None, &mut |done, _| {
+        if let Some(b) = &bar {
+            b.set_position(done as u64);
+        }
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let run = run.map_err(|e| anyhow::anyhow!("streaming failed: {}", describe(&e)))?;
+    Ok(Generated {
+        token_rows: run.tokens.len() / 5,
+        frames: run.frames_out(),
+        tokens: run.tokens,
+        follower_pos3d: run.pos,
+        follower_rotmat: run.rot,
+    })
+}
+
+fn progress_bar(len: u64, msg: &'static str, unit: &str) -> Option<indicatif::ProgressBar> {
+    if !std::io::stderr().is_terminal() || len == 0 {
+        return None;
+    }
+    let b = indicatif::ProgressBar::new(len);
+    b.set_style(
+        indicatif::ProgressStyle::with_template(&format!("{{msg}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{eta}} left"))
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    b.set_message(msg);
+    Some(b)
 }
 
 /// Writes `tokens.npy`, `follower_pos3d.npy`, `follower_rotmat.npy` into `dir`.
@@ -161,9 +209,17 @@ pub fn run(args: Args) -> Result<()> {
         }
         (None, None) => bail!("give --seed-tokens or --follower-start"),
     };
-    let Mode::Exact = args.mode;
     let started = std::time::Instant::now();
-    let g = generate_exact(&model, &leader.data, &music.data, seed)?;
+    let g = match args.mode {
+        Mode::Exact => generate_exact(&model, &leader.data, &music.data, seed)?,
+        Mode::Streaming => {
+            let sc = args.budget.config(&model.cfg)?;
+            let seed = seed_tokens(&model, seed, &leader.data)?;
+            let g = generate_streaming(&model, &leader.data[..t4 * POSE_DIM], &music.data, &sc, seed)?;
+            eprintln!("streaming: latency {} frames ({:.2} s at 30 fps)", sc.latency_frames(model.cfg.hop() as u32), sc.latency_frames(model.cfg.hop() as u32) as f64 / 30.0);
+            g
+        }
+    };
     write_outputs(&args.out, &g)?;
     eprintln!(
         "wrote {} follower frames ({} token rows) to {} in {:.1} s",

@@ -15,6 +15,8 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod budget;
+
 /// Declares the subcommand modules, the [`Command`] enum and its dispatcher
 /// from one list, so that a new subcommand cannot be half-registered.
 macro_rules! commands {
@@ -53,6 +55,8 @@ commands! {
     Dance => dance,
     /// Show a `.duo` model's config, sizes, dtypes, scratch memory and latency.
     Inspect => inspect,
+    /// Agreement of streaming (S) with exact (R) mode, or of two models (e.g. int8 vs f32): tokens and joints.
+    Compare => compare,
 }
 
 /// `duolando <command> [flags]`.

@@ -1,0 +1,86 @@
+//! The streaming latency budget as command-line flags (shared by
+//! `generate --mode streaming`, `compare` and `inspect`).
+
+use anyhow::{bail, Result};
+use clap::ValueEnum;
+use duolando_core::config::ModelConfig;
+use duolando_core::session::{Sampling, SessionConfig};
+
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum Preset {
+    /// Closest to R: full look-ahead and conv context (latency 291 frames = 9.7 s on the published model).
+    Reference,
+    /// No look-ahead, no conv future context: latency 0 frames.
+    Minimum,
+}
+
+/// `--preset` and per-setting overrides (docs/STREAMING.md §2).
+#[derive(clap::Args, Debug, Clone)]
+pub struct BudgetArgs {
+    /// Starting point of the streaming budget; the flags below override single settings.
+    #[arg(long, value_enum, default_value = "reference")]
+    pub preset: Preset,
+    /// Leader look-ahead in tokens (4 frames each), 0..=look_forward.
+    #[arg(long)]
+    pub lookahead: Option<u32>,
+    /// Encoder future context in tokens, 0..=enc_future_max.
+    #[arg(long)]
+    pub enc_future: Option<u32>,
+    /// Decoder future context in tokens, 0..=dec_future_max.
+    #[arg(long)]
+    pub dec_future: Option<u32>,
+    /// Chunk shift of the GPT window, 1..=block_size-1 (block_size-1 = R's sliding window).
+    #[arg(long)]
+    pub shift: Option<u32>,
+    /// Music look-ahead in tokens, 0..=look_forward (music known ahead: look_forward).
+    #[arg(long)]
+    pub music_lookahead: Option<u32>,
+    /// Top-k sampling (uniform over the k best tokens) instead of greedy.
+    #[arg(long)]
+    pub topk: Option<u32>,
+    /// RNG seed of top-k sampling (deterministic for a given seed).
+    #[arg(long, default_value_t = 0)]
+    pub rng_seed: u64,
+}
+
+impl BudgetArgs {
+    /// The session configuration for `cfg`, checked.
+    pub fn config(&self, cfg: &ModelConfig) -> Result<SessionConfig> {
+        let base = match self.preset {
+            Preset::Reference => SessionConfig::reference(cfg),
+            Preset::Minimum => SessionConfig::minimum(cfg),
+        };
+        let mut sc = SessionConfig::with(
+            cfg,
+            self.lookahead.unwrap_or(base.lookahead),
+            self.enc_future.unwrap_or(base.enc_future),
+            self.dec_future.unwrap_or(base.dec_future),
+            self.shift.unwrap_or(base.shift),
+        );
+        if let Some(m) = self.music_lookahead {
+            sc.music_lookahead = m;
+        }
+        if let Some(k) = self.topk {
+            sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };
+        }
+        if let Err((setting, value, max)) = sc.check(cfg) {
+            bail!("--{} {value} is outside its range for this model (largest allowed: {max})", flag(setting));
+        }
+        Ok(sc)
+    }
+}
+
+fn flag(s: duolando_core::session::Setting) -> &'static str {
+    use duolando_core::session::Setting::*;
+    match s {
+        Lookahead => "lookahead",
+        EncFuture => "enc-future",
+        DecFuture => "dec-future",
+        Shift => "shift",
+        MusicLookahead => "music-lookahead",
+        LatPast => "lat-past",
+        TopK => "topk",
+        PendingFrames => "pending-frames",
+        MusicBuffer => "music-buffer-frames",
+    }
+}

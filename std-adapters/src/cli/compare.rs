@@ -1,0 +1,185 @@
+//! `duolando compare`: how closely two ways of running the model agree on
+//! one clip (definitions: docs/STREAMING.md §7, `crate::agreement`).
+//!
+//! Without `--against`: streaming (S, with the given budget) against exact
+//! (R) on the same model: one-step agreement (S forced on R's history),
+//! free-running agreement, follower joint error.
+//! With `--against B.duo`: model A against model B in one mode (e.g. an
+//! int8 conversion against the f32 one): free-running agreement and joint
+//! error, plus one-step agreement in streaming mode (A forced on B's
+//! history).
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use duolando_core::config::POSE_DIM;
+use duolando_core::exact::Seed;
+use duolando_core::model::Model;
+use serde_json::{json, Map, Value};
+
+use crate::agreement::{free_run, joint_error_mm, one_step, TokenAgreement, STREAMS};
+use crate::cli::budget::BudgetArgs;
+use crate::cli::dance::inputs::{require_asset, DEMO_FOLLOWER_START, DEMO_LEADER, DEMO_MODEL, DEMO_MUSIC};
+use crate::cli::generate::{generate_exact, parse_seed_tokens, seed_tokens, Generated, Mode};
+use crate::engine_errors::describe;
+use crate::model_file::ModelFile;
+use crate::npy::read_f32_2d;
+use crate::streaming::run_streaming;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The model (default: the bundled demo model).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// A second model to compare against (same config; e.g. another dtype).
+    #[arg(long)]
+    pub against: Option<PathBuf>,
+    /// Mode of both runs with --against (without it: streaming vs exact).
+    #[arg(long, value_enum, default_value = "exact")]
+    pub mode: Mode,
+    /// Leader joint positions (T, 165) .npy (default: the bundled demo clip).
+    #[arg(long)]
+    pub leader: Option<PathBuf>,
+    /// Music features (T, 54) .npy (default: the bundled demo features).
+    #[arg(long)]
+    pub music: Option<PathBuf>,
+    /// Seed tokens "up,down,lhand,rhand,transl".
+    #[arg(long, conflicts_with = "follower_start")]
+    pub seed_tokens: Option<String>,
+    /// The follower's first frames (F, 165) .npy (default with the demo clip: the bundled start).
+    #[arg(long)]
+    pub follower_start: Option<PathBuf>,
+    #[command(flatten)]
+    pub budget: BudgetArgs,
+    /// Also write the figures as one flat JSON object.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+fn agreement_fields(out: &mut Map<String, Value>, prefix: &str, a: &TokenAgreement) {
+    out.insert(prefix.to_string(), json!(a.all));
+    for (s, v) in STREAMS.iter().zip(a.per_stream) {
+        out.insert(format!("{prefix}_{s}"), json!(v));
+    }
+}
+
+fn open(path: &PathBuf) -> Result<ModelFile> {
+    ModelFile::open(path).with_context(|| format!("cannot open the model {}", path.display()))
+}
+
+pub fn run(args: Args) -> Result<()> {
+    crate::simd::init();
+    let model_path = match &args.model {
+        Some(p) => p.clone(),
+        None => require_asset(DEMO_MODEL, "model")?,
+    };
+    let file = open(&model_path)?;
+    let duo = file.duo()?;
+    let model = Model::from_duo(&duo).map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", model_path.display()))?;
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let demo_inputs = args.leader.is_none() && args.music.is_none();
+    let leader_path = match &args.leader {
+        Some(p) => p.clone(),
+        None => require_asset(DEMO_LEADER, "leader clip")?,
+    };
+    let music_path = match &args.music {
+        Some(p) => p.clone(),
+        None => require_asset(DEMO_MUSIC, "music features")?,
+    };
+    let leader = read_f32_2d(&leader_path, Some(POSE_DIM), "leader joint positions (T, 165)")?;
+    let music = read_f32_2d(&music_path, Some(n_music), &format!("music features (T, {n_music})"))?;
+    let hop = model.cfg.hop();
+    let t4 = leader.rows / hop * hop;
+    if music.rows < t4 {
+        bail!("{}: {} music frames for {} leader frames; both are 30 fps and must cover the same time", music_path.display(), music.rows, t4);
+    }
+    let start;
+    let start_path = match (&args.follower_start, demo_inputs && args.seed_tokens.is_none()) {
+        (Some(p), _) => Some(p.clone()),
+        (None, true) => Some(require_asset(DEMO_FOLLOWER_START, "follower start")?),
+        (None, false) => None,
+    };
+    let seed = match (&args.seed_tokens, &start_path) {
+        (Some(s), _) => Seed::Tokens(parse_seed_tokens(s)?),
+        (None, Some(p)) => {
+            start = read_f32_2d(p, Some(POSE_DIM), "follower start frames (F, 165)")?;
+            Seed::FollowerFrames(&start.data)
+        }
+        (None, None) => bail!("give --seed-tokens or --follower-start"),
+    };
+    let leader = &leader.data[..t4 * POSE_DIM];
+    let sc = args.budget.config(&model.cfg)?;
+    let seed5 = seed_tokens(&model, seed, leader)?;
+    let mut out = Map::new();
+
+    match &args.against {
+        None => {
+            // S vs R on one model.
+            let r = generate_exact(&model, leader, &music.data, seed)?;
+            let stream = |forced: Option<&[u32]>| {
+                run_streaming(&model, leader, &music.data, &sc, seed5, forced, &mut |_, _| {})
+                    .map_err(|e| anyhow::anyhow!("streaming failed: {}", describe(&e)))
+            };
+            let forced = stream(Some(&r.tokens))?;
+            let free = stream(None)?;
+            let os = one_step(&forced.pred, &r.tokens);
+            let fr = free_run(&free.tokens, &r.tokens);
+            let (mean, max, frames) = joint_error_mm(&free.pos, &r.follower_pos3d);
+            agreement_fields(&mut out, "token_agreement", &os);
+            out.insert("free_run_agreement".into(), json!(fr.all));
+            out.insert("mean_joint_err_mm".into(), json!(mean));
+            out.insert("max_joint_err_mm".into(), json!(max));
+            out.insert("latency_frames".into(), json!(free.latency_frames));
+            out.insert("one_step_steps".into(), json!(os.rows));
+            out.insert("free_run_steps".into(), json!(fr.rows));
+            out.insert("joint_err_frames".into(), json!(frames));
+            out.insert("arena_bytes".into(), json!(free.arena_bytes));
+            println!("streaming (S) vs exact (R), {} on {} ({} frames)", model_path.display(), leader_path.display(), t4);
+        }
+        Some(b_path) => {
+            let b_file = open(b_path)?;
+            let b_duo = b_file.duo()?;
+            let b = Model::from_duo(&b_duo).map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", b_path.display()))?;
+            if b.cfg != model.cfg {
+                bail!("{} and {} have different configs; compare conversions of the same checkpoint", model_path.display(), b_path.display());
+            }
+            let gen = |m: &Model<'_>| -> Result<(Generated, Option<Vec<u32>>)> {
+                match args.mode {
+                    Mode::Exact => Ok((generate_exact(m, leader, &music.data, seed)?, None)),
+                    Mode::Streaming => {
+                        let r = run_streaming(m, leader, &music.data, &sc, seed5, None, &mut |_, _| {})
+                            .map_err(|e| anyhow::anyhow!("streaming failed: {}", describe(&e)))?;
+                        let frames = r.frames_out();
+                        Ok((Generated { token_rows: r.tokens.len() / 5, frames, tokens: r.tokens, follower_pos3d: r.pos, follower_rotmat: r.rot }, None))
+                    }
+                }
+            };
+            let (ga, _) = gen(&model)?;
+            let (gb, _) = gen(&b)?;
+            let fr = free_run(&ga.tokens, &gb.tokens);
+            agreement_fields(&mut out, "free_run_agreement", &fr);
+            if let Mode::Streaming = args.mode {
+                let forced = run_streaming(&model, leader, &music.data, &sc, seed5, Some(&gb.tokens), &mut |_, _| {})
+                    .map_err(|e| anyhow::anyhow!("streaming failed: {}", describe(&e)))?;
+                agreement_fields(&mut out, "token_agreement", &one_step(&forced.pred, &gb.tokens));
+            }
+            let (mean, max, frames) = joint_error_mm(&ga.follower_pos3d, &gb.follower_pos3d);
+            out.insert("mean_joint_err_mm".into(), json!(mean));
+            out.insert("max_joint_err_mm".into(), json!(max));
+            out.insert("free_run_steps".into(), json!(fr.rows));
+            out.insert("joint_err_frames".into(), json!(frames));
+            println!("{} vs {} ({:?} mode) on {} ({} frames)", model_path.display(), b_path.display(), args.mode, leader_path.display(), t4);
+        }
+    }
+    for (k, v) in [("lookahead", sc.lookahead), ("enc_future", sc.enc_future), ("dec_future", sc.dec_future), ("shift", sc.shift)] {
+        out.insert(k.into(), json!(v));
+    }
+    for (k, v) in &out {
+        println!("  {k:<28} {v}");
+    }
+    if let Some(p) = &args.json {
+        std::fs::write(p, serde_json::to_string_pretty(&Value::Object(out))? + "\n").with_context(|| format!("cannot write {}", p.display()))?;
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,165 @@
+//! `duolando compare` and `duolando generate --mode streaming` end to end:
+//! the figures equal those of the Python study
+//! (`tests/fixtures/streaming_compare/<model>.json`, written by
+//! `tools/streaming_study.py fixtures --write`), and streaming generation
+//! writes the S golden's outputs.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use duolando::npy::{read_f32_2d, read_i64_2d};
+use serde_json::Value;
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("duo-cmp-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn duolando(args: &[String]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_duolando")).args(args).output().unwrap()
+}
+
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+fn expected(model: &str) -> Value {
+    serde_json::from_slice(&std::fs::read(fixtures().join(format!("streaming_compare/{model}.json"))).unwrap()).unwrap()
+}
+
+/// Runs `compare` for one setting of the study and checks every figure.
+fn check(model: &str, setting: &str) {
+    let fx = fixtures();
+    let exp = expected(model);
+    let inputs = fx.join(exp["inputs"].as_str().unwrap());
+    let want = &exp["settings"][setting];
+    let out = tmp(&format!("{model}-{setting}"));
+    let json = out.join("figures.json");
+    let mut args: Vec<String> = ["compare", "--model"].map(String::from).to_vec();
+    args.push(s(&fx.join(format!("{model}/model.duo"))));
+    for (flag, file) in [("--leader", "leader_pos3d.npy"), ("--music", "music.npy")] {
+        args.push(flag.into());
+        args.push(s(&inputs.join(file)));
+    }
+    if inputs.join("follower_start.npy").exists() {
+        args.push("--follower-start".into());
+        args.push(s(&inputs.join("follower_start.npy")));
+    } else {
+        let t = read_i64_2d(&inputs.join("seed_tokens.npy"), Some(5), "seed").unwrap();
+        args.push("--seed-tokens".into());
+        args.push(t.data.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(","));
+    }
+    for k in ["lookahead", "enc_future", "dec_future", "shift"] {
+        args.push(format!("--{}", k.replace('_', "-")));
+        args.push(want[k].as_u64().unwrap().to_string());
+    }
+    args.push("--json".into());
+    args.push(s(&json));
+    let o = duolando(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let got: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    for key in ["latency_frames", "one_step_steps", "free_run_steps", "joint_err_frames"] {
+        assert_eq!(got[key], want[key], "{model} {setting}: {key}");
+    }
+    // Token counts are exact; the study stored them as float32 ratios.
+    for (key, v) in want.as_object().unwrap() {
+        if key.starts_with("token_agreement") || key == "free_run_agreement" {
+            let (g, w) = (got[key].as_f64().unwrap(), v.as_f64().unwrap());
+            assert!((g - w).abs() < 1e-6, "{model} {setting}: {key} {g} vs {w}");
+        }
+    }
+    for key in ["mean_joint_err_mm", "max_joint_err_mm"] {
+        let (g, w) = (got[key].as_f64().unwrap(), want[key].as_f64().unwrap());
+        assert!((g - w).abs() < 0.05, "{model} {setting}: {key} {g} vs {w} mm");
+    }
+}
+
+#[test]
+fn tiny_default_matches_the_study() {
+    check("tiny", "default");
+}
+
+#[test]
+fn tiny_minimum_matches_the_study() {
+    check("tiny", "minimum");
+}
+
+#[test]
+fn tiny2_exact_window_matches_the_study() {
+    check("tiny2", "exact-window");
+}
+
+#[test]
+fn tiny2_mid_matches_the_study() {
+    check("tiny2", "mid");
+}
+
+#[test]
+fn generate_streaming_writes_the_s_golden() {
+    let fx = fixtures();
+    let g = fx.join("streaming_tiny_mid_odd");
+    let roll = fx.join("rollout_tiny_odd");
+    let out = tmp("gen-stream");
+    let seed = read_i64_2d(&g.join("seed_tokens.npy"), Some(5), "seed").unwrap();
+    let args: Vec<String> = vec![
+        "generate".into(),
+        "--mode".into(),
+        "streaming".into(),
+        "--model".into(),
+        s(&fx.join("tiny/model.duo")),
+        "--leader".into(),
+        s(&roll.join("leader_pos3d.npy")),
+        "--music".into(),
+        s(&roll.join("music.npy")),
+        "--seed-tokens".into(),
+        seed.data.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(","),
+        "--lookahead".into(),
+        "6".into(),
+        "--enc-future".into(),
+        "4".into(),
+        "--dec-future".into(),
+        "4".into(),
+        "--shift".into(),
+        "15".into(),
+        "-o".into(),
+        s(&out),
+    ];
+    let o = duolando(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let tokens = read_i64_2d(&out.join("tokens.npy"), Some(5), "tokens").unwrap();
+    assert_eq!(tokens.data, read_i64_2d(&g.join("tokens.npy"), Some(5), "tokens").unwrap().data);
+    let pos = read_f32_2d(&out.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
+    let want = read_f32_2d(&g.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
+    assert_eq!(pos.rows, want.rows);
+    let err = pos.data.iter().zip(&want.data).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(err <= 1e-4, "max |pos err| {err}");
+}
+
+#[test]
+fn compare_rejects_a_budget_outside_the_model() {
+    let fx = fixtures();
+    let roll = fx.join("rollout_tiny2_tokens");
+    let args: Vec<String> = vec![
+        "compare".into(),
+        "--model".into(),
+        s(&fx.join("tiny2/model.duo")),
+        "--leader".into(),
+        s(&roll.join("leader_pos3d.npy")),
+        "--music".into(),
+        s(&roll.join("music.npy")),
+        "--seed-tokens".into(),
+        "0,0,0,0,0".into(),
+        "--lookahead".into(),
+        "99".into(),
+    ];
+    let o = duolando(&args);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--lookahead 99") && err.contains("largest allowed: 5"), "{err}");
+}
