@@ -1,0 +1,268 @@
+//! The streaming session's memory contract: `Model::session_bytes` is
+//! exactly what it needs (enough at any address, one 64-byte line less
+//! fails cleanly), nothing allocates after `Session::new`, the state does
+//! not grow, and one `Model` serves sessions on several threads at once.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use duolando::model_file::ModelFile;
+use duolando::npy::read_f32_2d;
+use duolando_core::error::Error;
+use duolando_core::model::Model;
+use duolando_core::session::{FollowerFrame, Sampling, Session, SessionConfig};
+use duolando_tests::fixture;
+
+/// Counts heap allocations made by the current thread while enabled.
+struct Counting;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<usize> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        if COUNTING.with(|c| c.get()) {
+            COUNT.with(|c| c.set(c.get() + 1));
+        }
+        // SAFETY: forwards the caller's layout to the system allocator unchanged.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: `p` was allocated by `System` with layout `l` (see `alloc`).
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        if COUNTING.with(|c| c.get()) {
+            COUNT.with(|c| c.set(c.get() + 1));
+        }
+        // SAFETY: as in `alloc`/`dealloc`.
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations_during(f: impl FnOnce()) -> usize {
+    COUNT.with(|c| c.set(0));
+    COUNTING.with(|c| c.set(true));
+    f();
+    COUNTING.with(|c| c.set(false));
+    COUNT.with(|c| c.get())
+}
+
+struct Clip {
+    leader: Vec<f32>,
+    music: Vec<f32>,
+}
+
+fn clip() -> Clip {
+    let d = fixture("rollout_tiny_long");
+    Clip {
+        leader: read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader").unwrap().data,
+        music: read_f32_2d(&d.join("music.npy"), None, "music").unwrap().data,
+    }
+}
+
+/// Pushes the whole clip (music frame by frame unless a track was set,
+/// then the leader frame), pulling after every push; returns the pulled
+/// frames' positions.
+fn drive(s: &mut Session<'_>, c: &Clip, n_music: usize, out: &mut Vec<f32>) -> Result<(), Error> {
+    let mut f = FollowerFrame::default();
+    let live = s.config().music_lookahead == 0;
+    for i in 0..c.leader.len() / 165 {
+        if live {
+            s.push_music_frame(&c.music[i * n_music..(i + 1) * n_music])?;
+        }
+        match s.push_leader_frame(&c.leader[i * 165..(i + 1) * 165]) {
+            // The track ends: its last tokens have no music look-ahead, so no
+            // step can run and leader frames back up.
+            Err(Error::Backlog { .. }) if !live => break,
+            r => r?,
+        }
+        while s.pull_follower_frame(&mut f)? {
+            out.extend_from_slice(&f.positions);
+        }
+    }
+    Ok(())
+}
+
+fn live_config(model: &Model<'_>) -> SessionConfig {
+    // Music pushed live, in lockstep with the leader: no music look-ahead.
+    let shift = SessionConfig::reference(&model.cfg).shift;
+    let mut sc = SessionConfig::with(&model.cfg, 4, 3, 3, shift);
+    sc.music_lookahead = 0;
+    sc.sampling = Sampling::TopK { k: 3, rng_seed: 7 };
+    sc
+}
+
+#[test]
+fn no_allocation_after_new_and_the_arena_is_exact() {
+    let file = ModelFile::open(fixture("tiny/model.duo")).unwrap();
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let c = clip();
+    for sc in [SessionConfig::reference(&model.cfg), SessionConfig::minimum(&model.cfg), live_config(&model)] {
+        let bytes = model.session_bytes(&sc).unwrap();
+        // Exactly `bytes` at the worst alignment (63 bytes past a line) is enough.
+        let mut buf = vec![0u8; bytes + 64];
+        let base = buf.as_ptr() as usize;
+        let off = (64 - base % 64) % 64 + 1;
+        let arena = &mut buf[off..off + bytes];
+        let mut out = Vec::with_capacity(c.leader.len() * 2);
+        let mut s = Session::new(&model, arena, &sc, [1, 2, 3, 4, 5]).unwrap();
+        if sc.music_lookahead > 0 {
+            s.set_music_track(&c.music).unwrap();
+        }
+        let n = allocations_during(|| drive(&mut s, &c, n_music, &mut out).unwrap());
+        assert_eq!(n, 0, "{sc:?}: {n} heap allocations while streaming");
+        assert!(s.steps() > 50, "{sc:?}: only {} steps", s.steps());
+        assert!(out.iter().all(|v| v.is_finite()));
+        // A 64-byte-aligned arena needs at most `bytes - 63`; one line less than that fails cleanly.
+        let mut small = vec![0u8; bytes - 63 - 64 + 64];
+        let base = small.as_ptr() as usize;
+        let off = (64 - base % 64) % 64;
+        let len = bytes - 63 - 64;
+        match Session::new(&model, &mut small[off..off + len], &sc, [1, 2, 3, 4, 5]) {
+            Err(Error::Arena(_)) => {}
+            Err(e) => panic!("{sc:?}: wrong error for a short arena: {e:?}"),
+            Ok(_) => panic!("{sc:?}: a session fit in {len} < {bytes} - 63 bytes: session_bytes is not exact"),
+        };
+    }
+}
+
+#[test]
+fn reset_reproduces_the_first_run_without_allocating() {
+    let file = ModelFile::open(fixture("tiny/model.duo")).unwrap();
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let c = clip();
+    let sc = live_config(&model);
+    let mut arena = vec![0u8; model.session_bytes(&sc).unwrap()];
+    let mut s = Session::new(&model, &mut arena, &sc, [3, 1, 4, 1, 5]).unwrap();
+    let (mut a, mut b) = (Vec::with_capacity(1 << 20), Vec::with_capacity(1 << 20));
+    drive(&mut s, &c, n_music, &mut a).unwrap();
+    let n = allocations_during(|| {
+        s.reset([3, 1, 4, 1, 5]).unwrap();
+        drive(&mut s, &c, n_music, &mut b).unwrap();
+    });
+    assert_eq!(n, 0);
+    assert!(!a.is_empty());
+    assert_eq!(a, b, "a reset session must replay bit for bit (same seed, same RNG seed)");
+}
+
+#[test]
+fn one_model_serves_sessions_on_four_threads() {
+    let file = ModelFile::open(fixture("tiny2/model.duo")).unwrap();
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let d = fixture("rollout_tiny2_frames");
+    let c = Clip {
+        leader: read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader").unwrap().data,
+        music: read_f32_2d(&d.join("music.npy"), None, "music").unwrap().data,
+    };
+    let sc = live_config(&model);
+    let single = {
+        let mut arena = vec![0u8; model.session_bytes(&sc).unwrap()];
+        let mut s = Session::new(&model, &mut arena, &sc, [0, 1, 2, 3, 4]).unwrap();
+        let mut out = Vec::new();
+        drive(&mut s, &c, n_music, &mut out).unwrap();
+        out
+    };
+    assert!(!single.is_empty());
+    let (model, c, sc) = (&model, &c, &sc);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..4)
+            .map(|_| {
+                scope.spawn(move || {
+                    let mut arena = vec![0u8; model.session_bytes(sc).unwrap()];
+                    let mut s = Session::new(model, &mut arena, sc, [0, 1, 2, 3, 4]).unwrap();
+                    let mut out = Vec::new();
+                    drive(&mut s, c, n_music, &mut out).unwrap();
+                    out
+                })
+            })
+            .collect();
+        for h in handles {
+            assert_eq!(h.join().unwrap(), single, "a session on another thread must give the same frames");
+        }
+    });
+}
+
+#[test]
+fn bad_frames_are_refused_and_leave_the_session_unchanged() {
+    let file = ModelFile::open(fixture("tiny/model.duo")).unwrap();
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let c = clip();
+    let sc = live_config(&model);
+    let clean = {
+        let mut arena = vec![0u8; model.session_bytes(&sc).unwrap()];
+        let mut s = Session::new(&model, &mut arena, &sc, [1, 1, 1, 1, 1]).unwrap();
+        let mut out = Vec::new();
+        drive(&mut s, &c, n_music, &mut out).unwrap();
+        out
+    };
+    let mut arena = vec![0u8; model.session_bytes(&sc).unwrap()];
+    let mut s = Session::new(&model, &mut arena, &sc, [1, 1, 1, 1, 1]).unwrap();
+    let mut out = Vec::new();
+    let mut f = FollowerFrame::default();
+    let mut bad = [0.5f32; 165];
+    for i in 0..c.leader.len() / 165 {
+        if i % 37 == 5 {
+            bad[(i * 7) % 165] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][i % 3];
+            assert!(matches!(s.push_leader_frame(&bad), Err(Error::NonFinite { .. })));
+            let mut m = c.music[..n_music].to_vec();
+            m[i % n_music] = f32::NAN;
+            assert!(matches!(s.push_music_frame(&m), Err(Error::NonFinite { .. })));
+            assert!(matches!(s.push_leader_frame(&bad[..100]), Err(Error::Length { .. })));
+        }
+        s.push_music_frame(&c.music[i * n_music..(i + 1) * n_music]).unwrap();
+        s.push_leader_frame(&c.leader[i * 165..(i + 1) * 165]).unwrap();
+        while s.pull_follower_frame(&mut f).unwrap() {
+            out.extend_from_slice(&f.positions);
+        }
+    }
+    assert_eq!(out, clean, "refused frames must not change what the session computes");
+}
+
+#[test]
+fn unpulled_frames_back_up_into_a_clean_refusal() {
+    let file = ModelFile::open(fixture("tiny2/model.duo")).unwrap();
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let mut sc = SessionConfig::minimum(&model.cfg);
+    sc.pending_frames = 8;
+    let c = clip();
+    let mut arena = vec![0u8; model.session_bytes(&sc).unwrap()];
+    let mut s = Session::new(&model, &mut arena, &sc, [0, 0, 0, 0, 0]).unwrap();
+    s.set_music_track(&c.music[..600 * model.cfg.gpt.music.n_in as usize]).unwrap();
+    let mut refused_at = None;
+    for i in 0..100 {
+        match s.push_leader_frame(&c.leader[i * 165..(i + 1) * 165]) {
+            Ok(()) => {}
+            Err(Error::Backlog { held, capacity, .. }) => {
+                assert_eq!(held, capacity);
+                refused_at = Some(i);
+                break;
+            }
+            Err(e) => panic!("{e:?}"),
+        }
+    }
+    // Latency 0: 1 + pending_frames leader frames may wait for a pull.
+    assert_eq!(refused_at, Some(9));
+    let mut f = FollowerFrame::default();
+    let mut pulled = 0;
+    while s.pull_follower_frame(&mut f).unwrap() {
+        assert_eq!(f.index, pulled);
+        pulled += 1;
+    }
+    assert_eq!(pulled, 9);
+    s.push_leader_frame(&c.leader[9 * 165..10 * 165]).unwrap();
+}
