@@ -1,0 +1,499 @@
+/* C host test of include/duolando.h, linked against the static and the
+ * dynamic library and run under valgrind by .ci/ffi.sh.
+ *
+ * Opens the fixture model (tests/fixtures/tiny/model.duo) from a file,
+ * from aligned memory and by copy; runs sessions in library memory and in
+ * caller memory, on 4 threads sharing one model; feeds bad input (NULL
+ * pointers, wrong sizes, truncated and misaligned models, NaN/Inf/huge
+ * frames, bad configs and seeds) and checks every result code; checks that
+ * rejected frames leave a session unchanged, that outputs are finite and
+ * deterministic, and that outputs are written only on success.
+ *
+ * usage: test_duolando <repo root> */
+#define _POSIX_C_SOURCE 200112L
+#include "duolando.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int failures = 0;
+
+#define CHECK(cond)                                                        \
+  do {                                                                     \
+    if (!(cond)) {                                                         \
+      fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__, __LINE__,     \
+              #cond);                                                      \
+      failures++;                                                          \
+    }                                                                      \
+  } while (0)
+
+/* Checks that `call` returns `want`; prints the last error otherwise. */
+#define EXPECT(call, want)                                                 \
+  do {                                                                     \
+    duo_result got_ = (call);                                              \
+    if (got_ != (want)) {                                                  \
+      char msg_[512];                                                      \
+      duo_last_error_message(msg_, sizeof msg_);                           \
+      fprintf(stderr, "%s:%d: %s returned %s, expected %s (%s)\n",         \
+              __FILE__, __LINE__, #call, duo_result_name(got_),            \
+              duo_result_name(want), msg_);                                \
+      failures++;                                                          \
+    }                                                                      \
+  } while (0)
+
+/* ---- fixture input ---------------------------------------------------- */
+
+static unsigned char *read_file(const char *path, size_t *len) {
+  FILE *f = fopen(path, "rb");
+  unsigned char *buf;
+  long n;
+  if (!f) return NULL;
+  fseek(f, 0, SEEK_END);
+  n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  buf = (unsigned char *)malloc((size_t)n + 1);
+  if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
+    free(buf);
+    buf = NULL;
+  }
+  fclose(f);
+  *len = (size_t)n;
+  return buf;
+}
+
+/* A little-endian float32 .npy file (version 1): the data and its size. */
+static float *read_npy_f32(const char *path, size_t *n_floats) {
+  size_t len = 0, header;
+  unsigned char *raw = read_file(path, &len);
+  float *data;
+  if (!raw || len < 10 || memcmp(raw, "\x93NUMPY", 6) != 0) {
+    free(raw);
+    return NULL;
+  }
+  header = 10 + (size_t)raw[8] + 256u * (size_t)raw[9];
+  if (!strstr((const char *)raw + 10, "'<f4'") || header > len) {
+    free(raw);
+    return NULL;
+  }
+  *n_floats = (len - header) / 4;
+  data = (float *)malloc(*n_floats * sizeof(float));
+  memcpy(data, raw + header, *n_floats * sizeof(float));
+  free(raw);
+  return data;
+}
+
+static char root_dir[1024];
+static char model_path[1100];
+static duo_leader_frame *leader = NULL; /* (n_frames) */
+static size_t n_frames = 0;
+static float *music = NULL; /* (n_frames, 54) */
+static size_t n_music_floats = 0;
+static const uint32_t seed[5] = {1, 2, 3, 4, 5};
+
+static int load_inputs(void) {
+  char path[1200];
+  size_t n = 0, i;
+  float *pos;
+  sprintf(path, "%s/tests/fixtures/rollout_tiny_odd/leader_pos3d.npy", root_dir);
+  pos = read_npy_f32(path, &n);
+  if (!pos) return 0;
+  n_frames = n / 165 / 4 * 4;
+  leader = (duo_leader_frame *)malloc(n_frames * sizeof(duo_leader_frame));
+  for (i = 0; i < n_frames; i++) memcpy(&leader[i], pos + i * 165, sizeof(duo_leader_frame));
+  free(pos);
+  sprintf(path, "%s/tests/fixtures/rollout_tiny_odd/music.npy", root_dir);
+  music = read_npy_f32(path, &n_music_floats);
+  return music != NULL && n_music_floats >= n_frames * 54;
+}
+
+static int frame_finite(const duo_follower_frame *f) {
+  int j;
+  for (j = 0; j < DUO_JOINTS; j++) {
+    const duo_vec3 *p = &f->positions[j];
+    const duo_quat *q = &f->rotations[j];
+    float n2 = q->x * q->x + q->y * q->y + q->z * q->z + q->w * q->w;
+    if (!isfinite(p->x) || !isfinite(p->y) || !isfinite(p->z)) return 0;
+    if (!(fabsf(n2 - 1.0f) < 1e-4f)) return 0;
+  }
+  return isfinite(f->root.x) && isfinite(f->root.y) && isfinite(f->root.z);
+}
+
+/* ---- a run ------------------------------------------------------------ */
+
+/* Pushes every leader frame (music as a track), pulling after each push;
+ * before every 5th frame (when `noise`) pushes a bad frame that must be
+ * rejected. Returns the number of frames written to out (<= cap). */
+static size_t drive(duo_session *s, duo_follower_frame *out, size_t cap, int noise) {
+  size_t i, got = 0;
+  duo_follower_frame f;
+  EXPECT(duo_session_set_music_track(s, music, n_frames * 54), DUO_OK);
+  for (i = 0; i < n_frames; i++) {
+    duo_result r;
+    if (noise && i % 5 == 2) {
+      duo_leader_frame bad = leader[i];
+      float v[3];
+      v[0] = (float)NAN;
+      v[1] = (float)INFINITY;
+      v[2] = 1e9f;
+      bad.joints[i % DUO_JOINTS].z = v[i % 3];
+      EXPECT(duo_session_push_leader(s, &bad), DUO_NON_FINITE_INPUT);
+    }
+    r = duo_session_push_leader(s, &leader[i]);
+    /* The music track ends: past its last step no frame comes out, the
+     * leader frames pile up, and the session refuses more. */
+    if (r == DUO_BACKLOG) break;
+    CHECK(r == DUO_OK);
+    while ((r = duo_session_pull_follower(s, &f)) == DUO_OK) {
+      CHECK(f.index == got);
+      CHECK(frame_finite(&f));
+      if (got < cap) out[got] = f;
+      got++;
+    }
+    CHECK(r == DUO_NOT_READY);
+  }
+  return got;
+}
+
+/* ---- tests ------------------------------------------------------------ */
+
+static void test_errors_and_version(void) {
+  char buf[8];
+  size_t n;
+  CHECK(strcmp(duo_version(), "0.1.0") == 0);
+  CHECK(strcmp(duo_result_name(DUO_OK), "DUO_OK") == 0);
+  CHECK(strcmp(duo_result_name(DUO_PANIC), "DUO_PANIC") == 0);
+  CHECK(strcmp(duo_result_name(-5), "DUO_UNKNOWN") == 0);
+  EXPECT(duo_model_get_info(NULL, NULL), DUO_NULL_PARAMETER);
+  n = duo_last_error_message(NULL, 0);
+  CHECK(n > 0);
+  memset(buf, 'x', sizeof buf);
+  CHECK(duo_last_error_message(buf, sizeof buf) == n);
+  CHECK(buf[7] == '\0' && strlen(buf) == 7); /* truncated */
+  CHECK(sizeof(duo_leader_frame) == 660);
+  CHECK(sizeof(duo_follower_frame) == 1560);
+  CHECK(sizeof(duo_session_config) == 48);
+  CHECK(sizeof(duo_model_info) == 32);
+}
+
+static void test_conversions(void) {
+  duo_vec3 left = {1.0f, 0.0f, 0.0f}, u, r;
+  duo_quat q = {0.1f, 0.2f, 0.3f, 0.927362f};
+  duo_quat qu = duo_quat_to_unity(q), qr = duo_quat_to_unreal(q), back;
+  duo_follower_frame f;
+  u = duo_vec3_to_unity(left);
+  r = duo_vec3_to_unreal(left);
+  CHECK(u.x == -1.0f && u.y == 0.0f && u.z == 0.0f);
+  CHECK(r.x == 0.0f && r.y == -100.0f && r.z == 0.0f);
+  CHECK(qu.x == 0.1f && qu.y == -0.2f && qu.z == -0.3f && qu.w == q.w);
+  back = duo_quat_from_unreal(qr);
+  CHECK(back.x == q.x && back.y == q.y && back.z == q.z && back.w == q.w);
+  u = duo_vec3_from_unity(duo_vec3_to_unity(left));
+  CHECK(u.x == 1.0f);
+  memset(&f, 0, sizeof f);
+  f.root.x = 1.0f;
+  EXPECT(duo_follower_frame_convert(&f, DUO_COORDS_UNITY), DUO_OK);
+  CHECK(f.root.x == -1.0f);
+  EXPECT(duo_follower_frame_convert(&f, 9), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_follower_frame_convert(NULL, DUO_COORDS_UNITY), DUO_NULL_PARAMETER);
+  EXPECT(duo_leader_frame_convert(NULL, DUO_COORDS_UNITY), DUO_NULL_PARAMETER);
+}
+
+static void test_model_open(duo_model **out_file_model) {
+  size_t len = 0;
+  unsigned char *bytes = read_file(model_path, &len);
+  void *aligned = NULL;
+  unsigned char *odd;
+  duo_model *m = NULL, *sentinel = (duo_model *)&len;
+  duo_model_info info;
+  CHECK(bytes != NULL);
+  /* From a file (mmap). */
+  EXPECT(duo_model_open_file(model_path, &m), DUO_OK);
+  EXPECT(duo_model_get_info(m, &info), DUO_OK);
+  CHECK(info.joints == 55 && info.music_features == 54 && info.fps == 30);
+  CHECK(info.frames_per_token == 4 && info.mapped == 1);
+  *out_file_model = m;
+  /* From aligned memory, without a copy. */
+  CHECK(posix_memalign(&aligned, 64, len) == 0);
+  memcpy(aligned, bytes, len);
+  m = NULL;
+  EXPECT(duo_model_open_bytes((const uint8_t *)aligned, len, &m), DUO_OK);
+  EXPECT(duo_model_get_info(m, &info), DUO_OK);
+  CHECK(info.mapped == 0);
+  duo_model_free(m);
+  /* Misaligned memory: refused without a copy, accepted with one. */
+  odd = (unsigned char *)malloc(len + 1);
+  memcpy(odd + 1, bytes, len);
+  m = sentinel;
+  EXPECT(duo_model_open_bytes(odd + 1, len, &m), DUO_INVALID_ARGUMENT);
+  CHECK(m == sentinel); /* outputs only on success */
+  EXPECT(duo_model_open_copy(odd + 1, len, &m), DUO_OK);
+  free(odd); /* the copy owns its bytes */
+  EXPECT(duo_model_get_info(m, &info), DUO_OK);
+  duo_model_free(m);
+  /* Truncated, empty, garbage. */
+  m = sentinel;
+  EXPECT(duo_model_open_bytes((const uint8_t *)aligned, len / 2, &m), DUO_BAD_MODEL);
+  EXPECT(duo_model_open_bytes((const uint8_t *)aligned, 23, &m), DUO_BAD_MODEL);
+  EXPECT(duo_model_open_copy(bytes, len - 1, &m), DUO_BAD_MODEL);
+  EXPECT(duo_model_open_bytes(NULL, 0, &m), DUO_BAD_MODEL);
+  memset(aligned, 0xAB, 64);
+  EXPECT(duo_model_open_bytes((const uint8_t *)aligned, len, &m), DUO_BAD_MODEL);
+  /* NULLs and missing files. */
+  EXPECT(duo_model_open_bytes(NULL, 10, &m), DUO_NULL_PARAMETER);
+  EXPECT(duo_model_open_bytes(bytes, len, NULL), DUO_NULL_PARAMETER);
+  EXPECT(duo_model_open_copy(bytes, len, NULL), DUO_NULL_PARAMETER);
+  EXPECT(duo_model_open_file(NULL, &m), DUO_NULL_PARAMETER);
+  EXPECT(duo_model_open_file(model_path, NULL), DUO_NULL_PARAMETER);
+  EXPECT(duo_model_open_file("/nonexistent/dir/model.duo", &m), DUO_IO);
+  {
+    char msg[256];
+    duo_last_error_message(msg, sizeof msg);
+    CHECK(strstr(msg, "/nonexistent/dir/model.duo") != NULL);
+  }
+  CHECK(m == sentinel);
+  duo_model_free(NULL);
+  free(aligned);
+  free(bytes);
+}
+
+static void test_session_errors(duo_model *m) {
+  duo_session_config c, bad;
+  duo_session *s = NULL, *sentinel = (duo_session *)&c;
+  duo_follower_frame f;
+  size_t bytes = 0;
+  unsigned char *mem;
+  float feat[54];
+  const uint32_t big_seed[5] = {100000, 0, 0, 0, 0};
+  uint32_t tokens[5], lat = 77;
+
+  EXPECT(duo_session_config_minimum(m, &c), DUO_OK);
+  EXPECT(duo_session_config_minimum(NULL, &c), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_config_reference(m, NULL), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_bytes(m, &c, &bytes), DUO_OK);
+  CHECK(bytes > 0);
+  bad = c;
+  bad.shift = 0;
+  s = sentinel;
+  EXPECT(duo_session_new(m, &bad, seed, &s), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_bytes(m, &bad, &bytes), DUO_INVALID_ARGUMENT);
+  bad = c;
+  bad.sampling = 5;
+  EXPECT(duo_session_new(m, &bad, seed, &s), DUO_INVALID_ARGUMENT);
+  bad = c;
+  bad.lookahead = 1000;
+  EXPECT(duo_session_new(m, &bad, seed, &s), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_new(m, &c, big_seed, &s), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_new(NULL, &c, seed, &s), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_new(m, NULL, seed, &s), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_new(m, &c, NULL, &s), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_new(m, &c, seed, NULL), DUO_NULL_PARAMETER);
+  mem = (unsigned char *)malloc(bytes);
+  EXPECT(duo_session_new_in(m, &c, seed, mem, bytes - 1, &s), DUO_BUFFER_TOO_SMALL);
+  EXPECT(duo_session_new_in(m, &c, seed, NULL, bytes, &s), DUO_NULL_PARAMETER);
+  CHECK(s == sentinel);
+  free(mem);
+
+  EXPECT(duo_session_new(m, &c, seed, &s), DUO_OK);
+  EXPECT(duo_session_latency_frames(s, &lat), DUO_OK);
+  CHECK(lat == 0);
+  EXPECT(duo_session_latency_frames(NULL, &lat), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_latency_frames(s, NULL), DUO_NULL_PARAMETER);
+  f.index = 4242;
+  EXPECT(duo_session_pull_follower(s, &f), DUO_NOT_READY);
+  CHECK(f.index == 4242);
+  EXPECT(duo_session_pull_follower(s, NULL), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_pull_follower(NULL, &f), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_push_leader(s, NULL), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_push_leader(NULL, &leader[0]), DUO_NULL_PARAMETER);
+  memset(feat, 0, sizeof feat);
+  EXPECT(duo_session_push_music(s, feat, 53), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_push_music(s, feat, 55), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_push_music(s, NULL, 54), DUO_NULL_PARAMETER);
+  feat[3] = (float)NAN;
+  EXPECT(duo_session_push_music(s, feat, 54), DUO_NON_FINITE_INPUT);
+  feat[3] = 0.0f;
+  EXPECT(duo_session_push_music(s, feat, 54), DUO_OK);
+  EXPECT(duo_session_set_music_track(s, music, 53), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_set_music_track(s, NULL, 0), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_reset(s, big_seed), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_reset(s, NULL), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_reset(NULL, seed), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_reset(s, seed), DUO_OK);
+
+  /* Backlog: push without pulling until refused, then drain. */
+  {
+    size_t i, pushed = 0, pulled = 0;
+    duo_result r = DUO_OK;
+    EXPECT(duo_session_set_music_track(s, music, n_frames * 54), DUO_OK);
+    for (i = 0; i < n_frames && r == DUO_OK; i++) {
+      r = duo_session_push_leader(s, &leader[i]);
+      if (r == DUO_OK) pushed++;
+    }
+    CHECK(r == DUO_BACKLOG);
+    CHECK(pushed == c.pending_frames + lat + 1);
+    while (duo_session_pull_follower(s, &f) == DUO_OK) pulled++;
+    CHECK(pulled == pushed);
+    EXPECT(duo_session_push_leader(s, &leader[pushed]), DUO_OK);
+  }
+
+  /* Seed tokens from start frames (8 frames of the leader as both). */
+  EXPECT(duo_model_seed_tokens(m, (const float *)leader, (const float *)leader, 8, tokens), DUO_OK);
+  EXPECT(duo_session_reset(s, tokens), DUO_OK);
+  EXPECT(duo_model_seed_tokens(m, (const float *)leader, (const float *)leader, 2, tokens), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_model_seed_tokens(m, NULL, (const float *)leader, 8, tokens), DUO_NULL_PARAMETER);
+  EXPECT(duo_model_seed_tokens(m, (const float *)leader, (const float *)leader, 8, NULL), DUO_NULL_PARAMETER);
+  duo_session_free(s);
+  duo_session_free(NULL);
+}
+
+/* Reference output of one clean run, for comparisons. */
+static duo_follower_frame *reference = NULL;
+static size_t reference_n = 0;
+
+static int same_frames(const duo_follower_frame *a, const duo_follower_frame *b, size_t n) {
+  return memcmp(a, b, n * sizeof *a) == 0;
+}
+
+static void test_sessions(duo_model *m) {
+  duo_session_config c;
+  duo_session *s = NULL, *t = NULL;
+  size_t bytes = 0, n;
+  unsigned char *mem;
+  duo_follower_frame *out = (duo_follower_frame *)malloc(n_frames * sizeof *out);
+
+  EXPECT(duo_session_config_minimum(m, &c), DUO_OK);
+  reference = (duo_follower_frame *)malloc(n_frames * sizeof *reference);
+  EXPECT(duo_session_new(m, &c, seed, &s), DUO_OK);
+  reference_n = drive(s, reference, n_frames, 0);
+  CHECK(reference_n > n_frames / 2);
+  /* Reset reproduces the run exactly; rejected frames change nothing. */
+  EXPECT(duo_session_reset(s, seed), DUO_OK);
+  n = drive(s, out, n_frames, 1);
+  CHECK(n == reference_n && same_frames(out, reference, n));
+  duo_session_free(s);
+
+  /* Caller memory, at an odd address. */
+  EXPECT(duo_session_bytes(m, &c, &bytes), DUO_OK);
+  mem = (unsigned char *)malloc(bytes + 3);
+  EXPECT(duo_session_new_in(m, &c, seed, mem + 3, bytes, &t), DUO_OK);
+  n = drive(t, out, n_frames, 0);
+  CHECK(n == reference_n && same_frames(out, reference, n));
+  duo_session_free(t);
+  free(mem);
+
+  /* A top-k session: finite, and reproducible for one rng_seed. */
+  c.sampling = DUO_SAMPLING_TOP_K;
+  c.top_k = 3;
+  c.rng_seed = 7;
+  EXPECT(duo_session_new(m, &c, seed, &s), DUO_OK);
+  n = drive(s, out, n_frames, 0);
+  CHECK(n == reference_n);
+  {
+    duo_follower_frame *again = (duo_follower_frame *)malloc(n_frames * sizeof *again);
+    EXPECT(duo_session_reset(s, seed), DUO_OK);
+    CHECK(drive(s, again, n_frames, 0) == n && same_frames(out, again, n));
+    free(again);
+  }
+  duo_session_free(s);
+  free(out);
+}
+
+struct worker {
+  duo_model *model;
+  int ok;
+};
+
+static void *worker_main(void *arg) {
+  struct worker *w = (struct worker *)arg;
+  duo_session_config c;
+  duo_session *s = NULL;
+  duo_follower_frame *out = (duo_follower_frame *)malloc(n_frames * sizeof *out);
+  size_t n;
+  int round;
+  w->ok = duo_session_config_minimum(w->model, &c) == DUO_OK &&
+          duo_session_new(w->model, &c, seed, &s) == DUO_OK;
+  for (round = 0; round < 2 && w->ok; round++) {
+    n = drive(s, out, n_frames, round);
+    w->ok = n == reference_n && same_frames(out, reference, n) && duo_session_reset(s, seed) == DUO_OK;
+  }
+  /* Errors are per thread. */
+  if (w->ok) {
+    char msg[64];
+    w->ok = duo_session_push_leader(s, NULL) == DUO_NULL_PARAMETER &&
+            duo_last_error_message(msg, sizeof msg) > 0;
+  }
+  duo_session_free(s);
+  free(out);
+  return NULL;
+}
+
+static void test_threads(duo_model *m) {
+  pthread_t th[4];
+  struct worker w[4];
+  int i;
+  for (i = 0; i < 4; i++) {
+    w[i].model = m;
+    w[i].ok = 0;
+    CHECK(pthread_create(&th[i], NULL, worker_main, &w[i]) == 0);
+  }
+  for (i = 0; i < 4; i++) {
+    CHECK(pthread_join(th[i], NULL) == 0);
+    CHECK(w[i].ok);
+  }
+}
+
+static void test_model_freed_first(void) {
+  duo_model *m = NULL;
+  duo_session *s = NULL;
+  duo_session_config c;
+  duo_follower_frame f;
+  size_t i, got = 0;
+  EXPECT(duo_model_open_file(model_path, &m), DUO_OK);
+  EXPECT(duo_session_config_minimum(m, &c), DUO_OK);
+  EXPECT(duo_session_new(m, &c, seed, &s), DUO_OK);
+  duo_model_free(m); /* the session keeps the weights alive */
+  EXPECT(duo_session_set_music_track(s, music, n_frames * 54), DUO_OK);
+  for (i = 0; i < 40; i++) {
+    EXPECT(duo_session_push_leader(s, &leader[i]), DUO_OK);
+    while (duo_session_pull_follower(s, &f) == DUO_OK) {
+      CHECK(got < reference_n && memcmp(&f, &reference[got], sizeof f) == 0);
+      got++;
+    }
+  }
+  CHECK(got > 0);
+  duo_session_free(s);
+}
+
+int main(int argc, char **argv) {
+  duo_model *m = NULL;
+  if (argc < 2 || strlen(argv[1]) > 1000) {
+    fprintf(stderr, "usage: %s <repo root>\n", argv[0]);
+    return 2;
+  }
+  strcpy(root_dir, argv[1]);
+  sprintf(model_path, "%s/tests/fixtures/tiny/model.duo", root_dir);
+  if (!load_inputs()) {
+    fprintf(stderr, "cannot read the fixture inputs under %s\n", root_dir);
+    return 2;
+  }
+  test_errors_and_version();
+  test_conversions();
+  test_model_open(&m);
+  test_session_errors(m);
+  test_sessions(m);
+  test_threads(m);
+  test_model_freed_first();
+  duo_model_free(m);
+  free(reference);
+  free(leader);
+  free(music);
+  if (failures) {
+    fprintf(stderr, "test_duolando: %d check(s) failed\n", failures);
+    return 1;
+  }
+  printf("test_duolando: all checks passed (%zu leader frames, %zu follower frames per run)\n", n_frames, reference_n);
+  return 0;
+}
