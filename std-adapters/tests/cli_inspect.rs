@@ -25,7 +25,8 @@ fn inspect_prints_the_tiny_config() {
         "dtype f32",
         "parameters",
         "R mode is offline",
-        "not available yet (streaming session not built)",
+        "reference    a 29 e 22 d 22 shift 22: latency 291 frames (9.70 s)",
+        "minimum      a 0 e 0 d 0 shift 22: latency 0 frames (0.00 s)",
     ] {
         assert!(s.contains(want), "missing '{want}' in:\n{s}");
     }
@@ -51,7 +52,18 @@ fn inspect_json_parses_and_agrees_with_the_file() {
     assert_eq!((r["steps"].as_u64(), r["output_frames"].as_u64()), (Some(120), Some(484)));
     assert!(v["r_mode"]["one_minute"]["scratch_bytes"].as_u64().unwrap() > 0);
     assert_eq!(v["r_mode"]["one_minute"]["input_frames"], 1800);
-    assert!(v["streaming"]["latency"].as_str().unwrap().contains("not available yet"));
+    // The tiny fixture has the published geometry: e_max = d_max = 22 (docs/STREAMING.md §1).
+    assert_eq!((v["streaming"]["enc_future_max"].as_u64(), v["streaming"]["dec_future_max"].as_u64()), (Some(22), Some(22)));
+    let b = &v["streaming"]["budgets"];
+    assert_eq!(b[0]["latency_frames"], 291);
+    assert_eq!(b[1]["latency_frames"], 31);
+    assert_eq!(b[2]["latency_frames"], 0);
+    // The arena figure is Model::session_bytes of that budget.
+    let file = duolando::model_file::ModelFile::open(&m).unwrap();
+    let duo = file.duo().unwrap();
+    let model = duolando_core::model::Model::from_duo(&duo).unwrap();
+    let sc = duolando_core::session::SessionConfig::reference(&model.cfg);
+    assert_eq!(b[0]["arena_bytes"].as_u64(), Some(model.session_bytes(&sc).unwrap() as u64));
 }
 
 #[test]

@@ -1,10 +1,11 @@
 //! `duolando inspect model.duo [--frames N] [--json]`: what a `.duo` model
 //! holds and what running it costs — the whole config, parameter count,
 //! file size, dtypes, tensor count, R-mode scratch for one minute of input,
-//! output frames for `--frames` input frames, and latency.
+//! output frames for `--frames` input frames, and the latency and session
+//! arena of streaming budgets.
 //!
 //! Reads only the header and tensor table (the file is validated as a whole
-//! by [`ModelFile::open`]); no weights are touched.
+//! by [`ModelFile::open`]) and binds the model (no weight is read).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -12,6 +13,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use duolando_core::config::{LatConfig, ModelConfig, VqConfig};
 use duolando_core::exact;
+use duolando_core::model::Model;
+use duolando_core::session::{dec_future_max, enc_future_max, SessionConfig};
 use duolando_core::tensor::DType;
 use serde_json::{json, Value};
 
@@ -106,9 +109,40 @@ pub fn report(model: &std::path::Path, frames: usize) -> Result<Value> {
             "requested": run(frames),
             "latency": "R mode is offline: it needs the whole leader clip and music before the first output frame",
         },
-        "streaming": {
-            "latency": "not available yet (streaming session not built)",
-        },
+        "streaming": streaming(&duo)?,
+    }))
+}
+
+/// Latency and session arena per streaming budget (docs/STREAMING.md §2):
+/// the reference preset, an interactive example, the minimum.
+fn streaming(duo: &duolando_core::format::DuoFile<'_>) -> Result<Value> {
+    let model = Model::from_duo(duo).map_err(|e| anyhow::anyhow!("the model cannot be bound: {e:?}"))?;
+    let cfg = &model.cfg;
+    let hop = cfg.hop() as u32;
+    let reference = SessionConfig::reference(cfg);
+    let interactive = SessionConfig::with(cfg, 4.min(cfg.gpt.look_forward), 2.min(enc_future_max(cfg)), 2.min(dec_future_max(cfg)), reference.shift);
+    let budgets: Vec<Value> = [("reference", reference), ("interactive", interactive), ("minimum", SessionConfig::minimum(cfg))]
+        .iter()
+        .map(|(name, sc)| {
+            let lat = sc.latency_frames(hop);
+            json!({
+                "budget": name,
+                "lookahead": sc.lookahead,
+                "enc_future": sc.enc_future,
+                "dec_future": sc.dec_future,
+                "shift": sc.shift,
+                "music_lookahead": sc.music_lookahead,
+                "latency_frames": lat,
+                "latency_seconds": lat as f64 / FPS as f64,
+                "arena_bytes": model.session_bytes(sc).ok(),
+            })
+        })
+        .collect();
+    Ok(json!({
+        "enc_future_max": enc_future_max(cfg),
+        "dec_future_max": dec_future_max(cfg),
+        "latency": "hop * (lookahead + enc_future + dec_future) - 1 frames (at least 0), with music known ahead",
+        "budgets": budgets,
     }))
 }
 
@@ -207,7 +241,26 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
     line(format!("  1 min: {}", run_lines(&r["r_mode"]["one_minute"])));
     line(format!("  --frames: {}", run_lines(&r["r_mode"]["requested"])));
     line(format!("  latency: {}", r["r_mode"]["latency"].as_str().unwrap_or("")));
-    line(format!("streaming latency: {}", r["streaming"]["latency"].as_str().unwrap_or("")));
+    let st = &r["streaming"];
+    line(format!(
+        "streaming (S): latency = {}; enc_future_max {}, dec_future_max {}",
+        st["latency"].as_str().unwrap_or(""),
+        st["enc_future_max"],
+        st["dec_future_max"]
+    ));
+    for b in st["budgets"].as_array().into_iter().flatten() {
+        line(format!(
+            "  {:<12} a {} e {} d {} shift {}: latency {} frames ({:.2} s), session arena {}",
+            b["budget"].as_str().unwrap_or(""),
+            b["lookahead"],
+            b["enc_future"],
+            b["dec_future"],
+            b["shift"],
+            b["latency_frames"],
+            b["latency_seconds"].as_f64().unwrap_or(0.0),
+            b["arena_bytes"].as_u64().map(mib).unwrap_or_else(|| "?".into())
+        ));
+    }
     s
 }
 
