@@ -105,7 +105,8 @@ fn no_allocation_after_new_and_the_arena_is_exact() {
     let model = Model::from_duo(&duo).unwrap();
     let n_music = model.cfg.gpt.music.n_in as usize;
     let c = clip();
-    for sc in [SessionConfig::reference(&model.cfg), SessionConfig::minimum(&model.cfg), live_config(&model)] {
+    let staggered = SessionConfig { staggered: true, ..SessionConfig::reference(&model.cfg) };
+    for sc in [SessionConfig::reference(&model.cfg), SessionConfig::minimum(&model.cfg), live_config(&model), staggered] {
         let bytes = model.session_bytes(&sc).unwrap();
         // Exactly `bytes` at the worst alignment (63 bytes past a line) is enough.
         let mut buf = vec![0u8; bytes + 64];

@@ -75,5 +75,6 @@ fn setting_name(s: duolando_core::session::Setting) -> &'static str {
         TopK => "topk",
         PendingFrames => "pending_frames",
         MusicBuffer => "music_buffer_frames",
+        Windows => "staggered (GPT caches needed)",
     }
 }

@@ -41,6 +41,48 @@ pub struct SessionConfig {
     /// Music frames that may wait in the session (pushed, not yet read by
     /// the music LAT) before `push_music_frame` answers `Backlog`.
     pub music_buffer_frames: u32,
+    /// GPT cache schedule (same values either way, docs/STREAMING.md §3.5):
+    /// false = one cache, re-prefilled when the window jumps (least memory,
+    /// a spike of `shift` rows every chunk); true = one cache per live
+    /// window, each fed one row per step (flat cost, [`window_pool`] caches).
+    pub staggered: bool,
+}
+
+/// Most GPT caches a staggered session may hold.
+pub const MAX_WINDOWS: usize = 16;
+
+/// Start (token index) of the GPT window of step `k`.
+pub fn window_start(k: usize, m: usize, s: usize) -> usize {
+    k + 1 - window_context(k, m, s)
+}
+
+/// Calls `f(lo)` for every window start `lo <= k` of a step `>= k`: the
+/// windows that contain token row `k` and are still to be used, in
+/// increasing order (the window starts never decrease).
+pub fn for_each_live_window(k: usize, m: usize, s: usize, mut f: impl FnMut(usize)) {
+    let mut last = None;
+    for k2 in k..k + m.max(1) {
+        let lo = window_start(k2, m, s);
+        if lo > k {
+            break;
+        }
+        if last != Some(lo) {
+            f(lo);
+            last = Some(lo);
+        }
+    }
+}
+
+/// Caches a staggered schedule needs: the most windows live at one step
+/// (the schedule is periodic after step `m`, so `3m + 2` steps cover it).
+pub fn window_pool(m: usize, s: usize) -> usize {
+    let mut most = 0;
+    for k in 0..3 * m + 2 {
+        let mut n = 0;
+        for_each_live_window(k, m, s, |_| n += 1);
+        most = most.max(n);
+    }
+    most
 }
 
 /// A setting outside its range (`Error::Setting`).
@@ -55,6 +97,8 @@ pub enum Setting {
     TopK,
     PendingFrames,
     MusicBuffer,
+    /// GPT caches a staggered schedule needs (value) above [`MAX_WINDOWS`].
+    Windows,
 }
 
 /// Largest `pending_frames` / `music_buffer_frames` (keeps every size far
@@ -104,6 +148,7 @@ impl SessionConfig {
             sampling: Sampling::Greedy,
             pending_frames: 64,
             music_buffer_frames: 4 * (2 * lf + 2 * enc_future_max(cfg) + 8),
+            staggered: false,
         }
     }
 
@@ -125,6 +170,10 @@ impl SessionConfig {
         // The music LAT reads 4 frames per step ahead of what it has consumed.
         let min_music = 4 * cfg.music_motion_rate;
         range(Setting::MusicBuffer, self.music_buffer_frames, min_music, MAX_BUFFER_FRAMES)?;
+        if self.staggered {
+            let pool = window_pool(m as usize, self.shift as usize) as u32;
+            range(Setting::Windows, pool, 1, MAX_WINDOWS as u32)?;
+        }
         Ok(())
     }
 
@@ -161,5 +210,43 @@ mod tests {
         assert_eq!(&c[30..40], &[22, 23, 24, 25, 26, 27, 28, 29, 22, 23]);
         // s = m: sliding window.
         assert!((29..100).all(|k| window_context(k, 29, 29) == 29));
+    }
+
+    #[test]
+    fn live_windows_cover_every_step_that_reads_a_row() {
+        for (m, s) in [(29, 22), (29, 15), (29, 8), (29, 27), (7, 5), (7, 7), (29, 1)] {
+            let pool = window_pool(m, s);
+            for k in 0..200 {
+                let mut live: [usize; 64] = [usize::MAX; 64];
+                let mut n = 0;
+                for_each_live_window(k, m, s, |lo| {
+                    live[n] = lo;
+                    n += 1;
+                });
+                assert!(n <= pool, "m {m} s {s} k {k}: {n} > pool {pool}");
+                // Brute force: every later step whose window contains row k has its start listed.
+                for k2 in k..k + 2 * m {
+                    let lo = window_start(k2, m, s);
+                    if lo <= k {
+                        assert!(live[..n].contains(&lo), "m {m} s {s} k {k}: window {lo} of step {k2} missing");
+                    }
+                }
+                assert!(live[..n].contains(&window_start(k, m, s)));
+            }
+        }
+        // docs/STREAMING.md §3.5: ceil(m / (m - s + 1)) caches in steady state (4 at s = 22, 2 at
+        // s = 15 and 8, 10 at s = 27), one more during start-up for the one-step window of step 29.
+        let steady = |s: usize| {
+            (60..200)
+                .map(|k| {
+                    let mut n = 0;
+                    for_each_live_window(k, 29, s, |_| n += 1);
+                    n
+                })
+                .max()
+                .unwrap()
+        };
+        assert_eq!([steady(22), steady(15), steady(8), steady(27)], [4, 2, 2, 10]);
+        assert_eq!([window_pool(29, 22), window_pool(29, 15), window_pool(29, 8), window_pool(29, 27)], [5, 3, 3, 11]);
     }
 }

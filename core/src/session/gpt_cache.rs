@@ -73,11 +73,12 @@ impl<'s> GptCache<'s> {
     }
 
     /// Appends `n` window rows `x` (n * streams, C) (inputs with position
-    /// rows added) and runs every layer over them. On return, the last
-    /// `FOLLOWER_STREAMS` rows of `x` hold the final hidden state of the
-    /// follower streams at the last new row (what the heads read); other
-    /// rows of `x` are scratch.
-    pub fn append(&mut self, gpt: &GptW<'_>, n_head: usize, x: &mut [f32], s: &mut BlockScratch<'_>) -> Result<(), Error> {
+    /// rows added) and runs every layer over them. With `need_output`, on
+    /// return the last `FOLLOWER_STREAMS` rows of `x` hold the final hidden
+    /// state of the follower streams at the last new row (what the heads
+    /// read); without it the last layer's attention and MLP are skipped
+    /// (only its K/V are kept). Other rows of `x` are scratch.
+    pub fn append(&mut self, gpt: &GptW<'_>, n_head: usize, x: &mut [f32], need_output: bool, s: &mut BlockScratch<'_>) -> Result<(), Error> {
         let (st, c) = (self.streams, self.c);
         let n = x.len() / (st * c).max(1);
         if n == 0 || x.len() != n * st * c || self.rows + n > self.m || gpt.base.len() + gpt.head.len() != self.layers {
@@ -92,7 +93,7 @@ impl<'s> GptCache<'s> {
             let (kr, vr) = (&kl[..r1 * c], &vl[..r1 * c]);
             if l + 1 < self.layers {
                 block_attend(b, x, kr, vr, c, n_head, &RowCausal { streams: st, q_row0: r0 }, s);
-            } else {
+            } else if need_output {
                 // Last layer: only the follower rows of the last new row are read.
                 let q0 = r1 - FOLLOWER_STREAMS;
                 let xs = &mut x[(q0 - r0) * c..];

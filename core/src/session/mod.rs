@@ -23,7 +23,7 @@ pub mod lat_stream;
 pub mod ring;
 mod state;
 
-pub use config::{dec_future_max, enc_future_max, window_context, Sampling, SessionConfig, Setting};
+pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
 use crate::arena::{Arena, Planner};
 use crate::config::{Part, POSE_DIM, ROT_DIM};
@@ -418,38 +418,56 @@ impl<'a> Session<'a> {
     fn step(&mut self) -> Result<(), Error> {
         let model = self.model;
         let g = &model.cfg.gpt;
-        let (e, bs) = (g.n_embd as usize, g.block_size as usize);
+        let e = g.n_embd as usize;
         let streams = g.n_streams as usize;
-        let m = bs - 1;
+        let m = g.block_size as usize - 1;
         let k = self.k;
-        let c = window_context(k, m, self.cfg.shift as usize);
+        let s = self.cfg.shift as usize;
+        let c = window_context(k, m, s);
         let lo = k + 1 - c;
-        let st = &mut self.st;
-        let first = if st.gpt.window_start() == Some(lo) { k } else {
-            st.gpt.restart(lo);
-            lo
-        };
-        // (n, 10, C) inputs of window rows first..=k, position-major.
-        let n = k + 1 - first;
-        let x = &mut st.x[..n * streams * e];
-        for (r, j) in (first..=k).enumerate() {
-            let i = j - lo;
-            for s in 0..streams {
-                let dst = &mut x[(r * streams + s) * e..(r * streams + s + 1) * e];
-                if s < FIRST_FOLLOWER_STREAM {
-                    dst.copy_from_slice(st.cond[s].row(j)?);
-                } else {
-                    let f = s - FIRST_FOLLOWER_STREAM;
-                    let tok = st.toks.row(j)?[f];
-                    model.gpt.tok_emb[follower_table(f)].row_into(tok as usize, dst);
-                }
-                let pos = &model.gpt.pos_emb[(s * bs + i) * e..(s * bs + i + 1) * e];
-                for (a, b) in dst.iter_mut().zip(pos) {
-                    *a += b;
+        let mut rows = 0;
+        let mut current = None;
+        if self.cfg.staggered {
+            // Every window that contains row k and is still to be used gets row k.
+            let st = &mut self.st;
+            let mut live: heapless::Vec<usize, { config::MAX_WINDOWS }> = heapless::Vec::new();
+            let mut over = false;
+            for_each_live_window(k, m, s, |w| over |= live.push(w).is_err());
+            if over {
+                return Err(Error::Setting { setting: Setting::Windows, value: live.len() as u32 + 1, max: config::MAX_WINDOWS as u32 });
+            }
+            // The current window (the smallest start) last, so its output stays in `x`.
+            for &w in live.iter().rev() {
+                let slot = match st.gpt.iter().position(|c| c.window_start() == Some(w)) {
+                    Some(i) => i,
+                    None => {
+                        // A free cache: one whose window is not live any more.
+                        let i = st.gpt.iter().position(|c| c.window_start().is_none_or(|x| !live.contains(&x))).ok_or(Error::Evicted { index: w, oldest: k, len: st.gpt.len() })?;
+                        st.gpt[i].restart(w);
+                        i
+                    }
+                };
+                let first = w + st.gpt[slot].rows();
+                rows += k + 1 - first;
+                let need_output = w == lo;
+                Self::append_rows(model, st, slot, w, first, k, need_output)?;
+                if need_output {
+                    current = Some(k + 1 - first);
                 }
             }
+        } else {
+            let st = &mut self.st;
+            let first = if st.gpt[0].window_start() == Some(lo) { k } else {
+                st.gpt[0].restart(lo);
+                lo
+            };
+            rows = k + 1 - first;
+            Self::append_rows(model, st, 0, lo, first, k, true)?;
+            current = Some(rows);
         }
-        st.gpt.append(&model.gpt, g.n_head as usize, x, &mut st.block_scratch)?;
+        let n = current.ok_or(Error::Evicted { index: lo, oldest: k, len: 0 })?;
+        let st = &mut self.st;
+        let x = &st.x[..n * streams * e];
         let last = &x[(n * streams - FOLLOWER_STREAMS) * e..];
         let mut pred = [0u32; 5];
         let mut off = 0;
@@ -471,9 +489,39 @@ impl<'a> Session<'a> {
             None => pred,
         };
         st.toks.push(&token)?;
-        self.last_step = Some(StepReport { k, context: c, window_lo: lo, rows_computed: n, pred, token });
+        self.last_step = Some(StepReport { k, context: c, window_lo: lo, rows_computed: rows, pred, token });
         self.k += 1;
         self.feed_decoders(token)
+    }
+
+    /// Builds the inputs of token rows `first..=k` of the window starting at
+    /// `lo` (position rows added) in `st.x` and appends them to cache `slot`.
+    /// With `need_output` the last row's follower features end up in `st.x`.
+    fn append_rows(model: &Model<'_>, st: &mut State<'_>, slot: usize, lo: usize, first: usize, k: usize, need_output: bool) -> Result<(), Error> {
+        let g = &model.cfg.gpt;
+        let (e, bs) = (g.n_embd as usize, g.block_size as usize);
+        let streams = g.n_streams as usize;
+        // (n, 10, C) inputs of window rows first..=k, position-major.
+        let n = k + 1 - first;
+        let x = &mut st.x[..n * streams * e];
+        for (r, j) in (first..=k).enumerate() {
+            let i = j - lo;
+            for s in 0..streams {
+                let dst = &mut x[(r * streams + s) * e..(r * streams + s + 1) * e];
+                if s < FIRST_FOLLOWER_STREAM {
+                    dst.copy_from_slice(st.cond[s].row(j)?);
+                } else {
+                    let f = s - FIRST_FOLLOWER_STREAM;
+                    let tok = st.toks.row(j)?[f];
+                    model.gpt.tok_emb[follower_table(f)].row_into(tok as usize, dst);
+                }
+                let pos = &model.gpt.pos_emb[(s * bs + i) * e..(s * bs + i + 1) * e];
+                for (a, b) in dst.iter_mut().zip(pos) {
+                    *a += b;
+                }
+            }
+        }
+        st.gpt[slot].append(&model.gpt, g.n_head as usize, x, need_output, &mut st.block_scratch)
     }
 
     /// Feeds follower token `token` to the 9 decoders; once token `q + d`

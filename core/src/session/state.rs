@@ -9,7 +9,8 @@ use crate::error::Error;
 use crate::gpt::logits_len;
 use crate::model::Model;
 use crate::quantizer::codebook_norms;
-use crate::session::config::SessionConfig;
+use crate::session::config::{window_pool, SessionConfig, MAX_WINDOWS};
+use heapless::Vec;
 use crate::session::gpt_cache::GptCache;
 use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
 use crate::session::ring::{RowRing, TokenRing};
@@ -48,7 +49,9 @@ pub struct State<'s> {
     pub cond_slack: usize,
     /// (m + 1, 5) follower history.
     pub toks: TokenRing<'s>,
-    pub gpt: GptCache<'s>,
+    /// GPT K/V caches: one (re-prefill schedule) or one per live window
+    /// (staggered schedule).
+    pub gpt: Vec<GptCache<'s>, MAX_WINDOWS>,
     /// (10 m, C) window rows being appended, position-major.
     pub x: &'s mut [f32],
     /// (sum of head rows) logits of one step.
@@ -128,6 +131,12 @@ impl<'s> State<'s> {
         let [r0, r1, r2, r3] = dec_rot;
         let dec_rot = [r0?, r1?, r2?, r3?];
 
+        let n_caches = if sc.staggered { window_pool(m, sc.shift as usize) } else { 1 };
+        let mut gpt = Vec::new();
+        for _ in 0..n_caches.min(MAX_WINDOWS) {
+            let cache = GptCache::carve(a, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c)?;
+            gpt.push(cache).map_err(|_| ov())?;
+        }
         let latency = sc.latency_frames(hop as u32) as usize;
         let roots_cap = latency + 2 + sc.pending_frames as usize;
         let keys = max_keys(past * mds, am * mds).max(max_keys(past * lds, la * lds));
@@ -146,7 +155,7 @@ impl<'s> State<'s> {
             cond,
             cond_slack,
             toks: TokenRing::carve(a, m + 1, 5)?,
-            gpt: GptCache::carve(a, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c)?,
+            gpt,
             x: a.f32(streams.checked_mul(m).and_then(|v| v.checked_mul(c)).ok_or(ov())?)?,
             logits: a.f32(logits_len(cfg))?,
             dec_pos,
@@ -184,7 +193,9 @@ impl<'s> State<'s> {
             r.clear();
         }
         self.toks.clear();
-        self.gpt.reset();
+        for g in self.gpt.iter_mut() {
+            g.reset();
+        }
         self.pending.clear();
         self.roots.clear();
     }

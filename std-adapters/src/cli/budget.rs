@@ -41,6 +41,10 @@ pub struct BudgetArgs {
     /// RNG seed of top-k sampling (deterministic for a given seed).
     #[arg(long, default_value_t = 0)]
     pub rng_seed: u64,
+    /// One GPT cache per live window, fed one row per step: a flat cost per
+    /// step instead of a re-prefill spike at every window jump (more memory).
+    #[arg(long)]
+    pub staggered: bool,
 }
 
 impl BudgetArgs {
@@ -60,6 +64,7 @@ impl BudgetArgs {
         if let Some(m) = self.music_lookahead {
             sc.music_lookahead = m;
         }
+        sc.staggered = self.staggered;
         if let Some(k) = self.topk {
             sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };
         }
@@ -82,5 +87,6 @@ fn flag(s: duolando_core::session::Setting) -> &'static str {
         TopK => "topk",
         PendingFrames => "pending-frames",
         MusicBuffer => "music-buffer-frames",
+        Windows => "staggered",
     }
 }
