@@ -25,6 +25,58 @@ fn check(name: &str) {
     check_schedule(name, true);
 }
 
+/// The golden's model, inputs, config and seed.
+fn setup(name: &str) -> (Value, std::path::PathBuf, std::path::PathBuf) {
+    let dir = fixture(&format!("streaming_{name}"));
+    let text = std::fs::read_to_string(dir.join("meta.json")).unwrap().replace("-Infinity", "null").replace("Infinity", "null");
+    let meta: Value = serde_json::from_str(&text).unwrap();
+    let inputs = dir.join(meta["inputs"].as_str().unwrap());
+    (meta, dir, inputs)
+}
+
+/// An f16 K/V cache on every golden: tokens agreement and motion error
+/// against the f32 golden (a measurement with a floor, not exactness:
+/// random-weight decisions have margins down to 1e-3).
+#[test]
+fn f16_kv_cache_tracks_the_goldens() {
+    let (mut agree, mut total, mut worst) = (0usize, 0usize, 0.0f32);
+    for name in ["tiny_default", "tiny_long_low", "tiny_minimum", "tiny_mid_odd", "tiny2_default"] {
+        let (meta, dir, inputs) = setup(name);
+        let file = ModelFile::open(fixture(&format!("{}/model.duo", meta["model"].as_str().unwrap()))).unwrap();
+        let duo = file.duo().unwrap();
+        let model = Model::from_duo(&duo).unwrap();
+        let leader = read_f32_2d(&inputs.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
+        let music = read_f32_2d(&inputs.join("music.npy"), None, "music").unwrap();
+        let c = &meta["config"];
+        let get = |k: &str| c[k].as_u64().unwrap() as u32;
+        let mut cfg = SessionConfig::with(&model.cfg, get("lookahead"), get("enc_future"), get("dec_future"), get("shift"));
+        let f32_bytes = model.session_bytes(&cfg).unwrap();
+        cfg.kv = duolando_core::session::KvType::F16;
+        let f16_bytes = model.session_bytes(&cfg).unwrap();
+        assert!(f16_bytes < f32_bytes, "{name}: f16 K/V arena {f16_bytes} >= f32 {f32_bytes}");
+        let seed: [u32; 5] = ints(&dir, "seed_tokens.npy").iter().map(|&t| t as u32).collect::<Vec<_>>().try_into().unwrap();
+        let t4 = meta["T4"].as_u64().unwrap() as usize;
+        let run = run_streaming(&model, &leader.data[..t4 * 165], &music.data, &cfg, seed, None, &mut |_, _| {}).unwrap();
+        let want = ints(&dir, "tokens.npy");
+        let got = as_i64(&run.tokens);
+        let n = got.len().min(want.len());
+        let same = got[..n].iter().zip(&want[..n]).filter(|(a, b)| a == b).count();
+        let first = got.iter().zip(&want).position(|(a, b)| a != b);
+        let pos = read_f32_2d(&dir.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
+        let (err, _) = max_errors(&run.pos[..run.pos.len().min(pos.data.len())], &pos.data[..run.pos.len().min(pos.data.len())]);
+        eprintln!("{name} f16 kv (arena {f16_bytes} vs {f32_bytes} bytes): {same}/{n} tokens equal (first difference at flat index {first:?}), max |pos err| {err:.2e} m");
+        if first.is_none() {
+            worst = worst.max(err);
+        }
+        agree += same;
+        total += n;
+    }
+    let rate = agree as f64 / total as f64;
+    eprintln!("f16 kv: token agreement {rate:.4} over {total} tokens; max |pos err| where tokens agree {worst:.2e} m");
+    assert!(rate >= 0.9, "f16 K/V agreement {rate}");
+    assert!(worst <= 1e-3, "f16 K/V motion error {worst}");
+}
+
 /// `staggered`: one GPT cache per live window instead of re-prefills (same values).
 fn check_schedule(name: &str, staggered: bool) {
     let dir = fixture(&format!("streaming_{name}"));

@@ -31,6 +31,8 @@ pub trait Carve<'a> {
     fn f32(&mut self, n: usize) -> Result<&'a mut [f32], ArenaError>;
     /// `n` u32 values, zeroed.
     fn u32(&mut self, n: usize) -> Result<&'a mut [u32], ArenaError>;
+    /// `n` u16 values (f16 bits), zeroed.
+    fn u16(&mut self, n: usize) -> Result<&'a mut [u16], ArenaError>;
 }
 
 /// Bytes an allocation of `n` elements of `size` bytes occupies.
@@ -96,6 +98,10 @@ impl<'a> Carve<'a> for Arena<'a> {
         let b = self.bytes(n, 4)?;
         bytemuck::try_cast_slice_mut(b).map_err(|_| ArenaError::Overflow)
     }
+    fn u16(&mut self, n: usize) -> Result<&'a mut [u16], ArenaError> {
+        let b = self.bytes(n, 2)?;
+        bytemuck::try_cast_slice_mut(b).map_err(|_| ArenaError::Overflow)
+    }
 }
 
 /// Counts the bytes a carve function needs, with the same rounding as
@@ -132,6 +138,10 @@ impl<'a> Carve<'a> for Planner {
     }
     fn u32(&mut self, n: usize) -> Result<&'a mut [u32], ArenaError> {
         self.add(rounded(n, 4)?)?;
+        Ok(&mut [])
+    }
+    fn u16(&mut self, n: usize) -> Result<&'a mut [u16], ArenaError> {
+        self.add(rounded(n, 2)?)?;
         Ok(&mut [])
     }
 }

@@ -3,6 +3,7 @@
 //! schedule, latency in frames.
 
 use crate::config::ModelConfig;
+use crate::session::gpt_cache::KvType;
 use crate::stream_conv::{future_max, StackKind};
 
 /// How the follower token of each head is chosen.
@@ -46,6 +47,8 @@ pub struct SessionConfig {
     /// a spike of `shift` rows every chunk); true = one cache per live
     /// window, each fed one row per step (flat cost, [`window_pool`] caches).
     pub staggered: bool,
+    /// Element type of the GPT K/V cache (f16: half the cache bytes).
+    pub kv: KvType,
 }
 
 /// Most GPT caches a staggered session may hold.
@@ -149,6 +152,7 @@ impl SessionConfig {
             pending_frames: 64,
             music_buffer_frames: 4 * (2 * lf + 2 * enc_future_max(cfg) + 8),
             staggered: false,
+            kv: KvType::F32,
         }
     }
 

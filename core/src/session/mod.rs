@@ -23,6 +23,7 @@ pub mod lat_stream;
 pub mod ring;
 mod state;
 
+pub use gpt_cache::KvType;
 pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
 use crate::arena::{Arena, Planner};
@@ -521,7 +522,7 @@ impl<'a> Session<'a> {
                 }
             }
         }
-        st.gpt[slot].append(&model.gpt, g.n_head as usize, x, need_output, &mut st.block_scratch)
+        st.gpt[slot].append(&model.gpt, g.n_head as usize, x, need_output, &mut st.kv, &mut st.block_scratch)
     }
 
     /// Feeds follower token `token` to the 9 decoders; once token `q + d`

@@ -11,7 +11,7 @@ use crate::model::Model;
 use crate::quantizer::codebook_norms;
 use crate::session::config::{window_pool, SessionConfig, MAX_WINDOWS};
 use heapless::Vec;
-use crate::session::gpt_cache::GptCache;
+use crate::session::gpt_cache::{GptCache, KvScratch};
 use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
 use crate::session::ring::{RowRing, TokenRing};
 use crate::stream_conv::{StackKind, StreamScratch, StreamStack};
@@ -52,6 +52,8 @@ pub struct State<'s> {
     /// GPT K/V caches: one (re-prefill schedule) or one per live window
     /// (staggered schedule).
     pub gpt: Vec<GptCache<'s>, MAX_WINDOWS>,
+    /// f32 view of one layer of an f16 K/V cache (empty for f32).
+    pub kv: KvScratch<'s>,
     /// (10 m, C) window rows being appended, position-major.
     pub x: &'s mut [f32],
     /// (sum of head rows) logits of one step.
@@ -134,7 +136,7 @@ impl<'s> State<'s> {
         let n_caches = if sc.staggered { window_pool(m, sc.shift as usize) } else { 1 };
         let mut gpt = Vec::new();
         for _ in 0..n_caches.min(MAX_WINDOWS) {
-            let cache = GptCache::carve(a, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c)?;
+            let cache = GptCache::carve(a, sc.kv, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c)?;
             gpt.push(cache).map_err(|_| ov())?;
         }
         let latency = sc.latency_frames(hop as u32) as usize;
@@ -156,6 +158,7 @@ impl<'s> State<'s> {
             cond_slack,
             toks: TokenRing::carve(a, m + 1, 5)?,
             gpt,
+            kv: KvScratch::carve(a, sc.kv, streams, m, c)?,
             x: a.f32(streams.checked_mul(m).and_then(|v| v.checked_mul(c)).ok_or(ov())?)?,
             logits: a.f32(logits_len(cfg))?,
             dec_pos,

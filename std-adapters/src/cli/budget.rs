@@ -45,6 +45,16 @@ pub struct BudgetArgs {
     /// step instead of a re-prefill spike at every window jump (more memory).
     #[arg(long)]
     pub staggered: bool,
+    /// Element type of the GPT K/V cache.
+    #[arg(long, value_enum, default_value = "f32")]
+    pub kv: Kv,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum Kv {
+    F32,
+    /// Half the cache bytes; rows rounded to f16.
+    F16,
 }
 
 impl BudgetArgs {
@@ -65,6 +75,10 @@ impl BudgetArgs {
             sc.music_lookahead = m;
         }
         sc.staggered = self.staggered;
+        sc.kv = match self.kv {
+            Kv::F32 => duolando_core::session::KvType::F32,
+            Kv::F16 => duolando_core::session::KvType::F16,
+        };
         if let Some(k) = self.topk {
             sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };
         }
