@@ -254,3 +254,27 @@ mod tests {
         assert_eq!([window_pool(29, 22), window_pool(29, 15), window_pool(29, 8), window_pool(29, 27)], [5, 3, 3, 11]);
     }
 }
+
+#[cfg(test)]
+mod published {
+    use super::*;
+    use crate::session::{session_bytes_for, KvType};
+
+    /// Arena of a full-size (published config) session, from the config
+    /// alone; figures quoted in docs/STREAMING.md §4.
+    #[test]
+    fn published_session_arena() {
+        let cfg = crate::presets::duolando_published();
+        let r = SessionConfig::reference(&cfg);
+        let f32kv = session_bytes_for(&cfg, &r).unwrap();
+        let f16kv = session_bytes_for(&cfg, &SessionConfig { kv: KvType::F16, ..r }).unwrap();
+        let stag = session_bytes_for(&cfg, &SessionConfig { staggered: true, ..r }).unwrap();
+        let min = session_bytes_for(&cfg, &SessionConfig::minimum(&cfg)).unwrap();
+        // One f32 cache is 12 layers x 2 x (10 x 29 x 768) floats = 21.4 MB (§4).
+        let cache = 12 * 2 * 10 * 29 * 768 * 4;
+        assert!(f32kv > cache && f32kv < cache + 40_000_000, "{f32kv}");
+        assert!(f16kv < f32kv - cache / 3, "{f16kv} vs {f32kv}");
+        assert!(stag > f32kv + 3 * cache, "{stag}");
+        std::println!("published arena: reference f32 KV {f32kv} B, f16 KV {f16kv} B, staggered f32 {stag} B, minimum {min} B");
+    }
+}

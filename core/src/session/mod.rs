@@ -27,7 +27,7 @@ pub use gpt_cache::KvType;
 pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
 use crate::arena::{Arena, Planner};
-use crate::config::{Part, POSE_DIM, ROT_DIM};
+use crate::config::{ModelConfig, Part, POSE_DIM, ROT_DIM};
 use crate::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::{check_len, Buffer, Error};
 use crate::gpt::head_rows;
@@ -82,16 +82,23 @@ impl Model<'_> {
     /// Arena bytes [`Session::new`] needs for `cfg` (for a buffer at any
     /// address). Exact: the session carves this and nothing else.
     pub fn session_bytes(&self, cfg: &SessionConfig) -> Result<usize, Error> {
-        check_config(self, cfg)?;
-        let mut p = Planner::new();
-        State::carve(&mut p, self, cfg)?;
-        p.total_for_any_base().ok_or(Error::Arena(crate::arena::ArenaError::Overflow))
+        session_bytes_for(&self.cfg, cfg)
     }
 }
 
-fn check_config(model: &Model<'_>, cfg: &SessionConfig) -> Result<(), Error> {
-    cfg.check(&model.cfg).map_err(|(setting, value, max)| Error::Setting { setting, value, max })?;
-    gpt_cache::check_layout(model.cfg.gpt.n_streams as usize)
+/// [`Model::session_bytes`] from the model's config alone (no weights):
+/// for sizing before a model is loaded, `inspect` and `bench`.
+pub fn session_bytes_for(model: &ModelConfig, cfg: &SessionConfig) -> Result<usize, Error> {
+    check_config(model, cfg)?;
+    let mut p = Planner::new();
+    State::carve(&mut p, model, cfg)?;
+    p.total_for_any_base().ok_or(Error::Arena(crate::arena::ArenaError::Overflow))
+}
+
+fn check_config(model: &ModelConfig, cfg: &SessionConfig) -> Result<(), Error> {
+    model.validate().map_err(|e| Error::Bind(crate::model::BindError::Config(e)))?;
+    cfg.check(model).map_err(|(setting, value, max)| Error::Setting { setting, value, max })?;
+    gpt_cache::check_layout(model.gpt.n_streams as usize)
 }
 
 fn check_seed(model: &Model<'_>, seed: &[u32; 5]) -> Result<(), Error> {
@@ -146,10 +153,10 @@ impl<'a> Session<'a> {
     /// seeded with follower tokens `seed` (up, down, lhand, rhand, transl;
     /// from frames: [`crate::exact::seed_tokens`]).
     pub fn new(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 5]) -> Result<Self, Error> {
-        check_config(model, cfg)?;
+        check_config(&model.cfg, cfg)?;
         check_seed(model, &seed)?;
         let mut a = Arena::new(arena);
-        let st = State::carve(&mut a, model, cfg)?;
+        let st = State::carve(&mut a, &model.cfg, cfg)?;
         let mut s = Session {
             model,
             cfg: *cfg,

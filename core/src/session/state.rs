@@ -93,8 +93,9 @@ fn ov() -> ArenaError {
 }
 
 impl<'s> State<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, model: &Model<'_>, sc: &SessionConfig) -> Result<Self, Error> {
-        let cfg = &model.cfg;
+    /// Every buffer for a model of config `cfg` (bound models have a
+    /// rotation decoder exactly where `rot_channels > 0`).
+    pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, sc: &SessionConfig) -> Result<Self, Error> {
         let g = &cfg.gpt;
         let hop = cfg.hop();
         let c = g.n_embd as usize;
@@ -126,9 +127,9 @@ impl<'s> State<'s> {
         });
         let [d0, d1, d2, d3, d4] = dec_pos;
         let dec_pos = [d0?, d1?, d2?, d3?, d4?];
-        let dec_rot = [0, 1, 2, 3].map(|p| match model.parts[p].rot {
-            Some(_) => StreamStack::carve(a, &cfg.parts[p], StackKind::Decoder, d).map(Some),
-            None => Ok(None),
+        let dec_rot = [0, 1, 2, 3].map(|p| match cfg.parts[p].rot_channels {
+            0 => Ok(None),
+            _ => StreamStack::carve(a, &cfg.parts[p], StackKind::Decoder, d).map(Some),
         });
         let [r0, r1, r2, r3] = dec_rot;
         let dec_rot = [r0?, r1?, r2?, r3?];
