@@ -183,7 +183,7 @@ duo_result duo_leader_frame_convert(duo_leader_frame *frame, uint32_t coords);
  * model handle AND every session made from it are freed. */
 typedef struct duo_model duo_model;
 
-/* Sizes an engine needs, from duo_model_info. */
+/* Sizes an engine needs, from duo_model_get_info. */
 typedef struct duo_model_info {
   uint32_t joints;           /* joints per pose (55) */
   uint32_t music_features;   /* floats per music frame (54) */
@@ -220,12 +220,155 @@ duo_result duo_model_open_copy(const uint8_t *bytes, size_t len, duo_model **out
 duo_result duo_model_open_file(const char *path, duo_model **out_model);
 
 /* Fills *out_info. DUO_NULL_PARAMETER. Thread-safe. */
-duo_result duo_model_info(const duo_model *model, duo_model_info *out_info);
+duo_result duo_model_get_info(const duo_model *model, duo_model_info *out_info);
 
 /* Releases the caller's reference to the model (the weights go when the
  * last session made from it is freed too). NULL is ignored. Each handle
  * must be freed exactly once and not used afterwards. */
 void duo_model_free(duo_model *model);
+
+/* Seed tokens from follower and leader start frames: n_frames frames of
+ * 165 floats each (SMPL-X metres), a multiple of frames_per_token is used
+ * (at least one token's worth). Allocates temporary memory. Writes 5
+ * tokens (up, down, lhand, rhand, transl) to out_tokens.
+ * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (too few frames),
+ * DUO_NON_FINITE_INPUT. Thread-safe. */
+duo_result duo_model_seed_tokens(const duo_model *model, const float *follower_pos3d,
+                                 const float *leader_pos3d, size_t n_frames,
+                                 uint32_t *out_tokens);
+
+/* ------------------------------------------------------------------ */
+/* Session                                                             */
+/* ------------------------------------------------------------------ */
+
+/* One follower dancer: streaming state in fixed memory, allocated once
+ * (duo_session_new) or placed in caller memory (duo_session_new_in); no
+ * allocation after creation.
+ * Thread rule: one thread at a time per session (it may move between
+ * threads between calls; no call may overlap another on the same
+ * session). Distinct sessions, even on one model, run in parallel.
+ * Lifetime: holds a reference to its model (see duo_model). */
+typedef struct duo_session duo_session;
+
+/* Accepted input magnitudes: larger values are rejected like NaN. */
+#define DUO_MAX_POSITION_M 1.0e4f   /* |leader coordinate|, metres */
+#define DUO_MAX_MUSIC_FEATURE 1.0e6f /* |music feature| */
+
+/* duo_session_config.sampling */
+typedef enum duo_sampling {
+  /* Argmax (lowest token id on ties). Deterministic. */
+  DUO_SAMPLING_GREEDY = 0,
+  /* Uniform among the top_k most likely tokens; a fixed rng_seed gives a
+   * reproducible dance. */
+  DUO_SAMPLING_TOP_K = 1
+} duo_sampling;
+
+/* duo_session_config.kv: element type of the GPT key/value cache. */
+typedef enum duo_kv {
+  DUO_KV_F32 = 0,
+  /* Half the cache bytes; tokens may rarely differ from f32. */
+  DUO_KV_F16 = 1
+} duo_kv;
+
+/* The latency budget and buffers of a session. Start from
+ * duo_session_config_reference or _minimum and change fields. Counts are
+ * tokens (4 frames) unless named frames. 56 bytes, no padding. */
+typedef struct duo_session_config {
+  uint32_t lookahead;           /* leader look-ahead, 0..look_forward */
+  uint32_t enc_future;          /* encoder future context */
+  uint32_t dec_future;          /* decoder future context */
+  uint32_t shift;               /* GPT window chunk shift, 1..block_size-1 */
+  uint32_t music_lookahead;     /* music look-ahead, 0..look_forward */
+  uint32_t lat_past;            /* past band of the look-ahead transformers */
+  uint32_t pending_frames;      /* follower frames that may wait unpulled
+                                   beyond the latency before DUO_BACKLOG */
+  uint32_t music_buffer_frames; /* music frames that may wait before
+                                   DUO_BACKLOG */
+  uint32_t sampling;            /* a duo_sampling value */
+  uint32_t top_k;               /* for DUO_SAMPLING_TOP_K */
+  uint32_t staggered;           /* 0: one GPT cache, re-filled when the window
+                                   jumps (least memory, a cost spike every
+                                   chunk); 1: one cache per live window (flat
+                                   cost per step, more memory). Same output. */
+  uint32_t kv;                  /* a duo_kv value */
+  uint64_t rng_seed;            /* for DUO_SAMPLING_TOP_K */
+} duo_session_config;
+
+/* The configuration closest to the offline model (long latency: about
+ * 9.7 s for the full model). DUO_NULL_PARAMETER. Thread-safe. */
+duo_result duo_session_config_reference(const duo_model *model, duo_session_config *out_config);
+
+/* The lowest-latency configuration: no leader look-ahead, no encoder or
+ * decoder future context (latency 0 frames), music look-ahead kept.
+ * DUO_NULL_PARAMETER. Thread-safe. */
+duo_result duo_session_config_minimum(const duo_model *model, duo_session_config *out_config);
+
+/* Bytes duo_session_new_in needs for this configuration, for memory at any
+ * address. DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (a setting out of
+ * range; the message names it). Thread-safe. */
+duo_result duo_session_bytes(const duo_model *model, const duo_session_config *config,
+                             size_t *out_bytes);
+
+/* Creates a session in library memory (one allocation, here).
+ * seed_tokens: 5 follower start tokens (up, down, lhand, rhand, transl),
+ * e.g. from duo_model_seed_tokens.
+ * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (config or seed token out of
+ * range). Thread-safe (takes a reference on the model). */
+duo_result duo_session_new(const duo_model *model, const duo_session_config *config,
+                           const uint32_t *seed_tokens, duo_session **out_session);
+
+/* Creates a session entirely inside caller memory: `memory` (any
+ * alignment), `len` >= duo_session_bytes(). No allocation. The memory
+ * must stay valid, unmoved and untouched until duo_session_free; free it
+ * yourself afterwards. DUO_BUFFER_TOO_SMALL, and as duo_session_new. */
+duo_result duo_session_new_in(const duo_model *model, const duo_session_config *config,
+                              const uint32_t *seed_tokens, void *memory, size_t len,
+                              duo_session **out_session);
+
+/* *out_frames = delay in frames between a leader frame and the follower
+ * frame of the same index (with music known ahead). DUO_NULL_PARAMETER. */
+duo_result duo_session_latency_frames(const duo_session *session, uint32_t *out_frames);
+
+/* Gives the session a whole music track known in advance: frames x
+ * music_features floats (30 fps), BORROWED: keep it valid and unmodified
+ * until the session is reset or freed. Use instead of
+ * duo_session_push_music, before any music frame is pushed.
+ * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (not whole frames; music
+ * already given), DUO_NON_FINITE_INPUT. */
+duo_result duo_session_set_music_track(duo_session *session, const float *track, size_t n_floats);
+
+/* Pushes one music feature frame (n_features = music_features floats,
+ * copied). Push music at least music_lookahead tokens ahead of the leader
+ * for the stated latency. DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (wrong
+ * count; a track was given), DUO_NON_FINITE_INPUT and DUO_BACKLOG (music
+ * buffer full: push leader frames first); both leave the session
+ * unchanged. */
+duo_result duo_session_push_music(duo_session *session, const float *features, size_t n_features);
+
+/* Pushes one leader frame (copied). May run one model step (the costly
+ * call: run it off the render thread).
+ * DUO_NON_FINITE_INPUT: NaN, infinity, or |value| > DUO_MAX_POSITION_M;
+ *   the frame is rejected and the session is unchanged. To keep the
+ *   30 fps clock, push your last good frame instead.
+ * DUO_BACKLOG: latency + 1 + pending_frames follower frames wait unpulled
+ *   (pull them first), or the music is too far behind; session unchanged.
+ * DUO_NULL_PARAMETER. */
+duo_result duo_session_push_leader(duo_session *session, const duo_leader_frame *frame);
+
+/* Pulls the next follower frame: DUO_OK (*out_frame written) or
+ * DUO_NOT_READY (nothing ready; *out_frame untouched). Frame f becomes
+ * ready once leader frame f + latency has been pushed. Pull in a loop
+ * after each push until DUO_NOT_READY. DUO_NULL_PARAMETER. */
+duo_result duo_session_pull_follower(duo_session *session, duo_follower_frame *out_frame);
+
+/* Back to the start (frame index 0) with new seed tokens; the music track
+ * is dropped. No allocation. DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT. */
+duo_result duo_session_reset(duo_session *session, const uint32_t *seed_tokens);
+
+/* Frees a session and drops its model reference. NULL is ignored. For a
+ * session made by duo_session_new_in, release the memory afterwards. Each
+ * session must be freed exactly once and not used afterwards. */
+void duo_session_free(duo_session *session);
 
 #ifdef __cplusplus
 }

@@ -172,7 +172,10 @@ value_fn!(
 
 use crate::result::{guard, DuoResult, Failure};
 
-fn coords_fns(coords: u32) -> Result<(fn(DuoVec3) -> DuoVec3, fn(DuoQuat) -> DuoQuat, fn(DuoVec3) -> DuoVec3), Failure> {
+/// Position to, rotation to, position from a coordinate system.
+type CoordFns = (fn(DuoVec3) -> DuoVec3, fn(DuoQuat) -> DuoQuat, fn(DuoVec3) -> DuoVec3);
+
+fn coords_fns(coords: u32) -> Result<CoordFns, Failure> {
     match coords {
         COORDS_SMPLX => Ok((|v| v, |q| q, |v| v)),
         COORDS_UNITY => Ok((vec3_to_unity, quat_to_unity, vec3_from_unity)),

@@ -14,10 +14,12 @@ use std::panic::catch_unwind;
 pub mod frames;
 pub mod model;
 pub mod result;
+pub mod session;
 
 pub use frames::{DuoFollowerFrame, DuoLeaderFrame, DuoQuat, DuoVec3};
 pub use model::{DuoModel, DuoModelInfo};
 pub use result::DuoResult;
+pub use session::{DuoSession, DuoSessionConfig};
 
 /// Major version, as in Cargo.toml (`DUOLANDO_VERSION_MAJOR` in the header).
 pub const VERSION_MAJOR: u32 = 0;

@@ -132,7 +132,7 @@ pub unsafe extern "C" fn duo_model_open_bytes(bytes: *const u8, len: usize, out_
         // SAFETY: caller contract.
         let b = unsafe { byte_slice(bytes, len, "bytes") }?;
         let addr = b.as_ptr() as usize;
-        if !b.is_empty() && addr % 64 != 0 {
+        if !b.is_empty() && addr & 63 != 0 {
             return Err(Failure::invalid(format!(
                 "model bytes at address {addr:#x} are not 64-byte aligned (address % 64 = {}); \
                  allocate them 64-byte aligned, or use duo_model_open_copy (copies) or duo_model_open_file (mmap)",
@@ -247,8 +247,8 @@ pub struct DuoModelInfo {
 /// # Safety
 /// `model` must be NULL or a live handle; `out_info` NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_model_info(model: *const DuoModel, out_info: *mut DuoModelInfo) -> DuoResult {
-    guard("duo_model_info", || {
+pub unsafe extern "C" fn duo_model_get_info(model: *const DuoModel, out_info: *mut DuoModelInfo) -> DuoResult {
+    guard("duo_model_get_info", || {
         // SAFETY: caller contract.
         let m = unsafe { model.as_ref() }.ok_or_else(|| Failure::null("model"))?;
         if out_info.is_null() {
@@ -298,7 +298,7 @@ pub(crate) mod tests {
     fn open_all_ways() {
         let m = open_fixture();
         let mut info = DuoModelInfo::default();
-        assert_eq!(unsafe { duo_model_info(m, &mut info) }, DuoResult::Ok);
+        assert_eq!(unsafe { duo_model_get_info(m, &mut info) }, DuoResult::Ok);
         assert_eq!((info.joints, info.fps, info.frames_per_token, info.mapped), (55, 30, 4, 1));
         unsafe { duo_model_free(m) };
 
@@ -306,7 +306,7 @@ pub(crate) mod tests {
         let mut c = ptr::null_mut();
         assert_eq!(unsafe { duo_model_open_copy(bytes.as_ptr(), bytes.len(), &mut c) }, DuoResult::Ok);
         let mut info2 = DuoModelInfo::default();
-        assert_eq!(unsafe { duo_model_info(c, &mut info2) }, DuoResult::Ok);
+        assert_eq!(unsafe { duo_model_get_info(c, &mut info2) }, DuoResult::Ok);
         assert_eq!(info2, DuoModelInfo { mapped: 0, ..info });
         unsafe { duo_model_free(c) };
 
@@ -320,7 +320,8 @@ pub(crate) mod tests {
     fn rejections() {
         let bytes = std::fs::read(fixture_path()).unwrap();
         let aligned = AlignedBytes::copy_from(&bytes);
-        let sentinel = 0x1 as *mut DuoModel;
+        let mut dummy = 0u8;
+        let sentinel = (&mut dummy as *mut u8).cast::<DuoModel>();
         let mut m = sentinel;
         // Misaligned caller bytes: refused, output untouched.
         let mis = AlignedBytes::copy_from(&[&[0u8][..], &bytes].concat());
@@ -344,7 +345,7 @@ pub(crate) mod tests {
         assert_eq!(unsafe { duo_model_open_file(missing.as_ptr(), &mut m) }, DuoResult::Io);
         assert!(last().contains("/nonexistent/model.duo"), "{}", last());
         assert_eq!(m, sentinel);
-        assert_eq!(unsafe { duo_model_info(ptr::null(), &mut DuoModelInfo::default()) }, DuoResult::NullParameter);
+        assert_eq!(unsafe { duo_model_get_info(ptr::null(), &mut DuoModelInfo::default()) }, DuoResult::NullParameter);
         unsafe { duo_model_free(ptr::null_mut()) };
     }
 }

@@ -93,6 +93,9 @@ impl Failure {
 pub fn code_of(e: &Error) -> DuoResult {
     match e {
         Error::NonFinite { .. } => DuoResult::NonFiniteInput,
+        Error::Backlog { .. } => DuoResult::Backlog,
+        Error::Evicted { .. } => DuoResult::Internal,
+        Error::Setting { .. } | Error::State => DuoResult::InvalidArgument,
         Error::Arena(ArenaError::OutOfMemory { .. }) => DuoResult::BufferTooSmall,
         Error::Arena(ArenaError::Overflow) => DuoResult::InvalidArgument,
         Error::Bind(_) => DuoResult::BadModel,

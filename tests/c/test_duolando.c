@@ -174,7 +174,7 @@ static void test_errors_and_version(void) {
   CHECK(buf[7] == '\0' && strlen(buf) == 7); /* truncated */
   CHECK(sizeof(duo_leader_frame) == 660);
   CHECK(sizeof(duo_follower_frame) == 1560);
-  CHECK(sizeof(duo_session_config) == 48);
+  CHECK(sizeof(duo_session_config) == 56);
   CHECK(sizeof(duo_model_info) == 32);
 }
 
@@ -281,6 +281,9 @@ static void test_session_errors(duo_model *m) {
   EXPECT(duo_session_bytes(m, &bad, &bytes), DUO_INVALID_ARGUMENT);
   bad = c;
   bad.sampling = 5;
+  EXPECT(duo_session_new(m, &bad, seed, &s), DUO_INVALID_ARGUMENT);
+  bad = c;
+  bad.kv = 2;
   EXPECT(duo_session_new(m, &bad, seed, &s), DUO_INVALID_ARGUMENT);
   bad = c;
   bad.lookahead = 1000;

@@ -32,7 +32,7 @@ static class TestUnity
         string root = args[0];
         Check(Marshal.SizeOf(typeof(LeaderFrame)) == 660, "LeaderFrame is 660 bytes");
         Check(Marshal.SizeOf(typeof(FollowerFrame)) == 1560, "FollowerFrame is 1560 bytes");
-        Check(Marshal.SizeOf(typeof(SessionConfig)) == 48, "SessionConfig is 48 bytes");
+        Check(Marshal.SizeOf(typeof(SessionConfig)) == 56, "SessionConfig is 56 bytes");
         Check(Marshal.SizeOf(typeof(ModelInfo)) == 32, "ModelInfo is 32 bytes");
         Check(Model.Version == "0.1.0", "version");
         try { Model.OpenFile("/nonexistent/model.duo"); Check(false, "missing file throws"); }

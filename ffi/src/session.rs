@@ -1,0 +1,530 @@
+//! `duo_session`: one follower dancer over a shared `duo_model`
+//! (`duolando_core::session::Session`), in library memory
+//! (`duo_session_new`) or in caller memory (`duo_session_bytes` +
+//! `duo_session_new_in`: no allocation at all).
+//!
+//! Input policy at the C boundary (issue #6 item 3): a leader or music
+//! frame holding NaN or infinity, or a magnitude above
+//! [`MAX_POSITION_M`] / [`MAX_MUSIC_FEATURE`], is rejected with
+//! `DUO_NON_FINITE_INPUT` and the session is left unchanged; the caller
+//! keeps the 30 fps clock by pushing its last good frame instead (the Unity
+//! and Unreal wrappers do). A refused push for lack of room answers
+//! `DUO_BACKLOG`, also without changing the session.
+//!
+//! Thread rule: a session is used by one thread at a time (it may move
+//! between threads); distinct sessions, even on one model, run in parallel.
+
+use std::sync::Arc;
+
+use duolando_core::config::{N_JOINTS, POSE_DIM};
+use duolando_core::session::{FollowerFrame, KvType, Sampling, Session, SessionConfig};
+
+use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
+use crate::model::{share, DuoModel, ModelInner};
+use crate::result::{guard, DuoResult, Failure};
+
+/// Largest accepted |coordinate| of a leader joint, metres
+/// (`DUO_MAX_POSITION_M`).
+pub const MAX_POSITION_M: f32 = 1.0e4;
+/// Largest accepted |value| of a music feature (`DUO_MAX_MUSIC_FEATURE`).
+pub const MAX_MUSIC_FEATURE: f32 = 1.0e6;
+
+/// `DUO_SAMPLING_GREEDY` / `DUO_SAMPLING_TOP_K`.
+pub const SAMPLING_GREEDY: u32 = 0;
+pub const SAMPLING_TOP_K: u32 = 1;
+/// `DUO_KV_F32` / `DUO_KV_F16`.
+pub const KV_F32: u32 = 0;
+pub const KV_F16: u32 = 1;
+
+/// `duo_session_config`: mirrors `duolando_core::session::SessionConfig`
+/// (counts in tokens of 4 frames unless named frames). 56 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DuoSessionConfig {
+    pub lookahead: u32,
+    pub enc_future: u32,
+    pub dec_future: u32,
+    pub shift: u32,
+    pub music_lookahead: u32,
+    pub lat_past: u32,
+    pub pending_frames: u32,
+    pub music_buffer_frames: u32,
+    pub sampling: u32,
+    pub top_k: u32,
+    /// 0: one GPT cache re-prefilled at window jumps; 1: one cache per live
+    /// window (flat cost per step, more memory).
+    pub staggered: u32,
+    /// K/V cache element type: `KV_F32` or `KV_F16`.
+    pub kv: u32,
+    pub rng_seed: u64,
+}
+
+const _: () = assert!(std::mem::size_of::<DuoSessionConfig>() == 56);
+
+impl DuoSessionConfig {
+    fn from_core(c: &SessionConfig) -> Self {
+        let (sampling, top_k, rng_seed) = match c.sampling {
+            Sampling::Greedy => (SAMPLING_GREEDY, 0, 0),
+            Sampling::TopK { k, rng_seed } => (SAMPLING_TOP_K, k, rng_seed),
+        };
+        DuoSessionConfig {
+            lookahead: c.lookahead,
+            enc_future: c.enc_future,
+            dec_future: c.dec_future,
+            shift: c.shift,
+            music_lookahead: c.music_lookahead,
+            lat_past: c.lat_past,
+            pending_frames: c.pending_frames,
+            music_buffer_frames: c.music_buffer_frames,
+            sampling,
+            top_k,
+            staggered: c.staggered as u32,
+            kv: match c.kv {
+                KvType::F32 => KV_F32,
+                KvType::F16 => KV_F16,
+            },
+            rng_seed,
+        }
+    }
+
+    fn to_core(self) -> Result<SessionConfig, Failure> {
+        let sampling = match self.sampling {
+            SAMPLING_GREEDY => Sampling::Greedy,
+            SAMPLING_TOP_K => Sampling::TopK { k: self.top_k, rng_seed: self.rng_seed },
+            s => return Err(Failure::invalid(format!("config.sampling {s} is not a duo_sampling value (0 greedy, 1 top-k)"))),
+        };
+        let kv = match self.kv {
+            KV_F32 => KvType::F32,
+            KV_F16 => KvType::F16,
+            k => return Err(Failure::invalid(format!("config.kv {k} is not a duo_kv value (0 f32, 1 f16)"))),
+        };
+        let staggered = match self.staggered {
+            0 => false,
+            1 => true,
+            v => return Err(Failure::invalid(format!("config.staggered is {v}, not 0 or 1"))),
+        };
+        Ok(SessionConfig {
+            lookahead: self.lookahead,
+            enc_future: self.enc_future,
+            dec_future: self.dec_future,
+            shift: self.shift,
+            music_lookahead: self.music_lookahead,
+            lat_past: self.lat_past,
+            sampling,
+            pending_frames: self.pending_frames,
+            music_buffer_frames: self.music_buffer_frames,
+            staggered,
+            kv,
+        })
+    }
+}
+
+/// What a `duo_session *` points to.
+pub struct SessionInner {
+    /// Borrows `model` and the arena; declared first, dropped first.
+    session: Session<'static>,
+    /// The counted model reference that keeps the weights alive.
+    _model: Arc<ModelInner>,
+    /// Library-allocated arena (`duo_session_new`); None in caller memory.
+    _arena: Option<Box<[u8]>>,
+    /// True when this struct lives in caller memory (`duo_session_new_in`).
+    in_caller_memory: bool,
+}
+
+/// Opaque `duo_session`.
+pub type DuoSession = SessionInner;
+
+fn model_ref<'x>(model: *const DuoModel) -> Result<&'x ModelInner, Failure> {
+    // SAFETY: NULL or a live handle (the documented contract).
+    unsafe { model.as_ref() }.ok_or_else(|| Failure::null("model"))
+}
+
+fn config_ref(model: &ModelInner, config: *const DuoSessionConfig) -> Result<SessionConfig, Failure> {
+    // SAFETY: NULL or a valid struct (contract).
+    let c = unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
+    let core = c.to_core()?;
+    // Validate now for a message naming the setting (also done by core).
+    model.model().session_bytes(&core)?;
+    Ok(core)
+}
+
+fn seed_ref(seed: *const u32) -> Result<[u32; 5], Failure> {
+    if seed.is_null() {
+        return Err(Failure::null("seed_tokens"));
+    }
+    // SAFETY: the contract: 5 readable u32.
+    Ok(unsafe { std::ptr::read_unaligned(seed.cast::<[u32; 5]>()) })
+}
+
+fn session_mut<'x>(session: *mut DuoSession) -> Result<&'x mut SessionInner, Failure> {
+    // SAFETY: NULL or a live handle used by one thread at a time (contract).
+    unsafe { session.as_mut() }.ok_or_else(|| Failure::null("session"))
+}
+
+/// Writes the default configuration for `which` into `out`.
+unsafe fn config_default(model: *const DuoModel, out: *mut DuoSessionConfig, reference: bool) -> Result<DuoResult, Failure> {
+    let m = model_ref(model)?;
+    if out.is_null() {
+        return Err(Failure::null("out_config"));
+    }
+    let cfg = m.model().config();
+    let c = if reference { SessionConfig::reference(cfg) } else { SessionConfig::minimum(cfg) };
+    // SAFETY: checked non-NULL.
+    unsafe { *out = DuoSessionConfig::from_core(&c) };
+    Ok(DuoResult::Ok)
+}
+
+/// The reference-quality configuration (closest to the offline model;
+/// about 9.7 s of latency for the full model).
+///
+/// # Safety
+/// `model` NULL or live; `out_config` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_config_reference(model: *const DuoModel, out_config: *mut DuoSessionConfig) -> DuoResult {
+    guard("duo_session_config_reference", || unsafe { config_default(model, out_config, true) })
+}
+
+/// The lowest-latency configuration (no leader look-ahead, no encoder or
+/// decoder future: latency 0 frames; music look-ahead kept).
+///
+/// # Safety
+/// `model` NULL or live; `out_config` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_config_minimum(model: *const DuoModel, out_config: *mut DuoSessionConfig) -> DuoResult {
+    guard("duo_session_config_minimum", || unsafe { config_default(model, out_config, false) })
+}
+
+/// Alignment slack and size of the handle placed at the start of caller memory.
+const HANDLE_BYTES: usize = std::mem::size_of::<SessionInner>() + std::mem::align_of::<SessionInner>();
+
+/// Bytes `duo_session_new_in` needs for `config` (any address).
+///
+/// # Safety
+/// Pointers NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_bytes(model: *const DuoModel, config: *const DuoSessionConfig, out_bytes: *mut usize) -> DuoResult {
+    guard("duo_session_bytes", || {
+        let m = model_ref(model)?;
+        let cfg = config_ref(m, config)?;
+        if out_bytes.is_null() {
+            return Err(Failure::null("out_bytes"));
+        }
+        let n = m.model().session_bytes(&cfg)?;
+        let total = n.checked_add(HANDLE_BYTES).ok_or_else(|| Failure::invalid("session size overflows size_t"))?;
+        // SAFETY: checked non-NULL.
+        unsafe { *out_bytes = total };
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Builds the core session over `arena` (which must outlive it: the
+/// caller of this function guarantees it).
+fn start(model: &Arc<ModelInner>, arena: &'static mut [u8], cfg: &SessionConfig, seed: [u32; 5]) -> Result<Session<'static>, Failure> {
+    // SAFETY: the model lives in the Arc, which the SessionInner keeps
+    // (and drops after the session).
+    let m: &'static ModelInner = unsafe { &*Arc::as_ptr(model) };
+    Ok(Session::new(m.model(), arena, cfg, seed)?)
+}
+
+/// A session in library memory (allocated here, once).
+///
+/// # Safety
+/// `model` NULL or live; `config` NULL or valid; `seed_tokens` NULL or 5
+/// readable u32; `out_session` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_new(
+    model: *const DuoModel,
+    config: *const DuoSessionConfig,
+    seed_tokens: *const u32,
+    out_session: *mut *mut DuoSession,
+) -> DuoResult {
+    guard("duo_session_new", || {
+        let m = model_ref(model)?;
+        let cfg = config_ref(m, config)?;
+        let seed = seed_ref(seed_tokens)?;
+        if out_session.is_null() {
+            return Err(Failure::null("out_session"));
+        }
+        let n = m.model().session_bytes(&cfg)?;
+        let mut arena = vec![0u8; n].into_boxed_slice();
+        // SAFETY: the boxed bytes stay at one address until the
+        // SessionInner drops them, after the session.
+        let bytes: &'static mut [u8] = unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
+        // SAFETY: `model` is a live handle (contract).
+        let arc = unsafe { share(model) };
+        let session = start(&arc, bytes, &cfg, seed)?;
+        let inner = Box::new(SessionInner { session, _model: arc, _arena: Some(arena), in_caller_memory: false });
+        // SAFETY: checked non-NULL.
+        unsafe { *out_session = Box::into_raw(inner) };
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// A session placed entirely in caller memory (`memory`, `len` >=
+/// `duo_session_bytes`; any alignment). No allocation.
+///
+/// # Safety
+/// As `duo_session_new`; `memory` NULL or `len` writable bytes that stay
+/// valid, unmoved and otherwise untouched until `duo_session_free`.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_new_in(
+    model: *const DuoModel,
+    config: *const DuoSessionConfig,
+    seed_tokens: *const u32,
+    memory: *mut u8,
+    len: usize,
+    out_session: *mut *mut DuoSession,
+) -> DuoResult {
+    guard("duo_session_new_in", || {
+        let m = model_ref(model)?;
+        let cfg = config_ref(m, config)?;
+        let seed = seed_ref(seed_tokens)?;
+        if out_session.is_null() {
+            return Err(Failure::null("out_session"));
+        }
+        if memory.is_null() {
+            return Err(Failure::null("memory"));
+        }
+        let need = m.model().session_bytes(&cfg)?.saturating_add(HANDLE_BYTES);
+        if len < need {
+            return Err(Failure::new(
+                DuoResult::BufferTooSmall,
+                format!("memory has {len} bytes, this configuration needs {need} (duo_session_bytes)"),
+            ));
+        }
+        let pad = memory.align_offset(std::mem::align_of::<SessionInner>());
+        if pad == usize::MAX || pad + std::mem::size_of::<SessionInner>() > len {
+            return Err(Failure::new(DuoResult::BufferTooSmall, "memory cannot hold the session handle"));
+        }
+        // SAFETY: [pad, pad + size) lies in the caller's `len` bytes and is
+        // aligned for SessionInner; the arena is the rest, disjoint.
+        let (slot, arena) = unsafe {
+            let slot = memory.add(pad).cast::<SessionInner>();
+            let start = pad + std::mem::size_of::<SessionInner>();
+            (slot, std::slice::from_raw_parts_mut(memory.add(start), len - start))
+        };
+        // SAFETY: `model` is a live handle (contract).
+        let arc = unsafe { share(model) };
+        let session = start(&arc, arena, &cfg, seed)?;
+        // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
+        unsafe {
+            slot.write(SessionInner { session, _model: arc, _arena: None, in_caller_memory: true });
+            *out_session = slot;
+        }
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Frees a session (and its model reference). NULL is ignored. For
+/// `duo_session_new_in`, the caller's memory may be released afterwards.
+///
+/// # Safety
+/// `session` NULL or a live handle, freed once, not used afterwards.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_free(session: *mut DuoSession) {
+    let _ = guard("duo_session_free", || {
+        if session.is_null() {
+            return Ok(DuoResult::Ok);
+        }
+        // SAFETY: a live handle (contract); read the flag before dropping.
+        unsafe {
+            if (*session).in_caller_memory {
+                std::ptr::drop_in_place(session);
+            } else {
+                drop(Box::from_raw(session));
+            }
+        }
+        Ok(DuoResult::Ok)
+    });
+}
+
+/// `*out_frames` = frames between a leader frame and the follower frame
+/// of the same index (with music known ahead).
+///
+/// # Safety
+/// Pointers NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_latency_frames(session: *const DuoSession, out_frames: *mut u32) -> DuoResult {
+    guard("duo_session_latency_frames", || {
+        // SAFETY: NULL or live (contract).
+        let s = unsafe { session.as_ref() }.ok_or_else(|| Failure::null("session"))?;
+        if out_frames.is_null() {
+            return Err(Failure::null("out_frames"));
+        }
+        // SAFETY: checked non-NULL.
+        unsafe { *out_frames = s.session.latency_frames() };
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Index and value of the first value that is non-finite or above `limit`.
+fn first_bad(x: &[f32], limit: f32) -> Option<(usize, f32)> {
+    x.iter().position(|v| !v.is_finite() || v.abs() > limit).map(|i| (i, x[i]))
+}
+
+fn reject(what: &str, i: usize, v: f32, limit: f32, unit: &str) -> Failure {
+    let msg = if v.is_finite() {
+        format!("{what} value {v:e} at flat index {i} exceeds {limit:e}{unit}; frame rejected, session unchanged")
+    } else {
+        format!("{what} contains {v} at flat index {i}; frame rejected, session unchanged")
+    };
+    Failure::new(DuoResult::NonFiniteInput, msg)
+}
+
+/// Pushes one leader frame (SMPL-X, metres).
+///
+/// # Safety
+/// `session` NULL or live (one thread at a time); `frame` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_push_leader(session: *mut DuoSession, frame: *const DuoLeaderFrame) -> DuoResult {
+    guard("duo_session_push_leader", || {
+        let s = session_mut(session)?;
+        // SAFETY: NULL or valid (contract).
+        let f = unsafe { frame.as_ref() }.ok_or_else(|| Failure::null("frame"))?;
+        let mut pos = [0.0f32; POSE_DIM];
+        for (j, v) in f.joints.iter().enumerate() {
+            pos[3 * j..3 * j + 3].copy_from_slice(&[v.x, v.y, v.z]);
+        }
+        if let Some((i, v)) = first_bad(&pos, MAX_POSITION_M) {
+            return Err(reject("leader frame", i, v, MAX_POSITION_M, " m"));
+        }
+        s.session.push_leader_frame(&pos)?;
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Pushes one music feature frame (`n_features` = duo_model_info.music_features).
+///
+/// # Safety
+/// `session` NULL or live; `features` NULL or `n_features` readable floats.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_push_music(session: *mut DuoSession, features: *const f32, n_features: usize) -> DuoResult {
+    guard("duo_session_push_music", || {
+        let s = session_mut(session)?;
+        if features.is_null() {
+            return Err(Failure::null("features"));
+        }
+        // SAFETY: contract.
+        let x = unsafe { std::slice::from_raw_parts(features, n_features) };
+        if let Some((i, v)) = first_bad(x, MAX_MUSIC_FEATURE) {
+            return Err(reject("music frame", i, v, MAX_MUSIC_FEATURE, ""));
+        }
+        s.session.push_music_frame(x)?;
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Gives the session a whole music track (frames x music_features floats),
+/// borrowed, instead of pushing music frame by frame.
+///
+/// # Safety
+/// `session` NULL or live; `track` NULL or `n_floats` readable floats that
+/// stay valid and unmodified until the session is reset or freed.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_set_music_track(session: *mut DuoSession, track: *const f32, n_floats: usize) -> DuoResult {
+    guard("duo_session_set_music_track", || {
+        let s = session_mut(session)?;
+        if track.is_null() {
+            return Err(Failure::null("track"));
+        }
+        // SAFETY: contract: valid until reset/free, which drop the borrow.
+        let x: &'static [f32] = unsafe { std::slice::from_raw_parts(track, n_floats) };
+        if let Some((i, v)) = first_bad(x, MAX_MUSIC_FEATURE) {
+            return Err(reject("music track", i, v, MAX_MUSIC_FEATURE, ""));
+        }
+        s.session.set_music_track(x)?;
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Converts a core frame to the C struct (rotations projected to the
+/// nearest rotation, as quaternions).
+pub fn to_c_frame(f: &FollowerFrame, out: &mut DuoFollowerFrame) {
+    out.index = f.index;
+    for j in 0..N_JOINTS {
+        out.positions[j] = DuoVec3 { x: f.positions[3 * j], y: f.positions[3 * j + 1], z: f.positions[3 * j + 2] };
+        out.rotations[j] = quat_of_raw(&f.rotations[9 * j..9 * j + 9]);
+    }
+    out.root = DuoVec3 { x: f.root[0], y: f.root[1], z: f.root[2] };
+}
+
+/// Pulls the next follower frame: DUO_OK (written) or DUO_NOT_READY
+/// (untouched).
+///
+/// # Safety
+/// `session` NULL or live; `out_frame` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_pull_follower(session: *mut DuoSession, out_frame: *mut DuoFollowerFrame) -> DuoResult {
+    guard("duo_session_pull_follower", || {
+        let s = session_mut(session)?;
+        if out_frame.is_null() {
+            return Err(Failure::null("out_frame"));
+        }
+        let mut f = FollowerFrame::default();
+        if !s.session.pull_follower_frame(&mut f)? {
+            return Ok(DuoResult::NotReady);
+        }
+        let mut c = DuoFollowerFrame::default();
+        to_c_frame(&f, &mut c);
+        // SAFETY: checked non-NULL.
+        unsafe { *out_frame = c };
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Back to the start with new seed tokens (the music track is dropped).
+///
+/// # Safety
+/// `session` NULL or live; `seed_tokens` NULL or 5 readable u32.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_reset(session: *mut DuoSession, seed_tokens: *const u32) -> DuoResult {
+    guard("duo_session_reset", || {
+        let s = session_mut(session)?;
+        let seed = seed_ref(seed_tokens)?;
+        s.session.reset(seed)?;
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Seed tokens from follower and leader start frames (`n_frames` each,
+/// 165 floats a frame, a multiple of frames_per_token is used).
+///
+/// # Safety
+/// `model` NULL or live; `follower_pos3d`/`leader_pos3d` NULL or
+/// `n_frames * 165` readable floats; `out_tokens` NULL or 5 writable u32.
+#[no_mangle]
+pub unsafe extern "C" fn duo_model_seed_tokens(
+    model: *const DuoModel,
+    follower_pos3d: *const f32,
+    leader_pos3d: *const f32,
+    n_frames: usize,
+    out_tokens: *mut u32,
+) -> DuoResult {
+    guard("duo_model_seed_tokens", || {
+        let m = model_ref(model)?;
+        if follower_pos3d.is_null() {
+            return Err(Failure::null("follower_pos3d"));
+        }
+        if leader_pos3d.is_null() {
+            return Err(Failure::null("leader_pos3d"));
+        }
+        if out_tokens.is_null() {
+            return Err(Failure::null("out_tokens"));
+        }
+        let n = n_frames.checked_mul(POSE_DIM).ok_or_else(|| Failure::invalid("n_frames too large"))?;
+        // SAFETY: contract.
+        let (f, l) = unsafe { (std::slice::from_raw_parts(follower_pos3d, n), std::slice::from_raw_parts(leader_pos3d, n)) };
+        for (what, x) in [("follower frames", f), ("leader frames", l)] {
+            if let Some((i, v)) = first_bad(x, MAX_POSITION_M) {
+                return Err(reject(what, i, v, MAX_POSITION_M, " m"));
+            }
+        }
+        let bytes = duolando_core::exact::seed_scratch_bytes(m.model().config(), n_frames)
+            .ok_or_else(|| Failure::invalid("n_frames too large"))?;
+        let mut scratch = vec![0u8; bytes];
+        let t = duolando_core::exact::seed_tokens(m.model(), f, l, &mut scratch)?;
+        // SAFETY: checked non-NULL; 5 writable u32 (contract).
+        unsafe { std::ptr::write_unaligned(out_tokens.cast::<[u32; 5]>(), t) };
+        Ok(DuoResult::Ok)
+    })
+}
