@@ -3,6 +3,7 @@
 //! rows), the last-position shortcut and, later, a streaming session
 //! (new queries against a cached key range).
 
+use super::simd;
 use super::weights::dot;
 
 /// Which keys a query may see. Row indices are relative to the `q` and
@@ -46,10 +47,19 @@ impl Mask for TiledCausalMask {
     }
 }
 
+/// Runs of allowed keys remembered per query (the masks of the model have
+/// one run (band) or one per stream (tiled causal)); a query whose mask
+/// breaks into more runs takes the key-by-key path.
+const MAX_RUNS: usize = 64;
+
 /// `out = softmax(mask(q k^T / sqrt(hd))) v`, per head. `q`: (nq, C);
 /// `k`, `v`: (nk, C); `out`: (nq, C); `scores`: >= nk scratch; `C = n_head
 /// * hd`. Masked keys are skipped (= -inf before softmax). A query that
 /// sees no key gets zeros (cannot happen with the model's masks).
+///
+/// Per query the mask is read once into runs of consecutive allowed keys;
+/// per head and run the scores are one [`simd::dot_rows`] call and the
+/// probability-weighted values [`simd::axpy_f32`] calls.
 pub fn attention<M: Mask>(
     q: &[f32],
     k: &[f32],
@@ -67,24 +77,47 @@ pub fn attention<M: Mask>(
     let nq = (q.len() / c).min(out.len() / c);
     let nk = (k.len() / c).min(v.len() / c).min(scores.len());
     let scale = 1.0 / libm::sqrtf(hd as f32);
+    let mut runs = [(0usize, 0usize); MAX_RUNS];
     for qi in 0..nq {
+        let mut nr = 0;
+        let mut kj = 0;
+        while kj < nk && nr <= MAX_RUNS {
+            if !mask.allowed(qi, kj) {
+                kj += 1;
+                continue;
+            }
+            let start = kj;
+            while kj < nk && mask.allowed(qi, kj) {
+                kj += 1;
+            }
+            if nr < MAX_RUNS {
+                runs[nr] = (start, kj);
+            }
+            nr += 1;
+        }
+        if nr > MAX_RUNS {
+            attention_query_keywise(q, k, v, c, n_head, mask, qi, nk, scale, scores, out);
+            continue;
+        }
+        let runs = &runs[..nr];
         for h in 0..n_head {
             let qh = &q[qi * c + h * hd..qi * c + (h + 1) * hd];
             let mut max = f32::NEG_INFINITY;
-            for kj in 0..nk {
-                if mask.allowed(qi, kj) {
-                    let s = dot(qh, &k[kj * c + h * hd..kj * c + (h + 1) * hd]) * scale;
-                    scores[kj] = s;
-                    max = max.max(s);
+            for &(a, b) in runs {
+                let run = &mut scores[a..b];
+                simd::dot_rows(qh, &k[a * c + h * hd..], c, run);
+                for s in run.iter_mut() {
+                    *s *= scale;
+                    max = max.max(*s);
                 }
             }
             let oh = &mut out[qi * c + h * hd..qi * c + (h + 1) * hd];
             oh.fill(0.0);
             let mut sum = 0.0f32;
-            for kj in 0..nk {
-                if mask.allowed(qi, kj) {
-                    let e = libm::expf(scores[kj] - max);
-                    scores[kj] = e;
+            for &(a, b) in runs {
+                for s in &mut scores[a..b] {
+                    let e = libm::expf(*s - max);
+                    *s = e;
                     sum += e;
                 }
             }
@@ -92,14 +125,58 @@ pub fn attention<M: Mask>(
                 continue;
             }
             let inv = 1.0 / sum;
-            for kj in 0..nk {
-                if mask.allowed(qi, kj) {
-                    let p = scores[kj] * inv;
-                    let vh = &v[kj * c + h * hd..kj * c + (h + 1) * hd];
-                    for (o, x) in oh.iter_mut().zip(vh) {
-                        *o += p * x;
-                    }
+            for &(a, b) in runs {
+                for (kj, &s) in (a..b).zip(&scores[a..b]) {
+                    simd::axpy_f32(s * inv, &v[kj * c + h * hd..kj * c + (h + 1) * hd], oh);
                 }
+            }
+        }
+    }
+}
+
+/// One query of [`attention`], key by key (masks with many runs).
+#[allow(clippy::too_many_arguments)]
+fn attention_query_keywise<M: Mask>(
+    q: &[f32],
+    k: &[f32],
+    v: &[f32],
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    qi: usize,
+    nk: usize,
+    scale: f32,
+    scores: &mut [f32],
+    out: &mut [f32],
+) {
+    let hd = c / n_head;
+    for h in 0..n_head {
+        let qh = &q[qi * c + h * hd..qi * c + (h + 1) * hd];
+        let mut max = f32::NEG_INFINITY;
+        for kj in 0..nk {
+            if mask.allowed(qi, kj) {
+                let s = dot(qh, &k[kj * c + h * hd..kj * c + (h + 1) * hd]) * scale;
+                scores[kj] = s;
+                max = max.max(s);
+            }
+        }
+        let oh = &mut out[qi * c + h * hd..qi * c + (h + 1) * hd];
+        oh.fill(0.0);
+        let mut sum = 0.0f32;
+        for kj in 0..nk {
+            if mask.allowed(qi, kj) {
+                let e = libm::expf(scores[kj] - max);
+                scores[kj] = e;
+                sum += e;
+            }
+        }
+        if sum == 0.0 {
+            continue;
+        }
+        let inv = 1.0 / sum;
+        for kj in 0..nk {
+            if mask.allowed(qi, kj) {
+                simd::axpy_f32(scores[kj] * inv, &v[kj * c + h * hd..kj * c + (h + 1) * hd], oh);
             }
         }
     }

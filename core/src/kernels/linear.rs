@@ -1,8 +1,8 @@
 //! Dense layers: `y = x W^T + b` (nn.Linear, conv as GEMM) and `z = x W`
 //! (the transposed-convolution GEMM). Written once against [`RowMatrix`].
 
-use super::simd::{TM, TN};
-use super::weights::{Matrix, PreparedAct, RowMatrix};
+use super::simd::{self, Q8_BLOCK, TM, TN};
+use super::weights::{Matrix, PreparedAct, Q8Rows, RowMatrix};
 
 /// Weight bytes kept hot per pass over the activations (~L2-sized blocks:
 /// 64 f32 rows at width 768, more rows for narrower weight types).
@@ -11,8 +11,75 @@ const BLOCK_BYTES: usize = 192 * 1024;
 /// `y = x W^T + b`. `x`: (n, in), `w`: (out, in), `b`: (out) or None,
 /// `y`: (n, out); `n = x.len() / in`. Callers check the lengths.
 pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
+    if let Matrix::Q8(q) = w {
+        if q.cols() <= Q8_PANEL {
+            return linear_q8(x, q, b, y);
+        }
+    }
     let block = (BLOCK_BYTES / (w.weight_bytes() / w.rows().max(1)).max(1)).clamp(16, 1024);
     crate::with_rows!(w, m => linear_impl(x, m, b, y, block))
+}
+
+/// Int8 activation values quantised at once by `linear` over a [`Q8Rows`]
+/// matrix (a stack panel: `Q8_PANEL` i8 + `Q8_PANEL / 32` f32 scales and i32
+/// corrections, and `TN x Q8_PANEL / 32` f32 weight scales: 56 KiB on 64-bit
+/// targets, 7 KiB on 32-bit ones). Rows of `x` are quantised once per call
+/// when `rows * in <= Q8_PANEL` (every matrix-vector and small-batch
+/// product of the model), else once per panel of `Q8_PANEL / in` rows
+/// (the weights are then read once per panel). Wider matrices (`in >
+/// Q8_PANEL`) take the generic chunked path.
+#[cfg(target_pointer_width = "64")]
+pub const Q8_PANEL: usize = 32 * 1024;
+/// See the 64-bit definition.
+#[cfg(not(target_pointer_width = "64"))]
+pub const Q8_PANEL: usize = 4 * 1024;
+const Q8_PANEL_BLOCKS: usize = Q8_PANEL / Q8_BLOCK;
+
+/// Fewest activation rows of a panel for the packed int8 path.
+const PACK_MIN_ROWS: usize = 4;
+
+/// Quantised activation rows (see [`Q8_PANEL`]).
+#[repr(C, align(64))]
+struct Q8Panel {
+    q: [i8; Q8_PANEL],
+    d: [f32; Q8_PANEL_BLOCKS],
+    c: [i32; 2 * Q8_PANEL_BLOCKS],
+}
+
+/// `y = x W^T + b` over int8 weights: activation rows quantised once per
+/// panel ([`simd::quantise_q8_corr`]), weight scales read once per tile of
+/// `TN` weight rows ([`simd::q8_scales`]) and reused by every activation
+/// tile of the panel ([`simd::gemm_q8`], `M` = 1..=4 rows, no padded rows).
+fn linear_q8(x: &[f32], w: &Q8Rows<'_>, b: Option<&[f32]>, y: &mut [f32]) {
+    let (n_in, n_out) = (w.cols(), w.rows());
+    if n_in == 0 || n_out == 0 {
+        return;
+    }
+    let n = (x.len() / n_in).min(y.len() / n_out);
+    let nb = n_in / Q8_BLOCK;
+    let per_panel = Q8_PANEL / n_in;
+    let mut p = Q8Panel { q: [0; Q8_PANEL], d: [0.0; Q8_PANEL_BLOCKS], c: [0; 2 * Q8_PANEL_BLOCKS] };
+    let mut p0 = 0;
+    while p0 < n {
+        let p1 = (p0 + per_panel).min(n);
+        for i in p0..p1 {
+            let r = i - p0;
+            simd::quantise_q8_corr(
+                &x[i * n_in..(i + 1) * n_in],
+                &mut p.q[r * n_in..(r + 1) * n_in],
+                &mut p.d[r * nb..(r + 1) * nb],
+                &mut p.c[2 * r * nb..2 * (r + 1) * nb],
+            );
+        }
+        // Packing 8 weight rows pays off from a few activation rows on
+        // (measured: at 1 row the unpacked VNNI tile is faster).
+        if p1 - p0 >= PACK_MIN_ROWS && simd::packed_q8_fast(nb) {
+            q8_panel_packed(w, b, y, &p, p0, p1, n_out, n_in);
+        } else {
+            q8_panel_tiles(w, b, y, &p, p0, p1, n_out, n_in);
+        }
+        p0 = p1;
+    }
 }
 
 fn linear_impl<W: RowMatrix>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f32], block: usize) {
@@ -93,5 +160,109 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
         for i in 0..n {
             w.axpy(r, x[i * rows + r], &mut z[i * cols..(i + 1) * cols]);
         }
+    }
+}
+
+/// Output tiles of `TN` weight rows x activation tiles of up to `TM` rows
+/// of one quantised panel (rows `p0..p1` of `x`), with [`simd::gemm_q8`].
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+fn q8_panel_tiles(w: &Q8Rows<'_>, b: Option<&[f32]>, y: &mut [f32], p: &Q8Panel, p0: usize, p1: usize, n_out: usize, n_in: usize) {
+    let nb = n_in / Q8_BLOCK;
+    let mut ws = [[0.0f32; Q8_PANEL_BLOCKS]; TN];
+    let mut t0 = 0;
+    while t0 < n_out {
+        let nt = TN.min(n_out - t0);
+        let rows: [usize; TN] = core::array::from_fn(|j| t0 + j.min(nt - 1));
+        let wr = rows.map(|r| w.row(r));
+        for (s, r) in ws.iter_mut().zip(&wr) {
+            simd::q8_scales(r, &mut s[..nb]);
+        }
+        let wd: [&[f32]; TN] = core::array::from_fn(|j| &ws[j][..nb]);
+        let mut i0 = p0;
+        while i0 < p1 {
+            let mt = TM.min(p1 - i0);
+            let pr = |m: usize| i0 - p0 + m.min(mt - 1);
+            let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
+            let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
+            let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
+            let mut put = |m: usize, t: [f32; TN]| {
+                let yr = &mut y[(i0 + m) * n_out + t0..(i0 + m) * n_out + t0 + nt];
+                for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
+                    *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
+                }
+            };
+            match mt {
+                1 => {
+                    let t = simd::gemm_q8::<1>(wr, wd, [q(0)], [d(0)], [c(0)]);
+                    put(0, t[0]);
+                }
+                2 => {
+                    let t = simd::gemm_q8::<2>(wr, wd, [q(0), q(1)], [d(0), d(1)], [c(0), c(1)]);
+                    t.into_iter().enumerate().for_each(|(m, r)| put(m, r));
+                }
+                3 => {
+                    let t = simd::gemm_q8::<3>(wr, wd, [q(0), q(1), q(2)], [d(0), d(1), d(2)], [c(0), c(1), c(2)]);
+                    t.into_iter().enumerate().for_each(|(m, r)| put(m, r));
+                }
+                _ => {
+                    let t = simd::gemm_q8::<4>(wr, wd, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
+                    t.into_iter().enumerate().for_each(|(m, r)| put(m, r));
+                }
+            }
+            i0 += mt;
+        }
+        t0 += nt;
+    }
+}
+
+/// [`q8_panel_tiles`] with 8 weight rows packed once per tile
+/// ([`simd::q8_pack8`]) and activation tiles of up to 8 rows
+/// ([`simd::gemm_q8_packed`]; the AVX512-VNNI path).
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+fn q8_panel_packed(w: &Q8Rows<'_>, b: Option<&[f32]>, y: &mut [f32], p: &Q8Panel, p0: usize, p1: usize, n_out: usize, n_in: usize) {
+    const R: usize = simd::PACK_ROWS;
+    let nb = n_in / Q8_BLOCK;
+    let mut pack = simd::Q8Pack8::new();
+    let mut t0 = 0;
+    while t0 < n_out {
+        let nt = R.min(n_out - t0);
+        let wr: [&[u8]; R] = core::array::from_fn(|j| w.row(t0 + j.min(nt - 1)));
+        simd::q8_pack8(wr, nb, &mut pack);
+        let mut i0 = p0;
+        while i0 < p1 {
+            let mt = R.min(p1 - i0);
+            let pr = |m: usize| i0 - p0 + m.min(mt - 1);
+            let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
+            let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
+            let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
+            let mut put = |m: usize, t: &[f32; R]| {
+                let yr = &mut y[(i0 + m) * n_out + t0..(i0 + m) * n_out + t0 + nt];
+                for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
+                    *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
+                }
+            };
+            macro_rules! run {
+                ($m:literal) => {{
+                    let t = simd::gemm_q8_packed::<$m>(&pack, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
+                    for (m, r) in t.iter().enumerate() {
+                        put(m, r);
+                    }
+                }};
+            }
+            match mt {
+                1 => run!(1),
+                2 => run!(2),
+                3 => run!(3),
+                4 => run!(4),
+                5 => run!(5),
+                6 => run!(6),
+                7 => run!(7),
+                _ => run!(8),
+            }
+            i0 += mt;
+        }
+        t0 += nt;
     }
 }

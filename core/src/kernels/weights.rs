@@ -97,6 +97,13 @@ pub trait DenseElem: Copy + 'static {
     fn dot(w: &[Self], x: &[f32]) -> f32;
     /// The register-blocked tile `out[m][n] = w[n] . x[m]` (ISA-dispatched).
     fn tile(w: [&[Self]; TN], x: [&[f32]; TM]) -> Tile;
+    /// `y += a * w` (ISA-dispatched where a variant exists).
+    #[inline]
+    fn axpy(a: f32, w: &[Self], y: &mut [f32]) {
+        for (yi, &wi) in y.iter_mut().zip(w) {
+            *yi += a * wi.to_f32();
+        }
+    }
 }
 
 impl DenseElem for f32 {
@@ -111,6 +118,10 @@ impl DenseElem for f32 {
     #[inline]
     fn tile(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
         simd::tile_f32(w, x)
+    }
+    #[inline]
+    fn axpy(a: f32, w: &[f32], y: &mut [f32]) {
+        simd::axpy_f32(a, w, y)
     }
 }
 
@@ -127,6 +138,10 @@ impl DenseElem for u16 {
     #[inline]
     fn tile(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
         simd::tile_f16(w, x)
+    }
+    #[inline]
+    fn axpy(a: f32, w: &[u16], y: &mut [f32]) {
+        simd::axpy_f16(a, w, y)
     }
 }
 
@@ -177,9 +192,7 @@ impl<E: DenseElem> RowMatrix for DenseRows<'_, E> {
     }
     #[inline]
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
-        for (yi, &wi) in y.iter_mut().zip(self.row(r)) {
-            *yi += a * wi.to_f32();
-        }
+        E::axpy(a, self.row(r), y)
     }
     fn row_into(&self, r: usize, out: &mut [f32]) {
         for (o, &w) in out.iter_mut().zip(self.row(r)) {
@@ -205,7 +218,8 @@ impl<'a> Q8Rows<'a> {
         }
         Some(Q8Rows { data, rows, cols })
     }
-    fn row(&self, r: usize) -> &'a [u8] {
+    /// The stored bytes of row `r` (`cols / 32` blocks of [f16 scale, 32 x i8]).
+    pub fn row(&self, r: usize) -> &'a [u8] {
         let rb = self.cols / Q8_BLOCK * Q8_BLOCK_BYTES;
         &self.data[r * rb..(r + 1) * rb]
     }

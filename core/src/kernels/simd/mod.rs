@@ -20,6 +20,8 @@
 use core::sync::atomic::{AtomicU8, Ordering};
 
 pub mod scalar;
+#[cfg(test)]
+mod tests;
 #[cfg(target_arch = "x86_64")]
 pub mod x86;
 #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
@@ -39,16 +41,56 @@ pub enum Isa {
     Avx2 = 1,
     /// aarch64 Advanced SIMD (NEON).
     Neon = 2,
+    /// x86_64 AVX-512 F/BW/DQ/VL (+ AVX2, FMA, F16C): 16-wide f32 tiles,
+    /// int8 via `vpmaddubsw` / `vpmaddwd` on 64-byte vectors.
+    Avx512 = 3,
+    /// [`Isa::Avx512`] + AVX512-VNNI: int8 dots with `vpdpbusd`.
+    Avx512Vnni = 4,
+    /// aarch64 NEON + the dot-product extension (`sdot`).
+    NeonDot = 5,
+}
+
+impl Isa {
+    /// True for the x86_64 variants (all imply AVX2 + FMA + F16C).
+    #[inline]
+    pub fn is_x86(self) -> bool {
+        matches!(self, Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni)
+    }
 }
 
 /// The best ISA the compile-time target features guarantee.
 pub const COMPILE_TIME_ISA: Isa = if cfg!(all(
+    target_arch = "x86_64",
+    target_feature = "avx512f",
+    target_feature = "avx512bw",
+    target_feature = "avx512dq",
+    target_feature = "avx512vl",
+    target_feature = "avx512vnni",
+    target_feature = "avx2",
+    target_feature = "fma",
+    target_feature = "f16c"
+)) {
+    Isa::Avx512Vnni
+} else if cfg!(all(
+    target_arch = "x86_64",
+    target_feature = "avx512f",
+    target_feature = "avx512bw",
+    target_feature = "avx512dq",
+    target_feature = "avx512vl",
+    target_feature = "avx2",
+    target_feature = "fma",
+    target_feature = "f16c"
+)) {
+    Isa::Avx512
+} else if cfg!(all(
     target_arch = "x86_64",
     target_feature = "avx2",
     target_feature = "fma",
     target_feature = "f16c"
 )) {
     Isa::Avx2
+} else if cfg!(all(target_arch = "aarch64", target_feature = "neon", target_feature = "dotprod")) {
+    Isa::NeonDot
 } else if cfg!(all(target_arch = "aarch64", target_feature = "neon")) {
     Isa::Neon
 } else {
@@ -63,6 +105,9 @@ pub fn isa() -> Isa {
     match ISA.load(Ordering::Relaxed) {
         1 => Isa::Avx2,
         2 => Isa::Neon,
+        3 => Isa::Avx512,
+        4 => Isa::Avx512Vnni,
+        5 => Isa::NeonDot,
         _ => Isa::Scalar,
     }
 }
@@ -71,8 +116,10 @@ pub fn isa() -> Isa {
 ///
 /// # Safety
 /// The CPU running this process must support `isa` (for [`Isa::Avx2`]:
-/// avx2, fma and f16c; for [`Isa::Neon`]: an aarch64 CPU, which always has
-/// it), and `isa` must be one this build has a variant for (an arm for a
+/// avx2, fma and f16c; [`Isa::Avx512`]: those and avx512f, avx512bw,
+/// avx512dq, avx512vl; [`Isa::Avx512Vnni`]: those and avx512vnni; for
+/// [`Isa::Neon`]: an aarch64 CPU, which always has it; [`Isa::NeonDot`]:
+/// the dotprod extension), and `isa` must be one this build has a variant for (an arm for a
 /// foreign architecture falls back to scalar). [`Isa::Scalar`] is always safe.
 pub unsafe fn set_isa(isa: Isa) {
     ISA.store(isa as u8, Ordering::Relaxed);
@@ -96,10 +143,10 @@ pub fn dot_f32(a: &[f32], b: &[f32]) -> f32 {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: ISA holds Avx2 only via COMPILE_TIME_ISA (features enabled
         // at build time) or `set_isa`, whose caller vouched for the CPU.
-        Isa::Avx2 => unsafe { x86::dot_f32(a, b) },
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_f32(a, b) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
-        Isa::Neon => unsafe { neon::dot_f32(a, b) },
+        Isa::Neon | Isa::NeonDot => unsafe { neon::dot_f32(a, b) },
         _ => scalar::dot_f32(a, b),
     }
 }
@@ -110,10 +157,10 @@ pub fn dot_f16(w: &[u16], x: &[f32]) -> f32 {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx2 implies f16c).
-        Isa::Avx2 => unsafe { x86::dot_f16(w, x) },
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_f16(w, x) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
-        Isa::Neon => unsafe { neon::dot_f16(w, x) },
+        Isa::Neon | Isa::NeonDot => unsafe { neon::dot_f16(w, x) },
         _ => scalar::dot_f16(w, x),
     }
 }
@@ -124,10 +171,10 @@ pub fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 => unsafe { x86::dot_q8(w, xq, xd) },
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_q8(w, xq, xd) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
-        Isa::Neon => unsafe { neon::dot_q8(w, xq, xd) },
+        Isa::Neon | Isa::NeonDot => unsafe { neon::dot_q8(w, xq, xd) },
         _ => scalar::dot_q8(w, xq, xd),
     }
 }
@@ -160,10 +207,13 @@ pub fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::tile_f32_512(w, x) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
         Isa::Avx2 => unsafe { x86::tile_f32(w, x) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
-        Isa::Neon => unsafe { neon::tile_f32(w, x) },
+        Isa::Neon | Isa::NeonDot => unsafe { neon::tile_f32(w, x) },
         _ => scalar::tile_f32(w, x),
     }
 }
@@ -174,10 +224,13 @@ pub fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx2 implies f16c).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::tile_f16_512(w, x) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx2 implies f16c).
         Isa::Avx2 => unsafe { x86::tile_f16(w, x) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
-        Isa::Neon => unsafe { neon::tile_f16(w, x) },
+        Isa::Neon | Isa::NeonDot => unsafe { neon::tile_f16(w, x) },
         _ => scalar::tile_f16(w, x),
     }
 }
@@ -189,10 +242,10 @@ pub fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 => unsafe { x86::tile_q8(w, xq, xd) },
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::tile_q8(w, xq, xd) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
-        Isa::Neon => unsafe { neon::tile_q8(w, xq, xd) },
+        Isa::Neon | Isa::NeonDot => unsafe { neon::tile_q8(w, xq, xd) },
         _ => scalar::tile_q8(w, xq, xd),
     }
 }
@@ -212,5 +265,183 @@ pub fn quantise_q8(x: &[f32], q: &mut [i8], d: &mut [f32]) {
         for (qv, &v) in qb.iter_mut().zip(xb) {
             *qv = libm::roundf(v * inv) as i8;
         }
+    }
+}
+
+// ---------------------------------------------------------------------
+// Int8 GEMM with activations quantised once per call (`linear` over a
+// `Q8Rows` matrix): the activation rows are quantised into a panel
+// ([`quantise_q8_corr`]), the weight scales of a tile of weight rows are
+// read out once ([`q8_scales`]), and [`gemm_q8`] forms a `M x TN` tile of
+// dot products with integer arithmetic per block of 32.
+// ---------------------------------------------------------------------
+
+/// [`quantise_q8`] (bit-identical `q` and `d`) that also writes, per
+/// block `b` and lane parity `j`, the offset correction `c[2b + j] = -128 *
+/// sum(q[32b + i] : (i % 8) / 4 == j)` the unsigned x signed VNNI dot needs
+/// (`sum((w + 128) q) + c = sum(w q)`, exact per 4-byte lane class).
+/// `c` >= 2 * x.len() / 32.
+#[inline]
+pub fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (every x86 variant implies avx2 + fma).
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::quantise_q8_corr(x, q, d, c) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::quantise_q8_corr(x, q, d, c) },
+        _ => scalar::quantise_q8_corr(x, q, d, c),
+    }
+}
+
+/// The f16 block scales of one stored Q8Block32 row as f32 (`out` >= blocks).
+#[inline]
+pub fn q8_scales(row: &[u8], out: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::q8_scales(row, out) },
+        _ => scalar::q8_scales(row, out),
+    }
+}
+
+/// A `M x TN` tile of int8 dot products: `out[m][n] = sum_b (wd[n][b] *
+/// xd[m][b]) * (w[n] block b . xq[m] block b)` over the fewest blocks of
+/// any argument, with `w[n]` stored Q8Block32 rows (their f16 scales are
+/// not read: `wd[n]` holds them as f32, [`q8_scales`]), and `xq` / `xd` /
+/// `xc` from [`quantise_q8_corr`]. `M` is 1..=4 (small-batch and
+/// matrix-vector products waste no lanes on padding rows).
+#[inline]
+pub fn gemm_q8<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; TN]; M] {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: ISA holds Avx512Vnni only via COMPILE_TIME_ISA or `set_isa`,
+        // whose caller vouched for avx512f/bw/dq/vl/vnni + avx2/fma/f16c.
+        Isa::Avx512Vnni => unsafe { x86::gemm_q8_vnni(w, wd, xq, xd, xc) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above, without vnni.
+        Isa::Avx512 => unsafe { x86::gemm_q8_512(w, wd, xq, xd, xc) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 => unsafe { x86::gemm_q8_avx2(w, wd, xq, xd, xc) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: ISA holds NeonDot only via COMPILE_TIME_ISA (dotprod enabled
+        // at build time) or `set_isa`, whose caller vouched for the CPU.
+        Isa::NeonDot => unsafe { neon::gemm_q8_dot(w, wd, xq, xd, xc) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon => unsafe { neon::gemm_q8(w, wd, xq, xd, xc) },
+        _ => scalar::gemm_q8(w, wd, xq, xd, xc),
+    }
+}
+
+/// `y += a * x` over the shorter length (attention's probability-weighted
+/// value rows, the transposed-convolution GEMM).
+#[inline]
+pub fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_f32(a, x, y) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_f32(a, x, y) },
+        _ => scalar::axpy_f32(a, x, y),
+    }
+}
+
+/// `out[j] = q . k[j * stride ..][..q.len()]` for `j < out.len()` (one
+/// attention query against a run of key rows of a strided matrix; `k`
+/// holds at least `(out.len() - 1) * stride + q.len()` floats when
+/// `out` is not empty).
+#[inline]
+pub fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512(q, k, stride, out) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 => unsafe { x86::dot_rows(q, k, stride, out) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::dot_rows(q, k, stride, out) },
+        _ => scalar::dot_rows(q, k, stride, out),
+    }
+}
+
+/// Weight rows of a packed int8 tile ([`Q8Pack8`]).
+pub const PACK_ROWS: usize = 8;
+/// Blocks (of 32 columns) a [`Q8Pack8`] holds: inputs up to 3072 wide.
+pub const PACK_BLOCKS: usize = 96;
+
+/// 8 int8 weight rows interleaved for `vpdpbusd` with broadcast
+/// activations: per block `b` and 8-byte group `g`, `v[b][g]` holds bytes
+/// `8g..8g + 8` of block `b` of rows 0..8 (row `n` at bytes `8n..8n + 8`),
+/// offset to unsigned (`w ^ 0x80`); `s[b]` the rows' scales, each twice
+/// (`s[b][2n] = s[b][2n + 1]` = row `n`'s). One packing per tile of 8
+/// weight rows serves every activation row of a panel.
+#[repr(C, align(64))]
+pub struct Q8Pack8 {
+    v: [[[u8; 64]; 4]; PACK_BLOCKS],
+    s: [[f32; 16]; PACK_BLOCKS],
+    nb: usize,
+}
+
+impl Q8Pack8 {
+    pub fn new() -> Self {
+        Q8Pack8 { v: [[[0; 64]; 4]; PACK_BLOCKS], s: [[0.0; 16]; PACK_BLOCKS], nb: 0 }
+    }
+}
+
+impl Default for Q8Pack8 {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Whether [`gemm_q8_packed`] has a fast variant on the selected ISA for
+/// rows of `nb` blocks (x86 AVX512-VNNI, `nb <= PACK_BLOCKS`); callers use
+/// [`gemm_q8`] otherwise.
+#[inline]
+pub fn packed_q8_fast(nb: usize) -> bool {
+    isa() == Isa::Avx512Vnni && nb <= PACK_BLOCKS
+}
+
+/// Packs 8 stored Q8Block32 rows (first `nb` blocks; `nb <= PACK_BLOCKS`,
+/// every row at least `nb` blocks), scales included.
+pub fn q8_pack8(rows: [&[u8]; PACK_ROWS], nb: usize, pack: &mut Q8Pack8) {
+    let nb = nb.min(PACK_BLOCKS);
+    pack.nb = nb;
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `gemm_q8_packed`.
+        Isa::Avx512Vnni => unsafe { x86::q8_pack8(rows, nb, &mut pack.v, &mut pack.s) },
+        _ => scalar::q8_pack8(rows, nb, &mut pack.v, &mut pack.s),
+    }
+}
+
+/// `out[m][n] = sum_b (s_n,b * xd[m][b]) * (row n block b . xq[m] block b)`
+/// over the packed rows (see [`gemm_q8`]; `xc` from [`quantise_q8_corr`]).
+/// `M` is 1..=8.
+#[inline]
+pub fn gemm_q8_packed<const M: usize>(pack: &Q8Pack8, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; PACK_ROWS]; M] {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: ISA holds Avx512Vnni only via COMPILE_TIME_ISA or `set_isa`,
+        // whose caller vouched for avx512f/bw/dq/vl/vnni + avx2/fma/f16c.
+        Isa::Avx512Vnni => unsafe { x86::gemm_q8_packed_vnni(&pack.v, &pack.s, pack.nb, xq, xd, xc) },
+        _ => scalar::gemm_q8_packed(&pack.v, &pack.s, pack.nb, xq, xd, xc),
+    }
+}
+
+/// `y += a * w` with binary16 `w` (exact f16 -> f32), over the shorter length.
+#[inline]
+pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_f16(a, w, y) },
+        _ => scalar::axpy_f16(a, w, y),
     }
 }

@@ -143,3 +143,153 @@ pub unsafe fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile
     // SAFETY: NEON is available (this fn's contract).
     pairwise(|m, n| unsafe { dot_q8(&w[n][..nb * Q8_BLOCK_BYTES], &xq[m][..nb * Q8_BLOCK], &xd[m][..nb]) })
 }
+
+/// See [`super::quantise_q8_corr`]: `vrndaq_f32` is `roundf` exactly (ties
+/// away from zero), `fcvtzs` maps NaN to 0 and `fmaxnm` ignores NaN like
+/// `f32::max`, so the result is bit-identical to the scalar twin.
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
+    let blocks = x.chunks_exact(Q8_BLOCK).zip(q.chunks_exact_mut(Q8_BLOCK)).zip(d.iter_mut().zip(c.chunks_exact_mut(2)));
+    for ((xb, qb), (db, cb)) in blocks {
+        // SAFETY: xb holds exactly 32 floats.
+        let v: [float32x4_t; 8] = core::array::from_fn(|i| unsafe { vld1q_f32(xb.as_ptr().add(4 * i)) });
+        let mut m = vdupq_n_f32(0.0);
+        for vi in &v {
+            m = vmaxnmq_f32(m, vabsq_f32(*vi));
+        }
+        let scale = vmaxnmvq_f32(m) / 127.0;
+        *db = scale;
+        let inv = if scale > 0.0 { 1.0 / scale } else { 0.0 };
+        let r: [int32x4_t; 8] = v.map(|vi| vcvtq_s32_f32(vrndaq_f32(vmulq_n_f32(vi, inv))));
+        // Quads 0, 2, 4, 6 are lane parity 0; 1, 3, 5, 7 parity 1.
+        let s0 = vaddq_s32(vaddq_s32(r[0], r[2]), vaddq_s32(r[4], r[6]));
+        let s1 = vaddq_s32(vaddq_s32(r[1], r[3]), vaddq_s32(r[5], r[7]));
+        cb[0] = -128 * vaddvq_s32(s0);
+        cb[1] = -128 * vaddvq_s32(s1);
+        for (k, pair) in r.chunks_exact(4).enumerate() {
+            let h0 = vcombine_s16(vqmovn_s32(pair[0]), vqmovn_s32(pair[1]));
+            let h1 = vcombine_s16(vqmovn_s32(pair[2]), vqmovn_s32(pair[3]));
+            let b = vcombine_s8(vqmovn_s16(h0), vqmovn_s16(h1));
+            // SAFETY: qb holds 32 bytes: 16 at 16k, k in 0..2.
+            unsafe { vst1q_s8(qb.as_mut_ptr().add(16 * k), b) };
+        }
+    }
+}
+
+/// `sdot` (4-way i8 dot into each i32 lane), via asm: the intrinsic is
+/// not stable Rust yet.
+#[inline]
+#[target_feature(enable = "neon,dotprod")]
+unsafe fn sdot(acc: int32x4_t, a: int8x16_t, b: int8x16_t) -> int32x4_t {
+    let mut r = acc;
+    // SAFETY: a register-only instruction of the dotprod extension (this
+    // fn's target feature; the caller vouched for the CPU).
+    unsafe { core::arch::asm!("sdot {0:v}.4s, {1:v}.16b, {2:v}.16b", inout(vreg) r, in(vreg) a, in(vreg) b, options(pure, nomem, nostack)) };
+    r
+}
+
+/// The 32 weights of block `b` of a stored row (two 16-byte vectors).
+#[inline]
+#[target_feature(enable = "neon")]
+unsafe fn wblock(row: &[u8], b: usize) -> [int8x16_t; 2] {
+    let q = &row[b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
+    // SAFETY: q holds exactly 32 bytes.
+    unsafe { [vld1q_s8(q.as_ptr() as *const i8), vld1q_s8(q.as_ptr().add(16) as *const i8)] }
+}
+
+/// The 32 quantised activations of block `b`.
+#[inline]
+#[target_feature(enable = "neon")]
+unsafe fn xblock(xq: &[i8], b: usize) -> [int8x16_t; 2] {
+    let q = &xq[b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
+    // SAFETY: q holds exactly 32 bytes.
+    unsafe { [vld1q_s8(q.as_ptr()), vld1q_s8(q.as_ptr().add(16))] }
+}
+
+/// See [`super::gemm_q8`]: per block, each weight row loaded once for all
+/// `M` activation rows; i8 x i8 -> i16 products (`smull`, exact) pairwise
+/// accumulated into i32 (`sadalp`); `xc` unused.
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn gemm_q8<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; TN]; M] {
+    let nb = super::scalar::gemm_blocks(&w, &wd, &xq, &xd, &xc);
+    let mut acc = [[vdupq_n_f32(0.0); TN]; M];
+    for b in 0..nb {
+        // SAFETY: every row holds at least nb blocks.
+        let wv: [[int8x16_t; 2]; TN] = core::array::from_fn(|n| unsafe { wblock(w[n], b) });
+        for m in 0..M {
+            // SAFETY: as above.
+            let xv = unsafe { xblock(xq[m], b) };
+            for n in 0..TN {
+                let mut s = vdupq_n_s32(0);
+                s = vpadalq_s16(s, vmull_s8(vget_low_s8(wv[n][0]), vget_low_s8(xv[0])));
+                s = vpadalq_s16(s, vmull_high_s8(wv[n][0], xv[0]));
+                s = vpadalq_s16(s, vmull_s8(vget_low_s8(wv[n][1]), vget_low_s8(xv[1])));
+                s = vpadalq_s16(s, vmull_high_s8(wv[n][1], xv[1]));
+                acc[m][n] = vfmaq_n_f32(acc[m][n], vcvtq_f32_s32(s), wd[n][b] * xd[m][b]);
+            }
+        }
+    }
+    acc.map(|am| am.map(|a| vaddvq_f32(a)))
+}
+
+/// [`gemm_q8`] with `sdot` (the dotprod extension).
+///
+/// # Safety
+/// NEON and the dotprod extension must be available.
+#[target_feature(enable = "neon,dotprod")]
+pub unsafe fn gemm_q8_dot<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; TN]; M] {
+    let nb = super::scalar::gemm_blocks(&w, &wd, &xq, &xd, &xc);
+    let mut acc = [[vdupq_n_f32(0.0); TN]; M];
+    for b in 0..nb {
+        // SAFETY: every row holds at least nb blocks.
+        let wv: [[int8x16_t; 2]; TN] = core::array::from_fn(|n| unsafe { wblock(w[n], b) });
+        for m in 0..M {
+            // SAFETY: as above.
+            let xv = unsafe { xblock(xq[m], b) };
+            for n in 0..TN {
+                let s = sdot(sdot(vdupq_n_s32(0), wv[n][0], xv[0]), wv[n][1], xv[1]);
+                acc[m][n] = vfmaq_n_f32(acc[m][n], vcvtq_f32_s32(s), wd[n][b] * xd[m][b]);
+            }
+        }
+    }
+    acc.map(|am| am.map(|a| vaddvq_f32(a)))
+}
+
+/// `y += a * x` (fused multiply-add).
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
+    let n = x.len().min(y.len());
+    let (x, y) = (&x[..n], &mut y[..n]);
+    let n4 = n - n % 4;
+    let (x4, x1) = x.split_at(n4);
+    let (y4, y1) = y.split_at_mut(n4);
+    for (xc, yc) in x4.chunks_exact(4).zip(y4.chunks_exact_mut(4)) {
+        // SAFETY: 4 floats each.
+        unsafe { vst1q_f32(yc.as_mut_ptr(), vfmaq_n_f32(vld1q_f32(yc.as_ptr()), vld1q_f32(xc.as_ptr()), a)) };
+    }
+    for (yi, xi) in y1.iter_mut().zip(x1) {
+        *yi += a * xi;
+    }
+}
+
+/// See [`super::dot_rows`] (one NEON dot per key row).
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
+    let hd = q.len();
+    for (j, o) in out.iter_mut().enumerate() {
+        // SAFETY: NEON is available (this fn's contract).
+        *o = unsafe { dot_f32(q, &k[j * stride..j * stride + hd]) };
+    }
+}

@@ -101,3 +101,122 @@ pub fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
     let nb = common_blocks(&w, &xq, &xd);
     pairwise(|m, n| dot_q8(&w[n][..nb * Q8_BLOCK_BYTES], &xq[m][..nb * Q8_BLOCK], &xd[m][..nb]))
 }
+
+/// Twin of [`super::quantise_q8_corr`]: [`super::quantise_q8`] plus the
+/// VNNI offset corrections per block and lane parity: `c[2b + j] = -128 *
+/// sum(q[32b + i])` over the `i` with `(i % 8) / 4 == j`.
+pub fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
+    super::quantise_q8(x, q, d);
+    for (cb, qb) in c.chunks_exact_mut(2).zip(q.chunks_exact(Q8_BLOCK)).take(x.len() / Q8_BLOCK) {
+        for (j, cj) in cb.iter_mut().enumerate() {
+            *cj = -128 * qb.iter().enumerate().filter(|(i, _)| (i % 8) / 4 == j).map(|(_, &v)| v as i32).sum::<i32>();
+        }
+    }
+}
+
+/// Twin of [`super::q8_scales`].
+pub fn q8_scales(row: &[u8], out: &mut [f32]) {
+    for (o, blk) in out.iter_mut().zip(row.chunks_exact(Q8_BLOCK_BYTES)) {
+        *o = f16_to_f32(u16::from_le_bytes([blk[0], blk[1]]));
+    }
+}
+
+/// The fewest blocks of any argument of [`gemm_q8`].
+#[inline]
+pub(crate) fn gemm_blocks<const M: usize>(w: &[&[u8]; TN], wd: &[&[f32]; TN], xq: &[&[i8]; M], xd: &[&[f32]; M], xc: &[&[i32]; M]) -> usize {
+    let a = w.iter().map(|r| r.len() / Q8_BLOCK_BYTES).chain(wd.iter().map(|r| r.len())).min().unwrap_or(0);
+    let b = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).chain(xc.iter().map(|r| r.len() / 2)).min().unwrap_or(0);
+    a.min(b)
+}
+
+/// Twin of [`super::gemm_q8`]: per pair, block by block, the exact i32 block
+/// dot scaled by `wd * xd` and summed in f32 (as [`dot_q8`]; `xc` unused).
+pub fn gemm_q8<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; TN]; M] {
+    let nb = gemm_blocks(&w, &wd, &xq, &xd, &xc);
+    let mut out = [[0.0f32; TN]; M];
+    for (m, row) in out.iter_mut().enumerate() {
+        for (n, o) in row.iter_mut().enumerate() {
+            let mut sum = 0.0f32;
+            for b in 0..nb {
+                let wq = &w[n][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
+                let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
+                let isum: i32 = wq.iter().zip(xs).map(|(&a, &c)| (a as i8 as i32) * c as i32).sum();
+                sum += (wd[n][b] * xd[m][b]) * isum as f32;
+            }
+            *o = sum;
+        }
+    }
+    out
+}
+
+/// Twin of [`super::axpy_f32`]: `y += a * x` (separate multiply and add).
+#[inline]
+pub fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += a * xi;
+    }
+}
+
+/// Twin of [`super::dot_rows`]: one [`dot_f32`] per key row.
+#[inline]
+pub fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
+    let hd = q.len();
+    for (j, o) in out.iter_mut().enumerate() {
+        *o = dot_f32(q, &k[j * stride..j * stride + hd]);
+    }
+}
+
+/// Twin of [`super::gemm_q8_packed`] (block by block, exact i32 block sums,
+/// as [`gemm_q8`]).
+pub fn gemm_q8_packed<const M: usize>(
+    v: &[[[u8; 64]; 4]],
+    s: &[[f32; 16]],
+    nb: usize,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    _xc: [&[i32]; M],
+) -> [[f32; 8]; M] {
+    let nb = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).fold(nb.min(v.len()).min(s.len()), usize::min);
+    let mut out = [[0.0f32; 8]; M];
+    for (m, row) in out.iter_mut().enumerate() {
+        for (n, o) in row.iter_mut().enumerate() {
+            let mut sum = 0.0f32;
+            for b in 0..nb {
+                let mut isum = 0i32;
+                for g in 0..4 {
+                    for i in 0..8 {
+                        isum += ((v[b][g][8 * n + i] ^ 0x80) as i8 as i32) * xq[m][b * Q8_BLOCK + 8 * g + i] as i32;
+                    }
+                }
+                sum += (s[b][2 * n] * xd[m][b]) * isum as f32;
+            }
+            *o = sum;
+        }
+    }
+    out
+}
+
+/// Twin of [`super::q8_pack8`] (layout documented at [`super::Q8Pack8`]).
+pub fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [[[u8; 64]; 4]], s: &mut [[f32; 16]]) {
+    for (b, (vb, sb)) in v.iter_mut().zip(s.iter_mut()).take(nb).enumerate() {
+        for (n, row) in rows.iter().enumerate() {
+            let q = &row[b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
+            for (g, vg) in vb.iter_mut().enumerate() {
+                for (dst, &src) in vg[8 * n..8 * n + 8].iter_mut().zip(&q[8 * g..8 * g + 8]) {
+                    *dst = src ^ 0x80;
+                }
+            }
+            let d = f16_to_f32(u16::from_le_bytes([row[b * Q8_BLOCK_BYTES], row[b * Q8_BLOCK_BYTES + 1]]));
+            sb[2 * n] = d;
+            sb[2 * n + 1] = d;
+        }
+    }
+}
+
+/// Twin of [`super::axpy_f16`].
+#[inline]
+pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
+    for (yi, &wi) in y.iter_mut().zip(w) {
+        *yi += a * f16_to_f32(wi);
+    }
+}

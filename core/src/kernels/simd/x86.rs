@@ -256,3 +256,558 @@ pub unsafe fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile
     }
     out
 }
+
+// ---------------------------------------------------------------------
+// AVX-512 f32 / f16 tiles, int8 GEMM (VNNI, AVX-512BW, AVX2), the
+// activation quantiser and axpy.
+// ---------------------------------------------------------------------
+
+/// Mask of the first `n` (< 16) lanes.
+#[inline]
+fn lanes16(n: usize) -> __mmask16 {
+    ((1u32 << n) - 1) as __mmask16
+}
+
+/// Register-blocked tile on 16-wide vectors: the whole `TM x TN` tile in
+/// 16 accumulators (AVX-512 has 32 registers), so each loaded vector is
+/// used 4 times; the column tail is one masked step (no scalar tail).
+///
+/// # Safety
+/// The CPU must support avx512f (and the dispatcher's Avx512 set).
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
+pub unsafe fn tile_f32_512(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
+    let k = tile_len(&w, &x);
+    let k16 = k - k % 16;
+    let mut acc = [[_mm512_setzero_ps(); TN]; TM];
+    let mut c = 0;
+    while c < k16 {
+        // SAFETY: c + 16 <= k and every row holds at least k floats.
+        let wv: [__m512; TN] = core::array::from_fn(|n| unsafe { _mm512_loadu_ps(w[n].as_ptr().add(c)) });
+        for (am, xm) in acc.iter_mut().zip(&x) {
+            // SAFETY: as above.
+            let xv = unsafe { _mm512_loadu_ps(xm.as_ptr().add(c)) };
+            for (a, wn) in am.iter_mut().zip(&wv) {
+                *a = _mm512_fmadd_ps(xv, *wn, *a);
+            }
+        }
+        c += 16;
+    }
+    if c < k {
+        let mk = lanes16(k - c);
+        // SAFETY: masked loads read only lanes c..k, inside every row.
+        let wv: [__m512; TN] = core::array::from_fn(|n| unsafe { _mm512_maskz_loadu_ps(mk, w[n].as_ptr().add(c)) });
+        for (am, xm) in acc.iter_mut().zip(&x) {
+            // SAFETY: as above.
+            let xv = unsafe { _mm512_maskz_loadu_ps(mk, xm.as_ptr().add(c)) };
+            for (a, wn) in am.iter_mut().zip(&wv) {
+                *a = _mm512_fmadd_ps(xv, *wn, *a);
+            }
+        }
+    }
+    acc.map(|am| am.map(|a| _mm512_reduce_add_ps(a)))
+}
+
+/// [`tile_f32_512`] with binary16 weights (16 converted per F16C step).
+///
+/// # Safety
+/// As [`tile_f32_512`].
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
+pub unsafe fn tile_f16_512(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
+    let k = tile_len(&w, &x);
+    let k16 = k - k % 16;
+    let mut acc = [[_mm512_setzero_ps(); TN]; TM];
+    let mut c = 0;
+    while c < k16 {
+        // SAFETY: c + 16 <= k: 16 u16 (one 256-bit load) of each row in bounds.
+        let wv: [__m512; TN] = core::array::from_fn(|n| unsafe { _mm512_cvtph_ps(_mm256_loadu_si256(w[n].as_ptr().add(c) as *const __m256i)) });
+        for (am, xm) in acc.iter_mut().zip(&x) {
+            // SAFETY: every x[m] holds at least k floats.
+            let xv = unsafe { _mm512_loadu_ps(xm.as_ptr().add(c)) };
+            for (a, wn) in am.iter_mut().zip(&wv) {
+                *a = _mm512_fmadd_ps(xv, *wn, *a);
+            }
+        }
+        c += 16;
+    }
+    if c < k {
+        let mk = lanes16(k - c);
+        // SAFETY: masked loads read only lanes c..k, inside every row.
+        let wv: [__m512; TN] = core::array::from_fn(|n| unsafe { _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(mk, w[n].as_ptr().add(c) as *const i16)) });
+        for (am, xm) in acc.iter_mut().zip(&x) {
+            // SAFETY: as above.
+            let xv = unsafe { _mm512_maskz_loadu_ps(mk, xm.as_ptr().add(c)) };
+            for (a, wn) in am.iter_mut().zip(&wv) {
+                *a = _mm512_fmadd_ps(xv, *wn, *a);
+            }
+        }
+    }
+    acc.map(|am| am.map(|a| _mm512_reduce_add_ps(a)))
+}
+
+/// `roundf` (half away from zero) of integral-range lanes, exactly as
+/// `libm::roundf`; NaN lanes become 0 (as the scalar `as i8` cast).
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn round_away(t: __m256) -> __m256 {
+    let r = _mm256_round_ps::<{ _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC }>(t);
+    let absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+    let frac = _mm256_and_ps(_mm256_sub_ps(t, r), absmask);
+    let half = _mm256_cmp_ps::<_CMP_GE_OQ>(frac, _mm256_set1_ps(0.5));
+    let one = _mm256_or_ps(_mm256_set1_ps(1.0), _mm256_andnot_ps(absmask, t)); // copysign(1, t)
+    let r = _mm256_add_ps(r, _mm256_and_ps(half, one));
+    _mm256_and_ps(r, _mm256_cmp_ps::<_CMP_ORD_Q>(t, t))
+}
+
+/// Horizontal max of 8 lanes.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn hmax(v: __m256) -> f32 {
+    let s = _mm_max_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps::<1>(v));
+    let s = _mm_max_ps(s, _mm_movehl_ps(s, s));
+    let s = _mm_max_ss(s, _mm_shuffle_ps::<0b01>(s, s));
+    _mm_cvtss_f32(s)
+}
+
+/// See [`super::quantise_q8_corr`]; bit-identical to the scalar twin (same
+/// IEEE divisions and products, `roundf` emulated exactly).
+///
+/// # Safety
+/// The CPU must support avx2 and fma.
+#[target_feature(enable = "avx2,fma")]
+pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
+    let absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+    let fix = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+    let blocks = x.chunks_exact(Q8_BLOCK).zip(q.chunks_exact_mut(Q8_BLOCK)).zip(d.iter_mut().zip(c.chunks_exact_mut(2)));
+    for ((xb, qb), (db, cb)) in blocks {
+        // SAFETY: xb holds exactly 32 floats.
+        let v: [__m256; 4] = core::array::from_fn(|i| unsafe { _mm256_loadu_ps(xb.as_ptr().add(8 * i)) });
+        // max(|v|, acc) keeps acc when v is NaN: f32::max's NaN rule, as the twin.
+        let mut m = _mm256_setzero_ps();
+        for vi in &v {
+            m = _mm256_max_ps(_mm256_and_ps(*vi, absmask), m);
+        }
+        let scale = hmax(m) / 127.0;
+        *db = scale;
+        let inv = _mm256_set1_ps(if scale > 0.0 { 1.0 / scale } else { 0.0 });
+        let r: [__m256; 4] = core::array::from_fn(|i| round_away(_mm256_mul_ps(v[i], inv)));
+        let sum = _mm256_add_ps(_mm256_add_ps(r[0], r[1]), _mm256_add_ps(r[2], r[3]));
+        // Lanes 0..4 of each 8 are parity 0, lanes 4..8 parity 1 (exact sums of integers).
+        let (lo, hi) = (_mm256_castps256_ps128(sum), _mm256_extractf128_ps::<1>(sum));
+        let h4 = |v: __m128| {
+            let s = _mm_add_ps(v, _mm_movehl_ps(v, v));
+            _mm_cvtss_f32(_mm_add_ss(s, _mm_shuffle_ps::<0b01>(s, s)))
+        };
+        cb[0] = -128 * h4(lo) as i32;
+        cb[1] = -128 * h4(hi) as i32;
+        let i: [__m256i; 4] = r.map(|ri| _mm256_cvtps_epi32(ri));
+        let p = _mm256_packs_epi16(_mm256_packs_epi32(i[0], i[1]), _mm256_packs_epi32(i[2], i[3]));
+        let p = _mm256_permutevar8x32_epi32(p, fix);
+        // SAFETY: qb holds exactly 32 bytes.
+        unsafe { _mm256_storeu_si256(qb.as_mut_ptr() as *mut __m256i, p) };
+    }
+}
+
+/// See [`super::q8_scales`] (F16C, 8 scales per conversion).
+///
+/// # Safety
+/// The CPU must support avx2 and f16c.
+#[target_feature(enable = "avx2,f16c")]
+pub unsafe fn q8_scales(row: &[u8], out: &mut [f32]) {
+    for (o, blks) in out.chunks_mut(8).zip(row.chunks(8 * Q8_BLOCK_BYTES)) {
+        let mut h = [0u16; 8];
+        for (hi, blk) in h.iter_mut().zip(blks.chunks_exact(Q8_BLOCK_BYTES)) {
+            *hi = u16::from_le_bytes([blk[0], blk[1]]);
+        }
+        let mut f = [0f32; 8];
+        // SAFETY: h holds 8 u16 (128 bits), f 8 floats.
+        unsafe { _mm256_storeu_ps(f.as_mut_ptr(), _mm256_cvtph_ps(_mm_loadu_si128(h.as_ptr() as *const __m128i))) };
+        let n = o.len().min(blks.len() / Q8_BLOCK_BYTES);
+        o[..n].copy_from_slice(&f[..n]);
+    }
+}
+
+/// The 32 quantised bytes of blocks `b` and `b + 1` of a stored row as one
+/// 64-byte vector (two 32-byte loads; the scale bytes between are skipped).
+///
+/// # Safety
+/// avx512f; `row` holds at least `b + 2` blocks.
+#[inline]
+#[target_feature(enable = "avx512f,avx2")]
+unsafe fn two_blocks(row: &[u8], b: usize) -> __m512i {
+    let blk = &row[b * Q8_BLOCK_BYTES..(b + 2) * Q8_BLOCK_BYTES];
+    // SAFETY: blk holds 68 bytes: 2..34 and 36..68 are in bounds.
+    let (lo, hi) = unsafe { (_mm256_loadu_si256(blk.as_ptr().add(2) as *const __m256i), _mm256_loadu_si256(blk.as_ptr().add(36) as *const __m256i)) };
+    _mm512_inserti64x4::<1>(_mm512_castsi256_si512(lo), hi)
+}
+
+/// `[s[b] x 8, s[b + 1] x 8]` (per-block scales of a block pair, by lane).
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn pair_scales(s: &[f32], b: usize) -> __m512 {
+    let p = &s[b..b + 2];
+    // SAFETY: p holds 2 floats (8 bytes, one unaligned 64-bit load).
+    let v = unsafe { _mm_castpd_ps(_mm_load_sd(p.as_ptr() as *const f64)) };
+    _mm512_permutexvar_ps(_mm512_setr_epi32(0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1), _mm512_castps128_ps512(v))
+}
+
+/// See [`super::gemm_q8`]: two blocks per 64-byte step; weights made
+/// unsigned (`w ^ 0x80 = w + 128`) for `vpdpbusd`, whose accumulator starts
+/// at the activation block's corrections (lanes 0 and 1 of each block's 8
+/// lanes), so each block's 8 i32 lanes sum to the exact
+/// `sum(w q)`; then converted, scaled by `wd * xd` and accumulated in f32.
+/// An odd last block takes one 32-byte step.
+///
+/// # Safety
+/// The CPU must support avx512f/bw/dq/vl/vnni, avx2, fma and f16c.
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
+pub unsafe fn gemm_q8_vnni<const M: usize>(
+    w: [&[u8]; TN],
+    wd: [&[f32]; TN],
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; TN]; M] {
+    let nb = super::scalar::gemm_blocks(&w, &wd, &xq, &xd, &xc);
+    let flip = _mm512_set1_epi8(-128);
+    let corr_idx = _mm512_setr_epi32(0, 1, 0, 0, 0, 0, 0, 0, 2, 3, 0, 0, 0, 0, 0, 0);
+    let mut acc = [[_mm512_setzero_ps(); TN]; M];
+    let mut b = 0;
+    while b + 2 <= nb {
+        // SAFETY (both): every row holds at least nb >= b + 2 blocks.
+        let wv: [__m512i; TN] = core::array::from_fn(|n| _mm512_xor_si512(unsafe { two_blocks(w[n], b) }, flip));
+        let dw: [__m512; TN] = core::array::from_fn(|n| unsafe { pair_scales(wd[n], b) });
+        for m in 0..M {
+            let xs = &xq[m][b * Q8_BLOCK..(b + 2) * Q8_BLOCK];
+            let cs = &xc[m][2 * b..2 * b + 4];
+            // SAFETY: xs holds 64 bytes; cs 4 i32 (one 128-bit load).
+            let (xv, cv) = unsafe { (_mm512_loadu_si512(xs.as_ptr() as *const _), _mm_loadu_si128(cs.as_ptr() as *const __m128i)) };
+            // Lanes 0, 1 <- block b's parity corrections, lanes 8, 9 <- block b + 1's.
+            let init = _mm512_maskz_permutexvar_epi32(0x0303, corr_idx, _mm512_castsi128_si512(cv));
+            // SAFETY: xd[m] holds at least b + 2 scales.
+            let dx = unsafe { pair_scales(xd[m], b) };
+            for n in 0..TN {
+                let dp = _mm512_dpbusd_epi32(init, wv[n], xv);
+                acc[m][n] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(dp), _mm512_mul_ps(dw[n], dx), acc[m][n]);
+            }
+        }
+        b += 2;
+    }
+    let mut out = acc.map(|am| am.map(|a| _mm512_reduce_add_ps(a)));
+    if b < nb {
+        let flip = _mm256_set1_epi8(-128);
+        let wv: [__m256i; TN] = core::array::from_fn(|n| {
+            let q = &w[n][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
+            // SAFETY: q holds exactly 32 bytes.
+            _mm256_xor_si256(unsafe { _mm256_loadu_si256(q.as_ptr() as *const __m256i) }, flip)
+        });
+        for m in 0..M {
+            let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
+            // SAFETY: xs holds exactly 32 bytes.
+            let xv = unsafe { _mm256_loadu_si256(xs.as_ptr() as *const __m256i) };
+            let init = _mm256_setr_epi32(xc[m][2 * b], xc[m][2 * b + 1], 0, 0, 0, 0, 0, 0);
+            for n in 0..TN {
+                let dp = _mm256_dpbusd_epi32(init, wv[n], xv);
+                out[m][n] += (wd[n][b] * xd[m][b]) * hsum(_mm256_cvtepi32_ps(dp));
+            }
+        }
+    }
+    out
+}
+
+/// [`gemm_q8_vnni`] without VNNI (AVX-512BW): `|w|` (unsigned) times
+/// `sign(w) x` (signed) with `vpmaddubsw` (pairs, at most 2*128*127 in
+/// magnitude: no i16 saturation since x is in [-127, 127]) and `vpmaddwd`
+/// by ones; `xc` unused.
+///
+/// # Safety
+/// The CPU must support avx512f/bw/dq/vl, avx2, fma and f16c.
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,f16c")]
+pub unsafe fn gemm_q8_512<const M: usize>(
+    w: [&[u8]; TN],
+    wd: [&[f32]; TN],
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; TN]; M] {
+    let nb = super::scalar::gemm_blocks(&w, &wd, &xq, &xd, &xc);
+    let ones = _mm512_set1_epi16(1);
+    let zero = _mm512_setzero_si512();
+    let mut acc = [[_mm512_setzero_ps(); TN]; M];
+    let mut b = 0;
+    while b + 2 <= nb {
+        // SAFETY (both): every row holds at least nb >= b + 2 blocks.
+        let raw: [__m512i; TN] = core::array::from_fn(|n| unsafe { two_blocks(w[n], b) });
+        let dw: [__m512; TN] = core::array::from_fn(|n| unsafe { pair_scales(wd[n], b) });
+        let aw = raw.map(|r| _mm512_abs_epi8(r));
+        let neg = raw.map(|r| _mm512_movepi8_mask(r));
+        for m in 0..M {
+            let xs = &xq[m][b * Q8_BLOCK..(b + 2) * Q8_BLOCK];
+            // SAFETY: xs holds 64 bytes; xd[m] at least b + 2 scales.
+            let (xv, dx) = unsafe { (_mm512_loadu_si512(xs.as_ptr() as *const _), pair_scales(xd[m], b)) };
+            for n in 0..TN {
+                let sx = _mm512_mask_sub_epi8(xv, neg[n], zero, xv);
+                let p = _mm512_madd_epi16(_mm512_maddubs_epi16(aw[n], sx), ones);
+                acc[m][n] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(p), _mm512_mul_ps(dw[n], dx), acc[m][n]);
+            }
+        }
+        b += 2;
+    }
+    let mut out = acc.map(|am| am.map(|a| _mm512_reduce_add_ps(a)));
+    if b < nb {
+        let tail = gemm_q8_avx2_from(w, wd, xq, xd, b, nb);
+        for (o, t) in out.iter_mut().zip(tail) {
+            for (a, v) in o.iter_mut().zip(t) {
+                *a += v;
+            }
+        }
+    }
+    out
+}
+
+/// See [`super::gemm_q8`] on 32-byte vectors, one block per step, weight
+/// rows two at a time (8 accumulators for M = 4 fit the 16 registers); the
+/// `vpsignb` trick of [`dot_q8`]; `xc` unused.
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+#[target_feature(enable = "avx2,fma,f16c")]
+pub unsafe fn gemm_q8_avx2<const M: usize>(
+    w: [&[u8]; TN],
+    wd: [&[f32]; TN],
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; TN]; M] {
+    let nb = super::scalar::gemm_blocks(&w, &wd, &xq, &xd, &xc);
+    gemm_q8_avx2_from(w, wd, xq, xd, 0, nb)
+}
+
+/// Blocks `b0..nb` of [`gemm_q8_avx2`].
+#[inline]
+#[target_feature(enable = "avx2,fma,f16c")]
+unsafe fn gemm_q8_avx2_from<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], b0: usize, nb: usize) -> [[f32; TN]; M] {
+    let ones = _mm256_set1_epi16(1);
+    let mut out = [[0.0f32; TN]; M];
+    for n0 in (0..TN).step_by(2) {
+        let mut acc = [[_mm256_setzero_ps(); 2]; M];
+        for b in b0..nb {
+            let (qa, qb) = (&w[n0][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES], &w[n0 + 1][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES]);
+            // SAFETY: qa and qb hold exactly 32 bytes each.
+            let (wa, wb) = unsafe { (_mm256_loadu_si256(qa.as_ptr() as *const __m256i), _mm256_loadu_si256(qb.as_ptr() as *const __m256i)) };
+            let (ua, ub) = (_mm256_sign_epi8(wa, wa), _mm256_sign_epi8(wb, wb));
+            let (dwa, dwb) = (_mm256_set1_ps(wd[n0][b]), _mm256_set1_ps(wd[n0 + 1][b]));
+            for (m, am) in acc.iter_mut().enumerate() {
+                let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
+                // SAFETY: xs holds exactly 32 bytes.
+                let xv = unsafe { _mm256_loadu_si256(xs.as_ptr() as *const __m256i) };
+                let dx = _mm256_set1_ps(xd[m][b]);
+                let pa = _mm256_madd_epi16(_mm256_maddubs_epi16(ua, _mm256_sign_epi8(xv, wa)), ones);
+                let pb = _mm256_madd_epi16(_mm256_maddubs_epi16(ub, _mm256_sign_epi8(xv, wb)), ones);
+                am[0] = _mm256_fmadd_ps(_mm256_cvtepi32_ps(pa), _mm256_mul_ps(dwa, dx), am[0]);
+                am[1] = _mm256_fmadd_ps(_mm256_cvtepi32_ps(pb), _mm256_mul_ps(dwb, dx), am[1]);
+            }
+        }
+        for (o, am) in out.iter_mut().zip(&acc) {
+            o[n0] = hsum(am[0]);
+            o[n0 + 1] = hsum(am[1]);
+        }
+    }
+    out
+}
+
+/// `y += a * x` (FMA).
+///
+/// # Safety
+/// The CPU must support avx2 and fma.
+#[target_feature(enable = "avx2,fma")]
+pub unsafe fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
+    let n = x.len().min(y.len());
+    let (x, y) = (&x[..n], &mut y[..n]);
+    let av = _mm256_set1_ps(a);
+    let n8 = n - n % 8;
+    let (x8, x1) = x.split_at(n8);
+    let (y8, y1) = y.split_at_mut(n8);
+    for (xc, yc) in x8.chunks_exact(8).zip(y8.chunks_exact_mut(8)) {
+        // SAFETY: 8 floats each.
+        unsafe { _mm256_storeu_ps(yc.as_mut_ptr(), _mm256_fmadd_ps(av, _mm256_loadu_ps(xc.as_ptr()), _mm256_loadu_ps(yc.as_ptr()))) };
+    }
+    for (yi, xi) in y1.iter_mut().zip(x1) {
+        *yi += a * xi;
+    }
+}
+
+/// See [`super::dot_rows`] (one AVX2 dot per key row, inlined).
+///
+/// # Safety
+/// The CPU must support avx2 and fma.
+#[target_feature(enable = "avx2,fma")]
+pub unsafe fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
+    let hd = q.len();
+    for (j, o) in out.iter_mut().enumerate() {
+        *o = dot_f32(q, &k[j * stride..j * stride + hd]);
+    }
+}
+
+/// See [`super::dot_rows`]: the query (up to 64 floats) stays in four
+/// 16-wide registers; keys two at a time; masked tail lanes, no scalar tail.
+/// Longer queries take the AVX2 dot.
+///
+/// # Safety
+/// The CPU must support avx512f, avx2 and fma.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub unsafe fn dot_rows_512(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
+    let hd = q.len();
+    if hd > 64 {
+        return dot_rows(q, k, stride, out);
+    }
+    let nv = hd.div_ceil(16);
+    let mask: [__mmask16; 4] = core::array::from_fn(|i| if 16 * (i + 1) <= hd { 0xffff } else if 16 * i < hd { lanes16(hd - 16 * i) } else { 0 });
+    // SAFETY: masked loads read only lanes < hd of q.
+    let qv: [__m512; 4] = core::array::from_fn(|i| if i < nv { unsafe { _mm512_maskz_loadu_ps(mask[i], q.as_ptr().add(16 * i)) } } else { _mm512_setzero_ps() });
+    let n = out.len();
+    let mut j = 0;
+    while j + 2 <= n {
+        let (ka, kb) = (&k[j * stride..j * stride + hd], &k[(j + 1) * stride..(j + 1) * stride + hd]);
+        let (mut a, mut b) = (_mm512_setzero_ps(), _mm512_setzero_ps());
+        for i in 0..nv {
+            // SAFETY: masked loads read only lanes < hd of each key row.
+            let (va, vb) = unsafe { (_mm512_maskz_loadu_ps(mask[i], ka.as_ptr().add(16 * i)), _mm512_maskz_loadu_ps(mask[i], kb.as_ptr().add(16 * i))) };
+            a = _mm512_fmadd_ps(qv[i], va, a);
+            b = _mm512_fmadd_ps(qv[i], vb, b);
+        }
+        out[j] = _mm512_reduce_add_ps(a);
+        out[j + 1] = _mm512_reduce_add_ps(b);
+        j += 2;
+    }
+    if j < n {
+        let ka = &k[j * stride..j * stride + hd];
+        let mut a = _mm512_setzero_ps();
+        for i in 0..nv {
+            // SAFETY: as above.
+            a = _mm512_fmadd_ps(qv[i], unsafe { _mm512_maskz_loadu_ps(mask[i], ka.as_ptr().add(16 * i)) }, a);
+        }
+        out[j] = _mm512_reduce_add_ps(a);
+    }
+}
+
+/// See [`super::gemm_q8_packed`]: per block and activation row, 4
+/// `vpdpbusd` of the packed groups against the row's 8-byte groups
+/// broadcast to every lane, started at the row's parity corrections (so
+/// each i32 lane is an exact 16-term dot), then one convert, one scale
+/// product and one FMA for all 8 weight rows (2 lanes each).
+///
+/// # Safety
+/// The CPU must support avx512f/bw/dq/vl/vnni, avx2, fma and f16c.
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
+pub unsafe fn gemm_q8_packed_vnni<const M: usize>(
+    v: &[[[u8; 64]; 4]],
+    s: &[[f32; 16]],
+    nb: usize,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; 8]; M] {
+    let nb = xq
+        .iter()
+        .map(|r| r.len() / Q8_BLOCK)
+        .chain(xd.iter().map(|r| r.len()))
+        .chain(xc.iter().map(|r| r.len() / 2))
+        .fold(nb.min(v.len()).min(s.len()), usize::min);
+    let mut acc = [_mm512_setzero_ps(); M];
+    for b in 0..nb {
+        // SAFETY: b < nb <= v.len(), s.len(): 4 x 64 bytes and 16 floats.
+        let wv: [__m512i; 4] = core::array::from_fn(|g| unsafe { _mm512_loadu_si512(v[b][g].as_ptr() as *const _) });
+        // SAFETY: as above.
+        let sv = unsafe { _mm512_loadu_ps(s[b].as_ptr()) };
+        for m in 0..M {
+            let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
+            let cs = &xc[m][2 * b..2 * b + 2];
+            // SAFETY: cs holds 2 i32 (8 bytes), xs 32 bytes (4 x 8).
+            let mut dp = unsafe { _mm512_set1_epi64((cs.as_ptr() as *const i64).read_unaligned()) };
+            for (g, wg) in wv.iter().enumerate() {
+                // SAFETY: 8g + 8 <= 32.
+                let xg = unsafe { _mm512_set1_epi64((xs.as_ptr().add(8 * g) as *const i64).read_unaligned()) };
+                dp = _mm512_dpbusd_epi32(dp, *wg, xg);
+            }
+            acc[m] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(dp), _mm512_mul_ps(sv, _mm512_set1_ps(xd[m][b])), acc[m]);
+        }
+    }
+    let mut out = [[0.0f32; 8]; M];
+    for (o, a) in out.iter_mut().zip(acc) {
+        // Lane pairs (2n, 2n + 1) are row n.
+        let pairs = _mm512_add_ps(a, _mm512_permute_ps::<0b10_11_00_01>(a));
+        let mut t = [0f32; 16];
+        // SAFETY: t holds 16 floats.
+        unsafe { _mm512_storeu_ps(t.as_mut_ptr(), pairs) };
+        for (n, on) in o.iter_mut().enumerate() {
+            *on = t[2 * n];
+        }
+    }
+    out
+}
+
+/// See [`super::q8_pack8`]: per block, the 8 rows' 32 bytes (as 4 qwords
+/// each) transposed to 4 vectors of 8 qwords with two `vpermt2q` and one
+/// `vshufi64x2` stage, offset by `^ 0x80`.
+///
+/// # Safety
+/// The CPU must support avx512f/bw/dq/vl, avx2, f16c; every row holds `nb` blocks.
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,f16c")]
+pub unsafe fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [[[u8; 64]; 4]], s: &mut [[f32; 16]]) {
+    let dup = _mm512_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
+    let flip = _mm512_set1_epi8(-128);
+    let ia = _mm512_setr_epi64(0, 4, 8, 12, 1, 5, 9, 13);
+    let ib = _mm512_setr_epi64(2, 6, 10, 14, 3, 7, 11, 15);
+    for (b, (vb, sb)) in v.iter_mut().zip(s.iter_mut()).take(nb).enumerate() {
+        let r: [__m256i; 8] = core::array::from_fn(|n| {
+            let q = &rows[n][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
+            // SAFETY: q holds exactly 32 bytes.
+            unsafe { _mm256_loadu_si256(q.as_ptr() as *const __m256i) }
+        });
+        let z: [__m512i; 4] = core::array::from_fn(|i| _mm512_inserti64x4::<1>(_mm512_castsi256_si512(r[2 * i]), r[2 * i + 1]));
+        let a = _mm512_permutex2var_epi64(z[0], ia, z[1]);
+        let bq = _mm512_permutex2var_epi64(z[0], ib, z[1]);
+        let c = _mm512_permutex2var_epi64(z[2], ia, z[3]);
+        let d = _mm512_permutex2var_epi64(z[2], ib, z[3]);
+        let out = [
+            _mm512_shuffle_i64x2::<0b01_00_01_00>(a, c),
+            _mm512_shuffle_i64x2::<0b11_10_11_10>(a, c),
+            _mm512_shuffle_i64x2::<0b01_00_01_00>(bq, d),
+            _mm512_shuffle_i64x2::<0b11_10_11_10>(bq, d),
+        ];
+        for (vg, o) in vb.iter_mut().zip(out) {
+            // SAFETY: vg holds 64 bytes.
+            unsafe { _mm512_storeu_si512(vg.as_mut_ptr() as *mut _, _mm512_xor_si512(o, flip)) };
+        }
+        let h: [u16; 8] = core::array::from_fn(|n| u16::from_le_bytes([rows[n][b * Q8_BLOCK_BYTES], rows[n][b * Q8_BLOCK_BYTES + 1]]));
+        // SAFETY: h holds 8 u16 (128 bits), sb 16 floats.
+        unsafe {
+            let f = _mm256_cvtph_ps(_mm_loadu_si128(h.as_ptr() as *const __m128i));
+            _mm512_storeu_ps(sb.as_mut_ptr(), _mm512_permutexvar_ps(dup, _mm512_castps256_ps512(f)));
+        }
+    }
+}
+
+/// `y += a * w`, binary16 `w` converted by F16C (exact), FMA.
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+#[target_feature(enable = "avx2,fma,f16c")]
+pub unsafe fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
+    let n = w.len().min(y.len());
+    let (w, y) = (&w[..n], &mut y[..n]);
+    let av = _mm256_set1_ps(a);
+    let n8 = n - n % 8;
+    let (w8, w1) = w.split_at(n8);
+    let (y8, y1) = y.split_at_mut(n8);
+    for (wc, yc) in w8.chunks_exact(8).zip(y8.chunks_exact_mut(8)) {
+        // SAFETY: 8 u16 (128 bits) and 8 floats.
+        unsafe {
+            let wv = _mm256_cvtph_ps(_mm_loadu_si128(wc.as_ptr() as *const __m128i));
+            _mm256_storeu_ps(yc.as_mut_ptr(), _mm256_fmadd_ps(av, wv, _mm256_loadu_ps(yc.as_ptr())));
+        }
+    }
+    for (yi, wi) in y1.iter_mut().zip(w1) {
+        *yi += a * super::f16_to_f32(*wi);
+    }
+}

@@ -1,0 +1,553 @@
+//! The kernels of the quantise-once int8 GEMM, the 16-wide tiles and axpy
+//! against their scalar twins, for every variant this CPU can run
+//! (ggml-style named error limits; `core/src/tests/simd.rs` covers the
+//! older dots and tiles). On aarch64 these run under qemu (`.ci/aarch64.sh`).
+
+use super::{scalar, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
+use crate::kernels::{linear, Matrix, Q8Rows, RowMatrix};
+
+/// SIMD int8 GEMM vs scalar twin: the per-block i32 sums are exact; only
+/// the f32 sum across blocks and lanes is reordered: limit * sum_b
+/// |wd_b xd_b| sum_i |w_i q_i|.
+const SIMD_VS_SCALAR_GEMM_Q8: f64 = 1e-6;
+/// 16-wide f32 / f16 tiles vs the scalar tile twin: limit * sum |w_i x_i|.
+const SIMD_VS_SCALAR_TILE_512: f64 = 1e-6;
+/// SIMD axpy (one FMA rounding) vs the scalar twin (two roundings):
+/// limit * (|y| + |a x|) per element.
+const SIMD_VS_SCALAR_AXPY: f64 = 2.5e-7;
+/// Quantise-once `linear` vs per-row `Matrix::dot` (same quantisation,
+/// summation order only): limit * (1 + sum |w_i x_i|).
+const Q8_LINEAR_VS_ROW_DOTS: f64 = 2e-6;
+
+struct Rng(u64);
+impl Rng {
+    fn u(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn f(&mut self) -> f32 {
+        (self.u() >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    }
+    fn vec(&mut self, n: usize) -> Vec<f32> {
+        (0..n).map(|_| self.f() * 3.0).collect()
+    }
+}
+
+/// Stored Q8Block32 bytes of `w` (as the converter writes them).
+fn q8_bytes(w: &[f32]) -> Vec<u8> {
+    let mut out = Vec::new();
+    for b in w.chunks_exact(Q8_BLOCK) {
+        let amax = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let d = half::f16::from_f32(amax / 127.0);
+        let inv = if d.to_f32() > 0.0 { 1.0 / d.to_f32() } else { 0.0 };
+        out.extend(d.to_le_bytes());
+        out.extend(b.iter().map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8));
+    }
+    out
+}
+
+type Gemm<const M: usize> = fn([&[u8]; TN], [&[f32]; TN], [&[i8]; M], [&[f32]; M], [&[i32]; M]) -> [[f32; TN]; M];
+
+/// One ISA's kernels as plain fns (the constructor checked the CPU).
+struct Variant {
+    name: &'static str,
+    quantise: fn(&[f32], &mut [i8], &mut [f32], &mut [i32]),
+    scales: fn(&[u8], &mut [f32]),
+    g1: Gemm<1>,
+    g2: Gemm<2>,
+    g3: Gemm<3>,
+    g4: Gemm<4>,
+    tile_f32: Option<fn([&[f32]; TN], [&[f32]; TM]) -> Tile>,
+    tile_f16: Option<fn([&[u16]; TN], [&[f32]; TM]) -> Tile>,
+    axpy: fn(f32, &[f32], &mut [f32]),
+}
+
+#[allow(unsafe_code)]
+fn variants() -> Vec<Variant> {
+    #[allow(unused_mut)]
+    let mut v = Vec::new();
+    #[cfg(target_arch = "x86_64")]
+    {
+        use super::x86;
+        use std::is_x86_feature_detected as has;
+        let avx2 = has!("avx2") && has!("fma") && has!("f16c");
+        let avx512 = avx2 && has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl");
+        // SAFETY (every closure below): the features of the kernel it calls
+        // were detected on this CPU just above.
+        if avx2 {
+            v.push(Variant {
+                name: "avx2",
+                quantise: |x, q, d, c| unsafe { x86::quantise_q8_corr(x, q, d, c) },
+                scales: |r, o| unsafe { x86::q8_scales(r, o) },
+                g1: |w, wd, q, d, c| unsafe { x86::gemm_q8_avx2(w, wd, q, d, c) },
+                g2: |w, wd, q, d, c| unsafe { x86::gemm_q8_avx2(w, wd, q, d, c) },
+                g3: |w, wd, q, d, c| unsafe { x86::gemm_q8_avx2(w, wd, q, d, c) },
+                g4: |w, wd, q, d, c| unsafe { x86::gemm_q8_avx2(w, wd, q, d, c) },
+                tile_f32: None,
+                tile_f16: None,
+                axpy: |a, x, y| unsafe { x86::axpy_f32(a, x, y) },
+            });
+        }
+        if avx512 {
+            v.push(Variant {
+                name: "avx512",
+                quantise: |x, q, d, c| unsafe { x86::quantise_q8_corr(x, q, d, c) },
+                scales: |r, o| unsafe { x86::q8_scales(r, o) },
+                g1: |w, wd, q, d, c| unsafe { x86::gemm_q8_512(w, wd, q, d, c) },
+                g2: |w, wd, q, d, c| unsafe { x86::gemm_q8_512(w, wd, q, d, c) },
+                g3: |w, wd, q, d, c| unsafe { x86::gemm_q8_512(w, wd, q, d, c) },
+                g4: |w, wd, q, d, c| unsafe { x86::gemm_q8_512(w, wd, q, d, c) },
+                tile_f32: Some(|w, x| unsafe { x86::tile_f32_512(w, x) }),
+                tile_f16: Some(|w, x| unsafe { x86::tile_f16_512(w, x) }),
+                axpy: |a, x, y| unsafe { x86::axpy_f32(a, x, y) },
+            });
+        }
+        if avx512 && has!("avx512vnni") {
+            v.push(Variant {
+                name: "avx512vnni",
+                quantise: |x, q, d, c| unsafe { x86::quantise_q8_corr(x, q, d, c) },
+                scales: |r, o| unsafe { x86::q8_scales(r, o) },
+                g1: |w, wd, q, d, c| unsafe { x86::gemm_q8_vnni(w, wd, q, d, c) },
+                g2: |w, wd, q, d, c| unsafe { x86::gemm_q8_vnni(w, wd, q, d, c) },
+                g3: |w, wd, q, d, c| unsafe { x86::gemm_q8_vnni(w, wd, q, d, c) },
+                g4: |w, wd, q, d, c| unsafe { x86::gemm_q8_vnni(w, wd, q, d, c) },
+                tile_f32: None,
+                tile_f16: None,
+                axpy: |a, x, y| unsafe { x86::axpy_f32(a, x, y) },
+            });
+        }
+    }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    {
+        use super::neon;
+        // SAFETY (every closure): NEON is enabled for this build.
+        v.push(Variant {
+            name: "neon",
+            quantise: |x, q, d, c| unsafe { neon::quantise_q8_corr(x, q, d, c) },
+            scales: scalar::q8_scales,
+            g1: |w, wd, q, d, c| unsafe { neon::gemm_q8(w, wd, q, d, c) },
+            g2: |w, wd, q, d, c| unsafe { neon::gemm_q8(w, wd, q, d, c) },
+            g3: |w, wd, q, d, c| unsafe { neon::gemm_q8(w, wd, q, d, c) },
+            g4: |w, wd, q, d, c| unsafe { neon::gemm_q8(w, wd, q, d, c) },
+            tile_f32: None,
+            tile_f16: None,
+            axpy: |a, x, y| unsafe { neon::axpy_f32(a, x, y) },
+        });
+        if std::arch::is_aarch64_feature_detected!("dotprod") {
+            // SAFETY (every closure): NEON is enabled and dotprod detected.
+            v.push(Variant {
+                name: "neondot",
+                quantise: |x, q, d, c| unsafe { neon::quantise_q8_corr(x, q, d, c) },
+                scales: scalar::q8_scales,
+                g1: |w, wd, q, d, c| unsafe { neon::gemm_q8_dot(w, wd, q, d, c) },
+                g2: |w, wd, q, d, c| unsafe { neon::gemm_q8_dot(w, wd, q, d, c) },
+                g3: |w, wd, q, d, c| unsafe { neon::gemm_q8_dot(w, wd, q, d, c) },
+                g4: |w, wd, q, d, c| unsafe { neon::gemm_q8_dot(w, wd, q, d, c) },
+                tile_f32: None,
+                tile_f16: None,
+                axpy: |a, x, y| unsafe { neon::axpy_f32(a, x, y) },
+            });
+        }
+    }
+    v
+}
+
+#[test]
+fn variants_exist_where_expected() {
+    let names: Vec<&str> = variants().iter().map(|v| v.name).collect();
+    eprintln!("int8 GEMM variants tested on this machine: {names:?}");
+    if cfg!(target_arch = "aarch64") {
+        assert!(names.contains(&"neon"));
+    }
+}
+
+/// Blocks with ties (`k + 0.5` after scaling), zeros, NaN and Inf, and random ones.
+fn quantiser_inputs(r: &mut Rng) -> Vec<f32> {
+    let mut x = r.vec(32 * 40);
+    // amax 127 -> scale 1, inv 1: exact ties.
+    for (i, v) in x[..32].iter_mut().enumerate() {
+        *v = if i == 0 { 127.0 } else { (i as f32 - 16.0) + 0.5 };
+    }
+    x[33] = -127.0;
+    x[34] = 0.499_999_97;
+    x[35] = -2.5;
+    x[64..96].fill(0.0);
+    x[100] = f32::NAN;
+    x[130] = f32::INFINITY;
+    x[170] = -f32::INFINITY;
+    x[200] = 1e-38;
+    x
+}
+
+#[test]
+fn quantiser_is_bit_identical_to_scalar_twin() {
+    let mut r = Rng(11);
+    let x = quantiser_inputs(&mut r);
+    let nb = x.len() / Q8_BLOCK;
+    let (mut q0, mut d0, mut c0) = (vec![0i8; x.len()], vec![0f32; nb], vec![0i32; 2 * nb]);
+    scalar::quantise_q8_corr(&x, &mut q0, &mut d0, &mut c0);
+    // The twin is the reference quantiser plus the correction.
+    let (mut q1, mut d1) = (vec![0i8; x.len()], vec![0f32; nb]);
+    super::quantise_q8(&x, &mut q1, &mut d1);
+    assert_eq!(q0, q1);
+    assert_eq!(d0.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), d1.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+    for (b, qb) in q0.chunks_exact(Q8_BLOCK).enumerate() {
+        assert_eq!(c0[2 * b] + c0[2 * b + 1], -128 * qb.iter().map(|&v| v as i32).sum::<i32>());
+        assert_eq!(c0[2 * b], -128 * (0..4).map(|g| qb[8 * g..8 * g + 4].iter().map(|&v| v as i32).sum::<i32>()).sum::<i32>());
+    }
+    for v in variants() {
+        let (mut q, mut d, mut c) = (vec![0i8; x.len()], vec![0f32; nb], vec![0i32; 2 * nb]);
+        (v.quantise)(&x, &mut q, &mut d, &mut c);
+        assert_eq!(q, q0, "{}: quantised values", v.name);
+        let bits = |d: &[f32]| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&d), bits(&d0), "{}: scales", v.name);
+        assert_eq!(c, c0, "{}: corrections", v.name);
+    }
+}
+
+#[test]
+fn q8_scales_match_scalar_twin() {
+    let mut r = Rng(3);
+    for nb in 0..40 {
+        let row = q8_bytes(&r.vec(nb * Q8_BLOCK));
+        let mut want = vec![0f32; nb];
+        scalar::q8_scales(&row, &mut want);
+        for v in variants() {
+            let mut got = vec![f32::NAN; nb];
+            (v.scales)(&row, &mut got);
+            assert_eq!(got, want, "{} nb={nb}", v.name);
+        }
+    }
+}
+
+fn check(name: &str, got: f32, want: f32, scale: f64, limit: f64) {
+    let err = (got as f64 - want as f64).abs();
+    assert!(err <= limit * scale + 1e-30, "{name}: {got} vs {want}, err {err:e} > {limit:e} * {scale:e}");
+}
+
+/// Every variant's `gemm_q8::<M>` (M = 1..=4) against the scalar twin, on
+/// every block count 0..=12 and larger odd / even ones, rows longer than
+/// the common prefix, and the extreme -128 weight against +-127.
+#[test]
+fn gemm_q8_matches_scalar_twin() {
+    let mut r = Rng(0x5151_7777);
+    for v in variants() {
+        for nb in (0..=12).chain([31, 48, 96]) {
+            let n = nb * Q8_BLOCK;
+            let mut wb: Vec<Vec<u8>> = (0..TN).map(|j| q8_bytes(&r.vec(n + 32 * (j % 2)))).collect();
+            if nb > 0 {
+                wb[1][2] = 0x80; // -128
+            }
+            let mut qs = vec![vec![0i8; n + 32]; 4];
+            let mut ds = vec![vec![0f32; nb + 1]; 4];
+            let mut cs = vec![vec![0i32; 2 * nb + 2]; 4];
+            for m in 0..4 {
+                let mut x = r.vec(n + 32);
+                if m == 3 && n > 0 {
+                    x[0] = 1e4;
+                }
+                if m == 2 && n > 0 {
+                    x[0] = -30.0; // -> -127 with the largest weight
+                    x[1] = 3.0;
+                }
+                super::scalar::quantise_q8_corr(&x, &mut qs[m], &mut ds[m], &mut cs[m]);
+            }
+            let mut wds = vec![vec![0f32; nb + 1]; TN];
+            for j in 0..TN {
+                scalar::q8_scales(&wb[j], &mut wds[j]);
+            }
+            let w: [&[u8]; TN] = core::array::from_fn(|j| &wb[j][..]);
+            let wd: [&[f32]; TN] = core::array::from_fn(|j| &wds[j][..nb]);
+            let q = |m: usize| &qs[m][..];
+            let d = |m: usize| &ds[m][..];
+            let c = |m: usize| &cs[m][..];
+            let scale = |m: usize, j: usize| -> f64 {
+                (0..nb)
+                    .map(|b| {
+                        let blk = &w[j][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
+                        let s: i64 = blk.iter().zip(&qs[m][b * 32..(b + 1) * 32]).map(|(&a, &c)| ((a as i8 as i64) * c as i64).abs()).sum();
+                        (wd[j][b] as f64 * ds[m][b] as f64).abs() * s as f64
+                    })
+                    .sum()
+            };
+            let want4 = scalar::gemm_q8::<4>(w, wd, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
+            let got: Vec<Vec<[f32; TN]>> = vec![
+                (v.g1)(w, wd, [q(0)], [d(0)], [c(0)]).to_vec(),
+                (v.g2)(w, wd, [q(0), q(1)], [d(0), d(1)], [c(0), c(1)]).to_vec(),
+                (v.g3)(w, wd, [q(0), q(1), q(2)], [d(0), d(1), d(2)], [c(0), c(1), c(2)]).to_vec(),
+                (v.g4)(w, wd, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c)).to_vec(),
+            ];
+            for (mm, g) in got.iter().enumerate() {
+                for (m, row) in g.iter().enumerate() {
+                    for j in 0..TN {
+                        check(&format!("{} gemm_q8::<{}> nb={nb} [{m}][{j}]", v.name, mm + 1), row[j], want4[m][j], scale(m, j), SIMD_VS_SCALAR_GEMM_Q8);
+                    }
+                }
+            }
+            // The twin is the pairwise blocked dot (`dot_q8`).
+            for m in 0..4 {
+                for j in 0..TN {
+                    let want = scalar::dot_q8(&w[j][..nb * Q8_BLOCK_BYTES], &qs[m][..n], &ds[m][..nb]);
+                    assert_eq!(want4[m][j], want, "scalar gemm_q8 is the pairwise dot_q8 twin");
+                }
+            }
+        }
+        // Extremes: every weight -128 or 127 against -127 / 127.
+        let mut w = vec![0u8; 2 * Q8_BLOCK_BYTES];
+        for blk in w.chunks_exact_mut(Q8_BLOCK_BYTES) {
+            blk[..2].copy_from_slice(&half::f16::from_f32(1.0).to_le_bytes());
+            for (i, b) in blk[2..].iter_mut().enumerate() {
+                *b = if i % 2 == 0 { 0x80 } else { 0x7f };
+            }
+        }
+        let q: Vec<i8> = (0..64).map(|i| if i % 2 == 0 { -127 } else { 127 }).collect();
+        let mut c = vec![0i32; 4];
+        let (mut qq, mut dd) = (vec![0i8; 64], vec![0f32; 2]);
+        let xf: Vec<f32> = q.iter().map(|&v| v as f32).collect();
+        scalar::quantise_q8_corr(&xf, &mut qq, &mut dd, &mut c);
+        assert_eq!((qq.clone(), dd.clone()), (q.clone(), vec![1.0, 1.0]));
+        let wd = [1.0f32; 2];
+        let t = (v.g1)([&w, &w, &w, &w], [&wd, &wd, &wd, &wd], [&q], [&[1.0, 1.0]], [&c]);
+        assert_eq!(t[0][0], 2.0 * (16.0 * 128.0 * 127.0 + 16.0 * 127.0 * 127.0), "{}: extreme int8 values", v.name);
+    }
+}
+
+#[test]
+fn wide_tiles_match_scalar_twins() {
+    let mut r = Rng(0xabcd);
+    for v in variants() {
+        let (Some(tf32), Some(tf16)) = (v.tile_f32, v.tile_f16) else { continue };
+        let mut ks: Vec<usize> = (0..=70).collect();
+        ks.extend([255, 257, 767, 768, 1031, 3072]);
+        for k in ks {
+            let ws: Vec<Vec<f32>> = (0..TN).map(|j| r.vec(k + j % 2)).collect();
+            let xs: Vec<Vec<f32>> = (0..TM).map(|m| r.vec(k + m)).collect();
+            let w: [&[f32]; TN] = core::array::from_fn(|j| &ws[j][..]);
+            let x: [&[f32]; TM] = core::array::from_fn(|m| &xs[m][..]);
+            let hs: Vec<Vec<u16>> = ws.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
+            let hw: [&[u16]; TN] = core::array::from_fn(|j| &hs[j][..]);
+            let (g32, w32) = (tf32(w, x), scalar::tile_f32(w, x));
+            let (g16, w16) = (tf16(hw, x), scalar::tile_f16(hw, x));
+            for m in 0..TM {
+                for j in 0..TN {
+                    let s: f64 = w[j][..k].iter().zip(&x[m][..k]).map(|(a, b)| (*a as f64 * *b as f64).abs()).sum();
+                    check(&format!("{} tile_f32 k={k}", v.name), g32[m][j], w32[m][j], s, SIMD_VS_SCALAR_TILE_512);
+                    let s: f64 = hw[j][..k].iter().zip(&x[m][..k]).map(|(a, b)| (super::f16_to_f32(*a) as f64 * *b as f64).abs()).sum();
+                    check(&format!("{} tile_f16 k={k}", v.name), g16[m][j], w16[m][j], s, SIMD_VS_SCALAR_TILE_512);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn axpy_matches_scalar_twin() {
+    let mut r = Rng(17);
+    for v in variants() {
+        for n in (0..=40).chain([63, 64, 65, 768, 1001]) {
+            let (x, y0) = (r.vec(n), r.vec(n));
+            let a = r.f();
+            let (mut got, mut want) = (y0.clone(), y0.clone());
+            (v.axpy)(a, &x, &mut got);
+            scalar::axpy_f32(a, &x, &mut want);
+            for i in 0..n {
+                let s = y0[i].abs() as f64 + (a * x[i]).abs() as f64;
+                check(&format!("{} axpy n={n}", v.name), got[i], want[i], s, SIMD_VS_SCALAR_AXPY);
+            }
+        }
+    }
+}
+
+/// The quantise-once `linear` (whichever ISA is selected) against per-row
+/// `Matrix::dot` (the chunked path): every row tail (n mod 4), output
+/// tail, and several panels (rows * in > Q8_PANEL).
+#[test]
+fn q8_linear_matches_row_dots() {
+    let mut r = Rng(4243);
+    let panel = crate::kernels::linear::Q8_PANEL;
+    let shapes = [(1, 32, 1), (2, 64, 3), (3, 96, 5), (5, 768, 7), (9, 1056, 13), (10, 3072, 6), (panel / 768 + 5, 768, 9)];
+    for &(n, i, o) in &shapes {
+        let (x, w, b) = (r.vec(n * i), r.vec(o * i), r.vec(o));
+        let q8 = q8_bytes(&w);
+        let m = Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap());
+        let mut y = vec![f32::NAN; n * o];
+        linear(&x, &m, Some(&b), &mut y);
+        let mut row = vec![0.0; i];
+        for a in 0..n {
+            let xa = &x[a * i..(a + 1) * i];
+            for c in 0..o {
+                m.row_into(c, &mut row);
+                let want = b[c] + m.dot(c, xa);
+                let s: f64 = row.iter().zip(xa).map(|(p, q)| (*p as f64 * *q as f64).abs()).sum();
+                check(&format!("q8 linear ({n},{i},{o}) [{a},{c}]"), y[a * o + c], want, 1.0 + s, Q8_LINEAR_VS_ROW_DOTS);
+            }
+        }
+        // Unused import guard: the trait's own row count.
+        if let Matrix::Q8(q) = m {
+            assert_eq!(q.rows(), o);
+        }
+    }
+}
+
+#[test]
+#[allow(unsafe_code)]
+fn dot_rows_match_scalar_twin() {
+    let mut r = Rng(23);
+    for hd in [1, 7, 15, 16, 17, 33, 48, 63, 64, 65, 96] {
+        let stride = hd + 5;
+        let q = r.vec(hd);
+        let k = r.vec(9 * stride + hd);
+        for n in 0..=10 {
+            let mut want = vec![0f32; n];
+            scalar::dot_rows(&q, &k, stride, &mut want);
+            let mut runs: Vec<(&str, Vec<f32>)> = Vec::new();
+            #[cfg(target_arch = "x86_64")]
+            {
+                use std::is_x86_feature_detected as has;
+                if has!("avx2") && has!("fma") {
+                    let mut g = vec![0f32; n];
+                    // SAFETY: avx2 and fma detected.
+                    unsafe { super::x86::dot_rows(&q, &k, stride, &mut g) };
+                    runs.push(("avx2", g));
+                }
+                if has!("avx512f") && has!("avx2") && has!("fma") {
+                    let mut g = vec![0f32; n];
+                    // SAFETY: avx512f, avx2 and fma detected.
+                    unsafe { super::x86::dot_rows_512(&q, &k, stride, &mut g) };
+                    runs.push(("avx512", g));
+                }
+            }
+            #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+            {
+                let mut g = vec![0f32; n];
+                // SAFETY: NEON is enabled for this build.
+                unsafe { super::neon::dot_rows(&q, &k, stride, &mut g) };
+                runs.push(("neon", g));
+            }
+            for (name, g) in runs {
+                for j in 0..n {
+                    let s: f64 = q.iter().zip(&k[j * stride..]).map(|(a, b)| (*a as f64 * *b as f64).abs()).sum();
+                    check(&format!("{name} dot_rows hd={hd} j={j}"), g[j], want[j], s, SIMD_VS_SCALAR_TILE_512);
+                }
+            }
+        }
+    }
+}
+
+/// The packed 8-row kernel (selected ISA's variant when it has one, and the
+/// AVX512-VNNI variant directly where the CPU has it) against two calls of
+/// the scalar 4-row twin, M = 1..=8.
+#[test]
+#[allow(unsafe_code)]
+fn packed_gemm_q8_matches_scalar_twin() {
+    use super::{Q8Pack8, PACK_ROWS};
+    let mut r = Rng(0x8888);
+    for nb in [0, 1, 2, 3, 7, 24, 95, 96] {
+        let n = nb * Q8_BLOCK;
+        let mut wb: Vec<Vec<u8>> = (0..PACK_ROWS).map(|_| q8_bytes(&r.vec(n))).collect();
+        if nb > 0 {
+            wb[3][2] = 0x80;
+        }
+        let mut wds = vec![vec![0f32; nb]; PACK_ROWS];
+        for j in 0..PACK_ROWS {
+            scalar::q8_scales(&wb[j], &mut wds[j]);
+        }
+        let mut pack = Q8Pack8::new();
+        super::q8_pack8(core::array::from_fn(|j| &wb[j][..]), nb, &mut pack);
+        let mut qs = vec![vec![0i8; n]; 8];
+        let mut ds = vec![vec![0f32; nb]; 8];
+        let mut cs = vec![vec![0i32; 2 * nb]; 8];
+        for m in 0..8 {
+            let mut x = r.vec(n);
+            if m == 5 && n > 0 {
+                x[0] = 1e4;
+            }
+            scalar::quantise_q8_corr(&x, &mut qs[m], &mut ds[m], &mut cs[m]);
+        }
+        let q: [&[i8]; 8] = core::array::from_fn(|m| &qs[m][..]);
+        let d: [&[f32]; 8] = core::array::from_fn(|m| &ds[m][..]);
+        let c: [&[i32]; 8] = core::array::from_fn(|m| &cs[m][..]);
+        let mut want = [[0f32; 8]; 8];
+        for half in 0..2 {
+            let w: [&[u8]; TN] = core::array::from_fn(|j| &wb[4 * half + j][..]);
+            let wd: [&[f32]; TN] = core::array::from_fn(|j| &wds[4 * half + j][..]);
+            for m0 in [0, 4] {
+                let t = scalar::gemm_q8::<4>(w, wd, core::array::from_fn(|i| q[m0 + i]), core::array::from_fn(|i| d[m0 + i]), core::array::from_fn(|i| c[m0 + i]));
+                for i in 0..4 {
+                    for j in 0..4 {
+                        want[m0 + i][4 * half + j] = t[i][j];
+                    }
+                }
+            }
+        }
+        let mut pv = vec![[[0u8; 64]; 4]; nb];
+        let mut ps = vec![[0f32; 16]; nb];
+        scalar::q8_pack8(core::array::from_fn(|j| &wb[j][..]), nb, &mut pv, &mut ps);
+        assert_eq!((&pack.v[..nb], &pack.s[..nb]), (&pv[..], &ps[..]), "dispatched packing vs scalar twin nb={nb}");
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512bw") && std::is_x86_feature_detected!("avx512dq") && std::is_x86_feature_detected!("avx512vl") {
+            let mut xv = vec![[[0u8; 64]; 4]; nb];
+            let mut xs = vec![[0f32; 16]; nb];
+            // SAFETY: avx512f/bw/dq/vl detected (avx2 and f16c implied on every such CPU).
+            unsafe { super::x86::q8_pack8(core::array::from_fn(|j| &wb[j][..]), nb, &mut xv, &mut xs) };
+            assert_eq!((&xv, &xs), (&pv, &ps), "avx512 packing vs scalar twin nb={nb}");
+        }
+        let twin = scalar::gemm_q8_packed::<8>(&pack.v, &pack.s, pack.nb, q, d, c);
+        assert_eq!(twin, want, "scalar packed twin nb={nb}");
+        let mut got: Vec<(&str, [[f32; 8]; 8])> = vec![("dispatched", super::gemm_q8_packed::<8>(&pack, q, d, c))];
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::is_x86_feature_detected as has;
+            if has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") && has!("avx512vnni") && has!("avx2") && has!("fma") && has!("f16c") {
+                // SAFETY: every feature of the kernel detected above.
+                got.push(("avx512vnni", unsafe { super::x86::gemm_q8_packed_vnni::<8>(&pack.v, &pack.s, pack.nb, q, d, c) }));
+                // SAFETY: as above.
+                let t3 = unsafe { super::x86::gemm_q8_packed_vnni::<3>(&pack.v, &pack.s, pack.nb, [q[2], q[3], q[4]], [d[2], d[3], d[4]], [c[2], c[3], c[4]]) };
+                let mut g = want;
+                g[2..5].copy_from_slice(&t3);
+                got.push(("avx512vnni M=3", g));
+            }
+        }
+        for (name, g) in got {
+            for m in 0..8 {
+                for j in 0..8 {
+                    let s: f64 = (0..nb)
+                        .map(|b| {
+                            let blk = &wb[j][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
+                            let a: i64 = blk.iter().zip(&qs[m][b * 32..(b + 1) * 32]).map(|(&w, &x)| ((w as i8 as i64) * x as i64).abs()).sum();
+                            (wds[j][b] as f64 * ds[m][b] as f64).abs() * a as f64
+                        })
+                        .sum();
+                    check(&format!("{name} packed nb={nb} [{m}][{j}]"), g[m][j], want[m][j], s, SIMD_VS_SCALAR_GEMM_Q8);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+#[allow(unsafe_code)]
+fn axpy_f16_matches_scalar_twin() {
+    let mut r = Rng(29);
+    for n in (0..=20).chain([63, 64, 65, 512, 1001]) {
+        let w: Vec<u16> = r.vec(n).iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+        let y0 = r.vec(n);
+        let a = r.f();
+        let mut want = y0.clone();
+        scalar::axpy_f16(a, &w, &mut want);
+        let mut got = y0.clone();
+        super::axpy_f16(a, &w, &mut got);
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("f16c") {
+            got = y0.clone();
+            // SAFETY: avx2, fma, f16c detected.
+            unsafe { super::x86::axpy_f16(a, &w, &mut got) };
+        }
+        for i in 0..n {
+            let s = y0[i].abs() as f64 + (a * super::f16_to_f32(w[i])).abs() as f64;
+            check(&format!("axpy_f16 n={n}"), got[i], want[i], s, SIMD_VS_SCALAR_AXPY);
+        }
+    }
+}
