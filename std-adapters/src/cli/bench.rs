@@ -3,14 +3,23 @@
 //! seeded random weights, per weight type (f32, f16, int8 as
 //! `duolando convert` would store them). No files needed.
 //!
-//! Measured now: the R step (one full window of the GPT at the largest
-//! context, `block_size - 1` = 29 tokens per stream, music and leader LATs
-//! included; exactly what `exact::generate` runs per step) — median and
-//! p99 over repeated runs after warm-up, weight bytes the step reads, the
-//! achieved GB/s, and a memcpy bandwidth measured in the same run. The S
-//! step, batched sessions and the session arena need the streaming session
-//! (not built yet) and the tract ratio needs the full-size ONNX export; they
-//! are reported as null.
+//! Measured, per weight type, on 1 thread and on 2 threads (two
+//! independent R steps / sessions at once, one per thread: the core is
+//! single-threaded; per-step latency under that load), medians and
+//! p99/median after warm-up, beside a memcpy bandwidth measured in the same
+//! run:
+//! - the R step (one full window of the GPT at the largest context,
+//!   `block_size - 1` = 29 tokens per stream, music and leader LATs
+//!   included; exactly what `exact::generate` runs per step), the weight
+//!   bytes it reads and the achieved GB/s;
+//! - the S step (`core::session` with `SessionConfig::reference`, f16 K/V:
+//!   the time of a `push_leader_frame` that runs a step, encoder and
+//!   decoder streaming included), GB/s over the model's weight bytes (every
+//!   layer runs each step), and the session arena bytes.
+//!
+//! Not measured yet (null in the JSON, said so on stdout): batched
+//! stepping of several sessions (no `Session::step_many` yet) and the tract
+//! ratio (no full-size R-step ONNX export in tools/reference yet).
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -21,6 +30,7 @@ use duolando_core::gpt::{self, Window};
 use duolando_core::model::{BindError, Model, TensorSource};
 use duolando_core::presets::duolando_published;
 use duolando_core::schema::{for_each_tensor, SchemaError, TensorSpec};
+use duolando_core::session::{FollowerFrame, KvType, Session, SessionConfig};
 use duolando_core::tensor::{DType, TensorRef, MAX_RANK};
 
 use crate::convert::storage_for;
@@ -32,6 +42,12 @@ pub struct Args {
     /// Timed R steps per weight type (after the warm-up).
     #[arg(long, default_value_t = 7)]
     pub runs: usize,
+    /// Timed S steps per weight type (after the warm-up steps).
+    #[arg(long, default_value_t = 40)]
+    pub s_steps: usize,
+    /// Thread counts to measure (comma separated; 1 and 2 supported).
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 2])]
+    pub threads: Vec<usize>,
     /// Untimed warm-up R steps per weight type.
     #[arg(long, default_value_t = 1)]
     pub warmup: usize,
@@ -149,6 +165,11 @@ impl RandomModel {
         }
         Ok(RandomModel { buf, table })
     }
+
+    /// Bytes of every stored tensor.
+    fn weight_bytes(&self) -> usize {
+        self.table.values().map(|(_, _, _, r)| r.len()).sum()
+    }
 }
 
 impl<'a> TensorSource<'a> for &'a RandomModel {
@@ -183,44 +204,141 @@ fn r_step_weight_bytes(m: &Model<'_>, c: usize) -> usize {
 
 struct DtypeResult {
     name: &'static str,
-    r: Stats,
+    /// Per thread count: R step timing.
+    r: Vec<(usize, Stats)>,
+    /// Per thread count: S step timing.
+    s: Vec<(usize, Stats)>,
     weight_bytes: usize,
-    gbps: f64,
+    model_bytes: usize,
+    arena_bytes: usize,
+}
+
+/// The R-step inputs of a full window (fixed pseudo-random tokens/features).
+struct RInputs {
+    c: usize,
+    music: Vec<f32>,
+    leader: Vec<Vec<u32>>,
+    follower: Vec<u32>,
+}
+
+impl RInputs {
+    fn new(model: &Model<'_>) -> RInputs {
+        let cfg = &model.cfg;
+        let g = &cfg.gpt;
+        let c = gpt::max_context(cfg);
+        let lf = g.look_forward as usize;
+        let ds = g.music.downsample_rate as usize;
+        let mut rng = Rng(42);
+        let music: Vec<f32> = (0..(c + lf) * ds * g.music.n_in as usize).map(|_| rng.next()).collect();
+        let leader: Vec<Vec<u32>> =
+            (0..4).map(|p| (0..c + lf).map(|i| ((i * 37 + p * 11) % g.vocab[p] as usize) as u32).collect()).collect();
+        let follower: Vec<u32> = (0..c * 5).map(|i| ((i * 13) % g.vocab[i % 5] as usize) as u32).collect();
+        RInputs { c, music, leader, follower }
+    }
+}
+
+/// `runs` timed R steps after `warmup` untimed ones (one thread).
+fn r_steps(model: &Model<'_>, inp: &RInputs, warmup: usize, runs: usize) -> anyhow::Result<Vec<Duration>> {
+    let cfg = &model.cfg;
+    let win = Window { c: inp.c, music: &inp.music, leader: [&inp.leader[0], &inp.leader[1], &inp.leader[2], &inp.leader[3]], follower: &inp.follower };
+    let mut scratch = vec![0u8; gpt::scratch_bytes(cfg, inp.c).context("scratch size")?];
+    let mut logits = vec![0.0f32; gpt::logits_len(cfg)];
+    for _ in 0..warmup {
+        gpt::step_logits(model, &win, &mut scratch, &mut logits).map_err(|e| anyhow!("{e:?}"))?;
+    }
+    let mut times = Vec::new();
+    for _ in 0..runs.max(1) {
+        let s = Instant::now();
+        gpt::step_logits(model, &win, &mut scratch, &mut logits).map_err(|e| anyhow!("{e:?}"))?;
+        times.push(s.elapsed());
+    }
+    if !logits.iter().all(|v| v.is_finite()) {
+        return Err(anyhow!("non-finite logits"));
+    }
+    Ok(times)
+}
+
+/// The session configuration measured: reference budget, f16 K/V.
+fn s_config(model: &Model<'_>) -> SessionConfig {
+    let mut cfg = SessionConfig::reference(&model.cfg);
+    cfg.kv = KvType::F16;
+    cfg
+}
+
+/// Streams pseudo-random leader and music frames into a fresh session and
+/// times each `push_leader_frame` that runs a GPT step; the first
+/// `warmup` steps are dropped, then `steps` are kept (one thread).
+fn s_steps(model: &Model<'_>, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
+    let cfg = s_config(model);
+    let mut arena = vec![0u8; model.session_bytes(&cfg).map_err(|e| anyhow!("session bytes: {e:?}"))?];
+    let mut sess = Session::new(model, &mut arena, &cfg, [0; 5]).map_err(|e| anyhow!("session: {e:?}"))?;
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let mut rng = Rng(7);
+    let mut music = vec![0.0f32; n_music];
+    let mut leader = vec![0.0f32; 165];
+    let mut out = FollowerFrame::default();
+    let mut times = Vec::new();
+    let mut frames = 0usize;
+    // Generous cap: the pipeline fills after the latency, then one step per hop.
+    let max_frames = 4 * (warmup + steps) + 4096;
+    while times.len() < warmup + steps && frames < max_frames {
+        music.iter_mut().for_each(|v| *v = rng.next());
+        // Music may be refused while the session holds enough (Backlog): fine.
+        let _ = sess.push_music_frame(&music);
+        for (i, v) in leader.iter_mut().enumerate() {
+            *v = 0.3 * rng.next() + if i % 3 == 1 { 1.0 } else { 0.0 };
+        }
+        let before = sess.steps();
+        let t = Instant::now();
+        sess.push_leader_frame(&leader).map_err(|e| anyhow!("push_leader_frame: {e:?}"))?;
+        let dt = t.elapsed();
+        if sess.steps() > before {
+            times.push(dt);
+        }
+        while sess.pull_follower_frame(&mut out).map_err(|e| anyhow!("pull: {e:?}"))? {}
+        frames += 1;
+    }
+    if times.len() < warmup + steps {
+        return Err(anyhow!("session ran only {} steps in {frames} frames", times.len()));
+    }
+    Ok(times.split_off(warmup))
+}
+
+/// Runs `f` on `threads` threads at once (the same model, own buffers);
+/// all their timings together.
+fn on_threads<F>(threads: usize, f: F) -> anyhow::Result<Vec<Duration>>
+where
+    F: Fn() -> anyhow::Result<Vec<Duration>> + Sync,
+{
+    if threads <= 1 {
+        return f();
+    }
+    std::thread::scope(|sc| {
+        let hs: Vec<_> = (0..threads).map(|_| sc.spawn(&f)).collect();
+        let mut all = Vec::new();
+        for h in hs {
+            all.extend(h.join().map_err(|_| anyhow!("bench thread panicked"))??);
+        }
+        Ok(all)
+    })
 }
 
 fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Result<DtypeResult> {
     let t0 = Instant::now();
     let rm = RandomModel::build(store_as, 0x5eed_0000 ^ store_as as u64)?;
     let model = Model::bind(&duolando_published(), &&rm).map_err(|e: BindError| anyhow!("bind: {e:?}"))?;
-    let cfg = &model.cfg;
-    let g = &cfg.gpt;
-    let c = gpt::max_context(cfg);
-    let lf = g.look_forward as usize;
-    let ds = g.music.downsample_rate as usize;
-    let mut rng = Rng(42);
-    let music: Vec<f32> = (0..(c + lf) * ds * g.music.n_in as usize).map(|_| rng.next()).collect();
-    let leader: Vec<Vec<u32>> =
-        (0..4).map(|p| (0..c + lf).map(|i| ((i * 37 + p * 11) % g.vocab[p] as usize) as u32).collect()).collect();
-    let follower: Vec<u32> = (0..c * 5).map(|i| ((i * 13) % g.vocab[i % 5] as usize) as u32).collect();
-    let win = Window { c, music: &music, leader: [&leader[0], &leader[1], &leader[2], &leader[3]], follower: &follower };
-    let mut scratch = vec![0u8; gpt::scratch_bytes(cfg, c).context("scratch size")?];
-    let mut logits = vec![0.0f32; gpt::logits_len(cfg)];
     eprintln!("{name}: model built and bound in {:.1} s", t0.elapsed().as_secs_f64());
-    for _ in 0..args.warmup {
-        gpt::step_logits(&model, &win, &mut scratch, &mut logits).map_err(|e| anyhow!("{e:?}"))?;
+    let inp = RInputs::new(&model);
+    let mut r = Vec::new();
+    let mut s = Vec::new();
+    for &t in &args.threads {
+        let times = on_threads(t, || r_steps(&model, &inp, args.warmup, args.runs)).with_context(|| format!("{name} R step, {t} threads"))?;
+        r.push((t, stats(times)));
+        let times = on_threads(t, || s_steps(&model, 3, args.s_steps)).with_context(|| format!("{name} S step, {t} threads"))?;
+        s.push((t, stats(times)));
     }
-    let mut times = Vec::new();
-    for _ in 0..args.runs.max(1) {
-        let s = Instant::now();
-        gpt::step_logits(&model, &win, &mut scratch, &mut logits).map_err(|e| anyhow!("{e:?}"))?;
-        times.push(s.elapsed());
-    }
-    if !logits.iter().all(|v| v.is_finite()) {
-        return Err(anyhow!("{name}: non-finite logits"));
-    }
-    let r = stats(times);
-    let weight_bytes = r_step_weight_bytes(&model, c);
-    Ok(DtypeResult { name, r, weight_bytes, gbps: weight_bytes as f64 / (r.median_ms * 1e-3) / 1e9 })
+    let arena_bytes = model.session_bytes(&s_config(&model)).map_err(|e| anyhow!("{e:?}"))?;
+    Ok(DtypeResult { name, r, s, weight_bytes: r_step_weight_bytes(&model, inp.c), model_bytes: rm.weight_bytes(), arena_bytes })
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -231,7 +349,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         crate::simd::init()
     };
     let memcpy = memcpy_gbps();
-    println!("kernels: {isa:?}; threads: 1; memcpy bandwidth (1 thread, 256 MiB): {memcpy:.1} GB/s");
+    println!("kernels: {isa:?}; threads: {:?}; memcpy bandwidth (1 thread, 256 MiB): {memcpy:.1} GB/s", args.threads);
     let mut results = Vec::new();
     for d in &args.dtypes {
         let (name, store_as) = match d.as_str() {
@@ -241,20 +359,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             other => return Err(anyhow!("unknown dtype '{other}' (f32, f16, int8)")),
         };
         let r = bench_dtype(name, store_as, &args)?;
-        println!(
-            "R step {:>4} (29-token window, LATs incl.): median {:8.1} ms  p99 {:8.1} ms  p99/median {:.2}  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy)",
-            r.name,
-            r.r.median_ms,
-            r.r.p99_ms,
-            r.r.p99_ms / r.r.median_ms,
-            r.weight_bytes as f64 / 1e6,
-            r.gbps,
-            100.0 * r.gbps / memcpy
-        );
+        for (t, st) in &r.r {
+            let gbps = r.weight_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
+            println!(
+                "R step {:>4} t{t} (29-token window, LATs incl.): median {:8.1} ms  p99 {:8.1} ms  p99/median {:.2}  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy)",
+                r.name,
+                st.median_ms,
+                st.p99_ms,
+                st.p99_ms / st.median_ms,
+                r.weight_bytes as f64 / 1e6,
+                gbps,
+                100.0 * gbps / memcpy
+            );
+        }
+        for (t, st) in &r.s {
+            let gbps = r.model_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
+            println!(
+                "S step {:>4} t{t} (reference budget, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy)  arena {:.1} MB",
+                r.name,
+                st.median_ms,
+                st.p99_ms,
+                st.p99_ms / st.median_ms,
+                r.model_bytes as f64 / 1e6,
+                gbps,
+                100.0 * gbps / memcpy,
+                r.arena_bytes as f64 / 1e6
+            );
+        }
         results.push(r);
     }
-    println!("S step, batched sessions, session arena: not measured (the streaming session does not exist yet).");
-    println!("tract ratio: not measured (needs the full-size R-step ONNX from tools/reference; not exported yet).");
+    println!("t2 = two independent steps at once, one per thread (the core is single-threaded): per-step latency under that load.");
+    println!("batched sessions (batch16_over_batch1_int8): not yet (no Session::step_many).");
+    println!("tract ratio: not measured (needs a full-size R-step ONNX export from tools/reference; none exists yet).");
     if let Some(path) = &args.json {
         let mut j = serde_json::Map::new();
         let null = serde_json::Value::Null;
@@ -275,11 +411,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         j.insert("memcpy_gbps_t1".into(), memcpy.into());
         j.insert("isa".into(), format!("{isa:?}").into());
+        j.insert("not_yet".into(), "batch16_over_batch1_int8 (no Session::step_many), tract_r_step_ms_t1 (no full-size ONNX export)".into());
         for r in &results {
-            j.insert(format!("r_step_ms_{}_t1", r.name), r.r.median_ms.into());
-            j.insert(format!("r_step_p99_ms_{}_t1", r.name), r.r.p99_ms.into());
+            for (t, st) in &r.r {
+                j.insert(format!("r_step_ms_{}_t{t}", r.name), st.median_ms.into());
+                j.insert(format!("r_step_p99_ms_{}_t{t}", r.name), st.p99_ms.into());
+                j.insert(format!("r_step_gbps_{}_t{t}", r.name), (r.weight_bytes as f64 / (st.median_ms * 1e-3) / 1e9).into());
+            }
+            for (t, st) in &r.s {
+                j.insert(format!("s_step_ms_{}_t{t}", r.name), st.median_ms.into());
+                j.insert(format!("s_step_p99_ms_{}_t{t}", r.name), st.p99_ms.into());
+                j.insert(format!("s_step_gbps_{}_t{t}", r.name), (r.model_bytes as f64 / (st.median_ms * 1e-3) / 1e9).into());
+            }
             j.insert(format!("r_step_weight_bytes_{}", r.name), r.weight_bytes.into());
-            j.insert(format!("r_step_gbps_{}_t1", r.name), r.gbps.into());
+            j.insert(format!("s_step_weight_bytes_{}", r.name), r.model_bytes.into());
+            j.insert("arena_bytes_f16kv".into(), r.arena_bytes.into());
         }
         std::fs::write(path, serde_json::to_string_pretty(&serde_json::Value::Object(j))?)
             .with_context(|| format!("writing {}", path.display()))?;

@@ -1,0 +1,107 @@
+//! Kernel speed per weight type and per instruction set, all in one run
+//! (ratios are what to compare on a shared machine; absolute times are
+//! not): `linear` (x W^T + b) at the model's shapes for 1..290 activation
+//! rows, with enough distinct weight matrices that the small-batch cases
+//! read their weights from memory (bandwidth-bound), and the attention
+//! kernel at the R step's coordinated-attention shape.
+//!
+//! `cargo bench -p duolando --bench kernels` (`-- quick` for fewer repeats).
+
+use std::time::Instant;
+
+use duolando::duo_writer::quantise_q8_block32;
+use duolando_core::kernels::simd;
+use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, TiledCausalMask};
+
+struct Rng(u64);
+impl Rng {
+    fn f(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    }
+    fn vec(&mut self, n: usize) -> Vec<f32> {
+        (0..n).map(|_| self.f() * 0.05).collect()
+    }
+}
+
+/// Median seconds of `reps` calls of `f` after one warm-up.
+fn time(reps: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    let mut t: Vec<f64> = (0..reps)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    t[t.len() / 2]
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "quick");
+    let reps = if quick { 3 } else { 7 };
+    let isas = duolando::simd::supported();
+    println!("ISAs on this CPU (best first): {isas:?}");
+    let mut r = Rng(0x1234_5678);
+    // (out, in): the MLP's two matrices (the largest of the model).
+    for &(o, i) in &[(3072usize, 768usize), (768, 3072)] {
+        // 64 MB of f32 weights per set: beyond the last-level cache.
+        let mats = (64 << 20) / (o * i * 4);
+        let wf: Vec<Vec<f32>> = (0..mats).map(|_| r.vec(o * i)).collect();
+        let wh: Vec<Vec<u16>> = wf.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
+        let wq: Vec<Vec<u8>> = wf.iter().map(|w| quantise_q8_block32(w)).collect();
+        let b = r.vec(o);
+        for &n in &[1usize, 10, 16, 64, 290] {
+            let x = r.vec(n * i);
+            let mut y = vec![0.0f32; n * o];
+            let reps_n = if n >= 64 { reps.min(3) } else { reps };
+            let sets = if n >= 64 { 1 } else { mats };
+            let mut line = format!("linear {o}x{i} n={n:>3}:");
+            let mut base = None;
+            for isa in &isas {
+                // SAFETY: `supported` lists only ISAs this CPU has.
+                unsafe { simd::set_isa(*isa) };
+                let mut per = Vec::new();
+                for (name, pick) in [("f32", 0), ("f16", 1), ("int8", 2)] {
+                    let t = time(reps_n, || {
+                        for k in 0..sets {
+                            let m = match pick {
+                                0 => Matrix::F32(F32Rows::new(&wf[k], o, i).unwrap()),
+                                1 => Matrix::F16(F16Rows::new(&wh[k], o, i).unwrap()),
+                                _ => Matrix::Q8(Q8Rows::new(&wq[k], o, i).unwrap()),
+                            };
+                            linear(&x, &m, Some(&b), &mut y);
+                        }
+                        std::hint::black_box(&y);
+                    }) / sets as f64;
+                    per.push((name, t));
+                }
+                let f32t = per[0].1;
+                base.get_or_insert(per.clone());
+                line += &format!(
+                    "  [{isa:?}] {}",
+                    per.iter().map(|(nm, t)| format!("{nm} {:.3} ms ({:.1} GMAC/s, {:.2}x f32)", t * 1e3, (n * o * i) as f64 / t / 1e9, f32t / t)).collect::<Vec<_>>().join(", ")
+                );
+            }
+            println!("{line}");
+        }
+    }
+    // Attention at the R step's coordinated-attention shape: 290 rows, C 768, 12 heads.
+    let (t, streams, c, nh) = (29usize, 10usize, 768usize, 12usize);
+    let n = t * streams;
+    let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
+    let mut out = vec![0.0f32; n * c];
+    let mut scores = vec![0.0f32; n];
+    let mask = TiledCausalMask { t_q: t, t_k: t, q_pos0: 0 };
+    let mut line = format!("attention {n}x{n} C={c} heads={nh}:");
+    for isa in &isas {
+        // SAFETY: as above.
+        unsafe { simd::set_isa(*isa) };
+        let s = time(reps, || attention(&q, &k, &v, c, nh, &mask, &mut scores, &mut out));
+        line += &format!("  [{isa:?}] {:.2} ms", s * 1e3);
+    }
+    println!("{line}");
+}
