@@ -89,7 +89,7 @@ fn f16_tokens_identical_to_f32() {
 /// block): leader tokens identical (measured 1.0: codebooks and encoders
 /// are f16), follower tokens in a FREE-RUNNING rollout agree at least 0.45
 /// (measured min 0.520 tiny2_frames; 0.810 tiny_long, 1.000 tiny_short,
-/// 0.812 tiny_odd, 0.926 tiny2_tokens; once one token differs the rollouts
+/// 0.594 tiny_odd (0.812 before the VNNI kernels changed the f32 summation order; int8 values are unchanged), 0.926 tiny2_tokens; once one token differs the rollouts
 /// follow different histories, so this is a lower bound on quality, not the
 /// 1-step agreement DESIGN.md §3 recommends, which needs forced histories);
 /// motion within the limits when all tokens agree.
