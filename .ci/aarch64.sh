@@ -12,4 +12,4 @@ fi
 rustup target add aarch64-unknown-linux-gnu
 CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc \
 CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" \
-    cargo test -p duolando-core --target aarch64-unknown-linux-gnu "$@"
+    cargo test --release -p duolando-core --target aarch64-unknown-linux-gnu "$@"
