@@ -1,0 +1,237 @@
+//! `.duo` inputs: raw bytes, or semantic edits of a valid file (the tiny2
+//! fixture): config varints, tensor-table entries (dtype, dims, rank,
+//! offsets, sizes, names, order, count), then byte edits. And the
+//! invariant every input must satisfy: [`check_duo`].
+
+use arbitrary::Arbitrary;
+use duolando::duo_writer::{assemble, Header, HeaderEntry};
+use duolando::model_file::AlignedBytes;
+use duolando_core::format::{align_up, DuoFile, FormatError, PREFIX_LEN};
+use duolando_core::model::{BindError, Model};
+
+use crate::bytes::{apply_all, varint_len, ByteMutation, Int, Regions};
+
+/// One edit of the tensor table (`entry` indices wrap around the table).
+#[derive(Arbitrary, Clone, Debug)]
+pub enum EntryEdit {
+    Dtype { entry: u16, code: u8 },
+    Dim { entry: u16, axis: u8, value: Int },
+    Rank { entry: u16, rank: u8, fill: Int },
+    Offset { entry: u16, value: Int },
+    OffsetDelta { entry: u16, delta: i32 },
+    Nbytes { entry: u16, value: Int },
+    NbytesDelta { entry: u16, delta: i32 },
+    /// Give `entry` the name of `other` (duplicates, or a missing tensor).
+    NameOf { entry: u16, other: u16 },
+    NameByte { entry: u16, at: u8, byte: u8 },
+    Remove { entry: u16 },
+    Swap { a: u16, b: u16 },
+    Duplicate { entry: u16 },
+}
+
+/// One edit of the postcard-encoded config: the `nth` varint (walking
+/// the bytes as consecutive varints) becomes `value`.
+#[derive(Arbitrary, Clone, Copy, Debug)]
+pub struct ConfigEdit {
+    pub nth: u8,
+    pub value: Int,
+}
+
+/// A `.duo` input for the decoder.
+#[derive(Arbitrary, Clone, Debug)]
+pub enum DuoInput {
+    Raw(Vec<u8>),
+    /// The base file with these edits (config, table, then bytes).
+    Edited { config: Vec<ConfigEdit>, table: Vec<EntryEdit>, bytes: Vec<ByteMutation> },
+}
+
+/// The pieces of a valid `.duo` file, editable.
+#[derive(Clone, Debug)]
+pub struct Parts {
+    pub config_bytes: Vec<u8>,
+    pub entries: Vec<HeaderEntry>,
+    pub data: Vec<u8>,
+}
+
+/// Splits a valid `.duo` file into config, table and data section.
+pub fn split(bytes: &[u8]) -> Parts {
+    let aligned = AlignedBytes::copy_from(bytes);
+    let file = DuoFile::parse(aligned.as_bytes()).expect("base .duo parses");
+    let config_bytes = postcard::to_stdvec(file.config()).expect("config encodes");
+    let entries = file
+        .tensors()
+        .map(|e| HeaderEntry { name: e.name.to_string(), dtype: e.dtype as u8, shape: e.dims().to_vec(), offset: e.offset, nbytes: e.nbytes })
+        .collect();
+    let header_len = u64::from_le_bytes(bytes[16..24].try_into().unwrap());
+    let data_start = align_up(PREFIX_LEN as u64 + header_len).unwrap() as usize;
+    Parts { config_bytes, entries, data: bytes[data_start..].to_vec() }
+}
+
+fn at(n: usize, i: u16) -> Option<usize> {
+    (n > 0).then(|| i as usize % n)
+}
+
+/// Header bytes: config, varint count, entries (exactly as the writer encodes them).
+fn header_bytes(p: &Parts) -> Vec<u8> {
+    #[derive(serde::Serialize)]
+    struct Table<'a> {
+        tensors: &'a [HeaderEntry],
+    }
+    let mut out = p.config_bytes.clone();
+    out.extend(postcard::to_stdvec(&Table { tensors: &p.entries }).expect("table encodes"));
+    out
+}
+
+impl EntryEdit {
+    pub fn apply(&self, e: &mut Vec<HeaderEntry>) {
+        let n = e.len();
+        match *self {
+            EntryEdit::Dtype { entry, code } => {
+                if let Some(i) = at(n, entry) {
+                    e[i].dtype = code % 5;
+                }
+            }
+            EntryEdit::Dim { entry, axis, value } => {
+                if let Some(i) = at(n, entry) {
+                    let r = e[i].shape.len();
+                    if r > 0 {
+                        e[i].shape[axis as usize % r] = value.value() as u32;
+                    }
+                }
+            }
+            EntryEdit::Rank { entry, rank, fill } => {
+                if let Some(i) = at(n, entry) {
+                    e[i].shape.resize(rank as usize % 7, fill.value() as u32);
+                }
+            }
+            EntryEdit::Offset { entry, value } => {
+                if let Some(i) = at(n, entry) {
+                    e[i].offset = value.value();
+                }
+            }
+            EntryEdit::OffsetDelta { entry, delta } => {
+                if let Some(i) = at(n, entry) {
+                    e[i].offset = e[i].offset.wrapping_add(delta as i64 as u64);
+                }
+            }
+            EntryEdit::Nbytes { entry, value } => {
+                if let Some(i) = at(n, entry) {
+                    e[i].nbytes = value.value();
+                }
+            }
+            EntryEdit::NbytesDelta { entry, delta } => {
+                if let Some(i) = at(n, entry) {
+                    e[i].nbytes = e[i].nbytes.wrapping_add(delta as i64 as u64);
+                }
+            }
+            EntryEdit::NameOf { entry, other } => {
+                if let (Some(i), Some(j)) = (at(n, entry), at(n, other)) {
+                    e[i].name = e[j].name.clone();
+                }
+            }
+            EntryEdit::NameByte { entry, at: k, byte } => {
+                if let Some(i) = at(n, entry) {
+                    let mut b = e[i].name.clone().into_bytes();
+                    if !b.is_empty() {
+                        let k = k as usize % b.len();
+                        b[k] = byte;
+                    }
+                    // Keep it a String (postcard needs UTF-8); invalid bytes become U+FFFD.
+                    e[i].name = String::from_utf8_lossy(&b).into_owned();
+                }
+            }
+            EntryEdit::Remove { entry } => {
+                if let Some(i) = at(n, entry) {
+                    e.remove(i);
+                }
+            }
+            EntryEdit::Swap { a, b } => {
+                if let (Some(i), Some(j)) = (at(n, a), at(n, b)) {
+                    e.swap(i, j);
+                }
+            }
+            EntryEdit::Duplicate { entry } => {
+                if let Some(i) = at(n, entry) {
+                    let d = e[i].clone();
+                    e.insert(i, d);
+                }
+            }
+        }
+    }
+}
+
+impl ConfigEdit {
+    pub fn apply(&self, cfg: &mut Vec<u8>) {
+        let mut pos = 0;
+        for _ in 0..self.nth {
+            if pos >= cfg.len() {
+                break;
+            }
+            pos += varint_len(&cfg[pos..]);
+        }
+        if pos >= cfg.len() {
+            return;
+        }
+        let old = varint_len(&cfg[pos..]);
+        let mut new = Vec::new();
+        crate::bytes::varint(self.value.value(), &mut new);
+        cfg.splice(pos..pos + old, new);
+    }
+}
+
+/// The bytes `input` describes (`base` = the split of a valid file).
+pub fn build(input: &DuoInput, base: &Parts) -> Vec<u8> {
+    match input {
+        DuoInput::Raw(b) => b.clone(),
+        DuoInput::Edited { config, table, bytes } => {
+            let mut p = base.clone();
+            for c in config.iter().take(16) {
+                c.apply(&mut p.config_bytes);
+            }
+            for t in table.iter().take(32) {
+                t.apply(&mut p.entries);
+            }
+            let header = header_bytes(&p);
+            let header_end = PREFIX_LEN + header.len();
+            let mut out = duolando::duo_writer::assemble_raw(&header, &p.data).expect("assemble");
+            apply_all(&mut out, Regions { prefix: PREFIX_LEN, header_end }, &bytes[..bytes.len().min(16)]);
+            out
+        }
+    }
+}
+
+/// How far an input got.
+#[derive(Clone, Debug, PartialEq)]
+pub enum DuoOutcome {
+    Rejected(FormatError),
+    /// Parsed and every tensor readable, but binding failed.
+    Unbound(BindError),
+    Bound,
+}
+
+/// The decoder invariant: on any bytes, `DuoFile::parse` answers without
+/// panicking; when it accepts, every listed tensor is readable with its
+/// listed dtype and payload size, and `Model::from_duo` answers without
+/// panicking. Panics (the fuzz/test failure) on a violation.
+pub fn check_duo(bytes: &[u8]) -> DuoOutcome {
+    let aligned = AlignedBytes::copy_from(bytes);
+    let file = match DuoFile::parse(aligned.as_bytes()) {
+        Ok(f) => f,
+        Err(e) => return DuoOutcome::Rejected(e),
+    };
+    for entry in file.tensors() {
+        let t = file.tensor(entry.name).expect("a listed tensor must be readable");
+        assert_eq!(t.dtype, entry.dtype, "{}", entry.name);
+        assert_eq!(t.dims(), entry.dims(), "{}", entry.name);
+    }
+    let outcome = match Model::from_duo(&file) {
+        Ok(_) => DuoOutcome::Bound,
+        Err(e) => DuoOutcome::Unbound(e),
+    };
+    outcome
+}
+
+/// Re-export for tests that build headers by hand.
+pub fn assemble_header(header: &Header, data: &[u8]) -> Vec<u8> {
+    assemble(header, data).expect("assemble")
+}
