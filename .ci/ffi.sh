@@ -3,9 +3,11 @@
 # and C++17 (included twice), the C host test linked against the static and
 # the dynamic library and run under valgrind, the C++ session runner of the
 # Unreal plugin run under valgrind, the Unity wrapper compiled and run under
-# Mono. Debian/Ubuntu; installs valgrind and mono-mcs when missing (root or
-# sudo). The Rust tests of the crate run with `cargo test --workspace`.
-# Honours CARGO_TARGET_DIR. Called by .ci/run.
+# Mono, and the C host test for aarch64 under qemu-user (skip with
+# DUO_FFI_SKIP_AARCH64=1). Debian/Ubuntu; installs valgrind, mono-mcs,
+# gcc-aarch64-linux-gnu and qemu-user when missing (root or sudo). The Rust
+# tests of the crate run with `cargo test --workspace`. Honours
+# CARGO_TARGET_DIR. Called by .ci/run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -70,4 +72,18 @@ fi
 mcs -unsafe -target:library -warnaserror -out:"$OUT/Duolando.dll" integrations/unity/Duolando.cs
 mcs -unsafe -warnaserror -out:"$OUT/test_unity.exe" integrations/unity/Duolando.cs tests/c/test_unity.cs
 LD_LIBRARY_PATH="$LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" mono "$OUT/test_unity.exe" "$ROOT"
+if [ "${DUO_FFI_SKIP_AARCH64:-0}" != 1 ]; then
+    echo "--- aarch64-unknown-linux-gnu: libduolando cross-built, the C host test run under qemu-user"
+    if ! command -v aarch64-linux-gnu-gcc >/dev/null || ! command -v qemu-aarch64 >/dev/null; then
+        SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+        $SUDO apt-get update -qq
+        $SUDO apt-get install -y -qq gcc-aarch64-linux-gnu qemu-user
+    fi
+    rustup target add aarch64-unknown-linux-gnu >/dev/null
+    CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc \
+        cargo build -p duolando-ffi --target aarch64-unknown-linux-gnu
+    ARM=$TARGET/aarch64-unknown-linux-gnu/debug
+    aarch64-linux-gnu-gcc $CFLAGS tests/c/test_duolando.c "$ARM/libduolando.a" -lpthread -lm -ldl -o "$OUT/test_aarch64"
+    qemu-aarch64 -L /usr/aarch64-linux-gnu "$OUT/test_aarch64" "$ROOT"
+fi
 echo "ffi: OK"
