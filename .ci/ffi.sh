@@ -3,8 +3,9 @@
 # and C++17 (included twice), the C host test linked against the static and
 # the dynamic library and run under valgrind, the C++ session runner of the
 # Unreal plugin run under valgrind, the Unity wrapper compiled and run under
-# Mono, and the C host test for aarch64 under qemu-user (skip with
-# DUO_FFI_SKIP_AARCH64=1). Debian/Ubuntu; installs valgrind, mono-mcs,
+# Mono, and, opt-in with DUO_FFI_AARCH64=1, the C host test for aarch64
+# under qemu-user (it cross-builds std-adapters: ~12 min, too long for the
+# 45-min CI budget, so .ci/run leaves it off). Debian/Ubuntu; installs valgrind, mono-mcs,
 # gcc-aarch64-linux-gnu and qemu-user when missing (root or sudo). The Rust
 # tests of the crate run with `cargo test --workspace`. Honours
 # CARGO_TARGET_DIR. Called by .ci/run.
@@ -72,7 +73,7 @@ fi
 mcs -unsafe -target:library -warnaserror -out:"$OUT/Duolando.dll" integrations/unity/Duolando.cs
 mcs -unsafe -warnaserror -out:"$OUT/test_unity.exe" integrations/unity/Duolando.cs tests/c/test_unity.cs
 LD_LIBRARY_PATH="$LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" mono "$OUT/test_unity.exe" "$ROOT"
-if [ "${DUO_FFI_SKIP_AARCH64:-0}" != 1 ]; then
+if [ "${DUO_FFI_AARCH64:-0}" = 1 ]; then
     echo "--- aarch64-unknown-linux-gnu: libduolando cross-built, the C host test run under qemu-user"
     if ! command -v aarch64-linux-gnu-gcc >/dev/null || ! command -v qemu-aarch64 >/dev/null; then
         SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
