@@ -46,10 +46,10 @@ impl Rng {
     }
 }
 
-/// The original `samplek` rule: the `k` largest logits (descending, ties
-/// to the lower index), one of them chosen uniformly by `rng`. `k` is
-/// clamped to `1..=min(MAX_TOP_K, logits.len())`.
-pub fn top_k(logits: &[f32], k: usize, rng: &mut Rng) -> u32 {
+/// The `k` largest logits (descending, ties to the lower index; NaN
+/// skipped): `(ids, n)` with `n = min(k, finite count)`, `k` clamped to
+/// `1..=min(MAX_TOP_K, logits.len())`.
+fn top_ids(logits: &[f32], k: usize) -> ([u32; MAX_TOP_K], usize) {
     let k = k.clamp(1, MAX_TOP_K).min(logits.len().max(1));
     let mut idx = [0u32; MAX_TOP_K];
     let mut n = 0usize;
@@ -76,6 +76,14 @@ pub fn top_k(logits: &[f32], k: usize, rng: &mut Rng) -> u32 {
             n += 1;
         }
     }
+    (idx, n)
+}
+
+/// The original `samplek` rule: the `k` largest logits (descending, ties
+/// to the lower index), one of them chosen uniformly by `rng`. `k` is
+/// clamped to `1..=min(MAX_TOP_K, logits.len())`.
+pub fn top_k(logits: &[f32], k: usize, rng: &mut Rng) -> u32 {
+    let (idx, n) = top_ids(logits, k);
     if n == 0 {
         return 0;
     }
@@ -89,31 +97,7 @@ pub fn top_k(logits: &[f32], k: usize, rng: &mut Rng) -> u32 {
 /// `1..=min(MAX_TOP_K, logits.len())`.
 pub fn top_k_by_id(logits: &[f32], k: usize, rng: &mut Rng) -> u32 {
     let k = k.clamp(1, MAX_TOP_K).min(logits.len().max(1));
-    let mut idx = [0u32; MAX_TOP_K];
-    let mut n = 0usize;
-    for (i, &v) in logits.iter().enumerate() {
-        if v.is_nan() {
-            continue;
-        }
-        // Insertion into the top list, descending; an equal value ranks below (higher id).
-        let mut pos = n;
-        while pos > 0 && logits[idx[pos - 1] as usize] < v {
-            pos -= 1;
-        }
-        if pos >= k {
-            continue;
-        }
-        let end = if n < k { n } else { k - 1 };
-        let mut m = end;
-        while m > pos {
-            idx[m] = idx[m - 1];
-            m -= 1;
-        }
-        idx[pos] = i as u32;
-        if n < k {
-            n += 1;
-        }
-    }
+    let (mut idx, n) = top_ids(logits, k);
     let r = rng.below(k as u32) as usize;
     if n == 0 {
         return 0;
