@@ -8,7 +8,7 @@ use std::cell::Cell;
 
 use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
-use duolando_core::error::Error;
+use duolando_core::error::{Buffer, Error};
 use duolando_core::model::Model;
 use duolando_core::session::{FollowerFrame, Sampling, Session, SessionConfig};
 use duolando_tests::fixture;
@@ -223,6 +223,14 @@ fn bad_frames_are_refused_and_leave_the_session_unchanged() {
             m[i % n_music] = f32::NAN;
             assert!(matches!(s.push_music_frame(&m), Err(Error::NonFinite { .. })));
             assert!(matches!(s.push_leader_frame(&bad[..100]), Err(Error::Length { .. })));
+            // Finite but out of range (input policy, docs/ROBUSTNESS.md §3).
+            let mut huge = c.leader[i * 165..(i + 1) * 165].to_vec();
+            huge[(i * 11) % 165] = [1e30, -2e4, f32::MAX][i % 3];
+            let e = s.push_leader_frame(&huge);
+            assert_eq!(e, Err(Error::OutOfRange { buffer: Buffer::LeaderPos3d, index: (i * 11) % 165 }));
+            let mut m = c.music[i * n_music..(i + 1) * n_music].to_vec();
+            m[0] = -1e30;
+            assert_eq!(s.push_music_frame(&m), Err(Error::OutOfRange { buffer: Buffer::Music, index: 0 }));
         }
         s.push_music_frame(&c.music[i * n_music..(i + 1) * n_music]).unwrap();
         s.push_leader_frame(&c.leader[i * 165..(i + 1) * 165]).unwrap();

@@ -39,6 +39,9 @@ pub enum Error {
     Context { c: usize, max: usize },
     /// A non-finite input value (NaN or infinity) at flat index `index`.
     NonFinite { buffer: Buffer, index: usize },
+    /// A finite input value whose magnitude exceeds its buffer's limit
+    /// (`input::limit_of`) at flat index `index`.
+    OutOfRange { buffer: Buffer, index: usize },
     /// A streaming-session setting outside `0..=max` (or `1..=max`).
     Setting { setting: crate::session::Setting, value: u32, max: u32 },
     /// A streaming session refused an input because its buffers are full

@@ -22,6 +22,7 @@ use crate::arena::{Arena, ArenaError, Carve, Planner};
 use crate::config::{ModelConfig, Part, POSE_DIM, ROT_DIM};
 use crate::conv_stack::ConvScratch;
 use crate::error::{check_at_least, check_len, Buffer, Error};
+use crate::input;
 use crate::gpt::{head_rows, logits_len, max_context, window_logits, GptScratch, Window};
 use crate::model::Model;
 use crate::motion::{denormalise, gather_part, normalise, scatter_part};
@@ -221,12 +222,6 @@ pub fn scratch_bytes(cfg: &ModelConfig, t_frames: usize) -> Option<usize> {
     total.total_for_any_base()
 }
 
-fn check_finite(buffer: Buffer, x: &[f32]) -> Result<(), Error> {
-    match x.iter().position(|v| !v.is_finite()) {
-        Some(index) => Err(Error::NonFinite { buffer, index }),
-        None => Ok(()),
-    }
-}
 
 fn rows(buffer: Buffer, x: &[f32], row: usize) -> Result<usize, Error> {
     if row == 0 || x.len() % row != 0 {
@@ -256,8 +251,8 @@ pub fn generate(
     }
     let leader = &inp.leader_pos3d[..sh.frames_in * POSE_DIM];
     let music = &inp.music[..sh.frames_in * n_music];
-    check_finite(Buffer::LeaderPos3d, leader)?;
-    check_finite(Buffer::Music, music)?;
+    input::check(Buffer::LeaderPos3d, leader)?;
+    input::check(Buffer::Music, music)?;
     check_len(Buffer::Tokens, out.tokens.len(), sh.token_rows * TOKEN_COLUMNS)?;
     check_len(Buffer::FollowerPos3d, out.follower_pos3d.len(), sh.frames_out * POSE_DIM)?;
     check_len(Buffer::FollowerRotmat, out.follower_rotmat.len(), sh.frames_out * ROT_DIM)?;
@@ -282,7 +277,7 @@ pub fn generate(
             if n > sh.frames_in {
                 return Err(Error::Length { buffer: Buffer::SeedFrames, len: n, expected: sh.frames_in });
             }
-            check_finite(Buffer::SeedFrames, &f[..n * POSE_DIM])?;
+            input::check(Buffer::SeedFrames, &f[..n * POSE_DIM])?;
             n
         }
     };
@@ -386,8 +381,8 @@ pub fn seed_tokens(model: &Model<'_>, follower: &[f32], leader: &[f32], scratch:
         return Err(Error::TooShort { buffer: Buffer::LeaderPos3d, frames: l, min: f });
     }
     let (follower, leader) = (&follower[..f * POSE_DIM], &leader[..f * POSE_DIM]);
-    check_finite(Buffer::SeedFrames, follower)?;
-    check_finite(Buffer::LeaderPos3d, leader)?;
+    input::check(Buffer::SeedFrames, follower)?;
+    input::check(Buffer::LeaderPos3d, leader)?;
     let mut a = Arena::new(scratch);
     let mut ph = SeedPhase::carve(&mut a, &model.cfg, f)?;
     encode_seed(model, follower, leader, ph.norm, ph.part, ph.feat, ph.codes, &mut ph.conv)

@@ -21,6 +21,7 @@ pub mod error;
 pub mod exact;
 pub mod format;
 pub mod gpt;
+pub mod input;
 pub mod kernels;
 pub mod lat;
 pub mod limits;

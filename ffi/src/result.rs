@@ -92,7 +92,7 @@ impl Failure {
 /// `duolando::engine_errors::describe`).
 pub fn code_of(e: &Error) -> DuoResult {
     match e {
-        Error::NonFinite { .. } => DuoResult::NonFiniteInput,
+        Error::NonFinite { .. } | Error::OutOfRange { .. } => DuoResult::NonFiniteInput,
         Error::Backlog { .. } => DuoResult::Backlog,
         Error::Evicted { .. } => DuoResult::Internal,
         Error::Setting { .. } | Error::State => DuoResult::InvalidArgument,

@@ -25,9 +25,9 @@ use crate::result::{guard, DuoResult, Failure};
 
 /// Largest accepted |coordinate| of a leader joint, metres
 /// (`DUO_MAX_POSITION_M`).
-pub const MAX_POSITION_M: f32 = 1.0e4;
+pub const MAX_POSITION_M: f32 = duolando_core::input::MAX_POSITION_M;
 /// Largest accepted |value| of a music feature (`DUO_MAX_MUSIC_FEATURE`).
-pub const MAX_MUSIC_FEATURE: f32 = 1.0e6;
+pub const MAX_MUSIC_FEATURE: f32 = duolando_core::input::MAX_MUSIC_FEATURE;
 
 /// `DUO_SAMPLING_GREEDY` / `DUO_SAMPLING_TOP_K`.
 pub const SAMPLING_GREEDY: u32 = 0;

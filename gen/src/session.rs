@@ -7,16 +7,18 @@
 //! - nothing panics; an `Err` is one of the documented refusals;
 //! - an `Err` leaves the session unchanged (the shadow, which never saw
 //!   the refused input, pulls bit-identical frames);
-//! - `NonFinite` exactly when the input holds NaN/Inf;
-//! - pulled frames are finite (unless a huge-but-finite input was
-//!   accepted since the last reset, see [`Report::tainted`]) and their
-//!   indices consecutive from 0 after every reset;
+//! - `NonFinite` exactly when the input holds NaN/Inf, `OutOfRange`
+//!   exactly when it is finite but above `input::limit_of` (the input
+//!   policy, docs/ROBUSTNESS.md §3);
+//! - pulled frames are always finite and their indices consecutive from 0
+//!   after every reset;
 //! - afterwards the session is usable: a reset and a clean drive produce
 //!   finite frames.
 
 use arbitrary::Arbitrary;
 use duolando_core::config::{POSE_DIM, ROT_DIM};
 use duolando_core::error::{Buffer, Error};
+use duolando_core::input;
 use duolando_core::model::Model;
 use duolando_core::sampler::MAX_TOP_K;
 use duolando_core::session::config::MAX_BUFFER_FRAMES;
@@ -149,11 +151,8 @@ pub struct Report {
     pub refused: usize,
     pub non_finite_refused: usize,
     pub backlog_refused: usize,
-    /// A huge finite input (|v| > 1e6) was accepted, after which pulled
-    /// frames were not required to be finite.
-    pub tainted: bool,
-    /// Pulled frames with a non-finite value (only while tainted).
-    pub non_finite_out: usize,
+    /// Frames refused as finite but out of range.
+    pub out_of_range_refused: usize,
     /// Frames of the clean drive after a reset at the end.
     pub recovered: usize,
 }
@@ -162,7 +161,7 @@ pub struct Report {
 fn documented(e: &Error) -> bool {
     matches!(
         e,
-        Error::NonFinite { .. } | Error::Length { .. } | Error::Backlog { .. } | Error::State | Error::Token { .. } | Error::Ragged { .. }
+        Error::NonFinite { .. } | Error::OutOfRange { .. } | Error::Length { .. } | Error::Backlog { .. } | Error::State | Error::Token { .. } | Error::Ragged { .. }
     )
 }
 
@@ -207,8 +206,10 @@ fn make_frame(g: FrameGen, recorded: &[f32], base: &[f32], buf: &mut Vec<f32>) {
     }
 }
 
-fn huge(x: &[f32]) -> bool {
-    x.iter().any(|v| v.is_finite() && v.abs() > 1e6)
+/// Finite values above the buffer's input limit.
+fn over_limit(buffer: Buffer, x: &[f32]) -> bool {
+    let lim = input::limit_of(buffer);
+    x.iter().all(|v| v.is_finite()) && x.iter().any(|v| v.abs() > lim)
 }
 
 /// A clean tick: music pushed ahead (until refused or `a_m + 3` tokens
@@ -344,10 +345,7 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
         assert_eq!(fa.index, *next_index, "frame indices not consecutive");
         *next_index += 1;
         rep.pulled += 1;
-        if !frame_finite(fa) {
-            assert!(rep.tainted, "non-finite follower frame {} from finite, bounded input", fa.index);
-            rep.non_finite_out += 1;
-        }
+        assert!(frame_finite(fa), "non-finite follower frame {} from accepted input", fa.index);
     };
     for (i, op) in ops.iter().enumerate() {
         match op {
@@ -357,13 +355,13 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                 make_frame(*g, rec, if is_leader { &base } else { &[] }, &mut buf);
                 let ra = if is_leader { a.push_leader_frame(&buf) } else { a.push_music_frame(&buf) };
                 let want_len = if is_leader { POSE_DIM } else { n_music };
+                let which = if is_leader { Buffer::LeaderPos3d } else { Buffer::Music };
                 match ra {
                     Ok(()) => {
                         let rb = if is_leader { b.push_leader_frame(&buf) } else { b.push_music_frame(&buf) };
                         assert_eq!(rb, Ok(()), "shadow refused what the session accepted");
-                        assert!(buf.len() == want_len && buf.iter().all(|v| v.is_finite()), "accepted a bad frame");
+                        assert!(buf.len() == want_len && input::check(which, &buf).is_ok(), "accepted a bad frame");
                         rep.pushed += 1;
-                        rep.tainted |= huge(&buf);
                         if is_leader {
                             leader_t += 1;
                         } else {
@@ -374,8 +372,11 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                         assert!(documented(&e), "op {i}: undocumented refusal {e:?}");
                         let bad = buf.len() == want_len && buf.iter().any(|v| !v.is_finite());
                         assert_eq!(matches!(e, Error::NonFinite { .. }), bad, "op {i}: NonFinite iff non-finite input ({e:?})");
+                        let over = buf.len() == want_len && over_limit(which, &buf);
+                        assert_eq!(matches!(e, Error::OutOfRange { .. }), over, "op {i}: OutOfRange iff finite over-limit input ({e:?})");
                         rep.refused += 1;
                         rep.non_finite_refused += bad as usize;
+                        rep.out_of_range_refused += over as usize;
                         rep.backlog_refused += matches!(e, Error::Backlog { .. }) as usize;
                     }
                 }
@@ -428,7 +429,6 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                 match ra {
                     Ok(()) => {
                         next_index = 0;
-                        rep.tainted = false;
                         leader_t = 0;
                         music_t = 0;
                     }
@@ -453,6 +453,9 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                         let bad = t.len() % n_music == 0 && t.iter().any(|v| !v.is_finite());
                         if matches!(e, Error::NonFinite { .. }) {
                             assert!(bad);
+                        }
+                        if matches!(e, Error::OutOfRange { .. }) {
+                            assert!(t.len() % n_music == 0 && over_limit(Buffer::Music, t));
                         }
                     }
                 }

@@ -45,6 +45,11 @@ pub fn describe(e: &Error) -> String {
         Error::NonFinite { buffer, index } => {
             format!("{} contains NaN or infinity at flat index {index}", buffer_name(*buffer))
         }
+        Error::OutOfRange { buffer, index } => format!(
+            "{} holds a value above {:e} in magnitude at flat index {index} (input policy, docs/ROBUSTNESS.md)",
+            buffer_name(*buffer),
+            duolando_core::input::limit_of(*buffer)
+        ),
         Error::Setting { setting, value, max } => {
             format!("session setting {} = {value} is outside its range (at most {max} for this model)", setting_name(*setting))
         }

@@ -31,6 +31,7 @@ use crate::config::{ModelConfig, Part, POSE_DIM, ROT_DIM};
 use crate::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::{check_len, Buffer, Error};
 use crate::gpt::head_rows;
+use crate::input;
 use crate::kernels::linear;
 use crate::model::Model;
 use crate::motion::{denormalise, gather_part, normalise, scatter_part};
@@ -111,12 +112,6 @@ fn check_seed(model: &Model<'_>, seed: &[u32; 5]) -> Result<(), Error> {
     Ok(())
 }
 
-fn check_finite(buffer: Buffer, x: &[f32]) -> Result<(), Error> {
-    match x.iter().position(|v| !v.is_finite()) {
-        Some(index) => Err(Error::NonFinite { buffer, index }),
-        None => Ok(()),
-    }
-}
 
 /// A streaming session over one [`Model`]. All state lives in the arena
 /// given to [`Session::new`]; nothing allocates afterwards.
@@ -278,21 +273,22 @@ impl<'a> Session<'a> {
         if n_music == 0 || track.len() % n_music != 0 {
             return Err(Error::Ragged { buffer: Buffer::Music, len: track.len(), row: n_music });
         }
-        check_finite(Buffer::Music, track)?;
+        input::check(Buffer::Music, track)?;
         self.track = Some(track);
         self.music_frames = track.len() / n_music;
         self.run_steps()
     }
 
     /// Appends one music feature frame (n_music). Non-finite values are
-    /// rejected (`NonFinite`) and leave the session unchanged; so does a
+    /// rejected (`NonFinite`, or `OutOfRange` above `input::MAX_MUSIC_FEATURE`)
+    /// and leave the session unchanged; so does a
     /// full music buffer (`Backlog`: push leader frames first).
     pub fn push_music_frame(&mut self, features: &[f32]) -> Result<(), Error> {
         if self.track.is_some() {
             return Err(Error::State);
         }
         check_len(Buffer::Music, features.len(), self.model.cfg.gpt.music.n_in as usize)?;
-        check_finite(Buffer::Music, features)?;
+        input::check(Buffer::Music, features)?;
         let mmr = self.model.cfg.music_motion_rate as usize;
         let next_needed = self.st.music_lat.pushed() + mmr;
         let held = self.music_frames.saturating_sub(next_needed);
@@ -307,12 +303,13 @@ impl<'a> Session<'a> {
 
     /// Appends one leader frame (165 floats: 55 joints x xyz, metres, world
     /// coordinates, SMPL-X order). Non-finite values are rejected
-    /// (`NonFinite`) and leave the session unchanged (the caller may push
+    /// (`NonFinite`, or `OutOfRange` above `input::MAX_POSITION_M`) and leave
+    /// the session unchanged (the caller may push
     /// its last good frame instead); so does a full output buffer
     /// (`Backlog`: pull follower frames first).
     pub fn push_leader_frame(&mut self, pos3d: &[f32]) -> Result<(), Error> {
         check_len(Buffer::LeaderPos3d, pos3d.len(), POSE_DIM)?;
-        check_finite(Buffer::LeaderPos3d, pos3d)?;
+        input::check(Buffer::LeaderPos3d, pos3d)?;
         let held = self.frames - self.emitted;
         let cap = self.latency_frames() as usize + 1 + self.cfg.pending_frames as usize;
         if held >= cap {
