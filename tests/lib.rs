@@ -1,5 +1,6 @@
 //! Shared helpers of the integration tests: fixture paths, `.npy` loading,
 //! tract-onnx as the golden reference, and named tolerances.
+#![forbid(unsafe_code)]
 
 use std::path::{Path, PathBuf};
 

@@ -311,6 +311,7 @@ mod tests {
 
     #[test]
     fn frame_conversion_in_place() {
+        // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         let mut f = DuoFollowerFrame::default();
         f.positions[3] = v(1.0, 2.0, 3.0);
         f.root = v(0.5, 0.9, -0.25);

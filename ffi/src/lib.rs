@@ -43,6 +43,7 @@ mod tests {
 
     #[test]
     fn version_matches_cargo_toml() {
+        // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         let s = unsafe { std::ffi::CStr::from_ptr(duo_version()) }.to_str().unwrap();
         assert_eq!(s, env!("CARGO_PKG_VERSION"));
         assert_eq!(s, format!("{VERSION_MAJOR}.{VERSION_MINOR}.{VERSION_PATCH}"));

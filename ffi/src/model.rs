@@ -22,6 +22,7 @@ use crate::result::{guard, DuoResult, Failure};
 /// Where the model bytes live. Each variant keeps its bytes at a fixed
 /// address for the life of the value (heap, mmap, or caller memory).
 enum Storage {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     /// Caller memory (`duo_model_open_bytes`): not owned.
     Borrowed,
     /// `duo_model_open_file` (mmap or aligned copy) or `duo_model_open_copy`.
@@ -41,6 +42,7 @@ pub struct ModelInner {
 // Send + Sync; `Borrowed` holds nothing. The caller's borrowed bytes are
 // only read.
 unsafe impl Send for ModelInner {}
+// SAFETY: as for `Send` above: nothing in it is mutated after construction.
 unsafe impl Sync for ModelInner {}
 
 impl ModelInner {
@@ -281,6 +283,7 @@ pub(crate) mod tests {
     }
 
     pub fn open_fixture() -> *mut DuoModel {
+        // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         let p = std::ffi::CString::new(fixture_path()).unwrap();
         let mut m = ptr::null_mut();
         assert_eq!(unsafe { duo_model_open_file(p.as_ptr(), &mut m) }, DuoResult::Ok);
@@ -289,6 +292,7 @@ pub(crate) mod tests {
     }
 
     fn last() -> String {
+        // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         let mut buf = vec![0 as c_char; 1024];
         unsafe { crate::result::duo_last_error_message(buf.as_mut_ptr(), buf.len()) };
         unsafe { CStr::from_ptr(buf.as_ptr()) }.to_str().unwrap().to_string()
@@ -296,6 +300,7 @@ pub(crate) mod tests {
 
     #[test]
     fn open_all_ways() {
+        // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         let m = open_fixture();
         let mut info = DuoModelInfo::default();
         assert_eq!(unsafe { duo_model_get_info(m, &mut info) }, DuoResult::Ok);
@@ -318,6 +323,7 @@ pub(crate) mod tests {
 
     #[test]
     fn rejections() {
+        // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         let bytes = std::fs::read(fixture_path()).unwrap();
         let aligned = AlignedBytes::copy_from(&bytes);
         let mut dummy = 0u8;

@@ -228,6 +228,7 @@ mod tests {
     use super::*;
 
     fn last() -> String {
+        // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         let n = unsafe { duo_last_error_message(std::ptr::null_mut(), 0) };
         let mut buf = vec![0 as c_char; n + 1];
         let m = unsafe { duo_last_error_message(buf.as_mut_ptr(), buf.len()) };
@@ -249,6 +250,7 @@ mod tests {
 
     #[test]
     fn message_truncates_snprintf_style() {
+        // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         set_last_error("héllo");
         let mut buf = [0x55 as c_char; 3];
         // "h" + 2-byte "é": 2 bytes fit, but that would split "é": keep "h".
@@ -267,6 +269,7 @@ mod tests {
 
     #[test]
     fn result_names() {
+        // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         for (i, code) in [
             DuoResult::Ok,
             DuoResult::NullParameter,

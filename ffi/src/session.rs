@@ -162,6 +162,10 @@ fn session_mut<'x>(session: *mut DuoSession) -> Result<&'x mut SessionInner, Fai
 }
 
 /// Writes the default configuration for `which` into `out`.
+///
+/// # Safety
+/// `model` NULL or a live handle; `out` NULL or writable (the contract of
+/// the two public entry points below).
 unsafe fn config_default(model: *const DuoModel, out: *mut DuoSessionConfig, reference: bool) -> Result<DuoResult, Failure> {
     let m = model_ref(model)?;
     if out.is_null() {
@@ -181,6 +185,7 @@ unsafe fn config_default(model: *const DuoModel, out: *mut DuoSessionConfig, ref
 /// `model` NULL or live; `out_config` NULL or writable.
 #[no_mangle]
 pub unsafe extern "C" fn duo_session_config_reference(model: *const DuoModel, out_config: *mut DuoSessionConfig) -> DuoResult {
+    // SAFETY: the caller's contract above is `config_default`'s.
     guard("duo_session_config_reference", || unsafe { config_default(model, out_config, true) })
 }
 
@@ -191,6 +196,7 @@ pub unsafe extern "C" fn duo_session_config_reference(model: *const DuoModel, ou
 /// `model` NULL or live; `out_config` NULL or writable.
 #[no_mangle]
 pub unsafe extern "C" fn duo_session_config_minimum(model: *const DuoModel, out_config: *mut DuoSessionConfig) -> DuoResult {
+    // SAFETY: the caller's contract above is `config_default`'s.
     guard("duo_session_config_minimum", || unsafe { config_default(model, out_config, false) })
 }
 

@@ -25,6 +25,7 @@ fn fixtures() -> PathBuf {
 }
 
 fn last_error() -> String {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     let mut buf = vec![0 as c_char; 512];
     unsafe { duo_last_error_message(buf.as_mut_ptr(), buf.len()) };
     unsafe { CStr::from_ptr(buf.as_ptr()) }.to_string_lossy().into_owned()
@@ -41,6 +42,7 @@ struct Golden {
 }
 
 fn golden() -> Golden {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     let dir = fixtures().join("streaming_tiny_minimum");
     // The goldens' meta.json may hold Python's bare `Infinity` (not JSON).
     let text = std::fs::read_to_string(dir.join("meta.json")).unwrap().replace("Infinity", "null");
@@ -78,6 +80,7 @@ unsafe impl Send for Model {}
 unsafe impl Sync for Model {}
 
 fn open() -> Model {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     let p = CString::new(fixtures().join("tiny/model.duo").to_str().unwrap()).unwrap();
     let mut m = ptr::null_mut();
     assert_eq!(unsafe { duo_model_open_file(p.as_ptr(), &mut m) }, DuoResult::Ok, "{}", last_error());
@@ -85,6 +88,7 @@ fn open() -> Model {
 }
 
 fn config(m: &Model, g: &Golden) -> DuoSessionConfig {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     let mut c = DuoSessionConfig::default();
     assert_eq!(unsafe { duo_session_config_minimum(m.0, &mut c) }, DuoResult::Ok);
     let get = |k: &str| g.config[k].as_u64().unwrap() as u32;
@@ -106,6 +110,7 @@ enum Noise {
 
 /// Drives `session` over the golden; returns every pulled frame.
 fn drive(s: *mut DuoSession, g: &Golden, noise: Noise) -> Vec<DuoFollowerFrame> {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     assert_eq!(unsafe { duo_session_set_music_track(s, g.music.as_ptr(), g.music.len()) }, DuoResult::Ok, "{}", last_error());
     let mut out = Vec::new();
     let mut f = DuoFollowerFrame::default();
@@ -169,6 +174,7 @@ fn check_within(out: &[DuoFollowerFrame], g: &Golden, pos_tol: f32, what: &str) 
 
 #[test]
 fn library_session_matches_the_golden_and_ignores_bad_frames() {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     let g = golden();
     let m = open();
     let c = config(&m, &g);
@@ -190,6 +196,7 @@ fn library_session_matches_the_golden_and_ignores_bad_frames() {
 
 #[test]
 fn caller_memory_and_threads_agree() {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     let g = golden();
     let m = open();
     let c = config(&m, &g);
@@ -229,6 +236,7 @@ fn caller_memory_and_threads_agree() {
 
 #[test]
 fn session_argument_checks() {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     let g = golden();
     let m = open();
     let c = config(&m, &g);
@@ -276,6 +284,7 @@ fn session_argument_checks() {
 
 #[test]
 fn staggered_cache_and_f16_cache_settings() {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     let g = golden();
     let m = open();
     let base = config(&m, &g);

@@ -1,4 +1,5 @@
 //! The `duolando` binary: a thin shell over [`duolando::cli`].
+#![forbid(unsafe_code)]
 
 fn main() {
     if let Err(err) = duolando::cli::run() {

@@ -70,6 +70,7 @@ impl ModelFile {
         } else {
             // SAFETY: read-only map; the file is not modified by us, and the
             // documented contract forbids others from modifying it meanwhile.
+            #[allow(unsafe_code)]
             let map = unsafe { memmap2::Mmap::map(&file) }.map_err(io)?;
             if (map.as_ptr() as usize) & 63 == 0 {
                 Storage::Mapped(map)

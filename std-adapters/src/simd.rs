@@ -68,6 +68,7 @@ pub fn init() -> Isa {
     let isa = detect();
     // SAFETY: `detect` returned `isa` only from `supported`, which checked
     // that this CPU supports every feature its kernels are compiled for.
+    #[allow(unsafe_code)]
     unsafe { simd::set_isa(isa) };
     isa
 }

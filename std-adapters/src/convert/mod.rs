@@ -189,6 +189,7 @@ fn map(path: &Path) -> Result<Mapped, ConvertError> {
     }
     // SAFETY: read-only map of an input file we do not modify; the caller
     // must not modify it during conversion (the usual mmap contract).
+    #[allow(unsafe_code)]
     let m = unsafe { memmap2::Mmap::map(&file) }.map_err(io)?;
     Ok(Mapped::Map(m))
 }

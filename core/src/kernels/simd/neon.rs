@@ -14,6 +14,9 @@ use super::scalar::{common, common_blocks};
 use super::{pairwise, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 
 /// 4 binary16 values (low 16 bits of each u32 lane... as a u16x4) to f32x4.
+///
+/// # Safety
+/// The CPU must support neon (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "neon")]
 unsafe fn f16x4_to_f32(h: uint16x4_t) -> float32x4_t {
@@ -181,6 +184,9 @@ pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [
 
 /// `sdot` (4-way i8 dot into each i32 lane), via asm: the intrinsic is
 /// not stable Rust yet.
+///
+/// # Safety
+/// The CPU must support neon, dotprod (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "neon,dotprod")]
 unsafe fn sdot(acc: int32x4_t, a: int8x16_t, b: int8x16_t) -> int32x4_t {
@@ -192,6 +198,9 @@ unsafe fn sdot(acc: int32x4_t, a: int8x16_t, b: int8x16_t) -> int32x4_t {
 }
 
 /// The 32 weights of block `b` of a stored row (two 16-byte vectors).
+///
+/// # Safety
+/// The CPU must support neon (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "neon")]
 unsafe fn wblock(row: &[u8], b: usize) -> [int8x16_t; 2] {
@@ -201,6 +210,9 @@ unsafe fn wblock(row: &[u8], b: usize) -> [int8x16_t; 2] {
 }
 
 /// The 32 quantised activations of block `b`.
+///
+/// # Safety
+/// The CPU must support neon (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "neon")]
 unsafe fn xblock(xq: &[i8], b: usize) -> [int8x16_t; 2] {

@@ -13,6 +13,9 @@ use super::{Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 const _: () = assert!(TN.is_multiple_of(2));
 
 /// Horizontal sum of 8 lanes.
+///
+/// # Safety
+/// The CPU must support avx2, fma (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn hsum(v: __m256) -> f32 {
@@ -207,6 +210,9 @@ pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
 }
 
 /// One binary16 scale to f32 (F16C, exact).
+///
+/// # Safety
+/// The CPU must support avx2, f16c (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "avx2,f16c")]
 unsafe fn f16_scale(blk: &[u8]) -> f32 {
@@ -346,6 +352,9 @@ pub unsafe fn tile_f16_512(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
 
 /// `roundf` (half away from zero) of integral-range lanes, exactly as
 /// `libm::roundf`; NaN lanes become 0 (as the scalar `as i8` cast).
+///
+/// # Safety
+/// The CPU must support avx2, fma (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn round_away(t: __m256) -> __m256 {
@@ -359,6 +368,9 @@ unsafe fn round_away(t: __m256) -> __m256 {
 }
 
 /// Horizontal max of 8 lanes.
+///
+/// # Safety
+/// The CPU must support avx2 (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "avx2")]
 unsafe fn hmax(v: __m256) -> f32 {
@@ -441,6 +453,9 @@ unsafe fn two_blocks(row: &[u8], b: usize) -> __m512i {
 }
 
 /// `[s[b] x 8, s[b + 1] x 8]` (per-block scales of a block pair, by lane).
+///
+/// # Safety
+/// The CPU must support avx512f (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "avx512f")]
 unsafe fn pair_scales(s: &[f32], b: usize) -> __m512 {
@@ -475,6 +490,7 @@ pub unsafe fn gemm_q8_vnni<const M: usize>(
     while b + 2 <= nb {
         // SAFETY (both): every row holds at least nb >= b + 2 blocks.
         let wv: [__m512i; TN] = core::array::from_fn(|n| _mm512_xor_si512(unsafe { two_blocks(w[n], b) }, flip));
+        // SAFETY: this function's target features include pair_scales' avx512f.
         let dw: [__m512; TN] = core::array::from_fn(|n| unsafe { pair_scales(wd[n], b) });
         for m in 0..M {
             let xs = &xq[m][b * Q8_BLOCK..(b + 2) * Q8_BLOCK];
@@ -537,6 +553,7 @@ pub unsafe fn gemm_q8_512<const M: usize>(
     while b + 2 <= nb {
         // SAFETY (both): every row holds at least nb >= b + 2 blocks.
         let raw: [__m512i; TN] = core::array::from_fn(|n| unsafe { two_blocks(w[n], b) });
+        // SAFETY: this function's target features include pair_scales' avx512f.
         let dw: [__m512; TN] = core::array::from_fn(|n| unsafe { pair_scales(wd[n], b) });
         let aw = raw.map(|r| _mm512_abs_epi8(r));
         let neg = raw.map(|r| _mm512_movepi8_mask(r));
@@ -583,6 +600,9 @@ pub unsafe fn gemm_q8_avx2<const M: usize>(
 }
 
 /// Blocks `b0..nb` of [`gemm_q8_avx2`].
+///
+/// # Safety
+/// The CPU must support avx2, fma, f16c (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "avx2,fma,f16c")]
 unsafe fn gemm_q8_avx2_from<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], b0: usize, nb: usize) -> [[f32; TN]; M] {

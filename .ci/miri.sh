@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Miri over core's unit tests that touch unsafe code (the SIMD kernels, run
+# with AVX2/FMA/F16C enabled at compile time so Miri executes the x86
+# intrinsics paths it can emulate) or byte casting (arena carving, weight
+# views, the activation quantiser). Each test runs on its own under a time
+# limit: Miri is ~1000x slower than native, and a test that exceeds the
+# limit is reported as TIMEOUT (not a failure), an error fails the script.
+#
+#   bash .ci/miri.sh [SECONDS_PER_TEST]     (default 240; not part of .ci/run)
+#
+# Figures of the last local run: docs/ROBUSTNESS.md §4.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+limit=${1:-240}
+rustup toolchain install nightly --profile minimal >/dev/null 2>&1 || true
+rustup +nightly component add miri rust-src >/dev/null
+export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-target/miri}
+export RUSTFLAGS="-C target-feature=+avx2,+fma,+f16c"
+cargo +nightly miri setup >/dev/null
+tests=(
+  input::tests::
+  tests::arena::
+  tests::engine::binding_reads_exactly_the_schema
+  tests::simd::
+  kernels::simd::tests::
+  tests::kernels::linear_matches_naive
+  tests::kernels::attention_band_and_tiled_causal
+  tests::motion_sampler::
+)
+# Expand the prefixes into single test names.
+cargo +nightly miri test -q -p duolando-core --lib --no-run >/dev/null 2>&1
+all=$(cargo +nightly miri test -q -p duolando-core --lib -- --list 2>/dev/null | sed -n 's/: test$//p')
+pass=0; fail=0; slow=0
+for t in $all; do
+  hit=0; for p in "${tests[@]}"; do [[ $t == $p* ]] && hit=1; done
+  [[ $hit == 1 ]] || continue
+  s=$(date +%s)
+  timeout "$limit" cargo +nightly miri test -q -p duolando-core --lib -- --exact "$t" >/tmp/miri-one.log 2>&1
+  rc=$?; d=$(( $(date +%s) - s ))
+  if [[ $rc == 0 ]]; then echo "ok       ${d}s  $t"; pass=$((pass+1))
+  elif [[ $rc == 124 ]]; then echo "TIMEOUT  ${d}s  $t"; slow=$((slow+1))
+  else echo "FAIL     ${d}s  $t"; tail -30 /tmp/miri-one.log; fail=$((fail+1)); fi
+done
+echo "miri: $pass passed, $fail failed, $slow over ${limit}s"
+[[ $fail == 0 ]]
