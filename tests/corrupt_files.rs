@@ -211,6 +211,28 @@ fn committed_fixture_models_open_mapped() {
     }
 }
 
+/// `find` uses a skip index (every `stride`-th entry's offset): every entry
+/// must be found at its table index, and no name between, before or after
+/// the entries, on files whose counts put names on and off the marks.
+#[test]
+fn find_locates_every_entry_and_nothing_else() {
+    for m in ["tiny", "tiny2"] {
+        let mf = ModelFile::open(duolando_tests::fixture(&format!("{m}/model.duo"))).unwrap();
+        let duo = mf.duo().unwrap();
+        let names: Vec<&str> = duo.tensors().map(|e| e.name).collect();
+        assert!(names.len() > 64 * 2, "{m}: too few tensors to exercise the skip index");
+        for (i, n) in names.iter().enumerate() {
+            let (at, e) = duo.find(n).unwrap_or_else(|| panic!("{m}: {n} not found"));
+            assert_eq!((at as usize, e.name), (i, *n));
+            // A name just above this one and below the next is absent.
+            assert!(duo.find(&format!("{n}\u{1}")).is_none(), "{m}: {n}+1");
+        }
+        assert!(duo.find("").is_none());
+        assert!(duo.find("\u{1}").is_none());
+        assert!(duo.find("\u{10ffff}").is_none());
+    }
+}
+
 #[test]
 fn first_non_finite_finds_a_nan_weight() {
     let mut p = valid_parts();

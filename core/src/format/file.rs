@@ -19,7 +19,16 @@ pub struct DuoFile<'a> {
     count: u32,
     /// The data section: from `prefix.data_start` to the end of the buffer.
     data: &'a [u8],
+    /// Skip index for [`DuoFile::find`]: `marks[m]` is the table byte offset
+    /// of entry `m * stride` (entries are variable-length, so this is what
+    /// makes a lookup O(log SKIP + stride) instead of O(count)).
+    marks: [u32; SKIP],
+    stride: u32,
 }
+
+/// Entries of the skip index (512 bytes; `MAX_TENSORS / SKIP` = 64 entries
+/// at most between marks).
+const SKIP: usize = 64;
 
 impl<'a> DuoFile<'a> {
     /// Validates `bytes` completely (prefix, header, table, offsets, config,
@@ -47,10 +56,17 @@ impl<'a> DuoFile<'a> {
         }
         let count = count as u32;
         let table = cur.rest;
+        let stride = count.div_ceil(SKIP as u32).max(1);
+        let mut marks = [0u32; SKIP];
 
         let mut prev: Option<TensorEntry<'a>> = None;
         let mut prev_end: u64 = 0;
         for index in 0..count {
+            if index % stride == 0 {
+                // index < count <= stride * SKIP, so the mark exists; the
+                // table is at most MAX_HEADER_LEN bytes, so the offset fits.
+                marks[(index / stride) as usize] = (table.len() - cur.rest.len()) as u32;
+            }
             let e = decode_entry(&mut cur, index)?;
             if let Some(p) = prev {
                 match e.name.as_bytes().cmp(p.name.as_bytes()) {
@@ -93,7 +109,7 @@ impl<'a> DuoFile<'a> {
             });
         }
 
-        let file = DuoFile { prefix, config, table, count, data };
+        let file = DuoFile { prefix, config, table, count, data, marks, stride };
         schema_check::check(&file)?;
         Ok(file)
     }
@@ -122,8 +138,8 @@ impl<'a> DuoFile<'a> {
         Tensors { cur: Cursor::new(self.table), index: 0, count: self.count }
     }
 
-    /// The entry and payload of the tensor called `name` (a linear scan
-    /// over the sorted table, stopping early).
+    /// The entry and payload of the tensor called `name` (a binary search
+    /// over the skip index, then a scan of at most `stride` entries).
     pub fn tensor(&self, name: &str) -> Result<TensorRef<'a>, FormatError> {
         self.entry(name).map(|e| self.view(&e))
     }
@@ -135,14 +151,34 @@ impl<'a> DuoFile<'a> {
 
     /// The table index and entry called `name`.
     pub fn find(&self, name: &str) -> Option<(u32, TensorEntry<'a>)> {
-        for (i, e) in self.tensors().enumerate() {
+        if self.count == 0 {
+            return None;
+        }
+        // The last mark whose entry name is <= `name` (names are sorted).
+        let n_marks = self.count.div_ceil(self.stride) as usize;
+        let (mut lo, mut hi) = (0usize, n_marks);
+        while hi - lo > 1 {
+            let mid = (lo + hi) / 2;
+            match self.from_mark(mid).next() {
+                Some(e) if e.name <= name => lo = mid,
+                _ => hi = mid,
+            }
+        }
+        let first = lo as u32 * self.stride;
+        for (i, e) in self.from_mark(lo).take(self.stride as usize).enumerate() {
             match e.name.cmp(name) {
-                core::cmp::Ordering::Equal => return Some((i as u32, e)),
+                core::cmp::Ordering::Equal => return Some((first + i as u32, e)),
                 core::cmp::Ordering::Greater => return None,
                 core::cmp::Ordering::Less => {}
             }
         }
         None
+    }
+
+    /// The entries from mark `m` on.
+    fn from_mark(&self, m: usize) -> Tensors<'a> {
+        let off = self.marks[m] as usize;
+        Tensors { cur: Cursor::new(self.table.get(off..).unwrap_or(&[])), index: m as u32 * self.stride, count: self.count }
     }
 
     /// The payload view of a validated entry of this file.

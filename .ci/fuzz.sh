@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Fuzz smoke: every cargo-fuzz target of fuzz/ for a short run from the
+# committed seeds (fuzz/seeds/<target>/), so a regression that crashes a
+# target on known-interesting inputs, or soon after, fails CI. Long runs
+# are local (docs/ROBUSTNESS.md §2, §7).
+#
+#   bash .ci/fuzz.sh                  # DUO_FUZZ_SECONDS per target (default 30)
+#
+# -malloc_limit_mb makes any single allocation over 512 MB a crash: no
+# input may make the decoder, converter or session allocate in proportion
+# to an unvalidated number. -rss_limit_mb bounds the whole process.
+set -euo pipefail
+cd "$(dirname "$0")/../fuzz"
+secs=${DUO_FUZZ_SECONDS:-30}
+rustup toolchain install nightly --profile minimal >/dev/null 2>&1
+if ! cargo +nightly fuzz --version >/dev/null 2>&1; then
+  cargo install cargo-fuzz --locked
+fi
+targets=(duo_parse duo_struct convert session)
+cargo +nightly fuzz build -O
+for t in "${targets[@]}"; do
+  mkdir -p "corpus/$t"
+  cp -n seeds/"$t"/* "corpus/$t/" 2>/dev/null || true
+  echo "--- fuzz $t for ${secs}s ($(ls "corpus/$t" | wc -l) inputs)"
+  cargo +nightly fuzz run -O "$t" "corpus/$t" -- \
+    -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=512 -timeout=30 -print_final_stats=1 2>&1 \
+    | grep -E "^Done|stat::number_of_executed_units|stat::average_exec_per_sec|ERROR|panicked|SUMMARY|Test unit written" || true
+  # cargo fuzz exits non-zero on a crash; re-check through the artifacts dir.
+  if ls "artifacts/$t"/crash-* "artifacts/$t"/leak-* "artifacts/$t"/oom-* "artifacts/$t"/timeout-* >/dev/null 2>&1; then
+    echo "fuzz target $t failed: see fuzz/artifacts/$t"
+    exit 1
+  fi
+done
+echo "fuzz smoke passed"
