@@ -21,6 +21,11 @@ cargo +nightly fuzz build -O
 for t in "${targets[@]}"; do
   mkdir -p "corpus/$t"
   cp -n seeds/"$t"/* "corpus/$t/" 2>/dev/null || true
+  if [[ $t == duo_parse ]]; then
+    # Whole valid files are large; take them from the fixtures, not seeds/.
+    cp ../tests/fixtures/tiny/model.duo "corpus/$t/fixture-tiny.duo"
+    cp ../tests/fixtures/tiny2/model.duo "corpus/$t/fixture-tiny2.duo"
+  fi
   echo "--- fuzz $t for ${secs}s ($(ls "corpus/$t" | wc -l) inputs)"
   cargo +nightly fuzz run -O "$t" "corpus/$t" -- \
     -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=512 -timeout=30 -print_final_stats=1 2>&1 \

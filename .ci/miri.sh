@@ -8,12 +8,12 @@
 # unsupported intrinsics) as UNSUPP; neither is a failure. An error (UB,
 # a failed assertion) fails the script.
 #
-#   bash .ci/miri.sh [SECONDS_PER_TEST]     (default 240; not part of .ci/run)
+#   bash .ci/miri.sh [SECONDS_PER_TEST]     (default 300; not part of .ci/run)
 #
 # Figures of the last local run: docs/ROBUSTNESS.md §4.
 set -uo pipefail
 cd "$(dirname "$0")/.."
-limit=${1:-240}
+limit=${1:-300}
 rustup toolchain install nightly --profile minimal >/dev/null 2>&1 || true
 rustup +nightly component add miri rust-src >/dev/null
 export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-target/miri}
