@@ -27,12 +27,19 @@ for t in "${targets[@]}"; do
     cp ../tests/fixtures/tiny2/model.duo "corpus/$t/fixture-tiny2.duo"
   fi
   echo "--- fuzz $t for ${secs}s ($(ls "corpus/$t" | wc -l) inputs)"
+  rm -rf "artifacts/$t"
+  log=$(mktemp)
+  set +e
   cargo +nightly fuzz run -O "$t" "corpus/$t" -- \
-    -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=512 -timeout=30 -print_final_stats=1 2>&1 \
-    | grep -E "^Done|stat::number_of_executed_units|stat::average_exec_per_sec|ERROR|panicked|SUMMARY|Test unit written" || true
-  # cargo fuzz exits non-zero on a crash; re-check through the artifacts dir.
-  if ls "artifacts/$t"/crash-* "artifacts/$t"/leak-* "artifacts/$t"/oom-* "artifacts/$t"/timeout-* >/dev/null 2>&1; then
-    echo "fuzz target $t failed: see fuzz/artifacts/$t"
+    -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=512 -timeout=30 -print_final_stats=1 >"$log" 2>&1
+  rc=$?
+  set -e
+  grep -E "^Done|stat::number_of_executed_units|stat::average_exec_per_sec|ERROR|panicked|SUMMARY|Test unit written" "$log" || true
+  # A crash, leak, OOM or timeout exits non-zero (and writes an artifact);
+  # so does a run that could not start. Either fails CI.
+  if [[ $rc != 0 ]] || ls "artifacts/$t"/* >/dev/null 2>&1; then
+    tail -40 "$log"
+    echo "fuzz target $t failed (exit $rc): see fuzz/artifacts/$t"
     exit 1
   fi
 done

@@ -4,7 +4,7 @@
 //! older dots and tiles). On aarch64 these run under qemu (`.ci/aarch64.sh`).
 
 use super::{scalar, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
-use crate::kernels::{linear, Matrix, Q8Rows, RowMatrix};
+use crate::kernels::{linear, F16Rows, F32Rows, Matrix, Q8Rows, RowMatrix};
 
 /// SIMD int8 GEMM vs scalar twin: the per-block i32 sums are exact; only
 /// the f32 sum across blocks and lanes is reordered: limit * sum_b
@@ -548,6 +548,40 @@ fn axpy_f16_matches_scalar_twin() {
         for i in 0..n {
             let s = y0[i].abs() as f64 + (a * super::f16_to_f32(w[i])).abs() as f64;
             check(&format!("axpy_f16 n={n}"), got[i], want[i], s, SIMD_VS_SCALAR_AXPY);
+        }
+    }
+}
+
+/// A row's `linear` output (int8, f16, f32) must not depend on how many other rows
+/// share the call (a batched step of several sessions must equal single
+/// steps bit for bit): 1..9 rows, at the model's shapes, under the
+/// dispatched kernels (packed 8-row VNNI tile from 4 rows on, unpacked
+/// tile below).
+#[test]
+fn linear_rows_do_not_depend_on_the_batch() {
+    let mut r = Rng(99);
+    for &(i, o) in &[(768usize, 64usize), (3072, 24), (256, 40)] {
+        let w = r.vec(o * i);
+        let q8 = q8_bytes(&w);
+        let h: Vec<u16> = w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+        let rows = 9;
+        let x = r.vec(rows * i);
+        for m in [
+            Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap()),
+            Matrix::F16(F16Rows::new(&h, o, i).unwrap()),
+            Matrix::F32(F32Rows::new(&w, o, i).unwrap()),
+        ] {
+        let mut alone = vec![0.0f32; rows * o];
+        for a in 0..rows {
+            linear(&x[a * i..(a + 1) * i], &m, None, &mut alone[a * o..(a + 1) * o]);
+        }
+        for n in 2..=rows {
+            let mut y = vec![0.0f32; n * o];
+            linear(&x[..n * i], &m, None, &mut y);
+            for (k, (a, b)) in y.iter().zip(&alone).enumerate() {
+                assert_eq!(a.to_bits(), b.to_bits(), "in {i} out {o}: {n} rows, element {k}: {a} vs {b} alone");
+            }
+        }
         }
     }
 }
