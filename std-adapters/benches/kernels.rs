@@ -13,18 +13,8 @@ use duolando::duo_writer::quantise_q8_block32;
 use duolando_core::kernels::simd;
 use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, TiledCausalMask};
 
-struct Rng(u64);
-impl Rng {
-    fn f(&mut self) -> f32 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    }
-    fn vec(&mut self, n: usize) -> Vec<f32> {
-        (0..n).map(|_| self.f() * 0.05).collect()
-    }
-}
+mod common;
+use common::Rng;
 
 /// Median seconds of `reps` calls of `f` after one warm-up.
 fn time(reps: usize, mut f: impl FnMut()) -> f64 {
