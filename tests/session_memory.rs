@@ -280,3 +280,45 @@ fn unpulled_frames_back_up_into_a_clean_refusal() {
     assert_eq!(pulled, 9);
     s.push_leader_frame(&c.leader[9 * 165..10 * 165]).unwrap();
 }
+
+#[test]
+fn step_many_allocates_nothing_and_its_batch_arena_is_exact() {
+    use duolando_core::session::StepBatch;
+    let file = ModelFile::open(fixture("tiny/model.duo")).unwrap();
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let c = clip();
+    let sc = live_config(&model);
+    let n = 3;
+    let mut arenas: Vec<Vec<u8>> = (0..n).map(|_| vec![0u8; model.session_bytes(&sc).unwrap()]).collect();
+    let mut sessions: Vec<Session<'_>> = arenas.iter_mut().enumerate().map(|(i, a)| Session::new(&model, a, &sc, [i as u32, 1, 2, 3, 4]).unwrap()).collect();
+    let bytes = StepBatch::bytes(&model.cfg, &sc, n).unwrap();
+    // Exactly `bytes` at the worst alignment is enough; a 64-byte-aligned arena one line short of `bytes - 63` is not.
+    let mut buf = vec![0u8; bytes + 64];
+    let off = (64 - buf.as_ptr() as usize % 64) % 64 + 1;
+    let mut batch = StepBatch::new(&model.cfg, &sc, n, &mut buf[off..off + bytes]).unwrap();
+    let mut small = vec![0u8; bytes];
+    let off = (64 - small.as_ptr() as usize % 64) % 64;
+    assert!(matches!(StepBatch::new(&model.cfg, &sc, n, &mut small[off..off + bytes - 127]), Err(Error::Arena(_))));
+    let frames = c.leader.len() / 165;
+    let mut refs: Vec<&mut Session<'_>> = sessions.iter_mut().collect();
+    let mut f = FollowerFrame::default();
+    let mut pulled = 0usize;
+    let allocs = allocations_during(|| {
+        for t in 0..frames {
+            for s in refs.iter_mut() {
+                s.push_music_frame(&c.music[t * n_music..(t + 1) * n_music]).unwrap();
+            }
+            let x = &c.leader[t * 165..(t + 1) * 165];
+            Session::step_many(&mut refs, &[x, x, x], &mut batch).unwrap();
+            for s in refs.iter_mut() {
+                while s.pull_follower_frame(&mut f).unwrap() {
+                    pulled += 1;
+                }
+            }
+        }
+    });
+    assert_eq!(allocs, 0, "{allocs} heap allocations while stepping {n} sessions together");
+    assert!(pulled > 3 * 100, "only {pulled} frames pulled");
+}

@@ -3,10 +3,12 @@
 //! `x += proj(attn(ln1 x)); x += mlp.2(gelu(mlp.0(ln2 x)))`.
 
 use crate::arena::{ArenaError, Carve};
+use crate::error::{Buffer, Error};
 use crate::kernels::{attention, gelu_inplace, layernorm, linear, Mask};
 use crate::model::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
+#[derive(Default)]
 pub struct BlockScratch<'s> {
     /// (rows, C) LayerNorm output, then projection output.
     pub ln: &'s mut [f32],
@@ -122,19 +124,46 @@ pub fn block_kv(w: &BlockW<'_>, x: &[f32], ln: &mut [f32], k: &mut [f32], v: &mu
     lin(ln, &w.value, v);
 }
 
-/// The rest of a block for new rows `x` (n, C) in place, given the keys
-/// and values they may attend to (`k`, `v`: (nk, C), already computed,
-/// including the new rows' own where `mask` allows):
-/// `x += proj(attn(query(ln1 x), k, v)); x += mlp(ln2 x)`.
-/// `mask` relates query row i of `x` to key row j of `k`.
-pub fn block_attend<M: Mask>(w: &BlockW<'_>, x: &mut [f32], k: &[f32], v: &[f32], c: usize, n_head: usize, mask: &M, s: &mut BlockScratch<'_>) {
+/// The rest of a block for groups of new rows in place, given the keys
+/// and values each group may attend to: for every group `g`,
+/// `x_g += proj(attn(query(ln1 x_g), k_g, v_g)); x_g += mlp(ln2 x_g)`.
+///
+/// `x` (n, C) holds the groups one after another, group `g` at rows
+/// `bounds[g]..bounds[g + 1]` (`bounds`: groups + 1 ascending row offsets,
+/// first 0, last n). `keys(g)` gives group g's keys and values
+/// ((nk_g, C) each, already computed, including the group's own rows where
+/// its mask allows) and its mask (query row i of the group, key row j).
+/// Groups are independent (one streaming session's window or LAT each);
+/// every weight matrix is read once for all of them, and a row's result
+/// does not depend on the other groups (the kernels compute rows
+/// independently: `linear_rows_do_not_depend_on_the_batch`).
+pub fn block_attend_groups<'k, M, F>(w: &BlockW<'_>, x: &mut [f32], bounds: &[usize], c: usize, n_head: usize, keys: F, s: &mut BlockScratch<'_>) -> Result<(), Error>
+where
+    M: Mask,
+    F: Fn(usize) -> Result<(&'k [f32], &'k [f32], M), Error>,
+{
     let nc = x.len();
-    let nk = k.len() / c.max(1);
+    let groups = bounds.len().saturating_sub(1);
+    if c == 0 || !nc.is_multiple_of(c) || bounds.first() != Some(&0) || bounds.last() != Some(&(nc / c)) || nc > s.ln.len() {
+        return Err(Error::Length { buffer: Buffer::Features, len: nc, expected: bounds.last().copied().unwrap_or(0) * c });
+    }
     let (ln, q, att) = (&mut s.ln[..nc], &mut s.q[..nc], &mut s.att[..nc]);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
     lin(ln, &w.query, q);
-    attention(q, k, v, c, n_head, mask, &mut s.scores[..nk], att);
+    for g in 0..groups {
+        let (a, b) = (bounds[g], bounds[g + 1]);
+        if b < a {
+            return Err(Error::Length { buffer: Buffer::Features, len: a, expected: b });
+        }
+        let (k, v, mask) = keys(g)?;
+        let nk = k.len() / c;
+        if nk > s.scores.len() {
+            return Err(Error::Length { buffer: Buffer::Features, len: nk, expected: s.scores.len() });
+        }
+        attention(&q[a * c..b * c], k, v, c, n_head, &mask, &mut s.scores[..nk], &mut att[a * c..b * c]);
+    }
     lin(att, &w.proj, ln);
     add(x, ln);
     mlp(w, x, ln, &mut s.hid[..4 * nc], att);
+    Ok(())
 }

@@ -1,20 +1,24 @@
 #!/usr/bin/env bash
-# Retrain the demo model from scratch and rebuild assets/demo.duo + the demo clip.
+# Retrain the demo model from scratch: writes $WORK/demo.duo + the demo clip in $WORK/assets,
+# evaluates, and only with INSTALL=1 copies them over assets/ (the shipped model).
 #
 #   tools/train/train_all.sh            # from the repository root
 #
 # Environment (all optional): PY (python with torch, default /work/venv/bin/python),
-# WORK (scratch dir, default /tmp/duo_train), DATA (synthetic data dir, default /tmp/duo_synth),
-# MINUTES / SEED (synthetic data), VQ_STEPS / TR_STEPS / GPT_STEPS / GPT2_STEPS, EVAL=0 to skip evaluation.
+# MINUTES / SEED (synthetic data, default 20 / 1), DATA (synthetic data dir, default
+# /tmp/duo_synth_m$MINUTES_s$SEED; reused when it exists), WORK (scratch dir, default
+# /tmp/duo_train_m$MINUTES_s$SEED), VQ_STEPS / TR_STEPS / GPT_STEPS / GPT2_STEPS, EVAL=0 to skip
+# evaluation, INSTALL=1 to replace assets/demo.duo and the demo clip, BIN (the duolando binary,
+# default $CARGO_TARGET_DIR or target, /release/duolando).
 # Single-threaded (torch.set_num_threads(1)) under nice; see docs/DEMO_MODEL.md for timings.
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
 PY="${PY:-/work/venv/bin/python}"
-WORK="${WORK:-/tmp/duo_train}"
-DATA="${DATA:-/tmp/duo_synth}"
 MINUTES="${MINUTES:-20}"
 SEED="${SEED:-1}"
-BIN="$ROOT/target/release/duolando"
+WORK="${WORK:-/tmp/duo_train_m${MINUTES}_s${SEED}}"
+DATA="${DATA:-/tmp/duo_synth_m${MINUTES}_s${SEED}}"
+BIN="${BIN:-${CARGO_TARGET_DIR:-$ROOT/target}/release/duolando}"
 T="$ROOT/tools/train"
 NICE="nice -n 10"
 mkdir -p "$WORK"
@@ -35,11 +39,18 @@ if [ "${GPT2_STEPS:-0}" != 0 ]; then
                              --init "$WORK/follower_gpt_a.pt" --out "$WORK/follower_gpt.pt" \
                              --steps "$GPT2_STEPS" --batch 16 --lr 5e-4
 fi
-$NICE "$PY" export.py --ckpt "$WORK" --out "$WORK/export" --data "$DATA" --assets "$ROOT/assets"
+$NICE "$PY" export.py --ckpt "$WORK" --out "$WORK/export" --data "$DATA" --assets "$WORK/assets"
 "$BIN" convert --config "$WORK/export/follower_gpt.yaml" --gpt "$WORK/export/gpt.safetensors" \
     --vqvae "$WORK/export/vqvae.safetensors" --transl "$WORK/export/transl.safetensors" \
-    --dtype f16 -o "$ROOT/assets/demo.duo"
+    --dtype f16 -o "$WORK/demo.duo"
 if [ "${EVAL:-1}" != 0 ]; then
-    $NICE "$PY" evaluate.py --data "$DATA" --ckpt "$WORK" --json "$WORK/eval.json" --duo "$ROOT/assets/demo.duo" --bin "$BIN"
+    $NICE "$PY" evaluate.py --data "$DATA" --ckpt "$WORK" --json "$WORK/eval.json" --duo "$WORK/demo.duo" --bin "$BIN"
 fi
-ls -l "$ROOT/assets"
+if [ "${INSTALL:-0}" = 1 ]; then
+    cp "$WORK/demo.duo" "$ROOT/assets/demo.duo"
+    cp "$WORK"/assets/demo_* "$ROOT/assets/"
+    ls -l "$ROOT/assets"
+else
+    ls -l "$WORK/demo.duo" "$WORK/assets"
+    echo "not installed (INSTALL=1 copies $WORK/demo.duo and the clip over assets/)"
+fi

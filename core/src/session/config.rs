@@ -102,6 +102,8 @@ pub enum Setting {
     MusicBuffer,
     /// GPT caches a staggered schedule needs (value) above [`MAX_WINDOWS`].
     Windows,
+    /// Sessions of a [`StepBatch`](super::StepBatch) outside `1..=MAX_BATCH`.
+    Batch,
 }
 
 /// Largest `pending_frames` / `music_buffer_frames` (keeps every size far

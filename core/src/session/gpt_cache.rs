@@ -9,7 +9,9 @@
 //! (`[music, L_up, L_down, L_lh, L_rh, F_up, F_down, F_lh, F_rh, F_transl]`).
 
 use crate::arena::{ArenaError, Carve};
-use crate::block::{block_attend, block_kv, BlockScratch};
+use crate::block::{block_attend_groups, block_kv, BlockScratch};
+use crate::session::MAX_BATCH;
+use heapless::Vec;
 use crate::coordinated_attention::{FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::{Buffer, Error};
 use crate::kernels::Mask;
@@ -54,6 +56,7 @@ impl<'s> KvBuf<'s> {
 }
 
 /// Per-step f32 view of one layer's f16 K/V: (streams * m, C) each.
+#[derive(Default)]
 pub struct KvScratch<'s> {
     pub k: &'s mut [f32],
     pub v: &'s mut [f32],
@@ -128,55 +131,137 @@ impl<'s> GptCache<'s> {
         self.lo = Some(lo);
     }
 
-    /// Appends `n` window rows `x` (n * streams, C) (inputs with position
-    /// rows added) and runs every layer over them. With `need_output`, on
-    /// return the last `FOLLOWER_STREAMS` rows of `x` hold the final hidden
-    /// state of the follower streams at the last new row (what the heads
-    /// read); without it the last layer's attention and MLP are skipped
-    /// (only its K/V are kept). Other rows of `x` are scratch.
-    /// `kv`: the f32 view scratch of an f16 cache (unused for f32).
-    #[allow(clippy::too_many_arguments)]
-    pub fn append(&mut self, gpt: &GptW<'_>, n_head: usize, x: &mut [f32], need_output: bool, kv: &mut KvScratch<'_>, s: &mut BlockScratch<'_>) -> Result<(), Error> {
-        let (st, c) = (self.streams, self.c);
-        let n = x.len() / (st * c).max(1);
-        if n == 0 || x.len() != n * st * c || self.rows + n > self.m || gpt.base.len() + gpt.head.len() != self.layers {
-            return Err(Error::Context { c: self.rows + n, max: self.m });
+    /// This cache's K/V of layer `l`, rows `..r1` (streams-rows), as f32:
+    /// in place (f32 cache) or the widened view in `kv` (f16 cache).
+    fn visible<'r>(&'r self, kv: &'r KvScratch<'_>, l: usize, r1: usize) -> Result<(&'r [f32], &'r [f32]), Error> {
+        let c = self.c;
+        let base = l * self.streams * self.m * c;
+        match (&self.k, &self.v) {
+            (KvBuf::F32(k), KvBuf::F32(v)) => Ok((&k[base..base + r1 * c], &v[base..base + r1 * c])),
+            (KvBuf::F16(_), KvBuf::F16(_)) => Ok((&kv.k[..r1 * c], &kv.v[..r1 * c])),
+            _ => Err(Error::State),
         }
-        let per_layer = st * self.m * c;
-        let (r0, r1) = (self.rows * st, (self.rows + n) * st);
-        for (l, b) in gpt.base.iter().chain(gpt.head.iter()).enumerate() {
-            let layer = l * per_layer..(l + 1) * per_layer;
-            // (r1, C) keys and values visible to the new rows, as f32.
-            let (kr, vr): (&[f32], &[f32]) = match (&mut self.k, &mut self.v) {
-                (KvBuf::F32(k), KvBuf::F32(v)) => {
-                    let (kl, vl) = (&mut k[layer.clone()], &mut v[layer]);
-                    block_kv(b, x, s.ln, &mut kl[r0 * c..r1 * c], &mut vl[r0 * c..r1 * c]);
-                    (&kl[..r1 * c], &vl[..r1 * c])
-                }
-                (KvBuf::F16(k), KvBuf::F16(v)) => {
-                    let (kl, vl) = (&mut k[layer.clone()], &mut v[layer]);
-                    let (kf, vf) = (&mut kv.k[..r1 * c], &mut kv.v[..r1 * c]);
-                    block_kv(b, x, s.ln, &mut kf[r0 * c..], &mut vf[r0 * c..]);
-                    store_f16(&mut kf[r0 * c..], &mut kl[r0 * c..r1 * c]);
-                    store_f16(&mut vf[r0 * c..], &mut vl[r0 * c..r1 * c]);
-                    widen_f16(&kl[..r0 * c], &mut kf[..r0 * c]);
-                    widen_f16(&vl[..r0 * c], &mut vf[..r0 * c]);
-                    (kf, vf)
-                }
-                _ => return Err(Error::State),
-            };
-            if l + 1 < self.layers {
-                block_attend(b, x, kr, vr, c, n_head, &RowCausal { streams: st, q_row0: r0 }, s);
-            } else if need_output {
-                // Last layer: only the follower rows of the last new row are read.
-                let q0 = r1 - FOLLOWER_STREAMS;
-                let xs = &mut x[(q0 - r0) * c..];
-                block_attend(b, xs, kr, vr, c, n_head, &RowCausal { streams: st, q_row0: q0 }, s);
+    }
+
+    /// Stores the new rows' K/V (`k`, `v`: (r1 - r0, C) f32) of layer `l`
+    /// at stream-rows `r0..r1`; for an f16 cache they are rounded in place
+    /// and the older rows widened into `kv`, so that [`GptCache::visible`]
+    /// then sees rows `..r1`.
+    fn store(&mut self, kv: &mut KvScratch<'_>, l: usize, r0: usize, r1: usize, k: &mut [f32], v: &mut [f32]) -> Result<(), Error> {
+        let c = self.c;
+        let base = l * self.streams * self.m * c;
+        let (a, b) = (base + r0 * c, base + r1 * c);
+        match (&mut self.k, &mut self.v) {
+            (KvBuf::F32(kc), KvBuf::F32(vc)) => {
+                kc[a..b].copy_from_slice(k);
+                vc[a..b].copy_from_slice(v);
             }
+            (KvBuf::F16(kc), KvBuf::F16(vc)) => {
+                store_f16(k, &mut kc[a..b]);
+                store_f16(v, &mut vc[a..b]);
+                kv.k[r0 * c..r1 * c].copy_from_slice(k);
+                kv.v[r0 * c..r1 * c].copy_from_slice(v);
+                widen_f16(&kc[base..a], &mut kv.k[..r0 * c]);
+                widen_f16(&vc[base..a], &mut kv.v[..r0 * c]);
+            }
+            _ => return Err(Error::State),
         }
-        self.rows += n;
         Ok(())
     }
+
+    /// Appends window rows to several caches at once (one per session of a
+    /// batch, or one alone) and runs every layer over them, reading each
+    /// weight matrix once for all. `x` (sum of n_i * streams, C) holds the
+    /// inputs (position rows added) of item `i`'s `n_i = items[i].rows` new
+    /// window rows, one item after another.
+    ///
+    /// On return, for the `j`-th item with `need_output` (in item order),
+    /// rows `j * FOLLOWER_STREAMS ..` of `x` hold the final hidden state of
+    /// the follower streams at its last new row (what the heads read);
+    /// items without it skip the last layer's attention and MLP (only its
+    /// K/V are kept). Other rows of `x` are scratch. An item's result is
+    /// what an append of its own would give.
+    pub fn append_many(gpt: &GptW<'_>, n_head: usize, items: &mut [GptItem<'_, '_>], x: &mut [f32], s: &mut BlockScratch<'_>) -> Result<(), Error> {
+        let Some(first) = items.first() else { return Ok(()) };
+        let (st, c, layers) = (first.cache.streams, first.cache.c, first.cache.layers);
+        if gpt.base.len() + gpt.head.len() != layers || items.len() > MAX_BATCH {
+            return Err(Error::Context { c: items.len(), max: MAX_BATCH });
+        }
+        // Row bounds of the items in `x`, and each item's first cached row.
+        let mut bounds: Vec<usize, { MAX_BATCH + 1 }> = Vec::new();
+        bounds.push(0).map_err(|_| Error::State)?;
+        let mut total = 0usize;
+        for it in items.iter() {
+            let ch = &it.cache;
+            if it.rows == 0 || ch.streams != st || ch.c != c || ch.layers != layers || ch.rows + it.rows > ch.m {
+                return Err(Error::Context { c: ch.rows + it.rows, max: ch.m });
+            }
+            total += it.rows * st;
+            bounds.push(total).map_err(|_| Error::State)?;
+        }
+        if x.len() != total * c || total * c > s.k.len() {
+            return Err(Error::Length { buffer: Buffer::Features, len: x.len(), expected: total * c });
+        }
+        let row0 = |it: &GptItem<'_, '_>| it.cache.rows * st;
+        for (l, b) in gpt.base.iter().chain(gpt.head.iter()).enumerate() {
+            // (total, C) keys and values of every new row, in one pass.
+            let (kn, vn) = (&mut s.k[..total * c], &mut s.v[..total * c]);
+            block_kv(b, x, s.ln, kn, vn);
+            for (i, it) in items.iter_mut().enumerate() {
+                let (a, z) = (bounds[i] * c, bounds[i + 1] * c);
+                let r0 = row0(it);
+                it.cache.store(it.kv, l, r0, r0 + it.rows * st, &mut kn[a..z], &mut vn[a..z])?;
+            }
+            let items_ro: &[GptItem<'_, '_>] = items;
+            if l + 1 < layers {
+                let keys = |g: usize| {
+                    let it = &items_ro[g];
+                    let r0 = row0(it);
+                    let (k, v) = it.cache.visible(it.kv, l, r0 + it.rows * st)?;
+                    Ok((k, v, RowCausal { streams: st, q_row0: r0 }))
+                };
+                block_attend_groups(b, x, &bounds, c, n_head, keys, s)?;
+            } else {
+                // Last layer: only the follower rows of each output item's
+                // last new row are read; they are gathered to the front.
+                let mut outs: Vec<usize, MAX_BATCH> = Vec::new();
+                let mut ob: Vec<usize, { MAX_BATCH + 1 }> = Vec::new();
+                ob.push(0).map_err(|_| Error::State)?;
+                for (i, it) in items_ro.iter().enumerate() {
+                    if it.need_output {
+                        let j = outs.len();
+                        let src = (bounds[i + 1] - FOLLOWER_STREAMS) * c;
+                        x.copy_within(src..src + FOLLOWER_STREAMS * c, j * FOLLOWER_STREAMS * c);
+                        outs.push(i).map_err(|_| Error::State)?;
+                        ob.push((j + 1) * FOLLOWER_STREAMS).map_err(|_| Error::State)?;
+                    }
+                }
+                if !outs.is_empty() {
+                    let keys = |g: usize| {
+                        let it = &items_ro[outs[g]];
+                        let r1 = row0(it) + it.rows * st;
+                        let (k, v) = it.cache.visible(it.kv, l, r1)?;
+                        Ok((k, v, RowCausal { streams: st, q_row0: r1 - FOLLOWER_STREAMS }))
+                    };
+                    let xs = &mut x[..outs.len() * FOLLOWER_STREAMS * c];
+                    block_attend_groups(b, xs, &ob, c, n_head, keys, s)?;
+                }
+            }
+        }
+        for it in items.iter_mut() {
+            it.cache.rows += it.rows;
+        }
+        Ok(())
+    }
+}
+
+/// One cache's share of [`GptCache::append_many`]: `rows` new window rows.
+pub struct GptItem<'r, 's> {
+    pub cache: &'r mut GptCache<'s>,
+    /// The f32 view scratch of the session's f16 caches (unused for f32).
+    pub kv: &'r mut KvScratch<'s>,
+    pub rows: usize,
+    pub need_output: bool,
 }
 
 /// Checks the stream layout this module assumes.

@@ -14,12 +14,13 @@
 use heapless::Vec;
 
 use crate::arena::{ArenaError, Carve};
-use crate::block::{block_attend, block_kv, BlockScratch};
+use crate::block::{block_attend_groups, block_kv, BlockScratch};
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::{linear, Mask};
 use crate::limits::MAX_LAT_LAYERS;
 use crate::model::LatW;
 use crate::session::ring::RowRing;
+use crate::session::MAX_BATCH;
 
 /// Every key handed to the attention is visible (the band is applied by
 /// choosing the key rows).
@@ -32,27 +33,33 @@ impl Mask for Visible {
     }
 }
 
-/// Per-step working memory shared by all LATs of a session.
+/// Per-step working memory shared by all LATs, for up to `n` LAT pushes
+/// at once (one per session of a batch; `n = 1` inside a session).
+#[derive(Default)]
 pub struct LatStepScratch<'s> {
-    /// (C) the position being pushed / processed.
+    /// (n, C) the positions being pushed / processed.
     pub h: &'s mut [f32],
-    /// (C) its K and V.
+    /// (n, C) their K and V.
     pub k: &'s mut [f32],
     pub v: &'s mut [f32],
-    /// (C) LayerNorm output.
+    /// (n, C) LayerNorm output.
     pub ln: &'s mut [f32],
-    /// (ds_max * C) concatenated last-layer rows.
+    /// (n, ds_max * C) concatenated last-layer rows.
     pub cat: &'s mut [f32],
+    /// Pushes it holds.
+    pub n: usize,
 }
 
 impl<'s> LatStepScratch<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, c: usize, ds_max: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, c: usize, ds_max: usize, n: usize) -> Result<Self, ArenaError> {
+        let nc = n.checked_mul(c).ok_or(ArenaError::Overflow)?;
         Ok(LatStepScratch {
-            h: a.f32(c)?,
-            k: a.f32(c)?,
-            v: a.f32(c)?,
-            ln: a.f32(c)?,
-            cat: a.f32(ds_max.checked_mul(c).ok_or(ArenaError::Overflow)?)?,
+            h: a.f32(nc)?,
+            k: a.f32(nc)?,
+            v: a.f32(nc)?,
+            ln: a.f32(nc)?,
+            cat: a.f32(ds_max.checked_mul(nc).ok_or(ArenaError::Overflow)?)?,
+            n,
         })
     }
 }
@@ -127,47 +134,105 @@ impl<'s> LatStream<'s> {
         self.rows
     }
 
-    /// Pushes one input position `x` (n_in). When it completes an output
-    /// row, writes it to `out` (C) and returns `Ok(true)`.
-    pub fn push(&mut self, w: &LatW<'_>, x: &[f32], s: &mut LatStepScratch<'_>, blk: &mut BlockScratch<'_>, out: &mut [f32]) -> Result<bool, Error> {
-        let c = self.c;
+    /// Pushes one input position into each of several LATs with the same
+    /// weights `w` (one per session of a batch): `x` (n, n_in) row `i` into
+    /// `lats[i]`. Where a push completes an output row, it is written to
+    /// row `i` of `out` (n, C) and `produced[i]` is set (else cleared).
+    /// Every weight matrix is read once for all `n` pushes; each LAT's
+    /// result is what a push of its own would give.
+    pub fn push_many(w: &LatW<'_>, lats: &mut [&mut LatStream<'_>], x: &[f32], s: &mut LatStepScratch<'_>, blk: &mut BlockScratch<'_>, out: &mut [f32], produced: &mut [bool]) -> Result<(), Error> {
+        let n = lats.len();
+        let Some(first) = lats.first() else { return Ok(()) };
+        let (c, ds) = (first.c, first.ds);
         let n_head = w.cfg.n_head as usize;
-        check_len(Buffer::Features, x.len(), w.cond_emb.w.cols())?;
-        check_len(Buffer::Output, out.len(), c)?;
-        if w.blocks.len() != self.k.len() || w.blocks.is_empty() {
-            return Err(Error::Length { buffer: Buffer::Features, len: w.blocks.len(), expected: self.k.len() });
+        let n_in = w.cond_emb.w.cols();
+        check_len(Buffer::Features, x.len(), n * n_in)?;
+        check_len(Buffer::Output, out.len(), n * c)?;
+        check_len(Buffer::Output, produced.len(), n)?;
+        if n > s.n || n > MAX_BATCH {
+            return Err(Error::Length { buffer: Buffer::Features, len: n, expected: s.n.min(MAX_BATCH) });
         }
-        // Layer-1 input of the new position, and its key/value.
-        linear(x, &w.cond_emb.w, w.cond_emb.b, s.h);
-        block_kv(&w.blocks[0], s.h, s.ln, s.k, s.v);
-        self.k[0].push(s.k)?;
-        self.v[0].push(s.v)?;
-        self.h0.push(s.h)?;
-        self.pushed += 1;
-        // The position whose layer-1 keys are now all present.
-        let Some(p) = self.pushed.checked_sub(1 + self.fut) else { return Ok(false) };
-        s.h.copy_from_slice(self.h0.row(p)?);
-        let lo = p.saturating_sub(self.past);
+        for lat in lats.iter() {
+            if w.blocks.len() != lat.k.len() || w.blocks.is_empty() || lat.c != c || w.cond_emb.w.rows() != c {
+                return Err(Error::Length { buffer: Buffer::Features, len: w.blocks.len(), expected: lat.k.len() });
+            }
+        }
+        produced.fill(false);
+        // (n, C) layer-1 inputs of the new positions, and their keys/values.
+        let nc = n * c;
+        linear(x, &w.cond_emb.w, w.cond_emb.b, &mut s.h[..nc]);
+        block_kv(&w.blocks[0], &s.h[..nc], &mut s.ln[..nc], &mut s.k[..nc], &mut s.v[..nc]);
+        // The LATs with a position whose layer-1 keys are now all present:
+        // (index into `lats`, position).
+        let mut ready: Vec<(usize, usize), MAX_BATCH> = Vec::new();
+        for (i, lat) in lats.iter_mut().enumerate() {
+            let row = i * c..(i + 1) * c;
+            lat.k[0].push(&s.k[row.clone()])?;
+            lat.v[0].push(&s.v[row.clone()])?;
+            lat.h0.push(&s.h[row])?;
+            lat.pushed += 1;
+            if let Some(p) = lat.pushed.checked_sub(1 + lat.fut) {
+                ready.push((i, p)).map_err(|_| Error::State)?;
+            }
+        }
+        let r = ready.len();
+        if r == 0 {
+            return Ok(());
+        }
+        // (r, C) the ready positions, one row (= one attention group) each.
+        let rc = r * c;
+        for (g, &(i, p)) in ready.iter().enumerate() {
+            s.h[g * c..(g + 1) * c].copy_from_slice(lats[i].h0.row(p)?);
+        }
+        let mut bounds: Vec<usize, { MAX_BATCH + 1 }> = Vec::new();
+        for g in 0..=r {
+            bounds.push(g).map_err(|_| Error::State)?;
+        }
         for (l, b) in w.blocks.iter().enumerate() {
             if l > 0 {
-                block_kv(b, s.h, s.ln, s.k, s.v);
-                self.k[l].push(s.k)?;
-                self.v[l].push(s.v)?;
+                block_kv(b, &s.h[..rc], &mut s.ln[..rc], &mut s.k[..rc], &mut s.v[..rc]);
+                for (g, &(i, _)) in ready.iter().enumerate() {
+                    lats[i].k[l].push(&s.k[g * c..(g + 1) * c])?;
+                    lats[i].v[l].push(&s.v[g * c..(g + 1) * c])?;
+                }
             }
-            let hi = p + 1 + if l == 0 { self.fut } else { 0 };
-            let (kr, vr) = (self.k[l].rows(lo, hi)?, self.v[l].rows(lo, hi)?);
-            block_attend(b, s.h, kr, vr, c, n_head, &Visible, blk);
+            let lats_ro: &[&mut LatStream<'_>] = lats;
+            let keys = |g: usize| {
+                let (i, p) = ready[g];
+                let lat = &lats_ro[i];
+                let lo = p.saturating_sub(lat.past);
+                let hi = p + 1 + if l == 0 { lat.fut } else { 0 };
+                Ok((lat.k[l].rows(lo, hi)?, lat.v[l].rows(lo, hi)?, Visible))
+            };
+            block_attend_groups(b, &mut s.h[..rc], &bounds, c, n_head, keys, blk)?;
         }
-        let slot = p % self.ds;
-        self.last[slot * c..(slot + 1) * c].copy_from_slice(s.h);
-        if slot + 1 < self.ds {
-            return Ok(false);
+        // Last-layer rows into each LAT's output row; the complete ones,
+        // (ds, C) viewed as one row of ds*C, go through the downsample.
+        let mut done: Vec<usize, MAX_BATCH> = Vec::new();
+        for (g, &(i, p)) in ready.iter().enumerate() {
+            let lat = &mut lats[i];
+            if lat.ds != ds {
+                return Err(Error::Length { buffer: Buffer::Features, len: lat.ds, expected: ds });
+            }
+            let slot = p % ds;
+            lat.last[slot * c..(slot + 1) * c].copy_from_slice(&s.h[g * c..(g + 1) * c]);
+            if slot + 1 == ds {
+                let d = done.len();
+                s.cat[d * ds * c..(d + 1) * ds * c].copy_from_slice(lat.last);
+                done.push(i).map_err(|_| Error::State)?;
+            }
         }
-        // (ds, C) viewed as one row of ds*C.
-        let cat = &mut s.cat[..self.ds * c];
-        cat.copy_from_slice(self.last);
-        linear(cat, &w.downsample.w, w.downsample.b, out);
-        self.rows += 1;
-        Ok(true)
+        let d = done.len();
+        if d == 0 {
+            return Ok(());
+        }
+        let y = &mut s.k[..d * c];
+        linear(&s.cat[..d * ds * c], &w.downsample.w, w.downsample.b, y);
+        for (j, &i) in done.iter().enumerate() {
+            out[i * c..(i + 1) * c].copy_from_slice(&y[j * c..(j + 1) * c]);
+            produced[i] = true;
+            lats[i].rows += 1;
+        }
+        Ok(())
     }
 }

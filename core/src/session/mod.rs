@@ -17,27 +17,27 @@
 //! threads and sessions); a [`Session`] is used by one thread at a time
 //! (it is `Send`).
 
+pub mod batch;
 pub mod config;
 pub mod gpt_cache;
 pub mod lat_stream;
 pub mod ring;
 mod state;
 
+pub use batch::{BatchError, StepBatch, StepDims, StepScratch, MAX_BATCH};
 pub use gpt_cache::KvType;
 pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
 use crate::arena::{Arena, Planner};
 use crate::config::{ModelConfig, Part, POSE_DIM, ROT_DIM};
-use crate::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::{check_len, Buffer, Error};
-use crate::gpt::head_rows;
 use crate::input;
-use crate::kernels::linear;
 use crate::model::Model;
 use crate::motion::{denormalise, gather_part, normalise, scatter_part};
 use crate::quantizer::nearest;
-use crate::sampler::{argmax, top_k_by_id, Rng};
+use crate::sampler::Rng;
 use crate::stream_conv::StackW;
+use batch::Append;
 use state::{State, FRAME_WIDTH};
 
 /// Relative translation scale of the translation VQ-VAE (R's `* 20`).
@@ -93,10 +93,11 @@ pub fn session_bytes_for(model: &ModelConfig, cfg: &SessionConfig) -> Result<usi
     check_config(model, cfg)?;
     let mut p = Planner::new();
     State::carve(&mut p, model, cfg)?;
+    StepScratch::carve(&mut p, StepDims::new(model, cfg, 1)?)?;
     p.total_for_any_base().ok_or(Error::Arena(crate::arena::ArenaError::Overflow))
 }
 
-fn check_config(model: &ModelConfig, cfg: &SessionConfig) -> Result<(), Error> {
+pub(crate) fn check_config(model: &ModelConfig, cfg: &SessionConfig) -> Result<(), Error> {
     model.validate().map_err(|e| Error::Bind(crate::model::BindError::Config(e)))?;
     cfg.check(model).map_err(|(setting, value, max)| Error::Setting { setting, value, max })?;
     gpt_cache::check_layout(model.gpt.n_streams as usize)
@@ -119,6 +120,8 @@ pub struct Session<'a> {
     model: &'a Model<'a>,
     cfg: SessionConfig,
     st: State<'a>,
+    /// The working memory of this session's own steps (`n = 1`).
+    sc: StepScratch<'a>,
     seed: [u32; 5],
     /// Forced follower history (n, 5): row 0 the seed, row k+1 appended by step k.
     forced: Option<&'a [u32]>,
@@ -132,8 +135,12 @@ pub struct Session<'a> {
     /// Leader codes emitted.
     codes: usize,
     last_code: Option<[u32; 4]>,
-    /// Next step.
+    /// A leader code not yet pushed into the leader LATs.
+    code: Option<[u32; 4]>,
+    /// Next step, its GPT appends and the window rows they computed.
     k: usize,
+    appends: heapless::Vec<Append, MAX_WINDOWS>,
+    rows_computed: usize,
     last_step: Option<StepReport>,
     /// Follower tokens fed to the decoders.
     dec_fed: usize,
@@ -152,10 +159,12 @@ impl<'a> Session<'a> {
         check_seed(model, &seed)?;
         let mut a = Arena::new(arena);
         let st = State::carve(&mut a, &model.cfg, cfg)?;
+        let sc = StepScratch::carve(&mut a, StepDims::new(&model.cfg, cfg, 1)?)?;
         let mut s = Session {
             model,
             cfg: *cfg,
             st,
+            sc,
             seed,
             forced: None,
             track: None,
@@ -164,7 +173,10 @@ impl<'a> Session<'a> {
             music_frames: 0,
             codes: 0,
             last_code: None,
+            code: None,
             k: 0,
+            appends: heapless::Vec::new(),
+            rows_computed: 0,
             last_step: None,
             dec_fed: 0,
             decoded: 0,
@@ -196,7 +208,10 @@ impl<'a> Session<'a> {
         self.music_frames = 0;
         self.codes = 0;
         self.last_code = None;
+        self.code = None;
         self.k = 0;
+        self.appends.clear();
+        self.rows_computed = 0;
         self.last_step = None;
         self.dec_fed = 0;
         self.decoded = 0;
@@ -276,7 +291,7 @@ impl<'a> Session<'a> {
         input::check(Buffer::Music, track)?;
         self.track = Some(track);
         self.music_frames = track.len() / n_music;
-        self.run_steps()
+        self.with_own_scratch(batch::run_steps)
     }
 
     /// Appends one music feature frame (n_music). Non-finite values are
@@ -298,7 +313,7 @@ impl<'a> Session<'a> {
         }
         self.st.music.push(features)?;
         self.music_frames += 1;
-        self.run_steps()
+        self.with_own_scratch(batch::run_steps)
     }
 
     /// Appends one leader frame (165 floats: 55 joints x xyz, metres, world
@@ -308,6 +323,55 @@ impl<'a> Session<'a> {
     /// its last good frame instead); so does a full output buffer
     /// (`Backlog`: pull follower frames first).
     pub fn push_leader_frame(&mut self, pos3d: &[f32]) -> Result<(), Error> {
+        self.check_leader_frame(pos3d)?;
+        self.accept_leader_frame(pos3d)?;
+        self.with_own_scratch(batch::advance)
+    }
+
+    /// Pushes one leader frame into each session (`frames[i]` into
+    /// `sessions[i]`) and runs the steps that become possible, with the
+    /// weight-heavy work (LATs, GPT, heads) batched: each weight matrix is
+    /// read once for all sessions. Every session ends exactly as after its
+    /// own [`Session::push_leader_frame`] (bit for bit).
+    ///
+    /// The sessions must share one model and fit `batch` (at most
+    /// [`StepBatch::capacity`] sessions, configs no larger than the one
+    /// `batch` was made for); else `Err((i, Error::State))` /
+    /// `Setting::Batch` before anything changes. A refused frame
+    /// (non-finite, out of range, wrong length, backlog) gives `Err((i, e))`
+    /// for the first such session, and no session changes. A failure
+    /// inside a step (an engine bug) names a session of the failing group.
+    pub fn step_many(sessions: &mut [&mut Session<'a>], frames: &[&[f32]], batch: &mut StepBatch<'_>) -> Result<(), BatchError> {
+        let n = sessions.len();
+        if n > batch.capacity() {
+            return Err((0, Error::Setting { setting: Setting::Batch, value: n.min(u32::MAX as usize) as u32, max: batch.capacity() as u32 }));
+        }
+        check_len(Buffer::LeaderPos3d, frames.len(), n).map_err(|e| (0, e))?;
+        let Some(first) = sessions.first() else { return Ok(()) };
+        let model = first.model;
+        for (i, s) in sessions.iter().enumerate() {
+            let need = StepDims::new(&s.model.cfg, &s.cfg, 1).map_err(|e| (i, Error::Arena(e)))?;
+            if !core::ptr::eq(s.model, model) || !batch.sc.dims.holds(&need) {
+                return Err((i, Error::State));
+            }
+            s.check_leader_frame(frames[i]).map_err(|e| (i, e))?;
+        }
+        for (i, s) in sessions.iter_mut().enumerate() {
+            s.accept_leader_frame(frames[i]).map_err(|e| (i, e))?;
+        }
+        batch::advance(sessions, &mut batch.sc)
+    }
+
+    /// Runs `f` over this session alone with its own step scratch.
+    fn with_own_scratch(&mut self, f: impl FnOnce(&mut [&mut Session<'a>], &mut StepScratch<'a>) -> Result<(), BatchError>) -> Result<(), Error> {
+        let mut sc = core::mem::take(&mut self.sc);
+        let r = f(&mut [&mut *self], &mut sc);
+        self.sc = sc;
+        r.map_err(|(_, e)| e)
+    }
+
+    /// Every refusal of [`Session::push_leader_frame`], changing nothing.
+    fn check_leader_frame(&self, pos3d: &[f32]) -> Result<(), Error> {
         check_len(Buffer::LeaderPos3d, pos3d.len(), POSE_DIM)?;
         input::check(Buffer::LeaderPos3d, pos3d)?;
         let held = self.frames - self.emitted;
@@ -319,6 +383,12 @@ impl<'a> Session<'a> {
         if waiting >= self.st.cond_slack {
             return Err(Error::Backlog { buffer: Buffer::Music, held: waiting, capacity: self.st.cond_slack });
         }
+        Ok(())
+    }
+
+    /// Takes a checked leader frame: normalised into the token being
+    /// filled; a complete token runs the encoders (`self.code`).
+    fn accept_leader_frame(&mut self, pos3d: &[f32]) -> Result<(), Error> {
         if self.frames == 0 {
             self.root0 = [pos3d[0], pos3d[1], pos3d[2]];
         }
@@ -330,11 +400,11 @@ impl<'a> Session<'a> {
         if slot + 1 == hop {
             self.encode_token()?;
         }
-        self.run_steps()
+        Ok(())
     }
 
     /// The `hop` buffered frames are complete: feed the encoders, and emit
-    /// leader code `q = tokens - 1 - e` into the leader LATs.
+    /// leader code `q = tokens - 1 - e` (for the leader LATs, `self.code`).
     fn encode_token(&mut self) -> Result<(), Error> {
         let model = self.model;
         let hop = model.cfg.hop();
@@ -362,171 +432,29 @@ impl<'a> Session<'a> {
         }
         self.codes += 1;
         self.last_code = Some(code);
-        let g = &model.gpt;
-        let e = model.cfg.gpt.n_embd as usize;
-        for (p, &c) in code.iter().enumerate() {
-            // Leader part p is embedded with the follower table of the same part.
-            g.tok_emb[p].row_into(c as usize, &mut st.emb[..e]);
-            let (lat, row) = (&mut st.leader_lat[p], &mut st.row[..e]);
-            if lat.push(&g.leaders[p], &st.emb[..e], &mut st.lat, &mut st.block_scratch, row)? {
-                st.cond[1 + p].push(row)?;
-            }
-        }
+        self.code = Some(code);
         Ok(())
     }
 
-    /// Runs every step whose inputs exist.
-    fn run_steps(&mut self) -> Result<(), Error> {
-        loop {
-            let k = self.k;
-            if self.st.leader_lat[0].rows() <= k {
-                return Ok(());
-            }
-            if let Some(f) = self.forced {
-                if k + 1 >= f.len() / 5 {
-                    return Ok(());
-                }
-            }
-            if !self.music_row(k)? {
-                return Ok(());
-            }
-            self.step()?;
-        }
-    }
-
-    /// Makes music row `k` (feeds the music LAT); false if its frames are
-    /// not there yet.
-    fn music_row(&mut self, k: usize) -> Result<bool, Error> {
-        let model = self.model;
-        let n_music = model.cfg.gpt.music.n_in as usize;
-        let mmr = model.cfg.music_motion_rate as usize;
-        let e = model.cfg.gpt.n_embd as usize;
-        let st = &mut self.st;
-        while st.music_lat.rows() <= k {
-            let frame = st.music_lat.pushed() + mmr;
-            if frame >= self.music_frames {
-                return Ok(false);
-            }
-            let x = match self.track {
-                Some(t) => &t[frame * n_music..(frame + 1) * n_music],
-                None => st.music.row(frame)?,
-            };
-            let row = &mut st.row[..e];
-            if st.music_lat.push(&model.gpt.music, x, &mut st.lat, &mut st.block_scratch, row)? {
-                st.cond[0].push(row)?;
-            }
-        }
-        Ok(true)
-    }
-
-    /// Step `k`: GPT over its window, choose, append, decode.
-    fn step(&mut self) -> Result<(), Error> {
-        let model = self.model;
-        let g = &model.cfg.gpt;
-        let e = g.n_embd as usize;
-        let streams = g.n_streams as usize;
-        let m = g.block_size as usize - 1;
+    /// Ends step `k` with the sampler's choice `pred`: appends the token
+    /// (or the forced one) to the history and feeds the decoders.
+    fn finish_step(&mut self, pred: [u32; 5]) -> Result<(), Error> {
         let k = self.k;
-        let s = self.cfg.shift as usize;
-        let c = window_context(k, m, s);
-        let lo = k + 1 - c;
-        let mut rows = 0;
-        let mut current = None;
-        if self.cfg.staggered {
-            // Every window that contains row k and is still to be used gets row k.
-            let st = &mut self.st;
-            let mut live: heapless::Vec<usize, { config::MAX_WINDOWS }> = heapless::Vec::new();
-            let mut over = false;
-            for_each_live_window(k, m, s, |w| over |= live.push(w).is_err());
-            if over {
-                return Err(Error::Setting { setting: Setting::Windows, value: live.len() as u32 + 1, max: config::MAX_WINDOWS as u32 });
-            }
-            // The current window (the smallest start) last, so its output stays in `x`.
-            for &w in live.iter().rev() {
-                let slot = match st.gpt.iter().position(|c| c.window_start() == Some(w)) {
-                    Some(i) => i,
-                    None => {
-                        // A free cache: one whose window is not live any more.
-                        let i = st.gpt.iter().position(|c| c.window_start().is_none_or(|x| !live.contains(&x))).ok_or(Error::Evicted { index: w, oldest: k, len: st.gpt.len() })?;
-                        st.gpt[i].restart(w);
-                        i
-                    }
-                };
-                let first = w + st.gpt[slot].rows();
-                rows += k + 1 - first;
-                let need_output = w == lo;
-                Self::append_rows(model, st, slot, w, first, k, need_output)?;
-                if need_output {
-                    current = Some(k + 1 - first);
-                }
-            }
-        } else {
-            let st = &mut self.st;
-            let first = if st.gpt[0].window_start() == Some(lo) { k } else {
-                st.gpt[0].restart(lo);
-                lo
-            };
-            rows = k + 1 - first;
-            Self::append_rows(model, st, 0, lo, first, k, true)?;
-            current = Some(rows);
-        }
-        let n = current.ok_or(Error::Evicted { index: lo, oldest: k, len: 0 })?;
-        let st = &mut self.st;
-        let x = &st.x[..n * streams * e];
-        let last = &x[(n * streams - FOLLOWER_STREAMS) * e..];
-        let mut pred = [0u32; 5];
-        let mut off = 0;
-        for (j, rows) in head_rows(&model.cfg).iter().enumerate() {
-            let lg = &mut st.logits[off..off + rows];
-            linear(&last[j * e..(j + 1) * e], &model.gpt.heads[j], None, lg);
-            pred[j] = match self.cfg.sampling {
-                Sampling::Greedy => argmax(lg),
-                Sampling::TopK { k: tk, .. } => top_k_by_id(lg, tk as usize, &mut self.rng),
-            };
-            off += rows;
-        }
+        let m = self.model.cfg.gpt.block_size as usize - 1;
+        let c = window_context(k, m, self.cfg.shift as usize);
         let token = match self.forced {
             Some(f) => {
                 let mut t = [0u32; 5];
-                t.copy_from_slice(&f[(k + 1) * 5..(k + 2) * 5]);
+                t.copy_from_slice(f.get((k + 1) * 5..(k + 2) * 5).ok_or(Error::State)?);
                 t
             }
             None => pred,
         };
-        st.toks.push(&token)?;
-        self.last_step = Some(StepReport { k, context: c, window_lo: lo, rows_computed: rows, pred, token });
+        self.st.toks.push(&token)?;
+        self.last_step = Some(StepReport { k, context: c, window_lo: k + 1 - c, rows_computed: self.rows_computed, pred, token });
+        self.rows_computed = 0;
         self.k += 1;
         self.feed_decoders(token)
-    }
-
-    /// Builds the inputs of token rows `first..=k` of the window starting at
-    /// `lo` (position rows added) in `st.x` and appends them to cache `slot`.
-    /// With `need_output` the last row's follower features end up in `st.x`.
-    fn append_rows(model: &Model<'_>, st: &mut State<'_>, slot: usize, lo: usize, first: usize, k: usize, need_output: bool) -> Result<(), Error> {
-        let g = &model.cfg.gpt;
-        let (e, bs) = (g.n_embd as usize, g.block_size as usize);
-        let streams = g.n_streams as usize;
-        // (n, 10, C) inputs of window rows first..=k, position-major.
-        let n = k + 1 - first;
-        let x = &mut st.x[..n * streams * e];
-        for (r, j) in (first..=k).enumerate() {
-            let i = j - lo;
-            for s in 0..streams {
-                let dst = &mut x[(r * streams + s) * e..(r * streams + s + 1) * e];
-                if s < FIRST_FOLLOWER_STREAM {
-                    dst.copy_from_slice(st.cond[s].row(j)?);
-                } else {
-                    let f = s - FIRST_FOLLOWER_STREAM;
-                    let tok = st.toks.row(j)?[f];
-                    model.gpt.tok_emb[follower_table(f)].row_into(tok as usize, dst);
-                }
-                let pos = &model.gpt.pos_emb[(s * bs + i) * e..(s * bs + i + 1) * e];
-                for (a, b) in dst.iter_mut().zip(pos) {
-                    *a += b;
-                }
-            }
-        }
-        st.gpt[slot].append(&model.gpt, g.n_head as usize, x, need_output, &mut st.kv, &mut st.block_scratch)
     }
 
     /// Feeds follower token `token` to the 9 decoders; once token `q + d`

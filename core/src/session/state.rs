@@ -3,16 +3,14 @@
 //! an [`Arena`](crate::arena::Arena) the state itself).
 
 use crate::arena::{ArenaError, Carve};
-use crate::block::BlockScratch;
 use crate::config::{ModelConfig, POSE_DIM, ROT_DIM};
 use crate::error::Error;
-use crate::gpt::logits_len;
 use crate::model::Model;
 use crate::quantizer::codebook_norms;
 use crate::session::config::{window_pool, SessionConfig, MAX_WINDOWS};
 use heapless::Vec;
 use crate::session::gpt_cache::{GptCache, KvScratch};
-use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
+use crate::session::lat_stream::LatStream;
 use crate::session::ring::{RowRing, TokenRing};
 use crate::stream_conv::{StackKind, StreamScratch, StreamStack};
 
@@ -33,9 +31,6 @@ pub struct State<'s> {
     pub kk_stride: usize,
     /// (max emb) one feature / one dequantised code.
     pub feat: &'s mut [f32],
-    /// (C) one token embedding; (C) one LAT output row.
-    pub emb: &'s mut [f32],
-    pub row: &'s mut [f32],
     pub leader_lat: [LatStream<'s>; 4],
     // --- music path ---
     pub music_lat: LatStream<'s>,
@@ -54,10 +49,6 @@ pub struct State<'s> {
     pub gpt: Vec<GptCache<'s>, MAX_WINDOWS>,
     /// f32 view of one layer of an f16 K/V cache (empty for f32).
     pub kv: KvScratch<'s>,
-    /// (10 m, C) window rows being appended, position-major.
-    pub x: &'s mut [f32],
-    /// (sum of head rows) logits of one step.
-    pub logits: &'s mut [f32],
     // --- decoders ---
     /// Position decoders of the 4 parts and the translation decoder.
     pub dec_pos: [StreamStack<'s>; 5],
@@ -71,10 +62,8 @@ pub struct State<'s> {
     pub pending: RowRing<'s>,
     /// (cap, 3) leader roots of frames not yet pulled.
     pub roots: RowRing<'s>,
-    // --- working memory shared by every module ---
+    // --- working memory of the VQ encoders/decoders (the step's own is `StepScratch`) ---
     pub conv: StreamScratch<'s>,
-    pub lat: LatStepScratch<'s>,
-    pub block_scratch: BlockScratch<'s>,
 }
 
 fn widths(cfg: &ModelConfig) -> (usize, usize, usize, usize) {
@@ -142,7 +131,6 @@ impl<'s> State<'s> {
         }
         let latency = sc.latency_frames(hop as u32) as usize;
         let roots_cap = latency + 2 + sc.pending_frames as usize;
-        let keys = max_keys(past * mds, am * mds).max(max_keys(past * lds, la * lds));
         Ok(State {
             block: a.f32(hop.checked_mul(POSE_DIM).ok_or(ov())?)?,
             part_in: a.f32(hop.checked_mul(pos).ok_or(ov())?)?,
@@ -150,8 +138,6 @@ impl<'s> State<'s> {
             kk: a.f32(4 * bins)?,
             kk_stride: bins,
             feat: a.f32(emb)?,
-            emb: a.f32(c)?,
-            row: a.f32(c)?,
             leader_lat,
             music_lat,
             music: RowRing::carve_plain(a, sc.music_buffer_frames as usize, g.music.n_in as usize)?,
@@ -160,8 +146,6 @@ impl<'s> State<'s> {
             toks: TokenRing::carve(a, m + 1, 5)?,
             gpt,
             kv: KvScratch::carve(a, sc.kv, streams, m, c)?,
-            x: a.f32(streams.checked_mul(m).and_then(|v| v.checked_mul(c)).ok_or(ov())?)?,
-            logits: a.f32(logits_len(cfg))?,
             dec_pos,
             dec_rot,
             dec_out: a.f32(hop.checked_mul(pos.max(rot)).ok_or(ov())?)?,
@@ -169,8 +153,6 @@ impl<'s> State<'s> {
             pending: RowRing::carve_plain(a, roots_cap + 2 * hop, FRAME_WIDTH)?,
             roots: RowRing::carve_plain(a, roots_cap, 3)?,
             conv: StreamScratch::carve(a, cfg)?,
-            lat: LatStepScratch::carve(a, c, mds.max(lds))?,
-            block_scratch: BlockScratch::carve(a, (streams * m).max(keys), c)?,
         })
     }
 

@@ -30,7 +30,7 @@ use duolando_core::gpt::{self, Window};
 use duolando_core::model::{BindError, Model, TensorSource};
 use duolando_core::presets::duolando_published;
 use duolando_core::schema::{for_each_tensor, SchemaError, TensorSpec};
-use duolando_core::session::{FollowerFrame, KvType, Session, SessionConfig};
+use duolando_core::session::{FollowerFrame, KvType, Session, SessionConfig, StepBatch};
 use duolando_core::tensor::{DType, TensorRef, MAX_RANK};
 
 use crate::convert::storage_for;
@@ -57,6 +57,10 @@ pub struct Args {
     /// Use the scalar reference kernels instead of the detected SIMD ones.
     #[arg(long)]
     pub scalar: bool,
+    /// Session counts stepped together with `Session::step_many` (int8
+    /// only; comma separated; empty to skip).
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16])]
+    pub batch: Vec<usize>,
     /// Also write the figures as one flat JSON object.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -211,6 +215,8 @@ struct DtypeResult {
     weight_bytes: usize,
     model_bytes: usize,
     arena_bytes: usize,
+    /// Per session count: one `step_many` call that steps every session.
+    batch: Vec<(usize, Stats)>,
 }
 
 /// The R-step inputs of a full window (fixed pseudo-random tokens/features).
@@ -304,6 +310,55 @@ fn s_steps(model: &Model<'_>, warmup: usize, steps: usize) -> anyhow::Result<Vec
     Ok(times.split_off(warmup))
 }
 
+/// `n` sessions stepped together: per frame, music pushed into each, then
+/// one `Session::step_many` with a pseudo-random leader frame per session;
+/// times the calls that run a step in every session (one thread).
+fn batched_steps(model: &Model<'_>, n: usize, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
+    let cfg = s_config(model);
+    let bytes = model.session_bytes(&cfg).map_err(|e| anyhow!("session bytes: {e:?}"))?;
+    let mut arenas: Vec<Vec<u8>> = (0..n).map(|_| vec![0u8; bytes]).collect();
+    let mut sessions = Vec::with_capacity(n);
+    for a in arenas.iter_mut() {
+        sessions.push(Session::new(model, a, &cfg, [0; 5]).map_err(|e| anyhow!("session: {e:?}"))?);
+    }
+    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, &cfg, n).map_err(|e| anyhow!("batch bytes: {e:?}"))?];
+    let mut batch = StepBatch::new(&model.cfg, &cfg, n, &mut batch_arena).map_err(|e| anyhow!("batch: {e:?}"))?;
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let mut rng = Rng(11);
+    let mut music = vec![0.0f32; n_music];
+    let mut leaders = vec![0.0f32; 165 * n];
+    let mut out = FollowerFrame::default();
+    let mut times = Vec::new();
+    let mut frames = 0usize;
+    let max_frames = 4 * (warmup + steps) + 4096;
+    while times.len() < warmup + steps && frames < max_frames {
+        for s in sessions.iter_mut() {
+            music.iter_mut().for_each(|v| *v = rng.next());
+            let _ = s.push_music_frame(&music);
+        }
+        for (i, v) in leaders.iter_mut().enumerate() {
+            *v = 0.3 * rng.next() + if i % 3 == 1 { 1.0 } else { 0.0 };
+        }
+        let rows: Vec<&[f32]> = leaders.chunks(165).collect();
+        let before: Vec<usize> = sessions.iter().map(|s| s.steps()).collect();
+        let mut refs: Vec<&mut Session<'_>> = sessions.iter_mut().collect();
+        let t = Instant::now();
+        Session::step_many(&mut refs, &rows, &mut batch).map_err(|(i, e)| anyhow!("step_many, session {i}: {e:?}"))?;
+        let dt = t.elapsed();
+        if sessions.iter().zip(&before).all(|(s, &b)| s.steps() > b) {
+            times.push(dt);
+        }
+        for s in sessions.iter_mut() {
+            while s.pull_follower_frame(&mut out).map_err(|e| anyhow!("pull: {e:?}"))? {}
+        }
+        frames += 1;
+    }
+    if times.len() < warmup + steps {
+        return Err(anyhow!("{n} sessions stepped together only {} times in {frames} frames", times.len()));
+    }
+    Ok(times.split_off(warmup))
+}
+
 /// Runs `f` on `threads` threads at once (the same model, own buffers);
 /// all their timings together.
 fn on_threads<F>(threads: usize, f: F) -> anyhow::Result<Vec<Duration>>
@@ -338,7 +393,14 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
         s.push((t, stats(times)));
     }
     let arena_bytes = model.session_bytes(&s_config(&model)).map_err(|e| anyhow!("{e:?}"))?;
-    Ok(DtypeResult { name, r, s, weight_bytes: r_step_weight_bytes(&model, inp.c), model_bytes: rm.weight_bytes(), arena_bytes })
+    let mut batch = Vec::new();
+    if name == "int8" {
+        for &n in &args.batch {
+            let times = batched_steps(&model, n, 3, args.s_steps).with_context(|| format!("{name}, {n} sessions stepped together"))?;
+            batch.push((n, stats(times)));
+        }
+    }
+    Ok(DtypeResult { name, r, s, weight_bytes: r_step_weight_bytes(&model, inp.c), model_bytes: rm.weight_bytes(), arena_bytes, batch })
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -386,10 +448,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 r.arena_bytes as f64 / 1e6
             );
         }
+        let one = r.batch.iter().find(|(n, _)| *n == 1).map(|(_, st)| st.median_ms);
+        for (n, st) in &r.batch {
+            println!(
+                "S step {:>4} x{n:<2} sessions in one step_many call: median {:8.2} ms  p99 {:8.2} ms  = {:.2} ms per session{}",
+                r.name,
+                st.median_ms,
+                st.p99_ms,
+                st.median_ms / *n as f64,
+                one.map(|o| format!("  ({:.2}x the time of 1 session)", st.median_ms / o)).unwrap_or_default()
+            );
+        }
         results.push(r);
     }
     println!("t2 = two independent steps at once, one per thread (the core is single-threaded): per-step latency under that load.");
-    println!("batched sessions (batch16_over_batch1_int8): not yet (no Session::step_many).");
     println!("tract ratio: not measured (needs a full-size R-step ONNX export from tools/reference; none exists yet).");
     if let Some(path) = &args.json {
         let mut j = serde_json::Map::new();
@@ -411,7 +483,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         j.insert("memcpy_gbps_t1".into(), memcpy.into());
         j.insert("isa".into(), format!("{isa:?}").into());
-        j.insert("not_yet".into(), "batch16_over_batch1_int8 (no Session::step_many), tract_r_step_ms_t1 (no full-size ONNX export)".into());
+        j.insert("not_yet".into(), "tract_r_step_ms_t1 (no full-size ONNX export)".into());
         for r in &results {
             for (t, st) in &r.r {
                 j.insert(format!("r_step_ms_{}_t{t}", r.name), st.median_ms.into());
@@ -426,6 +498,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             j.insert(format!("r_step_weight_bytes_{}", r.name), r.weight_bytes.into());
             j.insert(format!("s_step_weight_bytes_{}", r.name), r.model_bytes.into());
             j.insert("arena_bytes_f16kv".into(), r.arena_bytes.into());
+            for (n, st) in &r.batch {
+                j.insert(format!("batch{n}_step_ms_{}", r.name), st.median_ms.into());
+            }
+            let at = |n: usize| r.batch.iter().find(|(m, _)| *m == n).map(|(_, st)| st.median_ms);
+            if let (Some(a), Some(b)) = (at(16), at(1)) {
+                j.insert(format!("batch16_over_batch1_{}", r.name), (a / b).into());
+            }
         }
         std::fs::write(path, serde_json::to_string_pretty(&serde_json::Value::Object(j))?)
             .with_context(|| format!("writing {}", path.display()))?;

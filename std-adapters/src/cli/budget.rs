@@ -102,5 +102,6 @@ fn flag(s: duolando_core::session::Setting) -> &'static str {
         PendingFrames => "pending-frames",
         MusicBuffer => "music-buffer-frames",
         Windows => "staggered",
+        Batch => "sessions",
     }
 }

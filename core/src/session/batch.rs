@@ -1,0 +1,476 @@
+//! The phases of a streaming step over several sessions at once
+//! ([`Session::step_many`](super::Session::step_many)), and over one (every
+//! single-session call runs the same phases with the session's own
+//! scratch: one code path).
+//!
+//! The weight-heavy work is batched across sessions: the LATs (one new
+//! position per session per push, `LatStream::push_many`), the GPT over
+//! each session's window (`GptCache::append_many`) and the heads. Every
+//! weight matrix is then read once per phase for all sessions instead of
+//! once per session. A session's numbers do not depend on the others in
+//! its batch (row-independent kernels, per-session attention), so a
+//! batched session gives bit for bit what it gives alone (tested).
+//! The streaming VQ encoders/decoders and the sampler run per session.
+
+use heapless::Vec;
+
+use crate::arena::{ArenaError, Carve};
+use crate::block::BlockScratch;
+use crate::config::ModelConfig;
+use crate::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
+use crate::error::Error;
+use crate::gpt::{head_rows, logits_len};
+use crate::kernels::linear;
+use crate::model::Model;
+use crate::sampler::{argmax, top_k_by_id};
+use crate::session::config::{for_each_live_window, window_context, Sampling, Setting, MAX_WINDOWS};
+use crate::session::gpt_cache::{GptCache, GptItem};
+use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
+use crate::session::state::State;
+use crate::session::{Session, SessionConfig};
+
+/// Most sessions stepped together (and most LAT pushes / GPT windows in
+/// one batched call).
+pub const MAX_BATCH: usize = 64;
+
+/// Sizes of a [`StepScratch`]; a session fits a scratch whose every size is
+/// at least the session's own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct StepDims {
+    /// Sessions (LAT pushes, head rows) at once.
+    pub n: usize,
+    /// GPT rows (window rows x streams) at once: at least one whole window.
+    pub rows: usize,
+    /// Attention keys of one LAT query.
+    pub keys: usize,
+    pub c: usize,
+    /// Widest LAT input (C for the leader LATs, n_music for the music LAT).
+    pub lat_in: usize,
+    pub ds_max: usize,
+    pub logits: usize,
+}
+
+impl StepDims {
+    /// The sizes for `n` sessions of `cfg` under session config `sc`.
+    pub fn new(cfg: &ModelConfig, sc: &SessionConfig, n: usize) -> Result<StepDims, ArenaError> {
+        let g = &cfg.gpt;
+        let m = (g.block_size as usize).checked_sub(1).ok_or(ArenaError::Overflow)?;
+        let streams = g.n_streams as usize;
+        let (lds, mds) = (g.leader.downsample_rate as usize, g.music.downsample_rate as usize);
+        let past = sc.lat_past as usize;
+        let keys = max_keys(past * mds, sc.music_lookahead as usize * mds).max(max_keys(past * lds, sc.lookahead as usize * lds));
+        let window = streams.checked_mul(m).ok_or(ArenaError::Overflow)?;
+        Ok(StepDims {
+            n,
+            rows: window.max(n.checked_mul(streams).ok_or(ArenaError::Overflow)?),
+            keys,
+            c: g.n_embd as usize,
+            lat_in: (g.n_embd as usize).max(g.music.n_in as usize),
+            ds_max: lds.max(mds),
+            logits: logits_len(cfg),
+        })
+    }
+
+    /// Every size of `self` at least that of `need` (same width).
+    pub fn holds(&self, need: &StepDims) -> bool {
+        self.c == need.c && self.n >= need.n && self.rows >= need.rows && self.rows.max(self.keys) >= need.keys && self.lat_in >= need.lat_in && self.ds_max >= need.ds_max && self.logits >= need.logits
+    }
+}
+
+/// The working memory of a step, for up to `dims.n` sessions. Every
+/// session carves one for itself (`n = 1`); a [`StepBatch`] carves one for
+/// many.
+#[derive(Default)]
+pub struct StepScratch<'s> {
+    pub dims: StepDims,
+    /// (rows, C) GPT window rows of the items of one batched append,
+    /// position-major per item.
+    pub x: &'s mut [f32],
+    pub blk: BlockScratch<'s>,
+    pub lat: LatStepScratch<'s>,
+    /// (n, lat_in) LAT inputs; (n, C) LAT outputs.
+    pub lat_in: &'s mut [f32],
+    pub lat_out: &'s mut [f32],
+    /// (5, n, C) the follower rows each head reads, head-major.
+    pub heads_in: &'s mut [f32],
+    /// (n, logits) logits, head-major blocks of (n, head rows).
+    pub logits: &'s mut [f32],
+}
+
+impl<'s> StepScratch<'s> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, dims: StepDims) -> Result<Self, ArenaError> {
+        let StepDims { n, rows, keys, c, lat_in, ds_max, logits } = dims;
+        let mul = |x: usize, y: usize| x.checked_mul(y).ok_or(ArenaError::Overflow);
+        Ok(StepScratch {
+            dims,
+            x: a.f32(mul(rows, c)?)?,
+            blk: BlockScratch::carve(a, rows.max(keys), c)?,
+            lat: LatStepScratch::carve(a, c, ds_max, n)?,
+            lat_in: a.f32(mul(n, lat_in)?)?,
+            lat_out: a.f32(mul(n, c)?)?,
+            heads_in: a.f32(mul(mul(5, n)?, c)?)?,
+            logits: a.f32(mul(n, logits)?)?,
+        })
+    }
+}
+
+/// Scratch for stepping up to `n` sessions of one model together
+/// ([`Session::step_many`]), carved once from a caller arena
+/// ([`StepBatch::bytes`]).
+pub struct StepBatch<'s> {
+    pub(super) sc: StepScratch<'s>,
+}
+
+impl<'s> StepBatch<'s> {
+    /// Arena bytes for `n` (1..=[`MAX_BATCH`]) sessions of `cfg` under
+    /// session config `sc` (sessions with smaller needs fit too).
+    pub fn bytes(cfg: &ModelConfig, sc: &SessionConfig, n: usize) -> Result<usize, Error> {
+        let dims = batch_dims(cfg, sc, n)?;
+        let mut p = crate::arena::Planner::new();
+        StepScratch::carve(&mut p, dims)?;
+        p.total_for_any_base().ok_or(Error::Arena(ArenaError::Overflow))
+    }
+
+    pub fn new(cfg: &ModelConfig, sc: &SessionConfig, n: usize, arena: &'s mut [u8]) -> Result<Self, Error> {
+        let dims = batch_dims(cfg, sc, n)?;
+        let mut a = crate::arena::Arena::new(arena);
+        Ok(StepBatch { sc: StepScratch::carve(&mut a, dims)? })
+    }
+
+    /// Sessions it can step at once.
+    pub fn capacity(&self) -> usize {
+        self.sc.dims.n
+    }
+}
+
+fn batch_dims(cfg: &ModelConfig, sc: &SessionConfig, n: usize) -> Result<StepDims, Error> {
+    if n == 0 || n > MAX_BATCH {
+        return Err(Error::Setting { setting: Setting::Batch, value: n.min(u32::MAX as usize) as u32, max: MAX_BATCH as u32 });
+    }
+    super::check_config(cfg, sc)?;
+    Ok(StepDims::new(cfg, sc, n)?)
+}
+
+/// Index of the session an error belongs to.
+pub type BatchError = (usize, Error);
+
+fn at(i: usize) -> impl Fn(Error) -> BatchError {
+    move |e| (i, e)
+}
+
+/// The sessions `ss` (one model, each fitting `sc`) have accepted their
+/// inputs: runs the leader LATs on their new leader codes, then every step
+/// whose inputs exist.
+pub(super) fn advance(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+    for p in 0..4 {
+        leader_lat(ss, p, sc)?;
+    }
+    for s in ss.iter_mut() {
+        s.code = None;
+    }
+    run_steps(ss, sc)
+}
+
+/// Splits `0..ss.len()` filtered by `want` into chunks of at most `n`.
+fn for_chunks(ss: &mut [&mut Session<'_>], n: usize, want: impl Fn(&Session<'_>) -> bool, mut f: impl FnMut(&mut [&mut Session<'_>], &[usize]) -> Result<(), BatchError>) -> Result<(), BatchError> {
+    let mut chunk: Vec<usize, MAX_BATCH> = Vec::new();
+    let cap = n.clamp(1, MAX_BATCH);
+    for i in 0..ss.len() {
+        if want(ss[i]) {
+            chunk.push(i).map_err(|_| (i, Error::State))?;
+            if chunk.len() == cap {
+                f(ss, &chunk)?;
+                chunk.clear();
+            }
+        }
+    }
+    if !chunk.is_empty() {
+        f(ss, &chunk)?;
+    }
+    Ok(())
+}
+
+/// Leader LAT of part `p` for every session holding a new leader code.
+fn leader_lat(ss: &mut [&mut Session<'_>], p: usize, sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+    let n = sc.dims.n;
+    for_chunks(ss, n, |s| s.code.is_some(), |ss, chunk| {
+        let model = ss[chunk[0]].model;
+        let e = model.cfg.gpt.n_embd as usize;
+        let x = &mut sc.lat_in[..chunk.len() * e];
+        for (j, &i) in chunk.iter().enumerate() {
+            // Leader part p is embedded with the follower table of the same part.
+            let code = ss[i].code.ok_or((i, Error::State))?;
+            model.gpt.tok_emb[p].row_into(code[p] as usize, &mut x[j * e..(j + 1) * e]);
+        }
+        lat_push(ss, chunk, sc, Lat::Leader(p), &model.gpt.leaders[p], e)
+    })
+}
+
+/// Which LAT of a session.
+#[derive(Clone, Copy)]
+enum Lat {
+    Music,
+    /// Leader part 0..4.
+    Leader(usize),
+}
+
+/// One LAT push per session of `chunk` (inputs in `sc.lat_in`, `n_in`
+/// wide); produced rows go to the LAT's condition stream.
+fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], sc: &mut StepScratch<'_>, which: Lat, w: &crate::model::LatW<'_>, n_in: usize) -> Result<(), BatchError> {
+    let cond = match which {
+        Lat::Music => 0,
+        Lat::Leader(p) => 1 + p,
+    };
+    let c = sc.dims.c;
+    let n = chunk.len();
+    let first = chunk[0];
+    let mut produced: Vec<bool, MAX_BATCH> = Vec::new();
+    {
+        let mut lats: Vec<&mut LatStream<'_>, MAX_BATCH> = Vec::new();
+        let mut ci = 0;
+        for (i, s) in ss.iter_mut().enumerate() {
+            if ci < n && chunk[ci] == i {
+                let lat = match which {
+                    Lat::Music => &mut s.st.music_lat,
+                    Lat::Leader(p) => s.st.leader_lat.get_mut(p).ok_or((i, Error::State))?,
+                };
+                lats.push(lat).map_err(|_| (i, Error::State))?;
+                produced.push(false).map_err(|_| (i, Error::State))?;
+                ci += 1;
+            }
+        }
+        LatStream::push_many(w, &mut lats, &sc.lat_in[..n * n_in], &mut sc.lat, &mut sc.blk, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
+    }
+    for (j, &i) in chunk.iter().enumerate() {
+        if produced[j] {
+            ss[i].st.cond[cond].push(&sc.lat_out[j * c..(j + 1) * c]).map_err(at(i))?;
+        }
+    }
+    Ok(())
+}
+
+/// Step `k`'s leader row exists and the forced history (if any) goes on.
+fn leader_ready(s: &Session<'_>) -> bool {
+    s.st.leader_lat[0].rows() > s.k && s.forced.is_none_or(|f| s.k + 1 < f.len() / 5)
+}
+
+/// Step `k` still lacks its music row and a music frame for it is there.
+fn music_wanted(s: &Session<'_>) -> bool {
+    let mmr = s.model.cfg.music_motion_rate as usize;
+    leader_ready(s) && s.st.music_lat.rows() <= s.k && s.st.music_lat.pushed() + mmr < s.music_frames
+}
+
+/// Runs every step whose inputs exist, in every session.
+pub(super) fn run_steps(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+    loop {
+        // Music LAT pushes until each session's step k has its music row
+        // or runs out of music frames.
+        while ss.iter().any(|s| music_wanted(s)) {
+            let n = sc.dims.n;
+            for_chunks(ss, n, music_wanted, |ss, chunk| {
+                let model = ss[chunk[0]].model;
+                let n_music = model.cfg.gpt.music.n_in as usize;
+                let mmr = model.cfg.music_motion_rate as usize;
+                for (j, &i) in chunk.iter().enumerate() {
+                    let s = &ss[i];
+                    let frame = s.st.music_lat.pushed() + mmr;
+                    let x = match s.track {
+                        Some(t) => t.get(frame * n_music..(frame + 1) * n_music).ok_or((i, Error::State))?,
+                        None => s.st.music.row(frame).map_err(at(i))?,
+                    };
+                    sc.lat_in[j * n_music..(j + 1) * n_music].copy_from_slice(x);
+                }
+                lat_push(ss, chunk, sc, Lat::Music, &model.gpt.music, n_music)
+            })?;
+        }
+        let mut ready: Vec<usize, MAX_BATCH> = Vec::new();
+        for (i, s) in ss.iter().enumerate() {
+            if leader_ready(s) && s.st.music_lat.rows() > s.k {
+                ready.push(i).map_err(|_| (i, Error::State))?;
+            }
+        }
+        if ready.is_empty() {
+            return Ok(());
+        }
+        for part in ready.chunks(sc.dims.n.max(1)) {
+            gpt_step(ss, part, sc)?;
+        }
+    }
+}
+
+/// One GPT append of a step: window starting at token `lo` in cache `slot`,
+/// new window rows `first..=k`.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Append {
+    slot: usize,
+    lo: usize,
+    first: usize,
+    need_output: bool,
+}
+
+/// Plans step `k` of `s` (cache choice, restarts): its appends in
+/// `s.appends`, the current window's last (staggered) or alone.
+fn plan(s: &mut Session<'_>) -> Result<(), Error> {
+    let g = &s.model.cfg.gpt;
+    let m = g.block_size as usize - 1;
+    let k = s.k;
+    let shift = s.cfg.shift as usize;
+    let lo = k + 1 - window_context(k, m, shift);
+    s.appends.clear();
+    let st = &mut s.st;
+    if s.cfg.staggered {
+        // Every window that contains row k and is still to be used gets row k.
+        let mut live: Vec<usize, MAX_WINDOWS> = Vec::new();
+        let mut over = false;
+        for_each_live_window(k, m, shift, |w| over |= live.push(w).is_err());
+        if over {
+            return Err(Error::Setting { setting: Setting::Windows, value: live.len() as u32 + 1, max: MAX_WINDOWS as u32 });
+        }
+        for &w in live.iter().rev() {
+            let slot = match st.gpt.iter().position(|c| c.window_start() == Some(w)) {
+                Some(i) => i,
+                None => {
+                    // A free cache: one whose window is not live any more.
+                    let i = st.gpt.iter().position(|c| c.window_start().is_none_or(|x| !live.contains(&x))).ok_or(Error::Evicted { index: w, oldest: k, len: st.gpt.len() })?;
+                    st.gpt[i].restart(w);
+                    i
+                }
+            };
+            let first = w + st.gpt[slot].rows();
+            s.appends.push(Append { slot, lo: w, first, need_output: w == lo }).map_err(|_| Error::State)?;
+        }
+    } else {
+        let first = if st.gpt[0].window_start() == Some(lo) { k } else {
+            st.gpt[0].restart(lo);
+            lo
+        };
+        s.appends.push(Append { slot: 0, lo, first, need_output: true }).map_err(|_| Error::State)?;
+    }
+    if !s.appends.iter().any(|a| a.need_output) {
+        return Err(Error::Evicted { index: lo, oldest: k, len: 0 });
+    }
+    Ok(())
+}
+
+/// Builds the inputs of token rows `first..=k` of the window starting at
+/// `lo` (position rows added) into `x` ((k + 1 - first) * 10, C),
+/// position-major.
+fn window_rows(model: &Model<'_>, st: &State<'_>, lo: usize, first: usize, k: usize, x: &mut [f32]) -> Result<(), Error> {
+    let g = &model.cfg.gpt;
+    let (e, bs) = (g.n_embd as usize, g.block_size as usize);
+    let streams = g.n_streams as usize;
+    for (r, j) in (first..=k).enumerate() {
+        let i = j - lo;
+        for s in 0..streams {
+            let dst = &mut x[(r * streams + s) * e..(r * streams + s + 1) * e];
+            if s < FIRST_FOLLOWER_STREAM {
+                dst.copy_from_slice(st.cond[s].row(j)?);
+            } else {
+                let f = s - FIRST_FOLLOWER_STREAM;
+                let tok = st.toks.row(j)?[f];
+                model.gpt.tok_emb[follower_table(f)].row_into(tok as usize, dst);
+            }
+            let pos = &model.gpt.pos_emb[(s * bs + i) * e..(s * bs + i + 1) * e];
+            for (a, b) in dst.iter_mut().zip(pos) {
+                *a += b;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Step `k` of each session in `ready` (at most `sc.dims.n`): the GPT
+/// appends (batched), the heads (batched), then per session the sampler,
+/// the history and the decoders.
+fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+    let nr = ready.len();
+    for &i in ready {
+        plan(ss[i]).map_err(at(i))?;
+    }
+    let model = ss[ready[0]].model;
+    let g = &model.cfg.gpt;
+    let (c, streams) = (g.n_embd as usize, g.n_streams as usize);
+    // Round r runs the r-th append of every session (a session's caches
+    // share its K/V view scratch, so one append per session per call),
+    // in calls of at most `sc.dims.rows` rows.
+    let rounds = ready.iter().map(|&i| ss[i].appends.len()).max().unwrap_or(0);
+    for r in 0..rounds {
+        let mut q = 0;
+        while q < nr {
+            // (session position in `ready`, append) of this call.
+            let mut call: Vec<(usize, Append), MAX_BATCH> = Vec::new();
+            let mut total = 0;
+            while q < nr {
+                let i = ready[q];
+                let s = &ss[i];
+                if let Some(&a) = s.appends.get(r) {
+                    let rows = (s.k + 1 - a.first) * streams;
+                    if total + rows > sc.dims.rows && !call.is_empty() {
+                        break;
+                    }
+                    if rows > sc.dims.rows {
+                        return Err((i, Error::Context { c: rows, max: sc.dims.rows }));
+                    }
+                    window_rows(model, &s.st, a.lo, a.first, s.k, &mut sc.x[total * c..(total + rows) * c]).map_err(at(i))?;
+                    total += rows;
+                    call.push((q, a)).map_err(|_| (i, Error::State))?;
+                }
+                q += 1;
+            }
+            if call.is_empty() {
+                continue;
+            }
+            let first = ready[call[0].0];
+            {
+                let mut items: Vec<GptItem<'_, '_>, MAX_BATCH> = Vec::new();
+                let mut ci = 0;
+                for (i, s) in ss.iter_mut().enumerate() {
+                    if ci < call.len() && ready[call[ci].0] == i {
+                        let a = call[ci].1;
+                        let k = s.k;
+                        let st = &mut s.st;
+                        let cache: &mut GptCache<'_> = st.gpt.get_mut(a.slot).ok_or((i, Error::State))?;
+                        items.push(GptItem { cache, kv: &mut st.kv, rows: k + 1 - a.first, need_output: a.need_output }).map_err(|_| (i, Error::State))?;
+                        ci += 1;
+                    }
+                }
+                GptCache::append_many(&model.gpt, g.n_head as usize, &mut items, &mut sc.x[..total * c], &mut sc.blk).map_err(at(first))?;
+            }
+            // The follower rows of the output items, to the heads' inputs.
+            let mut j = 0;
+            for &(qi, a) in call.iter() {
+                let i = ready[qi];
+                ss[i].rows_computed += ss[i].k + 1 - a.first;
+                if a.need_output {
+                    for h in 0..FOLLOWER_STREAMS {
+                        let src = (j * FOLLOWER_STREAMS + h) * c;
+                        sc.heads_in[(h * nr + qi) * c..(h * nr + qi + 1) * c].copy_from_slice(&sc.x[src..src + c]);
+                    }
+                    j += 1;
+                }
+            }
+        }
+    }
+    // Heads: (nr, C) -> (nr, rows) per head, each matrix read once.
+    let hr = head_rows(&model.cfg);
+    let mut off = 0;
+    for (h, &rows) in hr.iter().enumerate() {
+        linear(&sc.heads_in[h * nr * c..(h + 1) * nr * c], &model.gpt.heads[h], None, &mut sc.logits[off..off + nr * rows]);
+        off += nr * rows;
+    }
+    for (qi, &i) in ready.iter().enumerate() {
+        let s = &mut *ss[i];
+        let mut pred = [0u32; 5];
+        let mut off = 0;
+        for (h, &rows) in hr.iter().enumerate() {
+            let lg = &mut sc.logits[off + qi * rows..off + (qi + 1) * rows];
+            pred[h] = match s.cfg.sampling {
+                Sampling::Greedy => argmax(lg),
+                Sampling::TopK { k: tk, .. } => top_k_by_id(lg, tk as usize, &mut s.rng),
+            };
+            off += nr * rows;
+        }
+        s.finish_step(pred).map_err(at(i))?;
+    }
+    Ok(())
+}
