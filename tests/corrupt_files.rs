@@ -586,6 +586,51 @@ fn rejects_nan_or_infinite_quantization_scale() {
     }
 }
 
+/// A valid file with the (8, 32) tensor replaced by Q4Block32 blocks whose
+/// scale is `scale` in block 5 (and 0.01 elsewhere).
+fn with_q4_tensor(scale: half::f16) -> (Vec<u8>, u32) {
+    let mut p = valid_parts();
+    let mut pay = payloads(&p);
+    let i = index_of(&p, |e| e.shape == [8, 32]);
+    let mut q = Vec::new();
+    for block in 0..8u8 {
+        let s = if block == 5 { scale } else { half::f16::from_f32(0.01) };
+        q.extend_from_slice(&s.to_le_bytes());
+        q.extend((0..16u8).map(|v| v.wrapping_mul(block)));
+    }
+    pay[i] = q;
+    p.header.tensors[i].dtype = DType::Q4Block32 as u8;
+    let data = relayout(&mut p.header, &pay);
+    (assemble(&p.header, &data).unwrap(), i as u32)
+}
+
+#[test]
+fn accepts_q4_tensor_with_finite_scales() {
+    let (bytes, i) = with_q4_tensor(half::f16::from_f32(0.02));
+    let aligned = AlignedBytes::copy_from(&bytes);
+    let duo = DuoFile::parse(aligned.as_bytes()).unwrap();
+    let e = duo.tensors().nth(i as usize).unwrap();
+    assert_eq!((e.dtype, e.nbytes), (DType::Q4Block32, 8 * 18));
+}
+
+#[test]
+fn rejects_nan_or_infinite_q4_scale() {
+    for scale in [half::f16::NAN, half::f16::INFINITY, half::f16::NEG_INFINITY] {
+        let (bytes, i) = with_q4_tensor(scale);
+        assert_eq!(parse(&bytes), Err(FormatError::NonFiniteScale { index: i, block: 5 }));
+    }
+}
+
+#[test]
+fn rejects_q4_payload_of_q8_size() {
+    // 8 blocks stored with the Q8 size (34 bytes each) under the Q4 code.
+    let (bytes, _) = with_q8_tensor(half::f16::from_f32(0.01));
+    let mut p = take_apart(&bytes);
+    let i = index_of(&p, |e| e.shape == [8, 32]);
+    p.header.tensors[i].dtype = DType::Q4Block32 as u8;
+    assert_eq!(parse(&rebuild(&p)), Err(FormatError::ByteLenMismatch { index: i as u32, expected: 8 * 18, found: 8 * 34 }));
+}
+
 #[test]
 fn rejects_q8_shape_not_in_whole_blocks() {
     let mut p = valid_parts();

@@ -20,6 +20,12 @@ pub enum DType {
     /// The v1 decoder validates it (layout, finite scales; docs/FORMAT.md §4);
     /// `Model::bind` accepts it for weight matrices (`kernels::Q8Rows`).
     Q8Block32 = 2,
+    /// 4-bit weights in blocks of 32 along the last axis: an f16 scale `d`,
+    /// then 16 bytes of nibbles, byte `j` holding element `j` (low nibble)
+    /// and element `j + 16` (high nibble); value = `d * (nibble - 8)`
+    /// (18 bytes per block; Q4_0-like). Validated like Q8Block32;
+    /// `Model::bind` accepts it for weight matrices (`kernels::Q4Rows`).
+    Q4Block32 = 3,
 }
 
 impl DType {
@@ -28,7 +34,16 @@ impl DType {
             0 => Some(DType::F32),
             1 => Some(DType::F16),
             2 => Some(DType::Q8Block32),
+            3 => Some(DType::Q4Block32),
             _ => None,
+        }
+    }
+    /// Bytes of one block of 32 values of a blocked type (0 for dense ones).
+    pub const fn block_bytes(self) -> usize {
+        match self {
+            DType::Q8Block32 => 34,
+            DType::Q4Block32 => 18,
+            DType::F32 | DType::F16 => 0,
         }
     }
     /// Bytes needed for `numel` elements whose last axis has `row` elements;
@@ -37,11 +52,11 @@ impl DType {
         match self {
             DType::F32 => numel.checked_mul(4),
             DType::F16 => numel.checked_mul(2),
-            DType::Q8Block32 => {
+            DType::Q8Block32 | DType::Q4Block32 => {
                 if row == 0 || row % 32 != 0 || numel % row != 0 {
                     return None;
                 }
-                (numel / 32).checked_mul(34)
+                (numel / 32).checked_mul(self.block_bytes())
             }
         }
     }

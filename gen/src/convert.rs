@@ -62,7 +62,7 @@ pub enum ConvertInput {
 }
 
 fn store_as(s: u8) -> StoreAs {
-    [StoreAs::F32, StoreAs::F16, StoreAs::Q8Block32][s as usize % 3]
+    [StoreAs::F32, StoreAs::F16, StoreAs::Q8Block32, StoreAs::Q4Block32][s as usize % 4]
 }
 
 fn line_idx(n: usize, l: u16) -> Option<usize> {

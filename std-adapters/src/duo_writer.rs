@@ -22,6 +22,9 @@ pub enum StoreAs {
     /// `DType::Q8Block32` (see [`quantise_q8_block32`]); the last axis must
     /// be a multiple of 32.
     Q8Block32,
+    /// `DType::Q4Block32` (see [`quantise_q4_block32`]); the last axis must
+    /// be a multiple of 32.
+    Q4Block32,
 }
 
 /// Quantises `values` (rows of the last axis, a multiple of 32) to
@@ -38,6 +41,25 @@ pub fn quantise_q8_block32(values: &[f32]) -> Vec<u8> {
         let inv = if df > 0.0 { 1.0 / df } else { 0.0 };
         out.extend_from_slice(&d.to_le_bytes());
         out.extend(b.iter().map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8));
+    }
+    out
+}
+
+/// Quantises `values` (rows of the last axis, a multiple of 32) to
+/// `Q4Block32` bytes: per block of 32, scale `d = f16(max|v| / 7)` (round to
+/// nearest) and `q = clamp(round(v / d), -8, 7)` (0 when `d == 0`), stored
+/// as the 2 scale bytes then 16 bytes, byte `j` = `(q_j + 8) | (q_{j+16} +
+/// 8) << 4`. As for Q8, the stored f16 scale is the one used for rounding.
+pub fn quantise_q4_block32(values: &[f32]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(values.len() / 32 * 18);
+    for b in values.chunks_exact(32) {
+        let amax = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let d = half::f16::from_f32(amax / 7.0);
+        let df = d.to_f32();
+        let inv = if df > 0.0 { 1.0 / df } else { 0.0 };
+        let q = |v: f32| ((v * inv).round().clamp(-8.0, 7.0) as i32 + 8) as u8;
+        out.extend_from_slice(&d.to_le_bytes());
+        out.extend((0..16).map(|j| q(b[j]) | (q(b[j + 16]) << 4)));
     }
     out
 }
@@ -75,7 +97,7 @@ pub struct Header {
 pub enum WriteError {
     /// `values.len()` differs from the product of `shape`.
     ValueCount { name: String, shape: Vec<u32>, expected: u64, found: usize },
-    /// `StoreAs::Q8Block32` on a tensor whose last axis is not a multiple of 32.
+    /// `StoreAs::Q8Block32` / `Q4Block32` on a tensor whose last axis is not a multiple of 32.
     BlockShape { name: String, shape: Vec<u32> },
     /// Two tensors with the same name.
     Duplicate { name: String },
@@ -94,7 +116,7 @@ impl fmt::Display for WriteError {
                 write!(f, "tensor '{name}': shape {shape:?} needs {expected} values, got {found}")
             }
             WriteError::BlockShape { name, shape } => {
-                write!(f, "tensor '{name}': shape {shape:?} cannot be stored as Q8Block32 (last axis not a multiple of 32)")
+                write!(f, "tensor '{name}': shape {shape:?} cannot be stored in blocks of 32 (Q8Block32/Q4Block32: last axis not a multiple of 32)")
             }
             WriteError::Duplicate { name } => write!(f, "tensor '{name}' given twice"),
             WriteError::Encode(e) => write!(f, "cannot encode the .duo header: {e}"),
@@ -161,13 +183,18 @@ pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, Wr
                 data.extend(t.values.iter().flat_map(|&v| half::f16::from_f32(v).to_le_bytes()));
                 DType::F16
             }
-            StoreAs::Q8Block32 => {
+            StoreAs::Q8Block32 | StoreAs::Q4Block32 => {
                 let row = t.shape.last().copied().unwrap_or(0) as usize;
                 if row == 0 || row % 32 != 0 {
                     return Err(WriteError::BlockShape { name: t.name.clone(), shape: t.shape.clone() });
                 }
-                data.extend(quantise_q8_block32(&t.values));
-                DType::Q8Block32
+                if t.store_as == StoreAs::Q8Block32 {
+                    data.extend(quantise_q8_block32(&t.values));
+                    DType::Q8Block32
+                } else {
+                    data.extend(quantise_q4_block32(&t.values));
+                    DType::Q4Block32
+                }
             }
         };
         let nbytes = data.len() as u64 - offset;

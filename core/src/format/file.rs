@@ -87,8 +87,8 @@ impl<'a> DuoFile<'a> {
             if end > data_len {
                 return Err(FormatError::DataOutOfRange { index, end, data_len });
             }
-            if e.dtype == DType::Q8Block32 {
-                check_q8_scales(payload(data, &e), index)?;
+            if matches!(e.dtype, DType::Q8Block32 | DType::Q4Block32) {
+                check_block_scales(payload(data, &e), e.dtype.block_bytes(), index)?;
             }
             prev_end = end;
             prev = Some(e);
@@ -199,8 +199,8 @@ impl<'a> DuoFile<'a> {
                 DType::F16 => bytes
                     .chunks_exact(2)
                     .position(|c| !half::f16::from_le_bytes([c[0], c[1]]).is_finite()),
-                // Scales were checked by parse; int8 values are always finite.
-                DType::Q8Block32 => None,
+                // Scales were checked by parse; int8 / int4 values are always finite.
+                DType::Q8Block32 | DType::Q4Block32 => None,
             };
             if let Some(i) = bad {
                 return Some((index as u32, i as u64));
@@ -221,9 +221,10 @@ fn payload<'a>(data: &'a [u8], e: &TensorEntry<'_>) -> &'a [u8] {
     }
 }
 
-/// Q8Block32 payloads are 34-byte blocks: an f16 scale, then 32 int8 values.
-fn check_q8_scales(bytes: &[u8], index: u32) -> Result<(), FormatError> {
-    for (block, chunk) in bytes.chunks_exact(34).enumerate() {
+/// Blocked payloads (Q8Block32: 34-byte blocks, Q4Block32: 18-byte ones)
+/// start each block with an f16 scale, which must be finite.
+fn check_block_scales(bytes: &[u8], block_bytes: usize, index: u32) -> Result<(), FormatError> {
+    for (block, chunk) in bytes.chunks_exact(block_bytes.max(2)).enumerate() {
         let scale = half::f16::from_le_bytes([chunk[0], chunk[1]]);
         if !scale.is_finite() {
             return Err(FormatError::NonFiniteScale { index, block: block as u64 });

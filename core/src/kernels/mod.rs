@@ -23,4 +23,4 @@ pub use attention::{attention, BandMask, Mask, TiledCausalMask};
 pub use conv::{conv1d, conv1d_col_len, conv_transpose1d, convt_z_len, ConvGeom, CONV_TILE};
 pub use linear::{linear, linear_xw};
 pub use norm::{layernorm, LN_EPS};
-pub use weights::{dot, DenseElem, DenseRows, F16Rows, F32Rows, Matrix, Q8Rows, RowMatrix};
+pub use weights::{dot, expand_q4, DenseElem, DenseRows, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows, RowMatrix, Q4_BLOCK_BYTES};

@@ -10,6 +10,7 @@
 //! | [`F32Rows`] | f32 | f32 | f32 as given |
 //! | [`F16Rows`] | IEEE binary16 | f32 (exact f16 -> f32) | f32 as given |
 //! | [`Q8Rows`] | blocks of 32: f16 scale + 32 i8 | i32 per block, f32 across blocks | quantised per block of 32 (f32 scale `max|x|/127`, round to nearest) once per row chunk ([`RowMatrix::prepare`]) |
+//! | [`Q4Rows`] | blocks of 32: f16 scale + 16 bytes of nibbles | as Q8 (the nibbles of a tile's rows are expanded to Q8 blocks in registers/stack, then the same Q8 dots run) | as Q8 |
 //!
 //! Quantising the activations per block (Q8_0 x Q8_0, as ggml) keeps the
 //! inner loop integer; the extra error is measured end to end
@@ -283,6 +284,123 @@ impl RowMatrix for Q8Rows<'_> {
     }
 }
 
+/// Bytes of one stored `DType::Q4Block32` block: f16 scale + 16 bytes.
+pub const Q4_BLOCK_BYTES: usize = 18;
+
+/// Expands stored Q4Block32 blocks (`src`: nb * 18 bytes) into the
+/// Q8Block32 layout (`dst`: nb * 34 bytes): same f16 scale, value
+/// `nibble - 8` as i8. Exact: `d * (nibble - 8)` is the same number in
+/// both layouts, so every Q8 kernel computes the Q4 product.
+#[inline]
+pub fn expand_q4(src: &[u8], dst: &mut [u8]) {
+    for (s, d) in src.chunks_exact(Q4_BLOCK_BYTES).zip(dst.chunks_exact_mut(Q8_BLOCK_BYTES)) {
+        d[0] = s[0];
+        d[1] = s[1];
+        let (lo, hi) = d[2..].split_at_mut(16);
+        for ((&b, l), h) in s[2..].iter().zip(lo.iter_mut()).zip(hi.iter_mut()) {
+            *l = ((b & 0x0f) as i8 - 8) as u8;
+            *h = ((b >> 4) as i8 - 8) as u8;
+        }
+    }
+}
+
+/// Row-major `DType::Q4Block32` weights: each row is `cols / 32` blocks of
+/// [f16 scale, 16 bytes of nibbles]; value = scale * (nibble - 8). Half the
+/// bytes of [`Q8Rows`]; dots expand the nibbles of the rows at hand into Q8
+/// blocks ([`expand_q4`]) and reuse the Q8 kernels (one int8 code path).
+#[derive(Clone, Copy, Debug)]
+pub struct Q4Rows<'a> {
+    data: &'a [u8],
+    rows: usize,
+    cols: usize,
+}
+
+/// Blocks of one activation chunk ([`ACT_CHUNK`] columns).
+const CHUNK_BLOCKS: usize = ACT_CHUNK / Q8_BLOCK;
+
+impl<'a> Q4Rows<'a> {
+    /// None unless `cols % 32 == 0` and `data.len() == rows * cols / 32 * 18`.
+    pub fn new(data: &'a [u8], rows: usize, cols: usize) -> Option<Self> {
+        if cols % Q8_BLOCK != 0 || rows.checked_mul(cols / Q8_BLOCK)?.checked_mul(Q4_BLOCK_BYTES)? != data.len() {
+            return None;
+        }
+        Some(Q4Rows { data, rows, cols })
+    }
+    /// The stored bytes of row `r`.
+    pub fn row(&self, r: usize) -> &'a [u8] {
+        let rb = self.cols / Q8_BLOCK * Q4_BLOCK_BYTES;
+        &self.data[r * rb..(r + 1) * rb]
+    }
+    /// Blocks `b0 .. b0 + nb` (`nb <= CHUNK_BLOCKS`) of row `r` as Q8 blocks in `buf`.
+    fn expand<'b>(&self, r: usize, b0: usize, nb: usize, buf: &'b mut [u8; CHUNK_BLOCKS * Q8_BLOCK_BYTES]) -> &'b [u8] {
+        let src = &self.row(r)[b0 * Q4_BLOCK_BYTES..(b0 + nb) * Q4_BLOCK_BYTES];
+        let dst = &mut buf[..nb * Q8_BLOCK_BYTES];
+        expand_q4(src, dst);
+        dst
+    }
+    /// `f(column block start, value of each of the 32 elements)` per block of row `r`.
+    fn for_blocks(&self, r: usize, mut f: impl FnMut(usize, &[f32; Q8_BLOCK])) {
+        let mut q8 = [0u8; Q8_BLOCK_BYTES];
+        let mut v = [0.0f32; Q8_BLOCK];
+        for (b, blk) in self.row(r).chunks_exact(Q4_BLOCK_BYTES).enumerate() {
+            expand_q4(blk, &mut q8);
+            let d = f16_to_f32(u16::from_le_bytes([q8[0], q8[1]]));
+            for (o, &q) in v.iter_mut().zip(&q8[2..]) {
+                *o = d * (q as i8 as f32);
+            }
+            f(b * Q8_BLOCK, &v);
+        }
+    }
+}
+
+impl RowMatrix for Q4Rows<'_> {
+    type Act = Q8Act;
+    const CHUNK: usize = ACT_CHUNK;
+    fn rows(&self) -> usize {
+        self.rows
+    }
+    fn cols(&self) -> usize {
+        self.cols
+    }
+    #[inline]
+    fn prepare(x: &[&[f32]], act: &mut Q8Act) {
+        Q8Rows::prepare(x, act)
+    }
+    #[inline]
+    fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], act: &Q8Act) -> f32 {
+        let nb = x.len() / Q8_BLOCK;
+        let mut buf = [0u8; CHUNK_BLOCKS * Q8_BLOCK_BYTES];
+        let w = self.expand(r, c0 / Q8_BLOCK, nb, &mut buf);
+        simd::dot_q8(w, &act.q[0][..nb * Q8_BLOCK], &act.d[0][..nb])
+    }
+    #[inline]
+    fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], act: &Q8Act) -> Tile {
+        let nb = x[0].len() / Q8_BLOCK;
+        let mut bufs = [[0u8; CHUNK_BLOCKS * Q8_BLOCK_BYTES]; TN];
+        for (buf, &r) in bufs.iter_mut().zip(&o) {
+            self.expand(r, c0 / Q8_BLOCK, nb, buf);
+        }
+        let w = bufs.each_ref().map(|b| &b[..nb * Q8_BLOCK_BYTES]);
+        let mut m = 0;
+        let xq = [(); TM].map(|_| {
+            m += 1;
+            &act.q[m - 1][..nb * Q8_BLOCK]
+        });
+        let xd = act.d.each_ref().map(|d| &d[..nb]);
+        simd::tile_q8(w, xq, xd)
+    }
+    fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
+        self.for_blocks(r, |c, v| {
+            for (yi, &vi) in y[c..c + Q8_BLOCK].iter_mut().zip(v) {
+                *yi += a * vi;
+            }
+        });
+    }
+    fn row_into(&self, r: usize, out: &mut [f32]) {
+        self.for_blocks(r, |c, v| out[c..c + Q8_BLOCK].copy_from_slice(v));
+    }
+}
+
 /// A weight matrix of any stored dtype; kernels match once per call (with
 /// [`with_rows!`](crate::with_rows)) and run their generic body.
 #[derive(Clone, Copy, Debug)]
@@ -290,6 +408,7 @@ pub enum Matrix<'a> {
     F32(F32Rows<'a>),
     F16(F16Rows<'a>),
     Q8(Q8Rows<'a>),
+    Q4(Q4Rows<'a>),
 }
 
 /// `with_rows!(matrix, m => expr)`: evaluates `expr` with `m` bound to the
@@ -301,6 +420,7 @@ macro_rules! with_rows {
             $crate::kernels::Matrix::F32($m) => $body,
             $crate::kernels::Matrix::F16($m) => $body,
             $crate::kernels::Matrix::Q8($m) => $body,
+            $crate::kernels::Matrix::Q4($m) => $body,
         }
     };
 }
@@ -326,6 +446,7 @@ impl Matrix<'_> {
             Matrix::F32(m) => m.rows * m.cols * 4,
             Matrix::F16(m) => m.rows * m.cols * 2,
             Matrix::Q8(m) => m.rows * m.cols / Q8_BLOCK * Q8_BLOCK_BYTES,
+            Matrix::Q4(m) => m.rows * m.cols / Q8_BLOCK * Q4_BLOCK_BYTES,
         }
     }
 }

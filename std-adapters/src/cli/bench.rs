@@ -34,7 +34,7 @@ use duolando_core::session::{FollowerFrame, KvType, Session, SessionConfig, Step
 use duolando_core::tensor::{DType, TensorRef, MAX_RANK};
 
 use crate::convert::storage_for;
-use crate::duo_writer::{quantise_q8_block32, StoreAs};
+use crate::duo_writer::{quantise_q4_block32, quantise_q8_block32, StoreAs};
 
 /// Flags of `duolando bench`.
 #[derive(clap::Args, Debug)]
@@ -51,7 +51,7 @@ pub struct Args {
     /// Untimed warm-up R steps per weight type.
     #[arg(long, default_value_t = 1)]
     pub warmup: usize,
-    /// Weight types to measure (comma separated: f32,f16,int8).
+    /// Weight types to measure (comma separated: f32,f16,int8,q4).
     #[arg(long, value_delimiter = ',', default_values_t = vec![String::from("int8"), String::from("f16"), String::from("f32")])]
     pub dtypes: Vec<String>,
     /// Use the scalar reference kernels instead of the detected SIMD ones.
@@ -135,6 +135,7 @@ impl RandomModel {
                 StoreAs::F32 => DType::F32,
                 StoreAs::F16 => DType::F16,
                 StoreAs::Q8Block32 => DType::Q8Block32,
+                StoreAs::Q4Block32 => DType::Q4Block32,
             };
             let numel: usize = dims.iter().map(|&d| d as usize).product();
             let bytes = dtype.bytes_for(numel, *dims.last().unwrap_or(&1) as usize).ok_or_else(|| anyhow!("size of {}", s.name))?;
@@ -164,6 +165,7 @@ impl RandomModel {
                     }
                 }
                 DType::Q8Block32 => dst.copy_from_slice(&quantise_q8_block32(&values)),
+                DType::Q4Block32 => dst.copy_from_slice(&quantise_q4_block32(&values)),
             }
             table.insert(name.to_string(), (dtype, s.shape, s.rank, base + range.start..base + range.end));
         }
@@ -418,7 +420,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "f32" => ("f32", StoreAs::F32),
             "f16" => ("f16", StoreAs::F16),
             "int8" => ("int8", StoreAs::Q8Block32),
-            other => return Err(anyhow!("unknown dtype '{other}' (f32, f16, int8)")),
+            "q4" => ("q4", StoreAs::Q4Block32),
+            other => return Err(anyhow!("unknown dtype '{other}' (f32, f16, int8, q4)")),
         };
         let r = bench_dtype(name, store_as, &args)?;
         for (t, st) in &r.r {

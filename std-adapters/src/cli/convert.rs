@@ -35,6 +35,9 @@ pub enum WeightType {
     /// Linear weights, embeddings and heads as Q8Block32 (f16 scales), the
     /// rest f16/f32 (docs/FORMAT.md §6).
     Int8,
+    /// The same tensors as int8 in 4 bits (Q4Block32: f16 scale per block
+    /// of 32, 18 bytes per block).
+    Q4,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -42,6 +45,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         WeightType::F32 => StoreAs::F32,
         WeightType::F16 => StoreAs::F16,
         WeightType::Int8 => StoreAs::Q8Block32,
+        WeightType::Q4 => StoreAs::Q4Block32,
     };
     let report = crate::convert::convert_files(&args.config, &args.gpt, &args.vqvae, &args.transl, store_as, &args.out)?;
     println!(

@@ -72,14 +72,16 @@ impl From<SchemaError> for ConvertError {
 /// - `Q8Block32`: Linear weights, token embeddings and GPT heads int8
 ///   (their last axis is the input width, a multiple of 32); conv weights
 ///   (last axis = kernel size 1/3/4, not blockable in format v1) and the VQ
-///   codebooks (nearest-neighbour encoding of the leader) F16.
+///   codebooks (nearest-neighbour encoding of the leader) F16;
+/// - `Q4Block32`: the same tensors as `Q8Block32` in 4 bits, the rest as
+///   there.
 pub fn storage_for(requested: StoreAs, name: &str, dims: &[u32]) -> StoreAs {
     if dims.len() < 2 || name.ends_with("pos_emb") || requested == StoreAs::F32 {
         return StoreAs::F32;
     }
     match requested {
-        StoreAs::Q8Block32 if dims.last().is_some_and(|&d| d % 32 == 0) && !name.ends_with("bottleneck.level_blocks.0.k") => {
-            StoreAs::Q8Block32
+        StoreAs::Q8Block32 | StoreAs::Q4Block32 if dims.last().is_some_and(|&d| d % 32 == 0) && !name.ends_with("bottleneck.level_blocks.0.k") => {
+            requested
         }
         _ => StoreAs::F16,
     }

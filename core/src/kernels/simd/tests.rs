@@ -4,7 +4,7 @@
 //! older dots and tiles). On aarch64 these run under qemu (`.ci/aarch64.sh`).
 
 use super::{scalar, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
-use crate::kernels::{linear, F16Rows, F32Rows, Matrix, Q8Rows, RowMatrix};
+use crate::kernels::{expand_q4, linear, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows, RowMatrix, Q4_BLOCK_BYTES};
 
 /// SIMD int8 GEMM vs scalar twin: the per-block i32 sums are exact; only
 /// the f32 sum across blocks and lanes is reordered: limit * sum_b
@@ -44,6 +44,20 @@ fn q8_bytes(w: &[f32]) -> Vec<u8> {
         let inv = if d.to_f32() > 0.0 { 1.0 / d.to_f32() } else { 0.0 };
         out.extend(d.to_le_bytes());
         out.extend(b.iter().map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8));
+    }
+    out
+}
+
+/// Stored Q4Block32 bytes of `w` (as the converter writes them).
+fn q4_bytes(w: &[f32]) -> Vec<u8> {
+    let mut out = Vec::new();
+    for b in w.chunks_exact(Q8_BLOCK) {
+        let amax = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let d = half::f16::from_f32(amax / 7.0);
+        let inv = if d.to_f32() > 0.0 { 1.0 / d.to_f32() } else { 0.0 };
+        let q = |v: f32| ((v * inv).round().clamp(-8.0, 7.0) as i32 + 8) as u8;
+        out.extend(d.to_le_bytes());
+        out.extend((0..16).map(|j| q(b[j]) | (q(b[j + 16]) << 4)));
     }
     out
 }
@@ -563,11 +577,13 @@ fn linear_rows_do_not_depend_on_the_batch() {
     for &(i, o) in &[(768usize, 64usize), (3072, 24), (256, 40)] {
         let w = r.vec(o * i);
         let q8 = q8_bytes(&w);
+        let q4 = q4_bytes(&w);
         let h: Vec<u16> = w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
         let rows = 9;
         let x = r.vec(rows * i);
         for m in [
             Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap()),
+            Matrix::Q4(Q4Rows::new(&q4, o, i).unwrap()),
             Matrix::F16(F16Rows::new(&h, o, i).unwrap()),
             Matrix::F32(F32Rows::new(&w, o, i).unwrap()),
         ] {
@@ -582,6 +598,74 @@ fn linear_rows_do_not_depend_on_the_batch() {
                 assert_eq!(a.to_bits(), b.to_bits(), "in {i} out {o}: {n} rows, element {k}: {a} vs {b} alone");
             }
         }
+        }
+    }
+}
+
+/// The Q4Block32 layout: element j of a block in the low nibble of byte j,
+/// element j + 16 in the high nibble, value = scale * (nibble - 8).
+#[test]
+fn q4_block_layout() {
+    let mut blk = [0u8; Q4_BLOCK_BYTES];
+    blk[..2].copy_from_slice(&half::f16::from_f32(0.5).to_le_bytes());
+    for j in 0..16 {
+        blk[2 + j] = (j as u8) | ((15 - j as u8) << 4);
+    }
+    let m = Q4Rows::new(&blk, 1, 32).unwrap();
+    let mut row = [0.0f32; 32];
+    m.row_into(0, &mut row);
+    for j in 0..16 {
+        assert_eq!(row[j], 0.5 * (j as f32 - 8.0), "element {j}");
+        assert_eq!(row[j + 16], 0.5 * (7.0 - j as f32), "element {}", j + 16);
+    }
+    let mut y = [1.0f32; 32];
+    m.axpy(0, 2.0, &mut y);
+    for j in 0..32 {
+        assert_eq!(y[j], 1.0 + 2.0 * row[j]);
+    }
+    assert!(Q4Rows::new(&blk[..17], 1, 32).is_none());
+    assert!(Q4Rows::new(&blk, 1, 16).is_none());
+}
+
+/// Q4 weights compute exactly what the Q8 blocks they expand to compute
+/// (same scale, values -8..7): dots, tiles (through `linear`) and rows are
+/// bit-identical, so the int8 kernels and their twins cover Q4.
+#[test]
+fn q4_matches_its_q8_expansion_bit_for_bit() {
+    let mut r = Rng(4747);
+    for &(n, i, o) in &[(1usize, 32usize, 3usize), (3, 96, 5), (5, 768, 7), (9, 1056, 13), (2, 3072, 6)] {
+        let (x, w) = (r.vec(n * i), r.vec(o * i));
+        let q4 = q4_bytes(&w);
+        let mut q8 = vec![0u8; o * i / Q8_BLOCK * Q8_BLOCK_BYTES];
+        expand_q4(&q4, &mut q8);
+        let (m4, m8) = (Q4Rows::new(&q4, o, i).unwrap(), Q8Rows::new(&q8, o, i).unwrap());
+        let (mut r4, mut r8) = (vec![0.0f32; i], vec![0.0f32; i]);
+        for c in 0..o {
+            m4.row_into(c, &mut r4);
+            m8.row_into(c, &mut r8);
+            assert_eq!(r4, r8, "row {c}");
+            // Within a quarter step of the f32 weights (round to nearest on the f16 scale's grid).
+            for (k, (&a, &b)) in r4.iter().zip(&w[c * i..(c + 1) * i]).enumerate() {
+                let blk = &w[c * i + k / 32 * 32..c * i + k / 32 * 32 + 32];
+                let d = half::f16::from_f32(blk.iter().fold(0.0f32, |m, v| m.max(v.abs())) / 7.0).to_f32();
+                assert!((a - b).abs() <= 0.5 * d * 1.001 + 1e-7, "({i},{o}) [{c},{k}]: {a} vs {b}, step {d}");
+            }
+            for a in 0..n {
+                let xa = &x[a * i..(a + 1) * i];
+                assert_eq!(m4.dot(c, xa).to_bits(), m8.dot(c, xa).to_bits(), "dot ({n},{i},{o}) [{a},{c}]");
+            }
+        }
+        // linear over Q4 (the generic chunked tile path) vs its own row dots.
+        let m = Matrix::Q4(m4);
+        let mut y = vec![f32::NAN; n * o];
+        linear(&x, &m, None, &mut y);
+        for a in 0..n {
+            let xa = &x[a * i..(a + 1) * i];
+            for c in 0..o {
+                m.row_into(c, &mut r4);
+                let s: f64 = r4.iter().zip(xa).map(|(p, q)| (*p as f64 * *q as f64).abs()).sum();
+                check(&format!("q4 linear ({n},{i},{o}) [{a},{c}]"), y[a * o + c], m.dot(c, xa), 1.0 + s, Q8_LINEAR_VS_ROW_DOTS);
+            }
         }
     }
 }
