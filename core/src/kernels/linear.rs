@@ -1,8 +1,8 @@
 //! Dense layers: `y = x W^T + b` (nn.Linear, conv as GEMM) and `z = x W`
 //! (the transposed-convolution GEMM). Written once against [`RowMatrix`].
 
-use super::simd::{self, Q8_BLOCK, TM, TN};
-use super::weights::{Matrix, PreparedAct, Q8Rows, RowMatrix};
+use super::simd::{self, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
+use super::weights::{expand_q4, Matrix, PreparedAct, Q4Rows, Q8Rows, RowMatrix};
 
 /// Weight bytes kept hot per pass over the activations (~L2-sized blocks:
 /// 64 f32 rows at width 768, more rows for narrower weight types).
@@ -11,10 +11,10 @@ const BLOCK_BYTES: usize = 192 * 1024;
 /// `y = x W^T + b`. `x`: (n, in), `w`: (out, in), `b`: (out) or None,
 /// `y`: (n, out); `n = x.len() / in`. Callers check the lengths.
 pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
-    if let Matrix::Q8(q) = w {
-        if q.cols() <= Q8_PANEL {
-            return linear_q8(x, q, b, y);
-        }
+    match w {
+        Matrix::Q8(q) if q.cols() <= Q8_PANEL => return linear_q8(x, q, b, y),
+        Matrix::Q4(q) if q.cols() <= Q4_FAST_COLS => return linear_q8(x, q, b, y),
+        _ => {}
     }
     let block = (BLOCK_BYTES / (w.weight_bytes() / w.rows().max(1)).max(1)).clamp(16, 1024);
     crate::with_rows!(w, m => linear_impl(x, m, b, y, block))
@@ -46,11 +46,57 @@ struct Q8Panel {
     c: [i32; 2 * Q8_PANEL_BLOCKS],
 }
 
+/// Widest Q4 row the int8 panel path takes (its rows are expanded to Q8
+/// blocks on the stack, `PACK_ROWS` at a time: 8 x 4352 bytes); wider
+/// rows take the generic chunked path.
+#[cfg(target_pointer_width = "64")]
+pub const Q4_FAST_COLS: usize = 4096;
+#[cfg(not(target_pointer_width = "64"))]
+pub const Q4_FAST_COLS: usize = 1024;
+const Q4_ROW_BYTES: usize = Q4_FAST_COLS / Q8_BLOCK * Q8_BLOCK_BYTES;
+
+/// Weight rows in the stored Q8Block32 layout, as the int8 panel path reads
+/// them: Q8 rows in place, Q4 rows expanded into a stack buffer (exact).
+trait Q8Source: RowMatrix {
+    /// Room for `simd::PACK_ROWS` expanded rows (nothing for Q8).
+    type Buf;
+    fn new_buf() -> Self::Buf;
+    /// Rows `rows` (N <= `simd::PACK_ROWS`) as stored Q8Block32 rows.
+    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut Self::Buf) -> [&'s [u8]; N];
+}
+
+impl Q8Source for Q8Rows<'_> {
+    type Buf = ();
+    #[inline]
+    fn new_buf() {}
+    #[inline]
+    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], _: &'s mut ()) -> [&'s [u8]; N] {
+        rows.map(|r| self.row(r))
+    }
+}
+
+impl Q8Source for Q4Rows<'_> {
+    type Buf = [[u8; Q4_ROW_BYTES]; simd::PACK_ROWS];
+    #[inline]
+    fn new_buf() -> Self::Buf {
+        [[0; Q4_ROW_BYTES]; simd::PACK_ROWS]
+    }
+    #[inline]
+    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut Self::Buf) -> [&'s [u8]; N] {
+        let n = (self.cols() / Q8_BLOCK * Q8_BLOCK_BYTES).min(Q4_ROW_BYTES);
+        for (dst, &r) in buf.iter_mut().zip(&rows) {
+            expand_q4(self.row(r), &mut dst[..n]);
+        }
+        let buf: &'s Self::Buf = buf;
+        core::array::from_fn(|j| &buf[j.min(simd::PACK_ROWS - 1)][..n])
+    }
+}
+
 /// `y = x W^T + b` over int8 weights: activation rows quantised once per
 /// panel ([`simd::quantise_q8_corr`]), weight scales read once per tile of
 /// `TN` weight rows ([`simd::q8_scales`]) and reused by every activation
 /// tile of the panel ([`simd::gemm_q8`], `M` = 1..=4 rows, no padded rows).
-fn linear_q8(x: &[f32], w: &Q8Rows<'_>, b: Option<&[f32]>, y: &mut [f32]) {
+fn linear_q8<W: Q8Source>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f32]) {
     let (n_in, n_out) = (w.cols(), w.rows());
     if n_in == 0 || n_out == 0 {
         return;
@@ -167,14 +213,15 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
 /// of one quantised panel (rows `p0..p1` of `x`), with [`simd::gemm_q8`].
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_tiles(w: &Q8Rows<'_>, b: Option<&[f32]>, y: &mut [f32], p: &Q8Panel, p0: usize, p1: usize, n_out: usize, n_in: usize) {
+fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, y: &mut [f32], p: &Q8Panel, p0: usize, p1: usize, n_out: usize, n_in: usize) {
     let nb = n_in / Q8_BLOCK;
     let mut ws = [[0.0f32; Q8_PANEL_BLOCKS]; TN];
+    let mut buf = W::new_buf();
     let mut t0 = 0;
     while t0 < n_out {
         let nt = TN.min(n_out - t0);
         let rows: [usize; TN] = core::array::from_fn(|j| t0 + j.min(nt - 1));
-        let wr = rows.map(|r| w.row(r));
+        let wr = w.q8_rows(rows, &mut buf);
         for (s, r) in ws.iter_mut().zip(&wr) {
             simd::q8_scales(r, &mut s[..nb]);
         }
@@ -221,14 +268,15 @@ fn q8_panel_tiles(w: &Q8Rows<'_>, b: Option<&[f32]>, y: &mut [f32], p: &Q8Panel,
 /// ([`simd::gemm_q8_packed`]; the AVX512-VNNI path).
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_packed(w: &Q8Rows<'_>, b: Option<&[f32]>, y: &mut [f32], p: &Q8Panel, p0: usize, p1: usize, n_out: usize, n_in: usize) {
+fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, y: &mut [f32], p: &Q8Panel, p0: usize, p1: usize, n_out: usize, n_in: usize) {
     const R: usize = simd::PACK_ROWS;
     let nb = n_in / Q8_BLOCK;
     let mut pack = simd::Q8Pack8::new();
+    let mut buf = W::new_buf();
     let mut t0 = 0;
     while t0 < n_out {
         let nt = R.min(n_out - t0);
-        let wr: [&[u8]; R] = core::array::from_fn(|j| w.row(t0 + j.min(nt - 1)));
+        let wr = w.q8_rows(core::array::from_fn(|j| t0 + j.min(nt - 1)), &mut buf);
         simd::q8_pack8(wr, nb, &mut pack);
         let mut i0 = p0;
         while i0 < p1 {

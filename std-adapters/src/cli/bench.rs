@@ -61,6 +61,11 @@ pub struct Args {
     /// only; comma separated; empty to skip).
     #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16])]
     pub batch: Vec<usize>,
+    /// The full-size R step as ONNX (tools/reference/export_full_r_step.py),
+    /// timed in tract in the same run (needs the `tract` cargo feature);
+    /// default: /tmp/duolando_full/full_r_step.onnx when it exists.
+    #[arg(long)]
+    pub tract_onnx: Option<PathBuf>,
     /// Also write the figures as one flat JSON object.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -465,7 +470,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         results.push(r);
     }
     println!("t2 = two independent steps at once, one per thread (the core is single-threaded): per-step latency under that load.");
-    println!("tract ratio: not measured (needs a full-size R-step ONNX export from tools/reference; none exists yet).");
+    let tract = match super::bench_tract::onnx_path(args.tract_onnx.as_deref()) {
+        None => {
+            println!("tract ratio: not measured (no full-size R-step ONNX; make it with: {})", super::bench_tract::HOW);
+            None
+        }
+        Some(path) => match super::bench_tract::r_steps(&path, args.warmup, args.runs) {
+            Ok((times, err)) => {
+                let st = stats(times);
+                println!(
+                    "R step tract t1 (same window, f32, {}): median {:8.1} ms  p99 {:8.1} ms  p99/median {:.2}  (logits vs torch: max rel diff {err:.1e})",
+                    path.display(),
+                    st.median_ms,
+                    st.p99_ms,
+                    st.p99_ms / st.median_ms
+                );
+                for r in &results {
+                    let at = |v: &[(usize, Stats)]| v.iter().find(|(t, _)| *t == 1).map(|(_, s)| s.median_ms);
+                    if let (Some(rr), Some(ss)) = (at(&r.r), at(&r.s)) {
+                        println!("  {:>4}: tract R step / our R step = {:.2}x; tract R step / our S step = {:.1}x", r.name, st.median_ms / rr, st.median_ms / ss);
+                    }
+                }
+                Some((st, err))
+            }
+            Err(e) => {
+                println!("tract ratio: not measured: {e:#}");
+                None
+            }
+        },
+    };
     if let Some(path) = &args.json {
         let mut j = serde_json::Map::new();
         let null = serde_json::Value::Null;
@@ -486,7 +519,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         j.insert("memcpy_gbps_t1".into(), memcpy.into());
         j.insert("isa".into(), format!("{isa:?}").into());
-        j.insert("not_yet".into(), "tract_r_step_ms_t1 (no full-size ONNX export)".into());
+        match &tract {
+            Some((st, err)) => {
+                j.insert("tract_r_step_ms_t1".into(), st.median_ms.into());
+                j.insert("tract_r_step_p99_ms_t1".into(), st.p99_ms.into());
+                j.insert("tract_logits_max_rel_diff".into(), (*err as f64).into());
+            }
+            None => {
+                j.insert("not_yet".into(), "tract_r_step_ms_t1 (no full-size R-step ONNX, or built without the tract feature)".into());
+            }
+        }
         for r in &results {
             for (t, st) in &r.r {
                 j.insert(format!("r_step_ms_{}_t{t}", r.name), st.median_ms.into());
@@ -503,6 +545,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             j.insert("arena_bytes_f16kv".into(), r.arena_bytes.into());
             for (n, st) in &r.batch {
                 j.insert(format!("batch{n}_step_ms_{}", r.name), st.median_ms.into());
+            }
+            if let (Some((tr, _)), Some((_, ss))) = (&tract, r.s.iter().find(|(t, _)| *t == 1)) {
+                j.insert(format!("tract_r_over_s_step_{}_t1", r.name), (tr.median_ms / ss.median_ms).into());
+            }
+            if let (Some((tr, _)), Some((_, rr))) = (&tract, r.r.iter().find(|(t, _)| *t == 1)) {
+                j.insert(format!("tract_r_over_r_step_{}_t1", r.name), (tr.median_ms / rr.median_ms).into());
             }
             let at = |n: usize| r.batch.iter().find(|(m, _)| *m == n).map(|(_, st)| st.median_ms);
             if let (Some(a), Some(b)) = (at(16), at(1)) {

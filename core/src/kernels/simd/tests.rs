@@ -628,12 +628,15 @@ fn q4_block_layout() {
 }
 
 /// Q4 weights compute exactly what the Q8 blocks they expand to compute
-/// (same scale, values -8..7): dots, tiles (through `linear`) and rows are
-/// bit-identical, so the int8 kernels and their twins cover Q4.
+/// (same scale, values -8..7): dots, rows and `linear` (the int8 panel
+/// path, up to `Q4_FAST_COLS` inputs) are bit-identical, so the int8
+/// kernels and their twins cover Q4; wider rows take the generic chunked
+/// path, checked against its own row dots.
 #[test]
 fn q4_matches_its_q8_expansion_bit_for_bit() {
     let mut r = Rng(4747);
-    for &(n, i, o) in &[(1usize, 32usize, 3usize), (3, 96, 5), (5, 768, 7), (9, 1056, 13), (2, 3072, 6)] {
+    let wide = crate::kernels::linear::Q4_FAST_COLS + 32;
+    for &(n, i, o) in &[(1usize, 32usize, 3usize), (3, 96, 5), (5, 768, 7), (9, 1056, 13), (2, 3072, 6), (12, 768, 9), (3, wide, 5)] {
         let (x, w) = (r.vec(n * i), r.vec(o * i));
         let q4 = q4_bytes(&w);
         let mut q8 = vec![0u8; o * i / Q8_BLOCK * Q8_BLOCK_BYTES];
@@ -655,10 +658,16 @@ fn q4_matches_its_q8_expansion_bit_for_bit() {
                 assert_eq!(m4.dot(c, xa).to_bits(), m8.dot(c, xa).to_bits(), "dot ({n},{i},{o}) [{a},{c}]");
             }
         }
-        // linear over Q4 (the generic chunked tile path) vs its own row dots.
         let m = Matrix::Q4(m4);
         let mut y = vec![f32::NAN; n * o];
         linear(&x, &m, None, &mut y);
+        if i <= crate::kernels::linear::Q4_FAST_COLS {
+            let mut y8 = vec![f32::NAN; n * o];
+            linear(&x, &Matrix::Q8(m8), None, &mut y8);
+            let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&y), bits(&y8), "linear ({n},{i},{o}): Q4 vs its Q8 expansion");
+        }
+        // ... and against its own row dots (the chunked path).
         for a in 0..n {
             let xa = &x[a * i..(a + 1) * i];
             for c in 0..o {
