@@ -180,3 +180,16 @@ pub fn run_rollout(file: &ModelFile, name: &str) -> Rollout {
     run.progress_calls = calls;
     run
 }
+
+/// Fixture model `model` (tests/fixtures/{tiny,tiny2}) converted in memory
+/// from its checkpoint sources with weight type `store_as`.
+pub fn convert_fixture(model: &str, store_as: duolando::duo_writer::StoreAs) -> ModelFile {
+    let dir = fixture(model);
+    let read = |f: &str| std::fs::read(dir.join(f)).unwrap();
+    let (g, v, t) = (read("gpt.safetensors"), read("vqvae.safetensors"), read("transl.safetensors"));
+    let yaml = String::from_utf8(read("follower_gpt.yaml")).unwrap();
+    let (gp, vp, tp) = (dir.join("gpt.safetensors"), dir.join("vqvae.safetensors"), dir.join("transl.safetensors"));
+    let sources = duolando::convert::Sources { gpt: (&gp, &g), vqvae: (&vp, &v), transl: (&tp, &t) };
+    let (bytes, _) = duolando::convert::convert_bytes((&dir.join("follower_gpt.yaml"), &yaml), &sources, store_as).unwrap();
+    ModelFile::from_bytes(bytes).unwrap()
+}

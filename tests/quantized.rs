@@ -8,7 +8,6 @@
 
 use std::path::PathBuf;
 
-use duolando::convert::{convert_bytes, Sources};
 use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, read_i64_2d};
@@ -21,14 +20,7 @@ fn fixtures() -> PathBuf {
 const ROLLOUTS: [&str; 5] = ["tiny_long", "tiny_short", "tiny_odd", "tiny2_frames", "tiny2_tokens"];
 
 fn convert(model: &str, store_as: StoreAs) -> ModelFile {
-    let dir = fixtures().join(model);
-    let read = |f: &str| std::fs::read(dir.join(f)).unwrap();
-    let (g, v, t) = (read("gpt.safetensors"), read("vqvae.safetensors"), read("transl.safetensors"));
-    let yaml = String::from_utf8(read("follower_gpt.yaml")).unwrap();
-    let (gp, vp, tp) = (dir.join("gpt.safetensors"), dir.join("vqvae.safetensors"), dir.join("transl.safetensors"));
-    let sources = Sources { gpt: (&gp, &g), vqvae: (&vp, &v), transl: (&tp, &t) };
-    let (bytes, _) = convert_bytes((&dir.join("follower_gpt.yaml"), &yaml), &sources, store_as).unwrap();
-    ModelFile::from_bytes(bytes).unwrap()
+    duolando_tests::convert_fixture(model, store_as)
 }
 
 fn model_of(rollout: &str) -> &'static str {

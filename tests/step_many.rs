@@ -3,7 +3,6 @@
 //! their own `push_leader_frame` calls would take them; refusals name the
 //! session and change none.
 
-use duolando::convert::{convert_bytes, Sources};
 use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
@@ -13,14 +12,7 @@ use duolando_core::session::{FollowerFrame, KvType, Sampling, Session, SessionCo
 use duolando_tests::fixture;
 
 fn convert(model: &str, store_as: StoreAs) -> ModelFile {
-    let dir = fixture(model);
-    let read = |f: &str| std::fs::read(dir.join(f)).unwrap();
-    let (g, v, t) = (read("gpt.safetensors"), read("vqvae.safetensors"), read("transl.safetensors"));
-    let yaml = String::from_utf8(read("follower_gpt.yaml")).unwrap();
-    let (gp, vp, tp) = (dir.join("gpt.safetensors"), dir.join("vqvae.safetensors"), dir.join("transl.safetensors"));
-    let sources = Sources { gpt: (&gp, &g), vqvae: (&vp, &v), transl: (&tp, &t) };
-    let (bytes, _) = convert_bytes((&dir.join("follower_gpt.yaml"), &yaml), &sources, store_as).unwrap();
-    ModelFile::from_bytes(bytes).unwrap()
+    duolando_tests::convert_fixture(model, store_as)
 }
 
 struct Clip {

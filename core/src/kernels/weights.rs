@@ -202,6 +202,15 @@ impl<E: DenseElem> RowMatrix for DenseRows<'_, E> {
     }
 }
 
+/// The int8 tile over `nb` blocks of stored Q8Block32 rows `w` and the
+/// prepared activations `act` (shared by [`Q8Rows`] and [`Q4Rows`]).
+#[inline]
+fn tile_q8_act(w: [&[u8]; TN], nb: usize, act: &Q8Act) -> Tile {
+    let xq = act.q.each_ref().map(|q| &q[..nb * Q8_BLOCK]);
+    let xd = act.d.each_ref().map(|d| &d[..nb]);
+    simd::tile_q8(w, xq, xd)
+}
+
 /// Row-major `DType::Q8Block32` weights: each row is `cols / 32` blocks of
 /// [f16 scale, 32 x i8]; value = scale * q.
 #[derive(Clone, Copy, Debug)]
@@ -258,14 +267,7 @@ impl RowMatrix for Q8Rows<'_> {
     fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], act: &Q8Act) -> Tile {
         let b0 = c0 / Q8_BLOCK * Q8_BLOCK_BYTES;
         let nb = x[0].len() / Q8_BLOCK;
-        let w = o.map(|r| &self.row(r)[b0..b0 + nb * Q8_BLOCK_BYTES]);
-        let mut m = 0;
-        let xq = [(); TM].map(|_| {
-            m += 1;
-            &act.q[m - 1][..nb * Q8_BLOCK]
-        });
-        let xd = act.d.each_ref().map(|d| &d[..nb]);
-        simd::tile_q8(w, xq, xd)
+        tile_q8_act(o.map(|r| &self.row(r)[b0..b0 + nb * Q8_BLOCK_BYTES]), nb, act)
     }
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
         self.for_blocks(r, |c, d, q| {
@@ -380,14 +382,7 @@ impl RowMatrix for Q4Rows<'_> {
         for (buf, &r) in bufs.iter_mut().zip(&o) {
             self.expand(r, c0 / Q8_BLOCK, nb, buf);
         }
-        let w = bufs.each_ref().map(|b| &b[..nb * Q8_BLOCK_BYTES]);
-        let mut m = 0;
-        let xq = [(); TM].map(|_| {
-            m += 1;
-            &act.q[m - 1][..nb * Q8_BLOCK]
-        });
-        let xd = act.d.each_ref().map(|d| &d[..nb]);
-        simd::tile_q8(w, xq, xd)
+        tile_q8_act(bufs.each_ref().map(|b| &b[..nb * Q8_BLOCK_BYTES]), nb, act)
     }
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
         self.for_blocks(r, |c, v| {
