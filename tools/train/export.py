@@ -7,6 +7,7 @@ Then: duolando convert --config DIR/follower_gpt.yaml --gpt DIR/gpt.safetensors
       --vqvae DIR/vqvae.safetensors --transl DIR/transl.safetensors --dtype f16 -o demo.duo
 """
 import argparse
+import json
 import os
 import sys
 
@@ -44,8 +45,11 @@ def main(argv=None):
     np.save(os.path.join(args.assets, "demo_leader_pos3d.npy"), tk["leader"][:n].astype(np.float32))
     np.save(os.path.join(args.assets, "demo_music.npy"), tk["music"][:n].astype(np.float32))
     np.save(os.path.join(args.assets, "demo_follower_start.npy"), tk["follower"][:4].astype(np.float32))
+    with open(os.path.join(args.data, "takes.json")) as f:
+        meta = json.load(f)
+    synth = f"duolando synth --minutes {meta['minutes_requested']:g} --seed {meta['seed']}"
     with open(os.path.join(args.assets, "demo_take.txt"), "w") as f:
-        f.write(f"{tk['name']} frames 0..{n} of the test split of `duolando synth --minutes 20 --seed 1`\n")
+        f.write(f"{tk['name']} frames 0..{n} of the test split of `{synth}`\n")
     print(f"demo clip: {tk['name']} frames 0..{n} ({n / 30:.1f} s)")
     return 0
 

@@ -5,7 +5,7 @@
 #   tools/train/train_all.sh            # from the repository root
 #
 # Environment (all optional): PY (python with torch, default /work/venv/bin/python),
-# MINUTES / SEED (synthetic data, default 20 / 1), DATA (synthetic data dir, default
+# MINUTES / SEED (synthetic data, default 60 / 1), DATA (synthetic data dir, default
 # /tmp/duo_synth_m$MINUTES_s$SEED; reused when it exists), WORK (scratch dir, default
 # /tmp/duo_train_m$MINUTES_s$SEED), VQ_STEPS / TR_STEPS / GPT_STEPS / GPT2_STEPS, EVAL=0 to skip
 # evaluation, INSTALL=1 to replace assets/demo.duo and the demo clip, BIN (the duolando binary,
@@ -14,7 +14,7 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
 PY="${PY:-/work/venv/bin/python}"
-MINUTES="${MINUTES:-20}"
+MINUTES="${MINUTES:-60}"
 SEED="${SEED:-1}"
 WORK="${WORK:-/tmp/duo_train_m${MINUTES}_s${SEED}}"
 DATA="${DATA:-/tmp/duo_synth_m${MINUTES}_s${SEED}}"
@@ -27,12 +27,12 @@ mkdir -p "$WORK"
 [ -d "$DATA/motion" ] || "$BIN" synth --minutes "$MINUTES" --seed "$SEED" --out "$DATA"
 
 cd "$T"
-$NICE "$PY" train_vqvae.py  --data "$DATA" --out "$WORK/motion_vqvae.pt" --steps "${VQ_STEPS:-1500}" --batch 8 --lr 6e-4
+$NICE "$PY" train_vqvae.py  --data "$DATA" --out "$WORK/motion_vqvae.pt" --steps "${VQ_STEPS:-3000}" --batch 8 --lr 6e-4
 $NICE "$PY" train_transl.py --data "$DATA" --out "$WORK/transl_vqvae.pt" --steps "${TR_STEPS:-1500}"
 $NICE "$PY" train_gpt.py    --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
-                            --out "$WORK/follower_gpt.pt" --steps "${GPT_STEPS:-900}" --batch 16
+                            --out "$WORK/follower_gpt.pt" --steps "${GPT_STEPS:-1800}" --batch 16
 # Optional second one-cycle run from the first (original `init_weight`). Off by default: with
-# 20 min of data, 600 more steps at lr 5e-4 overfit (held-out figures got worse, DEMO_MODEL.md).
+# 20 min of data, 600 more steps at lr 5e-4 overfit (held-out figures got worse; DEMO_MODEL.md).
 if [ "${GPT2_STEPS:-0}" != 0 ]; then
     mv "$WORK/follower_gpt.pt" "$WORK/follower_gpt_a.pt"
     $NICE "$PY" train_gpt.py --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
