@@ -8,7 +8,8 @@
 # MINUTES / SEED (synthetic data, default 60 / 1), DATA (synthetic data dir, default
 # /tmp/duo_synth_m$MINUTES_s$SEED; reused when it exists), WORK (scratch dir, default
 # /tmp/duo_train_m$MINUTES_s$SEED), VQ_STEPS / TR_STEPS / GPT_STEPS / GPT2_STEPS, EVAL=0 to skip
-# evaluation, INSTALL=1 to replace assets/demo.duo and the demo clip, BIN (the duolando binary,
+# evaluation, DEMO_TAKE (test take of the demo clip; default Quickstep_20_01, empty = the longest),
+# INSTALL=1 to replace assets/demo.duo and the demo clip, BIN (the duolando binary,
 # default $CARGO_TARGET_DIR or target, /release/duolando).
 # Single-threaded (torch.set_num_threads(1)) under nice; see docs/DEMO_MODEL.md for timings.
 set -euo pipefail
@@ -16,6 +17,7 @@ ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
 PY="${PY:-/work/venv/bin/python}"
 MINUTES="${MINUTES:-60}"
 SEED="${SEED:-1}"
+DEMO_TAKE="${DEMO_TAKE-Quickstep_20_01}"
 WORK="${WORK:-/tmp/duo_train_m${MINUTES}_s${SEED}}"
 DATA="${DATA:-/tmp/duo_synth_m${MINUTES}_s${SEED}}"
 BIN="${BIN:-${CARGO_TARGET_DIR:-$ROOT/target}/release/duolando}"
@@ -39,7 +41,8 @@ if [ "${GPT2_STEPS:-0}" != 0 ]; then
                              --init "$WORK/follower_gpt_a.pt" --out "$WORK/follower_gpt.pt" \
                              --steps "$GPT2_STEPS" --batch 16 --lr 5e-4
 fi
-$NICE "$PY" export.py --ckpt "$WORK" --out "$WORK/export" --data "$DATA" --assets "$WORK/assets"
+$NICE "$PY" export.py --ckpt "$WORK" --out "$WORK/export" --data "$DATA" --assets "$WORK/assets" \
+    ${DEMO_TAKE:+--take "$DEMO_TAKE"}
 "$BIN" convert --config "$WORK/export/follower_gpt.yaml" --gpt "$WORK/export/gpt.safetensors" \
     --vqvae "$WORK/export/vqvae.safetensors" --transl "$WORK/export/transl.safetensors" \
     --dtype f16 -o "$WORK/demo.duo"
