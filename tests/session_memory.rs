@@ -103,6 +103,19 @@ fn live_config(model: &Model<'_>) -> SessionConfig {
     sc
 }
 
+/// `bytes` bytes of `buf` (>= bytes + 64 long) starting 1 byte past a
+/// 64-byte line: the worst alignment an arena can have.
+fn worst_aligned(buf: &mut [u8], bytes: usize) -> &mut [u8] {
+    let off = (64 - buf.as_ptr() as usize % 64) % 64 + 1;
+    &mut buf[off..off + bytes]
+}
+
+/// `len` bytes of `buf` (>= len + 64 long) starting on a 64-byte line.
+fn line_aligned(buf: &mut [u8], len: usize) -> &mut [u8] {
+    let off = (64 - buf.as_ptr() as usize % 64) % 64;
+    &mut buf[off..off + len]
+}
+
 #[test]
 fn no_allocation_after_new_and_the_arena_is_exact() {
     let file = ModelFile::open(fixture("tiny/model.duo")).unwrap();
@@ -115,9 +128,7 @@ fn no_allocation_after_new_and_the_arena_is_exact() {
         let bytes = model.session_bytes(&sc).unwrap();
         // Exactly `bytes` at the worst alignment (63 bytes past a line) is enough.
         let mut buf = vec![0u8; bytes + 64];
-        let base = buf.as_ptr() as usize;
-        let off = (64 - base % 64) % 64 + 1;
-        let arena = &mut buf[off..off + bytes];
+        let arena = worst_aligned(&mut buf, bytes);
         let mut out = Vec::with_capacity(c.leader.len() * 2);
         let mut s = Session::new(&model, arena, &sc, [1, 2, 3, 4, 5]).unwrap();
         if sc.music_lookahead > 0 {
@@ -128,11 +139,9 @@ fn no_allocation_after_new_and_the_arena_is_exact() {
         assert!(s.steps() > 50, "{sc:?}: only {} steps", s.steps());
         assert!(out.iter().all(|v| v.is_finite()));
         // A 64-byte-aligned arena needs at most `bytes - 63`; one line less than that fails cleanly.
-        let mut small = vec![0u8; bytes - 63 - 64 + 64];
-        let base = small.as_ptr() as usize;
-        let off = (64 - base % 64) % 64;
         let len = bytes - 63 - 64;
-        match Session::new(&model, &mut small[off..off + len], &sc, [1, 2, 3, 4, 5]) {
+        let mut small = vec![0u8; len + 64];
+        match Session::new(&model, line_aligned(&mut small, len), &sc, [1, 2, 3, 4, 5]) {
             Err(Error::Arena(_)) => {}
             Err(e) => panic!("{sc:?}: wrong error for a short arena: {e:?}"),
             Ok(_) => panic!("{sc:?}: a session fit in {len} < {bytes} - 63 bytes: session_bytes is not exact"),
@@ -296,11 +305,9 @@ fn step_many_allocates_nothing_and_its_batch_arena_is_exact() {
     let bytes = StepBatch::bytes(&model.cfg, &sc, n).unwrap();
     // Exactly `bytes` at the worst alignment is enough; a 64-byte-aligned arena one line short of `bytes - 63` is not.
     let mut buf = vec![0u8; bytes + 64];
-    let off = (64 - buf.as_ptr() as usize % 64) % 64 + 1;
-    let mut batch = StepBatch::new(&model.cfg, &sc, n, &mut buf[off..off + bytes]).unwrap();
+    let mut batch = StepBatch::new(&model.cfg, &sc, n, worst_aligned(&mut buf, bytes)).unwrap();
     let mut small = vec![0u8; bytes];
-    let off = (64 - small.as_ptr() as usize % 64) % 64;
-    assert!(matches!(StepBatch::new(&model.cfg, &sc, n, &mut small[off..off + bytes - 127]), Err(Error::Arena(_))));
+    assert!(matches!(StepBatch::new(&model.cfg, &sc, n, line_aligned(&mut small, bytes - 127)), Err(Error::Arena(_))));
     let frames = c.leader.len() / 165;
     let mut refs: Vec<&mut Session<'_>> = sessions.iter_mut().collect();
     let mut f = FollowerFrame::default();
