@@ -352,3 +352,34 @@ fn yaml_syntax_error_names_the_file() {
     assert!(matches!(err, ConvertError::Yaml { .. }));
     assert!(err.to_string().contains("cfg.yaml"), "{err}");
 }
+
+/// `storage_for(int8)` over the published config, by schema role: the
+/// decoders' convs int8 (rows of `in * k`), the encoders' convs, codebooks
+/// and ConvTranspose1d weights f16, vectors and `pos_emb` f32, Linear and
+/// embeddings int8; every int8 tensor's row a multiple of 32.
+#[test]
+fn int8_storage_by_role_on_the_published_config() {
+    use duolando_core::schema::{for_each_tensor, Role, SchemaError};
+    use duolando_core::tensor::block_row;
+    let cfg = duolando_core::presets::duolando_published();
+    let mut by_role: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = Default::default();
+    for_each_tensor::<SchemaError>(&cfg, &mut |s| {
+        let got = duolando::convert::storage_for(StoreAs::Q8Block32, s);
+        let blockable = block_row(s.dims()) % 32 == 0;
+        let want = match s.role {
+            Role::Vector | Role::PosEmb => StoreAs::F32,
+            Role::Linear | Role::Embedding | Role::Conv if blockable => StoreAs::Q8Block32,
+            _ => StoreAs::F16,
+        };
+        assert_eq!(got, want, "{}", s.name);
+        by_role.entry(format!("{:?}", s.role)).or_default().insert(format!("{got:?}"));
+        Ok(())
+    })
+    .unwrap();
+    // Every role occurs; the published decoders' convs are all blockable.
+    assert_eq!(by_role.len(), 8, "{by_role:?}");
+    assert_eq!(by_role["Conv"].iter().collect::<Vec<_>>(), ["Q8Block32"]);
+    assert_eq!(by_role["EncoderConv"].iter().collect::<Vec<_>>(), ["F16"]);
+    assert_eq!(by_role["ConvTranspose"].iter().collect::<Vec<_>>(), ["F16"]);
+    assert_eq!(by_role["Codebook"].iter().collect::<Vec<_>>(), ["F16"]);
+}

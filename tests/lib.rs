@@ -140,16 +140,29 @@ pub fn rollout_model(name: &str) -> String {
 /// (seeded from `follower_start.npy` when present, else `seed_tokens.npy`).
 pub fn run_rollout(file: &ModelFile, name: &str) -> Rollout {
     let dir = fixture(&format!("rollout_{name}"));
+    let seed_tokens = dir.join("seed_tokens.npy");
+    run_r(file, &dir.join("leader_pos3d.npy"), &dir.join("music.npy"), &dir.join("follower_start.npy"), &seed_tokens)
+}
+
+/// The bundled demo clip (`assets/demo_*.npy`) in R mode with `file`.
+pub fn run_demo_clip(file: &ModelFile) -> Rollout {
+    let a = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    run_r(file, &a.join("demo_leader_pos3d.npy"), &a.join("demo_music.npy"), &a.join("demo_follower_start.npy"), &a.join("-"))
+}
+
+/// R mode over a leader clip and music, seeded from the follower start
+/// frames when `start` exists, else from the 5 tokens in `seed_tokens`.
+fn run_r(file: &ModelFile, leader: &Path, music: &Path, start_path: &Path, seed_tokens: &Path) -> Rollout {
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
-    let leader = read_f32_2d(&dir.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
-    let music = read_f32_2d(&dir.join("music.npy"), None, "music").unwrap();
+    let leader = read_f32_2d(leader, Some(165), "leader").unwrap();
+    let music = read_f32_2d(music, None, "music").unwrap();
     let start;
-    let seed = if dir.join("follower_start.npy").exists() {
-        start = read_f32_2d(&dir.join("follower_start.npy"), Some(165), "follower start").unwrap();
+    let seed = if start_path.exists() {
+        start = read_f32_2d(start_path, Some(165), "follower start").unwrap();
         Seed::FollowerFrames(&start.data)
     } else {
-        let s = read_i64_2d(&dir.join("seed_tokens.npy"), Some(5), "seed").unwrap();
+        let s = read_i64_2d(seed_tokens, Some(5), "seed").unwrap();
         Seed::Tokens([0, 1, 2, 3, 4].map(|i| s.data[i] as u32))
     };
     let shape = exact::output_shape(&model.cfg, leader.rows).unwrap();
@@ -192,4 +205,31 @@ pub fn convert_fixture(model: &str, store_as: duolando::duo_writer::StoreAs) -> 
     let sources = duolando::convert::Sources { gpt: (&gp, &g), vqvae: (&vp, &v), transl: (&tp, &t) };
     let (bytes, _) = duolando::convert::convert_bytes((&dir.join("follower_gpt.yaml"), &yaml), &sources, store_as).unwrap();
     ModelFile::from_bytes(bytes).unwrap()
+}
+
+/// A dense (f32/f16) `.duo` re-stored: every tensor read back as f32 and
+/// written as `store(spec)` (e.g. `convert::storage_for`, as the converter
+/// would from the f32 checkpoints; here from the stored values).
+pub fn restore_as(file: &ModelFile, store: &dyn Fn(&duolando_core::schema::TensorSpec) -> duolando::duo_writer::StoreAs) -> ModelFile {
+    use duolando_core::tensor::DType;
+    let duo = file.duo().unwrap();
+    let cfg = *duo.config();
+    let mut tensors = Vec::new();
+    duolando_core::schema::for_each_tensor::<duolando_core::schema::SchemaError>(&cfg, &mut |spec| {
+        let t = duo.tensor(&spec.name).unwrap();
+        let values: Vec<f32> = match t.dtype {
+            DType::F32 => t.data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),
+            DType::F16 => t.data.chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect(),
+            d => panic!("{}: {d:?} is not a dense type", spec.name),
+        };
+        tensors.push(duolando::duo_writer::Tensor {
+            name: spec.name.to_string(),
+            shape: spec.dims().to_vec(),
+            values,
+            store_as: store(spec),
+        });
+        Ok(())
+    })
+    .unwrap();
+    ModelFile::from_bytes(duolando::duo_writer::write_duo(&cfg, &tensors).unwrap()).unwrap()
 }

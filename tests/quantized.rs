@@ -62,8 +62,10 @@ fn f32_with_simd_kernels_matches_goldens() {
 }
 
 /// Motion error limits vs the f32 model while the follower tokens agree
-/// (decoders in f16 in both the f16 and the int8 models; the error is the
-/// f16 rounding of the conv weights). Measured (avx2): f16 max |pos err|
+/// (the fixtures' decoder convs have rows of 16/48 values, not blockable,
+/// so they are f16 in both the f16 and the int8 models; the error is the
+/// f16 rounding of the conv weights; int8 decoders: the demo-model test
+/// below). Measured (avx2): f16 max |pos err|
 /// 4.14e-3 m, max |rot err| 6.41e-3 over the 5 rollouts; int8 (tiny_short,
 /// the one whose tokens all agree) 3.36e-3 m / 4.52e-3.
 const POS_LIMIT_M: f32 = 1e-2;
@@ -137,3 +139,75 @@ fn q4_agreement_within_measured_limits() {
     compare(StoreAs::Q4Block32, Q4_MIN_AGREE);
 }
 const Q4_MIN_AGREE: f64 = 0.25;
+
+/// The VQ decoders' Conv1d weights in int8 (the fixture models' convs have
+/// rows of 16 or 48 values, not blockable, so only the demo model, width
+/// 64, exercises them): the bundled f16 demo model re-stored with the
+/// decoders' tensors as `storage_for(int8)` stores them and everything
+/// else f16, then (1) every decoder fed the same 64 codes, int8 output vs
+/// f16 output, and (2) R mode on the demo clip: every token identical (the
+/// GPT, encoders and codebooks are the same f16 tensors) and the motion
+/// within the decoder limit.
+#[test]
+fn int8_vq_decoders_on_the_demo_model() {
+    use duolando_core::config::Part;
+    use duolando_core::limits::VqWhich;
+    use duolando_core::model::Model;
+    use duolando_core::tensor::DType;
+    use duolando_core::vq_decoder::{decode_codes, scratch_bytes, Output};
+    duolando::simd::init();
+    let f16_file = ModelFile::open(duolando_tests::fixtures_dir().join("../../assets/demo.duo")).unwrap();
+    let decoders_int8 = |spec: &duolando_core::schema::TensorSpec| {
+        if spec.name.contains(".decoders") {
+            duolando::convert::storage_for(StoreAs::Q8Block32, spec)
+        } else {
+            duolando::convert::storage_for(StoreAs::F16, spec)
+        }
+    };
+    let q_file = duolando_tests::restore_as(&f16_file, &decoders_int8);
+    let (dq, df) = (q_file.duo().unwrap(), f16_file.duo().unwrap());
+    // The decoders' convs are int8 (all but the ConvTranspose1d ones).
+    let dec: Vec<DType> = dq.tensors().filter(|t| t.name.contains(".decoders") && t.rank == 3).map(|t| t.dtype).collect();
+    let n_q8 = dec.iter().filter(|&&d| d == DType::Q8Block32).count();
+    eprintln!("demo decoders: {n_q8} of {} conv weights int8", dec.len());
+    assert!(n_q8 >= 40, "decoder convs: {dec:?}");
+    let (mq, mf) = (Model::from_duo(&dq).unwrap(), Model::from_duo(&df).unwrap());
+    let cfg = mf.cfg;
+    let n = 64usize;
+    let mut scratch = vec![0u8; scratch_bytes(&cfg, n).unwrap()];
+    let mut worst = 0.0f32;
+    for (which, vq) in Part::ALL.iter().map(|&p| (VqWhich::Part(p), cfg.parts[p as usize])).chain([(VqWhich::Transl, cfg.transl)]) {
+        let codes: Vec<u32> = (0..n as u32).map(|i| (i * 37 + 11) % vq.l_bins).collect();
+        for (out, ch) in [(Output::Position, vq.in_channels), (Output::Rotation, vq.rot_channels)] {
+            if ch == 0 {
+                continue;
+            }
+            let len = n * cfg.hop() * ch as usize;
+            let (mut a, mut b) = (vec![0.0f32; len], vec![0.0f32; len]);
+            decode_codes(&mf, which, out, &codes, &mut scratch, &mut a).unwrap();
+            decode_codes(&mq, which, out, &codes, &mut scratch, &mut b).unwrap();
+            let scale = a.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            let err = max_abs(&a, &b);
+            eprintln!("demo {which:?} {out:?}: max |int8 - f16| {err:.3e} (max |f16 output| {scale:.3})");
+            worst = worst.max(err / scale);
+        }
+    }
+    eprintln!("demo decoders: worst max error relative to the output's max magnitude {worst:.3e}");
+    assert!(worst <= DECODER_REL_LIMIT, "{worst} > {DECODER_REL_LIMIT}");
+    let (a, b) = (duolando_tests::run_demo_clip(&f16_file), duolando_tests::run_demo_clip(&q_file));
+    let (pe, re) = (max_abs(&a.pos, &b.pos), max_abs(&a.rot, &b.rot));
+    let mean_pe = a.pos.iter().zip(&b.pos).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.pos.len() as f64;
+    eprintln!("demo clip R mode, int8 decoders vs f16: pos err mean {mean_pe:.3e} max {pe:.3e} m, max |rot err| {re:.3e}");
+    assert_eq!(a.tokens, b.tokens, "follower tokens");
+    assert_eq!(a.leader_tokens, b.leader_tokens, "leader tokens");
+    assert!(pe <= DEMO_POS_LIMIT_M && re <= DEMO_ROT_LIMIT, "pos {pe} rot {re}");
+}
+
+/// Limits of `int8_vq_decoders_on_the_demo_model`, about twice the
+/// measured figures (AVX512-VNNI, 2026-11-22): decoder max error / max
+/// |output| 1.09e-2 (worst: rhand positions 9.0e-3 of 1.13; translation
+/// 5.9e-2 of 7.5); demo clip R mode max |pos err| 6.2e-3 m (mean 8.5e-4),
+/// max |rot err| 7.9e-3.
+const DECODER_REL_LIMIT: f32 = 2e-2;
+const DEMO_POS_LIMIT_M: f32 = 1.5e-2;
+const DEMO_ROT_LIMIT: f32 = 2e-2;

@@ -187,7 +187,7 @@ impl<'a, S: TensorSource<'a>> Binder<'_, S> {
         let mut expected = [1u32; 4];
         expected[..dims.len()].copy_from_slice(dims);
         let numel = dims.iter().map(|&d| d as usize).product::<usize>();
-        if t.rank as usize != dims.len() || t.dims() != dims || t.dtype.bytes_for(numel, *dims.last().unwrap_or(&1) as usize) != Some(t.data.len()) {
+        if t.rank as usize != dims.len() || t.dims() != dims || t.dtype.bytes_for(numel, crate::tensor::block_row(dims)) != Some(t.data.len()) {
             return Err(BindError::Shape {
                 name: n.clone(),
                 expected,

@@ -34,6 +34,32 @@ pub struct TensorSpec {
     pub rank: u8,
     /// PyTorch-order dims; entries past `rank` are 1.
     pub shape: [u32; 4],
+    /// How the engine reads the tensor (decides which storage types suit it).
+    pub role: Role,
+}
+
+/// How the engine reads a tensor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Role {
+    /// Biases and LayerNorm parameters (f32 only).
+    Vector,
+    /// `Linear.weight (out, in)` and the GPT heads: rows dotted with activations.
+    Linear,
+    /// `Conv1d.weight (out, in, k)` of a VQ decoder: each output channel's
+    /// `in * k` values dotted with an im2col row.
+    Conv,
+    /// `Conv1d.weight` of a VQ encoder: read like [`Role::Conv`], kept apart
+    /// because the leader's tokens (the nearest codebook row to the
+    /// encoder's output) depend on it, so converters keep it more precise.
+    EncoderConv,
+    /// `ConvTranspose1d.weight (in, out, k)`: rows scaled and added (`x W`).
+    ConvTranspose,
+    /// Token embeddings: rows read whole.
+    Embedding,
+    /// VQ codebooks: rows read whole and compared by distance.
+    Codebook,
+    /// `pos_emb` (f32 only).
+    PosEmb,
 }
 
 impl TensorSpec {
@@ -142,38 +168,40 @@ struct Emit<'f, E> {
 }
 
 impl<E: From<SchemaError>> Emit<'_, E> {
-    fn t(&mut self, name: TensorName, dims: &[u32]) -> Result<(), E> {
+    fn t(&mut self, name: TensorName, dims: &[u32], role: Role) -> Result<(), E> {
         let mut shape = [1u32; 4];
         shape[..dims.len()].copy_from_slice(dims);
-        (self.f)(&TensorSpec { name, rank: dims.len() as u8, shape })
+        (self.f)(&TensorSpec { name, rank: dims.len() as u8, shape, role })
     }
-    fn wb(&mut self, prefix: &str, w: &[u32], bias: u32) -> Result<(), E> {
-        self.t(name(format_args!("{prefix}.weight"))?, w)?;
-        self.t(name(format_args!("{prefix}.bias"))?, &[bias])
+    /// `<prefix>.weight` (`w`, read as `role`) and `<prefix>.bias` (`bias`).
+    fn wb(&mut self, prefix: &str, w: &[u32], bias: u32, role: Role) -> Result<(), E> {
+        self.t(name(format_args!("{prefix}.weight"))?, w, role)?;
+        self.t(name(format_args!("{prefix}.bias"))?, &[bias], Role::Vector)
     }
     /// A pre-LN transformer block (`MusicBlock` or `Block`) of width `c`.
     fn block(&mut self, prefix: &str, c: u32) -> Result<(), E> {
-        self.wb(&name(format_args!("{prefix}.ln1"))?, &[c], c)?;
-        self.wb(&name(format_args!("{prefix}.ln2"))?, &[c], c)?;
+        self.wb(&name(format_args!("{prefix}.ln1"))?, &[c], c, Role::Vector)?;
+        self.wb(&name(format_args!("{prefix}.ln2"))?, &[c], c, Role::Vector)?;
         for p in ["key", "query", "value", "proj"] {
-            self.wb(&name(format_args!("{prefix}.attn.{p}"))?, &[c, c], c)?;
+            self.wb(&name(format_args!("{prefix}.attn.{p}"))?, &[c, c], c, Role::Linear)?;
         }
-        self.wb(&name(format_args!("{prefix}.mlp.0"))?, &[4 * c, c], 4 * c)?;
-        self.wb(&name(format_args!("{prefix}.mlp.2"))?, &[c, 4 * c], c)
+        self.wb(&name(format_args!("{prefix}.mlp.0"))?, &[4 * c, c], 4 * c, Role::Linear)?;
+        self.wb(&name(format_args!("{prefix}.mlp.2"))?, &[c, 4 * c], c, Role::Linear)
     }
     fn lat(&mut self, prefix: &str, lat: &LatConfig, c: u32) -> Result<(), E> {
-        self.wb(&name(format_args!("{prefix}.cond_emb"))?, &[c, lat.n_in], c)?;
+        self.wb(&name(format_args!("{prefix}.cond_emb"))?, &[c, lat.n_in], c, Role::Linear)?;
         for i in 0..lat.n_layer {
             self.block(&name(format_args!("{prefix}.blocks.{i}"))?, c)?;
         }
-        self.wb(&name(format_args!("{prefix}.downsample"))?, &[c, c * lat.downsample_rate], c)
+        self.wb(&name(format_args!("{prefix}.downsample"))?, &[c, c * lat.downsample_rate], c, Role::Linear)
     }
-    fn resnet(&mut self, stage: &str, vq: &VqConfig) -> Result<(), E> {
+    /// A Resnet1D whose convs are read as `conv` (encoder or decoder).
+    fn resnet(&mut self, stage: &str, vq: &VqConfig, conv: Role) -> Result<(), E> {
         let (w, inner) = (vq.width, vq.res_inner().unwrap_or(0));
         for d in 0..vq.depth {
             let blk = name(format_args!("{stage}.model.{d}.model"))?;
-            self.wb(&name(format_args!("{blk}.1"))?, &[inner, w, 3], inner)?;
-            self.wb(&name(format_args!("{blk}.3"))?, &[w, inner, 1], w)?;
+            self.wb(&name(format_args!("{blk}.1"))?, &[inner, w, 3], inner, conv)?;
+            self.wb(&name(format_args!("{blk}.3"))?, &[w, inner, 1], w, conv)?;
         }
         Ok(())
     }
@@ -182,24 +210,24 @@ impl<E: From<SchemaError>> Emit<'_, E> {
         for i in 0..vq.down_t {
             let stage = encoder_stage(vq_name, i)?;
             let c_in = if i == 0 { vq.in_channels } else { w };
-            self.wb(&name(format_args!("{stage}.0"))?, &[w, c_in, k], w)?;
-            self.resnet(&name(format_args!("{stage}.1"))?, vq)?;
+            self.wb(&name(format_args!("{stage}.0"))?, &[w, c_in, k], w, Role::EncoderConv)?;
+            self.resnet(&name(format_args!("{stage}.1"))?, vq, Role::EncoderConv)?;
         }
-        self.wb(&encoder_stage(vq_name, vq.down_t)?, &[vq.emb_width, w, 3], vq.emb_width)?;
-        self.t(codebook_name(vq_name)?, &[vq.l_bins, vq.emb_width])?;
+        self.wb(&encoder_stage(vq_name, vq.down_t)?, &[vq.emb_width, w, 3], vq.emb_width, Role::EncoderConv)?;
+        self.t(codebook_name(vq_name)?, &[vq.l_bins, vq.emb_width], Role::Codebook)?;
         for kind in [DecoderKind::Position, DecoderKind::Rotation] {
             let c_out = decoder_channels(vq, kind);
             if c_out == 0 {
                 continue;
             }
-            self.wb(&decoder_stage(vq_name, kind, 0)?, &[w, vq.emb_width, 3], w)?;
+            self.wb(&decoder_stage(vq_name, kind, 0)?, &[w, vq.emb_width, 3], w, Role::Conv)?;
             for i in 0..vq.down_t {
                 let stage = decoder_stage(vq_name, kind, i + 1)?;
-                self.resnet(&name(format_args!("{stage}.0"))?, vq)?;
+                self.resnet(&name(format_args!("{stage}.0"))?, vq, Role::Conv)?;
                 let out = if i + 1 == vq.down_t { vq.emb_width } else { w };
-                self.wb(&name(format_args!("{stage}.1"))?, &[w, out, k], out)?;
+                self.wb(&name(format_args!("{stage}.1"))?, &[w, out, k], out, Role::ConvTranspose)?;
             }
-            self.wb(&decoder_out(vq_name, kind)?, &[c_out, vq.emb_width, 3], c_out)?;
+            self.wb(&decoder_out(vq_name, kind)?, &[c_out, vq.emb_width, 3], c_out, Role::Conv)?;
         }
         Ok(())
     }
@@ -221,9 +249,9 @@ pub fn for_each_tensor<E: From<SchemaError>>(
         e.lat(&lat_prefix(Some(p))?, &g.leader, c)?;
     }
     for s in 0..5 {
-        e.t(tok_emb_name(s)?, &[g.vocab[s], c])?;
+        e.t(tok_emb_name(s)?, &[g.vocab[s], c], Role::Embedding)?;
     }
-    e.t(name(format_args!("gpt.gpt_base.pos_emb"))?, &[1, g.block_size.saturating_mul(g.n_streams), c])?;
+    e.t(name(format_args!("gpt.gpt_base.pos_emb"))?, &[1, g.block_size.saturating_mul(g.n_streams), c], Role::PosEmb)?;
     for i in 0..g.n_layer_base {
         e.block(&name(format_args!("gpt.gpt_base.blocks.{i}"))?, c)?;
     }
@@ -233,7 +261,7 @@ pub fn for_each_tensor<E: From<SchemaError>>(
     // Quirk of the original: head_lhand has vocab_up rows, head_rhand vocab_down rows.
     let head_rows = [g.vocab[0], g.vocab[1], g.vocab[0], g.vocab[1], g.vocab[4]];
     for (s, rows) in head_rows.iter().enumerate() {
-        e.t(head_name(s)?, &[*rows, c])?;
+        e.t(head_name(s)?, &[*rows, c], Role::Linear)?;
     }
     for (i, p) in Part::ALL.iter().enumerate() {
         e.vq(&vq_prefix(Some(*p))?, &cfg.parts[i])?;

@@ -15,12 +15,13 @@ pub enum DType {
     F32 = 0,
     /// IEEE-754 binary16, little-endian.
     F16 = 1,
-    /// int8 weights in blocks of 32 along the last axis, one f16 scale per
+    /// int8 weights in blocks of 32 along each row ([`block_row`] values:
+    /// every axis but the first), one f16 scale per
     /// block stored before the block's 32 values (34 bytes per block; Q8_0-like).
     /// The v1 decoder validates it (layout, finite scales; docs/FORMAT.md §4);
     /// `Model::bind` accepts it for weight matrices (`kernels::Q8Rows`).
     Q8Block32 = 2,
-    /// 4-bit weights in blocks of 32 along the last axis: an f16 scale `d`,
+    /// 4-bit weights in blocks of 32 along each row ([`block_row`]): an f16 scale `d`,
     /// then 16 bytes of nibbles, byte `j` holding element `j` (low nibble)
     /// and element `j + 16` (high nibble); value = `d * (nibble - 8)`
     /// (18 bytes per block; Q4_0-like). Validated like Q8Block32;
@@ -46,8 +47,9 @@ impl DType {
             DType::F32 | DType::F16 => 0,
         }
     }
-    /// Bytes needed for `numel` elements whose last axis has `row` elements;
-    /// None on overflow or when `row` does not divide into whole blocks.
+    /// Bytes needed for `numel` elements in rows of `row` elements
+    /// ([`block_row`] of the shape); None on overflow or when `row` does
+    /// not divide into whole blocks.
     pub fn bytes_for(self, numel: usize, row: usize) -> Option<usize> {
         match self {
             DType::F32 => numel.checked_mul(4),
@@ -59,6 +61,19 @@ impl DType {
                 (numel / 32).checked_mul(self.block_bytes())
             }
         }
+    }
+}
+
+/// Values per row of a blocked (`Q8Block32`, `Q4Block32`) tensor: the
+/// product of every axis after the first (a Linear `(out, in)`: `in`; a
+/// Conv1d `(out, in, k)`: the `in * k` values of one output channel, which
+/// the kernels dot as one row); the only axis for rank 1; 0 on overflow.
+/// Blocks of 32 never straddle two rows.
+pub fn block_row(dims: &[u32]) -> usize {
+    match dims {
+        [] => 0,
+        [only] => *only as usize,
+        [_, rest @ ..] => rest.iter().try_fold(1usize, |p, &d| p.checked_mul(d as usize)).unwrap_or(0),
     }
 }
 

@@ -184,7 +184,7 @@ pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, Wr
                 DType::F16
             }
             StoreAs::Q8Block32 | StoreAs::Q4Block32 => {
-                let row = t.shape.last().copied().unwrap_or(0) as usize;
+                let row = duolando_core::tensor::block_row(&t.shape);
                 if row == 0 || row % 32 != 0 {
                     return Err(WriteError::BlockShape { name: t.name.clone(), shape: t.shape.clone() });
                 }

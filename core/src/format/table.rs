@@ -19,7 +19,7 @@ pub struct TensorEntry<'a> {
     pub shape: [u32; MAX_RANK],
     /// Offset of the payload from the start of the data section.
     pub offset: u64,
-    /// Payload bytes (`dtype.bytes_for(numel, last dim)`).
+    /// Payload bytes (`dtype.bytes_for(numel, block_row(shape))`).
     pub nbytes: u64,
 }
 
@@ -88,7 +88,7 @@ pub(crate) fn decode_entry<'a>(cur: &mut Cursor<'a>, index: u32) -> Result<Tenso
     let offset: u64 = cur.take(HeaderField::Offset)?;
     let nbytes: u64 = cur.take(HeaderField::ByteLen)?;
     let numel = usize::try_from(numel).map_err(|_| FormatError::SizeOverflow { index })?;
-    let row = shape[(rank - 1) as usize] as usize;
+    let row = crate::tensor::block_row(&shape[..rank as usize]);
     let expected = dtype.bytes_for(numel, row).ok_or(FormatError::SizeOverflow { index })? as u64;
     if expected != nbytes {
         return Err(FormatError::ByteLenMismatch { index, expected, found: nbytes });

@@ -1,15 +1,9 @@
 //! Pointwise activations.
 
-/// Exact GELU (`nn.GELU()` default): `0.5 x (1 + erf(x / sqrt 2))`.
-#[inline]
-pub fn gelu(x: f32) -> f32 {
-    0.5 * x * (1.0 + libm::erff(x * core::f32::consts::FRAC_1_SQRT_2))
-}
-
+/// Exact GELU (`nn.GELU()` default): `0.5 x (1 + erf(x / sqrt 2))`
+/// ([`crate::kernels::simd::gelu_inplace`]: erf to 1.5e-7).
 pub fn gelu_inplace(x: &mut [f32]) {
-    for v in x {
-        *v = gelu(*v);
-    }
+    super::simd::gelu_inplace(x)
 }
 
 pub fn relu_inplace(x: &mut [f32]) {

@@ -115,11 +115,7 @@ pub fn attention<M: Mask>(
             oh.fill(0.0);
             let mut sum = 0.0f32;
             for &(a, b) in runs {
-                for s in &mut scores[a..b] {
-                    let e = libm::expf(*s - max);
-                    *s = e;
-                    sum += e;
-                }
+                sum += simd::exp_shifted_sum(&mut scores[a..b], max);
             }
             if sum == 0.0 {
                 continue;
@@ -165,7 +161,7 @@ fn attention_query_keywise<M: Mask>(
         let mut sum = 0.0f32;
         for kj in 0..nk {
             if mask.allowed(qi, kj) {
-                let e = libm::expf(scores[kj] - max);
+                let e = simd::scalar::exp(scores[kj] - max);
                 scores[kj] = e;
                 sum += e;
             }

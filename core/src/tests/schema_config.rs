@@ -160,3 +160,29 @@ fn config_rejections() {
     c.music_motion_rate = 0;
     assert!(matches!(c.validate(), Err(ConfigError::Zero { field: ConfigField::MusicMotionRate })));
 }
+
+/// Blocked rows run over every axis but the first: a Conv1d (out, in, k)
+/// blocks its `in * k` values; the byte count is the same block count as
+/// the old last-axis rule wherever that rule accepted a shape.
+#[test]
+fn block_rows_span_all_axes_but_the_first() {
+    use crate::tensor::{block_row, DType};
+    assert_eq!(block_row(&[512, 512, 3]), 1536);
+    assert_eq!(block_row(&[768, 3072]), 3072);
+    assert_eq!(block_row(&[96]), 96);
+    assert_eq!(block_row(&[]), 0);
+    assert_eq!(block_row(&[2, u32::MAX, u32::MAX, u32::MAX]), 0, "overflow reads as no row");
+    assert_eq!(DType::Q8Block32.bytes_for(512 * 512 * 3, block_row(&[512, 512, 3])), Some(512 * 48 * 34));
+    assert_eq!(DType::Q4Block32.bytes_for(64 * 64 * 3, block_row(&[64, 64, 3])), Some(64 * 6 * 18));
+    // 16 * 3 = 48 values per row do not make whole blocks.
+    assert_eq!(DType::Q8Block32.bytes_for(16 * 16 * 3, block_row(&[16, 16, 3])), None);
+    // Roles: the published model's first decoder conv is a Conv, the
+    // first encoder conv an EncoderConv, a decoder upsampler a ConvTranspose.
+    let v = specs(&duolando_published());
+    use crate::schema::Role;
+    assert_eq!(find(&v, "motion.vqvae_up.decoders.0.out.weight").role, Role::Conv);
+    assert_eq!(find(&v, "motion.vqvae_up.encoders.0.level_blocks.0.model.0.0.weight").role, Role::EncoderConv);
+    assert_eq!(find(&v, "motion.vqvae_up.decoders.0.level_blocks.0.model.1.1.weight").role, Role::ConvTranspose);
+    assert_eq!(find(&v, "gpt.gpt_base.pos_emb").role, Role::PosEmb);
+    assert_eq!(find(&v, "motion.vqvae_up.bottleneck.level_blocks.0.k").role, Role::Codebook);
+}

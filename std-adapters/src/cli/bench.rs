@@ -31,7 +31,7 @@ use duolando_core::model::{BindError, Model, TensorSource};
 use duolando_core::presets::duolando_published;
 use duolando_core::schema::{for_each_tensor, SchemaError, TensorSpec};
 use duolando_core::session::{FollowerFrame, KvType, Session, SessionConfig, StepBatch};
-use duolando_core::tensor::{DType, TensorRef, MAX_RANK};
+use duolando_core::tensor::{block_row, DType, TensorRef, MAX_RANK};
 
 use crate::convert::storage_for;
 use crate::duo_writer::{quantise_q4_block32, quantise_q8_block32, StoreAs};
@@ -136,14 +136,14 @@ impl RandomModel {
         let mut off = 0usize;
         for s in &specs {
             let dims = s.dims();
-            let dtype = match storage_for(requested, &s.name, dims) {
+            let dtype = match storage_for(requested, s) {
                 StoreAs::F32 => DType::F32,
                 StoreAs::F16 => DType::F16,
                 StoreAs::Q8Block32 => DType::Q8Block32,
                 StoreAs::Q4Block32 => DType::Q4Block32,
             };
             let numel: usize = dims.iter().map(|&d| d as usize).product();
-            let bytes = dtype.bytes_for(numel, *dims.last().unwrap_or(&1) as usize).ok_or_else(|| anyhow!("size of {}", s.name))?;
+            let bytes = dtype.bytes_for(numel, block_row(dims)).ok_or_else(|| anyhow!("size of {}", s.name))?;
             layout.push((dtype, off..off + bytes));
             off = (off + bytes).next_multiple_of(64);
         }

@@ -25,7 +25,8 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use duolando_core::config::ModelConfig;
-use duolando_core::schema::{for_each_tensor, SchemaError, TensorSpec};
+use duolando_core::schema::{for_each_tensor, Role, SchemaError, TensorSpec};
+use duolando_core::tensor::block_row;
 
 pub use config::{load_config, parse_config};
 pub use error::ConvertError;
@@ -65,24 +66,27 @@ impl From<SchemaError> for ConvertError {
 }
 
 /// How a tensor is stored when the model is converted for weight type
-/// `requested` (docs/FORMAT.md §6, "Weight types"):
+/// `requested` (docs/FORMAT.md §6, "Weight types"), by its schema role:
 /// - vectors (biases, LayerNorm) and `pos_emb` stay F32: the engine adds
 ///   them to activations as they are (<1% of the bytes);
-/// - `F16`: every other tensor (weight matrices, embeddings, codebooks) F16;
-/// - `Q8Block32`: Linear weights, token embeddings and GPT heads int8
-///   (their last axis is the input width, a multiple of 32); conv weights
-///   (last axis = kernel size 1/3/4, not blockable in format v1) and the VQ
-///   codebooks (nearest-neighbour encoding of the leader) F16;
+/// - `F16`: every other tensor F16;
+/// - `Q8Block32`: the tensors whose rows are dotted with activations or read
+///   whole as embeddings (Linear weights, GPT heads, token embeddings, and
+///   the VQ decoders' Conv1d weights, a row = one output channel's `in * k`
+///   values), when a row is a multiple of 32 values; the rest F16: the VQ
+///   encoders and codebooks (they pick the leader's tokens, the input of
+///   everything: int8 encoders flipped 1.3% of the fixtures' leader tokens,
+///   4-bit ones 16%), the ConvTranspose1d weights (their rows are scaled and
+///   added, `x W`), and rows of other lengths;
 /// - `Q4Block32`: the same tensors as `Q8Block32` in 4 bits, the rest as
 ///   there.
-pub fn storage_for(requested: StoreAs, name: &str, dims: &[u32]) -> StoreAs {
-    if dims.len() < 2 || name.ends_with("pos_emb") || requested == StoreAs::F32 {
+pub fn storage_for(requested: StoreAs, spec: &TensorSpec) -> StoreAs {
+    if requested == StoreAs::F32 || matches!(spec.role, Role::Vector | Role::PosEmb) {
         return StoreAs::F32;
     }
+    let blockable = matches!(spec.role, Role::Linear | Role::Conv | Role::Embedding) && block_row(spec.dims()) % 32 == 0;
     match requested {
-        StoreAs::Q8Block32 | StoreAs::Q4Block32 if dims.last().is_some_and(|&d| d % 32 == 0) && !name.ends_with("bottleneck.level_blocks.0.k") => {
-            requested
-        }
+        StoreAs::Q8Block32 | StoreAs::Q4Block32 if blockable && block_row(spec.dims()) > 0 => requested,
         _ => StoreAs::F16,
     }
 }
@@ -114,7 +118,7 @@ pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: Store
             return Err(ConvertError::NonFinite { path: src.path.clone(), tensor: rest.to_string(), index, value });
         }
         used[c].insert(rest.to_string());
-        let stored = storage_for(store_as, duo_name, spec.dims());
+        let stored = storage_for(store_as, spec);
         tensors.push(Tensor { name: duo_name.to_string(), shape: spec.dims().to_vec(), values, store_as: stored });
         Ok(())
     })?;

@@ -350,6 +350,33 @@ pub fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
     }
 }
 
+/// `s[i] = e^(s[i] - max)` and their sum (a softmax's numerator and
+/// denominator): [`scalar::exp`] (Cephes-style polynomial, max relative
+/// error ~2e-7 vs libm); the AVX2 variant is bit-identical to the twin
+/// (same operations, no FMA, the same 8 lane sums). NEON takes the twin.
+#[inline]
+pub fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::exp_shifted_sum(s, max) },
+        _ => scalar::exp_shifted_sum(s, max),
+    }
+}
+
+/// Exact GELU in place, erf by Abramowitz & Stegun 7.1.26 (absolute error
+/// 1.5e-7) with [`scalar::exp`]; the AVX2 variant is bit-identical to the
+/// twin. NEON takes the twin.
+#[inline]
+pub fn gelu_inplace(x: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::gelu_inplace(x) },
+        _ => scalar::gelu_inplace(x),
+    }
+}
+
 /// `out[j] = q . k[j * stride ..][..q.len()]` for `j < out.len()` (one
 /// attention query against a run of key rows of a strided matrix; `k`
 /// holds at least `(out.len() - 1) * stride + q.len()` floats when

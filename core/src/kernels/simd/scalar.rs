@@ -220,3 +220,92 @@ pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
         *yi += a * f16_to_f32(wi);
     }
 }
+
+/// Constants of [`exp`] (Cephes `expf`: `x = n ln 2 + r`, ln 2 split in two
+/// parts for an exact `n ln 2`, a degree-5 polynomial in `r`).
+pub mod exp_c {
+    pub const HI: f32 = 88.3;
+    pub const LO: f32 = -87.3;
+    pub const LOG2E: f32 = core::f32::consts::LOG2_E;
+    pub const C1: f32 = 0.693_359_4;
+    pub const C2: f32 = -2.121_944_4e-4;
+    pub const P: [f32; 6] = [1.987_569_1e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 0.166_666_65, 0.500_000_01];
+}
+
+/// `e^x` (max relative error ~2e-7 against libm; 0 below -87.3, inputs
+/// above 88.3 read as 88.3, NaN stays NaN). Plain IEEE multiplies and adds
+/// (no FMA), so the SIMD variants are bit-identical to it.
+#[inline]
+pub fn exp(x: f32) -> f32 {
+    use exp_c::*;
+    let x = if x > HI { HI } else { x };
+    if x < LO {
+        return 0.0;
+    }
+    let fx = libm::floorf(x * LOG2E + 0.5);
+    let r = x - fx * C1;
+    let r = r - fx * C2;
+    let z = r * r;
+    let mut y = P[0];
+    for p in &P[1..] {
+        y = y * r + p;
+    }
+    let y = y * z + r + 1.0;
+    // 2^n with n = fx in [-126, 127] (NaN: any bits; y is NaN then).
+    let n = fx as i32;
+    y * f32::from_bits(((n + 127) as u32) << 23)
+}
+
+/// `s[i] = e^(s[i] - max)` ([`exp`]); returns their sum in 8 lane sums
+/// reduced like [`dot_f32`] (the softmax numerator and denominator).
+#[inline]
+pub fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
+    let n = s.len();
+    let (body, tail) = s.split_at_mut(n - n % 8);
+    let mut acc = [0.0f32; 8];
+    for c in body.chunks_exact_mut(8) {
+        for l in 0..8 {
+            c[l] = exp(c[l] - max);
+            acc[l] += c[l];
+        }
+    }
+    let mut t = 0.0f32;
+    for v in tail {
+        *v = exp(*v - max);
+        t += *v;
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + t
+}
+
+/// Constants of [`gelu`]: Abramowitz & Stegun 7.1.26 for erf (max absolute
+/// error 1.5e-7).
+pub mod erf_c {
+    pub const P: f32 = 0.327_591_1;
+    pub const A: [f32; 5] = [1.061_405_4, -1.453_152, 1.421_413_8, -0.284_496_74, 0.254_829_6];
+}
+
+/// Exact GELU (`nn.GELU()` default) `0.5 x (1 + erf(x / sqrt 2))`, erf by
+/// [`erf_c`] with [`exp`]; plain multiplies, adds and one divide, so the
+/// SIMD variants are bit-identical to it.
+#[inline]
+pub fn gelu(x: f32) -> f32 {
+    use erf_c::*;
+    let u = x * core::f32::consts::FRAC_1_SQRT_2;
+    let a = if u < 0.0 { -u } else { u };
+    let t = 1.0 / (1.0 + P * a);
+    let mut y = A[0];
+    for c in &A[1..] {
+        y = y * t + c;
+    }
+    let e = 1.0 - y * t * exp(-(a * a));
+    let erf = if u < 0.0 { -e } else { e };
+    0.5 * x * (1.0 + erf)
+}
+
+/// [`gelu`] over a slice.
+#[inline]
+pub fn gelu_inplace(x: &mut [f32]) {
+    for v in x {
+        *v = gelu(*v);
+    }
+}

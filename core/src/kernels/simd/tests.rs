@@ -678,3 +678,75 @@ fn q4_matches_its_q8_expansion_bit_for_bit() {
         }
     }
 }
+
+/// Inputs for the exp / GELU twins: a dense sweep, the clamp edges, the
+/// zero region, and pseudo-random scores.
+fn exp_inputs() -> std::vec::Vec<f32> {
+    let mut v: std::vec::Vec<f32> = (-4000..=4000).map(|i| i as f32 * 0.0231).collect();
+    v.extend([0.0, -0.0, 1e-30, -1e-30, 88.29, 88.3, 88.31, 200.0, -87.29, -87.3, -87.31, -200.0, f32::NEG_INFINITY, f32::INFINITY, f32::MIN_POSITIVE]);
+    let mut r = Rng(99);
+    v.extend((0..997).map(|_| r.f() * 30.0));
+    v
+}
+
+/// `exp_shifted_sum` (AVX2) is bit-identical to its scalar twin, values and
+/// sum, on every length tail; the twin is within 2.5e-7 relative of libm.
+#[test]
+#[allow(unsafe_code)]
+fn exp_matches_scalar_twin_and_libm() {
+    let xs = exp_inputs();
+    for &x in &xs {
+        let (got, want) = (scalar::exp(x), libm::expf(x.min(88.3)));
+        if x >= -87.3 {
+            let rel = ((got as f64 - want as f64) / want as f64).abs();
+            assert!(rel <= 2.5e-7, "exp({x}) = {got}, libm {want}: rel {rel:e}");
+        } else {
+            assert_eq!(got, 0.0, "exp({x})");
+        }
+    }
+    assert!(scalar::exp(f32::NAN).is_nan());
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        for n in (0..=40).chain([63, 64, 65, 290, xs.len()]) {
+            let max = xs[..n].iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+            let (mut a, mut b) = (xs[..n].to_vec(), xs[..n].to_vec());
+            let sa = scalar::exp_shifted_sum(&mut a, max);
+            // SAFETY: avx2 detected.
+            let sb = unsafe { super::x86::exp_shifted_sum(&mut b, max) };
+            assert_eq!(sa.to_bits(), sb.to_bits(), "sum n={n}");
+            for (i, (p, q)) in a.iter().zip(&b).enumerate() {
+                assert_eq!(p.to_bits(), q.to_bits(), "n={n} i={i} x={}", xs[i]);
+            }
+        }
+        let (mut a, mut b) = ([f32::NAN; 9], [f32::NAN; 9]);
+        scalar::exp_shifted_sum(&mut a, 0.0);
+        // SAFETY: avx2 detected.
+        unsafe { super::x86::exp_shifted_sum(&mut b, 0.0) };
+        assert!(a.iter().chain(&b).all(|v| v.is_nan()), "NaN stays NaN");
+    }
+}
+
+/// GELU (AVX2) is bit-identical to its scalar twin; the twin is within
+/// 1e-7 (1 + |x|) of `0.5 x (1 + libm::erff(x / sqrt 2))`.
+#[test]
+#[allow(unsafe_code)]
+fn gelu_matches_scalar_twin_and_libm() {
+    let xs: std::vec::Vec<f32> = exp_inputs().into_iter().filter(|v| v.is_finite()).collect();
+    for &x in &xs {
+        let want = 0.5 * x as f64 * (1.0 + libm::erff(x * core::f32::consts::FRAC_1_SQRT_2) as f64);
+        let got = scalar::gelu(x) as f64;
+        assert!((got - want).abs() <= 1e-7 * (1.0 + x.abs() as f64), "gelu({x}) = {got}, libm {want}");
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        for n in (0..=20).chain([64, 65, xs.len()]) {
+            let (mut a, mut b) = (xs[..n].to_vec(), xs[..n].to_vec());
+            scalar::gelu_inplace(&mut a);
+            // SAFETY: avx2 detected.
+            unsafe { super::x86::gelu_inplace(&mut b) };
+            for (i, (p, q)) in a.iter().zip(&b).enumerate() {
+                assert_eq!(p.to_bits(), q.to_bits(), "n={n} x={}", xs[i]);
+            }
+        }
+    }
+}

@@ -831,3 +831,93 @@ pub unsafe fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
         *yi += a * super::f16_to_f32(*wi);
     }
 }
+
+/// [`super::scalar::exp`] on 8 lanes, the same operations in the same
+/// order (no FMA): bit-identical.
+///
+/// # Safety
+/// The CPU must support avx2.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn exp8(x: __m256) -> __m256 {
+    use super::scalar::exp_c::*;
+    // min(HI, x) keeps a NaN x (the second operand is returned on NaN).
+    let x = _mm256_min_ps(_mm256_set1_ps(HI), x);
+    let below = _mm256_cmp_ps::<_CMP_LT_OQ>(x, _mm256_set1_ps(LO));
+    let fx = _mm256_floor_ps(_mm256_add_ps(_mm256_mul_ps(x, _mm256_set1_ps(LOG2E)), _mm256_set1_ps(0.5)));
+    let r = _mm256_sub_ps(x, _mm256_mul_ps(fx, _mm256_set1_ps(C1)));
+    let r = _mm256_sub_ps(r, _mm256_mul_ps(fx, _mm256_set1_ps(C2)));
+    let z = _mm256_mul_ps(r, r);
+    let mut y = _mm256_set1_ps(P[0]);
+    for &p in &P[1..] {
+        y = _mm256_add_ps(_mm256_mul_ps(y, r), _mm256_set1_ps(p));
+    }
+    let y = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(y, z), r), _mm256_set1_ps(1.0));
+    let n = _mm256_cvtps_epi32(fx);
+    let pow2n = _mm256_castsi256_ps(_mm256_slli_epi32::<23>(_mm256_add_epi32(n, _mm256_set1_epi32(127))));
+    _mm256_andnot_ps(below, _mm256_mul_ps(y, pow2n))
+}
+
+/// See [`super::exp_shifted_sum`] (8 lane sums, reduced as the twin does).
+///
+/// # Safety
+/// The CPU must support avx2.
+#[target_feature(enable = "avx2")]
+pub unsafe fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
+    let n = s.len();
+    let (body, tail) = s.split_at_mut(n - n % 8);
+    let m = _mm256_set1_ps(max);
+    let mut acc = _mm256_setzero_ps();
+    for c in body.chunks_exact_mut(8) {
+        // SAFETY: c holds 8 floats.
+        unsafe {
+            let e = exp8(_mm256_sub_ps(_mm256_loadu_ps(c.as_ptr()), m));
+            _mm256_storeu_ps(c.as_mut_ptr(), e);
+            acc = _mm256_add_ps(acc, e);
+        }
+    }
+    let mut a = [0f32; 8];
+    // SAFETY: a holds 8 floats.
+    unsafe { _mm256_storeu_ps(a.as_mut_ptr(), acc) };
+    let mut t = 0.0f32;
+    for v in tail {
+        *v = super::scalar::exp(*v - max);
+        t += *v;
+    }
+    ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + t
+}
+
+/// See [`super::gelu_inplace`]: [`super::scalar::gelu`] on 8 lanes, the
+/// same operations in the same order (bit-identical).
+///
+/// # Safety
+/// The CPU must support avx2.
+#[target_feature(enable = "avx2")]
+pub unsafe fn gelu_inplace(x: &mut [f32]) {
+    use super::scalar::erf_c::*;
+    let n = x.len();
+    let (body, tail) = x.split_at_mut(n - n % 8);
+    let sign = _mm256_set1_ps(-0.0);
+    for c in body.chunks_exact_mut(8) {
+        // SAFETY: c holds 8 floats.
+        unsafe {
+            let xv = _mm256_loadu_ps(c.as_ptr());
+            let u = _mm256_mul_ps(xv, _mm256_set1_ps(core::f32::consts::FRAC_1_SQRT_2));
+            let neg = _mm256_cmp_ps::<_CMP_LT_OQ>(u, _mm256_setzero_ps());
+            let a = _mm256_blendv_ps(u, _mm256_xor_ps(u, sign), neg);
+            let t = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_add_ps(_mm256_set1_ps(1.0), _mm256_mul_ps(_mm256_set1_ps(P), a)));
+            let mut y = _mm256_set1_ps(A[0]);
+            for &cf in &A[1..] {
+                y = _mm256_add_ps(_mm256_mul_ps(y, t), _mm256_set1_ps(cf));
+            }
+            let e = exp8(_mm256_xor_ps(_mm256_mul_ps(a, a), sign));
+            let e = _mm256_sub_ps(_mm256_set1_ps(1.0), _mm256_mul_ps(_mm256_mul_ps(y, t), e));
+            let erf = _mm256_blendv_ps(e, _mm256_xor_ps(e, sign), neg);
+            let g = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(0.5), xv), _mm256_add_ps(_mm256_set1_ps(1.0), erf));
+            _mm256_storeu_ps(c.as_mut_ptr(), g);
+        }
+    }
+    for v in tail {
+        *v = super::scalar::gelu(*v);
+    }
+}
