@@ -94,4 +94,43 @@ fn main() {
         line += &format!("  [{isa:?}] {:.2} ms", s * 1e3);
     }
     println!("{line}");
+    // The softmax exponentials and the MLP's GELU against libm in the same run
+    // (the R step's 290-key scores; one MLP hidden of 290 rows).
+    let libm_exp = |s: &mut [f32], max: f32| s.iter_mut().fold(0.0f32, |a, v| {
+        *v = libm::expf(*v - max);
+        a + *v
+    });
+    let libm_gelu = |x: &mut [f32]| x.iter_mut().for_each(|v| *v = 0.5 * *v * (1.0 + libm::erff(*v * std::f32::consts::FRAC_1_SQRT_2)));
+    let x0: Vec<f32> = r.vec(290 * 4 * c).iter().map(|v| v * 4.0).collect();
+    let mut x = x0.clone();
+    let mut line = format!("exp (softmax, rows of 290) / GELU ({} values):", x0.len());
+    let t_libm_exp = time(reps, || {
+        x.copy_from_slice(&x0);
+        for row in x.chunks_mut(290) {
+            std::hint::black_box(libm_exp(row, 1.0));
+        }
+    });
+    let t_libm_gelu = time(reps, || {
+        x.copy_from_slice(&x0);
+        libm_gelu(&mut x);
+        std::hint::black_box(&x);
+    });
+    line += &format!("  [libm] exp {:.2} ms, GELU {:.2} ms", t_libm_exp * 1e3, t_libm_gelu * 1e3);
+    for isa in &isas {
+        // SAFETY: as above.
+        unsafe { simd::set_isa(*isa) };
+        let te = time(reps, || {
+            x.copy_from_slice(&x0);
+            for row in x.chunks_mut(290) {
+                std::hint::black_box(simd::exp_shifted_sum(row, 1.0));
+            }
+        });
+        let tg = time(reps, || {
+            x.copy_from_slice(&x0);
+            simd::gelu_inplace(&mut x);
+            std::hint::black_box(&x);
+        });
+        line += &format!("  [{isa:?}] exp {:.2} ms ({:.1}x libm), GELU {:.2} ms ({:.1}x libm)", te * 1e3, t_libm_exp / te, tg * 1e3, t_libm_gelu / tg);
+    }
+    println!("{line}");
 }

@@ -352,27 +352,33 @@ pub fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
 
 /// `s[i] = e^(s[i] - max)` and their sum (a softmax's numerator and
 /// denominator): [`scalar::exp`] (Cephes-style polynomial, max relative
-/// error ~2e-7 vs libm); the AVX2 variant is bit-identical to the twin
-/// (same operations, no FMA, the same 8 lane sums). NEON takes the twin.
+/// error ~2e-7 vs libm); the AVX2 and NEON variants are bit-identical to
+/// the twin (same operations, no FMA, the same 8 lane sums).
 #[inline]
 pub fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
         Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::exp_shifted_sum(s, max) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::exp_shifted_sum(s, max) },
         _ => scalar::exp_shifted_sum(s, max),
     }
 }
 
 /// Exact GELU in place, erf by Abramowitz & Stegun 7.1.26 (absolute error
-/// 1.5e-7) with [`scalar::exp`]; the AVX2 variant is bit-identical to the
-/// twin. NEON takes the twin.
+/// 1.5e-7) with [`scalar::exp`]; the AVX2 and NEON variants are
+/// bit-identical to the twin on finite inputs.
 #[inline]
 pub fn gelu_inplace(x: &mut [f32]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
         Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::gelu_inplace(x) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::gelu_inplace(x) },
         _ => scalar::gelu_inplace(x),
     }
 }

@@ -305,3 +305,101 @@ pub unsafe fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
         *o = unsafe { dot_f32(q, &k[j * stride..j * stride + hd]) };
     }
 }
+
+/// [`super::scalar::exp`] on 4 lanes, the same operations in the same
+/// order (no FMA): bit-identical.
+///
+/// # Safety
+/// NEON must be available.
+#[inline]
+#[target_feature(enable = "neon")]
+unsafe fn exp4(x: float32x4_t) -> float32x4_t {
+    use super::scalar::exp_c::*;
+    // fminnm would drop a NaN; fmin keeps it, like the twin.
+    let x = vminq_f32(x, vdupq_n_f32(HI));
+    let below = vcltq_f32(x, vdupq_n_f32(LO));
+    let fx = vrndmq_f32(vaddq_f32(vmulq_f32(x, vdupq_n_f32(LOG2E)), vdupq_n_f32(0.5)));
+    let r = vsubq_f32(x, vmulq_f32(fx, vdupq_n_f32(C1)));
+    let r = vsubq_f32(r, vmulq_f32(fx, vdupq_n_f32(C2)));
+    let z = vmulq_f32(r, r);
+    let mut y = vdupq_n_f32(P[0]);
+    for &p in &P[1..] {
+        y = vaddq_f32(vmulq_f32(y, r), vdupq_n_f32(p));
+    }
+    let y = vaddq_f32(vaddq_f32(vmulq_f32(y, z), r), vdupq_n_f32(1.0));
+    let n = vcvtq_s32_f32(fx);
+    let pow2n = vreinterpretq_f32_s32(vshlq_n_s32::<23>(vaddq_s32(n, vdupq_n_s32(127))));
+    vreinterpretq_f32_u32(vbicq_u32(vreinterpretq_u32_f32(vmulq_f32(y, pow2n)), below))
+}
+
+/// See [`super::exp_shifted_sum`] (the twin's 8 lane sums as two 4-lane
+/// accumulators, reduced the same way).
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
+    let n = s.len();
+    let (body, tail) = s.split_at_mut(n - n % 8);
+    let m = vdupq_n_f32(max);
+    let (mut lo, mut hi) = (vdupq_n_f32(0.0), vdupq_n_f32(0.0));
+    for c in body.chunks_exact_mut(8) {
+        let (a, b) = c.split_at_mut(4);
+        // SAFETY: a and b hold 4 floats each.
+        unsafe {
+            let ea = exp4(vsubq_f32(vld1q_f32(a.as_ptr()), m));
+            let eb = exp4(vsubq_f32(vld1q_f32(b.as_ptr()), m));
+            vst1q_f32(a.as_mut_ptr(), ea);
+            vst1q_f32(b.as_mut_ptr(), eb);
+            lo = vaddq_f32(lo, ea);
+            hi = vaddq_f32(hi, eb);
+        }
+    }
+    let mut a = [0f32; 8];
+    let (al, ah) = a.split_at_mut(4);
+    // SAFETY: 4 floats each.
+    unsafe {
+        vst1q_f32(al.as_mut_ptr(), lo);
+        vst1q_f32(ah.as_mut_ptr(), hi);
+    }
+    let mut t = 0.0f32;
+    for v in tail {
+        *v = super::scalar::exp(*v - max);
+        t += *v;
+    }
+    ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + t
+}
+
+/// See [`super::gelu_inplace`]: [`super::scalar::gelu`] on 4 lanes, the
+/// same operations in the same order (bit-identical on finite inputs).
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn gelu_inplace(x: &mut [f32]) {
+    use super::scalar::erf_c::*;
+    let n = x.len();
+    let (body, tail) = x.split_at_mut(n - n % 4);
+    let one = vdupq_n_f32(1.0);
+    for c in body.chunks_exact_mut(4) {
+        // SAFETY: c holds 4 floats.
+        unsafe {
+            let xv = vld1q_f32(c.as_ptr());
+            let u = vmulq_f32(xv, vdupq_n_f32(core::f32::consts::FRAC_1_SQRT_2));
+            let neg = vcltq_f32(u, vdupq_n_f32(0.0));
+            let a = vbslq_f32(neg, vnegq_f32(u), u);
+            let t = vdivq_f32(one, vaddq_f32(one, vmulq_f32(vdupq_n_f32(P), a)));
+            let mut y = vdupq_n_f32(A[0]);
+            for &cf in &A[1..] {
+                y = vaddq_f32(vmulq_f32(y, t), vdupq_n_f32(cf));
+            }
+            let e = exp4(vnegq_f32(vmulq_f32(a, a)));
+            let e = vsubq_f32(one, vmulq_f32(vmulq_f32(y, t), e));
+            let erf = vbslq_f32(neg, vnegq_f32(e), e);
+            vst1q_f32(c.as_mut_ptr(), vmulq_f32(vmulq_f32(vdupq_n_f32(0.5), xv), vaddq_f32(one, erf)));
+        }
+    }
+    for v in tail {
+        *v = super::scalar::gelu(*v);
+    }
+}

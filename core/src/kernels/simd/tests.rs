@@ -724,6 +724,18 @@ fn exp_matches_scalar_twin_and_libm() {
         unsafe { super::x86::exp_shifted_sum(&mut b, 0.0) };
         assert!(a.iter().chain(&b).all(|v| v.is_nan()), "NaN stays NaN");
     }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    for n in (0..=40).chain([63, 64, 65, 290, xs.len()]) {
+        let max = xs[..n].iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+        let (mut a, mut b) = (xs[..n].to_vec(), xs[..n].to_vec());
+        let sa = scalar::exp_shifted_sum(&mut a, max);
+        // SAFETY: NEON is enabled for this build.
+        let sb = unsafe { super::neon::exp_shifted_sum(&mut b, max) };
+        assert_eq!(sa.to_bits(), sb.to_bits(), "neon sum n={n}");
+        for (i, (p, q)) in a.iter().zip(&b).enumerate() {
+            assert_eq!(p.to_bits(), q.to_bits(), "neon n={n} i={i} x={}", xs[i]);
+        }
+    }
 }
 
 /// GELU (AVX2) is bit-identical to its scalar twin; the twin is within
@@ -747,6 +759,16 @@ fn gelu_matches_scalar_twin_and_libm() {
             for (i, (p, q)) in a.iter().zip(&b).enumerate() {
                 assert_eq!(p.to_bits(), q.to_bits(), "n={n} x={}", xs[i]);
             }
+        }
+    }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    for n in (0..=20).chain([64, 65, xs.len()]) {
+        let (mut a, mut b) = (xs[..n].to_vec(), xs[..n].to_vec());
+        scalar::gelu_inplace(&mut a);
+        // SAFETY: NEON is enabled for this build.
+        unsafe { super::neon::gelu_inplace(&mut b) };
+        for (i, (p, q)) in a.iter().zip(&b).enumerate() {
+            assert_eq!(p.to_bits(), q.to_bits(), "neon n={n} x={}", xs[i]);
         }
     }
 }
