@@ -63,6 +63,8 @@ trait Q8Source: RowMatrix {
     fn new_buf() -> Self::Buf;
     /// Rows `rows` (N <= `simd::PACK_ROWS`) as stored Q8Block32 rows.
     fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut Self::Buf) -> [&'s [u8]; N];
+    /// The stored bytes of rows `r0..r1` (for [`simd::prefetch`]).
+    fn stored_rows(&self, r0: usize, r1: usize) -> &[u8];
 }
 
 impl Q8Source for Q8Rows<'_> {
@@ -72,6 +74,10 @@ impl Q8Source for Q8Rows<'_> {
     #[inline]
     fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], _: &'s mut ()) -> [&'s [u8]; N] {
         rows.map(|r| self.row(r))
+    }
+    #[inline]
+    fn stored_rows(&self, r0: usize, r1: usize) -> &[u8] {
+        self.rows_bytes(r0, r1)
     }
 }
 
@@ -89,6 +95,10 @@ impl Q8Source for Q4Rows<'_> {
         }
         let buf: &'s Self::Buf = buf;
         core::array::from_fn(|j| &buf[j.min(simd::PACK_ROWS - 1)][..n])
+    }
+    #[inline]
+    fn stored_rows(&self, r0: usize, r1: usize) -> &[u8] {
+        self.rows_bytes(r0, r1)
     }
 }
 
@@ -225,6 +235,7 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, y: &mut [f32], p: &Q8Pa
         for (s, r) in ws.iter_mut().zip(&wr) {
             simd::q8_scales(r, &mut s[..nb]);
         }
+        simd::prefetch(w.stored_rows(t0 + TN, t0 + 2 * TN));
         let wd: [&[f32]; TN] = core::array::from_fn(|j| &ws[j][..nb]);
         let mut i0 = p0;
         while i0 < p1 {
@@ -278,6 +289,8 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, y: &mut [f32], p: &Q8P
         let nt = R.min(n_out - t0);
         let wr = w.q8_rows(core::array::from_fn(|j| t0 + j.min(nt - 1)), &mut buf);
         simd::q8_pack8(wr, nb, &mut pack);
+        // The next tile's weights stream in while this one is multiplied.
+        simd::prefetch(w.stored_rows(t0 + R, t0 + 2 * R));
         let mut i0 = p0;
         while i0 < p1 {
             let mt = R.min(p1 - i0);

@@ -233,6 +233,12 @@ impl<'a> Q8Rows<'a> {
         let rb = self.cols / Q8_BLOCK * Q8_BLOCK_BYTES;
         &self.data[r * rb..(r + 1) * rb]
     }
+    /// Stored bytes of rows `r0..r1` (clamped to the matrix; contiguous).
+    pub fn rows_bytes(&self, r0: usize, r1: usize) -> &'a [u8] {
+        let rb = self.cols / Q8_BLOCK * Q8_BLOCK_BYTES;
+        let (r0, r1) = (r0.min(self.rows), r1.min(self.rows));
+        &self.data[r0 * rb..r1.max(r0) * rb]
+    }
     /// `f(column block start, scale, 32 quantised values)` for each block of row `r`.
     fn for_blocks(&self, r: usize, mut f: impl FnMut(usize, f32, &[u8])) {
         for (b, blk) in self.row(r).chunks_exact(Q8_BLOCK_BYTES).enumerate() {
@@ -332,6 +338,12 @@ impl<'a> Q4Rows<'a> {
     pub fn row(&self, r: usize) -> &'a [u8] {
         let rb = self.cols / Q8_BLOCK * Q4_BLOCK_BYTES;
         &self.data[r * rb..(r + 1) * rb]
+    }
+    /// Stored bytes of rows `r0..r1` (clamped to the matrix; contiguous).
+    pub fn rows_bytes(&self, r0: usize, r1: usize) -> &'a [u8] {
+        let rb = self.cols / Q8_BLOCK * Q4_BLOCK_BYTES;
+        let (r0, r1) = (r0.min(self.rows), r1.min(self.rows));
+        &self.data[r0 * rb..r1.max(r0) * rb]
     }
     /// Blocks `b0 .. b0 + nb` (`nb <= CHUNK_BLOCKS`) of row `r` as Q8 blocks in `buf`.
     fn expand<'b>(&self, r: usize, b0: usize, nb: usize, buf: &'b mut [u8; CHUNK_BLOCKS * Q8_BLOCK_BYTES]) -> &'b [u8] {

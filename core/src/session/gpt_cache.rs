@@ -14,7 +14,7 @@ use crate::session::MAX_BATCH;
 use heapless::Vec;
 use crate::coordinated_attention::{FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::{Buffer, Error};
-use crate::kernels::Mask;
+use crate::kernels::{simd, Mask};
 use crate::model::GptW;
 
 /// Causal over window rows for a position-major layout: query row `qi`
@@ -80,12 +80,6 @@ fn store_f16(x: &mut [f32], dst: &mut [u16]) {
         let h = half::f16::from_f32(*a);
         *d = h.to_bits();
         *a = h.to_f32();
-    }
-}
-
-fn widen_f16(src: &[u16], dst: &mut [f32]) {
-    for (s, d) in src.iter().zip(dst.iter_mut()) {
-        *d = half::f16::from_bits(*s).to_f32();
     }
 }
 
@@ -161,8 +155,8 @@ impl<'s> GptCache<'s> {
                 store_f16(v, &mut vc[a..b]);
                 kv.k[r0 * c..r1 * c].copy_from_slice(k);
                 kv.v[r0 * c..r1 * c].copy_from_slice(v);
-                widen_f16(&kc[base..a], &mut kv.k[..r0 * c]);
-                widen_f16(&vc[base..a], &mut kv.v[..r0 * c]);
+                simd::widen_f16(&kc[base..a], &mut kv.k[..r0 * c]);
+                simd::widen_f16(&vc[base..a], &mut kv.v[..r0 * c]);
             }
             _ => return Err(Error::State),
         }

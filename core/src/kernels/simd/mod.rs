@@ -136,6 +136,42 @@ pub fn f16_to_f32(bits: u16) -> f32 {
     half::f16::from_bits(bits).to_f32()
 }
 
+/// `dst[i] = f32(src[i])` for binary16 bits, exact (the f16 K/V cache
+/// widened for the attention), over the shorter length.
+#[inline]
+pub fn widen_f16(src: &[u16], dst: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx2 implies f16c).
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::widen_f16(src, dst) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::widen_f16(src, dst) },
+        _ => scalar::widen_f16(src, dst),
+    }
+}
+
+/// Hints the CPU to bring `bytes` into cache (one prefetch per 64-byte
+/// line; x86 `prefetcht0`, aarch64 `prfm pldl1keep`; nothing elsewhere).
+/// Changes no result: the weight streams of the int8 GEMMs call it one
+/// tile ahead so memory reads overlap the multiplies.
+#[inline]
+pub fn prefetch(bytes: &[u8]) {
+    #[cfg(target_arch = "x86_64")]
+    for line in bytes.chunks(64) {
+        // SAFETY: a prefetch is a hint with no architectural effect; the
+        // address lies inside `bytes` (sse is baseline on x86_64).
+        unsafe { core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(line.as_ptr() as *const i8) };
+    }
+    #[cfg(target_arch = "aarch64")]
+    for line in bytes.chunks(64) {
+        // SAFETY: as above; `prfm` neither faults nor writes.
+        unsafe { core::arch::asm!("prfm pldl1keep, [{0}]", in(reg) line.as_ptr(), options(nostack, readonly, preserves_flags)) };
+    }
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    let _ = bytes;
+}
+
 /// `a . b` (f32 weights or activations).
 #[inline]
 pub fn dot_f32(a: &[f32], b: &[f32]) -> f32 {

@@ -403,3 +403,21 @@ pub unsafe fn gelu_inplace(x: &mut [f32]) {
         *v = super::scalar::gelu(*v);
     }
 }
+
+/// See [`super::widen_f16`] (exact: bit-identical to the twin).
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn widen_f16(src: &[u16], dst: &mut [f32]) {
+    let n = src.len().min(dst.len());
+    let (src, dst) = (&src[..n], &mut dst[..n]);
+    let n4 = n - n % 4;
+    let (s4, s1) = src.split_at(n4);
+    let (d4, d1) = dst.split_at_mut(n4);
+    for (s, d) in s4.chunks_exact(4).zip(d4.chunks_exact_mut(4)) {
+        // SAFETY: s holds 4 u16, d 4 floats.
+        unsafe { vst1q_f32(d.as_mut_ptr(), f16x4_to_f32(vld1_u16(s.as_ptr()))) };
+    }
+    super::scalar::widen_f16(s1, d1);
+}

@@ -309,3 +309,11 @@ pub fn gelu_inplace(x: &mut [f32]) {
         *v = gelu(*v);
     }
 }
+
+/// `dst[i] = f32(src[i])` for binary16 bits (exact) over the shorter length.
+#[inline]
+pub fn widen_f16(src: &[u16], dst: &mut [f32]) {
+    for (s, d) in src.iter().zip(dst.iter_mut()) {
+        *d = f16_to_f32(*s);
+    }
+}

@@ -772,3 +772,38 @@ fn gelu_matches_scalar_twin_and_libm() {
         }
     }
 }
+
+/// `widen_f16` (F16C / NEON) is bit-identical to its twin on every binary16
+/// pattern (NaNs compared as NaN), at every tail length.
+#[test]
+#[allow(unsafe_code)]
+fn widen_f16_matches_scalar_twin() {
+    let all: std::vec::Vec<u16> = (0..=u16::MAX).collect();
+    let mut want = std::vec![0.0f32; all.len()];
+    scalar::widen_f16(&all, &mut want);
+    for (h, w) in all.iter().zip(&want) {
+        let exact = half::f16::from_bits(*h).to_f32();
+        assert!(w.to_bits() == exact.to_bits() || (w.is_nan() && exact.is_nan()), "{h:#06x}");
+    }
+    let same = |a: &[f32], b: &[f32], what: &str| {
+        for (i, (x, y)) in a.iter().zip(b).enumerate() {
+            assert!(x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()), "{what} {:#06x}", all[i]);
+        }
+    };
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("f16c") {
+        for n in (0..=17).chain([all.len()]) {
+            let mut got = std::vec![0.0f32; n];
+            // SAFETY: avx2 and f16c detected.
+            unsafe { super::x86::widen_f16(&all[..n], &mut got) };
+            same(&got, &want[..n], "avx2");
+        }
+    }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    for n in (0..=17).chain([all.len()]) {
+        let mut got = std::vec![0.0f32; n];
+        // SAFETY: NEON is enabled for this build.
+        unsafe { super::neon::widen_f16(&all[..n], &mut got) };
+        same(&got, &want[..n], "neon");
+    }
+}

@@ -921,3 +921,21 @@ pub unsafe fn gelu_inplace(x: &mut [f32]) {
         *v = super::scalar::gelu(*v);
     }
 }
+
+/// See [`super::widen_f16`] (F16C, exact: bit-identical to the twin).
+///
+/// # Safety
+/// The CPU must support avx2 and f16c.
+#[target_feature(enable = "avx2,f16c")]
+pub unsafe fn widen_f16(src: &[u16], dst: &mut [f32]) {
+    let n = src.len().min(dst.len());
+    let (src, dst) = (&src[..n], &mut dst[..n]);
+    let n8 = n - n % 8;
+    let (s8, s1) = src.split_at(n8);
+    let (d8, d1) = dst.split_at_mut(n8);
+    for (s, d) in s8.chunks_exact(8).zip(d8.chunks_exact_mut(8)) {
+        // SAFETY: s holds 8 u16 (128 bits), d 8 floats.
+        unsafe { _mm256_storeu_ps(d.as_mut_ptr(), _mm256_cvtph_ps(_mm_loadu_si128(s.as_ptr() as *const __m128i))) };
+    }
+    super::scalar::widen_f16(s1, d1);
+}
