@@ -92,6 +92,11 @@ fn seed_of(i: usize) -> [u32; 5] {
 /// Runs `n` sessions of `model` over the clip, alone or together
 /// (`batched`), and returns each session's trace.
 fn run(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: bool) -> Vec<Trace> {
+    run_in(model, base, c, n, batched, n)
+}
+
+/// [`run`] with a `StepBatch` of capacity `cap` (>= n) for the batched run.
+fn run_in(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: bool, cap: usize) -> Vec<Trace> {
     let n_music = model.cfg.gpt.music.n_in as usize;
     let leaders: Vec<Vec<f32>> = (0..n).map(|i| leader_of(c, i)).collect();
     let cfgs: Vec<SessionConfig> = (0..n).map(|i| config_of(base, i)).collect();
@@ -103,8 +108,8 @@ fn run(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: boo
             s.set_music_track(&c.music).unwrap();
         }
     }
-    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, base, n).unwrap()];
-    let mut batch = StepBatch::new(&model.cfg, base, n, &mut batch_arena).unwrap();
+    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, base, cap).unwrap()];
+    let mut batch = StepBatch::new(&model.cfg, base, cap, &mut batch_arena).unwrap();
     let mut traces: Vec<Trace> = (0..n).map(|_| Trace { steps: Vec::new(), frames: Vec::new() }).collect();
     let frames = c.leader.len() / 165;
     let mut f = FollowerFrame::default();
@@ -157,6 +162,32 @@ fn batched_sessions_match_their_own_runs_bit_for_bit() {
             }
             // The sessions really differ from each other (else the test could not see a mix-up).
             assert_ne!(alone[0].frames, alone[1].frames, "{name} {label}");
+        }
+    }
+}
+
+/// A re-prefill runs in chunks of `REPREFILL_CHUNK` window rows in a
+/// session's own step, and in one call through a `StepBatch` of capacity
+/// 32 (32 window rows >= a whole window): the numbers are the same bit for
+/// bit, and the chunked run really did re-prefill more than a chunk.
+#[test]
+fn chunked_reprefill_matches_one_call_bit_for_bit() {
+    use duolando_core::session::REPREFILL_CHUNK;
+    for (name, store, rollout) in [("tiny", StoreAs::F32, "rollout_tiny_long"), ("tiny", StoreAs::Q8Block32, "rollout_tiny_long")] {
+        let file = convert(name, store);
+        let duo = file.duo().unwrap();
+        let model = Model::from_duo(&duo).unwrap();
+        let m = model.cfg.gpt.block_size as usize - 1;
+        let c = clip(rollout);
+        for (label, sc) in configs(&model) {
+            assert!(sc.shift as usize > REPREFILL_CHUNK || sc.staggered, "{label}: shift {} does not need chunks", sc.shift);
+            assert!(32 >= m, "capacity 32 holds a window of {m} rows");
+            let chunked = run(&model, &sc, &c, 1, false);
+            let one_call = run_in(&model, &sc, &c, 1, true, 32);
+            assert!(chunked[0].steps.iter().flatten().count() > sc.shift as usize + 2, "{label}: too few steps to re-prefill");
+            if let Some(d) = first_difference(&chunked[0], &one_call[0]) {
+                panic!("{name} {store:?} {label}: chunked re-prefill differs from one call: {d}");
+            }
         }
     }
 }

@@ -20,13 +20,19 @@ pub struct BlockScratch<'s> {
     pub att: &'s mut [f32],
     /// (rows, 4C) MLP hidden.
     pub hid: &'s mut [f32],
-    /// (rows) attention scores of one query.
+    /// (max(rows, keys)) attention scores of one query.
     pub scores: &'s mut [f32],
     pub rows: usize,
 }
 
 impl<'s> BlockScratch<'s> {
+    /// For blocks over at most `rows` rows whose queries see at most `rows` keys.
     pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, c: usize) -> Result<Self, ArenaError> {
+        Self::carve_keys(a, rows, rows, c)
+    }
+    /// For blocks over at most `rows` rows whose queries see at most
+    /// `keys` keys (a chunk of rows attending a longer cache).
+    pub fn carve_keys<A: Carve<'s>>(a: &mut A, rows: usize, keys: usize, c: usize) -> Result<Self, ArenaError> {
         let rc = rows.checked_mul(c).ok_or(ArenaError::Overflow)?;
         Ok(BlockScratch {
             ln: a.f32(rc)?,
@@ -35,7 +41,7 @@ impl<'s> BlockScratch<'s> {
             v: a.f32(rc)?,
             att: a.f32(rc)?,
             hid: a.f32(rc.checked_mul(4).ok_or(ArenaError::Overflow)?)?,
-            scores: a.f32(rows)?,
+            scores: a.f32(rows.max(keys))?,
             rows,
         })
     }

@@ -33,15 +33,26 @@ use crate::session::{Session, SessionConfig};
 /// one batched call).
 pub const MAX_BATCH: usize = 64;
 
+/// Window rows one GPT call appends at most for a session alone: a
+/// re-prefill (up to `block_size - 1` rows at a window jump) runs in
+/// chunks of this many rows, so the block scratch holds 8 window rows
+/// (80 stream rows) rather than a whole window (290). Chunks give the same
+/// numbers as one call (row-independent kernels; a chunk's rows attend the
+/// cached rows before them and themselves, as they would in one call); a
+/// re-prefill then reads the weights `ceil(rows / 8)` times.
+pub const REPREFILL_CHUNK: usize = 8;
+
 /// Sizes of a [`StepScratch`]; a session fits a scratch whose every size is
 /// at least the session's own.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct StepDims {
     /// Sessions (LAT pushes, head rows) at once.
     pub n: usize,
-    /// GPT rows (window rows x streams) at once: at least one whole window.
+    /// GPT rows (window rows x streams) at once: [`REPREFILL_CHUNK`] window
+    /// rows per session alone, one window row per session of a batch. A
+    /// longer append (a re-prefill) runs in chunks of this many rows.
     pub rows: usize,
-    /// Attention keys of one LAT query.
+    /// Attention keys of one query: a LAT's band or a whole GPT window.
     pub keys: usize,
     pub c: usize,
     /// Widest LAT input (C for the leader LATs, n_music for the music LAT).
@@ -60,10 +71,11 @@ impl StepDims {
         let past = sc.lat_past as usize;
         let keys = max_keys(past * mds, sc.music_lookahead as usize * mds).max(max_keys(past * lds, sc.lookahead as usize * lds));
         let window = streams.checked_mul(m).ok_or(ArenaError::Overflow)?;
+        let chunk = streams.checked_mul(REPREFILL_CHUNK.min(m.max(1))).ok_or(ArenaError::Overflow)?;
         Ok(StepDims {
             n,
-            rows: window.max(n.checked_mul(streams).ok_or(ArenaError::Overflow)?),
-            keys,
+            rows: chunk.max(n.checked_mul(streams).ok_or(ArenaError::Overflow)?),
+            keys: keys.max(window),
             c: g.n_embd as usize,
             lat_in: (g.n_embd as usize).max(g.music.n_in as usize),
             ds_max: lds.max(mds),
@@ -73,7 +85,7 @@ impl StepDims {
 
     /// Every size of `self` at least that of `need` (same width).
     pub fn holds(&self, need: &StepDims) -> bool {
-        self.c == need.c && self.n >= need.n && self.rows >= need.rows && self.rows.max(self.keys) >= need.keys && self.lat_in >= need.lat_in && self.ds_max >= need.ds_max && self.logits >= need.logits
+        self.c == need.c && self.n >= need.n && self.rows >= need.rows && self.keys >= need.keys && self.lat_in >= need.lat_in && self.ds_max >= need.ds_max && self.logits >= need.logits
     }
 }
 
@@ -104,7 +116,7 @@ impl<'s> StepScratch<'s> {
         Ok(StepScratch {
             dims,
             x: a.f32(mul(rows, c)?)?,
-            blk: BlockScratch::carve(a, rows.max(keys), c)?,
+            blk: BlockScratch::carve_keys(a, rows, keys, c)?,
             lat: LatStepScratch::carve(a, c, ds_max, n)?,
             lat_in: a.f32(mul(n, lat_in)?)?,
             lat_out: a.f32(mul(n, c)?)?,
@@ -390,58 +402,77 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
     let model = ss[ready[0]].model;
     let g = &model.cfg.gpt;
     let (c, streams) = (g.n_embd as usize, g.n_streams as usize);
-    // Round r runs the r-th append of every session (a session's caches
-    // share its K/V view scratch, so one append per session per call),
-    // in calls of at most `sc.dims.rows` rows.
-    let rounds = ready.iter().map(|&i| ss[i].appends.len()).max().unwrap_or(0);
-    for r in 0..rounds {
+    // Round r runs the r-th chunk of every session's appends (a session's
+    // caches share its K/V view scratch, so one chunk per session per
+    // call), in calls of at most `sc.dims.rows` rows. A chunk is window
+    // rows `first..=last` of one append, at most `chunk` of them.
+    let chunk = (sc.dims.rows / streams).max(1);
+    // Per session of `ready`: (append index, first row of its next chunk).
+    let mut cur: [(usize, usize); MAX_BATCH] = [(0, 0); MAX_BATCH];
+    for (q, &i) in ready.iter().enumerate() {
+        cur[q] = (0, ss[i].appends.first().map_or(0, |a| a.first));
+    }
+    // The next chunk of session `q` (append, first, last), if any is left.
+    let next = |s: &Session<'_>, (ai, f): (usize, usize)| -> Option<(Append, usize, usize)> {
+        let a = *s.appends.get(ai)?;
+        Some((a, f, s.k.min(f + chunk - 1)))
+    };
+    loop {
+        let mut any = false;
         let mut q = 0;
         while q < nr {
-            // (session position in `ready`, append) of this call.
-            let mut call: Vec<(usize, Append), MAX_BATCH> = Vec::new();
+            // (session position in `ready`, append, first, last) of this call.
+            let mut call: Vec<(usize, Append, usize, usize), MAX_BATCH> = Vec::new();
             let mut total = 0;
             while q < nr {
                 let i = ready[q];
                 let s = &ss[i];
-                if let Some(&a) = s.appends.get(r) {
-                    let rows = (s.k + 1 - a.first) * streams;
+                if let Some((a, f, l)) = next(s, cur[q]) {
+                    let rows = (l + 1 - f) * streams;
                     if total + rows > sc.dims.rows && !call.is_empty() {
                         break;
                     }
                     if rows > sc.dims.rows {
                         return Err((i, Error::Context { c: rows, max: sc.dims.rows }));
                     }
-                    window_rows(model, &s.st, a.lo, a.first, s.k, &mut sc.x[total * c..(total + rows) * c]).map_err(at(i))?;
+                    window_rows(model, &s.st, a.lo, f, l, &mut sc.x[total * c..(total + rows) * c]).map_err(at(i))?;
                     total += rows;
-                    call.push((q, a)).map_err(|_| (i, Error::State))?;
+                    call.push((q, a, f, l)).map_err(|_| (i, Error::State))?;
                 }
                 q += 1;
             }
             if call.is_empty() {
                 continue;
             }
+            any = true;
             let first = ready[call[0].0];
             {
                 let mut items: Vec<GptItem<'_, '_>, MAX_BATCH> = Vec::new();
                 let mut ci = 0;
                 for (i, s) in ss.iter_mut().enumerate() {
                     if ci < call.len() && ready[call[ci].0] == i {
-                        let a = call[ci].1;
-                        let k = s.k;
+                        let (_, a, f, l) = call[ci];
+                        let last_chunk = l == s.k;
                         let st = &mut s.st;
                         let cache: &mut GptCache<'_> = st.gpt.get_mut(a.slot).ok_or((i, Error::State))?;
-                        items.push(GptItem { cache, kv: &mut st.kv, rows: k + 1 - a.first, need_output: a.need_output }).map_err(|_| (i, Error::State))?;
+                        items.push(GptItem { cache, kv: &mut st.kv, rows: l + 1 - f, need_output: a.need_output && last_chunk }).map_err(|_| (i, Error::State))?;
                         ci += 1;
                     }
                 }
                 GptCache::append_many(&model.gpt, g.n_head as usize, &mut items, &mut sc.x[..total * c], &mut sc.blk).map_err(at(first))?;
             }
-            // The follower rows of the output items, to the heads' inputs.
+            // Advance the cursors; the follower rows of the output items, to the heads' inputs.
             let mut j = 0;
-            for &(qi, a) in call.iter() {
+            for &(qi, a, f, l) in call.iter() {
                 let i = ready[qi];
-                ss[i].rows_computed += ss[i].k + 1 - a.first;
-                if a.need_output {
+                ss[i].rows_computed += l + 1 - f;
+                cur[qi] = if l == ss[i].k {
+                    let ai = cur[qi].0 + 1;
+                    (ai, ss[i].appends.get(ai).map_or(0, |n| n.first))
+                } else {
+                    (cur[qi].0, l + 1)
+                };
+                if a.need_output && l == ss[i].k {
                     for h in 0..FOLLOWER_STREAMS {
                         let src = (j * FOLLOWER_STREAMS + h) * c;
                         sc.heads_in[(h * nr + qi) * c..(h * nr + qi + 1) * c].copy_from_slice(&sc.x[src..src + c]);
@@ -449,6 +480,9 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
                     j += 1;
                 }
             }
+        }
+        if !any {
+            break;
         }
     }
     // Heads: (nr, C) -> (nr, rows) per head, each matrix read once.

@@ -24,7 +24,7 @@ pub mod lat_stream;
 pub mod ring;
 mod state;
 
-pub use batch::{BatchError, StepBatch, StepDims, StepScratch, MAX_BATCH};
+pub use batch::{BatchError, StepBatch, StepDims, StepScratch, MAX_BATCH, REPREFILL_CHUNK};
 pub use gpt_cache::KvType;
 pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
