@@ -32,8 +32,9 @@ pub struct Args {
 pub enum WeightType {
     F32,
     F16,
-    /// Linear weights, embeddings and heads as Q8Block32 (f16 scales), the
-    /// rest f16/f32 (docs/FORMAT.md §6).
+    /// Linear weights, embeddings, heads and the VQ decoders' convs as
+    /// Q8Block32 (f16 scales); encoders, codebooks and transposed convs f16,
+    /// vectors f32 (docs/FORMAT.md §6).
     Int8,
     /// The same tensors as int8 in 4 bits (Q4Block32: f16 scale per block
     /// of 32, 18 bytes per block).

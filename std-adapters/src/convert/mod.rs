@@ -75,8 +75,8 @@ impl From<SchemaError> for ConvertError {
 ///   the VQ decoders' Conv1d weights, a row = one output channel's `in * k`
 ///   values), when a row is a multiple of 32 values; the rest F16: the VQ
 ///   encoders and codebooks (they pick the leader's tokens, the input of
-///   everything: int8 encoders flipped 1.3% of the fixtures' leader tokens,
-///   4-bit ones 16%), the ConvTranspose1d weights (their rows are scaled and
+///   everything: int8 encoders flipped 1.3% of the tiny_long fixture's
+///   leader tokens, 4-bit ones 16%), the ConvTranspose1d weights (their rows are scaled and
 ///   added, `x W`), and rows of other lengths;
 /// - `Q4Block32`: the same tensors as `Q8Block32` in 4 bits, the rest as
 ///   there.
