@@ -144,9 +144,19 @@ pub fn run_rollout(file: &ModelFile, name: &str) -> Rollout {
     run_r(file, &dir.join("leader_pos3d.npy"), &dir.join("music.npy"), &dir.join("follower_start.npy"), &seed_tokens)
 }
 
+/// The repository's `assets/` (the bundled demo model and clip).
+pub fn assets_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets")
+}
+
+/// The bundled demo model, `assets/demo.duo` (f16).
+pub fn demo_model() -> ModelFile {
+    ModelFile::open(assets_dir().join("demo.duo")).unwrap()
+}
+
 /// The bundled demo clip (`assets/demo_*.npy`) in R mode with `file`.
 pub fn run_demo_clip(file: &ModelFile) -> Rollout {
-    let a = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    let a = assets_dir();
     run_r(file, &a.join("demo_leader_pos3d.npy"), &a.join("demo_music.npy"), &a.join("demo_follower_start.npy"), &a.join("-"))
 }
 

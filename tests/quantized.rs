@@ -156,7 +156,7 @@ fn int8_vq_decoders_on_the_demo_model() {
     use duolando_core::tensor::DType;
     use duolando_core::vq_decoder::{decode_codes, scratch_bytes, Output};
     duolando::simd::init();
-    let f16_file = ModelFile::open(duolando_tests::fixtures_dir().join("../../assets/demo.duo")).unwrap();
+    let f16_file = duolando_tests::demo_model();
     let decoders_int8 = |spec: &duolando_core::schema::TensorSpec| {
         if spec.name.contains(".decoders") {
             duolando::convert::storage_for(StoreAs::Q8Block32, spec)

@@ -26,6 +26,8 @@ const ALLOWED: &[&str] = &[
     "core/src/kernels/simd/tests.rs",
     "core/src/tests/simd.rs",
     "std-adapters/src/simd.rs",
+    "std-adapters/src/workers.rs",
+    "core/src/kernels/parallel.rs",
     "std-adapters/src/model_file.rs",
     "std-adapters/src/convert/mod.rs",
     "std-adapters/benches/kernels.rs",

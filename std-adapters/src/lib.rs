@@ -1,8 +1,9 @@
 //! duolando: the std side of the Duolando engine — model files, the
 //! converter from the original checkpoints, audio features, motion I/O and
 //! export, the viewer, and the `duolando` CLI.
-// Unsafe code is denied except at three allowed sites, each with a SAFETY
-// comment: the two read-only file maps and the ISA switch (tests/unsafe_audit.rs).
+// Unsafe code is denied except at four allowed sites, each with a SAFETY
+// comment: the two read-only file maps, the ISA switch and the GEMM thread
+// pool (tests/unsafe_audit.rs).
 #![deny(unsafe_code)]
 
 pub mod agreement;
@@ -20,3 +21,4 @@ pub mod streaming;
 pub mod skeleton;
 pub mod synth;
 pub mod viewer;
+pub mod workers;

@@ -1,6 +1,7 @@
 //! Dense layers: `y = x W^T + b` (nn.Linear, conv as GEMM) and `z = x W`
 //! (the transposed-convolution GEMM). Written once against [`RowMatrix`].
 
+use super::parallel::{split_cols, Cols};
 use super::simd::{self, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 use super::weights::{expand_q4, Matrix, PreparedAct, Q4Rows, Q8Rows, RowMatrix};
 
@@ -10,14 +11,26 @@ const BLOCK_BYTES: usize = 192 * 1024;
 
 /// `y = x W^T + b`. `x`: (n, in), `w`: (out, in), `b`: (out) or None,
 /// `y`: (n, out); `n = x.len() / in`. Callers check the lengths.
+///
+/// With a worker pool installed ([`super::parallel`]) the output columns
+/// are split over its threads; the values are the same bit for bit.
 pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
+    let (n_in, n_out) = (w.cols(), w.rows());
+    if n_in == 0 || n_out == 0 {
+        return;
+    }
+    let n = (x.len() / n_in).min(y.len() / n_out);
+    if n == 0 {
+        return;
+    }
+    let (x, y) = (&x[..n * n_in], &mut y[..n * n_out]);
     match w {
-        Matrix::Q8(q) if q.cols() <= Q8_PANEL => return linear_q8(x, q, b, y),
-        Matrix::Q4(q) if q.cols() <= Q4_FAST_COLS => return linear_q8(x, q, b, y),
+        Matrix::Q8(q) if n_in <= Q8_PANEL => return linear_q8(x, q, b, y),
+        Matrix::Q4(q) if n_in <= Q4_FAST_COLS => return linear_q8(x, q, b, y),
         _ => {}
     }
-    let block = (BLOCK_BYTES / (w.weight_bytes() / w.rows().max(1)).max(1)).clamp(16, 1024);
-    crate::with_rows!(w, m => linear_impl(x, m, b, y, block))
+    let block = (BLOCK_BYTES / (w.weight_bytes() / n_out).max(1)).clamp(16, 1024);
+    split_cols(y, n_out, w.weight_bytes().saturating_mul(n), |cols| crate::with_rows!(w, m => linear_impl(x, m, b, cols, block)))
 }
 
 /// Int8 activation values quantised at once by `linear` over a [`Q8Rows`]
@@ -106,11 +119,8 @@ impl Q8Source for Q4Rows<'_> {
 /// panel ([`simd::quantise_q8_corr`]), weight scales read once per tile of
 /// `TN` weight rows ([`simd::q8_scales`]) and reused by every activation
 /// tile of the panel ([`simd::gemm_q8`], `M` = 1..=4 rows, no padded rows).
-fn linear_q8<W: Q8Source>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f32]) {
+fn linear_q8<W: Q8Source + Sync>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f32]) {
     let (n_in, n_out) = (w.cols(), w.rows());
-    if n_in == 0 || n_out == 0 {
-        return;
-    }
     let n = (x.len() / n_in).min(y.len() / n_out);
     let nb = n_in / Q8_BLOCK;
     let per_panel = Q8_PANEL / n_in;
@@ -129,37 +139,37 @@ fn linear_q8<W: Q8Source>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f32]) {
         }
         // Packing 8 weight rows pays off from a few activation rows on
         // (measured: at 1 row the unpacked VNNI tile is faster).
-        if p1 - p0 >= PACK_MIN_ROWS && simd::packed_q8_fast(nb) {
-            q8_panel_packed(w, b, y, &p, p0, p1, n_out, n_in);
-        } else {
-            q8_panel_tiles(w, b, y, &p, p0, p1, n_out, n_in);
-        }
+        let packed = p1 - p0 >= PACK_MIN_ROWS && simd::packed_q8_fast(nb);
+        let work = (n_out * nb * Q8_BLOCK_BYTES).saturating_mul(p1 - p0);
+        let p = &p;
+        split_cols(&mut y[p0 * n_out..p1 * n_out], n_out, work, |cols| {
+            if packed {
+                q8_panel_packed(w, b, cols, p, p1 - p0, n_in)
+            } else {
+                q8_panel_tiles(w, b, cols, p, p1 - p0, n_in)
+            }
+        });
         p0 = p1;
     }
 }
 
-fn linear_impl<W: RowMatrix>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f32], block: usize) {
-    let (n_in, n_out) = (w.cols(), w.rows());
-    if n_in == 0 || n_out == 0 {
-        return;
-    }
-    let n = (x.len() / n_in).min(y.len() / n_out);
-    if n == 0 {
-        return;
-    }
+/// Output columns `y.lo()..y.hi()` of the generic path (`n = x.len() / in` rows).
+fn linear_impl<W: RowMatrix>(x: &[f32], w: &W, b: Option<&[f32]>, mut y: Cols<'_>, block: usize) {
+    let n_in = w.cols();
+    let n = x.len() / n_in;
     let chunk = W::CHUNK.min(n_in);
     let mut act = W::Act::new();
     // Output blocks (weights kept hot in L2) x activation tiles of TM rows
     // (prepared once per block and chunk) x weight tiles of TN rows. Tails
     // repeat the last real row / output and drop the extra results.
-    let mut o0 = 0;
-    while o0 < n_out {
-        let o1 = (o0 + block).min(n_out);
+    let mut o0 = y.lo();
+    while o0 < y.hi() {
+        let o1 = (o0 + block).min(y.hi());
         let mut i0 = 0;
         while i0 < n {
             let mt = TM.min(n - i0);
             for i in i0..i0 + mt {
-                let yi = &mut y[i * n_out + o0..i * n_out + o1];
+                let yi = y.seg(i, o0, o1);
                 match b {
                     Some(b) => yi.copy_from_slice(&b[o0..o1]),
                     None => yi.fill(0.0),
@@ -185,8 +195,7 @@ fn linear_impl<W: RowMatrix>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f32],
                     });
                     let tile = w.dot_tile(ot, c0, xt, &act);
                     for (r, tr) in tile.iter().enumerate().take(mt) {
-                        let yr = &mut y[(i0 + r) * n_out + t0..(i0 + r) * n_out + t0 + nt];
-                        for (yo, t) in yr.iter_mut().zip(tr) {
+                        for (yo, t) in y.seg(i0 + r, t0, t0 + nt).iter_mut().zip(tr) {
                             *yo += t;
                         }
                     }
@@ -220,32 +229,33 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
 }
 
 /// Output tiles of `TN` weight rows x activation tiles of up to `TM` rows
-/// of one quantised panel (rows `p0..p1` of `x`), with [`simd::gemm_q8`].
+/// of one quantised panel (`rows` rows; output columns `y.lo()..y.hi()`),
+/// with [`simd::gemm_q8`].
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, y: &mut [f32], p: &Q8Panel, p0: usize, p1: usize, n_out: usize, n_in: usize) {
+fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel, n_rows: usize, n_in: usize) {
     let nb = n_in / Q8_BLOCK;
     let mut ws = [[0.0f32; Q8_PANEL_BLOCKS]; TN];
     let mut buf = W::new_buf();
-    let mut t0 = 0;
-    while t0 < n_out {
-        let nt = TN.min(n_out - t0);
+    let mut t0 = y.lo();
+    while t0 < y.hi() {
+        let nt = TN.min(y.hi() - t0);
         let rows: [usize; TN] = core::array::from_fn(|j| t0 + j.min(nt - 1));
         let wr = w.q8_rows(rows, &mut buf);
         for (s, r) in ws.iter_mut().zip(&wr) {
             simd::q8_scales(r, &mut s[..nb]);
         }
-        simd::prefetch(w.stored_rows(t0 + TN, t0 + 2 * TN));
+        simd::prefetch(w.stored_rows(t0 + TN, (t0 + 2 * TN).min(y.hi())));
         let wd: [&[f32]; TN] = core::array::from_fn(|j| &ws[j][..nb]);
-        let mut i0 = p0;
-        while i0 < p1 {
-            let mt = TM.min(p1 - i0);
-            let pr = |m: usize| i0 - p0 + m.min(mt - 1);
+        let mut i0 = 0;
+        while i0 < n_rows {
+            let mt = TM.min(n_rows - i0);
+            let pr = |m: usize| i0 + m.min(mt - 1);
             let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
             let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
             let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
             let mut put = |m: usize, t: [f32; TN]| {
-                let yr = &mut y[(i0 + m) * n_out + t0..(i0 + m) * n_out + t0 + nt];
+                let yr = y.seg(i0 + m, t0, t0 + nt);
                 for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
                     *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
                 }
@@ -279,27 +289,27 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, y: &mut [f32], p: &Q8Pa
 /// ([`simd::gemm_q8_packed`]; the AVX512-VNNI path).
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, y: &mut [f32], p: &Q8Panel, p0: usize, p1: usize, n_out: usize, n_in: usize) {
+fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel, n_rows: usize, n_in: usize) {
     const R: usize = simd::PACK_ROWS;
     let nb = n_in / Q8_BLOCK;
     let mut pack = simd::Q8Pack8::new();
     let mut buf = W::new_buf();
-    let mut t0 = 0;
-    while t0 < n_out {
-        let nt = R.min(n_out - t0);
+    let mut t0 = y.lo();
+    while t0 < y.hi() {
+        let nt = R.min(y.hi() - t0);
         let wr = w.q8_rows(core::array::from_fn(|j| t0 + j.min(nt - 1)), &mut buf);
         simd::q8_pack8(wr, nb, &mut pack);
         // The next tile's weights stream in while this one is multiplied.
-        simd::prefetch(w.stored_rows(t0 + R, t0 + 2 * R));
-        let mut i0 = p0;
-        while i0 < p1 {
-            let mt = R.min(p1 - i0);
-            let pr = |m: usize| i0 - p0 + m.min(mt - 1);
+        simd::prefetch(w.stored_rows(t0 + R, (t0 + 2 * R).min(y.hi())));
+        let mut i0 = 0;
+        while i0 < n_rows {
+            let mt = R.min(n_rows - i0);
+            let pr = |m: usize| i0 + m.min(mt - 1);
             let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
             let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
             let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
             let mut put = |m: usize, t: &[f32; R]| {
-                let yr = &mut y[(i0 + m) * n_out + t0..(i0 + m) * n_out + t0 + nt];
+                let yr = y.seg(i0 + m, t0, t0 + nt);
                 for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
                     *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
                 }

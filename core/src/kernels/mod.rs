@@ -15,6 +15,7 @@ pub mod attention;
 pub mod conv;
 pub mod linear;
 pub mod norm;
+pub mod parallel;
 pub mod simd;
 pub mod weights;
 

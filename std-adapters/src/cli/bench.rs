@@ -3,11 +3,10 @@
 //! seeded random weights, per weight type (f32, f16, int8 as
 //! `duolando convert` would store them). No files needed.
 //!
-//! Measured, per weight type, on 1 thread and on 2 threads (two
-//! independent R steps / sessions at once, one per thread: the core is
-//! single-threaded; per-step latency under that load), medians and
-//! p99/median after warm-up, beside a memcpy bandwidth measured in the same
-//! run:
+//! Measured, per weight type, on 1 thread and on 2 threads (one step
+//! whose large GEMMs are split over a pool of that many threads,
+//! `crate::workers`), medians and p99/median after warm-up, beside a
+//! memcpy bandwidth measured in the same run (1 and 2 threads):
 //! - the R step (one full window of the GPT at the largest context,
 //!   `block_size - 1` = 29 tokens per stream, music and leader LATs
 //!   included; exactly what `exact::generate` runs per step), the weight
@@ -16,10 +15,9 @@
 //!   the time of a `push_leader_frame` that runs a step, encoder and
 //!   decoder streaming included), GB/s over the model's weight bytes (every
 //!   layer runs each step), and the session arena bytes.
-//!
-//! Not measured yet (null in the JSON, said so on stdout): batched
-//! stepping of several sessions (no `Session::step_many` yet) and the tract
-//! ratio (no full-size R-step ONNX export in tools/reference yet).
+//! - `Session::step_many` over 1, 4 and 16 sessions (int8, one thread);
+//! - tract running the full-size R step exported from tools/reference
+//!   (`--tract-onnx`, built with the `tract` feature), for the ratios.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -45,7 +43,8 @@ pub struct Args {
     /// Timed S steps per weight type (after the warm-up steps).
     #[arg(long, default_value_t = 40)]
     pub s_steps: usize,
-    /// Thread counts to measure (comma separated; 1 and 2 supported).
+    /// Thread counts to measure (comma separated): the large GEMMs of one
+    /// step split over that many threads.
     #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 2])]
     pub threads: Vec<usize>,
     /// Untimed warm-up R steps per weight type.
@@ -87,17 +86,28 @@ fn stats(mut t: Vec<Duration>) -> Stats {
     Stats { median_ms: if n % 2 == 1 { ms(t[n / 2]) } else { 0.5 * (ms(t[n / 2 - 1]) + ms(t[n / 2])) }, p99_ms: ms(t[p99]) }
 }
 
-/// Single-thread memcpy bandwidth: bytes copied per second, 256 MiB buffers
-/// (far beyond the caches), median of 9 copies.
-fn memcpy_gbps() -> f64 {
+/// memcpy bandwidth over `threads` threads (each copying its own half /
+/// third / ... at once): bytes copied per second, 256 MiB buffers (far
+/// beyond the caches), median of 9 copies.
+fn memcpy_gbps(threads: usize) -> f64 {
     let n = 256 << 20;
     let src = vec![1u8; n];
     let mut dst = vec![0u8; n];
     dst.copy_from_slice(&src);
+    let per = n.div_ceil(threads.max(1));
     let mut t = Vec::new();
     for _ in 0..9 {
         let s = Instant::now();
-        dst.copy_from_slice(std::hint::black_box(&src));
+        std::thread::scope(|sc| {
+            let mut parts = dst.chunks_mut(per).zip(src.chunks(per));
+            let first = parts.next();
+            for (d, c) in parts {
+                sc.spawn(move || d.copy_from_slice(std::hint::black_box(c)));
+            }
+            if let Some((d, c)) = first {
+                d.copy_from_slice(std::hint::black_box(c));
+            }
+        });
         t.push(s.elapsed());
         std::hint::black_box(&dst);
     }
@@ -366,23 +376,21 @@ fn batched_steps(model: &Model<'_>, n: usize, warmup: usize, steps: usize) -> an
     Ok(times.split_off(warmup))
 }
 
-/// Runs `f` on `threads` threads at once (the same model, own buffers);
-/// all their timings together.
+/// Runs `f` with the GEMMs split over `threads` threads (the pool of
+/// `crate::workers`), then back to one thread.
 fn on_threads<F>(threads: usize, f: F) -> anyhow::Result<Vec<Duration>>
 where
-    F: Fn() -> anyhow::Result<Vec<Duration>> + Sync,
+    F: Fn() -> anyhow::Result<Vec<Duration>>,
 {
-    if threads <= 1 {
-        return f();
+    crate::workers::set_threads(threads).context("starting the GEMM threads")?;
+    let jobs = crate::workers::split_jobs();
+    let times = f();
+    let split = crate::workers::split_jobs() - jobs;
+    crate::workers::set_threads(1)?;
+    if threads > 1 && split == 0 {
+        return Err(anyhow!("no GEMM was split over {threads} threads"));
     }
-    std::thread::scope(|sc| {
-        let hs: Vec<_> = (0..threads).map(|_| sc.spawn(&f)).collect();
-        let mut all = Vec::new();
-        for h in hs {
-            all.extend(h.join().map_err(|_| anyhow!("bench thread panicked"))??);
-        }
-        Ok(all)
-    })
+    times
 }
 
 fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Result<DtypeResult> {
@@ -417,8 +425,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         crate::simd::init()
     };
-    let memcpy = memcpy_gbps();
-    println!("kernels: {isa:?}; threads: {:?}; memcpy bandwidth (1 thread, 256 MiB): {memcpy:.1} GB/s", args.threads);
+    let memcpy = memcpy_gbps(1);
+    let memcpy_t2 = memcpy_gbps(2);
+    println!("kernels: {isa:?}; threads: {:?}; memcpy bandwidth (256 MiB): {memcpy:.1} GB/s on 1 thread, {memcpy_t2:.1} GB/s on 2", args.threads);
     let mut results = Vec::new();
     for d in &args.dtypes {
         let (name, store_as) = match d.as_str() {
@@ -469,7 +478,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         results.push(r);
     }
-    println!("t2 = two independent steps at once, one per thread (the core is single-threaded): per-step latency under that load.");
+    println!("t2 = one step with its large GEMMs split over 2 threads (duolando::workers); % of memcpy is against the 1-thread memcpy.");
     let tract = match super::bench_tract::onnx_path(args.tract_onnx.as_deref()) {
         None => {
             println!("tract ratio: not measured (no full-size R-step ONNX; make it with: {})", super::bench_tract::HOW);
@@ -518,6 +527,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             j.insert(k.into(), null.clone());
         }
         j.insert("memcpy_gbps_t1".into(), memcpy.into());
+        j.insert("memcpy_gbps_t2".into(), memcpy_t2.into());
         j.insert("isa".into(), format!("{isa:?}").into());
         match &tract {
             Some((st, err)) => {

@@ -807,3 +807,67 @@ fn widen_f16_matches_scalar_twin() {
         same(&got, &want[..n], "neon");
     }
 }
+
+/// A [`Workers`](crate::kernels::parallel::Workers) stand-in for the split
+/// tests: 3 "threads", run one after another in reverse order, jobs counted.
+struct ReversePool(std::sync::atomic::AtomicUsize);
+
+// SAFETY: `run` calls each `task(i)`, `i < n`, exactly once and returns after them.
+unsafe impl crate::kernels::parallel::Workers for ReversePool {
+    fn threads(&self) -> usize {
+        3
+    }
+    fn run(&self, n: usize, task: &(dyn Fn(usize) + Sync)) {
+        self.0.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        (0..n).rev().for_each(task);
+    }
+}
+
+static REVERSE: ReversePool = ReversePool(std::sync::atomic::AtomicUsize::new(0));
+static REVERSE_INSTALLED: crate::kernels::parallel::Installed = crate::kernels::parallel::Installed(&REVERSE);
+
+/// `linear` split over a pool's output-column ranges equals the one-thread
+/// call bit for bit, for every weight type and path (int8 unpacked and
+/// packed tiles, two int8 panels, the generic f32/f16/wide-Q4 path), with
+/// output counts that are and are not multiples of the split alignment.
+#[test]
+fn split_gemm_matches_one_thread_bit_for_bit() {
+    use crate::kernels::parallel::{set_workers, split_count};
+    use std::sync::atomic::Ordering;
+    // Other tests of this binary run while the pool is installed; they see
+    // the same values (this is what the test shows), so only the
+    // one-thread reference below needs the pool off, and nothing else
+    // installs one.
+    let mut r = Rng(2024);
+    let wide = crate::kernels::linear::Q4_FAST_COLS + 64;
+    for &(n, i, o) in &[(1usize, 768usize, 203usize), (5, 768, 203), (9, 256, 520), (3, 3072, 67), (50, 768, 96), (2, wide, 40)] {
+        let w = r.vec(o * i);
+        let (q8, q4) = (q8_bytes(&w), q4_bytes(&w));
+        let h: Vec<u16> = w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+        let (x, b) = (r.vec(n * i), r.vec(o));
+        for m in [
+            Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap()),
+            Matrix::Q4(Q4Rows::new(&q4, o, i).unwrap()),
+            Matrix::F16(F16Rows::new(&h, o, i).unwrap()),
+            Matrix::F32(F32Rows::new(&w, o, i).unwrap()),
+        ] {
+            set_workers(None);
+            let mut one = vec![f32::NAN; n * o];
+            linear(&x, &m, Some(&b), &mut one);
+            set_workers(Some(&REVERSE_INSTALLED));
+            let jobs = REVERSE.0.load(Ordering::Relaxed);
+            let mut split = vec![f32::NAN; n * o];
+            linear(&x, &m, Some(&b), &mut split);
+            set_workers(None);
+            assert!(REVERSE.0.load(Ordering::Relaxed) > jobs, "({n},{i},{o}) {:?}: not split", m.rows());
+            for (k, (a, s)) in one.iter().zip(&split).enumerate() {
+                assert_eq!(a.to_bits(), s.to_bits(), "({n},{i},{o}) element {k}: one thread {a}, split {s}");
+            }
+        }
+    }
+    // Too little work, or too few columns for two ranges: not split.
+    set_workers(Some(&REVERSE_INSTALLED));
+    let (small, narrow) = (split_count(512, 1024), split_count(15, 1 << 30));
+    set_workers(None);
+    assert_eq!((small, narrow), (1, 1));
+}
