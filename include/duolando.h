@@ -70,7 +70,8 @@ typedef enum duo_result {
   /* The push was refused because ready follower frames must be pulled
    * first (or the music buffer is full). The session is unchanged. */
   DUO_BACKLOG = 7,
-  /* The model file could not be opened or read. */
+  /* An operating-system call failed: the model file could not be opened
+   * or read, or a worker thread could not be started. */
   DUO_IO = 8,
   /* A panic was caught inside the library (a bug: please report it). The
    * object of the call must not be used again, except to free it. */
@@ -96,6 +97,22 @@ size_t duo_last_error_message(char *buf, size_t len);
 /* The library version, e.g. "0.1.0": a static NUL-terminated string.
  * Never NULL; do not free it. Thread-safe. */
 const char *duo_version(void);
+
+/* Most threads duo_set_threads accepts. */
+#define DUOLANDO_MAX_THREADS 64
+
+/* Splits the large matrix products of every later call (all models and
+ * sessions of this process) over `threads` threads: the calling thread
+ * plus threads - 1 pooled workers, started on first use of that count.
+ * 0 or 1: everything on the calling thread (the default). Outputs do not
+ * depend on the thread count (bit-identical). One split product runs at a
+ * time: a session stepped on another thread meanwhile computes on its own
+ * thread. DUO_INVALID_ARGUMENT above DUOLANDO_MAX_THREADS; DUO_IO when the
+ * operating system refuses a thread. Thread-safe. */
+duo_result duo_set_threads(uint32_t threads);
+
+/* The thread count set by duo_set_threads (1 when unset). Thread-safe. */
+uint32_t duo_get_threads(void);
 
 /* ------------------------------------------------------------------ */
 /* Frames and coordinates                                              */

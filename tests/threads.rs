@@ -44,6 +44,7 @@ fn split_gemms_are_bit_identical_to_one_thread() {
     duolando::simd::init();
     let f16 = demo_model();
     let int8 = restore_as(&f16, &|spec| storage_for(StoreAs::Q8Block32, spec));
+    let mut one_thread = Vec::new();
     for (name, file) in [("f16", &f16), ("int8", &int8)] {
         workers::set_threads(1).unwrap();
         let (r1, s1) = (run_demo_clip(file), stream(file, 400));
@@ -66,6 +67,18 @@ fn split_gemms_are_bit_identical_to_one_thread() {
                 panic!("{name}, {n} threads: streamed frame {i} differs from one thread's");
             }
         }
+        one_thread.push(s1);
     }
+    // Two sessions stepped on two threads at once while a 2-thread pool is
+    // installed: one thread's GEMMs take the pool, the other's run alone
+    // whenever it is busy; both still match one thread.
+    workers::set_threads(2).unwrap();
+    let both: Vec<Vec<FollowerFrame>> = std::thread::scope(|sc| {
+        let hs: Vec<_> = [&f16, &int8].map(|f| sc.spawn(move || stream(f, 400))).into_iter().collect();
+        hs.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    workers::set_threads(1).unwrap();
+    assert!(both[0] == one_thread[0], "f16 session beside another thread differs");
+    assert!(both[1] == one_thread[1], "int8 session beside another thread differs");
     assert_eq!(workers::threads(), 1);
 }

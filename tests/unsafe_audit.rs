@@ -2,7 +2,8 @@
 //! test so that it cannot rot:
 //!
 //! 1. `unsafe` appears only in the files of [`ALLOWED`] (the SIMD kernels
-//!    and their tests, the two read-only file maps and the ISA switch of
+//!    and their tests, the split-GEMM output views of core, the two
+//!    read-only file maps, the GEMM thread pool and the ISA switch of
 //!    std-adapters, the C ABI and its tests, the counting allocators of
 //!    the memory tests); every other crate root forbids or denies it;
 //! 2. every `unsafe` block or impl in library code has a `SAFETY:` comment

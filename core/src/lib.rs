@@ -8,8 +8,9 @@
 //! orchestrated by [`exact`]. Weights: [`model`] (bound from a `.duo`
 //! file, names from [`schema`]). Memory: [`arena`]. Math: [`kernels`].
 #![cfg_attr(not(test), no_std)]
-// Unsafe code is denied everywhere except `kernels::simd` (intrinsics),
-// which allows it with a SAFETY comment on every block.
+// Unsafe code is denied everywhere except `kernels::simd` (intrinsics) and
+// `kernels::parallel` (split-GEMM output views), which allow it with a
+// SAFETY comment on every block.
 #![deny(unsafe_code)]
 
 pub mod arena;

@@ -37,9 +37,53 @@ pub extern "C" fn duo_version() -> *const c_char {
     catch_unwind(|| VERSION.as_ptr().cast::<c_char>()).unwrap_or(c"?".as_ptr())
 }
 
+/// Most threads [`duo_set_threads`] accepts.
+pub const MAX_THREADS: u32 = 64;
+
+/// Splits the large matrix products of every later call (all models and
+/// sessions of this process) over `threads` threads: the calling thread
+/// plus `threads - 1` pooled workers, started on first use of that count.
+/// 0 or 1: everything on the calling thread (the default). Outputs do not
+/// depend on the thread count (bit-identical). One split product runs at a
+/// time: a session stepped on another thread meanwhile computes on its own
+/// thread. `DUO_INVALID_ARGUMENT` above `DUOLANDO_MAX_THREADS` (64);
+/// `DUO_IO` when the operating system refuses a thread. Thread-safe.
+#[no_mangle]
+pub extern "C" fn duo_set_threads(threads: u32) -> DuoResult {
+    result::guard("duo_set_threads", || {
+        if threads > MAX_THREADS {
+            return Err(result::Failure::new(DuoResult::InvalidArgument, format!("{threads} threads: at most {MAX_THREADS}")));
+        }
+        duolando_std::workers::set_threads(threads as usize)
+            .map_err(|e| result::Failure::new(DuoResult::Io, format!("could not start {threads} threads: {e}")))?;
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// The thread count set by [`duo_set_threads`] (1 when unset). Thread-safe.
+#[no_mangle]
+pub extern "C" fn duo_get_threads() -> u32 {
+    catch_unwind(|| duolando_std::workers::threads() as u32).unwrap_or(1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn set_threads_accepts_0_to_64_and_reports_above() {
+        assert_eq!(duo_set_threads(2), DuoResult::Ok);
+        assert_eq!(duo_get_threads(), 2);
+        assert_eq!(duo_set_threads(0), DuoResult::Ok);
+        assert_eq!(duo_get_threads(), 1);
+        assert_eq!(duo_set_threads(MAX_THREADS + 1), DuoResult::InvalidArgument);
+        assert_eq!(duo_get_threads(), 1);
+        let mut buf = [0u8; 128];
+        // SAFETY: buf is a live local of the given length.
+        let n = unsafe { result::duo_last_error_message(buf.as_mut_ptr().cast(), buf.len()) };
+        let msg = std::str::from_utf8(&buf[..n.min(127)]).unwrap();
+        assert_eq!(msg, "duo_set_threads: 65 threads: at most 64");
+    }
 
     #[test]
     fn version_matches_cargo_toml() {

@@ -40,7 +40,8 @@ pub enum DuoResult {
     /// The session refused the push: ready follower frames must be pulled
     /// first (or the music buffer is full). The session is unchanged.
     Backlog = 7,
-    /// The model file could not be opened or read.
+    /// An operating-system call failed: the model file could not be opened
+    /// or read, or a worker thread could not be started.
     Io = 8,
     /// A panic was caught inside the library (a bug: please report it).
     /// The object the call was made on must not be used again except to

@@ -195,6 +195,8 @@ namespace Duolando
         const CallingConvention CC = CallingConvention.Cdecl;
 
         [DllImport(Lib, CallingConvention = CC)] public static extern IntPtr duo_version();
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_set_threads(uint threads);
+        [DllImport(Lib, CallingConvention = CC)] public static extern uint duo_get_threads();
         [DllImport(Lib, CallingConvention = CC)] public static extern UIntPtr duo_last_error_message(byte[] buf, UIntPtr len);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_model_open_file(byte[] pathUtf8Nul, out ModelHandle model);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_model_open_copy(byte[] bytes, UIntPtr len, out ModelHandle model);
@@ -237,6 +239,15 @@ namespace Duolando
         Model(ModelHandle h) { Handle = h; }
 
         public static string Version { get { return Marshal.PtrToStringAnsi(Native.duo_version()); } }
+
+        /// <summary>Threads the large matrix products of every session are split over
+        /// (the calling thread plus pooled workers; 1 = the calling thread only, the default).
+        /// Outputs do not depend on it. Process-wide.</summary>
+        public static uint Threads
+        {
+            get { return Native.duo_get_threads(); }
+            set { Native.Check(Native.duo_set_threads(value)); }
+        }
 
         /// <summary>Memory-maps a .duo file (on Android, copy it out of the APK to persistentDataPath first).</summary>
         public static Model OpenFile(string path)

@@ -8,6 +8,8 @@
 //! columns, so each thread reads only its share of the weights. Results
 //! are bit-identical to one thread (tests/threads.rs).
 //!
+//! `set_threads(1)` stops and joins the workers.
+//!
 //! One split GEMM runs on the pool at a time: a second thread that calls a
 //! kernel while the pool is busy (two sessions on two threads) runs its
 //! GEMM alone on its own thread, so nothing waits on anything but its own
@@ -54,6 +56,8 @@ struct Shared {
     /// Workers inside the current job.
     active: AtomicUsize,
     panicked: AtomicBool,
+    /// Set (under `slot`'s lock) to make the workers exit.
+    stop: AtomicBool,
 }
 
 /// `threads - 1` workers plus the calling thread.
@@ -61,10 +65,12 @@ struct Pool {
     threads: usize,
     shared: Arc<Shared>,
     busy: Mutex<()>,
+    /// The running workers (empty: stopped).
+    handles: Mutex<Vec<std::thread::JoinHandle<()>>>,
 }
 
 impl Pool {
-    fn new(threads: usize) -> std::io::Result<Pool> {
+    fn new(threads: usize) -> Pool {
         let shared = Arc::new(Shared {
             slot: Mutex::new(Slot { job: None, epoch: 0 }),
             wake: Condvar::new(),
@@ -73,12 +79,48 @@ impl Pool {
             left: AtomicUsize::new(0),
             active: AtomicUsize::new(0),
             panicked: AtomicBool::new(false),
+            stop: AtomicBool::new(true),
         });
-        for i in 1..threads {
-            let sh = Arc::clone(&shared);
-            std::thread::Builder::new().name(format!("duolando-gemm-{i}")).spawn(move || worker(&sh))?;
+        Pool { threads, shared, busy: Mutex::new(()), handles: Mutex::new(Vec::new()) }
+    }
+
+    /// Starts the workers (nothing when running); on failure none runs.
+    fn start(&self) -> std::io::Result<()> {
+        let mut hs = self.handles.lock().unwrap_or_else(|e| e.into_inner());
+        if !hs.is_empty() {
+            return Ok(());
         }
-        Ok(Pool { threads, shared, busy: Mutex::new(()) })
+        let seen = {
+            let slot = self.shared.slot.lock().unwrap_or_else(|e| e.into_inner());
+            self.shared.stop.store(false, Ordering::Release);
+            slot.epoch
+        };
+        for i in 1..self.threads {
+            let sh = Arc::clone(&self.shared);
+            match std::thread::Builder::new().name(format!("duolando-gemm-{i}")).spawn(move || worker(&sh, seen)) {
+                Ok(h) => hs.push(h),
+                Err(e) => {
+                    drop(hs);
+                    self.stop();
+                    return Err(e);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Makes the workers exit and waits for them. A GEMM running on the
+    /// pool meanwhile finishes on its caller's thread.
+    fn stop(&self) {
+        let hs = std::mem::take(&mut *self.handles.lock().unwrap_or_else(|e| e.into_inner()));
+        {
+            let _slot = self.shared.slot.lock().unwrap_or_else(|e| e.into_inner());
+            self.shared.stop.store(true, Ordering::Release);
+        }
+        self.shared.wake.notify_all();
+        for h in hs {
+            let _ = h.join();
+        }
     }
 }
 
@@ -100,17 +142,20 @@ fn drain(sh: &Shared, job: Job) {
     }
 }
 
-fn worker(sh: &Shared) {
-    let mut seen = 0u64;
+fn worker(sh: &Shared, mut seen: u64) {
     loop {
         let mut spins = 0;
-        while sh.epoch.load(Ordering::Acquire) == seen && spins < IDLE_SPINS {
+        while sh.epoch.load(Ordering::Acquire) == seen && spins < IDLE_SPINS && !sh.stop.load(Ordering::Acquire) {
             std::hint::spin_loop();
             spins += 1;
         }
         let mut slot = sh.slot.lock().unwrap_or_else(|e| e.into_inner());
-        while slot.epoch == seen {
+        while slot.epoch == seen && !sh.stop.load(Ordering::Acquire) {
             slot = sh.wake.wait(slot).unwrap_or_else(|e| e.into_inner());
+        }
+        // A job published meanwhile is drained by its caller.
+        if sh.stop.load(Ordering::Acquire) {
+            return;
         }
         seen = slot.epoch;
         let Some(job) = slot.job else { continue };
@@ -147,8 +192,9 @@ unsafe impl Workers for Pool {
 
     fn run(&self, n: usize, task: &(dyn Fn(usize) + Sync)) {
         let busy = match self.busy.try_lock() {
-            Ok(b) if n > 1 && self.threads > 1 => b,
-            // Pool taken by another thread's GEMM (or nothing to share): run here.
+            Ok(b) if n > 1 && self.threads > 1 && !self.shared.stop.load(Ordering::Acquire) => b,
+            // Pool taken by another thread's GEMM, stopped, or nothing to
+            // share: run here.
             _ => return (0..n).for_each(task),
         };
         SPLIT_JOBS.fetch_add(1, Ordering::Relaxed);
@@ -188,31 +234,44 @@ pub fn split_jobs() -> u64 {
     SPLIT_JOBS.load(Ordering::Relaxed)
 }
 
-/// Pools made so far, by thread count (kept for the life of the process).
-static POOLS: Mutex<Vec<&'static Installed>> = Mutex::new(Vec::new());
+/// The pool of each thread count used so far (kept for the life of the
+/// process; at most one has running workers: the installed one).
+static POOLS: Mutex<Vec<(&'static Pool, &'static Installed)>> = Mutex::new(Vec::new());
 
-/// Splits every large GEMM of this process over `n` threads from now on
-/// (the calling thread and `n - 1` pooled workers, started on first use of
-/// `n`); `n <= 1` runs everything on the caller's thread again (the
-/// default). Outputs do not depend on `n`.
+/// Splits every large GEMM of this process over `n` threads from now on:
+/// the calling thread and `n - 1` pooled workers (started here; the
+/// workers of a previous count are stopped and joined). `n <= 1` runs
+/// everything on the caller's thread again (the default) and stops the
+/// workers. Outputs do not depend on `n`. Errors when the operating system
+/// refuses a thread (then one thread is in use).
 pub fn set_threads(n: usize) -> std::io::Result<()> {
-    if n <= 1 {
-        parallel::set_workers(None);
-        return Ok(());
-    }
     let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
-    let found = pools.iter().copied().find(|p| p.0.threads() == n);
-    let inst = match found {
-        Some(p) => p,
-        None => {
-            let pool: &'static Pool = Box::leak(Box::new(Pool::new(n)?));
+    let mut result = Ok(());
+    let mut installed = None;
+    if n > 1 {
+        let found = pools.iter().copied().find(|(p, _)| p.threads == n);
+        let (pool, inst) = found.unwrap_or_else(|| {
+            let pool: &'static Pool = Box::leak(Box::new(Pool::new(n)));
             let inst: &'static Installed = Box::leak(Box::new(Installed(pool)));
-            pools.push(inst);
-            inst
+            pools.push((pool, inst));
+            (pool, inst)
+        });
+        match pool.start() {
+            Ok(()) => installed = Some(inst),
+            Err(e) => result = Err(e),
         }
-    };
-    parallel::set_workers(Some(inst));
-    Ok(())
+    }
+    parallel::set_workers(installed);
+    for (p, _) in pools.iter().filter(|(p, _)| installed.is_none() || p.threads != n) {
+        p.stop();
+    }
+    result
+}
+
+/// The CLI's default thread count: every core the process may use, at
+/// most 8 (results do not depend on it).
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get()).min(8)
 }
 
 /// Threads the GEMMs are split over now (1: no pool).

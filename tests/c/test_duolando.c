@@ -163,6 +163,11 @@ static void test_errors_and_version(void) {
   char buf[8];
   size_t n;
   CHECK(strcmp(duo_version(), "0.1.0") == 0);
+  CHECK(duo_get_threads() == 1);
+  EXPECT(duo_set_threads(2), DUO_OK);
+  CHECK(duo_get_threads() == 2);
+  EXPECT(duo_set_threads(DUOLANDO_MAX_THREADS + 1), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_set_threads(1), DUO_OK);
   CHECK(strcmp(duo_result_name(DUO_OK), "DUO_OK") == 0);
   CHECK(strcmp(duo_result_name(DUO_PANIC), "DUO_PANIC") == 0);
   CHECK(strcmp(duo_result_name(-5), "DUO_UNKNOWN") == 0);

@@ -35,6 +35,12 @@ static class TestUnity
         Check(Marshal.SizeOf(typeof(SessionConfig)) == 56, "SessionConfig is 56 bytes");
         Check(Marshal.SizeOf(typeof(ModelInfo)) == 32, "ModelInfo is 32 bytes");
         Check(Model.Version == "0.1.0", "version");
+        Check(Model.Threads == 1, "one thread by default");
+        Model.Threads = 2;
+        Check(Model.Threads == 2, "two threads");
+        Model.Threads = 1;
+        try { Model.Threads = 65; Check(false, "65 threads throws"); }
+        catch (DuolandoException e) { Check(e.Result == DuoResult.InvalidArgument && e.Message.Contains("at most 64"), "InvalidArgument: " + e.Message); }
         try { Model.OpenFile("/nonexistent/model.duo"); Check(false, "missing file throws"); }
         catch (DuolandoException e) { Check(e.Result == DuoResult.Io && e.Message.Contains("/nonexistent/model.duo"), "Io with the path: " + e.Message); }
         try { Model.OpenCopy(new byte[100]); Check(false, "garbage throws"); }

@@ -50,7 +50,10 @@ pub struct Args {
     pub seed_tokens: Option<String>,
     /// Output directory (created; existing files of the same names are replaced).
     #[arg(long, short)]
-    pub out: PathBuf,
+    pub out: PathBuf,    /// Threads the large matrix products are split over (the output does not
+    /// depend on it). Default: every core, at most 8.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub threads: Option<u32>,
 }
 
 /// A rig fit worse than this (metres) is pointed out on stderr.
@@ -181,7 +184,9 @@ pub fn run(args: Args) -> Result<()> {
         ),
     };
 
-    stage(1, &format!("model {}", model_path.display()));
+    let threads = args.threads.map_or_else(crate::workers::default_threads, |n| n as usize);
+    crate::workers::set_threads(threads).with_context(|| format!("starting {threads} threads"))?;
+    stage(1, &format!("model {}, {threads} thread(s)", model_path.display()));
     let t = Instant::now();
     let file = ModelFile::open(&model_path)?;
     let duo = file.duo()?;

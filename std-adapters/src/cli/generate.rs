@@ -53,7 +53,10 @@ pub struct Args {
     pub budget: crate::cli::budget::BudgetArgs,
     /// Output directory (created).
     #[arg(long, short)]
-    pub out: PathBuf,
+    pub out: PathBuf,    /// Threads the large matrix products are split over (the output does not
+    /// depend on it). Default: every core, at most 8.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub threads: Option<u32>,
 }
 
 /// What [`generate_exact`] produced.
@@ -182,6 +185,8 @@ pub fn write_outputs(dir: &Path, g: &Generated) -> Result<()> {
 
 pub fn run(args: Args) -> Result<()> {
     crate::simd::init();
+    let threads = args.threads.map_or_else(crate::workers::default_threads, |n| n as usize);
+    crate::workers::set_threads(threads).with_context(|| format!("starting {threads} threads"))?;
     let file = ModelFile::open(&args.model)?;
     let duo = file.duo()?;
     let model = Model::from_duo(&duo)
