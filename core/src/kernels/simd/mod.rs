@@ -403,6 +403,23 @@ pub fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
     }
 }
 
+/// One LayerNorm row, `y = (x - mean) / sqrt(var + eps) * w + b` (biased
+/// variance), over the shortest of the four slices: mean and variance as 8
+/// lane sums ([`scalar::layernorm_row`]); the AVX2 and NEON variants are
+/// bit-identical to the twin.
+#[inline]
+pub fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::layernorm_row(x, w, b, eps, y) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::layernorm_row(x, w, b, eps, y) },
+        _ => scalar::layernorm_row(x, w, b, eps, y),
+    }
+}
+
 /// Exact GELU in place, erf by Abramowitz & Stegun 7.1.26 (absolute error
 /// 1.5e-7) with [`scalar::exp`]; the AVX2 and NEON variants are
 /// bit-identical to the twin on finite inputs.

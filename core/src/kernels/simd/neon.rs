@@ -367,7 +367,73 @@ pub unsafe fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
         *v = super::scalar::exp(*v - max);
         t += *v;
     }
-    ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + t
+    super::scalar::reduce8(a, t)
+}
+
+/// The 8 lanes of a (lo, hi) pair of 4-lane vectors.
+///
+/// # Safety
+/// NEON must be available (always on aarch64).
+#[inline]
+unsafe fn lanes8(lo: float32x4_t, hi: float32x4_t) -> [f32; 8] {
+    let mut a = [0f32; 8];
+    let (al, ah) = a.split_at_mut(4);
+    // SAFETY: 4 floats each.
+    unsafe {
+        vst1q_f32(al.as_mut_ptr(), lo);
+        vst1q_f32(ah.as_mut_ptr(), hi);
+    }
+    a
+}
+
+/// See [`super::layernorm_row`]: the twin's operations on 2 x 4 lanes.
+///
+/// # Safety
+/// NEON must be available (always on aarch64).
+#[target_feature(enable = "neon")]
+pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
+    let n = x.len().min(w.len()).min(b.len()).min(y.len());
+    if n == 0 {
+        return;
+    }
+    let (x, w, b, y) = (&x[..n], &w[..n], &b[..n], &mut y[..n]);
+    let body = n - n % 8;
+    let (mut lo, mut hi) = (vdupq_n_f32(0.0), vdupq_n_f32(0.0));
+    for c in x[..body].chunks_exact(8) {
+        // SAFETY: c holds 8 floats.
+        unsafe {
+            lo = vaddq_f32(lo, vld1q_f32(c.as_ptr()));
+            hi = vaddq_f32(hi, vld1q_f32(c.as_ptr().add(4)));
+        }
+    }
+    // SAFETY: NEON (this function's feature).
+    let mean = super::scalar::reduce8(unsafe { lanes8(lo, hi) }, x[body..].iter().fold(0.0, |t, &v| t + v)) / n as f32;
+    let m = vdupq_n_f32(mean);
+    let (mut lo, mut hi) = (vdupq_n_f32(0.0), vdupq_n_f32(0.0));
+    for c in x[..body].chunks_exact(8) {
+        // SAFETY: c holds 8 floats.
+        unsafe {
+            let da = vsubq_f32(vld1q_f32(c.as_ptr()), m);
+            let db = vsubq_f32(vld1q_f32(c.as_ptr().add(4)), m);
+            lo = vaddq_f32(lo, vmulq_f32(da, da));
+            hi = vaddq_f32(hi, vmulq_f32(db, db));
+        }
+    }
+    let tail = x[body..].iter().fold(0.0, |t, &v| t + (v - mean) * (v - mean));
+    // SAFETY: NEON (this function's feature).
+    let var = super::scalar::reduce8(unsafe { lanes8(lo, hi) }, tail) / n as f32;
+    let inv = 1.0 / libm::sqrtf(var + eps);
+    let iv = vdupq_n_f32(inv);
+    for i in (0..body).step_by(4) {
+        // SAFETY: i + 4 <= body <= n, the length of all four slices.
+        unsafe {
+            let t = vmulq_f32(vmulq_f32(vsubq_f32(vld1q_f32(x.as_ptr().add(i)), m), iv), vld1q_f32(w.as_ptr().add(i)));
+            vst1q_f32(y.as_mut_ptr().add(i), vaddq_f32(t, vld1q_f32(b.as_ptr().add(i))));
+        }
+    }
+    for i in body..n {
+        y[i] = (x[i] - mean) * inv * w[i] + b[i];
+    }
 }
 
 /// See [`super::gelu_inplace`]: [`super::scalar::gelu`] on 4 lanes, the

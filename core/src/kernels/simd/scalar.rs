@@ -274,7 +274,46 @@ pub fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
         *v = exp(*v - max);
         t += *v;
     }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + t
+    reduce8(acc, t)
+}
+
+/// The 8 lane sums of an 8-wide SIMD loop and the in-order sum of the
+/// tail, reduced in the one order every variant uses.
+#[inline]
+pub fn reduce8(a: [f32; 8], tail: f32) -> f32 {
+    ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + tail
+}
+
+/// `f(x[i])` summed as 8 lanes (element `i` of the 8-element body to lane
+/// `i % 8`), the tail in order, then [`reduce8`].
+#[inline]
+fn lane_sum(x: &[f32], f: impl Fn(f32) -> f32) -> f32 {
+    let (body, tail) = x.split_at(x.len() - x.len() % 8);
+    let mut acc = [0.0f32; 8];
+    for c in body.chunks_exact(8) {
+        for l in 0..8 {
+            acc[l] += f(c[l]);
+        }
+    }
+    reduce8(acc, tail.iter().fold(0.0, |t, &v| t + f(v)))
+}
+
+/// One LayerNorm row: `y = (x - mean) * inv * w + b`, `inv = 1 / sqrt(var +
+/// eps)`, biased variance (PyTorch), over the shortest of the four slices;
+/// mean and variance as 8 lane sums ([`reduce8`]), no fused multiply-add,
+/// so the SIMD variants are bit-identical to it.
+pub fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
+    let n = x.len().min(w.len()).min(b.len()).min(y.len());
+    if n == 0 {
+        return;
+    }
+    let x = &x[..n];
+    let mean = lane_sum(x, |v| v) / n as f32;
+    let var = lane_sum(x, |v| (v - mean) * (v - mean)) / n as f32;
+    let inv = 1.0 / libm::sqrtf(var + eps);
+    for i in 0..n {
+        y[i] = (x[i] - mean) * inv * w[i] + b[i];
+    }
 }
 
 /// Constants of [`gelu`]: Abramowitz & Stegun 7.1.26 for erf (max absolute

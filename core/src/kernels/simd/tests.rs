@@ -871,3 +871,77 @@ fn split_gemm_matches_one_thread_bit_for_bit() {
     set_workers(None);
     assert_eq!((small, narrow), (1, 1));
 }
+
+/// `layernorm_row` (AVX2 / NEON) is bit-identical to its scalar twin at
+/// every width 0..=70 and the model's 768 / 3072 (tails included, rows with
+/// a large offset, where the mean matters), and the twin is within 1e-5 of
+/// an f64 LayerNorm.
+#[test]
+#[allow(unsafe_code)]
+fn layernorm_matches_scalar_twin_and_f64() {
+    let mut r = Rng(777);
+    for n in (0..=70).chain([768, 3072]) {
+        for offset in [0.0f32, 40.0] {
+            let x: std::vec::Vec<f32> = r.vec(n).iter().map(|v| 3.0 * v + offset).collect();
+            let (w, b) = (r.vec(n), r.vec(n));
+            let mut want = std::vec![f32::NAN; n];
+            scalar::layernorm_row(&x, &w, &b, 1e-5, &mut want);
+            if n > 1 {
+                let mean = x.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
+                let var = x.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n as f64;
+                for i in 0..n {
+                    let e = (x[i] as f64 - mean) / (var + 1e-5).sqrt() * w[i] as f64 + b[i] as f64;
+                    assert!((want[i] as f64 - e).abs() <= 1e-5 * (1.0 + e.abs()), "n={n} offset {offset} [{i}]: {} vs f64 {e}", want[i]);
+                }
+            }
+            let mut got = std::vec![f32::NAN; n];
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: avx2 detected.
+                unsafe { super::x86::layernorm_row(&x, &w, &b, 1e-5, &mut got) };
+                assert_eq!(got.iter().map(|v| v.to_bits()).collect::<std::vec::Vec<_>>(), want.iter().map(|v| v.to_bits()).collect::<std::vec::Vec<_>>(), "avx2 n={n}");
+            }
+            #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+            {
+                // SAFETY: NEON is enabled for this build.
+                unsafe { super::neon::layernorm_row(&x, &w, &b, 1e-5, &mut got) };
+                assert_eq!(got.iter().map(|v| v.to_bits()).collect::<std::vec::Vec<_>>(), want.iter().map(|v| v.to_bits()).collect::<std::vec::Vec<_>>(), "neon n={n}");
+            }
+            let _ = &mut got;
+        }
+    }
+}
+
+/// `split_cols` hands each task a disjoint range of output columns, cut at
+/// multiples of `SPLIT_ALIGN`, that together cover every column of every
+/// row exactly once (small enough for Miri).
+#[test]
+fn split_cols_ranges_cover_every_column_once() {
+    use crate::kernels::parallel::{set_workers, split_cols, SPLIT_ALIGN};
+    for n_out in [16usize, 17, 40, 41, 64] {
+        let rows = 3;
+        let mut y = std::vec![0.0f32; rows * n_out];
+        let ranges = std::sync::Mutex::new(std::vec::Vec::new());
+        set_workers(Some(&REVERSE_INSTALLED));
+        split_cols(&mut y, n_out, usize::MAX, |mut cols| {
+            let (lo, hi) = (cols.lo(), cols.hi());
+            ranges.lock().unwrap().push((lo, hi));
+            for i in 0..rows {
+                for v in cols.seg(i, lo, hi) {
+                    *v += 1.0;
+                }
+            }
+        });
+        set_workers(None);
+        let mut ranges = ranges.into_inner().unwrap();
+        ranges.sort();
+        assert!(ranges.len() >= 2, "{n_out} columns not split: {ranges:?}");
+        assert_eq!(ranges[0].0, 0);
+        assert_eq!(ranges.last().unwrap().1, n_out);
+        for w in ranges.windows(2) {
+            assert_eq!(w[0].1, w[1].0, "{n_out}: ranges {ranges:?} leave a gap or overlap");
+        }
+        assert!(ranges.iter().all(|&(lo, hi)| lo % SPLIT_ALIGN == 0 && lo < hi), "{n_out}: {ranges:?}");
+        assert!(y.iter().all(|&v| v == 1.0), "{n_out}: some column written other than once: {y:?}");
+    }
+}

@@ -884,7 +884,54 @@ pub unsafe fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
         *v = super::scalar::exp(*v - max);
         t += *v;
     }
-    ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + t
+    super::scalar::reduce8(a, t)
+}
+
+/// See [`super::layernorm_row`]: the twin's operations on 8 lanes.
+///
+/// # Safety
+/// The CPU must support avx2.
+#[target_feature(enable = "avx2")]
+pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
+    let n = x.len().min(w.len()).min(b.len()).min(y.len());
+    if n == 0 {
+        return;
+    }
+    let (x, w, b, y) = (&x[..n], &w[..n], &b[..n], &mut y[..n]);
+    let body = n - n % 8;
+    let lanes = |v: __m256| {
+        let mut a = [0f32; 8];
+        // SAFETY: a holds 8 floats.
+        unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) };
+        a
+    };
+    let mut acc = _mm256_setzero_ps();
+    for c in x[..body].chunks_exact(8) {
+        // SAFETY: c holds 8 floats.
+        acc = _mm256_add_ps(acc, unsafe { _mm256_loadu_ps(c.as_ptr()) });
+    }
+    let mean = super::scalar::reduce8(lanes(acc), x[body..].iter().fold(0.0, |t, &v| t + v)) / n as f32;
+    let m = _mm256_set1_ps(mean);
+    let mut acc = _mm256_setzero_ps();
+    for c in x[..body].chunks_exact(8) {
+        // SAFETY: c holds 8 floats.
+        let d = _mm256_sub_ps(unsafe { _mm256_loadu_ps(c.as_ptr()) }, m);
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(d, d));
+    }
+    let tail = x[body..].iter().fold(0.0, |t, &v| t + (v - mean) * (v - mean));
+    let var = super::scalar::reduce8(lanes(acc), tail) / n as f32;
+    let inv = 1.0 / libm::sqrtf(var + eps);
+    let iv = _mm256_set1_ps(inv);
+    for i in (0..body).step_by(8) {
+        // SAFETY: i + 8 <= body <= n, the length of all four slices.
+        unsafe {
+            let t = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(x.as_ptr().add(i)), m), iv), _mm256_loadu_ps(w.as_ptr().add(i)));
+            _mm256_storeu_ps(y.as_mut_ptr().add(i), _mm256_add_ps(t, _mm256_loadu_ps(b.as_ptr().add(i))));
+        }
+    }
+    for i in body..n {
+        y[i] = (x[i] - mean) * inv * w[i] + b[i];
+    }
 }
 
 /// See [`super::gelu_inplace`]: [`super::scalar::gelu`] on 8 lanes, the
