@@ -3,12 +3,13 @@
 //! rows), the last-position shortcut and, later, a streaming session
 //! (new queries against a cached key range).
 
+use super::parallel::split_cols_aligned;
 use super::simd;
 use super::weights::dot;
 
 /// Which keys a query may see. Row indices are relative to the `q` and
 /// `k`/`v` slices handed to [`attention`]; positions are derived by the mask.
-pub trait Mask {
+pub trait Mask: Sync {
     fn allowed(&self, qi: usize, kj: usize) -> bool;
 }
 
@@ -52,6 +53,11 @@ impl Mask for TiledCausalMask {
 /// breaks into more runs takes the key-by-key path.
 const MAX_RUNS: usize = 64;
 
+/// Most keys of an attention split over threads: each thread scores its
+/// queries in a stack buffer of this many floats (4 KiB); longer key runs
+/// stay on the calling thread (with the caller's `scores`).
+pub const SPLIT_MAX_KEYS: usize = 1024;
+
 /// `out = softmax(mask(q k^T / sqrt(hd))) v`, per head. `q`: (nq, C);
 /// `k`, `v`: (nk, C); `out`: (nq, C); `scores`: >= nk scratch; `C = n_head
 /// * hd`. Masked keys are skipped (= -inf before softmax). A query that
@@ -59,7 +65,11 @@ const MAX_RUNS: usize = 64;
 ///
 /// Per query the mask is read once into runs of consecutive allowed keys;
 /// per head and run the scores are one [`simd::dot_rows`] call and the
-/// probability-weighted values [`simd::axpy_f32`] calls.
+/// probability-weighted values [`simd::axpy_f32`] calls. With a worker
+/// pool ([`super::parallel`]) and at most [`SPLIT_MAX_KEYS`] keys, the
+/// queries are split over its threads (each query computed as on one
+/// thread: bit-identical).
+#[allow(clippy::too_many_arguments)]
 pub fn attention<M: Mask>(
     q: &[f32],
     k: &[f32],
@@ -73,12 +83,26 @@ pub fn attention<M: Mask>(
     if c == 0 || n_head == 0 {
         return;
     }
-    let hd = c / n_head;
     let nq = (q.len() / c).min(out.len() / c);
     let nk = (k.len() / c).min(v.len() / c).min(scores.len());
+    let out = &mut out[..nq * c];
+    if nk > SPLIT_MAX_KEYS {
+        return attend_queries(q, k, v, c, n_head, mask, 0, nk, scores, out);
+    }
+    split_cols_aligned(out, nq * c, c, nq.saturating_mul(nk).saturating_mul(c), |mut cols| {
+        let (lo, hi) = (cols.lo(), cols.hi());
+        let mut scores = [0.0f32; SPLIT_MAX_KEYS];
+        attend_queries(q, k, v, c, n_head, mask, lo / c, nk, &mut scores, cols.seg(0, lo, hi));
+    });
+}
+
+/// Queries `q0 .. q0 + out.len() / c` of [`attention`] (`out`: their rows).
+#[allow(clippy::too_many_arguments)]
+fn attend_queries<M: Mask>(q: &[f32], k: &[f32], v: &[f32], c: usize, n_head: usize, mask: &M, q0: usize, nk: usize, scores: &mut [f32], out: &mut [f32]) {
+    let hd = c / n_head;
     let scale = 1.0 / libm::sqrtf(hd as f32);
     let mut runs = [(0usize, 0usize); MAX_RUNS];
-    for qi in 0..nq {
+    for (qi, orow) in (q0..).zip(out.chunks_exact_mut(c)) {
         let mut nr = 0;
         let mut kj = 0;
         while kj < nk && nr <= MAX_RUNS {
@@ -96,7 +120,7 @@ pub fn attention<M: Mask>(
             nr += 1;
         }
         if nr > MAX_RUNS {
-            attention_query_keywise(q, k, v, c, n_head, mask, qi, nk, scale, scores, out);
+            attention_query_keywise(q, k, v, c, n_head, mask, qi, nk, scale, scores, orow);
             continue;
         }
         let runs = &runs[..nr];
@@ -111,7 +135,7 @@ pub fn attention<M: Mask>(
                     max = max.max(*s);
                 }
             }
-            let oh = &mut out[qi * c + h * hd..qi * c + (h + 1) * hd];
+            let oh = &mut orow[h * hd..(h + 1) * hd];
             oh.fill(0.0);
             let mut sum = 0.0f32;
             for &(a, b) in runs {
@@ -130,7 +154,8 @@ pub fn attention<M: Mask>(
     }
 }
 
-/// One query of [`attention`], key by key (masks with many runs).
+/// One query of [`attention`], key by key (masks with many runs); `out`:
+/// the query's output row.
 #[allow(clippy::too_many_arguments)]
 fn attention_query_keywise<M: Mask>(
     q: &[f32],
@@ -156,7 +181,7 @@ fn attention_query_keywise<M: Mask>(
                 max = max.max(s);
             }
         }
-        let oh = &mut out[qi * c + h * hd..qi * c + (h + 1) * hd];
+        let oh = &mut out[h * hd..(h + 1) * hd];
         oh.fill(0.0);
         let mut sum = 0.0f32;
         for kj in 0..nk {

@@ -64,8 +64,13 @@ pub const MIN_SPLIT_WORK: usize = 128 * 1024;
 /// How many ranges a GEMM of `n_out` output columns and `work` (weight
 /// bytes x activation rows) is split into now: 1 without a pool.
 pub fn split_count(n_out: usize, work: usize) -> usize {
+    split_units(n_out / SPLIT_ALIGN, work)
+}
+
+/// Ranges for `units` splittable units of `work`: 1 without a pool.
+fn split_units(units: usize, work: usize) -> usize {
     match workers() {
-        Some(w) if work >= MIN_SPLIT_WORK => w.threads().min(n_out / SPLIT_ALIGN).max(1),
+        Some(w) if work >= MIN_SPLIT_WORK => w.threads().min(units).max(1),
         _ => 1,
     }
 }
@@ -129,12 +134,23 @@ pub fn split_cols<F>(y: &mut [f32], n_out: usize, work: usize, f: F)
 where
     F: Fn(Cols<'_>) + Sync,
 {
-    let tasks = split_count(n_out, work);
+    split_cols_aligned(y, n_out, SPLIT_ALIGN, work, f)
+}
+
+/// [`split_cols`] with ranges cut at multiples of `align` columns (an
+/// attention output seen as one row of `n_out = queries * C` columns is
+/// split at whole queries: `align = C`).
+pub fn split_cols_aligned<F>(y: &mut [f32], n_out: usize, align: usize, work: usize, f: F)
+where
+    F: Fn(Cols<'_>) + Sync,
+{
+    let align = align.max(1);
+    let tasks = split_units(n_out / align, work);
     let pool = match workers() {
         Some(w) if tasks > 1 => w,
         _ => return f(Cols::whole(y, n_out)),
     };
-    let per = n_out.div_ceil(SPLIT_ALIGN).div_ceil(tasks) * SPLIT_ALIGN;
+    let per = n_out.div_ceil(align).div_ceil(tasks) * align;
     let out = &SharedOut { ptr: y.as_mut_ptr(), len: y.len(), stride: n_out, _y: PhantomData };
     pool.run(tasks, &|t| {
         let (lo, hi) = ((t * per).min(n_out), ((t + 1) * per).min(n_out));

@@ -478,7 +478,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         results.push(r);
     }
-    println!("t2 = one step with its large GEMMs split over 2 threads (duolando::workers); % of memcpy is against the 1-thread memcpy.");
+    println!("tN = one step with its large GEMMs split over N threads (duolando::workers); % of memcpy is against the 1-thread memcpy.");
     let tract = match super::bench_tract::onnx_path(args.tract_onnx.as_deref()) {
         None => {
             println!("tract ratio: not measured (no full-size R-step ONNX; make it with: {})", super::bench_tract::HOW);

@@ -392,6 +392,7 @@ unsafe fn lanes8(lo: float32x4_t, hi: float32x4_t) -> [f32; 8] {
 /// NEON must be available (always on aarch64).
 #[target_feature(enable = "neon")]
 pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
+    use super::scalar::{ln_affine, ln_inv_std, ln_mean};
     let n = x.len().min(w.len()).min(b.len()).min(y.len());
     if n == 0 {
         return;
@@ -407,7 +408,7 @@ pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [
         }
     }
     // SAFETY: NEON (this function's feature).
-    let mean = super::scalar::reduce8(unsafe { lanes8(lo, hi) }, x[body..].iter().fold(0.0, |t, &v| t + v)) / n as f32;
+    let mean = ln_mean(unsafe { lanes8(lo, hi) }, x, body);
     let m = vdupq_n_f32(mean);
     let (mut lo, mut hi) = (vdupq_n_f32(0.0), vdupq_n_f32(0.0));
     for c in x[..body].chunks_exact(8) {
@@ -419,10 +420,8 @@ pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [
             hi = vaddq_f32(hi, vmulq_f32(db, db));
         }
     }
-    let tail = x[body..].iter().fold(0.0, |t, &v| t + (v - mean) * (v - mean));
     // SAFETY: NEON (this function's feature).
-    let var = super::scalar::reduce8(unsafe { lanes8(lo, hi) }, tail) / n as f32;
-    let inv = 1.0 / libm::sqrtf(var + eps);
+    let inv = ln_inv_std(unsafe { lanes8(lo, hi) }, x, body, mean, eps);
     let iv = vdupq_n_f32(inv);
     for i in (0..body).step_by(4) {
         // SAFETY: i + 4 <= body <= n, the length of all four slices.
@@ -431,9 +430,7 @@ pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [
             vst1q_f32(y.as_mut_ptr().add(i), vaddq_f32(t, vld1q_f32(b.as_ptr().add(i))));
         }
     }
-    for i in body..n {
-        y[i] = (x[i] - mean) * inv * w[i] + b[i];
-    }
+    ln_affine(x, w, b, mean, inv, y, body);
 }
 
 /// See [`super::gelu_inplace`]: [`super::scalar::gelu`] on 4 lanes, the

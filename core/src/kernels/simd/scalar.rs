@@ -284,36 +284,54 @@ pub fn reduce8(a: [f32; 8], tail: f32) -> f32 {
     ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + tail
 }
 
-/// `f(x[i])` summed as 8 lanes (element `i` of the 8-element body to lane
-/// `i % 8`), the tail in order, then [`reduce8`].
+/// LayerNorm's mean: the 8 lane sums of `x[..body]` (`body` a multiple of
+/// 8) with the tail `x[body..]` added in order ([`reduce8`]).
 #[inline]
-fn lane_sum(x: &[f32], f: impl Fn(f32) -> f32) -> f32 {
-    let (body, tail) = x.split_at(x.len() - x.len() % 8);
-    let mut acc = [0.0f32; 8];
-    for c in body.chunks_exact(8) {
-        for l in 0..8 {
-            acc[l] += f(c[l]);
-        }
+pub fn ln_mean(lanes: [f32; 8], x: &[f32], body: usize) -> f32 {
+    reduce8(lanes, x[body..].iter().fold(0.0, |t, &v| t + v)) / x.len() as f32
+}
+
+/// LayerNorm's `1 / sqrt(var + eps)` (biased variance): the 8 lane sums of
+/// `(x - mean)^2` over `x[..body]` with the tail added in order.
+#[inline]
+pub fn ln_inv_std(lanes: [f32; 8], x: &[f32], body: usize, mean: f32, eps: f32) -> f32 {
+    let var = reduce8(lanes, x[body..].iter().fold(0.0, |t, &v| t + (v - mean) * (v - mean))) / x.len() as f32;
+    1.0 / libm::sqrtf(var + eps)
+}
+
+/// `y[i] = (x[i] - mean) * inv * w[i] + b[i]` for `i` in `from..x.len()`
+/// (the scalar rows, or a SIMD variant's tail).
+#[inline]
+pub fn ln_affine(x: &[f32], w: &[f32], b: &[f32], mean: f32, inv: f32, y: &mut [f32], from: usize) {
+    for i in from..x.len() {
+        y[i] = (x[i] - mean) * inv * w[i] + b[i];
     }
-    reduce8(acc, tail.iter().fold(0.0, |t, &v| t + f(v)))
 }
 
 /// One LayerNorm row: `y = (x - mean) * inv * w + b`, `inv = 1 / sqrt(var +
 /// eps)`, biased variance (PyTorch), over the shortest of the four slices;
 /// mean and variance as 8 lane sums ([`reduce8`]), no fused multiply-add,
-/// so the SIMD variants are bit-identical to it.
+/// so the SIMD variants (which share [`ln_mean`], [`ln_inv_std`] and
+/// [`ln_affine`] for their tails) are bit-identical to it.
 pub fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
     let n = x.len().min(w.len()).min(b.len()).min(y.len());
     if n == 0 {
         return;
     }
     let x = &x[..n];
-    let mean = lane_sum(x, |v| v) / n as f32;
-    let var = lane_sum(x, |v| (v - mean) * (v - mean)) / n as f32;
-    let inv = 1.0 / libm::sqrtf(var + eps);
-    for i in 0..n {
-        y[i] = (x[i] - mean) * inv * w[i] + b[i];
-    }
+    let body = n - n % 8;
+    let lanes = |f: &dyn Fn(f32) -> f32| {
+        let mut acc = [0.0f32; 8];
+        for c in x[..body].chunks_exact(8) {
+            for l in 0..8 {
+                acc[l] += f(c[l]);
+            }
+        }
+        acc
+    };
+    let mean = ln_mean(lanes(&|v| v), x, body);
+    let inv = ln_inv_std(lanes(&|v| (v - mean) * (v - mean)), x, body, mean, eps);
+    ln_affine(x, w, b, mean, inv, y, 0);
 }
 
 /// Constants of [`gelu`]: Abramowitz & Stegun 7.1.26 for erf (max absolute

@@ -945,3 +945,45 @@ fn split_cols_ranges_cover_every_column_once() {
         assert!(y.iter().all(|&v| v == 1.0), "{n_out}: some column written other than once: {y:?}");
     }
 }
+
+/// `attention` split over a pool's query ranges equals the one-thread call
+/// bit for bit (band and tiled-causal masks, a mask of many runs that takes
+/// the key-by-key path, and more keys than a split takes).
+#[test]
+fn split_attention_matches_one_thread_bit_for_bit() {
+    use crate::kernels::parallel::set_workers;
+    use crate::kernels::{attention, BandMask, Mask, TiledCausalMask};
+    use std::sync::atomic::Ordering;
+    /// Every other key (more runs than a query remembers).
+    struct Comb;
+    impl Mask for Comb {
+        fn allowed(&self, _: usize, kj: usize) -> bool {
+            kj % 2 == 0
+        }
+    }
+    fn run(m: &dyn Fn(&[f32], &[f32], &[f32], &mut [f32], &mut [f32]), nq: usize, nk: usize, c: usize, r: &mut Rng, split_expected: bool) {
+        let (q, k, v) = (r.vec(nq * c), r.vec(nk * c), r.vec(nk * c));
+        let mut scores = std::vec![0.0f32; nk];
+        set_workers(None);
+        let mut one = std::vec![f32::NAN; nq * c];
+        m(&q, &k, &v, &mut scores, &mut one);
+        set_workers(Some(&REVERSE_INSTALLED));
+        let jobs = REVERSE.0.load(Ordering::Relaxed);
+        let mut split = std::vec![f32::NAN; nq * c];
+        m(&q, &k, &v, &mut scores, &mut split);
+        set_workers(None);
+        assert_eq!(REVERSE.0.load(Ordering::Relaxed) > jobs, split_expected, "({nq},{nk},{c}): split or not");
+        for (i, (a, b)) in one.iter().zip(&split).enumerate() {
+            assert_eq!(a.to_bits(), b.to_bits(), "({nq},{nk},{c}) element {i}: {a} vs {b}");
+        }
+    }
+    let mut r = Rng(31);
+    let (c, nh) = (64usize, 4usize);
+    let band = BandMask { radius: 9, q_pos0: 3, k_pos0: 0 };
+    run(&|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o), 40, 60, c, &mut r, true);
+    let tiled = TiledCausalMask { t_q: 6, t_k: 30, q_pos0: 20 };
+    run(&|q, k, v, s, o| attention(q, k, v, c, nh, &tiled, s, o), 30, 150, c, &mut r, true);
+    run(&|q, k, v, s, o| attention(q, k, v, c, nh, &Comb, s, o), 12, 200, c, &mut r, true);
+    let wide = crate::kernels::attention::SPLIT_MAX_KEYS + 8;
+    run(&|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o), 9, wide, c, &mut r, false);
+}

@@ -893,6 +893,7 @@ pub unsafe fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
 /// The CPU must support avx2.
 #[target_feature(enable = "avx2")]
 pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
+    use super::scalar::{ln_affine, ln_inv_std, ln_mean};
     let n = x.len().min(w.len()).min(b.len()).min(y.len());
     if n == 0 {
         return;
@@ -910,7 +911,7 @@ pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [
         // SAFETY: c holds 8 floats.
         acc = _mm256_add_ps(acc, unsafe { _mm256_loadu_ps(c.as_ptr()) });
     }
-    let mean = super::scalar::reduce8(lanes(acc), x[body..].iter().fold(0.0, |t, &v| t + v)) / n as f32;
+    let mean = ln_mean(lanes(acc), x, body);
     let m = _mm256_set1_ps(mean);
     let mut acc = _mm256_setzero_ps();
     for c in x[..body].chunks_exact(8) {
@@ -918,9 +919,7 @@ pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [
         let d = _mm256_sub_ps(unsafe { _mm256_loadu_ps(c.as_ptr()) }, m);
         acc = _mm256_add_ps(acc, _mm256_mul_ps(d, d));
     }
-    let tail = x[body..].iter().fold(0.0, |t, &v| t + (v - mean) * (v - mean));
-    let var = super::scalar::reduce8(lanes(acc), tail) / n as f32;
-    let inv = 1.0 / libm::sqrtf(var + eps);
+    let inv = ln_inv_std(lanes(acc), x, body, mean, eps);
     let iv = _mm256_set1_ps(inv);
     for i in (0..body).step_by(8) {
         // SAFETY: i + 8 <= body <= n, the length of all four slices.
@@ -929,9 +928,7 @@ pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [
             _mm256_storeu_ps(y.as_mut_ptr().add(i), _mm256_add_ps(t, _mm256_loadu_ps(b.as_ptr().add(i))));
         }
     }
-    for i in body..n {
-        y[i] = (x[i] - mean) * inv * w[i] + b[i];
-    }
+    ln_affine(x, w, b, mean, inv, y, body);
 }
 
 /// See [`super::gelu_inplace`]: [`super::scalar::gelu`] on 8 lanes, the
