@@ -1,5 +1,6 @@
-//! GEMMs split over threads (`duolando::workers::set_threads`, issue #4
-//! item 5) give the same bits as one thread: the demo model (f16 and its
+//! GEMMs and attention split over threads
+//! (`duolando::workers::set_threads`, issue #4 item 5) give the same bits
+//! as one thread: the demo model (f16 and its
 //! int8 re-store) in R mode over the demo clip and in S mode (a streaming
 //! session over the same clip), at 1, 2 and 3 threads. The split really
 //! happens (`workers::split_jobs` counts the GEMMs that ran on a pool).

@@ -5,8 +5,9 @@
 //! installs a process-wide pool of `n - 1` parked worker threads; from then
 //! on every large `linear` (weight bytes x rows >= 128 KiB) hands each of
 //! the `n` threads (the caller's included) its own share of the output
-//! columns, so each thread reads only its share of the weights. Results
-//! are bit-identical to one thread (tests/threads.rs).
+//! columns, so each thread reads only its share of the weights, and every
+//! large `attention` its own share of the queries. Results are
+//! bit-identical to one thread (tests/threads.rs).
 //!
 //! `set_threads(1)` stops and joins the workers.
 //!

@@ -6,9 +6,11 @@
 //! [`linear`](super::linear) hands each thread its own range of output
 //! columns (weight rows), cut at multiples of [`SPLIT_ALIGN`]: each thread
 //! reads only its share of the weights, which is what a weight-bound step
-//! needs. Every output value is computed by the same code over the same
-//! data as without a pool, so results are bit-identical for any thread
-//! count (tests: `split_gemm_*` in core, `tests/threads.rs`).
+//! needs; [`attention`](super::attention) hands each thread its own whole
+//! query rows. Every output value is computed by the same code over the
+//! same data as without a pool, so results are bit-identical for any
+//! thread count (tests: `split_gemm_*`, `split_attention_*` and
+//! `split_cols_*` in core, `tests/threads.rs`).
 
 // The module's unsafe: the pool pointer, the disjoint output views and the
 // pool contract, each with a SAFETY note (tests/unsafe_audit.rs).
