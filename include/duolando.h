@@ -280,10 +280,11 @@ typedef enum duo_sampling {
   DUO_SAMPLING_TOP_K = 1
 } duo_sampling;
 
-/* duo_session_config.kv: element type of the GPT key/value cache. */
+/* duo_session_config.kv: element type of the session's keys and values
+ * (the GPT cache and the LAT rings). */
 typedef enum duo_kv {
   DUO_KV_F32 = 0,
-  /* Half the cache bytes; tokens may rarely differ from f32. */
+  /* Half the K/V bytes; tokens may rarely differ from f32. */
   DUO_KV_F16 = 1
 } duo_kv;
 

@@ -4,7 +4,7 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
-use crate::kernels::{attention, gelu_inplace, layernorm, linear, Mask};
+use crate::kernels::{attention, gelu_inplace, layernorm, linear, KvRows, Mask};
 use crate::model::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
@@ -137,7 +137,7 @@ pub fn block_kv(w: &BlockW<'_>, x: &[f32], ln: &mut [f32], k: &mut [f32], v: &mu
 /// `x` (n, C) holds the groups one after another, group `g` at rows
 /// `bounds[g]..bounds[g + 1]` (`bounds`: groups + 1 ascending row offsets,
 /// first 0, last n). `keys(g)` gives group g's keys and values
-/// ((nk_g, C) each, already computed, including the group's own rows where
+/// ((nk_g, C) each as [`KvRows`], already computed, including the group's own rows where
 /// its mask allows) and its mask (query row i of the group, key row j).
 /// Groups are independent (one streaming session's window or LAT each);
 /// every weight matrix is read once for all of them, and a row's result
@@ -146,7 +146,7 @@ pub fn block_kv(w: &BlockW<'_>, x: &[f32], ln: &mut [f32], k: &mut [f32], v: &mu
 pub fn block_attend_groups<'k, M, F>(w: &BlockW<'_>, x: &mut [f32], bounds: &[usize], c: usize, n_head: usize, keys: F, s: &mut BlockScratch<'_>) -> Result<(), Error>
 where
     M: Mask,
-    F: Fn(usize) -> Result<(&'k [f32], &'k [f32], M), Error>,
+    F: Fn(usize) -> Result<(KvRows<'k>, KvRows<'k>, M), Error>,
 {
     let nc = x.len();
     let groups = bounds.len().saturating_sub(1);
@@ -162,7 +162,7 @@ where
             return Err(Error::Length { buffer: Buffer::Features, len: a, expected: b });
         }
         let (k, v, mask) = keys(g)?;
-        let nk = k.len() / c;
+        let nk = k.rows(c);
         if nk > s.scores.len() {
             return Err(Error::Length { buffer: Buffer::Features, len: nk, expected: s.scores.len() });
         }

@@ -62,7 +62,7 @@ fn attention_r_step(c: &mut Criterion) {
     g.sample_size(20);
     g.bench_function("r_step_290x290_c768_h12", |bch| {
         bch.iter(|| {
-            attention(&q, &k, &v, c_dim, heads, &mask, &mut scores, &mut out);
+            attention(&q, &k[..], &v[..], c_dim, heads, &mask, &mut scores, &mut out);
             std::hint::black_box(&out);
         })
     });

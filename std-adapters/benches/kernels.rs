@@ -90,7 +90,7 @@ fn main() {
     for isa in &isas {
         // SAFETY: as above.
         unsafe { simd::set_isa(*isa) };
-        let s = time(reps, || attention(&q, &k, &v, c, nh, &mask, &mut scores, &mut out));
+        let s = time(reps, || attention(&q, &k[..], &v[..], c, nh, &mask, &mut scores, &mut out));
         line += &format!("  [{isa:?}] {:.2} ms", s * 1e3);
     }
     println!("{line}");

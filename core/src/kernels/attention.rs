@@ -3,9 +3,9 @@
 //! rows), the last-position shortcut and, later, a streaming session
 //! (new queries against a cached key range).
 
+use super::kv_rows::KvRows;
 use super::parallel::split_cols_aligned;
 use super::simd;
-use super::weights::dot;
 
 /// Which keys a query may see. Row indices are relative to the `q` and
 /// `k`/`v` slices handed to [`attention`]; positions are derived by the mask.
@@ -59,7 +59,8 @@ const MAX_RUNS: usize = 64;
 pub const SPLIT_MAX_KEYS: usize = 1024;
 
 /// `out = softmax(mask(q k^T / sqrt(hd))) v`, per head. `q`: (nq, C);
-/// `k`, `v`: (nk, C); `out`: (nq, C); `scores`: >= nk scratch; `C = n_head
+/// `k`, `v`: (nk, C) ([`KvRows`]: a plain f32 slice, or a cache's one or
+/// two runs of f32 / f16 rows); `out`: (nq, C); `scores`: >= nk scratch; `C = n_head
 /// * hd`. Masked keys are skipped (= -inf before softmax). A query that
 /// sees no key gets zeros (cannot happen with the model's masks).
 ///
@@ -70,10 +71,10 @@ pub const SPLIT_MAX_KEYS: usize = 1024;
 /// queries are split over its threads (each query computed as on one
 /// thread: bit-identical).
 #[allow(clippy::too_many_arguments)]
-pub fn attention<M: Mask>(
+pub fn attention<'a, M: Mask>(
     q: &[f32],
-    k: &[f32],
-    v: &[f32],
+    k: impl Into<KvRows<'a>>,
+    v: impl Into<KvRows<'a>>,
     c: usize,
     n_head: usize,
     mask: &M,
@@ -83,22 +84,23 @@ pub fn attention<M: Mask>(
     if c == 0 || n_head == 0 {
         return;
     }
+    let (k, v) = (k.into(), v.into());
     let nq = (q.len() / c).min(out.len() / c);
-    let nk = (k.len() / c).min(v.len() / c).min(scores.len());
+    let nk = k.rows(c).min(v.rows(c)).min(scores.len());
     let out = &mut out[..nq * c];
     if nk > SPLIT_MAX_KEYS {
-        return attend_queries(q, k, v, c, n_head, mask, 0, nk, scores, out);
+        return attend_queries(q, &k, &v, c, n_head, mask, 0, nk, scores, out);
     }
     split_cols_aligned(out, nq * c, c, nq.saturating_mul(nk).saturating_mul(c), |mut cols| {
         let (lo, hi) = (cols.lo(), cols.hi());
         let mut scores = [0.0f32; SPLIT_MAX_KEYS];
-        attend_queries(q, k, v, c, n_head, mask, lo / c, nk, &mut scores, cols.seg(0, lo, hi));
+        attend_queries(q, &k, &v, c, n_head, mask, lo / c, nk, &mut scores, cols.seg(0, lo, hi));
     });
 }
 
 /// Queries `q0 .. q0 + out.len() / c` of [`attention`] (`out`: their rows).
 #[allow(clippy::too_many_arguments)]
-fn attend_queries<M: Mask>(q: &[f32], k: &[f32], v: &[f32], c: usize, n_head: usize, mask: &M, q0: usize, nk: usize, scores: &mut [f32], out: &mut [f32]) {
+fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_head: usize, mask: &M, q0: usize, nk: usize, scores: &mut [f32], out: &mut [f32]) {
     let hd = c / n_head;
     let scale = 1.0 / libm::sqrtf(hd as f32);
     let mut runs = [(0usize, 0usize); MAX_RUNS];
@@ -129,7 +131,7 @@ fn attend_queries<M: Mask>(q: &[f32], k: &[f32], v: &[f32], c: usize, n_head: us
             let mut max = f32::NEG_INFINITY;
             for &(a, b) in runs {
                 let run = &mut scores[a..b];
-                simd::dot_rows(qh, &k[a * c + h * hd..], c, run);
+                k.dot_rows(qh, a, b, c, h * hd, run);
                 for s in run.iter_mut() {
                     *s *= scale;
                     max = max.max(*s);
@@ -147,7 +149,7 @@ fn attend_queries<M: Mask>(q: &[f32], k: &[f32], v: &[f32], c: usize, n_head: us
             let inv = 1.0 / sum;
             for &(a, b) in runs {
                 for (kj, &s) in (a..b).zip(&scores[a..b]) {
-                    simd::axpy_f32(s * inv, &v[kj * c + h * hd..kj * c + (h + 1) * hd], oh);
+                    v.axpy(s * inv, kj, c, h * hd, oh);
                 }
             }
         }
@@ -159,8 +161,8 @@ fn attend_queries<M: Mask>(q: &[f32], k: &[f32], v: &[f32], c: usize, n_head: us
 #[allow(clippy::too_many_arguments)]
 fn attention_query_keywise<M: Mask>(
     q: &[f32],
-    k: &[f32],
-    v: &[f32],
+    k: &KvRows<'_>,
+    v: &KvRows<'_>,
     c: usize,
     n_head: usize,
     mask: &M,
@@ -176,7 +178,7 @@ fn attention_query_keywise<M: Mask>(
         let mut max = f32::NEG_INFINITY;
         for kj in 0..nk {
             if mask.allowed(qi, kj) {
-                let s = dot(qh, &k[kj * c + h * hd..kj * c + (h + 1) * hd]) * scale;
+                let s = k.dot(qh, kj, c, h * hd) * scale;
                 scores[kj] = s;
                 max = max.max(s);
             }
@@ -197,7 +199,7 @@ fn attention_query_keywise<M: Mask>(
         let inv = 1.0 / sum;
         for kj in 0..nk {
             if mask.allowed(qi, kj) {
-                simd::axpy_f32(scores[kj] * inv, &v[kj * c + h * hd..kj * c + (h + 1) * hd], oh);
+                v.axpy(scores[kj] * inv, kj, c, h * hd, oh);
             }
         }
     }

@@ -13,6 +13,7 @@
 pub mod activation;
 pub mod attention;
 pub mod conv;
+pub mod kv_rows;
 pub mod linear;
 pub mod norm;
 pub mod parallel;
@@ -21,6 +22,7 @@ pub mod weights;
 
 pub use activation::{gelu_inplace, relu_inplace, relu_into};
 pub use attention::{attention, BandMask, Mask, TiledCausalMask};
+pub use kv_rows::{KvRows, RowData};
 pub use conv::{conv1d, conv1d_col_len, conv_transpose1d, convt_z_len, ConvGeom, CONV_TILE};
 pub use linear::{linear, linear_xw};
 pub use norm::{layernorm, LN_EPS};

@@ -105,6 +105,9 @@ pub trait DenseElem: Copy + 'static {
             *yi += a * wi.to_f32();
         }
     }
+    /// `out[j] = q . rows[j * stride ..][..q.len()]` (attention scores
+    /// against stored key rows; ISA-dispatched, [`simd::dot_rows`]).
+    fn dot_rows(q: &[f32], rows: &[Self], stride: usize, out: &mut [f32]);
 }
 
 impl DenseElem for f32 {
@@ -123,6 +126,10 @@ impl DenseElem for f32 {
     #[inline]
     fn axpy(a: f32, w: &[f32], y: &mut [f32]) {
         simd::axpy_f32(a, w, y)
+    }
+    #[inline]
+    fn dot_rows(q: &[f32], rows: &[f32], stride: usize, out: &mut [f32]) {
+        simd::dot_rows(q, rows, stride, out)
     }
 }
 
@@ -143,6 +150,10 @@ impl DenseElem for u16 {
     #[inline]
     fn axpy(a: f32, w: &[u16], y: &mut [f32]) {
         simd::axpy_f16(a, w, y)
+    }
+    #[inline]
+    fn dot_rows(q: &[f32], rows: &[u16], stride: usize, out: &mut [f32]) {
+        simd::dot_rows_f16(q, rows, stride, out)
     }
 }
 

@@ -455,7 +455,7 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
                         let last_chunk = l == s.k;
                         let st = &mut s.st;
                         let cache: &mut GptCache<'_> = st.gpt.get_mut(a.slot).ok_or((i, Error::State))?;
-                        items.push(GptItem { cache, kv: &mut st.kv, rows: l + 1 - f, need_output: a.need_output && last_chunk }).map_err(|_| (i, Error::State))?;
+                        items.push(GptItem { cache, rows: l + 1 - f, need_output: a.need_output && last_chunk }).map_err(|_| (i, Error::State))?;
                         ci += 1;
                     }
                 }

@@ -10,12 +10,14 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::block::{block_attend_groups, block_kv, BlockScratch};
-use crate::session::MAX_BATCH;
-use heapless::Vec;
 use crate::coordinated_attention::{FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::{Buffer, Error};
-use crate::kernels::{simd, Mask};
+use crate::kernels::{KvRows, Mask};
 use crate::model::GptW;
+use crate::session::kv_store::KvBuf;
+pub use crate::session::kv_store::KvType;
+use crate::session::MAX_BATCH;
+use heapless::Vec;
 
 /// Causal over window rows for a position-major layout: query row `qi`
 /// (flat index `q_row0 + qi`) sees every key whose window row is not later.
@@ -28,58 +30,6 @@ impl Mask for RowCausal {
     #[inline]
     fn allowed(&self, qi: usize, kj: usize) -> bool {
         kj / self.streams <= (self.q_row0 + qi) / self.streams
-    }
-}
-
-/// Element type of the K/V cache.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum KvType {
-    F32,
-    /// f16 storage (half the bytes); rows are widened to f32 per layer for
-    /// the attention, and a new row's own K/V is rounded the same way.
-    F16,
-}
-
-/// (layers, streams * m, C) keys or values, position-major, in `KvType`.
-enum KvBuf<'s> {
-    F32(&'s mut [f32]),
-    F16(&'s mut [u16]),
-}
-
-impl<'s> KvBuf<'s> {
-    fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, n: usize) -> Result<Self, ArenaError> {
-        Ok(match kv {
-            KvType::F32 => KvBuf::F32(a.f32(n)?),
-            KvType::F16 => KvBuf::F16(a.u16(n)?),
-        })
-    }
-}
-
-/// Per-step f32 view of one layer's f16 K/V: (streams * m, C) each.
-#[derive(Default)]
-pub struct KvScratch<'s> {
-    pub k: &'s mut [f32],
-    pub v: &'s mut [f32],
-}
-
-impl<'s> KvScratch<'s> {
-    /// Empty for an f32 cache (it is read in place).
-    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, streams: usize, m: usize, c: usize) -> Result<Self, ArenaError> {
-        let n = match kv {
-            KvType::F32 => 0,
-            KvType::F16 => streams.checked_mul(m).and_then(|v| v.checked_mul(c)).ok_or(ArenaError::Overflow)?,
-        };
-        Ok(KvScratch { k: a.f32(n)?, v: a.f32(n)? })
-    }
-}
-
-/// Stores rows `x` (f32) at `dst` of an f16 buffer and writes the rounded
-/// values back to `x` (so every reader sees the same numbers).
-fn store_f16(x: &mut [f32], dst: &mut [u16]) {
-    for (a, d) in x.iter_mut().zip(dst.iter_mut()) {
-        let h = half::f16::from_f32(*a);
-        *d = h.to_bits();
-        *a = h.to_f32();
     }
 }
 
@@ -125,42 +75,24 @@ impl<'s> GptCache<'s> {
         self.lo = Some(lo);
     }
 
-    /// This cache's K/V of layer `l`, rows `..r1` (streams-rows), as f32:
-    /// in place (f32 cache) or the widened view in `kv` (f16 cache).
-    fn visible<'r>(&'r self, kv: &'r KvScratch<'_>, l: usize, r1: usize) -> Result<(&'r [f32], &'r [f32]), Error> {
+    /// This cache's K/V of layer `l`, rows `..r1` (streams-rows), read in
+    /// place (f32 or f16).
+    fn visible(&self, l: usize, r1: usize) -> Result<(KvRows<'_>, KvRows<'_>), Error> {
         let c = self.c;
         let base = l * self.streams * self.m * c;
-        match (&self.k, &self.v) {
-            (KvBuf::F32(k), KvBuf::F32(v)) => Ok((&k[base..base + r1 * c], &v[base..base + r1 * c])),
-            (KvBuf::F16(_), KvBuf::F16(_)) => Ok((&kv.k[..r1 * c], &kv.v[..r1 * c])),
-            _ => Err(Error::State),
-        }
+        Ok((KvRows::one(self.k.view(base, base + r1 * c)?), KvRows::one(self.v.view(base, base + r1 * c)?)))
     }
 
     /// Stores the new rows' K/V (`k`, `v`: (r1 - r0, C) f32) of layer `l`
-    /// at stream-rows `r0..r1`; for an f16 cache they are rounded in place
-    /// and the older rows widened into `kv`, so that [`GptCache::visible`]
-    /// then sees rows `..r1`.
-    fn store(&mut self, kv: &mut KvScratch<'_>, l: usize, r0: usize, r1: usize, k: &mut [f32], v: &mut [f32]) -> Result<(), Error> {
+    /// at stream-rows `r0..r1` (an f16 cache rounds them).
+    fn store(&mut self, l: usize, r0: usize, r1: usize, k: &[f32], v: &[f32]) -> Result<(), Error> {
         let c = self.c;
-        let base = l * self.streams * self.m * c;
-        let (a, b) = (base + r0 * c, base + r1 * c);
-        match (&mut self.k, &mut self.v) {
-            (KvBuf::F32(kc), KvBuf::F32(vc)) => {
-                kc[a..b].copy_from_slice(k);
-                vc[a..b].copy_from_slice(v);
-            }
-            (KvBuf::F16(kc), KvBuf::F16(vc)) => {
-                store_f16(k, &mut kc[a..b]);
-                store_f16(v, &mut vc[a..b]);
-                kv.k[r0 * c..r1 * c].copy_from_slice(k);
-                kv.v[r0 * c..r1 * c].copy_from_slice(v);
-                simd::widen_f16(&kc[base..a], &mut kv.k[..r0 * c]);
-                simd::widen_f16(&vc[base..a], &mut kv.v[..r0 * c]);
-            }
-            _ => return Err(Error::State),
+        let at = l * self.streams * self.m * c + r0 * c;
+        if k.len() != (r1 - r0) * c || v.len() != k.len() {
+            return Err(Error::Length { buffer: Buffer::Features, len: k.len(), expected: (r1 - r0) * c });
         }
-        Ok(())
+        self.k.store(at, k)?;
+        self.v.store(at, v)
     }
 
     /// Appends window rows to several caches at once (one per session of a
@@ -204,14 +136,14 @@ impl<'s> GptCache<'s> {
             for (i, it) in items.iter_mut().enumerate() {
                 let (a, z) = (bounds[i] * c, bounds[i + 1] * c);
                 let r0 = row0(it);
-                it.cache.store(it.kv, l, r0, r0 + it.rows * st, &mut kn[a..z], &mut vn[a..z])?;
+                it.cache.store(l, r0, r0 + it.rows * st, &kn[a..z], &vn[a..z])?;
             }
             let items_ro: &[GptItem<'_, '_>] = items;
             if l + 1 < layers {
                 let keys = |g: usize| {
                     let it = &items_ro[g];
                     let r0 = row0(it);
-                    let (k, v) = it.cache.visible(it.kv, l, r0 + it.rows * st)?;
+                    let (k, v) = it.cache.visible(l, r0 + it.rows * st)?;
                     Ok((k, v, RowCausal { streams: st, q_row0: r0 }))
                 };
                 block_attend_groups(b, x, &bounds, c, n_head, keys, s)?;
@@ -234,7 +166,7 @@ impl<'s> GptCache<'s> {
                     let keys = |g: usize| {
                         let it = &items_ro[outs[g]];
                         let r1 = row0(it) + it.rows * st;
-                        let (k, v) = it.cache.visible(it.kv, l, r1)?;
+                        let (k, v) = it.cache.visible(l, r1)?;
                         Ok((k, v, RowCausal { streams: st, q_row0: r1 - FOLLOWER_STREAMS }))
                     };
                     let xs = &mut x[..outs.len() * FOLLOWER_STREAMS * c];
@@ -252,8 +184,6 @@ impl<'s> GptCache<'s> {
 /// One cache's share of [`GptCache::append_many`]: `rows` new window rows.
 pub struct GptItem<'r, 's> {
     pub cache: &'r mut GptCache<'s>,
-    /// The f32 view scratch of the session's f16 caches (unused for f32).
-    pub kv: &'r mut KvScratch<'s>,
     pub rows: usize,
     pub need_output: bool,
 }

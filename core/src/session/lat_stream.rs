@@ -19,6 +19,7 @@ use crate::error::{check_len, Buffer, Error};
 use crate::kernels::{linear, Mask};
 use crate::limits::MAX_LAT_LAYERS;
 use crate::model::LatW;
+use crate::session::kv_store::{KvRing, KvType};
 use crate::session::ring::RowRing;
 use crate::session::MAX_BATCH;
 
@@ -72,9 +73,9 @@ pub fn max_keys(past: usize, fut: usize) -> usize {
 /// State of one LAT in a session.
 pub struct LatStream<'s> {
     /// Per layer: keys and values of the last `past + 1` positions (layer
-    /// 1: `past + fut + 1`), mirrored rings of (cap, C).
-    k: Vec<RowRing<'s>, { MAX_LAT_LAYERS as usize }>,
-    v: Vec<RowRing<'s>, { MAX_LAT_LAYERS as usize }>,
+    /// 1: `past + fut + 1`), rings of (cap, C) in the session's `KvType`.
+    k: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
+    v: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
     /// (fut + 1, C) residual inputs of layer 1 (a query waits `fut`
     /// positions for its keys).
     h0: RowRing<'s>,
@@ -91,19 +92,19 @@ pub struct LatStream<'s> {
 }
 
 impl<'s> LatStream<'s> {
-    /// `past`, `fut`: band in LAT input units.
-    pub fn carve<A: Carve<'s>>(a: &mut A, w_layers: usize, ds: usize, c: usize, past: usize, fut: usize) -> Result<Self, ArenaError> {
+    /// `past`, `fut`: band in LAT input units; `kv`: K/V storage type.
+    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, w_layers: usize, ds: usize, c: usize, past: usize, fut: usize) -> Result<Self, ArenaError> {
         let mut k = Vec::new();
         let mut v = Vec::new();
         for l in 0..w_layers {
             let cap = past + 1 + if l == 0 { fut } else { 0 };
-            k.push(RowRing::carve(a, cap, c)?).map_err(|_| ArenaError::Overflow)?;
-            v.push(RowRing::carve(a, cap, c)?).map_err(|_| ArenaError::Overflow)?;
+            k.push(KvRing::carve(a, kv, cap, c)?).map_err(|_| ArenaError::Overflow)?;
+            v.push(KvRing::carve(a, kv, cap, c)?).map_err(|_| ArenaError::Overflow)?;
         }
         Ok(LatStream {
             k,
             v,
-            h0: RowRing::carve_plain(a, fut + 1, c)?,
+            h0: RowRing::carve(a, fut + 1, c)?,
             last: a.f32(ds.checked_mul(c).ok_or(ArenaError::Overflow)?)?,
             past,
             fut,

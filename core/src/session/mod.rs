@@ -20,6 +20,7 @@
 pub mod batch;
 pub mod config;
 pub mod gpt_cache;
+pub mod kv_store;
 pub mod lat_stream;
 pub mod ring;
 mod state;

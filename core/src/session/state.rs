@@ -9,7 +9,7 @@ use crate::model::Model;
 use crate::quantizer::codebook_norms;
 use crate::session::config::{window_pool, SessionConfig, MAX_WINDOWS};
 use heapless::Vec;
-use crate::session::gpt_cache::{GptCache, KvScratch};
+use crate::session::gpt_cache::GptCache;
 use crate::session::lat_stream::LatStream;
 use crate::session::ring::{RowRing, TokenRing};
 use crate::stream_conv::{StackKind, StreamScratch, StreamStack};
@@ -47,8 +47,6 @@ pub struct State<'s> {
     /// GPT K/V caches: one (re-prefill schedule) or one per live window
     /// (staggered schedule).
     pub gpt: Vec<GptCache<'s>, MAX_WINDOWS>,
-    /// f32 view of one layer of an f16 K/V cache (empty for f32).
-    pub kv: KvScratch<'s>,
     // --- decoders ---
     /// Position decoders of the 4 parts and the translation decoder.
     pub dec_pos: [StreamStack<'s>; 5],
@@ -101,13 +99,13 @@ impl<'s> State<'s> {
         let [e0, e1, e2, e3] = enc;
         let enc = [e0?, e1?, e2?, e3?];
         let lat_layers = |l: &crate::config::LatConfig| l.n_layer as usize;
-        let leader_lat = [0, 1, 2, 3].map(|_| LatStream::carve(a, lat_layers(&g.leader), lds, c, past * lds, la * lds));
+        let leader_lat = [0, 1, 2, 3].map(|_| LatStream::carve(a, sc.kv, lat_layers(&g.leader), lds, c, past * lds, la * lds));
         let [l0, l1, l2, l3] = leader_lat;
         let leader_lat = [l0?, l1?, l2?, l3?];
-        let music_lat = LatStream::carve(a, lat_layers(&g.music), mds, c, past * mds, am * mds)?;
+        let music_lat = LatStream::carve(a, sc.kv, lat_layers(&g.music), mds, c, past * mds, am * mds)?;
         let cond_slack = am + 10;
         let cond_cap = m.checked_add(cond_slack).ok_or(ov())?;
-        let cond = [0, 1, 2, 3, 4].map(|_| RowRing::carve_plain(a, cond_cap, c));
+        let cond = [0, 1, 2, 3, 4].map(|_| RowRing::carve(a, cond_cap, c));
         let [c0, c1, c2, c3, c4] = cond;
         let cond = [c0?, c1?, c2?, c3?, c4?];
         let dec_pos = [0, 1, 2, 3, 4].map(|p| {
@@ -140,18 +138,17 @@ impl<'s> State<'s> {
             feat: a.f32(emb)?,
             leader_lat,
             music_lat,
-            music: RowRing::carve_plain(a, sc.music_buffer_frames as usize, g.music.n_in as usize)?,
+            music: RowRing::carve(a, sc.music_buffer_frames as usize, g.music.n_in as usize)?,
             cond,
             cond_slack,
             toks: TokenRing::carve(a, m + 1, 5)?,
             gpt,
-            kv: KvScratch::carve(a, sc.kv, streams, m, c)?,
             dec_pos,
             dec_rot,
             dec_out: a.f32(hop.checked_mul(pos.max(rot)).ok_or(ov())?)?,
             frames: a.f32(hop.checked_mul(FRAME_WIDTH).ok_or(ov())?)?,
-            pending: RowRing::carve_plain(a, roots_cap + 2 * hop, FRAME_WIDTH)?,
-            roots: RowRing::carve_plain(a, roots_cap, 3)?,
+            pending: RowRing::carve(a, roots_cap + 2 * hop, FRAME_WIDTH)?,
+            roots: RowRing::carve(a, roots_cap, 3)?,
             conv: StreamScratch::carve(a, cfg)?,
         })
     }

@@ -192,8 +192,8 @@ fn attention_band_and_tiled_causal() {
     let mut out = vec![0.0; n * c];
     let mut scores = vec![0.0; n];
     let band = BandMask { radius: 4, q_pos0: 0, k_pos0: 0 };
-    attention(&q, &k, &v, c, nh, &band, &mut scores, &mut out);
-    assert_close(&out, &naive_attention(&q, &k, &v, c, nh, &|i, j| i.abs_diff(j) <= 4), CLOSE);
+    attention(&q, &k[..], &v[..], c, nh, &band, &mut scores, &mut out);
+    assert_close(&out, &naive_attention(&q, &k[..], &v[..], c, nh, &|i, j| i.abs_diff(j) <= 4), CLOSE);
     // Tiled causal: 10 streams of t = 3.
     let t = 3;
     let n = 10 * t;
@@ -201,13 +201,13 @@ fn attention_band_and_tiled_causal() {
     let mut out = vec![0.0; n * c];
     let mut scores = vec![0.0; n];
     let m = TiledCausalMask { t_q: t, t_k: t, q_pos0: 0 };
-    attention(&q, &k, &v, c, nh, &m, &mut scores, &mut out);
-    let want = naive_attention(&q, &k, &v, c, nh, &|i, j| j % t <= i % t);
+    attention(&q, &k[..], &v[..], c, nh, &m, &mut scores, &mut out);
+    let want = naive_attention(&q, &k[..], &v[..], c, nh, &|i, j| j % t <= i % t);
     assert_close(&out, &want, CLOSE);
     // Only the last position of stream 7 as a query (the logits shortcut).
     let qi = 7 * t + t - 1;
     let mut one = vec![0.0; c];
     let last = TiledCausalMask { t_q: 1, t_k: t, q_pos0: t - 1 };
-    attention(&q[qi * c..(qi + 1) * c], &k, &v, c, nh, &last, &mut scores, &mut one);
+    attention(&q[qi * c..(qi + 1) * c], &k[..], &v[..], c, nh, &last, &mut scores, &mut one);
     assert_close(&one, &want[qi * c..(qi + 1) * c], CLOSE);
 }

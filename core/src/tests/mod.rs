@@ -6,5 +6,6 @@ mod arena;
 mod kernels;
 mod engine;
 mod motion_sampler;
+mod rings;
 mod schema_config;
 mod simd;

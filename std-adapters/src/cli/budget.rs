@@ -53,7 +53,7 @@ pub struct BudgetArgs {
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum Kv {
     F32,
-    /// Half the cache bytes; rows rounded to f16.
+    /// Half the K/V bytes (GPT cache and LAT rings); keys and values rounded to f16.
     F16,
 }
 

@@ -456,6 +456,25 @@ pub fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
     }
 }
 
+/// [`dot_rows`] over binary16 key rows (an f16 K/V cache read in place):
+/// the same operations in the same order as [`dot_rows`] on the exactly
+/// widened rows, so the result is bit-identical to widening first.
+#[inline]
+pub fn dot_rows_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f/bw/vl and f16c).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_f16(q, k, stride, out) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx2 implies f16c).
+        Isa::Avx2 => unsafe { x86::dot_rows_f16(q, k, stride, out) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::dot_rows_f16(q, k, stride, out) },
+        _ => scalar::dot_rows_f16(q, k, stride, out),
+    }
+}
+
 /// Weight rows of a packed int8 tile ([`Q8Pack8`]).
 pub const PACK_ROWS: usize = 8;
 /// Blocks (of 32 columns) a [`Q8Pack8`] holds: inputs up to 3072 wide.
@@ -521,13 +540,18 @@ pub fn gemm_q8_packed<const M: usize>(pack: &Q8Pack8, xq: [&[i8]; M], xd: [&[f32
     }
 }
 
-/// `y += a * w` with binary16 `w` (exact f16 -> f32), over the shorter length.
+/// `y += a * w` with binary16 `w` (exact f16 -> f32), over the shorter
+/// length: the same operations as [`axpy_f32`] on the widened `w`
+/// (bit-identical to widening first).
 #[inline]
 pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
         Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_f16(a, w, y) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_f16(a, w, y) },
         _ => scalar::axpy_f16(a, w, y),
     }
 }

@@ -306,6 +306,65 @@ pub unsafe fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
     }
 }
 
+/// See [`super::dot_rows_f16`]: per key row the operations of
+/// [`dot_f32`] (4 accumulators over 16 lanes, then 4-lane steps into the
+/// first, a scalar tail) on the exactly widened binary16 lanes, so the
+/// result is [`dot_rows`]'s on the widened rows, bit for bit.
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn dot_rows_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32]) {
+    let hd = q.len();
+    let (q16, qr) = q.split_at(hd - hd % 16);
+    let (q4, q1) = qr.split_at(qr.len() - qr.len() % 4);
+    for (j, o) in out.iter_mut().enumerate() {
+        let row = &k[j * stride..j * stride + hd];
+        let (k16, kr) = row.split_at(q16.len());
+        let (k4, k1) = kr.split_at(q4.len());
+        let mut acc = [vdupq_n_f32(0.0); 4];
+        for (x, y) in q16.chunks_exact(16).zip(k16.chunks_exact(16)) {
+            for (l, accl) in acc.iter_mut().enumerate() {
+                // SAFETY: x holds 16 floats, y 16 u16; lanes l*4..l*4+4 are in bounds.
+                let (xv, yv) = unsafe { (vld1q_f32(x.as_ptr().add(l * 4)), f16x4_to_f32(vld1_u16(y.as_ptr().add(l * 4)))) };
+                *accl = vfmaq_f32(*accl, xv, yv);
+            }
+        }
+        for (x, y) in q4.chunks_exact(4).zip(k4.chunks_exact(4)) {
+            // SAFETY: 4 floats and 4 u16.
+            let (xv, yv) = unsafe { (vld1q_f32(x.as_ptr()), f16x4_to_f32(vld1_u16(y.as_ptr()))) };
+            acc[0] = vfmaq_f32(acc[0], xv, yv);
+        }
+        let s = vaddq_f32(vaddq_f32(acc[0], acc[1]), vaddq_f32(acc[2], acc[3]));
+        let mut tail = 0.0f32;
+        for (x, y) in q1.iter().zip(k1) {
+            tail += x * super::f16_to_f32(*y);
+        }
+        *o = vaddvq_f32(s) + tail;
+    }
+}
+
+/// See [`super::axpy_f16`]: [`axpy_f32`]'s operations on the exactly
+/// widened binary16 lanes (bit-identical to widening first).
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
+    let n = w.len().min(y.len());
+    let (w, y) = (&w[..n], &mut y[..n]);
+    let n4 = n - n % 4;
+    let (w4, w1) = w.split_at(n4);
+    let (y4, y1) = y.split_at_mut(n4);
+    for (wc, yc) in w4.chunks_exact(4).zip(y4.chunks_exact_mut(4)) {
+        // SAFETY: 4 u16 and 4 floats.
+        unsafe { vst1q_f32(yc.as_mut_ptr(), vfmaq_n_f32(vld1q_f32(yc.as_ptr()), f16x4_to_f32(vld1_u16(wc.as_ptr())), a)) };
+    }
+    for (yi, wi) in y1.iter_mut().zip(w1) {
+        *yi += a * super::f16_to_f32(*wi);
+    }
+}
+
 /// [`super::scalar::exp`] on 4 lanes, the same operations in the same
 /// order (no FMA): bit-identical.
 ///

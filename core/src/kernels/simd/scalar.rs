@@ -166,6 +166,17 @@ pub fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
     }
 }
 
+/// Twin of [`super::dot_rows_f16`]: one [`dot_f16`] per binary16 key row
+/// (the same operations in the same order as [`dot_rows`] on the widened
+/// rows: bit-identical to it).
+#[inline]
+pub fn dot_rows_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32]) {
+    let hd = q.len();
+    for (j, o) in out.iter_mut().enumerate() {
+        *o = dot_f16(&k[j * stride..j * stride + hd], q);
+    }
+}
+
 /// Twin of [`super::gemm_q8_packed`] (block by block, exact i32 block sums,
 /// as [`gemm_q8`]).
 pub fn gemm_q8_packed<const M: usize>(

@@ -987,3 +987,126 @@ fn split_attention_matches_one_thread_bit_for_bit() {
     let wide = crate::kernels::attention::SPLIT_MAX_KEYS + 8;
     run(&|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o), 9, wide, c, &mut r, false);
 }
+
+/// The f16 K/V readers (`dot_rows_f16`, `axpy_f16`) of every variant this
+/// CPU runs equal the same variant's f32 kernel on the exactly widened rows,
+/// bit for bit (an f16 cache read in place computes what widening it first
+/// computed), and track the scalar twin within the f32 kernels' limits.
+#[test]
+#[allow(unsafe_code)]
+fn f16_row_readers_equal_f32_kernels_on_widened_rows() {
+    /// (variant, f16 reader, f32 kernel of the same variant).
+    ///
+    /// # Safety
+    /// Both kernels need the variant's CPU features (pushed only where detected).
+    type DotRows = (&'static str, unsafe fn(&[f32], &[u16], usize, &mut [f32]), unsafe fn(&[f32], &[f32], usize, &mut [f32]));
+    /// (variant, f16 axpy, f32 axpy of the same variant).
+    ///
+    /// # Safety
+    /// As for `DotRows`.
+    type Axpy = (&'static str, unsafe fn(f32, &[u16], &mut [f32]), unsafe fn(f32, &[f32], &mut [f32]));
+    let mut dots: Vec<DotRows> = vec![("scalar", |q, k, s, o| scalar::dot_rows_f16(q, k, s, o), |q, k, s, o| scalar::dot_rows(q, k, s, o))];
+    let mut axpys: Vec<Axpy> = vec![("scalar", |a, w, y| scalar::axpy_f16(a, w, y), |a, x, y| scalar::axpy_f32(a, x, y))];
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::is_x86_feature_detected as has;
+        if has!("avx2") && has!("fma") && has!("f16c") {
+            dots.push(("avx2", super::x86::dot_rows_f16, super::x86::dot_rows));
+            axpys.push(("avx2", super::x86::axpy_f16, super::x86::axpy_f32));
+        }
+        if has!("avx512f") && has!("avx512bw") && has!("avx512vl") && has!("avx2") && has!("fma") && has!("f16c") {
+            dots.push(("avx512", super::x86::dot_rows_512_f16, super::x86::dot_rows_512));
+        }
+    }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    {
+        dots.push(("neon", super::neon::dot_rows_f16, super::neon::dot_rows));
+        axpys.push(("neon", super::neon::axpy_f16, super::neon::axpy_f32));
+    }
+    let mut r = Rng(41);
+    let h = |v: &[f32]| -> Vec<u16> { v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect() };
+    let widen = |v: &[u16]| -> Vec<f32> { v.iter().map(|&b| super::f16_to_f32(b)).collect() };
+    for hd in [1, 3, 4, 7, 15, 16, 17, 33, 48, 63, 64, 65, 96] {
+        let stride = hd + 3;
+        let q = r.vec(hd);
+        let k16 = h(&r.vec(9 * stride + hd));
+        let kw = widen(&k16);
+        for n in 0..=10 {
+            let mut twin = vec![0f32; n];
+            scalar::dot_rows_f16(&q, &k16, stride, &mut twin);
+            for &(name, f16k, f32k) in &dots {
+                let (mut a, mut b) = (vec![0f32; n], vec![0f32; n]);
+                // SAFETY: each variant was pushed only where its CPU features were detected.
+                unsafe { f16k(&q, &k16, stride, &mut a) };
+                // SAFETY: as above.
+                unsafe { f32k(&q, &kw, stride, &mut b) };
+                for j in 0..n {
+                    assert_eq!(a[j].to_bits(), b[j].to_bits(), "{name} dot_rows_f16 hd={hd} j={j}: {} vs {}", a[j], b[j]);
+                    let s: f64 = q.iter().zip(&kw[j * stride..]).map(|(x, y)| (*x as f64 * *y as f64).abs()).sum();
+                    check(&format!("{name} dot_rows_f16 vs twin hd={hd} j={j}"), a[j], twin[j], s, SIMD_VS_SCALAR_TILE_512);
+                }
+            }
+        }
+    }
+    for n in (0..=20).chain([63, 64, 65, 512, 1001]) {
+        let w16 = h(&r.vec(n));
+        let ww = widen(&w16);
+        let (y0, a) = (r.vec(n), r.f());
+        for &(name, f16k, f32k) in &axpys {
+            let (mut g, mut want) = (y0.clone(), y0.clone());
+            // SAFETY: as above.
+            unsafe { f16k(a, &w16, &mut g) };
+            // SAFETY: as above.
+            unsafe { f32k(a, &ww, &mut want) };
+            for i in 0..n {
+                assert_eq!(g[i].to_bits(), want[i].to_bits(), "{name} axpy_f16 n={n} i={i}");
+            }
+        }
+    }
+}
+
+/// `attention` over key/value rows given as two runs (a ring's wrap), in
+/// f32 or f16, equals the call on one contiguous f32 copy bit for bit, for
+/// every split point (band, tiled-causal and many-run masks; the values
+/// are f16-exact so the f16 storage holds the same numbers).
+#[test]
+fn attention_over_split_and_f16_rows_equals_contiguous() {
+    use crate::kernels::{attention, BandMask, KvRows, Mask, RowData, TiledCausalMask};
+    struct Comb;
+    impl Mask for Comb {
+        fn allowed(&self, _: usize, kj: usize) -> bool {
+            kj % 2 == 0
+        }
+    }
+    let mut r = Rng(43);
+    let (c, nh) = (96usize, 3usize);
+    let round = |v: Vec<f32>| -> Vec<f32> { v.into_iter().map(|x| half::f16::from_f32(x).to_f32()).collect() };
+    let check_mask = |m: &dyn Fn(&[f32], KvRows<'_>, KvRows<'_>, &mut [f32], &mut [f32]), nq: usize, nk: usize, r: &mut Rng| {
+        let (q, k, v) = (r.vec(nq * c), round(r.vec(nk * c)), round(r.vec(nk * c)));
+        let (k16, v16): (Vec<u16>, Vec<u16>) = (k.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect(), v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect());
+        let mut scores = vec![0f32; nk];
+        let mut want = vec![f32::NAN; nq * c];
+        m(&q, KvRows::from(&k[..]), KvRows::from(&v[..]), &mut scores, &mut want);
+        for split in [0, 1, nk / 3, nk / 2, nk - 1, nk] {
+            let cut = split * c;
+            let cases = [
+                ("f32 two runs", KvRows::two(RowData::F32(&k[..cut]), RowData::F32(&k[cut..])), KvRows::two(RowData::F32(&v[..cut]), RowData::F32(&v[cut..]))),
+                ("f16 two runs", KvRows::two(RowData::F16(&k16[..cut]), RowData::F16(&k16[cut..])), KvRows::two(RowData::F16(&v16[..cut]), RowData::F16(&v16[cut..]))),
+                ("f16 one run", KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16))),
+            ];
+            for (name, kr, vr) in cases {
+                assert_eq!(kr.rows(c), nk);
+                let mut got = vec![f32::NAN; nq * c];
+                m(&q, kr, vr, &mut scores, &mut got);
+                for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+                    assert_eq!(a.to_bits(), b.to_bits(), "{name} split {split} ({nq}x{nk}) element {i}: {a} vs {b}");
+                }
+            }
+        }
+    };
+    let band = BandMask { radius: 7, q_pos0: 5, k_pos0: 0 };
+    check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o), 12, 25, &mut r);
+    let tiled = TiledCausalMask { t_q: 3, t_k: 8, q_pos0: 4 };
+    check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &tiled, s, o), 9, 40, &mut r);
+    check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &Comb, s, o), 2, 150, &mut r);
+}

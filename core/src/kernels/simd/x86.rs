@@ -668,6 +668,20 @@ pub unsafe fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
     }
 }
 
+/// See [`super::dot_rows_f16`] (one AVX2 [`dot_f16`] per key row: the
+/// operations of [`dot_rows`] on the widened rows).
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+#[target_feature(enable = "avx2,fma,f16c")]
+pub unsafe fn dot_rows_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32]) {
+    let hd = q.len();
+    for (j, o) in out.iter_mut().enumerate() {
+        // SAFETY: this fn's contract.
+        *o = unsafe { dot_f16(&k[j * stride..j * stride + hd], q) };
+    }
+}
+
 /// See [`super::dot_rows`]: the query (up to 64 floats) stays in four
 /// 16-wide registers; keys two at a time; masked tail lanes, no scalar tail.
 /// Longer queries take the AVX2 dot.
@@ -680,6 +694,43 @@ pub unsafe fn dot_rows_512(q: &[f32], k: &[f32], stride: usize, out: &mut [f32])
     if hd > 64 {
         return dot_rows(q, k, stride, out);
     }
+    // SAFETY: masked loads read only lanes < hd of key row j (in bounds: `k` holds the rows).
+    let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_maskz_loadu_ps(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i)) };
+    // SAFETY: this fn's contract.
+    unsafe { dot_rows_512_by(q, load, out) }
+}
+
+/// See [`super::dot_rows_f16`]: [`dot_rows_512`] with each key lane loaded
+/// as binary16 and widened by `vcvtph2ps` (exact), so every FMA and the
+/// reduction see the values [`dot_rows_512`] sees on the widened rows.
+///
+/// # Safety
+/// The CPU must support avx512f, avx512bw, avx512vl, avx2, fma and f16c.
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
+pub unsafe fn dot_rows_512_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32]) {
+    let hd = q.len();
+    if hd > 64 {
+        // SAFETY: this fn's contract implies dot_rows_f16's.
+        return unsafe { dot_rows_f16(q, k, stride, out) };
+    }
+    // SAFETY: masked 16-bit loads read only lanes < hd of key row j.
+    let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i) as *const i16)) };
+    // SAFETY: this fn's contract.
+    unsafe { dot_rows_512_by(q, load, out) }
+}
+
+/// The shared body of [`dot_rows_512`] and [`dot_rows_512_f16`]:
+/// `out[j] = q . key j`, with `load(j, i, mask)` giving lanes
+/// `16 i .. 16 i + 16` of key row `j` as f32 (masked lanes zero);
+/// `q.len() <= 64`.
+///
+/// # Safety
+/// The CPU must support avx512f and fma; `load` must be sound for
+/// `j < out.len()`, `i < ceil(q.len() / 16)`.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn dot_rows_512_by(q: &[f32], load: impl Fn(usize, usize, __mmask16) -> __m512, out: &mut [f32]) {
+    let hd = q.len().min(64);
     let nv = hd.div_ceil(16);
     let mask: [__mmask16; 4] = core::array::from_fn(|i| if 16 * (i + 1) <= hd { 0xffff } else if 16 * i < hd { lanes16(hd - 16 * i) } else { 0 });
     // SAFETY: masked loads read only lanes < hd of q.
@@ -687,24 +738,19 @@ pub unsafe fn dot_rows_512(q: &[f32], k: &[f32], stride: usize, out: &mut [f32])
     let n = out.len();
     let mut j = 0;
     while j + 2 <= n {
-        let (ka, kb) = (&k[j * stride..j * stride + hd], &k[(j + 1) * stride..(j + 1) * stride + hd]);
         let (mut a, mut b) = (_mm512_setzero_ps(), _mm512_setzero_ps());
         for i in 0..nv {
-            // SAFETY: masked loads read only lanes < hd of each key row.
-            let (va, vb) = unsafe { (_mm512_maskz_loadu_ps(mask[i], ka.as_ptr().add(16 * i)), _mm512_maskz_loadu_ps(mask[i], kb.as_ptr().add(16 * i))) };
-            a = _mm512_fmadd_ps(qv[i], va, a);
-            b = _mm512_fmadd_ps(qv[i], vb, b);
+            a = _mm512_fmadd_ps(qv[i], load(j, i, mask[i]), a);
+            b = _mm512_fmadd_ps(qv[i], load(j + 1, i, mask[i]), b);
         }
         out[j] = _mm512_reduce_add_ps(a);
         out[j + 1] = _mm512_reduce_add_ps(b);
         j += 2;
     }
     if j < n {
-        let ka = &k[j * stride..j * stride + hd];
         let mut a = _mm512_setzero_ps();
         for i in 0..nv {
-            // SAFETY: as above.
-            a = _mm512_fmadd_ps(qv[i], unsafe { _mm512_maskz_loadu_ps(mask[i], ka.as_ptr().add(16 * i)) }, a);
+            a = _mm512_fmadd_ps(qv[i], load(j, i, mask[i]), a);
         }
         out[j] = _mm512_reduce_add_ps(a);
     }

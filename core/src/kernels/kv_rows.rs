@@ -1,0 +1,113 @@
+//! Key and value rows as the attention reads them: `n` rows of width `C`
+//! in key order, stored as one or two runs (a ring's older rows up to the
+//! wrap, then the rest) of f32 or binary16 (an f16 cache, widened exactly
+//! lane by lane inside the kernels). Reading a cache in place this way
+//! needs no mirrored copy and no widened copy: the session's rings and
+//! K/V caches are stored once, in their own element type.
+//!
+//! Every operation is written once over [`DenseElem`] (f32 / f16) and
+//! gives, for f16 rows, bit for bit what the f32 kernels give on the
+//! widened rows (`simd::dot_rows_f16`, `simd::axpy_f16`; tested).
+
+use super::weights::DenseElem;
+
+/// One run of whole rows.
+#[derive(Clone, Copy, Debug)]
+pub enum RowData<'a> {
+    F32(&'a [f32]),
+    /// IEEE binary16 bit patterns.
+    F16(&'a [u16]),
+}
+
+impl RowData<'_> {
+    fn len(&self) -> usize {
+        match self {
+            RowData::F32(d) => d.len(),
+            RowData::F16(d) => d.len(),
+        }
+    }
+}
+
+/// `n` rows of width `C`: the rows of `parts[0]`, then those of `parts[1]`.
+#[derive(Clone, Copy, Debug)]
+pub struct KvRows<'a> {
+    parts: [RowData<'a>; 2],
+}
+
+impl<'a> KvRows<'a> {
+    /// One run.
+    pub fn one(d: RowData<'a>) -> Self {
+        KvRows { parts: [d, RowData::F32(&[])] }
+    }
+
+    /// `first`'s rows, then `second`'s (each a whole number of rows).
+    pub fn two(first: RowData<'a>, second: RowData<'a>) -> Self {
+        KvRows { parts: [first, second] }
+    }
+
+    /// Whole rows of width `c` held (a part's partial last row is not one).
+    pub fn rows(&self, c: usize) -> usize {
+        if c == 0 {
+            return 0;
+        }
+        self.parts[0].len() / c + self.parts[1].len() / c
+    }
+
+    /// Rows of the first run.
+    fn split(&self, c: usize) -> usize {
+        self.parts[0].len() / c
+    }
+
+    /// `out[j - a] = qh . row j [h_off .. h_off + qh.len()]` for keys
+    /// `a..b` (`b <= rows(c)`, `h_off + qh.len() <= c`; `out`: b - a).
+    pub(crate) fn dot_rows(&self, qh: &[f32], a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32]) {
+        let n0 = self.split(c);
+        let run = |part: &RowData<'_>, lo: usize, hi: usize, out: &mut [f32]| {
+            if hi > lo {
+                match part {
+                    RowData::F32(d) => dots(qh, &d[lo * c + h_off..], c, out),
+                    RowData::F16(d) => dots(qh, &d[lo * c + h_off..], c, out),
+                }
+            }
+        };
+        let mid = b.min(n0).max(a);
+        run(&self.parts[0], a, mid, &mut out[..mid - a]);
+        run(&self.parts[1], mid - n0.min(mid), b.saturating_sub(n0), &mut out[mid - a..b - a]);
+    }
+
+    /// `y += s * row j [h_off .. h_off + y.len()]`.
+    pub(crate) fn axpy(&self, s: f32, j: usize, c: usize, h_off: usize, y: &mut [f32]) {
+        let n0 = self.split(c);
+        let (part, r) = if j < n0 { (&self.parts[0], j) } else { (&self.parts[1], j - n0) };
+        let at = r * c + h_off;
+        match part {
+            RowData::F32(d) => f32::axpy(s, &d[at..at + y.len()], y),
+            RowData::F16(d) => u16::axpy(s, &d[at..at + y.len()], y),
+        }
+    }
+
+    /// `qh . row j [h_off .. h_off + qh.len()]` (the key-by-key path): the
+    /// kernel of [`KvRows::dot_rows`] on one key, so f16 rows give what
+    /// the widened f32 rows give on every ISA.
+    pub(crate) fn dot(&self, qh: &[f32], j: usize, c: usize, h_off: usize) -> f32 {
+        let mut out = [0.0f32];
+        self.dot_rows(qh, j, j + 1, c, h_off, &mut out);
+        out[0]
+    }
+}
+
+fn dots<E: DenseElem>(qh: &[f32], rows: &[E], stride: usize, out: &mut [f32]) {
+    E::dot_rows(qh, rows, stride, out)
+}
+
+impl<'a> From<&'a [f32]> for KvRows<'a> {
+    fn from(d: &'a [f32]) -> Self {
+        KvRows::one(RowData::F32(d))
+    }
+}
+
+impl<'a> From<&'a mut [f32]> for KvRows<'a> {
+    fn from(d: &'a mut [f32]) -> Self {
+        KvRows::one(RowData::F32(d))
+    }
+}

@@ -1,0 +1,143 @@
+//! Where the streaming session keeps keys and values: the GPT's K/V cache
+//! ([`super::gpt_cache`]) and the LATs' K/V rings ([`KvRing`]) store each
+//! row ONCE, in the session's [`KvType`], and hand the attention a
+//! [`KvRows`] view of them in place (no mirrored copy, no widened copy).
+
+use crate::arena::{ArenaError, Carve};
+use crate::error::{Buffer, Error};
+use crate::kernels::{KvRows, RowData};
+
+/// Element type of the session's K/V storage (the GPT cache and the LAT
+/// rings).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KvType {
+    F32,
+    /// f16 storage (half the bytes): each key/value is rounded to the
+    /// nearest binary16 when stored and read back exactly (the attention
+    /// kernels widen it lane by lane).
+    F16,
+}
+
+/// A flat run of K/V elements in `KvType` storage.
+pub enum KvBuf<'s> {
+    F32(&'s mut [f32]),
+    F16(&'s mut [u16]),
+}
+
+fn out_of_range(at: usize, len: usize) -> Error {
+    Error::Length { buffer: Buffer::Output, len: at, expected: len }
+}
+
+impl<'s> KvBuf<'s> {
+    /// `n` zeroed elements.
+    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, n: usize) -> Result<Self, ArenaError> {
+        Ok(match kv {
+            KvType::F32 => KvBuf::F32(a.f32(n)?),
+            KvType::F16 => KvBuf::F16(a.u16(n)?),
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        match self {
+            KvBuf::F32(d) => d.len(),
+            KvBuf::F16(d) => d.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Stores `x` at elements `at .. at + x.len()` (f16: rounded to nearest).
+    pub fn store(&mut self, at: usize, x: &[f32]) -> Result<(), Error> {
+        let end = at.checked_add(x.len()).filter(|&e| e <= self.len()).ok_or(out_of_range(at, self.len()))?;
+        match self {
+            KvBuf::F32(d) => d[at..end].copy_from_slice(x),
+            KvBuf::F16(d) => {
+                for (o, &v) in d[at..end].iter_mut().zip(x) {
+                    *o = half::f16::from_f32(v).to_bits();
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Elements `a..b` for the attention.
+    pub fn view(&self, a: usize, b: usize) -> Result<RowData<'_>, Error> {
+        if a > b || b > self.len() {
+            return Err(out_of_range(b, self.len()));
+        }
+        Ok(match self {
+            KvBuf::F32(d) => RowData::F32(&d[a..b]),
+            KvBuf::F16(d) => RowData::F16(&d[a..b]),
+        })
+    }
+}
+
+/// The last `cap` key (or value) rows of one attention layer of an
+/// append-only sequence, each stored once at slot `i % cap`: any run of at
+/// most `cap` consecutive rows is at most two contiguous runs (before and
+/// after the wrap), which [`KvRows`] hands to the attention in order.
+/// Reads outside the last `cap` rows are errors, never panics.
+pub struct KvRing<'s> {
+    /// (cap, width) in `KvType` storage.
+    data: KvBuf<'s>,
+    cap: usize,
+    width: usize,
+    /// Rows appended so far.
+    len: usize,
+}
+
+impl<'s> KvRing<'s> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, cap: usize, width: usize) -> Result<Self, ArenaError> {
+        let n = cap.checked_mul(width).ok_or(ArenaError::Overflow)?;
+        Ok(KvRing { data: KvBuf::carve(a, kv, n)?, cap, width, len: 0 })
+    }
+
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Rows appended so far.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.cap
+    }
+
+    /// Appends one row; the oldest falls out once `cap` are held.
+    pub fn push(&mut self, row: &[f32]) -> Result<(), Error> {
+        let w = self.width;
+        if row.len() != w || self.cap == 0 {
+            return Err(Error::Length { buffer: Buffer::Output, len: row.len(), expected: w });
+        }
+        self.data.store((self.len % self.cap) * w, row)?;
+        self.len += 1;
+        Ok(())
+    }
+
+    /// Rows `[lo, hi)` in order. Errors if any of them is no longer (or
+    /// not yet) held.
+    pub fn rows(&self, lo: usize, hi: usize) -> Result<KvRows<'_>, Error> {
+        let oldest = self.len.saturating_sub(self.cap);
+        if lo > hi || lo < oldest || hi > self.len {
+            return Err(Error::Evicted { index: lo, oldest, len: self.len });
+        }
+        let w = self.width;
+        if lo == hi {
+            return Ok(KvRows::one(self.data.view(0, 0)?));
+        }
+        let (s, n) = (lo % self.cap, hi - lo);
+        if s + n <= self.cap {
+            Ok(KvRows::one(self.data.view(s * w, (s + n) * w)?))
+        } else {
+            Ok(KvRows::two(self.data.view(s * w, self.cap * w)?, self.data.view(0, (s + n - self.cap) * w)?))
+        }
+    }
+}
