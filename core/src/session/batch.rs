@@ -55,8 +55,12 @@ pub struct StepDims {
     /// Attention keys of one query: a LAT's band or a whole GPT window.
     pub keys: usize,
     pub c: usize,
-    /// Widest LAT input (C for the leader LATs, n_music for the music LAT).
+    /// Widest LAT input of one push (C for the leader LATs, `music_burst`
+    /// x n_music for the music LAT).
     pub lat_in: usize,
+    /// Music frames one music-LAT push carries per session
+    /// ([`music_burst`]).
+    pub music_burst: usize,
     pub ds_max: usize,
     pub logits: usize,
 }
@@ -77,7 +81,8 @@ impl StepDims {
             rows: chunk.max(n.checked_mul(streams).ok_or(ArenaError::Overflow)?),
             keys: keys.max(window),
             c: g.n_embd as usize,
-            lat_in: (g.n_embd as usize).max(g.music.n_in as usize),
+            lat_in: (g.n_embd as usize).max(music_burst(cfg) * g.music.n_in as usize),
+            music_burst: music_burst(cfg),
             ds_max: lds.max(mds),
             logits: logits_len(cfg),
         })
@@ -85,7 +90,14 @@ impl StepDims {
 
     /// Every size of `self` at least that of `need` (same width).
     pub fn holds(&self, need: &StepDims) -> bool {
-        self.c == need.c && self.n >= need.n && self.rows >= need.rows && self.keys >= need.keys && self.lat_in >= need.lat_in && self.ds_max >= need.ds_max && self.logits >= need.logits
+        self.c == need.c
+            && self.n >= need.n
+            && self.rows >= need.rows
+            && self.keys >= need.keys
+            && self.lat_in >= need.lat_in
+            && self.music_burst >= need.music_burst
+            && self.ds_max >= need.ds_max
+            && self.logits >= need.logits
     }
 }
 
@@ -100,7 +112,8 @@ pub struct StepScratch<'s> {
     pub x: &'s mut [f32],
     pub blk: BlockScratch<'s>,
     pub lat: LatStepScratch<'s>,
-    /// (n, lat_in) LAT inputs; (n, C) LAT outputs.
+    /// (n, lat_in) LAT inputs (a session's positions of one push side by
+    /// side); (n, C) LAT outputs.
     pub lat_in: &'s mut [f32],
     pub lat_out: &'s mut [f32],
     /// (5, n, C) the follower rows each head reads, head-major.
@@ -111,13 +124,13 @@ pub struct StepScratch<'s> {
 
 impl<'s> StepScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, dims: StepDims) -> Result<Self, ArenaError> {
-        let StepDims { n, rows, keys, c, lat_in, ds_max, logits } = dims;
+        let StepDims { n, rows, keys, c, lat_in, music_burst, ds_max, logits } = dims;
         let mul = |x: usize, y: usize| x.checked_mul(y).ok_or(ArenaError::Overflow);
         Ok(StepScratch {
             dims,
             x: a.f32(mul(rows, c)?)?,
             blk: BlockScratch::carve_keys(a, rows, keys, c)?,
-            lat: LatStepScratch::carve(a, c, ds_max, n)?,
+            lat: LatStepScratch::carve(a, c, ds_max, n, mul(n, music_burst)?)?,
             lat_in: a.f32(mul(n, lat_in)?)?,
             lat_out: a.f32(mul(n, c)?)?,
             heads_in: a.f32(mul(mul(5, n)?, c)?)?,
@@ -202,6 +215,12 @@ fn for_chunks(ss: &mut [&mut Session<'_>], n: usize, want: impl Fn(&Session<'_>)
     Ok(())
 }
 
+/// Music frames one music-LAT push carries per session: a step's frames
+/// (the music LAT's downsampling, 4), so its weights are read once per step.
+pub fn music_burst(cfg: &ModelConfig) -> usize {
+    (cfg.gpt.music.downsample_rate as usize).clamp(1, 4)
+}
+
 /// Leader LAT of part `p` for every session holding a new leader code.
 fn leader_lat(ss: &mut [&mut Session<'_>], p: usize, sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
     let n = sc.dims.n;
@@ -214,7 +233,8 @@ fn leader_lat(ss: &mut [&mut Session<'_>], p: usize, sc: &mut StepScratch<'_>) -
             let code = ss[i].code.ok_or((i, Error::State))?;
             model.gpt.tok_emb[p].row_into(code[p] as usize, &mut x[j * e..(j + 1) * e]);
         }
-        lat_push(ss, chunk, sc, Lat::Leader(p), &model.gpt.leaders[p], e)
+        let ones = [1usize; MAX_BATCH];
+        lat_push(ss, chunk, &ones[..chunk.len()], sc, Lat::Leader(p), &model.gpt.leaders[p], e)
     })
 }
 
@@ -226,9 +246,10 @@ enum Lat {
     Leader(usize),
 }
 
-/// One LAT push per session of `chunk` (inputs in `sc.lat_in`, `n_in`
-/// wide); produced rows go to the LAT's condition stream.
-fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], sc: &mut StepScratch<'_>, which: Lat, w: &crate::model::LatW<'_>, n_in: usize) -> Result<(), BatchError> {
+/// One LAT push of `counts[j]` positions per session `chunk[j]` (inputs
+/// in `sc.lat_in`, rows `n_in` wide, one session's after another); produced
+/// rows go to the LAT's condition stream.
+fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: &mut StepScratch<'_>, which: Lat, w: &crate::model::LatW<'_>, n_in: usize) -> Result<(), BatchError> {
     let cond = match which {
         Lat::Music => 0,
         Lat::Leader(p) => 1 + p,
@@ -251,7 +272,8 @@ fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], sc: &mut StepScratch<'
                 ci += 1;
             }
         }
-        LatStream::push_many(w, &mut lats, &sc.lat_in[..n * n_in], &mut sc.lat, &mut sc.blk, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
+        let total: usize = counts.iter().sum();
+        LatStream::push_many(w, &mut lats, counts, &sc.lat_in[..total * n_in], &mut sc.lat, &mut sc.blk, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
     }
     for (j, &i) in chunk.iter().enumerate() {
         if produced[j] {
@@ -268,8 +290,23 @@ fn leader_ready(s: &Session<'_>) -> bool {
 
 /// Step `k` still lacks its music row and a music frame for it is there.
 fn music_wanted(s: &Session<'_>) -> bool {
+    music_frames_wanted(s) > 0
+}
+
+/// Music frames the next music-LAT push of `s` carries: those step `k`'s
+/// music row still needs, that are there, at most the LAT's burst (so one
+/// push per step in the steady state).
+fn music_frames_wanted(s: &Session<'_>) -> usize {
     let mmr = s.model.cfg.music_motion_rate as usize;
-    leader_ready(s) && s.st.music_lat.rows() <= s.k && s.st.music_lat.pushed() + mmr < s.music_frames
+    let lat = &s.st.music_lat;
+    if !leader_ready(s) || lat.rows() > s.k {
+        return 0;
+    }
+    let ds = s.model.cfg.gpt.music.downsample_rate as usize;
+    // Row k is produced when position ds k + ds - 1 + fut is pushed.
+    let need = (ds * (s.k + 1) + s.cfg.music_lookahead as usize * ds).saturating_sub(lat.pushed());
+    let there = s.music_frames.saturating_sub(lat.pushed() + mmr);
+    need.min(there).min(lat.burst())
 }
 
 /// Runs every step whose inputs exist, in every session.
@@ -283,16 +320,22 @@ pub(super) fn run_steps(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -
                 let model = ss[chunk[0]].model;
                 let n_music = model.cfg.gpt.music.n_in as usize;
                 let mmr = model.cfg.music_motion_rate as usize;
+                let mut counts = [0usize; MAX_BATCH];
+                let mut row = 0;
                 for (j, &i) in chunk.iter().enumerate() {
                     let s = &ss[i];
-                    let frame = s.st.music_lat.pushed() + mmr;
-                    let x = match s.track {
-                        Some(t) => t.get(frame * n_music..(frame + 1) * n_music).ok_or((i, Error::State))?,
-                        None => s.st.music.row(frame).map_err(at(i))?,
-                    };
-                    sc.lat_in[j * n_music..(j + 1) * n_music].copy_from_slice(x);
+                    counts[j] = music_frames_wanted(s);
+                    for f in 0..counts[j] {
+                        let frame = s.st.music_lat.pushed() + mmr + f;
+                        let x = match s.track {
+                            Some(t) => t.get(frame * n_music..(frame + 1) * n_music).ok_or((i, Error::State))?,
+                            None => s.st.music.row(frame).map_err(at(i))?,
+                        };
+                        sc.lat_in.get_mut(row * n_music..(row + 1) * n_music).ok_or((i, Error::State))?.copy_from_slice(x);
+                        row += 1;
+                    }
                 }
-                lat_push(ss, chunk, sc, Lat::Music, &model.gpt.music, n_music)
+                lat_push(ss, chunk, &counts[..chunk.len()], sc, Lat::Music, &model.gpt.music, n_music)
             })?;
         }
         let mut ready: Vec<usize, MAX_BATCH> = Vec::new();

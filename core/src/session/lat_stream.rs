@@ -10,6 +10,13 @@
 //!
 //! Positions are LAT input units: tokens for the leader LATs (`ds = 1`),
 //! music frames for the music LAT (`ds = 4`).
+//!
+//! One push may carry up to `burst` consecutive positions of a LAT (the
+//! music LAT takes a step's 4 frames at once): every weight matrix is then
+//! read once for all of them, and each position computes what it computes
+//! pushed alone (row-independent kernels; a position's queries only see
+//! keys of its band, which the rings still hold: they keep `burst - 1`
+//! extra rows).
 
 use heapless::Vec;
 
@@ -23,6 +30,10 @@ use crate::session::kv_store::{KvRing, KvType};
 use crate::session::ring::RowRing;
 use crate::session::MAX_BATCH;
 
+/// Most positions one [`LatStream::push_many`] call carries over all its
+/// LATs (a batch of [`MAX_BATCH`] sessions, 4 music frames each).
+pub const MAX_LAT_ROWS: usize = 4 * MAX_BATCH;
+
 /// Every key handed to the attention is visible (the band is applied by
 /// choosing the key rows).
 pub struct Visible;
@@ -35,32 +46,38 @@ impl Mask for Visible {
 }
 
 /// Per-step working memory shared by all LATs, for up to `n` LAT pushes
-/// at once (one per session of a batch; `n = 1` inside a session).
+/// (one per session of a batch; `n = 1` inside a session) of up to `rows`
+/// positions in all.
 #[derive(Default)]
 pub struct LatStepScratch<'s> {
-    /// (n, C) the positions being pushed / processed.
+    /// (rows, C) the positions being pushed / processed.
     pub h: &'s mut [f32],
-    /// (n, C) their K and V.
+    /// (rows, C) their K and V.
     pub k: &'s mut [f32],
     pub v: &'s mut [f32],
-    /// (n, C) LayerNorm output.
+    /// (rows, C) LayerNorm output.
     pub ln: &'s mut [f32],
     /// (n, ds_max * C) concatenated last-layer rows.
     pub cat: &'s mut [f32],
-    /// Pushes it holds.
+    /// Pushes (LATs) it holds.
     pub n: usize,
+    /// Positions it holds over all pushes.
+    pub rows: usize,
 }
 
 impl<'s> LatStepScratch<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, c: usize, ds_max: usize, n: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, c: usize, ds_max: usize, n: usize, rows: usize) -> Result<Self, ArenaError> {
+        let rows = rows.max(n);
         let nc = n.checked_mul(c).ok_or(ArenaError::Overflow)?;
+        let rc = rows.checked_mul(c).ok_or(ArenaError::Overflow)?;
         Ok(LatStepScratch {
-            h: a.f32(nc)?,
-            k: a.f32(nc)?,
-            v: a.f32(nc)?,
-            ln: a.f32(nc)?,
+            h: a.f32(rc)?,
+            k: a.f32(rc)?,
+            v: a.f32(rc)?,
+            ln: a.f32(rc)?,
             cat: a.f32(ds_max.checked_mul(nc).ok_or(ArenaError::Overflow)?)?,
             n,
+            rows,
         })
     }
 }
@@ -76,7 +93,7 @@ pub struct LatStream<'s> {
     /// 1: `past + fut + 1`), rings of (cap, C) in the session's `KvType`.
     k: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
     v: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
-    /// (fut + 1, C) residual inputs of layer 1 (a query waits `fut`
+    /// (fut + burst, C) residual inputs of layer 1 (a query waits `fut`
     /// positions for its keys).
     h0: RowRing<'s>,
     /// (ds, C) last-layer outputs of the output row being assembled.
@@ -85,6 +102,8 @@ pub struct LatStream<'s> {
     fut: usize,
     ds: usize,
     c: usize,
+    /// Most positions one push carries.
+    burst: usize,
     /// Positions pushed so far.
     pushed: usize,
     /// Output rows produced so far.
@@ -92,24 +111,28 @@ pub struct LatStream<'s> {
 }
 
 impl<'s> LatStream<'s> {
-    /// `past`, `fut`: band in LAT input units; `kv`: K/V storage type.
-    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, w_layers: usize, ds: usize, c: usize, past: usize, fut: usize) -> Result<Self, ArenaError> {
+    /// `past`, `fut`: band in LAT input units; `kv`: K/V storage type;
+    /// `burst` (>= 1): most positions one push carries.
+    #[allow(clippy::too_many_arguments)]
+    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, w_layers: usize, ds: usize, c: usize, past: usize, fut: usize, burst: usize) -> Result<Self, ArenaError> {
+        let burst = burst.clamp(1, ds.max(1));
         let mut k = Vec::new();
         let mut v = Vec::new();
         for l in 0..w_layers {
-            let cap = past + 1 + if l == 0 { fut } else { 0 };
+            let cap = past + burst + if l == 0 { fut } else { 0 };
             k.push(KvRing::carve(a, kv, cap, c)?).map_err(|_| ArenaError::Overflow)?;
             v.push(KvRing::carve(a, kv, cap, c)?).map_err(|_| ArenaError::Overflow)?;
         }
         Ok(LatStream {
             k,
             v,
-            h0: RowRing::carve(a, fut + 1, c)?,
+            h0: RowRing::carve(a, fut + burst, c)?,
             last: a.f32(ds.checked_mul(c).ok_or(ArenaError::Overflow)?)?,
             past,
             fut,
             ds,
             c,
+            burst,
             pushed: 0,
             rows: 0,
         })
@@ -135,45 +158,62 @@ impl<'s> LatStream<'s> {
         self.rows
     }
 
-    /// Pushes one input position into each of several LATs with the same
-    /// weights `w` (one per session of a batch): `x` (n, n_in) row `i` into
-    /// `lats[i]`. Where a push completes an output row, it is written to
-    /// row `i` of `out` (n, C) and `produced[i]` is set (else cleared).
-    /// Every weight matrix is read once for all `n` pushes; each LAT's
-    /// result is what a push of its own would give.
-    pub fn push_many(w: &LatW<'_>, lats: &mut [&mut LatStream<'_>], x: &[f32], s: &mut LatStepScratch<'_>, blk: &mut BlockScratch<'_>, out: &mut [f32], produced: &mut [bool]) -> Result<(), Error> {
+    /// Most positions one push may carry (`burst`, at most `ds`: a push
+    /// completes at most one output row).
+    pub fn burst(&self) -> usize {
+        self.burst
+    }
+
+    /// Pushes `counts[i]` consecutive input positions into `lats[i]`, for
+    /// several LATs with the same weights `w` (one per session of a batch):
+    /// `x` (sum counts, n_in) holds LAT 0's rows, then LAT 1's, ... Where a
+    /// push completes an output row, it is written to row `i` of `out`
+    /// (n, C) and `produced[i]` is set (else cleared). Every weight matrix
+    /// is read once for all positions; each LAT's result is what pushing
+    /// its positions one at a time would give.
+    #[allow(clippy::too_many_arguments)]
+    pub fn push_many(w: &LatW<'_>, lats: &mut [&mut LatStream<'_>], counts: &[usize], x: &[f32], s: &mut LatStepScratch<'_>, blk: &mut BlockScratch<'_>, out: &mut [f32], produced: &mut [bool]) -> Result<(), Error> {
         let n = lats.len();
         let Some(first) = lats.first() else { return Ok(()) };
         let (c, ds) = (first.c, first.ds);
         let n_head = w.cfg.n_head as usize;
         let n_in = w.cond_emb.w.cols();
-        check_len(Buffer::Features, x.len(), n * n_in)?;
+        let total: usize = counts.iter().sum();
+        check_len(Buffer::Features, counts.len(), n)?;
+        check_len(Buffer::Features, x.len(), total * n_in)?;
         check_len(Buffer::Output, out.len(), n * c)?;
         check_len(Buffer::Output, produced.len(), n)?;
-        if n > s.n || n > MAX_BATCH {
-            return Err(Error::Length { buffer: Buffer::Features, len: n, expected: s.n.min(MAX_BATCH) });
+        if n > s.n || n > MAX_BATCH || total > s.rows || total > MAX_LAT_ROWS {
+            return Err(Error::Length { buffer: Buffer::Features, len: total, expected: s.rows.min(MAX_LAT_ROWS) });
         }
-        for lat in lats.iter() {
+        for (lat, &cnt) in lats.iter().zip(counts) {
             if w.blocks.len() != lat.k.len() || w.blocks.is_empty() || lat.c != c || w.cond_emb.w.rows() != c {
                 return Err(Error::Length { buffer: Buffer::Features, len: w.blocks.len(), expected: lat.k.len() });
             }
+            if cnt > lat.burst {
+                return Err(Error::Length { buffer: Buffer::Features, len: cnt, expected: lat.burst });
+            }
         }
         produced.fill(false);
-        // (n, C) layer-1 inputs of the new positions, and their keys/values.
-        let nc = n * c;
-        linear(x, &w.cond_emb.w, w.cond_emb.b, &mut s.h[..nc]);
-        block_kv(&w.blocks[0], &s.h[..nc], &mut s.ln[..nc], &mut s.k[..nc], &mut s.v[..nc]);
-        // The LATs with a position whose layer-1 keys are now all present:
-        // (index into `lats`, position).
-        let mut ready: Vec<(usize, usize), MAX_BATCH> = Vec::new();
-        for (i, lat) in lats.iter_mut().enumerate() {
-            let row = i * c..(i + 1) * c;
-            lat.k[0].push(&s.k[row.clone()])?;
-            lat.v[0].push(&s.v[row.clone()])?;
-            lat.h0.push(&s.h[row])?;
-            lat.pushed += 1;
-            if let Some(p) = lat.pushed.checked_sub(1 + lat.fut) {
-                ready.push((i, p)).map_err(|_| Error::State)?;
+        // (total, C) layer-1 inputs of the new positions, and their keys/values.
+        let tc = total * c;
+        linear(x, &w.cond_emb.w, w.cond_emb.b, &mut s.h[..tc]);
+        block_kv(&w.blocks[0], &s.h[..tc], &mut s.ln[..tc], &mut s.k[..tc], &mut s.v[..tc]);
+        // The positions whose layer-1 keys are now all present: (index
+        // into `lats`, position), each LAT's in order.
+        let mut ready: Vec<(usize, usize), MAX_LAT_ROWS> = Vec::new();
+        let mut row = 0;
+        for (i, (lat, &cnt)) in lats.iter_mut().zip(counts).enumerate() {
+            for _ in 0..cnt {
+                let r = row * c..(row + 1) * c;
+                lat.k[0].push(&s.k[r.clone()])?;
+                lat.v[0].push(&s.v[r.clone()])?;
+                lat.h0.push(&s.h[r])?;
+                lat.pushed += 1;
+                row += 1;
+                if let Some(p) = lat.pushed.checked_sub(1 + lat.fut) {
+                    ready.push((i, p)).map_err(|_| Error::State)?;
+                }
             }
         }
         let r = ready.len();
@@ -185,7 +225,7 @@ impl<'s> LatStream<'s> {
         for (g, &(i, p)) in ready.iter().enumerate() {
             s.h[g * c..(g + 1) * c].copy_from_slice(lats[i].h0.row(p)?);
         }
-        let mut bounds: Vec<usize, { MAX_BATCH + 1 }> = Vec::new();
+        let mut bounds: Vec<usize, { MAX_LAT_ROWS + 1 }> = Vec::new();
         for g in 0..=r {
             bounds.push(g).map_err(|_| Error::State)?;
         }
@@ -218,6 +258,10 @@ impl<'s> LatStream<'s> {
             let slot = p % ds;
             lat.last[slot * c..(slot + 1) * c].copy_from_slice(&s.h[g * c..(g + 1) * c]);
             if slot + 1 == ds {
+                if done.contains(&i) {
+                    // Two output rows from one push (counts above `ds`).
+                    return Err(Error::State);
+                }
                 let d = done.len();
                 s.cat[d * ds * c..(d + 1) * ds * c].copy_from_slice(lat.last);
                 done.push(i).map_err(|_| Error::State)?;

@@ -809,8 +809,19 @@ fn widen_f16_matches_scalar_twin() {
 }
 
 /// A [`Workers`](crate::kernels::parallel::Workers) stand-in for the split
-/// tests: 3 "threads", run one after another in reverse order, jobs counted.
-struct ReversePool(std::sync::atomic::AtomicUsize);
+/// tests: 3 "threads", run one after another in reverse order on the
+/// calling thread, jobs counted per calling thread (so a kernel call of a
+/// test running in parallel is never counted as this test's split).
+struct ReversePool;
+
+std::thread_local! {
+    static REVERSE_JOBS: core::cell::Cell<usize> = const { core::cell::Cell::new(0) };
+}
+
+/// Split jobs the pool ran for the current thread so far.
+fn reverse_jobs() -> usize {
+    REVERSE_JOBS.with(|j| j.get())
+}
 
 // SAFETY: `run` calls each `task(i)`, `i < n`, exactly once and returns after them.
 unsafe impl crate::kernels::parallel::Workers for ReversePool {
@@ -818,13 +829,20 @@ unsafe impl crate::kernels::parallel::Workers for ReversePool {
         3
     }
     fn run(&self, n: usize, task: &(dyn Fn(usize) + Sync)) {
-        self.0.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        REVERSE_JOBS.with(|j| j.set(j.get() + 1));
         (0..n).rev().for_each(task);
     }
 }
 
-static REVERSE: ReversePool = ReversePool(std::sync::atomic::AtomicUsize::new(0));
+static REVERSE: ReversePool = ReversePool;
 static REVERSE_INSTALLED: crate::kernels::parallel::Installed = crate::kernels::parallel::Installed(&REVERSE);
+/// Held by every test that installs or removes the (process-wide) pool, so
+/// one test's `set_workers(None)` never lands inside another's split call.
+static POOL_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn pool_lock() -> std::sync::MutexGuard<'static, ()> {
+    POOL_LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 /// `linear` split over a pool's output-column ranges equals the one-thread
 /// call bit for bit, for every weight type and path (int8 unpacked and
@@ -832,8 +850,8 @@ static REVERSE_INSTALLED: crate::kernels::parallel::Installed = crate::kernels::
 /// output counts that are and are not multiples of the split alignment.
 #[test]
 fn split_gemm_matches_one_thread_bit_for_bit() {
+    let _pool = pool_lock();
     use crate::kernels::parallel::{set_workers, split_count};
-    use std::sync::atomic::Ordering;
     // Other tests of this binary run while the pool is installed; they see
     // the same values (this is what the test shows), so only the
     // one-thread reference below needs the pool off, and nothing else
@@ -855,11 +873,11 @@ fn split_gemm_matches_one_thread_bit_for_bit() {
             let mut one = vec![f32::NAN; n * o];
             linear(&x, &m, Some(&b), &mut one);
             set_workers(Some(&REVERSE_INSTALLED));
-            let jobs = REVERSE.0.load(Ordering::Relaxed);
+            let jobs = reverse_jobs();
             let mut split = vec![f32::NAN; n * o];
             linear(&x, &m, Some(&b), &mut split);
             set_workers(None);
-            assert!(REVERSE.0.load(Ordering::Relaxed) > jobs, "({n},{i},{o}) {:?}: not split", m.rows());
+            assert!(reverse_jobs() > jobs, "({n},{i},{o}) {:?}: not split", m.rows());
             for (k, (a, s)) in one.iter().zip(&split).enumerate() {
                 assert_eq!(a.to_bits(), s.to_bits(), "({n},{i},{o}) element {k}: one thread {a}, split {s}");
             }
@@ -917,6 +935,7 @@ fn layernorm_matches_scalar_twin_and_f64() {
 /// row exactly once (small enough for Miri).
 #[test]
 fn split_cols_ranges_cover_every_column_once() {
+    let _pool = pool_lock();
     use crate::kernels::parallel::{set_workers, split_cols, SPLIT_ALIGN};
     for n_out in [16usize, 17, 40, 41, 64] {
         let rows = 3;
@@ -951,9 +970,9 @@ fn split_cols_ranges_cover_every_column_once() {
 /// the key-by-key path, and more keys than a split takes).
 #[test]
 fn split_attention_matches_one_thread_bit_for_bit() {
+    let _pool = pool_lock();
     use crate::kernels::parallel::set_workers;
     use crate::kernels::{attention, BandMask, Mask, TiledCausalMask};
-    use std::sync::atomic::Ordering;
     /// Every other key (more runs than a query remembers).
     struct Comb;
     impl Mask for Comb {
@@ -968,11 +987,11 @@ fn split_attention_matches_one_thread_bit_for_bit() {
         let mut one = std::vec![f32::NAN; nq * c];
         m(&q, &k, &v, &mut scores, &mut one);
         set_workers(Some(&REVERSE_INSTALLED));
-        let jobs = REVERSE.0.load(Ordering::Relaxed);
+        let jobs = reverse_jobs();
         let mut split = std::vec![f32::NAN; nq * c];
         m(&q, &k, &v, &mut scores, &mut split);
         set_workers(None);
-        assert_eq!(REVERSE.0.load(Ordering::Relaxed) > jobs, split_expected, "({nq},{nk},{c}): split or not");
+        assert_eq!(reverse_jobs() > jobs, split_expected, "({nq},{nk},{c}): split or not");
         for (i, (a, b)) in one.iter().zip(&split).enumerate() {
             assert_eq!(a.to_bits(), b.to_bits(), "({nq},{nk},{c}) element {i}: {a} vs {b}");
         }
