@@ -307,7 +307,10 @@ typedef struct duo_session_config {
   uint32_t staggered;           /* 0: one GPT cache, re-filled when the window
                                    jumps (least memory, a cost spike every
                                    chunk); 1: one cache per live window (flat
-                                   cost per step, more memory). Same output. */
+                                   cost per step, more memory); 2: two caches,
+                                   the next window filled a few rows per step
+                                   (flat cost at 0's mean, 2 caches). Same
+                                   output. */
   uint32_t kv;                  /* a duo_kv value */
   uint64_t rng_seed;            /* for DUO_SAMPLING_TOP_K */
 } duo_session_config;

@@ -73,6 +73,7 @@ fn configs(model: &Model<'_>) -> Vec<(&'static str, SessionConfig)> {
         ("minimum+f16kv", f16kv),
         ("live+topk", live),
         ("staggered+f16kv", SessionConfig { staggered: true, kv: KvType::F16, ..reference }),
+        ("spread", SessionConfig { spread: true, ..reference }),
     ]
 }
 
@@ -180,7 +181,7 @@ fn chunked_reprefill_matches_one_call_bit_for_bit() {
         let m = model.cfg.gpt.block_size as usize - 1;
         let c = clip(rollout);
         for (label, sc) in configs(&model) {
-            assert!(sc.shift as usize > REPREFILL_CHUNK || sc.staggered, "{label}: shift {} does not need chunks", sc.shift);
+            assert!(sc.shift as usize > REPREFILL_CHUNK || sc.staggered || sc.spread, "{label}: shift {} does not need chunks", sc.shift);
             assert!(32 >= m, "capacity 32 holds a window of {m} rows");
             let chunked = run(&model, &sc, &c, 1, false);
             let one_call = run_in(&model, &sc, &c, 1, true, 32);

@@ -21,8 +21,18 @@ fn as_i64<T: Copy + Into<i64>>(v: &[T]) -> Vec<i64> {
 }
 
 fn check(name: &str) {
-    check_schedule(name, false);
-    check_schedule(name, true);
+    check_schedule(name, Schedule::Reprefill);
+    check_schedule(name, Schedule::Staggered);
+    check_schedule(name, Schedule::Spread);
+}
+
+/// The GPT cache schedules (`SessionConfig::staggered`, `::spread`): the
+/// same values under each.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Schedule {
+    Reprefill,
+    Staggered,
+    Spread,
 }
 
 /// The golden's model, inputs, config and seed.
@@ -77,8 +87,11 @@ fn f16_kv_cache_tracks_the_goldens() {
     assert!(worst <= 1e-3, "f16 K/V motion error {worst}");
 }
 
-/// `staggered`: one GPT cache per live window instead of re-prefills (same values).
-fn check_schedule(name: &str, staggered: bool) {
+/// `schedule`: one cache re-prefilled at each window jump, one cache per
+/// live window, or two caches with the next window filled ahead (same
+/// values; spread: at most `1 + ceil((s - 1) / min(p, s - 1))` window rows
+/// per step after start-up, `p = m + 1 - s`).
+fn check_schedule(name: &str, schedule: Schedule) {
     let dir = fixture(&format!("streaming_{name}"));
     // The generator writes Python's `Infinity` for "no top-k decision": not JSON.
     let text = std::fs::read_to_string(dir.join("meta.json")).unwrap().replace("-Infinity", "null").replace("Infinity", "null");
@@ -94,7 +107,8 @@ fn check_schedule(name: &str, staggered: bool) {
     let get = |k: &str| c[k].as_u64().unwrap() as u32;
     let mut cfg = SessionConfig::with(&model.cfg, get("lookahead"), get("enc_future"), get("dec_future"), get("shift"));
     cfg.music_lookahead = get("music_lookahead");
-    cfg.staggered = staggered;
+    cfg.staggered = schedule == Schedule::Staggered;
+    cfg.spread = schedule == Schedule::Spread;
     if let Some(tk) = meta["sampling"].get("topk") {
         cfg.sampling = Sampling::TopK { k: tk.as_u64().unwrap() as u32, rng_seed: meta["sampling"]["rng_seed"].as_u64().unwrap() };
     }
@@ -130,7 +144,11 @@ fn check_schedule(name: &str, staggered: bool) {
     let want_pos = read_f32_2d(&dir.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
     assert_eq!(run.frames_out(), want_pos.rows, "{name}: follower frames");
     let (pos_err, _) = max_errors(&run.pos, &want_pos.data);
-    let tag = if staggered { " (staggered)" } else { "" };
+    let tag = match schedule {
+        Schedule::Reprefill => "",
+        Schedule::Staggered => " (staggered)",
+        Schedule::Spread => " (spread)",
+    };
     let mut msg = format!("{name}{tag}: {} steps, {} frames, max |pos err| {pos_err:.2e} m", run.steps(), run.frames_out());
     assert!(pos_err <= Tol::MotionAbs.limit(), "{msg}");
     if dir.join("follower_rotmat.npy").exists() {
@@ -140,8 +158,15 @@ fn check_schedule(name: &str, staggered: bool) {
         assert!(rot_err <= Tol::MotionAbs.limit(), "{msg}");
     }
     let rows: usize = run.rows_computed.iter().sum();
-    let most = run.rows_computed.iter().skip(run.steps().min(31)).max().copied().unwrap_or(0);
+    let m = model.cfg.gpt.block_size as usize - 1;
+    let most = run.rows_computed.iter().skip(run.steps().min(m + 2)).max().copied().unwrap_or(0);
     eprintln!("{msg}; {:.2} GPT rows per step, at most {most} after start-up; arena {} bytes", rows as f64 / run.steps().max(1) as f64, run.arena_bytes);
+    if schedule == Schedule::Spread && run.steps() > m + 2 {
+        let s = cfg.shift as usize;
+        let p = m + 1 - s;
+        let bound = 1 + (s - 1).div_ceil(p.min(s - 1).max(1));
+        assert!(most <= bound, "{name} (spread): {most} window rows in one step after start-up, bound {bound} (m {m}, s {s})");
+    }
 }
 
 #[test]

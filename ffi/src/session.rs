@@ -52,7 +52,8 @@ pub struct DuoSessionConfig {
     pub sampling: u32,
     pub top_k: u32,
     /// 0: one GPT cache re-prefilled at window jumps; 1: one cache per live
-    /// window (flat cost per step, more memory).
+    /// window (flat cost per step, more memory); 2: two caches, the next
+    /// window filled ahead a few rows per step (`SessionConfig::spread`).
     pub staggered: u32,
     /// K/V cache element type: `KV_F32` or `KV_F16`.
     pub kv: u32,
@@ -78,7 +79,7 @@ impl DuoSessionConfig {
             music_buffer_frames: c.music_buffer_frames,
             sampling,
             top_k,
-            staggered: c.staggered as u32,
+            staggered: if c.staggered { 1 } else if c.spread { 2 } else { 0 },
             kv: match c.kv {
                 KvType::F32 => KV_F32,
                 KvType::F16 => KV_F16,
@@ -98,10 +99,11 @@ impl DuoSessionConfig {
             KV_F16 => KvType::F16,
             k => return Err(Failure::invalid(format!("config.kv {k} is not a duo_kv value (0 f32, 1 f16)"))),
         };
-        let staggered = match self.staggered {
-            0 => false,
-            1 => true,
-            v => return Err(Failure::invalid(format!("config.staggered is {v}, not 0 or 1"))),
+        let (staggered, spread) = match self.staggered {
+            0 => (false, false),
+            1 => (true, false),
+            2 => (false, true),
+            v => return Err(Failure::invalid(format!("config.staggered is {v}, not 0, 1 or 2"))),
         };
         Ok(SessionConfig {
             lookahead: self.lookahead,
@@ -114,6 +116,7 @@ impl DuoSessionConfig {
             pending_frames: self.pending_frames,
             music_buffer_frames: self.music_buffer_frames,
             staggered,
+            spread,
             kv,
         })
     }

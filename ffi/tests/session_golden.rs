@@ -296,10 +296,11 @@ fn staggered_cache_and_f16_cache_settings() {
         out
     };
     check_within(&run(DuoSessionConfig { staggered: 1, ..base }), &g, MOTION_ABS, "staggered");
+    check_within(&run(DuoSessionConfig { staggered: 2, ..base }), &g, MOTION_ABS, "spread");
     // f16 K/V: same tokens on this golden; motion within a looser bound.
     check_within(&run(DuoSessionConfig { kv: KV_F16, ..base }), &g, 1e-2, "f16 K/V");
     let mut s = ptr::null_mut();
-    for bad in [DuoSessionConfig { kv: 2, ..base }, DuoSessionConfig { staggered: 2, ..base }] {
+    for bad in [DuoSessionConfig { kv: 2, ..base }, DuoSessionConfig { staggered: 3, ..base }] {
         assert_eq!(unsafe { duo_session_new(m.0, &bad, g.seed.as_ptr(), &mut s) }, DuoResult::InvalidArgument);
     }
     assert!(s.is_null());

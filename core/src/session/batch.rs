@@ -23,7 +23,7 @@ use crate::gpt::{head_rows, logits_len};
 use crate::kernels::linear;
 use crate::model::Model;
 use crate::sampler::{argmax, top_k_by_id};
-use crate::session::config::{for_each_live_window, window_context, Sampling, Setting, MAX_WINDOWS};
+use crate::session::config::{for_each_live_window, window_context, window_start, Sampling, Setting, MAX_WINDOWS};
 use crate::session::gpt_cache::{GptCache, GptItem};
 use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
 use crate::session::state::State;
@@ -354,17 +354,20 @@ pub(super) fn run_steps(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -
 }
 
 /// One GPT append of a step: window starting at token `lo` in cache `slot`,
-/// new window rows `first..=k`.
+/// new window rows `first..=last` (`last = k` but for a spread schedule's
+/// prefill of the next window).
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Append {
     slot: usize,
     lo: usize,
     first: usize,
+    last: usize,
     need_output: bool,
 }
 
 /// Plans step `k` of `s` (cache choice, restarts): its appends in
-/// `s.appends`, the current window's last (staggered) or alone.
+/// `s.appends`: the current window's last (staggered) or first (spread: then
+/// the next window's share of rows), or alone.
 fn plan(s: &mut Session<'_>) -> Result<(), Error> {
     let g = &s.model.cfg.gpt;
     let m = g.block_size as usize - 1;
@@ -392,14 +395,47 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
                 }
             };
             let first = w + st.gpt[slot].rows();
-            s.appends.push(Append { slot, lo: w, first, need_output: w == lo }).map_err(|_| Error::State)?;
+            s.appends.push(Append { slot, lo: w, first, last: k, need_output: w == lo }).map_err(|_| Error::State)?;
+        }
+    } else if s.cfg.spread && st.gpt.len() >= 2 {
+        // The cache of this window (filled ahead), or a restart in the
+        // cache that does not hold it.
+        let slot = match st.gpt.iter().position(|c| c.window_start() == Some(lo)) {
+            Some(i) => i,
+            None => {
+                let i = st.gpt.iter().position(|c| c.window_start().is_none_or(|x| x < lo)).ok_or(Error::State)?;
+                st.gpt[i].restart(lo);
+                i
+            }
+        };
+        s.appends.push(Append { slot, lo, first: lo + st.gpt[slot].rows(), last: k, need_output: true }).map_err(|_| Error::State)?;
+        // The next window (start `nlo`, first used at step `k2`) in the other
+        // cache: rows `nlo..k2` must be there by the end of step `k2 - 1`;
+        // this step appends its share of the rows still missing.
+        let mut k2 = k + 1;
+        while window_start(k2, m, shift) == lo && k2 < k + 2 * m + 2 {
+            k2 += 1;
+        }
+        let nlo = window_start(k2, m, shift);
+        if nlo > lo {
+            let other = 1 - slot.min(1);
+            if st.gpt[other].window_start() != Some(nlo) {
+                st.gpt[other].restart(nlo);
+            }
+            let fill = nlo + st.gpt[other].rows();
+            let missing = k2.saturating_sub(fill);
+            let share = missing.div_ceil(k2 - k);
+            if share > 0 && fill <= k {
+                let last = (fill + share - 1).min(k);
+                s.appends.push(Append { slot: other, lo: nlo, first: fill, last, need_output: false }).map_err(|_| Error::State)?;
+            }
         }
     } else {
         let first = if st.gpt[0].window_start() == Some(lo) { k } else {
             st.gpt[0].restart(lo);
             lo
         };
-        s.appends.push(Append { slot: 0, lo, first, need_output: true }).map_err(|_| Error::State)?;
+        s.appends.push(Append { slot: 0, lo, first, last: k, need_output: true }).map_err(|_| Error::State)?;
     }
     if !s.appends.iter().any(|a| a.need_output) {
         return Err(Error::Evicted { index: lo, oldest: k, len: 0 });
@@ -445,10 +481,12 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
     let model = ss[ready[0]].model;
     let g = &model.cfg.gpt;
     let (c, streams) = (g.n_embd as usize, g.n_streams as usize);
-    // Round r runs the r-th chunk of every session's appends (a session's
-    // caches share its K/V view scratch, so one chunk per session per
-    // call), in calls of at most `sc.dims.rows` rows. A chunk is window
-    // rows `first..=last` of one append, at most `chunk` of them.
+    // Each call takes, session after session, every next chunk that fits
+    // in `sc.dims.rows` rows, at most one per cache (a chunk attends the
+    // rows of its cache appended before it): a session's appends to
+    // different caches (staggered windows) share one pass over the
+    // weights. A chunk is window rows `first..=last` of one append, at
+    // most `chunk` of them.
     let chunk = (sc.dims.rows / streams).max(1);
     // Per session of `ready`: (append index, first row of its next chunk).
     let mut cur: [(usize, usize); MAX_BATCH] = [(0, 0); MAX_BATCH];
@@ -458,7 +496,15 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
     // The next chunk of session `q` (append, first, last), if any is left.
     let next = |s: &Session<'_>, (ai, f): (usize, usize)| -> Option<(Append, usize, usize)> {
         let a = *s.appends.get(ai)?;
-        Some((a, f, s.k.min(f + chunk - 1)))
+        Some((a, f, a.last.min(f + chunk - 1)))
+    };
+    // The cursor after chunk (append, .., last) of append `ai`.
+    let advance = |s: &Session<'_>, ai: usize, l: usize| -> (usize, usize) {
+        if s.appends.get(ai).is_none_or(|a| l >= a.last) {
+            (ai + 1, s.appends.get(ai + 1).map_or(0, |n| n.first))
+        } else {
+            (ai, l + 1)
+        }
     };
     loop {
         let mut any = false;
@@ -467,12 +513,19 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
             // (session position in `ready`, append, first, last) of this call.
             let mut call: Vec<(usize, Append, usize, usize), MAX_BATCH> = Vec::new();
             let mut total = 0;
-            while q < nr {
+            let mut full = false;
+            while q < nr && !full {
                 let i = ready[q];
                 let s = &ss[i];
-                if let Some((a, f, l)) = next(s, cur[q]) {
+                let mut cq = cur[q];
+                let mut used = [false; MAX_WINDOWS];
+                while let Some((a, f, l)) = next(s, cq) {
+                    if used.get(a.slot).copied().unwrap_or(true) {
+                        break;
+                    }
                     let rows = (l + 1 - f) * streams;
                     if total + rows > sc.dims.rows && !call.is_empty() {
+                        full = true;
                         break;
                     }
                     if rows > sc.dims.rows {
@@ -481,8 +534,12 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
                     window_rows(model, &s.st, a.lo, f, l, &mut sc.x[total * c..(total + rows) * c]).map_err(at(i))?;
                     total += rows;
                     call.push((q, a, f, l)).map_err(|_| (i, Error::State))?;
+                    used[a.slot] = true;
+                    cq = advance(s, cq.0, l);
                 }
-                q += 1;
+                if !full {
+                    q += 1;
+                }
             }
             if call.is_empty() {
                 continue;
@@ -493,12 +550,12 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
                 let mut items: Vec<GptItem<'_, '_>, MAX_BATCH> = Vec::new();
                 let mut ci = 0;
                 for (i, s) in ss.iter_mut().enumerate() {
-                    if ci < call.len() && ready[call[ci].0] == i {
+                    // The session's caches, each handed out at most once.
+                    let mut caches: Vec<Option<&mut GptCache<'_>>, MAX_WINDOWS> = s.st.gpt.iter_mut().map(Some).collect();
+                    while ci < call.len() && ready[call[ci].0] == i {
                         let (_, a, f, l) = call[ci];
-                        let last_chunk = l == s.k;
-                        let st = &mut s.st;
-                        let cache: &mut GptCache<'_> = st.gpt.get_mut(a.slot).ok_or((i, Error::State))?;
-                        items.push(GptItem { cache, rows: l + 1 - f, need_output: a.need_output && last_chunk }).map_err(|_| (i, Error::State))?;
+                        let cache = caches.get_mut(a.slot).and_then(Option::take).ok_or((i, Error::State))?;
+                        items.push(GptItem { cache, rows: l + 1 - f, need_output: a.need_output && l == a.last }).map_err(|_| (i, Error::State))?;
                         ci += 1;
                     }
                 }
@@ -509,13 +566,8 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
             for &(qi, a, f, l) in call.iter() {
                 let i = ready[qi];
                 ss[i].rows_computed += l + 1 - f;
-                cur[qi] = if l == ss[i].k {
-                    let ai = cur[qi].0 + 1;
-                    (ai, ss[i].appends.get(ai).map_or(0, |n| n.first))
-                } else {
-                    (cur[qi].0, l + 1)
-                };
-                if a.need_output && l == ss[i].k {
+                cur[qi] = advance(ss[i], cur[qi].0, l);
+                if a.need_output && l == a.last {
                     for h in 0..FOLLOWER_STREAMS {
                         let src = (j * FOLLOWER_STREAMS + h) * c;
                         sc.heads_in[(h * nr + qi) * c..(h * nr + qi + 1) * c].copy_from_slice(&sc.x[src..src + c]);

@@ -47,6 +47,11 @@ pub struct SessionConfig {
     /// a spike of `shift` rows every chunk); true = one cache per live
     /// window, each fed one row per step (flat cost, [`window_pool`] caches).
     pub staggered: bool,
+    /// With `staggered` false: two caches, and the next window's rows are
+    /// appended a few per step over the steps before its jump (flat cost at
+    /// the re-prefill schedule's mean, twice its cache memory; one
+    /// re-prefill at step `m`, the first jump). Ignored when `staggered`.
+    pub spread: bool,
     /// Element type of the GPT K/V cache (f16: half the cache bytes).
     pub kv: KvType,
 }
@@ -154,6 +159,7 @@ impl SessionConfig {
             pending_frames: 64,
             music_buffer_frames: 4 * (2 * lf + 2 * enc_future_max(cfg) + 8),
             staggered: false,
+            spread: false,
             kv: KvType::F32,
         }
     }

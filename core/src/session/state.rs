@@ -122,7 +122,13 @@ impl<'s> State<'s> {
         let [r0, r1, r2, r3] = dec_rot;
         let dec_rot = [r0?, r1?, r2?, r3?];
 
-        let n_caches = if sc.staggered { window_pool(m, sc.shift as usize) } else { 1 };
+        let n_caches = if sc.staggered {
+            window_pool(m, sc.shift as usize)
+        } else if sc.spread {
+            2
+        } else {
+            1
+        };
         let mut gpt = Vec::new();
         for _ in 0..n_caches.min(MAX_WINDOWS) {
             let cache = GptCache::carve(a, sc.kv, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c)?;

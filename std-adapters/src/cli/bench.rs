@@ -75,6 +75,8 @@ pub struct Args {
 struct Stats {
     median_ms: f64,
     p99_ms: f64,
+    /// The mean: for S steps the amortised cost, re-prefills included.
+    mean_ms: f64,
 }
 
 fn stats(mut t: Vec<Duration>) -> Stats {
@@ -83,7 +85,8 @@ fn stats(mut t: Vec<Duration>) -> Stats {
     let n = t.len();
     // p99 by nearest rank: with fewer than 100 runs it is the maximum.
     let p99 = ((0.99 * n as f64).ceil() as usize).clamp(1, n) - 1;
-    Stats { median_ms: if n % 2 == 1 { ms(t[n / 2]) } else { 0.5 * (ms(t[n / 2 - 1]) + ms(t[n / 2])) }, p99_ms: ms(t[p99]) }
+    let mean_ms = t.iter().map(|&d| ms(d)).sum::<f64>() / n.max(1) as f64;
+    Stats { median_ms: if n % 2 == 1 { ms(t[n / 2]) } else { 0.5 * (ms(t[n / 2 - 1]) + ms(t[n / 2])) }, p99_ms: ms(t[p99]), mean_ms }
 }
 
 /// memcpy bandwidth over `threads` threads (each copying its own half /
@@ -234,6 +237,8 @@ struct DtypeResult {
     arena_bytes: usize,
     /// Per session count: one `step_many` call that steps every session.
     batch: Vec<(usize, Stats)>,
+    /// int8: the S step under each of [`SCHEDULES`] (one thread) and its arena bytes.
+    schedules: Vec<(&'static str, Stats, usize)>,
 }
 
 /// The R-step inputs of a full window (fixed pseudo-random tokens/features).
@@ -281,18 +286,26 @@ fn r_steps(model: &Model<'_>, inp: &RInputs, warmup: usize, runs: usize) -> anyh
     Ok(times)
 }
 
-/// The session configuration measured: reference budget, f16 K/V.
-fn s_config(model: &Model<'_>) -> SessionConfig {
+/// The GPT cache schedules the bench times (int8, one thread) beside the
+/// default re-prefill: one cache per live window, and two caches with the
+/// next window filled ahead.
+const SCHEDULES: [&str; 2] = ["staggered", "spread"];
+
+/// The session configuration measured: reference budget, f16 K/V, the
+/// GPT cache `schedule` ("reprefill" or one of [`SCHEDULES`]).
+fn s_config(model: &Model<'_>, schedule: &str) -> SessionConfig {
     let mut cfg = SessionConfig::reference(&model.cfg);
     cfg.kv = KvType::F16;
+    cfg.staggered = schedule == "staggered";
+    cfg.spread = schedule == "spread";
     cfg
 }
 
 /// Streams pseudo-random leader and music frames into a fresh session and
 /// times each `push_leader_frame` that runs a GPT step; the first
 /// `warmup` steps are dropped, then `steps` are kept (one thread).
-fn s_steps(model: &Model<'_>, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
-    let cfg = s_config(model);
+fn s_steps(model: &Model<'_>, schedule: &str, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
+    let cfg = s_config(model, schedule);
     let mut arena = vec![0u8; model.session_bytes(&cfg).map_err(|e| anyhow!("session bytes: {e:?}"))?];
     let mut sess = Session::new(model, &mut arena, &cfg, [0; 5]).map_err(|e| anyhow!("session: {e:?}"))?;
     let n_music = model.cfg.gpt.music.n_in as usize;
@@ -331,7 +344,7 @@ fn s_steps(model: &Model<'_>, warmup: usize, steps: usize) -> anyhow::Result<Vec
 /// one `Session::step_many` with a pseudo-random leader frame per session;
 /// times the calls that run a step in every session (one thread).
 fn batched_steps(model: &Model<'_>, n: usize, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
-    let cfg = s_config(model);
+    let cfg = s_config(model, "reprefill");
     let bytes = model.session_bytes(&cfg).map_err(|e| anyhow!("session bytes: {e:?}"))?;
     let mut arenas: Vec<Vec<u8>> = (0..n).map(|_| vec![0u8; bytes]).collect();
     let mut sessions = Vec::with_capacity(n);
@@ -404,18 +417,26 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
     for &t in &args.threads {
         let times = on_threads(t, || r_steps(&model, &inp, args.warmup, args.runs)).with_context(|| format!("{name} R step, {t} threads"))?;
         r.push((t, stats(times)));
-        let times = on_threads(t, || s_steps(&model, 3, args.s_steps)).with_context(|| format!("{name} S step, {t} threads"))?;
+        let times = on_threads(t, || s_steps(&model, "reprefill", 3, args.s_steps)).with_context(|| format!("{name} S step, {t} threads"))?;
         s.push((t, stats(times)));
     }
-    let arena_bytes = model.session_bytes(&s_config(&model)).map_err(|e| anyhow!("{e:?}"))?;
+    let arena_bytes = model.session_bytes(&s_config(&model, "reprefill")).map_err(|e| anyhow!("{e:?}"))?;
     let mut batch = Vec::new();
+    let mut schedules = Vec::new();
     if name == "int8" {
+        // After start-up (the first full window, step m: a spread schedule's
+        // one re-prefill): the steady state.
+        let steady = model.cfg.gpt.block_size as usize + 2;
+        for sched in SCHEDULES {
+            let times = s_steps(&model, sched, steady, args.s_steps).with_context(|| format!("{name} S step, {sched} caches"))?;
+            schedules.push((sched, stats(times), model.session_bytes(&s_config(&model, sched)).map_err(|e| anyhow!("{e:?}"))?));
+        }
         for &n in &args.batch {
             let times = batched_steps(&model, n, 3, args.s_steps).with_context(|| format!("{name}, {n} sessions stepped together"))?;
             batch.push((n, stats(times)));
         }
     }
-    Ok(DtypeResult { name, r, s, weight_bytes: r_step_weight_bytes(&model, inp.c), model_bytes: rm.weight_bytes(), arena_bytes, batch })
+    Ok(DtypeResult { name, r, s, weight_bytes: r_step_weight_bytes(&model, inp.c), model_bytes: rm.weight_bytes(), arena_bytes, batch, schedules })
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -454,15 +475,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for (t, st) in &r.s {
             let gbps = r.model_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
             println!(
-                "S step {:>4} t{t} (reference budget, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy)  arena {:.1} MB",
+                "S step {:>4} t{t} (reference budget, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy)  arena {:.1} MB",
                 r.name,
                 st.median_ms,
                 st.p99_ms,
                 st.p99_ms / st.median_ms,
+                st.mean_ms,
                 r.model_bytes as f64 / 1e6,
                 gbps,
                 100.0 * gbps / memcpy,
                 r.arena_bytes as f64 / 1e6
+            );
+        }
+        for (sched, st, bytes) in &r.schedules {
+            println!(
+                "S step {:>4} t1 {sched:<9} caches, after start-up: median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  arena {:.1} MB",
+                r.name,
+                st.median_ms,
+                st.p99_ms,
+                st.p99_ms / st.median_ms,
+                st.mean_ms,
+                *bytes as f64 / 1e6
             );
         }
         let one = r.batch.iter().find(|(n, _)| *n == 1).map(|(_, st)| st.median_ms);
@@ -548,11 +581,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             for (t, st) in &r.s {
                 j.insert(format!("s_step_ms_{}_t{t}", r.name), st.median_ms.into());
                 j.insert(format!("s_step_p99_ms_{}_t{t}", r.name), st.p99_ms.into());
+                j.insert(format!("s_step_mean_ms_{}_t{t}", r.name), st.mean_ms.into());
                 j.insert(format!("s_step_gbps_{}_t{t}", r.name), (r.model_bytes as f64 / (st.median_ms * 1e-3) / 1e9).into());
             }
             j.insert(format!("r_step_weight_bytes_{}", r.name), r.weight_bytes.into());
             j.insert(format!("s_step_weight_bytes_{}", r.name), r.model_bytes.into());
             j.insert("arena_bytes_f16kv".into(), r.arena_bytes.into());
+            for (sched, st, bytes) in &r.schedules {
+                j.insert(format!("s_step_ms_{}_t1_{sched}", r.name), st.median_ms.into());
+                j.insert(format!("s_step_p99_ms_{}_t1_{sched}", r.name), st.p99_ms.into());
+                j.insert(format!("s_step_mean_ms_{}_t1_{sched}", r.name), st.mean_ms.into());
+                j.insert(format!("arena_bytes_f16kv_{sched}"), (*bytes).into());
+            }
             for (n, st) in &r.batch {
                 j.insert(format!("batch{n}_step_ms_{}", r.name), st.median_ms.into());
             }

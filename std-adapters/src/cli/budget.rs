@@ -45,7 +45,12 @@ pub struct BudgetArgs {
     /// step instead of a re-prefill spike at every window jump (more memory).
     #[arg(long)]
     pub staggered: bool,
-    /// Element type of the GPT K/V cache.
+    /// Two GPT caches, the next window filled a few rows per step ahead of
+    /// its jump: a flat cost per step at the re-prefill schedule's mean
+    /// (twice its cache memory; one re-prefill at the first jump).
+    #[arg(long, conflicts_with = "staggered")]
+    pub spread: bool,
+    /// Element type of the session's keys and values (GPT cache, LAT rings).
     #[arg(long, value_enum, default_value = "f32")]
     pub kv: Kv,
 }
@@ -75,6 +80,7 @@ impl BudgetArgs {
             sc.music_lookahead = m;
         }
         sc.staggered = self.staggered;
+        sc.spread = self.spread;
         sc.kv = match self.kv {
             Kv::F32 => duolando_core::session::KvType::F32,
             Kv::F16 => duolando_core::session::KvType::F16,
