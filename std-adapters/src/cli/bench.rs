@@ -237,6 +237,8 @@ struct DtypeResult {
     arena_bytes: usize,
     /// Per session count: one `step_many` call that steps every session.
     batch: Vec<(usize, Stats)>,
+    /// The same with spread GPT caches, after start-up.
+    batch_spread: Vec<(usize, Stats)>,
     /// int8: the S step under each of [`SCHEDULES`] (one thread) and its arena bytes.
     schedules: Vec<(&'static str, Stats, usize)>,
 }
@@ -343,8 +345,8 @@ fn s_steps(model: &Model<'_>, schedule: &str, warmup: usize, steps: usize) -> an
 /// `n` sessions stepped together: per frame, music pushed into each, then
 /// one `Session::step_many` with a pseudo-random leader frame per session;
 /// times the calls that run a step in every session (one thread).
-fn batched_steps(model: &Model<'_>, n: usize, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
-    let cfg = s_config(model, "reprefill");
+fn batched_steps(model: &Model<'_>, schedule: &str, n: usize, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
+    let cfg = s_config(model, schedule);
     let bytes = model.session_bytes(&cfg).map_err(|e| anyhow!("session bytes: {e:?}"))?;
     let mut arenas: Vec<Vec<u8>> = (0..n).map(|_| vec![0u8; bytes]).collect();
     let mut sessions = Vec::with_capacity(n);
@@ -423,6 +425,7 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
     let arena_bytes = model.session_bytes(&s_config(&model, "reprefill")).map_err(|e| anyhow!("{e:?}"))?;
     let mut batch = Vec::new();
     let mut schedules = Vec::new();
+    let mut batch_spread = Vec::new();
     if name == "int8" {
         // After start-up (the first full window, step m: a spread schedule's
         // one re-prefill): the steady state.
@@ -432,11 +435,17 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
             schedules.push((sched, stats(times), model.session_bytes(&s_config(&model, sched)).map_err(|e| anyhow!("{e:?}"))?));
         }
         for &n in &args.batch {
-            let times = batched_steps(&model, n, 3, args.s_steps).with_context(|| format!("{name}, {n} sessions stepped together"))?;
+            let times = batched_steps(&model, "reprefill", n, 3, args.s_steps).with_context(|| format!("{name}, {n} sessions stepped together"))?;
             batch.push((n, stats(times)));
         }
+        // The batch with spread caches, after start-up: no step where every
+        // session re-prefills at once.
+        for &n in &args.batch {
+            let times = batched_steps(&model, "spread", n, steady, args.s_steps).with_context(|| format!("{name}, {n} spread sessions stepped together"))?;
+            batch_spread.push((n, stats(times)));
+        }
     }
-    Ok(DtypeResult { name, r, s, weight_bytes: r_step_weight_bytes(&model, inp.c), model_bytes: rm.weight_bytes(), arena_bytes, batch, schedules })
+    Ok(DtypeResult { name, r, s, weight_bytes: r_step_weight_bytes(&model, inp.c), model_bytes: rm.weight_bytes(), arena_bytes, batch, batch_spread, schedules })
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -505,6 +514,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 r.name,
                 st.median_ms,
                 st.p99_ms,
+                st.median_ms / *n as f64,
+                one.map(|o| format!("  ({:.2}x the time of 1 session)", st.median_ms / o)).unwrap_or_default()
+            );
+        }
+        let one = r.batch_spread.iter().find(|(n, _)| *n == 1).map(|(_, st)| st.median_ms);
+        for (n, st) in &r.batch_spread {
+            println!(
+                "S step {:>4} x{n:<2} spread sessions, one step_many, after start-up: median {:8.2} ms  p99 {:8.2} ms  mean {:8.2} ms  = {:.2} ms per session{}",
+                r.name,
+                st.median_ms,
+                st.p99_ms,
+                st.mean_ms,
                 st.median_ms / *n as f64,
                 one.map(|o| format!("  ({:.2}x the time of 1 session)", st.median_ms / o)).unwrap_or_default()
             );
@@ -595,6 +616,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             for (n, st) in &r.batch {
                 j.insert(format!("batch{n}_step_ms_{}", r.name), st.median_ms.into());
+                j.insert(format!("batch{n}_step_p99_ms_{}", r.name), st.p99_ms.into());
+            }
+            for (n, st) in &r.batch_spread {
+                j.insert(format!("batch{n}_step_ms_{}_spread", r.name), st.median_ms.into());
+                j.insert(format!("batch{n}_step_p99_ms_{}_spread", r.name), st.p99_ms.into());
+                j.insert(format!("batch{n}_step_mean_ms_{}_spread", r.name), st.mean_ms.into());
             }
             if let (Some((tr, _)), Some((_, ss))) = (&tract, r.s.iter().find(|(t, _)| *t == 1)) {
                 j.insert(format!("tract_r_over_s_step_{}_t1", r.name), (tr.median_ms / ss.median_ms).into());
