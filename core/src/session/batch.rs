@@ -23,7 +23,7 @@ use crate::gpt::{head_rows, logits_len};
 use crate::kernels::linear;
 use crate::model::Model;
 use crate::sampler::{argmax, top_k_by_id};
-use crate::session::config::{for_each_live_window, window_context, window_start, Sampling, Setting, MAX_WINDOWS};
+use crate::session::config::{for_each_live_window, next_window, window_context, Sampling, Setting, MAX_WINDOWS};
 use crate::session::gpt_cache::{GptCache, GptItem};
 use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
 use crate::session::state::State;
@@ -302,9 +302,7 @@ fn music_frames_wanted(s: &Session<'_>) -> usize {
     if !leader_ready(s) || lat.rows() > s.k {
         return 0;
     }
-    let ds = s.model.cfg.gpt.music.downsample_rate as usize;
-    // Row k is produced when position ds k + ds - 1 + fut is pushed.
-    let need = (ds * (s.k + 1) + s.cfg.music_lookahead as usize * ds).saturating_sub(lat.pushed());
+    let need = lat.pushes_before_row(s.k);
     let there = s.music_frames.saturating_sub(lat.pushed() + mmr);
     need.min(there).min(lat.burst())
 }
@@ -412,11 +410,7 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
         // The next window (start `nlo`, first used at step `k2`) in the other
         // cache: rows `nlo..k2` must be there by the end of step `k2 - 1`;
         // this step appends its share of the rows still missing.
-        let mut k2 = k + 1;
-        while window_start(k2, m, shift) == lo && k2 < k + 2 * m + 2 {
-            k2 += 1;
-        }
-        let nlo = window_start(k2, m, shift);
+        let (k2, nlo) = next_window(k, m, shift);
         if nlo > lo {
             let other = 1 - slot.min(1);
             if st.gpt[other].window_start() != Some(nlo) {

@@ -64,6 +64,18 @@ pub fn window_start(k: usize, m: usize, s: usize) -> usize {
     k + 1 - window_context(k, m, s)
 }
 
+/// The first step after `k` whose window starts later than step `k`'s,
+/// and that start: `(k2, lo2)` (window starts never decrease and move at
+/// least every `m` steps).
+pub fn next_window(k: usize, m: usize, s: usize) -> (usize, usize) {
+    let lo = window_start(k, m, s);
+    let mut k2 = k + 1;
+    while window_start(k2, m, s) == lo && k2 <= k + m.max(1) {
+        k2 += 1;
+    }
+    (k2, window_start(k2, m, s))
+}
+
 /// Calls `f(lo)` for every window start `lo <= k` of a step `>= k`: the
 /// windows that contain token row `k` and are still to be used, in
 /// increasing order (the window starts never decrease).
@@ -212,6 +224,18 @@ pub fn window_context(k: usize, m: usize, s: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn next_window_finds_each_jump() {
+        // m = 29, s = 22: lo 0 on steps 0..28, 1 at step 29, 9 on 30..37, 17 from 38.
+        assert_eq!(next_window(0, 29, 22), (29, 1));
+        assert_eq!(next_window(28, 29, 22), (29, 1));
+        assert_eq!(next_window(29, 29, 22), (30, 9));
+        assert_eq!(next_window(30, 29, 22), (38, 17));
+        assert_eq!(next_window(37, 29, 22), (38, 17));
+        // s = m: a sliding window moves every step.
+        assert_eq!(next_window(40, 29, 29), (41, 13));
+    }
 
     #[test]
     fn window_schedule_matches_the_reference_formula() {

@@ -158,6 +158,12 @@ impl<'s> LatStream<'s> {
         self.rows
     }
 
+    /// Positions still to push before output row `row` exists (row `j` is
+    /// produced when position `ds j + ds - 1 + fut` is pushed).
+    pub fn pushes_before_row(&self, row: usize) -> usize {
+        (self.ds * (row + 1) + self.fut).saturating_sub(self.pushed)
+    }
+
     /// Most positions one push may carry (`burst`, at most `ds`: a push
     /// completes at most one output row).
     pub fn burst(&self) -> usize {

@@ -391,6 +391,22 @@ fn batched_steps(model: &Model<'_>, schedule: &str, n: usize, warmup: usize, ste
     Ok(times.split_off(warmup))
 }
 
+/// One line per session count of a `step_many` measurement, with its ratio
+/// to one session of the same measurement.
+fn print_batch(name: &str, what: &str, v: &[(usize, Stats)]) {
+    let one = v.iter().find(|(n, _)| *n == 1).map(|(_, st)| st.median_ms);
+    for (n, st) in v {
+        println!(
+            "S step {name:>4} x{n:<2} {what} median {:8.2} ms  p99 {:8.2} ms  mean {:8.2} ms  = {:.2} ms per session{}",
+            st.median_ms,
+            st.p99_ms,
+            st.mean_ms,
+            st.median_ms / *n as f64,
+            one.map(|o| format!("  ({:.2}x the time of 1 session)", st.median_ms / o)).unwrap_or_default()
+        );
+    }
+}
+
 /// Runs `f` with the GEMMs split over `threads` threads (the pool of
 /// `crate::workers`), then back to one thread.
 fn on_threads<F>(threads: usize, f: F) -> anyhow::Result<Vec<Duration>>
@@ -507,29 +523,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 *bytes as f64 / 1e6
             );
         }
-        let one = r.batch.iter().find(|(n, _)| *n == 1).map(|(_, st)| st.median_ms);
-        for (n, st) in &r.batch {
-            println!(
-                "S step {:>4} x{n:<2} sessions in one step_many call: median {:8.2} ms  p99 {:8.2} ms  = {:.2} ms per session{}",
-                r.name,
-                st.median_ms,
-                st.p99_ms,
-                st.median_ms / *n as f64,
-                one.map(|o| format!("  ({:.2}x the time of 1 session)", st.median_ms / o)).unwrap_or_default()
-            );
-        }
-        let one = r.batch_spread.iter().find(|(n, _)| *n == 1).map(|(_, st)| st.median_ms);
-        for (n, st) in &r.batch_spread {
-            println!(
-                "S step {:>4} x{n:<2} spread sessions, one step_many, after start-up: median {:8.2} ms  p99 {:8.2} ms  mean {:8.2} ms  = {:.2} ms per session{}",
-                r.name,
-                st.median_ms,
-                st.p99_ms,
-                st.mean_ms,
-                st.median_ms / *n as f64,
-                one.map(|o| format!("  ({:.2}x the time of 1 session)", st.median_ms / o)).unwrap_or_default()
-            );
-        }
+        print_batch(r.name, "sessions in one step_many call:", &r.batch);
+        print_batch(r.name, "spread sessions, one step_many, after start-up:", &r.batch_spread);
         results.push(r);
     }
     println!("tN = one step with its large GEMMs split over N threads (duolando::workers); % of memcpy is against the 1-thread memcpy.");
