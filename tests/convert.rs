@@ -356,7 +356,9 @@ fn yaml_syntax_error_names_the_file() {
 /// `storage_for(int8)` over the published config, by schema role: the
 /// decoders' convs int8 (rows of `in * k`), the encoders' convs, codebooks
 /// and ConvTranspose1d weights f16, vectors and `pos_emb` f32, Linear and
-/// embeddings int8; every int8 tensor's row a multiple of 32.
+/// embeddings int8 (the GEMM matrices, Linear and Conv, as `Q8Block32x8`
+/// row groups, the embeddings as `Q8Block32` rows; requesting x8 is the
+/// same); every int8 tensor's row a multiple of 32.
 #[test]
 fn int8_storage_by_role_on_the_published_config() {
     use duolando_core::schema::{for_each_tensor, Role, SchemaError};
@@ -368,17 +370,21 @@ fn int8_storage_by_role_on_the_published_config() {
         let blockable = block_row(s.dims()) % 32 == 0;
         let want = match s.role {
             Role::Vector | Role::PosEmb => StoreAs::F32,
-            Role::Linear | Role::Embedding | Role::Conv if blockable => StoreAs::Q8Block32,
+            Role::Embedding if blockable => StoreAs::Q8Block32,
+            Role::Linear | Role::Conv if blockable => StoreAs::Q8Block32x8,
             _ => StoreAs::F16,
         };
         assert_eq!(got, want, "{}", s.name);
+        assert_eq!(duolando::convert::storage_for(StoreAs::Q8Block32x8, s), want, "{} (x8 requested)", s.name);
         by_role.entry(format!("{:?}", s.role)).or_default().insert(format!("{got:?}"));
         Ok(())
     })
     .unwrap();
     // Every role occurs; the published decoders' convs are all blockable.
     assert_eq!(by_role.len(), 8, "{by_role:?}");
-    assert_eq!(by_role["Conv"].iter().collect::<Vec<_>>(), ["Q8Block32"]);
+    assert_eq!(by_role["Conv"].iter().collect::<Vec<_>>(), ["Q8Block32x8"]);
+    assert_eq!(by_role["Linear"].iter().collect::<Vec<_>>(), ["F16", "Q8Block32x8"], "music_trans' input rows are not in blocks of 32");
+    assert_eq!(by_role["Embedding"].iter().collect::<Vec<_>>(), ["Q8Block32"]);
     assert_eq!(by_role["EncoderConv"].iter().collect::<Vec<_>>(), ["F16"]);
     assert_eq!(by_role["ConvTranspose"].iter().collect::<Vec<_>>(), ["F16"]);
     assert_eq!(by_role["Codebook"].iter().collect::<Vec<_>>(), ["F16"]);

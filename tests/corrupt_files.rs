@@ -639,6 +639,73 @@ fn rejects_q8_shape_not_in_whole_blocks() {
     assert_eq!(parse(&rebuild(&p)), Err(FormatError::SizeOverflow { index: i as u32 }));
 }
 
+/// A valid file with the (8, 32) tensor re-encoded as Q8Block32x8 (one
+/// group; the tiny model has no blocked tensor whose rows need padding:
+/// padded groups are covered in tests/int8_layouts.rs) with scale `scale`
+/// at row `bad_row` of block 0 (0.01 elsewhere).
+fn with_q8x8_tensor(scale: half::f16, bad_row: usize) -> (Vec<u8>, u32, usize) {
+    let mut p = valid_parts();
+    let mut pay = payloads(&p);
+    let i = index_of(&p, |e| e.shape == [8, 32]);
+    let (rows, cols) = (p.header.tensors[i].shape[0] as usize, p.header.tensors[i].shape[1] as usize);
+    let nb = cols / 32;
+    let groups = rows.div_ceil(8);
+    let mut q = vec![0u8; groups * 8 * nb * 34];
+    for t in 0..groups {
+        let g = &mut q[t * 8 * nb * 34..(t + 1) * 8 * nb * 34];
+        for (k, v) in g[..nb * 256].iter_mut().enumerate() {
+            *v = (k as u8).wrapping_mul(7);
+        }
+        for b in 0..nb {
+            for n in 0..8 {
+                let s = if b == 0 && t * 8 + n == bad_row { scale } else { half::f16::from_f32(0.01) };
+                g[nb * 256 + 16 * b + 2 * n..nb * 256 + 16 * b + 2 * n + 2].copy_from_slice(&s.to_le_bytes());
+            }
+        }
+    }
+    pay[i] = q;
+    p.header.tensors[i].dtype = DType::Q8Block32x8 as u8;
+    let data = relayout(&mut p.header, &pay);
+    (assemble(&p.header, &data).unwrap(), i as u32, rows)
+}
+
+#[test]
+fn accepts_q8x8_tensor_with_finite_scales() {
+    let (bytes, i, rows) = with_q8x8_tensor(half::f16::from_f32(0.02), 0);
+    let aligned = AlignedBytes::copy_from(&bytes);
+    let duo = DuoFile::parse(aligned.as_bytes()).unwrap();
+    let e = duo.tensors().nth(i as usize).unwrap();
+    let nb = e.shape[1] as u64 / 32;
+    assert_eq!((e.dtype, e.nbytes), (DType::Q8Block32x8, rows.div_ceil(8) as u64 * 8 * nb * 34));
+}
+
+#[test]
+fn rejects_non_finite_q8x8_scale() {
+    for (row, scale) in [(0, half::f16::NAN), (5, half::f16::INFINITY), (7, half::f16::NEG_INFINITY)] {
+        let (bytes, i, _) = with_q8x8_tensor(scale, row);
+        // Blocks numbered group-major, then block, then row: block 0 of
+        // row r < 8 of a one-block (8, 32) tensor is r.
+        let want = row as u64;
+        assert_eq!(parse(&bytes), Err(FormatError::NonFiniteScale { index: i, block: want }), "row {row}");
+    }
+}
+
+#[test]
+fn rejects_q8x8_payload_short_of_its_groups() {
+    let (bytes, _, _) = with_q8x8_tensor(half::f16::from_f32(0.01), 0);
+    let rows = 7; // one row short of the group
+    let mut p = take_apart(&bytes);
+    let i = index_of(&p, |e| e.dtype == DType::Q8Block32x8 as u8);
+    let nb = p.header.tensors[i].shape[1] as u64 / 32;
+    let mut pay = payloads(&p);
+    pay[i].truncate(rows * nb as usize * 34);
+    let data = relayout(&mut p.header, &pay);
+    assert_eq!(
+        parse(&assemble(&p.header, &data).unwrap()),
+        Err(FormatError::ByteLenMismatch { index: i as u32, expected: rows.div_ceil(8) as u64 * 8 * nb * 34, found: rows as u64 * nb * 34 })
+    );
+}
+
 // ------------------------------------------------------ std-side messages
 
 #[test]

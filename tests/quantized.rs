@@ -168,7 +168,7 @@ fn int8_vq_decoders_on_the_demo_model() {
     let (dq, df) = (q_file.duo().unwrap(), f16_file.duo().unwrap());
     // The decoders' convs are int8 (all but the ConvTranspose1d ones).
     let dec: Vec<DType> = dq.tensors().filter(|t| t.name.contains(".decoders") && t.rank == 3).map(|t| t.dtype).collect();
-    let n_q8 = dec.iter().filter(|&&d| d == DType::Q8Block32).count();
+    let n_q8 = dec.iter().filter(|&&d| d == DType::Q8Block32x8).count();
     eprintln!("demo decoders: {n_q8} of {} conv weights int8", dec.len());
     assert!(n_q8 >= 40, "decoder convs: {dec:?}");
     let (mq, mf) = (Model::from_duo(&dq).unwrap(), Model::from_duo(&df).unwrap());

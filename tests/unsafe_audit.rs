@@ -41,6 +41,7 @@ const ALLOWED: &[&str] = &[
     "ffi/tests/session_golden.rs",
     "tests/session_memory.rs",
     "tests/step_many.rs",
+    "tests/int8_layouts.rs",
 ];
 
 /// Crate roots and the lint level they must set for `unsafe_code`.

@@ -27,6 +27,14 @@ pub enum DType {
     /// (18 bytes per block; Q4_0-like). Validated like Q8Block32;
     /// `Model::bind` accepts it for weight matrices (`kernels::Q4Rows`).
     Q4Block32 = 3,
+    /// The blocks, scales and values of `Q8Block32` with the rows in
+    /// groups of 8, each group interleaved for the int8 GEMM
+    /// (`kernels::simd::PackedQ8`: per block, the 8 rows' values by 8-byte
+    /// group, then the 8 rows' f16 scales at the group's end); the last
+    /// group padded to 8 rows (`ceil(rows / 8) * 8 * row / 32 * 34` bytes).
+    /// Validated like Q8Block32 (every scale, padding rows' included);
+    /// `Model::bind` accepts it for weight matrices (`kernels::Q8x8Rows`).
+    Q8Block32x8 = 4,
 }
 
 impl DType {
@@ -36,13 +44,14 @@ impl DType {
             1 => Some(DType::F16),
             2 => Some(DType::Q8Block32),
             3 => Some(DType::Q4Block32),
+            4 => Some(DType::Q8Block32x8),
             _ => None,
         }
     }
     /// Bytes of one block of 32 values of a blocked type (0 for dense ones).
     pub const fn block_bytes(self) -> usize {
         match self {
-            DType::Q8Block32 => 34,
+            DType::Q8Block32 | DType::Q8Block32x8 => 34,
             DType::Q4Block32 => 18,
             DType::F32 | DType::F16 => 0,
         }
@@ -59,6 +68,12 @@ impl DType {
                     return None;
                 }
                 (numel / 32).checked_mul(self.block_bytes())
+            }
+            DType::Q8Block32x8 => {
+                if row == 0 || row % 32 != 0 || numel % row != 0 {
+                    return None;
+                }
+                (numel / row).div_ceil(8).checked_mul(8 * (row / 32) * self.block_bytes())
             }
         }
     }

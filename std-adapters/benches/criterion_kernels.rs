@@ -9,9 +9,9 @@
 //! `cargo bench -p duolando --bench criterion_kernels [-- FILTER]`
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use duolando::duo_writer::quantise_q8_block32;
+use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando::model_file::ModelFile;
-use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, TiledCausalMask};
+use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, Q8x8Rows, TiledCausalMask};
 use duolando_core::model::Model;
 use duolando_core::session::{Session, SessionConfig};
 
@@ -25,6 +25,7 @@ fn linear_mlp(c: &mut Criterion) {
     let wf = r.vec(o * i);
     let wh: Vec<u16> = wf.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
     let wq = quantise_q8_block32(&wf);
+    let wx = quantise_q8_block32x8(&wf, i);
     let b = r.vec(o);
     let mut g = c.benchmark_group("linear_3072x768");
     g.sample_size(20);
@@ -32,13 +33,14 @@ fn linear_mlp(c: &mut Criterion) {
         let x = r.vec(n * i);
         let mut y = vec![0.0f32; n * o];
         g.throughput(Throughput::Elements((n * o * i) as u64));
-        for (name, pick) in [("f32", 0), ("f16", 1), ("int8", 2)] {
+        for (name, pick) in [("f32", 0), ("f16", 1), ("int8", 2), ("int8x8", 3)] {
             g.bench_with_input(BenchmarkId::new(name, n), &n, |bch, _| {
                 bch.iter(|| {
                     let m = match pick {
                         0 => Matrix::F32(F32Rows::new(&wf, o, i).unwrap()),
                         1 => Matrix::F16(F16Rows::new(&wh, o, i).unwrap()),
-                        _ => Matrix::Q8(Q8Rows::new(&wq, o, i).unwrap()),
+                        2 => Matrix::Q8(Q8Rows::new(&wq, o, i).unwrap()),
+                        _ => Matrix::Q8x8(Q8x8Rows::new(&wx, o, i).unwrap()),
                     };
                     linear(&x, &m, Some(&b), &mut y);
                     std::hint::black_box(&y);

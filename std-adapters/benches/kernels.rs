@@ -4,14 +4,16 @@
 //! rows, with enough distinct weight matrices that the small-batch cases
 //! read their weights from memory (bandwidth-bound), and the attention
 //! kernel at the R step's coordinated-attention shape.
+//! int8 is measured in both stored layouts: `Q8Block32` rows (`int8`) and
+//! `Q8Block32x8` row groups (`int8x8`, what `convert --dtype int8` writes).
 //!
 //! `cargo bench -p duolando --bench kernels` (`-- quick` for fewer repeats).
 
 use std::time::Instant;
 
-use duolando::duo_writer::quantise_q8_block32;
+use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd;
-use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, TiledCausalMask};
+use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, Q8x8Rows, TiledCausalMask};
 
 mod common;
 use common::Rng;
@@ -43,6 +45,7 @@ fn main() {
         let wf: Vec<Vec<f32>> = (0..mats).map(|_| r.vec(o * i)).collect();
         let wh: Vec<Vec<u16>> = wf.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
         let wq: Vec<Vec<u8>> = wf.iter().map(|w| quantise_q8_block32(w)).collect();
+        let wx: Vec<Vec<u8>> = wf.iter().map(|w| quantise_q8_block32x8(w, i)).collect();
         let b = r.vec(o);
         for &n in &[1usize, 10, 16, 64, 290] {
             let x = r.vec(n * i);
@@ -55,13 +58,14 @@ fn main() {
                 // SAFETY: `supported` lists only ISAs this CPU has.
                 unsafe { simd::set_isa(*isa) };
                 let mut per = Vec::new();
-                for (name, pick) in [("f32", 0), ("f16", 1), ("int8", 2)] {
+                for (name, pick) in [("f32", 0), ("f16", 1), ("int8", 2), ("int8x8", 3)] {
                     let t = time(reps_n, || {
                         for k in 0..sets {
                             let m = match pick {
                                 0 => Matrix::F32(F32Rows::new(&wf[k], o, i).unwrap()),
                                 1 => Matrix::F16(F16Rows::new(&wh[k], o, i).unwrap()),
-                                _ => Matrix::Q8(Q8Rows::new(&wq[k], o, i).unwrap()),
+                                2 => Matrix::Q8(Q8Rows::new(&wq[k], o, i).unwrap()),
+                                _ => Matrix::Q8x8(Q8x8Rows::new(&wx[k], o, i).unwrap()),
                             };
                             linear(&x, &m, Some(&b), &mut y);
                         }

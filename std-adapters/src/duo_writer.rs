@@ -22,6 +22,9 @@ pub enum StoreAs {
     /// `DType::Q8Block32` (see [`quantise_q8_block32`]); the last axis must
     /// be a multiple of 32.
     Q8Block32,
+    /// `DType::Q8Block32x8` (see [`quantise_q8_block32x8`]): the Q8Block32
+    /// rows interleaved in groups of 8; the last axis must be a multiple of 32.
+    Q8Block32x8,
     /// `DType::Q4Block32` (see [`quantise_q4_block32`]); the last axis must
     /// be a multiple of 32.
     Q4Block32,
@@ -41,6 +44,31 @@ pub fn quantise_q8_block32(values: &[f32]) -> Vec<u8> {
         let inv = if df > 0.0 { 1.0 / df } else { 0.0 };
         out.extend_from_slice(&d.to_le_bytes());
         out.extend(b.iter().map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8));
+    }
+    out
+}
+
+/// [`quantise_q8_block32`] (the same blocks, scales and values) with the
+/// rows of `row` values in groups of 8, each group in the interleaved
+/// layout of `DType::Q8Block32x8` (docs/FORMAT.md §4); the last group padded
+/// with zero rows (scale 0, values 0).
+pub fn quantise_q8_block32x8(values: &[f32], row: usize) -> Vec<u8> {
+    let plain = quantise_q8_block32(values);
+    let nb = row / 32;
+    let rb = nb * 34;
+    let rows = if rb == 0 { 0 } else { plain.len() / rb };
+    let mut out = vec![0u8; rows.div_ceil(8) * 8 * rb];
+    for (r, src) in plain.chunks_exact(rb.max(1)).enumerate().take(rows) {
+        let (t, n) = (r / 8, r % 8);
+        let group = &mut out[t * 8 * rb..(t + 1) * 8 * rb];
+        for (b, blk) in src.chunks_exact(34).enumerate() {
+            for g in 0..4 {
+                let at = 256 * b + 64 * g + 8 * n;
+                group[at..at + 8].copy_from_slice(&blk[2 + 8 * g..2 + 8 * g + 8]);
+            }
+            let at = 256 * nb + 16 * b + 2 * n;
+            group[at..at + 2].copy_from_slice(&blk[..2]);
+        }
     }
     out
 }
@@ -183,17 +211,24 @@ pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, Wr
                 data.extend(t.values.iter().flat_map(|&v| half::f16::from_f32(v).to_le_bytes()));
                 DType::F16
             }
-            StoreAs::Q8Block32 | StoreAs::Q4Block32 => {
+            StoreAs::Q8Block32 | StoreAs::Q8Block32x8 | StoreAs::Q4Block32 => {
                 let row = duolando_core::tensor::block_row(&t.shape);
                 if row == 0 || row % 32 != 0 {
                     return Err(WriteError::BlockShape { name: t.name.clone(), shape: t.shape.clone() });
                 }
-                if t.store_as == StoreAs::Q8Block32 {
-                    data.extend(quantise_q8_block32(&t.values));
-                    DType::Q8Block32
-                } else {
-                    data.extend(quantise_q4_block32(&t.values));
-                    DType::Q4Block32
+                match t.store_as {
+                    StoreAs::Q8Block32 => {
+                        data.extend(quantise_q8_block32(&t.values));
+                        DType::Q8Block32
+                    }
+                    StoreAs::Q8Block32x8 => {
+                        data.extend(quantise_q8_block32x8(&t.values, row));
+                        DType::Q8Block32x8
+                    }
+                    _ => {
+                        data.extend(quantise_q4_block32(&t.values));
+                        DType::Q4Block32
+                    }
                 }
             }
         };

@@ -4,7 +4,7 @@ use super::prefix::Prefix;
 use super::table::{decode_entry, Cursor, TensorEntry};
 use super::{align_up, schema_check, FormatError, HeaderField, MAX_TENSORS, PREFIX_LEN};
 use crate::config::ModelConfig;
-use crate::tensor::{DType, TensorRef};
+use crate::tensor::{block_row, DType, TensorRef};
 
 /// A `.duo` buffer that passed every rule of docs/FORMAT.md.
 ///
@@ -87,8 +87,10 @@ impl<'a> DuoFile<'a> {
             if end > data_len {
                 return Err(FormatError::DataOutOfRange { index, end, data_len });
             }
-            if matches!(e.dtype, DType::Q8Block32 | DType::Q4Block32) {
-                check_block_scales(payload(data, &e), e.dtype.block_bytes(), index)?;
+            match e.dtype {
+                DType::Q8Block32 | DType::Q4Block32 => check_block_scales(payload(data, &e), e.dtype.block_bytes(), index)?,
+                DType::Q8Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, index)?,
+                DType::F32 | DType::F16 => {}
             }
             prev_end = end;
             prev = Some(e);
@@ -200,7 +202,7 @@ impl<'a> DuoFile<'a> {
                     .chunks_exact(2)
                     .position(|c| !half::f16::from_le_bytes([c[0], c[1]]).is_finite()),
                 // Scales were checked by parse; int8 / int4 values are always finite.
-                DType::Q8Block32 | DType::Q4Block32 => None,
+                DType::Q8Block32 | DType::Q4Block32 | DType::Q8Block32x8 => None,
             };
             if let Some(i) = bad {
                 return Some((index as u32, i as u64));
@@ -228,6 +230,25 @@ fn check_block_scales(bytes: &[u8], block_bytes: usize, index: u32) -> Result<()
         let scale = half::f16::from_le_bytes([chunk[0], chunk[1]]);
         if !scale.is_finite() {
             return Err(FormatError::NonFiniteScale { index, block: block as u64 });
+        }
+    }
+    Ok(())
+}
+
+/// `Q8Block32x8` payloads: row groups of `nb` blocks, each `nb * 256`
+/// value bytes then `nb * 8` f16 scales, which must be finite (the padding
+/// rows' too). Blocks are numbered as in the Q8Block32 layout of the
+/// padded matrix: group-major, then block, then row (`(t * nb + b) * 8 + n`).
+fn check_group_scales(bytes: &[u8], nb: usize, index: u32) -> Result<(), FormatError> {
+    let (values, group) = (nb * 256, nb * 8 * 34);
+    if group == 0 {
+        return Ok(());
+    }
+    for (t, g) in bytes.chunks_exact(group).enumerate() {
+        for (k, c) in g[values..].chunks_exact(2).enumerate() {
+            if !half::f16::from_le_bytes([c[0], c[1]]).is_finite() {
+                return Err(FormatError::NonFiniteScale { index, block: (t * nb * 8 + k) as u64 });
+            }
         }
     }
     Ok(())

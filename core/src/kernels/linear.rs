@@ -3,7 +3,7 @@
 
 use super::parallel::{split_cols, Cols};
 use super::simd::{self, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
-use super::weights::{expand_q4, Matrix, PreparedAct, Q4Rows, Q8Rows, RowMatrix};
+use super::weights::{expand_q4, Matrix, PreparedAct, Q4Rows, Q8Rows, Q8x8Rows, RowMatrix, Q8X8_ROWS};
 
 /// Weight bytes kept hot per pass over the activations (~L2-sized blocks:
 /// 64 f32 rows at width 768, more rows for narrower weight types).
@@ -26,6 +26,9 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
     let (x, y) = (&x[..n * n_in], &mut y[..n * n_out]);
     match w {
         Matrix::Q8(q) if n_in <= Q8_PANEL => return linear_q8(x, q, b, y),
+        // Packed in place on VNNI; expanded per tile (stack rows of at most
+        // `Q4_FAST_COLS`) elsewhere.
+        Matrix::Q8x8(q) if n_in <= Q4_FAST_COLS || (n_in <= Q8_PANEL && simd::packed_q8_fast()) => return linear_q8(x, q, b, y),
         Matrix::Q4(q) if n_in <= Q4_FAST_COLS => return linear_q8(x, q, b, y),
         _ => {}
     }
@@ -48,6 +51,9 @@ pub const Q8_PANEL: usize = 32 * 1024;
 pub const Q8_PANEL: usize = 4 * 1024;
 const Q8_PANEL_BLOCKS: usize = Q8_PANEL / Q8_BLOCK;
 
+// Threads split the output columns at multiples of 8: whole Q8x8 row groups.
+const _: () = assert!(super::parallel::SPLIT_ALIGN % Q8X8_ROWS == 0);
+
 /// Fewest activation rows of a panel for the packed int8 path.
 const PACK_MIN_ROWS: usize = 4;
 
@@ -68,20 +74,36 @@ pub const Q4_FAST_COLS: usize = 4096;
 pub const Q4_FAST_COLS: usize = 1024;
 const Q4_ROW_BYTES: usize = Q4_FAST_COLS / Q8_BLOCK * Q8_BLOCK_BYTES;
 
-/// Weight rows in the stored Q8Block32 layout, as the int8 panel path reads
-/// them: Q8 rows in place, Q4 rows expanded into a stack buffer (exact).
+/// Weight rows as the int8 panel path reads them: as Q8Block32 rows (Q8
+/// rows in place; Q4 and Q8x8 rows expanded into a stack buffer, exact)
+/// for [`simd::gemm_q8`], and as packed 8-row tiles for
+/// [`simd::gemm_q8_packed`] (Q8x8 groups in place; Q8 and Q4 rows packed
+/// per tile).
 trait Q8Source: RowMatrix {
     /// Room for `simd::PACK_ROWS` expanded rows (nothing for Q8).
     type Buf;
+    /// Whether the tiles are stored packed (the packed kernel then pays
+    /// off from one activation row on).
+    const PREPACKED: bool;
     fn new_buf() -> Self::Buf;
     /// Rows `rows` (N <= `simd::PACK_ROWS`) as stored Q8Block32 rows.
     fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut Self::Buf) -> [&'s [u8]; N];
+    /// Rows `t0 .. t0 + 8` (`t0` a multiple of 8; rows past the matrix
+    /// repeat its last row or are padding: their results are dropped) as
+    /// a packed tile of `nb` blocks (`nb <= PACK_BLOCKS` unless PREPACKED).
+    fn packed_tile<'s>(&'s self, t0: usize, nb: usize, pack: &'s mut simd::Q8Pack8, buf: &'s mut Self::Buf) -> simd::PackedQ8<'s> {
+        let last = self.rows() - 1;
+        let rows = self.q8_rows(core::array::from_fn(|j| (t0 + j).min(last)), buf);
+        simd::q8_pack8(rows, nb, pack);
+        pack.view()
+    }
     /// The stored bytes of rows `r0..r1` (for [`simd::prefetch`]).
     fn stored_rows(&self, r0: usize, r1: usize) -> &[u8];
 }
 
 impl Q8Source for Q8Rows<'_> {
     type Buf = ();
+    const PREPACKED: bool = false;
     #[inline]
     fn new_buf() {}
     #[inline]
@@ -96,6 +118,7 @@ impl Q8Source for Q8Rows<'_> {
 
 impl Q8Source for Q4Rows<'_> {
     type Buf = [[u8; Q4_ROW_BYTES]; simd::PACK_ROWS];
+    const PREPACKED: bool = false;
     #[inline]
     fn new_buf() -> Self::Buf {
         [[0; Q4_ROW_BYTES]; simd::PACK_ROWS]
@@ -108,6 +131,32 @@ impl Q8Source for Q4Rows<'_> {
         }
         let buf: &'s Self::Buf = buf;
         core::array::from_fn(|j| &buf[j.min(simd::PACK_ROWS - 1)][..n])
+    }
+    #[inline]
+    fn stored_rows(&self, r0: usize, r1: usize) -> &[u8] {
+        self.rows_bytes(r0, r1)
+    }
+}
+
+impl Q8Source for Q8x8Rows<'_> {
+    type Buf = [[u8; Q4_ROW_BYTES]; simd::PACK_ROWS];
+    const PREPACKED: bool = true;
+    #[inline]
+    fn new_buf() -> Self::Buf {
+        [[0; Q4_ROW_BYTES]; simd::PACK_ROWS]
+    }
+    #[inline]
+    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut Self::Buf) -> [&'s [u8]; N] {
+        let nb = (self.cols() / Q8_BLOCK).min(Q4_FAST_COLS / Q8_BLOCK);
+        for (dst, &r) in buf.iter_mut().zip(&rows) {
+            self.expand(r, 0, nb, dst);
+        }
+        let buf: &'s Self::Buf = buf;
+        core::array::from_fn(|j| &buf[j.min(simd::PACK_ROWS - 1)][..nb * Q8_BLOCK_BYTES])
+    }
+    #[inline]
+    fn packed_tile<'s>(&'s self, t0: usize, _nb: usize, _: &'s mut simd::Q8Pack8, _: &'s mut Self::Buf) -> simd::PackedQ8<'s> {
+        self.group(t0 / Q8X8_ROWS)
     }
     #[inline]
     fn stored_rows(&self, r0: usize, r1: usize) -> &[u8] {
@@ -137,9 +186,10 @@ fn linear_q8<W: Q8Source + Sync>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f
                 &mut p.c[2 * r * nb..2 * (r + 1) * nb],
             );
         }
-        // Packing 8 weight rows pays off from a few activation rows on
-        // (measured: at 1 row the unpacked VNNI tile is faster).
-        let packed = p1 - p0 >= PACK_MIN_ROWS && simd::packed_q8_fast(nb);
+        // Packing 8 weight rows per call pays off from a few activation
+        // rows on (measured: at 1 row the unpacked VNNI tile is faster);
+        // stored packed tiles are faster from one row on.
+        let packed = simd::packed_q8_fast() && (W::PREPACKED || (p1 - p0 >= PACK_MIN_ROWS && nb <= simd::PACK_BLOCKS));
         let work = (n_out * nb * Q8_BLOCK_BYTES).saturating_mul(p1 - p0);
         let p = &p;
         split_cols(&mut y[p0 * n_out..p1 * n_out], n_out, work, |cols| {
@@ -284,9 +334,9 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8
     }
 }
 
-/// [`q8_panel_tiles`] with 8 weight rows packed once per tile
-/// ([`simd::q8_pack8`]) and activation tiles of up to 8 rows
-/// ([`simd::gemm_q8_packed`]; the AVX512-VNNI path).
+/// [`q8_panel_tiles`] over packed tiles of 8 weight rows (stored packed,
+/// or packed once per tile: [`Q8Source::packed_tile`]) and activation
+/// tiles of up to 8 rows ([`simd::gemm_q8_packed`]; the AVX512-VNNI path).
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel, n_rows: usize, n_in: usize) {
@@ -297,8 +347,7 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
     let mut t0 = y.lo();
     while t0 < y.hi() {
         let nt = R.min(y.hi() - t0);
-        let wr = w.q8_rows(core::array::from_fn(|j| t0 + j.min(nt - 1)), &mut buf);
-        simd::q8_pack8(wr, nb, &mut pack);
+        let tile = w.packed_tile(t0, nb, &mut pack, &mut buf);
         // The next tile's weights stream in while this one is multiplied.
         simd::prefetch(w.stored_rows(t0 + R, (t0 + 2 * R).min(y.hi())));
         let mut i0 = 0;
@@ -316,7 +365,7 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
             };
             macro_rules! run {
                 ($m:literal) => {{
-                    let t = simd::gemm_q8_packed::<$m>(&pack, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
+                    let t = simd::gemm_q8_packed::<$m>(tile, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
                     for (m, r) in t.iter().enumerate() {
                         put(m, r);
                     }

@@ -10,6 +10,7 @@
 //! | [`F32Rows`] | f32 | f32 | f32 as given |
 //! | [`F16Rows`] | IEEE binary16 | f32 (exact f16 -> f32) | f32 as given |
 //! | [`Q8Rows`] | blocks of 32: f16 scale + 32 i8 | i32 per block, f32 across blocks | quantised per block of 32 (f32 scale `max|x|/127`, round to nearest) once per row chunk ([`RowMatrix::prepare`]) |
+//! | [`Q8x8Rows`] | the Q8 blocks of 8 rows interleaved ([`simd::PackedQ8`]) | as Q8 (the packed kernel reads a row group in place; other kernels expand a row's blocks to Q8 blocks) | as Q8 |
 //! | [`Q4Rows`] | blocks of 32: f16 scale + 16 bytes of nibbles | as Q8 (the nibbles of a tile's rows are expanded to Q8 blocks in registers/stack, then the same Q8 dots run) | as Q8 |
 //!
 //! Quantising the activations per block (Q8_0 x Q8_0, as ggml) keeps the
@@ -222,6 +223,22 @@ fn tile_q8_act(w: [&[u8]; TN], nb: usize, act: &Q8Act) -> Tile {
     simd::tile_q8(w, xq, xd)
 }
 
+/// `y += s * q` over one block's quantised values (`s`: activation x scale).
+#[inline]
+fn q8_block_axpy(s: f32, q: &[u8], y: &mut [f32]) {
+    for (yi, &qi) in y.iter_mut().zip(q) {
+        *yi += s * (qi as i8 as f32);
+    }
+}
+
+/// `out = d * q` over one block's quantised values.
+#[inline]
+fn q8_block_into(d: f32, q: &[u8], out: &mut [f32]) {
+    for (o, &qi) in out.iter_mut().zip(q) {
+        *o = d * (qi as i8 as f32);
+    }
+}
+
 /// Row-major `DType::Q8Block32` weights: each row is `cols / 32` blocks of
 /// [f16 scale, 32 x i8]; value = scale * q.
 #[derive(Clone, Copy, Debug)]
@@ -287,19 +304,82 @@ impl RowMatrix for Q8Rows<'_> {
         tile_q8_act(o.map(|r| &self.row(r)[b0..b0 + nb * Q8_BLOCK_BYTES]), nb, act)
     }
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
-        self.for_blocks(r, |c, d, q| {
-            let s = a * d;
-            for (yi, &qi) in y[c..c + Q8_BLOCK].iter_mut().zip(q) {
-                *yi += s * (qi as i8 as f32);
-            }
-        });
+        self.for_blocks(r, |c, d, q| q8_block_axpy(a * d, q, &mut y[c..c + Q8_BLOCK]));
     }
     fn row_into(&self, r: usize, out: &mut [f32]) {
-        self.for_blocks(r, |c, d, q| {
-            for (o, &qi) in out[c..c + Q8_BLOCK].iter_mut().zip(q) {
-                *o = d * (qi as i8 as f32);
+        self.for_blocks(r, |c, d, q| q8_block_into(d, q, &mut out[c..c + Q8_BLOCK]));
+    }
+}
+
+/// Rows per interleaved group of `DType::Q8Block32x8`.
+pub const Q8X8_ROWS: usize = simd::PACK_ROWS;
+
+/// Bytes of one stored `DType::Q8Block32x8` row group of `nb` blocks (8
+/// rows: `nb * 256` value bytes, then `nb * 16` scale bytes).
+pub const fn q8x8_group_bytes(nb: usize) -> usize {
+    nb * Q8X8_ROWS * Q8_BLOCK_BYTES
+}
+
+/// `DType::Q8Block32x8` weights: the rows of a Q8Block32 matrix (same
+/// blocks, scales and values) in groups of 8, each group stored as a
+/// [`simd::PackedQ8`] tile; the last group is padded with rows whose
+/// results are dropped. The int8 GEMM reads a group's tile in place (no
+/// packing per call); the other kernels expand one row's blocks back to
+/// Q8 blocks ([`Q8x8Rows::expand`]) and run the Q8 code.
+#[derive(Clone, Copy, Debug)]
+pub struct Q8x8Rows<'a> {
+    data: &'a [u8],
+    rows: usize,
+    cols: usize,
+}
+
+impl<'a> Q8x8Rows<'a> {
+    /// None unless `cols % 32 == 0` and `data.len() == ceil(rows / 8) *
+    /// 8 * cols / 32 * 34`.
+    pub fn new(data: &'a [u8], rows: usize, cols: usize) -> Option<Self> {
+        let groups = rows.div_ceil(Q8X8_ROWS);
+        if cols % Q8_BLOCK != 0 || groups.checked_mul(q8x8_group_bytes(cols / Q8_BLOCK))? != data.len() {
+            return None;
+        }
+        Some(Q8x8Rows { data, rows, cols })
+    }
+    fn group_bytes(&self) -> usize {
+        q8x8_group_bytes(self.cols / Q8_BLOCK)
+    }
+    /// The packed tile of rows `8t .. 8t + 8` (`t < ceil(rows / 8)`).
+    pub fn group(&self, t: usize) -> simd::PackedQ8<'a> {
+        let gb = self.group_bytes();
+        let nb = self.cols / Q8_BLOCK;
+        simd::PackedQ8::from_group(&self.data[t * gb..(t + 1) * gb], nb).unwrap_or_else(|| unreachable!("group length checked by new"))
+    }
+    /// Stored bytes of the groups holding rows `r0..r1` (clamped; contiguous).
+    pub fn rows_bytes(&self, r0: usize, r1: usize) -> &'a [u8] {
+        let gb = self.group_bytes();
+        let (r0, r1) = (r0.min(self.rows), r1.min(self.rows));
+        &self.data[r0 / Q8X8_ROWS * gb..r1.max(r0).div_ceil(Q8X8_ROWS) * gb]
+    }
+    /// Blocks `b0 .. b0 + nb` of row `r` in the Q8Block32 layout (`dst`:
+    /// at least `nb * 34` bytes; exact: the same scale and values).
+    pub fn expand(&self, r: usize, b0: usize, nb: usize, dst: &mut [u8]) {
+        let g = self.group(r / Q8X8_ROWS);
+        let n = r % Q8X8_ROWS;
+        for (k, d) in dst.chunks_exact_mut(Q8_BLOCK_BYTES).take(nb).enumerate() {
+            let b = b0 + k;
+            d[..2].copy_from_slice(&g.scale_bits(b, n).to_le_bytes());
+            for (i, q) in d[2..].iter_mut().enumerate() {
+                *q = g.value(b, n, i) as u8;
             }
-        });
+        }
+    }
+}
+
+impl ExpandsToQ8 for Q8x8Rows<'_> {
+    fn dims(&self) -> (usize, usize) {
+        (self.rows, self.cols)
+    }
+    #[inline]
+    fn expand_blocks(&self, r: usize, b0: usize, nb: usize, dst: &mut [u8]) {
+        self.expand(r, b0, nb, dst)
     }
 }
 
@@ -356,36 +436,48 @@ impl<'a> Q4Rows<'a> {
         let (r0, r1) = (r0.min(self.rows), r1.min(self.rows));
         &self.data[r0 * rb..r1.max(r0) * rb]
     }
-    /// Blocks `b0 .. b0 + nb` (`nb <= CHUNK_BLOCKS`) of row `r` as Q8 blocks in `buf`.
-    fn expand<'b>(&self, r: usize, b0: usize, nb: usize, buf: &'b mut [u8; CHUNK_BLOCKS * Q8_BLOCK_BYTES]) -> &'b [u8] {
-        let src = &self.row(r)[b0 * Q4_BLOCK_BYTES..(b0 + nb) * Q4_BLOCK_BYTES];
-        let dst = &mut buf[..nb * Q8_BLOCK_BYTES];
-        expand_q4(src, dst);
-        dst
+}
+
+impl ExpandsToQ8 for Q4Rows<'_> {
+    fn dims(&self) -> (usize, usize) {
+        (self.rows, self.cols)
     }
-    /// `f(column block start, value of each of the 32 elements)` per block of row `r`.
-    fn for_blocks(&self, r: usize, mut f: impl FnMut(usize, &[f32; Q8_BLOCK])) {
-        let mut q8 = [0u8; Q8_BLOCK_BYTES];
-        let mut v = [0.0f32; Q8_BLOCK];
-        for (b, blk) in self.row(r).chunks_exact(Q4_BLOCK_BYTES).enumerate() {
-            expand_q4(blk, &mut q8);
-            let d = f16_to_f32(u16::from_le_bytes([q8[0], q8[1]]));
-            for (o, &q) in v.iter_mut().zip(&q8[2..]) {
-                *o = d * (q as i8 as f32);
-            }
-            f(b * Q8_BLOCK, &v);
-        }
+    #[inline]
+    fn expand_blocks(&self, r: usize, b0: usize, nb: usize, dst: &mut [u8]) {
+        expand_q4(&self.row(r)[b0 * Q4_BLOCK_BYTES..(b0 + nb) * Q4_BLOCK_BYTES], dst);
     }
 }
 
-impl RowMatrix for Q4Rows<'_> {
+/// An int8 layout read through its exact expansion into Q8Block32 blocks
+/// ([`Q4Rows`]: nibbles to i8; [`Q8x8Rows`]: a row out of its group): the
+/// row reads expand the blocks at hand into a stack buffer and run the Q8
+/// code, so every such layout computes what its Q8 expansion computes.
+pub trait ExpandsToQ8 {
+    /// `(rows, cols)`.
+    fn dims(&self) -> (usize, usize);
+    /// Blocks `b0 .. b0 + nb` of row `r` as Q8Block32 blocks (`dst`: at
+    /// least `nb * 34` bytes).
+    fn expand_blocks(&self, r: usize, b0: usize, nb: usize, dst: &mut [u8]);
+}
+
+/// `f(column block start, scale, 32 quantised values)` for each block of
+/// row `r` of an expanded layout (as [`Q8Rows`] hands them over).
+fn expanded_blocks<W: ExpandsToQ8>(w: &W, r: usize, mut f: impl FnMut(usize, f32, &[u8])) {
+    let mut q8 = [0u8; Q8_BLOCK_BYTES];
+    for b in 0..w.dims().1 / Q8_BLOCK {
+        w.expand_blocks(r, b, 1, &mut q8);
+        f(b * Q8_BLOCK, f16_to_f32(u16::from_le_bytes([q8[0], q8[1]])), &q8[2..]);
+    }
+}
+
+impl<W: ExpandsToQ8> RowMatrix for W {
     type Act = Q8Act;
     const CHUNK: usize = ACT_CHUNK;
     fn rows(&self) -> usize {
-        self.rows
+        self.dims().0
     }
     fn cols(&self) -> usize {
-        self.cols
+        self.dims().1
     }
     #[inline]
     fn prepare(x: &[&[f32]], act: &mut Q8Act) {
@@ -395,27 +487,23 @@ impl RowMatrix for Q4Rows<'_> {
     fn dot_chunk(&self, r: usize, c0: usize, x: &[f32], act: &Q8Act) -> f32 {
         let nb = x.len() / Q8_BLOCK;
         let mut buf = [0u8; CHUNK_BLOCKS * Q8_BLOCK_BYTES];
-        let w = self.expand(r, c0 / Q8_BLOCK, nb, &mut buf);
-        simd::dot_q8(w, &act.q[0][..nb * Q8_BLOCK], &act.d[0][..nb])
+        self.expand_blocks(r, c0 / Q8_BLOCK, nb, &mut buf);
+        simd::dot_q8(&buf[..nb * Q8_BLOCK_BYTES], &act.q[0][..nb * Q8_BLOCK], &act.d[0][..nb])
     }
     #[inline]
     fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], act: &Q8Act) -> Tile {
         let nb = x[0].len() / Q8_BLOCK;
         let mut bufs = [[0u8; CHUNK_BLOCKS * Q8_BLOCK_BYTES]; TN];
         for (buf, &r) in bufs.iter_mut().zip(&o) {
-            self.expand(r, c0 / Q8_BLOCK, nb, buf);
+            self.expand_blocks(r, c0 / Q8_BLOCK, nb, buf);
         }
         tile_q8_act(bufs.each_ref().map(|b| &b[..nb * Q8_BLOCK_BYTES]), nb, act)
     }
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
-        self.for_blocks(r, |c, v| {
-            for (yi, &vi) in y[c..c + Q8_BLOCK].iter_mut().zip(v) {
-                *yi += a * vi;
-            }
-        });
+        expanded_blocks(self, r, |c, d, q| q8_block_axpy(a * d, q, &mut y[c..c + Q8_BLOCK]));
     }
     fn row_into(&self, r: usize, out: &mut [f32]) {
-        self.for_blocks(r, |c, v| out[c..c + Q8_BLOCK].copy_from_slice(v));
+        expanded_blocks(self, r, |c, d, q| q8_block_into(d, q, &mut out[c..c + Q8_BLOCK]));
     }
 }
 
@@ -426,6 +514,7 @@ pub enum Matrix<'a> {
     F32(F32Rows<'a>),
     F16(F16Rows<'a>),
     Q8(Q8Rows<'a>),
+    Q8x8(Q8x8Rows<'a>),
     Q4(Q4Rows<'a>),
 }
 
@@ -438,6 +527,7 @@ macro_rules! with_rows {
             $crate::kernels::Matrix::F32($m) => $body,
             $crate::kernels::Matrix::F16($m) => $body,
             $crate::kernels::Matrix::Q8($m) => $body,
+            $crate::kernels::Matrix::Q8x8($m) => $body,
             $crate::kernels::Matrix::Q4($m) => $body,
         }
     };
@@ -464,6 +554,7 @@ impl Matrix<'_> {
             Matrix::F32(m) => m.rows * m.cols * 4,
             Matrix::F16(m) => m.rows * m.cols * 2,
             Matrix::Q8(m) => m.rows * m.cols / Q8_BLOCK * Q8_BLOCK_BYTES,
+            Matrix::Q8x8(m) => m.data.len(),
             Matrix::Q4(m) => m.rows * m.cols / Q8_BLOCK * Q4_BLOCK_BYTES,
         }
     }

@@ -78,15 +78,27 @@ impl From<SchemaError> for ConvertError {
 ///   everything: int8 encoders flipped 1.3% of the tiny_long fixture's
 ///   leader tokens, 4-bit ones 16%), the ConvTranspose1d weights (their rows are scaled and
 ///   added, `x W`), and rows of other lengths;
+///   Of these, the matrices of the int8 GEMM (Linear weights, heads, decoder
+///   convs) are stored as `Q8Block32x8` (the same values, rows interleaved
+///   in groups of 8 for the GEMM), the embeddings as `Q8Block32`;
+///   requesting `Q8Block32x8` means the same;
 /// - `Q4Block32`: the same tensors as `Q8Block32` in 4 bits, the rest as
 ///   there.
 pub fn storage_for(requested: StoreAs, spec: &TensorSpec) -> StoreAs {
     if requested == StoreAs::F32 || matches!(spec.role, Role::Vector | Role::PosEmb) {
         return StoreAs::F32;
     }
-    let blockable = matches!(spec.role, Role::Linear | Role::Conv | Role::Embedding) && block_row(spec.dims()) % 32 == 0;
+    let row = block_row(spec.dims());
+    let blockable = matches!(spec.role, Role::Linear | Role::Conv | Role::Embedding) && row % 32 == 0 && row > 0;
     match requested {
-        StoreAs::Q8Block32 | StoreAs::Q4Block32 if blockable && block_row(spec.dims()) > 0 => requested,
+        StoreAs::Q8Block32 | StoreAs::Q8Block32x8 if blockable => {
+            if spec.role == Role::Embedding {
+                StoreAs::Q8Block32
+            } else {
+                StoreAs::Q8Block32x8
+            }
+        }
+        StoreAs::Q4Block32 if blockable => requested,
         _ => StoreAs::F16,
     }
 }

@@ -475,27 +475,72 @@ pub fn dot_rows_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32]) {
     }
 }
 
-/// Weight rows of a packed int8 tile ([`Q8Pack8`]).
+/// Weight rows of a packed int8 tile ([`PackedQ8`]).
 pub const PACK_ROWS: usize = 8;
 /// Blocks (of 32 columns) a [`Q8Pack8`] holds: inputs up to 3072 wide.
 pub const PACK_BLOCKS: usize = 96;
+/// Value bytes of one block of a packed tile (8 rows x 32).
+pub const PACK_BLOCK_VALUES: usize = PACK_ROWS * Q8_BLOCK;
+/// Scale bytes of one block of a packed tile (8 f16).
+pub const PACK_BLOCK_SCALES: usize = PACK_ROWS * 2;
 
-/// 8 int8 weight rows interleaved for `vpdpbusd` with broadcast
-/// activations: per block `b` and 8-byte group `g`, `v[b][g]` holds bytes
-/// `8g..8g + 8` of block `b` of rows 0..8 (row `n` at bytes `8n..8n + 8`),
-/// offset to unsigned (`w ^ 0x80`); `s[b]` the rows' scales, each twice
-/// (`s[b][2n] = s[b][2n + 1]` = row `n`'s). One packing per tile of 8
-/// weight rows serves every activation row of a panel.
+/// 8 int8 weight rows over `nb` blocks in the interleaved layout of
+/// `DType::Q8Block32x8` (docs/FORMAT.md §4): `v` holds, per block `b` and
+/// 8-byte group `g` (0..4), bytes `8g..8g + 8` of block `b` of rows 0..8
+/// (row `n` at `256b + 64g + 8n`), signed; `s` the rows' f16 scales of
+/// block `b` at `16b + 2n`. The layout `vpdpbusd` (and `sdot`) want with
+/// each activation 8-byte group broadcast: one packing serves every
+/// activation row of a panel, and a `Q8Block32x8` file stores its row
+/// groups this way, so its tiles need no packing at all.
+#[derive(Clone, Copy, Debug)]
+pub struct PackedQ8<'a> {
+    v: &'a [u8],
+    s: &'a [u8],
+    nb: usize,
+}
+
+impl<'a> PackedQ8<'a> {
+    /// One stored group of `nb` blocks (`nb * 256` value bytes then `nb *
+    /// 16` scale bytes); None if `group` is shorter.
+    pub fn from_group(group: &'a [u8], nb: usize) -> Option<Self> {
+        let nv = nb.checked_mul(PACK_BLOCK_VALUES)?;
+        let ns = nb.checked_mul(PACK_BLOCK_SCALES)?;
+        let v = group.get(..nv)?;
+        let s = group.get(nv..nv.checked_add(ns)?)?;
+        Some(PackedQ8 { v, s, nb })
+    }
+    pub fn blocks(&self) -> usize {
+        self.nb
+    }
+    /// Row `n`'s 32 signed values of block `b` (`n < 8`, `b < nb`), by 8-byte group.
+    #[inline]
+    pub fn value(&self, b: usize, n: usize, i: usize) -> i8 {
+        self.v[PACK_BLOCK_VALUES * b + 64 * (i / 8) + 8 * n + i % 8] as i8
+    }
+    /// Row `n`'s f16 scale bits of block `b`.
+    #[inline]
+    pub fn scale_bits(&self, b: usize, n: usize) -> u16 {
+        u16::from_le_bytes([self.s[PACK_BLOCK_SCALES * b + 2 * n], self.s[PACK_BLOCK_SCALES * b + 2 * n + 1]])
+    }
+}
+
+/// Room for one tile of 8 stored Q8Block32 rows packed on the fly
+/// ([`q8_pack8`]; the layout of [`PackedQ8`]).
 #[repr(C, align(64))]
 pub struct Q8Pack8 {
-    v: [[[u8; 64]; 4]; PACK_BLOCKS],
-    s: [[f32; 16]; PACK_BLOCKS],
+    v: [u8; PACK_BLOCKS * PACK_BLOCK_VALUES],
+    s: [u8; PACK_BLOCKS * PACK_BLOCK_SCALES],
     nb: usize,
 }
 
 impl Q8Pack8 {
     pub fn new() -> Self {
-        Q8Pack8 { v: [[[0; 64]; 4]; PACK_BLOCKS], s: [[0.0; 16]; PACK_BLOCKS], nb: 0 }
+        Q8Pack8 { v: [0; PACK_BLOCKS * PACK_BLOCK_VALUES], s: [0; PACK_BLOCKS * PACK_BLOCK_SCALES], nb: 0 }
+    }
+    /// The packed tile of the last [`q8_pack8`].
+    pub fn view(&self) -> PackedQ8<'_> {
+        let nb = self.nb.min(PACK_BLOCKS);
+        PackedQ8 { v: &self.v[..nb * PACK_BLOCK_VALUES], s: &self.s[..nb * PACK_BLOCK_SCALES], nb }
     }
 }
 
@@ -505,16 +550,16 @@ impl Default for Q8Pack8 {
     }
 }
 
-/// Whether [`gemm_q8_packed`] has a fast variant on the selected ISA for
-/// rows of `nb` blocks (x86 AVX512-VNNI, `nb <= PACK_BLOCKS`); callers use
-/// [`gemm_q8`] otherwise.
+/// Whether [`gemm_q8_packed`] has a fast variant on the selected ISA
+/// (x86 AVX512-VNNI); callers use [`gemm_q8`] otherwise.
 #[inline]
-pub fn packed_q8_fast(nb: usize) -> bool {
-    isa() == Isa::Avx512Vnni && nb <= PACK_BLOCKS
+pub fn packed_q8_fast() -> bool {
+    isa() == Isa::Avx512Vnni
 }
 
 /// Packs 8 stored Q8Block32 rows (first `nb` blocks; `nb <= PACK_BLOCKS`,
-/// every row at least `nb` blocks), scales included.
+/// every row at least `nb` blocks), scales included: a pure byte
+/// rearrangement (the layout of [`PackedQ8`]).
 pub fn q8_pack8(rows: [&[u8]; PACK_ROWS], nb: usize, pack: &mut Q8Pack8) {
     let nb = nb.min(PACK_BLOCKS);
     pack.nb = nb;
@@ -530,13 +575,13 @@ pub fn q8_pack8(rows: [&[u8]; PACK_ROWS], nb: usize, pack: &mut Q8Pack8) {
 /// over the packed rows (see [`gemm_q8`]; `xc` from [`quantise_q8_corr`]).
 /// `M` is 1..=8.
 #[inline]
-pub fn gemm_q8_packed<const M: usize>(pack: &Q8Pack8, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; PACK_ROWS]; M] {
+pub fn gemm_q8_packed<const M: usize>(w: PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; PACK_ROWS]; M] {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: ISA holds Avx512Vnni only via COMPILE_TIME_ISA or `set_isa`,
         // whose caller vouched for avx512f/bw/dq/vl/vnni + avx2/fma/f16c.
-        Isa::Avx512Vnni => unsafe { x86::gemm_q8_packed_vnni(&pack.v, &pack.s, pack.nb, xq, xd, xc) },
-        _ => scalar::gemm_q8_packed(&pack.v, &pack.s, pack.nb, xq, xd, xc),
+        Isa::Avx512Vnni => unsafe { x86::gemm_q8_packed_vnni(w, xq, xd, xc) },
+        _ => scalar::gemm_q8_packed(w, xq, xd, xc),
     }
 }
 

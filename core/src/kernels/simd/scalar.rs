@@ -179,27 +179,15 @@ pub fn dot_rows_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32]) {
 
 /// Twin of [`super::gemm_q8_packed`] (block by block, exact i32 block sums,
 /// as [`gemm_q8`]).
-pub fn gemm_q8_packed<const M: usize>(
-    v: &[[[u8; 64]; 4]],
-    s: &[[f32; 16]],
-    nb: usize,
-    xq: [&[i8]; M],
-    xd: [&[f32]; M],
-    _xc: [&[i32]; M],
-) -> [[f32; 8]; M] {
-    let nb = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).fold(nb.min(v.len()).min(s.len()), usize::min);
+pub fn gemm_q8_packed<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], _xc: [&[i32]; M]) -> [[f32; 8]; M] {
+    let nb = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).fold(w.blocks(), usize::min);
     let mut out = [[0.0f32; 8]; M];
     for (m, row) in out.iter_mut().enumerate() {
         for (n, o) in row.iter_mut().enumerate() {
             let mut sum = 0.0f32;
             for b in 0..nb {
-                let mut isum = 0i32;
-                for g in 0..4 {
-                    for i in 0..8 {
-                        isum += ((v[b][g][8 * n + i] ^ 0x80) as i8 as i32) * xq[m][b * Q8_BLOCK + 8 * g + i] as i32;
-                    }
-                }
-                sum += (s[b][2 * n] * xd[m][b]) * isum as f32;
+                let isum: i32 = (0..Q8_BLOCK).map(|i| w.value(b, n, i) as i32 * xq[m][b * Q8_BLOCK + i] as i32).sum();
+                sum += (f16_to_f32(w.scale_bits(b, n)) * xd[m][b]) * isum as f32;
             }
             *o = sum;
         }
@@ -207,19 +195,16 @@ pub fn gemm_q8_packed<const M: usize>(
     out
 }
 
-/// Twin of [`super::q8_pack8`] (layout documented at [`super::Q8Pack8`]).
-pub fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [[[u8; 64]; 4]], s: &mut [[f32; 16]]) {
-    for (b, (vb, sb)) in v.iter_mut().zip(s.iter_mut()).take(nb).enumerate() {
+/// Twin of [`super::q8_pack8`] (layout documented at [`super::PackedQ8`]).
+pub fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [u8], s: &mut [u8]) {
+    use super::{PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
+    for b in 0..nb.min(v.len() / PV).min(s.len() / PS) {
         for (n, row) in rows.iter().enumerate() {
-            let q = &row[b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
-            for (g, vg) in vb.iter_mut().enumerate() {
-                for (dst, &src) in vg[8 * n..8 * n + 8].iter_mut().zip(&q[8 * g..8 * g + 8]) {
-                    *dst = src ^ 0x80;
-                }
+            let blk = &row[b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
+            for g in 0..4 {
+                v[PV * b + 64 * g + 8 * n..PV * b + 64 * g + 8 * n + 8].copy_from_slice(&blk[2 + 8 * g..2 + 8 * g + 8]);
             }
-            let d = f16_to_f32(u16::from_le_bytes([row[b * Q8_BLOCK_BYTES], row[b * Q8_BLOCK_BYTES + 1]]));
-            sb[2 * n] = d;
-            sb[2 * n + 1] = d;
+            s[PS * b + 2 * n..PS * b + 2 * n + 2].copy_from_slice(&blk[..2]);
         }
     }
 }

@@ -496,29 +496,41 @@ fn packed_gemm_q8_matches_scalar_twin() {
                 }
             }
         }
-        let mut pv = vec![[[0u8; 64]; 4]; nb];
-        let mut ps = vec![[0f32; 16]; nb];
+        let (mut pv, mut ps) = (vec![0u8; nb * super::PACK_BLOCK_VALUES], vec![0u8; nb * super::PACK_BLOCK_SCALES]);
         scalar::q8_pack8(core::array::from_fn(|j| &wb[j][..]), nb, &mut pv, &mut ps);
-        assert_eq!((&pack.v[..nb], &pack.s[..nb]), (&pv[..], &ps[..]), "dispatched packing vs scalar twin nb={nb}");
+        let view = pack.view();
+        assert_eq!((view.v, view.s), (&pv[..], &ps[..]), "dispatched packing vs scalar twin nb={nb}");
+        // The packed layout holds each row's stored values and scale bits.
+        for j in 0..PACK_ROWS {
+            for b in 0..nb {
+                let blk = &wb[j][b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
+                assert_eq!(view.scale_bits(b, j), u16::from_le_bytes([blk[0], blk[1]]));
+                assert!((0..Q8_BLOCK).all(|i| view.value(b, j, i) == blk[2 + i] as i8), "row {j} block {b}");
+            }
+        }
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512bw") && std::is_x86_feature_detected!("avx512dq") && std::is_x86_feature_detected!("avx512vl") {
-            let mut xv = vec![[[0u8; 64]; 4]; nb];
-            let mut xs = vec![[0f32; 16]; nb];
-            // SAFETY: avx512f/bw/dq/vl detected (avx2 and f16c implied on every such CPU).
+            let (mut xv, mut xs) = (vec![0u8; nb * super::PACK_BLOCK_VALUES], vec![0u8; nb * super::PACK_BLOCK_SCALES]);
+            // SAFETY: avx512f/bw/dq/vl detected (avx2 implied on every such CPU).
             unsafe { super::x86::q8_pack8(core::array::from_fn(|j| &wb[j][..]), nb, &mut xv, &mut xs) };
             assert_eq!((&xv, &xs), (&pv, &ps), "avx512 packing vs scalar twin nb={nb}");
         }
-        let twin = scalar::gemm_q8_packed::<8>(&pack.v, &pack.s, pack.nb, q, d, c);
+        // A stored group (values then scales, as a Q8Block32x8 file holds it) reads the same.
+        let group: Vec<u8> = pv.iter().chain(&ps).copied().collect();
+        let stored = super::PackedQ8::from_group(&group, nb).unwrap();
+        assert!(super::PackedQ8::from_group(&group[..group.len().saturating_sub(1)], nb).is_none() || nb == 0);
+        let twin = scalar::gemm_q8_packed::<8>(view, q, d, c);
+        assert_eq!(scalar::gemm_q8_packed::<8>(stored, q, d, c), twin, "stored group vs stack pack nb={nb}");
         assert_eq!(twin, want, "scalar packed twin nb={nb}");
-        let mut got: Vec<(&str, [[f32; 8]; 8])> = vec![("dispatched", super::gemm_q8_packed::<8>(&pack, q, d, c))];
+        let mut got: Vec<(&str, [[f32; 8]; 8])> = vec![("dispatched", super::gemm_q8_packed::<8>(view, q, d, c)), ("dispatched, stored group", super::gemm_q8_packed::<8>(stored, q, d, c))];
         #[cfg(target_arch = "x86_64")]
         {
             use std::is_x86_feature_detected as has;
             if has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") && has!("avx512vnni") && has!("avx2") && has!("fma") && has!("f16c") {
                 // SAFETY: every feature of the kernel detected above.
-                got.push(("avx512vnni", unsafe { super::x86::gemm_q8_packed_vnni::<8>(&pack.v, &pack.s, pack.nb, q, d, c) }));
+                got.push(("avx512vnni", unsafe { super::x86::gemm_q8_packed_vnni::<8>(view, q, d, c) }));
                 // SAFETY: as above.
-                let t3 = unsafe { super::x86::gemm_q8_packed_vnni::<3>(&pack.v, &pack.s, pack.nb, [q[2], q[3], q[4]], [d[2], d[3], d[4]], [c[2], c[3], c[4]]) };
+                let t3 = unsafe { super::x86::gemm_q8_packed_vnni::<3>(stored, [q[2], q[3], q[4]], [d[2], d[3], d[4]], [c[2], c[3], c[4]]) };
                 let mut g = want;
                 g[2..5].copy_from_slice(&t3);
                 got.push(("avx512vnni M=3", g));

@@ -756,35 +756,35 @@ unsafe fn dot_rows_512_by(q: &[f32], load: impl Fn(usize, usize, __mmask16) -> _
     }
 }
 
-/// See [`super::gemm_q8_packed`]: per block and activation row, 4
-/// `vpdpbusd` of the packed groups against the row's 8-byte groups
-/// broadcast to every lane, started at the row's parity corrections (so
-/// each i32 lane is an exact 16-term dot), then one convert, one scale
-/// product and one FMA for all 8 weight rows (2 lanes each).
+/// See [`super::gemm_q8_packed`]: per block, the 4 packed groups made
+/// unsigned (`^ 0x80`) and the 8 f16 scales widened (each twice, one per
+/// lane pair) once for every activation row; per activation row, 4
+/// `vpdpbusd` of the groups against the row's 8-byte groups broadcast to
+/// every lane, started at the row's parity corrections (so each i32 lane
+/// is an exact 16-term dot), then one convert, one scale product and one
+/// FMA for all 8 weight rows (2 lanes each).
 ///
 /// # Safety
 /// The CPU must support avx512f/bw/dq/vl/vnni, avx2, fma and f16c.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
-pub unsafe fn gemm_q8_packed_vnni<const M: usize>(
-    v: &[[[u8; 64]; 4]],
-    s: &[[f32; 16]],
-    nb: usize,
-    xq: [&[i8]; M],
-    xd: [&[f32]; M],
-    xc: [&[i32]; M],
-) -> [[f32; 8]; M] {
+pub unsafe fn gemm_q8_packed_vnni<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; 8]; M] {
+    use super::{PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let nb = xq
         .iter()
         .map(|r| r.len() / Q8_BLOCK)
         .chain(xd.iter().map(|r| r.len()))
         .chain(xc.iter().map(|r| r.len() / 2))
-        .fold(nb.min(v.len()).min(s.len()), usize::min);
+        .fold(w.blocks().min(w.v.len() / PV).min(w.s.len() / PS), usize::min);
+    let flip = _mm512_set1_epi8(-128);
+    let dup = _mm512_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
     let mut acc = [_mm512_setzero_ps(); M];
     for b in 0..nb {
-        // SAFETY: b < nb <= v.len(), s.len(): 4 x 64 bytes and 16 floats.
-        let wv: [__m512i; 4] = core::array::from_fn(|g| unsafe { _mm512_loadu_si512(v[b][g].as_ptr() as *const _) });
-        // SAFETY: as above.
-        let sv = unsafe { _mm512_loadu_ps(s[b].as_ptr()) };
+        let vb = &w.v[PV * b..PV * (b + 1)];
+        let sb = &w.s[PS * b..PS * (b + 1)];
+        // SAFETY: vb holds 4 x 64 bytes.
+        let wv: [__m512i; 4] = core::array::from_fn(|g| _mm512_xor_si512(unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _) }, flip));
+        // SAFETY: sb holds 8 f16 (128 bits).
+        let sv = _mm512_permutexvar_ps(dup, _mm512_castps256_ps512(_mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) })));
         for m in 0..M {
             let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
             let cs = &xc[m][2 * b..2 * b + 2];
@@ -814,17 +814,16 @@ pub unsafe fn gemm_q8_packed_vnni<const M: usize>(
 
 /// See [`super::q8_pack8`]: per block, the 8 rows' 32 bytes (as 4 qwords
 /// each) transposed to 4 vectors of 8 qwords with two `vpermt2q` and one
-/// `vshufi64x2` stage, offset by `^ 0x80`.
+/// `vshufi64x2` stage; the 8 scale words gathered.
 ///
 /// # Safety
-/// The CPU must support avx512f/bw/dq/vl, avx2, f16c; every row holds `nb` blocks.
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,f16c")]
-pub unsafe fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [[[u8; 64]; 4]], s: &mut [[f32; 16]]) {
-    let dup = _mm512_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
-    let flip = _mm512_set1_epi8(-128);
+/// The CPU must support avx512f/bw/dq/vl, avx2; every row holds `nb` blocks.
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2")]
+pub unsafe fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [u8], s: &mut [u8]) {
+    use super::{PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let ia = _mm512_setr_epi64(0, 4, 8, 12, 1, 5, 9, 13);
     let ib = _mm512_setr_epi64(2, 6, 10, 14, 3, 7, 11, 15);
-    for (b, (vb, sb)) in v.iter_mut().zip(s.iter_mut()).take(nb).enumerate() {
+    for b in 0..nb.min(v.len() / PV).min(s.len() / PS) {
         let r: [__m256i; 8] = core::array::from_fn(|n| {
             let q = &rows[n][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
             // SAFETY: q holds exactly 32 bytes.
@@ -841,15 +840,14 @@ pub unsafe fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [[[u8; 64]; 4]], s: 
             _mm512_shuffle_i64x2::<0b01_00_01_00>(bq, d),
             _mm512_shuffle_i64x2::<0b11_10_11_10>(bq, d),
         ];
-        for (vg, o) in vb.iter_mut().zip(out) {
-            // SAFETY: vg holds 64 bytes.
-            unsafe { _mm512_storeu_si512(vg.as_mut_ptr() as *mut _, _mm512_xor_si512(o, flip)) };
+        let vb = &mut v[PV * b..PV * (b + 1)];
+        for (g, o) in out.into_iter().enumerate() {
+            // SAFETY: vb holds 4 x 64 bytes.
+            unsafe { _mm512_storeu_si512(vb.as_mut_ptr().add(64 * g) as *mut _, o) };
         }
-        let h: [u16; 8] = core::array::from_fn(|n| u16::from_le_bytes([rows[n][b * Q8_BLOCK_BYTES], rows[n][b * Q8_BLOCK_BYTES + 1]]));
-        // SAFETY: h holds 8 u16 (128 bits), sb 16 floats.
-        unsafe {
-            let f = _mm256_cvtph_ps(_mm_loadu_si128(h.as_ptr() as *const __m128i));
-            _mm512_storeu_ps(sb.as_mut_ptr(), _mm512_permutexvar_ps(dup, _mm512_castps256_ps512(f)));
+        let sb = &mut s[PS * b..PS * (b + 1)];
+        for (n, row) in rows.iter().enumerate() {
+            sb[2 * n..2 * n + 2].copy_from_slice(&row[b * Q8_BLOCK_BYTES..b * Q8_BLOCK_BYTES + 2]);
         }
     }
 }
