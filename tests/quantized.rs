@@ -79,11 +79,15 @@ fn f16_tokens_identical_to_f32() {
     compare(StoreAs::F16, 1.0);
 }
 
-/// int8 (Q8Block32 Linear/embedding/head weights, int8 activations per
-/// block): leader tokens identical (measured 1.0: codebooks and encoders
-/// are f16), follower tokens in a FREE-RUNNING rollout agree at least 0.45
-/// (measured min 0.520 tiny2_frames; 0.810 tiny_long, 1.000 tiny_short,
-/// 0.594 tiny_odd (0.812 before the VNNI kernels changed the f32 summation order; int8 values are unchanged), 0.926 tiny2_tokens; once one token differs the rollouts
+/// int8 (Q8Block32x8 Linear/head weights, Q8Block32 embeddings, int8
+/// activations per block): leader tokens identical (measured 1.0: codebooks
+/// and encoders are f16), follower tokens in a FREE-RUNNING rollout agree at
+/// least 0.45 (measured 2026-12-01 under AVX512-VNNI: min 0.520 tiny2_frames;
+/// 0.901 tiny_long, 1.000 tiny_short, 0.721 tiny_odd, 0.926 tiny2_tokens;
+/// before the x8 layout took the packed tile for 1-3 rows: 0.810 / 1.000 /
+/// 0.594 / 0.520 / 0.926, and 0.812 for tiny_odd before the VNNI kernels:
+/// only the f32 summation order of the int8 dots moved, the quantised
+/// values are the same), 0.926 tiny2_tokens; once one token differs the rollouts
 /// follow different histories, so this is a lower bound on quality, not the
 /// 1-step agreement DESIGN.md §3 recommends, which needs forced histories);
 /// motion within the limits when all tokens agree.
