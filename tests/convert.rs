@@ -376,6 +376,13 @@ fn int8_storage_by_role_on_the_published_config() {
         };
         assert_eq!(got, want, "{}", s.name);
         assert_eq!(duolando::convert::storage_for(StoreAs::Q8Block32x8, s), want, "{} (x8 requested)", s.name);
+        // 4-bit: the same tensors, in the 4-bit layouts.
+        let want4 = match want {
+            StoreAs::Q8Block32 => StoreAs::Q4Block32,
+            StoreAs::Q8Block32x8 => StoreAs::Q4Block32x8,
+            other => other,
+        };
+        assert_eq!(duolando::convert::storage_for(StoreAs::Q4Block32, s), want4, "{} (q4)", s.name);
         by_role.entry(format!("{:?}", s.role)).or_default().insert(format!("{got:?}"));
         Ok(())
     })

@@ -639,71 +639,83 @@ fn rejects_q8_shape_not_in_whole_blocks() {
     assert_eq!(parse(&rebuild(&p)), Err(FormatError::SizeOverflow { index: i as u32 }));
 }
 
-/// A valid file with the (8, 32) tensor re-encoded as Q8Block32x8 (one
-/// group; the tiny model has no blocked tensor whose rows need padding:
-/// padded groups are covered in tests/int8_layouts.rs) with scale `scale`
-/// at row `bad_row` of block 0 (0.01 elsewhere).
-fn with_q8x8_tensor(scale: half::f16, bad_row: usize) -> (Vec<u8>, u32, usize) {
+/// A valid file with the (8, 32) tensor re-encoded as `dtype`
+/// (Q8Block32x8 or Q4Block32x8: one group; the tiny model has no blocked
+/// tensor whose rows need padding: padded groups are covered in
+/// tests/int8_layouts.rs) with scale `scale` at row `bad_row` of block 0
+/// (0.01 elsewhere).
+fn with_x8_tensor(dtype: DType, scale: half::f16, bad_row: usize) -> (Vec<u8>, u32, usize) {
     let mut p = valid_parts();
     let mut pay = payloads(&p);
     let i = index_of(&p, |e| e.shape == [8, 32]);
     let (rows, cols) = (p.header.tensors[i].shape[0] as usize, p.header.tensors[i].shape[1] as usize);
     let nb = cols / 32;
+    let per_block = if dtype == DType::Q4Block32x8 { 128 } else { 256 };
+    let group = nb * (per_block + 16);
     let groups = rows.div_ceil(8);
-    let mut q = vec![0u8; groups * 8 * nb * 34];
+    let mut q = vec![0u8; groups * group];
     for t in 0..groups {
-        let g = &mut q[t * 8 * nb * 34..(t + 1) * 8 * nb * 34];
-        for (k, v) in g[..nb * 256].iter_mut().enumerate() {
+        let g = &mut q[t * group..(t + 1) * group];
+        for (k, v) in g[..nb * per_block].iter_mut().enumerate() {
             *v = (k as u8).wrapping_mul(7);
         }
         for b in 0..nb {
             for n in 0..8 {
                 let s = if b == 0 && t * 8 + n == bad_row { scale } else { half::f16::from_f32(0.01) };
-                g[nb * 256 + 16 * b + 2 * n..nb * 256 + 16 * b + 2 * n + 2].copy_from_slice(&s.to_le_bytes());
+                let at = nb * per_block + 16 * b + 2 * n;
+                g[at..at + 2].copy_from_slice(&s.to_le_bytes());
             }
         }
     }
     pay[i] = q;
-    p.header.tensors[i].dtype = DType::Q8Block32x8 as u8;
+    p.header.tensors[i].dtype = dtype as u8;
     let data = relayout(&mut p.header, &pay);
     (assemble(&p.header, &data).unwrap(), i as u32, rows)
 }
 
-#[test]
-fn accepts_q8x8_tensor_with_finite_scales() {
-    let (bytes, i, rows) = with_q8x8_tensor(half::f16::from_f32(0.02), 0);
-    let aligned = AlignedBytes::copy_from(&bytes);
-    let duo = DuoFile::parse(aligned.as_bytes()).unwrap();
-    let e = duo.tensors().nth(i as usize).unwrap();
-    let nb = e.shape[1] as u64 / 32;
-    assert_eq!((e.dtype, e.nbytes), (DType::Q8Block32x8, rows.div_ceil(8) as u64 * 8 * nb * 34));
-}
+const X8: [(DType, u64); 2] = [(DType::Q8Block32x8, 34), (DType::Q4Block32x8, 18)];
 
 #[test]
-fn rejects_non_finite_q8x8_scale() {
-    for (row, scale) in [(0, half::f16::NAN), (5, half::f16::INFINITY), (7, half::f16::NEG_INFINITY)] {
-        let (bytes, i, _) = with_q8x8_tensor(scale, row);
-        // Blocks numbered group-major, then block, then row: block 0 of
-        // row r < 8 of a one-block (8, 32) tensor is r.
-        let want = row as u64;
-        assert_eq!(parse(&bytes), Err(FormatError::NonFiniteScale { index: i, block: want }), "row {row}");
+fn accepts_x8_tensors_with_finite_scales() {
+    for (dtype, block_bytes) in X8 {
+        let (bytes, i, rows) = with_x8_tensor(dtype, half::f16::from_f32(0.02), 0);
+        let aligned = AlignedBytes::copy_from(&bytes);
+        let duo = DuoFile::parse(aligned.as_bytes()).unwrap();
+        let e = duo.tensors().nth(i as usize).unwrap();
+        let nb = e.shape[1] as u64 / 32;
+        assert_eq!((e.dtype, e.nbytes), (dtype, rows.div_ceil(8) as u64 * 8 * nb * block_bytes));
     }
 }
 
 #[test]
-fn rejects_q8x8_payload_short_of_its_groups() {
-    let (bytes, _, _) = with_q8x8_tensor(half::f16::from_f32(0.01), 0);
-    let rows = 7; // one row short of the group
-    let mut p = take_apart(&bytes);
-    let i = index_of(&p, |e| e.dtype == DType::Q8Block32x8 as u8);
-    let nb = p.header.tensors[i].shape[1] as u64 / 32;
-    let mut pay = payloads(&p);
-    pay[i].truncate(rows * nb as usize * 34);
-    let data = relayout(&mut p.header, &pay);
-    assert_eq!(
-        parse(&assemble(&p.header, &data).unwrap()),
-        Err(FormatError::ByteLenMismatch { index: i as u32, expected: rows.div_ceil(8) as u64 * 8 * nb * 34, found: rows as u64 * nb * 34 })
-    );
+fn rejects_non_finite_x8_scale() {
+    for (dtype, _) in X8 {
+        for (row, scale) in [(0, half::f16::NAN), (5, half::f16::INFINITY), (7, half::f16::NEG_INFINITY)] {
+            let (bytes, i, _) = with_x8_tensor(dtype, scale, row);
+            // Blocks numbered group-major, then block, then row: block 0 of
+            // row r < 8 of a one-block (8, 32) tensor is r.
+            assert_eq!(parse(&bytes), Err(FormatError::NonFiniteScale { index: i, block: row as u64 }), "{dtype:?} row {row}");
+        }
+    }
+}
+
+#[test]
+fn rejects_x8_payload_short_of_its_groups() {
+    for (dtype, block_bytes) in X8 {
+        let (bytes, _, _) = with_x8_tensor(dtype, half::f16::from_f32(0.01), 0);
+        let rows = 7; // one row short of the group
+        let mut p = take_apart(&bytes);
+        let i = index_of(&p, |e| e.dtype == dtype as u8);
+        let nb = p.header.tensors[i].shape[1] as u64 / 32;
+        let mut pay = payloads(&p);
+        pay[i].truncate(rows * (nb * block_bytes) as usize);
+        let data = relayout(&mut p.header, &pay);
+        assert_eq!(
+            parse(&assemble(&p.header, &data).unwrap()),
+            Err(FormatError::ByteLenMismatch { index: i as u32, expected: 8 * nb * block_bytes, found: rows as u64 * nb * block_bytes }),
+            "{dtype:?}"
+        );
+    }
 }
 
 // ------------------------------------------------------ std-side messages

@@ -16,7 +16,7 @@
 use heapless::Vec;
 
 use crate::config::{LatConfig, ModelConfig, Part, VqConfig};
-use crate::kernels::{ConvGeom, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows, Q8x8Rows};
+use crate::kernels::{ConvGeom, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows, X8Rows};
 use crate::limits::{ConfigError, MAX_DEPTH, MAX_DOWN_T, MAX_GPT_LAYERS, MAX_LAT_LAYERS};
 use crate::schema::{self, name, DecoderKind, SchemaError, TensorName};
 use crate::tensor::{DType, TensorRef};
@@ -207,7 +207,7 @@ impl<'a, S: TensorSource<'a>> Binder<'_, S> {
         t.as_f32().ok_or(BindError::Misaligned { name: n })
     }
     /// A weight matrix viewed as (dims[0], product of the rest): any dtype
-    /// with a [`crate::kernels::RowMatrix`] impl (F32, F16, Q8Block32, Q8Block32x8, Q4Block32).
+    /// with a [`crate::kernels::RowMatrix`] impl (F32, F16, Q8Block32, Q8Block32x8, Q4Block32, Q4Block32x8).
     fn matrix(&self, n: TensorName, dims: &[u32]) -> Result<Matrix<'a>, BindError> {
         let t = self.tensor(&n, dims)?;
         let rows = dims[0] as usize;
@@ -219,7 +219,8 @@ impl<'a, S: TensorSource<'a>> Binder<'_, S> {
                 F16Rows::new(bits, rows, cols).map(Matrix::F16)
             }
             DType::Q8Block32 => Q8Rows::new(t.data, rows, cols).map(Matrix::Q8),
-            DType::Q8Block32x8 => Q8x8Rows::new(t.data, rows, cols).map(Matrix::Q8x8),
+            DType::Q8Block32x8 => X8Rows::new(t.data, rows, cols).map(Matrix::X8),
+            DType::Q4Block32x8 => X8Rows::new_q4(t.data, rows, cols).map(Matrix::X8),
             DType::Q4Block32 => Q4Rows::new(t.data, rows, cols).map(Matrix::Q4),
         };
         m.ok_or(BindError::DType { name: n, dtype: t.dtype })

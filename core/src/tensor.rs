@@ -33,8 +33,15 @@ pub enum DType {
     /// group, then the 8 rows' f16 scales at the group's end); the last
     /// group padded to 8 rows (`ceil(rows / 8) * 8 * row / 32 * 34` bytes).
     /// Validated like Q8Block32 (every scale, padding rows' included);
-    /// `Model::bind` accepts it for weight matrices (`kernels::Q8x8Rows`).
+    /// `Model::bind` accepts it for weight matrices (`kernels::X8Rows`).
     Q8Block32x8 = 4,
+    /// The blocks, scales and nibbles of `Q4Block32` with the rows in
+    /// groups of 8, interleaved like `Q8Block32x8` (`kernels::simd::PackedQ8`:
+    /// per block, each row's two 8-byte halves of nibbles side by side, then
+    /// the 8 rows' f16 scales at the group's end); the last group padded
+    /// to 8 rows (`ceil(rows / 8) * 8 * row / 32 * 18` bytes). Validated
+    /// like Q4Block32; `Model::bind` accepts it for weight matrices.
+    Q4Block32x8 = 5,
 }
 
 impl DType {
@@ -45,6 +52,7 @@ impl DType {
             2 => Some(DType::Q8Block32),
             3 => Some(DType::Q4Block32),
             4 => Some(DType::Q8Block32x8),
+            5 => Some(DType::Q4Block32x8),
             _ => None,
         }
     }
@@ -52,7 +60,7 @@ impl DType {
     pub const fn block_bytes(self) -> usize {
         match self {
             DType::Q8Block32 | DType::Q8Block32x8 => 34,
-            DType::Q4Block32 => 18,
+            DType::Q4Block32 | DType::Q4Block32x8 => 18,
             DType::F32 | DType::F16 => 0,
         }
     }
@@ -69,7 +77,7 @@ impl DType {
                 }
                 (numel / 32).checked_mul(self.block_bytes())
             }
-            DType::Q8Block32x8 => {
+            DType::Q8Block32x8 | DType::Q4Block32x8 => {
                 if row == 0 || row % 32 != 0 || numel % row != 0 {
                     return None;
                 }

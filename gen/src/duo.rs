@@ -88,7 +88,7 @@ impl EntryEdit {
         match *self {
             EntryEdit::Dtype { entry, code } => {
                 if let Some(i) = at(n, entry) {
-                    e[i].dtype = code % 6;
+                    e[i].dtype = code % 7;
                 }
             }
             EntryEdit::Dim { entry, axis, value } => {

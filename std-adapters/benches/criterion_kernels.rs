@@ -11,7 +11,7 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando::model_file::ModelFile;
-use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, Q8x8Rows, TiledCausalMask};
+use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, X8Rows, TiledCausalMask};
 use duolando_core::model::Model;
 use duolando_core::session::{Session, SessionConfig};
 
@@ -40,7 +40,7 @@ fn linear_mlp(c: &mut Criterion) {
                         0 => Matrix::F32(F32Rows::new(&wf, o, i).unwrap()),
                         1 => Matrix::F16(F16Rows::new(&wh, o, i).unwrap()),
                         2 => Matrix::Q8(Q8Rows::new(&wq, o, i).unwrap()),
-                        _ => Matrix::Q8x8(Q8x8Rows::new(&wx, o, i).unwrap()),
+                        _ => Matrix::X8(X8Rows::new(&wx, o, i).unwrap()),
                     };
                     linear(&x, &m, Some(&b), &mut y);
                     std::hint::black_box(&y);

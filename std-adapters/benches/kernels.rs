@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd;
-use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, Q8x8Rows, TiledCausalMask};
+use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, X8Rows, TiledCausalMask};
 
 mod common;
 use common::Rng;
@@ -65,7 +65,7 @@ fn main() {
                                 0 => Matrix::F32(F32Rows::new(&wf[k], o, i).unwrap()),
                                 1 => Matrix::F16(F16Rows::new(&wh[k], o, i).unwrap()),
                                 2 => Matrix::Q8(Q8Rows::new(&wq[k], o, i).unwrap()),
-                                _ => Matrix::Q8x8(Q8x8Rows::new(&wx[k], o, i).unwrap()),
+                                _ => Matrix::X8(X8Rows::new(&wx[k], o, i).unwrap()),
                             };
                             linear(&x, &m, Some(&b), &mut y);
                         }

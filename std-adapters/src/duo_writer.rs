@@ -28,6 +28,8 @@ pub enum StoreAs {
     /// `DType::Q4Block32` (see [`quantise_q4_block32`]); the last axis must
     /// be a multiple of 32.
     Q4Block32,
+    /// `DType::Q4Block32x8` (see [`quantise_q4_block32x8`]).
+    Q4Block32x8,
 }
 
 /// Quantises `values` (rows of the last axis, a multiple of 32) to
@@ -53,20 +55,33 @@ pub fn quantise_q8_block32(values: &[f32]) -> Vec<u8> {
 /// layout of `DType::Q8Block32x8` (docs/FORMAT.md §4); the last group padded
 /// with zero rows (scale 0, values 0).
 pub fn quantise_q8_block32x8(values: &[f32], row: usize) -> Vec<u8> {
-    let plain = quantise_q8_block32(values);
+    interleave_x8(&quantise_q8_block32(values), row, 34)
+}
+
+/// [`quantise_q4_block32`] in the row groups of `DType::Q4Block32x8`
+/// (docs/FORMAT.md §4); the last group padded with zero bytes.
+pub fn quantise_q4_block32x8(values: &[f32], row: usize) -> Vec<u8> {
+    interleave_x8(&quantise_q4_block32(values), row, 18)
+}
+
+/// Blocked rows (`block_bytes` per block of 32: a 2-byte scale, then the
+/// values) of `row` values each, regrouped by 8 rows: per block, each
+/// 8-byte piece `c` of the values of rows 0..8 side by side (`vb * 8 * b +
+/// 64c + 8n`, `vb = block_bytes - 2`), then the 8 rows' scales per block.
+fn interleave_x8(plain: &[u8], row: usize, block_bytes: usize) -> Vec<u8> {
     let nb = row / 32;
-    let rb = nb * 34;
+    let (rb, vb) = (nb * block_bytes, block_bytes - 2);
     let rows = if rb == 0 { 0 } else { plain.len() / rb };
     let mut out = vec![0u8; rows.div_ceil(8) * 8 * rb];
     for (r, src) in plain.chunks_exact(rb.max(1)).enumerate().take(rows) {
         let (t, n) = (r / 8, r % 8);
         let group = &mut out[t * 8 * rb..(t + 1) * 8 * rb];
-        for (b, blk) in src.chunks_exact(34).enumerate() {
-            for g in 0..4 {
-                let at = 256 * b + 64 * g + 8 * n;
-                group[at..at + 8].copy_from_slice(&blk[2 + 8 * g..2 + 8 * g + 8]);
+        for (b, blk) in src.chunks_exact(block_bytes).enumerate() {
+            for c in 0..vb / 8 {
+                let at = 8 * vb * b + 64 * c + 8 * n;
+                group[at..at + 8].copy_from_slice(&blk[2 + 8 * c..2 + 8 * c + 8]);
             }
-            let at = 256 * nb + 16 * b + 2 * n;
+            let at = 8 * vb * nb + 16 * b + 2 * n;
             group[at..at + 2].copy_from_slice(&blk[..2]);
         }
     }
@@ -211,7 +226,7 @@ pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, Wr
                 data.extend(t.values.iter().flat_map(|&v| half::f16::from_f32(v).to_le_bytes()));
                 DType::F16
             }
-            StoreAs::Q8Block32 | StoreAs::Q8Block32x8 | StoreAs::Q4Block32 => {
+            StoreAs::Q8Block32 | StoreAs::Q8Block32x8 | StoreAs::Q4Block32 | StoreAs::Q4Block32x8 => {
                 let row = duolando_core::tensor::block_row(&t.shape);
                 if row == 0 || row % 32 != 0 {
                     return Err(WriteError::BlockShape { name: t.name.clone(), shape: t.shape.clone() });
@@ -224,6 +239,10 @@ pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, Wr
                     StoreAs::Q8Block32x8 => {
                         data.extend(quantise_q8_block32x8(&t.values, row));
                         DType::Q8Block32x8
+                    }
+                    StoreAs::Q4Block32x8 => {
+                        data.extend(quantise_q4_block32x8(&t.values, row));
+                        DType::Q4Block32x8
                     }
                     _ => {
                         data.extend(quantise_q4_block32(&t.values));

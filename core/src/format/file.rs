@@ -89,7 +89,8 @@ impl<'a> DuoFile<'a> {
             }
             match e.dtype {
                 DType::Q8Block32 | DType::Q4Block32 => check_block_scales(payload(data, &e), e.dtype.block_bytes(), index)?,
-                DType::Q8Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, index)?,
+                DType::Q8Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, 256, index)?,
+                DType::Q4Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, 128, index)?,
                 DType::F32 | DType::F16 => {}
             }
             prev_end = end;
@@ -202,7 +203,7 @@ impl<'a> DuoFile<'a> {
                     .chunks_exact(2)
                     .position(|c| !half::f16::from_le_bytes([c[0], c[1]]).is_finite()),
                 // Scales were checked by parse; int8 / int4 values are always finite.
-                DType::Q8Block32 | DType::Q4Block32 | DType::Q8Block32x8 => None,
+                DType::Q8Block32 | DType::Q4Block32 | DType::Q8Block32x8 | DType::Q4Block32x8 => None,
             };
             if let Some(i) = bad {
                 return Some((index as u32, i as u64));
@@ -235,12 +236,12 @@ fn check_block_scales(bytes: &[u8], block_bytes: usize, index: u32) -> Result<()
     Ok(())
 }
 
-/// `Q8Block32x8` payloads: row groups of `nb` blocks, each `nb * 256`
-/// value bytes then `nb * 8` f16 scales, which must be finite (the padding
-/// rows' too). Blocks are numbered as in the Q8Block32 layout of the
-/// padded matrix: group-major, then block, then row (`(t * nb + b) * 8 + n`).
-fn check_group_scales(bytes: &[u8], nb: usize, index: u32) -> Result<(), FormatError> {
-    let (values, group) = (nb * 256, nb * 8 * 34);
+/// `Q8Block32x8` / `Q4Block32x8` payloads: row groups of `nb` blocks, each
+/// `nb * per_block` value bytes (256 / 128) then `nb * 8` f16 scales, which
+/// must be finite (the padding rows' too). Blocks are numbered group-major,
+/// then block, then row (`(t * nb + b) * 8 + n`).
+fn check_group_scales(bytes: &[u8], nb: usize, per_block: usize, index: u32) -> Result<(), FormatError> {
+    let (values, group) = (nb * per_block, nb * (per_block + 16));
     if group == 0 {
         return Ok(());
     }

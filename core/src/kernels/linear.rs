@@ -3,7 +3,7 @@
 
 use super::parallel::{split_cols, Cols};
 use super::simd::{self, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
-use super::weights::{expand_q4, Matrix, PreparedAct, Q4Rows, Q8Rows, Q8x8Rows, RowMatrix, Q8X8_ROWS};
+use super::weights::{expand_q4, Matrix, PreparedAct, Q4Rows, Q8Rows, X8Rows, RowMatrix, Q8X8_ROWS};
 
 /// Weight bytes kept hot per pass over the activations (~L2-sized blocks:
 /// 64 f32 rows at width 768, more rows for narrower weight types).
@@ -28,7 +28,7 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
         Matrix::Q8(q) if n_in <= Q8_PANEL => return linear_q8(x, q, b, y),
         // Packed in place on VNNI; expanded per tile (stack rows of at most
         // `Q4_FAST_COLS`) elsewhere.
-        Matrix::Q8x8(q) if n_in <= Q4_FAST_COLS || (n_in <= Q8_PANEL && simd::packed_q8_fast()) => return linear_q8(x, q, b, y),
+        Matrix::X8(q) if n_in <= Q4_FAST_COLS || (n_in <= Q8_PANEL && simd::packed_q8_fast()) => return linear_q8(x, q, b, y),
         Matrix::Q4(q) if n_in <= Q4_FAST_COLS => return linear_q8(x, q, b, y),
         _ => {}
     }
@@ -51,7 +51,7 @@ pub const Q8_PANEL: usize = 32 * 1024;
 pub const Q8_PANEL: usize = 4 * 1024;
 const Q8_PANEL_BLOCKS: usize = Q8_PANEL / Q8_BLOCK;
 
-// Threads split the output columns at multiples of 8: whole Q8x8 row groups.
+// Threads split the output columns at multiples of 8: whole x8 row groups.
 const _: () = assert!(super::parallel::SPLIT_ALIGN % Q8X8_ROWS == 0);
 
 /// Fewest activation rows of a panel for the packed int8 path.
@@ -75,9 +75,9 @@ pub const Q4_FAST_COLS: usize = 1024;
 const Q4_ROW_BYTES: usize = Q4_FAST_COLS / Q8_BLOCK * Q8_BLOCK_BYTES;
 
 /// Weight rows as the int8 panel path reads them: as Q8Block32 rows (Q8
-/// rows in place; Q4 and Q8x8 rows expanded into a stack buffer, exact)
+/// rows in place; Q4 and x8 rows expanded into a stack buffer, exact)
 /// for [`simd::gemm_q8`], and as packed 8-row tiles for
-/// [`simd::gemm_q8_packed`] (Q8x8 groups in place; Q8 and Q4 rows packed
+/// [`simd::gemm_q8_packed`] (x8 groups in place; Q8 and Q4 rows packed
 /// per tile).
 trait Q8Source: RowMatrix {
     /// Room for `simd::PACK_ROWS` expanded rows (nothing for Q8).
@@ -138,7 +138,7 @@ impl Q8Source for Q4Rows<'_> {
     }
 }
 
-impl Q8Source for Q8x8Rows<'_> {
+impl Q8Source for X8Rows<'_> {
     type Buf = [[u8; Q4_ROW_BYTES]; simd::PACK_ROWS];
     const PREPACKED: bool = true;
     #[inline]

@@ -26,4 +26,4 @@ pub use kv_rows::{KvRows, RowData};
 pub use conv::{conv1d, conv1d_col_len, conv_transpose1d, convt_z_len, ConvGeom, CONV_TILE};
 pub use linear::{linear, linear_xw};
 pub use norm::{layernorm, LN_EPS};
-pub use weights::{dot, expand_q4, DenseElem, DenseRows, F16Rows, F32Rows, Matrix, ExpandsToQ8, Q4Rows, Q8Rows, Q8x8Rows, RowMatrix, Q4_BLOCK_BYTES, Q8X8_ROWS};
+pub use weights::{dot, expand_q4, DenseElem, DenseRows, F16Rows, F32Rows, Matrix, ExpandsToQ8, Q4Rows, Q8Rows, X8Rows, RowMatrix, Q4_BLOCK_BYTES, Q8X8_ROWS};

@@ -10,7 +10,7 @@
 //! | [`F32Rows`] | f32 | f32 | f32 as given |
 //! | [`F16Rows`] | IEEE binary16 | f32 (exact f16 -> f32) | f32 as given |
 //! | [`Q8Rows`] | blocks of 32: f16 scale + 32 i8 | i32 per block, f32 across blocks | quantised per block of 32 (f32 scale `max|x|/127`, round to nearest) once per row chunk ([`RowMatrix::prepare`]) |
-//! | [`Q8x8Rows`] | the Q8 blocks of 8 rows interleaved ([`simd::PackedQ8`]) | as Q8 (the packed kernel reads a row group in place; other kernels expand a row's blocks to Q8 blocks) | as Q8 |
+//! | [`X8Rows`] | the Q8 or Q4 blocks of 8 rows interleaved ([`simd::PackedQ8`]) | as Q8 (the packed kernel reads a row group in place; other kernels expand a row's blocks to Q8 blocks) | as Q8 |
 //! | [`Q4Rows`] | blocks of 32: f16 scale + 16 bytes of nibbles | as Q8 (the nibbles of a tile's rows are expanded to Q8 blocks in registers/stack, then the same Q8 dots run) | as Q8 |
 //!
 //! Quantising the activations per block (Q8_0 x Q8_0, as ggml) keeps the
@@ -320,37 +320,61 @@ pub const fn q8x8_group_bytes(nb: usize) -> usize {
     nb * Q8X8_ROWS * Q8_BLOCK_BYTES
 }
 
-/// `DType::Q8Block32x8` weights: the rows of a Q8Block32 matrix (same
-/// blocks, scales and values) in groups of 8, each group stored as a
-/// [`simd::PackedQ8`] tile; the last group is padded with rows whose
-/// results are dropped. The int8 GEMM reads a group's tile in place (no
-/// packing per call); the other kernels expand one row's blocks back to
-/// Q8 blocks ([`Q8x8Rows::expand`]) and run the Q8 code.
+/// Bytes of one stored `DType::Q4Block32x8` row group of `nb` blocks (8
+/// rows: `nb * 128` value bytes, then `nb * 16` scale bytes).
+pub const fn q4x8_group_bytes(nb: usize) -> usize {
+    nb * Q8X8_ROWS * Q4_BLOCK_BYTES
+}
+
+/// `DType::Q8Block32x8` / `DType::Q4Block32x8` weights: the rows of a
+/// Q8Block32 / Q4Block32 matrix (same blocks, scales and values) in groups
+/// of 8, each group stored as a [`simd::PackedQ8`] tile; the last group is
+/// padded with rows whose results are dropped. The int8 GEMM reads a
+/// group's tile in place (no packing per call); the other kernels expand
+/// one row's blocks to Q8 blocks ([`X8Rows::expand`], exact) and run the
+/// Q8 code.
 #[derive(Clone, Copy, Debug)]
-pub struct Q8x8Rows<'a> {
+pub struct X8Rows<'a> {
     data: &'a [u8],
     rows: usize,
     cols: usize,
+    q4: bool,
 }
 
-impl<'a> Q8x8Rows<'a> {
-    /// None unless `cols % 32 == 0` and `data.len() == ceil(rows / 8) *
-    /// 8 * cols / 32 * 34`.
+impl<'a> X8Rows<'a> {
+    /// `Q8Block32x8`: None unless `cols % 32 == 0` and `data.len() ==
+    /// ceil(rows / 8) * 8 * cols / 32 * 34`.
     pub fn new(data: &'a [u8], rows: usize, cols: usize) -> Option<Self> {
+        Self::with(data, rows, cols, false)
+    }
+    /// `Q4Block32x8`: None unless `cols % 32 == 0` and `data.len() ==
+    /// ceil(rows / 8) * 8 * cols / 32 * 18`.
+    pub fn new_q4(data: &'a [u8], rows: usize, cols: usize) -> Option<Self> {
+        Self::with(data, rows, cols, true)
+    }
+    fn with(data: &'a [u8], rows: usize, cols: usize, q4: bool) -> Option<Self> {
         let groups = rows.div_ceil(Q8X8_ROWS);
-        if cols % Q8_BLOCK != 0 || groups.checked_mul(q8x8_group_bytes(cols / Q8_BLOCK))? != data.len() {
+        let m = X8Rows { data, rows, cols, q4 };
+        if cols % Q8_BLOCK != 0 || groups.checked_mul(m.group_bytes())? != data.len() {
             return None;
         }
-        Some(Q8x8Rows { data, rows, cols })
+        Some(m)
     }
     fn group_bytes(&self) -> usize {
-        q8x8_group_bytes(self.cols / Q8_BLOCK)
+        let nb = self.cols / Q8_BLOCK;
+        if self.q4 {
+            q4x8_group_bytes(nb)
+        } else {
+            q8x8_group_bytes(nb)
+        }
     }
     /// The packed tile of rows `8t .. 8t + 8` (`t < ceil(rows / 8)`).
     pub fn group(&self, t: usize) -> simd::PackedQ8<'a> {
         let gb = self.group_bytes();
         let nb = self.cols / Q8_BLOCK;
-        simd::PackedQ8::from_group(&self.data[t * gb..(t + 1) * gb], nb).unwrap_or_else(|| unreachable!("group length checked by new"))
+        let g = &self.data[t * gb..(t + 1) * gb];
+        let tile = if self.q4 { simd::PackedQ8::from_q4_group(g, nb) } else { simd::PackedQ8::from_group(g, nb) };
+        tile.unwrap_or_else(|| unreachable!("group length checked by new"))
     }
     /// Stored bytes of the groups holding rows `r0..r1` (clamped; contiguous).
     pub fn rows_bytes(&self, r0: usize, r1: usize) -> &'a [u8] {
@@ -373,7 +397,7 @@ impl<'a> Q8x8Rows<'a> {
     }
 }
 
-impl ExpandsToQ8 for Q8x8Rows<'_> {
+impl ExpandsToQ8 for X8Rows<'_> {
     fn dims(&self) -> (usize, usize) {
         (self.rows, self.cols)
     }
@@ -449,7 +473,7 @@ impl ExpandsToQ8 for Q4Rows<'_> {
 }
 
 /// An int8 layout read through its exact expansion into Q8Block32 blocks
-/// ([`Q4Rows`]: nibbles to i8; [`Q8x8Rows`]: a row out of its group): the
+/// ([`Q4Rows`]: nibbles to i8; [`X8Rows`]: a row out of its group): the
 /// row reads expand the blocks at hand into a stack buffer and run the Q8
 /// code, so every such layout computes what its Q8 expansion computes.
 pub trait ExpandsToQ8 {
@@ -514,7 +538,7 @@ pub enum Matrix<'a> {
     F32(F32Rows<'a>),
     F16(F16Rows<'a>),
     Q8(Q8Rows<'a>),
-    Q8x8(Q8x8Rows<'a>),
+    X8(X8Rows<'a>),
     Q4(Q4Rows<'a>),
 }
 
@@ -527,7 +551,7 @@ macro_rules! with_rows {
             $crate::kernels::Matrix::F32($m) => $body,
             $crate::kernels::Matrix::F16($m) => $body,
             $crate::kernels::Matrix::Q8($m) => $body,
-            $crate::kernels::Matrix::Q8x8($m) => $body,
+            $crate::kernels::Matrix::X8($m) => $body,
             $crate::kernels::Matrix::Q4($m) => $body,
         }
     };
@@ -554,7 +578,7 @@ impl Matrix<'_> {
             Matrix::F32(m) => m.rows * m.cols * 4,
             Matrix::F16(m) => m.rows * m.cols * 2,
             Matrix::Q8(m) => m.rows * m.cols / Q8_BLOCK * Q8_BLOCK_BYTES,
-            Matrix::Q8x8(m) => m.data.len(),
+            Matrix::X8(m) => m.data.len(),
             Matrix::Q4(m) => m.rows * m.cols / Q8_BLOCK * Q4_BLOCK_BYTES,
         }
     }

@@ -32,7 +32,7 @@ use duolando_core::session::{FollowerFrame, KvType, Session, SessionConfig, Step
 use duolando_core::tensor::{block_row, DType, TensorRef, MAX_RANK};
 
 use crate::convert::storage_for;
-use crate::duo_writer::{quantise_q4_block32, quantise_q8_block32, quantise_q8_block32x8, StoreAs};
+use crate::duo_writer::{quantise_q4_block32, quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8, StoreAs};
 
 /// Flags of `duolando bench`.
 #[derive(clap::Args, Debug)]
@@ -154,6 +154,7 @@ impl RandomModel {
                 StoreAs::F16 => DType::F16,
                 StoreAs::Q8Block32 => DType::Q8Block32,
                 StoreAs::Q8Block32x8 => DType::Q8Block32x8,
+                StoreAs::Q4Block32x8 => DType::Q4Block32x8,
                 StoreAs::Q4Block32 => DType::Q4Block32,
             };
             let numel: usize = dims.iter().map(|&d| d as usize).product();
@@ -185,6 +186,7 @@ impl RandomModel {
                 }
                 DType::Q8Block32 => dst.copy_from_slice(&quantise_q8_block32(&values)),
                 DType::Q8Block32x8 => dst.copy_from_slice(&quantise_q8_block32x8(&values, block_row(dims))),
+                DType::Q4Block32x8 => dst.copy_from_slice(&quantise_q4_block32x8(&values, block_row(dims))),
                 DType::Q4Block32 => dst.copy_from_slice(&quantise_q4_block32(&values)),
             }
             table.insert(name.to_string(), (dtype, s.shape, s.rank, base + range.start..base + range.end));

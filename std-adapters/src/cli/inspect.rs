@@ -45,6 +45,7 @@ fn dtype_name(d: DType) -> &'static str {
         DType::F16 => "f16",
         DType::Q8Block32 => "q8_block32",
         DType::Q8Block32x8 => "q8_block32x8",
+        DType::Q4Block32x8 => "q4_block32x8",
         DType::Q4Block32 => "q4_block32",
     }
 }

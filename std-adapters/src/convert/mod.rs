@@ -82,7 +82,8 @@ impl From<SchemaError> for ConvertError {
 ///   convs) are stored as `Q8Block32x8` (the same values, rows interleaved
 ///   in groups of 8 for the GEMM), the embeddings as `Q8Block32`;
 ///   requesting `Q8Block32x8` means the same;
-/// - `Q4Block32`: the same tensors as `Q8Block32` in 4 bits, the rest as
+/// - `Q4Block32`: the same tensors as `Q8Block32` in 4 bits (the GEMM
+///   matrices as `Q4Block32x8`, the embeddings as `Q4Block32`), the rest as
 ///   there.
 pub fn storage_for(requested: StoreAs, spec: &TensorSpec) -> StoreAs {
     if requested == StoreAs::F32 || matches!(spec.role, Role::Vector | Role::PosEmb) {
@@ -98,7 +99,13 @@ pub fn storage_for(requested: StoreAs, spec: &TensorSpec) -> StoreAs {
                 StoreAs::Q8Block32x8
             }
         }
-        StoreAs::Q4Block32 if blockable => requested,
+        StoreAs::Q4Block32 | StoreAs::Q4Block32x8 if blockable => {
+            if spec.role == Role::Embedding {
+                StoreAs::Q4Block32
+            } else {
+                StoreAs::Q4Block32x8
+            }
+        }
         _ => StoreAs::F16,
     }
 }

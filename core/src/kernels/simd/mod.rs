@@ -484,38 +484,72 @@ pub const PACK_BLOCK_VALUES: usize = PACK_ROWS * Q8_BLOCK;
 /// Scale bytes of one block of a packed tile (8 f16).
 pub const PACK_BLOCK_SCALES: usize = PACK_ROWS * 2;
 
-/// 8 int8 weight rows over `nb` blocks in the interleaved layout of
-/// `DType::Q8Block32x8` (docs/FORMAT.md §4): `v` holds, per block `b` and
-/// 8-byte group `g` (0..4), bytes `8g..8g + 8` of block `b` of rows 0..8
-/// (row `n` at `256b + 64g + 8n`), signed; `s` the rows' f16 scales of
-/// block `b` at `16b + 2n`. The layout `vpdpbusd` (and `sdot`) want with
-/// each activation 8-byte group broadcast: one packing serves every
-/// activation row of a panel, and a `Q8Block32x8` file stores its row
-/// groups this way, so its tiles need no packing at all.
+/// Value bytes of one block of a packed 4-bit tile (8 rows x 16).
+pub const PACK_BLOCK_NIBBLES: usize = PACK_ROWS * Q8_BLOCK / 2;
+
+/// 8 weight rows over `nb` blocks in the interleaved layout of
+/// `DType::Q8Block32x8` or `DType::Q4Block32x8` (docs/FORMAT.md §4).
+///
+/// int8 (`from_group`): `v` holds, per block `b` and 8-byte group `g`
+/// (0..4), values `8g..8g + 8` of block `b` of rows 0..8 (row `n` at
+/// `256b + 64g + 8n`), signed.
+///
+/// 4-bit (`from_q4_group`): `v` holds, per block `b`, two 64-byte halves
+/// `h` (0, 1): row `n`'s stored Q4Block32 bytes `8h..8h + 8` at `128b +
+/// 64h + 8n` (byte `j` of a row: element `j` in the low nibble, `j + 16`
+/// in the high one, each `q + 8`), so the low nibbles of half `h` are group
+/// `h` and the high nibbles group `h + 2` of the int8 layout.
+///
+/// Both: `s` holds row `n`'s f16 scale of block `b` at `16b + 2n`. This is
+/// the operand order `vpdpbusd` (and `sdot`) want with each activation
+/// 8-byte group broadcast: one packing serves every activation row of a
+/// panel, and an x8 file stores its row groups this way, so its tiles need
+/// no packing at all.
 #[derive(Clone, Copy, Debug)]
 pub struct PackedQ8<'a> {
     v: &'a [u8],
     s: &'a [u8],
     nb: usize,
+    q4: bool,
 }
 
 impl<'a> PackedQ8<'a> {
-    /// One stored group of `nb` blocks (`nb * 256` value bytes then `nb *
-    /// 16` scale bytes); None if `group` is shorter.
+    /// One stored int8 group of `nb` blocks (`nb * 256` value bytes then
+    /// `nb * 16` scale bytes); None if `group` is shorter.
     pub fn from_group(group: &'a [u8], nb: usize) -> Option<Self> {
-        let nv = nb.checked_mul(PACK_BLOCK_VALUES)?;
+        Self::split(group, nb, PACK_BLOCK_VALUES, false)
+    }
+    /// One stored 4-bit group of `nb` blocks (`nb * 128` value bytes then
+    /// `nb * 16` scale bytes); None if `group` is shorter.
+    pub fn from_q4_group(group: &'a [u8], nb: usize) -> Option<Self> {
+        Self::split(group, nb, PACK_BLOCK_NIBBLES, true)
+    }
+    fn split(group: &'a [u8], nb: usize, per_block: usize, q4: bool) -> Option<Self> {
+        let nv = nb.checked_mul(per_block)?;
         let ns = nb.checked_mul(PACK_BLOCK_SCALES)?;
         let v = group.get(..nv)?;
         let s = group.get(nv..nv.checked_add(ns)?)?;
-        Some(PackedQ8 { v, s, nb })
+        Some(PackedQ8 { v, s, nb, q4 })
     }
     pub fn blocks(&self) -> usize {
         self.nb
     }
-    /// Row `n`'s 32 signed values of block `b` (`n < 8`, `b < nb`), by 8-byte group.
+    /// Whether the values are 4-bit (see the type's documentation).
+    pub fn is_q4(&self) -> bool {
+        self.q4
+    }
+    /// Row `n`'s value `i` (0..32) of block `b` (`n < 8`, `b < nb`), as the
+    /// signed integer the scale multiplies.
     #[inline]
     pub fn value(&self, b: usize, n: usize, i: usize) -> i8 {
-        self.v[PACK_BLOCK_VALUES * b + 64 * (i / 8) + 8 * n + i % 8] as i8
+        if self.q4 {
+            let (g, k) = (i / 8, i % 8);
+            let byte = self.v[PACK_BLOCK_NIBBLES * b + 64 * (g % 2) + 8 * n + k];
+            let nib = if g < 2 { byte & 0x0f } else { byte >> 4 };
+            nib as i8 - 8
+        } else {
+            self.v[PACK_BLOCK_VALUES * b + 64 * (i / 8) + 8 * n + i % 8] as i8
+        }
     }
     /// Row `n`'s f16 scale bits of block `b`.
     #[inline]
@@ -540,7 +574,7 @@ impl Q8Pack8 {
     /// The packed tile of the last [`q8_pack8`].
     pub fn view(&self) -> PackedQ8<'_> {
         let nb = self.nb.min(PACK_BLOCKS);
-        PackedQ8 { v: &self.v[..nb * PACK_BLOCK_VALUES], s: &self.s[..nb * PACK_BLOCK_SCALES], nb }
+        PackedQ8 { v: &self.v[..nb * PACK_BLOCK_VALUES], s: &self.s[..nb * PACK_BLOCK_SCALES], nb, q4: false }
     }
 }
 

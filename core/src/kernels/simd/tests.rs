@@ -1141,3 +1141,77 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
     check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &tiled, s, o), 9, 40, &mut r);
     check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &Comb, s, o), 2, 150, &mut r);
 }
+
+/// A 4-bit row group (`PackedQ8::from_q4_group`: each row's two 8-byte
+/// halves of nibbles side by side, then the scales) holds the values of the
+/// Q8 expansion of its rows, and the packed tile (dispatched, scalar twin,
+/// and AVX512-VNNI where the CPU has it, whose nibbles enter `vpdpbusd` as
+/// stored with the correction shifted to `-8 sum(q)`) computes exactly
+/// what it computes on the packed expansion: the i32 lane sums are equal.
+#[test]
+#[allow(unsafe_code)]
+fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
+    use super::{PackedQ8, Q8Pack8, PACK_ROWS};
+    let mut r = Rng(0x4444);
+    for nb in [1usize, 2, 3, 24, 96, 130] {
+        let n = nb * Q8_BLOCK;
+        let rows4: Vec<Vec<u8>> = (0..PACK_ROWS).map(|_| q4_bytes(&r.vec(n))).collect();
+        // The stored group: per block, half h of every row side by side, then the scales.
+        let mut group = vec![0u8; nb * (128 + 16)];
+        for (j, row) in rows4.iter().enumerate() {
+            for b in 0..nb {
+                let blk = &row[b * Q4_BLOCK_BYTES..(b + 1) * Q4_BLOCK_BYTES];
+                for h in 0..2 {
+                    group[128 * b + 64 * h + 8 * j..128 * b + 64 * h + 8 * j + 8].copy_from_slice(&blk[2 + 8 * h..2 + 8 * h + 8]);
+                }
+                group[128 * nb + 16 * b + 2 * j..128 * nb + 16 * b + 2 * j + 2].copy_from_slice(&blk[..2]);
+            }
+        }
+        let g = PackedQ8::from_q4_group(&group, nb).unwrap();
+        assert!(PackedQ8::from_q4_group(&group[..group.len() - 1], nb).is_none());
+        let rows8: Vec<Vec<u8>> = rows4
+            .iter()
+            .map(|q4| {
+                let mut q8 = vec![0u8; nb * Q8_BLOCK_BYTES];
+                expand_q4(q4, &mut q8);
+                q8
+            })
+            .collect();
+        for (j, q8) in rows8.iter().enumerate() {
+            for b in 0..nb {
+                let blk = &q8[b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
+                assert_eq!(g.scale_bits(b, j), u16::from_le_bytes([blk[0], blk[1]]));
+                assert!((0..Q8_BLOCK).all(|i| g.value(b, j, i) == blk[2 + i] as i8), "nb={nb} row {j} block {b}");
+            }
+        }
+        let mut qs = vec![vec![0i8; n]; 8];
+        let mut ds = vec![vec![0f32; nb]; 8];
+        let mut cs = vec![vec![0i32; 2 * nb]; 8];
+        for m in 0..8 {
+            scalar::quantise_q8_corr(&r.vec(n), &mut qs[m], &mut ds[m], &mut cs[m]);
+        }
+        let q: [&[i8]; 8] = core::array::from_fn(|m| &qs[m][..]);
+        let d: [&[f32]; 8] = core::array::from_fn(|m| &ds[m][..]);
+        let c: [&[i32]; 8] = core::array::from_fn(|m| &cs[m][..]);
+        let bits = |t: [[f32; 8]; 8]| t.map(|row| row.map(f32::to_bits));
+        let twin = scalar::gemm_q8_packed::<8>(g, q, d, c);
+        if nb <= super::PACK_BLOCKS {
+            let mut pack = Q8Pack8::new();
+            super::q8_pack8(core::array::from_fn(|j| &rows8[j][..]), nb, &mut pack);
+            assert_eq!(bits(twin), bits(scalar::gemm_q8_packed::<8>(pack.view(), q, d, c)), "scalar twin nb={nb}");
+            assert_eq!(bits(super::gemm_q8_packed::<8>(g, q, d, c)), bits(super::gemm_q8_packed::<8>(pack.view(), q, d, c)), "dispatched nb={nb}");
+            #[cfg(target_arch = "x86_64")]
+            {
+                use std::is_x86_feature_detected as has;
+                if has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") && has!("avx512vnni") && has!("avx2") && has!("fma") && has!("f16c") {
+                    // SAFETY: every feature of the kernel detected above.
+                    let (a, b) = unsafe { (super::x86::gemm_q8_packed_vnni::<8>(g, q, d, c), super::x86::gemm_q8_packed_vnni::<8>(pack.view(), q, d, c)) };
+                    assert_eq!(bits(a), bits(b), "avx512vnni q4 group vs packed expansion nb={nb}");
+                    // SAFETY: as above.
+                    let a3 = unsafe { super::x86::gemm_q8_packed_vnni::<3>(g, [q[1], q[2], q[7]], [d[1], d[2], d[7]], [c[1], c[2], c[7]]) };
+                    assert_eq!(a3.map(|row| row.map(f32::to_bits)), [1, 2, 7].map(|m| bits(a)[m]), "M = 3 rows equal their rows of M = 8");
+                }
+            }
+        }
+    }
+}

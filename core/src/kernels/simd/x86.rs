@@ -757,32 +757,63 @@ unsafe fn dot_rows_512_by(q: &[f32], load: impl Fn(usize, usize, __mmask16) -> _
 }
 
 /// See [`super::gemm_q8_packed`]: per block, the 4 packed groups made
-/// unsigned (`^ 0x80`) and the 8 f16 scales widened (each twice, one per
-/// lane pair) once for every activation row; per activation row, 4
-/// `vpdpbusd` of the groups against the row's 8-byte groups broadcast to
-/// every lane, started at the row's parity corrections (so each i32 lane
-/// is an exact 16-term dot), then one convert, one scale product and one
-/// FMA for all 8 weight rows (2 lanes each).
+/// unsigned (int8: `^ 0x80` = `w + 128`; 4-bit: the nibbles as stored, `q +
+/// 8`, split out of the two halves) and the 8 f16 scales widened (each
+/// twice, one per lane pair) once for every activation row; per activation
+/// row, 4 `vpdpbusd` of the groups against the row's 8-byte groups
+/// broadcast to every lane, started at the row's parity corrections (int8:
+/// `-128 sum(q)` as given, 4-bit: the same shifted to `-8 sum(q)`, exact),
+/// so each i32 lane is an exact 16-term dot, then one convert, one scale
+/// product and one FMA for all 8 weight rows (2 lanes each).
 ///
 /// # Safety
 /// The CPU must support avx512f/bw/dq/vl/vnni, avx2, fma and f16c.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
 pub unsafe fn gemm_q8_packed_vnni<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; 8]; M] {
-    use super::{PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
+    if w.q4 {
+        // SAFETY: the caller's features are this function's.
+        unsafe { packed_vnni::<M, true>(w, xq, xd, xc) }
+    } else {
+        // SAFETY: as above.
+        unsafe { packed_vnni::<M, false>(w, xq, xd, xc) }
+    }
+}
+
+/// [`gemm_q8_packed_vnni`] for one value width (`Q4`: 4-bit halves).
+///
+/// # Safety
+/// As [`gemm_q8_packed_vnni`].
+#[inline]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
+unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; 8]; M] {
+    use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
+    let pv = if Q4 { PN } else { PV };
     let nb = xq
         .iter()
         .map(|r| r.len() / Q8_BLOCK)
         .chain(xd.iter().map(|r| r.len()))
         .chain(xc.iter().map(|r| r.len() / 2))
-        .fold(w.blocks().min(w.v.len() / PV).min(w.s.len() / PS), usize::min);
+        .fold(w.blocks().min(w.v.len() / pv).min(w.s.len() / PS), usize::min);
     let flip = _mm512_set1_epi8(-128);
+    let low = _mm512_set1_epi8(0x0f);
     let dup = _mm512_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
     let mut acc = [_mm512_setzero_ps(); M];
     for b in 0..nb {
-        let vb = &w.v[PV * b..PV * (b + 1)];
+        let vb = &w.v[pv * b..pv * (b + 1)];
         let sb = &w.s[PS * b..PS * (b + 1)];
-        // SAFETY: vb holds 4 x 64 bytes.
-        let wv: [__m512i; 4] = core::array::from_fn(|g| _mm512_xor_si512(unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _) }, flip));
+        let wv: [__m512i; 4] = if Q4 {
+            // SAFETY: vb holds 2 x 64 bytes.
+            let h: [__m512i; 2] = core::array::from_fn(|k| unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * k) as *const _) });
+            [
+                _mm512_and_si512(h[0], low),
+                _mm512_and_si512(h[1], low),
+                _mm512_and_si512(_mm512_srli_epi16::<4>(h[0]), low),
+                _mm512_and_si512(_mm512_srli_epi16::<4>(h[1]), low),
+            ]
+        } else {
+            // SAFETY: vb holds 4 x 64 bytes.
+            core::array::from_fn(|g| _mm512_xor_si512(unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _) }, flip))
+        };
         // SAFETY: sb holds 8 f16 (128 bits).
         let sv = _mm512_permutexvar_ps(dup, _mm512_castps256_ps512(_mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) })));
         for m in 0..M {
@@ -790,6 +821,9 @@ pub unsafe fn gemm_q8_packed_vnni<const M: usize>(w: super::PackedQ8<'_>, xq: [&
             let cs = &xc[m][2 * b..2 * b + 2];
             // SAFETY: cs holds 2 i32 (8 bytes), xs 32 bytes (4 x 8).
             let mut dp = unsafe { _mm512_set1_epi64((cs.as_ptr() as *const i64).read_unaligned()) };
+            if Q4 {
+                dp = _mm512_srai_epi32::<4>(dp);
+            }
             for (g, wg) in wv.iter().enumerate() {
                 // SAFETY: 8g + 8 <= 32.
                 let xg = unsafe { _mm512_set1_epi64((xs.as_ptr().add(8 * g) as *const i64).read_unaligned()) };
