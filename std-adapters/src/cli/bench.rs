@@ -117,6 +117,24 @@ fn memcpy_gbps(threads: usize) -> f64 {
     n as f64 / (stats(t).median_ms * 1e-3) / 1e9
 }
 
+/// Read-only bandwidth on one thread: bytes read per second over a 256
+/// MiB buffer (far beyond the caches) by the selected ISA's f32 dot kernel
+/// dotting the buffer with itself (one stream of loads, several
+/// accumulators), median of 9 passes. What a step that only streams its
+/// weights could reach; memcpy also writes every byte.
+fn read_gbps() -> f64 {
+    let n = 256 << 20;
+    let buf: Vec<f32> = (0..n / 4).map(|i| (i % 7) as f32 * 0.125).collect();
+    let mut t = Vec::new();
+    for _ in 0..9 {
+        let s = Instant::now();
+        let b = std::hint::black_box(&buf[..]);
+        std::hint::black_box(duolando_core::kernels::dot(b, b));
+        t.push(s.elapsed());
+    }
+    n as f64 / (stats(t).median_ms * 1e-3) / 1e9
+}
+
 /// A full-size model's tensors, stored in one 64-byte aligned buffer.
 struct RandomModel {
     buf: Vec<u64>,
@@ -477,7 +495,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let memcpy = memcpy_gbps(1);
     let memcpy_t2 = memcpy_gbps(2);
-    println!("kernels: {isa:?}; threads: {:?}; memcpy bandwidth (256 MiB): {memcpy:.1} GB/s on 1 thread, {memcpy_t2:.1} GB/s on 2", args.threads);
+    let read = read_gbps();
+    println!(
+        "kernels: {isa:?}; threads: {:?}; memcpy bandwidth (256 MiB): {memcpy:.1} GB/s on 1 thread, {memcpy_t2:.1} GB/s on 2; read-only: {read:.1} GB/s on 1 thread",
+        args.threads
+    );
     let mut results = Vec::new();
     for d in &args.dtypes {
         let (name, store_as) = match d.as_str() {
@@ -504,7 +526,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for (t, st) in &r.s {
             let gbps = r.model_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
             println!(
-                "S step {:>4} t{t} (reference budget, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy)  arena {:.1} MB",
+                "S step {:>4} t{t} (reference budget, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy, {:.0}% of read)  arena {:.1} MB",
                 r.name,
                 st.median_ms,
                 st.p99_ms,
@@ -513,6 +535,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 r.model_bytes as f64 / 1e6,
                 gbps,
                 100.0 * gbps / memcpy,
+                100.0 * gbps / read,
                 r.arena_bytes as f64 / 1e6
             );
         }
@@ -581,6 +604,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         j.insert("memcpy_gbps_t1".into(), memcpy.into());
         j.insert("memcpy_gbps_t2".into(), memcpy_t2.into());
+        j.insert("read_gbps_t1".into(), read.into());
         j.insert("isa".into(), format!("{isa:?}").into());
         match &tract {
             Some((st, err)) => {
