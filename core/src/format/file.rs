@@ -4,6 +4,7 @@ use super::prefix::Prefix;
 use super::table::{decode_entry, Cursor, TensorEntry};
 use super::{align_up, schema_check, FormatError, HeaderField, MAX_TENSORS, PREFIX_LEN};
 use crate::config::ModelConfig;
+use crate::kernels::simd::{PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES};
 use crate::tensor::{block_row, DType, TensorRef};
 
 /// A `.duo` buffer that passed every rule of docs/FORMAT.md.
@@ -89,8 +90,8 @@ impl<'a> DuoFile<'a> {
             }
             match e.dtype {
                 DType::Q8Block32 | DType::Q4Block32 => check_block_scales(payload(data, &e), e.dtype.block_bytes(), index)?,
-                DType::Q8Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, 256, index)?,
-                DType::Q4Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, 128, index)?,
+                DType::Q8Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, PACK_BLOCK_VALUES, index)?,
+                DType::Q4Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, PACK_BLOCK_NIBBLES, index)?,
                 DType::F32 | DType::F16 => {}
             }
             prev_end = end;
@@ -241,7 +242,7 @@ fn check_block_scales(bytes: &[u8], block_bytes: usize, index: u32) -> Result<()
 /// must be finite (the padding rows' too). Blocks are numbered group-major,
 /// then block, then row (`(t * nb + b) * 8 + n`).
 fn check_group_scales(bytes: &[u8], nb: usize, per_block: usize, index: u32) -> Result<(), FormatError> {
-    let (values, group) = (nb * per_block, nb * (per_block + 16));
+    let (values, group) = (nb * per_block, nb * (per_block + PACK_BLOCK_SCALES));
     if group == 0 {
         return Ok(());
     }

@@ -3,7 +3,7 @@
 
 use super::parallel::{split_cols, Cols};
 use super::simd::{self, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
-use super::weights::{expand_q4, Matrix, PreparedAct, Q4Rows, Q8Rows, X8Rows, RowMatrix, Q8X8_ROWS};
+use super::weights::{ExpandsToQ8, Matrix, PreparedAct, Q4Rows, Q8Rows, RowMatrix, X8Rows, Q8X8_ROWS};
 
 /// Weight bytes kept hot per pass over the activations (~L2-sized blocks:
 /// 64 f32 rows at width 768, more rows for narrower weight types).
@@ -116,21 +116,32 @@ impl Q8Source for Q8Rows<'_> {
     }
 }
 
+/// Room for `simd::PACK_ROWS` rows expanded to Q8Block32 (at most
+/// `Q4_FAST_COLS` values each).
+type ExpandBuf = [[u8; Q4_ROW_BYTES]; simd::PACK_ROWS];
+
+/// Rows `rows` of a layout read through its Q8 expansion, expanded into
+/// `buf` (the first `Q4_FAST_COLS` columns; callers keep rows that short).
+#[inline]
+fn expanded_rows<'s, W: ExpandsToQ8, const N: usize>(w: &W, rows: [usize; N], buf: &'s mut ExpandBuf) -> [&'s [u8]; N] {
+    let nb = (w.dims().1 / Q8_BLOCK).min(Q4_FAST_COLS / Q8_BLOCK);
+    for (dst, &r) in buf.iter_mut().zip(&rows) {
+        w.expand_blocks(r, 0, nb, dst);
+    }
+    let buf: &'s ExpandBuf = buf;
+    core::array::from_fn(|j| &buf[j.min(simd::PACK_ROWS - 1)][..nb * Q8_BLOCK_BYTES])
+}
+
 impl Q8Source for Q4Rows<'_> {
-    type Buf = [[u8; Q4_ROW_BYTES]; simd::PACK_ROWS];
+    type Buf = ExpandBuf;
     const PREPACKED: bool = false;
     #[inline]
-    fn new_buf() -> Self::Buf {
+    fn new_buf() -> ExpandBuf {
         [[0; Q4_ROW_BYTES]; simd::PACK_ROWS]
     }
     #[inline]
-    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut Self::Buf) -> [&'s [u8]; N] {
-        let n = (self.cols() / Q8_BLOCK * Q8_BLOCK_BYTES).min(Q4_ROW_BYTES);
-        for (dst, &r) in buf.iter_mut().zip(&rows) {
-            expand_q4(self.row(r), &mut dst[..n]);
-        }
-        let buf: &'s Self::Buf = buf;
-        core::array::from_fn(|j| &buf[j.min(simd::PACK_ROWS - 1)][..n])
+    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut ExpandBuf) -> [&'s [u8]; N] {
+        expanded_rows(self, rows, buf)
     }
     #[inline]
     fn stored_rows(&self, r0: usize, r1: usize) -> &[u8] {
@@ -139,20 +150,15 @@ impl Q8Source for Q4Rows<'_> {
 }
 
 impl Q8Source for X8Rows<'_> {
-    type Buf = [[u8; Q4_ROW_BYTES]; simd::PACK_ROWS];
+    type Buf = ExpandBuf;
     const PREPACKED: bool = true;
     #[inline]
-    fn new_buf() -> Self::Buf {
+    fn new_buf() -> ExpandBuf {
         [[0; Q4_ROW_BYTES]; simd::PACK_ROWS]
     }
     #[inline]
-    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut Self::Buf) -> [&'s [u8]; N] {
-        let nb = (self.cols() / Q8_BLOCK).min(Q4_FAST_COLS / Q8_BLOCK);
-        for (dst, &r) in buf.iter_mut().zip(&rows) {
-            self.expand(r, 0, nb, dst);
-        }
-        let buf: &'s Self::Buf = buf;
-        core::array::from_fn(|j| &buf[j.min(simd::PACK_ROWS - 1)][..nb * Q8_BLOCK_BYTES])
+    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut ExpandBuf) -> [&'s [u8]; N] {
+        expanded_rows(self, rows, buf)
     }
     #[inline]
     fn packed_tile<'s>(&'s self, t0: usize, _nb: usize, _: &'s mut simd::Q8Pack8, _: &'s mut Self::Buf) -> simd::PackedQ8<'s> {

@@ -316,13 +316,13 @@ pub const Q8X8_ROWS: usize = simd::PACK_ROWS;
 
 /// Bytes of one stored `DType::Q8Block32x8` row group of `nb` blocks (8
 /// rows: `nb * 256` value bytes, then `nb * 16` scale bytes).
-pub const fn q8x8_group_bytes(nb: usize) -> usize {
+const fn q8x8_group_bytes(nb: usize) -> usize {
     nb * Q8X8_ROWS * Q8_BLOCK_BYTES
 }
 
 /// Bytes of one stored `DType::Q4Block32x8` row group of `nb` blocks (8
 /// rows: `nb * 128` value bytes, then `nb * 16` scale bytes).
-pub const fn q4x8_group_bytes(nb: usize) -> usize {
+const fn q4x8_group_bytes(nb: usize) -> usize {
     nb * Q8X8_ROWS * Q4_BLOCK_BYTES
 }
 

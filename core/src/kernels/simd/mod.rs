@@ -534,10 +534,6 @@ impl<'a> PackedQ8<'a> {
     pub fn blocks(&self) -> usize {
         self.nb
     }
-    /// Whether the values are 4-bit (see the type's documentation).
-    pub fn is_q4(&self) -> bool {
-        self.q4
-    }
     /// Row `n`'s value `i` (0..32) of block `b` (`n < 8`, `b < nb`), as the
     /// signed integer the scale multiplies.
     #[inline]
