@@ -10,7 +10,7 @@ use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
 use duolando_core::error::{Buffer, Error};
 use duolando_core::model::Model;
-use duolando_core::session::{FollowerFrame, Sampling, Session, SessionConfig};
+use duolando_core::session::{CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig};
 use duolando_tests::fixture;
 
 /// Counts heap allocations made by the current thread while enabled.
@@ -123,7 +123,7 @@ fn no_allocation_after_new_and_the_arena_is_exact() {
     let model = Model::from_duo(&duo).unwrap();
     let n_music = model.cfg.gpt.music.n_in as usize;
     let c = clip();
-    let staggered = SessionConfig { staggered: true, ..SessionConfig::reference(&model.cfg) };
+    let staggered = SessionConfig { schedule: CacheSchedule::Staggered, ..SessionConfig::reference(&model.cfg) };
     for sc in [SessionConfig::reference(&model.cfg), SessionConfig::minimum(&model.cfg), live_config(&model), staggered] {
         let bytes = model.session_bytes(&sc).unwrap();
         // Exactly `bytes` at the worst alignment (63 bytes past a line) is enough.

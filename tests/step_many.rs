@@ -8,7 +8,7 @@ use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
 use duolando_core::error::{Buffer, Error};
 use duolando_core::model::Model;
-use duolando_core::session::{FollowerFrame, KvType, Sampling, Session, SessionConfig, Setting, StepBatch, StepReport};
+use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Sampling, Session, SessionConfig, Setting, StepBatch, StepReport};
 use duolando_tests::fixture;
 
 fn convert(model: &str, store_as: StoreAs) -> ModelFile {
@@ -72,8 +72,8 @@ fn configs(model: &Model<'_>) -> Vec<(&'static str, SessionConfig)> {
         ("reference", reference),
         ("minimum+f16kv", f16kv),
         ("live+topk", live),
-        ("staggered+f16kv", SessionConfig { staggered: true, kv: KvType::F16, ..reference }),
-        ("spread", SessionConfig { spread: true, ..reference }),
+        ("staggered+f16kv", SessionConfig { schedule: CacheSchedule::Staggered, kv: KvType::F16, ..reference }),
+        ("spread", SessionConfig { schedule: CacheSchedule::Spread, ..reference }),
     ]
 }
 
@@ -181,7 +181,7 @@ fn chunked_reprefill_matches_one_call_bit_for_bit() {
         let m = model.cfg.gpt.block_size as usize - 1;
         let c = clip(rollout);
         for (label, sc) in configs(&model) {
-            assert!(sc.shift as usize > REPREFILL_CHUNK || sc.staggered || sc.spread, "{label}: shift {} does not need chunks", sc.shift);
+            assert!(sc.shift as usize > REPREFILL_CHUNK || sc.schedule != CacheSchedule::Reprefill, "{label}: shift {} does not need chunks", sc.shift);
             assert!(32 >= m, "capacity 32 holds a window of {m} rows");
             let chunked = run(&model, &sc, &c, 1, false);
             let one_call = run_in(&model, &sc, &c, 1, true, 32);

@@ -8,6 +8,8 @@ use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, read_i64_2d};
 use duolando::streaming::run_streaming;
 use duolando_core::model::Model;
+// The GPT cache schedules: the same values under each.
+use duolando_core::session::CacheSchedule as Schedule;
 use duolando_core::session::{Sampling, SessionConfig};
 use duolando_tests::{fixture, max_errors, Tol};
 use serde_json::Value;
@@ -24,15 +26,6 @@ fn check(name: &str) {
     check_schedule(name, Schedule::Reprefill);
     check_schedule(name, Schedule::Staggered);
     check_schedule(name, Schedule::Spread);
-}
-
-/// The GPT cache schedules (`SessionConfig::staggered`, `::spread`): the
-/// same values under each.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Schedule {
-    Reprefill,
-    Staggered,
-    Spread,
 }
 
 /// The golden's model, inputs, config and seed.
@@ -107,8 +100,7 @@ fn check_schedule(name: &str, schedule: Schedule) {
     let get = |k: &str| c[k].as_u64().unwrap() as u32;
     let mut cfg = SessionConfig::with(&model.cfg, get("lookahead"), get("enc_future"), get("dec_future"), get("shift"));
     cfg.music_lookahead = get("music_lookahead");
-    cfg.staggered = schedule == Schedule::Staggered;
-    cfg.spread = schedule == Schedule::Spread;
+    cfg.schedule = schedule;
     if let Some(tk) = meta["sampling"].get("topk") {
         cfg.sampling = Sampling::TopK { k: tk.as_u64().unwrap() as u32, rng_seed: meta["sampling"]["rng_seed"].as_u64().unwrap() };
     }

@@ -17,7 +17,7 @@
 use std::sync::Arc;
 
 use duolando_core::config::{N_JOINTS, POSE_DIM};
-use duolando_core::session::{FollowerFrame, KvType, Sampling, Session, SessionConfig};
+use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Sampling, Session, SessionConfig};
 
 use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
 use crate::model::{share, DuoModel, ModelInner};
@@ -79,7 +79,11 @@ impl DuoSessionConfig {
             music_buffer_frames: c.music_buffer_frames,
             sampling,
             top_k,
-            staggered: if c.staggered { 1 } else if c.spread { 2 } else { 0 },
+            staggered: match c.schedule {
+                CacheSchedule::Reprefill => 0,
+                CacheSchedule::Staggered => 1,
+                CacheSchedule::Spread => 2,
+            },
             kv: match c.kv {
                 KvType::F32 => KV_F32,
                 KvType::F16 => KV_F16,
@@ -99,10 +103,10 @@ impl DuoSessionConfig {
             KV_F16 => KvType::F16,
             k => return Err(Failure::invalid(format!("config.kv {k} is not a duo_kv value (0 f32, 1 f16)"))),
         };
-        let (staggered, spread) = match self.staggered {
-            0 => (false, false),
-            1 => (true, false),
-            2 => (false, true),
+        let schedule = match self.staggered {
+            0 => CacheSchedule::Reprefill,
+            1 => CacheSchedule::Staggered,
+            2 => CacheSchedule::Spread,
             v => return Err(Failure::invalid(format!("config.staggered is {v}, not 0, 1 or 2"))),
         };
         Ok(SessionConfig {
@@ -115,8 +119,7 @@ impl DuoSessionConfig {
             sampling,
             pending_frames: self.pending_frames,
             music_buffer_frames: self.music_buffer_frames,
-            staggered,
-            spread,
+            schedule,
             kv,
         })
     }

@@ -22,7 +22,7 @@ use duolando_core::input;
 use duolando_core::model::Model;
 use duolando_core::sampler::MAX_TOP_K;
 use duolando_core::session::config::MAX_BUFFER_FRAMES;
-use duolando_core::session::{dec_future_max, enc_future_max, FollowerFrame, Sampling, Session, SessionConfig};
+use duolando_core::session::{dec_future_max, enc_future_max, CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig};
 
 use crate::fixture::Clip;
 use crate::floats::{synthetic_leader, Hostile};
@@ -82,7 +82,7 @@ impl ConfigGen {
         };
         s.pending_frames = self.pending_frames.get(0, 512.min(MAX_BUFFER_FRAMES));
         s.music_buffer_frames = self.music_buffer_frames.get(min_music, 512.max(min_music));
-        s.staggered = self.staggered;
+        s.schedule = if self.staggered { CacheSchedule::Staggered } else { CacheSchedule::Reprefill };
         s
     }
 }

@@ -23,7 +23,7 @@ use crate::gpt::{head_rows, logits_len};
 use crate::kernels::linear;
 use crate::model::Model;
 use crate::sampler::{argmax, top_k_by_id};
-use crate::session::config::{for_each_live_window, next_window, window_context, Sampling, Setting, MAX_WINDOWS};
+use crate::session::config::{for_each_live_window, next_window, CacheSchedule, window_context, Sampling, Setting, MAX_WINDOWS};
 use crate::session::gpt_cache::{GptCache, GptItem};
 use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
 use crate::session::state::State;
@@ -374,7 +374,7 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
     let lo = k + 1 - window_context(k, m, shift);
     s.appends.clear();
     let st = &mut s.st;
-    if s.cfg.staggered {
+    if s.cfg.schedule == CacheSchedule::Staggered {
         // Every window that contains row k and is still to be used gets row k.
         let mut live: Vec<usize, MAX_WINDOWS> = Vec::new();
         let mut over = false;
@@ -395,7 +395,7 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
             let first = w + st.gpt[slot].rows();
             s.appends.push(Append { slot, lo: w, first, last: k, need_output: w == lo }).map_err(|_| Error::State)?;
         }
-    } else if s.cfg.spread && st.gpt.len() >= 2 {
+    } else if s.cfg.schedule == CacheSchedule::Spread && st.gpt.len() >= 2 {
         // The cache of this window (filled ahead), or a restart in the
         // cache that does not hold it.
         let slot = match st.gpt.iter().position(|c| c.window_start() == Some(lo)) {

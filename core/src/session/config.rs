@@ -42,18 +42,37 @@ pub struct SessionConfig {
     /// Music frames that may wait in the session (pushed, not yet read by
     /// the music LAT) before `push_music_frame` answers `Backlog`.
     pub music_buffer_frames: u32,
-    /// GPT cache schedule (same values either way, docs/STREAMING.md §3.5):
-    /// false = one cache, re-prefilled when the window jumps (least memory,
-    /// a spike of `shift` rows every chunk); true = one cache per live
-    /// window, each fed one row per step (flat cost, [`window_pool`] caches).
-    pub staggered: bool,
-    /// With `staggered` false: two caches, and the next window's rows are
-    /// appended a few per step over the steps before its jump (flat cost at
-    /// the re-prefill schedule's mean, twice its cache memory; one
-    /// re-prefill at step `m`, the first jump). Ignored when `staggered`.
-    pub spread: bool,
+    /// GPT cache schedule (the same values under each, docs/STREAMING.md §3.5).
+    pub schedule: CacheSchedule,
     /// Element type of the GPT K/V cache (f16: half the cache bytes).
     pub kv: KvType,
+}
+
+/// How a session keeps the GPT window's keys and values as the window moves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum CacheSchedule {
+    /// One cache, re-prefilled when the window jumps (least memory, a spike
+    /// of `shift` rows every chunk).
+    #[default]
+    Reprefill,
+    /// One cache per live window, each fed one row per step (flat cost,
+    /// [`window_pool`] caches).
+    Staggered,
+    /// Two caches, the next window's rows appended a few per step over the
+    /// steps before its jump (flat cost at the re-prefill schedule's mean,
+    /// twice its cache memory; one re-prefill at step `m`, the first jump).
+    Spread,
+}
+
+impl CacheSchedule {
+    /// GPT caches a session with this schedule holds (`m` = block size - 1).
+    pub fn caches(self, m: usize, shift: usize) -> usize {
+        match self {
+            CacheSchedule::Reprefill => 1,
+            CacheSchedule::Staggered => window_pool(m, shift),
+            CacheSchedule::Spread => 2,
+        }
+    }
 }
 
 /// Most GPT caches a staggered session may hold.
@@ -170,8 +189,7 @@ impl SessionConfig {
             sampling: Sampling::Greedy,
             pending_frames: 64,
             music_buffer_frames: 4 * (2 * lf + 2 * enc_future_max(cfg) + 8),
-            staggered: false,
-            spread: false,
+            schedule: CacheSchedule::Reprefill,
             kv: KvType::F32,
         }
     }
@@ -194,7 +212,7 @@ impl SessionConfig {
         // The music LAT reads 4 frames per step ahead of what it has consumed.
         let min_music = 4 * cfg.music_motion_rate;
         range(Setting::MusicBuffer, self.music_buffer_frames, min_music, MAX_BUFFER_FRAMES)?;
-        if self.staggered {
+        if self.schedule == CacheSchedule::Staggered {
             let pool = window_pool(m as usize, self.shift as usize) as u32;
             range(Setting::Windows, pool, 1, MAX_WINDOWS as u32)?;
         }
@@ -300,7 +318,7 @@ mod published {
         let r = SessionConfig::reference(&cfg);
         let f32kv = session_bytes_for(&cfg, &r).unwrap();
         let f16kv = session_bytes_for(&cfg, &SessionConfig { kv: KvType::F16, ..r }).unwrap();
-        let stag = session_bytes_for(&cfg, &SessionConfig { staggered: true, ..r }).unwrap();
+        let stag = session_bytes_for(&cfg, &SessionConfig { schedule: CacheSchedule::Staggered, ..r }).unwrap();
         let min = session_bytes_for(&cfg, &SessionConfig::minimum(&cfg)).unwrap();
         // One f32 cache is 12 layers x 2 x (10 x 29 x 768) floats = 21.4 MB (§4).
         let cache = 12 * 2 * 10 * 29 * 768 * 4;

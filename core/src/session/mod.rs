@@ -27,7 +27,7 @@ mod state;
 
 pub use batch::{BatchError, StepBatch, StepDims, StepScratch, MAX_BATCH, REPREFILL_CHUNK};
 pub use gpt_cache::KvType;
-pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, Sampling, SessionConfig, Setting, MAX_WINDOWS};
+pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, CacheSchedule, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
 use crate::arena::{Arena, Planner};
 use crate::config::{ModelConfig, Part, POSE_DIM, ROT_DIM};

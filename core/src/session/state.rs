@@ -7,7 +7,7 @@ use crate::config::{ModelConfig, POSE_DIM, ROT_DIM};
 use crate::error::Error;
 use crate::model::Model;
 use crate::quantizer::codebook_norms;
-use crate::session::config::{window_pool, SessionConfig, MAX_WINDOWS};
+use crate::session::config::{SessionConfig, MAX_WINDOWS};
 use heapless::Vec;
 use crate::session::gpt_cache::GptCache;
 use crate::session::batch::music_burst;
@@ -122,13 +122,7 @@ impl<'s> State<'s> {
         let [r0, r1, r2, r3] = dec_rot;
         let dec_rot = [r0?, r1?, r2?, r3?];
 
-        let n_caches = if sc.staggered {
-            window_pool(m, sc.shift as usize)
-        } else if sc.spread {
-            2
-        } else {
-            1
-        };
+        let n_caches = sc.schedule.caches(m, sc.shift as usize);
         let mut gpt = Vec::new();
         for _ in 0..n_caches.min(MAX_WINDOWS) {
             let cache = GptCache::carve(a, sc.kv, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c)?;

@@ -28,7 +28,7 @@ use duolando_core::gpt::{self, Window};
 use duolando_core::model::{BindError, Model, TensorSource};
 use duolando_core::presets::duolando_published;
 use duolando_core::schema::{for_each_tensor, SchemaError, TensorSpec};
-use duolando_core::session::{FollowerFrame, KvType, Session, SessionConfig, StepBatch};
+use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Session, SessionConfig, StepBatch};
 use duolando_core::tensor::{block_row, DType, TensorRef, MAX_RANK};
 
 use crate::convert::storage_for;
@@ -320,8 +320,11 @@ const SCHEDULES: [&str; 3] = ["reprefill", "staggered", "spread"];
 fn s_config(model: &Model<'_>, schedule: &str) -> SessionConfig {
     let mut cfg = SessionConfig::reference(&model.cfg);
     cfg.kv = KvType::F16;
-    cfg.staggered = schedule == "staggered";
-    cfg.spread = schedule == "spread";
+    cfg.schedule = match schedule {
+        "staggered" => CacheSchedule::Staggered,
+        "spread" => CacheSchedule::Spread,
+        _ => CacheSchedule::Reprefill,
+    };
     cfg
 }
 

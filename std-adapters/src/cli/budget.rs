@@ -4,7 +4,7 @@
 use anyhow::{bail, Result};
 use clap::ValueEnum;
 use duolando_core::config::ModelConfig;
-use duolando_core::session::{Sampling, SessionConfig};
+use duolando_core::session::{CacheSchedule, Sampling, SessionConfig};
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum Preset {
@@ -79,8 +79,11 @@ impl BudgetArgs {
         if let Some(m) = self.music_lookahead {
             sc.music_lookahead = m;
         }
-        sc.staggered = self.staggered;
-        sc.spread = self.spread;
+        sc.schedule = match (self.staggered, self.spread) {
+            (true, _) => CacheSchedule::Staggered,
+            (false, true) => CacheSchedule::Spread,
+            (false, false) => CacheSchedule::Reprefill,
+        };
         sc.kv = match self.kv {
             Kv::F32 => duolando_core::session::KvType::F32,
             Kv::F16 => duolando_core::session::KvType::F16,
