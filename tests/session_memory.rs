@@ -290,6 +290,72 @@ fn unpulled_frames_back_up_into_a_clean_refusal() {
     s.push_leader_frame(&c.leader[9 * 165..10 * 165]).unwrap();
 }
 
+/// The decoded-frame ring holds `pending_frames + hop + 1` frames, not the
+/// whole latency: a caller that lets frames back up into `Backlog` before
+/// pulling them all gets every frame, equal to those of a caller pulling
+/// after every push (an evicted frame would answer `Evicted`).
+#[test]
+fn frames_backed_up_to_the_refusal_are_all_kept() {
+    let c = clip();
+    for (name, preset, pending) in [("tiny", "reference", 0u32), ("tiny", "reference", 5), ("tiny2", "minimum", 0), ("tiny2", "minimum", 3), ("tiny", "live", 2)] {
+        let file = ModelFile::open(fixture(&format!("{name}/model.duo"))).unwrap();
+        let duo = file.duo().unwrap();
+        let model = Model::from_duo(&duo).unwrap();
+        let mut sc = match preset {
+            "reference" => SessionConfig::reference(&model.cfg),
+            "minimum" => SessionConfig::minimum(&model.cfg),
+            _ => SessionConfig::with(&model.cfg, 1, 0, 0, SessionConfig::reference(&model.cfg).shift),
+        };
+        sc.pending_frames = pending;
+        let n_music = model.cfg.gpt.music.n_in as usize;
+        let frames = c.leader.len() / 165;
+        let track = &c.music[..frames.min(c.music.len() / n_music) * n_music];
+        let run = |eager: bool| -> Vec<(u64, Vec<f32>)> {
+            let mut arena = vec![0u8; model.session_bytes(&sc).unwrap()];
+            let mut s = Session::new(&model, &mut arena, &sc, [0, 0, 0, 0, 0]).unwrap();
+            s.set_music_track(track).unwrap();
+            let mut f = FollowerFrame::default();
+            let mut out = Vec::new();
+            let mut refusals = 0;
+            let mut pull_all = |s: &mut Session<'_>, out: &mut Vec<(u64, Vec<f32>)>| {
+                while s.pull_follower_frame(&mut f).unwrap() {
+                    out.push((f.index, f.positions.to_vec()));
+                }
+            };
+            let mut i = 0;
+            while i < frames {
+                match s.push_leader_frame(&c.leader[i * 165..(i + 1) * 165]) {
+                    Ok(()) => i += 1,
+                    Err(Error::Backlog { buffer: Buffer::FollowerPos3d, .. }) => {
+                        // Pulling frees the backlog, unless no step can run any
+                        // more (the end of the music track).
+                        let before = out.len();
+                        pull_all(&mut s, &mut out);
+                        if out.len() == before {
+                            break;
+                        }
+                        refusals += 1;
+                        continue;
+                    }
+                    Err(Error::Backlog { buffer: Buffer::Music, .. }) => break,
+                    Err(e) => panic!("{name} {preset}: frame {i}: {e:?}"),
+                }
+                if eager {
+                    pull_all(&mut s, &mut out);
+                }
+            }
+            pull_all(&mut s, &mut out);
+            assert!(eager || refusals > 0, "{name} {preset} {pending}: the backlog was never reached");
+            out
+        };
+        let eager = run(true);
+        let backed_up = run(false);
+        assert!(eager.len() > 100, "{name} {preset}: {} frames", eager.len());
+        assert_eq!(backed_up.len(), eager.len(), "{name} {preset} {pending}");
+        assert!(backed_up == eager, "{name} {preset} {pending}: frames differ");
+    }
+}
+
 #[test]
 fn step_many_allocates_nothing_and_its_batch_arena_is_exact() {
     use duolando_core::session::StepBatch;

@@ -8,21 +8,32 @@ use crate::kernels::{attention, gelu_inplace, layernorm, linear, KvRows, Mask};
 use crate::model::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
+///
+/// The MLP hidden rows reuse the memory of the query, key and value rows:
+/// those are dead once the attention has run, before the MLP starts.
 #[derive(Default)]
 pub struct BlockScratch<'s> {
     /// (rows, C) LayerNorm output, then projection output.
     pub ln: &'s mut [f32],
-    /// (rows, C) each.
-    pub q: &'s mut [f32],
-    pub k: &'s mut [f32],
-    pub v: &'s mut [f32],
     /// (rows, C) attention output, then MLP output.
     pub att: &'s mut [f32],
-    /// (rows, 4C) MLP hidden.
-    pub hid: &'s mut [f32],
+    /// (rows, 4C): query | key | value, (rows, C) each, during the
+    /// attention; the MLP hidden rows (rows, 4C) after it.
+    work: &'s mut [f32],
     /// (max(rows, keys)) attention scores of one query.
     pub scores: &'s mut [f32],
     pub rows: usize,
+}
+
+/// The parts of a [`BlockScratch`] live during the attention, each
+/// `(rows, C)` (the caller takes the prefixes it needs).
+pub struct QkvParts<'a> {
+    pub ln: &'a mut [f32],
+    pub q: &'a mut [f32],
+    pub k: &'a mut [f32],
+    pub v: &'a mut [f32],
+    pub att: &'a mut [f32],
+    pub scores: &'a mut [f32],
 }
 
 impl<'s> BlockScratch<'s> {
@@ -36,14 +47,29 @@ impl<'s> BlockScratch<'s> {
         let rc = rows.checked_mul(c).ok_or(ArenaError::Overflow)?;
         Ok(BlockScratch {
             ln: a.f32(rc)?,
-            q: a.f32(rc)?,
-            k: a.f32(rc)?,
-            v: a.f32(rc)?,
             att: a.f32(rc)?,
-            hid: a.f32(rc.checked_mul(4).ok_or(ArenaError::Overflow)?)?,
+            work: a.f32(rc.checked_mul(4).ok_or(ArenaError::Overflow)?)?,
             scores: a.f32(rows.max(keys))?,
             rows,
         })
+    }
+
+    /// Floats of one (rows, C) buffer.
+    pub fn row_floats(&self) -> usize {
+        self.ln.len()
+    }
+
+    /// The attention-phase buffers (query, key and value over the work region).
+    pub fn qkv(&mut self) -> QkvParts<'_> {
+        let rc = self.ln.len();
+        let (q, rest) = self.work.split_at_mut(rc);
+        let (k, rest) = rest.split_at_mut(rc);
+        QkvParts { ln: self.ln, q, k, v: &mut rest[..rc], att: self.att, scores: self.scores }
+    }
+
+    /// The MLP-phase buffers: LayerNorm output, hidden rows (rows, 4C), output.
+    fn mlp_parts(&mut self) -> (&mut [f32], &mut [f32], &mut [f32]) {
+        (self.ln, self.work, self.att)
     }
 }
 
@@ -62,19 +88,23 @@ fn add(x: &mut [f32], y: &[f32]) {
 pub fn block_forward<M: Mask>(w: &BlockW<'_>, x: &mut [f32], c: usize, n_head: usize, mask: &M, s: &mut BlockScratch<'_>) {
     let nc = x.len();
     let n = nc / c;
-    let (ln, q, k, v, att) = (&mut s.ln[..nc], &mut s.q[..nc], &mut s.k[..nc], &mut s.v[..nc], &mut s.att[..nc]);
+    let p = s.qkv();
+    let (ln, q, k, v, att) = (&mut p.ln[..nc], &mut p.q[..nc], &mut p.k[..nc], &mut p.v[..nc], &mut p.att[..nc]);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
     lin(ln, &w.query, q);
     lin(ln, &w.key, k);
     lin(ln, &w.value, v);
-    attention(q, k, v, c, n_head, mask, &mut s.scores[..n], att);
+    attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att);
     lin(att, &w.proj, ln);
     add(x, ln);
-    mlp(w, x, ln, &mut s.hid[..4 * nc], att);
+    mlp(w, x, s, nc);
 }
 
-/// `x += mlp.2(gelu(mlp.0(ln2 x)))` with `ln`, `out`: like `x`; `hid`: 4x.
-fn mlp(w: &BlockW<'_>, x: &mut [f32], ln: &mut [f32], hid: &mut [f32], out: &mut [f32]) {
+/// `x += mlp.2(gelu(mlp.0(ln2 x)))` over the first `nc` floats of the
+/// scratch's MLP buffers (`x`: (n, C), `nc = n * C`).
+fn mlp(w: &BlockW<'_>, x: &mut [f32], s: &mut BlockScratch<'_>, nc: usize) {
+    let (ln, hid, out) = s.mlp_parts();
+    let (ln, hid, out) = (&mut ln[..nc], &mut hid[..4 * nc], &mut out[..nc]);
     layernorm(x, w.ln2.w, w.ln2.b, ln);
     lin(ln, &w.fc, hid);
     gelu_inplace(hid);
@@ -100,7 +130,8 @@ pub fn block_forward_rows<M: Mask>(
     let n = nc / c;
     let r = rows.len();
     let rc = r * c;
-    let (ln, q, k, v, att) = (&mut s.ln[..nc], &mut s.q[..rc], &mut s.k[..nc], &mut s.v[..nc], &mut s.att[..nc]);
+    let p = s.qkv();
+    let (ln, q, k, v, att) = (&mut p.ln[..nc], &mut p.q[..rc], &mut p.k[..nc], &mut p.v[..nc], &mut p.att[..nc]);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
     lin(ln, &w.key, k);
     lin(ln, &w.value, v);
@@ -112,12 +143,11 @@ pub fn block_forward_rows<M: Mask>(
     }
     lin(&att[..rc], &w.query, q);
     let att_sel = &mut att[..rc];
-    attention(q, k, v, c, n_head, mask, &mut s.scores[..n], att_sel);
+    attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att_sel);
     let proj = &mut ln[..rc];
     lin(att_sel, &w.proj, proj);
     add(&mut out[..rc], proj);
-    // q is free again: it takes the MLP output.
-    mlp(w, &mut out[..rc], &mut ln[..rc], &mut s.hid[..4 * rc], q);
+    mlp(w, &mut out[..rc], s, rc);
 }
 
 /// Keys and values of rows `x` (n, C): `k`, `v` (n, C) = key/value(ln1 x).
@@ -153,7 +183,8 @@ where
     if c == 0 || !nc.is_multiple_of(c) || bounds.first() != Some(&0) || bounds.last() != Some(&(nc / c)) || nc > s.ln.len() {
         return Err(Error::Length { buffer: Buffer::Features, len: nc, expected: bounds.last().copied().unwrap_or(0) * c });
     }
-    let (ln, q, att) = (&mut s.ln[..nc], &mut s.q[..nc], &mut s.att[..nc]);
+    let p = s.qkv();
+    let (ln, q, att, scores) = (&mut p.ln[..nc], &mut p.q[..nc], &mut p.att[..nc], p.scores);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
     lin(ln, &w.query, q);
     for g in 0..groups {
@@ -163,13 +194,13 @@ where
         }
         let (k, v, mask) = keys(g)?;
         let nk = k.rows(c);
-        if nk > s.scores.len() {
-            return Err(Error::Length { buffer: Buffer::Features, len: nk, expected: s.scores.len() });
+        if nk > scores.len() {
+            return Err(Error::Length { buffer: Buffer::Features, len: nk, expected: scores.len() });
         }
-        attention(&q[a * c..b * c], k, v, c, n_head, &mask, &mut s.scores[..nk], &mut att[a * c..b * c]);
+        attention(&q[a * c..b * c], k, v, c, n_head, &mask, &mut scores[..nk], &mut att[a * c..b * c]);
     }
     lin(att, &w.proj, ln);
     add(x, ln);
-    mlp(w, x, ln, &mut s.hid[..4 * nc], att);
+    mlp(w, x, s, nc);
     Ok(())
 }

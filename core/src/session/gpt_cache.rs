@@ -125,14 +125,15 @@ impl<'s> GptCache<'s> {
             total += it.rows * st;
             bounds.push(total).map_err(|_| Error::State)?;
         }
-        if x.len() != total * c || total * c > s.k.len() {
+        if x.len() != total * c || total * c > s.row_floats() {
             return Err(Error::Length { buffer: Buffer::Features, len: x.len(), expected: total * c });
         }
         let row0 = |it: &GptItem<'_, '_>| it.cache.rows * st;
         for (l, b) in gpt.base.iter().chain(gpt.head.iter()).enumerate() {
             // (total, C) keys and values of every new row, in one pass.
-            let (kn, vn) = (&mut s.k[..total * c], &mut s.v[..total * c]);
-            block_kv(b, x, s.ln, kn, vn);
+            let p = s.qkv();
+            let (kn, vn) = (&mut p.k[..total * c], &mut p.v[..total * c]);
+            block_kv(b, x, p.ln, kn, vn);
             for (i, it) in items.iter_mut().enumerate() {
                 let (a, z) = (bounds[i] * c, bounds[i + 1] * c);
                 let r0 = row0(it);

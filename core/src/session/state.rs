@@ -130,6 +130,13 @@ impl<'s> State<'s> {
         }
         let latency = sc.latency_frames(hop as u32) as usize;
         let roots_cap = latency + 2 + sc.pending_frames as usize;
+        // Decoded, unpulled frames. Step k runs once leader frame
+        // hop(k + a + e + 1) - 1 is in and then completes the frames of token
+        // k + 1 - d, so at most hop(1 - a - e - d) frames are decoded beyond
+        // those pushed; with at most latency + 1 + pending_frames pushed and
+        // unpulled (the backlog refusal), at most pending_frames + hop + 1
+        // decoded frames wait (the +1: latency 0 is not hop(a+e+d) - 1).
+        let pending_cap = (sc.pending_frames as usize).checked_add(hop + 1).ok_or(ov())?;
         Ok(State {
             block: a.f32(hop.checked_mul(POSE_DIM).ok_or(ov())?)?,
             part_in: a.f32(hop.checked_mul(pos).ok_or(ov())?)?,
@@ -148,7 +155,7 @@ impl<'s> State<'s> {
             dec_rot,
             dec_out: a.f32(hop.checked_mul(pos.max(rot)).ok_or(ov())?)?,
             frames: a.f32(hop.checked_mul(FRAME_WIDTH).ok_or(ov())?)?,
-            pending: RowRing::carve(a, roots_cap + 2 * hop, FRAME_WIDTH)?,
+            pending: RowRing::carve(a, pending_cap, FRAME_WIDTH)?,
             roots: RowRing::carve(a, roots_cap, 3)?,
             conv: StreamScratch::carve(a, cfg)?,
         })
