@@ -3,7 +3,8 @@
 //! not): `linear` (x W^T + b) at the model's shapes for 1..290 activation
 //! rows, with enough distinct weight matrices that the small-batch cases
 //! read their weights from memory (bandwidth-bound), and the attention
-//! kernel at the R step's coordinated-attention shape.
+//! kernel at the R step's coordinated-attention shape and at one streaming
+//! append (10 rows against a full f16 cache).
 //! int8 is measured in both stored layouts: `Q8Block32` rows (`int8`) and
 //! `Q8Block32x8` row groups (`int8x8`, what `convert --dtype int8` writes).
 //!
@@ -13,7 +14,7 @@ use std::time::Instant;
 
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd;
-use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, X8Rows, TiledCausalMask};
+use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, KvRows, Matrix, Q8Rows, RowData, X8Rows, TiledCausalMask};
 
 mod common;
 use common::Rng;
@@ -96,6 +97,22 @@ fn main() {
         unsafe { simd::set_isa(*isa) };
         let s = time(reps, || attention(&q, &k[..], &v[..], c, nh, &mask, &mut scores, &mut out));
         line += &format!("  [{isa:?}] {:.2} ms", s * 1e3);
+    }
+    println!("{line}");
+    // Attention of one S-step append: the 10 new rows of one position against
+    // a full f16 cache (290 keys, read in place), as in every streaming step.
+    let (k16, v16): (Vec<u16>, Vec<u16>) = (
+        k.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect(),
+        v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect(),
+    );
+    let mask = TiledCausalMask { t_q: 1, t_k: t, q_pos0: t - 1 };
+    let mut line = format!("attention S append {streams}x{n} f16 K/V C={c} heads={nh}:");
+    for isa in &isas {
+        // SAFETY: as above.
+        unsafe { simd::set_isa(*isa) };
+        let (kr, vr) = (KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16)));
+        let s = time(reps * 20, || attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]));
+        line += &format!("  [{isa:?}] {:.3} ms", s * 1e3);
     }
     println!("{line}");
     // The softmax exponentials and the MLP's GELU against libm in the same run

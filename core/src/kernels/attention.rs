@@ -66,7 +66,7 @@ pub const SPLIT_MAX_KEYS: usize = 1024;
 ///
 /// Per query the mask is read once into runs of consecutive allowed keys;
 /// per head and run the scores are one [`simd::dot_rows`] call and the
-/// probability-weighted values [`simd::axpy_f32`] calls. With a worker
+/// probability-weighted values one [`simd::axpy_rows_f32`] call. With a worker
 /// pool ([`super::parallel`]) and at most [`SPLIT_MAX_KEYS`] keys, the
 /// queries are split over its threads (each query computed as on one
 /// thread: bit-identical).
@@ -148,9 +148,11 @@ fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, 
             }
             let inv = 1.0 / sum;
             for &(a, b) in runs {
-                for (kj, &s) in (a..b).zip(&scores[a..b]) {
-                    v.axpy(s * inv, kj, c, h * hd, oh);
+                let p = &mut scores[a..b];
+                for s in p.iter_mut() {
+                    *s *= inv;
                 }
+                v.axpy_rows(p, a, b, c, h * hd, oh);
             }
         }
     }

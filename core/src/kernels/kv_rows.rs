@@ -86,6 +86,26 @@ impl<'a> KvRows<'a> {
         }
     }
 
+    /// `y += sum_j coef[j - a] * row j [h_off .. h_off + y.len()]` for rows
+    /// `a..b` in order (`coef`: b - a): [`KvRows::axpy`] row after row, bit
+    /// for bit, in one kernel call per run.
+    pub(crate) fn axpy_rows(&self, coef: &[f32], a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32]) {
+        let n0 = self.split(c);
+        let n = y.len();
+        let mut run = |part: &RowData<'_>, lo: usize, hi: usize, coef: &[f32]| {
+            if hi > lo {
+                let (s, e) = (lo * c + h_off, (hi - 1) * c + h_off + n);
+                match part {
+                    RowData::F32(d) => f32::axpy_rows(coef, &d[s..e], c, y),
+                    RowData::F16(d) => u16::axpy_rows(coef, &d[s..e], c, y),
+                }
+            }
+        };
+        let mid = b.min(n0).max(a);
+        run(&self.parts[0], a, mid, &coef[..mid - a]);
+        run(&self.parts[1], mid - n0.min(mid), b.saturating_sub(n0), &coef[mid - a..b - a]);
+    }
+
     /// `qh . row j [h_off .. h_off + qh.len()]` (the key-by-key path): the
     /// kernel of [`KvRows::dot_rows`] on one key, so f16 rows give what
     /// the widened f32 rows give on every ISA.

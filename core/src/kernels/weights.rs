@@ -109,6 +109,10 @@ pub trait DenseElem: Copy + 'static {
     /// `out[j] = q . rows[j * stride ..][..q.len()]` (attention scores
     /// against stored key rows; ISA-dispatched, [`simd::dot_rows`]).
     fn dot_rows(q: &[f32], rows: &[Self], stride: usize, out: &mut [f32]);
+    /// `y += sum_j coef[j] * rows[j * stride ..][..y.len()]` (attention's
+    /// weighted values; ISA-dispatched, [`simd::axpy_rows_f32`]): [`Self::axpy`]
+    /// row after row, bit for bit.
+    fn axpy_rows(coef: &[f32], rows: &[Self], stride: usize, y: &mut [f32]);
 }
 
 impl DenseElem for f32 {
@@ -131,6 +135,10 @@ impl DenseElem for f32 {
     #[inline]
     fn dot_rows(q: &[f32], rows: &[f32], stride: usize, out: &mut [f32]) {
         simd::dot_rows(q, rows, stride, out)
+    }
+    #[inline]
+    fn axpy_rows(coef: &[f32], rows: &[f32], stride: usize, y: &mut [f32]) {
+        simd::axpy_rows_f32(coef, rows, stride, y)
     }
 }
 
@@ -155,6 +163,10 @@ impl DenseElem for u16 {
     #[inline]
     fn dot_rows(q: &[f32], rows: &[u16], stride: usize, out: &mut [f32]) {
         simd::dot_rows_f16(q, rows, stride, out)
+    }
+    #[inline]
+    fn axpy_rows(coef: &[f32], rows: &[u16], stride: usize, y: &mut [f32]) {
+        simd::axpy_rows_f16(coef, rows, stride, y)
     }
 }
 

@@ -615,6 +615,45 @@ pub fn gemm_q8_packed<const M: usize>(w: PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f3
     }
 }
 
+/// `y += sum_j coef[j] * row j` (row `j`: `x[j * stride ..][..y.len()]`;
+/// rows that are not whole are left out): attention's probability-weighted
+/// values of one query and head. Per lane the same operations in the same
+/// order as [`axpy_f32`] called row after row (bit-identical to that), with
+/// the output lanes held in registers across the rows.
+#[inline]
+pub fn axpy_rows_f32(coef: &[f32], x: &[f32], stride: usize, y: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_f32(coef, x, stride, y) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 => unsafe { x86::axpy_rows_f32(coef, x, stride, y) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_rows_f32(coef, x, stride, y) },
+        _ => scalar::axpy_rows_f32(coef, x, stride, y),
+    }
+}
+
+/// [`axpy_rows_f32`] over binary16 rows (an f16 value cache read in
+/// place): [`axpy_f16`] row after row, bit for bit.
+#[inline]
+pub fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_f16(coef, w, stride, y) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
+        Isa::Avx2 => unsafe { x86::axpy_rows_f16(coef, w, stride, y) },
+        #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+        // SAFETY: NEON is enabled for this build (cfg above).
+        Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_rows_f16(coef, w, stride, y) },
+        _ => scalar::axpy_rows_f16(coef, w, stride, y),
+    }
+}
+
 /// `y += a * w` with binary16 `w` (exact f16 -> f32), over the shorter
 /// length: the same operations as [`axpy_f32`] on the widened `w`
 /// (bit-identical to widening first).

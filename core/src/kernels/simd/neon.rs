@@ -365,6 +365,78 @@ pub unsafe fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
     }
 }
 
+/// See [`super::axpy_rows_f32`].
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn axpy_rows_f32(coef: &[f32], x: &[f32], stride: usize, y: &mut [f32]) {
+    // SAFETY: `row` holds y.len() floats and `e + 4 <= y.len()` (axpy_rows_by's contract).
+    let load = |row: &[f32], e: usize| unsafe { vld1q_f32(row.as_ptr().add(e)) };
+    // SAFETY: this fn's contract.
+    unsafe { axpy_rows_by(coef, x, stride, y, load, |v| v) }
+}
+
+/// See [`super::axpy_rows_f16`].
+///
+/// # Safety
+/// NEON must be available.
+#[target_feature(enable = "neon")]
+pub unsafe fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
+    // SAFETY: as in `axpy_rows_f32` (4 u16 at e).
+    let load = |row: &[u16], e: usize| unsafe { f16x4_to_f32(vld1_u16(row.as_ptr().add(e))) };
+    // SAFETY: this fn's contract.
+    unsafe { axpy_rows_by(coef, w, stride, y, load, super::f16_to_f32) }
+}
+
+/// The shared body of [`axpy_rows_f32`] and [`axpy_rows_f16`]: per lane
+/// below `n - n % 4` the FMA of [`axpy_f32`] / [`axpy_f16`] row after row
+/// (64 lanes, then 4, held in registers over all rows); the last `n % 4`
+/// lanes unfused, as those kernels' tails.
+///
+/// # Safety
+/// NEON must be available; `load(row, e)` must be sound for `e + 4 <= row.len()`.
+#[inline]
+#[target_feature(enable = "neon")]
+unsafe fn axpy_rows_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: &mut [f32], load: impl Fn(&[E], usize) -> float32x4_t, widen: impl Fn(E) -> f32) {
+    let n = y.len();
+    let nk = super::scalar::whole_rows(coef.len(), rows.len(), stride, n);
+    let n4 = n - n % 4;
+    let row = |j: usize| &rows[j * stride..j * stride + n];
+    let mut e = 0;
+    while e + 64 <= n4 {
+        // SAFETY: lanes e .. e + 64 of y (<= n).
+        let mut acc: [float32x4_t; 16] = core::array::from_fn(|t| unsafe { vld1q_f32(y.as_ptr().add(e + 4 * t)) });
+        for (j, &a) in coef.iter().enumerate().take(nk) {
+            let r = row(j);
+            for (t, acc) in acc.iter_mut().enumerate() {
+                *acc = vfmaq_n_f32(*acc, load(r, e + 4 * t), a);
+            }
+        }
+        for (t, acc) in acc.iter().enumerate() {
+            // SAFETY: as above.
+            unsafe { vst1q_f32(y.as_mut_ptr().add(e + 4 * t), *acc) };
+        }
+        e += 64;
+    }
+    while e + 4 <= n4 {
+        // SAFETY: lanes e .. e + 4 of y.
+        let mut acc = unsafe { vld1q_f32(y.as_ptr().add(e)) };
+        for (j, &a) in coef.iter().enumerate().take(nk) {
+            acc = vfmaq_n_f32(acc, load(row(j), e), a);
+        }
+        // SAFETY: as above.
+        unsafe { vst1q_f32(y.as_mut_ptr().add(e), acc) };
+        e += 4;
+    }
+    for (j, &a) in coef.iter().enumerate().take(nk) {
+        let r = row(j);
+        for (yi, &xi) in y[n4..].iter_mut().zip(&r[n4..]) {
+            *yi += a * widen(xi);
+        }
+    }
+}
+
 /// [`super::scalar::exp`] on 4 lanes, the same operations in the same
 /// order (no FMA): bit-identical.
 ///

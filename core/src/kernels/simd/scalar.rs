@@ -209,6 +209,34 @@ pub fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [u8], s: &mut [u8]) {
     }
 }
 
+/// Rows `j < coef.len()` of `rows` (row `j` at `j * stride`, `y.len()`
+/// floats) that are whole: the others are left out by every variant.
+#[inline]
+pub(crate) fn whole_rows(coef: usize, len: usize, stride: usize, n: usize) -> usize {
+    if len < n {
+        return 0;
+    }
+    coef.min(if stride == 0 { usize::MAX } else { (len - n) / stride + 1 })
+}
+
+/// Twin of [`super::axpy_rows_f32`]: [`axpy_f32`] row after row.
+#[inline]
+pub fn axpy_rows_f32(coef: &[f32], x: &[f32], stride: usize, y: &mut [f32]) {
+    let n = y.len();
+    for (j, &a) in coef.iter().enumerate().take(whole_rows(coef.len(), x.len(), stride, n)) {
+        axpy_f32(a, &x[j * stride..j * stride + n], y);
+    }
+}
+
+/// Twin of [`super::axpy_rows_f16`]: [`axpy_f16`] row after row.
+#[inline]
+pub fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
+    let n = y.len();
+    for (j, &a) in coef.iter().enumerate().take(whole_rows(coef.len(), w.len(), stride, n)) {
+        axpy_f16(a, &w[j * stride..j * stride + n], y);
+    }
+}
+
 /// Twin of [`super::axpy_f16`].
 #[inline]
 pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {

@@ -1215,3 +1215,88 @@ fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
         }
     }
 }
+
+/// `axpy_rows_f32` / `axpy_rows_f16` of every variant this CPU runs equal
+/// the same variant's `axpy` called row after row, bit for bit (the
+/// attention's values computed in one call per run give what the per-key
+/// calls gave), leave out rows that are not whole, and track the scalar
+/// twin within `SIMD_VS_SCALAR_AXPY` per row.
+#[test]
+#[allow(unsafe_code)]
+fn axpy_rows_equal_axpy_row_after_row() {
+    /// (variant, rows kernel, axpy of the same variant).
+    ///
+    /// # Safety
+    /// Both kernels need the variant's CPU features (pushed only where detected).
+    type Rows32 = (&'static str, unsafe fn(&[f32], &[f32], usize, &mut [f32]), unsafe fn(f32, &[f32], &mut [f32]));
+    /// As `Rows32`, binary16 rows.
+    ///
+    /// # Safety
+    /// As for `Rows32`.
+    type Rows16 = (&'static str, unsafe fn(&[f32], &[u16], usize, &mut [f32]), unsafe fn(f32, &[u16], &mut [f32]));
+    let mut v32: Vec<Rows32> = vec![("scalar", |c, x, s, y| scalar::axpy_rows_f32(c, x, s, y), |a, x, y| scalar::axpy_f32(a, x, y))];
+    let mut v16: Vec<Rows16> = vec![("scalar", |c, x, s, y| scalar::axpy_rows_f16(c, x, s, y), |a, x, y| scalar::axpy_f16(a, x, y))];
+    v32.push(("dispatched", |c, x, s, y| super::axpy_rows_f32(c, x, s, y), |a, x, y| super::axpy_f32(a, x, y)));
+    v16.push(("dispatched", |c, x, s, y| super::axpy_rows_f16(c, x, s, y), |a, x, y| super::axpy_f16(a, x, y)));
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::is_x86_feature_detected as has;
+        if has!("avx2") && has!("fma") && has!("f16c") {
+            v32.push(("avx2", super::x86::axpy_rows_f32, super::x86::axpy_f32));
+            v16.push(("avx2", super::x86::axpy_rows_f16, super::x86::axpy_f16));
+            if has!("avx512f") {
+                v32.push(("avx512", super::x86::axpy_rows_512_f32, super::x86::axpy_f32));
+                v16.push(("avx512", super::x86::axpy_rows_512_f16, super::x86::axpy_f16));
+            }
+        }
+    }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    {
+        v32.push(("neon", super::neon::axpy_rows_f32, super::neon::axpy_f32));
+        v16.push(("neon", super::neon::axpy_rows_f16, super::neon::axpy_f16));
+    }
+    let mut r = Rng(53);
+    for n in [0, 1, 3, 4, 7, 8, 9, 15, 16, 33, 63, 64, 65, 72, 130, 200] {
+        for nk in [0, 1, 2, 5, 31, 300] {
+            let stride = n + 5;
+            let x = r.vec(nk * stride + 2);
+            let x16: Vec<u16> = x.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+            // Exactly nk whole rows; one more coefficient than rows: it is left out.
+            let len = if nk == 0 { 0 } else { (nk - 1) * stride + n };
+            let coef: Vec<f32> = (0..nk + 1).map(|_| r.f() * 0.1).collect();
+            let y0 = r.vec(n);
+            let mut twin = y0.clone();
+            scalar::axpy_rows_f32(&coef, &x[..len], stride, &mut twin);
+            for &(name, rows, axpy) in &v32 {
+                let (mut got, mut want) = (y0.clone(), y0.clone());
+                // SAFETY: each variant was pushed only where its CPU features were detected.
+                unsafe { rows(&coef, &x[..len], stride, &mut got) };
+                for j in 0..nk {
+                    // SAFETY: as above.
+                    unsafe { axpy(coef[j], &x[j * stride..j * stride + n], &mut want) };
+                }
+                for i in 0..n {
+                    assert_eq!(got[i].to_bits(), want[i].to_bits(), "{name} axpy_rows_f32 n={n} nk={nk} lane {i}: {} vs {}", got[i], want[i]);
+                    let s = y0[i].abs() as f64 + (0..nk).map(|j| (coef[j] * x[j * stride + i]).abs() as f64).sum::<f64>();
+                    check(&format!("{name} axpy_rows_f32 vs twin n={n} nk={nk}"), got[i], twin[i], s, SIMD_VS_SCALAR_AXPY * nk.max(1) as f64);
+                }
+            }
+            let mut twin = y0.clone();
+            scalar::axpy_rows_f16(&coef, &x16[..len], stride, &mut twin);
+            for &(name, rows, axpy) in &v16 {
+                let (mut got, mut want) = (y0.clone(), y0.clone());
+                // SAFETY: as above.
+                unsafe { rows(&coef, &x16[..len], stride, &mut got) };
+                for j in 0..nk {
+                    // SAFETY: as above.
+                    unsafe { axpy(coef[j], &x16[j * stride..j * stride + n], &mut want) };
+                }
+                for i in 0..n {
+                    assert_eq!(got[i].to_bits(), want[i].to_bits(), "{name} axpy_rows_f16 n={n} nk={nk} lane {i}");
+                    let s = y0[i].abs() as f64 + (0..nk).map(|j| (coef[j] * super::f16_to_f32(x16[j * stride + i])).abs() as f64).sum::<f64>();
+                    check(&format!("{name} axpy_rows_f16 vs twin n={n} nk={nk}"), got[i], twin[i], s, SIMD_VS_SCALAR_AXPY * nk.max(1) as f64);
+                }
+            }
+        }
+    }
+}

@@ -886,6 +886,162 @@ pub unsafe fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [u8], s: &mut [u8]) 
     }
 }
 
+/// See [`super::axpy_rows_f32`].
+///
+/// # Safety
+/// The CPU must support avx2 and fma.
+#[target_feature(enable = "avx2,fma")]
+pub unsafe fn axpy_rows_f32(coef: &[f32], x: &[f32], stride: usize, y: &mut [f32]) {
+    // SAFETY: this fn's contract.
+    unsafe { axpy_rows_f32_from(coef, x, stride, y, 0) }
+}
+
+/// Lanes `e0 ..` of [`axpy_rows_f32`] (`e0`: a multiple of 8).
+///
+/// # Safety
+/// As [`axpy_rows_f32`].
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn axpy_rows_f32_from(coef: &[f32], x: &[f32], stride: usize, y: &mut [f32], e0: usize) {
+    // SAFETY: `row` holds y.len() floats and `e + 8 <= y.len()` (axpy_rows_by's contract).
+    let load = |row: &[f32], e: usize| unsafe { _mm256_loadu_ps(row.as_ptr().add(e)) };
+    // SAFETY: this fn's contract.
+    unsafe { axpy_rows_by(coef, x, stride, y, e0, load, |v| v) }
+}
+
+/// See [`super::axpy_rows_f16`] (lanes widened by F16C, exact).
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+#[target_feature(enable = "avx2,fma,f16c")]
+pub unsafe fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
+    // SAFETY: this fn's contract.
+    unsafe { axpy_rows_f16_from(coef, w, stride, y, 0) }
+}
+
+/// Lanes `e0 ..` of [`axpy_rows_f16`] (`e0`: a multiple of 8).
+///
+/// # Safety
+/// As [`axpy_rows_f16`].
+#[inline]
+#[target_feature(enable = "avx2,fma,f16c")]
+unsafe fn axpy_rows_f16_from(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32], e0: usize) {
+    // SAFETY: as in `axpy_rows_f32_from` (8 u16 = 128 bits at e).
+    let load = |row: &[u16], e: usize| unsafe { _mm256_cvtph_ps(_mm_loadu_si128(row.as_ptr().add(e) as *const __m128i)) };
+    // SAFETY: this fn's contract.
+    unsafe { axpy_rows_by(coef, w, stride, y, e0, load, super::f16_to_f32) }
+}
+
+/// [`axpy_rows_f32`] on 512-bit registers: the same FMA per lane (lanes
+/// below `n - n % 8`; FMA rounds each lane alone), so bit-identical.
+///
+/// # Safety
+/// The CPU must support avx512f, avx2 and fma.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub unsafe fn axpy_rows_512_f32(coef: &[f32], x: &[f32], stride: usize, y: &mut [f32]) {
+    // SAFETY: `row` holds y.len() floats and `e + 16 <= y.len()` (axpy_rows_512_by's contract).
+    let load = |row: &[f32], e: usize| unsafe { _mm512_loadu_ps(row.as_ptr().add(e)) };
+    // SAFETY: this fn's contract.
+    let done = unsafe { axpy_rows_512_by(coef, x, stride, y, load) };
+    // SAFETY: as above; lanes from `done` on take the 256-bit body.
+    unsafe { axpy_rows_f32_from(coef, x, stride, y, done) }
+}
+
+/// [`axpy_rows_f16`] on 512-bit registers (`vcvtph2ps`, exact): bit-identical.
+///
+/// # Safety
+/// The CPU must support avx512f, avx2, fma and f16c.
+#[target_feature(enable = "avx512f,avx2,fma,f16c")]
+pub unsafe fn axpy_rows_512_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
+    // SAFETY: as in `axpy_rows_512_f32` (16 u16 = 256 bits at e).
+    let load = |row: &[u16], e: usize| unsafe { _mm512_cvtph_ps(_mm256_loadu_si256(row.as_ptr().add(e) as *const __m256i)) };
+    // SAFETY: this fn's contract.
+    let done = unsafe { axpy_rows_512_by(coef, w, stride, y, load) };
+    // SAFETY: as above.
+    unsafe { axpy_rows_f16_from(coef, w, stride, y, done) }
+}
+
+/// Lanes `0 .. 64 k` (the largest multiple of 64 within `n - n % 8`) of
+/// [`axpy_rows_512_f32`] / [`axpy_rows_512_f16`], 64 lanes in 4 registers
+/// over all rows; returns `64 k`.
+///
+/// # Safety
+/// The CPU must support avx512f; `load(row, e)` must be sound for `e + 16 <= row.len()`.
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn axpy_rows_512_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: &mut [f32], load: impl Fn(&[E], usize) -> __m512) -> usize {
+    let n = y.len();
+    let nk = super::scalar::whole_rows(coef.len(), rows.len(), stride, n);
+    let n8 = n - n % 8;
+    let mut e = 0;
+    while e + 64 <= n8 {
+        // SAFETY: lanes e .. e + 64 of y (<= n).
+        let mut acc: [__m512; 4] = core::array::from_fn(|t| unsafe { _mm512_loadu_ps(y.as_ptr().add(e + 16 * t)) });
+        for (j, &a) in coef.iter().enumerate().take(nk) {
+            let (r, av) = (&rows[j * stride..j * stride + n], _mm512_set1_ps(a));
+            for (t, acc) in acc.iter_mut().enumerate() {
+                *acc = _mm512_fmadd_ps(av, load(r, e + 16 * t), *acc);
+            }
+        }
+        for (t, acc) in acc.iter().enumerate() {
+            // SAFETY: as above.
+            unsafe { _mm512_storeu_ps(y.as_mut_ptr().add(e + 16 * t), *acc) };
+        }
+        e += 64;
+    }
+    e
+}
+
+/// The shared body of [`axpy_rows_f32`] and [`axpy_rows_f16`]: per lane/// The shared body of [`axpy_rows_f32`] and [`axpy_rows_f16`]: per lane
+/// below `n - n % 8` the FMA of [`axpy_f32`] / [`axpy_f16`] row after row
+/// (64 lanes, then 8, held in registers over all rows), from lane `e0` (a
+/// multiple of 8) on; the last `n % 8` lanes unfused, as those kernels'
+/// tails. `load(row, e)` gives lanes
+/// `e .. e + 8` of a row (`e + 8 <= row.len()`), `widen` one lane.
+///
+/// # Safety
+/// The CPU must support avx2 and fma; `load` must be sound for such `e`.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn axpy_rows_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: &mut [f32], e0: usize, load: impl Fn(&[E], usize) -> __m256, widen: impl Fn(E) -> f32) {
+    let n = y.len();
+    let nk = super::scalar::whole_rows(coef.len(), rows.len(), stride, n);
+    let n8 = n - n % 8;
+    let row = |j: usize| &rows[j * stride..j * stride + n];
+    let mut e = e0.min(n8);
+    while e + 64 <= n8 {
+        // SAFETY: lanes e .. e + 64 of y (<= n).
+        let mut acc: [__m256; 8] = core::array::from_fn(|t| unsafe { _mm256_loadu_ps(y.as_ptr().add(e + 8 * t)) });
+        for (j, &a) in coef.iter().enumerate().take(nk) {
+            let (r, av) = (row(j), _mm256_set1_ps(a));
+            for (t, acc) in acc.iter_mut().enumerate() {
+                *acc = _mm256_fmadd_ps(av, load(r, e + 8 * t), *acc);
+            }
+        }
+        for (t, acc) in acc.iter().enumerate() {
+            // SAFETY: as above.
+            unsafe { _mm256_storeu_ps(y.as_mut_ptr().add(e + 8 * t), *acc) };
+        }
+        e += 64;
+    }
+    while e + 8 <= n8 {
+        // SAFETY: lanes e .. e + 8 of y.
+        let mut acc = unsafe { _mm256_loadu_ps(y.as_ptr().add(e)) };
+        for (j, &a) in coef.iter().enumerate().take(nk) {
+            acc = _mm256_fmadd_ps(_mm256_set1_ps(a), load(row(j), e), acc);
+        }
+        // SAFETY: as above.
+        unsafe { _mm256_storeu_ps(y.as_mut_ptr().add(e), acc) };
+        e += 8;
+    }
+    for (j, &a) in coef.iter().enumerate().take(nk) {
+        let r = row(j);
+        for (yi, &xi) in y[n8..].iter_mut().zip(&r[n8..]) {
+            *yi += a * widen(xi);
+        }
+    }
+}
+
 /// `y += a * w`, binary16 `w` converted by F16C (exact), FMA.
 ///
 /// # Safety
