@@ -58,52 +58,47 @@ impl<'a> KvRows<'a> {
         self.parts[0].len() / c
     }
 
+    /// Rows `a..b` as at most two pieces, one per run: `(run, lo, hi, at)`,
+    /// rows `lo..hi` of `run` being rows `a + at ..` of the range (empty
+    /// pieces have `lo == hi`).
+    fn pieces(&self, a: usize, b: usize, c: usize) -> [(&RowData<'a>, usize, usize, usize); 2] {
+        let n0 = self.split(c);
+        let mid = b.min(n0).max(a);
+        [(&self.parts[0], a, mid, 0), (&self.parts[1], mid - n0.min(mid), b.saturating_sub(n0), mid - a)]
+    }
+
     /// `out[j - a] = qh . row j [h_off .. h_off + qh.len()]` for keys
     /// `a..b` (`b <= rows(c)`, `h_off + qh.len() <= c`; `out`: b - a).
     pub(crate) fn dot_rows(&self, qh: &[f32], a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32]) {
-        let n0 = self.split(c);
-        let run = |part: &RowData<'_>, lo: usize, hi: usize, out: &mut [f32]| {
-            if hi > lo {
-                match part {
-                    RowData::F32(d) => dots(qh, &d[lo * c + h_off..], c, out),
-                    RowData::F16(d) => dots(qh, &d[lo * c + h_off..], c, out),
-                }
+        for (part, lo, hi, at) in self.pieces(a, b, c) {
+            let out = &mut out[at..at + (hi - lo)];
+            match part {
+                _ if hi == lo => {}
+                RowData::F32(d) => dots(qh, &d[lo * c + h_off..], c, out),
+                RowData::F16(d) => dots(qh, &d[lo * c + h_off..], c, out),
             }
-        };
-        let mid = b.min(n0).max(a);
-        run(&self.parts[0], a, mid, &mut out[..mid - a]);
-        run(&self.parts[1], mid - n0.min(mid), b.saturating_sub(n0), &mut out[mid - a..b - a]);
-    }
-
-    /// `y += s * row j [h_off .. h_off + y.len()]`.
-    pub(crate) fn axpy(&self, s: f32, j: usize, c: usize, h_off: usize, y: &mut [f32]) {
-        let n0 = self.split(c);
-        let (part, r) = if j < n0 { (&self.parts[0], j) } else { (&self.parts[1], j - n0) };
-        let at = r * c + h_off;
-        match part {
-            RowData::F32(d) => f32::axpy(s, &d[at..at + y.len()], y),
-            RowData::F16(d) => u16::axpy(s, &d[at..at + y.len()], y),
         }
     }
 
+    /// `y += s * row j [h_off .. h_off + y.len()]` (the key-by-key path):
+    /// [`KvRows::axpy_rows`] on one row.
+    pub(crate) fn axpy(&self, s: f32, j: usize, c: usize, h_off: usize, y: &mut [f32]) {
+        self.axpy_rows(&[s], j, j + 1, c, h_off, y)
+    }
+
     /// `y += sum_j coef[j - a] * row j [h_off .. h_off + y.len()]` for rows
-    /// `a..b` in order (`coef`: b - a): [`KvRows::axpy`] row after row, bit
-    /// for bit, in one kernel call per run.
+    /// `a..b` in order (`coef`: b - a): per lane the `axpy` of each row in
+    /// turn, bit for bit, in one kernel call per run.
     pub(crate) fn axpy_rows(&self, coef: &[f32], a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32]) {
-        let n0 = self.split(c);
         let n = y.len();
-        let mut run = |part: &RowData<'_>, lo: usize, hi: usize, coef: &[f32]| {
-            if hi > lo {
-                let (s, e) = (lo * c + h_off, (hi - 1) * c + h_off + n);
-                match part {
-                    RowData::F32(d) => f32::axpy_rows(coef, &d[s..e], c, y),
-                    RowData::F16(d) => u16::axpy_rows(coef, &d[s..e], c, y),
-                }
+        for (part, lo, hi, at) in self.pieces(a, b, c) {
+            let (coef, s, e) = (&coef[at..at + (hi - lo)], lo * c + h_off, hi.saturating_sub(1) * c + h_off + n);
+            match part {
+                _ if hi == lo => {}
+                RowData::F32(d) => f32::axpy_rows(coef, &d[s..e], c, y),
+                RowData::F16(d) => u16::axpy_rows(coef, &d[s..e], c, y),
             }
-        };
-        let mid = b.min(n0).max(a);
-        run(&self.parts[0], a, mid, &coef[..mid - a]);
-        run(&self.parts[1], mid - n0.min(mid), b.saturating_sub(n0), &coef[mid - a..b - a]);
+        }
     }
 
     /// `qh . row j [h_off .. h_off + qh.len()]` (the key-by-key path): the
