@@ -243,3 +243,63 @@ fn a_refused_frame_names_its_session_and_changes_none() {
     Session::step_many(&mut refs, &[good, good, good], &mut batch).unwrap();
     assert!(sessions.iter().all(|s| s.frames_pushed() == 1));
 }
+
+/// Sessions of different budgets (encoder/decoder lags, hence different
+/// tail cones in the streaming convolutions) and out of phase (one starts
+/// two leader frames later, so its tokens complete at other calls) share
+/// one batch: the batched encoders/decoders compute each stack's own
+/// columns, and every session ends bit for bit where it ends alone.
+#[test]
+fn mixed_budgets_and_phases_in_one_batch_match_their_own_runs() {
+    for (name, store, rollout) in [("tiny", StoreAs::F32, "rollout_tiny_long"), ("tiny2", StoreAs::Q8Block32, "rollout_tiny2_frames")] {
+        let file = convert(name, store);
+        let duo = file.duo().unwrap();
+        let model = Model::from_duo(&duo).unwrap();
+        let c = clip(rollout);
+        let r = SessionConfig::reference(&model.cfg);
+        let cfgs = [r, SessionConfig::with(&model.cfg, r.lookahead, r.enc_future / 2, 1, r.shift), SessionConfig::minimum(&model.cfg), r];
+        let delay = [0usize, 0, 0, 2];
+        let n = cfgs.len();
+        let leaders: Vec<Vec<f32>> = (0..n).map(|i| leader_of(&c, i)).collect();
+        // Stop well before the track ends (its last tokens lack music look-ahead).
+        let frames = c.leader.len() / 165 * 3 / 4;
+        let run = |batched: bool| -> Vec<Trace> {
+            let mut arenas: Vec<Vec<u8>> = cfgs.iter().map(|sc| vec![0u8; model.session_bytes(sc).unwrap()]).collect();
+            let mut sessions: Vec<Session<'_>> = arenas.iter_mut().zip(&cfgs).enumerate().map(|(i, (a, sc))| Session::new(&model, a, sc, seed_of(i)).unwrap()).collect();
+            for s in sessions.iter_mut() {
+                s.set_music_track(&c.music).unwrap();
+            }
+            let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, &r, n).unwrap()];
+            let mut batch = StepBatch::new(&model.cfg, &r, n, &mut batch_arena).unwrap();
+            let mut traces: Vec<Trace> = (0..n).map(|_| Trace { steps: Vec::new(), frames: Vec::new() }).collect();
+            let mut f = FollowerFrame::default();
+            for t in 0..frames + 2 {
+                let active: Vec<usize> = (0..n).filter(|&i| t >= delay[i] && t - delay[i] < frames).collect();
+                let rows: Vec<&[f32]> = active.iter().map(|&i| &leaders[i][(t - delay[i]) * 165..(t - delay[i] + 1) * 165]).collect();
+                if batched {
+                    let mut refs: Vec<&mut Session<'_>> = sessions.iter_mut().enumerate().filter(|(i, _)| active.contains(i)).map(|(_, s)| s).collect();
+                    Session::step_many(&mut refs, &rows, &mut batch).unwrap();
+                } else {
+                    for (&i, x) in active.iter().zip(&rows) {
+                        sessions[i].push_leader_frame(x).unwrap_or_else(|e| panic!("session {i} at frame {t}: {e:?}"));
+                    }
+                }
+                for &i in &active {
+                    traces[i].steps.push(sessions[i].last_step());
+                    while sessions[i].pull_follower_frame(&mut f).unwrap() {
+                        traces[i].frames.push(f);
+                    }
+                }
+            }
+            traces
+        };
+        let (alone, together) = (run(false), run(true));
+        for i in 0..n {
+            assert!(alone[i].frames.len() > 20, "{name}: session {i} pulled only {} frames", alone[i].frames.len());
+            if let Some(d) = first_difference(&alone[i], &together[i]) {
+                panic!("{name} {store:?}: session {i} ({:?}, {} frames late) differs in the mixed batch: {d}", cfgs[i], delay[i]);
+            }
+        }
+        assert_ne!(cfgs[1].enc_future, cfgs[0].enc_future, "{name}: the budgets must differ");
+    }
+}

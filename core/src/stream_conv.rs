@@ -20,6 +20,15 @@
 //! unit by unit, from ring + tail of the unit below, zeros past the end.
 //! At a lag of [`future_max`] or more no tail is ever computed.
 //!
+//! Several stacks of one geometry (the same stack of several sessions) can
+//! be pushed and read together ([`StreamStack::push_many`],
+//! [`StreamStack::output_many`]): unit after unit, every stack's new
+//! columns (or tail cone) are gathered one after another and computed as
+//! one segmented conv (`conv1d_segs`, `conv_transpose1d_segs`), so the
+//! unit's weights are read once per kernel tile for all of them. Each
+//! stack's columns are bit for bit those of its own push (row-independent
+//! kernels); the single-stack calls are the same code on one stack.
+//!
 //! Every capacity (rings, output ring, scratch) comes from an integer
 //! simulation of the settled counts ([`StackPlan`]), the same code path the
 //! stack runs, so an [`Arena`](crate::arena::Arena) and a
@@ -34,10 +43,14 @@ use heapless::Vec;
 use crate::arena::{ArenaError, Carve};
 use crate::config::{ModelConfig, VqConfig};
 use crate::error::{Buffer, Error};
-use crate::kernels::{conv1d, conv1d_col_len, conv_transpose1d, convt_z_len, relu_inplace, ConvGeom, Matrix};
+use crate::kernels::{conv1d, conv1d_col_len, conv1d_segs, conv_transpose1d_segs, convt_z_len, relu_inplace, ConvGeom, ConvSeg, Matrix};
 use crate::limits::{MAX_DEPTH, MAX_DILATION, MAX_DOWNSAMPLE, MAX_DOWN_T, MAX_STRIDE, MAX_WIDTH};
 use crate::model::{ConvTW, ConvW, DecoderW, EncoderW, ResBlockW};
 use crate::schema::dilation;
+
+/// Most stacks one [`StreamStack::push_many`] / [`StreamStack::output_many`]
+/// computes together (the sessions of a batch).
+pub const MAX_STACKS: usize = 64;
 
 /// Most units of one stack: decoder `1 + down_t * (depth + 1) + 1`.
 pub const MAX_UNITS: usize = (MAX_DOWN_T * (MAX_DEPTH + 1)) as usize + 2;
@@ -371,9 +384,10 @@ pub struct StackPlan {
     pub gather: [usize; MAX_UNITS],
 }
 
-/// Floats of each [`StreamScratch`] buffer a plan needs.
+/// Floats of each [`StreamScratch`] buffer one stack needs (a scratch for
+/// `n` stacks at once holds `n` times the per-column buffers).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct ScratchNeed {
+pub struct ScratchNeed {
     g: usize,
     h: usize,
     r: usize,
@@ -393,6 +407,31 @@ impl ScratchNeed {
             z: self.z.max(o.z),
         }
     }
+    /// The needs of two stacks computed together: per-column buffers add
+    /// up, the kernel tiles are shared.
+    fn plus(self, o: ScratchNeed) -> ScratchNeed {
+        ScratchNeed { g: self.g + o.g, h: self.h + o.h, r: self.r + o.r, t: self.t + o.t, col: self.col.max(o.col), z: self.z.max(o.z) }
+    }
+
+    /// The largest need of any stack of `cfg` (every VQ-VAE, both kinds,
+    /// every lag `0..=future_max`); None for a config outside the limits.
+    pub fn for_model(cfg: &ModelConfig) -> Option<ScratchNeed> {
+        let mut need = ScratchNeed::default();
+        for vq in cfg.parts.iter().chain(core::iter::once(&cfg.transl)) {
+            for kind in [StackKind::Encoder, StackKind::Decoder] {
+                let g = Geometry::new(vq, kind)?;
+                let fmax = future_max_of(&g);
+                need = need.max(StackPlan::simulate(g, 0, fmax).scratch_need());
+            }
+        }
+        Some(need)
+    }
+
+    /// Every buffer of `self` at least that of `o`.
+    pub fn holds(&self, o: &ScratchNeed) -> bool {
+        self.g >= o.g && self.h >= o.h && self.r >= o.r && self.t >= o.t && self.col >= o.col && self.z >= o.z
+    }
+
     /// True if `s` holds at least these floats in every buffer.
     fn fits(&self, s: &StreamScratch<'_>) -> bool {
         s.g.len() >= self.g
@@ -537,7 +576,9 @@ impl StackPlan {
 // ---------------------------------------------------------------------------
 
 /// Working memory of every stack of a model (sized for the widest stack
-/// and every lag `0..=future_max`); carve once per session.
+/// and every lag `0..=future_max`), for up to `n` stacks computed together
+/// ([`StreamStack::push_many`]); carve once per session (`n = 1`) or per
+/// batch of sessions.
 pub struct StreamScratch<'s> {
     /// (cols, c_in) input columns of one unit, gathered contiguous.
     g: &'s mut [f32],
@@ -557,24 +598,31 @@ pub struct StreamScratch<'s> {
 }
 
 impl<'s> StreamScratch<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig) -> Result<Self, ArenaError> {
-        let mut need = ScratchNeed::default();
-        for vq in cfg.parts.iter().chain(core::iter::once(&cfg.transl)) {
-            for kind in [StackKind::Encoder, StackKind::Decoder] {
-                let g = Geometry::new(vq, kind).ok_or(ArenaError::Overflow)?;
-                let fmax = future_max_of(&g);
-                need = need.max(StackPlan::simulate(g, 0, fmax).scratch_need());
-            }
-        }
+    /// Scratch for `n` stacks of needs at most `need` ([`ScratchNeed::for_model`]).
+    pub fn carve<A: Carve<'s>>(a: &mut A, need: ScratchNeed, n: usize) -> Result<Self, ArenaError> {
+        let per = |f: usize| f.checked_mul(n).ok_or(ArenaError::Overflow);
         Ok(StreamScratch {
-            g: a.f32(need.g)?,
-            h: a.f32(need.h)?,
-            r: a.f32(need.r)?,
-            ta: a.f32(need.t)?,
-            tb: a.f32(need.t)?,
+            g: a.f32(per(need.g)?)?,
+            h: a.f32(per(need.h)?)?,
+            r: a.f32(per(need.r)?)?,
+            ta: a.f32(per(need.t)?)?,
+            tb: a.f32(per(need.t)?)?,
             col: a.f32(need.col)?,
             z: a.f32(need.z)?,
         })
+    }
+}
+
+impl<'s> StreamScratch<'s> {
+    /// Scratch for one stack of any VQ-VAE of `cfg` at a time.
+    pub fn for_model<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig) -> Result<Self, ArenaError> {
+        StreamScratch::carve(a, ScratchNeed::for_model(cfg).ok_or(ArenaError::Overflow)?, 1)
+    }
+}
+
+impl Default for StreamScratch<'_> {
+    fn default() -> Self {
+        StreamScratch { g: &mut [], h: &mut [], r: &mut [], ta: &mut [], tb: &mut [], col: &mut [], z: &mut [] }
     }
 }
 
@@ -683,13 +731,24 @@ impl<'r, 'a> UnitW<'r, 'a> {
         }
     }
 
-    /// Outputs `[a, a + y.len() / c_out)` from input columns gathered from
-    /// `g0` into `x` ((x.len() / c_in) columns, modified: ReLU in place for a
-    /// residual block). `h`, `r`: residual scratch; `col`, `z`: kernel tiles.
+    /// Runs the unit for every job at once (one GEMM per kernel tile for
+    /// all of them): job `j`'s outputs `[a, a + n_out)` from its `n_in`
+    /// input columns gathered from `g0`, the jobs' inputs one after another
+    /// in `x` (modified: ReLU in place for a residual block), their outputs
+    /// likewise in `y`. `h`, `r`: residual scratch; `col`, `z`: kernel tiles.
     #[allow(clippy::too_many_arguments)]
-    fn run(&self, u: &Unit, a: usize, g0: usize, x: &mut [f32], y: &mut [f32], h: &mut [f32], r: &mut [f32], col: &mut [f32], z: &mut [f32]) -> Result<(), Error> {
-        let pad = u.local_pad(a, g0).ok_or(Error::Length { buffer: Buffer::Features, len: g0, expected: a })?;
-        let geom = ConvGeom { kernel: u.kernel, stride: u.stride, pad, dilation: u.dilation };
+    fn run(&self, u: &Unit, jobs: &[Job], x: &mut [f32], y: &mut [f32], h: &mut [f32], r: &mut [f32], col: &mut [f32], z: &mut [f32]) -> Result<(), Error> {
+        let mut segs: Vec<ConvSeg, MAX_STACKS> = Vec::new();
+        for j in jobs {
+            let pad = u.local_pad(j.a, j.g0).ok_or(Error::Length { buffer: Buffer::Features, len: j.g0, expected: j.a })?;
+            segs.push(ConvSeg { t_in: j.n_in, t_out: j.n_out, pad }).map_err(|_| Error::State)?;
+        }
+        let (n_in, n_out) = (jobs.iter().map(|j| j.n_in).sum::<usize>(), jobs.iter().map(|j| j.n_out).sum::<usize>());
+        let oc = self.c_out();
+        if x.len() != n_in * u.c_in || y.len() != n_out * oc {
+            return Err(Error::Length { buffer: Buffer::Features, len: y.len(), expected: n_out * oc });
+        }
+        let geom = ConvGeom { kernel: u.kernel, stride: u.stride, pad: 0, dilation: u.dilation };
         let tile = match self {
             UnitW::ConvT(t) => convt_z_len(t.c_out, t.kernel).saturating_sub(z.len()),
             _ => conv1d_col_len(u.c_in, u.kernel).saturating_sub(col.len()),
@@ -698,20 +757,24 @@ impl<'r, 'a> UnitW<'r, 'a> {
             return Err(Error::Length { buffer: Buffer::Features, len: col.len().min(z.len()), expected: tile });
         }
         match self {
-            UnitW::Conv(c) => conv1d(x, c.c_in, &c.w, c.b, geom, y, col),
-            UnitW::ConvT(t) => conv_transpose1d(x, &t.w, t.b, t.kernel, t.stride, pad, y, z),
+            UnitW::Conv(c) => conv1d_segs(x, c.c_in, &c.w, c.b, geom, &segs, y, col),
+            UnitW::ConvT(t) => conv_transpose1d_segs(x, &t.w, t.b, t.kernel, t.stride, &segs, y, z),
             UnitW::Res(b) => {
                 let (w, inner) = (b.conv_dil.c_in, b.conv_dil.c_out);
-                let n = y.len() / w;
-                // Identity: output a + j is input a + j = gathered row a + j - g0.
-                let id = a.saturating_sub(g0) * w;
-                let src = x.get(id..id + n * w).ok_or(Error::Length { buffer: Buffer::Features, len: x.len(), expected: id + n * w })?;
-                y.copy_from_slice(src);
+                // Identity: output a + t of a job is its gathered row a + t - g0.
+                let (mut xo, mut yo) = (0, 0);
+                for j in jobs {
+                    let id = (xo + j.a.saturating_sub(j.g0)) * w;
+                    let src = x.get(id..id + j.n_out * w).ok_or(Error::Length { buffer: Buffer::Features, len: x.len(), expected: id + j.n_out * w })?;
+                    y[yo * w..(yo + j.n_out) * w].copy_from_slice(src);
+                    xo += j.n_in;
+                    yo += j.n_out;
+                }
                 relu_inplace(x);
-                let h = first(h, n * inner)?;
-                conv1d(x, w, &b.conv_dil.w, b.conv_dil.b, geom, h, col);
+                let h = first(h, n_out * inner)?;
+                conv1d_segs(x, w, &b.conv_dil.w, b.conv_dil.b, geom, &segs, h, col);
                 relu_inplace(h);
-                let r = first(r, n * w)?;
+                let r = first(r, n_out * w)?;
                 let g1 = ConvGeom { kernel: 1, stride: 1, pad: 0, dilation: 1 };
                 conv1d(h, inner, &b.conv_1x1.w, b.conv_1x1.b, g1, r, col);
                 for (o, v) in y.iter_mut().zip(r.iter()) {
@@ -721,6 +784,17 @@ impl<'r, 'a> UnitW<'r, 'a> {
         }
         Ok(())
     }
+}
+
+/// One stack's share of a unit computed for several stacks at once.
+#[derive(Clone, Copy, Debug)]
+struct Job {
+    /// First output column.
+    a: usize,
+    /// First gathered input column.
+    g0: usize,
+    n_in: usize,
+    n_out: usize,
 }
 
 /// The first `n` floats of `b`, or a length error.
@@ -864,64 +938,124 @@ impl<'s> StreamStack<'s> {
     /// error half-way (impossible with the planned sizes) leaves it broken
     /// until [`StreamStack::reset`].
     pub fn push(&mut self, w: StackW<'_, '_>, cols: &[f32], s: &mut StreamScratch<'_>) -> Result<(), Error> {
-        if self.broken {
-            return Err(Error::State);
+        Self::push_many(&mut [self], w, &[cols], s)
+    }
+
+    /// [`StreamStack::push`] of `cols[i]` into `stacks[i]` for several
+    /// stacks of one geometry (the same stack of several sessions), every
+    /// unit computed for all of them at once: one read of its weights per
+    /// kernel tile instead of one per stack. Each stack ends bit for bit as
+    /// after its own push (row-independent kernels). `s` must hold the
+    /// stacks' needs together ([`StreamScratch::carve`] for `n` stacks).
+    pub fn push_many(stacks: &mut [&mut StreamStack<'s>], w: StackW<'_, '_>, cols: &[&[f32]], s: &mut StreamScratch<'_>) -> Result<(), Error> {
+        let units = Self::check_many(stacks.iter().map(|st| &**st), w, s)?;
+        let Some(first) = stacks.first() else { return Ok(()) };
+        if cols.len() != stacks.len() {
+            return Err(Error::Length { buffer: first.in_buffer(), len: cols.len(), expected: stacks.len() });
         }
-        let units = self.bind(w)?;
-        let g = &self.plan.geometry;
-        let c_in = g.units[0].c_in;
-        let expected = g.in_per_push * c_in;
-        if cols.len() != expected {
-            return Err(Error::Length { buffer: self.in_buffer(), len: cols.len(), expected });
+        let g = &first.plan.geometry;
+        let expected = g.in_per_push * g.units[0].c_in;
+        if let Some(c) = cols.iter().find(|c| c.len() != expected) {
+            return Err(Error::Length { buffer: first.in_buffer(), len: c.len(), expected });
         }
         let oc = units[g.n_units - 1].c_out();
-        if self.out_ch != 0 && oc != self.out_ch {
-            return Err(Error::Length { buffer: self.out_buffer(), len: oc, expected: self.out_ch });
+        for st in stacks.iter_mut() {
+            st.broken = true;
         }
-        if !self.need.fits(s) {
-            return Err(Error::Length { buffer: Buffer::Features, len: s.g.len(), expected: self.need.g });
+        Self::settle(stacks, &units, cols, s)?;
+        for st in stacks.iter_mut() {
+            st.out_ch = oc;
+            st.pushed += 1;
+            st.broken = false;
         }
-        self.broken = true;
-        self.settle(&units, cols, s)?;
-        self.out_ch = oc;
-        self.pushed += 1;
-        self.broken = false;
         Ok(())
     }
 
-    /// The push proper: new input columns into ring 0, then every unit's
-    /// newly settled outputs into the next ring.
-    fn settle(&mut self, units: &[UnitW<'_, '_>], cols: &[f32], s: &mut StreamScratch<'_>) -> Result<(), Error> {
-        let mut counts = self.counts;
-        let new = counts.advance(&self.plan.geometry);
-        for c in cols.chunks_exact(self.rings[0].ch) {
-            self.rings[0].push(c)?;
+    /// The checks every `*_many` call makes before it changes anything:
+    /// at most [`MAX_STACKS`] stacks, none broken, one geometry, weights
+    /// that fit it (and the output channels of earlier pushes), scratch for
+    /// all of them together. Returns the bound weights.
+    fn check_many<'r, 'a, 'x>(stacks: impl Iterator<Item = &'x StreamStack<'s>> + Clone, w: StackW<'r, 'a>, s: &StreamScratch<'_>) -> Result<Vec<UnitW<'r, 'a>, MAX_UNITS>, Error>
+    where
+        's: 'x,
+    {
+        let Some(first) = stacks.clone().next() else { return Ok(Vec::new()) };
+        let units = first.bind(w)?;
+        let oc = units[first.plan.geometry.n_units - 1].c_out();
+        let mut need = ScratchNeed::default();
+        for (i, st) in stacks.enumerate() {
+            if st.broken || i >= MAX_STACKS || st.plan.geometry != first.plan.geometry {
+                return Err(Error::State);
+            }
+            if st.out_ch != 0 && oc != st.out_ch {
+                return Err(Error::Length { buffer: st.out_buffer(), len: oc, expected: st.out_ch });
+            }
+            need = need.plus(st.need);
+        }
+        if !need.fits(s) {
+            return Err(Error::Length { buffer: Buffer::Features, len: s.g.len(), expected: need.g });
+        }
+        Ok(units)
+    }
+
+    /// The push proper: new input columns into ring 0 of every stack, then
+    /// unit after unit every stack's newly settled outputs (one computation
+    /// for all stacks) into the next ring.
+    fn settle(stacks: &mut [&mut StreamStack<'s>], units: &[UnitW<'_, '_>], cols: &[&[f32]], s: &mut StreamScratch<'_>) -> Result<(), Error> {
+        let g = stacks[0].plan.geometry.clone();
+        let mut counts: Vec<Counts, MAX_STACKS> = Vec::new();
+        let mut new: Vec<[Span; MAX_UNITS], MAX_STACKS> = Vec::new();
+        for (st, c) in stacks.iter_mut().zip(cols) {
+            let mut k = st.counts;
+            new.push(k.advance(&g)).map_err(|_| Error::State)?;
+            counts.push(k).map_err(|_| Error::State)?;
+            for col in c.chunks_exact(st.rings[0].ch) {
+                st.rings[0].push(col)?;
+            }
         }
         let last = units.len() - 1;
         for (u, uw) in units.iter().enumerate() {
-            let Span { lo, hi } = new[u];
-            if lo >= hi {
+            let unit = g.units[u];
+            // (stack, its job); the jobs' inputs gathered one after another into s.g.
+            let mut jobs: Vec<(usize, Job), MAX_STACKS> = Vec::new();
+            let (mut xo, mut yo) = (0, 0);
+            for (i, st) in stacks.iter().enumerate() {
+                let Span { lo, hi } = new[i][u];
+                if lo >= hi {
+                    continue;
+                }
+                let (g0, g1) = unit.gather_span(lo, hi, counts[i].n_in(u));
+                let ring = &st.rings[u];
+                if ring.n != counts[i].set_in(u) {
+                    return Err(evicted(g1, g0, ring.n));
+                }
+                let x = cols_at(s.g, xo, g1 - g0, unit.c_in)?;
+                for (c, xc) in (g0..g1).zip(x.chunks_exact_mut(unit.c_in)) {
+                    xc.copy_from_slice(ring.col(c)?);
+                }
+                jobs.push((i, Job { a: lo, g0, n_in: g1 - g0, n_out: hi - lo })).map_err(|_| Error::State)?;
+                xo += g1 - g0;
+                yo += hi - lo;
+            }
+            if jobs.is_empty() {
                 continue;
             }
-            let unit = self.plan.geometry.units[u];
-            let (g0, g1) = unit.gather_span(lo, hi, counts.n_in(u));
-            let ring = &self.rings[u];
-            if ring.n != counts.set_in(u) {
-                return Err(evicted(g1, g0, ring.n));
-            }
-            let x = first(s.g, (g1 - g0) * unit.c_in)?;
-            for (i, xc) in (g0..g1).zip(x.chunks_exact_mut(unit.c_in)) {
-                xc.copy_from_slice(ring.col(i)?);
-            }
             let oc = uw.c_out();
-            let y = first(s.ta, (hi - lo) * oc)?;
-            uw.run(&unit, lo, g0, x, y, s.h, s.r, s.col, s.z)?;
-            let next = if u == last { &mut self.out } else { &mut self.rings[u + 1] };
-            for c in y.chunks_exact(oc) {
-                next.push(c)?;
+            let js: Vec<Job, MAX_STACKS> = jobs.iter().map(|&(_, j)| j).collect();
+            let y = first(s.ta, yo * oc)?;
+            uw.run(&unit, &js, first(s.g, xo * unit.c_in)?, y, s.h, s.r, s.col, s.z)?;
+            let mut rows = y.chunks_exact(oc);
+            for &(i, j) in jobs.iter() {
+                let st = &mut *stacks[i];
+                let next = if u == last { &mut st.out } else { &mut st.rings[u + 1] };
+                for c in rows.by_ref().take(j.n_out) {
+                    next.push(c)?;
+                }
             }
         }
-        self.counts = counts;
+        for (st, c) in stacks.iter_mut().zip(counts) {
+            st.counts = c;
+        }
         Ok(())
     }
 
@@ -932,69 +1066,114 @@ impl<'s> StreamStack<'s> {
     /// computed now from the tail cone. Errors if `t + n` exceeds the
     /// prefix's output, or a column is older than the output ring holds.
     pub fn output(&self, w: StackW<'_, '_>, t: usize, n: usize, s: &mut StreamScratch<'_>, out: &mut [f32]) -> Result<(), Error> {
-        if self.broken {
-            return Err(Error::State);
+        Self::output_many(&[self], w, &[t], n, s, &mut [out])
+    }
+
+    /// [`StreamStack::output`] of columns `[ts[i], ts[i] + n)` of
+    /// `stacks[i]` into `outs[i]` for several stacks of one geometry, the
+    /// tails of all of them computed together (one read of each unit's
+    /// weights); bit for bit what each stack's own call gives.
+    pub fn output_many(stacks: &[&StreamStack<'s>], w: StackW<'_, '_>, ts: &[usize], n: usize, s: &mut StreamScratch<'_>, outs: &mut [&mut [f32]]) -> Result<(), Error> {
+        let units = Self::check_many(stacks.iter().copied(), w, s)?;
+        let Some(first) = stacks.first() else { return Ok(()) };
+        if ts.len() != stacks.len() || outs.len() != stacks.len() {
+            return Err(Error::Length { buffer: first.out_buffer(), len: ts.len().min(outs.len()), expected: stacks.len() });
         }
-        let units = self.bind(w)?;
-        let g = &self.plan.geometry;
-        let last = g.n_units - 1;
-        let oc = units[last].c_out();
-        if self.out_ch != 0 && oc != self.out_ch {
-            return Err(Error::Length { buffer: self.out_buffer(), len: oc, expected: self.out_ch });
+        let oc = units[first.plan.geometry.n_units - 1].c_out();
+        let expected = n.checked_mul(oc).ok_or(Error::Length { buffer: first.out_buffer(), len: n, expected: usize::MAX })?;
+        // Per stack: the unsettled columns [a, end) still to compute, if any.
+        let mut want: Vec<Option<(usize, usize)>, MAX_STACKS> = Vec::new();
+        for ((st, &t), out) in stacks.iter().zip(ts).zip(outs.iter()) {
+            if out.len() != expected {
+                return Err(Error::Length { buffer: st.out_buffer(), len: out.len(), expected });
+            }
+            let end = t.saturating_add(n);
+            if end > st.len() {
+                return Err(Error::Length { buffer: st.out_buffer(), len: end, expected: st.len() });
+            }
+            let set = st.settled();
+            want.push((end > set).then(|| (t.max(set), end))).map_err(|_| Error::State)?;
         }
-        let expected = n.checked_mul(oc).ok_or(Error::Length { buffer: self.out_buffer(), len: out.len(), expected: usize::MAX })?;
-        if out.len() != expected {
-            return Err(Error::Length { buffer: self.out_buffer(), len: out.len(), expected });
+        for ((st, &t), out) in stacks.iter().zip(ts).zip(outs.iter_mut()) {
+            let set = st.settled();
+            for (j, o) in (t..(t + n).min(set)).zip(out.chunks_exact_mut(oc)) {
+                o.copy_from_slice(&st.out.col(j)?[..oc]);
+            }
         }
-        let end = t.saturating_add(n);
-        if end > self.len() {
-            return Err(Error::Length { buffer: self.out_buffer(), len: end, expected: self.len() });
-        }
-        let set = self.settled();
-        for (j, o) in (t..end.min(set)).zip(out.chunks_exact_mut(oc)) {
-            o.copy_from_slice(&self.out.col(j)?[..oc]);
-        }
-        if end > set {
-            let a = t.max(set);
-            let tail = self.tails(&units, a, end, s)?;
-            out[(a - t) * oc..].copy_from_slice(&tail[..(end - a) * oc]);
+        if want.iter().any(Option::is_some) {
+            let (tail, at) = Self::tails(stacks, &units, &want, s)?;
+            for (i, out) in outs.iter_mut().enumerate() {
+                if let Some((a, end)) = want[i] {
+                    let src = tail.get(at[i] * oc..(at[i] + end - a) * oc).ok_or(Error::State)?;
+                    out[(a - ts[i]) * oc..].copy_from_slice(src);
+                }
+            }
         }
         Ok(())
     }
 
-    /// Computes the unsettled outputs `[a, b)` of the last unit through the
-    /// tail cone; returns them ((b - a), c_out) in a scratch buffer.
-    fn tails<'x>(&self, units: &[UnitW<'_, '_>], a: usize, b: usize, s: &'x mut StreamScratch<'_>) -> Result<&'x [f32], Error> {
-        let g = &self.plan.geometry;
-        let c = &self.counts;
-        let need = c.cone(g, a, b);
-        let u0 = (0..g.n_units).find(|&u| !need[u].is_empty()).unwrap_or(g.n_units - 1);
-        // prev: tail of the unit below ((need[u-1].len(), c_out of u-1)); cur: this unit's.
+    /// Computes the unsettled outputs `want[i] = [a, b)` of the last unit
+    /// of each stack through its tail cone, all stacks unit by unit
+    /// together; returns them in a scratch buffer: stack `i`'s `(b - a,
+    /// c_out)` rows from row `at[i]`.
+    #[allow(clippy::type_complexity)]
+    fn tails<'x>(stacks: &[&StreamStack<'s>], units: &[UnitW<'_, '_>], want: &[Option<(usize, usize)>], s: &'x mut StreamScratch<'_>) -> Result<(&'x [f32], [usize; MAX_STACKS]), Error> {
+        let g = &stacks[0].plan.geometry;
+        let mut need: Vec<[Span; MAX_UNITS], MAX_STACKS> = Vec::new();
+        for (st, w) in stacks.iter().zip(want) {
+            let cone = match *w {
+                Some((a, b)) => st.counts.cone(g, a, b),
+                None => [Span::default(); MAX_UNITS],
+            };
+            need.push(cone).map_err(|_| Error::State)?;
+        }
+        let u0 = (0..g.n_units).find(|&u| need.iter().any(|nd| !nd[u].is_empty())).unwrap_or(g.n_units - 1);
+        // prev: tails of the unit below (stack i's from row prev_at[i]); cur: this unit's.
         let (mut prev, mut cur): (&mut [f32], &mut [f32]) = (&mut s.ta[..], &mut s.tb[..]);
+        let (mut prev_at, mut cur_at) = ([0usize; MAX_STACKS], [0usize; MAX_STACKS]);
         for u in u0..g.n_units {
             let unit = g.units[u];
-            let Span { lo, hi } = need[u];
-            let (g0, g1) = unit.gather_span(lo, hi, c.n_in(u));
-            let (set_in, ring) = (c.set_in(u), &self.rings[u]);
-            let x = first(s.g, (g1 - g0) * unit.c_in)?;
-            for (i, xc) in (g0..g1).zip(x.chunks_exact_mut(unit.c_in)) {
-                if i < set_in {
-                    xc.copy_from_slice(ring.col(i)?);
-                } else {
-                    // Unsettled input: tail of unit u-1, which covers [set_in, g1).
-                    let below = if u > 0 { need[u - 1] } else { Span::default() };
-                    let k = i.checked_sub(below.lo).filter(|_| i < below.hi);
-                    let src = k.and_then(|k| prev.get(k * unit.c_in..(k + 1) * unit.c_in));
-                    xc.copy_from_slice(src.ok_or(evicted(i, set_in, c.n_in(u)))?);
+            let mut jobs: Vec<Job, MAX_STACKS> = Vec::new();
+            let (mut xo, mut yo) = (0, 0);
+            for (i, st) in stacks.iter().enumerate() {
+                let Span { lo, hi } = need[i][u];
+                if lo >= hi {
+                    continue;
                 }
+                let c = &st.counts;
+                let (g0, g1) = unit.gather_span(lo, hi, c.n_in(u));
+                let (set_in, ring) = (c.set_in(u), &st.rings[u]);
+                let x = cols_at(s.g, xo, g1 - g0, unit.c_in)?;
+                for (col, xc) in (g0..g1).zip(x.chunks_exact_mut(unit.c_in)) {
+                    if col < set_in {
+                        xc.copy_from_slice(ring.col(col)?);
+                    } else {
+                        // Unsettled input: tail of unit u-1, which covers [set_in, g1).
+                        let below = if u > 0 { need[i][u - 1] } else { Span::default() };
+                        let k = col.checked_sub(below.lo).filter(|_| col < below.hi);
+                        let src = k.and_then(|k| prev.get((prev_at[i] + k) * unit.c_in..(prev_at[i] + k + 1) * unit.c_in));
+                        xc.copy_from_slice(src.ok_or(evicted(col, set_in, c.n_in(u)))?);
+                    }
+                }
+                jobs.push(Job { a: lo, g0, n_in: g1 - g0, n_out: hi - lo }).map_err(|_| Error::State)?;
+                cur_at[i] = yo;
+                xo += g1 - g0;
+                yo += hi - lo;
             }
             let oc = units[u].c_out();
-            let y = first(cur, (hi - lo) * oc)?;
-            units[u].run(&unit, lo, g0, x, y, s.h, s.r, s.col, s.z)?;
+            let y = first(cur, yo * oc)?;
+            units[u].run(&unit, &jobs, first(s.g, xo * unit.c_in)?, y, s.h, s.r, s.col, s.z)?;
             core::mem::swap(&mut prev, &mut cur);
+            core::mem::swap(&mut prev_at, &mut cur_at);
         }
-        Ok(prev)
+        Ok((prev, prev_at))
     }
+}
+
+/// Columns `[at, at + n)` of `c` floats each of `b`, or a length error.
+fn cols_at(b: &mut [f32], at: usize, n: usize, c: usize) -> Result<&mut [f32], Error> {
+    let len = b.len();
+    b.get_mut(at * c..(at + n) * c).ok_or(Error::Length { buffer: Buffer::Features, len, expected: (at + n) * c })
 }
 
 #[cfg(test)]

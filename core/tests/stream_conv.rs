@@ -108,7 +108,7 @@ fn run_encoder(mcfg: &ModelConfig, vq: &VqW<'static>, lag: usize, seed: u64) -> 
     let n_push = pushes(fmax, lag);
     let mut mem = vec![0u8; 1 << 22];
     let mut a = Arena::new(&mut mem);
-    let mut s = StreamScratch::carve(&mut a, mcfg).unwrap();
+    let mut s = StreamScratch::for_model(&mut a, mcfg).unwrap();
     let mut st = StreamStack::carve(&mut a, cfg, StackKind::Encoder, lag).unwrap();
     let mut full_mem = vec![0u8; duolando_core::vq_encoder::scratch_bytes(mcfg, n_push * hop).unwrap()];
     let mut fa = Arena::new(&mut full_mem);
@@ -147,7 +147,7 @@ fn run_decoder(mcfg: &ModelConfig, vq: &VqW<'static>, which: Output, stream: u8,
     let n_push = pushes(fmax, lag);
     let mut mem = vec![0u8; 1 << 22];
     let mut a = Arena::new(&mut mem);
-    let mut s = StreamScratch::carve(&mut a, mcfg).unwrap();
+    let mut s = StreamScratch::for_model(&mut a, mcfg).unwrap();
     let mut st = StreamStack::carve(&mut a, cfg, StackKind::Decoder, lag).unwrap();
     let mut full_mem = vec![0u8; duolando_core::vq_decoder::scratch_bytes(mcfg, n_push).unwrap()];
     let mut fa = Arena::new(&mut full_mem);
@@ -253,7 +253,7 @@ fn no_tail_at_future_max() {
 /// Carves everything a session would (scratch + one stack per decoder and
 /// encoder) on `a`.
 fn carve_all<'s, A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, lag: usize) {
-    StreamScratch::carve(a, cfg).unwrap();
+    StreamScratch::for_model(a, cfg).unwrap();
     for vq in cfg.parts.iter().chain([&cfg.transl]) {
         for kind in [StackKind::Encoder, StackKind::Decoder] {
             StreamStack::carve(a, vq, kind, lag).unwrap();
@@ -310,7 +310,7 @@ fn errors_not_panics() {
     let (hop, c_in, emb) = (cfg.hop().unwrap() as usize, cfg.in_channels as usize, cfg.emb_width as usize);
     let mut mem = vec![0u8; 1 << 22];
     let mut a = Arena::new(&mut mem);
-    let mut s = StreamScratch::carve(&mut a, &m.cfg).unwrap();
+    let mut s = StreamScratch::for_model(&mut a, &m.cfg).unwrap();
     let lag = 3;
     let mut enc = StreamStack::carve(&mut a, cfg, StackKind::Encoder, lag).unwrap();
     let mut dec = StreamStack::carve(&mut a, cfg, StackKind::Decoder, lag).unwrap();
@@ -351,15 +351,15 @@ fn errors_not_panics() {
     // Too small a scratch: an error before anything changes.
     let mut small = vec![0u8; 4096];
     let mut sa = Arena::new(&mut small);
-    let mut tiny_s = StreamScratch::carve(&mut sa, &duolando_core::presets::duolando_published()).err();
+    let mut tiny_s = StreamScratch::for_model(&mut sa, &duolando_core::presets::duolando_published()).err();
     assert!(tiny_s.take().is_some(), "a 4 KiB arena cannot hold the published scratch");
     let mut p = Planner::new();
-    let _ = StreamScratch::carve(&mut p, &m.cfg).unwrap();
+    let _ = StreamScratch::for_model(&mut p, &m.cfg).unwrap();
     // A stack carved by a Planner holds no memory: errors, no panic.
     let mut pl = Planner::new();
     let mut ghost = StreamStack::carve(&mut pl, cfg, StackKind::Encoder, lag).unwrap();
     assert!(ghost.push(we, &x[..hop * c_in], &mut s).is_err());
-    let mut ghost_s = StreamScratch::carve(&mut pl, &m.cfg).unwrap();
+    let mut ghost_s = StreamScratch::for_model(&mut pl, &m.cfg).unwrap();
     assert!(enc.push(we, &x[..hop * c_in], &mut ghost_s).is_err());
     assert!(enc.output(we, 39, 1, &mut ghost_s, &mut out).is_err(), "a tail needs scratch");
     // reset: back to zero, works again.
@@ -491,7 +491,7 @@ fn other_geometries_equal_the_prefix_stacks() {
 fn published_bytes_and_speed() {
     let p = duolando_published();
     let mut sp = Planner::new();
-    StreamScratch::carve(&mut sp, &p).unwrap();
+    StreamScratch::for_model(&mut sp, &p).unwrap();
     eprintln!("published: shared scratch {} bytes", sp.bytes());
     for lag in [0, 2, 22] {
         for kind in [StackKind::Encoder, StackKind::Decoder] {
@@ -509,7 +509,7 @@ fn published_bytes_and_speed() {
     let (hop, c_in, emb) = (cfg.hop().unwrap() as usize, cfg.in_channels as usize, cfg.emb_width as usize);
     let mut mem = vec![0u8; 64 << 20];
     let mut a = Arena::new(&mut mem);
-    let mut s = StreamScratch::carve(&mut a, &mcfg).unwrap();
+    let mut s = StreamScratch::for_model(&mut a, &mcfg).unwrap();
     let mut rng = Rng(1);
     for lag in [22, 11, 0] {
         let mut enc = StreamStack::carve(&mut a, cfg, StackKind::Encoder, lag).unwrap();

@@ -40,6 +40,19 @@ pub fn conv1d_col_len(c_in: usize, kernel: usize) -> usize {
     CONV_TILE * c_in * kernel
 }
 
+/// One independent sequence of a batched convolution: `t_in` input rows
+/// (the segments' inputs lie one after another in the shared input), `t_out`
+/// output rows (likewise in the shared output) and its own left offset
+/// `pad`. Several streams' new columns run as one GEMM per tile, so the
+/// weights are read once for all of them; each output row is computed
+/// exactly as in a call over its segment alone (row-independent kernels).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConvSeg {
+    pub t_in: usize,
+    pub t_out: usize,
+    pub pad: usize,
+}
+
 /// `Conv1d`: `x` (t_in, c_in), `w` (c_out, c_in*k) viewing PyTorch's
 /// (c_out, c_in, k), `b` (c_out), `y` (t_out, c_out) with `t_out =
 /// y.len() / c_out`. `col`: >= [`conv1d_col_len`] floats (unused when the
@@ -49,26 +62,51 @@ pub fn conv1d(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeom, y:
     if c_out == 0 || c_in == 0 {
         return;
     }
-    let t_in = x.len() / c_in;
-    let t_out = y.len() / c_out;
-    if g.kernel == 1 && g.stride == 1 && g.pad == 0 {
-        let n = t_in.min(t_out);
-        linear(&x[..n * c_in], w, Some(b), &mut y[..n * c_out]);
+    let seg = ConvSeg { t_in: x.len() / c_in, t_out: y.len() / c_out, pad: g.pad };
+    conv1d_segs(x, c_in, w, b, g, &[seg], y, col);
+}
+
+/// [`conv1d`] over several segments at once (`g.pad` unused: each segment
+/// has its own): `x` holds the segments' input rows one after another,
+/// `y` their output rows. im2col tiles of [`CONV_TILE`] rows run across
+/// segment ends, so a tile reads the weights once for every segment in it.
+#[allow(clippy::too_many_arguments)]
+pub fn conv1d_segs(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeom, segs: &[ConvSeg], y: &mut [f32], col: &mut [f32]) {
+    let c_out = w.rows();
+    if c_out == 0 || c_in == 0 {
         return;
     }
+    if g.kernel == 1 && g.stride == 1 && segs.iter().all(|s| s.pad == 0 && s.t_in >= s.t_out) {
+        // Pointwise: output row t of a segment is its input row t. Rows of
+        // a segment past its t_out are skipped; the rest is one GEMM per run.
+        if segs.iter().all(|s| s.t_in == s.t_out) || segs.len() == 1 {
+            let n: usize = segs.iter().map(|s| s.t_out).sum();
+            linear(&x[..n * c_in], w, Some(b), &mut y[..n * c_out]);
+            return;
+        }
+    }
     let ck = c_in * g.kernel;
-    let mut t0 = 0;
-    while t0 < t_out {
-        let rows = CONV_TILE.min(t_out - t0);
-        for r in 0..rows {
-            let t = t0 + r;
-            let row = &mut col[r * ck..(r + 1) * ck];
+    // Tile fill: (segment, its input row offset, first output row of the segment still to do).
+    let (mut si, mut x0, mut t) = (0usize, 0usize, 0usize);
+    let mut y0 = 0;
+    while si < segs.len() {
+        let mut rows = 0;
+        while rows < CONV_TILE && si < segs.len() {
+            let s = segs[si];
+            if t >= s.t_out {
+                x0 += s.t_in;
+                si += 1;
+                t = 0;
+                continue;
+            }
+            let xs = &x[x0 * c_in..(x0 + s.t_in) * c_in];
+            let row = &mut col[rows * ck..(rows + 1) * ck];
             for j in 0..g.kernel {
                 // Input index t*s - pad + j*d, zero outside [0, t_in).
-                let pos = (t * g.stride + j * g.dilation).checked_sub(g.pad);
+                let pos = (t * g.stride + j * g.dilation).checked_sub(s.pad);
                 match pos {
-                    Some(p) if p < t_in => {
-                        let xr = &x[p * c_in..(p + 1) * c_in];
+                    Some(p) if p < s.t_in => {
+                        let xr = &xs[p * c_in..(p + 1) * c_in];
                         for c in 0..c_in {
                             row[c * g.kernel + j] = xr[c];
                         }
@@ -80,9 +118,13 @@ pub fn conv1d(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeom, y:
                     }
                 }
             }
+            rows += 1;
+            t += 1;
         }
-        linear(&col[..rows * ck], w, Some(b), &mut y[t0 * c_out..(t0 + rows) * c_out]);
-        t0 += rows;
+        if rows > 0 {
+            linear(&col[..rows * ck], w, Some(b), &mut y[y0 * c_out..(y0 + rows) * c_out]);
+            y0 += rows;
+        }
     }
 }
 
@@ -95,37 +137,51 @@ pub fn convt_z_len(c_out: usize, kernel: usize) -> usize {
 /// PyTorch's (c_in, c_out, k), `b` (c_out), `y` (t_out, c_out): output row
 /// `t = i*stride - pad + j` receives `x[i] . W[:, o, j]`; rows outside
 /// `[0, t_out)` are dropped. `z`: >= [`convt_z_len`] floats.
-pub fn conv_transpose1d(
-    x: &[f32],
-    w: &Matrix<'_>,
-    b: &[f32],
-    kernel: usize,
-    stride: usize,
-    pad: usize,
-    y: &mut [f32],
-    z: &mut [f32],
-) {
+#[allow(clippy::too_many_arguments)]
+pub fn conv_transpose1d(x: &[f32], w: &Matrix<'_>, b: &[f32], kernel: usize, stride: usize, pad: usize, y: &mut [f32], z: &mut [f32]) {
+    let (c_in, c_out) = (w.rows(), b.len());
+    if c_in == 0 || c_out == 0 || kernel == 0 {
+        return;
+    }
+    let seg = ConvSeg { t_in: x.len() / c_in, t_out: y.len() / c_out, pad };
+    conv_transpose1d_segs(x, w, b, kernel, stride, &[seg], y, z);
+}
+
+/// [`conv_transpose1d`] over several segments at once (inputs one after
+/// another in `x`, outputs in `y`, each with its own `pad`): `z = x W`
+/// tiles of [`CONV_TILE`] input rows run across segment ends.
+#[allow(clippy::too_many_arguments)]
+pub fn conv_transpose1d_segs(x: &[f32], w: &Matrix<'_>, b: &[f32], kernel: usize, stride: usize, segs: &[ConvSeg], y: &mut [f32], z: &mut [f32]) {
     let c_in = w.rows();
     let c_out = b.len();
     if c_in == 0 || c_out == 0 || kernel == 0 {
         return;
     }
-    let t_in = x.len() / c_in;
-    let t_out = y.len() / c_out;
-    for yr in y.chunks_exact_mut(c_out) {
+    let t_in: usize = segs.iter().map(|s| s.t_in).sum();
+    let t_out: usize = segs.iter().map(|s| s.t_out).sum();
+    for yr in y[..t_out * c_out].chunks_exact_mut(c_out) {
         yr.copy_from_slice(b);
     }
     let zk = c_out * kernel;
+    // Input row i0 of the whole input lies in segment `si`, which starts at input row `xs`, output row `ys`.
+    let (mut si, mut xs, mut ys) = (0usize, 0usize, 0usize);
     let mut i0 = 0;
     while i0 < t_in {
         let rows = CONV_TILE.min(t_in - i0);
         linear_xw(&x[i0 * c_in..(i0 + rows) * c_in], w, &mut z[..rows * zk]);
         for r in 0..rows {
-            let i = i0 + r;
+            let ig = i0 + r;
+            while ig >= xs + segs[si].t_in {
+                xs += segs[si].t_in;
+                ys += segs[si].t_out;
+                si += 1;
+            }
+            let s = segs[si];
+            let i = ig - xs;
             let zr = &z[r * zk..(r + 1) * zk];
             for j in 0..kernel {
-                let t = match (i * stride + j).checked_sub(pad) {
-                    Some(t) if t < t_out => t,
+                let t = match (i * stride + j).checked_sub(s.pad) {
+                    Some(t) if t < s.t_out => ys + t,
                     _ => continue,
                 };
                 let yr = &mut y[t * c_out..(t + 1) * c_out];

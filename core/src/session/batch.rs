@@ -10,7 +10,9 @@
 //! once per session. A session's numbers do not depend on the others in
 //! its batch (row-independent kernels, per-session attention), so a
 //! batched session gives bit for bit what it gives alone (tested).
-//! The streaming VQ encoders/decoders and the sampler run per session.
+//! So are the streaming VQ encoders and decoders (`vq_stream`: each conv
+//! unit computed for every session's new columns at once). The sampler
+//! runs per session.
 
 use heapless::Vec;
 
@@ -27,7 +29,8 @@ use crate::session::config::{for_each_live_window, next_window, CacheSchedule, w
 use crate::session::gpt_cache::{GptCache, GptItem};
 use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
 use crate::session::state::State;
-use crate::session::{Session, SessionConfig};
+use crate::session::{vq_stream, Session, SessionConfig};
+use crate::stream_conv::{ScratchNeed, StreamScratch};
 
 /// Most sessions stepped together (and most LAT pushes / GPT windows in
 /// one batched call).
@@ -63,6 +66,10 @@ pub struct StepDims {
     pub music_burst: usize,
     pub ds_max: usize,
     pub logits: usize,
+    /// One VQ stack's conv scratch (the widest of the model); the step
+    /// scratch holds `n` of them, for the encoders/decoders of `n` sessions
+    /// computed together.
+    pub conv: ScratchNeed,
 }
 
 impl StepDims {
@@ -85,6 +92,7 @@ impl StepDims {
             music_burst: music_burst(cfg),
             ds_max: lds.max(mds),
             logits: logits_len(cfg),
+            conv: ScratchNeed::for_model(cfg).ok_or(ArenaError::Overflow)?,
         })
     }
 
@@ -98,6 +106,7 @@ impl StepDims {
             && self.music_burst >= need.music_burst
             && self.ds_max >= need.ds_max
             && self.logits >= need.logits
+            && self.conv.holds(&need.conv)
     }
 }
 
@@ -120,11 +129,13 @@ pub struct StepScratch<'s> {
     pub heads_in: &'s mut [f32],
     /// (n, logits) logits, head-major blocks of (n, head rows).
     pub logits: &'s mut [f32],
+    /// The VQ encoders'/decoders' working memory, for `n` stacks at once.
+    pub conv: StreamScratch<'s>,
 }
 
 impl<'s> StepScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, dims: StepDims) -> Result<Self, ArenaError> {
-        let StepDims { n, rows, keys, c, lat_in, music_burst, ds_max, logits } = dims;
+        let StepDims { n, rows, keys, c, lat_in, music_burst, ds_max, logits, conv } = dims;
         let mul = |x: usize, y: usize| x.checked_mul(y).ok_or(ArenaError::Overflow);
         Ok(StepScratch {
             dims,
@@ -135,6 +146,7 @@ impl<'s> StepScratch<'s> {
             lat_out: a.f32(mul(n, c)?)?,
             heads_in: a.f32(mul(mul(5, n)?, c)?)?,
             logits: a.f32(mul(n, logits)?)?,
+            conv: StreamScratch::carve(a, conv, n)?,
         })
     }
 }
@@ -184,9 +196,10 @@ fn at(i: usize) -> impl Fn(Error) -> BatchError {
 }
 
 /// The sessions `ss` (one model, each fitting `sc`) have accepted their
-/// inputs: runs the leader LATs on their new leader codes, then every step
-/// whose inputs exist.
+/// inputs: runs the encoders on the tokens completed, the leader LATs on
+/// the new leader codes, then every step whose inputs exist.
 pub(super) fn advance(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+    vq_stream::encode(ss, sc)?;
     for p in 0..4 {
         leader_lat(ss, p, sc)?;
     }
@@ -581,6 +594,7 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
         linear(&sc.heads_in[h * nr * c..(h + 1) * nr * c], &model.gpt.heads[h], None, &mut sc.logits[off..off + nr * rows]);
         off += nr * rows;
     }
+    let mut tokens = [[0u32; 5]; MAX_BATCH];
     for (qi, &i) in ready.iter().enumerate() {
         let s = &mut *ss[i];
         let mut pred = [0u32; 5];
@@ -593,7 +607,7 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
             };
             off += nr * rows;
         }
-        s.finish_step(pred).map_err(at(i))?;
+        tokens[qi] = s.finish_step(pred).map_err(at(i))?;
     }
-    Ok(())
+    vq_stream::decode(ss, ready, &tokens[..nr], sc)
 }

@@ -24,22 +24,21 @@ pub mod kv_store;
 pub mod lat_stream;
 pub mod ring;
 mod state;
+mod vq_stream;
 
 pub use batch::{BatchError, StepBatch, StepDims, StepScratch, MAX_BATCH, REPREFILL_CHUNK};
 pub use gpt_cache::KvType;
 pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, CacheSchedule, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
 use crate::arena::{Arena, Planner};
-use crate::config::{ModelConfig, Part, POSE_DIM, ROT_DIM};
+use crate::config::{ModelConfig, POSE_DIM, ROT_DIM};
 use crate::error::{check_len, Buffer, Error};
 use crate::input;
 use crate::model::Model;
-use crate::motion::{denormalise, gather_part, normalise, scatter_part};
-use crate::quantizer::nearest;
+use crate::motion::{denormalise, normalise};
 use crate::sampler::Rng;
-use crate::stream_conv::StackW;
 use batch::Append;
-use state::{State, FRAME_WIDTH};
+use state::State;
 
 /// Relative translation scale of the translation VQ-VAE (R's `* 20`).
 const TRANSL_SCALE: f32 = 20.0;
@@ -220,7 +219,7 @@ impl<'a> Session<'a> {
         self.root0 = [0.0; 3];
         let seed = self.seed;
         self.st.toks.push(&seed)?;
-        self.feed_decoders(seed)
+        self.with_own_scratch(|ss, sc| vq_stream::decode(ss, &[0], &[seed], sc))
     }
 
     pub fn config(&self) -> &SessionConfig {
@@ -351,8 +350,8 @@ impl<'a> Session<'a> {
         let Some(first) = sessions.first() else { return Ok(()) };
         let model = first.model;
         for (i, s) in sessions.iter().enumerate() {
-            let need = StepDims::new(&s.model.cfg, &s.cfg, 1).map_err(|e| (i, Error::Arena(e)))?;
-            if !core::ptr::eq(s.model, model) || !batch.sc.dims.holds(&need) {
+            // The session's own scratch was carved for its needs (`StepDims::new(cfg, s.cfg, 1)`).
+            if !core::ptr::eq(s.model, model) || !batch.sc.dims.holds(&s.sc.dims) {
                 return Err((i, Error::State));
             }
             s.check_leader_frame(frames[i]).map_err(|e| (i, e))?;
@@ -388,7 +387,8 @@ impl<'a> Session<'a> {
     }
 
     /// Takes a checked leader frame: normalised into the token being
-    /// filled; a complete token runs the encoders (`self.code`).
+    /// filled (a complete token runs the encoders in the step that follows:
+    /// `vq_stream::encode`).
     fn accept_leader_frame(&mut self, pos3d: &[f32]) -> Result<(), Error> {
         if self.frames == 0 {
             self.root0 = [pos3d[0], pos3d[1], pos3d[2]];
@@ -398,48 +398,13 @@ impl<'a> Session<'a> {
         let slot = self.frames % hop;
         normalise(pos3d, &mut self.st.block[slot * POSE_DIM..(slot + 1) * POSE_DIM]);
         self.frames += 1;
-        if slot + 1 == hop {
-            self.encode_token()?;
-        }
-        Ok(())
-    }
-
-    /// The `hop` buffered frames are complete: feed the encoders, and emit
-    /// leader code `q = tokens - 1 - e` (for the leader LATs, `self.code`).
-    fn encode_token(&mut self) -> Result<(), Error> {
-        let model = self.model;
-        let hop = model.cfg.hop();
-        let st = &mut self.st;
-        // The pelvis channel is zeroed for encoding (R's leader input).
-        for f in 0..hop {
-            st.block[f * POSE_DIM..f * POSE_DIM + 3].fill(0.0);
-        }
-        for (p, part) in Part::ALL.iter().enumerate() {
-            let vq = &model.parts[p];
-            let w = vq.cfg.in_channels as usize;
-            let x = &mut st.part_in[..hop * w];
-            gather_part(*part, &st.block[..hop * POSE_DIM], x);
-            st.enc[p].push(StackW::Encoder(&vq.encoder), x, &mut st.conv)?;
-        }
-        let tokens = self.frames / hop;
-        let Some(q) = tokens.checked_sub(1 + self.cfg.enc_future as usize) else { return Ok(()) };
-        let mut code = [0u32; 4];
-        for (p, c) in code.iter_mut().enumerate() {
-            let vq = &model.parts[p];
-            let emb = vq.cfg.emb_width as usize;
-            let feat = &mut st.feat[..emb];
-            st.enc[p].output(StackW::Encoder(&vq.encoder), q, 1, &mut st.conv, feat)?;
-            *c = nearest(&vq.codebook, &st.kk[p * st.kk_stride..(p + 1) * st.kk_stride], feat);
-        }
-        self.codes += 1;
-        self.last_code = Some(code);
-        self.code = Some(code);
         Ok(())
     }
 
     /// Ends step `k` with the sampler's choice `pred`: appends the token
-    /// (or the forced one) to the history and feeds the decoders.
-    fn finish_step(&mut self, pred: [u32; 5]) -> Result<(), Error> {
+    /// (or the forced one) to the history and returns it (for the decoders:
+    /// `vq_stream::decode`).
+    fn finish_step(&mut self, pred: [u32; 5]) -> Result<[u32; 5], Error> {
         let k = self.k;
         let m = self.model.cfg.gpt.block_size as usize - 1;
         let c = window_context(k, m, self.cfg.shift as usize);
@@ -455,57 +420,7 @@ impl<'a> Session<'a> {
         self.last_step = Some(StepReport { k, context: c, window_lo: k + 1 - c, rows_computed: self.rows_computed, pred, token });
         self.rows_computed = 0;
         self.k += 1;
-        self.feed_decoders(token)
-    }
-
-    /// Feeds follower token `token` to the 9 decoders; once token `q + d`
-    /// is in, the `hop` frames of token `q` are final and wait for pulling.
-    fn feed_decoders(&mut self, token: [u32; 5]) -> Result<(), Error> {
-        let model = self.model;
-        let hop = model.cfg.hop();
-        let st = &mut self.st;
-        for p in 0..5 {
-            let vq = if p < 4 { &model.parts[p] } else { &model.transl };
-            let emb = vq.cfg.emb_width as usize;
-            let z = &mut st.feat[..emb];
-            crate::quantizer::dequantise(&vq.codebook, &token[p..p + 1], p as u8, z)?;
-            st.dec_pos[p].push(StackW::Decoder(&vq.pos), z, &mut st.conv)?;
-            if let (Some(rot), Some(stack)) = (vq.rot.as_ref(), st.dec_rot.get_mut(p).and_then(|s| s.as_mut())) {
-                stack.push(StackW::Decoder(rot), z, &mut st.conv)?;
-            }
-        }
-        self.dec_fed += 1;
-        let Some(q) = self.dec_fed.checked_sub(1 + self.cfg.dec_future as usize) else { return Ok(()) };
-        // (hop, FRAME_WIDTH) rows: normalised pose (165) | rotations (495) | translation (3).
-        let frames = &mut st.frames[..hop * FRAME_WIDTH];
-        frames.fill(0.0);
-        for (p, part) in Part::ALL.iter().enumerate() {
-            let vq = &model.parts[p];
-            let w = vq.cfg.in_channels as usize;
-            let out = &mut st.dec_out[..hop * w];
-            st.dec_pos[p].output(StackW::Decoder(&vq.pos), hop * q, hop, &mut st.conv, out)?;
-            for f in 0..hop {
-                scatter_part(*part, 3, &out[f * w..(f + 1) * w], &mut frames[f * FRAME_WIDTH..f * FRAME_WIDTH + POSE_DIM]);
-            }
-            if let (Some(rot), Some(stack)) = (vq.rot.as_ref(), st.dec_rot[p].as_mut()) {
-                let r = vq.cfg.rot_channels as usize;
-                let out = &mut st.dec_out[..hop * r];
-                stack.output(StackW::Decoder(rot), hop * q, hop, &mut st.conv, out)?;
-                for f in 0..hop {
-                    let dst = &mut frames[f * FRAME_WIDTH + POSE_DIM..f * FRAME_WIDTH + POSE_DIM + ROT_DIM];
-                    scatter_part(*part, 9, &out[f * r..(f + 1) * r], dst);
-                }
-            }
-        }
-        let tr = &mut st.dec_out[..hop * 3];
-        st.dec_pos[4].output(StackW::Decoder(&model.transl.pos), hop * q, hop, &mut st.conv, tr)?;
-        for f in 0..hop {
-            let base = f * FRAME_WIDTH + POSE_DIM + ROT_DIM;
-            frames[base..base + 3].copy_from_slice(&tr[f * 3..f * 3 + 3]);
-            st.pending.push(&frames[f * FRAME_WIDTH..(f + 1) * FRAME_WIDTH])?;
-        }
-        self.decoded += hop;
-        Ok(())
+        Ok(token)
     }
 
     /// The next follower frame, if it is ready (decoded, and its leader

@@ -13,7 +13,7 @@ use crate::session::gpt_cache::GptCache;
 use crate::session::batch::music_burst;
 use crate::session::lat_stream::LatStream;
 use crate::session::ring::{RowRing, TokenRing};
-use crate::stream_conv::{StackKind, StreamScratch, StreamStack};
+use crate::stream_conv::{StackKind, StreamStack};
 
 /// Floats of one decoded follower frame waiting to be pulled:
 /// normalised pose (165) | rotation matrices (495) | translation (3).
@@ -61,8 +61,6 @@ pub struct State<'s> {
     pub pending: RowRing<'s>,
     /// (cap, 3) leader roots of frames not yet pulled.
     pub roots: RowRing<'s>,
-    // --- working memory of the VQ encoders/decoders (the step's own is `StepScratch`) ---
-    pub conv: StreamScratch<'s>,
 }
 
 fn widths(cfg: &ModelConfig) -> (usize, usize, usize, usize) {
@@ -157,7 +155,6 @@ impl<'s> State<'s> {
             frames: a.f32(hop.checked_mul(FRAME_WIDTH).ok_or(ov())?)?,
             pending: RowRing::carve(a, pending_cap, FRAME_WIDTH)?,
             roots: RowRing::carve(a, roots_cap, 3)?,
-            conv: StreamScratch::carve(a, cfg)?,
         })
     }
 

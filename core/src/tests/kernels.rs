@@ -156,6 +156,80 @@ fn conv_transpose_matches_naive() {
     }
 }
 
+/// The segmented convolutions (several streams' columns in one GEMM per
+/// tile) give each segment bit for bit what a call over that segment alone
+/// gives: f32, f16 and int8 weights, segments of every length around the
+/// tile size (tiles crossing segment ends), empty segments, inputs longer
+/// than the outputs need, and per-segment offsets.
+#[test]
+fn segmented_convs_equal_one_call_per_segment() {
+    use super::simd::{f16_bits, q8_bytes};
+    let mut r = Lcg(11);
+    let (ci, co) = (32usize, 40usize);
+    let lists: [&[(usize, usize, usize)]; 5] = [
+        &[(5, 3, 1)],
+        &[(3, 2, 1), (0, 0, 0), (7, 5, 2), (1, 1, 0)],
+        &[(40, 33, 1), (31, 30, 3), (2, 2, 0)],
+        &[(33, 32, 0), (33, 32, 0), (1, 1, 1), (64, 40, 2)],
+        &[(12, 12, 0), (12, 12, 0), (12, 12, 0)],
+    ];
+    let geoms = [
+        ConvGeom { kernel: 3, stride: 1, pad: 0, dilation: 3 },
+        ConvGeom { kernel: 4, stride: 2, pad: 0, dilation: 1 },
+        ConvGeom { kernel: 1, stride: 1, pad: 0, dilation: 1 },
+    ];
+    for g in geoms {
+        let ck = ci * g.kernel;
+        let (w, b) = (r.vec(co * ck), r.vec(co));
+        let (h, q) = (f16_bits(&w), q8_bytes(&w));
+        let mats = [mat(&w, co, ck), Matrix::F16(F16Rows::new(&h, co, ck).unwrap()), Matrix::Q8(Q8Rows::new(&q, co, ck).unwrap())];
+        for m in &mats {
+            for list in lists {
+                // (t_in, t_out, pad); a pointwise conv reads input row t for output row t.
+                let segs: Vec<ConvSeg> = list.iter().map(|&(ti, to, p)| if g.kernel == 1 { ConvSeg { t_in: ti, t_out: to.min(ti), pad: 0 } } else { ConvSeg { t_in: ti, t_out: to, pad: p } }).collect();
+                let t_in: usize = segs.iter().map(|s| s.t_in).sum();
+                let t_out: usize = segs.iter().map(|s| s.t_out).sum();
+                let x = r.vec(t_in * ci);
+                let mut col = vec![0.0; conv1d_col_len(ci, g.kernel)];
+                let mut y = vec![f32::NAN; t_out * co];
+                conv1d_segs(&x, ci, m, &b, g, &segs, &mut y, &mut col);
+                let (mut x0, mut y0) = (0, 0);
+                for s in &segs {
+                    let mut alone = vec![f32::NAN; s.t_out * co];
+                    conv1d(&x[x0 * ci..(x0 + s.t_in) * ci], ci, m, &b, ConvGeom { pad: s.pad, ..g }, &mut alone, &mut col);
+                    assert!(alone.iter().zip(&y[y0 * co..(y0 + s.t_out) * co]).all(|(a, b)| a.to_bits() == b.to_bits()), "conv1d {g:?} {segs:?}: segment {s:?}");
+                    x0 += s.t_in;
+                    y0 += s.t_out;
+                }
+            }
+        }
+    }
+    // Transposed: w (c_in, c_out * k).
+    let (k, st) = (4usize, 2usize);
+    let (w, b) = (r.vec(ci * co * k), r.vec(co));
+    let (h, q) = (f16_bits(&w), q8_bytes(&w));
+    let mats = [mat(&w, ci, co * k), Matrix::F16(F16Rows::new(&h, ci, co * k).unwrap()), Matrix::Q8(Q8Rows::new(&q, ci, co * k).unwrap())];
+    for m in &mats {
+        for list in lists {
+            let segs: Vec<ConvSeg> = list.iter().map(|&(ti, _, p)| ConvSeg { t_in: ti, t_out: (ti * st).saturating_sub(p), pad: p }).collect();
+            let t_in: usize = segs.iter().map(|s| s.t_in).sum();
+            let t_out: usize = segs.iter().map(|s| s.t_out).sum();
+            let x = r.vec(t_in * ci);
+            let mut z = vec![0.0; convt_z_len(co, k)];
+            let mut y = vec![f32::NAN; t_out * co];
+            conv_transpose1d_segs(&x, m, &b, k, st, &segs, &mut y, &mut z);
+            let (mut x0, mut y0) = (0, 0);
+            for s in &segs {
+                let mut alone = vec![f32::NAN; s.t_out * co];
+                conv_transpose1d(&x[x0 * ci..(x0 + s.t_in) * ci], m, &b, k, st, s.pad, &mut alone, &mut z);
+                assert!(alone.iter().zip(&y[y0 * co..(y0 + s.t_out) * co]).all(|(a, b)| a.to_bits() == b.to_bits()), "conv_transpose1d {segs:?}: segment {s:?}");
+                x0 += s.t_in;
+                y0 += s.t_out;
+            }
+        }
+    }
+}
+
 fn naive_attention(q: &[f32], k: &[f32], v: &[f32], c: usize, nh: usize, allowed: &dyn Fn(usize, usize) -> bool) -> Vec<f64> {
     let hd = c / nh;
     let (nq, nk) = (q.len() / c, k.len() / c);

@@ -40,12 +40,12 @@ fn lengths(r: &mut Rng) -> Vec<usize> {
     v
 }
 
-fn f16_bits(x: &[f32]) -> Vec<u16> {
+pub(super) fn f16_bits(x: &[f32]) -> Vec<u16> {
     x.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()
 }
 
 /// Quantises `w` (len multiple of 32) into stored Q8Block32 bytes, like the converter.
-fn q8_bytes(w: &[f32]) -> Vec<u8> {
+pub(super) fn q8_bytes(w: &[f32]) -> Vec<u8> {
     let mut out = Vec::new();
     for b in w.chunks_exact(Q8_BLOCK) {
         let amax = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
