@@ -145,3 +145,41 @@ impl<'a> Carve<'a> for Planner {
         Ok(&mut [])
     }
 }
+
+/// Carves consecutive pieces of one f32 pool carved earlier, NOT zeroed:
+/// for working memory that the phases of a step use in turn (a piece's
+/// contents are whatever the previous phase left; its users write before
+/// they read). Pieces are rounded like [`Arena`]'s, so a pool of
+/// `Planner::bytes() / 4` floats fits the same carve function. f32 only.
+pub struct Split<'a> {
+    rest: &'a mut [f32],
+}
+
+impl<'a> Split<'a> {
+    pub fn new(pool: &'a mut [f32]) -> Self {
+        Split { rest: pool }
+    }
+
+    /// Floats of a pool that holds what `plan` counted.
+    pub fn floats_for(plan: &Planner) -> usize {
+        plan.bytes() / 4
+    }
+}
+
+impl<'a> Carve<'a> for Split<'a> {
+    fn f32(&mut self, n: usize) -> Result<&'a mut [f32], ArenaError> {
+        let take = rounded(n, 4)? / 4;
+        if take > self.rest.len() {
+            return Err(ArenaError::OutOfMemory { needed: take * 4, available: self.rest.len() * 4 });
+        }
+        let (head, tail) = core::mem::take(&mut self.rest).split_at_mut(take);
+        self.rest = tail;
+        Ok(&mut head[..n])
+    }
+    fn u32(&mut self, n: usize) -> Result<&'a mut [u32], ArenaError> {
+        Err(ArenaError::OutOfMemory { needed: rounded(n, 4)?, available: 0 })
+    }
+    fn u16(&mut self, n: usize) -> Result<&'a mut [u16], ArenaError> {
+        Err(ArenaError::OutOfMemory { needed: rounded(n, 2)?, available: 0 })
+    }
+}

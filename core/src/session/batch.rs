@@ -16,7 +16,7 @@
 
 use heapless::Vec;
 
-use crate::arena::{ArenaError, Carve};
+use crate::arena::{ArenaError, Carve, Planner, Split};
 use crate::block::BlockScratch;
 use crate::config::ModelConfig;
 use crate::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
@@ -119,7 +119,10 @@ pub struct StepScratch<'s> {
     /// (rows, C) GPT window rows of the items of one batched append,
     /// position-major per item.
     pub x: &'s mut [f32],
-    pub blk: BlockScratch<'s>,
+    /// The block scratch of the LAT and GPT phases and the conv scratch of
+    /// the VQ encoder/decoder phases, in turn ([`block_scratch`],
+    /// [`conv_scratch`]): the larger of the two, not their sum.
+    pub pool: &'s mut [f32],
     pub lat: LatStepScratch<'s>,
     /// (n, lat_in) LAT inputs (a session's positions of one push side by
     /// side); (n, C) LAT outputs.
@@ -129,26 +132,45 @@ pub struct StepScratch<'s> {
     pub heads_in: &'s mut [f32],
     /// (n, logits) logits, head-major blocks of (n, head rows).
     pub logits: &'s mut [f32],
-    /// The VQ encoders'/decoders' working memory, for `n` stacks at once.
-    pub conv: StreamScratch<'s>,
 }
 
 impl<'s> StepScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, dims: StepDims) -> Result<Self, ArenaError> {
-        let StepDims { n, rows, keys, c, lat_in, music_burst, ds_max, logits, conv } = dims;
+        let StepDims { n, rows, keys: _, c, lat_in, music_burst, ds_max, logits, conv: _ } = dims;
         let mul = |x: usize, y: usize| x.checked_mul(y).ok_or(ArenaError::Overflow);
         Ok(StepScratch {
             dims,
             x: a.f32(mul(rows, c)?)?,
-            blk: BlockScratch::carve_keys(a, rows, keys, c)?,
+            pool: a.f32(pool_floats(&dims)?)?,
             lat: LatStepScratch::carve(a, c, ds_max, n, mul(n, music_burst)?)?,
             lat_in: a.f32(mul(n, lat_in)?)?,
             lat_out: a.f32(mul(n, c)?)?,
             heads_in: a.f32(mul(mul(5, n)?, c)?)?,
             logits: a.f32(mul(n, logits)?)?,
-            conv: StreamScratch::carve(a, conv, n)?,
         })
     }
+}
+
+/// Floats of the shared pool of a [`StepScratch`]: the larger of the block
+/// scratch and the conv scratch for `dims`.
+fn pool_floats(d: &StepDims) -> Result<usize, ArenaError> {
+    let mut blk = Planner::new();
+    BlockScratch::carve_keys(&mut blk, d.rows, d.keys, d.c)?;
+    let mut conv = Planner::new();
+    StreamScratch::carve(&mut conv, d.conv, d.n)?;
+    Ok(Split::floats_for(&blk).max(Split::floats_for(&conv)))
+}
+
+/// The block scratch (LAT pushes, GPT appends) over the pool of a
+/// [`StepScratch`] with dims `d`.
+pub fn block_scratch<'x>(pool: &'x mut [f32], d: &StepDims) -> Result<BlockScratch<'x>, Error> {
+    Ok(BlockScratch::carve_keys(&mut Split::new(pool), d.rows, d.keys, d.c)?)
+}
+
+/// The conv scratch of the streaming VQ stacks of `d.n` sessions over the
+/// pool of a [`StepScratch`] with dims `d`.
+pub fn conv_scratch<'x>(pool: &'x mut [f32], d: &StepDims) -> Result<StreamScratch<'x>, Error> {
+    Ok(StreamScratch::carve(&mut Split::new(pool), d.conv, d.n)?)
 }
 
 /// Scratch for stepping up to `n` sessions of one model together
@@ -286,7 +308,7 @@ fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: 
             }
         }
         let total: usize = counts.iter().sum();
-        LatStream::push_many(w, &mut lats, counts, &sc.lat_in[..total * n_in], &mut sc.lat, &mut sc.blk, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
+        LatStream::push_many(w, &mut lats, counts, &sc.lat_in[..total * n_in], &mut sc.lat, &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
     }
     for (j, &i) in chunk.iter().enumerate() {
         if produced[j] {
@@ -566,7 +588,7 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
                         ci += 1;
                     }
                 }
-                GptCache::append_many(&model.gpt, g.n_head as usize, &mut items, &mut sc.x[..total * c], &mut sc.blk).map_err(at(first))?;
+                GptCache::append_many(&model.gpt, g.n_head as usize, &mut items, &mut sc.x[..total * c], &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?).map_err(at(first))?;
             }
             // Advance the cursors; the follower rows of the output items, to the heads' inputs.
             let mut j = 0;

@@ -13,7 +13,7 @@ use crate::config::{Part, POSE_DIM, ROT_DIM};
 use crate::error::Error;
 use crate::motion::{gather_part, scatter_part};
 use crate::quantizer::{dequantise, nearest};
-use crate::session::batch::{BatchError, StepScratch, MAX_BATCH};
+use crate::session::batch::{conv_scratch, BatchError, StepScratch, MAX_BATCH};
 use crate::session::state::{State, FRAME_WIDTH};
 use crate::session::Session;
 use crate::stream_conv::{StackW, StreamStack};
@@ -63,6 +63,7 @@ pub(super) fn encode(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> R
     let hop = model.cfg.hop();
     by_chunks(&due, sc.dims.n, |chunk, _| {
         let g = chunk[0];
+        let conv = &mut conv_scratch(sc.pool, &sc.dims).map_err(at(g))?;
         {
             let mut sts = states(ss, chunk)?;
             // The pelvis channel is zeroed for encoding (R's leader input).
@@ -82,7 +83,7 @@ pub(super) fn encode(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> R
                     stacks.push(&mut enc[p]).map_err(|_| (g, Error::State))?;
                     cols.push(&part_in[..hop * w]).map_err(|_| (g, Error::State))?;
                 }
-                StreamStack::push_many(&mut stacks, StackW::Encoder(&vq.encoder), &cols, &mut sc.conv).map_err(at(g))?;
+                StreamStack::push_many(&mut stacks, StackW::Encoder(&vq.encoder), &cols, conv).map_err(at(g))?;
             }
         }
         // Sessions whose code `q = tokens - 1 - e` is now computable.
@@ -111,7 +112,7 @@ pub(super) fn encode(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> R
                     stacks.push(&enc[p]).map_err(|_| (g, Error::State))?;
                     outs.push(&mut feat[..emb]).map_err(|_| (g, Error::State))?;
                 }
-                StreamStack::output_many(&stacks, StackW::Encoder(&vq.encoder), &qs, 1, &mut sc.conv, &mut outs).map_err(at(ready[0]))?;
+                StreamStack::output_many(&stacks, StackW::Encoder(&vq.encoder), &qs, 1, conv, &mut outs).map_err(at(ready[0]))?;
                 drop((stacks, outs));
                 for (j, st) in sts.iter().enumerate() {
                     codes[j][p] = nearest(&vq.codebook, &st.kk[p * st.kk_stride..(p + 1) * st.kk_stride], &st.feat[..emb]);
@@ -140,6 +141,7 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], idx: &[usize], tokens: &[[u32;
     let hop = model.cfg.hop();
     by_chunks(idx, sc.dims.n, |chunk, off| {
         let g = chunk[0];
+        let conv = &mut conv_scratch(sc.pool, &sc.dims).map_err(at(g))?;
         let toks = &tokens[off..off + chunk.len()];
         {
             let mut sts = states(ss, chunk)?;
@@ -161,9 +163,9 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], idx: &[usize], tokens: &[[u32;
                     }
                     cols.push(&feat[..emb]).map_err(|_| (g, Error::State))?;
                 }
-                StreamStack::push_many(&mut stacks, StackW::Decoder(&vq.pos), &cols, &mut sc.conv).map_err(at(g))?;
+                StreamStack::push_many(&mut stacks, StackW::Decoder(&vq.pos), &cols, conv).map_err(at(g))?;
                 if let Some(rot) = vq.rot.as_ref() {
-                    StreamStack::push_many(&mut rots, StackW::Decoder(rot), &cols, &mut sc.conv).map_err(at(g))?;
+                    StreamStack::push_many(&mut rots, StackW::Decoder(rot), &cols, conv).map_err(at(g))?;
                 }
             }
         }
@@ -189,7 +191,7 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], idx: &[usize], tokens: &[[u32;
         for (p, part) in Part::ALL.iter().enumerate() {
             let vq = &model.parts[p];
             let w = vq.cfg.in_channels as usize;
-            decoder_frames(&mut sts, p, false, StackW::Decoder(&vq.pos), &ts, hop, hop * w, &mut sc.conv).map_err(at(ready[0]))?;
+            decoder_frames(&mut sts, p, false, StackW::Decoder(&vq.pos), &ts, hop, hop * w, conv).map_err(at(ready[0]))?;
             for st in sts.iter_mut() {
                 for f in 0..hop {
                     scatter_part(*part, 3, &st.dec_out[f * w..(f + 1) * w], &mut st.frames[f * FRAME_WIDTH..f * FRAME_WIDTH + POSE_DIM]);
@@ -197,7 +199,7 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], idx: &[usize], tokens: &[[u32;
             }
             if let Some(rot) = vq.rot.as_ref() {
                 let r = vq.cfg.rot_channels as usize;
-                decoder_frames(&mut sts, p, true, StackW::Decoder(rot), &ts, hop, hop * r, &mut sc.conv).map_err(at(ready[0]))?;
+                decoder_frames(&mut sts, p, true, StackW::Decoder(rot), &ts, hop, hop * r, conv).map_err(at(ready[0]))?;
                 for st in sts.iter_mut() {
                     for f in 0..hop {
                         let dst = &mut st.frames[f * FRAME_WIDTH + POSE_DIM..f * FRAME_WIDTH + POSE_DIM + ROT_DIM];
@@ -206,7 +208,7 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], idx: &[usize], tokens: &[[u32;
                 }
             }
         }
-        decoder_frames(&mut sts, 4, false, StackW::Decoder(&model.transl.pos), &ts, hop, hop * 3, &mut sc.conv).map_err(at(ready[0]))?;
+        decoder_frames(&mut sts, 4, false, StackW::Decoder(&model.transl.pos), &ts, hop, hop * 3, conv).map_err(at(ready[0]))?;
         for (st, &i) in sts.iter_mut().zip(ready.iter()) {
             let State { frames, dec_out, pending, .. } = &mut **st;
             for f in 0..hop {

@@ -1,4 +1,4 @@
-use crate::arena::{Arena, ArenaError, Carve, Planner, ALIGN};
+use crate::arena::{Arena, ArenaError, Carve, Planner, Split, ALIGN};
 
 fn carve<'a, C: Carve<'a>>(c: &mut C) -> Result<(&'a mut [f32], &'a mut [u32], &'a mut [f32]), ArenaError> {
     Ok((c.f32(3)?, c.u32(17)?, c.f32(100)?))
@@ -31,4 +31,29 @@ fn planner_matches_arena_and_fails_one_byte_short() {
     assert!(matches!(carve(&mut a), Err(ArenaError::OutOfMemory { .. })));
     let mut a = Arena::new(&mut buf[..]);
     assert_eq!(a.f32(usize::MAX / 2).unwrap_err(), ArenaError::Overflow);
+}
+
+/// A `Split` pool of `floats_for(plan)` floats fits what the plan counted
+/// (pieces rounded like the arena's, so an aligned pool gives aligned
+/// pieces), one piece less of room fails with `OutOfMemory`, pieces do not
+/// zero (a phase sees the previous phase's values) and only f32 is handed out.
+#[test]
+fn split_pool_fits_its_plan_and_does_not_zero() {
+    let pieces = |c: &mut Split<'_>| -> Result<usize, ArenaError> {
+        let (a, b, d) = (c.f32(3)?, c.f32(100)?, c.f32(16)?);
+        assert_eq!((a.len(), b.len(), d.len()), (3, 100, 16));
+        assert_eq!(b.as_ptr() as usize - a.as_ptr() as usize, 64);
+        assert_eq!(d.as_ptr() as usize - b.as_ptr() as usize, 448);
+        Ok(d[0].to_bits() as usize)
+    };
+    let mut p = Planner::new();
+    for n in [3, 100, 16] {
+        p.f32(n).unwrap();
+    }
+    let n = Split::floats_for(&p);
+    assert_eq!(n, (64 + 448 + 64) / 4);
+    let mut pool = vec![7.0f32; n];
+    assert_eq!(pieces(&mut Split::new(&mut pool)).unwrap(), 7.0f32.to_bits() as usize);
+    assert!(matches!(pieces(&mut Split::new(&mut pool[..n - 1])), Err(ArenaError::OutOfMemory { .. })));
+    assert!(Split::new(&mut pool).u32(1).is_err() && Split::new(&mut pool).u16(1).is_err());
 }
