@@ -58,11 +58,8 @@ pub struct ConvSeg {
 /// y.len() / c_out`. `col`: >= [`conv1d_col_len`] floats (unused when the
 /// conv is pointwise). Callers check lengths.
 pub fn conv1d(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeom, y: &mut [f32], col: &mut [f32]) {
-    let c_out = w.rows();
-    if c_out == 0 || c_in == 0 {
-        return;
-    }
-    let seg = ConvSeg { t_in: x.len() / c_in, t_out: y.len() / c_out, pad: g.pad };
+    let rows = |len: usize, c: usize| len.checked_div(c).unwrap_or(0);
+    let seg = ConvSeg { t_in: rows(x.len(), c_in), t_out: rows(y.len(), w.rows()), pad: g.pad };
     conv1d_segs(x, c_in, w, b, g, &[seg], y, col);
 }
 
@@ -76,14 +73,14 @@ pub fn conv1d_segs(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeo
     if c_out == 0 || c_in == 0 {
         return;
     }
-    if g.kernel == 1 && g.stride == 1 && segs.iter().all(|s| s.pad == 0 && s.t_in >= s.t_out) {
-        // Pointwise: output row t of a segment is its input row t. Rows of
-        // a segment past its t_out are skipped; the rest is one GEMM per run.
-        if segs.iter().all(|s| s.t_in == s.t_out) || segs.len() == 1 {
-            let n: usize = segs.iter().map(|s| s.t_out).sum();
-            linear(&x[..n * c_in], w, Some(b), &mut y[..n * c_out]);
-            return;
-        }
+    // Pointwise, and the output rows are the input rows (a lone segment
+    // may have spare input rows at its end): one GEMM, no im2col.
+    let pointwise = g.kernel == 1 && g.stride == 1 && segs.iter().all(|s| s.pad == 0);
+    let in_place = segs.iter().all(|s| s.t_in == s.t_out) || matches!(segs, [s] if s.t_in >= s.t_out);
+    if pointwise && in_place {
+        let n: usize = segs.iter().map(|s| s.t_out).sum();
+        linear(&x[..n * c_in], w, Some(b), &mut y[..n * c_out]);
+        return;
     }
     let ck = c_in * g.kernel;
     // Tile fill: (segment, its input row offset, first output row of the segment still to do).
@@ -139,11 +136,8 @@ pub fn convt_z_len(c_out: usize, kernel: usize) -> usize {
 /// `[0, t_out)` are dropped. `z`: >= [`convt_z_len`] floats.
 #[allow(clippy::too_many_arguments)]
 pub fn conv_transpose1d(x: &[f32], w: &Matrix<'_>, b: &[f32], kernel: usize, stride: usize, pad: usize, y: &mut [f32], z: &mut [f32]) {
-    let (c_in, c_out) = (w.rows(), b.len());
-    if c_in == 0 || c_out == 0 || kernel == 0 {
-        return;
-    }
-    let seg = ConvSeg { t_in: x.len() / c_in, t_out: y.len() / c_out, pad };
+    let rows = |len: usize, c: usize| len.checked_div(c).unwrap_or(0);
+    let seg = ConvSeg { t_in: rows(x.len(), w.rows()), t_out: rows(y.len(), b.len()), pad };
     conv_transpose1d_segs(x, w, b, kernel, stride, &[seg], y, z);
 }
 

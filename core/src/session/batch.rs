@@ -213,7 +213,7 @@ fn batch_dims(cfg: &ModelConfig, sc: &SessionConfig, n: usize) -> Result<StepDim
 /// Index of the session an error belongs to.
 pub type BatchError = (usize, Error);
 
-fn at(i: usize) -> impl Fn(Error) -> BatchError {
+pub(super) fn at(i: usize) -> impl Fn(Error) -> BatchError {
     move |e| (i, e)
 }
 
@@ -231,8 +231,24 @@ pub(super) fn advance(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> 
     run_steps(ss, sc)
 }
 
+/// The states of sessions `chunk` (increasing indices into `ss`), in order.
+pub(super) fn states<'x, 'a>(ss: &'x mut [&mut Session<'a>], chunk: &[usize]) -> Result<Vec<&'x mut State<'a>, MAX_BATCH>, BatchError> {
+    let mut v = Vec::new();
+    let mut ci = 0;
+    for (i, s) in ss.iter_mut().enumerate() {
+        if ci < chunk.len() && chunk[ci] == i {
+            v.push(&mut s.st).map_err(|_| (i, Error::State))?;
+            ci += 1;
+        }
+    }
+    if ci != chunk.len() {
+        return Err((chunk.first().copied().unwrap_or(0), Error::State));
+    }
+    Ok(v)
+}
+
 /// Splits `0..ss.len()` filtered by `want` into chunks of at most `n`.
-fn for_chunks(ss: &mut [&mut Session<'_>], n: usize, want: impl Fn(&Session<'_>) -> bool, mut f: impl FnMut(&mut [&mut Session<'_>], &[usize]) -> Result<(), BatchError>) -> Result<(), BatchError> {
+pub(super) fn for_chunks(ss: &mut [&mut Session<'_>], n: usize, want: impl Fn(&Session<'_>) -> bool, mut f: impl FnMut(&mut [&mut Session<'_>], &[usize]) -> Result<(), BatchError>) -> Result<(), BatchError> {
     let mut chunk: Vec<usize, MAX_BATCH> = Vec::new();
     let cap = n.clamp(1, MAX_BATCH);
     for i in 0..ss.len() {
@@ -295,17 +311,13 @@ fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: 
     let mut produced: Vec<bool, MAX_BATCH> = Vec::new();
     {
         let mut lats: Vec<&mut LatStream<'_>, MAX_BATCH> = Vec::new();
-        let mut ci = 0;
-        for (i, s) in ss.iter_mut().enumerate() {
-            if ci < n && chunk[ci] == i {
-                let lat = match which {
-                    Lat::Music => &mut s.st.music_lat,
-                    Lat::Leader(p) => s.st.leader_lat.get_mut(p).ok_or((i, Error::State))?,
-                };
-                lats.push(lat).map_err(|_| (i, Error::State))?;
-                produced.push(false).map_err(|_| (i, Error::State))?;
-                ci += 1;
-            }
+        for st in states(ss, chunk)? {
+            let lat = match which {
+                Lat::Music => &mut st.music_lat,
+                Lat::Leader(p) => st.leader_lat.get_mut(p).ok_or((first, Error::State))?,
+            };
+            lats.push(lat).map_err(|_| (first, Error::State))?;
+            produced.push(false).map_err(|_| (first, Error::State))?;
         }
         let total: usize = counts.iter().sum();
         LatStream::push_many(w, &mut lats, counts, &sc.lat_in[..total * n_in], &mut sc.lat, &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;

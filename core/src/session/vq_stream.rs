@@ -13,56 +13,21 @@ use crate::config::{Part, POSE_DIM, ROT_DIM};
 use crate::error::Error;
 use crate::motion::{gather_part, scatter_part};
 use crate::quantizer::{dequantise, nearest};
-use crate::session::batch::{conv_scratch, BatchError, StepScratch, MAX_BATCH};
+use crate::session::batch::{at, conv_scratch, for_chunks, states, BatchError, StepScratch, MAX_BATCH};
 use crate::session::state::{State, FRAME_WIDTH};
 use crate::session::Session;
 use crate::stream_conv::{StackW, StreamStack};
-
-fn at(i: usize) -> impl Fn(Error) -> BatchError {
-    move |e| (i, e)
-}
-
-/// Runs `f` over chunks of at most `n` of the sessions `idx`.
-fn by_chunks(idx: &[usize], n: usize, mut f: impl FnMut(&[usize], usize) -> Result<(), BatchError>) -> Result<(), BatchError> {
-    let n = n.max(1);
-    for (c, chunk) in idx.chunks(n).enumerate() {
-        f(chunk, c * n)?;
-    }
-    Ok(())
-}
-
-/// The states of sessions `chunk` (increasing indices into `ss`), in order.
-fn states<'x, 'a>(ss: &'x mut [&mut Session<'a>], chunk: &[usize]) -> Result<Vec<&'x mut State<'a>, MAX_BATCH>, BatchError> {
-    let mut v = Vec::new();
-    let mut ci = 0;
-    for (i, s) in ss.iter_mut().enumerate() {
-        if ci < chunk.len() && chunk[ci] == i {
-            v.push(&mut s.st).map_err(|_| (i, Error::State))?;
-            ci += 1;
-        }
-    }
-    if ci != chunk.len() {
-        return Err((chunk.first().copied().unwrap_or(0), Error::State));
-    }
-    Ok(v)
-}
 
 /// Every session holding a complete token its encoders have not seen:
 /// pushes the token's `hop` frames into the 4 part encoders and, once
 /// token `q + e` is in, emits leader code `q` (`Session::code`, for the
 /// leader LATs).
 pub(super) fn encode(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
-    let mut due: Vec<usize, MAX_BATCH> = Vec::new();
-    for (i, s) in ss.iter().enumerate() {
-        if s.frames / s.model.cfg.hop() > s.st.enc[0].pushed() {
-            due.push(i).map_err(|_| (i, Error::State))?;
-        }
-    }
-    let Some(&first) = due.first() else { return Ok(()) };
-    let model = ss[first].model;
-    let hop = model.cfg.hop();
-    by_chunks(&due, sc.dims.n, |chunk, _| {
+    let due = |s: &Session<'_>| s.frames / s.model.cfg.hop() > s.st.enc[0].pushed();
+    for_chunks(ss, sc.dims.n, due, |ss, chunk| {
         let g = chunk[0];
+        let model = ss[g].model;
+        let hop = model.cfg.hop();
         let conv = &mut conv_scratch(sc.pool, &sc.dims).map_err(at(g))?;
         {
             let mut sts = states(ss, chunk)?;
@@ -129,100 +94,97 @@ pub(super) fn encode(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> R
     })
 }
 
-/// Feeds follower token `tokens[j]` of session `idx[j]` to its 9
-/// decoders; once token `q + d` is in, the `hop` frames of token `q` are
-/// final and wait for pulling.
-pub(super) fn decode(ss: &mut [&mut Session<'_>], idx: &[usize], tokens: &[[u32; 5]], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
-    let Some(&first) = idx.first() else { return Ok(()) };
-    if tokens.len() != idx.len() {
-        return Err((first, Error::State));
+/// Feeds follower token `toks[j]` of session `chunk[j]` (at most
+/// `sc.dims.n` sessions, increasing indices) to its 9 decoders; once token
+/// `q + d` is in, the `hop` frames of token `q` are final and wait for
+/// pulling.
+pub(super) fn decode(ss: &mut [&mut Session<'_>], chunk: &[usize], toks: &[[u32; 5]], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+    let Some(&g) = chunk.first() else { return Ok(()) };
+    if toks.len() != chunk.len() || chunk.len() > sc.dims.n {
+        return Err((g, Error::State));
     }
-    let model = ss[first].model;
+    let model = ss[g].model;
     let hop = model.cfg.hop();
-    by_chunks(idx, sc.dims.n, |chunk, off| {
-        let g = chunk[0];
-        let conv = &mut conv_scratch(sc.pool, &sc.dims).map_err(at(g))?;
-        let toks = &tokens[off..off + chunk.len()];
-        {
-            let mut sts = states(ss, chunk)?;
-            for p in 0..5 {
-                let vq = if p < 4 { &model.parts[p] } else { &model.transl };
-                let emb = vq.cfg.emb_width as usize;
-                for (st, t) in sts.iter_mut().zip(toks) {
-                    dequantise(&vq.codebook, &t[p..p + 1], p as u8, &mut st.feat[..emb]).map_err(at(g))?;
+    let conv = &mut conv_scratch(sc.pool, &sc.dims).map_err(at(g))?;
+    {
+        let mut sts = states(ss, chunk)?;
+        for p in 0..5 {
+            let vq = if p < 4 { &model.parts[p] } else { &model.transl };
+            let emb = vq.cfg.emb_width as usize;
+            for (st, t) in sts.iter_mut().zip(toks) {
+                dequantise(&vq.codebook, &t[p..p + 1], p as u8, &mut st.feat[..emb]).map_err(at(g))?;
+            }
+            let mut stacks: Vec<&mut StreamStack<'_>, MAX_BATCH> = Vec::new();
+            let mut rots: Vec<&mut StreamStack<'_>, MAX_BATCH> = Vec::new();
+            let mut cols: Vec<&[f32], MAX_BATCH> = Vec::new();
+            for st in sts.iter_mut() {
+                let State { dec_pos, dec_rot, feat, .. } = &mut **st;
+                stacks.push(&mut dec_pos[p]).map_err(|_| (g, Error::State))?;
+                if vq.rot.is_some() {
+                    let r = dec_rot.get_mut(p).and_then(|r| r.as_mut()).ok_or((g, Error::State))?;
+                    rots.push(r).map_err(|_| (g, Error::State))?;
                 }
-                let mut stacks: Vec<&mut StreamStack<'_>, MAX_BATCH> = Vec::new();
-                let mut rots: Vec<&mut StreamStack<'_>, MAX_BATCH> = Vec::new();
-                let mut cols: Vec<&[f32], MAX_BATCH> = Vec::new();
-                for st in sts.iter_mut() {
-                    let State { dec_pos, dec_rot, feat, .. } = &mut **st;
-                    stacks.push(&mut dec_pos[p]).map_err(|_| (g, Error::State))?;
-                    if vq.rot.is_some() {
-                        let r = dec_rot.get_mut(p).and_then(|r| r.as_mut()).ok_or((g, Error::State))?;
-                        rots.push(r).map_err(|_| (g, Error::State))?;
-                    }
-                    cols.push(&feat[..emb]).map_err(|_| (g, Error::State))?;
-                }
-                StreamStack::push_many(&mut stacks, StackW::Decoder(&vq.pos), &cols, conv).map_err(at(g))?;
-                if let Some(rot) = vq.rot.as_ref() {
-                    StreamStack::push_many(&mut rots, StackW::Decoder(rot), &cols, conv).map_err(at(g))?;
-                }
+                cols.push(&feat[..emb]).map_err(|_| (g, Error::State))?;
+            }
+            StreamStack::push_many(&mut stacks, StackW::Decoder(&vq.pos), &cols, conv).map_err(at(g))?;
+            if let Some(rot) = vq.rot.as_ref() {
+                StreamStack::push_many(&mut rots, StackW::Decoder(rot), &cols, conv).map_err(at(g))?;
             }
         }
-        // Sessions whose token q's frames are now final, and t = hop q.
-        let mut ready: Vec<usize, MAX_BATCH> = Vec::new();
-        let mut ts: Vec<usize, MAX_BATCH> = Vec::new();
-        for &i in chunk {
-            let s = &mut *ss[i];
-            s.dec_fed += 1;
-            if let Some(q) = s.dec_fed.checked_sub(1 + s.cfg.dec_future as usize) {
-                ready.push(i).map_err(|_| (i, Error::State))?;
-                ts.push(hop * q).map_err(|_| (i, Error::State))?;
-            }
+    }
+    // Sessions whose token q's frames are now final, and t = hop q.
+    let mut ready: Vec<usize, MAX_BATCH> = Vec::new();
+    let mut ts: Vec<usize, MAX_BATCH> = Vec::new();
+    for &i in chunk {
+        let s = &mut *ss[i];
+        s.dec_fed += 1;
+        if let Some(q) = s.dec_fed.checked_sub(1 + s.cfg.dec_future as usize) {
+            ready.push(i).map_err(|_| (i, Error::State))?;
+            ts.push(hop * q).map_err(|_| (i, Error::State))?;
         }
-        if ready.is_empty() {
-            return Ok(());
-        }
-        let mut sts = states(ss, &ready)?;
-        // (hop, FRAME_WIDTH) rows: normalised pose (165) | rotations (495) | translation (3).
+    }
+    if ready.is_empty() {
+        return Ok(());
+    }
+    let mut sts = states(ss, &ready)?;
+    // (hop, FRAME_WIDTH) rows: normalised pose (165) | rotations (495) | translation (3).
+    for st in sts.iter_mut() {
+        st.frames[..hop * FRAME_WIDTH].fill(0.0);
+    }
+    for (p, part) in Part::ALL.iter().enumerate() {
+        let vq = &model.parts[p];
+        let w = vq.cfg.in_channels as usize;
+        decoder_frames(&mut sts, p, false, StackW::Decoder(&vq.pos), &ts, hop, hop * w, conv).map_err(at(ready[0]))?;
         for st in sts.iter_mut() {
-            st.frames[..hop * FRAME_WIDTH].fill(0.0);
+            for f in 0..hop {
+                scatter_part(*part, 3, &st.dec_out[f * w..(f + 1) * w], &mut st.frames[f * FRAME_WIDTH..f * FRAME_WIDTH + POSE_DIM]);
+            }
         }
-        for (p, part) in Part::ALL.iter().enumerate() {
-            let vq = &model.parts[p];
-            let w = vq.cfg.in_channels as usize;
-            decoder_frames(&mut sts, p, false, StackW::Decoder(&vq.pos), &ts, hop, hop * w, conv).map_err(at(ready[0]))?;
+        if let Some(rot) = vq.rot.as_ref() {
+            let r = vq.cfg.rot_channels as usize;
+            decoder_frames(&mut sts, p, true, StackW::Decoder(rot), &ts, hop, hop * r, conv).map_err(at(ready[0]))?;
             for st in sts.iter_mut() {
                 for f in 0..hop {
-                    scatter_part(*part, 3, &st.dec_out[f * w..(f + 1) * w], &mut st.frames[f * FRAME_WIDTH..f * FRAME_WIDTH + POSE_DIM]);
-                }
-            }
-            if let Some(rot) = vq.rot.as_ref() {
-                let r = vq.cfg.rot_channels as usize;
-                decoder_frames(&mut sts, p, true, StackW::Decoder(rot), &ts, hop, hop * r, conv).map_err(at(ready[0]))?;
-                for st in sts.iter_mut() {
-                    for f in 0..hop {
-                        let dst = &mut st.frames[f * FRAME_WIDTH + POSE_DIM..f * FRAME_WIDTH + POSE_DIM + ROT_DIM];
-                        scatter_part(*part, 9, &st.dec_out[f * r..(f + 1) * r], dst);
-                    }
+                    let dst = &mut st.frames[f * FRAME_WIDTH + POSE_DIM..f * FRAME_WIDTH + POSE_DIM + ROT_DIM];
+                    scatter_part(*part, 9, &st.dec_out[f * r..(f + 1) * r], dst);
                 }
             }
         }
-        decoder_frames(&mut sts, 4, false, StackW::Decoder(&model.transl.pos), &ts, hop, hop * 3, conv).map_err(at(ready[0]))?;
-        for (st, &i) in sts.iter_mut().zip(ready.iter()) {
-            let State { frames, dec_out, pending, .. } = &mut **st;
-            for f in 0..hop {
-                let base = f * FRAME_WIDTH + POSE_DIM + ROT_DIM;
-                frames[base..base + 3].copy_from_slice(&dec_out[f * 3..f * 3 + 3]);
-                pending.push(&frames[f * FRAME_WIDTH..(f + 1) * FRAME_WIDTH]).map_err(at(i))?;
-            }
+    }
+    decoder_frames(&mut sts, 4, false, StackW::Decoder(&model.transl.pos), &ts, hop, hop * 3, conv).map_err(at(ready[0]))?;
+    for (st, &i) in sts.iter_mut().zip(ready.iter()) {
+        let State { frames, dec_out, pending, .. } = &mut **st;
+        for f in 0..hop {
+            let base = f * FRAME_WIDTH + POSE_DIM + ROT_DIM;
+            frames[base..base + 3].copy_from_slice(&dec_out[f * 3..f * 3 + 3]);
+            pending.push(&frames[f * FRAME_WIDTH..(f + 1) * FRAME_WIDTH]).map_err(at(i))?;
         }
-        drop(sts);
-        for &i in ready.iter() {
-            ss[i].decoded += hop;
-        }
-        Ok(())
-    })
+    }
+    drop(sts);
+    for &i in ready.iter() {
+        ss[i].decoded += hop;
+    }
+    Ok(())
 }
 
 /// Frames `[ts[j], ts[j] + hop)` of decoder `p` (position, or rotation if
