@@ -1,7 +1,10 @@
 //! `Session::step_many`: sessions stepped together (LATs, GPT and heads
 //! batched, each weight matrix read once for all) end bit for bit where
 //! their own `push_leader_frame` calls would take them; refusals name the
-//! session and change none.
+//! session and change none. Every test runs the kernels this CPU selects
+//! (`duolando::simd::init`: on an AMX machine the batch's GEMMs of 16 and
+//! more rows take the tile kernel while one session's take AVX512-VNNI, so
+//! the bit-identity covers that switch too).
 
 use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
@@ -142,10 +145,35 @@ fn run_in(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: 
     traces
 }
 
+/// Holds the process-wide kernel choice for one test (the tests of this
+/// file run one at a time): the detected kernels ([`duolando::simd::init`]).
+fn detected_kernels() -> std::sync::MutexGuard<'static, ()> {
+    static KERNELS: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let guard = KERNELS.lock().unwrap_or_else(|e| e.into_inner());
+    duolando::simd::init();
+    guard
+}
+
+/// Under the detected kernels and again under the scalar ones.
 #[test]
 fn batched_sessions_match_their_own_runs_bit_for_bit() {
-    let cases = [("tiny", StoreAs::F32, "rollout_tiny_long"), ("tiny2", StoreAs::Q8Block32, "rollout_tiny2_frames"), ("tiny", StoreAs::F16, "rollout_tiny_long")];
-    for (name, store, rollout) in cases {
+    let _kernels = detected_kernels();
+    let cases = [
+        ("tiny", StoreAs::F32, "rollout_tiny_long"),
+        ("tiny2", StoreAs::Q8Block32, "rollout_tiny2_frames"),
+        ("tiny2", StoreAs::Q4Block32x8, "rollout_tiny2_frames"),
+        ("tiny", StoreAs::F16, "rollout_tiny_long"),
+    ];
+    for scalar in [false, true] {
+        if scalar {
+            duolando_core::kernels::simd::force_scalar();
+        }
+        each_case(&cases);
+    }
+}
+
+fn each_case(cases: &[(&str, StoreAs, &str)]) {
+    for &(name, store, rollout) in cases {
         let file = convert(name, store);
         let duo = file.duo().unwrap();
         let model = Model::from_duo(&duo).unwrap();
@@ -173,6 +201,7 @@ fn batched_sessions_match_their_own_runs_bit_for_bit() {
 /// bit, and the chunked run really did re-prefill more than a chunk.
 #[test]
 fn chunked_reprefill_matches_one_call_bit_for_bit() {
+    let _kernels = detected_kernels();
     use duolando_core::session::REPREFILL_CHUNK;
     for (name, store, rollout) in [("tiny", StoreAs::F32, "rollout_tiny_long"), ("tiny", StoreAs::Q8Block32, "rollout_tiny_long")] {
         let file = convert(name, store);
@@ -195,6 +224,7 @@ fn chunked_reprefill_matches_one_call_bit_for_bit() {
 
 #[test]
 fn a_refused_frame_names_its_session_and_changes_none() {
+    let _kernels = detected_kernels();
     let file = ModelFile::open(fixture("tiny/model.duo")).unwrap();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
@@ -251,6 +281,7 @@ fn a_refused_frame_names_its_session_and_changes_none() {
 /// columns, and every session ends bit for bit where it ends alone.
 #[test]
 fn mixed_budgets_and_phases_in_one_batch_match_their_own_runs() {
+    let _kernels = detected_kernels();
     for (name, store, rollout) in [("tiny", StoreAs::F32, "rollout_tiny_long"), ("tiny2", StoreAs::Q8Block32, "rollout_tiny2_frames")] {
         let file = convert(name, store);
         let duo = file.duo().unwrap();

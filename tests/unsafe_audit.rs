@@ -23,6 +23,7 @@ use std::path::{Path, PathBuf};
 const ALLOWED: &[&str] = &[
     "core/src/kernels/simd/mod.rs",
     "core/src/kernels/simd/x86.rs",
+    "core/src/kernels/simd/amx.rs",
     "core/src/kernels/simd/neon.rs",
     "core/src/kernels/simd/tests.rs",
     "core/src/tests/simd.rs",
@@ -41,6 +42,7 @@ const ALLOWED: &[&str] = &[
     "ffi/tests/session_golden.rs",
     "tests/session_memory.rs",
     "tests/step_many.rs",
+    "tests/amx.rs",
     "tests/int8_layouts.rs",
 ];
 

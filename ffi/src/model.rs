@@ -58,8 +58,16 @@ impl ModelInner {
 pub type DuoModel = ModelInner;
 
 /// Binds a parsed file whose bytes outlive the returned model (the caller
-/// guarantees it; see the Storage variants).
+/// guarantees it; see the Storage variants). The first model of the
+/// process selects the SIMD kernels this CPU supports
+/// (`duolando::simd::init`, as the CLI does; bit-identical across thread
+/// counts, not across ISAs); a build without this would run the scalar
+/// kernels its compile-time target allows.
 fn bind(duo: &DuoFile<'static>, origin: &str) -> Result<Model<'static>, Failure> {
+    static KERNELS: std::sync::Once = std::sync::Once::new();
+    KERNELS.call_once(|| {
+        duolando_std::simd::init();
+    });
     Model::from_duo(duo).map_err(|e| {
         Failure::new(
             DuoResult::BadModel,

@@ -4,8 +4,15 @@
 //! process-wide kernel table. Call [`init`] once at start-up (the CLI
 //! commands that run the model do).
 //!
-//! `DUOLANDO_ISA=scalar|avx2|avx512|avx512vnni|neon|neondot` caps the
-//! choice (an ISA this CPU lacks selects scalar), for comparisons.
+//! `DUOLANDO_ISA=scalar|avx2|avx512|avx512vnni|avx512amx|neon|neondot` caps
+//! the choice (an ISA this CPU lacks selects scalar), for comparisons.
+//!
+//! AMX-INT8 (Intel Sapphire Rapids and later) is not an ISA of its own
+//! here: on top of AVX512-VNNI, [`init`] asks Linux for the tile
+//! permission and, if granted, lets the packed int8 GEMM run whole tiles
+//! of 16 activation rows on the tile unit (the same values bit for bit:
+//! `duolando_core::kernels::simd::amx`). `DUOLANDO_ISA=avx512vnni` keeps
+//! it off; unset or `avx512amx` allows it.
 
 use duolando_core::kernels::simd::{self, Isa};
 
@@ -56,19 +63,50 @@ pub fn parse(name: &str) -> Option<Isa> {
         "scalar" => Isa::Scalar,
         "avx2" => Isa::Avx2,
         "avx512" => Isa::Avx512,
-        "avx512vnni" => Isa::Avx512Vnni,
+        "avx512vnni" | "avx512amx" => Isa::Avx512Vnni,
         "neon" => Isa::Neon,
         "neondot" => Isa::NeonDot,
         _ => return None,
     })
 }
 
-/// Selects the detected kernels ([`detect`]) for the whole process; returns them.
+/// Selects the detected kernels ([`detect`]) for the whole process, and the
+/// AMX tiles where [`amx_usable`] (unless `DUOLANDO_ISA` names another ISA
+/// than `avx512amx`); returns the ISA.
 pub fn init() -> Isa {
     let isa = detect();
     // SAFETY: `detect` returned `isa` only from `supported`, which checked
     // that this CPU supports every feature its kernels are compiled for.
     #[allow(unsafe_code)]
     unsafe { simd::set_isa(isa) };
+    let wanted = std::env::var("DUOLANDO_ISA").map_or(true, |s| s.eq_ignore_ascii_case("avx512amx"));
+    let amx = isa == Isa::Avx512Vnni && wanted && amx_usable();
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: `amx_usable` checked the CPU's amx-tile and amx-int8 bits and
+    // got the tile permission from the OS; the ISA is Avx512Vnni.
+    #[allow(unsafe_code)]
+    unsafe {
+        simd::amx::enable(amx)
+    };
+    let _ = amx;
     isa
+}
+
+/// Whether the AMX tile kernel runs now (after [`init`]).
+pub fn amx_active() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return simd::amx::enabled();
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+/// Whether this CPU has AMX-TILE and AMX-INT8 and the OS granted this
+/// process the tile data state (asked for here; Linux x86_64 only).
+pub fn amx_usable() -> bool {
+    #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+    {
+        simd::amx::cpu_has_amx_int8() && simd::amx::request_linux_permission()
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
+    false
 }

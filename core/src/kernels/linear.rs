@@ -38,14 +38,15 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
 
 /// Int8 activation values quantised at once by `linear` over a [`Q8Rows`]
 /// matrix (a stack panel: `Q8_PANEL` i8 + `Q8_PANEL / 32` f32 scales and i32
-/// corrections, and `TN x Q8_PANEL / 32` f32 weight scales: 56 KiB on 64-bit
-/// targets, 7 KiB on 32-bit ones). Rows of `x` are quantised once per call
+/// corrections, and `TN x Q8_PANEL / 32` f32 weight scales: 90 KiB on 64-bit
+/// targets, 7 KiB on 32-bit ones; 48 KiB of values hold 16 rows of the
+/// widest GPT input, 3072, one AMX tile). Rows of `x` are quantised once per call
 /// when `rows * in <= Q8_PANEL` (every matrix-vector and small-batch
 /// product of the model), else once per panel of `Q8_PANEL / in` rows
 /// (the weights are then read once per panel). Wider matrices (`in >
 /// Q8_PANEL`) take the generic chunked path.
 #[cfg(target_pointer_width = "64")]
-pub const Q8_PANEL: usize = 32 * 1024;
+pub const Q8_PANEL: usize = 96 * 1024;
 /// See the 64-bit definition.
 #[cfg(not(target_pointer_width = "64"))]
 pub const Q8_PANEL: usize = 4 * 1024;
@@ -343,37 +344,62 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8
 /// [`q8_panel_tiles`] over packed tiles of 8 weight rows (stored packed,
 /// or packed once per tile: [`Q8Source::packed_tile`]) and activation
 /// tiles of up to 8 rows ([`simd::gemm_q8_packed`]; the AVX512-VNNI path).
+/// Where AMX runs ([`simd::amx::enabled`]), whole tiles of 16 activation
+/// rows take the AMX kernel, which gives the same values bit for bit.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel, n_rows: usize, n_in: usize) {
     const R: usize = simd::PACK_ROWS;
+    /// Activation rows per AMX call (its tile configuration is loaded once per call).
+    const AMX_CALL_ROWS: usize = 4 * simd::AMX_ROWS;
     let nb = n_in / Q8_BLOCK;
     let mut pack = simd::Q8Pack8::new();
     let mut buf = W::new_buf();
+    let mut amx = (n_rows >= simd::AMX_ROWS).then(simd::AmxWeights::new);
     let mut t0 = y.lo();
     while t0 < y.hi() {
         let nt = R.min(y.hi() - t0);
         let tile = w.packed_tile(t0, nb, &mut pack, &mut buf);
         // The next tile's weights stream in while this one is multiplied.
-        simd::prefetch(w.stored_rows(t0 + R, (t0 + 2 * R).min(y.hi())));
+        if n_rows < simd::AMX_ROWS {
+            simd::prefetch(w.stored_rows(t0 + R, (t0 + 2 * R).min(y.hi())));
+        }
+        let mut put = |i: usize, t: &[f32; R]| {
+            let yr = y.seg(i, t0, t0 + nt);
+            for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
+                *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
+            }
+        };
         let mut i0 = 0;
+        let prepared = amx.as_mut().is_some_and(|a| a.prepare(tile));
+        match amx.as_ref() {
+            Some(a) if prepared => {
+                let mut out = [[0.0f32; R]; AMX_CALL_ROWS];
+                while n_rows - i0 >= simd::AMX_ROWS {
+                    let k = (n_rows - i0).min(AMX_CALL_ROWS);
+                    let done = simd::gemm_q8_packed_amx(a, tile, &p.q[i0 * n_in..n_rows * n_in], n_in, &p.d[i0 * nb..n_rows * nb], &mut out[..k]);
+                    if done == 0 {
+                        break;
+                    }
+                    for (m, t) in out[..done].iter().enumerate() {
+                        put(i0 + m, t);
+                    }
+                    i0 += done;
+                }
+            }
+            _ => {}
+        }
         while i0 < n_rows {
             let mt = R.min(n_rows - i0);
             let pr = |m: usize| i0 + m.min(mt - 1);
             let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
             let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
             let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
-            let mut put = |m: usize, t: &[f32; R]| {
-                let yr = y.seg(i0 + m, t0, t0 + nt);
-                for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
-                    *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
-                }
-            };
             macro_rules! run {
                 ($m:literal) => {{
                     let t = simd::gemm_q8_packed::<$m>(tile, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
                     for (m, r) in t.iter().enumerate() {
-                        put(m, r);
+                        put(i0 + m, r);
                     }
                 }};
             }

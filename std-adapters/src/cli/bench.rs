@@ -496,11 +496,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         crate::simd::init()
     };
+    let isa = format!("{isa:?}{}", if crate::simd::amx_active() { "+AMX" } else { "" });
     let memcpy = memcpy_gbps(1);
     let memcpy_t2 = memcpy_gbps(2);
     let read = read_gbps();
     println!(
-        "kernels: {isa:?}; threads: {:?}; memcpy bandwidth (256 MiB): {memcpy:.1} GB/s on 1 thread, {memcpy_t2:.1} GB/s on 2; read-only: {read:.1} GB/s on 1 thread",
+        "kernels: {isa}; threads: {:?}; memcpy bandwidth (256 MiB): {memcpy:.1} GB/s on 1 thread, {memcpy_t2:.1} GB/s on 2; read-only: {read:.1} GB/s on 1 thread",
         args.threads
     );
     let mut results = Vec::new();
@@ -608,7 +609,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         j.insert("memcpy_gbps_t1".into(), memcpy.into());
         j.insert("memcpy_gbps_t2".into(), memcpy_t2.into());
         j.insert("read_gbps_t1".into(), read.into());
-        j.insert("isa".into(), format!("{isa:?}").into());
+        j.insert("isa".into(), isa.clone().into());
         match &tract {
             Some((st, err)) => {
                 j.insert("tract_r_step_ms_t1".into(), st.median_ms.into());

@@ -24,6 +24,12 @@ pub mod scalar;
 mod tests;
 #[cfg(target_arch = "x86_64")]
 pub mod x86;
+#[cfg(target_arch = "x86_64")]
+pub mod amx;
+#[cfg(target_arch = "x86_64")]
+pub use amx::{gemm_q8_packed_amx, AmxWeights, ROWS as AMX_ROWS};
+#[cfg(not(target_arch = "x86_64"))]
+pub use no_amx::{gemm_q8_packed_amx, AmxWeights, ROWS as AMX_ROWS};
 #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
 pub mod neon;
 
@@ -667,5 +673,33 @@ pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_f16(a, w, y) },
         _ => scalar::axpy_f16(a, w, y),
+    }
+}
+
+/// The AMX entry points on targets without AMX: nothing is prepared and no
+/// row is computed, so callers take [`gemm_q8_packed`] for every row.
+#[cfg(not(target_arch = "x86_64"))]
+mod no_amx {
+    /// As on x86_64.
+    pub const ROWS: usize = 16;
+    /// Holds nothing.
+    pub struct AmxWeights;
+    impl AmxWeights {
+        pub fn new() -> Self {
+            AmxWeights
+        }
+        /// Always false.
+        pub fn prepare(&mut self, _: super::PackedQ8<'_>) -> bool {
+            false
+        }
+    }
+    impl Default for AmxWeights {
+        fn default() -> Self {
+            Self::new()
+        }
+    }
+    /// Always 0 rows.
+    pub fn gemm_q8_packed_amx(_: &AmxWeights, _: super::PackedQ8<'_>, _: &[i8], _: usize, _: &[f32], _: &mut [[f32; 8]]) -> usize {
+        0
     }
 }

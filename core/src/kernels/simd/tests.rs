@@ -62,6 +62,22 @@ fn q4_bytes(w: &[f32]) -> Vec<u8> {
     out
 }
 
+/// The stored `Q4Block32x8` group of 8 Q4Block32 rows (first `nb` blocks):
+/// per block, half `h` of every row side by side, then the scales.
+fn q4_group(rows: &[Vec<u8>], nb: usize) -> Vec<u8> {
+    let mut group = vec![0u8; nb * (128 + 16)];
+    for (j, row) in rows.iter().enumerate().take(8) {
+        for b in 0..nb {
+            let blk = &row[b * Q4_BLOCK_BYTES..(b + 1) * Q4_BLOCK_BYTES];
+            for h in 0..2 {
+                group[128 * b + 64 * h + 8 * j..128 * b + 64 * h + 8 * j + 8].copy_from_slice(&blk[2 + 8 * h..2 + 8 * h + 8]);
+            }
+            group[128 * nb + 16 * b + 2 * j..128 * nb + 16 * b + 2 * j + 2].copy_from_slice(&blk[..2]);
+        }
+    }
+    group
+}
+
 type Gemm<const M: usize> = fn([&[u8]; TN], [&[f32]; TN], [&[i8]; M], [&[f32]; M], [&[i32]; M]) -> [[f32; TN]; M];
 
 /// One ISA's kernels as plain fns (the constructor checked the CPU).
@@ -1156,17 +1172,7 @@ fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
     for nb in [1usize, 2, 3, 24, 96, 130] {
         let n = nb * Q8_BLOCK;
         let rows4: Vec<Vec<u8>> = (0..PACK_ROWS).map(|_| q4_bytes(&r.vec(n))).collect();
-        // The stored group: per block, half h of every row side by side, then the scales.
-        let mut group = vec![0u8; nb * (128 + 16)];
-        for (j, row) in rows4.iter().enumerate() {
-            for b in 0..nb {
-                let blk = &row[b * Q4_BLOCK_BYTES..(b + 1) * Q4_BLOCK_BYTES];
-                for h in 0..2 {
-                    group[128 * b + 64 * h + 8 * j..128 * b + 64 * h + 8 * j + 8].copy_from_slice(&blk[2 + 8 * h..2 + 8 * h + 8]);
-                }
-                group[128 * nb + 16 * b + 2 * j..128 * nb + 16 * b + 2 * j + 2].copy_from_slice(&blk[..2]);
-            }
-        }
+        let group = q4_group(&rows4, nb);
         let g = PackedQ8::from_q4_group(&group, nb).unwrap();
         assert!(PackedQ8::from_q4_group(&group[..group.len() - 1], nb).is_none());
         let rows8: Vec<Vec<u8>> = rows4
@@ -1299,4 +1305,93 @@ fn axpy_rows_equal_axpy_row_after_row() {
             }
         }
     }
+}
+
+/// The AMX tile kernel (where this CPU has AMX-INT8 and Linux grants the
+/// tile permission) equals the AVX512-VNNI packed kernel bit for bit, row
+/// for row, on int8 and 4-bit tiles, stored and packed on the stack, for
+/// 16-64 activation rows (a trailing partial tile is left to the caller),
+/// and tracks the scalar twin like the VNNI kernel does; it refuses short
+/// operands and tiles wider than `PACK_BLOCKS` instead of reading past them.
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+#[test]
+#[allow(unsafe_code)]
+fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
+    use super::amx::{self, AmxWeights};
+    use super::{PackedQ8, Q8Pack8, PACK_BLOCKS, PACK_ROWS};
+    use std::is_x86_feature_detected as has;
+    let vnni = has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") && has!("avx512vnni") && has!("avx2") && has!("fma") && has!("f16c");
+    // SAFETY (whole test): the AMX calls run only where the CPU reports
+    // amx-tile and amx-int8 and Linux granted the tile permission, plus
+    // every VNNI feature detected above; the VNNI kernel only where `vnni`.
+    let tiles = vnni && amx::cpu_has_amx_int8() && amx::request_linux_permission();
+    if !tiles {
+        eprintln!("skipped: this CPU or OS does not run AMX-INT8 tiles");
+        return;
+    }
+    let mut r = Rng(0xa3a3);
+    for nb in [1usize, 2, 3, 24, 95, 96] {
+        let n = nb * Q8_BLOCK;
+        for q4 in [false, true] {
+            let rows: Vec<Vec<u8>> = (0..PACK_ROWS).map(|_| if q4 { q4_bytes(&r.vec(n)) } else { q8_bytes(&r.vec(n)) }).collect();
+            // The tile as the kernels read it: q8 rows packed on the stack, or a stored 4-bit group.
+            let mut pack = Q8Pack8::new();
+            let group = if q4 { q4_group(&rows, nb) } else { Vec::new() };
+            let tile = if q4 {
+                PackedQ8::from_q4_group(&group, nb).unwrap()
+            } else {
+                scalar::q8_pack8(core::array::from_fn(|j| &rows[j][..]), nb, &mut pack.v, &mut pack.s);
+                pack.nb = nb;
+                pack.view()
+            };
+            let mut w = AmxWeights::new();
+            assert!(unsafe { w.prepare_raw(tile) }, "nb={nb}");
+            let m_rows = 64;
+            let mut qs = vec![0i8; m_rows * n];
+            let mut ds = vec![0f32; m_rows * nb];
+            let mut cs = vec![0i32; m_rows * 2 * nb];
+            for m in 0..m_rows {
+                let mut x = r.vec(n);
+                if m == 17 {
+                    x[n - 1] = 1e4;
+                }
+                scalar::quantise_q8_corr(&x, &mut qs[m * n..(m + 1) * n], &mut ds[m * nb..(m + 1) * nb], &mut cs[m * 2 * nb..(m + 1) * 2 * nb]);
+            }
+            let row = |m: usize| (&qs[m * n..(m + 1) * n], &ds[m * nb..(m + 1) * nb], &cs[m * 2 * nb..(m + 1) * 2 * nb]);
+            for want_rows in [16usize, 40, 64] {
+                let mut out = vec![[0f32; 8]; want_rows];
+                let done = unsafe { amx::gemm_q8_packed_amx_raw(&w, tile, &qs, n, &ds, &mut out) };
+                assert_eq!(done, want_rows / 16 * 16, "whole tiles only");
+                for m0 in (0..done).step_by(8) {
+                    let v = unsafe { super::x86::gemm_q8_packed_vnni::<8>(tile, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2)) };
+                    let s = scalar::gemm_q8_packed::<8>(tile, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2));
+                    for m in 0..8 {
+                        assert_eq!(out[m0 + m].map(f32::to_bits), v[m].map(f32::to_bits), "q4={q4} nb={nb} row {}", m0 + m);
+                        for j in 0..8 {
+                            let mag: f64 = (0..nb)
+                                .map(|b| {
+                                    let a: i64 = (0..Q8_BLOCK).map(|i| (tile.value(b, j, i) as i64 * row(m0 + m).0[b * 32 + i] as i64).abs()).sum();
+                                    (super::f16_to_f32(tile.scale_bits(b, j)) as f64 * row(m0 + m).1[b] as f64).abs() * a as f64
+                                })
+                                .sum();
+                            check(&format!("amx q4={q4} nb={nb} [{}][{j}]", m0 + m), out[m0 + m][j], s[m][j], mag, SIMD_VS_SCALAR_GEMM_Q8);
+                        }
+                    }
+                }
+            }
+            // Short operands are refused, not read past.
+            let mut out = vec![[0f32; 8]; 16];
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, tile, &qs[..15 * n + n - 1], n, &ds, &mut out) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, tile, &qs, n, &ds[..16 * nb - 1], &mut out) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, tile, &qs, n, &ds, &mut out[..15]) }, 0);
+        }
+    }
+    // Wider than the prepared room: refused.
+    let wide = vec![0u8; (PACK_BLOCKS + 1) * (256 + 16)];
+    let mut w = AmxWeights::new();
+    assert!(!unsafe { w.prepare_raw(PackedQ8::from_group(&wide, PACK_BLOCKS + 1).unwrap()) });
+    let qs = vec![0i8; 16 * (PACK_BLOCKS + 1) * 32];
+    let ds = vec![0f32; 16 * (PACK_BLOCKS + 1)];
+    let mut out = vec![[0f32; 8]; 16];
+    assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, PackedQ8::from_group(&wide, PACK_BLOCKS + 1).unwrap(), &qs, (PACK_BLOCKS + 1) * 32, &ds, &mut out) }, 0);
 }
