@@ -38,9 +38,11 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
 
 /// Int8 activation values quantised at once by `linear` over a [`Q8Rows`]
 /// matrix (a stack panel: `Q8_PANEL` i8 + `Q8_PANEL / 32` f32 scales and i32
-/// corrections, and `TN x Q8_PANEL / 32` f32 weight scales: 90 KiB on 64-bit
-/// targets, 7 KiB on 32-bit ones; 48 KiB of values hold 16 rows of the
-/// widest GPT input, 3072, one AMX tile). Rows of `x` are quantised once per call
+/// corrections, and `TN x Q8_PANEL / 32` f32 weight scales: 180 KiB on
+/// 64-bit targets (the packed path: the 132 KiB panel, a 24 KiB tile pack
+/// and 48 KiB of AMX weight operands), 7 KiB on 32-bit ones; 96 KiB of
+/// values hold 32 rows of the widest GPT input, 3072: two AMX tiles, the
+/// weights read once per 32 rows). Rows of `x` are quantised once per call
 /// when `rows * in <= Q8_PANEL` (every matrix-vector and small-batch
 /// product of the model), else once per panel of `Q8_PANEL / in` rows
 /// (the weights are then read once per panel). Wider matrices (`in >
