@@ -8,21 +8,9 @@
 //! Its own test binary: it switches the process-wide kernels.
 
 use duolando::duo_writer::{quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8};
+use duolando_tests::Rng;
 use duolando_core::kernels::simd::{self, Isa};
 use duolando_core::kernels::{linear, Matrix, Q8Rows, X8Rows};
-
-struct Rng(u64);
-impl Rng {
-    fn f(&mut self) -> f32 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    }
-    fn vec(&mut self, n: usize) -> Vec<f32> {
-        (0..n).map(|_| self.f()).collect()
-    }
-}
 
 fn bits(v: &[f32]) -> Vec<u32> {
     v.iter().map(|f| f.to_bits()).collect()

@@ -13,21 +13,9 @@
 //! - an x8 row's output never depends on how many rows share the call.
 
 use duolando::duo_writer::{quantise_q4_block32, quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8};
+use duolando_tests::Rng;
 use duolando_core::kernels::simd::{self, f16_to_f32};
 use duolando_core::kernels::{expand_q4, linear, Matrix, Q4Rows, Q8Rows, RowMatrix, X8Rows};
-
-struct Rng(u64);
-impl Rng {
-    fn f(&mut self) -> f32 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    }
-    fn vec(&mut self, n: usize) -> Vec<f32> {
-        (0..n).map(|_| self.f()).collect()
-    }
-}
 
 /// |kernel - exact| <= limit * (1 + sum_b |w_scale x_scale| sum_i |w_i q_i|):
 /// the per-lane i32 sums are exact, only the f32 sum over lanes and blocks

@@ -11,6 +11,20 @@ use duolando_core::model::Model;
 use tract_onnx::prelude::*;
 
 /// `tests/fixtures/`.
+/// Seeded xorshift64 values in [-1, 1) for the kernel tests.
+pub struct Rng(pub u64);
+impl Rng {
+    pub fn f(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    }
+    pub fn vec(&mut self, n: usize) -> Vec<f32> {
+        (0..n).map(|_| self.f()).collect()
+    }
+}
+
 pub fn fixtures_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures")
 }

@@ -79,16 +79,17 @@ pub fn init() -> Isa {
     // that this CPU supports every feature its kernels are compiled for.
     #[allow(unsafe_code)]
     unsafe { simd::set_isa(isa) };
-    let wanted = std::env::var("DUOLANDO_ISA").map_or(true, |s| s.eq_ignore_ascii_case("avx512amx"));
-    let amx = isa == Isa::Avx512Vnni && wanted && amx_usable();
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: `amx_usable` checked the CPU's amx-tile and amx-int8 bits and
-    // got the tile permission from the OS; the ISA is Avx512Vnni.
-    #[allow(unsafe_code)]
-    unsafe {
-        simd::amx::enable(amx)
-    };
-    let _ = amx;
+    {
+        let wanted = std::env::var("DUOLANDO_ISA").map_or(true, |s| s.eq_ignore_ascii_case("avx512amx"));
+        let amx = isa == Isa::Avx512Vnni && wanted && amx_usable();
+        // SAFETY: `amx_usable` checked the CPU's amx-tile and amx-int8 bits
+        // and got the tile permission from the OS; the ISA is Avx512Vnni.
+        #[allow(unsafe_code)]
+        unsafe {
+            simd::amx::enable(amx)
+        };
+    }
     isa
 }
 

@@ -352,8 +352,6 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8
 #[inline(never)]
 fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel, n_rows: usize, n_in: usize) {
     const R: usize = simd::PACK_ROWS;
-    /// Activation rows per AMX call (its tile configuration is loaded once per call).
-    const AMX_CALL_ROWS: usize = 4 * simd::AMX_ROWS;
     let nb = n_in / Q8_BLOCK;
     let mut pack = simd::Q8Pack8::new();
     let mut buf = W::new_buf();
@@ -372,25 +370,7 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
                 *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
             }
         };
-        let mut i0 = 0;
-        let prepared = amx.as_mut().is_some_and(|a| a.prepare(tile));
-        match amx.as_ref() {
-            Some(a) if prepared => {
-                let mut out = [[0.0f32; R]; AMX_CALL_ROWS];
-                while n_rows - i0 >= simd::AMX_ROWS {
-                    let k = (n_rows - i0).min(AMX_CALL_ROWS);
-                    let done = simd::gemm_q8_packed_amx(a, tile, &p.q[i0 * n_in..n_rows * n_in], n_in, &p.d[i0 * nb..n_rows * nb], &mut out[..k]);
-                    if done == 0 {
-                        break;
-                    }
-                    for (m, t) in out[..done].iter().enumerate() {
-                        put(i0 + m, t);
-                    }
-                    i0 += done;
-                }
-            }
-            _ => {}
-        }
+        let mut i0 = amx.as_mut().map_or(0, |a| amx_rows(a, tile, p, n_rows, n_in, &mut put));
         while i0 < n_rows {
             let mt = R.min(n_rows - i0);
             let pr = |m: usize| i0 + m.min(mt - 1);
@@ -419,4 +399,30 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
         }
         t0 += nt;
     }
+}
+
+/// The leading whole 16-row tiles of a panel's `n_rows` rows on the AMX
+/// kernel (`put(row, values)`); returns the rows done (0 where AMX does not
+/// run or `tile` is too wide). The caller takes the rest on VNNI.
+fn amx_rows(a: &mut simd::AmxWeights, tile: simd::PackedQ8<'_>, p: &Q8Panel, n_rows: usize, n_in: usize, put: &mut impl FnMut(usize, &[f32; simd::PACK_ROWS])) -> usize {
+    /// Activation rows per AMX call (its tile configuration is loaded once per call).
+    const CALL_ROWS: usize = 4 * simd::AMX_ROWS;
+    if !a.prepare(tile) {
+        return 0;
+    }
+    let nb = n_in / Q8_BLOCK;
+    let mut out = [[0.0f32; simd::PACK_ROWS]; CALL_ROWS];
+    let mut i0 = 0;
+    while n_rows - i0 >= simd::AMX_ROWS {
+        let k = (n_rows - i0).min(CALL_ROWS);
+        let done = simd::gemm_q8_packed_amx(a, tile, &p.q[i0 * n_in..n_rows * n_in], n_in, &p.d[i0 * nb..n_rows * nb], &mut out[..k]);
+        if done == 0 {
+            break;
+        }
+        for (m, t) in out[..done].iter().enumerate() {
+            put(i0 + m, t);
+        }
+        i0 += done;
+    }
+    i0
 }
