@@ -1,7 +1,8 @@
 //! `linear` with the AMX tile kernel on gives what it gives with the
 //! AVX512-VNNI kernels alone, bit for bit (int8 and 4-bit row groups, int8
-//! rows packed per call; 1 to 160 activation rows, so whole 16-row tiles,
-//! partial ones and several stack panels; one thread and two): the kernel
+//! rows packed per call; 1 to 160 activation rows, so whole 8-row groups,
+//! partial ones and several stack panels; 1 to 5 weight tiles, so whole
+//! tile pairs, a single last tile and partial tiles; one thread and two): the kernel
 //! choice may depend on the number of rows without changing a number, as
 //! `Session::step_many`'s bit-identity needs. Runs only where the CPU has
 //! AMX-INT8 and Linux grants the tile permission; says so when skipped.
@@ -36,7 +37,7 @@ fn linear_with_amx_tiles_equals_linear_without() {
             ("int8 rows", Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap())),
         ];
         let bias = r.vec(o);
-        for n in [1usize, 15, 16, 17, 33, 64, 70, 160] {
+        for n in [1usize, 15, 16, 17, 24, 33, 40, 64, 70, 160] {
             let mut x = r.vec(n * i);
             x[(n / 2) * i] = 40.0; // one outlier block
             for threads in [1usize, 2] {

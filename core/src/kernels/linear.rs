@@ -346,8 +346,10 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8
 /// [`q8_panel_tiles`] over packed tiles of 8 weight rows (stored packed,
 /// or packed once per tile: [`Q8Source::packed_tile`]) and activation
 /// tiles of up to 8 rows ([`simd::gemm_q8_packed`]; the AVX512-VNNI path).
-/// Where AMX runs ([`simd::amx::enabled`]), whole tiles of 16 activation
-/// rows take the AMX kernel, which gives the same values bit for bit.
+/// Where AMX runs ([`simd::amx_enabled`]) and the panel has at least
+/// [`AMX_MIN_ROWS`] rows, tiles go in pairs and their whole 8-row groups of
+/// activation rows take the AMX kernel, which gives the same values bit for
+/// bit; the rows after them stay on VNNI.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel, n_rows: usize, n_in: usize) {
@@ -355,67 +357,114 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
     let nb = n_in / Q8_BLOCK;
     let mut pack = simd::Q8Pack8::new();
     let mut buf = W::new_buf();
-    let mut amx = (n_rows >= simd::AMX_ROWS).then(simd::AmxWeights::new);
+    let mut amx = (n_rows >= AMX_MIN_ROWS && simd::amx_enabled()).then(simd::AmxWeights::new);
+    // The AMX kernel's rows of this panel (whole 8-row groups; 0 if it would refuse the extents).
+    let amx_planned = simd::amx_rows(nb, n_rows * n_in, n_in, n_rows * nb, n_rows);
     let mut t0 = y.lo();
     while t0 < y.hi() {
         let nt = R.min(y.hi() - t0);
         let tile = w.packed_tile(t0, nb, &mut pack, &mut buf);
         // The next tile's weights stream in while this one is multiplied.
-        if n_rows < simd::AMX_ROWS {
+        if n_rows < AMX_MIN_ROWS {
             simd::prefetch(w.stored_rows(t0 + R, (t0 + 2 * R).min(y.hi())));
         }
-        let mut put = |i: usize, t: &[f32; R]| {
-            let yr = y.seg(i, t0, t0 + nt);
-            for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
-                *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
-            }
+        let prepared = amx_planned > 0 && amx.as_mut().is_some_and(|a| a.prepare(0, tile));
+        let Some(a) = amx.as_mut().filter(|_| prepared) else {
+            vnni_rows(tile, p, 0, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t));
+            t0 += nt;
+            continue;
         };
-        let mut i0 = amx.as_mut().map_or(0, |a| amx_rows(a, tile, p, n_rows, n_in, &mut put));
-        while i0 < n_rows {
-            let mt = R.min(n_rows - i0);
-            let pr = |m: usize| i0 + m.min(mt - 1);
-            let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
-            let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
-            let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
-            macro_rules! run {
-                ($m:literal) => {{
-                    let t = simd::gemm_q8_packed::<$m>(tile, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
-                    for (m, r) in t.iter().enumerate() {
-                        put(i0 + m, r);
-                    }
-                }};
-            }
-            match mt {
-                1 => run!(1),
-                2 => run!(2),
-                3 => run!(3),
-                4 => run!(4),
-                5 => run!(5),
-                6 => run!(6),
-                7 => run!(7),
-                _ => run!(8),
-            }
-            i0 += mt;
+        // This tile's rows after the AMX rows, then the second tile's (or
+        // this one again as a second operand whose results are dropped).
+        vnni_rows(tile, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t));
+        let t1 = t0 + R;
+        let nt1 = if t1 < y.hi() { R.min(y.hi() - t1) } else { 0 };
+        if nt1 > 0 {
+            let tile1 = w.packed_tile(t1, nb, &mut pack, &mut buf);
+            a.prepare(1, tile1);
+            vnni_rows(tile1, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t1, nt1, t));
+        } else {
+            a.prepare(1, tile);
         }
-        t0 += nt;
+        let done = amx_pair(a, p, amx_planned, n_in, |i, t| {
+            put_row(&mut y, b, i, t0, nt, &t[..R]);
+            if nt1 > 0 {
+                put_row(&mut y, b, i, t1, nt1, &t[R..]);
+            }
+        });
+        if done < amx_planned {
+            // Not reached (the extents were checked for the plan); kept so a
+            // refusal never leaves outputs unwritten.
+            for (tt, ntt) in [(t0, nt), (t1, nt1)] {
+                if ntt > 0 {
+                    let tile = w.packed_tile(tt, nb, &mut pack, &mut buf);
+                    vnni_rows(tile, p, done, amx_planned, n_in, |i, t| put_row(&mut y, b, i, tt, ntt, t));
+                }
+            }
+        }
+        t0 += nt + nt1;
     }
 }
 
-/// The leading whole 16-row tiles of a panel's `n_rows` rows on the AMX
-/// kernel (`put(row, values)`); returns the rows done (0 where AMX does not
-/// run or `tile` is too wide). The caller takes the rest on VNNI.
-fn amx_rows(a: &mut simd::AmxWeights, tile: simd::PackedQ8<'_>, p: &Q8Panel, n_rows: usize, n_in: usize, put: &mut impl FnMut(usize, &[f32; simd::PACK_ROWS])) -> usize {
-    /// Activation rows per AMX call (its tile configuration is loaded once per call).
-    const CALL_ROWS: usize = 4 * simd::AMX_ROWS;
-    if !a.prepare(tile) {
-        return 0;
+/// The fewest rows of a panel for which the AMX kernel runs (below it the
+/// VNNI rows with the next tile's prefetch are as fast: the S step's panels).
+const AMX_MIN_ROWS: usize = 16;
+
+/// `y[i][t0..t0 + nt] = b[t0..] + t[..nt]`.
+#[inline]
+fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, t: &[f32]) {
+    let yr = y.seg(i, t0, t0 + nt);
+    for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
+        *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
     }
+}
+
+/// Activation rows `r0..r1` of a panel against one packed tile on
+/// [`simd::gemm_q8_packed`], up to 8 rows per call (`put(row, values)`).
+#[inline]
+fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel, r0: usize, r1: usize, n_in: usize, mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS])) {
     let nb = n_in / Q8_BLOCK;
-    let mut out = [[0.0f32; simd::PACK_ROWS]; CALL_ROWS];
+    let mut i0 = r0;
+    while i0 < r1 {
+        let mt = simd::PACK_ROWS.min(r1 - i0);
+        let pr = |m: usize| i0 + m.min(mt - 1);
+        let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
+        let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
+        let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
+        macro_rules! run {
+            ($m:literal) => {{
+                let t = simd::gemm_q8_packed::<$m>(tile, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
+                for (m, r) in t.iter().enumerate() {
+                    put(i0 + m, r);
+                }
+            }};
+        }
+        match mt {
+            1 => run!(1),
+            2 => run!(2),
+            3 => run!(3),
+            4 => run!(4),
+            5 => run!(5),
+            6 => run!(6),
+            7 => run!(7),
+            _ => run!(8),
+        }
+        i0 += mt;
+    }
+}
+
+/// The first `rows` activation rows of a panel (a multiple of
+/// [`simd::AMX_ROWS`]) against the two tiles prepared in `a`, on the AMX
+/// kernel (`put(row, values of both tiles)`); returns the rows done.
+fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel, rows: usize, n_in: usize, mut put: impl FnMut(usize, &[f32; simd::AMX_COLS])) -> usize {
+    /// Activation rows per AMX call (its tile configuration is loaded once per call).
+    const CALL_ROWS: usize = 8 * simd::AMX_ROWS;
+    let nb = n_in / Q8_BLOCK;
+    let mut out = [[0.0f32; simd::AMX_COLS]; CALL_ROWS];
     let mut i0 = 0;
-    while n_rows - i0 >= simd::AMX_ROWS {
-        let k = (n_rows - i0).min(CALL_ROWS);
-        let done = simd::gemm_q8_packed_amx(a, tile, &p.q[i0 * n_in..n_rows * n_in], n_in, &p.d[i0 * nb..n_rows * nb], &mut out[..k]);
+    while i0 < rows {
+        let k = (rows - i0).min(CALL_ROWS);
+        let done = simd::gemm_q8_packed_amx(a, &p.q[i0 * n_in..rows * n_in], n_in, &p.d[i0 * nb..rows * nb], &mut out[..k]);
         if done == 0 {
             break;
         }

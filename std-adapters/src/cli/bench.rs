@@ -57,8 +57,8 @@ pub struct Args {
     #[arg(long)]
     pub scalar: bool,
     /// Session counts stepped together with `Session::step_many` (int8
-    /// only; comma separated; empty to skip).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16])]
+    /// only; comma separated; `--batch` with no value skips them).
+    #[arg(long, value_delimiter = ',', num_args = 0.., default_values_t = vec![1usize, 4, 16])]
     pub batch: Vec<usize>,
     /// The full-size R step as ONNX (tools/reference/export_full_r_step.py),
     /// timed in tract in the same run (needs the `tract` cargo feature);

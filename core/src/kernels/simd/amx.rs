@@ -1,20 +1,20 @@
-//! Intel AMX-INT8 variant of the packed int8 GEMM ([`super::gemm_q8_packed`]),
-//! 16 activation rows x one packed tile of 8 weight rows per tile multiply,
+//! Intel AMX-INT8 variant of the packed int8 GEMM ([`super::gemm_q8_packed`]):
+//! 8 activation rows x two packed tiles (16 weight rows) per tile multiply,
 //! bit-identical to the AVX512-VNNI kernel ([`super::x86::gemm_q8_packed_vnni`]).
 //!
-//! Why it is bit-identical: the VNNI kernel forms, per weight row `n`, block
-//! `b` and lane half `h` (values `8g + 4h .. 8g + 4h + 4` of the block's four
-//! 8-byte groups `g`), the exact i32 sum `sum w x`, converts it to f32 and
-//! adds `(s_n,b * xd_b) * sum` into lane `2n + h` with one FMA; the two
-//! lanes of a row are added at the end. The tile multiply `tdpbssd` forms
-//! the same i32 sums (signed x signed, no offset correction needed) if its
-//! weight operand (`B`: K/4 rows of 16 four-byte columns) keeps, in row
-//! `2g + h`, only the columns `2n + h` of the stored 8-byte group `g` (the
-//! stored 64-byte line is exactly `[row 0 half 0, row 0 half 1, row 1
-//! half 0, ...]`): [`AmxWeights::prepare`] lays that out once per packed tile.
-//! With the activation block as the `A` row (32 bytes, natural order), the
-//! 16 x 16 result tile is lane for lane the VNNI kernel's `dp`, and the f32
-//! steps after it are the same instructions in the same order.
+//! Why it is bit-identical: the VNNI kernel forms, per weight row `n` and
+//! block `b`, the exact i32 block sum `sum w x`, converts it to f32 and adds
+//! `(s_n,b * xd_b) * sum` with one FMA into lane `2n` (even blocks) or `2n +
+//! 1` (odd blocks) of its accumulator; the two lanes of a row are added at
+//! the end. The tile multiply `tdpbssd` forms the same i32 sums (signed x
+//! signed, no offset correction needed) with the activation block as the
+//! `A` row (32 bytes, natural order) and a weight operand (`B`: 8 rows of
+//! 16 four-byte columns, one column per weight row) whose row `2g + h` holds
+//! the four-byte halves `h` of the 16 rows' stored 8-byte groups `g`
+//! ([`AmxWeights::prepare`] lays that out once per packed tile). Per
+//! activation row, two blocks' result rows are interleaved into the VNNI
+//! lane order and the f32 steps after that are the VNNI kernel's, in the
+//! same order.
 //!
 //! Tile instructions fault unless the OS granted the process the tile
 //! data state (Linux: `arch_prctl(ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA)`);
@@ -30,12 +30,16 @@ use core::arch::asm;
 use core::arch::x86_64::*;
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use super::{Isa, PackedQ8, PACK_BLOCKS, PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES, Q8_BLOCK};
+use super::{Isa, PackedQ8, PACK_BLOCKS, PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES, PACK_ROWS, Q8_BLOCK};
 
 /// Activation rows per tile multiply (the rows of the `A` and `C` tiles).
-pub const ROWS: usize = 16;
-/// Bytes of one block's masked weight operand: 8 `B` rows of 64 bytes.
+pub const ROWS: usize = 8;
+/// Weight rows per tile multiply: two packed tiles (the `B` and `C` columns).
+pub const COLS: usize = 2 * PACK_ROWS;
+/// Bytes of one block's weight operand: 8 `B` rows of 64 bytes.
 const B_BLOCK: usize = 512;
+/// Block pairs of the widest prepared tile.
+const PAIRS: usize = PACK_BLOCKS.div_ceil(2);
 
 static ENABLED: AtomicBool = AtomicBool::new(false);
 
@@ -57,47 +61,57 @@ pub fn enabled() -> bool {
     ENABLED.load(Ordering::Relaxed) && super::isa() == Isa::Avx512Vnni
 }
 
-/// The `B` operands of one packed tile of 8 weight rows, per block 8 rows
-/// of 64 bytes (row `2g + h`: the stored group-`g` line with only the
-/// four-byte columns `2n + h` kept, the others zero; 4-bit tiles widened to
-/// signed bytes first). At most [`PACK_BLOCKS`] blocks.
+/// The `B` operands of two packed tiles of 8 weight rows (tile `t`: the
+/// operand columns `8t .. 8t + 8`), per block 8 rows of 64 bytes (row `2g +
+/// h`, column `8t + n`: bytes `8g + 4h .. 8g + 4h + 4` of row `n`'s block;
+/// 4-bit tiles widened to signed bytes first), and their scales as the
+/// kernel multiplies them (per tile and block pair, lane `2n`: `s_n,2p`,
+/// lane `2n + 1`: `s_n,2p+1`). At most [`PACK_BLOCKS`] blocks.
 #[repr(C, align(64))]
 pub struct AmxWeights {
     b: [u8; PACK_BLOCKS * B_BLOCK],
-    nb: usize,
+    s: [[[f32; 16]; PAIRS]; 2],
+    nb: [usize; 2],
 }
 
 impl AmxWeights {
     pub fn new() -> Self {
-        AmxWeights { b: [0; PACK_BLOCKS * B_BLOCK], nb: 0 }
+        AmxWeights { b: [0; PACK_BLOCKS * B_BLOCK], s: [[[0.0; 16]; PAIRS]; 2], nb: [0; 2] }
     }
 
-    /// Lays out `w`'s weight operands; false (and nothing usable) if the
-    /// kernel does not run ([`enabled`]) or `w` has more than
-    /// [`PACK_BLOCKS`] blocks.
-    pub fn prepare(&mut self, w: PackedQ8<'_>) -> bool {
-        self.nb = 0;
+    /// Lays out `w` as tile `half` (0: weight rows 0-7 of the result, 1:
+    /// rows 8-15) of the operands; false (and nothing usable) if the kernel
+    /// does not run ([`enabled`]), `half > 1` or `w` has more than
+    /// [`PACK_BLOCKS`] blocks. Both tiles must be laid out, with the same
+    /// number of blocks, before [`gemm_q8_packed_amx`] runs.
+    pub fn prepare(&mut self, half: usize, w: PackedQ8<'_>) -> bool {
+        if half < 2 {
+            self.nb[half] = 0;
+        }
         if !enabled() {
             return false;
         }
         // SAFETY: `enabled` implies the Avx512Vnni ISA (avx512f/bw among its features).
-        unsafe { self.prepare_raw(w) }
+        unsafe { self.prepare_raw(half, w) }
     }
 
     /// [`Self::prepare`] without the [`enabled`] check.
     ///
     /// # Safety
-    /// The CPU must support avx512f and avx512bw.
-    pub unsafe fn prepare_raw(&mut self, w: PackedQ8<'_>) -> bool {
-        self.nb = 0;
+    /// The CPU must support avx512f, avx512bw and f16c.
+    pub unsafe fn prepare_raw(&mut self, half: usize, w: PackedQ8<'_>) -> bool {
+        if half > 1 {
+            return false;
+        }
+        self.nb[half] = 0;
         let nb = w.blocks();
         let per = if w.q4 { PACK_BLOCK_NIBBLES } else { PACK_BLOCK_VALUES };
-        if nb > PACK_BLOCKS || w.v.len() < nb * per {
+        if nb > PACK_BLOCKS || w.v.len() < nb * per || w.s.len() < nb * PACK_BLOCK_SCALES {
             return false;
         }
         // SAFETY: the caller's features; the extents were checked above.
-        unsafe { prepare_b(w, nb, &mut self.b) };
-        self.nb = nb;
+        unsafe { prepare_b(w, nb, half, &mut self.b, &mut self.s[half]) };
+        self.nb[half] = nb;
         true
     }
 }
@@ -108,14 +122,17 @@ impl Default for AmxWeights {
     }
 }
 
-/// [`AmxWeights::prepare`]'s layout.
+/// [`AmxWeights::prepare`]'s layout of tile `half`.
 ///
 /// # Safety
-/// avx512f and avx512bw; `w.v` holds `nb` blocks, `out` `nb * B_BLOCK` bytes.
-#[target_feature(enable = "avx512f,avx512bw")]
-unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, out: &mut [u8]) {
+/// avx512f, avx512bw and f16c; `w.v` holds `nb` blocks, `w.s` their scales,
+/// `out` `nb * B_BLOCK` bytes, `nb <= PACK_BLOCKS`.
+#[target_feature(enable = "avx512f,avx512bw,f16c")]
+unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], scales: &mut [[f32; 16]; PAIRS]) {
     let low = _mm512_set1_epi8(0x0f);
     let eight = _mm512_set1_epi8(8);
+    // Low half: the even dwords (h = 0) of a stored line, high half: the odd ones.
+    let split = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
     for (b, ob) in out.chunks_exact_mut(B_BLOCK).take(nb).enumerate() {
         let lines: [__m512i; 4] = if w.q4 {
             let vb = &w.v[PACK_BLOCK_NIBBLES * b..PACK_BLOCK_NIBBLES * (b + 1)];
@@ -133,28 +150,56 @@ unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, out: &mut [u8]) {
             core::array::from_fn(|g| unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _) })
         };
         for (g, line) in lines.iter().enumerate() {
-            // SAFETY: ob holds 8 x 64 bytes; 128g + 64 + 64 <= 512.
+            let v = _mm512_permutexvar_epi32(split, *line);
+            // SAFETY: ob holds 8 x 64 bytes; 128g + 64 + 32 half + 32 <= 512.
             unsafe {
-                _mm512_storeu_si512(ob.as_mut_ptr().add(128 * g) as *mut _, _mm512_maskz_mov_epi32(0x5555, *line));
-                _mm512_storeu_si512(ob.as_mut_ptr().add(128 * g + 64) as *mut _, _mm512_maskz_mov_epi32(0xaaaa, *line));
+                _mm256_storeu_si256(ob.as_mut_ptr().add(128 * g + 32 * half) as *mut _, _mm512_castsi512_si256(v));
+                _mm256_storeu_si256(ob.as_mut_ptr().add(128 * g + 64 + 32 * half) as *mut _, _mm512_extracti64x4_epi64::<1>(v));
             }
+        }
+    }
+    let scale = |b: usize| -> [f32; 8] {
+        let mut f = [0f32; 8];
+        if b < nb {
+            // SAFETY: block b's 8 f16 scales (16 bytes) lie in w.s; f holds 8 floats.
+            unsafe { _mm256_storeu_ps(f.as_mut_ptr(), _mm256_cvtph_ps(_mm_loadu_si128(w.s[PACK_BLOCK_SCALES * b..].as_ptr() as *const __m128i))) };
+        }
+        f
+    };
+    for (p, sp) in scales.iter_mut().enumerate().take(nb.div_ceil(2)) {
+        let (e, o) = (scale(2 * p), scale(2 * p + 1));
+        for n in 0..PACK_ROWS {
+            sp[2 * n] = e[n];
+            sp[2 * n + 1] = o[n];
         }
     }
 }
 
-/// `out[m][n]` for the `out.len() / 16 * 16` activation rows `m` (row `m`:
-/// `xq[m * stride..][..32 nb]`, `xd[m * nb..][..nb]`) and the 8 weight rows
-/// of `w` (prepared from `s` by [`AmxWeights::prepare`]; `s` supplies the
-/// scales): what [`super::gemm_q8_packed`] gives on AVX512-VNNI, bit for
-/// bit. Returns the rows written: 0 when the kernel does not run
-/// ([`enabled`]), the slices are short or `w` holds no prepared tile of
-/// `s`'s blocks.
-pub fn gemm_q8_packed_amx(w: &AmxWeights, s: PackedQ8<'_>, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; 8]]) -> usize {
+/// `out[m][8t + n]` for the `out.len() / 8 * 8` activation rows `m` (row
+/// `m`: `xq[m * stride..][..32 nb]`, `xd[m * nb..][..nb]`) and the weight
+/// rows `n` of the two tiles `t` prepared in `w` ([`AmxWeights::prepare`]):
+/// what [`super::gemm_q8_packed`] gives on AVX512-VNNI for each tile, bit
+/// for bit. Returns the rows written ([`amx_rows`]): 0 when the kernel does
+/// not run ([`enabled`]), the slices are short or `w` does not hold two
+/// tiles of the same blocks.
+pub fn gemm_q8_packed_amx(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]]) -> usize {
     if !enabled() {
         return 0;
     }
     // SAFETY: `enabled` (see `enable`'s contract).
-    unsafe { gemm_q8_packed_amx_raw(w, s, xq, stride, xd, out) }
+    unsafe { gemm_q8_packed_amx_raw(w, xq, stride, xd, out) }
+}
+
+/// The activation rows [`gemm_q8_packed_amx`] computes of `rows` rows of
+/// `nb` blocks with these operand extents (a multiple of [`ROWS`]; 0 if it
+/// would refuse them).
+pub fn amx_rows(nb: usize, xq_len: usize, stride: usize, xd_len: usize, rows: usize) -> usize {
+    let rows = rows / ROWS * ROWS;
+    let need_q = if rows == 0 { 0 } else { (rows - 1) * stride + nb * Q8_BLOCK };
+    if rows == 0 || nb == 0 || nb > PACK_BLOCKS || stride < nb * Q8_BLOCK || xq_len < need_q || xd_len < rows * nb {
+        return 0;
+    }
+    rows
 }
 
 /// [`gemm_q8_packed_amx`] without the [`enabled`] check.
@@ -163,17 +208,16 @@ pub fn gemm_q8_packed_amx(w: &AmxWeights, s: PackedQ8<'_>, xq: &[i8], stride: us
 /// The CPU must support amx-tile, amx-int8, avx512f/bw/dq/vl, avx2, fma and
 /// f16c, and the OS must have granted this process the tile data state
 /// ([`request_linux_permission`]).
-pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, s: PackedQ8<'_>, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; 8]]) -> usize {
-    let nb = w.nb;
-    let rows = out.len() / ROWS * ROWS;
-    let need_q = if rows == 0 { 0 } else { (rows - 1) * stride + nb * Q8_BLOCK };
-    if rows == 0 || nb == 0 || s.blocks() != nb || s.s.len() < nb * PACK_BLOCK_SCALES || stride < nb * Q8_BLOCK || xq.len() < need_q || xd.len() < rows * nb {
+pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]]) -> usize {
+    let nb = w.nb[0];
+    let rows = amx_rows(nb, xq.len(), stride, xd.len(), out.len());
+    if rows == 0 || w.nb[1] != nb {
         return 0;
     }
     // SAFETY: the caller's features and permission; the operand extents
-    // were checked above: 16 rows of every tile of xq reach `need_q`, the
-    // weight operands are `nb * B_BLOCK` bytes of `w.b`.
-    unsafe { tiles_q8(&w.b[..nb * B_BLOCK], s.s, nb, xq, stride, xd, &mut out[..rows]) };
+    // were checked by `amx_rows`: 8 rows of every tile of xq reach
+    // `need_q`, the weight operands are `nb * B_BLOCK` bytes of `w.b`.
+    unsafe { tiles_q8(&w.b[..nb * B_BLOCK], &w.s, nb, xq, stride, xd, &mut out[..rows]) };
     rows
 }
 
@@ -211,12 +255,12 @@ pub fn request_linux_permission() -> bool {
 #[repr(C, align(64))]
 struct TileConfig([u8; 64]);
 
-/// Tile 0 and 3: C (16 x 64 bytes), tile 1: A (16 x 32 bytes), tiles 2 and
-/// 4: B (8 x 64 bytes).
+/// C tiles 0, 3 (even block pairs) and 6, 7 (odd pairs): 8 x 64 bytes; A
+/// tiles 1 and 5: 8 x 32 bytes; B tiles 2 and 4: 8 x 64 bytes.
 const fn config() -> TileConfig {
     let mut c = [0u8; 64];
     c[0] = 1; // palette 1
-    let tiles: [(usize, u8, u16); 5] = [(0, 16, 64), (1, 16, 32), (2, 8, 64), (3, 16, 64), (4, 8, 64)];
+    let tiles: [(usize, u8, u16); 8] = [(0, 8, 64), (1, 8, 32), (2, 8, 64), (3, 8, 64), (4, 8, 64), (5, 8, 32), (6, 8, 64), (7, 8, 64)];
     let mut i = 0;
     while i < tiles.len() {
         let (t, rows, colsb) = tiles[i];
@@ -229,108 +273,137 @@ const fn config() -> TileConfig {
 }
 static CONFIG: TileConfig = config();
 
-/// C tile (16 rows x 16 i32) as stored.
+/// The C tiles of one block pair (8 rows x 16 i32 each) as stored.
 #[repr(C, align(64))]
-struct CTile([i32; 256]);
+struct CPair([[i32; 128]; 2]);
 
-/// `C(even) = A . B` into tile 0 (`EVEN`) or tile 3 (else).
+/// The C tiles of block pair `p` = blocks `2p` and `2p + 1` (the second
+/// only if `two`): `tmm0`/`tmm3` for even `p` (`EVEN`), `tmm6`/`tmm7` for odd.
 ///
 /// # Safety
-/// Tiles configured ([`CONFIG`]); `a` has 16 rows of 32 bytes at `stride`,
-/// `b` 8 rows of 64 bytes.
+/// Tiles configured ([`CONFIG`]); `a` has 8 rows of 32 (64 if `two`) bytes
+/// at `stride`, `b` 8 (16 if `two`) rows of 64 bytes.
 #[inline(always)]
-unsafe fn multiply<const EVEN: bool>(a: *const i8, stride: usize, b: *const u8) {
-    // SAFETY: the caller's.
+unsafe fn multiply<const EVEN: bool>(a: *const i8, stride: usize, b: *const u8, two: bool) {
+    // SAFETY: the caller's; the second block's operands are 32 bytes
+    // further in `a` and `B_BLOCK` bytes further in `b`.
     unsafe {
-        if EVEN {
-            asm!("tilezero tmm0", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm0, tmm1, tmm2",
-                a = in(reg) a, sa = in(reg) stride, b = in(reg) b, sb = in(reg) 64usize, options(nostack, readonly));
-        } else {
-            asm!("tilezero tmm3", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm4, [{b} + {sb}]", "tdpbssd tmm3, tmm1, tmm4",
-                a = in(reg) a, sa = in(reg) stride, b = in(reg) b, sb = in(reg) 64usize, options(nostack, readonly));
+        let (a1, b1) = (a.add(32), b.add(B_BLOCK));
+        match (EVEN, two) {
+            (true, true) => asm!("tilezero tmm0", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm0, tmm1, tmm2",
+                "tilezero tmm3", "tileloadd tmm5, [{a1} + {sa}]", "tileloadd tmm4, [{b1} + {sb}]", "tdpbssd tmm3, tmm5, tmm4",
+                a = in(reg) a, a1 = in(reg) a1, sa = in(reg) stride, b = in(reg) b, b1 = in(reg) b1, sb = in(reg) 64usize, options(nostack, readonly)),
+            (true, false) => asm!("tilezero tmm0", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm0, tmm1, tmm2",
+                a = in(reg) a, sa = in(reg) stride, b = in(reg) b, sb = in(reg) 64usize, options(nostack, readonly)),
+            (false, true) => asm!("tilezero tmm6", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm6, tmm1, tmm2",
+                "tilezero tmm7", "tileloadd tmm5, [{a1} + {sa}]", "tileloadd tmm4, [{b1} + {sb}]", "tdpbssd tmm7, tmm5, tmm4",
+                a = in(reg) a, a1 = in(reg) a1, sa = in(reg) stride, b = in(reg) b, b1 = in(reg) b1, sb = in(reg) 64usize, options(nostack, readonly)),
+            (false, false) => asm!("tilezero tmm6", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm6, tmm1, tmm2",
+                a = in(reg) a, sa = in(reg) stride, b = in(reg) b, sb = in(reg) 64usize, options(nostack, readonly)),
         }
     }
 }
 
-/// Stores C tile 0 (`EVEN`) or 3.
+/// Stores the C tiles of a block pair ([`multiply`]'s `EVEN`; the second
+/// only if `two`).
 ///
 /// # Safety
-/// Tiles configured; `c` is a whole [`CTile`].
+/// Tiles configured and multiplied.
 #[inline(always)]
-unsafe fn store<const EVEN: bool>(c: &mut CTile) {
-    // SAFETY: the caller's; 16 rows x 64 bytes fill `c`.
+unsafe fn store<const EVEN: bool>(c: &mut CPair, two: bool) {
+    let (c0, c1) = (c.0[0].as_mut_ptr(), c.0[1].as_mut_ptr());
+    // SAFETY: the caller's; 8 rows x 64 bytes fill each half of `c`.
     unsafe {
-        if EVEN {
-            asm!("tilestored [{c} + {sc}], tmm0", c = in(reg) c.0.as_mut_ptr(), sc = in(reg) 64usize, options(nostack));
-        } else {
-            asm!("tilestored [{c} + {sc}], tmm3", c = in(reg) c.0.as_mut_ptr(), sc = in(reg) 64usize, options(nostack));
+        match (EVEN, two) {
+            (true, true) => asm!("tilestored [{c0} + {s}], tmm0", "tilestored [{c1} + {s}], tmm3", c0 = in(reg) c0, c1 = in(reg) c1, s = in(reg) 64usize, options(nostack)),
+            (true, false) => asm!("tilestored [{c0} + {s}], tmm0", c0 = in(reg) c0, s = in(reg) 64usize, options(nostack)),
+            (false, true) => asm!("tilestored [{c0} + {s}], tmm6", "tilestored [{c1} + {s}], tmm7", c0 = in(reg) c0, c1 = in(reg) c1, s = in(reg) 64usize, options(nostack)),
+            (false, false) => asm!("tilestored [{c0} + {s}], tmm6", c0 = in(reg) c0, s = in(reg) 64usize, options(nostack)),
         }
     }
 }
 
-/// The kernel of [`gemm_q8_packed_amx`] (extents checked there). Per 16-row
-/// tile and block `b`: multiply block `b + 1` while block `b`'s result is
-/// stored and block `b - 1`'s is scaled into the accumulators (two C tiles
-/// and two stored copies alternate).
+/// The kernel of [`gemm_q8_packed_amx`] (extents checked there). Per 8-row
+/// tile and block pair `p`: multiply pair `p + 1` while pair `p`'s results
+/// are stored and scaled into the accumulators (two sets of C tiles and two
+/// stored copies alternate).
 ///
 /// # Safety
 /// As [`gemm_q8_packed_amx`]'s SAFETY note: AMX usable, the Avx512Vnni
 /// features, and the extents it checked.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,f16c")]
-unsafe fn tiles_q8(wb: &[u8], s: &[u8], nb: usize, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; 8]]) {
-    let dup = _mm512_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
-    let mut c = [CTile([0; 256]), CTile([0; 256])];
+unsafe fn tiles_q8(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: usize, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]]) {
+    // Result row m of a pair: tile t's lanes (2n, 2n + 1) = weight row 8t + n's sums of blocks (2p, 2p + 1).
+    let ilv = [_mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23), _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31)];
+    let np = nb.div_ceil(2);
+    let mut c = [CPair([[0; 128]; 2]), CPair([[0; 128]; 2])];
     // SAFETY: CONFIG is a valid palette-1 configuration.
     unsafe { asm!("ldtilecfg [{0}]", in(reg) CONFIG.0.as_ptr(), options(nostack, readonly)) };
     for (t, ot) in out.chunks_exact_mut(ROWS).enumerate() {
         let a = &xq[t * ROWS * stride..];
         let d = &xd[t * ROWS * nb..(t + 1) * ROWS * nb];
-        let mut acc = [_mm512_setzero_ps(); ROWS];
-        // SAFETY: block 0 of 16 rows of `a` and of `wb` (extents checked by the caller).
-        unsafe { multiply::<true>(a.as_ptr(), stride, wb.as_ptr()) };
-        for b in 0..=nb {
-            if b < nb {
-                if b + 1 < nb {
-                    let (ap, bp) = (a[32 * (b + 1)..].as_ptr(), wb[B_BLOCK * (b + 1)..].as_ptr());
-                    // SAFETY: block b + 1 < nb, as for block 0.
-                    unsafe {
-                        if b % 2 == 0 {
-                            multiply::<false>(ap, stride, bp)
-                        } else {
-                            multiply::<true>(ap, stride, bp)
-                        }
-                    }
-                }
-                // SAFETY: tiles configured; block b's result is in tile 0 (b even) or 3.
-                unsafe {
-                    if b % 2 == 0 {
-                        store::<true>(&mut c[0])
+        let mut acc = [[_mm512_setzero_ps(); ROWS]; 2];
+        let two = |p: usize| 2 * p + 1 < nb;
+        // SAFETY (multiply, store): pair p's blocks < nb of 8 rows of `a` and of `wb` (extents checked by the caller).
+        unsafe { multiply::<true>(a.as_ptr(), stride, wb.as_ptr(), two(0)) };
+        for p in 0..np {
+            unsafe {
+                if p + 1 < np {
+                    let (ap, bp) = (a[64 * (p + 1)..].as_ptr(), wb[2 * B_BLOCK * (p + 1)..].as_ptr());
+                    if p % 2 == 0 {
+                        multiply::<false>(ap, stride, bp, two(p + 1))
                     } else {
-                        store::<false>(&mut c[1])
+                        multiply::<true>(ap, stride, bp, two(p + 1))
                     }
                 }
+                if p % 2 == 0 {
+                    store::<true>(&mut c[0], two(p))
+                } else {
+                    store::<false>(&mut c[1], two(p))
+                }
             }
-            if b == 0 {
-                continue;
-            }
-            let p = b - 1;
             let cp = &c[p % 2].0;
-            // SAFETY: s holds nb x 8 f16 (16 bytes per block).
-            let sv = _mm512_permutexvar_ps(dup, _mm512_castps256_ps512(_mm256_cvtph_ps(unsafe { _mm_loadu_si128(s[PACK_BLOCK_SCALES * p..].as_ptr() as *const __m128i) })));
-            for (m, am) in acc.iter_mut().enumerate() {
-                // SAFETY: row m of the stored tile: 16 i32 at 16m (aligned).
-                let dp = unsafe { _mm512_load_si512(cp[16 * m..].as_ptr() as *const _) };
-                *am = _mm512_fmadd_ps(_mm512_cvtepi32_ps(dp), _mm512_mul_ps(sv, _mm512_set1_ps(d[m * nb + p])), *am);
+            // SAFETY: the pair's scales: 16 floats per tile.
+            let sv: [__m512; 2] = core::array::from_fn(|h| unsafe { _mm512_loadu_ps(sc[h][p].as_ptr()) });
+            if two(p) {
+                for m in 0..ROWS {
+                    // SAFETY: row m of each stored tile: 16 i32 at 16m (aligned);
+                    // d holds blocks 2p and 2p + 1 of row m (2p + 1 < nb).
+                    let (r0, r1, xdv) = unsafe {
+                        (
+                            _mm512_load_si512(cp[0][16 * m..].as_ptr() as *const _),
+                            _mm512_load_si512(cp[1][16 * m..].as_ptr() as *const _),
+                            _mm512_castsi512_ps(_mm512_set1_epi64((d.as_ptr().add(m * nb + 2 * p) as *const i64).read_unaligned())),
+                        )
+                    };
+                    for h in 0..2 {
+                        let sums = _mm512_permutex2var_epi32(r0, ilv[h], r1);
+                        acc[h][m] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv[h], xdv), acc[h][m]);
+                    }
+                }
+            } else {
+                for m in 0..ROWS {
+                    // SAFETY: row m of the stored tile, as above.
+                    let r0 = unsafe { _mm512_load_si512(cp[0][16 * m..].as_ptr() as *const _) };
+                    let xdv = _mm512_set1_ps(d[m * nb + 2 * p]);
+                    for h in 0..2 {
+                        let sums = _mm512_permutexvar_epi32(ilv[h], r0);
+                        acc[h][m] = _mm512_mask3_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv[h], xdv), acc[h][m], 0x5555);
+                    }
+                }
             }
         }
-        for (o, a) in ot.iter_mut().zip(acc) {
-            // Lane pairs (2n, 2n + 1) are row n, as in the VNNI kernel.
-            let pairs = _mm512_add_ps(a, _mm512_permute_ps::<0b10_11_00_01>(a));
-            let mut v = [0f32; 16];
-            // SAFETY: v holds 16 floats.
-            unsafe { _mm512_storeu_ps(v.as_mut_ptr(), pairs) };
-            for (n, on) in o.iter_mut().enumerate() {
-                *on = v[2 * n];
+        for (m, o) in ot.iter_mut().enumerate() {
+            for h in 0..2 {
+                // Lane pairs (2n, 2n + 1) are row n, as in the VNNI kernel.
+                let a = acc[h][m];
+                let pairs = _mm512_add_ps(a, _mm512_permute_ps::<0b10_11_00_01>(a));
+                let mut v = [0f32; 16];
+                // SAFETY: v holds 16 floats.
+                unsafe { _mm512_storeu_ps(v.as_mut_ptr(), pairs) };
+                for n in 0..PACK_ROWS {
+                    o[PACK_ROWS * h + n] = v[2 * n];
+                }
             }
         }
     }

@@ -27,9 +27,9 @@ pub mod x86;
 #[cfg(target_arch = "x86_64")]
 pub mod amx;
 #[cfg(target_arch = "x86_64")]
-pub use amx::{gemm_q8_packed_amx, AmxWeights, ROWS as AMX_ROWS};
+pub use amx::{amx_rows, gemm_q8_packed_amx, AmxWeights, COLS as AMX_COLS, ROWS as AMX_ROWS};
 #[cfg(not(target_arch = "x86_64"))]
-pub use no_amx::{gemm_q8_packed_amx, AmxWeights, ROWS as AMX_ROWS};
+pub use no_amx::{amx_rows, gemm_q8_packed_amx, AmxWeights, COLS as AMX_COLS, ROWS as AMX_ROWS};
 #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
 pub mod neon;
 
@@ -676,12 +676,23 @@ pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
     }
 }
 
+/// Whether the AMX int8 kernel runs ([`amx::enabled`]; never off x86_64).
+#[inline]
+pub fn amx_enabled() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return amx::enabled();
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// The AMX entry points on targets without AMX: nothing is prepared and no
 /// row is computed, so callers take [`gemm_q8_packed`] for every row.
 #[cfg(not(target_arch = "x86_64"))]
 mod no_amx {
     /// As on x86_64.
-    pub const ROWS: usize = 16;
+    pub const ROWS: usize = 8;
+    /// As on x86_64.
+    pub const COLS: usize = 2 * super::PACK_ROWS;
     /// Holds nothing.
     pub struct AmxWeights;
     impl AmxWeights {
@@ -689,7 +700,7 @@ mod no_amx {
             AmxWeights
         }
         /// Always false.
-        pub fn prepare(&mut self, _: super::PackedQ8<'_>) -> bool {
+        pub fn prepare(&mut self, _: usize, _: super::PackedQ8<'_>) -> bool {
             false
         }
     }
@@ -699,7 +710,11 @@ mod no_amx {
         }
     }
     /// Always 0 rows.
-    pub fn gemm_q8_packed_amx(_: &AmxWeights, _: super::PackedQ8<'_>, _: &[i8], _: usize, _: &[f32], _: &mut [[f32; 8]]) -> usize {
+    pub fn amx_rows(_: usize, _: usize, _: usize, _: usize, _: usize) -> usize {
+        0
+    }
+    /// Always 0 rows.
+    pub fn gemm_q8_packed_amx(_: &AmxWeights, _: &[i8], _: usize, _: &[f32], _: &mut [[f32; COLS]]) -> usize {
         0
     }
 }

@@ -1309,10 +1309,12 @@ fn axpy_rows_equal_axpy_row_after_row() {
 
 /// The AMX tile kernel (where this CPU has AMX-INT8 and Linux grants the
 /// tile permission) equals the AVX512-VNNI packed kernel bit for bit, row
-/// for row, on int8 and 4-bit tiles, stored and packed on the stack, for
-/// 16-64 activation rows (a trailing partial tile is left to the caller),
-/// and tracks the scalar twin like the VNNI kernel does; it refuses short
-/// operands and tiles wider than `PACK_BLOCKS` instead of reading past them.
+/// for row and tile for tile, on pairs of int8 and 4-bit tiles (stored, and
+/// packed on the stack), for 8-64 activation rows (a trailing partial
+/// group of 8 is left to the caller), odd and even block counts, and
+/// tracks the scalar twin like the VNNI kernel does; it refuses short
+/// operands, tiles of different widths and tiles wider than `PACK_BLOCKS`
+/// instead of reading past them.
 #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
 #[test]
 #[allow(unsafe_code)]
@@ -1333,19 +1335,19 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     for nb in [1usize, 2, 3, 24, 95, 96] {
         let n = nb * Q8_BLOCK;
         for q4 in [false, true] {
-            let rows: Vec<Vec<u8>> = (0..PACK_ROWS).map(|_| if q4 { q4_bytes(&r.vec(n)) } else { q8_bytes(&r.vec(n)) }).collect();
-            // The tile as the kernels read it: q8 rows packed on the stack, or a stored 4-bit group.
-            let mut pack = Q8Pack8::new();
-            let group = if q4 { q4_group(&rows, nb) } else { Vec::new() };
-            let tile = if q4 {
-                PackedQ8::from_q4_group(&group, nb).unwrap()
-            } else {
-                scalar::q8_pack8(core::array::from_fn(|j| &rows[j][..]), nb, &mut pack.v, &mut pack.s);
+            // Two tiles as the kernels read them: q8 rows packed on the stack, or stored 4-bit groups.
+            let rows: [Vec<Vec<u8>>; 2] = core::array::from_fn(|_| (0..PACK_ROWS).map(|_| if q4 { q4_bytes(&r.vec(n)) } else { q8_bytes(&r.vec(n)) }).collect());
+            let mut packs = [Q8Pack8::new(), Q8Pack8::new()];
+            let groups: [Vec<u8>; 2] = core::array::from_fn(|t| if q4 { q4_group(&rows[t], nb) } else { Vec::new() });
+            for (t, pack) in packs.iter_mut().enumerate().filter(|_| !q4) {
+                scalar::q8_pack8(core::array::from_fn(|j| &rows[t][j][..]), nb, &mut pack.v, &mut pack.s);
                 pack.nb = nb;
-                pack.view()
-            };
+            }
+            let tile: [PackedQ8<'_>; 2] = core::array::from_fn(|t| if q4 { PackedQ8::from_q4_group(&groups[t], nb).unwrap() } else { packs[t].view() });
             let mut w = AmxWeights::new();
-            assert!(unsafe { w.prepare_raw(tile) }, "nb={nb}");
+            for (t, tl) in tile.iter().enumerate() {
+                assert!(unsafe { w.prepare_raw(t, *tl) }, "nb={nb}");
+            }
             let m_rows = 64;
             let mut qs = vec![0i8; m_rows * n];
             let mut ds = vec![0f32; m_rows * nb];
@@ -1358,40 +1360,52 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
                 scalar::quantise_q8_corr(&x, &mut qs[m * n..(m + 1) * n], &mut ds[m * nb..(m + 1) * nb], &mut cs[m * 2 * nb..(m + 1) * 2 * nb]);
             }
             let row = |m: usize| (&qs[m * n..(m + 1) * n], &ds[m * nb..(m + 1) * nb], &cs[m * 2 * nb..(m + 1) * 2 * nb]);
-            for want_rows in [16usize, 40, 64] {
-                let mut out = vec![[0f32; 8]; want_rows];
-                let done = unsafe { amx::gemm_q8_packed_amx_raw(&w, tile, &qs, n, &ds, &mut out) };
-                assert_eq!(done, want_rows / 16 * 16, "whole tiles only");
+            for want_rows in [8usize, 15, 40, 64] {
+                let mut out = vec![[0f32; amx::COLS]; want_rows];
+                let done = unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, &mut out) };
+                assert_eq!(done, want_rows / 8 * 8, "whole groups of 8 rows only");
                 for m0 in (0..done).step_by(8) {
-                    let v = unsafe { super::x86::gemm_q8_packed_vnni::<8>(tile, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2)) };
-                    let s = scalar::gemm_q8_packed::<8>(tile, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2));
-                    for m in 0..8 {
-                        assert_eq!(out[m0 + m].map(f32::to_bits), v[m].map(f32::to_bits), "q4={q4} nb={nb} row {}", m0 + m);
-                        for j in 0..8 {
-                            let mag: f64 = (0..nb)
-                                .map(|b| {
-                                    let a: i64 = (0..Q8_BLOCK).map(|i| (tile.value(b, j, i) as i64 * row(m0 + m).0[b * 32 + i] as i64).abs()).sum();
-                                    (super::f16_to_f32(tile.scale_bits(b, j)) as f64 * row(m0 + m).1[b] as f64).abs() * a as f64
-                                })
-                                .sum();
-                            check(&format!("amx q4={q4} nb={nb} [{}][{j}]", m0 + m), out[m0 + m][j], s[m][j], mag, SIMD_VS_SCALAR_GEMM_Q8);
+                    for (t, tl) in tile.iter().enumerate() {
+                        let v = unsafe { super::x86::gemm_q8_packed_vnni::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2)) };
+                        let s = scalar::gemm_q8_packed::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2));
+                        for m in 0..8 {
+                            let got: [f32; 8] = core::array::from_fn(|j| out[m0 + m][8 * t + j]);
+                            assert_eq!(got.map(f32::to_bits), v[m].map(f32::to_bits), "q4={q4} nb={nb} tile {t} row {}", m0 + m);
+                            for j in 0..8 {
+                                let mag: f64 = (0..nb)
+                                    .map(|b| {
+                                        let a: i64 = (0..Q8_BLOCK).map(|i| (tl.value(b, j, i) as i64 * row(m0 + m).0[b * 32 + i] as i64).abs()).sum();
+                                        (super::f16_to_f32(tl.scale_bits(b, j)) as f64 * row(m0 + m).1[b] as f64).abs() * a as f64
+                                    })
+                                    .sum();
+                                check(&format!("amx q4={q4} nb={nb} tile {t} [{}][{j}]", m0 + m), got[j], s[m][j], mag, SIMD_VS_SCALAR_GEMM_Q8);
+                            }
                         }
                     }
                 }
             }
             // Short operands are refused, not read past.
-            let mut out = vec![[0f32; 8]; 16];
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, tile, &qs[..15 * n + n - 1], n, &ds, &mut out) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, tile, &qs, n, &ds[..16 * nb - 1], &mut out) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, tile, &qs, n, &ds, &mut out[..15]) }, 0);
+            let mut out = vec![[0f32; amx::COLS]; 8];
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs[..7 * n + n - 1], n, &ds, &mut out) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds[..8 * nb - 1], &mut out) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, &mut out[..7]) }, 0);
+            // A second tile of other blocks: refused.
+            if nb > 1 {
+                let zeros = vec![0u8; (nb - 1) * (256 + 16)];
+                let narrow = if q4 { PackedQ8::from_q4_group(&zeros, nb - 1) } else { PackedQ8::from_group(&zeros, nb - 1) }.unwrap();
+                let mut w2 = AmxWeights::new();
+                assert!(unsafe { w2.prepare_raw(0, tile[0]) && w2.prepare_raw(1, narrow) });
+                assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w2, &qs, n, &ds, &mut out) }, 0);
+            }
         }
     }
-    // Wider than the prepared room: refused.
+    // Wider than the prepared room, or a third tile: refused.
     let wide = vec![0u8; (PACK_BLOCKS + 1) * (256 + 16)];
     let mut w = AmxWeights::new();
-    assert!(!unsafe { w.prepare_raw(PackedQ8::from_group(&wide, PACK_BLOCKS + 1).unwrap()) });
-    let qs = vec![0i8; 16 * (PACK_BLOCKS + 1) * 32];
-    let ds = vec![0f32; 16 * (PACK_BLOCKS + 1)];
-    let mut out = vec![[0f32; 8]; 16];
-    assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, PackedQ8::from_group(&wide, PACK_BLOCKS + 1).unwrap(), &qs, (PACK_BLOCKS + 1) * 32, &ds, &mut out) }, 0);
+    assert!(!unsafe { w.prepare_raw(0, PackedQ8::from_group(&wide, PACK_BLOCKS + 1).unwrap()) });
+    assert!(!unsafe { w.prepare_raw(2, PackedQ8::from_group(&wide, 1).unwrap()) });
+    let qs = vec![0i8; 8 * (PACK_BLOCKS + 1) * 32];
+    let ds = vec![0f32; 8 * (PACK_BLOCKS + 1)];
+    let mut out = vec![[0f32; amx::COLS]; 8];
+    assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, (PACK_BLOCKS + 1) * 32, &ds, &mut out) }, 0);
 }

@@ -758,13 +758,19 @@ unsafe fn dot_rows_512_by(q: &[f32], load: impl Fn(usize, usize, __mmask16) -> _
 
 /// See [`super::gemm_q8_packed`]: per block, the 4 packed groups made
 /// unsigned (int8: `^ 0x80` = `w + 128`; 4-bit: the nibbles as stored, `q +
-/// 8`, split out of the two halves) and the 8 f16 scales widened (each
-/// twice, one per lane pair) once for every activation row; per activation
-/// row, 4 `vpdpbusd` of the groups against the row's 8-byte groups
-/// broadcast to every lane, started at the row's parity corrections (int8:
-/// `-128 sum(q)` as given, 4-bit: the same shifted to `-8 sum(q)`, exact),
-/// so each i32 lane is an exact 16-term dot, then one convert, one scale
-/// product and one FMA for all 8 weight rows (2 lanes each).
+/// 8`, split out of the two halves) and the 8 f16 scales widened once for
+/// every activation row; per activation row, 4 `vpdpbusd` of the groups
+/// against the row's 8-byte groups broadcast to every lane, started at the
+/// row's parity corrections (int8: `-128 sum(q)` as given, 4-bit: the same
+/// shifted to `-8 sum(q)`, exact), so the two i32 lanes of a weight row
+/// hold the halves of its block dot, added (exact) into the block's sum.
+///
+/// Blocks go in pairs: lane `2n` of the accumulator takes weight row `n`'s
+/// even blocks, lane `2n + 1` its odd blocks, each block with one convert,
+/// one scale product `s_n,b * xd_b` and one FMA (a last unpaired block
+/// updates the even lanes only); the two lanes are added at the end. The
+/// AMX kernel ([`super::amx`]) performs exactly these f32 steps per lane on
+/// the tile unit's block sums, so both give the same bits.
 ///
 /// # Safety
 /// The CPU must support avx512f/bw/dq/vl/vnni, avx2, fma and f16c.
@@ -796,9 +802,9 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
         .fold(w.blocks().min(w.v.len() / pv).min(w.s.len() / PS), usize::min);
     let flip = _mm512_set1_epi8(-128);
     let low = _mm512_set1_epi8(0x0f);
-    let dup = _mm512_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
-    let mut acc = [_mm512_setzero_ps(); M];
-    for b in 0..nb {
+    let ilv = _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
+    // Block b's 4 unsigned groups and 8 widened scales.
+    let block = |b: usize| -> ([__m512i; 4], __m256) {
         let vb = &w.v[pv * b..pv * (b + 1)];
         let sb = &w.s[PS * b..PS * (b + 1)];
         let wv: [__m512i; 4] = if Q4 {
@@ -815,21 +821,49 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
             core::array::from_fn(|g| _mm512_xor_si512(unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _) }, flip))
         };
         // SAFETY: sb holds 8 f16 (128 bits).
-        let sv = _mm512_permutexvar_ps(dup, _mm512_castps256_ps512(_mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) })));
-        for m in 0..M {
-            let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
-            let cs = &xc[m][2 * b..2 * b + 2];
-            // SAFETY: cs holds 2 i32 (8 bytes), xs 32 bytes (4 x 8).
-            let mut dp = unsafe { _mm512_set1_epi64((cs.as_ptr() as *const i64).read_unaligned()) };
-            if Q4 {
-                dp = _mm512_srai_epi32::<4>(dp);
-            }
-            for (g, wg) in wv.iter().enumerate() {
-                // SAFETY: 8g + 8 <= 32.
-                let xg = unsafe { _mm512_set1_epi64((xs.as_ptr().add(8 * g) as *const i64).read_unaligned()) };
-                dp = _mm512_dpbusd_epi32(dp, *wg, xg);
-            }
-            acc[m] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(dp), _mm512_mul_ps(sv, _mm512_set1_ps(xd[m][b])), acc[m]);
+        (wv, _mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) }))
+    };
+    // Row m's dot with block b's groups: lanes (2n, 2n + 1) = row n's halves.
+    let dot = |m: usize, b: usize, wv: &[__m512i; 4]| -> __m512i {
+        let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
+        let cs = &xc[m][2 * b..2 * b + 2];
+        // SAFETY: cs holds 2 i32 (8 bytes), xs 32 bytes (4 x 8).
+        let mut dp = unsafe { _mm512_set1_epi64((cs.as_ptr() as *const i64).read_unaligned()) };
+        if Q4 {
+            dp = _mm512_srai_epi32::<4>(dp);
+        }
+        for (g, wg) in wv.iter().enumerate() {
+            // SAFETY: 8g + 8 <= 32.
+            let xg = unsafe { _mm512_set1_epi64((xs.as_ptr().add(8 * g) as *const i64).read_unaligned()) };
+            dp = _mm512_dpbusd_epi32(dp, *wg, xg);
+        }
+        dp
+    };
+    let mut acc = [_mm512_setzero_ps(); M];
+    let mut b = 0;
+    while b + 1 < nb {
+        let (w0, s0) = block(b);
+        let (w1, s1) = block(b + 1);
+        // Lane 2n: s_n,b; lane 2n + 1: s_n,b+1.
+        let sv = _mm512_permutex2var_ps(_mm512_castps256_ps512(s0), ilv, _mm512_castps256_ps512(s1));
+        for (m, am) in acc.iter_mut().enumerate() {
+            let (d0, d1) = (dot(m, b, &w0), dot(m, b + 1, &w1));
+            // Lane 2n: block b's sum of row n; lane 2n + 1: block b + 1's.
+            let sums = _mm512_add_epi32(_mm512_mask_shuffle_epi32::<0xb1>(d0, 0xaaaa, d1), _mm512_mask_shuffle_epi32::<0xb1>(d1, 0x5555, d0));
+            // SAFETY: xd[m] holds blocks b and b + 1 (b + 1 < nb).
+            let xdv = _mm512_castsi512_ps(_mm512_set1_epi64(unsafe { (xd[m].as_ptr().add(b) as *const i64).read_unaligned() }));
+            *am = _mm512_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv, xdv), *am);
+        }
+        b += 2;
+    }
+    if b < nb {
+        let (w0, s0) = block(b);
+        let dup = _mm512_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
+        let sv = _mm512_permutexvar_ps(dup, _mm512_castps256_ps512(s0));
+        for (m, am) in acc.iter_mut().enumerate() {
+            let d0 = dot(m, b, &w0);
+            let sums = _mm512_add_epi32(d0, _mm512_shuffle_epi32::<0xb1>(d0));
+            *am = _mm512_mask3_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv, _mm512_set1_ps(xd[m][b])), *am, 0x5555);
         }
     }
     let mut out = [[0.0f32; 8]; M];
