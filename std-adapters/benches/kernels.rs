@@ -13,7 +13,7 @@
 use std::time::Instant;
 
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
-use duolando_core::kernels::simd;
+use duolando_core::kernels::simd::{self, Isa};
 use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, KvRows, Matrix, Q8Rows, RowData, X8Rows, TiledCausalMask};
 
 mod common;
@@ -38,6 +38,11 @@ fn main() {
     let reps = if quick { 3 } else { 7 };
     let isas = duolando::simd::supported();
     println!("ISAs on this CPU (best first): {isas:?}");
+    // The linear lines measure AVX512-VNNI once more with the AMX tiles where they run.
+    let mut variants: Vec<(Isa, bool)> = isas.iter().map(|&i| (i, false)).collect();
+    if isas.contains(&Isa::Avx512Vnni) && duolando::simd::amx_usable() {
+        variants.insert(0, (Isa::Avx512Vnni, true));
+    }
     let mut r = Rng(0x1234_5678);
     // (out, in): the MLP's two matrices (the largest of the model).
     for &(o, i) in &[(3072usize, 768usize), (768, 3072)] {
@@ -55,9 +60,14 @@ fn main() {
             let sets = if n >= 64 { 1 } else { mats };
             let mut line = format!("linear {o}x{i} n={n:>3}:");
             let mut base = None;
-            for isa in &isas {
-                // SAFETY: `supported` lists only ISAs this CPU has.
-                unsafe { simd::set_isa(*isa) };
+            for &(isa, amx) in &variants {
+                // SAFETY: `supported` lists only ISAs this CPU has; AMX is
+                // switched on only where `amx_usable` got the tile permission.
+                unsafe {
+                    simd::set_isa(isa);
+                    amx_switch(amx);
+                }
+                let label = if amx { format!("{isa:?}+AMX") } else { format!("{isa:?}") };
                 let mut per = Vec::new();
                 for (name, pick) in [("f32", 0), ("f16", 1), ("int8", 2), ("int8x8", 3)] {
                     let t = time(reps_n, || {
@@ -77,13 +87,15 @@ fn main() {
                 let f32t = per[0].1;
                 base.get_or_insert(per.clone());
                 line += &format!(
-                    "  [{isa:?}] {}",
+                    "  [{label}] {}",
                     per.iter().map(|(nm, t)| format!("{nm} {:.3} ms ({:.1} GMAC/s, {:.2}x f32)", t * 1e3, (n * o * i) as f64 / t / 1e9, f32t / t)).collect::<Vec<_>>().join(", ")
                 );
             }
             println!("{line}");
         }
     }
+    // SAFETY: turning the tiles off is always sound.
+    unsafe { amx_switch(false) };
     // Attention at the R step's coordinated-attention shape: 290 rows, C 768, 12 heads.
     let (t, streams, c, nh) = (29usize, 10usize, 768usize, 12usize);
     let n = t * streams;
@@ -154,4 +166,17 @@ fn main() {
         line += &format!("  [{isa:?}] exp {:.2} ms ({:.1}x libm), GELU {:.2} ms ({:.1}x libm)", te * 1e3, t_libm_exp / te, tg * 1e3, t_libm_gelu / tg);
     }
     println!("{line}");
+}
+
+/// Switches the AMX int8 tiles on or off (x86_64; nothing elsewhere).
+///
+/// # Safety
+/// With `on`: as `simd::amx::enable`.
+#[allow(unused_variables)]
+unsafe fn amx_switch(on: bool) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: the caller's.
+    unsafe {
+        simd::amx::enable(on)
+    };
 }
