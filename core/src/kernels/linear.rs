@@ -37,18 +37,20 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
 }
 
 /// Int8 activation values quantised at once by `linear` over a [`Q8Rows`]
-/// matrix (a stack panel: `Q8_PANEL` i8 + `Q8_PANEL / 32` f32 scales and i32
-/// corrections, and `TN x Q8_PANEL / 32` f32 weight scales: 180 KiB on
-/// 64-bit targets (the packed path: the 132 KiB panel, a 24 KiB tile pack
-/// and 48 KiB of AMX weight operands), 7 KiB on 32-bit ones; 96 KiB of
-/// values hold 32 rows of the widest GPT input, 3072: two AMX tiles, the
-/// weights read once per 32 rows). Rows of `x` are quantised once per call
-/// when `rows * in <= Q8_PANEL` (every matrix-vector and small-batch
-/// product of the model), else once per panel of `Q8_PANEL / in` rows
-/// (the weights are then read once per panel). Wider matrices (`in >
-/// Q8_PANEL`) take the generic chunked path.
+/// matrix (a stack panel: `Q8_PANEL` i8 + `Q8_PANEL / 32` f32 scales and
+/// `2 Q8_PANEL / 32` i32 corrections, 264 KiB on 64-bit targets, with
+/// either `TN x Q8_PANEL / 32` f32 weight scales (96 KiB) or the packed
+/// path's 26 KiB tile pack and 54 KiB of AMX weight operands; 7 KiB in all
+/// on 32-bit ones). 192 KiB of values hold 64 rows of the widest GPT input,
+/// 3072: eight AMX row groups per preparation of a tile pair's operands,
+/// the weights read once per 64 rows (96 KiB: the R step's 768 x 3072
+/// GEMM at 1.32x VNNI with AMX in the kernel bench, 1.70x at 192 KiB).
+/// Rows of `x` are quantised once per call when `rows * in <= Q8_PANEL`
+/// (every matrix-vector and small-batch product of the model), else once
+/// per panel of `Q8_PANEL / in` rows (the weights are then read once per
+/// panel). Wider matrices (`in > Q8_PANEL`) take the generic chunked path.
 #[cfg(target_pointer_width = "64")]
-pub const Q8_PANEL: usize = 96 * 1024;
+pub const Q8_PANEL: usize = 192 * 1024;
 /// See the 64-bit definition.
 #[cfg(not(target_pointer_width = "64"))]
 pub const Q8_PANEL: usize = 4 * 1024;
@@ -414,8 +416,9 @@ const AMX_MIN_ROWS: usize = 16;
 #[inline]
 fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, t: &[f32]) {
     let yr = y.seg(i, t0, t0 + nt);
-    for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
-        *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
+    match b {
+        Some(b) => yr.iter_mut().zip(t).zip(&b[t0..]).for_each(|((yo, v), bj)| *yo = bj + v),
+        None => yr.iter_mut().zip(t).for_each(|(yo, v)| *yo = 0.0 + v),
     }
 }
 
