@@ -388,7 +388,9 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
         } else {
             a.prepare(1, tile);
         }
-        let done = amx_pair(a, p, amx_planned, n_in, |i, t| {
+        // The next pair's weights stream in (into L2) while this pair is multiplied.
+        let ahead = w.stored_rows(t0 + 2 * R, (t0 + 4 * R).min(y.hi()));
+        let done = amx_pair(a, p, amx_planned, n_in, ahead, |i, t| {
             put_row(&mut y, b, i, t0, nt, &t[..R]);
             if nt1 > 0 {
                 put_row(&mut y, b, i, t1, nt1, &t[R..]);
@@ -458,8 +460,9 @@ fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel, r0: usize, r1: usize, n_in: 
 
 /// The first `rows` activation rows of a panel (a multiple of
 /// [`simd::AMX_ROWS`]) against the two tiles prepared in `a`, on the AMX
-/// kernel (`put(row, values of both tiles)`); returns the rows done.
-fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel, rows: usize, n_in: usize, mut put: impl FnMut(usize, &[f32; simd::AMX_COLS])) -> usize {
+/// kernel (`put(row, values of both tiles)`), prefetching `ahead` over the
+/// calls; returns the rows done.
+fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel, rows: usize, n_in: usize, ahead: &[u8], mut put: impl FnMut(usize, &[f32; simd::AMX_COLS])) -> usize {
     /// Activation rows per AMX call (its tile configuration is loaded once per call).
     const CALL_ROWS: usize = 8 * simd::AMX_ROWS;
     let nb = n_in / Q8_BLOCK;
@@ -467,7 +470,9 @@ fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel, rows: usize, n_in: usize, mut put
     let mut i0 = 0;
     while i0 < rows {
         let k = (rows - i0).min(CALL_ROWS);
-        let done = simd::gemm_q8_packed_amx(a, &p.q[i0 * n_in..rows * n_in], n_in, &p.d[i0 * nb..rows * nb], &mut out[..k]);
+        // This call's share of `ahead` (by rows).
+        let share = &ahead[i0 * ahead.len() / rows..(i0 + k) * ahead.len() / rows];
+        let done = simd::gemm_q8_packed_amx(a, &p.q[i0 * n_in..rows * n_in], n_in, &p.d[i0 * nb..rows * nb], &mut out[..k], share);
         if done == 0 {
             break;
         }

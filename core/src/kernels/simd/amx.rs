@@ -181,13 +181,16 @@ unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], sca
 /// what [`super::gemm_q8_packed`] gives on AVX512-VNNI for each tile, bit
 /// for bit. Returns the rows written ([`amx_rows`]): 0 when the kernel does
 /// not run ([`enabled`]), the slices are short or `w` does not hold two
-/// tiles of the same blocks.
-pub fn gemm_q8_packed_amx(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]]) -> usize {
+/// tiles of the same blocks. The lines of `ahead` (the weights the caller
+/// reads next) are prefetched into L2 a few per block pair, spread over the
+/// call, so their memory reads overlap the tile multiplies; no result
+/// depends on it.
+pub fn gemm_q8_packed_amx(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]], ahead: &[u8]) -> usize {
     if !enabled() {
         return 0;
     }
     // SAFETY: `enabled` (see `enable`'s contract).
-    unsafe { gemm_q8_packed_amx_raw(w, xq, stride, xd, out) }
+    unsafe { gemm_q8_packed_amx_raw(w, xq, stride, xd, out, ahead) }
 }
 
 /// The activation rows [`gemm_q8_packed_amx`] computes of `rows` rows of
@@ -208,7 +211,7 @@ pub fn amx_rows(nb: usize, xq_len: usize, stride: usize, xd_len: usize, rows: us
 /// The CPU must support amx-tile, amx-int8, avx512f/bw/dq/vl, avx2, fma and
 /// f16c, and the OS must have granted this process the tile data state
 /// ([`request_linux_permission`]).
-pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]]) -> usize {
+pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]], ahead: &[u8]) -> usize {
     let nb = w.nb[0];
     let rows = amx_rows(nb, xq.len(), stride, xd.len(), out.len());
     if rows == 0 || w.nb[1] != nb {
@@ -217,7 +220,7 @@ pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, xq: &[i8], stride: usize, x
     // SAFETY: the caller's features and permission; the operand extents
     // were checked by `amx_rows`: 8 rows of every tile of xq reach
     // `need_q`, the weight operands are `nb * B_BLOCK` bytes of `w.b`.
-    unsafe { tiles_q8(&w.b[..nb * B_BLOCK], &w.s, nb, xq, stride, xd, &mut out[..rows]) };
+    unsafe { tiles_q8(&w.b[..nb * B_BLOCK], &w.s, nb, xq, stride, xd, &mut out[..rows], ahead) };
     rows
 }
 
@@ -326,16 +329,20 @@ unsafe fn store<const EVEN: bool>(c: &mut CPair, two: bool) {
 /// The kernel of [`gemm_q8_packed_amx`] (extents checked there). Per 8-row
 /// tile and block pair `p`: multiply pair `p + 1` while pair `p`'s results
 /// are stored and scaled into the accumulators (two sets of C tiles and two
-/// stored copies alternate).
+/// stored copies alternate), and the next share of `ahead`'s lines is
+/// prefetched.
 ///
 /// # Safety
 /// As [`gemm_q8_packed_amx`]'s SAFETY note: AMX usable, the Avx512Vnni
 /// features, and the extents it checked.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,f16c")]
-unsafe fn tiles_q8(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: usize, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]]) {
+#[allow(clippy::too_many_arguments)]
+unsafe fn tiles_q8(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: usize, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]], ahead: &[u8]) {
     // Result row m of a pair: tile t's lanes (2n, 2n + 1) = weight row 8t + n's sums of blocks (2p, 2p + 1).
     let ilv = [_mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23), _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31)];
     let np = nb.div_ceil(2);
+    // `ahead`'s lines, spread evenly over the (row group, block pair) steps.
+    let (lines, steps) = (ahead.len().div_ceil(64), out.len() / ROWS * np);
     let mut c = [CPair([[0; 128]; 2]), CPair([[0; 128]; 2])];
     // SAFETY: CONFIG is a valid palette-1 configuration.
     unsafe { asm!("ldtilecfg [{0}]", in(reg) CONFIG.0.as_ptr(), options(nostack, readonly)) };
@@ -361,6 +368,11 @@ unsafe fn tiles_q8(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: usize, xq: &[i8]
                 } else {
                     store::<false>(&mut c[1], two(p))
                 }
+            }
+            let step = t * np + p;
+            for l in step * lines / steps..(step + 1) * lines / steps {
+                // SAFETY: a prefetch is a hint with no architectural effect; line l < lines lies in `ahead`.
+                unsafe { _mm_prefetch::<_MM_HINT_T1>(ahead.as_ptr().add(64 * l) as *const i8) };
             }
             let cp = &c[p % 2].0;
             // SAFETY: the pair's scales: 16 floats per tile.

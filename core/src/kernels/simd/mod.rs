@@ -714,7 +714,7 @@ mod no_amx {
         0
     }
     /// Always 0 rows.
-    pub fn gemm_q8_packed_amx(_: &AmxWeights, _: &[i8], _: usize, _: &[f32], _: &mut [[f32; COLS]]) -> usize {
+    pub fn gemm_q8_packed_amx(_: &AmxWeights, _: &[i8], _: usize, _: &[f32], _: &mut [[f32; COLS]], _: &[u8]) -> usize {
         0
     }
 }

@@ -1362,7 +1362,7 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
             let row = |m: usize| (&qs[m * n..(m + 1) * n], &ds[m * nb..(m + 1) * nb], &cs[m * 2 * nb..(m + 1) * 2 * nb]);
             for want_rows in [8usize, 15, 40, 64] {
                 let mut out = vec![[0f32; amx::COLS]; want_rows];
-                let done = unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, &mut out) };
+                let done = unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, &mut out, rows[0][0].as_slice()) };
                 assert_eq!(done, want_rows / 8 * 8, "whole groups of 8 rows only");
                 for m0 in (0..done).step_by(8) {
                     for (t, tl) in tile.iter().enumerate() {
@@ -1386,16 +1386,16 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
             }
             // Short operands are refused, not read past.
             let mut out = vec![[0f32; amx::COLS]; 8];
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs[..7 * n + n - 1], n, &ds, &mut out) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds[..8 * nb - 1], &mut out) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, &mut out[..7]) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs[..7 * n + n - 1], n, &ds, &mut out, &[]) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds[..8 * nb - 1], &mut out, &[]) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, &mut out[..7], &[]) }, 0);
             // A second tile of other blocks: refused.
             if nb > 1 {
                 let zeros = vec![0u8; (nb - 1) * (256 + 16)];
                 let narrow = if q4 { PackedQ8::from_q4_group(&zeros, nb - 1) } else { PackedQ8::from_group(&zeros, nb - 1) }.unwrap();
                 let mut w2 = AmxWeights::new();
                 assert!(unsafe { w2.prepare_raw(0, tile[0]) && w2.prepare_raw(1, narrow) });
-                assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w2, &qs, n, &ds, &mut out) }, 0);
+                assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w2, &qs, n, &ds, &mut out, &[]) }, 0);
             }
         }
     }
@@ -1407,5 +1407,5 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     let qs = vec![0i8; 8 * (PACK_BLOCKS + 1) * 32];
     let ds = vec![0f32; 8 * (PACK_BLOCKS + 1)];
     let mut out = vec![[0f32; amx::COLS]; 8];
-    assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, (PACK_BLOCKS + 1) * 32, &ds, &mut out) }, 0);
+    assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, (PACK_BLOCKS + 1) * 32, &ds, &mut out, &[]) }, 0);
 }
