@@ -82,7 +82,8 @@ fn f16_tokens_identical_to_f32() {
 /// int8 (Q8Block32x8 Linear/head weights, Q8Block32 embeddings, int8
 /// activations per block): leader tokens identical (measured 1.0: codebooks
 /// and encoders are f16), follower tokens in a FREE-RUNNING rollout agree at
-/// least 0.45 (measured 2026-12-01 under AVX512-VNNI: min 0.520 tiny2_frames;
+/// least 0.45 (measured 2026-12-01 under AVX512-VNNI, and the same on
+/// 2026-12-02 after the block-pair summation: min 0.520 tiny2_frames;
 /// 0.901 tiny_long, 1.000 tiny_short, 0.721 tiny_odd, 0.926 tiny2_tokens;
 /// before the x8 layout took the packed tile for 1-3 rows: 0.810 / 1.000 /
 /// 0.594 / 0.520 / 0.926, and 0.812 for tiny_odd before the VNNI kernels:
@@ -131,9 +132,10 @@ fn compare(store_as: StoreAs, min_agree: f64) {
 /// activations int8 per block as for int8): leader tokens identical
 /// (codebooks and encoders f16), follower tokens in a FREE-RUNNING rollout
 /// agree at least Q4_MIN_AGREE (measured: see below); motion within the
-/// limits when all tokens agree. Measured (AVX512-VNNI): tiny_long 0.686,
-/// tiny_short 0.473, tiny_odd 0.303, tiny2_frames 0.422, tiny2_tokens 0.779
-/// (first differing token at flat index 5-45); a broken 4-bit path agrees
+/// limits when all tokens agree. Measured (AVX512-VNNI, 2026-12-02, the
+/// block-pair summation): tiny_long 0.623 (0.686 with the per-half
+/// summation before), tiny_short 0.473, tiny_odd 0.303, tiny2_frames 0.422,
+/// tiny2_tokens 0.779 (first differing token at flat index 5-45); a broken 4-bit path agrees
 /// at chance (~1/64 per token). On these random-weight fixtures every
 /// logit is a near-tie, so this is a floor, not the quality on a trained
 /// model (docs/PERFORMANCE.md has the demo model's figures).
