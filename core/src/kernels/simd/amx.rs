@@ -351,9 +351,12 @@ unsafe fn tiles_q8(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: usize, xq: &[i8]
         let d = &xd[t * ROWS * nb..(t + 1) * ROWS * nb];
         let mut acc = [[_mm512_setzero_ps(); ROWS]; 2];
         let two = |p: usize| 2 * p + 1 < nb;
-        // SAFETY (multiply, store): pair p's blocks < nb of 8 rows of `a` and of `wb` (extents checked by the caller).
+        // SAFETY: pair 0's blocks (< nb) of 8 rows of `a` and of `wb` (extents checked by the caller).
         unsafe { multiply::<true>(a.as_ptr(), stride, wb.as_ptr(), two(0)) };
         for p in 0..np {
+            // SAFETY: tiles configured; pair p + 1's blocks (< nb) of 8 rows of
+            // `a` and of `wb`, as for pair 0; pair p's results are in the C
+            // tiles of its parity (multiplied in the previous step).
             unsafe {
                 if p + 1 < np {
                     let (ap, bp) = (a[64 * (p + 1)..].as_ptr(), wb[2 * B_BLOCK * (p + 1)..].as_ptr());
