@@ -11,6 +11,14 @@ use super::simd;
 /// `k`/`v` slices handed to [`attention`]; positions are derived by the mask.
 pub trait Mask: Sync {
     fn allowed(&self, qi: usize, kj: usize) -> bool;
+    /// A `p > 0` with `allowed(qi, kj) == allowed(qi + p, kj)` for all
+    /// `qi`, `kj`, where the mask has one: queries `p` apart see the same
+    /// keys, and [`attention`] scores them together (each key and value row
+    /// read once for a group). `None`: every query alone. Only a hint for
+    /// speed: a group's members are checked to have the same key runs.
+    fn period(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// The LAT band (`get_subsequent_mask` in the original): query at
@@ -46,6 +54,10 @@ impl Mask for TiledCausalMask {
     fn allowed(&self, qi: usize, kj: usize) -> bool {
         kj % self.t_k <= self.q_pos0 + qi % self.t_q
     }
+    /// The streams' rows at one position (`t_q` apart) see the same keys.
+    fn period(&self) -> Option<usize> {
+        (self.t_q > 0).then_some(self.t_q)
+    }
 }
 
 /// Runs of allowed keys remembered per query (the masks of the model have
@@ -54,9 +66,15 @@ impl Mask for TiledCausalMask {
 const MAX_RUNS: usize = 64;
 
 /// Most keys of an attention split over threads: each thread scores its
-/// queries in a stack buffer of this many floats (4 KiB); longer key runs
-/// stay on the calling thread (with the caller's `scores`).
+/// queries in a stack buffer of [`SPLIT_SCORES`] floats; longer key runs
+/// stay on the calling thread (with the caller's `scores`, one query at a
+/// time unless it holds more than one row of scores).
 pub const SPLIT_MAX_KEYS: usize = 1024;
+
+/// Floats of a thread's score buffer (8 KiB): two rows of
+/// [`SPLIT_MAX_KEYS`], or [`simd::QUERY_GROUP`] rows of up to 512 keys (a
+/// query group needs one row of scores per member).
+const SPLIT_SCORES: usize = 2 * SPLIT_MAX_KEYS;
 
 /// `out = softmax(mask(q k^T / sqrt(hd))) v`, per head. `q`: (nq, C);
 /// `k`, `v`: (nk, C) ([`KvRows`]: a plain f32 slice, or a cache's one or
@@ -65,8 +83,11 @@ pub const SPLIT_MAX_KEYS: usize = 1024;
 /// sees no key gets zeros (cannot happen with the model's masks).
 ///
 /// Per query the mask is read once into runs of consecutive allowed keys;
-/// per head and run the scores are one [`simd::dot_rows`] call and the
-/// probability-weighted values one [`simd::axpy_rows_f32`] call. With a worker
+/// per head and run the scores are one [`simd::dot_rows_group`] call and
+/// the probability-weighted values one [`simd::axpy_rows_group_f32`] call
+/// for a group of queries that see the same keys ([`Mask::period`]; each
+/// query's numbers are those of [`simd::dot_rows`] and
+/// [`simd::axpy_rows_f32`] on it alone). With a worker
 /// pool ([`super::parallel`]) and at most [`SPLIT_MAX_KEYS`] keys, the
 /// queries are split over its threads (each query computed as on one
 /// thread: bit-identical).
@@ -93,66 +114,125 @@ pub fn attention<'a, M: Mask>(
     }
     split_cols_aligned(out, nq * c, c, nq.saturating_mul(nk).saturating_mul(c), |mut cols| {
         let (lo, hi) = (cols.lo(), cols.hi());
-        let mut scores = [0.0f32; SPLIT_MAX_KEYS];
+        let mut scores = [0.0f32; SPLIT_SCORES];
         attend_queries(q, &k, &v, c, n_head, mask, lo / c, nk, &mut scores, cols.seg(0, lo, hi));
     });
 }
 
 /// Queries `q0 .. q0 + out.len() / c` of [`attention`] (`out`: their rows).
+///
+/// Queries a [`Mask::period`] apart are taken in groups of up to
+/// [`simd::QUERY_GROUP`] consecutive members of their class whose key runs
+/// are equal (as many groups as needed, sized evenly), so each key and
+/// value row is read once per group; `scores` holds one row of `nk` per
+/// member. Each query's numbers are those of attending it alone.
 #[allow(clippy::too_many_arguments)]
 fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_head: usize, mask: &M, q0: usize, nk: usize, scores: &mut [f32], out: &mut [f32]) {
-    let hd = c / n_head;
-    let scale = 1.0 / libm::sqrtf(hd as f32);
+    let nq = out.len() / c;
+    let g_max = simd::QUERY_GROUP.min(scores.len() / nk.max(1)).max(1);
+    let p = match mask.period() {
+        Some(p) if p > 0 && g_max > 1 => p,
+        _ => nq.max(1),
+    };
     let mut runs = [(0usize, 0usize); MAX_RUNS];
-    for (qi, orow) in (q0..).zip(out.chunks_exact_mut(c)) {
-        let mut nr = 0;
-        let mut kj = 0;
-        while kj < nk && nr <= MAX_RUNS {
-            if !mask.allowed(qi, kj) {
-                kj += 1;
-                continue;
+    let mut next = [(0usize, 0usize); MAX_RUNS];
+    for lead in 0..p.min(nq) {
+        let count = (nq - lead).div_ceil(p);
+        let size = count.div_ceil(count.div_ceil(g_max));
+        let (mut first, mut g, mut nr) = (lead, 0usize, 0usize);
+        for li in (lead..nq).step_by(p) {
+            let n = key_runs(mask, q0 + li, nk, &mut next);
+            let same = n == nr && n <= MAX_RUNS && next[..n] == runs[..n];
+            if g > 0 && (g == size || !same) {
+                attend_group(q, k, v, c, n_head, mask, q0 + first, p, g, &runs, nr, nk, scores, &mut out[first * c..]);
+                g = 0;
             }
-            let start = kj;
-            while kj < nk && mask.allowed(qi, kj) {
-                kj += 1;
+            if g == 0 {
+                (first, nr) = (li, n);
+                let keep = n.min(MAX_RUNS);
+                runs[..keep].copy_from_slice(&next[..keep]);
             }
-            if nr < MAX_RUNS {
-                runs[nr] = (start, kj);
-            }
-            nr += 1;
+            g += 1;
         }
-        if nr > MAX_RUNS {
-            attention_query_keywise(q, k, v, c, n_head, mask, qi, nk, scale, scores, orow);
+        if g > 0 {
+            attend_group(q, k, v, c, n_head, mask, q0 + first, p, g, &runs, nr, nk, scores, &mut out[first * c..]);
+        }
+    }
+}
+
+/// The runs of keys `0..nk` query `qi` may see, as `(start, end)` pairs in
+/// `runs`; returns their number (more than [`MAX_RUNS`]: only the first
+/// `MAX_RUNS` are written, and the caller goes key by key).
+fn key_runs<M: Mask>(mask: &M, qi: usize, nk: usize, runs: &mut [(usize, usize); MAX_RUNS]) -> usize {
+    let mut nr = 0;
+    let mut kj = 0;
+    while kj < nk && nr <= MAX_RUNS {
+        if !mask.allowed(qi, kj) {
+            kj += 1;
             continue;
         }
-        let runs = &runs[..nr];
-        for h in 0..n_head {
-            let qh = &q[qi * c + h * hd..qi * c + (h + 1) * hd];
+        let start = kj;
+        while kj < nk && mask.allowed(qi, kj) {
+            kj += 1;
+        }
+        if nr < MAX_RUNS {
+            runs[nr] = (start, kj);
+        }
+        nr += 1;
+    }
+    nr
+}
+
+/// `g` queries `qi0, qi0 + p, ..` that see the same `nr` key runs (`out`:
+/// from the first one's row; the others `p` rows apart). Per head: the
+/// scores of all members in one [`KvRows::dot_rows_group`] call per run
+/// (`scores`: `g` rows of `nk`), each member's softmax, and the weighted
+/// values in one [`KvRows::axpy_rows_group`] call per run.
+#[allow(clippy::too_many_arguments)]
+fn attend_group<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_head: usize, mask: &M, qi0: usize, p: usize, g: usize, runs: &[(usize, usize); MAX_RUNS], nr: usize, nk: usize, scores: &mut [f32], out: &mut [f32]) {
+    let hd = c / n_head;
+    let scale = 1.0 / libm::sqrtf(hd as f32);
+    let rs = p * c;
+    if nr > MAX_RUNS {
+        for m in 0..g {
+            attention_query_keywise(q, k, v, c, n_head, mask, qi0 + m * p, nk, scale, scores, &mut out[m * rs..m * rs + c]);
+        }
+        return;
+    }
+    let runs = &runs[..nr];
+    let scores = &mut scores[..g * nk];
+    let mut sums = [0.0f32; simd::QUERY_GROUP];
+    for h in 0..n_head {
+        let (qh, oh) = (&q[qi0 * c + h * hd..], &mut out[h * hd..]);
+        for &(a, b) in runs {
+            k.dot_rows_group(qh, hd, rs, g, a, b, c, h * hd, &mut scores[a..], nk);
+        }
+        for (row, sum) in scores.chunks_exact_mut(nk).zip(&mut sums) {
             let mut max = f32::NEG_INFINITY;
             for &(a, b) in runs {
-                let run = &mut scores[a..b];
-                k.dot_rows(qh, a, b, c, h * hd, run);
-                for s in run.iter_mut() {
-                    *s *= scale;
-                    max = max.max(*s);
-                }
+                max = simd::scale_max(&mut row[a..b], scale, max);
             }
-            let oh = &mut orow[h * hd..(h + 1) * hd];
-            oh.fill(0.0);
-            let mut sum = 0.0f32;
+            *sum = 0.0;
             for &(a, b) in runs {
-                sum += simd::exp_shifted_sum(&mut scores[a..b], max);
+                *sum += simd::exp_shifted_sum(&mut row[a..b], max);
             }
-            if sum == 0.0 {
-                continue;
-            }
-            let inv = 1.0 / sum;
+            // A query that sees no key (or only zero weights) keeps zeros.
+            let inv = if *sum == 0.0 { 0.0 } else { 1.0 / *sum };
             for &(a, b) in runs {
-                let p = &mut scores[a..b];
-                for s in p.iter_mut() {
+                for s in row[a..b].iter_mut() {
                     *s *= inv;
                 }
-                v.axpy_rows(p, a, b, c, h * hd, oh);
+            }
+        }
+        for m in 0..g {
+            oh[m * rs..m * rs + hd].fill(0.0);
+        }
+        for &(a, b) in runs {
+            v.axpy_rows_group(&scores[a..], nk, a, b, c, h * hd, oh, rs, hd, g);
+        }
+        for (m, &sum) in sums[..g].iter().enumerate() {
+            if sum == 0.0 {
+                oh[m * rs..m * rs + hd].fill(0.0);
             }
         }
     }

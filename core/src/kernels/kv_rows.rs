@@ -101,6 +101,37 @@ impl<'a> KvRows<'a> {
         }
     }
 
+    /// [`KvRows::dot_rows`] for `g` queries of `hd` lanes `q_stride` apart
+    /// in `q`: query `m`'s score of key `j` goes to `out[m out_stride + j -
+    /// a]` (`out_stride >= b - a`); each key row read once for the group
+    /// where the ISA allows, bit for bit the per-query call.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn dot_rows_group(&self, q: &[f32], hd: usize, q_stride: usize, g: usize, a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32], out_stride: usize) {
+        for (part, lo, hi, at) in self.pieces(a, b, c) {
+            let out = &mut out[at..];
+            match part {
+                _ if hi == lo => {}
+                RowData::F32(d) => f32::dot_rows_group(q, hd, q_stride, g, &d[lo * c + h_off..], c, hi - lo, out, out_stride),
+                RowData::F16(d) => u16::dot_rows_group(q, hd, q_stride, g, &d[lo * c + h_off..], c, hi - lo, out, out_stride),
+            }
+        }
+    }
+
+    /// [`KvRows::axpy_rows`] for `g` queries: query `m`'s coefficient of
+    /// row `j` is `coef[m coef_stride + j - a]`, its output `y[m y_stride
+    /// ..][..n]`; bit for bit the per-query call.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn axpy_rows_group(&self, coef: &[f32], coef_stride: usize, a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+        for (part, lo, hi, at) in self.pieces(a, b, c) {
+            let (coef, s, e) = (&coef[at..], lo * c + h_off, hi.saturating_sub(1) * c + h_off + n);
+            match part {
+                _ if hi == lo => {}
+                RowData::F32(d) => f32::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], c, y, y_stride, n, g),
+                RowData::F16(d) => u16::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], c, y, y_stride, n, g),
+            }
+        }
+    }
+
     /// `qh . row j [h_off .. h_off + qh.len()]` (the key-by-key path): the
     /// kernel of [`KvRows::dot_rows`] on one key, so f16 rows give what
     /// the widened f32 rows give on every ISA.

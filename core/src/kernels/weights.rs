@@ -113,6 +113,16 @@ pub trait DenseElem: Copy + 'static {
     /// weighted values; ISA-dispatched, [`simd::axpy_rows_f32`]): [`Self::axpy`]
     /// row after row, bit for bit.
     fn axpy_rows(coef: &[f32], rows: &[Self], stride: usize, y: &mut [f32]);
+    /// [`Self::dot_rows`] for `g` queries `q_stride` apart, their `n`
+    /// scores `out_stride` apart ([`simd::dot_rows_group`]; bit for bit the
+    /// per-query call).
+    #[allow(clippy::too_many_arguments)]
+    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[Self], stride: usize, n: usize, out: &mut [f32], out_stride: usize);
+    /// [`Self::axpy_rows`] for `g` queries: coefficients `coef_stride`
+    /// apart, outputs of `n` lanes `y_stride` apart
+    /// ([`simd::axpy_rows_group_f32`]; bit for bit the per-query call).
+    #[allow(clippy::too_many_arguments)]
+    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[Self], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize);
 }
 
 impl DenseElem for f32 {
@@ -139,6 +149,14 @@ impl DenseElem for f32 {
     #[inline]
     fn axpy_rows(coef: &[f32], rows: &[f32], stride: usize, y: &mut [f32]) {
         simd::axpy_rows_f32(coef, rows, stride, y)
+    }
+    #[inline]
+    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+        simd::dot_rows_group(q, hd, q_stride, g, rows, stride, n, out, out_stride)
+    }
+    #[inline]
+    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+        simd::axpy_rows_group_f32(coef, coef_stride, nk, rows, stride, y, y_stride, n, g)
     }
 }
 
@@ -167,6 +185,14 @@ impl DenseElem for u16 {
     #[inline]
     fn axpy_rows(coef: &[f32], rows: &[u16], stride: usize, y: &mut [f32]) {
         simd::axpy_rows_f16(coef, rows, stride, y)
+    }
+    #[inline]
+    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+        simd::dot_rows_group_f16(q, hd, q_stride, g, rows, stride, n, out, out_stride)
+    }
+    #[inline]
+    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+        simd::axpy_rows_group_f16(coef, coef_stride, nk, rows, stride, y, y_stride, n, g)
     }
 }
 

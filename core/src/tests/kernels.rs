@@ -285,3 +285,72 @@ fn attention_band_and_tiled_causal() {
     attention(&q[qi * c..(qi + 1) * c], &k[..], &v[..], c, nh, &last, &mut scores, &mut one);
     assert_close(&one, &want[qi * c..(qi + 1) * c], CLOSE);
 }
+
+/// A mask with its period hidden: [`attention`] takes every query alone.
+struct Alone<M>(M);
+impl<M: Mask> Mask for Alone<M> {
+    fn allowed(&self, qi: usize, kj: usize) -> bool {
+        self.0.allowed(qi, kj)
+    }
+}
+
+/// A band that claims every query sees the same keys (it does not): the
+/// group's check of the members' key runs must take each query alone.
+struct FalsePeriod(BandMask);
+impl Mask for FalsePeriod {
+    fn allowed(&self, qi: usize, kj: usize) -> bool {
+        self.0.allowed(qi, kj)
+    }
+    fn period(&self) -> Option<usize> {
+        Some(1)
+    }
+}
+
+/// Queries scored in groups ([`Mask::period`]) give, bit for bit, what
+/// each query attended alone gives: the tiled causal mask of 1-10 streams
+/// (S-mode rows of one position, R-mode windows, offsets `q_pos0`), f32
+/// rows and f16 rows split in two runs, heads of 8, 64 and 96 lanes (past
+/// the register block), score buffers of 1-5 rows; a false period is caught
+/// by the run check (equal to the band alone and to the naive reference).
+#[test]
+fn grouped_queries_equal_each_query_alone() {
+    let mut r = Lcg(71);
+    for (c, nh) in [(32, 4), (128, 2), (96, 1)] {
+        for (streams, t_q, t_k, q_pos0) in [(10, 1, 4, 3), (10, 4, 4, 0), (5, 7, 9, 2), (3, 2, 5, 1), (1, 6, 6, 0)] {
+            let (nq, nk) = (streams * t_q, streams * t_k);
+            let (q, k, v) = (r.vec(nq * c), r.vec(nk * c), r.vec(nk * c));
+            let f16 = |x: &[f32]| -> Vec<u16> { x.iter().map(|&a| half::f16::from_f32(a).to_bits()).collect() };
+            let (k16, v16) = (f16(&k), f16(&v));
+            let split = (nk / 3) * c;
+            let m = TiledCausalMask { t_q, t_k, q_pos0 };
+            for rows in [1, 2, 5] {
+                let mut scores = vec![0.0; rows * nk];
+                let (mut grouped, mut alone) = (vec![f32::NAN; nq * c], vec![f32::NAN; nq * c]);
+                attention(&q, &k[..], &v[..], c, nh, &m, &mut scores, &mut grouped);
+                attention(&q, &k[..], &v[..], c, nh, &Alone(m), &mut scores, &mut alone);
+                assert!(grouped.iter().zip(&alone).all(|(a, b)| a.to_bits() == b.to_bits()), "f32 c={c} {streams}x{t_q} q_pos0={q_pos0} rows={rows}");
+                fn kv16(d: &[u16], split: usize) -> KvRows<'_> {
+                    KvRows::two(RowData::F16(&d[..split]), RowData::F16(&d[split..]))
+                }
+                let (mut grouped16, mut alone16) = (vec![f32::NAN; nq * c], vec![f32::NAN; nq * c]);
+                attention(&q, kv16(&k16, split), kv16(&v16, split), c, nh, &m, &mut scores, &mut grouped16);
+                attention(&q, kv16(&k16, split), kv16(&v16, split), c, nh, &Alone(m), &mut scores, &mut alone16);
+                assert!(grouped16.iter().zip(&alone16).all(|(a, b)| a.to_bits() == b.to_bits()), "f16 c={c} {streams}x{t_q} q_pos0={q_pos0} rows={rows}");
+            }
+            let want = naive_attention(&q, &k, &v, c, nh, &|i, j| j % t_k <= q_pos0 + i % t_q);
+            let mut scores = vec![0.0; nk];
+            let mut out = vec![0.0; nq * c];
+            attention(&q, &k[..], &v[..], c, nh, &m, &mut scores, &mut out);
+            assert_close(&out, &want, CLOSE);
+        }
+        let n = 24;
+        let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
+        let band = BandMask { radius: 3, q_pos0: 0, k_pos0: 0 };
+        let mut scores = vec![0.0; 4 * n];
+        let (mut fooled, mut plain) = (vec![0.0; n * c], vec![0.0; n * c]);
+        attention(&q, &k[..], &v[..], c, nh, &FalsePeriod(band), &mut scores, &mut fooled);
+        attention(&q, &k[..], &v[..], c, nh, &band, &mut scores, &mut plain);
+        assert!(fooled.iter().zip(&plain).all(|(a, b)| a.to_bits() == b.to_bits()), "false period c={c}");
+        assert_close(&fooled, &naive_attention(&q, &k, &v, c, nh, &|i, j| i.abs_diff(j) <= 3), CLOSE);
+    }
+}

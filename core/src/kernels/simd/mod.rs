@@ -400,12 +400,31 @@ pub fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
 pub fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
     match isa() {
         #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f and avx2).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::exp_shifted_sum_512(s, max) },
+        #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::exp_shifted_sum(s, max) },
+        Isa::Avx2 => unsafe { x86::exp_shifted_sum(s, max) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::exp_shifted_sum(s, max) },
         _ => scalar::exp_shifted_sum(s, max),
+    }
+}
+
+/// `s[i] *= scale`, and the largest of `max` and the scaled values
+/// (`f32::max`: NaN scores are skipped; `max` itself is not NaN): the
+/// attention's scaled scores and softmax shift. The maximum of a set is
+/// exact and independent of the order, so every variant returns the twin's
+/// value (only the sign of a zero maximum may differ, which
+/// [`exp_shifted_sum`] does not see); the scaled scores are the twin's.
+#[inline]
+pub fn scale_max(s: &mut [f32], scale: f32, max: f32) -> f32 {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::scale_max_512(s, scale, max) },
+        _ => scalar::scale_max(s, scale, max),
     }
 }
 
@@ -657,6 +676,86 @@ pub fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_rows_f16(coef, w, stride, y) },
         _ => scalar::axpy_rows_f16(coef, w, stride, y),
+    }
+}
+
+/// Most queries one register block of [`dot_rows_group`] /
+/// [`axpy_rows_group_f32`] holds (larger groups go this many at a time).
+pub const QUERY_GROUP: usize = 4;
+
+/// [`dot_rows`] for `g` queries against the same `n` key rows: query `m`
+/// is `q[m q_stride ..][..hd]`, its scores go to `out[m
+/// out_stride ..][..n]` (`out_stride >= n`). Bit for bit [`dot_rows`] per
+/// query on every ISA; AVX-512 loads each key row once for up to
+/// [`QUERY_GROUP`] queries (heads of at most 64 lanes), the others call
+/// [`dot_rows`] per query.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_group(q, hd, q_stride, g, k, stride, n, out, out_stride) },
+        _ => per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| dot_rows(qm, k, stride, o)),
+    }
+}
+
+/// [`dot_rows_group`] over binary16 key rows: bit for bit
+/// [`dot_rows_f16`] per query.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn dot_rows_group_f16(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f/bw/vl and f16c).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_group_f16(q, hd, q_stride, g, k, stride, n, out, out_stride) },
+        _ => per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| dot_rows_f16(qm, k, stride, o)),
+    }
+}
+
+/// `f(query m, its n scores)` for each query of a [`dot_rows_group`] call.
+#[allow(clippy::too_many_arguments)]
+fn per_query(q: &[f32], hd: usize, q_stride: usize, g: usize, n: usize, out: &mut [f32], out_stride: usize, mut f: impl FnMut(&[f32], &mut [f32])) {
+    for m in 0..g {
+        f(&q[m * q_stride..m * q_stride + hd], &mut out[m * out_stride..m * out_stride + n]);
+    }
+}
+
+/// [`axpy_rows_f32`] for `g` queries over the same value rows: query `m`'s
+/// coefficients are `coef[m coef_stride ..][..nk]`, its output `y[m
+/// y_stride ..][..n]`. Bit for bit [`axpy_rows_f32`] per query on
+/// every ISA; AVX-512 loads each value row once for up to [`QUERY_GROUP`]
+/// queries, the others call [`axpy_rows_f32`] per query.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn axpy_rows_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_group_f32(coef, coef_stride, nk, x, stride, y, y_stride, n, g) },
+        _ => per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| axpy_rows_f32(c, x, stride, ym)),
+    }
+}
+
+/// [`axpy_rows_group_f32`] over binary16 rows: bit for bit
+/// [`axpy_rows_f16`] per query.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn axpy_rows_group_f16(coef: &[f32], coef_stride: usize, nk: usize, w: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_group_f16(coef, coef_stride, nk, w, stride, y, y_stride, n, g) },
+        _ => per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| axpy_rows_f16(c, w, stride, ym)),
+    }
+}
+
+/// `f(query m's coefficients, its output row)` for each query of an
+/// [`axpy_rows_group_f32`] call.
+#[allow(clippy::too_many_arguments)]
+fn per_query_axpy(coef: &[f32], coef_stride: usize, nk: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, mut f: impl FnMut(&[f32], &mut [f32])) {
+    for m in 0..g {
+        f(&coef[m * coef_stride..m * coef_stride + nk], &mut y[m * y_stride..m * y_stride + n]);
     }
 }
 

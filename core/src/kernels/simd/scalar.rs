@@ -280,6 +280,25 @@ pub fn exp(x: f32) -> f32 {
     y * f32::from_bits(((n + 127) as u32) << 23)
 }
 
+/// Twin of [`super::scale_max`]: in 16 independent lanes (so it
+/// vectorizes where no SIMD variant runs), the rest in order.
+pub fn scale_max(s: &mut [f32], scale: f32, max: f32) -> f32 {
+    let mut lanes = [f32::NEG_INFINITY; 16];
+    let mut chunks = s.chunks_exact_mut(16);
+    for chunk in &mut chunks {
+        for (x, m) in chunk.iter_mut().zip(&mut lanes) {
+            *x *= scale;
+            *m = m.max(*x);
+        }
+    }
+    let mut max = max;
+    for x in chunks.into_remainder() {
+        *x *= scale;
+        max = max.max(*x);
+    }
+    lanes.iter().fold(max, |a, &b| a.max(b))
+}
+
 /// `s[i] = e^(s[i] - max)` ([`exp`]); returns their sum in 8 lane sums
 /// reduced like [`dot_f32`] (the softmax numerator and denominator).
 #[inline]

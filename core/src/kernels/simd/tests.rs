@@ -717,8 +717,8 @@ fn exp_inputs() -> std::vec::Vec<f32> {
     v
 }
 
-/// `exp_shifted_sum` (AVX2) is bit-identical to its scalar twin, values and
-/// sum, on every length tail; the twin is within 2.5e-7 relative of libm.
+/// `exp_shifted_sum` (AVX2, AVX-512) is bit-identical to its scalar twin,
+/// values and sum, on every length tail; the twin is within 2.5e-7 relative of libm.
 #[test]
 #[allow(unsafe_code)]
 fn exp_matches_scalar_twin_and_libm() {
@@ -745,12 +745,27 @@ fn exp_matches_scalar_twin_and_libm() {
             for (i, (p, q)) in a.iter().zip(&b).enumerate() {
                 assert_eq!(p.to_bits(), q.to_bits(), "n={n} i={i} x={}", xs[i]);
             }
+            if std::is_x86_feature_detected!("avx512f") {
+                let mut c = xs[..n].to_vec();
+                // SAFETY: avx512f (and avx2) detected.
+                let sc = unsafe { super::x86::exp_shifted_sum_512(&mut c, max) };
+                assert_eq!(sa.to_bits(), sc.to_bits(), "avx512 sum n={n}");
+                for (i, (p, q)) in a.iter().zip(&c).enumerate() {
+                    assert_eq!(p.to_bits(), q.to_bits(), "avx512 n={n} i={i} x={}", xs[i]);
+                }
+            }
         }
         let (mut a, mut b) = ([f32::NAN; 9], [f32::NAN; 9]);
         scalar::exp_shifted_sum(&mut a, 0.0);
         // SAFETY: avx2 detected.
         unsafe { super::x86::exp_shifted_sum(&mut b, 0.0) };
         assert!(a.iter().chain(&b).all(|v| v.is_nan()), "NaN stays NaN");
+        if std::is_x86_feature_detected!("avx512f") {
+            let mut c = [f32::NAN; 19];
+            // SAFETY: avx512f (and avx2) detected.
+            unsafe { super::x86::exp_shifted_sum_512(&mut c, 0.0) };
+            assert!(c.iter().all(|v| v.is_nan()), "avx512: NaN stays NaN");
+        }
     }
     #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
     for n in (0..=40).chain([63, 64, 65, 290, xs.len()]) {
@@ -1408,4 +1423,198 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     let ds = vec![0f32; 8 * (PACK_BLOCKS + 1)];
     let mut out = vec![[0f32; amx::COLS]; 8];
     assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, (PACK_BLOCKS + 1) * 32, &ds, &mut out, &[]) }, 0);
+}
+
+/// The query-group kernels (`dot_rows_group*`, `axpy_rows_group*`) of
+/// every variant this CPU runs equal the same variant's per-query kernel
+/// called for each member, bit for bit (the attention scores a group of
+/// queries per key read and keeps each query's numbers), write nothing
+/// between the members' rows, and track the scalar twin (the per-query
+/// scalar kernels) within the per-query limits. Groups of 1-9 members
+/// (blocks of `QUERY_GROUP` and their rests), heads of 1-96 lanes (the
+/// masked tails, and past the 64 lanes a register block holds).
+#[test]
+#[allow(unsafe_code, clippy::type_complexity)]
+fn query_groups_equal_the_per_query_kernels() {
+    /// (variant, group kernel, the per-query kernel of the same variant).
+    ///
+    /// # Safety
+    /// Both kernels need the variant's CPU features (pushed only where detected).
+    type Dots<E> = (&'static str, unsafe fn(&[f32], usize, usize, usize, &[E], usize, usize, &mut [f32], usize), unsafe fn(&[f32], &[E], usize, &mut [f32]));
+    /// As `Dots`, for the weighted value rows.
+    ///
+    /// # Safety
+    /// As for `Dots`.
+    type Axpys<E> = (&'static str, unsafe fn(&[f32], usize, usize, &[E], usize, &mut [f32], usize, usize, usize), unsafe fn(&[f32], &[E], usize, &mut [f32]));
+    let mut d32: Vec<Dots<f32>> = vec![("dispatched", |q, hd, qs, g, k, s, n, o, os| super::dot_rows_group(q, hd, qs, g, k, s, n, o, os), |q, k, s, o| super::dot_rows(q, k, s, o))];
+    let mut d16: Vec<Dots<u16>> = vec![("dispatched", |q, hd, qs, g, k, s, n, o, os| super::dot_rows_group_f16(q, hd, qs, g, k, s, n, o, os), |q, k, s, o| super::dot_rows_f16(q, k, s, o))];
+    let mut a32: Vec<Axpys<f32>> = vec![("dispatched", |c, cs, nk, x, s, y, ys, n, g| super::axpy_rows_group_f32(c, cs, nk, x, s, y, ys, n, g), |c, x, s, y| super::axpy_rows_f32(c, x, s, y))];
+    let mut a16: Vec<Axpys<u16>> = vec![("dispatched", |c, cs, nk, x, s, y, ys, n, g| super::axpy_rows_group_f16(c, cs, nk, x, s, y, ys, n, g), |c, x, s, y| super::axpy_rows_f16(c, x, s, y))];
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::is_x86_feature_detected as has;
+        if has!("avx512f") && has!("avx512bw") && has!("avx512vl") && has!("avx2") && has!("fma") && has!("f16c") {
+            d32.push(("avx512", super::x86::dot_rows_512_group, super::x86::dot_rows_512));
+            d16.push(("avx512", super::x86::dot_rows_512_group_f16, super::x86::dot_rows_512_f16));
+            a32.push(("avx512", super::x86::axpy_rows_512_group_f32, super::x86::axpy_rows_512_f32));
+            a16.push(("avx512", super::x86::axpy_rows_512_group_f16, super::x86::axpy_rows_512_f16));
+        }
+    }
+    let to16 = |v: &[f32]| -> Vec<u16> { v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect() };
+    let mut r = Rng(97);
+    for g in 1..=9 {
+        for hd in [1, 5, 16, 17, 48, 64, 65, 96] {
+            for n in [0, 1, 2, 3, 29] {
+                let (q_stride, stride, out_stride) = (hd + 3, hd + 11, n + 2);
+                let q = r.vec((g - 1) * q_stride + hd);
+                let k = r.vec(n * stride);
+                let k16 = to16(&k);
+                let len = (g - 1) * out_stride + n;
+                let twin = |m: usize, j: usize, got: f32, name: &str, k: &dyn Fn(usize) -> f32| {
+                    let qm = &q[m * q_stride..m * q_stride + hd];
+                    let kj: Vec<f32> = (0..hd).map(|i| k(j * stride + i)).collect();
+                    let want: f64 = qm.iter().zip(&kj).map(|(&a, &b)| a as f64 * b as f64).sum();
+                    let s: f64 = qm.iter().zip(&kj).map(|(&a, &b)| (a as f64 * b as f64).abs()).sum();
+                    check(&format!("{name} g={g} hd={hd} n={n} m={m} j={j} vs twin"), got, want as f32, s, SIMD_VS_SCALAR_TILE_512);
+                };
+                for &(name, group, one) in &d32 {
+                    let mut got = vec![f32::NAN; len];
+                    // SAFETY: each variant was pushed only where its CPU features were detected.
+                    unsafe { group(&q, hd, q_stride, g, &k, stride, n, &mut got, out_stride) };
+                    for m in 0..g {
+                        let mut want = vec![0.0; n];
+                        // SAFETY: as above.
+                        unsafe { one(&q[m * q_stride..m * q_stride + hd], &k, stride, &mut want) };
+                        for j in 0..n {
+                            assert_eq!(got[m * out_stride + j].to_bits(), want[j].to_bits(), "{name} dot_rows_group g={g} hd={hd} n={n} m={m} j={j}");
+                            twin(m, j, got[m * out_stride + j], name, &|i| k[i]);
+                        }
+                        if m + 1 < g {
+                            assert!(got[m * out_stride + n..(m + 1) * out_stride].iter().all(|v| v.is_nan()), "{name} wrote between rows");
+                        }
+                    }
+                }
+                for &(name, group, one) in &d16 {
+                    let mut got = vec![f32::NAN; len];
+                    // SAFETY: as above.
+                    unsafe { group(&q, hd, q_stride, g, &k16, stride, n, &mut got, out_stride) };
+                    for m in 0..g {
+                        let mut want = vec![0.0; n];
+                        // SAFETY: as above.
+                        unsafe { one(&q[m * q_stride..m * q_stride + hd], &k16, stride, &mut want) };
+                        for j in 0..n {
+                            assert_eq!(got[m * out_stride + j].to_bits(), want[j].to_bits(), "{name} dot_rows_group_f16 g={g} hd={hd} n={n} m={m} j={j}");
+                            twin(m, j, got[m * out_stride + j], name, &|i| super::f16_to_f32(k16[i]));
+                        }
+                        if m + 1 < g {
+                            assert!(got[m * out_stride + n..(m + 1) * out_stride].iter().all(|v| v.is_nan()), "{name} f16 wrote between rows");
+                        }
+                    }
+                }
+            }
+        }
+        for n in [1, 8, 15, 63, 64, 65, 128, 130] {
+            for nk in [0, 1, 5, 29] {
+                let (stride, coef_stride, y_stride) = (n + 5, nk + 3, n + 7);
+                let x = r.vec(nk * stride);
+                let x16 = to16(&x);
+                let coef: Vec<f32> = (0..(g - 1) * coef_stride + nk).map(|_| r.f() * 0.1).collect();
+                let y0: Vec<f32> = (0..(g - 1) * y_stride + n).map(|i| if i % y_stride < n { r.f() } else { f32::NAN }).collect();
+                let rows_len = if nk == 0 { 0 } else { (nk - 1) * stride + n };
+                let check_rows = |name: &str, got: &[f32], per: &dyn Fn(&[f32], &mut [f32]), row: &dyn Fn(usize) -> f32| {
+                    for m in 0..g {
+                        let cm = &coef[m * coef_stride..m * coef_stride + nk];
+                        let mut want = y0[m * y_stride..m * y_stride + n].to_vec();
+                        per(cm, &mut want);
+                        for i in 0..n {
+                            let gv = got[m * y_stride + i];
+                            assert_eq!(gv.to_bits(), want[i].to_bits(), "{name} axpy_rows_group g={g} n={n} nk={nk} m={m} lane {i}");
+                            let y = y0[m * y_stride + i] as f64;
+                            let t: f64 = y + (0..nk).map(|j| cm[j] as f64 * row(j * stride + i) as f64).sum::<f64>();
+                            let s: f64 = y.abs() + (0..nk).map(|j| (cm[j] as f64 * row(j * stride + i) as f64).abs()).sum::<f64>();
+                            check(&format!("{name} axpy_rows_group g={g} n={n} nk={nk} vs twin"), gv, t as f32, s, SIMD_VS_SCALAR_AXPY * nk.max(1) as f64);
+                        }
+                        if m + 1 < g {
+                            assert!(got[m * y_stride + n..(m + 1) * y_stride].iter().all(|v| v.is_nan()), "{name} axpy wrote between rows");
+                        }
+                    }
+                };
+                for &(name, group, one) in &a32 {
+                    let mut got = y0.clone();
+                    // SAFETY: as above.
+                    unsafe { group(&coef, coef_stride, nk, &x[..rows_len], stride, &mut got, y_stride, n, g) };
+                    // SAFETY: as above.
+                    check_rows(name, &got, &|c, y| unsafe { one(c, &x[..rows_len], stride, y) }, &|i| x[i]);
+                }
+                for &(name, group, one) in &a16 {
+                    let mut got = y0.clone();
+                    // SAFETY: as above.
+                    unsafe { group(&coef, coef_stride, nk, &x16[..rows_len], stride, &mut got, y_stride, n, g) };
+                    // SAFETY: as above.
+                    check_rows(name, &got, &|c, y| unsafe { one(c, &x16[..rows_len], stride, y) }, &|i| super::f16_to_f32(x16[i]));
+                }
+            }
+        }
+    }
+}
+
+/// `exp_shifted_sum` gives the same bits whichever sign a zero maximum has
+/// (the attention's `scale_max` may return either zero when the largest
+/// score is zero): `s - 0.0` and `s - (-0.0)` differ only for `s = -0.0`,
+/// and e^(+0) and e^(-0) are both exactly 1, on the dispatched variant and
+/// the scalar twin.
+#[test]
+fn softmax_shift_by_a_signed_zero_is_the_same() {
+    let base = [0.0f32, -0.0, -1.5, -0.25, 0.0, -3.0, -0.0, -7.0, -0.5, 0.0, -2.0, -0.0, -1.0, -4.0, 0.0, -0.125, -0.0];
+    let run = |f: &dyn Fn(&mut [f32], f32) -> f32, max: f32| {
+        let mut s = base.to_vec();
+        let sum = f(&mut s, max);
+        (sum.to_bits(), s.iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+    };
+    for (name, f) in [("dispatched", &(|s: &mut [f32], m: f32| super::exp_shifted_sum(s, m)) as &dyn Fn(&mut [f32], f32) -> f32), ("scalar", &|s: &mut [f32], m: f32| scalar::exp_shifted_sum(s, m))] {
+        let (plus, minus) = (run(f, 0.0), run(f, -0.0));
+        assert_eq!(plus, minus, "{name}");
+        assert_eq!(plus.1[0], 1.0f32.to_bits(), "{name}");
+        assert_eq!(plus.1[1], 1.0f32.to_bits(), "{name}");
+    }
+}
+
+/// `scale_max` of every variant this CPU runs scales the scores exactly as
+/// the twin does (bit for bit) and returns the twin's maximum (the same
+/// value; zeros of either sign compare equal): every length 0-40 and a
+/// long run, NaN scores skipped, a starting maximum above all scores.
+#[test]
+#[allow(unsafe_code)]
+fn scale_max_equals_the_twin() {
+    let mut r = Rng(29);
+    /// (variant, kernel).
+    ///
+    /// # Safety
+    /// The kernel needs the variant's CPU features (pushed only where detected).
+    type ScaleMax = (&'static str, unsafe fn(&mut [f32], f32, f32) -> f32);
+    let mut v: Vec<ScaleMax> = vec![("dispatched", |s, a, m| super::scale_max(s, a, m))];
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx512f") {
+        v.push(("avx512", super::x86::scale_max_512));
+    }
+    for n in (0..=40).chain([290, 1000]) {
+        for start in [f32::NEG_INFINITY, 0.0, 100.0] {
+            let mut s0 = r.vec(n);
+            if n > 3 {
+                s0[n / 2] = f32::NAN;
+                s0[n - 1] = -0.0;
+            }
+            let mut twin = s0.clone();
+            let want = scalar::scale_max(&mut twin, 0.125, start);
+            let naive = s0.iter().filter(|x| !x.is_nan()).fold(start, |m, &x| if x * 0.125 > m { x * 0.125 } else { m });
+            assert_eq!(want, naive, "twin n={n}");
+            for &(name, f) in &v {
+                let mut got = s0.clone();
+                // SAFETY: pushed only where its CPU features were detected.
+                let m = unsafe { f(&mut got, 0.125, start) };
+                assert_eq!(m, want, "{name} n={n} start={start}");
+                assert!(got.iter().zip(&twin).all(|(a, b)| a.to_bits() == b.to_bits()), "{name} scaled n={n}");
+            }
+        }
+    }
 }

@@ -756,6 +756,110 @@ unsafe fn dot_rows_512_by(q: &[f32], load: impl Fn(usize, usize, __mmask16) -> _
     }
 }
 
+/// See [`super::dot_rows_group`]: [`dot_rows_512`] for `g`
+/// queries, up to [`super::QUERY_GROUP`] of them held in registers while
+/// each key row is loaded once; every (query, key) score takes the FMAs
+/// and the reduction of [`dot_rows_512`], so bit for bit the same.
+/// Heads wider than 64 take [`dot_rows_512`] per query.
+///
+/// # Safety
+/// The CPU must support avx512f, avx2 and fma.
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn dot_rows_512_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+    if hd == 0 || hd > 64 {
+        for m in 0..g {
+            // SAFETY: this fn's contract.
+            unsafe { dot_rows_512(&q[m * q_stride..m * q_stride + hd], k, stride, &mut out[m * out_stride..m * out_stride + n]) };
+        }
+        return;
+    }
+    // SAFETY: masked loads read only lanes < hd of key row j (the slice is bounds-checked).
+    let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_maskz_loadu_ps(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i)) };
+    // SAFETY: this fn's contract.
+    unsafe { dot_rows_512_group_by(q, hd, q_stride, g, load, n, out, out_stride) }
+}
+
+/// [`dot_rows_512_group`] over binary16 key rows: each key lane widened by
+/// `vcvtph2ps` (exact) once for the group, as [`dot_rows_512_f16`] widens it
+/// per query: bit for bit what [`dot_rows_512_f16`] gives per query.
+///
+/// # Safety
+/// The CPU must support avx512f, avx512bw, avx512vl, avx2, fma and f16c.
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn dot_rows_512_group_f16(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+    if hd == 0 || hd > 64 {
+        for m in 0..g {
+            // SAFETY: this fn's contract.
+            unsafe { dot_rows_512_f16(&q[m * q_stride..m * q_stride + hd], k, stride, &mut out[m * out_stride..m * out_stride + n]) };
+        }
+        return;
+    }
+    // SAFETY: masked 16-bit loads read only lanes < hd of key row j (bounds-checked slice).
+    let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i) as *const i16)) };
+    // SAFETY: this fn's contract.
+    unsafe { dot_rows_512_group_by(q, hd, q_stride, g, load, n, out, out_stride) }
+}
+
+/// The shared body of [`dot_rows_512_group`] and [`dot_rows_512_group_f16`]
+/// (`0 < hd <= 64`; `load` as in [`dot_rows_512_by`]): the queries in
+/// blocks of up to [`super::QUERY_GROUP`].
+///
+/// # Safety
+/// As [`dot_rows_512_by`], for `j < n`.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn dot_rows_512_group_by(q: &[f32], hd: usize, q_stride: usize, g: usize, load: impl Fn(usize, usize, __mmask16) -> __m512 + Copy, n: usize, out: &mut [f32], out_stride: usize) {
+    let mut m0 = 0;
+    while m0 < g {
+        let gm = (g - m0).min(super::QUERY_GROUP);
+        let (q, out) = (&q[m0 * q_stride..], &mut out[m0 * out_stride..]);
+        // SAFETY: this fn's contract.
+        unsafe {
+            match gm {
+                4 => dot_block::<4>(q, hd, q_stride, load, n, out, out_stride),
+                3 => dot_block::<3>(q, hd, q_stride, load, n, out, out_stride),
+                2 => dot_block::<2>(q, hd, q_stride, load, n, out, out_stride),
+                _ => dot_block::<1>(q, hd, q_stride, load, n, out, out_stride),
+            }
+        }
+        m0 += gm;
+    }
+}
+
+/// `G` queries (query `m`: `q[m q_stride ..][..hd]`, `0 < hd <= 64`) against keys `0..n`: per key,
+/// its `ceil(hd / 16)` lane groups loaded once and multiplied into `G`
+/// accumulators, each reduced as in [`dot_rows_512_by`];
+/// `out[m out_stride + j]`.
+///
+/// # Safety
+/// As [`dot_rows_512_group_by`].
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load: impl Fn(usize, usize, __mmask16) -> __m512, n: usize, out: &mut [f32], out_stride: usize) {
+    let nv = hd.div_ceil(16);
+    let mask: [__mmask16; 4] = core::array::from_fn(|i| if 16 * (i + 1) <= hd { 0xffff } else if 16 * i < hd { lanes16(hd - 16 * i) } else { 0 });
+    let q = &q[..(G - 1) * q_stride + hd];
+    // SAFETY: masked loads read only lanes < hd of query m (within `q`).
+    let qv: [[__m512; 4]; G] = core::array::from_fn(|m| core::array::from_fn(|i| if i < nv { unsafe { _mm512_maskz_loadu_ps(mask[i], q.as_ptr().add(m * q_stride + 16 * i)) } } else { _mm512_setzero_ps() }));
+    let out = &mut out[..(G - 1) * out_stride + n];
+    for j in 0..n {
+        let mut acc = [_mm512_setzero_ps(); G];
+        for i in 0..nv {
+            let kv = load(j, i, mask[i]);
+            for (a, qm) in acc.iter_mut().zip(&qv) {
+                *a = _mm512_fmadd_ps(qm[i], kv, *a);
+            }
+        }
+        for (m, a) in acc.iter().enumerate() {
+            out[m * out_stride + j] = _mm512_reduce_add_ps(*a);
+        }
+    }
+}
+
 /// See [`super::gemm_q8_packed`]: per block, the 4 packed groups made
 /// unsigned (int8: `^ 0x80` = `w + 128`; 4-bit: the nibbles as stored, `q +
 /// 8`, split out of the two halves) and the 8 f16 scales widened once for
@@ -1026,7 +1130,120 @@ unsafe fn axpy_rows_512_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: 
     e
 }
 
-/// The shared body of [`axpy_rows_f32`] and [`axpy_rows_f16`]: per lane/// The shared body of [`axpy_rows_f32`] and [`axpy_rows_f16`]: per lane
+/// See [`super::axpy_rows_group_f32`]: [`axpy_rows_512_f32`] for `g`
+/// queries, the 64-lane blocks of up to [`super::QUERY_GROUP`] queries
+/// held in registers while each value row's lanes are loaded once (per lane
+/// the FMAs of [`axpy_rows_512_f32`] in the same order); the lanes past
+/// them per query as there. Bit for bit [`axpy_rows_512_f32`] per query.
+///
+/// # Safety
+/// The CPU must support avx512f, avx2 and fma.
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn axpy_rows_512_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+    // SAFETY: `row` holds n floats and `e + 16 <= n` (axpy_rows_512_group_by's contract).
+    let load = |row: &[f32], e: usize| unsafe { _mm512_loadu_ps(row.as_ptr().add(e)) };
+    // SAFETY: this fn's contract.
+    let done = unsafe { axpy_rows_512_group_by(coef, coef_stride, nk, x, stride, y, y_stride, n, g, load) };
+    // Lanes past the 64-lane blocks (none for 64-lane heads) per query.
+    for m in 0..if done < n { g } else { 0 } {
+        let ym = &mut y[m * y_stride..m * y_stride + n];
+        // SAFETY: as above; lanes from `done` on take the 256-bit body.
+        unsafe { axpy_rows_f32_from(&coef[m * coef_stride..m * coef_stride + nk], x, stride, ym, done) };
+    }
+}
+
+/// [`axpy_rows_512_group_f32`] over binary16 rows (`vcvtph2ps`, exact):
+/// bit for bit [`axpy_rows_512_f16`] per query.
+///
+/// # Safety
+/// The CPU must support avx512f, avx2, fma and f16c.
+#[target_feature(enable = "avx512f,avx2,fma,f16c")]
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn axpy_rows_512_group_f16(coef: &[f32], coef_stride: usize, nk: usize, w: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+    // SAFETY: as in `axpy_rows_512_group_f32` (16 u16 = 256 bits at e).
+    let load = |row: &[u16], e: usize| unsafe { _mm512_cvtph_ps(_mm256_loadu_si256(row.as_ptr().add(e) as *const __m256i)) };
+    // SAFETY: this fn's contract.
+    let done = unsafe { axpy_rows_512_group_by(coef, coef_stride, nk, w, stride, y, y_stride, n, g, load) };
+    // Lanes past the 64-lane blocks (none for 64-lane heads) per query.
+    for m in 0..if done < n { g } else { 0 } {
+        let ym = &mut y[m * y_stride..m * y_stride + n];
+        // SAFETY: as above.
+        unsafe { axpy_rows_f16_from(&coef[m * coef_stride..m * coef_stride + nk], w, stride, ym, done) };
+    }
+}
+
+/// Lanes `0 .. 64 k` (as in [`axpy_rows_512_by`]) of every query of
+/// [`axpy_rows_512_group_f32`] / [`axpy_rows_512_group_f16`], the queries in
+/// blocks of up to [`super::QUERY_GROUP`]; returns `64 k`.
+///
+/// # Safety
+/// As [`axpy_rows_512_by`].
+#[allow(clippy::too_many_arguments)]
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn axpy_rows_512_group_by<E: Copy>(coef: &[f32], coef_stride: usize, nk: usize, rows: &[E], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, load: impl Fn(&[E], usize) -> __m512 + Copy) -> usize {
+    if n == 0 {
+        return 0;
+    }
+    let nk = super::scalar::whole_rows(nk, rows.len(), stride, n);
+    let n8 = n - n % 8;
+    let done = n8 - n8 % 64;
+    let mut m0 = 0;
+    while m0 < g {
+        let gm = (g - m0).min(super::QUERY_GROUP);
+        let (coef, y) = (&coef[m0 * coef_stride..], &mut y[m0 * y_stride..]);
+        // SAFETY: this fn's contract.
+        unsafe {
+            match gm {
+                4 => axpy_block::<4, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load),
+                3 => axpy_block::<3, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load),
+                2 => axpy_block::<2, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load),
+                _ => axpy_block::<1, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load),
+            }
+        }
+        m0 += gm;
+    }
+    done
+}
+
+/// `G` queries' lanes `0..done` (`done`: a multiple of 64, `<= n`): per 64
+/// lanes, `G x 4` accumulators over value rows `0..nk`, each row's four lane
+/// groups loaded once.
+///
+/// # Safety
+/// As [`axpy_rows_512_by`]; `y` holds `G` rows of `n` lanes, `y_stride` apart.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn axpy_block<const G: usize, E: Copy>(coef: &[f32], coef_stride: usize, nk: usize, rows: &[E], stride: usize, y: &mut [f32], y_stride: usize, n: usize, done: usize, load: impl Fn(&[E], usize) -> __m512) {
+    let coef = &coef[..(G - 1) * coef_stride + nk];
+    let y = &mut y[..(G - 1) * y_stride + n];
+    let mut e = 0;
+    while e + 64 <= done {
+        // SAFETY: lanes e .. e + 64 <= n of row m of y.
+        let mut acc: [[__m512; 4]; G] = core::array::from_fn(|m| core::array::from_fn(|t| unsafe { _mm512_loadu_ps(y.as_ptr().add(m * y_stride + e + 16 * t)) }));
+        for j in 0..nk {
+            let r = &rows[j * stride..j * stride + n];
+            let v: [__m512; 4] = core::array::from_fn(|t| load(r, e + 16 * t));
+            for (m, acc) in acc.iter_mut().enumerate() {
+                let av = _mm512_set1_ps(coef[m * coef_stride + j]);
+                for (a, v) in acc.iter_mut().zip(&v) {
+                    *a = _mm512_fmadd_ps(av, *v, *a);
+                }
+            }
+        }
+        for (m, acc) in acc.iter().enumerate() {
+            for (t, a) in acc.iter().enumerate() {
+                // SAFETY: as above.
+                unsafe { _mm512_storeu_ps(y.as_mut_ptr().add(m * y_stride + e + 16 * t), *a) };
+            }
+        }
+        e += 64;
+    }
+}
+
+/// The shared body of [`axpy_rows_f32`] and [`axpy_rows_f16`]: per lane
 /// below `n - n % 8` the FMA of [`axpy_f32`] / [`axpy_f16`] row after row
 /// (64 lanes, then 8, held in registers over all rows), from lane `e0` (a
 /// multiple of 8) on; the last `n % 8` lanes unfused, as those kernels'
@@ -1126,6 +1343,98 @@ unsafe fn exp8(x: __m256) -> __m256 {
     _mm256_andnot_ps(below, _mm256_mul_ps(y, pow2n))
 }
 
+/// [`exp8`] on 16 lanes: the same operations (no FMA; `vrndscaleps` as
+/// floor, a zeroing mask for the underflow), so each lane is
+/// [`super::scalar::exp`], bit for bit.
+///
+/// # Safety
+/// The CPU must support avx512f.
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn exp16(x: __m512) -> __m512 {
+    use super::scalar::exp_c::*;
+    // min(HI, x) keeps a NaN x (the second operand is returned on NaN).
+    let x = _mm512_min_ps(_mm512_set1_ps(HI), x);
+    let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(x, _mm512_set1_ps(LO));
+    let fx = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(_mm512_add_ps(_mm512_mul_ps(x, _mm512_set1_ps(LOG2E)), _mm512_set1_ps(0.5)));
+    let r = _mm512_sub_ps(x, _mm512_mul_ps(fx, _mm512_set1_ps(C1)));
+    let r = _mm512_sub_ps(r, _mm512_mul_ps(fx, _mm512_set1_ps(C2)));
+    let z = _mm512_mul_ps(r, r);
+    let mut y = _mm512_set1_ps(P[0]);
+    for &p in &P[1..] {
+        y = _mm512_add_ps(_mm512_mul_ps(y, r), _mm512_set1_ps(p));
+    }
+    let y = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(y, z), r), _mm512_set1_ps(1.0));
+    let n = _mm512_cvtps_epi32(fx);
+    let pow2n = _mm512_castsi512_ps(_mm512_slli_epi32::<23>(_mm512_add_epi32(n, _mm512_set1_epi32(127))));
+    _mm512_maskz_mov_ps(!below, _mm512_mul_ps(y, pow2n))
+}
+
+/// See [`super::exp_shifted_sum`]: [`exp_shifted_sum`] with the
+/// exponentials on 16 lanes (the tail masked); the two 8-lane halves of a
+/// 16-lane block are added into the 8 lane sums one after the other, as
+/// the 8-wide loop adds two blocks, and the tail in order: bit for bit.
+///
+/// # Safety
+/// The CPU must support avx512f and avx2.
+#[target_feature(enable = "avx512f,avx2")]
+pub unsafe fn exp_shifted_sum_512(s: &mut [f32], max: f32) -> f32 {
+    let n = s.len();
+    let (body, rest) = s.split_at_mut(n - n % 16);
+    let m = _mm512_set1_ps(max);
+    let mut acc = _mm256_setzero_ps();
+    for c in body.chunks_exact_mut(16) {
+        // SAFETY: c holds 16 floats.
+        unsafe {
+            let e = exp16(_mm512_sub_ps(_mm512_loadu_ps(c.as_ptr()), m));
+            _mm512_storeu_ps(c.as_mut_ptr(), e);
+            acc = _mm256_add_ps(acc, _mm512_castps512_ps256(e));
+            acc = _mm256_add_ps(acc, _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(e))));
+        }
+    }
+    let mut t = 0.0f32;
+    if !rest.is_empty() {
+        let k = lanes16(rest.len());
+        let mut e = [0f32; 16];
+        // SAFETY: masked lanes < rest.len() of rest; e holds 16 floats.
+        unsafe { _mm512_storeu_ps(e.as_mut_ptr(), exp16(_mm512_sub_ps(_mm512_maskz_loadu_ps(k, rest.as_ptr()), m))) };
+        rest.copy_from_slice(&e[..rest.len()]);
+        let whole = if rest.len() >= 8 { 8 } else { 0 };
+        if whole == 8 {
+            // SAFETY: e holds 16 floats.
+            acc = _mm256_add_ps(acc, unsafe { _mm256_loadu_ps(e.as_ptr()) });
+        }
+        for &v in &e[whole..rest.len()] {
+            t += v;
+        }
+    }
+    let mut a = [0f32; 8];
+    // SAFETY: a holds 8 floats.
+    unsafe { _mm256_storeu_ps(a.as_mut_ptr(), acc) };
+    super::scalar::reduce8(a, t)
+}
+
+/// See [`super::scale_max`]: 16 lanes at a time, the tail masked; the lane
+/// maxima by `vmaxps` with the running maximum as its second operand (a NaN
+/// score leaves it as it was, as `f32::max` does).
+///
+/// # Safety
+/// The CPU must support avx512f.
+#[target_feature(enable = "avx512f")]
+pub unsafe fn scale_max_512(s: &mut [f32], scale: f32, max: f32) -> f32 {
+    let (sc, mut vm) = (_mm512_set1_ps(scale), _mm512_set1_ps(f32::NEG_INFINITY));
+    for c in s.chunks_mut(16) {
+        let m = lanes16(c.len());
+        // SAFETY: masked lanes < c.len() of c only.
+        unsafe {
+            let v = _mm512_mul_ps(_mm512_maskz_loadu_ps(m, c.as_ptr()), sc);
+            _mm512_mask_storeu_ps(c.as_mut_ptr(), m, v);
+            vm = _mm512_mask_max_ps(vm, m, v, vm);
+        }
+    }
+    max.max(_mm512_reduce_max_ps(vm))
+}
+
 /// See [`super::exp_shifted_sum`] (8 lane sums, reduced as the twin does).
 ///
 /// # Safety
@@ -1147,10 +1456,18 @@ pub unsafe fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
     let mut a = [0f32; 8];
     // SAFETY: a holds 8 floats.
     unsafe { _mm256_storeu_ps(a.as_mut_ptr(), acc) };
+    // The tail's exponentials on 8 lanes too (each lane is `scalar::exp`,
+    // bit for bit), then added in order as the twin adds them.
     let mut t = 0.0f32;
-    for v in tail {
-        *v = super::scalar::exp(*v - max);
-        t += *v;
+    if !tail.is_empty() {
+        let mut pad = [0f32; 8];
+        pad[..tail.len()].copy_from_slice(tail);
+        // SAFETY: pad holds 8 floats.
+        unsafe { _mm256_storeu_ps(pad.as_mut_ptr(), exp8(_mm256_sub_ps(_mm256_loadu_ps(pad.as_ptr()), m))) };
+        for (v, &e) in tail.iter_mut().zip(&pad) {
+            *v = e;
+            t += e;
+        }
     }
     super::scalar::reduce8(a, t)
 }
