@@ -275,6 +275,15 @@ pub fn linear_xw(x: &[f32], w: &Matrix<'_>, z: &mut [f32]) {
     crate::with_rows!(w, m => linear_xw_impl(x, m, z))
 }
 
+/// Weight rows per pass of [`linear_xw`] over its output rows: each output
+/// lane is loaded and stored once per this many weight rows.
+const XW_ROWS: usize = 8;
+
+/// Per output row `i`, `z_i = sum_r x[i, r] row(r)` with the rows `r` in
+/// order (each row's `axpy`: the numbers of one `axpy` per (row, input
+/// row)); in passes of [`XW_ROWS`] weight rows, the output rows
+/// [`simd::QUERY_GROUP`] at a time (a dense row's lanes loaded once for
+/// them).
 fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
     let (rows, cols) = (w.rows(), w.cols());
     if rows == 0 || cols == 0 {
@@ -282,9 +291,11 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
     }
     let n = (x.len() / rows).min(z.len() / cols);
     z[..n * cols].fill(0.0);
-    for r in 0..rows {
-        for i in 0..n {
-            w.axpy(r, x[i * rows + r], &mut z[i * cols..(i + 1) * cols]);
+    for r0 in (0..rows).step_by(XW_ROWS) {
+        let r1 = (r0 + XW_ROWS).min(rows);
+        for i0 in (0..n).step_by(simd::QUERY_GROUP) {
+            let g = simd::QUERY_GROUP.min(n - i0);
+            w.axpy_rows_group(r0, r1, &x[i0 * rows + r0..], rows, &mut z[i0 * cols..], cols, g);
         }
     }
 }

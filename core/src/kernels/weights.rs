@@ -71,6 +71,20 @@ pub trait RowMatrix {
     fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], act: &Self::Act) -> Tile;
     /// `y += a * row(r)` (`y`: cols).
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]);
+    /// For `m < g`: `y_m += sum_r coef[m coef_stride + r - r0] * row(r)`
+    /// over rows `r0..r1` in order, `y_m = y[m y_stride ..][..cols]`: per
+    /// output row bit for bit [`Self::axpy`] row after row (dense rows:
+    /// each row's lanes loaded once for the `g` outputs,
+    /// [`DenseElem::axpy_rows_group`]).
+    #[allow(clippy::too_many_arguments)]
+    fn axpy_rows_group(&self, r0: usize, r1: usize, coef: &[f32], coef_stride: usize, y: &mut [f32], y_stride: usize, g: usize) {
+        let n = self.cols();
+        for m in 0..g {
+            for r in r0..r1 {
+                self.axpy(r, coef[m * coef_stride + r - r0], &mut y[m * y_stride..m * y_stride + n]);
+            }
+        }
+    }
     /// `out = row(r)` as f32 (`out`: cols; embedding and codebook rows).
     fn row_into(&self, r: usize, out: &mut [f32]);
     /// `row(r) . x` (`x`: cols), chunk by chunk.
@@ -244,6 +258,10 @@ impl<E: DenseElem> RowMatrix for DenseRows<'_, E> {
     #[inline]
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
         E::axpy(a, self.row(r), y)
+    }
+    fn axpy_rows_group(&self, r0: usize, r1: usize, coef: &[f32], coef_stride: usize, y: &mut [f32], y_stride: usize, g: usize) {
+        let c = self.cols;
+        E::axpy_rows_group(coef, coef_stride, r1.saturating_sub(r0), &self.data[r0 * c..r1 * c], c, y, y_stride, c, g)
     }
     fn row_into(&self, r: usize, out: &mut [f32]) {
         for (o, &w) in out.iter_mut().zip(self.row(r)) {

@@ -354,3 +354,38 @@ fn grouped_queries_equal_each_query_alone() {
         assert_close(&fooled, &naive_attention(&q, &k, &v, c, nh, &|i, j| i.abs_diff(j) <= 3), CLOSE);
     }
 }
+
+/// `linear_xw` (passes of 8 weight rows, output rows 4 at a time over a
+/// dense row's lanes loaded once) gives, bit for bit, one `axpy` per
+/// (weight row, input row) in weight-row order, as it did before: f32 and
+/// f16 rows, 0-9 input rows (whole groups and rests), weight rows across
+/// pass ends, output widths with 64-lane blocks, 8-lane bodies and tails.
+#[test]
+fn linear_xw_equals_one_axpy_per_row_and_input() {
+    use crate::kernels::weights::RowMatrix;
+    let mut r = Lcg(83);
+    for rows in [1, 3, 8, 9, 17] {
+        for cols in [1, 7, 8, 64, 65, 130] {
+            let w = r.vec(rows * cols);
+            let w16: Vec<u16> = w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+            let f32m = F32Rows::new(&w, rows, cols).unwrap();
+            let f16m = F16Rows::new(&w16, rows, cols).unwrap();
+            for n in 0..=9 {
+                let x = r.vec(n * rows);
+                let check = |m: &Matrix<'_>, one: &dyn Fn(usize, f32, &mut [f32]), name: &str| {
+                    let mut z = vec![f32::NAN; n * cols];
+                    linear_xw(&x, m, &mut z);
+                    let mut want = vec![0.0f32; n * cols];
+                    for k in 0..rows {
+                        for i in 0..n {
+                            one(k, x[i * rows + k], &mut want[i * cols..(i + 1) * cols]);
+                        }
+                    }
+                    assert!(z.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "{name} rows={rows} cols={cols} n={n}");
+                };
+                check(&Matrix::F32(f32m), &|k, a, y| f32m.axpy(k, a, y), "f32");
+                check(&Matrix::F16(f16m), &|k, a, y| f16m.axpy(k, a, y), "f16");
+            }
+        }
+    }
+}

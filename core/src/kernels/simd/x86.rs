@@ -831,7 +831,8 @@ unsafe fn dot_rows_512_group_by(q: &[f32], hd: usize, q_stride: usize, g: usize,
 
 /// `G` queries (query `m`: `q[m q_stride ..][..hd]`, `0 < hd <= 64`) against keys `0..n`: per key,
 /// its `ceil(hd / 16)` lane groups loaded once and multiplied into `G`
-/// accumulators, each reduced as in [`dot_rows_512_by`];
+/// accumulators, reduced side by side ([`reduce4`]: the tree of
+/// [`dot_rows_512_by`]'s `_mm512_reduce_add_ps`);
 /// `out[m out_stride + j]`.
 ///
 /// # Safety
@@ -854,10 +855,35 @@ unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load:
                 *a = _mm512_fmadd_ps(qm[i], kv, *a);
             }
         }
-        for (m, a) in acc.iter().enumerate() {
-            out[m * out_stride + j] = _mm512_reduce_add_ps(*a);
+        // SAFETY: avx512f (this fn's features).
+        let sums = unsafe { reduce4(core::array::from_fn(|m| if m < G { acc[m] } else { _mm512_setzero_ps() })) };
+        let mut lanes = [0f32; 16];
+        // SAFETY: lanes holds 16 floats.
+        unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), sums) };
+        for m in 0..G {
+            out[m * out_stride + j] = lanes[4 * m];
         }
     }
+}
+
+/// Four horizontal sums at once: lane `4 m` of the result is
+/// `_mm512_reduce_add_ps(a[m])`, bit for bit. Each sum takes that
+/// intrinsic's tree (the 256-bit halves, the 128-bit halves, lanes `i + 2`,
+/// then `i + 1`), the four side by side at each level.
+///
+/// # Safety
+/// The CPU must support avx512f.
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn reduce4(a: [__m512; 4]) -> __m512 {
+    // 128-bit lanes: the 256-bit half sums of a[0] (lanes 0, 1) and a[1] (2, 3); of a[2], a[3].
+    let b0 = _mm512_add_ps(_mm512_shuffle_f32x4::<0x44>(a[0], a[1]), _mm512_shuffle_f32x4::<0xEE>(a[0], a[1]));
+    let b1 = _mm512_add_ps(_mm512_shuffle_f32x4::<0x44>(a[2], a[3]), _mm512_shuffle_f32x4::<0xEE>(a[2], a[3]));
+    // 128-bit lane m: the 128-bit half sum of a[m].
+    let c = _mm512_add_ps(_mm512_shuffle_f32x4::<0x88>(b0, b1), _mm512_shuffle_f32x4::<0xDD>(b0, b1));
+    // Lanes (i, i + 2), then (0, 1), within each 128-bit lane.
+    let d = _mm512_add_ps(c, _mm512_permute_ps::<0x4E>(c));
+    _mm512_add_ps(d, _mm512_movehdup_ps(d))
 }
 
 /// See [`super::gemm_q8_packed`]: per block, the 4 packed groups made
