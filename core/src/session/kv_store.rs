@@ -53,11 +53,7 @@ impl<'s> KvBuf<'s> {
         let end = at.checked_add(x.len()).filter(|&e| e <= self.len()).ok_or(out_of_range(at, self.len()))?;
         match self {
             KvBuf::F32(d) => d[at..end].copy_from_slice(x),
-            KvBuf::F16(d) => {
-                for (o, &v) in d[at..end].iter_mut().zip(x) {
-                    *o = half::f16::from_f32(v).to_bits();
-                }
-            }
+            KvBuf::F16(d) => crate::kernels::simd::narrow_f16(x, &mut d[at..end]),
         }
         Ok(())
     }

@@ -157,6 +157,20 @@ pub fn widen_f16(src: &[u16], dst: &mut [f32]) {
     }
 }
 
+/// `dst[i] = binary16(src[i])`, rounded to nearest even (`half`'s
+/// `f16::from_f32`), over the shorter length: the rows an f16 K/V cache
+/// stores. The F16C variant is bit-identical to the twin on every non-NaN
+/// input (NaNs stay NaN).
+#[inline]
+pub fn narrow_f16(src: &[f32], dst: &mut [u16]) {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx2 implies f16c).
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::narrow_f16(src, dst) },
+        _ => scalar::narrow_f16(src, dst),
+    }
+}
+
 /// Hints the CPU to bring `bytes` into cache (one prefetch per 64-byte
 /// line; x86 `prefetcht0`, aarch64 `prfm pldl1keep`; nothing elsewhere).
 /// Changes no result: the weight streams of the int8 GEMMs call it one
@@ -446,14 +460,17 @@ pub fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
 }
 
 /// Exact GELU in place, erf by Abramowitz & Stegun 7.1.26 (absolute error
-/// 1.5e-7) with [`scalar::exp`]; the AVX2 and NEON variants are
+/// 1.5e-7) with [`scalar::exp`]; the AVX-512, AVX2 and NEON variants are
 /// bit-identical to the twin on finite inputs.
 #[inline]
 pub fn gelu_inplace(x: &mut [f32]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::gelu_inplace_512(x) },
+        #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::gelu_inplace(x) },
+        Isa::Avx2 => unsafe { x86::gelu_inplace(x) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::gelu_inplace(x) },

@@ -410,6 +410,14 @@ pub fn gelu_inplace(x: &mut [f32]) {
     }
 }
 
+/// Twin of [`super::narrow_f16`]: `half::f16::from_f32` per value.
+#[inline]
+pub fn narrow_f16(src: &[f32], dst: &mut [u16]) {
+    for (s, d) in src.iter().zip(dst.iter_mut()) {
+        *d = half::f16::from_f32(*s).to_bits();
+    }
+}
+
 /// `dst[i] = f32(src[i])` for binary16 bits (exact) over the shorter length.
 #[inline]
 pub fn widen_f16(src: &[u16], dst: &mut [f32]) {

@@ -802,6 +802,14 @@ fn gelu_matches_scalar_twin_and_libm() {
             for (i, (p, q)) in a.iter().zip(&b).enumerate() {
                 assert_eq!(p.to_bits(), q.to_bits(), "n={n} x={}", xs[i]);
             }
+            if std::is_x86_feature_detected!("avx512f") {
+                let mut c = xs[..n].to_vec();
+                // SAFETY: avx512f detected.
+                unsafe { super::x86::gelu_inplace_512(&mut c) };
+                for (i, (p, q)) in a.iter().zip(&c).enumerate() {
+                    assert_eq!(p.to_bits(), q.to_bits(), "avx512 n={n} x={}", xs[i]);
+                }
+            }
         }
     }
     #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
@@ -1614,6 +1622,54 @@ fn scale_max_equals_the_twin() {
                 let m = unsafe { f(&mut got, 0.125, start) };
                 assert_eq!(m, want, "{name} n={n} start={start}");
                 assert!(got.iter().zip(&twin).all(|(a, b)| a.to_bits() == b.to_bits()), "{name} scaled n={n}");
+            }
+        }
+    }
+}
+
+/// `narrow_f16` (F16C) rounds as its twin (`half::f16::from_f32`) does, bit
+/// for bit on every non-NaN input (NaNs stay NaN): every binary16 value and
+/// the midpoints and neighbours between them (the ties to even),
+/// infinities, zeros, subnormals, values past the largest half, 300000
+/// random bit patterns; every tail length.
+#[test]
+#[allow(unsafe_code)]
+fn narrow_f16_matches_scalar_twin() {
+    let mut xs: Vec<f32> = Vec::new();
+    for h in 0..=u16::MAX {
+        let v = half::f16::from_bits(h).to_f32();
+        let next = half::f16::from_bits(h.wrapping_add(1)).to_f32();
+        xs.push(v);
+        if v.is_finite() && next.is_finite() && (h & 0x7fff) < 0x7bff {
+            let mid = (v as f64 + next as f64) / 2.0;
+            let m = mid as f32;
+            xs.extend([m, f32::from_bits(m.to_bits().wrapping_add(1)), f32::from_bits(m.to_bits().wrapping_sub(1))]);
+        }
+    }
+    xs.extend([f32::INFINITY, f32::NEG_INFINITY, 65520.0, 65519.99, 1e9, -1e9, f32::MIN_POSITIVE, 1e-30, -0.0, f32::NAN]);
+    let mut r = 0x9e3779b97f4a7c15u64;
+    for _ in 0..300_000 {
+        r ^= r << 13;
+        r ^= r >> 7;
+        r ^= r << 17;
+        xs.push(f32::from_bits(r as u32));
+    }
+    let mut want = vec![0u16; xs.len()];
+    scalar::narrow_f16(&xs, &mut want);
+    type Narrow = (&'static str, fn(&[f32], &mut [u16]));
+    let mut variants: Vec<Narrow> = vec![("dispatched", super::narrow_f16)];
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("f16c") {
+        // SAFETY: avx2 and f16c detected.
+        variants.push(("f16c", |s, d| unsafe { super::x86::narrow_f16(s, d) }));
+    }
+    let nan = |h: u16| h & 0x7c00 == 0x7c00 && h & 0x03ff != 0;
+    for (name, f) in variants {
+        for n in (0..=17).chain([xs.len()]) {
+            let mut got = vec![0u16; n];
+            f(&xs[..n], &mut got);
+            for (i, (&g, &w)) in got.iter().zip(&want).enumerate() {
+                assert!(g == w || (nan(g) && nan(w)), "{name} n={n}: {} -> {g:#06x}, twin {w:#06x}", xs[i]);
             }
         }
     }

@@ -1577,6 +1577,55 @@ pub unsafe fn gelu_inplace(x: &mut [f32]) {
     }
 }
 
+/// See [`super::gelu_inplace`]: [`gelu_inplace`] on 16 lanes ([`exp16`];
+/// the signs by integer `xor`, the tail masked): the same operations,
+/// bit-identical to the twin.
+///
+/// # Safety
+/// The CPU must support avx512f.
+#[target_feature(enable = "avx512f")]
+pub unsafe fn gelu_inplace_512(x: &mut [f32]) {
+    use super::scalar::erf_c::*;
+    let sign = _mm512_set1_epi32(i32::MIN);
+    let flip = |v: __m512| _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(v), sign));
+    for c in x.chunks_mut(16) {
+        let m = lanes16(c.len());
+        // SAFETY: masked lanes < c.len() of c only.
+        unsafe {
+            let xv = _mm512_maskz_loadu_ps(m, c.as_ptr());
+            let u = _mm512_mul_ps(xv, _mm512_set1_ps(core::f32::consts::FRAC_1_SQRT_2));
+            let neg = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(u, _mm512_setzero_ps());
+            let a = _mm512_mask_blend_ps(neg, u, flip(u));
+            let t = _mm512_div_ps(_mm512_set1_ps(1.0), _mm512_add_ps(_mm512_set1_ps(1.0), _mm512_mul_ps(_mm512_set1_ps(P), a)));
+            let mut y = _mm512_set1_ps(A[0]);
+            for &cf in &A[1..] {
+                y = _mm512_add_ps(_mm512_mul_ps(y, t), _mm512_set1_ps(cf));
+            }
+            let e = exp16(flip(_mm512_mul_ps(a, a)));
+            let e = _mm512_sub_ps(_mm512_set1_ps(1.0), _mm512_mul_ps(_mm512_mul_ps(y, t), e));
+            let erf = _mm512_mask_blend_ps(neg, e, flip(e));
+            let g = _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(0.5), xv), _mm512_add_ps(_mm512_set1_ps(1.0), erf));
+            _mm512_mask_storeu_ps(c.as_mut_ptr(), m, g);
+        }
+    }
+}
+
+/// See [`super::narrow_f16`]: `vcvtps2ph` (round to nearest even) on 8
+/// lanes, the tail by the twin.
+///
+/// # Safety
+/// The CPU must support avx2 and f16c.
+#[target_feature(enable = "avx2,f16c")]
+pub unsafe fn narrow_f16(src: &[f32], dst: &mut [u16]) {
+    let n = src.len().min(dst.len());
+    let n8 = n - n % 8;
+    for (s, d) in src[..n8].chunks_exact(8).zip(dst[..n8].chunks_exact_mut(8)) {
+        // SAFETY: s and d hold 8 values each.
+        unsafe { _mm_storeu_si128(d.as_mut_ptr() as *mut __m128i, _mm256_cvtps_ph::<_MM_FROUND_TO_NEAREST_INT>(_mm256_loadu_ps(s.as_ptr()))) };
+    }
+    super::scalar::narrow_f16(&src[n8..n], &mut dst[n8..n]);
+}
+
 /// See [`super::widen_f16`] (F16C, exact: bit-identical to the twin).
 ///
 /// # Safety
