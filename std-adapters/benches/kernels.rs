@@ -14,16 +14,7 @@ use std::time::Instant;
 
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd::{self, Isa};
-use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, KvRows, Mask, Matrix, Q8Rows, RowData, X8Rows, TiledCausalMask};
-
-/// A mask with its period hidden: the attention takes every query alone
-/// (the per-query path the query groups replaced), for the in-process ratio.
-struct Alone<M>(M);
-impl<M: Mask> Mask for Alone<M> {
-    fn allowed(&self, qi: usize, kj: usize) -> bool {
-        self.0.allowed(qi, kj)
-    }
-}
+use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, KvRows, Matrix, Q8Rows, RowData, TiledCausalMask, Ungrouped, X8Rows};
 
 mod common;
 use common::Rng;
@@ -110,14 +101,14 @@ fn main() {
     let n = t * streams;
     let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
     let mut out = vec![0.0f32; n * c];
-    let mut scores = vec![0.0f32; simd::QUERY_GROUP * n];
+    let mut scores = vec![0.0f32; n];
     let mask = TiledCausalMask { t_q: t, t_k: t, q_pos0: 0 };
     let mut line = format!("attention {n}x{n} C={c} heads={nh}:");
     for isa in &isas {
         // SAFETY: as above.
         unsafe { simd::set_isa(*isa) };
         let s = time(reps, || attention(&q, &k[..], &v[..], c, nh, &mask, &mut scores, &mut out));
-        let alone = time(reps, || attention(&q, &k[..], &v[..], c, nh, &Alone(mask), &mut scores, &mut out));
+        let alone = time(reps, || attention(&q, &k[..], &v[..], c, nh, &Ungrouped(mask), &mut scores, &mut out));
         line += &format!("  [{isa:?}] {:.2} ms (queries alone {:.2} ms: {:.2}x)", s * 1e3, alone * 1e3, s / alone);
     }
     println!("{line}");
@@ -134,7 +125,7 @@ fn main() {
         unsafe { simd::set_isa(*isa) };
         let (kr, vr) = (KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16)));
         let s = time(reps * 20, || attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]));
-        let alone = time(reps * 20, || attention(&q[..streams * c], kr, vr, c, nh, &Alone(mask), &mut scores, &mut out[..streams * c]));
+        let alone = time(reps * 20, || attention(&q[..streams * c], kr, vr, c, nh, &Ungrouped(mask), &mut scores, &mut out[..streams * c]));
         line += &format!("  [{isa:?}] {:.3} ms (queries alone {:.3} ms: {:.2}x)", s * 1e3, alone * 1e3, s / alone);
     }
     println!("{line}");

@@ -60,6 +60,19 @@ impl Mask for TiledCausalMask {
     }
 }
 
+/// A mask with its [`Mask::period`] hidden: [`attention`] takes every query
+/// alone, with the same numbers (the per-query path, for comparisons of the
+/// query groups: tests and the kernel bench).
+#[derive(Clone, Copy, Debug)]
+pub struct Ungrouped<M>(pub M);
+
+impl<M: Mask> Mask for Ungrouped<M> {
+    #[inline]
+    fn allowed(&self, qi: usize, kj: usize) -> bool {
+        self.0.allowed(qi, kj)
+    }
+}
+
 /// Runs of allowed keys remembered per query (the masks of the model have
 /// one run (band) or one per stream (tiled causal)); a query whose mask
 /// breaks into more runs takes the key-by-key path.

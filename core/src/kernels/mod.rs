@@ -21,7 +21,7 @@ pub mod simd;
 pub mod weights;
 
 pub use activation::{gelu_inplace, relu_inplace, relu_into};
-pub use attention::{attention, BandMask, Mask, TiledCausalMask};
+pub use attention::{attention, BandMask, Mask, TiledCausalMask, Ungrouped};
 pub use kv_rows::{KvRows, RowData};
 pub use conv::{conv1d, conv1d_col_len, conv1d_segs, conv_transpose1d, conv_transpose1d_segs, convt_z_len, ConvGeom, ConvSeg, CONV_TILE};
 pub use linear::{linear, linear_xw};

@@ -286,14 +286,6 @@ fn attention_band_and_tiled_causal() {
     assert_close(&one, &want[qi * c..(qi + 1) * c], CLOSE);
 }
 
-/// A mask with its period hidden: [`attention`] takes every query alone.
-struct Alone<M>(M);
-impl<M: Mask> Mask for Alone<M> {
-    fn allowed(&self, qi: usize, kj: usize) -> bool {
-        self.0.allowed(qi, kj)
-    }
-}
-
 /// A band that claims every query sees the same keys (it does not): the
 /// group's check of the members' key runs must take each query alone.
 struct FalsePeriod(BandMask);
@@ -327,14 +319,14 @@ fn grouped_queries_equal_each_query_alone() {
                 let mut scores = vec![0.0; rows * nk];
                 let (mut grouped, mut alone) = (vec![f32::NAN; nq * c], vec![f32::NAN; nq * c]);
                 attention(&q, &k[..], &v[..], c, nh, &m, &mut scores, &mut grouped);
-                attention(&q, &k[..], &v[..], c, nh, &Alone(m), &mut scores, &mut alone);
+                attention(&q, &k[..], &v[..], c, nh, &Ungrouped(m), &mut scores, &mut alone);
                 assert!(grouped.iter().zip(&alone).all(|(a, b)| a.to_bits() == b.to_bits()), "f32 c={c} {streams}x{t_q} q_pos0={q_pos0} rows={rows}");
                 fn kv16(d: &[u16], split: usize) -> KvRows<'_> {
                     KvRows::two(RowData::F16(&d[..split]), RowData::F16(&d[split..]))
                 }
                 let (mut grouped16, mut alone16) = (vec![f32::NAN; nq * c], vec![f32::NAN; nq * c]);
                 attention(&q, kv16(&k16, split), kv16(&v16, split), c, nh, &m, &mut scores, &mut grouped16);
-                attention(&q, kv16(&k16, split), kv16(&v16, split), c, nh, &Alone(m), &mut scores, &mut alone16);
+                attention(&q, kv16(&k16, split), kv16(&v16, split), c, nh, &Ungrouped(m), &mut scores, &mut alone16);
                 assert!(grouped16.iter().zip(&alone16).all(|(a, b)| a.to_bits() == b.to_bits()), "f16 c={c} {streams}x{t_q} q_pos0={q_pos0} rows={rows}");
             }
             let want = naive_attention(&q, &k, &v, c, nh, &|i, j| j % t_k <= q_pos0 + i % t_q);
