@@ -129,6 +129,35 @@ fn main() {
         line += &format!("  [{isa:?}] {:.3} ms (queries alone {:.3} ms: {:.2}x)", s * 1e3, alone * 1e3, s / alone);
     }
     println!("{line}");
+    // The appends of 16 sessions x 12 layers in one `step_many`, each over its
+    // own cache (192 caches, 171 MB: read cold from memory), against as many
+    // appends over one cache (hot): how much of the memory time is hidden.
+    let caches: Vec<(Vec<u16>, Vec<u16>)> = (0..16 * 12)
+        .map(|_| {
+            let to_f16 = |v: Vec<f32>| v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect::<Vec<u16>>();
+            (to_f16(r.vec(n * c)), to_f16(r.vec(n * c)))
+        })
+        .collect();
+    let mut line = format!("attention S append x{} caches (16 sessions x 12 layers):", caches.len());
+    for isa in &isas {
+        // SAFETY: as above.
+        unsafe { simd::set_isa(*isa) };
+        let cold = time(reps, || {
+            for (kc, vc) in &caches {
+                let (kr, vr) = (KvRows::one(RowData::F16(kc)), KvRows::one(RowData::F16(vc)));
+                attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]);
+            }
+        });
+        let (kr, vr) = (KvRows::one(RowData::F16(&caches[0].0)), KvRows::one(RowData::F16(&caches[0].1)));
+        let hot = time(reps, || {
+            for _ in 0..caches.len() {
+                attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]);
+            }
+        });
+        line += &format!("  [{isa:?}] {:.2} ms (one hot cache {:.2} ms: {:.2}x)", cold * 1e3, hot * 1e3, cold / hot);
+    }
+    println!("{line}");
+    drop(caches);
     // The softmax exponentials and the MLP's GELU against libm in the same run
     // (the R step's 290-key scores; one MLP hidden of 290 rows).
     let libm_exp = |s: &mut [f32], max: f32| s.iter_mut().fold(0.0f32, |a, v| {

@@ -308,19 +308,38 @@ pub fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
 
 /// Quantises activations for [`dot_q8`]: per block of 32, `d = max|x| /
 /// 127` (f32) and `q = round(x / d)` in [-127, 127] (0 when the block is
-/// all zeros). `x.len()` must be a multiple of 32 (a trailing partial
-/// block is ignored); `q` >= x.len(), `d` >= x.len() / 32.
+/// all zeros, or so small that `1 / d` overflows: [`q8_scale`]). `x.len()`
+/// must be a multiple of 32 (a trailing partial block is ignored); `q` >=
+/// x.len(), `d` >= x.len() / 32.
 pub fn quantise_q8(x: &[f32], q: &mut [i8], d: &mut [f32]) {
     for ((xb, qb), db) in x.chunks_exact(Q8_BLOCK).zip(q.chunks_exact_mut(Q8_BLOCK)).zip(d.iter_mut()) {
         let amax = xb.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-        // Non-finite activations give a non-finite scale (NaN propagates to
-        // the output, never a panic); the i8 cast saturates.
-        let scale = amax / 127.0;
+        let (scale, inv) = q8_scale(amax);
         *db = scale;
-        let inv = if scale > 0.0 { 1.0 / scale } else { 0.0 };
         for (qv, &v) in qb.iter_mut().zip(xb) {
             *qv = libm::roundf(v * inv) as i8;
         }
+    }
+}
+
+/// The scale `d` of an activation block of largest magnitude `amax` and the
+/// factor `1 / d` its values are multiplied by before rounding, as every
+/// quantiser kernel computes them (scalar IEEE operations, so every ISA
+/// gives the same bits). A block of zeros gets `(0, 0)`. So does a block
+/// below ~1.5e-36 (`d` subnormal, `1 / d` overflows to infinity): its
+/// values would otherwise become infinities, which the scalar cast and the
+/// SIMD conversions turn into different integers; its contribution to any
+/// product is below `256 d` per value either way. Non-finite activations
+/// give a non-finite `d` and `1 / d = 0` (the NaN reaches the output, never
+/// a panic).
+#[inline]
+pub fn q8_scale(amax: f32) -> (f32, f32) {
+    let scale = amax / 127.0;
+    let inv = if scale > 0.0 { 1.0 / scale } else { 0.0 };
+    if inv == f32::INFINITY {
+        (0.0, 0.0)
+    } else {
+        (scale, inv)
     }
 }
 

@@ -163,9 +163,8 @@ pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [
         for vi in &v {
             m = vmaxnmq_f32(m, vabsq_f32(*vi));
         }
-        let scale = vmaxnmvq_f32(m) / 127.0;
+        let (scale, inv) = super::q8_scale(vmaxnmvq_f32(m));
         *db = scale;
-        let inv = if scale > 0.0 { 1.0 / scale } else { 0.0 };
         let r: [int32x4_t; 8] = v.map(|vi| vcvtq_s32_f32(vrndaq_f32(vmulq_n_f32(vi, inv))));
         // Quads 0, 2, 4, 6 are lane parity 0; 1, 3, 5, 7 parity 1.
         let s0 = vaddq_s32(vaddq_s32(r[0], r[2]), vaddq_s32(r[4], r[6]));

@@ -208,6 +208,10 @@ fn quantiser_inputs(r: &mut Rng) -> Vec<f32> {
     x[130] = f32::INFINITY;
     x[170] = -f32::INFINITY;
     x[200] = 1e-38;
+    // Block 8: every |x| < 1.5e-36, so 1 / scale overflows: all zero, scale 0.
+    for (i, v) in x[256..288].iter_mut().enumerate() {
+        *v = (i as f32 - 10.0) * 1e-39;
+    }
     x
 }
 
@@ -222,18 +226,22 @@ fn quantiser_is_bit_identical_to_scalar_twin() {
     let (mut q1, mut d1) = (vec![0i8; x.len()], vec![0f32; nb]);
     super::quantise_q8(&x, &mut q1, &mut d1);
     assert_eq!(q0, q1);
+    assert!(q0[256..288].iter().all(|&v| v == 0) && d0[8] == 0.0, "a block whose 1 / scale overflows quantises to zero");
     assert_eq!(d0.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), d1.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
     for (b, qb) in q0.chunks_exact(Q8_BLOCK).enumerate() {
         assert_eq!(c0[2 * b] + c0[2 * b + 1], -128 * qb.iter().map(|&v| v as i32).sum::<i32>());
         assert_eq!(c0[2 * b], -128 * (0..4).map(|g| qb[8 * g..8 * g + 4].iter().map(|&v| v as i32).sum::<i32>()).sum::<i32>());
     }
+    // Every block count up to the whole input (odd counts end on a lone block).
     for v in variants() {
-        let (mut q, mut d, mut c) = (vec![0i8; x.len()], vec![0f32; nb], vec![0i32; 2 * nb]);
-        (v.quantise)(&x, &mut q, &mut d, &mut c);
-        assert_eq!(q, q0, "{}: quantised values", v.name);
-        let bits = |d: &[f32]| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&d), bits(&d0), "{}: scales", v.name);
-        assert_eq!(c, c0, "{}: corrections", v.name);
+        for n in 0..=nb {
+            let (mut q, mut d, mut c) = (vec![0i8; 32 * n], vec![0f32; n], vec![0i32; 2 * n]);
+            (v.quantise)(&x[..32 * n], &mut q, &mut d, &mut c);
+            assert_eq!(q, q0[..32 * n], "{} ({n} blocks): quantised values", v.name);
+            let bits = |d: &[f32]| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&d), bits(&d0[..n]), "{} ({n} blocks): scales", v.name);
+            assert_eq!(c, c0[..2 * n], "{} ({n} blocks): corrections", v.name);
+        }
     }
 }
 
