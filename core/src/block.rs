@@ -4,7 +4,7 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
-use crate::kernels::{attention, gelu_inplace, layernorm, linear, KvRows, Mask};
+use crate::kernels::{attention, layernorm, linear, linear_each, linear_gelu, KvRows, Mask};
 use crate::model::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
@@ -91,9 +91,7 @@ pub fn block_forward<M: Mask>(w: &BlockW<'_>, x: &mut [f32], c: usize, n_head: u
     let p = s.qkv();
     let (ln, q, k, v, att) = (&mut p.ln[..nc], &mut p.q[..nc], &mut p.k[..nc], &mut p.v[..nc], &mut p.att[..nc]);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    lin(ln, &w.query, q);
-    lin(ln, &w.key, k);
-    lin(ln, &w.value, v);
+    linear_each(ln, [&w.query.w, &w.key.w, &w.value.w], [w.query.b, w.key.b, w.value.b], [q, k, v]);
     attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att);
     lin(att, &w.proj, ln);
     add(x, ln);
@@ -106,8 +104,7 @@ fn mlp(w: &BlockW<'_>, x: &mut [f32], s: &mut BlockScratch<'_>, nc: usize) {
     let (ln, hid, out) = s.mlp_parts();
     let (ln, hid, out) = (&mut ln[..nc], &mut hid[..4 * nc], &mut out[..nc]);
     layernorm(x, w.ln2.w, w.ln2.b, ln);
-    lin(ln, &w.fc, hid);
-    gelu_inplace(hid);
+    linear_gelu(ln, &w.fc.w, w.fc.b, hid);
     lin(hid, &w.fc_out, out);
     add(x, out);
 }
@@ -133,8 +130,7 @@ pub fn block_forward_rows<M: Mask>(
     let p = s.qkv();
     let (ln, q, k, v, att) = (&mut p.ln[..nc], &mut p.q[..rc], &mut p.k[..nc], &mut p.v[..nc], &mut p.att[..nc]);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    lin(ln, &w.key, k);
-    lin(ln, &w.value, v);
+    linear_each(ln, [&w.key.w, &w.value.w], [w.key.b, w.value.b], [k, v]);
     // Gather the selected rows of ln1(x) and of x.
     for (i, &row) in rows.iter().enumerate() {
         let (a, b) = (row * c, (row + 1) * c);
@@ -156,8 +152,7 @@ pub fn block_forward_rows<M: Mask>(
 pub fn block_kv(w: &BlockW<'_>, x: &[f32], ln: &mut [f32], k: &mut [f32], v: &mut [f32]) {
     let ln = &mut ln[..x.len()];
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    lin(ln, &w.key, k);
-    lin(ln, &w.value, v);
+    linear_each(ln, [&w.key.w, &w.value.w], [w.key.b, w.value.b], [k, v]);
 }
 
 /// The rest of a block for groups of new rows in place, given the keys

@@ -15,6 +15,20 @@ const BLOCK_BYTES: usize = 192 * 1024;
 /// With a worker pool installed ([`super::parallel`]) the output columns
 /// are split over its threads; the values are the same bit for bit.
 pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
+    linear_act(x, w, b, y, false)
+}
+
+/// `y = gelu(x W^T + b)` (the MLP's first layer): [`linear`] then
+/// [`super::gelu_inplace`] over the `n` rows written, bit for bit. On the
+/// int8 panel path each output segment goes through GELU as it is
+/// written, while it is in cache: the 3072-wide hidden rows of an R window
+/// (3.5 MB) are not read and written once more.
+pub fn linear_gelu(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
+    linear_act(x, w, b, y, true)
+}
+
+/// [`linear`], with GELU on the results if `gelu`.
+fn linear_act(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], gelu: bool) {
     let (n_in, n_out) = (w.cols(), w.rows());
     if n_in == 0 || n_out == 0 {
         return;
@@ -24,16 +38,67 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
         return;
     }
     let (x, y) = (&x[..n * n_in], &mut y[..n * n_out]);
-    match w {
-        Matrix::Q8(q) if n_in <= Q8_PANEL => return linear_q8(x, q, b, y),
-        // Packed in place on VNNI; expanded per tile (stack rows of at most
-        // `Q4_FAST_COLS`) elsewhere.
-        Matrix::X8(q) if n_in <= Q4_FAST_COLS || (n_in <= Q8_PANEL && simd::packed_q8_fast()) => return linear_q8(x, q, b, y),
-        Matrix::Q4(q) if n_in <= Q4_FAST_COLS => return linear_q8(x, q, b, y),
-        _ => {}
+    if takes_q8_panel(w) {
+        match w {
+            Matrix::Q8(q) => return linear_q8(x, [q], [b], [y], gelu),
+            Matrix::X8(q) => return linear_q8(x, [q], [b], [y], gelu),
+            Matrix::Q4(q) => return linear_q8(x, [q], [b], [y], gelu),
+            _ => {}
+        }
     }
     let block = (BLOCK_BYTES / (w.weight_bytes() / n_out).max(1)).clamp(16, 1024);
-    split_cols(y, n_out, w.weight_bytes().saturating_mul(n), |cols| crate::with_rows!(w, m => linear_impl(x, m, b, cols, block)))
+    split_cols(y, n_out, w.weight_bytes().saturating_mul(n), |cols| crate::with_rows!(w, m => linear_impl(x, m, b, cols, block)));
+    if gelu {
+        super::gelu_inplace(y);
+    }
+}
+
+/// Whether [`linear`] runs `w` on the int8 panel path ([`linear_q8`]).
+fn takes_q8_panel(w: &Matrix<'_>) -> bool {
+    let n_in = w.cols();
+    match w {
+        Matrix::Q8(_) => n_in <= Q8_PANEL,
+        // Packed in place on VNNI; expanded per tile (stack rows of at most
+        // `Q4_FAST_COLS`) elsewhere.
+        Matrix::X8(_) => n_in <= Q4_FAST_COLS || (n_in <= Q8_PANEL && simd::packed_q8_fast()),
+        Matrix::Q4(_) => n_in <= Q4_FAST_COLS,
+        _ => false,
+    }
+}
+
+/// `y_k = x W_k^T + b_k` for `N` matrices over the same input rows (the
+/// attention's query, key and value projections): the values of `N`
+/// [`linear`] calls, bit for bit. Where all `N` are stored in the same
+/// int8 layout, of the same width, for the same rows, and take the int8
+/// panel path, the activation rows are quantised once for all of them.
+pub fn linear_each<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N]) {
+    let n_in = ws.first().map_or(0, |w| w.cols());
+    let rows = |k: usize, y: &[f32]| if n_in == 0 || ws[k].rows() == 0 { 0 } else { (x.len() / n_in).min(y.len() / ws[k].rows()) };
+    let n = ys.first().map_or(0, |y| rows(0, y));
+    let shared = n > 0 && ws.iter().all(|w| w.cols() == n_in && takes_q8_panel(w)) && ys.iter().enumerate().all(|(k, y)| rows(k, y) == n);
+    if shared {
+        let x = &x[..n * n_in];
+        macro_rules! same {
+            ($variant:ident) => {
+                if ws.iter().all(|w| matches!(w, Matrix::$variant(_))) {
+                    let m = ws.map(|w| match w {
+                        Matrix::$variant(q) => Some(q),
+                        _ => None,
+                    });
+                    if let Some(first) = m[0] {
+                        let m = m.map(|q| q.unwrap_or(first));
+                        return linear_q8(x, m, bs, ys, false);
+                    }
+                }
+            };
+        }
+        same!(X8);
+        same!(Q8);
+        same!(Q4);
+    }
+    for ((w, b), y) in ws.into_iter().zip(bs).zip(ys) {
+        linear(x, w, b, y);
+    }
 }
 
 /// Int8 activation values quantised at once by `linear` over a [`Q8Rows`]
@@ -62,12 +127,28 @@ const _: () = assert!(super::parallel::SPLIT_ALIGN % Q8X8_ROWS == 0);
 /// Fewest activation rows of a panel for the packed int8 path.
 const PACK_MIN_ROWS: usize = 4;
 
-/// Quantised activation rows (see [`Q8_PANEL`]).
+/// The panel of a call whose rows fit in 32 KiB of values (the streaming
+/// step's GEMMs of one session: up to 10 rows of the widest input). Its
+/// zeroed stack room is 44 KiB where the full panel's is 264 KiB, zeroed
+/// on every call (which showed in the streaming step's profile).
+const Q8_PANEL_SMALL: usize = if Q8_PANEL < 32 * 1024 { Q8_PANEL } else { 32 * 1024 };
+
+/// Room for `Q` quantised activation values (`B = Q / 32` block scales,
+/// `C = 2 B` VNNI corrections).
 #[repr(C, align(64))]
-struct Q8Panel {
-    q: [i8; Q8_PANEL],
-    d: [f32; Q8_PANEL_BLOCKS],
-    c: [i32; 2 * Q8_PANEL_BLOCKS],
+struct PanelRoom<const Q: usize, const B: usize, const C: usize> {
+    q: [i8; Q],
+    d: [f32; B],
+    c: [i32; C],
+}
+
+/// Quantised activation rows of one panel (see [`Q8_PANEL`]): row `r`'s
+/// values `q[r * in..][..in]`, scales `d[r * in / 32..]`, corrections
+/// `c[2 r * in / 32..]`.
+struct Q8Panel<'a> {
+    q: &'a [i8],
+    d: &'a [f32],
+    c: &'a [i32],
 }
 
 /// Widest Q4 row the int8 panel path takes (its rows are expanded to Q8
@@ -96,9 +177,13 @@ trait Q8Source: RowMatrix {
     /// Rows `t0 .. t0 + 8` (`t0` a multiple of 8; rows past the matrix
     /// repeat its last row or are padding: their results are dropped) as
     /// a packed tile of `nb` blocks (`nb <= PACK_BLOCKS` unless PREPACKED).
-    fn packed_tile<'s>(&'s self, t0: usize, nb: usize, pack: &'s mut simd::Q8Pack8, buf: &'s mut Self::Buf) -> simd::PackedQ8<'s> {
+    /// `pack` and `buf` are made on first use (a source stored packed
+    /// needs neither: zeroing their ~60 KiB per call showed in the
+    /// streaming step's profile).
+    fn packed_tile<'s>(&'s self, t0: usize, nb: usize, pack: &'s mut Option<simd::Q8Pack8>, buf: &'s mut Option<Self::Buf>) -> simd::PackedQ8<'s> {
         let last = self.rows() - 1;
-        let rows = self.q8_rows(core::array::from_fn(|j| (t0 + j).min(last)), buf);
+        let rows = self.q8_rows(core::array::from_fn(|j| (t0 + j).min(last)), buf.get_or_insert_with(Self::new_buf));
+        let pack = pack.get_or_insert_with(simd::Q8Pack8::new);
         simd::q8_pack8(rows, nb, pack);
         pack.view()
     }
@@ -166,7 +251,7 @@ impl Q8Source for X8Rows<'_> {
         expanded_rows(self, rows, buf)
     }
     #[inline]
-    fn packed_tile<'s>(&'s self, t0: usize, _nb: usize, _: &'s mut simd::Q8Pack8, _: &'s mut Self::Buf) -> simd::PackedQ8<'s> {
+    fn packed_tile<'s>(&'s self, t0: usize, _nb: usize, _: &'s mut Option<simd::Q8Pack8>, _: &'s mut Option<Self::Buf>) -> simd::PackedQ8<'s> {
         self.group(t0 / Q8X8_ROWS)
     }
     #[inline]
@@ -179,12 +264,29 @@ impl Q8Source for X8Rows<'_> {
 /// panel ([`simd::quantise_q8_corr`]), weight scales read once per tile of
 /// `TN` weight rows ([`simd::q8_scales`]) and reused by every activation
 /// tile of the panel ([`simd::gemm_q8`], `M` = 1..=4 rows, no padded rows).
-fn linear_q8<W: Q8Source + Sync>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f32]) {
-    let (n_in, n_out) = (w.cols(), w.rows());
-    let n = (x.len() / n_in).min(y.len() / n_out);
+///
+/// `N` matrices of the same width over the same `n = x.len() / in` rows
+/// (each `y` holds `n` rows; [`linear_each`] checks it) share the
+/// quantised panel; each takes its own kernels, as if called alone.
+///
+/// With `gelu`, every output segment goes through GELU as it is written.
+fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N], gelu: bool) {
+    let n_in = ws.first().map_or(0, |w| w.cols());
+    if n_in == 0 || x.len() / n_in * n_in <= Q8_PANEL_SMALL {
+        linear_q8_in::<W, N, Q8_PANEL_SMALL, { Q8_PANEL_SMALL / Q8_BLOCK }, { 2 * Q8_PANEL_SMALL / Q8_BLOCK }>(x, ws, bs, ys, gelu)
+    } else {
+        linear_q8_in::<W, N, Q8_PANEL, Q8_PANEL_BLOCKS, { 2 * Q8_PANEL_BLOCKS }>(x, ws, bs, ys, gelu)
+    }
+}
+
+/// [`linear_q8`] with a panel of `Q` values (`B = Q / 32`, `C = 2 B`).
+#[inline(never)]
+fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usize, const C: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], mut ys: [&mut [f32]; N], gelu: bool) {
+    let Some(n_in) = ws.first().map(|w| w.cols()).filter(|&c| c > 0) else { return };
+    let n = x.len() / n_in;
     let nb = n_in / Q8_BLOCK;
-    let per_panel = Q8_PANEL / n_in;
-    let mut p = Q8Panel { q: [0; Q8_PANEL], d: [0.0; Q8_PANEL_BLOCKS], c: [0; 2 * Q8_PANEL_BLOCKS] };
+    let per_panel = Q / n_in;
+    let mut room = PanelRoom::<Q, B, C> { q: [0; Q], d: [0.0; B], c: [0; C] };
     let mut p0 = 0;
     while p0 < n {
         let p1 = (p0 + per_panel).min(n);
@@ -192,24 +294,27 @@ fn linear_q8<W: Q8Source + Sync>(x: &[f32], w: &W, b: Option<&[f32]>, y: &mut [f
             let r = i - p0;
             simd::quantise_q8_corr(
                 &x[i * n_in..(i + 1) * n_in],
-                &mut p.q[r * n_in..(r + 1) * n_in],
-                &mut p.d[r * nb..(r + 1) * nb],
-                &mut p.c[2 * r * nb..2 * (r + 1) * nb],
+                &mut room.q[r * n_in..(r + 1) * n_in],
+                &mut room.d[r * nb..(r + 1) * nb],
+                &mut room.c[2 * r * nb..2 * (r + 1) * nb],
             );
         }
         // Packing 8 weight rows per call pays off from a few activation
         // rows on (measured: at 1 row the unpacked VNNI tile is faster);
         // stored packed tiles are faster from one row on.
         let packed = simd::packed_q8_fast() && (W::PREPACKED || (p1 - p0 >= PACK_MIN_ROWS && nb <= simd::PACK_BLOCKS));
-        let work = (n_out * nb * Q8_BLOCK_BYTES).saturating_mul(p1 - p0);
-        let p = &p;
-        split_cols(&mut y[p0 * n_out..p1 * n_out], n_out, work, |cols| {
-            if packed {
-                q8_panel_packed(w, b, cols, p, p1 - p0, n_in)
-            } else {
-                q8_panel_tiles(w, b, cols, p, p1 - p0, n_in)
-            }
-        });
+        let p = &Q8Panel { q: &room.q, d: &room.d, c: &room.c };
+        for ((w, b), y) in ws.iter().zip(bs).zip(ys.iter_mut()) {
+            let n_out = w.rows();
+            let work = (n_out * nb * Q8_BLOCK_BYTES).saturating_mul(p1 - p0);
+            split_cols(&mut y[p0 * n_out..p1 * n_out], n_out, work, |cols| {
+                if packed {
+                    q8_panel_packed(*w, b, cols, p, p1 - p0, n_in, gelu)
+                } else {
+                    q8_panel_tiles(*w, b, cols, p, p1 - p0, n_in, gelu)
+                }
+            });
+        }
         p0 = p1;
     }
 }
@@ -305,7 +410,7 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
 /// with [`simd::gemm_q8`].
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel, n_rows: usize, n_in: usize) {
+fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize, gelu: bool) {
     let nb = n_in / Q8_BLOCK;
     let mut ws = [[0.0f32; Q8_PANEL_BLOCKS]; TN];
     let mut buf = W::new_buf();
@@ -330,6 +435,9 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8
                 let yr = y.seg(i0 + m, t0, t0 + nt);
                 for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
                     *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
+                }
+                if gelu {
+                    simd::gelu_inplace(yr);
                 }
             };
             match mt {
@@ -365,11 +473,10 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8
 /// bit; the rows after them stay on VNNI.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel, n_rows: usize, n_in: usize) {
+fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize, gelu: bool) {
     const R: usize = simd::PACK_ROWS;
     let nb = n_in / Q8_BLOCK;
-    let mut pack = simd::Q8Pack8::new();
-    let mut buf = W::new_buf();
+    let (mut pack, mut buf) = (None, None);
     let mut amx = (n_rows >= AMX_MIN_ROWS && simd::amx_enabled()).then(simd::AmxWeights::new);
     // The AMX kernel's rows of this panel (whole 8-row groups; 0 if it would refuse the extents).
     let amx_planned = simd::amx_rows(nb, n_rows * n_in, n_in, n_rows * nb, n_rows);
@@ -383,28 +490,28 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
         }
         let prepared = amx_planned > 0 && amx.as_mut().is_some_and(|a| a.prepare(0, tile));
         let Some(a) = amx.as_mut().filter(|_| prepared) else {
-            vnni_rows(tile, p, 0, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t));
+            vnni_rows(tile, p, 0, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t, gelu));
             t0 += nt;
             continue;
         };
         // This tile's rows after the AMX rows, then the second tile's (or
         // this one again as a second operand whose results are dropped).
-        vnni_rows(tile, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t));
+        vnni_rows(tile, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t, gelu));
         let t1 = t0 + R;
         let nt1 = if t1 < y.hi() { R.min(y.hi() - t1) } else { 0 };
         if nt1 > 0 {
             let tile1 = w.packed_tile(t1, nb, &mut pack, &mut buf);
             a.prepare(1, tile1);
-            vnni_rows(tile1, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t1, nt1, t));
+            vnni_rows(tile1, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t1, nt1, t, gelu));
         } else {
             a.prepare(1, tile);
         }
         // The next pair's weights stream in (into L2) while this pair is multiplied.
         let ahead = w.stored_rows(t0 + 2 * R, (t0 + 4 * R).min(y.hi()));
         let done = amx_pair(a, p, amx_planned, n_in, ahead, |i, t| {
-            put_row(&mut y, b, i, t0, nt, &t[..R]);
+            put_row(&mut y, b, i, t0, nt, &t[..R], gelu);
             if nt1 > 0 {
-                put_row(&mut y, b, i, t1, nt1, &t[R..]);
+                put_row(&mut y, b, i, t1, nt1, &t[R..], gelu);
             }
         });
         if done < amx_planned {
@@ -413,7 +520,7 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
             for (tt, ntt) in [(t0, nt), (t1, nt1)] {
                 if ntt > 0 {
                     let tile = w.packed_tile(tt, nb, &mut pack, &mut buf);
-                    vnni_rows(tile, p, done, amx_planned, n_in, |i, t| put_row(&mut y, b, i, tt, ntt, t));
+                    vnni_rows(tile, p, done, amx_planned, n_in, |i, t| put_row(&mut y, b, i, tt, ntt, t, gelu));
                 }
             }
         }
@@ -425,20 +532,23 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
 /// VNNI rows with the next tile's prefetch are as fast: the S step's panels).
 const AMX_MIN_ROWS: usize = 16;
 
-/// `y[i][t0..t0 + nt] = b[t0..] + t[..nt]`.
+/// `y[i][t0..t0 + nt] = b[t0..] + t[..nt]`, through GELU if `gelu`.
 #[inline]
-fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, t: &[f32]) {
+fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, t: &[f32], gelu: bool) {
     let yr = y.seg(i, t0, t0 + nt);
     match b {
         Some(b) => yr.iter_mut().zip(t).zip(&b[t0..]).for_each(|((yo, v), bj)| *yo = bj + v),
         None => yr.iter_mut().zip(t).for_each(|(yo, v)| *yo = 0.0 + v),
+    }
+    if gelu {
+        simd::gelu_inplace(yr);
     }
 }
 
 /// Activation rows `r0..r1` of a panel against one packed tile on
 /// [`simd::gemm_q8_packed`], up to 8 rows per call (`put(row, values)`).
 #[inline]
-fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel, r0: usize, r1: usize, n_in: usize, mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS])) {
+fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_in: usize, mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS])) {
     let nb = n_in / Q8_BLOCK;
     let mut i0 = r0;
     while i0 < r1 {
@@ -473,7 +583,7 @@ fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel, r0: usize, r1: usize, n_in: 
 /// [`simd::AMX_ROWS`]) against the two tiles prepared in `a`, on the AMX
 /// kernel (`put(row, values of both tiles)`), prefetching `ahead` over the
 /// calls; returns the rows done.
-fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel, rows: usize, n_in: usize, ahead: &[u8], mut put: impl FnMut(usize, &[f32; simd::AMX_COLS])) -> usize {
+fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel<'_>, rows: usize, n_in: usize, ahead: &[u8], mut put: impl FnMut(usize, &[f32; simd::AMX_COLS])) -> usize {
     /// Activation rows per AMX call (its tile configuration is loaded once per call).
     const CALL_ROWS: usize = 8 * simd::AMX_ROWS;
     let nb = n_in / Q8_BLOCK;

@@ -615,9 +615,12 @@ fn linear_rows_do_not_depend_on_the_batch() {
         let q8 = q8_bytes(&w);
         let q4 = q4_bytes(&w);
         let h: Vec<u16> = w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
-        let rows = 9;
+        let x8 = x8_bytes(&q8, o, i);
+        // 12 rows: at 3072 inputs more than 10 rows take the full panel, fewer the small one.
+        let rows = 12;
         let x = r.vec(rows * i);
         for m in [
+            Matrix::X8(crate::kernels::X8Rows::new(&x8, o, i).unwrap()),
             Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap()),
             Matrix::Q4(Q4Rows::new(&q4, o, i).unwrap()),
             Matrix::F16(F16Rows::new(&h, o, i).unwrap()),
@@ -634,6 +637,103 @@ fn linear_rows_do_not_depend_on_the_batch() {
                 assert_eq!(a.to_bits(), b.to_bits(), "in {i} out {o}: {n} rows, element {k}: {a} vs {b} alone");
             }
         }
+        }
+    }
+}
+
+/// The stored `Q8Block32x8` groups of `Q8Block32` rows (`o` a multiple of 8).
+fn x8_bytes(q8: &[u8], o: usize, i: usize) -> Vec<u8> {
+    let (nb, q8r) = (i / Q8_BLOCK, Q8Rows::new(q8, o, i).unwrap());
+    let mut x8 = Vec::new();
+    for g in 0..o / 8 {
+        let mut pack = super::Q8Pack8::new();
+        super::q8_pack8(core::array::from_fn(|j| q8r.row(8 * g + j)), nb, &mut pack);
+        let v = pack.view();
+        x8.extend_from_slice(&v.v[..nb * super::PACK_BLOCK_VALUES]);
+        x8.extend_from_slice(&v.s[..nb * super::PACK_BLOCK_SCALES]);
+    }
+    x8
+}
+
+#[test]
+fn linear_each_equals_one_linear_per_matrix() {
+    use crate::kernels::{linear_each, X8Rows};
+    let mut r = Rng(5);
+    for &i in &[768usize, 3072, 256] {
+        // Three matrices of different heights (the int8 ones share one quantised panel).
+        let outs = [64usize, 24, 40];
+        let w: Vec<Vec<f32>> = outs.iter().map(|&o| r.vec(o * i)).collect();
+        let q8: Vec<Vec<u8>> = w.iter().map(|w| q8_bytes(w)).collect();
+        let x8: Vec<Vec<u8>> = q8.iter().zip(&outs).map(|(q, &o)| x8_bytes(q, o, i)).collect();
+        let q4: Vec<Vec<u8>> = w.iter().map(|w| q4_bytes(w)).collect();
+        let h: Vec<Vec<u16>> = w.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
+        let b: Vec<Vec<f32>> = outs.iter().map(|&o| r.vec(o)).collect();
+        let sets: Vec<[Matrix<'_>; 3]> = vec![
+            core::array::from_fn(|k| Matrix::X8(X8Rows::new(&x8[k], outs[k], i).unwrap())),
+            core::array::from_fn(|k| Matrix::Q8(Q8Rows::new(&q8[k], outs[k], i).unwrap())),
+            core::array::from_fn(|k| Matrix::Q4(Q4Rows::new(&q4[k], outs[k], i).unwrap())),
+            core::array::from_fn(|k| Matrix::F16(F16Rows::new(&h[k], outs[k], i).unwrap())),
+            // Mixed layouts: one call per matrix.
+            [Matrix::X8(X8Rows::new(&x8[0], outs[0], i).unwrap()), Matrix::Q8(Q8Rows::new(&q8[1], outs[1], i).unwrap()), Matrix::F32(F32Rows::new(&w[2], outs[2], i).unwrap())],
+        ];
+        // Up to 12 rows: at 3072 inputs more than 10 rows take the full panel.
+        for n in [1usize, 4, 9, 11, 12] {
+            let x = r.vec(n * i);
+            for m in &sets {
+                let want: Vec<Vec<f32>> = (0..3)
+                    .map(|k| {
+                        let mut y = vec![0.0f32; n * outs[k]];
+                        linear(&x, &m[k], Some(&b[k]), &mut y);
+                        y
+                    })
+                    .collect();
+                // One spare row of output room: only n rows are written.
+                let mut got: Vec<Vec<f32>> = outs.iter().map(|&o| vec![7.0f32; (n + 1) * o]).collect();
+                let [g0, g1, g2] = &mut got[..] else { unreachable!() };
+                linear_each(&x, [&m[0], &m[1], &m[2]], [Some(&b[0][..]), Some(&b[1][..]), Some(&b[2][..])], [&mut g0[..], &mut g1[..], &mut g2[..]]);
+                for k in 0..3 {
+                    let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got[k][..n * outs[k]]), bits(&want[k]), "in {i}, {n} rows, matrix {k}");
+                    assert!(got[k][n * outs[k]..].iter().all(|&v| v == 7.0), "in {i}, {n} rows, matrix {k}: spare row written");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn linear_gelu_equals_linear_then_gelu() {
+    use crate::kernels::{gelu_inplace, linear_gelu, X8Rows};
+    let mut r = Rng(17);
+    for &(i, o) in &[(768usize, 64usize), (3072, 24), (256, 40)] {
+        // Outputs of about unit size: GELU's curved part.
+        let k = 0.5 / (i as f32).sqrt();
+        let w: Vec<f32> = r.vec(o * i).iter().map(|v| k * v).collect();
+        let q8 = q8_bytes(&w);
+        let x8 = x8_bytes(&q8, o, i);
+        let q4 = q4_bytes(&w);
+        let h: Vec<u16> = w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+        let b: Vec<f32> = r.vec(o).iter().map(|v| 0.2 * v).collect();
+        for m in [
+            Matrix::X8(X8Rows::new(&x8, o, i).unwrap()),
+            Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap()),
+            Matrix::Q4(Q4Rows::new(&q4, o, i).unwrap()),
+            Matrix::F16(F16Rows::new(&h, o, i).unwrap()),
+            Matrix::F32(F32Rows::new(&w, o, i).unwrap()),
+        ] {
+            // 1-3 rows take the unpacked int8 tiles, 4+ the packed ones; 11-12 rows of 3072 the full panel.
+            for n in [1usize, 2, 4, 9, 12] {
+                let x = r.vec(n * i);
+                let mut want = vec![0.0f32; n * o];
+                linear(&x, &m, Some(&b), &mut want);
+                gelu_inplace(&mut want);
+                let mut got = vec![7.0f32; (n + 1) * o];
+                linear_gelu(&x, &m, Some(&b), &mut got);
+                let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&got[..n * o]), bits(&want), "in {i} out {o}, {n} rows");
+                assert!(got[n * o..].iter().all(|&v| v == 7.0), "in {i} out {o}, {n} rows: spare row written");
+                assert!(want.iter().any(|&v| v < -0.05), "in {i} out {o}, {n} rows: GELU's negative part not reached");
+            }
         }
     }
 }

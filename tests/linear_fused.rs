@@ -1,0 +1,86 @@
+//! The fused entry points of the dense layers give what the plain ones give,
+//! bit for bit, on every kernel set this CPU runs (the AMX tiles on and
+//! off where they run) and on one thread and two: `linear_each` (one
+//! quantised panel for the query, key and value projections) against one
+//! `linear` per matrix, and `linear_gelu` (GELU applied to each output
+//! segment as it is written) against `linear` then `gelu_inplace`. Rows
+//! 1 to 290, so the unpacked and packed int8 tiles, the AMX row groups,
+//! the small and the full quantised panel and several panels. Its own test
+//! binary: it switches the process-wide kernels.
+
+use duolando::duo_writer::{quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8};
+use duolando_core::kernels::simd::{self, Isa};
+use duolando_core::kernels::{gelu_inplace, linear, linear_each, linear_gelu, F16Rows, Matrix, Q8Rows, X8Rows};
+use duolando_tests::Rng;
+
+fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|f| f.to_bits()).collect()
+}
+
+#[test]
+#[allow(unsafe_code)]
+fn fused_linear_entry_points_equal_the_plain_ones() {
+    let amx = duolando::simd::amx_usable();
+    let mut variants: Vec<(Isa, bool)> = duolando::simd::supported().into_iter().map(|i| (i, false)).collect();
+    if amx && variants.iter().any(|v| v.0 == Isa::Avx512Vnni) {
+        variants.push((Isa::Avx512Vnni, true));
+    }
+    let mut r = Rng(0xf00d);
+    for &i in &[768usize, 3072] {
+        // Query/key/value-like matrices of different heights; unit-sized outputs (GELU's curved part).
+        let outs = [48usize, 24, 40];
+        let k = 0.5 / (i as f32).sqrt();
+        let w: Vec<Vec<f32>> = outs.iter().map(|&o| r.vec(o * i).iter().map(|v| k * v).collect()).collect();
+        let q8: Vec<Vec<u8>> = w.iter().map(|w| quantise_q8_block32(w)).collect();
+        let x8: Vec<Vec<u8>> = w.iter().map(|w| quantise_q8_block32x8(w, i)).collect();
+        let x4: Vec<Vec<u8>> = w.iter().map(|w| quantise_q4_block32x8(w, i)).collect();
+        let h: Vec<Vec<u16>> = w.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
+        let b: Vec<Vec<f32>> = outs.iter().map(|&o| r.vec(o).iter().map(|v| 0.2 * v).collect()).collect();
+        let sets: Vec<(&str, [Matrix<'_>; 3])> = vec![
+            ("int8 x8", core::array::from_fn(|m| Matrix::X8(X8Rows::new(&x8[m], outs[m], i).unwrap()))),
+            ("q4 x8", core::array::from_fn(|m| Matrix::X8(X8Rows::new_q4(&x4[m], outs[m], i).unwrap()))),
+            ("int8 rows", core::array::from_fn(|m| Matrix::Q8(Q8Rows::new(&q8[m], outs[m], i).unwrap()))),
+            ("f16", core::array::from_fn(|m| Matrix::F16(F16Rows::new(&h[m], outs[m], i).unwrap()))),
+        ];
+        for n in [1usize, 3, 4, 10, 11, 16, 17, 160, 290] {
+            let x = r.vec(n * i);
+            for &(isa, on) in &variants {
+                // SAFETY: `supported` lists only ISAs this CPU runs; AMX is
+                // switched on only where `amx_usable` got the tile permission.
+                unsafe {
+                    simd::set_isa(isa);
+                    simd::amx::enable(on);
+                }
+                for threads in [1usize, 2] {
+                    duolando::workers::set_threads(threads).unwrap();
+                    for (name, m) in &sets {
+                        let what = format!("{name}, in {i}, {n} rows, {isa:?}{}, {threads} threads", if on { "+AMX" } else { "" });
+                        let want: Vec<Vec<f32>> = (0..3)
+                            .map(|k| {
+                                let mut y = vec![0.0f32; n * outs[k]];
+                                linear(&x, &m[k], Some(&b[k]), &mut y);
+                                y
+                            })
+                            .collect();
+                        let mut got: Vec<Vec<f32>> = outs.iter().map(|&o| vec![f32::NAN; n * o]).collect();
+                        let [g0, g1, g2] = &mut got[..] else { unreachable!() };
+                        linear_each(&x, [&m[0], &m[1], &m[2]], [Some(&b[0][..]), Some(&b[1][..]), Some(&b[2][..])], [&mut g0[..], &mut g1[..], &mut g2[..]]);
+                        for k in 0..3 {
+                            assert_eq!(bits(&got[k]), bits(&want[k]), "linear_each, {what}, matrix {k}");
+                        }
+                        let mut g = want[0].clone();
+                        gelu_inplace(&mut g);
+                        assert!(g.iter().any(|&v| v < -0.05), "{what}: GELU's negative part not reached");
+                        let mut y = vec![f32::NAN; n * outs[0]];
+                        linear_gelu(&x, &m[0], Some(&b[0]), &mut y);
+                        assert_eq!(bits(&y), bits(&g), "linear_gelu, {what}");
+                    }
+                }
+            }
+        }
+    }
+    // SAFETY: turning the kernel off is always sound; the best ISA is supported.
+    unsafe { simd::amx::enable(false) };
+    duolando::simd::init();
+    duolando::workers::set_threads(1).unwrap();
+}
