@@ -4,7 +4,7 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
-use crate::kernels::{attention, layernorm, linear, linear_each, linear_gelu, KvRows, Mask};
+use crate::kernels::{attention, gelu_inplace, layernorm, linear, linear_each, KvRows, Mask};
 use crate::model::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
@@ -104,7 +104,8 @@ fn mlp(w: &BlockW<'_>, x: &mut [f32], s: &mut BlockScratch<'_>, nc: usize) {
     let (ln, hid, out) = s.mlp_parts();
     let (ln, hid, out) = (&mut ln[..nc], &mut hid[..4 * nc], &mut out[..nc]);
     layernorm(x, w.ln2.w, w.ln2.b, ln);
-    linear_gelu(ln, &w.fc.w, w.fc.b, hid);
+    lin(ln, &w.fc, hid);
+    gelu_inplace(hid);
     lin(hid, &w.fc_out, out);
     add(x, out);
 }

@@ -15,20 +15,6 @@ const BLOCK_BYTES: usize = 192 * 1024;
 /// With a worker pool installed ([`super::parallel`]) the output columns
 /// are split over its threads; the values are the same bit for bit.
 pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
-    linear_act(x, w, b, y, false)
-}
-
-/// `y = gelu(x W^T + b)` (the MLP's first layer): [`linear`] then
-/// [`super::gelu_inplace`] over the `n` rows written, bit for bit. On the
-/// int8 panel path each output segment goes through GELU as it is
-/// written, while it is in cache: the 3072-wide hidden rows of an R window
-/// (3.5 MB) are not read and written once more.
-pub fn linear_gelu(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
-    linear_act(x, w, b, y, true)
-}
-
-/// [`linear`], with GELU on the results if `gelu`.
-fn linear_act(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], gelu: bool) {
     let (n_in, n_out) = (w.cols(), w.rows());
     if n_in == 0 || n_out == 0 {
         return;
@@ -40,17 +26,14 @@ fn linear_act(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], gelu:
     let (x, y) = (&x[..n * n_in], &mut y[..n * n_out]);
     if takes_q8_panel(w) {
         match w {
-            Matrix::Q8(q) => return linear_q8(x, [q], [b], [y], gelu),
-            Matrix::X8(q) => return linear_q8(x, [q], [b], [y], gelu),
-            Matrix::Q4(q) => return linear_q8(x, [q], [b], [y], gelu),
+            Matrix::Q8(q) => return linear_q8(x, [q], [b], [y]),
+            Matrix::X8(q) => return linear_q8(x, [q], [b], [y]),
+            Matrix::Q4(q) => return linear_q8(x, [q], [b], [y]),
             _ => {}
         }
     }
     let block = (BLOCK_BYTES / (w.weight_bytes() / n_out).max(1)).clamp(16, 1024);
-    split_cols(y, n_out, w.weight_bytes().saturating_mul(n), |cols| crate::with_rows!(w, m => linear_impl(x, m, b, cols, block)));
-    if gelu {
-        super::gelu_inplace(y);
-    }
+    split_cols(y, n_out, w.weight_bytes().saturating_mul(n), |cols| crate::with_rows!(w, m => linear_impl(x, m, b, cols, block)))
 }
 
 /// Whether [`linear`] runs `w` on the int8 panel path ([`linear_q8`]).
@@ -87,7 +70,7 @@ pub fn linear_each<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Option<
                     });
                     if let Some(first) = m[0] {
                         let m = m.map(|q| q.unwrap_or(first));
-                        return linear_q8(x, m, bs, ys, false);
+                        return linear_q8(x, m, bs, ys);
                     }
                 }
             };
@@ -268,20 +251,18 @@ impl Q8Source for X8Rows<'_> {
 /// `N` matrices of the same width over the same `n = x.len() / in` rows
 /// (each `y` holds `n` rows; [`linear_each`] checks it) share the
 /// quantised panel; each takes its own kernels, as if called alone.
-///
-/// With `gelu`, every output segment goes through GELU as it is written.
-fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N], gelu: bool) {
+fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N]) {
     let n_in = ws.first().map_or(0, |w| w.cols());
     if n_in == 0 || x.len() / n_in * n_in <= Q8_PANEL_SMALL {
-        linear_q8_in::<W, N, Q8_PANEL_SMALL, { Q8_PANEL_SMALL / Q8_BLOCK }, { 2 * Q8_PANEL_SMALL / Q8_BLOCK }>(x, ws, bs, ys, gelu)
+        linear_q8_in::<W, N, Q8_PANEL_SMALL, { Q8_PANEL_SMALL / Q8_BLOCK }, { 2 * Q8_PANEL_SMALL / Q8_BLOCK }>(x, ws, bs, ys)
     } else {
-        linear_q8_in::<W, N, Q8_PANEL, Q8_PANEL_BLOCKS, { 2 * Q8_PANEL_BLOCKS }>(x, ws, bs, ys, gelu)
+        linear_q8_in::<W, N, Q8_PANEL, Q8_PANEL_BLOCKS, { 2 * Q8_PANEL_BLOCKS }>(x, ws, bs, ys)
     }
 }
 
 /// [`linear_q8`] with a panel of `Q` values (`B = Q / 32`, `C = 2 B`).
 #[inline(never)]
-fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usize, const C: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], mut ys: [&mut [f32]; N], gelu: bool) {
+fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usize, const C: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], mut ys: [&mut [f32]; N]) {
     let Some(n_in) = ws.first().map(|w| w.cols()).filter(|&c| c > 0) else { return };
     let n = x.len() / n_in;
     let nb = n_in / Q8_BLOCK;
@@ -309,9 +290,9 @@ fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usi
             let work = (n_out * nb * Q8_BLOCK_BYTES).saturating_mul(p1 - p0);
             split_cols(&mut y[p0 * n_out..p1 * n_out], n_out, work, |cols| {
                 if packed {
-                    q8_panel_packed(*w, b, cols, p, p1 - p0, n_in, gelu)
+                    q8_panel_packed(*w, b, cols, p, p1 - p0, n_in)
                 } else {
-                    q8_panel_tiles(*w, b, cols, p, p1 - p0, n_in, gelu)
+                    q8_panel_tiles(*w, b, cols, p, p1 - p0, n_in)
                 }
             });
         }
@@ -410,7 +391,7 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
 /// with [`simd::gemm_q8`].
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize, gelu: bool) {
+fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
     let nb = n_in / Q8_BLOCK;
     let mut ws = [[0.0f32; Q8_PANEL_BLOCKS]; TN];
     let mut buf = W::new_buf();
@@ -435,9 +416,6 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8
                 let yr = y.seg(i0 + m, t0, t0 + nt);
                 for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
                     *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
-                }
-                if gelu {
-                    simd::gelu_inplace(yr);
                 }
             };
             match mt {
@@ -473,7 +451,7 @@ fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8
 /// bit; the rows after them stay on VNNI.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize, gelu: bool) {
+fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
     const R: usize = simd::PACK_ROWS;
     let nb = n_in / Q8_BLOCK;
     let (mut pack, mut buf) = (None, None);
@@ -490,28 +468,28 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
         }
         let prepared = amx_planned > 0 && amx.as_mut().is_some_and(|a| a.prepare(0, tile));
         let Some(a) = amx.as_mut().filter(|_| prepared) else {
-            vnni_rows(tile, p, 0, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t, gelu));
+            vnni_rows(tile, p, 0, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t));
             t0 += nt;
             continue;
         };
         // This tile's rows after the AMX rows, then the second tile's (or
         // this one again as a second operand whose results are dropped).
-        vnni_rows(tile, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t, gelu));
+        vnni_rows(tile, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t));
         let t1 = t0 + R;
         let nt1 = if t1 < y.hi() { R.min(y.hi() - t1) } else { 0 };
         if nt1 > 0 {
             let tile1 = w.packed_tile(t1, nb, &mut pack, &mut buf);
             a.prepare(1, tile1);
-            vnni_rows(tile1, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t1, nt1, t, gelu));
+            vnni_rows(tile1, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t1, nt1, t));
         } else {
             a.prepare(1, tile);
         }
         // The next pair's weights stream in (into L2) while this pair is multiplied.
         let ahead = w.stored_rows(t0 + 2 * R, (t0 + 4 * R).min(y.hi()));
         let done = amx_pair(a, p, amx_planned, n_in, ahead, |i, t| {
-            put_row(&mut y, b, i, t0, nt, &t[..R], gelu);
+            put_row(&mut y, b, i, t0, nt, &t[..R]);
             if nt1 > 0 {
-                put_row(&mut y, b, i, t1, nt1, &t[R..], gelu);
+                put_row(&mut y, b, i, t1, nt1, &t[R..]);
             }
         });
         if done < amx_planned {
@@ -520,7 +498,7 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
             for (tt, ntt) in [(t0, nt), (t1, nt1)] {
                 if ntt > 0 {
                     let tile = w.packed_tile(tt, nb, &mut pack, &mut buf);
-                    vnni_rows(tile, p, done, amx_planned, n_in, |i, t| put_row(&mut y, b, i, tt, ntt, t, gelu));
+                    vnni_rows(tile, p, done, amx_planned, n_in, |i, t| put_row(&mut y, b, i, tt, ntt, t));
                 }
             }
         }
@@ -532,16 +510,13 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
 /// VNNI rows with the next tile's prefetch are as fast: the S step's panels).
 const AMX_MIN_ROWS: usize = 16;
 
-/// `y[i][t0..t0 + nt] = b[t0..] + t[..nt]`, through GELU if `gelu`.
+/// `y[i][t0..t0 + nt] = b[t0..] + t[..nt]`.
 #[inline]
-fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, t: &[f32], gelu: bool) {
+fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, t: &[f32]) {
     let yr = y.seg(i, t0, t0 + nt);
     match b {
         Some(b) => yr.iter_mut().zip(t).zip(&b[t0..]).for_each(|((yo, v), bj)| *yo = bj + v),
         None => yr.iter_mut().zip(t).for_each(|(yo, v)| *yo = 0.0 + v),
-    }
-    if gelu {
-        simd::gelu_inplace(yr);
     }
 }
 
