@@ -44,6 +44,7 @@ const ALLOWED: &[&str] = &[
     "tests/step_many.rs",
     "tests/amx.rs",
     "tests/int8_layouts.rs",
+    "tests/linear_fused.rs",
 ];
 
 /// Crate roots and the lint level they must set for `unsafe_code`.
