@@ -292,7 +292,7 @@ fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usi
                 if packed {
                     q8_panel_packed(*w, b, cols, p, p1 - p0, n_in)
                 } else {
-                    q8_panel_tiles(*w, b, cols, p, p1 - p0, n_in)
+                    q8_panel_tiles_for(*w, b, cols, p, p1 - p0, n_in)
                 }
             });
         }
@@ -386,14 +386,26 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
     }
 }
 
+/// [`q8_panel_tiles`] with weight-scale room for `in / 32` blocks: rows of
+/// at most `PACK_BLOCKS` blocks (every matrix of the model; 1.5 KiB zeroed
+/// per call) or the widest the panel takes (96 KiB). Off AVX512-VNNI every
+/// int8 GEMM of a streaming step runs here.
+fn q8_panel_tiles_for<W: Q8Source>(w: &W, b: Option<&[f32]>, y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
+    if n_in / Q8_BLOCK <= simd::PACK_BLOCKS {
+        q8_panel_tiles::<W, { simd::PACK_BLOCKS }>(w, b, y, p, n_rows, n_in)
+    } else {
+        q8_panel_tiles::<W, Q8_PANEL_BLOCKS>(w, b, y, p, n_rows, n_in)
+    }
+}
+
 /// Output tiles of `TN` weight rows x activation tiles of up to `TM` rows
 /// of one quantised panel (`rows` rows; output columns `y.lo()..y.hi()`),
 /// with [`simd::gemm_q8`].
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_tiles<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
+fn q8_panel_tiles<W: Q8Source, const WB: usize>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
     let nb = n_in / Q8_BLOCK;
-    let mut ws = [[0.0f32; Q8_PANEL_BLOCKS]; TN];
+    let mut ws = [[0.0f32; WB]; TN];
     let mut buf = W::new_buf();
     let mut t0 = y.lo();
     while t0 < y.hi() {

@@ -444,11 +444,7 @@ impl<'a> X8Rows<'a> {
         let g = self.group(r / Q8X8_ROWS);
         let n = r % Q8X8_ROWS;
         for (k, d) in dst.chunks_exact_mut(Q8_BLOCK_BYTES).take(nb).enumerate() {
-            let b = b0 + k;
-            d[..2].copy_from_slice(&g.scale_bits(b, n).to_le_bytes());
-            for (i, q) in d[2..].iter_mut().enumerate() {
-                *q = g.value(b, n, i) as u8;
-            }
+            g.q8_block_of_row(b0 + k, n, d);
         }
     }
 }

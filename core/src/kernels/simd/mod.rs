@@ -613,6 +613,30 @@ impl<'a> PackedQ8<'a> {
     pub fn scale_bits(&self, b: usize, n: usize) -> u16 {
         u16::from_le_bytes([self.s[PACK_BLOCK_SCALES * b + 2 * n], self.s[PACK_BLOCK_SCALES * b + 2 * n + 1]])
     }
+    /// Row `n`'s block `b` as a stored Q8Block32 block (`dst`: at least 34
+    /// bytes: the f16 scale, then the 32 values): [`Self::scale_bits`] and
+    /// [`Self::value`] for every value, taken 8-byte group by group (one
+    /// copy per group for int8; per value, the element-wise reads cost more
+    /// than the dot products of the tiles that use them).
+    pub fn q8_block_of_row(&self, b: usize, n: usize, dst: &mut [u8]) {
+        dst[..2].copy_from_slice(&self.scale_bits(b, n).to_le_bytes());
+        let vals = &mut dst[2..2 + Q8_BLOCK];
+        if self.q4 {
+            let base = PACK_BLOCK_NIBBLES * b + 8 * n;
+            for (g, d) in vals.chunks_exact_mut(8).enumerate() {
+                let src = &self.v[base + 64 * (g % 2)..base + 64 * (g % 2) + 8];
+                for (q, &byte) in d.iter_mut().zip(src) {
+                    let nib = if g < 2 { byte & 0x0f } else { byte >> 4 };
+                    *q = (nib as i8 - 8) as u8;
+                }
+            }
+        } else {
+            let base = PACK_BLOCK_VALUES * b + 8 * n;
+            for (g, d) in vals.chunks_exact_mut(8).enumerate() {
+                d.copy_from_slice(&self.v[base + 64 * g..base + 64 * g + 8]);
+            }
+        }
+    }
 }
 
 /// Room for one tile of 8 stored Q8Block32 rows packed on the fly

@@ -656,6 +656,30 @@ fn x8_bytes(q8: &[u8], o: usize, i: usize) -> Vec<u8> {
 }
 
 #[test]
+fn group_blocks_expand_to_their_values() {
+    // Random int8 and 4-bit groups of 3 blocks: every row's block as Q8Block32 bytes.
+    let mut r = Rng(23);
+    let nb = 3;
+    for q4 in [false, true] {
+        let per = if q4 { super::PACK_BLOCK_NIBBLES } else { super::PACK_BLOCK_VALUES };
+        let bytes: Vec<u8> = (0..nb * (per + super::PACK_BLOCK_SCALES)).map(|_| r.u() as u8).collect();
+        let g = if q4 { super::PackedQ8::from_q4_group(&bytes, nb) } else { super::PackedQ8::from_group(&bytes, nb) }.unwrap();
+        for b in 0..nb {
+            for n in 0..super::PACK_ROWS {
+                let mut got = [0u8; Q8_BLOCK_BYTES];
+                g.q8_block_of_row(b, n, &mut got);
+                let mut want = [0u8; Q8_BLOCK_BYTES];
+                want[..2].copy_from_slice(&g.scale_bits(b, n).to_le_bytes());
+                for i in 0..Q8_BLOCK {
+                    want[2 + i] = g.value(b, n, i) as u8;
+                }
+                assert_eq!(got, want, "q4 {q4}, block {b}, row {n}");
+            }
+        }
+    }
+}
+
+#[test]
 fn linear_each_equals_one_linear_per_matrix() {
     use crate::kernels::{linear_each, X8Rows};
     let mut r = Rng(5);
