@@ -114,10 +114,8 @@ fn main() {
     println!("{line}");
     // Attention of one S-step append: the 10 new rows of one position against
     // a full f16 cache (290 keys, read in place), as in every streaming step.
-    let (k16, v16): (Vec<u16>, Vec<u16>) = (
-        k.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect(),
-        v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect(),
-    );
+    let to_f16 = |v: &[f32]| v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect::<Vec<u16>>();
+    let (k16, v16) = (to_f16(&k), to_f16(&v));
     let mask = TiledCausalMask { t_q: 1, t_k: t, q_pos0: t - 1 };
     let mut line = format!("attention S append {streams}x{n} f16 K/V C={c} heads={nh}:");
     for isa in &isas {
@@ -132,12 +130,7 @@ fn main() {
     // The appends of 16 sessions x 12 layers in one `step_many`, each over its
     // own cache (192 caches, 171 MB: read cold from memory), against as many
     // appends over one cache (hot): how much of the memory time is hidden.
-    let caches: Vec<(Vec<u16>, Vec<u16>)> = (0..16 * 12)
-        .map(|_| {
-            let to_f16 = |v: Vec<f32>| v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect::<Vec<u16>>();
-            (to_f16(r.vec(n * c)), to_f16(r.vec(n * c)))
-        })
-        .collect();
+    let caches: Vec<(Vec<u16>, Vec<u16>)> = (0..16 * 12).map(|_| (to_f16(&r.vec(n * c)), to_f16(&r.vec(n * c)))).collect();
     let mut line = format!("attention S append x{} caches (16 sessions x 12 layers):", caches.len());
     for isa in &isas {
         // SAFETY: as above.

@@ -61,27 +61,27 @@ pub fn linear_each<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Option<
     let shared = n > 0 && ws.iter().all(|w| w.cols() == n_in && takes_q8_panel(w)) && ys.iter().enumerate().all(|(k, y)| rows(k, y) == n);
     if shared {
         let x = &x[..n * n_in];
-        macro_rules! same {
-            ($variant:ident) => {
-                if ws.iter().all(|w| matches!(w, Matrix::$variant(_))) {
-                    let m = ws.map(|w| match w {
-                        Matrix::$variant(q) => Some(q),
-                        _ => None,
-                    });
-                    if let Some(first) = m[0] {
-                        let m = m.map(|q| q.unwrap_or(first));
-                        return linear_q8(x, m, bs, ys);
-                    }
-                }
-            };
+        if let Some(m) = same_layout(ws, |w| if let Matrix::X8(q) = w { Some(q) } else { None }) {
+            return linear_q8(x, m, bs, ys);
         }
-        same!(X8);
-        same!(Q8);
-        same!(Q4);
+        if let Some(m) = same_layout(ws, |w| if let Matrix::Q8(q) = w { Some(q) } else { None }) {
+            return linear_q8(x, m, bs, ys);
+        }
+        if let Some(m) = same_layout(ws, |w| if let Matrix::Q4(q) = w { Some(q) } else { None }) {
+            return linear_q8(x, m, bs, ys);
+        }
     }
     for ((w, b), y) in ws.into_iter().zip(bs).zip(ys) {
         linear(x, w, b, y);
     }
+}
+
+/// The `N` matrices as one stored layout (`pick` takes a matrix's rows of
+/// it), if every one is stored so; None for `N = 0`.
+fn same_layout<'a, 'm, T, const N: usize>(ws: [&'a Matrix<'m>; N], pick: impl Fn(&'a Matrix<'m>) -> Option<&'a T>) -> Option<[&'a T; N]> {
+    let m = ws.map(pick);
+    let first = m.first().copied().flatten()?;
+    m.iter().all(Option::is_some).then(|| m.map(|q| q.unwrap_or(first)))
 }
 
 /// Int8 activation values quantised at once by `linear` over a [`Q8Rows`]
