@@ -354,11 +354,12 @@ fn yaml_syntax_error_names_the_file() {
 }
 
 /// `storage_for(int8)` over the published config, by schema role: the
-/// decoders' convs int8 (rows of `in * k`), the encoders' convs, codebooks
-/// and ConvTranspose1d weights f16, vectors and `pos_emb` f32, Linear and
-/// embeddings int8 (the GEMM matrices, Linear and Conv, as `Q8Block32x8`
-/// row groups, the embeddings as `Q8Block32` rows; requesting x8 is the
-/// same); every int8 tensor's row a multiple of 32.
+/// decoders' convs int8 (rows of `in * k`) and their ConvTranspose1d
+/// weights int8 in GEMM order (rows of `in`, shape `(out * k, in)`), the
+/// encoders' convs and codebooks f16, vectors and `pos_emb` f32, Linear and
+/// embeddings int8 (the GEMM matrices, Linear, Conv and ConvTranspose, as
+/// `Q8Block32x8` row groups, the embeddings as `Q8Block32` rows; requesting
+/// x8 is the same); every int8 tensor's row a multiple of 32.
 #[test]
 fn int8_storage_by_role_on_the_published_config() {
     use duolando_core::schema::{for_each_tensor, Role, SchemaError};
@@ -368,13 +369,21 @@ fn int8_storage_by_role_on_the_published_config() {
     for_each_tensor::<SchemaError>(&cfg, &mut |s| {
         let got = duolando::convert::storage_for(StoreAs::Q8Block32, s);
         let blockable = block_row(s.dims()) % 32 == 0;
-        let want = match s.role {
-            Role::Vector | Role::PosEmb => StoreAs::F32,
-            Role::Embedding if blockable => StoreAs::Q8Block32,
-            Role::Linear | Role::Conv if blockable => StoreAs::Q8Block32x8,
+        let want = match (s.role, s.dims()) {
+            (Role::Vector | Role::PosEmb, _) => StoreAs::F32,
+            (Role::Embedding, _) if blockable => StoreAs::Q8Block32,
+            (Role::Linear | Role::Conv, _) if blockable => StoreAs::Q8Block32x8,
+            (Role::ConvTranspose, &[c_in, _, _]) if c_in % 32 == 0 => StoreAs::Q8Block32x8,
             _ => StoreAs::F16,
         };
         assert_eq!(got, want, "{}", s.name);
+        // Written in GEMM order exactly when a ConvTranspose1d weight is blocked.
+        let shape = duolando::convert::stored_dims(s, got);
+        match (s.role, s.dims()) {
+            (Role::ConvTranspose, &[c_in, c_out, k]) => assert_eq!(shape, [c_out * k, c_in], "{}", s.name),
+            _ => assert_eq!(shape, s.dims(), "{}", s.name),
+        }
+        assert_eq!(duolando::convert::stored_dims(s, StoreAs::F16), s.dims(), "{} (f16)", s.name);
         assert_eq!(duolando::convert::storage_for(StoreAs::Q8Block32x8, s), want, "{} (x8 requested)", s.name);
         // 4-bit: the same tensors, in the 4-bit layouts.
         let want4 = match want {
@@ -393,6 +402,6 @@ fn int8_storage_by_role_on_the_published_config() {
     assert_eq!(by_role["Linear"].iter().collect::<Vec<_>>(), ["F16", "Q8Block32x8"], "music_trans' input rows are not in blocks of 32");
     assert_eq!(by_role["Embedding"].iter().collect::<Vec<_>>(), ["Q8Block32"]);
     assert_eq!(by_role["EncoderConv"].iter().collect::<Vec<_>>(), ["F16"]);
-    assert_eq!(by_role["ConvTranspose"].iter().collect::<Vec<_>>(), ["F16"]);
+    assert_eq!(by_role["ConvTranspose"].iter().collect::<Vec<_>>(), ["Q8Block32x8"]);
     assert_eq!(by_role["Codebook"].iter().collect::<Vec<_>>(), ["F16"]);
 }

@@ -13,7 +13,7 @@ use duolando_core::format::{
     schema_tensor, DuoFile, FormatError, HeaderField, Shape, MAX_DIM, MAX_HEADER_LEN, MAX_NAME_LEN, MAX_TENSORS,
 };
 use duolando_core::limits::{ConfigError, ConfigField};
-use duolando_core::schema::{for_each_tensor, tensor_count, SchemaError, TensorSpec};
+use duolando_core::schema::{for_each_tensor, tensor_count, Role, SchemaError, TensorSpec};
 use duolando_core::tensor::DType;
 use proptest::prelude::*;
 
@@ -550,6 +550,46 @@ fn rejects_shape_not_matching_the_config() {
         parse(&rebuild(&p)),
         Err(FormatError::ShapeMismatch { index: i as u32, expected: shape(&expected), found: shape(&found) })
     );
+}
+
+/// The first ConvTranspose1d weight of the valid file: its index and spec.
+fn first_conv_transpose(p: &Parts) -> (usize, TensorSpec) {
+    let mut spec = None;
+    for_each_tensor::<SchemaError>(&p.header.config, &mut |s: &TensorSpec| {
+        if spec.is_none() && s.role == Role::ConvTranspose {
+            spec = Some(s.clone());
+        }
+        Ok(())
+    })
+    .unwrap();
+    let spec = spec.expect("the tiny config has decoders");
+    (index_of(p, |e| e.name == spec.name.as_str()), spec)
+}
+
+#[test]
+fn accepts_conv_transpose_in_gemm_order() {
+    let mut p = valid_parts();
+    let (i, spec) = first_conv_transpose(&p);
+    let [c_in, c_out, k] = spec.dims() else { panic!("{spec:?}") };
+    p.header.tensors[i].shape = vec![c_out * k, *c_in]; // same element count
+    assert_eq!(parse(&rebuild(&p)), Ok(()));
+}
+
+#[test]
+fn rejects_conv_transpose_in_other_rank2_shapes() {
+    let mut p = valid_parts();
+    let (i, spec) = first_conv_transpose(&p);
+    let [c_in, c_out, k] = *spec.dims() else { panic!("{spec:?}") };
+    for found in [vec![c_in, c_out * k], vec![c_out, k * c_in], vec![k * c_in, c_out]] {
+        if found == [c_out * k, c_in] {
+            continue;
+        }
+        p.header.tensors[i].shape = found.clone();
+        let Err(FormatError::ShapeMismatch { index, expected, found: got }) = parse(&rebuild(&p)) else {
+            panic!("{found:?} accepted")
+        };
+        assert_eq!((index, expected.rank, &expected.dims[..3], got.rank), (i as u32, 3, spec.dims(), 2), "{found:?}");
+    }
 }
 
 /// A model with one tensor re-encoded as Q8Block32 (last dim 32): the

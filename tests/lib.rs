@@ -246,12 +246,9 @@ pub fn restore_as(file: &ModelFile, store: &dyn Fn(&duolando_core::schema::Tenso
             DType::F16 => t.data.chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect(),
             d => panic!("{}: {d:?} is not a dense type", spec.name),
         };
-        tensors.push(duolando::duo_writer::Tensor {
-            name: spec.name.to_string(),
-            shape: spec.dims().to_vec(),
-            values,
-            store_as: store(spec),
-        });
+        let store_as = store(spec);
+        let (shape, values) = duolando::convert::to_stored_order(spec, store_as, values);
+        tensors.push(duolando::duo_writer::Tensor { name: spec.name.to_string(), shape, values, store_as });
         Ok(())
     })
     .unwrap();

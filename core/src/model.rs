@@ -5,7 +5,9 @@
 //!
 //! Dtypes: weight matrices (Linear, Conv1d/ConvTranspose1d, token
 //! embeddings, codebooks, heads) bind as [`Matrix`] of any stored type
-//! (F32, F16, Q8Block32; one generic kernel path, `kernels::weights`);
+//! (F32, F16, Q8Block32, Q4Block32 and their x8 groups; one generic kernel
+//! path, `kernels::weights`); a ConvTranspose1d weight in either stored
+//! order ([`ConvTWeight`]: PyTorch's, or the GEMM order of blocked files);
 //! biases, LayerNorm parameters and `pos_emb` are added to activations
 //! as they are and must be F32 (they are <1% of the bytes).
 //!
@@ -16,7 +18,7 @@
 use heapless::Vec;
 
 use crate::config::{LatConfig, ModelConfig, Part, VqConfig};
-use crate::kernels::{ConvGeom, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows, X8Rows};
+use crate::kernels::{ConvGeom, ConvTWeight, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows, X8Rows};
 use crate::limits::{ConfigError, MAX_DEPTH, MAX_DOWN_T, MAX_GPT_LAYERS, MAX_LAT_LAYERS};
 use crate::schema::{self, name, DecoderKind, SchemaError, TensorName};
 use crate::tensor::{DType, TensorRef};
@@ -118,8 +120,9 @@ pub struct ConvW<'a> {
 /// A `ConvTranspose1d(k = 2s, stride s, pad s/2)`.
 #[derive(Clone, Copy, Debug)]
 pub struct ConvTW<'a> {
-    /// (c_in, c_out * k).
-    pub w: Matrix<'a>,
+    /// PyTorch's (c_in, c_out, k) as stored: (c_in, c_out * k), or in GEMM
+    /// order (c_out * k, c_in).
+    pub w: ConvTWeight<'a>,
     pub b: &'a [f32],
     pub c_in: usize,
     pub c_out: usize,
@@ -225,6 +228,15 @@ impl<'a, S: TensorSource<'a>> Binder<'_, S> {
         };
         m.ok_or(BindError::DType { name: n, dtype: t.dtype })
     }
+    /// A `ConvTranspose1d` weight `(c_in, c_out, k)`: PyTorch order (rank
+    /// 3), or GEMM order `(c_out * k, c_in)` (rank 2; docs/FORMAT.md §6).
+    fn conv_t(&self, n: TensorName, c_in: u32, c_out: u32, k: u32) -> Result<ConvTWeight<'a>, BindError> {
+        let gemm = self.src.tensor(&n).is_some_and(|t| t.rank == 2);
+        match c_out.checked_mul(k) {
+            Some(zk) if gemm => Ok(ConvTWeight::Gemm(self.matrix(n, &[zk, c_in])?)),
+            _ => Ok(ConvTWeight::Rows(self.matrix(n, &[c_in, c_out, k])?)),
+        }
+    }
     fn linear(&self, prefix: &str, out: u32, inp: u32, bias: bool) -> Result<Linear<'a>, BindError> {
         let w = self.matrix(name(format_args!("{prefix}.weight"))?, &[out, inp])?;
         let b = if bias { Some(self.get(name(format_args!("{prefix}.bias"))?, &[out])?) } else { None };
@@ -299,7 +311,7 @@ impl<'a, S: TensorSource<'a>> Binder<'_, S> {
             let out = if i + 1 == vq.down_t { vq.emb_width } else { w };
             let k = 2 * s;
             let ct = ConvTW {
-                w: self.matrix(name(format_args!("{stage}.1.weight"))?, &[w, out, k])?,
+                w: self.conv_t(name(format_args!("{stage}.1.weight"))?, w, out, k)?,
                 b: self.get(name(format_args!("{stage}.1.bias"))?, &[out])?,
                 c_in: w as usize,
                 c_out: out as usize,

@@ -52,7 +52,9 @@ pub enum Role {
     /// because the leader's tokens (the nearest codebook row to the
     /// encoder's output) depend on it, so converters keep it more precise.
     EncoderConv,
-    /// `ConvTranspose1d.weight (in, out, k)`: rows scaled and added (`x W`).
+    /// `ConvTranspose1d.weight (in, out, k)`: rows scaled and added (`x W`),
+    /// or stored in GEMM order (`TensorSpec::gemm_dims`) and dotted with
+    /// the input rows.
     ConvTranspose,
     /// Token embeddings: rows read whole.
     Embedding,
@@ -65,6 +67,21 @@ pub enum Role {
 impl TensorSpec {
     pub fn dims(&self) -> &[u32] {
         &self.shape[..self.rank as usize]
+    }
+    /// The GEMM-order shape a file may store a `ConvTranspose1d` weight
+    /// `(in, out, k)` in instead: `(out * k, in)`, row `o * k + j` holding
+    /// `W[:, o, j]` (docs/FORMAT.md §6). None for every other role, or if
+    /// `out * k` overflows.
+    pub fn gemm_dims(&self) -> Option<[u32; 2]> {
+        match (self.role, self.dims()) {
+            (Role::ConvTranspose, &[c_in, c_out, k]) => Some([c_out.checked_mul(k)?, c_in]),
+            _ => None,
+        }
+    }
+    /// Whether a stored tensor of shape `dims` is this tensor: the schema's
+    /// shape, or [`Self::gemm_dims`].
+    pub fn accepts(&self, dims: &[u32]) -> bool {
+        dims == self.dims() || self.gemm_dims().is_some_and(|g| dims == g)
     }
 }
 

@@ -724,7 +724,8 @@ impl<'r, 'a> UnitW<'r, 'a> {
                 c_out_ok(t.c_out)
                     && t.c_in == u.c_in
                     && (t.kernel, t.stride, t.pad) == (u.kernel, u.stride, u.pad)
-                    && mat_fits(&t.w, u.c_in, t.c_out * t.kernel)
+                    && t.w.c_in() == u.c_in
+                    && t.w.z_cols() == t.c_out * t.kernel
                     && t.b.len() == t.c_out
             }
             _ => false,

@@ -8,7 +8,7 @@ use duolando_core::config::{ModelConfig, Part, VqConfig};
 use duolando_core::conv_stack::ConvScratch;
 use duolando_core::error::Error;
 use duolando_core::format::DuoFile;
-use duolando_core::kernels::{ConvGeom, DenseRows, Matrix};
+use duolando_core::kernels::{ConvGeom, ConvTWeight, DenseRows, Matrix};
 use duolando_core::model::{ConvTW, ConvW, DecoderW, EncoderW, Model, ResBlockW, ResnetW, VqW};
 use duolando_core::presets::duolando_published;
 use duolando_core::quantizer::dequantise;
@@ -397,7 +397,9 @@ fn synth_resnet(rng: &mut Rng, cfg: &VqConfig, reversed: bool) -> ResnetW<'stati
     v
 }
 
-fn synth_decoder(rng: &mut Rng, cfg: &VqConfig, c_out: usize) -> DecoderW<'static> {
+/// `gemm`: the ConvTranspose1d weights in GEMM order (as blocked files
+/// store them), else in PyTorch order.
+fn synth_decoder(rng: &mut Rng, cfg: &VqConfig, c_out: usize, gemm: bool) -> DecoderW<'static> {
     let (w, s, emb) = (cfg.width as usize, cfg.stride_t as usize, cfg.emb_width as usize);
     let g3 = ConvGeom { kernel: 3, stride: 1, pad: 1, dilation: 1 };
     let input = synth_conv(rng, w, emb, g3);
@@ -407,7 +409,11 @@ fn synth_decoder(rng: &mut Rng, cfg: &VqConfig, c_out: usize) -> DecoderW<'stati
         let out = if i + 1 == cfg.down_t { emb } else { w };
         let data = rand_leak(rng, w * out * 2 * s, 1.5 / ((w * 2) as f32).sqrt());
         let up = ConvTW {
-            w: Matrix::F32(DenseRows::new(data, w, out * 2 * s).unwrap()),
+            w: if gemm {
+                ConvTWeight::Gemm(Matrix::F32(DenseRows::new(data, out * 2 * s, w).unwrap()))
+            } else {
+                ConvTWeight::Rows(Matrix::F32(DenseRows::new(data, w, out * 2 * s).unwrap()))
+            },
             b: rand_leak(rng, out, 0.3),
             c_in: w,
             c_out: out,
@@ -435,8 +441,8 @@ fn synth_vq(cfg: VqConfig, seed: u64) -> &'static VqW<'static> {
     let out = synth_conv(&mut rng, cfg.emb_width as usize, w, g3);
     let (bins, emb) = (cfg.l_bins as usize, cfg.emb_width as usize);
     let codebook = Matrix::F32(DenseRows::new(rand_leak(&mut rng, bins * emb, 1.0), bins, emb).unwrap());
-    let pos = synth_decoder(&mut rng, &cfg, cfg.in_channels as usize);
-    let rot = Some(synth_decoder(&mut rng, &cfg, cfg.rot_channels as usize));
+    let pos = synth_decoder(&mut rng, &cfg, cfg.in_channels as usize, false);
+    let rot = Some(synth_decoder(&mut rng, &cfg, cfg.rot_channels as usize, true));
     Box::leak(Box::new(VqW { cfg, encoder: EncoderW { stages, out }, codebook, pos, rot }))
 }
 

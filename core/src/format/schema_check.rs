@@ -1,5 +1,6 @@
 //! Rule 14 of docs/FORMAT.md: the table holds exactly the tensors that
-//! `schema::for_each_tensor` lists for the file's config, with its shapes.
+//! `schema::for_each_tensor` lists for the file's config, with its shapes
+//! (a ConvTranspose1d weight in either order: `TensorSpec::accepts`).
 
 use super::{DuoFile, FormatError, Shape};
 use crate::schema::{for_each_tensor, SchemaError, TensorSpec};
@@ -10,12 +11,13 @@ impl From<SchemaError> for FormatError {
     }
 }
 
-/// Every schema tensor present with the schema shape; nothing else present.
+/// Every schema tensor present with the schema shape (or a ConvTranspose1d
+/// weight's GEMM-order shape); nothing else present.
 pub(super) fn check(file: &DuoFile<'_>) -> Result<(), FormatError> {
     let mut schema_index: u32 = 0;
     for_each_tensor::<FormatError>(file.config(), &mut |spec: &TensorSpec| {
         let (index, e) = file.find(spec.name.as_str()).ok_or(FormatError::MissingTensor { schema_index })?;
-        if e.dims() != spec.dims() {
+        if !spec.accepts(e.dims()) {
             return Err(FormatError::ShapeMismatch {
                 index,
                 expected: Shape { rank: spec.rank, dims: spec.shape },

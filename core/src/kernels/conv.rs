@@ -1,13 +1,59 @@
 //! 1-D convolutions over time-major activations `(T, C)`, as GEMMs.
 //!
 //! `conv1d` gathers a tile of output rows into an im2col buffer and runs
-//! [`linear`]; `conv_transpose1d` runs `z = x W` for a tile of input rows
-//! and scatter-adds `z` into the output. Input positions outside `[0, T_in)`
+//! [`linear`]; `conv_transpose1d` computes `z` (every input row's
+//! contribution to `k` output rows) for a tile of input rows, as `x W` over
+//! PyTorch-order weights or as [`linear`] over GEMM-order ones
+//! ([`ConvTWeight`]), and scatter-adds `z` into the output. Input positions outside `[0, T_in)`
 //! read as zero, so a caller can run a layer over a window with explicit
 //! left context by choosing `pad` (streaming, DESIGN.md §3 S).
 
 use super::linear::{linear, linear_xw};
 use super::weights::Matrix;
+
+/// A `ConvTranspose1d` weight as stored (docs/FORMAT.md §6). Either way
+/// `z = x . W` has one row of `c_out * k` values per input row, value
+/// `o * k + j` going to output channel `o` of the `j`-th output row the
+/// input row reaches.
+#[derive(Clone, Copy, Debug)]
+pub enum ConvTWeight<'a> {
+    /// PyTorch order, (c_in, c_out * k): `z = x W`, weight rows scaled and
+    /// added ([`linear_xw`]; f32 and f16 files).
+    Rows(Matrix<'a>),
+    /// GEMM order, (c_out * k, c_in): row `o * k + j` holds `W[:, o, j]`,
+    /// `z = x W^T` ([`linear`]: the int8 / 4-bit GEMMs, blocks along `c_in`).
+    Gemm(Matrix<'a>),
+}
+
+impl ConvTWeight<'_> {
+    /// Input channels.
+    pub fn c_in(&self) -> usize {
+        match self {
+            ConvTWeight::Rows(m) => m.rows(),
+            ConvTWeight::Gemm(m) => m.cols(),
+        }
+    }
+    /// Values of `z` per input row (`c_out * k`).
+    pub fn z_cols(&self) -> usize {
+        match self {
+            ConvTWeight::Rows(m) => m.cols(),
+            ConvTWeight::Gemm(m) => m.rows(),
+        }
+    }
+    /// The stored matrix.
+    pub fn matrix(&self) -> &Matrix<'_> {
+        match self {
+            ConvTWeight::Rows(m) | ConvTWeight::Gemm(m) => m,
+        }
+    }
+    /// `z = x . W` for `x.len() / c_in` input rows.
+    fn z(&self, x: &[f32], z: &mut [f32]) {
+        match self {
+            ConvTWeight::Rows(m) => linear_xw(x, m, z),
+            ConvTWeight::Gemm(m) => linear(x, m, None, z),
+        }
+    }
+}
 
 /// Output rows gathered per im2col tile (and input rows per transposed tile).
 pub const CONV_TILE: usize = 32;
@@ -130,25 +176,25 @@ pub fn convt_z_len(c_out: usize, kernel: usize) -> usize {
     CONV_TILE * c_out * kernel
 }
 
-/// `ConvTranspose1d`: `x` (t_in, c_in), `w` (c_in, c_out*k) viewing
-/// PyTorch's (c_in, c_out, k), `b` (c_out), `y` (t_out, c_out): output row
+/// `ConvTranspose1d`: `x` (t_in, c_in), `w` PyTorch's (c_in, c_out, k) in
+/// either stored order, `b` (c_out), `y` (t_out, c_out): output row
 /// `t = i*stride - pad + j` receives `x[i] . W[:, o, j]`; rows outside
 /// `[0, t_out)` are dropped. `z`: >= [`convt_z_len`] floats.
 #[allow(clippy::too_many_arguments)]
-pub fn conv_transpose1d(x: &[f32], w: &Matrix<'_>, b: &[f32], kernel: usize, stride: usize, pad: usize, y: &mut [f32], z: &mut [f32]) {
+pub fn conv_transpose1d(x: &[f32], w: &ConvTWeight<'_>, b: &[f32], kernel: usize, stride: usize, pad: usize, y: &mut [f32], z: &mut [f32]) {
     let rows = |len: usize, c: usize| len.checked_div(c).unwrap_or(0);
-    let seg = ConvSeg { t_in: rows(x.len(), w.rows()), t_out: rows(y.len(), b.len()), pad };
+    let seg = ConvSeg { t_in: rows(x.len(), w.c_in()), t_out: rows(y.len(), b.len()), pad };
     conv_transpose1d_segs(x, w, b, kernel, stride, &[seg], y, z);
 }
 
 /// [`conv_transpose1d`] over several segments at once (inputs one after
-/// another in `x`, outputs in `y`, each with its own `pad`): `z = x W`
+/// another in `x`, outputs in `y`, each with its own `pad`): `z = x . W`
 /// tiles of [`CONV_TILE`] input rows run across segment ends.
 #[allow(clippy::too_many_arguments)]
-pub fn conv_transpose1d_segs(x: &[f32], w: &Matrix<'_>, b: &[f32], kernel: usize, stride: usize, segs: &[ConvSeg], y: &mut [f32], z: &mut [f32]) {
-    let c_in = w.rows();
+pub fn conv_transpose1d_segs(x: &[f32], w: &ConvTWeight<'_>, b: &[f32], kernel: usize, stride: usize, segs: &[ConvSeg], y: &mut [f32], z: &mut [f32]) {
+    let c_in = w.c_in();
     let c_out = b.len();
-    if c_in == 0 || c_out == 0 || kernel == 0 {
+    if c_in == 0 || c_out == 0 || kernel == 0 || w.z_cols() != c_out * kernel {
         return;
     }
     let t_in: usize = segs.iter().map(|s| s.t_in).sum();
@@ -162,7 +208,7 @@ pub fn conv_transpose1d_segs(x: &[f32], w: &Matrix<'_>, b: &[f32], kernel: usize
     let mut i0 = 0;
     while i0 < t_in {
         let rows = CONV_TILE.min(t_in - i0);
-        linear_xw(&x[i0 * c_in..(i0 + rows) * c_in], w, &mut z[..rows * zk]);
+        w.z(&x[i0 * c_in..(i0 + rows) * c_in], &mut z[..rows * zk]);
         for r in 0..rows {
             let ig = i0 + r;
             while ig >= xs + segs[si].t_in {

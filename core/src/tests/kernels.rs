@@ -130,9 +130,11 @@ fn conv_transpose_matches_naive() {
         let t_out = (t_in - 1) * s + k - 2 * p;
         assert_eq!(t_out, t_in * s);
         let (x, w, b) = (r.vec(t_in * ci), r.vec(ci * co * k), r.vec(co));
-        let mut y = vec![0.0; t_out * co];
+        let wt = gemm_order(&w, ci, co * k);
+        let mut ys = [vec![0.0; t_out * co], vec![0.0; t_out * co]];
         let mut z = vec![0.0; convt_z_len(co, k)];
-        conv_transpose1d(&x, &mat(&w, ci, co * k), &b, k, s, p, &mut y, &mut z);
+        conv_transpose1d(&x, &ConvTWeight::Rows(mat(&w, ci, co * k)), &b, k, s, p, &mut ys[0], &mut z);
+        conv_transpose1d(&x, &ConvTWeight::Gemm(mat(&wt, co * k, ci)), &b, k, s, p, &mut ys[1], &mut z);
         let mut want = vec![0.0f64; t_out * co];
         for t in 0..t_out {
             for o in 0..co {
@@ -152,8 +154,16 @@ fn conv_transpose_matches_naive() {
                 }
             }
         }
-        assert_close(&y, &want, CLOSE);
+        for y in &ys {
+            assert_close(y, &want, CLOSE);
+        }
     }
+}
+
+/// A ConvTranspose1d weight (c_in, c_out * k) in GEMM order (c_out * k,
+/// c_in): row `o * k + j` = `W[:, o, j]`.
+fn gemm_order(w: &[f32], c_in: usize, zk: usize) -> Vec<f32> {
+    (0..zk * c_in).map(|n| w[(n % c_in) * zk + n / c_in]).collect()
 }
 
 /// The segmented convolutions (several streams' columns in one GEMM per
@@ -204,11 +214,18 @@ fn segmented_convs_equal_one_call_per_segment() {
             }
         }
     }
-    // Transposed: w (c_in, c_out * k).
+    // Transposed: w (c_in, c_out * k), or (c_out * k, c_in) in GEMM order.
     let (k, st) = (4usize, 2usize);
     let (w, b) = (r.vec(ci * co * k), r.vec(co));
-    let (h, q) = (f16_bits(&w), q8_bytes(&w));
-    let mats = [mat(&w, ci, co * k), Matrix::F16(F16Rows::new(&h, ci, co * k).unwrap()), Matrix::Q8(Q8Rows::new(&q, ci, co * k).unwrap())];
+    let wt = gemm_order(&w, ci, co * k);
+    let (h, q, qt) = (f16_bits(&w), q8_bytes(&w), q8_bytes(&wt));
+    let mats = [
+        ConvTWeight::Rows(mat(&w, ci, co * k)),
+        ConvTWeight::Rows(Matrix::F16(F16Rows::new(&h, ci, co * k).unwrap())),
+        ConvTWeight::Rows(Matrix::Q8(Q8Rows::new(&q, ci, co * k).unwrap())),
+        ConvTWeight::Gemm(mat(&wt, co * k, ci)),
+        ConvTWeight::Gemm(Matrix::Q8(Q8Rows::new(&qt, co * k, ci).unwrap())),
+    ];
     for m in &mats {
         for list in lists {
             let segs: Vec<ConvSeg> = list.iter().map(|&(ti, _, p)| ConvSeg { t_in: ti, t_out: (ti * st).saturating_sub(p), pad: p }).collect();

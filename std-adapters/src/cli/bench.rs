@@ -31,7 +31,7 @@ use duolando_core::schema::{for_each_tensor, SchemaError, TensorSpec};
 use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Session, SessionConfig, StepBatch};
 use duolando_core::tensor::{block_row, DType, TensorRef, MAX_RANK};
 
-use crate::convert::storage_for;
+use crate::convert::{storage_for, stored_dims};
 use crate::duo_writer::{quantise_q4_block32, quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8, StoreAs};
 
 /// Flags of `duolando bench`.
@@ -166,8 +166,9 @@ impl RandomModel {
         let mut layout = Vec::new();
         let mut off = 0usize;
         for s in &specs {
-            let dims = s.dims();
-            let dtype = match storage_for(requested, s) {
+            let stored = storage_for(requested, s);
+            let dims = &stored_dims(s, stored)[..];
+            let dtype = match stored {
                 StoreAs::F32 => DType::F32,
                 StoreAs::F16 => DType::F16,
                 StoreAs::Q8Block32 => DType::Q8Block32,
@@ -177,7 +178,9 @@ impl RandomModel {
             };
             let numel: usize = dims.iter().map(|&d| d as usize).product();
             let bytes = dtype.bytes_for(numel, block_row(dims)).ok_or_else(|| anyhow!("size of {}", s.name))?;
-            layout.push((dtype, off..off + bytes));
+            let mut shape = [1u32; MAX_RANK];
+            shape[..dims.len()].copy_from_slice(dims);
+            layout.push((dtype, shape, dims.len() as u8, off..off + bytes));
             off = (off + bytes).next_multiple_of(64);
         }
         let mut buf = vec![0u64; off / 8 + 8];
@@ -186,8 +189,8 @@ impl RandomModel {
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut buf);
         let mut rng = Rng(seed | 1);
         let mut table = HashMap::new();
-        for (s, (dtype, range)) in specs.iter().zip(layout) {
-            let dims = s.dims();
+        for (s, (dtype, shape, rank, range)) in specs.iter().zip(layout) {
+            let dims = &shape[..rank as usize];
             let numel: usize = dims.iter().map(|&d| d as usize).product();
             let name = s.name.as_str();
             // Weights ~ U(-0.05, 0.05); LayerNorm weights 1, biases small.
@@ -207,7 +210,7 @@ impl RandomModel {
                 DType::Q4Block32x8 => dst.copy_from_slice(&quantise_q4_block32x8(&values, block_row(dims))),
                 DType::Q4Block32 => dst.copy_from_slice(&quantise_q4_block32(&values)),
             }
-            table.insert(name.to_string(), (dtype, s.shape, s.rank, base + range.start..base + range.end));
+            table.insert(name.to_string(), (dtype, shape, rank, base + range.start..base + range.end));
         }
         Ok(RandomModel { buf, table })
     }

@@ -73,15 +73,17 @@ impl From<SchemaError> for ConvertError {
 /// - `Q8Block32`: the tensors whose rows are dotted with activations or read
 ///   whole as embeddings (Linear weights, GPT heads, token embeddings, and
 ///   the VQ decoders' Conv1d weights, a row = one output channel's `in * k`
-///   values), when a row is a multiple of 32 values; the rest F16: the VQ
-///   encoders and codebooks (they pick the leader's tokens, the input of
-///   everything: int8 encoders flipped 1.3% of the tiny_long fixture's
-///   leader tokens, 4-bit ones 16%), the ConvTranspose1d weights (their rows are scaled and
-///   added, `x W`), and rows of other lengths;
+///   values, and their ConvTranspose1d weights in GEMM order
+///   ([`to_stored_order`]: a row = the `in` values feeding one output
+///   channel at one kernel tap), when a row is a multiple of 32 values; the
+///   rest F16: the VQ encoders and codebooks (they pick the leader's
+///   tokens, the input of everything: int8 encoders flipped 1.3% of the
+///   tiny_long fixture's leader tokens, 4-bit ones 16%) and rows of other
+///   lengths;
 ///   Of these, the matrices of the int8 GEMM (Linear weights, heads, decoder
-///   convs) are stored as `Q8Block32x8` (the same values, rows interleaved
-///   in groups of 8 for the GEMM), the embeddings as `Q8Block32`;
-///   requesting `Q8Block32x8` means the same;
+///   convs and conv-transposes) are stored as `Q8Block32x8` (the same
+///   values, rows interleaved in groups of 8 for the GEMM), the embeddings
+///   as `Q8Block32`; requesting `Q8Block32x8` means the same;
 /// - `Q4Block32`: the same tensors as `Q8Block32` in 4 bits (the GEMM
 ///   matrices as `Q4Block32x8`, the embeddings as `Q4Block32`), the rest as
 ///   there.
@@ -89,8 +91,9 @@ pub fn storage_for(requested: StoreAs, spec: &TensorSpec) -> StoreAs {
     if requested == StoreAs::F32 || matches!(spec.role, Role::Vector | Role::PosEmb) {
         return StoreAs::F32;
     }
-    let row = block_row(spec.dims());
-    let blockable = matches!(spec.role, Role::Linear | Role::Conv | Role::Embedding) && row % 32 == 0 && row > 0;
+    // A ConvTranspose1d weight is blocked along `in`, in GEMM order.
+    let row = spec.gemm_dims().map_or_else(|| block_row(spec.dims()), |[_, c_in]| c_in as usize);
+    let blockable = matches!(spec.role, Role::Linear | Role::Conv | Role::ConvTranspose | Role::Embedding) && row % 32 == 0 && row > 0;
     match requested {
         StoreAs::Q8Block32 | StoreAs::Q8Block32x8 if blockable => {
             if spec.role == Role::Embedding {
@@ -107,6 +110,42 @@ pub fn storage_for(requested: StoreAs, spec: &TensorSpec) -> StoreAs {
             }
         }
         _ => StoreAs::F16,
+    }
+}
+
+/// Whether a tensor stored as `stored` is written in GEMM order: a
+/// ConvTranspose1d weight in a blocked type (its blocks run along `in`).
+fn gemm_order(spec: &TensorSpec, stored: StoreAs) -> bool {
+    spec.gemm_dims().is_some() && !matches!(stored, StoreAs::F32 | StoreAs::F16)
+}
+
+/// The shape a tensor is written with when stored as `stored`: the
+/// schema's, or GEMM order ([`to_stored_order`]).
+pub fn stored_dims(spec: &TensorSpec, stored: StoreAs) -> Vec<u32> {
+    match spec.gemm_dims() {
+        Some(gemm) if gemm_order(spec, stored) => gemm.to_vec(),
+        _ => spec.dims().to_vec(),
+    }
+}
+
+/// The shape and values a tensor is written with when stored as `stored`
+/// (`values` in PyTorch order, as the schema lists the tensor): a
+/// ConvTranspose1d weight `(in, out, k)` stored blocked becomes the GEMM
+/// order `(out * k, in)`, row `o * k + j` = `W[:, o, j]` (docs/FORMAT.md
+/// §6); everything else as it is.
+pub fn to_stored_order(spec: &TensorSpec, stored: StoreAs, values: Vec<f32>) -> (Vec<u32>, Vec<f32>) {
+    match (spec.dims(), spec.gemm_dims()) {
+        (&[c_in, c_out, k], Some(gemm)) if gemm_order(spec, stored) => {
+            let (c_in, zk) = (c_in as usize, c_out as usize * k as usize);
+            let mut t = vec![0.0f32; values.len()];
+            for (i, row) in values.chunks_exact(zk).enumerate() {
+                for (r, &v) in row.iter().enumerate() {
+                    t[r * c_in + i] = v;
+                }
+            }
+            (gemm.to_vec(), t)
+        }
+        _ => (spec.dims().to_vec(), values),
     }
 }
 
@@ -138,7 +177,8 @@ pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: Store
         }
         used[c].insert(rest.to_string());
         let stored = storage_for(store_as, spec);
-        tensors.push(Tensor { name: duo_name.to_string(), shape: spec.dims().to_vec(), values, store_as: stored });
+        let (shape, values) = to_stored_order(spec, stored, values);
+        tensors.push(Tensor { name: duo_name.to_string(), shape, values, store_as: stored });
         Ok(())
     })?;
     let mut report = Report { written: tensors.len(), ..Report::default() };
