@@ -4,7 +4,8 @@
 //! rows, with enough distinct weight matrices that the small-batch cases
 //! read their weights from memory (bandwidth-bound), and the attention
 //! kernel at the R step's coordinated-attention shape and at one streaming
-//! append (10 rows against a full f16 cache).
+//! append (10 rows against a full f16 cache), and the VQ decoders'
+//! conv-transpose `z` from f16 rows against int8 in GEMM order.
 //! int8 is measured in both stored layouts: `Q8Block32` rows (`int8`) and
 //! `Q8Block32x8` row groups (`int8x8`, what `convert --dtype int8` writes).
 //!
@@ -14,7 +15,7 @@ use std::time::Instant;
 
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd::{self, Isa};
-use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, KvRows, Matrix, Q8Rows, RowData, TiledCausalMask, Ungrouped, X8Rows};
+use duolando_core::kernels::{attention, linear, linear_xw, F16Rows, F32Rows, KvRows, Matrix, Q8Rows, RowData, TiledCausalMask, Ungrouped, X8Rows};
 
 mod common;
 use common::Rng;
@@ -94,6 +95,45 @@ fn main() {
             println!("{line}");
         }
     }
+    // The VQ decoders' ConvTranspose1d (512 -> 512 x k=4): `z` for n input
+    // rows from f16 weights in PyTorch order (`linear_xw`, what f16 files
+    // and int8 files before 2026-12-03 run) and from int8 weights in GEMM
+    // order (`linear` over `Q8Block32x8`, what int8 files run now); n = 1-2
+    // is one session's step, 16-32 a 16-session `step_many`.
+    let (ci, zk) = (512usize, 2048usize);
+    let mats = (64 << 20) / (ci * zk * 4);
+    let wf: Vec<Vec<f32>> = (0..mats).map(|_| r.vec(ci * zk)).collect();
+    let wh: Vec<Vec<u16>> = wf.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
+    // GEMM order (zk, ci) of the same values.
+    let wx: Vec<Vec<u8>> = wf.iter().map(|w| quantise_q8_block32x8(&(0..zk * ci).map(|k| w[(k % ci) * zk + k / ci]).collect::<Vec<f32>>(), ci)).collect();
+    for &n in &[1usize, 2, 16, 32] {
+        let x = r.vec(n * ci);
+        let mut z = vec![0.0f32; n * zk];
+        let mut line = format!("conv-transpose z {ci}->{zk} n={n:>2}:");
+        for &(isa, amx) in &variants {
+            // SAFETY: as for the linear lines.
+            unsafe {
+                simd::set_isa(isa);
+                amx_switch(amx);
+            }
+            let label = if amx { format!("{isa:?}+AMX") } else { format!("{isa:?}") };
+            let rows = time(reps, || {
+                for w in &wh {
+                    linear_xw(&x, &Matrix::F16(F16Rows::new(w, ci, zk).unwrap()), &mut z);
+                }
+                std::hint::black_box(&z);
+            }) / mats as f64;
+            let gemm = time(reps, || {
+                for w in &wx {
+                    linear(&x, &Matrix::X8(X8Rows::new(w, zk, ci).unwrap()), None, &mut z);
+                }
+                std::hint::black_box(&z);
+            }) / mats as f64;
+            line += &format!("  [{label}] f16 x W {:.3} ms, int8x8 GEMM order {:.3} ms ({:.2}x)", rows * 1e3, gemm * 1e3, gemm / rows);
+        }
+        println!("{line}");
+    }
+    drop((wf, wh, wx));
     // SAFETY: turning the tiles off is always sound.
     unsafe { amx_switch(false) };
     // Attention at the R step's coordinated-attention shape: 290 rows, C 768, 12 heads.
