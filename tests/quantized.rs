@@ -156,11 +156,8 @@ const Q4_MIN_AGREE: f64 = 0.25;
 /// within the decoder limit.
 #[test]
 fn int8_vq_decoders_on_the_demo_model() {
-    use duolando_core::config::Part;
-    use duolando_core::limits::VqWhich;
     use duolando_core::model::Model;
     use duolando_core::tensor::DType;
-    use duolando_core::vq_decoder::{decode_codes, scratch_bytes, Output};
     duolando::simd::init();
     let f16_file = duolando_tests::demo_model();
     let decoders_int8 = |spec: &duolando_core::schema::TensorSpec| {
@@ -181,25 +178,12 @@ fn int8_vq_decoders_on_the_demo_model() {
     assert_eq!(n_q8, dec.len(), "decoder weights: {dec:?}");
     assert!(n_gemm >= 16, "ConvTranspose1d weights: {dec:?}");
     let (mq, mf) = (Model::from_duo(&dq).unwrap(), Model::from_duo(&df).unwrap());
-    let cfg = mf.cfg;
-    let n = 64usize;
-    let mut scratch = vec![0u8; scratch_bytes(&cfg, n).unwrap()];
     let mut worst = 0.0f32;
-    for (which, vq) in Part::ALL.iter().map(|&p| (VqWhich::Part(p), cfg.parts[p as usize])).chain([(VqWhich::Transl, cfg.transl)]) {
-        let codes: Vec<u32> = (0..n as u32).map(|i| (i * 37 + 11) % vq.l_bins).collect();
-        for (out, ch) in [(Output::Position, vq.in_channels), (Output::Rotation, vq.rot_channels)] {
-            if ch == 0 {
-                continue;
-            }
-            let len = n * cfg.hop() * ch as usize;
-            let (mut a, mut b) = (vec![0.0f32; len], vec![0.0f32; len]);
-            decode_codes(&mf, which, out, &codes, &mut scratch, &mut a).unwrap();
-            decode_codes(&mq, which, out, &codes, &mut scratch, &mut b).unwrap();
-            let scale = a.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-            let err = max_abs(&a, &b);
-            eprintln!("demo {which:?} {out:?}: max |int8 - f16| {err:.3e} (max |f16 output| {scale:.3})");
-            worst = worst.max(err / scale);
-        }
+    for ((label, a), (_, b)) in every_decoder(&mf).iter().zip(every_decoder(&mq)) {
+        let scale = a.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let err = max_abs(a, &b);
+        eprintln!("demo {label}: max |int8 - f16| {err:.3e} (max |f16 output| {scale:.3})");
+        worst = worst.max(err / scale);
     }
     eprintln!("demo decoders: worst max error relative to the output's max magnitude {worst:.3e}");
     assert!(worst <= DECODER_REL_LIMIT, "{worst} > {DECODER_REL_LIMIT}");
@@ -212,6 +196,30 @@ fn int8_vq_decoders_on_the_demo_model() {
     assert!(pe <= DEMO_POS_LIMIT_M && re <= DEMO_ROT_LIMIT, "pos {pe} rot {re}");
 }
 
+/// Every VQ decoder of `m` (4 parts x positions / rotations, then the
+/// translation) fed the same 64 codes: (label, output frames).
+fn every_decoder(m: &duolando_core::model::Model<'_>) -> Vec<(String, Vec<f32>)> {
+    use duolando_core::config::Part;
+    use duolando_core::limits::VqWhich;
+    use duolando_core::vq_decoder::{decode_codes, scratch_bytes, Output};
+    let cfg = m.cfg;
+    let n = 64usize;
+    let mut scratch = vec![0u8; scratch_bytes(&cfg, n).unwrap()];
+    let mut outs = Vec::new();
+    for (which, vq) in Part::ALL.iter().map(|&p| (VqWhich::Part(p), cfg.parts[p as usize])).chain([(VqWhich::Transl, cfg.transl)]) {
+        let codes: Vec<u32> = (0..n as u32).map(|i| (i * 37 + 11) % vq.l_bins).collect();
+        for (out, ch) in [(Output::Position, vq.in_channels), (Output::Rotation, vq.rot_channels)] {
+            if ch == 0 {
+                continue;
+            }
+            let mut y = vec![0.0f32; n * cfg.hop() * ch as usize];
+            decode_codes(m, which, out, &codes, &mut scratch, &mut y).unwrap();
+            outs.push((format!("{which:?} {out:?}"), y));
+        }
+    }
+    outs
+}
+
 /// A ConvTranspose1d weight stored in GEMM order `(out * k, in)` decodes
 /// as the same weight in PyTorch order `(in, out, k)`: the demo model
 /// re-stored in f32 both ways (the same values), every decoder fed the same
@@ -222,11 +230,8 @@ fn int8_vq_decoders_on_the_demo_model() {
 #[test]
 fn conv_transpose_gemm_order_decodes_as_pytorch_order() {
     use duolando::duo_writer::{write_duo, Tensor};
-    use duolando_core::config::Part;
-    use duolando_core::limits::VqWhich;
     use duolando_core::model::Model;
     use duolando_core::schema::{for_each_tensor, Role, SchemaError};
-    use duolando_core::vq_decoder::{decode_codes, scratch_bytes, Output};
     duolando::simd::init();
     let f32_file = duolando_tests::restore_as(&duolando_tests::demo_model(), &|_| StoreAs::F32);
     let duo = f32_file.duo().unwrap();
@@ -254,22 +259,10 @@ fn conv_transpose_gemm_order_decodes_as_pytorch_order() {
     let (dg, df) = (gemm_file.duo().unwrap(), f32_file.duo().unwrap());
     assert!(dg.tensors().any(|t| t.name.contains(".decoders") && t.rank == 2), "GEMM order stored");
     let (mg, mf) = (Model::from_duo(&dg).unwrap(), Model::from_duo(&df).unwrap());
-    let n = 64usize;
-    let mut scratch = vec![0u8; scratch_bytes(&cfg, n).unwrap()];
     let mut worst = 0.0f32;
-    for (which, vq) in Part::ALL.iter().map(|&p| (VqWhich::Part(p), cfg.parts[p as usize])).chain([(VqWhich::Transl, cfg.transl)]) {
-        let codes: Vec<u32> = (0..n as u32).map(|i| (i * 53 + 5) % vq.l_bins).collect();
-        for (out, ch) in [(Output::Position, vq.in_channels), (Output::Rotation, vq.rot_channels)] {
-            if ch == 0 {
-                continue;
-            }
-            let len = n * cfg.hop() * ch as usize;
-            let (mut a, mut b) = (vec![0.0f32; len], vec![0.0f32; len]);
-            decode_codes(&mf, which, out, &codes, &mut scratch, &mut a).unwrap();
-            decode_codes(&mg, which, out, &codes, &mut scratch, &mut b).unwrap();
-            let scale = a.iter().fold(1.0f32, |m, v| m.max(v.abs()));
-            worst = worst.max(max_abs(&a, &b) / scale);
-        }
+    for ((_, a), (_, b)) in every_decoder(&mf).iter().zip(every_decoder(&mg)) {
+        let scale = a.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+        worst = worst.max(max_abs(a, &b) / scale);
     }
     eprintln!("demo decoders, GEMM-order vs PyTorch-order ConvTranspose1d (f32): worst max error / max |output| {worst:.3e}");
     assert!(worst <= F32_REORDER_LIMIT, "{worst} > {F32_REORDER_LIMIT}");
