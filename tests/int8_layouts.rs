@@ -97,7 +97,8 @@ fn x8_groups_compute_what_their_rows_compute_under_every_isa() {
                 }
                 let mx = Matrix::X8(packed);
                 assert_eq!(mx.weight_bytes(), bytes);
-                let rows = 9;
+                // Up to 17 rows: calls of 5 + 5 (10), 8 + 8 (16), 6 + 6 + 5 (17) under VNNI.
+                let rows = 17;
                 let x = r.vec(rows * i);
                 let bias = r.vec(o);
                 let mut alone = vec![0f32; rows * o];

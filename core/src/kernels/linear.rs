@@ -539,7 +539,12 @@ fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_
     let nb = n_in / Q8_BLOCK;
     let mut i0 = r0;
     while i0 < r1 {
-        let mt = simd::PACK_ROWS.min(r1 - i0);
+        // The fewest calls, the rows shared evenly among them: 10 rows (a
+        // GPT step) run as 5 + 5, not 8 + 2, ~8% faster on AVX512-VNNI (a
+        // call of 1-2 rows waits on its dot chains). A row's numbers do not
+        // depend on its call's size.
+        let left = r1 - i0;
+        let mt = left.div_ceil(left.div_ceil(simd::PACK_ROWS));
         let pr = |m: usize| i0 + m.min(mt - 1);
         let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
         let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];

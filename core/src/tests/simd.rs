@@ -248,6 +248,42 @@ fn linear_over_f16_and_q8_matches_naive() {
     }
 }
 
+/// Activation rows repeated at the end of a tile (a partial tile's padding:
+/// the same slice again) get the numbers of distinct copies of those rows,
+/// bit for bit, under every f32 / f16 tile (they compute such rows once:
+/// `simd::distinct_rows`); other repeats are computed as they come.
+#[test]
+fn simd_tiles_give_repeated_rows_the_numbers_of_copies() {
+    type Tiles = (&'static str, fn([&[f32]; TN], [&[f32]; TM]) -> Tile, fn([&[u16]; TN], [&[f32]; TM]) -> Tile);
+    let mut tiles: Vec<Tiles> = variants().iter().map(|v| (v.name, v.tile_f32, v.tile_f16)).collect();
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512bw") && std::is_x86_feature_detected!("avx512vl") && std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("f16c") {
+        // SAFETY (both): the CPU supports the 16-wide tiles' features (checked above).
+        tiles.push(("avx512", |w, x| unsafe { simd::x86::tile_f32_512(w, x) }, |w, x| unsafe { simd::x86::tile_f16_512(w, x) }));
+    }
+    tiles.push(("scalar", scalar::tile_f32, scalar::tile_f16));
+    let mut r = Rng(0xd15c_0123_4567_89ab);
+    for (name, tf32, tf16) in tiles {
+        for k in [1usize, 7, 8, 15, 16, 17, 100, 768, 1536] {
+            let ws: Vec<Vec<f32>> = (0..TN).map(|_| r.vec(k)).collect();
+            let hs: Vec<Vec<u16>> = ws.iter().map(|w| f16_bits(w)).collect();
+            let w: [&[f32]; TN] = std::array::from_fn(|j| &ws[j][..]);
+            let hw: [&[u16]; TN] = std::array::from_fn(|j| &hs[j][..]);
+            let xs: Vec<Vec<f32>> = (0..TM).map(|_| r.vec(k)).collect();
+            // Which distinct row each tile row reads.
+            let patterns: [[usize; TM]; 6] = [[0, 0, 0, 0], [0, 1, 1, 1], [0, 1, 2, 2], [0, 1, 2, 3], [0, 0, 1, 1], [0, 1, 0, 1]];
+            for pat in patterns {
+                let shared: [&[f32]; TM] = std::array::from_fn(|m| &xs[pat[m]][..]);
+                let copies: Vec<Vec<f32>> = pat.iter().map(|&p| xs[p].clone()).collect();
+                let apart: [&[f32]; TM] = std::array::from_fn(|m| &copies[m][..]);
+                let bits = |t: Tile| t.map(|row| row.map(f32::to_bits));
+                assert_eq!(bits(tf32(w, shared)), bits(tf32(w, apart)), "{name} tile_f32 k={k} rows {pat:?}");
+                assert_eq!(bits(tf16(hw, shared)), bits(tf16(hw, apart)), "{name} tile_f16 k={k} rows {pat:?}");
+            }
+        }
+    }
+}
+
 /// SIMD tile vs scalar tile twin, every entry: |simd - scalar| <= limit *
 /// sum |w_i x_i| (summation order and FMA rounding only).
 const SIMD_VS_SCALAR_TILE: f64 = 1e-6;

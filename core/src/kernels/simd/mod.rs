@@ -246,14 +246,39 @@ pub type Tile = [[f32; TN]; TM];
 /// Every pair of a tile through a single-row dot (the scalar twins, and
 /// the NEON path until it has a register-blocked kernel).
 #[inline]
-pub(crate) fn pairwise(mut f: impl FnMut(usize, usize) -> f32) -> Tile {
+pub(crate) fn pairwise(f: impl FnMut(usize, usize) -> f32) -> Tile {
+    pairwise_rows(TM, f)
+}
+
+/// [`pairwise`] over rows `0..d` only; rows `d..` repeat row `d - 1` (the
+/// numbers of a repeated activation row: [`distinct_rows`]).
+#[inline]
+pub(crate) fn pairwise_rows(d: usize, mut f: impl FnMut(usize, usize) -> f32) -> Tile {
+    let d = d.clamp(1, TM);
     let mut out = [[0.0; TN]; TM];
-    for (m, row) in out.iter_mut().enumerate() {
+    for (m, row) in out.iter_mut().enumerate().take(d) {
         for (n, o) in row.iter_mut().enumerate() {
             *o = f(m, n);
         }
     }
+    let last = out[d - 1];
+    out[d..].fill(last);
     out
+}
+
+/// Activation rows of a tile to compute: `linear` pads a partial tile by
+/// handing the last row again (the same slice), and rows that repeat the
+/// one before them at the end of `x` give that row's numbers, so the f32 /
+/// f16 tiles compute rows `0..distinct_rows(x)` and copy the rest (a 1-row
+/// GEMV does a quarter of the multiplies; bit-identical, tested by
+/// `wide_tiles_give_repeated_rows_the_numbers_of_copies`).
+#[inline]
+pub(crate) fn distinct_rows<T>(x: &[&[T]; TM]) -> usize {
+    let mut d = TM;
+    while d > 1 && core::ptr::eq(x[d - 1], x[d - 2]) {
+        d -= 1;
+    }
+    d
 }
 
 /// Register-blocked `x . w^T` tile with f32 weights: `out[m][n] = w[n] .

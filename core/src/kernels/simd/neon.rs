@@ -11,7 +11,7 @@
 use core::arch::aarch64::*;
 
 use super::scalar::{common, common_blocks};
-use super::{pairwise, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
+use super::{distinct_rows, pairwise, pairwise_rows, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 
 /// 4 binary16 values (low 16 bits of each u32 lane... as a u16x4) to f32x4.
 ///
@@ -114,7 +114,9 @@ pub unsafe fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
 }
 
 /// Tile of pairwise NEON dots over the common row length (no register-
-/// blocked NEON kernel yet; same contract as [`super::scalar::tile_f32`]).
+/// blocked NEON kernel yet; same contract as [`super::scalar::tile_f32`]);
+/// activation rows repeated at the end are computed once
+/// ([`distinct_rows`]).
 ///
 /// # Safety
 /// NEON must be available.
@@ -122,7 +124,7 @@ pub unsafe fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
 pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
     let k = common(&w, &x);
     // SAFETY: NEON is available (this fn's contract).
-    pairwise(|m, n| unsafe { dot_f32(&w[n][..k], &x[m][..k]) })
+    pairwise_rows(distinct_rows(&x), |m, n| unsafe { dot_f32(&w[n][..k], &x[m][..k]) })
 }
 
 /// Pairwise NEON tile with binary16 weights (see [`tile_f32`]).
@@ -133,7 +135,7 @@ pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
 pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
     let k = common(&w, &x);
     // SAFETY: NEON is available (this fn's contract).
-    pairwise(|m, n| unsafe { dot_f16(&w[n][..k], &x[m][..k]) })
+    pairwise_rows(distinct_rows(&x), |m, n| unsafe { dot_f16(&w[n][..k], &x[m][..k]) })
 }
 
 /// Pairwise NEON int8 tile (see [`tile_f32`]).

@@ -6,7 +6,7 @@
 
 use core::arch::x86_64::*;
 
-use super::{Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
+use super::{distinct_rows, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 
 // The tiled kernels walk the weight rows two at a time (8 f32 accumulators
 // for a 4x2 sub-tile, plus two weight and one activation register).
@@ -128,42 +128,17 @@ fn tile_len<A, B>(w: &[&[A]; TN], x: &[&[B]; TM]) -> usize {
 
 /// Register-blocked tile (see [`super::scalar::tile_f32`]): each 4x2
 /// sub-tile keeps 8 accumulators in registers, so every weight and
-/// activation vector loaded is used 2 or 4 times.
+/// activation vector loaded is used 2 or 4 times. Activation rows repeated
+/// at the end of `x` are computed once ([`distinct_rows`]).
 ///
 /// # Safety
 /// The CPU must support avx2 and fma.
 #[target_feature(enable = "avx2,fma")]
 pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
-    let k = tile_len(&w, &x);
-    let k8 = k - k % 8;
-    let mut out = [[0.0f32; TN]; TM];
-    for n0 in (0..TN).step_by(2) {
-        let (wa, wb) = (&w[n0][..k], &w[n0 + 1][..k]);
-        let mut acc = [[_mm256_setzero_ps(); 2]; TM];
-        let mut c = 0;
-        while c < k8 {
-            // SAFETY: c + 8 <= k8 <= k, and wa, wb and every x[m] hold at
-            // least k floats.
-            let (va, vb) = unsafe { (_mm256_loadu_ps(wa.as_ptr().add(c)), _mm256_loadu_ps(wb.as_ptr().add(c))) };
-            for (am, xm) in acc.iter_mut().zip(&x) {
-                // SAFETY: as above.
-                let xv = unsafe { _mm256_loadu_ps(xm.as_ptr().add(c)) };
-                am[0] = _mm256_fmadd_ps(xv, va, am[0]);
-                am[1] = _mm256_fmadd_ps(xv, vb, am[1]);
-            }
-            c += 8;
-        }
-        for (m, am) in acc.iter().enumerate() {
-            for (j, wr) in [wa, wb].into_iter().enumerate() {
-                let mut tail = 0.0f32;
-                for (a, b) in wr[k8..].iter().zip(&x[m][k8..k]) {
-                    tail += a * b;
-                }
-                out[m][n0 + j] = hsum(am[j]) + tail;
-            }
-        }
-    }
-    out
+    // SAFETY: lanes c..c + 8 of a row holding at least k >= c + 8 floats.
+    let load = |r: &[f32], c: usize| unsafe { _mm256_loadu_ps(r.as_ptr().add(c)) };
+    // SAFETY: the caller's features are tile_256's (fma implies nothing more).
+    unsafe { tile_256(w, x, load, |v: &f32| *v) }
 }
 
 /// [`tile_f32`] with binary16 weights: each weight vector is converted
@@ -173,23 +148,51 @@ pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
 /// The CPU must support avx2, fma and f16c.
 #[target_feature(enable = "avx2,fma,f16c")]
 pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
+    // SAFETY: 8 u16 (one 128-bit load) of lanes c..c + 8 of a row holding
+    // at least k >= c + 8 values.
+    let load = |r: &[u16], c: usize| unsafe { _mm256_cvtph_ps(_mm_loadu_si128(r.as_ptr().add(c) as *const __m128i)) };
+    // SAFETY: the caller's features are tile_256's.
+    unsafe { tile_256(w, x, load, |v: &u16| super::f16_to_f32(*v)) }
+}
+
+/// The tile of [`tile_f32`] / [`tile_f16`] over any weight element (`load`:
+/// lanes c..c + 8 as f32; `val`: one value, for the scalar column tail).
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c; `load` must be sound for lanes
+/// below the shortest row's length.
+#[inline]
+#[target_feature(enable = "avx2,fma,f16c")]
+unsafe fn tile_256<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize) -> __m256, val: impl Fn(&E) -> f32) -> Tile {
     let k = tile_len(&w, &x);
+    // SAFETY: the caller's features are rows_256's; d <= TM.
+    unsafe {
+        match distinct_rows(&x) {
+            1 => padded(rows_256::<E, 1>(&w, &x, k, &load, &val)),
+            2 => padded(rows_256::<E, 2>(&w, &x, k, &load, &val)),
+            3 => padded(rows_256::<E, 3>(&w, &x, k, &load, &val)),
+            _ => padded(rows_256::<E, TM>(&w, &x, k, &load, &val)),
+        }
+    }
+}
+
+/// Rows `0..M` of [`tile_256`] (each row's dots in the same order for any `M`).
+///
+/// # Safety
+/// As [`tile_256`]; `M <= TM`.
+#[inline]
+#[target_feature(enable = "avx2,fma,f16c")]
+unsafe fn rows_256<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize, load: &impl Fn(&[E], usize) -> __m256, val: &impl Fn(&E) -> f32) -> [[f32; TN]; M] {
     let k8 = k - k % 8;
-    let mut out = [[0.0f32; TN]; TM];
+    let mut out = [[0.0f32; TN]; M];
     for n0 in (0..TN).step_by(2) {
         let (wa, wb) = (&w[n0][..k], &w[n0 + 1][..k]);
-        let mut acc = [[_mm256_setzero_ps(); 2]; TM];
+        let mut acc = [[_mm256_setzero_ps(); 2]; M];
         let mut c = 0;
         while c < k8 {
-            // SAFETY: c + 8 <= k8 <= k: 8 u16 (one 128-bit load) of wa and wb in bounds.
-            let (va, vb) = unsafe {
-                (
-                    _mm256_cvtph_ps(_mm_loadu_si128(wa.as_ptr().add(c) as *const __m128i)),
-                    _mm256_cvtph_ps(_mm_loadu_si128(wb.as_ptr().add(c) as *const __m128i)),
-                )
-            };
-            for (am, xm) in acc.iter_mut().zip(&x) {
-                // SAFETY: every x[m] holds at least k floats.
+            let (va, vb) = (load(wa, c), load(wb, c));
+            for (am, xm) in acc.iter_mut().zip(x) {
+                // SAFETY: c + 8 <= k8 <= k and every x[m] holds at least k floats.
                 let xv = unsafe { _mm256_loadu_ps(xm.as_ptr().add(c)) };
                 am[0] = _mm256_fmadd_ps(xv, va, am[0]);
                 am[1] = _mm256_fmadd_ps(xv, vb, am[1]);
@@ -200,7 +203,7 @@ pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
             for (j, wr) in [wa, wb].into_iter().enumerate() {
                 let mut tail = 0.0f32;
                 for (a, b) in wr[k8..].iter().zip(&x[m][k8..k]) {
-                    tail += super::f16_to_f32(*a) * b;
+                    tail += val(a) * b;
                 }
                 out[m][n0 + j] = hsum(am[j]) + tail;
             }
@@ -277,40 +280,21 @@ fn lanes16(n: usize) -> __mmask16 {
 /// Register-blocked tile on 16-wide vectors: the whole `TM x TN` tile in
 /// 16 accumulators (AVX-512 has 32 registers), so each loaded vector is
 /// used 4 times; the column tail is one masked step (no scalar tail).
+/// Activation rows that repeat the row before them at the end of `x` (a
+/// partial tile's padding) are not computed again: their results are the
+/// same numbers, copied ([`distinct_rows`]), so a 1-row GEMV does 4 FMAs per
+/// loaded weight vector, not 16 (the AVX2 and NEON tiles do the same).
 ///
 /// # Safety
 /// The CPU must support avx512f (and the dispatcher's Avx512 set).
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
 pub unsafe fn tile_f32_512(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
-    let k = tile_len(&w, &x);
-    let k16 = k - k % 16;
-    let mut acc = [[_mm512_setzero_ps(); TN]; TM];
-    let mut c = 0;
-    while c < k16 {
-        // SAFETY: c + 16 <= k and every row holds at least k floats.
-        let wv: [__m512; TN] = core::array::from_fn(|n| unsafe { _mm512_loadu_ps(w[n].as_ptr().add(c)) });
-        for (am, xm) in acc.iter_mut().zip(&x) {
-            // SAFETY: as above.
-            let xv = unsafe { _mm512_loadu_ps(xm.as_ptr().add(c)) };
-            for (a, wn) in am.iter_mut().zip(&wv) {
-                *a = _mm512_fmadd_ps(xv, *wn, *a);
-            }
-        }
-        c += 16;
-    }
-    if c < k {
-        let mk = lanes16(k - c);
-        // SAFETY: masked loads read only lanes c..k, inside every row.
-        let wv: [__m512; TN] = core::array::from_fn(|n| unsafe { _mm512_maskz_loadu_ps(mk, w[n].as_ptr().add(c)) });
-        for (am, xm) in acc.iter_mut().zip(&x) {
-            // SAFETY: as above.
-            let xv = unsafe { _mm512_maskz_loadu_ps(mk, xm.as_ptr().add(c)) };
-            for (a, wn) in am.iter_mut().zip(&wv) {
-                *a = _mm512_fmadd_ps(xv, *wn, *a);
-            }
-        }
-    }
-    acc.map(|am| am.map(|a| _mm512_reduce_add_ps(a)))
+    // SAFETY: the tile reads lanes c..c + 16 of rows holding at least k >= c + 16 floats.
+    let load = |r: &[f32], c: usize| unsafe { _mm512_loadu_ps(r.as_ptr().add(c)) };
+    // SAFETY: a masked load of lanes c..k, inside every row.
+    let tail = |r: &[f32], c: usize, mk: __mmask16| unsafe { _mm512_maskz_loadu_ps(mk, r.as_ptr().add(c)) };
+    // SAFETY: the caller's features are tile_512's.
+    unsafe { tile_512(w, x, load, tail) }
 }
 
 /// [`tile_f32_512`] with binary16 weights (16 converted per F16C step).
@@ -319,14 +303,54 @@ pub unsafe fn tile_f32_512(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
 /// As [`tile_f32_512`].
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
 pub unsafe fn tile_f16_512(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
+    // SAFETY: 16 u16 (one 256-bit load) of lanes c..c + 16 of a row holding at least k >= c + 16 values.
+    let load = |r: &[u16], c: usize| unsafe { _mm512_cvtph_ps(_mm256_loadu_si256(r.as_ptr().add(c) as *const __m256i)) };
+    // SAFETY: a masked load of lanes c..k, inside every row.
+    let tail = |r: &[u16], c: usize, mk: __mmask16| unsafe { _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(mk, r.as_ptr().add(c) as *const i16)) };
+    // SAFETY: as in tile_f32_512.
+    unsafe { tile_512(w, x, load, tail) }
+}
+
+/// The tile of [`tile_f32_512`] / [`tile_f16_512`] over any weight element
+/// (`load(row, c)`: lanes c..c + 16 as f32; `tail`: the masked lanes).
+///
+/// # Safety
+/// As [`tile_f32_512`]; `load` / `tail` must be sound for lanes below the
+/// shortest row's length.
+#[inline]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
+unsafe fn tile_512<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize) -> __m512, tail: impl Fn(&[E], usize, __mmask16) -> __m512) -> Tile {
     let k = tile_len(&w, &x);
+    // SAFETY: the caller's features are rows_512's; d <= TM.
+    unsafe {
+        match distinct_rows(&x) {
+            1 => padded(rows_512::<E, 1>(&w, &x, k, &load, &tail)),
+            2 => padded(rows_512::<E, 2>(&w, &x, k, &load, &tail)),
+            3 => padded(rows_512::<E, 3>(&w, &x, k, &load, &tail)),
+            _ => padded(rows_512::<E, TM>(&w, &x, k, &load, &tail)),
+        }
+    }
+}
+
+/// A tile whose rows `M..` repeat row `M - 1` (`M >= 1`).
+#[inline]
+fn padded<const M: usize>(r: [[f32; TN]; M]) -> Tile {
+    core::array::from_fn(|m| r[m.min(M - 1)])
+}
+
+/// Rows `0..M` of [`tile_512`] (each row's dots in the same order for any `M`).
+///
+/// # Safety
+/// As [`tile_512`]; `M <= TM`.
+#[inline]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
+unsafe fn rows_512<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize, load: &impl Fn(&[E], usize) -> __m512, tail: &impl Fn(&[E], usize, __mmask16) -> __m512) -> [[f32; TN]; M] {
     let k16 = k - k % 16;
-    let mut acc = [[_mm512_setzero_ps(); TN]; TM];
+    let mut acc = [[_mm512_setzero_ps(); TN]; M];
     let mut c = 0;
     while c < k16 {
-        // SAFETY: c + 16 <= k: 16 u16 (one 256-bit load) of each row in bounds.
-        let wv: [__m512; TN] = core::array::from_fn(|n| unsafe { _mm512_cvtph_ps(_mm256_loadu_si256(w[n].as_ptr().add(c) as *const __m256i)) });
-        for (am, xm) in acc.iter_mut().zip(&x) {
+        let wv: [__m512; TN] = core::array::from_fn(|n| load(w[n], c));
+        for (am, xm) in acc.iter_mut().zip(x) {
             // SAFETY: every x[m] holds at least k floats.
             let xv = unsafe { _mm512_loadu_ps(xm.as_ptr().add(c)) };
             for (a, wn) in am.iter_mut().zip(&wv) {
@@ -337,10 +361,9 @@ pub unsafe fn tile_f16_512(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
     }
     if c < k {
         let mk = lanes16(k - c);
-        // SAFETY: masked loads read only lanes c..k, inside every row.
-        let wv: [__m512; TN] = core::array::from_fn(|n| unsafe { _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(mk, w[n].as_ptr().add(c) as *const i16)) });
-        for (am, xm) in acc.iter_mut().zip(&x) {
-            // SAFETY: as above.
+        let wv: [__m512; TN] = core::array::from_fn(|n| tail(w[n], c, mk));
+        for (am, xm) in acc.iter_mut().zip(x) {
+            // SAFETY: masked loads read only lanes c..k, inside every row.
             let xv = unsafe { _mm512_maskz_loadu_ps(mk, xm.as_ptr().add(c)) };
             for (a, wn) in am.iter_mut().zip(&wv) {
                 *a = _mm512_fmadd_ps(xv, *wn, *a);
