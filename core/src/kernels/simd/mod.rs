@@ -270,8 +270,9 @@ pub(crate) fn pairwise_rows(d: usize, mut f: impl FnMut(usize, usize) -> f32) ->
 /// handing the last row again (the same slice), and rows that repeat the
 /// one before them at the end of `x` give that row's numbers, so the f32 /
 /// f16 tiles compute rows `0..distinct_rows(x)` and copy the rest (a 1-row
-/// GEMV does a quarter of the multiplies; bit-identical, tested by
-/// `wide_tiles_give_repeated_rows_the_numbers_of_copies`).
+/// GEMV does a quarter of the multiplies; every f32 / f16 tile, the scalar
+/// one included; bit-identical, tested by
+/// `simd_tiles_give_repeated_rows_the_numbers_of_copies`).
 #[inline]
 pub(crate) fn distinct_rows<T>(x: &[&[T]; TM]) -> usize {
     let mut d = TM;

@@ -2,7 +2,7 @@
 //! definition each SIMD variant is tested against, and the path taken on
 //! targets without a SIMD variant.
 
-use super::{f16_to_f32, pairwise, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
+use super::{distinct_rows, f16_to_f32, pairwise, pairwise_rows, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 
 /// `a . b` over `min(len)` with 8 independent accumulators (the summation
 /// order SIMD variants approximate; they differ by rounding only).
@@ -74,18 +74,19 @@ pub(crate) fn common<A, B>(w: &[&[A]; TN], x: &[&[B]; TM]) -> usize {
 
 /// Tile twin of [`dot_f32`]: `out[m][n] = dot_f32(w[n][..k], x[m][..k])`
 /// with `k` the shortest row of the tile (the reference every tiled SIMD
-/// kernel is tested against).
+/// kernel is tested against). Activation rows repeated at the end of `x`
+/// are computed once ([`distinct_rows`]: the same numbers).
 #[inline]
 pub fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
     let k = common(&w, &x);
-    pairwise(|m, n| dot_f32(&w[n][..k], &x[m][..k]))
+    pairwise_rows(distinct_rows(&x), |m, n| dot_f32(&w[n][..k], &x[m][..k]))
 }
 
 /// Tile twin of [`dot_f16`] (over the shortest row, as [`tile_f32`]).
 #[inline]
 pub fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
     let k = common(&w, &x);
-    pairwise(|m, n| dot_f16(&w[n][..k], &x[m][..k]))
+    pairwise_rows(distinct_rows(&x), |m, n| dot_f16(&w[n][..k], &x[m][..k]))
 }
 
 /// The fewest int8 blocks of any row of a tile.
