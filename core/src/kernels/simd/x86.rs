@@ -132,12 +132,12 @@ fn tile_len<A, B>(w: &[&[A]; TN], x: &[&[B]; TM]) -> usize {
 /// at the end of `x` are computed once ([`distinct_rows`]).
 ///
 /// # Safety
-/// The CPU must support avx2 and fma.
-#[target_feature(enable = "avx2,fma")]
+/// The CPU must support avx2, fma and f16c (as every x86 `Isa` does).
+#[target_feature(enable = "avx2,fma,f16c")]
 pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
     // SAFETY: lanes c..c + 8 of a row holding at least k >= c + 8 floats.
     let load = |r: &[f32], c: usize| unsafe { _mm256_loadu_ps(r.as_ptr().add(c)) };
-    // SAFETY: the caller's features are tile_256's (fma implies nothing more).
+    // SAFETY: the caller's features are tile_256's.
     unsafe { tile_256(w, x, load, |v: &f32| *v) }
 }
 
