@@ -368,8 +368,9 @@ fn padded<const M: usize>(r: [[f32; TN]; M]) -> Tile {
 /// One activation row `x` against the tile's weight rows, one weight row
 /// after another: per row the operations of [`rows_512`] for that entry
 /// (one accumulator over the 16-lane steps, the masked tail, one reduction),
-/// so the same numbers. Out of memory one weight stream at a time reads
-/// 1.4-2.5x faster than the tile's 4 rows side by side (docs/PERFORMANCE.md);
+/// so the same numbers. Out of memory one weight stream at a time ran
+/// 1.3-2.4x faster than the tile's 4 rows side by side on the measured
+/// shapes (f32 768x3072: 1.07x slower; docs/PERFORMANCE.md);
 /// 2-4 activation rows stay on the tile (row by row they leave L1 on long
 /// rows).
 ///
