@@ -7,9 +7,10 @@
 //! - the generic row reads (`row_into`, `dot`, `axpy`) are bit-identical;
 //! - `linear` is bit-identical wherever both take the same kernel (the
 //!   packed 8-row tile from 4 activation rows on under AVX512-VNNI, the
-//!   4-row tile on every other ISA, for rows up to `Q4_FAST_COLS`), and within the int8 kernels' summation
-//!   limit of the exact block sums elsewhere (x8 takes the packed tile from
-//!   one row on under VNNI);
+//!   4-row tile under scalar and NEON without dotprod, for rows up to
+//!   `Q4_FAST_COLS`), and within the int8 kernels' summation limit of the
+//!   exact block sums elsewhere (x8 takes the packed tile from one row on
+//!   under AVX512-VNNI, AVX-512, AVX2 and NEON dotprod);
 //! - an x8 row's output never depends on how many rows share the call.
 
 use duolando::duo_writer::{quantise_q4_block32, quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8};
@@ -111,10 +112,19 @@ fn x8_groups_compute_what_their_rows_compute_under_every_isa() {
                     linear(&x[..n * i], &mx, Some(&bias), &mut yx);
                     assert_eq!(bits(&yx), bits(&alone[..n * o]), "{isa:?} {name} ({o}, {i}): x8 rows alone vs {n} together");
                     // VNNI: the row layouts pack per call from 4 rows (and up
-                    // to PACK_BLOCKS blocks). Elsewhere x8 rows are expanded
-                    // for the same tile up to Q4_FAST_COLS wide, beyond which
-                    // x8 takes the chunked path (and so does Q4).
-                    let same_kernel = if simd::packed_q8_fast() { n >= 4 && i / 32 <= simd::PACK_BLOCKS && i < wide } else { i < wide || name == "q4" };
+                    // to PACK_BLOCKS blocks). AVX2, AVX-512 and NEON dotprod
+                    // read x8 groups in place with the packed kernel, the row
+                    // layouts take the 4-row tile: never the same kernel.
+                    // Elsewhere x8 rows are expanded for the same tile up to
+                    // Q4_FAST_COLS wide, beyond which x8 takes the chunked
+                    // path (and so does Q4).
+                    let same_kernel = if simd::q8_packing_pays() {
+                        n >= 4 && i / 32 <= simd::PACK_BLOCKS && i < wide
+                    } else if simd::packed_q8_fast() {
+                        false
+                    } else {
+                        i < wide || name == "q4"
+                    };
                     if same_kernel {
                         assert_eq!(bits(&yx), bits(&yp), "{isa:?} {name} ({o}, {i}) {n} rows: x8 vs rows");
                     }

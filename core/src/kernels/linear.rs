@@ -283,7 +283,7 @@ fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usi
         // Packing 8 weight rows per call pays off from a few activation
         // rows on (measured: at 1 row the unpacked VNNI tile is faster);
         // stored packed tiles are faster from one row on.
-        let packed = simd::packed_q8_fast() && (W::PREPACKED || (p1 - p0 >= PACK_MIN_ROWS && nb <= simd::PACK_BLOCKS));
+        let packed = simd::packed_q8_fast() && (W::PREPACKED || (simd::q8_packing_pays() && p1 - p0 >= PACK_MIN_ROWS && nb <= simd::PACK_BLOCKS));
         let p = &Q8Panel { q: &room.q, d: &room.d, c: &room.c };
         for ((w, b), y) in ws.iter().zip(bs).zip(ys.iter_mut()) {
             let n_out = w.rows();

@@ -691,10 +691,21 @@ impl Default for Q8Pack8 {
     }
 }
 
-/// Whether [`gemm_q8_packed`] has a fast variant on the selected ISA
-/// (x86 AVX512-VNNI); callers use [`gemm_q8`] otherwise.
+/// Whether [`gemm_q8_packed`] has a SIMD variant on the selected ISA
+/// (x86: AVX2, AVX-512, AVX512-VNNI; aarch64: NEON with dotprod), so that
+/// stored row groups (`Q8Block32x8`, `Q4Block32x8`) are read in place;
+/// callers expand them to rows for [`gemm_q8`] otherwise.
 #[inline]
 pub fn packed_q8_fast() -> bool {
+    matches!(isa(), Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni | Isa::NeonDot)
+}
+
+/// Whether packing 8 stored rows per tile ([`q8_pack8`]) for
+/// [`gemm_q8_packed`] pays off over [`gemm_q8`] on the rows (AVX512-VNNI,
+/// from a few activation rows on: measured). Elsewhere the packing itself
+/// is the scalar twin's byte copy.
+#[inline]
+pub fn q8_packing_pays() -> bool {
     isa() == Isa::Avx512Vnni
 }
 
@@ -722,6 +733,14 @@ pub fn gemm_q8_packed<const M: usize>(w: PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f3
         // SAFETY: ISA holds Avx512Vnni only via COMPILE_TIME_ISA or `set_isa`,
         // whose caller vouched for avx512f/bw/dq/vl/vnni + avx2/fma/f16c.
         Isa::Avx512Vnni => unsafe { x86::gemm_q8_packed_vnni(w, xq, xd, xc) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: ISA holds Avx2 or Avx512 only via COMPILE_TIME_ISA or
+        // `set_isa`, whose caller vouched for avx2/fma/f16c (both imply them).
+        Isa::Avx2 | Isa::Avx512 => unsafe { x86::gemm_q8_packed_avx2(w, xq, xd, xc) },
+        #[cfg(target_arch = "aarch64")]
+        // SAFETY: ISA holds NeonDot only via COMPILE_TIME_ISA or `set_isa`,
+        // whose caller vouched for neon + dotprod.
+        Isa::NeonDot => unsafe { neon::gemm_q8_packed_dot(w, xq, xd, xc) },
         _ => scalar::gemm_q8_packed(w, xq, xd, xc),
     }
 }

@@ -274,6 +274,115 @@ pub unsafe fn gemm_q8_dot<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: 
     acc.map(|am| am.map(|a| vaddvq_f32(a)))
 }
 
+/// See [`super::gemm_q8_packed`] with `sdot`: the stored groups read in
+/// place, no expansion to rows. Per block and 8-byte group `g`, the
+/// group's four 16-byte quarters (weight rows `2j, 2j + 1`) are `sdot`
+/// against the activation group held twice (int8: the stored values;
+/// 4-bit: the nibbles less 8, so no correction): i32 lanes `(2r, 2r + 1)`
+/// hold the halves of row `r`'s block dot, exact; `addp` gives the 8 block
+/// sums. The f32 steps are those of the AVX512-VNNI kernel (per block one
+/// convert, one scale product `s_n,b * xd_b`, one FMA; even and odd
+/// blocks in their own accumulators, added at the end); `xc` unused.
+///
+/// The activation rows go 4 at most at a time (shared evenly), each row's
+/// numbers the same whatever its company.
+///
+/// # Safety
+/// NEON and the dotprod extension must be available.
+#[target_feature(enable = "neon,dotprod")]
+pub unsafe fn gemm_q8_packed_dot<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], _xc: [&[i32]; M]) -> [[f32; 8]; M] {
+    let mut out = [[0.0f32; 8]; M];
+    let mut part = |m0: usize, k: usize| {
+        macro_rules! run {
+            ($k:literal) => {{
+                let (q, d): ([&[i8]; $k], [&[f32]; $k]) = (core::array::from_fn(|m| xq[m0 + m]), core::array::from_fn(|m| xd[m0 + m]));
+                // SAFETY: the caller's features are these functions'.
+                let t = unsafe { if w.q4 { packed_dot::<$k, true>(w, q, d) } else { packed_dot::<$k, false>(w, q, d) } };
+                out[m0..m0 + $k].copy_from_slice(&t);
+            }};
+        }
+        match k {
+            1 => run!(1),
+            2 => run!(2),
+            3 => run!(3),
+            _ => run!(4),
+        }
+    };
+    let mut m0 = 0;
+    while m0 < M {
+        let left = M - m0;
+        let k = left.div_ceil(left.div_ceil(4));
+        part(m0, k);
+        m0 += k;
+    }
+    out
+}
+
+/// [`gemm_q8_packed_dot`] for `K` (1..=4) activation rows and one value
+/// width (`Q4`: 4-bit halves).
+///
+/// # Safety
+/// As [`gemm_q8_packed_dot`].
+#[inline]
+#[target_feature(enable = "neon,dotprod")]
+unsafe fn packed_dot<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K]) -> [[f32; 8]; K] {
+    use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
+    let pv = if Q4 { PN } else { PV };
+    let nb = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).fold(w.blocks().min(w.v.len() / pv).min(w.s.len() / PS), usize::min);
+    let low = vdupq_n_u8(0x0f);
+    let eight = vdupq_n_s8(8);
+    // [row m][even / odd blocks][rows 0-3 / 4-7].
+    let mut acc = [[[vdupq_n_f32(0.0); 2]; 2]; K];
+    for b in 0..nb {
+        let vb = &w.v[pv * b..pv * (b + 1)];
+        let sb = &w.s[PS * b..PS * (b + 1)];
+        // SAFETY: sb holds 8 f16 (16 bytes).
+        let s16 = unsafe { vld1q_u16(sb.as_ptr() as *const u16) };
+        // SAFETY: this function's features include f16x4_to_f32's.
+        let sv = unsafe { [f16x4_to_f32(vget_low_u16(s16)), f16x4_to_f32(vget_high_u16(s16))] };
+        // [row m][quarter j]: lanes (2r, 2r + 1) = halves of row 2j + r's block dot.
+        let mut dp = [[vdupq_n_s32(0); 4]; K];
+        for g in 0..4 {
+            let wg: [int8x16_t; 4] = core::array::from_fn(|j| {
+                if Q4 {
+                    // SAFETY: vb holds 2 x 64 bytes; 64 (g % 2) + 16 j + 16 <= 128.
+                    let v = unsafe { vld1q_u8(vb.as_ptr().add(64 * (g % 2) + 16 * j)) };
+                    let nib = if g < 2 { vandq_u8(v, low) } else { vshrq_n_u8::<4>(v) };
+                    vsubq_s8(vreinterpretq_s8_u8(nib), eight)
+                } else {
+                    // SAFETY: vb holds 4 x 64 bytes; 64 g + 16 j + 16 <= 256.
+                    unsafe { vld1q_s8(vb.as_ptr().add(64 * g + 16 * j) as *const i8) }
+                }
+            });
+            for (m, dm) in dp.iter_mut().enumerate() {
+                let xs = &xq[m][b * Q8_BLOCK + 8 * g..b * Q8_BLOCK + 8 * g + 8];
+                // SAFETY: xs holds 8 bytes.
+                let xg = vreinterpretq_s8_u64(vdupq_n_u64(unsafe { (xs.as_ptr() as *const u64).read_unaligned() }));
+                for (d, wj) in dm.iter_mut().zip(&wg) {
+                    // SAFETY: this function's features are sdot's.
+                    *d = unsafe { sdot(*d, *wj, xg) };
+                }
+            }
+        }
+        for (m, am) in acc.iter_mut().enumerate() {
+            let sx = vdupq_n_f32(xd[m][b]);
+            let a = &mut am[b % 2];
+            for h in 0..2 {
+                let sums = vpaddq_s32(dp[m][2 * h], dp[m][2 * h + 1]);
+                a[h] = vfmaq_f32(a[h], vcvtq_f32_s32(sums), vmulq_f32(sv[h], sx));
+            }
+        }
+    }
+    let mut out = [[0.0f32; 8]; K];
+    for (o, a) in out.iter_mut().zip(acc) {
+        for h in 0..2 {
+            // SAFETY: o holds 8 floats: 4 at 4h.
+            unsafe { vst1q_f32(o.as_mut_ptr().add(4 * h), vaddq_f32(a[0][h], a[1][h])) };
+        }
+    }
+    out
+}
+
 /// `y += a * x` (fused multiply-add).
 ///
 /// # Safety

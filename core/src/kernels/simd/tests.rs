@@ -477,6 +477,81 @@ fn dot_rows_match_scalar_twin() {
 /// The packed 8-row kernel (selected ISA's variant when it has one, and the
 /// AVX512-VNNI variant directly where the CPU has it) against two calls of
 /// the scalar 4-row twin, M = 1..=8.
+/// The f32 bits of packed-kernel rows.
+fn bits8(t: &[[f32; 8]]) -> Vec<[u32; 8]> {
+    t.iter().map(|r| r.map(f32::to_bits)).collect()
+}
+
+/// Calls `f(m0, k)` for every run of `k` (1..=8) activation rows out of 8.
+#[allow(dead_code)]
+fn for_row_counts(f: &mut dyn FnMut(usize, usize)) {
+    for k in 1..=8 {
+        for m0 in 0..=8 - k {
+            f(m0, k);
+        }
+    }
+}
+
+/// The f32 steps every SIMD packed kernel performs (AVX512-VNNI, AMX, AVX2,
+/// NEON dotprod), written out: per row and block, the exact i32 block dot
+/// converted, times `s_n,b * xd_b`, fused into the even or the odd blocks'
+/// sum; the two sums added at the end. The kernels must equal it bit for
+/// bit, so an x8 file gives the same numbers on every such CPU.
+fn packed_paired_model(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]]) -> Vec<[f32; 8]> {
+    let nb = q.iter().map(|r| r.len() / Q8_BLOCK).chain(d.iter().map(|r| r.len())).fold(w.blocks(), usize::min);
+    q.iter()
+        .zip(d)
+        .map(|(qm, dm)| {
+            core::array::from_fn(|n| {
+                let mut acc = [0.0f32; 2];
+                for b in 0..nb {
+                    let isum: i32 = (0..Q8_BLOCK).map(|i| w.value(b, n, i) as i32 * qm[b * Q8_BLOCK + i] as i32).sum();
+                    acc[b % 2] = (isum as f32).mul_add(super::f16_to_f32(w.scale_bits(b, n)) * dm[b], acc[b % 2]);
+                }
+                acc[0] + acc[1]
+            })
+        })
+        .collect()
+}
+
+/// Dispatches a run of `q.len()` (1..=8) rows to the AVX2 packed kernel.
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+unsafe fn packed_rows_avx2(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]], c: &[&[i32]]) -> Vec<[f32; 8]> {
+    macro_rules! call {
+        ($($k:literal)*) => {
+            match q.len() {
+                // SAFETY: the caller's features.
+                $($k => unsafe { super::x86::gemm_q8_packed_avx2::<$k>(w, core::array::from_fn(|m| q[m]), core::array::from_fn(|m| d[m]), core::array::from_fn(|m| c[m])) }.to_vec(),)*
+                _ => unreachable!(),
+            }
+        };
+    }
+    call!(1 2 3 4 5 6 7 8)
+}
+
+/// Dispatches a run of `q.len()` (1..=8) rows to the NEON dotprod packed kernel.
+///
+/// # Safety
+/// The CPU must support neon and dotprod.
+#[cfg(target_arch = "aarch64")]
+#[allow(unsafe_code)]
+unsafe fn packed_rows_dot(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]], c: &[&[i32]]) -> Vec<[f32; 8]> {
+    macro_rules! call {
+        ($($k:literal)*) => {
+            match q.len() {
+                // SAFETY: the caller's features.
+                $($k => unsafe { super::neon::gemm_q8_packed_dot::<$k>(w, core::array::from_fn(|m| q[m]), core::array::from_fn(|m| d[m]), core::array::from_fn(|m| c[m])) }.to_vec(),)*
+                _ => unreachable!(),
+            }
+        };
+    }
+    call!(1 2 3 4 5 6 7 8)
+}
+
 #[test]
 #[allow(unsafe_code)]
 fn packed_gemm_q8_matches_scalar_twin() {
@@ -552,12 +627,42 @@ fn packed_gemm_q8_matches_scalar_twin() {
             use std::is_x86_feature_detected as has;
             if has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") && has!("avx512vnni") && has!("avx2") && has!("fma") && has!("f16c") {
                 // SAFETY: every feature of the kernel detected above.
-                got.push(("avx512vnni", unsafe { super::x86::gemm_q8_packed_vnni::<8>(view, q, d, c) }));
+                let v8 = unsafe { super::x86::gemm_q8_packed_vnni::<8>(view, q, d, c) };
+                got.push(("avx512vnni", v8));
                 // SAFETY: as above.
                 let t3 = unsafe { super::x86::gemm_q8_packed_vnni::<3>(stored, [q[2], q[3], q[4]], [d[2], d[3], d[4]], [c[2], c[3], c[4]]) };
-                let mut g = want;
+                let mut g = v8;
                 g[2..5].copy_from_slice(&t3);
                 got.push(("avx512vnni M=3", g));
+            }
+            if has!("avx2") && has!("fma") && has!("f16c") {
+                // SAFETY: every feature of the kernel detected above.
+                let a8 = unsafe { super::x86::gemm_q8_packed_avx2::<8>(view, q, d, c) };
+                got.push(("avx2", a8));
+                // Every row count gives each row the numbers it gets among 8.
+                for_row_counts(&mut |m0, k| {
+                    // SAFETY: as above.
+                    let t = unsafe { packed_rows_avx2(stored, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k]) };
+                    assert_eq!(bits8(&t), bits8(&a8[m0..m0 + k]), "avx2 rows {m0}..{} nb={nb}", m0 + k);
+                });
+            }
+        }
+        #[cfg(target_arch = "aarch64")]
+        if std::arch::is_aarch64_feature_detected!("dotprod") {
+            // SAFETY: neon (baseline) and dotprod detected.
+            let a8 = unsafe { super::neon::gemm_q8_packed_dot::<8>(view, q, d, c) };
+            got.push(("neondot", a8));
+            for_row_counts(&mut |m0, k| {
+                // SAFETY: as above.
+                let t = unsafe { packed_rows_dot(stored, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k]) };
+                assert_eq!(bits8(&t), bits8(&a8[m0..m0 + k]), "neondot rows {m0}..{} nb={nb}", m0 + k);
+            });
+        }
+        // Every SIMD variant performs the paired f32 steps: the same bits on every such CPU.
+        let model = bits8(&packed_paired_model(view, &q, &d));
+        for (name, g) in &got {
+            if !name.starts_with("dispatched") || super::packed_q8_fast() {
+                assert_eq!(bits8(g), model, "{name}: the paired f32 steps, bit for bit, nb={nb}");
             }
         }
         for (name, g) in got {
@@ -1282,6 +1387,26 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
 /// and AVX512-VNNI where the CPU has it, whose nibbles enter `vpdpbusd` as
 /// stored with the correction shifted to `-8 sum(q)`) computes exactly
 /// what it computes on the packed expansion: the i32 lane sums are equal.
+/// A packed kernel's 8 x 8 outputs against the scalar twin's, within the
+/// int8 GEMM limit of the block sums' magnitude (`rows`: the weight rows
+/// as Q8Block32 rows; `qs`, `ds`: the quantised activation rows).
+#[allow(dead_code)]
+fn check_packed_rows(name: &str, got: [[f32; 8]; 8], twin: [[f32; 8]; 8], rows: &[Vec<u8>], qs: &[Vec<i8>], ds: &[Vec<f32>], nb: usize) {
+    for m in 0..8 {
+        for j in 0..8 {
+            let s: f64 = (0..nb)
+                .map(|b| {
+                    let blk = &rows[j][b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
+                    let ws = super::f16_to_f32(u16::from_le_bytes([blk[0], blk[1]])) as f64;
+                    let a: i64 = blk[2..].iter().zip(&qs[m][b * 32..(b + 1) * 32]).map(|(&w, &x)| ((w as i8 as i64) * x as i64).abs()).sum();
+                    (ws * ds[m][b] as f64).abs() * a as f64
+                })
+                .sum();
+            check(&format!("{name} nb={nb} [{m}][{j}]"), got[m][j], twin[m][j], s, SIMD_VS_SCALAR_GEMM_Q8);
+        }
+    }
+}
+
 #[test]
 #[allow(unsafe_code)]
 fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
@@ -1335,6 +1460,22 @@ fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
                     let a3 = unsafe { super::x86::gemm_q8_packed_vnni::<3>(g, [q[1], q[2], q[7]], [d[1], d[2], d[7]], [c[1], c[2], c[7]]) };
                     assert_eq!(a3.map(|row| row.map(f32::to_bits)), [1, 2, 7].map(|m| bits(a)[m]), "M = 3 rows equal their rows of M = 8");
                 }
+                if has!("avx2") && has!("fma") && has!("f16c") {
+                    // SAFETY: every feature of the kernel detected above.
+                    let (a, b) = unsafe { (super::x86::gemm_q8_packed_avx2::<8>(g, q, d, c), super::x86::gemm_q8_packed_avx2::<8>(pack.view(), q, d, c)) };
+                    assert_eq!(bits(a), bits(b), "avx2 q4 group vs packed expansion nb={nb}");
+                    check_packed_rows("avx2 q4", a, twin, &rows8, &qs, &ds, nb);
+                    // SAFETY: as above.
+                    let a3 = unsafe { super::x86::gemm_q8_packed_avx2::<3>(g, [q[1], q[2], q[7]], [d[1], d[2], d[7]], [c[1], c[2], c[7]]) };
+                    assert_eq!(a3.map(|row| row.map(f32::to_bits)), [1, 2, 7].map(|m| bits(a)[m]), "avx2 M = 3 rows equal their rows of M = 8");
+                }
+            }
+            #[cfg(target_arch = "aarch64")]
+            if std::arch::is_aarch64_feature_detected!("dotprod") {
+                // SAFETY: neon (baseline) and dotprod detected.
+                let (a, b) = unsafe { (super::neon::gemm_q8_packed_dot::<8>(g, q, d, c), super::neon::gemm_q8_packed_dot::<8>(pack.view(), q, d, c)) };
+                assert_eq!(bits(a), bits(b), "neondot q4 group vs packed expansion nb={nb}");
+                check_packed_rows("neondot q4", a, twin, &rows8, &qs, &ds, nb);
             }
         }
     }

@@ -1139,6 +1139,137 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
     out
 }
 
+/// See [`super::gemm_q8_packed`] on 32-byte vectors (AVX2, and AVX-512
+/// without VNNI): the stored groups read in place, no expansion to rows.
+///
+/// Per block and 8-byte group `g`, the group's two 32-byte halves (weight
+/// rows 0-3, 4-7) are the unsigned operand of `vpmaddubsw` (int8: `|w|`,
+/// with the activation group broadcast to every lane and given `w`'s sign
+/// by `vpsignb`, the sign trick of [`gemm_q8_avx2`]; 4-bit: the stored
+/// nibbles `q + 8` against the activation group as it is, the sums started
+/// at the row's corrections shifted to `-8 sum(q)`), then `vpmaddwd` by
+/// ones: i32 lanes `(2r, 2r + 1)` hold the halves of weight row `r`'s
+/// block dot, exact. `vphaddd` of the two halves gives the 8 block sums
+/// (lanes: rows 0, 1, 4, 5 | 2, 3, 6, 7), and the f32 steps are
+/// [`gemm_q8_packed_vnni`]'s: per block one convert, one scale product
+/// `s_n,b * xd_b` and one FMA, even blocks and odd blocks in their own
+/// accumulators, added at the end, so both give the same bits.
+///
+/// The activation rows go 4 at most at a time (the rows shared evenly:
+/// 5 = 3 + 2), each row's numbers the same whatever its company.
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+#[target_feature(enable = "avx2,fma,f16c")]
+pub unsafe fn gemm_q8_packed_avx2<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; 8]; M] {
+    let mut out = [[0.0f32; 8]; M];
+    // Rows m0 .. m0 + K into `out`.
+    let mut part = |m0: usize, k: usize| {
+        macro_rules! run {
+            ($k:literal) => {{
+                let pick = |m: usize| m0 + m;
+                let (q, d, c): ([&[i8]; $k], [&[f32]; $k], [&[i32]; $k]) = (core::array::from_fn(|m| xq[pick(m)]), core::array::from_fn(|m| xd[pick(m)]), core::array::from_fn(|m| xc[pick(m)]));
+                // SAFETY: the caller's features are these functions'.
+                let t = unsafe { if w.q4 { packed_avx2::<$k, true>(w, q, d, c) } else { packed_avx2::<$k, false>(w, q, d, c) } };
+                out[m0..m0 + $k].copy_from_slice(&t);
+            }};
+        }
+        match k {
+            1 => run!(1),
+            2 => run!(2),
+            3 => run!(3),
+            _ => run!(4),
+        }
+    };
+    let mut m0 = 0;
+    while m0 < M {
+        let left = M - m0;
+        let k = left.div_ceil(left.div_ceil(4));
+        part(m0, k);
+        m0 += k;
+    }
+    out
+}
+
+/// [`gemm_q8_packed_avx2`] for `K` (1..=4) activation rows and one value
+/// width (`Q4`: 4-bit halves).
+///
+/// # Safety
+/// As [`gemm_q8_packed_avx2`].
+#[inline]
+#[target_feature(enable = "avx2,fma,f16c")]
+unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K], xc: [&[i32]; K]) -> [[f32; 8]; K] {
+    use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
+    let pv = if Q4 { PN } else { PV };
+    let nb = xq
+        .iter()
+        .map(|r| r.len() / Q8_BLOCK)
+        .chain(xd.iter().map(|r| r.len()))
+        .chain(xc.iter().map(|r| r.len() / 2))
+        .fold(w.blocks().min(w.v.len() / pv).min(w.s.len() / PS), usize::min);
+    let ones = _mm256_set1_epi16(1);
+    let low = _mm256_set1_epi8(0x0f);
+    // The lane order of `vphaddd` over the two halves, and back (its own inverse).
+    let order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
+    // [row m][even / odd blocks]: lanes in `order`.
+    let mut acc = [[_mm256_setzero_ps(); 2]; K];
+    for b in 0..nb {
+        let vb = &w.v[pv * b..pv * (b + 1)];
+        let sb = &w.s[PS * b..PS * (b + 1)];
+        // SAFETY: sb holds 8 f16 (128 bits).
+        let sv = _mm256_permutevar8x32_ps(_mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) }), order);
+        // [row m][weight rows 0-3 / 4-7]: i32 lanes (2r, 2r + 1) = halves of row r's block dot.
+        let mut dp: [[__m256i; 2]; K] = core::array::from_fn(|m| {
+            if Q4 {
+                let cs = &xc[m][2 * b..2 * b + 2];
+                // SAFETY: cs holds 2 i32 (8 bytes).
+                let c = _mm256_srai_epi32::<4>(_mm256_set1_epi64x(unsafe { (cs.as_ptr() as *const i64).read_unaligned() }));
+                [c, c]
+            } else {
+                [_mm256_setzero_si256(); 2]
+            }
+        });
+        for g in 0..4 {
+            let wg: [__m256i; 2] = core::array::from_fn(|h| {
+                if Q4 {
+                    // SAFETY: vb holds 2 x 64 bytes; 64 (g % 2) + 32 h + 32 <= 128.
+                    let v = unsafe { _mm256_loadu_si256(vb.as_ptr().add(64 * (g % 2) + 32 * h) as *const __m256i) };
+                    if g < 2 {
+                        _mm256_and_si256(v, low)
+                    } else {
+                        _mm256_and_si256(_mm256_srli_epi16::<4>(v), low)
+                    }
+                } else {
+                    // SAFETY: vb holds 4 x 64 bytes; 64 g + 32 h + 32 <= 256.
+                    unsafe { _mm256_loadu_si256(vb.as_ptr().add(64 * g + 32 * h) as *const __m256i) }
+                }
+            });
+            let uw = if Q4 { wg } else { wg.map(|v| _mm256_sign_epi8(v, v)) };
+            for (m, dm) in dp.iter_mut().enumerate() {
+                let xs = &xq[m][b * Q8_BLOCK + 8 * g..b * Q8_BLOCK + 8 * g + 8];
+                // SAFETY: xs holds 8 bytes.
+                let xg = _mm256_set1_epi64x(unsafe { (xs.as_ptr() as *const i64).read_unaligned() });
+                for h in 0..2 {
+                    let sx = if Q4 { xg } else { _mm256_sign_epi8(xg, wg[h]) };
+                    dm[h] = _mm256_add_epi32(dm[h], _mm256_madd_epi16(_mm256_maddubs_epi16(uw[h], sx), ones));
+                }
+            }
+        }
+        for (m, am) in acc.iter_mut().enumerate() {
+            // Lanes: the block sums of rows 0, 1, 4, 5 | 2, 3, 6, 7.
+            let sums = _mm256_hadd_epi32(dp[m][0], dp[m][1]);
+            let a = &mut am[b % 2];
+            *a = _mm256_fmadd_ps(_mm256_cvtepi32_ps(sums), _mm256_mul_ps(sv, _mm256_set1_ps(xd[m][b])), *a);
+        }
+    }
+    let mut out = [[0.0f32; 8]; K];
+    for (o, a) in out.iter_mut().zip(acc) {
+        // SAFETY: o holds 8 floats.
+        unsafe { _mm256_storeu_ps(o.as_mut_ptr(), _mm256_permutevar8x32_ps(_mm256_add_ps(a[0], a[1]), order)) };
+    }
+    out
+}
+
 /// See [`super::q8_pack8`]: per block, the 8 rows' 32 bytes (as 4 qwords
 /// each) transposed to 4 vectors of 8 qwords with two `vpermt2q` and one
 /// `vshufi64x2` stage; the 8 scale words gathered.
