@@ -474,9 +474,9 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
     while t0 < y.hi() {
         let nt = R.min(y.hi() - t0);
         let tile = w.packed_tile(t0, nb, &mut pack, &mut buf);
-        // The next tile's weights stream in while this one is multiplied.
-        if n_rows < AMX_MIN_ROWS {
-            simd::prefetch(w.stored_rows(t0 + R, (t0 + 2 * R).min(y.hi())));
+        // The weights two tiles ahead stream into L2 while this one is multiplied.
+        if n_rows < AMX_MIN_ROWS && t0 + PREFETCH_TILES * R < y.hi() {
+            simd::prefetch_l2(w.stored_rows(t0 + PREFETCH_TILES * R, (t0 + (PREFETCH_TILES + 1) * R).min(y.hi())));
         }
         let prepared = amx_planned > 0 && amx.as_mut().is_some_and(|a| a.prepare(0, tile));
         let Some(a) = amx.as_mut().filter(|_| prepared) else {
@@ -517,6 +517,10 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
         t0 += nt + nt1;
     }
 }
+
+/// How many packed tiles ahead [`q8_panel_packed`] prefetches (into L2;
+/// see [`simd::prefetch_l2`]).
+const PREFETCH_TILES: usize = 2;
 
 /// The fewest rows of a panel for which the AMX kernel runs (below it the
 /// VNNI rows with the next tile's prefetch are as fast: the S step's panels).
