@@ -474,25 +474,24 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
     while t0 < y.hi() {
         let nt = R.min(y.hi() - t0);
         let tile = w.packed_tile(t0, nb, &mut pack, &mut buf);
-        // The weights two tiles ahead stream into L2 while this one is multiplied.
-        if n_rows < AMX_MIN_ROWS && t0 + PREFETCH_TILES * R < y.hi() {
-            simd::prefetch_l2(w.stored_rows(t0 + PREFETCH_TILES * R, (t0 + (PREFETCH_TILES + 1) * R).min(y.hi())));
-        }
+        // The weights two tiles ahead stream into L2 while this one is
+        // multiplied, the prefetches spread over the kernel's blocks.
+        let ahead = if n_rows < AMX_MIN_ROWS && t0 + PREFETCH_TILES * R < y.hi() { w.stored_rows(t0 + PREFETCH_TILES * R, (t0 + (PREFETCH_TILES + 1) * R).min(y.hi())) } else { &[] };
         let prepared = amx_planned > 0 && amx.as_mut().is_some_and(|a| a.prepare(0, tile));
         let Some(a) = amx.as_mut().filter(|_| prepared) else {
-            vnni_rows(tile, p, 0, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t));
+            vnni_rows(tile, p, 0, n_rows, n_in, ahead, |i, t| put_row(&mut y, b, i, t0, nt, t));
             t0 += nt;
             continue;
         };
         // This tile's rows after the AMX rows, then the second tile's (or
         // this one again as a second operand whose results are dropped).
-        vnni_rows(tile, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t0, nt, t));
+        vnni_rows(tile, p, amx_planned, n_rows, n_in, &[], |i, t| put_row(&mut y, b, i, t0, nt, t));
         let t1 = t0 + R;
         let nt1 = if t1 < y.hi() { R.min(y.hi() - t1) } else { 0 };
         if nt1 > 0 {
             let tile1 = w.packed_tile(t1, nb, &mut pack, &mut buf);
             a.prepare(1, tile1);
-            vnni_rows(tile1, p, amx_planned, n_rows, n_in, |i, t| put_row(&mut y, b, i, t1, nt1, t));
+            vnni_rows(tile1, p, amx_planned, n_rows, n_in, &[], |i, t| put_row(&mut y, b, i, t1, nt1, t));
         } else {
             a.prepare(1, tile);
         }
@@ -510,7 +509,7 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
             for (tt, ntt) in [(t0, nt), (t1, nt1)] {
                 if ntt > 0 {
                     let tile = w.packed_tile(tt, nb, &mut pack, &mut buf);
-                    vnni_rows(tile, p, done, amx_planned, n_in, |i, t| put_row(&mut y, b, i, tt, ntt, t));
+                    vnni_rows(tile, p, done, amx_planned, n_in, &[], |i, t| put_row(&mut y, b, i, tt, ntt, t));
                 }
             }
         }
@@ -537,12 +536,17 @@ fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, 
 }
 
 /// Activation rows `r0..r1` of a panel against one packed tile on
-/// [`simd::gemm_q8_packed`], up to 8 rows per call (`put(row, values)`).
+/// [`simd::gemm_q8_packed_ahead`], up to 8 rows per call (`put(row,
+/// values)`), prefetching `ahead` (shared evenly among the calls).
 #[inline]
-fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_in: usize, mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS])) {
+fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_in: usize, ahead: &[u8], mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS])) {
     let nb = n_in / Q8_BLOCK;
-    let mut i0 = r0;
+    let calls = r1.saturating_sub(r0).div_ceil(simd::PACK_ROWS).max(1);
+    let (mut i0, mut k) = (r0, 0);
     while i0 < r1 {
+        // Call k's share of `ahead`.
+        let share = &ahead[(k * ahead.len() / calls).min(ahead.len())..((k + 1) * ahead.len() / calls).min(ahead.len())];
+        k += 1;
         // The fewest calls, the rows shared evenly among them: 10 rows (a
         // GPT step) run as 5 + 5, not 8 + 2, ~8% faster on AVX512-VNNI (a
         // call of 1-2 rows waits on its dot chains). A row's numbers do not
@@ -555,7 +559,7 @@ fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_
         let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
         macro_rules! run {
             ($m:literal) => {{
-                let t = simd::gemm_q8_packed::<$m>(tile, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
+                let t = simd::gemm_q8_packed_ahead::<$m>(tile, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c), share);
                 for (m, r) in t.iter().enumerate() {
                     put(i0 + m, r);
                 }

@@ -291,13 +291,25 @@ pub unsafe fn gemm_q8_dot<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: 
 /// NEON and the dotprod extension must be available.
 #[target_feature(enable = "neon,dotprod")]
 pub unsafe fn gemm_q8_packed_dot<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], _xc: [&[i32]; M]) -> [[f32; 8]; M] {
+    // SAFETY: the caller's features are this function's.
+    unsafe { gemm_q8_packed_dot_ahead(w, xq, xd, _xc, &[]) }
+}
+
+/// [`gemm_q8_packed_dot`] that also prefetches `ahead` into L2, spread over the
+/// blocks of its first pass ([`super::prefetch_part`]).
+///
+/// # Safety
+/// As [`gemm_q8_packed_dot`].
+#[target_feature(enable = "neon,dotprod")]
+pub unsafe fn gemm_q8_packed_dot_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], _xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
     let mut out = [[0.0f32; 8]; M];
     let mut part = |m0: usize, k: usize| {
         macro_rules! run {
             ($k:literal) => {{
                 let (q, d): ([&[i8]; $k], [&[f32]; $k]) = (core::array::from_fn(|m| xq[m0 + m]), core::array::from_fn(|m| xd[m0 + m]));
+                let a = if m0 == 0 { ahead } else { &[] };
                 // SAFETY: the caller's features are these functions'.
-                let t = unsafe { if w.q4 { packed_dot::<$k, true>(w, q, d) } else { packed_dot::<$k, false>(w, q, d) } };
+                let t = unsafe { if w.q4 { packed_dot::<$k, true>(w, q, d, a) } else { packed_dot::<$k, false>(w, q, d, a) } };
                 out[m0..m0 + $k].copy_from_slice(&t);
             }};
         }
@@ -325,7 +337,7 @@ pub unsafe fn gemm_q8_packed_dot<const M: usize>(w: super::PackedQ8<'_>, xq: [&[
 /// As [`gemm_q8_packed_dot`].
 #[inline]
 #[target_feature(enable = "neon,dotprod")]
-unsafe fn packed_dot<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K]) -> [[f32; 8]; K] {
+unsafe fn packed_dot<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K], ahead: &[u8]) -> [[f32; 8]; K] {
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
     let nb = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).fold(w.blocks().min(w.v.len() / pv).min(w.s.len() / PS), usize::min);
@@ -334,6 +346,7 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq:
     // [row m][even / odd blocks][rows 0-3 / 4-7].
     let mut acc = [[[vdupq_n_f32(0.0); 2]; 2]; K];
     for b in 0..nb {
+        super::prefetch_part(ahead, b, nb);
         let vb = &w.v[pv * b..pv * (b + 1)];
         let sb = &w.s[PS * b..PS * (b + 1)];
         // SAFETY: sb holds 8 f16 (16 bytes).

@@ -1910,3 +1910,23 @@ fn narrow_f16_matches_scalar_twin() {
         }
     }
 }
+
+/// The prefetch shares of a kernel's blocks cover the bytes ahead once, in
+/// order, at line boundaries; parts past the last (and 0 parts) are empty.
+#[test]
+fn prefetch_parts_cover_the_bytes_once() {
+    for len in [0usize, 1, 63, 64, 65, 6528, 26112, 100_000] {
+        for parts in [1usize, 2, 3, 12, 24, 96, 200] {
+            let mut at = 0;
+            for i in 0..parts {
+                let (b0, b1) = super::part_bytes(len, i, parts);
+                assert_eq!(b0, at, "len {len} parts {parts} part {i} starts where the last ended");
+                assert!(b1 >= b0 && (b1 % 64 == 0 || b1 == len), "len {len} parts {parts} part {i}: {b0}..{b1}");
+                at = b1;
+            }
+            assert_eq!(at, len, "len {len} parts {parts}: covered");
+            assert_eq!(super::part_bytes(len, parts, parts).0, super::part_bytes(len, parts, parts).1);
+        }
+        assert_eq!(super::part_bytes(len, 0, 0), (0, 0));
+    }
+}

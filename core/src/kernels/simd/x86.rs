@@ -1035,12 +1035,23 @@ unsafe fn reduce4(a: [__m512; 4]) -> __m512 {
 /// The CPU must support avx512f/bw/dq/vl/vnni, avx2, fma and f16c.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
 pub unsafe fn gemm_q8_packed_vnni<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; 8]; M] {
+    // SAFETY: the caller's features are this function's.
+    unsafe { gemm_q8_packed_vnni_ahead(w, xq, xd, xc, &[]) }
+}
+
+/// [`gemm_q8_packed_vnni`] that also prefetches `ahead` into L2, spread
+/// over its block pairs ([`super::prefetch_part`]).
+///
+/// # Safety
+/// As [`gemm_q8_packed_vnni`].
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
+pub unsafe fn gemm_q8_packed_vnni_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
     if w.q4 {
         // SAFETY: the caller's features are this function's.
-        unsafe { packed_vnni::<M, true>(w, xq, xd, xc) }
+        unsafe { packed_vnni::<M, true>(w, xq, xd, xc, ahead) }
     } else {
         // SAFETY: as above.
-        unsafe { packed_vnni::<M, false>(w, xq, xd, xc) }
+        unsafe { packed_vnni::<M, false>(w, xq, xd, xc, ahead) }
     }
 }
 
@@ -1050,7 +1061,7 @@ pub unsafe fn gemm_q8_packed_vnni<const M: usize>(w: super::PackedQ8<'_>, xq: [&
 /// As [`gemm_q8_packed_vnni`].
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
-unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; 8]; M] {
+unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
     let nb = xq
@@ -1100,7 +1111,9 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
     };
     let mut acc = [_mm512_setzero_ps(); M];
     let mut b = 0;
+    let pairs = nb.div_ceil(2);
     while b + 1 < nb {
+        super::prefetch_part(ahead, b / 2, pairs);
         let (w0, s0) = block(b);
         let (w1, s1) = block(b + 1);
         // Lane 2n: s_n,b; lane 2n + 1: s_n,b+1.
@@ -1116,6 +1129,7 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
         b += 2;
     }
     if b < nb {
+        super::prefetch_part(ahead, b / 2, pairs);
         let (w0, s0) = block(b);
         let dup = _mm512_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
         let sv = _mm512_permutexvar_ps(dup, _mm512_castps256_ps512(s0));
@@ -1162,6 +1176,17 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
 /// The CPU must support avx2, fma and f16c.
 #[target_feature(enable = "avx2,fma,f16c")]
 pub unsafe fn gemm_q8_packed_avx2<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; 8]; M] {
+    // SAFETY: the caller's features are this function's.
+    unsafe { gemm_q8_packed_avx2_ahead(w, xq, xd, xc, &[]) }
+}
+
+/// [`gemm_q8_packed_avx2`] that also prefetches `ahead` into L2, spread over the
+/// blocks of its first pass ([`super::prefetch_part`]).
+///
+/// # Safety
+/// As [`gemm_q8_packed_avx2`].
+#[target_feature(enable = "avx2,fma,f16c")]
+pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
     let mut out = [[0.0f32; 8]; M];
     // Rows m0 .. m0 + K into `out`.
     let mut part = |m0: usize, k: usize| {
@@ -1169,8 +1194,9 @@ pub unsafe fn gemm_q8_packed_avx2<const M: usize>(w: super::PackedQ8<'_>, xq: [&
             ($k:literal) => {{
                 let pick = |m: usize| m0 + m;
                 let (q, d, c): ([&[i8]; $k], [&[f32]; $k], [&[i32]; $k]) = (core::array::from_fn(|m| xq[pick(m)]), core::array::from_fn(|m| xd[pick(m)]), core::array::from_fn(|m| xc[pick(m)]));
+                let a = if m0 == 0 { ahead } else { &[] };
                 // SAFETY: the caller's features are these functions'.
-                let t = unsafe { if w.q4 { packed_avx2::<$k, true>(w, q, d, c) } else { packed_avx2::<$k, false>(w, q, d, c) } };
+                let t = unsafe { if w.q4 { packed_avx2::<$k, true>(w, q, d, c, a) } else { packed_avx2::<$k, false>(w, q, d, c, a) } };
                 out[m0..m0 + $k].copy_from_slice(&t);
             }};
         }
@@ -1198,7 +1224,7 @@ pub unsafe fn gemm_q8_packed_avx2<const M: usize>(w: super::PackedQ8<'_>, xq: [&
 /// As [`gemm_q8_packed_avx2`].
 #[inline]
 #[target_feature(enable = "avx2,fma,f16c")]
-unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K], xc: [&[i32]; K]) -> [[f32; 8]; K] {
+unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K], xc: [&[i32]; K], ahead: &[u8]) -> [[f32; 8]; K] {
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
     let nb = xq
@@ -1214,6 +1240,7 @@ unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
     // [row m][even / odd blocks]: lanes in `order`.
     let mut acc = [[_mm256_setzero_ps(); 2]; K];
     for b in 0..nb {
+        super::prefetch_part(ahead, b, nb);
         let vb = &w.v[pv * b..pv * (b + 1)];
         let sb = &w.s[PS * b..PS * (b + 1)];
         // SAFETY: sb holds 8 f16 (128 bits).
