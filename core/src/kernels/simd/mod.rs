@@ -214,6 +214,20 @@ pub fn prefetch_l2(bytes: &[u8]) {
     let _ = bytes;
 }
 
+/// Splits `m` activation rows into the fewest passes of at most `most`
+/// rows, the rows shared evenly (10 rows at most 8: 5 + 5; 5 at most 4:
+/// 3 + 2): `f(first row, rows)` per pass, in order.
+#[inline(always)]
+pub(crate) fn even_passes(m: usize, most: usize, f: &mut impl FnMut(usize, usize)) {
+    let mut m0 = 0;
+    while m0 < m {
+        let left = m - m0;
+        let k = left.div_ceil(left.div_ceil(most.max(1)));
+        f(m0, k);
+        m0 += k;
+    }
+}
+
 /// Prefetches (into L2) part `i` of `parts` of `ahead`'s 64-byte lines: a
 /// kernel that calls it once per block (pair) spreads the next tiles'
 /// prefetch over its work. One burst of a tile's lines at the tile's start
@@ -667,6 +681,17 @@ impl<'a> PackedQ8<'a> {
     }
     pub fn blocks(&self) -> usize {
         self.nb
+    }
+    /// The blocks a packed kernel computes: the group's, cut to what every
+    /// activation row, scale row and correction row (2 per block) holds.
+    #[inline]
+    pub(crate) fn blocks_for<const M: usize, const C: usize>(&self, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; C]) -> usize {
+        let pv = if self.q4 { PACK_BLOCK_NIBBLES } else { PACK_BLOCK_VALUES };
+        xq.iter()
+            .map(|r| r.len() / Q8_BLOCK)
+            .chain(xd.iter().map(|r| r.len()))
+            .chain(xc.iter().map(|r| r.len() / 2))
+            .fold(self.nb.min(self.v.len() / pv).min(self.s.len() / PACK_BLOCK_SCALES), usize::min)
     }
     /// Row `n`'s value `i` (0..32) of block `b` (`n < 8`, `b < nb`), as the
     /// signed integer the scale multiplies.

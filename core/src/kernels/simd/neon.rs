@@ -320,13 +320,7 @@ pub unsafe fn gemm_q8_packed_dot_ahead<const M: usize>(w: super::PackedQ8<'_>, x
             _ => run!(4),
         }
     };
-    let mut m0 = 0;
-    while m0 < M {
-        let left = M - m0;
-        let k = left.div_ceil(left.div_ceil(4));
-        part(m0, k);
-        m0 += k;
-    }
+    super::even_passes(M, 4, &mut part);
     out
 }
 
@@ -340,7 +334,7 @@ pub unsafe fn gemm_q8_packed_dot_ahead<const M: usize>(w: super::PackedQ8<'_>, x
 unsafe fn packed_dot<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K], ahead: &[u8]) -> [[f32; 8]; K] {
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
-    let nb = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).fold(w.blocks().min(w.v.len() / pv).min(w.s.len() / PS), usize::min);
+    let nb = w.blocks_for(xq, xd, []);
     let low = vdupq_n_u8(0x0f);
     let eight = vdupq_n_s8(8);
     // [row m][even / odd blocks][rows 0-3 / 4-7].

@@ -1064,12 +1064,8 @@ pub unsafe fn gemm_q8_packed_vnni_ahead<const M: usize>(w: super::PackedQ8<'_>, 
 unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
-    let nb = xq
-        .iter()
-        .map(|r| r.len() / Q8_BLOCK)
-        .chain(xd.iter().map(|r| r.len()))
-        .chain(xc.iter().map(|r| r.len() / 2))
-        .fold(w.blocks().min(w.v.len() / pv).min(w.s.len() / PS), usize::min);
+    debug_assert_eq!(w.q4, Q4);
+    let nb = w.blocks_for(xq, xd, xc);
     let flip = _mm512_set1_epi8(-128);
     let low = _mm512_set1_epi8(0x0f);
     let ilv = _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
@@ -1207,13 +1203,7 @@ pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(w: super::PackedQ8<'_>, 
             _ => run!(4),
         }
     };
-    let mut m0 = 0;
-    while m0 < M {
-        let left = M - m0;
-        let k = left.div_ceil(left.div_ceil(4));
-        part(m0, k);
-        m0 += k;
-    }
+    super::even_passes(M, 4, &mut part);
     out
 }
 
@@ -1227,12 +1217,8 @@ pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(w: super::PackedQ8<'_>, 
 unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K], xc: [&[i32]; K], ahead: &[u8]) -> [[f32; 8]; K] {
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
-    let nb = xq
-        .iter()
-        .map(|r| r.len() / Q8_BLOCK)
-        .chain(xd.iter().map(|r| r.len()))
-        .chain(xc.iter().map(|r| r.len() / 2))
-        .fold(w.blocks().min(w.v.len() / pv).min(w.s.len() / PS), usize::min);
+    debug_assert_eq!(w.q4, Q4);
+    let nb = w.blocks_for(xq, xd, xc);
     let ones = _mm256_set1_epi16(1);
     let low = _mm256_set1_epi8(0x0f);
     // The lane order of `vphaddd` over the two halves, and back (its own inverse).
