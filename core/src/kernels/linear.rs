@@ -456,7 +456,7 @@ fn q8_panel_tiles<W: Q8Source, const WB: usize>(w: &W, b: Option<&[f32]>, mut y:
 
 /// [`q8_panel_tiles`] over packed tiles of 8 weight rows (stored packed,
 /// or packed once per tile: [`Q8Source::packed_tile`]) and activation
-/// tiles of up to 8 rows ([`simd::gemm_q8_packed`]; the AVX512-VNNI path).
+/// tiles of up to [`PACKED_CALL_ROWS`] rows ([`simd::gemm_q8_packed`]).
 /// Where AMX runs ([`simd::amx_enabled`]) and the panel has at least
 /// [`AMX_MIN_ROWS`] rows, tiles go in pairs and their whole 8-row groups of
 /// activation rows take the AMX kernel, which gives the same values bit for
@@ -535,24 +535,34 @@ fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, 
     }
 }
 
+/// Most activation rows per call of the packed int8 kernel. The rows of a
+/// panel go in the fewest calls, shared evenly ([`simd::even_passes`]): a
+/// GPT step's 10 rows in one call, 16 as 8 + 8, 20 as 10 + 10. Each call
+/// reads the tile's blocks and widens their scales once for all its rows
+/// (on AVX-512 VNNI 12 accumulators and the two blocks' groups still fit
+/// the 32 registers). Measured on AVX512-VNNI (2026-12-03, int8 x8, 128 MB
+/// of distinct weights): at most 12 against at most 8 rows per call, 10
+/// rows of 3072x768 / 768x3072 / 2304x768 / 768x768 0.85-0.95x the time
+/// cold, 0.71-0.88x hot; 12 and 20 rows 0.86-0.98x. Until then 8, and until
+/// 2026-12-03 morning 8 + 2 for 10 rows (5 + 5 was ~8% faster). A row's
+/// numbers do not depend on its call's size. The AVX2 and NEON packed
+/// kernels split a call into passes of at most 4 rows themselves.
+const PACKED_CALL_ROWS: usize = 12;
+
 /// Activation rows `r0..r1` of a panel against one packed tile on
-/// [`simd::gemm_q8_packed_ahead`], up to 8 rows per call (`put(row,
-/// values)`), prefetching `ahead` (shared evenly among the calls).
+/// [`simd::gemm_q8_packed_ahead`], in calls of up to [`PACKED_CALL_ROWS`]
+/// rows (`put(row, values)`), prefetching `ahead` (each call its share:
+/// [`simd::part_bytes`]).
 #[inline]
 fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_in: usize, ahead: &[u8], mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS])) {
     let nb = n_in / Q8_BLOCK;
-    let calls = r1.saturating_sub(r0).div_ceil(simd::PACK_ROWS).max(1);
-    let (mut i0, mut k) = (r0, 0);
-    while i0 < r1 {
-        // Call k's share of `ahead`.
-        let share = &ahead[(k * ahead.len() / calls).min(ahead.len())..((k + 1) * ahead.len() / calls).min(ahead.len())];
+    let calls = r1.saturating_sub(r0).div_ceil(PACKED_CALL_ROWS);
+    let mut k = 0;
+    simd::even_passes(r1.saturating_sub(r0), PACKED_CALL_ROWS, &mut |m0, mt| {
+        let i0 = r0 + m0;
+        let (a0, a1) = simd::part_bytes(ahead.len(), k, calls);
+        let share = &ahead[a0..a1];
         k += 1;
-        // The fewest calls, the rows shared evenly among them: 10 rows (a
-        // GPT step) run as 5 + 5, not 8 + 2, ~8% faster on AVX512-VNNI (a
-        // call of 1-2 rows waits on its dot chains). A row's numbers do not
-        // depend on its call's size.
-        let left = r1 - i0;
-        let mt = left.div_ceil(left.div_ceil(simd::PACK_ROWS));
         let pr = |m: usize| i0 + m.min(mt - 1);
         let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
         let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
@@ -573,10 +583,13 @@ fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_
             5 => run!(5),
             6 => run!(6),
             7 => run!(7),
-            _ => run!(8),
+            8 => run!(8),
+            9 => run!(9),
+            10 => run!(10),
+            11 => run!(11),
+            _ => run!(12),
         }
-        i0 += mt;
-    }
+    });
 }
 
 /// The first `rows` activation rows of a panel (a multiple of
@@ -591,8 +604,9 @@ fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel<'_>, rows: usize, n_in: usize, ahe
     let mut i0 = 0;
     while i0 < rows {
         let k = (rows - i0).min(CALL_ROWS);
-        // This call's share of `ahead` (by rows).
-        let share = &ahead[i0 * ahead.len() / rows..(i0 + k) * ahead.len() / rows];
+        // This call's share of `ahead`.
+        let (a0, a1) = simd::part_bytes(ahead.len(), i0 / CALL_ROWS, rows.div_ceil(CALL_ROWS));
+        let share = &ahead[a0..a1];
         let done = simd::gemm_q8_packed_amx(a, &p.q[i0 * n_in..rows * n_in], n_in, &p.d[i0 * nb..rows * nb], &mut out[..k], share);
         if done == 0 {
             break;

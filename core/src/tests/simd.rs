@@ -284,6 +284,46 @@ fn simd_tiles_give_repeated_rows_the_numbers_of_copies() {
     }
 }
 
+/// Each row of a 2-4-row f32 / f16 tile gets the numbers of that row's
+/// 1-row tile, bit for bit, under every tile variant (the scalar one
+/// included): per entry one accumulation in the same order, whether the
+/// tile takes its weight rows side by side or one after another (AVX-512
+/// takes them one after another up to `SEQ_TILE_VALUES` activation
+/// values: k = 768 at 4 rows, 1536 at 2; longer k stays side by side).
+#[test]
+fn tile_rows_equal_one_row_tiles_bit_for_bit() {
+    type Tiles = (&'static str, fn([&[f32]; TN], [&[f32]; TM]) -> Tile, fn([&[u16]; TN], [&[f32]; TM]) -> Tile);
+    let mut tiles: Vec<Tiles> = variants().iter().map(|v| (v.name, v.tile_f32, v.tile_f16)).collect();
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512bw") && std::is_x86_feature_detected!("avx512vl") && std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("f16c") {
+        // SAFETY (both): the CPU supports the 16-wide tiles' features (checked above).
+        tiles.push(("avx512", |w, x| unsafe { simd::x86::tile_f32_512(w, x) }, |w, x| unsafe { simd::x86::tile_f16_512(w, x) }));
+    }
+    tiles.push(("scalar", scalar::tile_f32, scalar::tile_f16));
+    let mut r = Rng(0x0e0e_1234_0f0f_5678);
+    for (name, tf32, tf16) in tiles {
+        for k in [1usize, 15, 16, 17, 100, 512, 767, 768, 769, 1024, 1025, 1536, 1537, 2048] {
+            let ws: Vec<Vec<f32>> = (0..TN).map(|_| r.vec(k)).collect();
+            let hs: Vec<Vec<u16>> = ws.iter().map(|w| f16_bits(w)).collect();
+            let w: [&[f32]; TN] = std::array::from_fn(|j| &ws[j][..]);
+            let hw: [&[u16]; TN] = std::array::from_fn(|j| &hs[j][..]);
+            let xs: Vec<Vec<f32>> = (0..TM).map(|_| r.vec(k)).collect();
+            let bits = |t: Tile| t.map(|row| row.map(f32::to_bits));
+            let alone: Vec<(Tile, Tile)> = xs.iter().map(|x| (tf32(w, [&x[..]; TM]), tf16(hw, [&x[..]; TM]))).collect();
+            for rows in 2..=TM {
+                // Rows past `rows` repeat the last one (a partial tile's padding).
+                let x: [&[f32]; TM] = std::array::from_fn(|m| &xs[m.min(rows - 1)][..]);
+                let (t32, t16) = (bits(tf32(w, x)), bits(tf16(hw, x)));
+                for m in 0..TM {
+                    let (a32, a16) = (bits(alone[m.min(rows - 1)].0), bits(alone[m.min(rows - 1)].1));
+                    assert_eq!(t32[m], a32[0], "{name} tile_f32 k={k} rows={rows} row {m}");
+                    assert_eq!(t16[m], a16[0], "{name} tile_f16 k={k} rows={rows} row {m}");
+                }
+            }
+        }
+    }
+}
+
 /// SIMD tile vs scalar tile twin, every entry: |simd - scalar| <= limit *
 /// sum |w_i x_i| (summation order and FMA rounding only).
 const SIMD_VS_SCALAR_TILE: f64 = 1e-6;

@@ -173,23 +173,11 @@ pub fn narrow_f16(src: &[f32], dst: &mut [u16]) {
 
 /// Hints the CPU to bring `bytes` into cache (one prefetch per 64-byte
 /// line; x86 `prefetcht0`, aarch64 `prfm pldl1keep`; nothing elsewhere).
-/// Changes no result: the weight streams of the int8 GEMMs call it one
-/// tile ahead so memory reads overlap the multiplies.
+/// Changes no result: the unpacked int8 tiles call it one tile ahead so
+/// memory reads overlap the multiplies.
 #[inline]
 pub fn prefetch(bytes: &[u8]) {
-    #[cfg(target_arch = "x86_64")]
-    for line in bytes.chunks(64) {
-        // SAFETY: a prefetch is a hint with no architectural effect; the
-        // address lies inside `bytes` (sse is baseline on x86_64).
-        unsafe { core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(line.as_ptr() as *const i8) };
-    }
-    #[cfg(target_arch = "aarch64")]
-    for line in bytes.chunks(64) {
-        // SAFETY: as above; `prfm` neither faults nor writes.
-        unsafe { core::arch::asm!("prfm pldl1keep, [{0}]", in(reg) line.as_ptr(), options(nostack, readonly, preserves_flags)) };
-    }
-    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
-    let _ = bytes;
+    prefetch_into::<false>(bytes)
 }
 
 /// [`prefetch`] into the second-level cache only (x86 `prefetcht1`,
@@ -200,22 +188,44 @@ pub fn prefetch(bytes: &[u8]) {
 /// time at 5-10 rows of 768-wide matrices).
 #[inline]
 pub fn prefetch_l2(bytes: &[u8]) {
+    prefetch_into::<true>(bytes)
+}
+
+/// One prefetch per 64-byte line of `bytes`, into L1 or (`L2`) into the
+/// second-level cache only.
+#[inline(always)]
+fn prefetch_into<const L2: bool>(bytes: &[u8]) {
     #[cfg(target_arch = "x86_64")]
     for line in bytes.chunks(64) {
-        // SAFETY: as in `prefetch`.
-        unsafe { core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T1 }>(line.as_ptr() as *const i8) };
+        use core::arch::x86_64::{_mm_prefetch, _MM_HINT_T0, _MM_HINT_T1};
+        let p = line.as_ptr() as *const i8;
+        // SAFETY: a prefetch is a hint with no architectural effect; the
+        // address lies inside `bytes` (sse is baseline on x86_64).
+        unsafe {
+            if L2 {
+                _mm_prefetch::<_MM_HINT_T1>(p)
+            } else {
+                _mm_prefetch::<_MM_HINT_T0>(p)
+            }
+        };
     }
     #[cfg(target_arch = "aarch64")]
     for line in bytes.chunks(64) {
-        // SAFETY: as in `prefetch`.
-        unsafe { core::arch::asm!("prfm pldl2keep, [{0}]", in(reg) line.as_ptr(), options(nostack, readonly, preserves_flags)) };
+        // SAFETY: as above; `prfm` neither faults nor writes.
+        unsafe {
+            if L2 {
+                core::arch::asm!("prfm pldl2keep, [{0}]", in(reg) line.as_ptr(), options(nostack, readonly, preserves_flags))
+            } else {
+                core::arch::asm!("prfm pldl1keep, [{0}]", in(reg) line.as_ptr(), options(nostack, readonly, preserves_flags))
+            }
+        };
     }
     #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
     let _ = bytes;
 }
 
 /// Splits `m` activation rows into the fewest passes of at most `most`
-/// rows, the rows shared evenly (10 rows at most 8: 5 + 5; 5 at most 4:
+/// rows, the rows shared evenly (10 rows at most 8: 5 + 5; 20 at most 12: 10 + 10; 5 at most 4:
 /// 3 + 2): `f(first row, rows)` per pass, in order.
 #[inline(always)]
 pub(crate) fn even_passes(m: usize, most: usize, f: &mut impl FnMut(usize, usize)) {
@@ -227,6 +237,42 @@ pub(crate) fn even_passes(m: usize, most: usize, f: &mut impl FnMut(usize, usize
         m0 += k;
     }
 }
+
+/// `[[f32; PACK_ROWS]; $m]` from a packed kernel of at most 4 activation
+/// rows per pass (AVX2, NEON dotprod): `$m` rows in the fewest passes,
+/// shared evenly ([`even_passes`]); `$body` gives rows `$m0 .. $m0 + $k`
+/// with `$k` a `const usize` (1..=4) and `$a` the bytes to prefetch (all
+/// of `$ahead` in the first pass, none after).
+#[cfg_attr(not(any(target_arch = "x86_64", target_arch = "aarch64")), allow(unused_macros))]
+macro_rules! passes_of_four {
+    ($m:expr, $ahead:expr, |$k:ident, $m0:ident, $a:ident| $body:expr) => {{
+        let mut out = [[0.0f32; $crate::kernels::simd::PACK_ROWS]; $m];
+        $crate::kernels::simd::even_passes($m, 4, &mut |$m0: usize, rows: usize| {
+            let $a: &[u8] = if $m0 == 0 { $ahead } else { &[] };
+            match rows {
+                1 => {
+                    const $k: usize = 1;
+                    out[$m0..$m0 + $k].copy_from_slice(&$body);
+                }
+                2 => {
+                    const $k: usize = 2;
+                    out[$m0..$m0 + $k].copy_from_slice(&$body);
+                }
+                3 => {
+                    const $k: usize = 3;
+                    out[$m0..$m0 + $k].copy_from_slice(&$body);
+                }
+                _ => {
+                    const $k: usize = 4;
+                    out[$m0..$m0 + $k].copy_from_slice(&$body);
+                }
+            }
+        });
+        out
+    }};
+}
+#[cfg_attr(not(any(target_arch = "x86_64", target_arch = "aarch64")), allow(unused_imports))]
+pub(crate) use passes_of_four;
 
 /// Prefetches (into L2) part `i` of `parts` of `ahead`'s 64-byte lines: a
 /// kernel that calls it once per block (pair) spreads the next tiles'
@@ -797,7 +843,7 @@ pub fn q8_pack8(rows: [&[u8]; PACK_ROWS], nb: usize, pack: &mut Q8Pack8) {
 
 /// `out[m][n] = sum_b (s_n,b * xd[m][b]) * (row n block b . xq[m] block b)`
 /// over the packed rows (see [`gemm_q8`]; `xc` from [`quantise_q8_corr`]).
-/// `M` is 1..=8.
+/// `M` is 1..=12 (`linear` hands it at most 12 rows per call).
 #[inline]
 pub fn gemm_q8_packed<const M: usize>(w: PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; PACK_ROWS]; M] {
     gemm_q8_packed_ahead(w, xq, xd, xc, &[])

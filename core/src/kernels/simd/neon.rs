@@ -302,26 +302,11 @@ pub unsafe fn gemm_q8_packed_dot<const M: usize>(w: super::PackedQ8<'_>, xq: [&[
 /// As [`gemm_q8_packed_dot`].
 #[target_feature(enable = "neon,dotprod")]
 pub unsafe fn gemm_q8_packed_dot_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], _xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
-    let mut out = [[0.0f32; 8]; M];
-    let mut part = |m0: usize, k: usize| {
-        macro_rules! run {
-            ($k:literal) => {{
-                let (q, d): ([&[i8]; $k], [&[f32]; $k]) = (core::array::from_fn(|m| xq[m0 + m]), core::array::from_fn(|m| xd[m0 + m]));
-                let a = if m0 == 0 { ahead } else { &[] };
-                // SAFETY: the caller's features are these functions'.
-                let t = unsafe { if w.q4 { packed_dot::<$k, true>(w, q, d, a) } else { packed_dot::<$k, false>(w, q, d, a) } };
-                out[m0..m0 + $k].copy_from_slice(&t);
-            }};
-        }
-        match k {
-            1 => run!(1),
-            2 => run!(2),
-            3 => run!(3),
-            _ => run!(4),
-        }
-    };
-    super::even_passes(M, 4, &mut part);
-    out
+    super::passes_of_four!(M, ahead, |K, m0, a| {
+        let (q, d): ([&[i8]; K], [&[f32]; K]) = (core::array::from_fn(|m| xq[m0 + m]), core::array::from_fn(|m| xd[m0 + m]));
+        // SAFETY: the caller's features are these functions'.
+        unsafe { if w.q4 { packed_dot::<K, true>(w, q, d, a) } else { packed_dot::<K, false>(w, q, d, a) } }
+    })
 }
 
 /// [`gemm_q8_packed_dot`] for `K` (1..=4) activation rows and one value

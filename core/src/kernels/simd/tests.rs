@@ -682,6 +682,66 @@ fn packed_gemm_q8_matches_scalar_twin() {
     }
 }
 
+/// Dispatches a run of `q.len()` (1..=12) rows to the packed kernel that
+/// `linear` calls ([`super::gemm_q8_packed_ahead`], at most 12 rows per
+/// call), prefetching `ahead`.
+fn packed_rows_dispatched(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]], c: &[&[i32]], ahead: &[u8]) -> Vec<[f32; 8]> {
+    macro_rules! call {
+        ($($k:literal)*) => {
+            match q.len() {
+                $($k => super::gemm_q8_packed_ahead::<$k>(w, core::array::from_fn(|m| q[m]), core::array::from_fn(|m| d[m]), core::array::from_fn(|m| c[m]), ahead).to_vec(),)*
+                _ => unreachable!(),
+            }
+        };
+    }
+    call!(1 2 3 4 5 6 7 8 9 10 11 12)
+}
+
+/// Every run of 1-12 activation rows out of 12 (`linear` hands the packed
+/// kernel up to 12 rows per call), int8 and 4-bit groups, with and without
+/// bytes to prefetch: under the selected kernel each row gets the paired
+/// f32 steps' bits where it is a SIMD packed variant, else the scalar
+/// twin's bits for that row alone.
+#[test]
+fn packed_kernel_runs_of_up_to_12_rows_give_each_row_its_numbers() {
+    use super::{PackedQ8, Q8Pack8, PACK_ROWS};
+    const ROWS: usize = 12;
+    let mut r = Rng(0x1212);
+    for nb in [1usize, 2, 3, 24, 96] {
+        let n = nb * Q8_BLOCK;
+        let rows8: Vec<Vec<u8>> = (0..PACK_ROWS).map(|_| q8_bytes(&r.vec(n))).collect();
+        let mut pack = Q8Pack8::new();
+        super::q8_pack8(core::array::from_fn(|j| &rows8[j][..]), nb, &mut pack);
+        let rows4: Vec<Vec<u8>> = (0..PACK_ROWS).map(|_| q4_bytes(&r.vec(n))).collect();
+        let group4 = q4_group(&rows4, nb);
+        let g4 = PackedQ8::from_q4_group(&group4, nb).unwrap();
+        let mut qs = vec![vec![0i8; n]; ROWS];
+        let mut ds = vec![vec![0f32; nb]; ROWS];
+        let mut cs = vec![vec![0i32; 2 * nb]; ROWS];
+        for m in 0..ROWS {
+            scalar::quantise_q8_corr(&r.vec(n), &mut qs[m], &mut ds[m], &mut cs[m]);
+        }
+        let q: Vec<&[i8]> = qs.iter().map(|v| &v[..]).collect();
+        let d: Vec<&[f32]> = ds.iter().map(|v| &v[..]).collect();
+        let c: Vec<&[i32]> = cs.iter().map(|v| &v[..]).collect();
+        let ahead = vec![7u8; 3000];
+        for (name, w) in [("int8", pack.view()), ("q4", g4)] {
+            let want: Vec<[u32; 8]> = if super::packed_q8_fast() {
+                bits8(&packed_paired_model(w, &q, &d))
+            } else {
+                (0..ROWS).flat_map(|m| bits8(&scalar::gemm_q8_packed::<1>(w, [q[m]], [d[m]], [c[m]]))).collect()
+            };
+            for k in 1..=ROWS {
+                for m0 in 0..=ROWS - k {
+                    let a = if m0 % 2 == 0 { &ahead[..] } else { &[] };
+                    let t = packed_rows_dispatched(w, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k], a);
+                    assert_eq!(bits8(&t), want[m0..m0 + k], "{name} rows {m0}..{} nb={nb}", m0 + k);
+                }
+            }
+        }
+    }
+}
+
 #[test]
 #[allow(unsafe_code)]
 fn axpy_f16_matches_scalar_twin() {

@@ -177,7 +177,7 @@ unsafe fn tile_256<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize)
 }
 
 /// One activation row `x` against the tile's weight rows, one weight row
-/// after another (the same numbers as [`rows_256`]; why: [`one_row_512`]).
+/// after another (the same numbers as [`rows_256`]; why: [`seq_rows_512`]).
 ///
 /// # Safety
 /// As [`tile_256`].
@@ -351,7 +351,10 @@ unsafe fn tile_512<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize)
     // SAFETY: the caller's features are rows_512's; d <= TM.
     unsafe {
         match distinct_rows(&x) {
-            1 => padded(one_row_512(&w, x[0], k, &load, &tail)),
+            1 => padded(seq_rows_512::<E, 1>(&w, &x, k, &load, &tail)),
+            2 if 2 * k <= SEQ_TILE_VALUES => padded(seq_rows_512::<E, 2>(&w, &x, k, &load, &tail)),
+            3 if 3 * k <= SEQ_TILE_VALUES => padded(seq_rows_512::<E, 3>(&w, &x, k, &load, &tail)),
+            4 if 4 * k <= SEQ_TILE_VALUES => padded(seq_rows_512::<E, TM>(&w, &x, k, &load, &tail)),
             2 => padded(rows_512::<E, 2>(&w, &x, k, &load, &tail)),
             3 => padded(rows_512::<E, 3>(&w, &x, k, &load, &tail)),
             _ => padded(rows_512::<E, TM>(&w, &x, k, &load, &tail)),
@@ -365,38 +368,59 @@ fn padded<const M: usize>(r: [[f32; TN]; M]) -> Tile {
     core::array::from_fn(|m| r[m.min(M - 1)])
 }
 
-/// One activation row `x` against the tile's weight rows, one weight row
-/// after another: per row the operations of [`rows_512`] for that entry
-/// (one accumulator over the 16-lane steps, the masked tail, one reduction),
-/// so the same numbers. Out of memory one weight stream at a time ran
-/// 1.3-2.4x faster than the tile's 4 rows side by side on the measured
-/// shapes (f32 768x3072: 1.07x slower; docs/PERFORMANCE.md);
-/// 2-4 activation rows stay on the tile (row by row they leave L1 on long
-/// rows).
+/// Most activation values (`rows x k`) of a 2-4-row tile that takes its
+/// weight rows one after another ([`seq_rows_512`]); longer tiles take
+/// [`rows_512`]. At 12 KiB of f32 rows the activations stay in L1 while a
+/// weight row streams past them. Measured cold (96 MB of f16 matrices,
+/// 2026-12-03, AMD EPYC): 512x512 at 2-4 rows 0.50-0.65x the time of the
+/// tile, 512x1536 at 2 rows 0.69x; longer (3 x 1536: 0.88-0.98x; 4 x 1536,
+/// 2-4 x 2048: 1.08-1.74x, the rows re-read from L2) stay on the tile.
+const SEQ_TILE_VALUES: usize = 3072;
+
+/// Activation rows `0..M` against the tile's weight rows, one weight row
+/// after another (a single memory stream through the tile, which is
+/// contiguous in the weights: 4 rows side by side are 4 streams that each
+/// restart every row, which the hardware prefetchers follow badly on short
+/// rows): per entry the operations of [`rows_512`] (one accumulator over
+/// the 16-lane steps, the masked tail, one reduction), so the same numbers
+/// (test `tile_rows_equal_one_row_tiles_bit_for_bit`). One row: 1.3-2.4x
+/// faster out of memory than the tile on the measured shapes (f32
+/// 768x3072: 1.07x slower; docs/PERFORMANCE.md); 2-4 rows: see
+/// [`SEQ_TILE_VALUES`].
 ///
 /// # Safety
-/// As [`tile_512`].
+/// As [`tile_512`]; `M <= TM`.
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
-unsafe fn one_row_512<E>(w: &[&[E]; TN], x: &[f32], k: usize, load: &impl Fn(&[E], usize) -> __m512, tail: &impl Fn(&[E], usize, __mmask16) -> __m512) -> [[f32; TN]; 1] {
+unsafe fn seq_rows_512<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize, load: &impl Fn(&[E], usize) -> __m512, tail: &impl Fn(&[E], usize, __mmask16) -> __m512) -> [[f32; TN]; M] {
     let k16 = k - k % 16;
-    [core::array::from_fn(|n| {
-        let mut a = _mm512_setzero_ps();
+    let mut out = [[0.0f32; TN]; M];
+    for (n, wn) in w.iter().enumerate() {
+        let mut acc = [_mm512_setzero_ps(); M];
         let mut c = 0;
         while c < k16 {
-            // SAFETY: c + 16 <= k16 <= k, and x holds at least k floats.
-            let xv = unsafe { _mm512_loadu_ps(x.as_ptr().add(c)) };
-            a = _mm512_fmadd_ps(xv, load(w[n], c), a);
+            let wv = load(wn, c);
+            for (a, xm) in acc.iter_mut().zip(x) {
+                // SAFETY: c + 16 <= k16 <= k, and every x[m] holds at least k floats.
+                let xv = unsafe { _mm512_loadu_ps(xm.as_ptr().add(c)) };
+                *a = _mm512_fmadd_ps(xv, wv, *a);
+            }
             c += 16;
         }
         if c < k {
             let mk = lanes16(k - c);
-            // SAFETY: a masked load of lanes c..k, inside x.
-            let xv = unsafe { _mm512_maskz_loadu_ps(mk, x.as_ptr().add(c)) };
-            a = _mm512_fmadd_ps(xv, tail(w[n], c, mk), a);
+            let wv = tail(wn, c, mk);
+            for (a, xm) in acc.iter_mut().zip(x) {
+                // SAFETY: a masked load of lanes c..k, inside every x[m].
+                let xv = unsafe { _mm512_maskz_loadu_ps(mk, xm.as_ptr().add(c)) };
+                *a = _mm512_fmadd_ps(xv, wv, *a);
+            }
         }
-        _mm512_reduce_add_ps(a)
-    })]
+        for (o, a) in out.iter_mut().zip(acc) {
+            o[n] = _mm512_reduce_add_ps(a);
+        }
+    }
+    out
 }
 
 /// Rows `0..M` of [`tile_512`] (each row's dots in the same order for any `M`).
@@ -1183,28 +1207,11 @@ pub unsafe fn gemm_q8_packed_avx2<const M: usize>(w: super::PackedQ8<'_>, xq: [&
 /// As [`gemm_q8_packed_avx2`].
 #[target_feature(enable = "avx2,fma,f16c")]
 pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
-    let mut out = [[0.0f32; 8]; M];
-    // Rows m0 .. m0 + K into `out`.
-    let mut part = |m0: usize, k: usize| {
-        macro_rules! run {
-            ($k:literal) => {{
-                let pick = |m: usize| m0 + m;
-                let (q, d, c): ([&[i8]; $k], [&[f32]; $k], [&[i32]; $k]) = (core::array::from_fn(|m| xq[pick(m)]), core::array::from_fn(|m| xd[pick(m)]), core::array::from_fn(|m| xc[pick(m)]));
-                let a = if m0 == 0 { ahead } else { &[] };
-                // SAFETY: the caller's features are these functions'.
-                let t = unsafe { if w.q4 { packed_avx2::<$k, true>(w, q, d, c, a) } else { packed_avx2::<$k, false>(w, q, d, c, a) } };
-                out[m0..m0 + $k].copy_from_slice(&t);
-            }};
-        }
-        match k {
-            1 => run!(1),
-            2 => run!(2),
-            3 => run!(3),
-            _ => run!(4),
-        }
-    };
-    super::even_passes(M, 4, &mut part);
-    out
+    super::passes_of_four!(M, ahead, |K, m0, a| {
+        let (q, d, c): ([&[i8]; K], [&[f32]; K], [&[i32]; K]) = (core::array::from_fn(|m| xq[m0 + m]), core::array::from_fn(|m| xd[m0 + m]), core::array::from_fn(|m| xc[m0 + m]));
+        // SAFETY: the caller's features are these functions'.
+        unsafe { if w.q4 { packed_avx2::<K, true>(w, q, d, c, a) } else { packed_avx2::<K, false>(w, q, d, c, a) } }
+    })
 }
 
 /// [`gemm_q8_packed_avx2`] for `K` (1..=4) activation rows and one value
