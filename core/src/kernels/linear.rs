@@ -542,8 +542,8 @@ fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, 
 /// (on AVX-512 VNNI 12 accumulators and the two blocks' groups still fit
 /// the 32 registers). Measured on AVX512-VNNI (2026-12-03, int8 x8, 128 MB
 /// of distinct weights): at most 12 against at most 8 rows per call, 10
-/// rows of 3072x768 / 768x3072 / 2304x768 / 768x768 0.85-0.95x the time
-/// cold, 0.71-0.88x hot; 12 and 20 rows 0.86-0.98x. Until then 8, and until
+/// rows of 3072x768 / 768x3072 / 2304x768 / 768x768 0.86-0.92x the time
+/// cold, 0.71-0.83x hot; 12 and 20 rows 0.86-0.98x. Until then 8, and until
 /// 2026-12-03 morning 8 + 2 for 10 rows (5 + 5 was ~8% faster). A row's
 /// numbers do not depend on its call's size. The AVX2 and NEON packed
 /// kernels split a call into passes of at most 4 rows themselves.

@@ -168,7 +168,10 @@ unsafe fn tile_256<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize)
     // SAFETY: the caller's features are rows_256's; d <= TM.
     unsafe {
         match distinct_rows(&x) {
-            1 => padded(one_row_256(&w, x[0], k, &load, &val)),
+            1 => padded(seq_rows_256::<E, 1>(&w, &x, k, &load, &val)),
+            2 if 2 * k <= SEQ_TILE_VALUES => padded(seq_rows_256::<E, 2>(&w, &x, k, &load, &val)),
+            3 if 3 * k <= SEQ_TILE_VALUES => padded(seq_rows_256::<E, 3>(&w, &x, k, &load, &val)),
+            4 if 4 * k <= SEQ_TILE_VALUES => padded(seq_rows_256::<E, TM>(&w, &x, k, &load, &val)),
             2 => padded(rows_256::<E, 2>(&w, &x, k, &load, &val)),
             3 => padded(rows_256::<E, 3>(&w, &x, k, &load, &val)),
             _ => padded(rows_256::<E, TM>(&w, &x, k, &load, &val)),
@@ -176,31 +179,41 @@ unsafe fn tile_256<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize)
     }
 }
 
-/// One activation row `x` against the tile's weight rows, one weight row
-/// after another (the same numbers as [`rows_256`]; why: [`seq_rows_512`]).
+/// Activation rows `0..M` against the tile's weight rows, one weight row
+/// after another (the same numbers as [`rows_256`]; why: [`seq_rows_512`];
+/// 2-4 rows while `rows x k <= SEQ_TILE_VALUES`). Measured cold under
+/// AVX2 (2026-12-03, f16): 512x512 at 2-4 rows 0.45-0.57x the time of
+/// the tile's pairs of weight rows, 512x1536 at 2 rows 0.55x.
 ///
 /// # Safety
-/// As [`tile_256`].
+/// As [`tile_256`]; `M <= TM`.
 #[inline]
 #[target_feature(enable = "avx2,fma,f16c")]
-unsafe fn one_row_256<E>(w: &[&[E]; TN], x: &[f32], k: usize, load: &impl Fn(&[E], usize) -> __m256, val: &impl Fn(&E) -> f32) -> [[f32; TN]; 1] {
+unsafe fn seq_rows_256<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize, load: &impl Fn(&[E], usize) -> __m256, val: &impl Fn(&E) -> f32) -> [[f32; TN]; M] {
     let k8 = k - k % 8;
-    [core::array::from_fn(|n| {
-        let wr = &w[n][..k];
-        let mut a = _mm256_setzero_ps();
+    let mut out = [[0.0f32; TN]; M];
+    for (n, wn) in w.iter().enumerate() {
+        let wr = &wn[..k];
+        let mut acc = [_mm256_setzero_ps(); M];
         let mut c = 0;
         while c < k8 {
-            // SAFETY: c + 8 <= k8 <= k, and x holds at least k floats.
-            let xv = unsafe { _mm256_loadu_ps(x.as_ptr().add(c)) };
-            a = _mm256_fmadd_ps(xv, load(wr, c), a);
+            let wv = load(wr, c);
+            for (a, xm) in acc.iter_mut().zip(x) {
+                // SAFETY: c + 8 <= k8 <= k, and every x[m] holds at least k floats.
+                let xv = unsafe { _mm256_loadu_ps(xm.as_ptr().add(c)) };
+                *a = _mm256_fmadd_ps(xv, wv, *a);
+            }
             c += 8;
         }
-        let mut tail = 0.0f32;
-        for (wv, b) in wr[k8..].iter().zip(&x[k8..k]) {
-            tail += val(wv) * b;
+        for ((o, a), xm) in out.iter_mut().zip(acc).zip(x) {
+            let mut tail = 0.0f32;
+            for (wv, b) in wr[k8..].iter().zip(&xm[k8..k]) {
+                tail += val(wv) * b;
+            }
+            o[n] = hsum(a) + tail;
         }
-        hsum(a) + tail
-    })]
+    }
+    out
 }
 
 /// Rows `0..M` of [`tile_256`] (each row's dots in the same order for any `M`).
