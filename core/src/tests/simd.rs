@@ -248,13 +248,12 @@ fn linear_over_f16_and_q8_matches_naive() {
     }
 }
 
-/// Activation rows repeated at the end of a tile (a partial tile's padding:
-/// the same slice again) get the numbers of distinct copies of those rows,
-/// bit for bit, under every f32 / f16 tile (they compute such rows once:
-/// `simd::distinct_rows`); other repeats are computed as they come.
-#[test]
-fn simd_tiles_give_repeated_rows_the_numbers_of_copies() {
-    type Tiles = (&'static str, fn([&[f32]; TN], [&[f32]; TM]) -> Tile, fn([&[u16]; TN], [&[f32]; TM]) -> Tile);
+/// A tile variant: its name, its f32 tile and its f16 tile.
+type Tiles = (&'static str, fn([&[f32]; TN], [&[f32]; TM]) -> Tile, fn([&[u16]; TN], [&[f32]; TM]) -> Tile);
+
+/// Every f32 / f16 tile this CPU runs: the SIMD variants, the 16-wide one
+/// where the CPU has AVX-512, and the scalar twin.
+fn every_tile() -> Vec<Tiles> {
     let mut tiles: Vec<Tiles> = variants().iter().map(|v| (v.name, v.tile_f32, v.tile_f16)).collect();
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512bw") && std::is_x86_feature_detected!("avx512vl") && std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("f16c") {
@@ -262,6 +261,16 @@ fn simd_tiles_give_repeated_rows_the_numbers_of_copies() {
         tiles.push(("avx512", |w, x| unsafe { simd::x86::tile_f32_512(w, x) }, |w, x| unsafe { simd::x86::tile_f16_512(w, x) }));
     }
     tiles.push(("scalar", scalar::tile_f32, scalar::tile_f16));
+    tiles
+}
+
+/// Activation rows repeated at the end of a tile (a partial tile's padding:
+/// the same slice again) get the numbers of distinct copies of those rows,
+/// bit for bit, under every f32 / f16 tile (they compute such rows once:
+/// `simd::distinct_rows`); other repeats are computed as they come.
+#[test]
+fn simd_tiles_give_repeated_rows_the_numbers_of_copies() {
+    let tiles = every_tile();
     let mut r = Rng(0xd15c_0123_4567_89ab);
     for (name, tf32, tf16) in tiles {
         for k in [1usize, 7, 8, 15, 16, 17, 100, 768, 1536] {
@@ -292,14 +301,7 @@ fn simd_tiles_give_repeated_rows_the_numbers_of_copies() {
 /// values: k = 768 at 4 rows, 1536 at 2; longer k stays side by side).
 #[test]
 fn tile_rows_equal_one_row_tiles_bit_for_bit() {
-    type Tiles = (&'static str, fn([&[f32]; TN], [&[f32]; TM]) -> Tile, fn([&[u16]; TN], [&[f32]; TM]) -> Tile);
-    let mut tiles: Vec<Tiles> = variants().iter().map(|v| (v.name, v.tile_f32, v.tile_f16)).collect();
-    #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512bw") && std::is_x86_feature_detected!("avx512vl") && std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("f16c") {
-        // SAFETY (both): the CPU supports the 16-wide tiles' features (checked above).
-        tiles.push(("avx512", |w, x| unsafe { simd::x86::tile_f32_512(w, x) }, |w, x| unsafe { simd::x86::tile_f16_512(w, x) }));
-    }
-    tiles.push(("scalar", scalar::tile_f32, scalar::tile_f16));
+    let tiles = every_tile();
     let mut r = Rng(0x0e0e_1234_0f0f_5678);
     for (name, tf32, tf16) in tiles {
         for k in [1usize, 15, 16, 17, 100, 512, 767, 768, 769, 1024, 1025, 1536, 1537, 2048] {

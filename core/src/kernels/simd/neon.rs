@@ -303,7 +303,8 @@ pub unsafe fn gemm_q8_packed_dot<const M: usize>(w: super::PackedQ8<'_>, xq: [&[
 #[target_feature(enable = "neon,dotprod")]
 pub unsafe fn gemm_q8_packed_dot_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], _xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
     super::passes_of_four!(M, ahead, |K, m0, a| {
-        let (q, d): ([&[i8]; K], [&[f32]; K]) = (core::array::from_fn(|m| xq[m0 + m]), core::array::from_fn(|m| xd[m0 + m]));
+        let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
+        let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
         // SAFETY: the caller's features are these functions'.
         unsafe { if w.q4 { packed_dot::<K, true>(w, q, d, a) } else { packed_dot::<K, false>(w, q, d, a) } }
     })

@@ -1221,7 +1221,9 @@ pub unsafe fn gemm_q8_packed_avx2<const M: usize>(w: super::PackedQ8<'_>, xq: [&
 #[target_feature(enable = "avx2,fma,f16c")]
 pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
     super::passes_of_four!(M, ahead, |K, m0, a| {
-        let (q, d, c): ([&[i8]; K], [&[f32]; K], [&[i32]; K]) = (core::array::from_fn(|m| xq[m0 + m]), core::array::from_fn(|m| xd[m0 + m]), core::array::from_fn(|m| xc[m0 + m]));
+        let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
+        let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
+        let c: [&[i32]; K] = core::array::from_fn(|m| xc[m0 + m]);
         // SAFETY: the caller's features are these functions'.
         unsafe { if w.q4 { packed_avx2::<K, true>(w, q, d, c, a) } else { packed_avx2::<K, false>(w, q, d, c, a) } }
     })
