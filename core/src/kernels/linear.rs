@@ -556,9 +556,10 @@ const PACKED_CALL_ROWS: usize = 12;
 #[inline]
 fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_in: usize, ahead: &[u8], mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS])) {
     let nb = n_in / Q8_BLOCK;
-    let calls = r1.saturating_sub(r0).div_ceil(PACKED_CALL_ROWS);
+    let rows = r1.saturating_sub(r0);
+    let calls = rows.div_ceil(PACKED_CALL_ROWS);
     let mut k = 0;
-    simd::even_passes(r1.saturating_sub(r0), PACKED_CALL_ROWS, &mut |m0, mt| {
+    simd::even_passes(rows, PACKED_CALL_ROWS, &mut |m0, mt| {
         let i0 = r0 + m0;
         let (a0, a1) = simd::part_bytes(ahead.len(), k, calls);
         let share = &ahead[a0..a1];

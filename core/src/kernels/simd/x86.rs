@@ -167,13 +167,14 @@ unsafe fn tile_256<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize)
     let k = tile_len(&w, &x);
     // SAFETY: the caller's features are rows_256's; d <= TM.
     unsafe {
-        match distinct_rows(&x) {
-            1 => padded(seq_rows_256::<E, 1>(&w, &x, k, &load, &val)),
-            2 if 2 * k <= SEQ_TILE_VALUES => padded(seq_rows_256::<E, 2>(&w, &x, k, &load, &val)),
-            3 if 3 * k <= SEQ_TILE_VALUES => padded(seq_rows_256::<E, 3>(&w, &x, k, &load, &val)),
-            4 if 4 * k <= SEQ_TILE_VALUES => padded(seq_rows_256::<E, TM>(&w, &x, k, &load, &val)),
-            2 => padded(rows_256::<E, 2>(&w, &x, k, &load, &val)),
-            3 => padded(rows_256::<E, 3>(&w, &x, k, &load, &val)),
+        let d = distinct_rows(&x);
+        match (d, one_stream(d, k)) {
+            (1, _) => padded(seq_rows_256::<E, 1>(&w, &x, k, &load, &val)),
+            (2, true) => padded(seq_rows_256::<E, 2>(&w, &x, k, &load, &val)),
+            (3, true) => padded(seq_rows_256::<E, 3>(&w, &x, k, &load, &val)),
+            (_, true) => padded(seq_rows_256::<E, TM>(&w, &x, k, &load, &val)),
+            (2, false) => padded(rows_256::<E, 2>(&w, &x, k, &load, &val)),
+            (3, false) => padded(rows_256::<E, 3>(&w, &x, k, &load, &val)),
             _ => padded(rows_256::<E, TM>(&w, &x, k, &load, &val)),
         }
     }
@@ -363,13 +364,14 @@ unsafe fn tile_512<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize)
     let k = tile_len(&w, &x);
     // SAFETY: the caller's features are rows_512's; d <= TM.
     unsafe {
-        match distinct_rows(&x) {
-            1 => padded(seq_rows_512::<E, 1>(&w, &x, k, &load, &tail)),
-            2 if 2 * k <= SEQ_TILE_VALUES => padded(seq_rows_512::<E, 2>(&w, &x, k, &load, &tail)),
-            3 if 3 * k <= SEQ_TILE_VALUES => padded(seq_rows_512::<E, 3>(&w, &x, k, &load, &tail)),
-            4 if 4 * k <= SEQ_TILE_VALUES => padded(seq_rows_512::<E, TM>(&w, &x, k, &load, &tail)),
-            2 => padded(rows_512::<E, 2>(&w, &x, k, &load, &tail)),
-            3 => padded(rows_512::<E, 3>(&w, &x, k, &load, &tail)),
+        let d = distinct_rows(&x);
+        match (d, one_stream(d, k)) {
+            (1, _) => padded(seq_rows_512::<E, 1>(&w, &x, k, &load, &tail)),
+            (2, true) => padded(seq_rows_512::<E, 2>(&w, &x, k, &load, &tail)),
+            (3, true) => padded(seq_rows_512::<E, 3>(&w, &x, k, &load, &tail)),
+            (_, true) => padded(seq_rows_512::<E, TM>(&w, &x, k, &load, &tail)),
+            (2, false) => padded(rows_512::<E, 2>(&w, &x, k, &load, &tail)),
+            (3, false) => padded(rows_512::<E, 3>(&w, &x, k, &load, &tail)),
             _ => padded(rows_512::<E, TM>(&w, &x, k, &load, &tail)),
         }
     }
@@ -389,6 +391,14 @@ fn padded<const M: usize>(r: [[f32; TN]; M]) -> Tile {
 /// tile, 512x1536 at 2 rows 0.69x; longer (3 x 1536: 0.88-0.98x; 4 x 1536,
 /// 2-4 x 2048: 1.08-1.74x, the rows re-read from L2) stay on the tile.
 const SEQ_TILE_VALUES: usize = 3072;
+
+/// Whether a tile of `d` distinct activation rows of `k` values takes its
+/// weight rows one after another (one memory stream): one row always, 2-4
+/// rows up to [`SEQ_TILE_VALUES`] values (the AVX2 and AVX-512 tiles).
+#[inline]
+fn one_stream(d: usize, k: usize) -> bool {
+    d == 1 || d * k <= SEQ_TILE_VALUES
+}
 
 /// Activation rows `0..M` against the tile's weight rows, one weight row
 /// after another (a single memory stream through the tile, which is
