@@ -1,5 +1,8 @@
 //! `linear_each` (one quantised panel for the query, key and value
-//! projections) gives what one `linear` per matrix gives, bit for bit, on
+//! projections) gives what one `linear` per matrix gives, bit for bit, and
+//! so do `linear_with` / `linear_each_with` quantising into caller memory
+//! (R mode's block scratch: one panel for a whole window, or panels of a
+//! room's rows), on
 //! every kernel set this CPU runs (the AMX tiles on and off where they run)
 //! and on one thread and two. Rows 1 to 290, so the unpacked and packed
 //! int8 tiles, the AMX row groups, the small and the full quantised panel
@@ -8,7 +11,8 @@
 
 use duolando::duo_writer::{quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd::{self, Isa};
-use duolando_core::kernels::{linear, linear_each, F16Rows, Matrix, Q8Rows, X8Rows};
+use duolando_core::arena::{Arena, Planner};
+use duolando_core::kernels::{linear, linear_each, linear_each_with, linear_with, F16Rows, Matrix, Q8Rows, Q8Room, X8Rows};
 use duolando_tests::Rng;
 
 fn bits(v: &[f32]) -> Vec<u32> {
@@ -66,6 +70,27 @@ fn linear_each_equals_one_linear_per_matrix() {
                         for k in 0..3 {
                             assert!(want[k].iter().all(|v| v.is_finite()), "{what}, matrix {k}");
                             assert_eq!(bits(&got[k]), bits(&want[k]), "linear_each, {what}, matrix {k}");
+                        }
+                        // Caller rooms: all the rows, about a third of them, and none.
+                        for room_rows in [n, n.div_ceil(3) + 1, 0] {
+                            let values = room_rows * i;
+                            let mut plan = Planner::new();
+                            Q8Room::carve(&mut plan, values).unwrap();
+                            let mut mem = vec![0u8; plan.total_for_any_base().unwrap()];
+                            let mut arena = Arena::new(&mut mem);
+                            let mut room = Q8Room::carve(&mut arena, values).unwrap();
+                            let what = format!("{what}, a room of {room_rows} rows");
+                            for k in 0..3 {
+                                let mut y = vec![f32::NAN; n * outs[k]];
+                                linear_with(&x, &m[k], Some(&b[k]), &mut y, &mut room);
+                                assert_eq!(bits(&y), bits(&want[k]), "linear_with, {what}, matrix {k}");
+                            }
+                            let mut got: Vec<Vec<f32>> = outs.iter().map(|&o| vec![f32::NAN; n * o]).collect();
+                            let [g0, g1, g2] = &mut got[..] else { unreachable!() };
+                            linear_each_with(&x, [&m[0], &m[1], &m[2]], [Some(&b[0][..]), Some(&b[1][..]), Some(&b[2][..])], [&mut g0[..], &mut g1[..], &mut g2[..]], &mut room);
+                            for k in 0..3 {
+                                assert_eq!(bits(&got[k]), bits(&want[k]), "linear_each_with, {what}, matrix {k}");
+                            }
                         }
                     }
                 }

@@ -33,6 +33,16 @@ pub trait Carve<'a> {
     fn u32(&mut self, n: usize) -> Result<&'a mut [u32], ArenaError>;
     /// `n` u16 values (f16 bits), zeroed.
     fn u16(&mut self, n: usize) -> Result<&'a mut [u16], ArenaError>;
+    /// `n` i8 values, zeroed (carved as `ceil(n / 4)` u32; a [`Planner`]'s is empty).
+    fn i8(&mut self, n: usize) -> Result<&'a mut [i8], ArenaError> {
+        let b: &'a mut [i8] = bytemuck::cast_slice_mut(self.u32(n.div_ceil(4))?);
+        let len = b.len().min(n);
+        Ok(&mut b[..len])
+    }
+    /// `n` i32 values, zeroed (carved as u32).
+    fn i32(&mut self, n: usize) -> Result<&'a mut [i32], ArenaError> {
+        Ok(bytemuck::cast_slice_mut(self.u32(n)?))
+    }
 }
 
 /// Bytes an allocation of `n` elements of `size` bytes occupies.

@@ -4,7 +4,7 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
-use crate::kernels::{attention, gelu_inplace, layernorm, linear, linear_each, KvRows, Mask};
+use crate::kernels::{attention, gelu_inplace, layernorm, linear_each_with, linear_with, KvRows, Mask, Q8Room};
 use crate::model::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
@@ -22,6 +22,10 @@ pub struct BlockScratch<'s> {
     work: &'s mut [f32],
     /// (max(rows, keys)) attention scores of one query.
     pub scores: &'s mut [f32],
+    /// (rows, 4C) int8 activation rows of the block's GEMMs, quantised at
+    /// once ([`linear_with`]; R mode's windows); empty in a streaming
+    /// session, whose GEMMs take the stack panel.
+    pub panel: Q8Room<'s>,
     pub rows: usize,
 }
 
@@ -34,12 +38,18 @@ pub struct QkvParts<'a> {
     pub v: &'a mut [f32],
     pub att: &'a mut [f32],
     pub scores: &'a mut [f32],
+    pub panel: Q8Room<'a>,
 }
 
 impl<'s> BlockScratch<'s> {
-    /// For blocks over at most `rows` rows whose queries see at most `rows` keys.
+    /// For blocks over at most `rows` rows whose queries see at most `rows`
+    /// keys, with an int8 panel for all of them (R mode: a whole window's
+    /// rows are quantised once per GEMM, each weight tile read once).
     pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, c: usize) -> Result<Self, ArenaError> {
-        Self::carve_keys(a, rows, rows, c)
+        let mut s = Self::carve_keys(a, rows, rows, c)?;
+        let values = rows.checked_mul(c).and_then(|v| v.checked_mul(4)).ok_or(ArenaError::Overflow)?;
+        s.panel = Q8Room::carve(a, values)?;
+        Ok(s)
     }
     /// For blocks over at most `rows` rows whose queries see at most
     /// `keys` keys (a chunk of rows attending a longer cache).
@@ -50,6 +60,7 @@ impl<'s> BlockScratch<'s> {
             att: a.f32(rc)?,
             work: a.f32(rc.checked_mul(4).ok_or(ArenaError::Overflow)?)?,
             scores: a.f32(rows.max(keys))?,
+            panel: Q8Room::default(),
             rows,
         })
     }
@@ -64,17 +75,17 @@ impl<'s> BlockScratch<'s> {
         let rc = self.ln.len();
         let (q, rest) = self.work.split_at_mut(rc);
         let (k, rest) = rest.split_at_mut(rc);
-        QkvParts { ln: self.ln, q, k, v: &mut rest[..rc], att: self.att, scores: self.scores }
+        QkvParts { ln: self.ln, q, k, v: &mut rest[..rc], att: self.att, scores: self.scores, panel: self.panel.reborrow() }
     }
 
-    /// The MLP-phase buffers: LayerNorm output, hidden rows (rows, 4C), output.
-    fn mlp_parts(&mut self) -> (&mut [f32], &mut [f32], &mut [f32]) {
-        (self.ln, self.work, self.att)
+    /// The MLP-phase buffers: LayerNorm output, hidden rows (rows, 4C), output, int8 panel.
+    fn mlp_parts(&mut self) -> (&mut [f32], &mut [f32], &mut [f32], Q8Room<'_>) {
+        (self.ln, self.work, self.att, self.panel.reborrow())
     }
 }
 
-fn lin(x: &[f32], l: &Linear<'_>, y: &mut [f32]) {
-    linear(x, &l.w, l.b, y);
+fn lin(x: &[f32], l: &Linear<'_>, y: &mut [f32], panel: &mut Q8Room<'_>) {
+    linear_with(x, &l.w, l.b, y, panel);
 }
 
 fn add(x: &mut [f32], y: &[f32]) {
@@ -88,12 +99,12 @@ fn add(x: &mut [f32], y: &[f32]) {
 pub fn block_forward<M: Mask>(w: &BlockW<'_>, x: &mut [f32], c: usize, n_head: usize, mask: &M, s: &mut BlockScratch<'_>) {
     let nc = x.len();
     let n = nc / c;
-    let p = s.qkv();
+    let mut p = s.qkv();
     let (ln, q, k, v, att) = (&mut p.ln[..nc], &mut p.q[..nc], &mut p.k[..nc], &mut p.v[..nc], &mut p.att[..nc]);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    linear_each(ln, [&w.query.w, &w.key.w, &w.value.w], [w.query.b, w.key.b, w.value.b], [q, k, v]);
+    linear_each_with(ln, [&w.query.w, &w.key.w, &w.value.w], [w.query.b, w.key.b, w.value.b], [q, k, v], &mut p.panel);
     attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att);
-    lin(att, &w.proj, ln);
+    lin(att, &w.proj, ln, &mut p.panel);
     add(x, ln);
     mlp(w, x, s, nc);
 }
@@ -101,12 +112,12 @@ pub fn block_forward<M: Mask>(w: &BlockW<'_>, x: &mut [f32], c: usize, n_head: u
 /// `x += mlp.2(gelu(mlp.0(ln2 x)))` over the first `nc` floats of the
 /// scratch's MLP buffers (`x`: (n, C), `nc = n * C`).
 fn mlp(w: &BlockW<'_>, x: &mut [f32], s: &mut BlockScratch<'_>, nc: usize) {
-    let (ln, hid, out) = s.mlp_parts();
+    let (ln, hid, out, mut panel) = s.mlp_parts();
     let (ln, hid, out) = (&mut ln[..nc], &mut hid[..4 * nc], &mut out[..nc]);
     layernorm(x, w.ln2.w, w.ln2.b, ln);
-    lin(ln, &w.fc, hid);
+    lin(ln, &w.fc, hid, &mut panel);
     gelu_inplace(hid);
-    lin(hid, &w.fc_out, out);
+    lin(hid, &w.fc_out, out, &mut panel);
     add(x, out);
 }
 
@@ -128,21 +139,21 @@ pub fn block_forward_rows<M: Mask>(
     let n = nc / c;
     let r = rows.len();
     let rc = r * c;
-    let p = s.qkv();
+    let mut p = s.qkv();
     let (ln, q, k, v, att) = (&mut p.ln[..nc], &mut p.q[..rc], &mut p.k[..nc], &mut p.v[..nc], &mut p.att[..nc]);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    linear_each(ln, [&w.key.w, &w.value.w], [w.key.b, w.value.b], [k, v]);
+    linear_each_with(ln, [&w.key.w, &w.value.w], [w.key.b, w.value.b], [k, v], &mut p.panel);
     // Gather the selected rows of ln1(x) and of x.
     for (i, &row) in rows.iter().enumerate() {
         let (a, b) = (row * c, (row + 1) * c);
         att[i * c..(i + 1) * c].copy_from_slice(&ln[a..b]);
         out[i * c..(i + 1) * c].copy_from_slice(&x[a..b]);
     }
-    lin(&att[..rc], &w.query, q);
+    lin(&att[..rc], &w.query, q, &mut p.panel);
     let att_sel = &mut att[..rc];
     attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att_sel);
     let proj = &mut ln[..rc];
-    lin(att_sel, &w.proj, proj);
+    lin(att_sel, &w.proj, proj, &mut p.panel);
     add(&mut out[..rc], proj);
     mlp(w, &mut out[..rc], s, rc);
 }
@@ -153,7 +164,7 @@ pub fn block_forward_rows<M: Mask>(
 pub fn block_kv(w: &BlockW<'_>, x: &[f32], ln: &mut [f32], k: &mut [f32], v: &mut [f32]) {
     let ln = &mut ln[..x.len()];
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    linear_each(ln, [&w.key.w, &w.value.w], [w.key.b, w.value.b], [k, v]);
+    linear_each_with(ln, [&w.key.w, &w.value.w], [w.key.b, w.value.b], [k, v], &mut Q8Room::default());
 }
 
 /// The rest of a block for groups of new rows in place, given the keys
@@ -179,10 +190,10 @@ where
     if c == 0 || !nc.is_multiple_of(c) || bounds.first() != Some(&0) || bounds.last() != Some(&(nc / c)) || nc > s.ln.len() {
         return Err(Error::Length { buffer: Buffer::Features, len: nc, expected: bounds.last().copied().unwrap_or(0) * c });
     }
-    let p = s.qkv();
+    let mut p = s.qkv();
     let (ln, q, att, scores) = (&mut p.ln[..nc], &mut p.q[..nc], &mut p.att[..nc], p.scores);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    lin(ln, &w.query, q);
+    lin(ln, &w.query, q, &mut p.panel);
     for g in 0..groups {
         let (a, b) = (bounds[g], bounds[g + 1]);
         if b < a {
@@ -195,7 +206,7 @@ where
         }
         attention(&q[a * c..b * c], k, v, c, n_head, &mask, &mut scores[..nk], &mut att[a * c..b * c]);
     }
-    lin(att, &w.proj, ln);
+    lin(att, &w.proj, ln, &mut p.panel);
     add(x, ln);
     mlp(w, x, s, nc);
     Ok(())

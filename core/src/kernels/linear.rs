@@ -2,6 +2,7 @@
 //! (the transposed-convolution GEMM). Written once against [`RowMatrix`].
 
 use super::parallel::{split_cols, Cols};
+use crate::arena::{ArenaError, Carve};
 use super::simd::{self, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
 use super::weights::{ExpandsToQ8, Matrix, PreparedAct, Q4Rows, Q8Rows, RowMatrix, X8Rows, Q8X8_ROWS};
 
@@ -15,6 +16,16 @@ const BLOCK_BYTES: usize = 192 * 1024;
 /// With a worker pool installed ([`super::parallel`]) the output columns
 /// are split over its threads; the values are the same bit for bit.
 pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
+    linear_with(x, w, b, y, &mut Q8Room::default())
+}
+
+/// [`linear`] with caller memory for the int8 activation panel: a call
+/// whose rows do not fit the stack panel ([`Q8_PANEL`] values) but fit
+/// more of them in `room` is quantised into `room`, so each weight tile
+/// (and its AMX operands) is read and prepared once per `room`'s rows
+/// rather than once per stack panel. The values are the same bit for bit
+/// (rows are computed independently); an empty `room` is [`linear`].
+pub fn linear_with(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], room: &mut Q8Room<'_>) {
     let (n_in, n_out) = (w.cols(), w.rows());
     if n_in == 0 || n_out == 0 {
         return;
@@ -26,9 +37,9 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
     let (x, y) = (&x[..n * n_in], &mut y[..n * n_out]);
     if takes_q8_panel(w) {
         match w {
-            Matrix::Q8(q) => return linear_q8(x, [q], [b], [y]),
-            Matrix::X8(q) => return linear_q8(x, [q], [b], [y]),
-            Matrix::Q4(q) => return linear_q8(x, [q], [b], [y]),
+            Matrix::Q8(q) => return linear_q8(x, [q], [b], [y], room),
+            Matrix::X8(q) => return linear_q8(x, [q], [b], [y], room),
+            Matrix::Q4(q) => return linear_q8(x, [q], [b], [y], room),
             _ => {}
         }
     }
@@ -55,6 +66,11 @@ fn takes_q8_panel(w: &Matrix<'_>) -> bool {
 /// int8 layout, of the same width, for the same rows, and take the int8
 /// panel path, the activation rows are quantised once for all of them.
 pub fn linear_each<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N]) {
+    linear_each_with(x, ws, bs, ys, &mut Q8Room::default())
+}
+
+/// [`linear_each`] with caller memory for the int8 panel (see [`linear_with`]).
+pub fn linear_each_with<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N], room: &mut Q8Room<'_>) {
     let n_in = ws.first().map_or(0, |w| w.cols());
     let rows = |k: usize, y: &[f32]| if n_in == 0 || ws[k].rows() == 0 { 0 } else { (x.len() / n_in).min(y.len() / ws[k].rows()) };
     let n = ys.first().map_or(0, |y| rows(0, y));
@@ -62,17 +78,17 @@ pub fn linear_each<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Option<
     if shared {
         let x = &x[..n * n_in];
         if let Some(m) = same_layout(ws, |w| if let Matrix::X8(q) = w { Some(q) } else { None }) {
-            return linear_q8(x, m, bs, ys);
+            return linear_q8(x, m, bs, ys, room);
         }
         if let Some(m) = same_layout(ws, |w| if let Matrix::Q8(q) = w { Some(q) } else { None }) {
-            return linear_q8(x, m, bs, ys);
+            return linear_q8(x, m, bs, ys, room);
         }
         if let Some(m) = same_layout(ws, |w| if let Matrix::Q4(q) = w { Some(q) } else { None }) {
-            return linear_q8(x, m, bs, ys);
+            return linear_q8(x, m, bs, ys, room);
         }
     }
     for ((w, b), y) in ws.into_iter().zip(bs).zip(ys) {
-        linear(x, w, b, y);
+        linear_with(x, w, b, y, room);
     }
 }
 
@@ -123,6 +139,38 @@ struct PanelRoom<const Q: usize, const B: usize, const C: usize> {
     q: [i8; Q],
     d: [f32; B],
     c: [i32; C],
+}
+
+/// Caller memory for the quantised activation rows of [`linear_with`]
+/// (values, their block scales and VNNI corrections); empty by default.
+#[derive(Default)]
+pub struct Q8Room<'a> {
+    q: &'a mut [i8],
+    d: &'a mut [f32],
+    c: &'a mut [i32],
+}
+
+impl<'a> Q8Room<'a> {
+    /// Room for `values` activation values (rows x width of the widest
+    /// call that should be quantised at once).
+    pub fn carve<A: Carve<'a>>(a: &mut A, values: usize) -> Result<Self, ArenaError> {
+        let blocks = values.div_ceil(Q8_BLOCK);
+        Ok(Q8Room { q: a.i8(values)?, d: a.f32(blocks)?, c: a.i32(blocks.checked_mul(2).ok_or(ArenaError::Overflow)?)? })
+    }
+
+    /// The same memory, borrowed for a shorter time.
+    pub fn reborrow(&mut self) -> Q8Room<'_> {
+        Q8Room { q: self.q, d: self.d, c: self.c }
+    }
+
+    /// Rows of width `n_in` (a multiple of 32) it holds.
+    fn rows(&self, n_in: usize) -> usize {
+        let nb = n_in / Q8_BLOCK;
+        if nb == 0 {
+            return 0;
+        }
+        (self.q.len() / n_in).min(self.d.len() / nb).min(self.c.len() / (2 * nb))
+    }
 }
 
 /// Quantised activation rows of one panel (see [`Q8_PANEL`]): row `r`'s
@@ -251,23 +299,36 @@ impl Q8Source for X8Rows<'_> {
 /// `N` matrices of the same width over the same `n = x.len() / in` rows
 /// (each `y` holds `n` rows; [`linear_each`] checks it) share the
 /// quantised panel; each takes its own kernels, as if called alone.
-fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N]) {
+fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N], room: &mut Q8Room<'_>) {
     let n_in = ws.first().map_or(0, |w| w.cols());
-    if n_in == 0 || x.len() / n_in * n_in <= Q8_PANEL_SMALL {
+    let values = if n_in == 0 { 0 } else { x.len() / n_in * n_in };
+    if values <= Q8_PANEL_SMALL {
         linear_q8_in::<W, N, Q8_PANEL_SMALL, { Q8_PANEL_SMALL / Q8_BLOCK }, { 2 * Q8_PANEL_SMALL / Q8_BLOCK }>(x, ws, bs, ys)
+    } else if values > Q8_PANEL && room.rows(n_in) > Q8_PANEL / n_in {
+        linear_q8_on(x, ws, bs, ys, room.q, room.d, room.c)
     } else {
         linear_q8_in::<W, N, Q8_PANEL, Q8_PANEL_BLOCKS, { 2 * Q8_PANEL_BLOCKS }>(x, ws, bs, ys)
     }
 }
 
-/// [`linear_q8`] with a panel of `Q` values (`B = Q / 32`, `C = 2 B`).
+/// [`linear_q8`] with a stack panel of `Q` values (`B = Q / 32`, `C = 2 B`).
 #[inline(never)]
-fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usize, const C: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], mut ys: [&mut [f32]; N]) {
+fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usize, const C: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N]) {
+    let mut room = PanelRoom::<Q, B, C> { q: [0; Q], d: [0.0; B], c: [0; C] };
+    linear_q8_on(x, ws, bs, ys, &mut room.q, &mut room.d, &mut room.c)
+}
+
+/// [`linear_q8`] on panel memory `q` (values), `d` (block scales), `c`
+/// (corrections): the rows in panels of as many rows as it holds.
+#[inline(never)]
+fn linear_q8_on<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], mut ys: [&mut [f32]; N], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
     let Some(n_in) = ws.first().map(|w| w.cols()).filter(|&c| c > 0) else { return };
     let n = x.len() / n_in;
     let nb = n_in / Q8_BLOCK;
-    let per_panel = Q / n_in;
-    let mut room = PanelRoom::<Q, B, C> { q: [0; Q], d: [0.0; B], c: [0; C] };
+    let per_panel = (q.len() / n_in).min(d.len() / nb.max(1)).min(c.len() / (2 * nb).max(1));
+    if per_panel == 0 {
+        return;
+    }
     let mut p0 = 0;
     while p0 < n {
         let p1 = (p0 + per_panel).min(n);
@@ -275,16 +336,16 @@ fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usi
             let r = i - p0;
             simd::quantise_q8_corr(
                 &x[i * n_in..(i + 1) * n_in],
-                &mut room.q[r * n_in..(r + 1) * n_in],
-                &mut room.d[r * nb..(r + 1) * nb],
-                &mut room.c[2 * r * nb..2 * (r + 1) * nb],
+                &mut q[r * n_in..(r + 1) * n_in],
+                &mut d[r * nb..(r + 1) * nb],
+                &mut c[2 * r * nb..2 * (r + 1) * nb],
             );
         }
         // Packing 8 weight rows per call pays off from a few activation
         // rows on (measured: at 1 row the unpacked VNNI tile is faster);
         // stored packed tiles are faster from one row on.
         let packed = simd::packed_q8_fast() && (W::PREPACKED || (simd::q8_packing_pays() && p1 - p0 >= PACK_MIN_ROWS && nb <= simd::PACK_BLOCKS));
-        let p = &Q8Panel { q: &room.q, d: &room.d, c: &room.c };
+        let p = &Q8Panel { q: &*q, d: &*d, c: &*c };
         for ((w, b), y) in ws.iter().zip(bs).zip(ys.iter_mut()) {
             let n_out = w.rows();
             let work = (n_out * nb * Q8_BLOCK_BYTES).saturating_mul(p1 - p0);
