@@ -1,6 +1,6 @@
 //! `linear` with the AMX tile kernel on gives what it gives with the
 //! AVX512-VNNI kernels alone, bit for bit (int8 and 4-bit row groups, int8
-//! rows packed per call; 1 to 160 activation rows, so whole 8-row groups,
+//! rows packed per call; 1 to 160 activation rows, so whole 12- and 8-row groups (100: a call of 84 rows before one of 16),
 //! partial ones and several stack panels; 1 to 5 weight tiles, so whole
 //! tile pairs, a single last tile and partial tiles; one thread and two): the kernel
 //! choice may depend on the number of rows without changing a number, as
@@ -37,7 +37,7 @@ fn linear_with_amx_tiles_equals_linear_without() {
             ("int8 rows", Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap())),
         ];
         let bias = r.vec(o);
-        for n in [1usize, 15, 16, 17, 24, 33, 40, 64, 70, 160] {
+        for n in [1usize, 15, 16, 17, 24, 28, 33, 40, 64, 70, 100, 103, 160] {
             let mut x = r.vec(n * i);
             x[(n / 2) * i] = 40.0; // one outlier block
             for threads in [1usize, 2] {

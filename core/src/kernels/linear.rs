@@ -665,7 +665,10 @@ fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel<'_>, rows: usize, n_in: usize, ahe
     let mut out = [[0.0f32; simd::AMX_COLS]; CALL_ROWS];
     let mut i0 = 0;
     while i0 < rows {
-        let k = (rows - i0).min(CALL_ROWS);
+        // Calls of whole row groups: a last call of 4 rows would be left
+        // to VNNI (a tile group has 8 or 12 rows), so the call before it takes 12 fewer.
+        let left = rows - i0;
+        let k = if left == CALL_ROWS + 4 { CALL_ROWS - 12 } else { left.min(CALL_ROWS) };
         // This call's share of `ahead`.
         let (a0, a1) = simd::part_bytes(ahead.len(), i0 / CALL_ROWS, rows.div_ceil(CALL_ROWS));
         let share = &ahead[a0..a1];

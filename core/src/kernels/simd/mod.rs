@@ -1023,7 +1023,7 @@ pub fn amx_enabled() -> bool {
 #[cfg(not(target_arch = "x86_64"))]
 mod no_amx {
     /// As on x86_64.
-    pub const ROWS: usize = 8;
+    pub const ROWS: usize = 12;
     /// As on x86_64.
     pub const COLS: usize = 2 * super::PACK_ROWS;
     /// Holds nothing.

@@ -1629,8 +1629,8 @@ fn axpy_rows_equal_axpy_row_after_row() {
 /// The AMX tile kernel (where this CPU has AMX-INT8 and Linux grants the
 /// tile permission) equals the AVX512-VNNI packed kernel bit for bit, row
 /// for row and tile for tile, on pairs of int8 and 4-bit tiles (stored, and
-/// packed on the stack), for 8-64 activation rows (a trailing partial
-/// group of 8 is left to the caller), odd and even block counts, and
+/// packed on the stack), for 7-64 activation rows in groups of 12 and 8
+/// (at most 3 trailing rows, or fewer than 8, are left to the caller), odd and even block counts, and
 /// tracks the scalar twin like the VNNI kernel does; it refuses short
 /// operands, tiles of different widths and tiles wider than `PACK_BLOCKS`
 /// instead of reading past them.
@@ -1679,15 +1679,17 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
                 scalar::quantise_q8_corr(&x, &mut qs[m * n..(m + 1) * n], &mut ds[m * nb..(m + 1) * nb], &mut cs[m * 2 * nb..(m + 1) * 2 * nb]);
             }
             let row = |m: usize| (&qs[m * n..(m + 1) * n], &ds[m * nb..(m + 1) * nb], &cs[m * 2 * nb..(m + 1) * 2 * nb]);
-            for want_rows in [8usize, 15, 40, 64] {
+            // (rows given, rows done: whole groups of 12 and 8).
+            for (want_rows, want_done) in [(7usize, 0usize), (8, 8), (12, 12), (15, 12), (16, 16), (20, 20), (28, 28), (40, 40), (63, 60), (64, 64)] {
+                assert_eq!(amx::amx_rows(nb, qs.len(), n, ds.len(), want_rows), want_done);
                 let mut out = vec![[0f32; amx::COLS]; want_rows];
                 let done = unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, &mut out, rows[0][0].as_slice()) };
-                assert_eq!(done, want_rows / 8 * 8, "whole groups of 8 rows only");
+                assert_eq!(done, want_done, "whole groups of 12 and 8 rows only");
                 for m0 in (0..done).step_by(8) {
                     for (t, tl) in tile.iter().enumerate() {
                         let v = unsafe { super::x86::gemm_q8_packed_vnni::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2)) };
                         let s = scalar::gemm_q8_packed::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2));
-                        for m in 0..8 {
+                        for m in 0..8.min(done - m0) {
                             let got: [f32; 8] = core::array::from_fn(|j| out[m0 + m][8 * t + j]);
                             assert_eq!(got.map(f32::to_bits), v[m].map(f32::to_bits), "q4={q4} nb={nb} tile {t} row {}", m0 + m);
                             for j in 0..8 {
