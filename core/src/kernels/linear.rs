@@ -301,7 +301,7 @@ impl Q8Source for X8Rows<'_> {
 /// quantised panel; each takes its own kernels, as if called alone.
 fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N], room: &mut Q8Room<'_>) {
     let n_in = ws.first().map_or(0, |w| w.cols());
-    let values = if n_in == 0 { 0 } else { x.len() / n_in * n_in };
+    let values = x.len().checked_div(n_in).map_or(0, |rows| rows * n_in);
     if values <= Q8_PANEL_SMALL {
         linear_q8_in::<W, N, Q8_PANEL_SMALL, { Q8_PANEL_SMALL / Q8_BLOCK }, { 2 * Q8_PANEL_SMALL / Q8_BLOCK }>(x, ws, bs, ys)
     } else if values > Q8_PANEL && room.rows(n_in) > Q8_PANEL / n_in {
