@@ -15,7 +15,8 @@ use duolando_tests::fixture;
 /// The stack of the stepping thread: 1 MiB, or `STACK_KIB` KiB (to find the
 /// least that works; 2026-12-02, release: > 576 and <= 640 KiB, the same
 /// before and after the int8 panel grew to 96 KiB; > 576 and <= 608 KiB with
-/// the AMX tile-pair kernel and the 192 KiB panel; the test profile: <= 768 KiB).
+/// the AMX tile-pair kernel and the 192 KiB panel, and again on 2026-12-03 with 12-row AMX
+/// groups; the test profile: <= 768 KiB).
 fn stack() -> usize {
     std::env::var("STACK_KIB").ok().and_then(|v| v.parse().ok()).unwrap_or(1024) * 1024
 }

@@ -35,8 +35,8 @@ use super::{Isa, PackedQ8, PACK_BLOCKS, PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, P
 /// Activation rows per tile multiply: groups of 12, and of [`ROWS_SMALL`]
 /// where 12s leave 8-11 rows ([`groups`]). Measured (2026-12-03, the Xeon
 /// with AMX, one tile pair hot, 96 rows, time per row against 8-row
-/// groups): 10 rows 0.85 / 0.79x (768 / 3072 wide), 12 rows 0.86 /
-/// 0.81x, 14 rows 1.06 / 1.05x, 16 rows 1.03 / 0.96x: the tile multiplies
+/// groups): 10 rows 0.90 / 0.84x (768 / 3072 wide), 12 rows 0.80-0.88 /
+/// 0.79-0.84x, 14 rows 1.05 / 1.00x, 16 rows 1.03 / 0.95x: the tile multiplies
 /// cost little more for 12 rows than for 8, and the 24 accumulators of 12
 /// rows still fit the registers (16 rows: 32, which spill).
 pub const ROWS: usize = 12;
