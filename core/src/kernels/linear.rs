@@ -563,12 +563,8 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
         }
         // The next pair's weights stream in (into L2) while this pair is multiplied.
         let ahead = w.stored_rows(t0 + 2 * R, (t0 + 4 * R).min(y.hi()));
-        let done = amx_pair(a, p, amx_planned, n_in, ahead, |i, t| {
-            put_row(&mut y, b, i, t0, nt, &t[..R]);
-            if nt1 > 0 {
-                put_row(&mut y, b, i, t1, nt1, &t[R..]);
-            }
-        });
+        // The two tiles' columns are adjacent (t1 = t0 + 8): one segment per row.
+        let done = amx_pair(a, p, amx_planned, n_in, ahead, |i, t| put_row(&mut y, b, i, t0, nt + nt1, t));
         if done < amx_planned {
             // Not reached (the extents were checked for the plan); kept so a
             // refusal never leaves outputs unwritten.

@@ -444,18 +444,13 @@ unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: 
                 }
             }
         }
+        // Lane 2n of tile h's sums is weight row 8h + n: the even lanes of both, in order.
+        let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
         for (m, o) in ot.iter_mut().enumerate() {
-            for h in 0..2 {
-                // Lane pairs (2n, 2n + 1) are row n, as in the VNNI kernel.
-                let a = acc[h][m];
-                let pairs = _mm512_add_ps(a, _mm512_permute_ps::<0b10_11_00_01>(a));
-                let mut v = [0f32; 16];
-                // SAFETY: v holds 16 floats.
-                unsafe { _mm512_storeu_ps(v.as_mut_ptr(), pairs) };
-                for n in 0..PACK_ROWS {
-                    o[PACK_ROWS * h + n] = v[2 * n];
-                }
-            }
+            // Lane pairs (2n, 2n + 1) are row n, as in the VNNI kernel.
+            let pairs: [__m512; 2] = core::array::from_fn(|h| _mm512_add_ps(acc[h][m], _mm512_permute_ps::<0b10_11_00_01>(acc[h][m])));
+            // SAFETY: o holds COLS = 16 floats.
+            unsafe { _mm512_storeu_ps(o.as_mut_ptr(), _mm512_permutex2var_ps(pairs[0], even, pairs[1])) };
         }
     }
     // SAFETY: tiles configured above; releasing returns them to the init state.
