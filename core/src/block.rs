@@ -4,7 +4,7 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
-use crate::kernels::{attention, gelu_inplace, layernorm, linear_each_with, linear_with, KvRows, Mask, Q8Room};
+use crate::kernels::{attention, gelu_inplace, layernorm, linear_each, linear_each_with, linear_with, KvRows, Mask, Q8Room};
 use crate::model::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
@@ -164,7 +164,7 @@ pub fn block_forward_rows<M: Mask>(
 pub fn block_kv(w: &BlockW<'_>, x: &[f32], ln: &mut [f32], k: &mut [f32], v: &mut [f32]) {
     let ln = &mut ln[..x.len()];
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    linear_each_with(ln, [&w.key.w, &w.value.w], [w.key.b, w.value.b], [k, v], &mut Q8Room::default());
+    linear_each(ln, [&w.key.w, &w.value.w], [w.key.b, w.value.b], [k, v]);
 }
 
 /// The rest of a block for groups of new rows in place, given the keys

@@ -168,14 +168,20 @@ impl<'a> Q8Room<'a> {
         Q8Room { q: self.q, d: self.d, c: self.c }
     }
 
-    /// Rows of width `n_in` (a multiple of 32) it holds.
+    /// Rows of width `n_in` it holds.
     fn rows(&self, n_in: usize) -> usize {
-        let nb = n_in / Q8_BLOCK;
-        if nb == 0 {
-            return 0;
-        }
-        (self.q.len() / n_in).min(self.d.len() / nb).min(self.c.len() / (2 * nb))
+        panel_rows(self.q, self.d, self.c, n_in)
     }
+}
+
+/// Rows of width `n_in` (a multiple of 32) that panel memory of `q`
+/// values, `d` scales and `c` corrections holds.
+fn panel_rows(q: &[i8], d: &[f32], c: &[i32], n_in: usize) -> usize {
+    let nb = n_in / Q8_BLOCK;
+    if nb == 0 {
+        return 0;
+    }
+    (q.len() / n_in).min(d.len() / nb).min(c.len() / (2 * nb))
 }
 
 /// Quantised activation rows of one panel (see [`Q8_PANEL`]): row `r`'s
@@ -330,7 +336,7 @@ fn linear_q8_on<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: 
     let Some(n_in) = ws.first().map(|w| w.cols()).filter(|&c| c > 0) else { return };
     let n = x.len() / n_in;
     let nb = n_in / Q8_BLOCK;
-    let per_panel = (q.len() / n_in).min(d.len() / nb.max(1)).min(c.len() / (2 * nb).max(1));
+    let per_panel = panel_rows(q, d, c, n_in);
     if per_panel == 0 {
         return;
     }

@@ -241,8 +241,8 @@ pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, xq: &[i8], stride: usize, x
         return 0;
     }
     // SAFETY: the caller's features and permission; the operand extents
-    // were checked by `amx_rows`: 8 rows of every tile of xq reach
-    // `need_q`, the weight operands are `nb * B_BLOCK` bytes of `w.b`.
+    // were checked by `amx_rows`: every row of every group lies within
+    // `need_q` of xq, the weight operands are `nb * B_BLOCK` bytes of `w.b`.
     let big = groups(rows).0 * ROWS;
     let (o_big, o_small) = out[..rows].split_at_mut(big);
     // SAFETY: as above; the small groups' rows start `big` rows further in
