@@ -4,7 +4,7 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
-use crate::kernels::{attention, gelu_inplace, layernorm, linear_each, linear_each_with, linear_with, KvRows, Mask, Q8Room};
+use crate::kernels::{attention, attention_ahead, gelu_inplace, layernorm, linear_each, linear_each_with, linear_with, KvRows, Mask, Q8Room};
 use crate::model::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
@@ -204,7 +204,12 @@ where
         if nk > scores.len() {
             return Err(Error::Length { buffer: Buffer::Features, len: nk, expected: scores.len() });
         }
-        attention(&q[a * c..b * c], k, v, c, n_head, &mask, &mut scores[..nk], &mut att[a * c..b * c]);
+        // The next group's keys and values stream in while this one computes.
+        let ahead = match g + 1 < groups {
+            true => keys(g + 1).map(|(k, v, _)| [k.lead_bytes(), v.lead_bytes()])?,
+            false => [&[][..], &[][..]],
+        };
+        attention_ahead(&q[a * c..b * c], k, v, c, n_head, &mask, &mut scores[..nk], &mut att[a * c..b * c], ahead);
     }
     lin(att, &w.proj, ln, &mut p.panel);
     add(x, ln);

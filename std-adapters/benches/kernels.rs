@@ -9,13 +9,14 @@
 //! int8 is measured in both stored layouts: `Q8Block32` rows (`int8`) and
 //! `Q8Block32x8` row groups (`int8x8`, what `convert --dtype int8` writes).
 //!
-//! `cargo bench -p duolando --bench kernels` (`-- quick` for fewer repeats).
+//! `cargo bench -p duolando --bench kernels` (`-- quick` for fewer repeats,
+//! `-- attention` for the attention lines alone).
 
 use std::time::Instant;
 
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd::{self, Isa};
-use duolando_core::kernels::{attention, linear, linear_xw, F16Rows, F32Rows, KvRows, Matrix, Q8Rows, RowData, TiledCausalMask, Ungrouped, X8Rows};
+use duolando_core::kernels::{attention, attention_ahead, linear, linear_xw, F16Rows, F32Rows, KvRows, Matrix, Q8Rows, RowData, TiledCausalMask, Ungrouped, X8Rows};
 
 mod common;
 use common::Rng;
@@ -37,6 +38,8 @@ fn time(reps: usize, mut f: impl FnMut()) -> f64 {
 fn main() {
     let quick = std::env::args().any(|a| a == "quick");
     let reps = if quick { 3 } else { 7 };
+    // `attention`: only the attention lines (the linear and conv lines take minutes).
+    let only_attention = std::env::args().any(|a| a == "attention");
     let isas = duolando::simd::supported();
     println!("ISAs on this CPU (best first): {isas:?}");
     // The linear lines measure AVX512-VNNI once more with the AMX tiles where they run.
@@ -46,7 +49,7 @@ fn main() {
     }
     let mut r = Rng(0x1234_5678);
     // (out, in): the MLP's two matrices (the largest of the model).
-    for &(o, i) in &[(3072usize, 768usize), (768, 3072)] {
+    for &(o, i) in if only_attention { &[][..] } else { &[(3072usize, 768usize), (768, 3072)][..] } {
         // 64 MB of f32 weights per set: beyond the last-level cache.
         let mats = (64 << 20) / (o * i * 4);
         let wf: Vec<Vec<f32>> = (0..mats).map(|_| r.vec(o * i)).collect();
@@ -106,7 +109,7 @@ fn main() {
     let wh: Vec<Vec<u16>> = wf.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
     // GEMM order (zk, ci) of the same values.
     let wx: Vec<Vec<u8>> = wf.iter().map(|w| quantise_q8_block32x8(&(0..zk * ci).map(|k| w[(k % ci) * zk + k / ci]).collect::<Vec<f32>>(), ci)).collect();
-    for &n in &[1usize, 2, 16, 32] {
+    for &n in if only_attention { &[][..] } else { &[1usize, 2, 16, 32][..] } {
         let x = r.vec(n * ci);
         let mut z = vec![0.0f32; n * zk];
         let mut line = format!("conv-transpose z {ci}->{zk} n={n:>2}:");
@@ -181,13 +184,22 @@ fn main() {
                 attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]);
             }
         });
+        // As `step_many` attends them: the next session's keys and values
+        // prefetched while this one computes (`attention_ahead`).
+        let ahead = time(reps, || {
+            for (i, (kc, vc)) in caches.iter().enumerate() {
+                let (kr, vr) = (KvRows::one(RowData::F16(kc)), KvRows::one(RowData::F16(vc)));
+                let next = caches.get(i + 1).map_or([&[][..], &[][..]], |(kn, vn)| [bytemuck::cast_slice(kn), bytemuck::cast_slice(vn)]);
+                attention_ahead(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c], next);
+            }
+        });
         let (kr, vr) = (KvRows::one(RowData::F16(&caches[0].0)), KvRows::one(RowData::F16(&caches[0].1)));
         let hot = time(reps, || {
             for _ in 0..caches.len() {
                 attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]);
             }
         });
-        line += &format!("  [{isa:?}] {:.2} ms (one hot cache {:.2} ms: {:.2}x)", cold * 1e3, hot * 1e3, cold / hot);
+        line += &format!("  [{isa:?}] {:.2} ms (the next cache prefetched meanwhile {:.2} ms: {:.2}x; one hot cache {:.2} ms: {:.2}x)", cold * 1e3, ahead * 1e3, ahead / cold, hot * 1e3, cold / hot);
     }
     println!("{line}");
     drop(caches);

@@ -11,11 +11,13 @@ use super::simd;
 /// `k`/`v` slices handed to [`attention`]; positions are derived by the mask.
 pub trait Mask: Sync {
     fn allowed(&self, qi: usize, kj: usize) -> bool;
-    /// A `p > 0` with `allowed(qi, kj) == allowed(qi + p, kj)` for all
-    /// `qi`, `kj`, where the mask has one: queries `p` apart see the same
-    /// keys, and [`attention`] scores them together (each key and value row
+    /// A `p > 0` such that queries `p` apart mostly see the same keys
+    /// (`allowed(qi, kj) == allowed(qi + p, kj)`: for all `qi` in the tiled
+    /// causal mask, within a window row in the streaming GPT's row-causal
+    /// one): [`attention`] scores them together (each key and value row
     /// read once for a group). `None`: every query alone. Only a hint for
-    /// speed: a group's members are checked to have the same key runs.
+    /// speed: a group's members are checked to have the same key runs, and
+    /// a group ends where they differ.
     fn period(&self) -> Option<usize> {
         None
     }
@@ -115,6 +117,30 @@ pub fn attention<'a, M: Mask>(
     scores: &mut [f32],
     out: &mut [f32],
 ) {
+    attention_ahead(q, k, v, c, n_head, mask, scores, out, [&[], &[]])
+}
+
+/// [`attention`] that also prefetches `ahead` into L2 while it computes,
+/// with the same numbers: `ahead[0]` spread key by key over the score
+/// passes of the first query group, `ahead[1]` row by row over its value
+/// passes (an even share per head and key run). A batch of sessions
+/// passes the next session's keys and values: they arrive while this one
+/// computes, instead of one session's reads waiting on memory after
+/// another's compute. Prefetching them in one burst before the call
+/// stalls the core on the burst (measured: no gain); only the AVX-512
+/// kernels take the prefetch.
+#[allow(clippy::too_many_arguments)]
+pub fn attention_ahead<'a, M: Mask>(
+    q: &[f32],
+    k: impl Into<KvRows<'a>>,
+    v: impl Into<KvRows<'a>>,
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    scores: &mut [f32],
+    out: &mut [f32],
+    ahead: [&[u8]; 2],
+) {
     if c == 0 || n_head == 0 {
         return;
     }
@@ -123,12 +149,14 @@ pub fn attention<'a, M: Mask>(
     let nk = k.rows(c).min(v.rows(c)).min(scores.len());
     let out = &mut out[..nq * c];
     if nk > SPLIT_MAX_KEYS {
-        return attend_queries(q, &k, &v, c, n_head, mask, 0, nk, scores, out);
+        return attend_queries(q, &k, &v, c, n_head, mask, 0, nk, scores, out, ahead);
     }
     split_cols_aligned(out, nq * c, c, nq.saturating_mul(nk).saturating_mul(c), |mut cols| {
         let (lo, hi) = (cols.lo(), cols.hi());
         let mut scores = [0.0f32; SPLIT_SCORES];
-        attend_queries(q, &k, &v, c, n_head, mask, lo / c, nk, &mut scores, cols.seg(0, lo, hi));
+        // The first share of the queries prefetches `ahead` (once).
+        let ahead = if lo == 0 { ahead } else { [&[][..], &[][..]] };
+        attend_queries(q, &k, &v, c, n_head, mask, lo / c, nk, &mut scores, cols.seg(0, lo, hi), ahead);
     });
 }
 
@@ -138,9 +166,10 @@ pub fn attention<'a, M: Mask>(
 /// [`simd::QUERY_GROUP`] consecutive members of their class whose key runs
 /// are equal (as many groups as needed, sized evenly), so each key and
 /// value row is read once per group; `scores` holds one row of `nk` per
-/// member. Each query's numbers are those of attending it alone.
+/// member. Each query's numbers are those of attending it alone. The
+/// first group prefetches `ahead` ([`attention_ahead`]).
 #[allow(clippy::too_many_arguments)]
-fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_head: usize, mask: &M, q0: usize, nk: usize, scores: &mut [f32], out: &mut [f32]) {
+fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_head: usize, mask: &M, q0: usize, nk: usize, scores: &mut [f32], out: &mut [f32], mut ahead: [&[u8]; 2]) {
     let nq = out.len() / c;
     let g_max = simd::QUERY_GROUP.min(scores.len() / nk.max(1)).max(1);
     let p = match mask.period() {
@@ -157,7 +186,8 @@ fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, 
             let n = key_runs(mask, q0 + li, nk, &mut next);
             let same = n == nr && n <= MAX_RUNS && next[..n] == runs[..n];
             if g > 0 && (g == size || !same) {
-                attend_group(q, k, v, c, n_head, mask, q0 + first, p, g, &runs, nr, nk, scores, &mut out[first * c..]);
+                attend_group(q, k, v, c, n_head, mask, q0 + first, p, g, &runs, nr, nk, scores, &mut out[first * c..], ahead);
+                ahead = [&[], &[]];
                 g = 0;
             }
             if g == 0 {
@@ -168,7 +198,8 @@ fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, 
             g += 1;
         }
         if g > 0 {
-            attend_group(q, k, v, c, n_head, mask, q0 + first, p, g, &runs, nr, nk, scores, &mut out[first * c..]);
+            attend_group(q, k, v, c, n_head, mask, q0 + first, p, g, &runs, nr, nk, scores, &mut out[first * c..], ahead);
+            ahead = [&[], &[]];
         }
     }
 }
@@ -200,9 +231,10 @@ fn key_runs<M: Mask>(mask: &M, qi: usize, nk: usize, runs: &mut [(usize, usize);
 /// from the first one's row; the others `p` rows apart). Per head: the
 /// scores of all members in one [`KvRows::dot_rows_group`] call per run
 /// (`scores`: `g` rows of `nk`), each member's softmax, and the weighted
-/// values in one [`KvRows::axpy_rows_group`] call per run.
+/// values in one [`KvRows::axpy_rows_group`] call per run; each call
+/// prefetches its share of `ahead` ([`attention_ahead`]).
 #[allow(clippy::too_many_arguments)]
-fn attend_group<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_head: usize, mask: &M, qi0: usize, p: usize, g: usize, runs: &[(usize, usize); MAX_RUNS], nr: usize, nk: usize, scores: &mut [f32], out: &mut [f32]) {
+fn attend_group<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_head: usize, mask: &M, qi0: usize, p: usize, g: usize, runs: &[(usize, usize); MAX_RUNS], nr: usize, nk: usize, scores: &mut [f32], out: &mut [f32], ahead: [&[u8]; 2]) {
     let hd = c / n_head;
     let scale = 1.0 / libm::sqrtf(hd as f32);
     let rs = p * c;
@@ -217,8 +249,10 @@ fn attend_group<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_
     let mut sums = [0.0f32; simd::QUERY_GROUP];
     for h in 0..n_head {
         let (qh, oh) = (&q[qi0 * c + h * hd..], &mut out[h * hd..]);
-        for &(a, b) in runs {
-            k.dot_rows_group(qh, hd, rs, g, a, b, c, h * hd, &mut scores[a..], nk);
+        // Call (h, run r)'s share of `ahead`.
+        let share = |bytes, r| share(bytes, h * nr + r, n_head * nr);
+        for (r, &(a, b)) in runs.iter().enumerate() {
+            k.dot_rows_group(qh, hd, rs, g, a, b, c, h * hd, &mut scores[a..], nk, share(ahead[0], r));
         }
         for (row, sum) in scores.chunks_exact_mut(nk).zip(&mut sums) {
             let mut max = f32::NEG_INFINITY;
@@ -240,8 +274,8 @@ fn attend_group<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_
         for m in 0..g {
             oh[m * rs..m * rs + hd].fill(0.0);
         }
-        for &(a, b) in runs {
-            v.axpy_rows_group(&scores[a..], nk, a, b, c, h * hd, oh, rs, hd, g);
+        for (r, &(a, b)) in runs.iter().enumerate() {
+            v.axpy_rows_group(&scores[a..], nk, a, b, c, h * hd, oh, rs, hd, g, share(ahead[1], r));
         }
         for (m, &sum) in sums[..g].iter().enumerate() {
             if sum == 0.0 {
@@ -249,6 +283,12 @@ fn attend_group<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_
             }
         }
     }
+}
+
+/// Part `i` of `parts` of `bytes`, cut at 64-byte lines.
+fn share(bytes: &[u8], i: usize, parts: usize) -> &[u8] {
+    let (b0, b1) = simd::part_bytes(bytes.len(), i, parts);
+    &bytes[b0..b1]
 }
 
 /// One query of [`attention`], key by key (masks with many runs); `out`:

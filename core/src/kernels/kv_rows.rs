@@ -106,14 +106,17 @@ impl<'a> KvRows<'a> {
     /// a]` (`out_stride >= b - a`); each key row read once for the group
     /// where the ISA allows, bit for bit the per-query call.
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn dot_rows_group(&self, q: &[f32], hd: usize, q_stride: usize, g: usize, a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32], out_stride: usize) {
+    /// `side`: bytes prefetched into L2 over the pass (the first non-empty
+    /// run's call; [`simd::dot_rows_group`](super::simd::dot_rows_group)).
+    pub(crate) fn dot_rows_group(&self, q: &[f32], hd: usize, q_stride: usize, g: usize, a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32], out_stride: usize, mut side: &[u8]) {
         for (part, lo, hi, at) in self.pieces(a, b, c) {
             let out = &mut out[at..];
             match part {
-                _ if hi == lo => {}
-                RowData::F32(d) => f32::dot_rows_group(q, hd, q_stride, g, &d[lo * c + h_off..], c, hi - lo, out, out_stride),
-                RowData::F16(d) => u16::dot_rows_group(q, hd, q_stride, g, &d[lo * c + h_off..], c, hi - lo, out, out_stride),
+                _ if hi == lo => continue,
+                RowData::F32(d) => f32::dot_rows_group(q, hd, q_stride, g, &d[lo * c + h_off..], c, hi - lo, out, out_stride, side),
+                RowData::F16(d) => u16::dot_rows_group(q, hd, q_stride, g, &d[lo * c + h_off..], c, hi - lo, out, out_stride, side),
             }
+            side = &[];
         }
     }
 
@@ -121,14 +124,25 @@ impl<'a> KvRows<'a> {
     /// row `j` is `coef[m coef_stride + j - a]`, its output `y[m y_stride
     /// ..][..n]`; bit for bit the per-query call.
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn axpy_rows_group(&self, coef: &[f32], coef_stride: usize, a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+    /// `side` as in [`KvRows::dot_rows_group`].
+    pub(crate) fn axpy_rows_group(&self, coef: &[f32], coef_stride: usize, a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, mut side: &[u8]) {
         for (part, lo, hi, at) in self.pieces(a, b, c) {
             let (coef, s, e) = (&coef[at..], lo * c + h_off, hi.saturating_sub(1) * c + h_off + n);
             match part {
-                _ if hi == lo => {}
-                RowData::F32(d) => f32::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], c, y, y_stride, n, g),
-                RowData::F16(d) => u16::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], c, y, y_stride, n, g),
+                _ if hi == lo => continue,
+                RowData::F32(d) => f32::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], c, y, y_stride, n, g, side),
+                RowData::F16(d) => u16::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], c, y, y_stride, n, g, side),
             }
+            side = &[];
+        }
+    }
+
+    /// The stored bytes of the first run (all the rows of a one-run set):
+    /// what a caller prefetches ahead of attending them.
+    pub fn lead_bytes(&self) -> &'a [u8] {
+        match self.parts[0] {
+            RowData::F32(d) => bytemuck::cast_slice(d),
+            RowData::F16(d) => bytemuck::cast_slice(d),
         }
     }
 

@@ -21,7 +21,7 @@ pub mod simd;
 pub mod weights;
 
 pub use activation::{gelu_inplace, relu_inplace, relu_into};
-pub use attention::{attention, BandMask, Mask, TiledCausalMask, Ungrouped};
+pub use attention::{attention, attention_ahead, BandMask, Mask, TiledCausalMask, Ungrouped};
 pub use kv_rows::{KvRows, RowData};
 pub use conv::{conv1d, conv1d_col_len, conv1d_segs, conv_transpose1d, conv_transpose1d_segs, convt_z_len, ConvGeom, ConvSeg, ConvTWeight, CONV_TILE};
 pub use linear::{linear, linear_each, linear_each_with, linear_with, linear_xw, Q8Room};

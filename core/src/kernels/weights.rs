@@ -129,14 +129,14 @@ pub trait DenseElem: Copy + 'static {
     fn axpy_rows(coef: &[f32], rows: &[Self], stride: usize, y: &mut [f32]);
     /// [`Self::dot_rows`] for `g` queries `q_stride` apart, their `n`
     /// scores `out_stride` apart ([`simd::dot_rows_group`]; bit for bit the
-    /// per-query call).
+    /// per-query call; `side` prefetched into L2 meanwhile).
     #[allow(clippy::too_many_arguments)]
-    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[Self], stride: usize, n: usize, out: &mut [f32], out_stride: usize);
+    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[Self], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]);
     /// [`Self::axpy_rows`] for `g` queries: coefficients `coef_stride`
     /// apart, outputs of `n` lanes `y_stride` apart
     /// ([`simd::axpy_rows_group_f32`]; bit for bit the per-query call).
     #[allow(clippy::too_many_arguments)]
-    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[Self], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize);
+    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[Self], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]);
 }
 
 impl DenseElem for f32 {
@@ -165,12 +165,12 @@ impl DenseElem for f32 {
         simd::axpy_rows_f32(coef, rows, stride, y)
     }
     #[inline]
-    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
-        simd::dot_rows_group(q, hd, q_stride, g, rows, stride, n, out, out_stride)
+    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
+        simd::dot_rows_group(q, hd, q_stride, g, rows, stride, n, out, out_stride, side)
     }
     #[inline]
-    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
-        simd::axpy_rows_group_f32(coef, coef_stride, nk, rows, stride, y, y_stride, n, g)
+    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
+        simd::axpy_rows_group_f32(coef, coef_stride, nk, rows, stride, y, y_stride, n, g, side)
     }
 }
 
@@ -201,12 +201,12 @@ impl DenseElem for u16 {
         simd::axpy_rows_f16(coef, rows, stride, y)
     }
     #[inline]
-    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
-        simd::dot_rows_group_f16(q, hd, q_stride, g, rows, stride, n, out, out_stride)
+    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
+        simd::dot_rows_group_f16(q, hd, q_stride, g, rows, stride, n, out, out_stride, side)
     }
     #[inline]
-    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
-        simd::axpy_rows_group_f16(coef, coef_stride, nk, rows, stride, y, y_stride, n, g)
+    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
+        simd::axpy_rows_group_f16(coef, coef_stride, nk, rows, stride, y, y_stride, n, g, side)
     }
 }
 
@@ -261,7 +261,7 @@ impl<E: DenseElem> RowMatrix for DenseRows<'_, E> {
     }
     fn axpy_rows_group(&self, r0: usize, r1: usize, coef: &[f32], coef_stride: usize, y: &mut [f32], y_stride: usize, g: usize) {
         let c = self.cols;
-        E::axpy_rows_group(coef, coef_stride, r1.saturating_sub(r0), &self.data[r0 * c..r1 * c], c, y, y_stride, c, g)
+        E::axpy_rows_group(coef, coef_stride, r1.saturating_sub(r0), &self.data[r0 * c..r1 * c], c, y, y_stride, c, g, &[])
     }
     fn row_into(&self, r: usize, out: &mut [f32]) {
         for (o, &w) in out.iter_mut().zip(self.row(r)) {

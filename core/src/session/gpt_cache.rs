@@ -21,6 +21,7 @@ use heapless::Vec;
 
 /// Causal over window rows for a position-major layout: query row `qi`
 /// (flat index `q_row0 + qi`) sees every key whose window row is not later.
+#[derive(Clone, Copy)]
 struct RowCausal {
     streams: usize,
     q_row0: usize,
@@ -30,6 +31,11 @@ impl Mask for RowCausal {
     #[inline]
     fn allowed(&self, qi: usize, kj: usize) -> bool {
         kj / self.streams <= (self.q_row0 + qi) / self.streams
+    }
+    /// The streams of one window row see the same keys: consecutive
+    /// queries are scored together, in groups that end where a row does.
+    fn period(&self) -> Option<usize> {
+        Some(1)
     }
 }
 
@@ -195,4 +201,45 @@ pub fn check_layout(streams: usize) -> Result<(), Error> {
         return Err(Error::Length { buffer: Buffer::Features, len: streams, expected: FIRST_FOLLOWER_STREAM + FOLLOWER_STREAMS });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::vec::Vec;
+
+    use super::RowCausal;
+    use crate::kernels::{attention, KvRows, RowData, Ungrouped};
+
+    /// The row-causal mask's query groups (`period`: a window row's streams
+    /// scored together) give every query what it gets alone, bit for bit:
+    /// an append of one row, a chunk of rows (groups end at row ends), the
+    /// last layer's 5 follower rows (not row-aligned), f32 and f16 keys.
+    #[test]
+    fn row_causal_groups_equal_queries_alone() {
+        let mut seed = 0x9e37_79b9_u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 6.0 - 3.0
+        };
+        let (st, c, nh) = (10usize, 128usize, 2usize);
+        for (nq, q_row0) in [(10usize, 40usize), (30, 20), (5, 45), (13, 27)] {
+            let nk = q_row0 + nq;
+            let q: Vec<f32> = (0..nq * c).map(|_| next()).collect();
+            let k: Vec<f32> = (0..nk * c).map(|_| next()).collect();
+            let v: Vec<f32> = (0..nk * c).map(|_| next()).collect();
+            let k16: Vec<u16> = k.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
+            let v16: Vec<u16> = v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
+            let mask = RowCausal { streams: st, q_row0 };
+            let mut scores = std::vec![0f32; nk];
+            for (kr, vr) in [(KvRows::from(&k[..]), KvRows::from(&v[..])), (KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16)))] {
+                let (mut grouped, mut alone) = (std::vec![f32::NAN; nq * c], std::vec![f32::NAN; nq * c]);
+                attention(&q, kr, vr, c, nh, &mask, &mut scores, &mut grouped);
+                attention(&q, kr, vr, c, nh, &Ungrouped(mask), &mut scores, &mut alone);
+                assert!(grouped.iter().zip(&alone).all(|(a, b)| a.to_bits() == b.to_bits()), "nq {nq} q_row0 {q_row0}: grouped queries differ from alone");
+            }
+        }
+    }
 }

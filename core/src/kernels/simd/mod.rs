@@ -915,22 +915,27 @@ pub fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
 
 /// Most queries one register block of [`dot_rows_group`] /
 /// [`axpy_rows_group_f32`] holds (larger groups go this many at a time).
-pub const QUERY_GROUP: usize = 4;
+pub const QUERY_GROUP: usize = 5;
 
 /// [`dot_rows`] for `g` queries against the same `n` key rows: query `m`
 /// is `q[m q_stride ..][..hd]`, its scores go to `out[m
 /// out_stride ..][..n]` (`out_stride >= n`). Bit for bit [`dot_rows`] per
 /// query on every ISA; AVX-512 loads each key row once for up to
 /// [`QUERY_GROUP`] queries (heads of at most 64 lanes), the others call
-/// [`dot_rows`] per query.
+/// [`dot_rows`] per query. `side`: bytes prefetched into L2 spread over
+/// the pass (key by key: the next attention's keys, read while this one
+/// computes; no result depends on it); only the AVX-512 kernels use it.
 #[inline]
 #[allow(clippy::too_many_arguments)]
-pub fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+pub fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx512* imply avx512f).
-        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_group(q, hd, q_stride, g, k, stride, n, out, out_stride) },
-        _ => per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| dot_rows(qm, k, stride, o)),
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_group(q, hd, q_stride, g, k, stride, n, out, out_stride, side) },
+        _ => {
+            let _ = side;
+            per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| dot_rows(qm, k, stride, o))
+        }
     }
 }
 
@@ -938,12 +943,15 @@ pub fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32]
 /// [`dot_rows_f16`] per query.
 #[inline]
 #[allow(clippy::too_many_arguments)]
-pub fn dot_rows_group_f16(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+pub fn dot_rows_group_f16(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx512* imply avx512f/bw/vl and f16c).
-        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_group_f16(q, hd, q_stride, g, k, stride, n, out, out_stride) },
-        _ => per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| dot_rows_f16(qm, k, stride, o)),
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_group_f16(q, hd, q_stride, g, k, stride, n, out, out_stride, side) },
+        _ => {
+            let _ = side;
+            per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| dot_rows_f16(qm, k, stride, o))
+        }
     }
 }
 
@@ -959,15 +967,19 @@ fn per_query(q: &[f32], hd: usize, q_stride: usize, g: usize, n: usize, out: &mu
 /// coefficients are `coef[m coef_stride ..][..nk]`, its output `y[m
 /// y_stride ..][..n]`. Bit for bit [`axpy_rows_f32`] per query on
 /// every ISA; AVX-512 loads each value row once for up to [`QUERY_GROUP`]
-/// queries, the others call [`axpy_rows_f32`] per query.
+/// queries, the others call [`axpy_rows_f32`] per query. `side`: as in
+/// [`dot_rows_group`].
 #[inline]
 #[allow(clippy::too_many_arguments)]
-pub fn axpy_rows_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+pub fn axpy_rows_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_group_f32(coef, coef_stride, nk, x, stride, y, y_stride, n, g) },
-        _ => per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| axpy_rows_f32(c, x, stride, ym)),
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_group_f32(coef, coef_stride, nk, x, stride, y, y_stride, n, g, side) },
+        _ => {
+            let _ = side;
+            per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| axpy_rows_f32(c, x, stride, ym))
+        }
     }
 }
 
@@ -975,12 +987,15 @@ pub fn axpy_rows_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32
 /// [`axpy_rows_f16`] per query.
 #[inline]
 #[allow(clippy::too_many_arguments)]
-pub fn axpy_rows_group_f16(coef: &[f32], coef_stride: usize, nk: usize, w: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+pub fn axpy_rows_group_f16(coef: &[f32], coef_stride: usize, nk: usize, w: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
-        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_group_f16(coef, coef_stride, nk, w, stride, y, y_stride, n, g) },
-        _ => per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| axpy_rows_f16(c, w, stride, ym)),
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_group_f16(coef, coef_stride, nk, w, stride, y, y_stride, n, g, side) },
+        _ => {
+            let _ = side;
+            per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| axpy_rows_f16(c, w, stride, ym))
+        }
     }
 }
 

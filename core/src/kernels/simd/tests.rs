@@ -1398,10 +1398,11 @@ fn f16_row_readers_equal_f32_kernels_on_widened_rows() {
 /// `attention` over key/value rows given as two runs (a ring's wrap), in
 /// f32 or f16, equals the call on one contiguous f32 copy bit for bit, for
 /// every split point (band, tiled-causal and many-run masks; the values
-/// are f16-exact so the f16 storage holds the same numbers).
+/// are f16-exact so the f16 storage holds the same numbers), and so does
+/// `attention_ahead` with bytes to prefetch meanwhile.
 #[test]
 fn attention_over_split_and_f16_rows_equals_contiguous() {
-    use crate::kernels::{attention, BandMask, KvRows, Mask, RowData, TiledCausalMask};
+    use crate::kernels::{attention, attention_ahead, BandMask, KvRows, Mask, RowData, TiledCausalMask};
     struct Comb;
     impl Mask for Comb {
         fn allowed(&self, _: usize, kj: usize) -> bool {
@@ -1439,6 +1440,33 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
     let tiled = TiledCausalMask { t_q: 3, t_k: 8, q_pos0: 4 };
     check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &tiled, s, o), 9, 40, &mut r);
     check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &Comb, s, o), 2, 150, &mut r);
+    // The same with other rows prefetched meanwhile (`attention_ahead`: the
+    // next session's keys and values in a batch): no number changes.
+    let (ka, va) = (vec![3u8; 5000], vec![5u8; 70]);
+    let (nq, nk) = (10usize, 40usize);
+    let (q, k, v) = (r.vec(nq * c), r.vec(nk * c), r.vec(nk * c));
+    let k16: Vec<u16> = k.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
+    let v16: Vec<u16> = v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
+    let append = TiledCausalMask { t_q: 1, t_k: 4, q_pos0: 3 };
+    let mut scores = vec![0f32; nk];
+    for (kr, vr) in [(KvRows::from(&k[..]), KvRows::from(&v[..])), (KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16)))] {
+        /// One attention call given what it prefetches (keys, values).
+        type Attend<'x> = &'x dyn Fn(&[u8], &[u8], &mut [f32], &mut [f32]);
+        let masks: [Attend<'_>; 3] = [
+            &|a, b, s, o| attention_ahead(&q, kr, vr, c, nh, &band, s, o, [a, b]),
+            &|a, b, s, o| attention_ahead(&q, kr, vr, c, nh, &append, s, o, [a, b]),
+            &|a, b, s, o| attention_ahead(&q, kr, vr, c, nh, &Comb, s, o, [a, b]),
+        ];
+        for m in masks {
+            let mut want = vec![f32::NAN; nq * c];
+            m(&[], &[], &mut scores, &mut want);
+            for (a, b) in [(&ka[..], &va[..]), (&[][..], &ka[..]), (&va[..], &[][..])] {
+                let mut got = vec![f32::NAN; nq * c];
+                m(a, b, &mut scores, &mut got);
+                assert!(got.iter().zip(&want).all(|(x, y)| x.to_bits() == y.to_bits()), "attention_ahead changed a number");
+            }
+        }
+    }
 }
 
 /// A 4-bit row group (`PackedQ8::from_q4_group`: each row's two 8-byte
@@ -1738,7 +1766,8 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
 /// between the members' rows, and track the scalar twin (the per-query
 /// scalar kernels) within the per-query limits. Groups of 1-9 members
 /// (blocks of `QUERY_GROUP` and their rests), heads of 1-96 lanes (the
-/// masked tails, and past the 64 lanes a register block holds).
+/// masked tails, and past the 64 lanes a register block holds), with and
+/// without bytes to prefetch on the side.
 #[test]
 #[allow(unsafe_code, clippy::type_complexity)]
 fn query_groups_equal_the_per_query_kernels() {
@@ -1746,16 +1775,16 @@ fn query_groups_equal_the_per_query_kernels() {
     ///
     /// # Safety
     /// Both kernels need the variant's CPU features (pushed only where detected).
-    type Dots<E> = (&'static str, unsafe fn(&[f32], usize, usize, usize, &[E], usize, usize, &mut [f32], usize), unsafe fn(&[f32], &[E], usize, &mut [f32]));
+    type Dots<E> = (&'static str, unsafe fn(&[f32], usize, usize, usize, &[E], usize, usize, &mut [f32], usize, &[u8]), unsafe fn(&[f32], &[E], usize, &mut [f32]));
     /// As `Dots`, for the weighted value rows.
     ///
     /// # Safety
     /// As for `Dots`.
-    type Axpys<E> = (&'static str, unsafe fn(&[f32], usize, usize, &[E], usize, &mut [f32], usize, usize, usize), unsafe fn(&[f32], &[E], usize, &mut [f32]));
-    let mut d32: Vec<Dots<f32>> = vec![("dispatched", |q, hd, qs, g, k, s, n, o, os| super::dot_rows_group(q, hd, qs, g, k, s, n, o, os), |q, k, s, o| super::dot_rows(q, k, s, o))];
-    let mut d16: Vec<Dots<u16>> = vec![("dispatched", |q, hd, qs, g, k, s, n, o, os| super::dot_rows_group_f16(q, hd, qs, g, k, s, n, o, os), |q, k, s, o| super::dot_rows_f16(q, k, s, o))];
-    let mut a32: Vec<Axpys<f32>> = vec![("dispatched", |c, cs, nk, x, s, y, ys, n, g| super::axpy_rows_group_f32(c, cs, nk, x, s, y, ys, n, g), |c, x, s, y| super::axpy_rows_f32(c, x, s, y))];
-    let mut a16: Vec<Axpys<u16>> = vec![("dispatched", |c, cs, nk, x, s, y, ys, n, g| super::axpy_rows_group_f16(c, cs, nk, x, s, y, ys, n, g), |c, x, s, y| super::axpy_rows_f16(c, x, s, y))];
+    type Axpys<E> = (&'static str, unsafe fn(&[f32], usize, usize, &[E], usize, &mut [f32], usize, usize, usize, &[u8]), unsafe fn(&[f32], &[E], usize, &mut [f32]));
+    let mut d32: Vec<Dots<f32>> = vec![("dispatched", |q, hd, qs, g, k, s, n, o, os, side| super::dot_rows_group(q, hd, qs, g, k, s, n, o, os, side), |q, k, s, o| super::dot_rows(q, k, s, o))];
+    let mut d16: Vec<Dots<u16>> = vec![("dispatched", |q, hd, qs, g, k, s, n, o, os, side| super::dot_rows_group_f16(q, hd, qs, g, k, s, n, o, os, side), |q, k, s, o| super::dot_rows_f16(q, k, s, o))];
+    let mut a32: Vec<Axpys<f32>> = vec![("dispatched", |c, cs, nk, x, s, y, ys, n, g, side| super::axpy_rows_group_f32(c, cs, nk, x, s, y, ys, n, g, side), |c, x, s, y| super::axpy_rows_f32(c, x, s, y))];
+    let mut a16: Vec<Axpys<u16>> = vec![("dispatched", |c, cs, nk, x, s, y, ys, n, g, side| super::axpy_rows_group_f16(c, cs, nk, x, s, y, ys, n, g, side), |c, x, s, y| super::axpy_rows_f16(c, x, s, y))];
     #[cfg(target_arch = "x86_64")]
     {
         use std::is_x86_feature_detected as has;
@@ -1768,7 +1797,11 @@ fn query_groups_equal_the_per_query_kernels() {
     }
     let to16 = |v: &[f32]| -> Vec<u16> { v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect() };
     let mut r = Rng(97);
+    // Bytes the kernels prefetch meanwhile (no result may depend on them;
+    // empty, shorter and longer than a line per key).
+    let sides: [Vec<u8>; 3] = [Vec::new(), vec![7; 100], vec![9; 64 * 40 + 3]];
     for g in 1..=9 {
+        let side = &sides[g % 3][..];
         for hd in [1, 5, 16, 17, 48, 64, 65, 96] {
             for n in [0, 1, 2, 3, 29] {
                 let (q_stride, stride, out_stride) = (hd + 3, hd + 11, n + 2);
@@ -1786,7 +1819,7 @@ fn query_groups_equal_the_per_query_kernels() {
                 for &(name, group, one) in &d32 {
                     let mut got = vec![f32::NAN; len];
                     // SAFETY: each variant was pushed only where its CPU features were detected.
-                    unsafe { group(&q, hd, q_stride, g, &k, stride, n, &mut got, out_stride) };
+                    unsafe { group(&q, hd, q_stride, g, &k, stride, n, &mut got, out_stride, side) };
                     for m in 0..g {
                         let mut want = vec![0.0; n];
                         // SAFETY: as above.
@@ -1803,7 +1836,7 @@ fn query_groups_equal_the_per_query_kernels() {
                 for &(name, group, one) in &d16 {
                     let mut got = vec![f32::NAN; len];
                     // SAFETY: as above.
-                    unsafe { group(&q, hd, q_stride, g, &k16, stride, n, &mut got, out_stride) };
+                    unsafe { group(&q, hd, q_stride, g, &k16, stride, n, &mut got, out_stride, side) };
                     for m in 0..g {
                         let mut want = vec![0.0; n];
                         // SAFETY: as above.
@@ -1848,14 +1881,14 @@ fn query_groups_equal_the_per_query_kernels() {
                 for &(name, group, one) in &a32 {
                     let mut got = y0.clone();
                     // SAFETY: as above.
-                    unsafe { group(&coef, coef_stride, nk, &x[..rows_len], stride, &mut got, y_stride, n, g) };
+                    unsafe { group(&coef, coef_stride, nk, &x[..rows_len], stride, &mut got, y_stride, n, g, side) };
                     // SAFETY: as above.
                     check_rows(name, &got, &|c, y| unsafe { one(c, &x[..rows_len], stride, y) }, &|i| x[i]);
                 }
                 for &(name, group, one) in &a16 {
                     let mut got = y0.clone();
                     // SAFETY: as above.
-                    unsafe { group(&coef, coef_stride, nk, &x16[..rows_len], stride, &mut got, y_stride, n, g) };
+                    unsafe { group(&coef, coef_stride, nk, &x16[..rows_len], stride, &mut got, y_stride, n, g, side) };
                     // SAFETY: as above.
                     check_rows(name, &got, &|c, y| unsafe { one(c, &x16[..rows_len], stride, y) }, &|i| super::f16_to_f32(x16[i]));
                 }

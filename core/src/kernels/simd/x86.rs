@@ -926,7 +926,7 @@ fn prefetch_span<T>(s: &[T]) {
 /// The CPU must support avx512f, avx2 and fma.
 #[target_feature(enable = "avx512f,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn dot_rows_512_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+pub unsafe fn dot_rows_512_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
     if hd == 0 || hd > 64 {
         for m in 0..g {
             // SAFETY: this fn's contract.
@@ -938,7 +938,7 @@ pub unsafe fn dot_rows_512_group(q: &[f32], hd: usize, q_stride: usize, g: usize
     let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_maskz_loadu_ps(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i)) };
     let ahead = |j: usize| prefetch_span(&k[j * stride..j * stride + hd]);
     // SAFETY: this fn's contract.
-    unsafe { dot_rows_512_group_by(q, hd, q_stride, g, load, ahead, n, out, out_stride) }
+    unsafe { dot_rows_512_group_by(q, hd, q_stride, g, load, ahead, n, out, out_stride, side) }
 }
 
 /// [`dot_rows_512_group`] over binary16 key rows: each key lane widened by
@@ -949,7 +949,7 @@ pub unsafe fn dot_rows_512_group(q: &[f32], hd: usize, q_stride: usize, g: usize
 /// The CPU must support avx512f, avx512bw, avx512vl, avx2, fma and f16c.
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn dot_rows_512_group_f16(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize) {
+pub unsafe fn dot_rows_512_group_f16(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
     if hd == 0 || hd > 64 {
         for m in 0..g {
             // SAFETY: this fn's contract.
@@ -961,7 +961,7 @@ pub unsafe fn dot_rows_512_group_f16(q: &[f32], hd: usize, q_stride: usize, g: u
     let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i) as *const i16)) };
     let ahead = |j: usize| prefetch_span(&k[j * stride..j * stride + hd]);
     // SAFETY: this fn's contract.
-    unsafe { dot_rows_512_group_by(q, hd, q_stride, g, load, ahead, n, out, out_stride) }
+    unsafe { dot_rows_512_group_by(q, hd, q_stride, g, load, ahead, n, out, out_stride, side) }
 }
 
 /// The shared body of [`dot_rows_512_group`] and [`dot_rows_512_group_f16`]
@@ -984,18 +984,22 @@ unsafe fn dot_rows_512_group_by(
     n: usize,
     out: &mut [f32],
     out_stride: usize,
+    side: &[u8],
 ) {
     let mut m0 = 0;
     while m0 < g {
         let gm = (g - m0).min(super::QUERY_GROUP);
         let (q, out) = (&q[m0 * q_stride..], &mut out[m0 * out_stride..]);
+        // The first block's pass over the keys prefetches `side`.
+        let side = if m0 == 0 { side } else { &[] };
         // SAFETY: this fn's contract.
         unsafe {
             match gm {
-                4 => dot_block::<4>(q, hd, q_stride, load, ahead, n, out, out_stride),
-                3 => dot_block::<3>(q, hd, q_stride, load, ahead, n, out, out_stride),
-                2 => dot_block::<2>(q, hd, q_stride, load, ahead, n, out, out_stride),
-                _ => dot_block::<1>(q, hd, q_stride, load, ahead, n, out, out_stride),
+                5 => dot_block::<5>(q, hd, q_stride, load, ahead, n, out, out_stride, side),
+                4 => dot_block::<4>(q, hd, q_stride, load, ahead, n, out, out_stride, side),
+                3 => dot_block::<3>(q, hd, q_stride, load, ahead, n, out, out_stride, side),
+                2 => dot_block::<2>(q, hd, q_stride, load, ahead, n, out, out_stride, side),
+                _ => dot_block::<1>(q, hd, q_stride, load, ahead, n, out, out_stride, side),
             }
         }
         m0 += gm;
@@ -1013,7 +1017,7 @@ unsafe fn dot_rows_512_group_by(
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load: impl Fn(usize, usize, __mmask16) -> __m512, ahead: impl Fn(usize), n: usize, out: &mut [f32], out_stride: usize) {
+unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load: impl Fn(usize, usize, __mmask16) -> __m512, ahead: impl Fn(usize), n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
     let nv = hd.div_ceil(16);
     let mask: [__mmask16; 4] = core::array::from_fn(|i| if 16 * (i + 1) <= hd { 0xffff } else if 16 * i < hd { lanes16(hd - 16 * i) } else { 0 });
     let q = &q[..(G - 1) * q_stride + hd];
@@ -1024,6 +1028,7 @@ unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load:
         if j + KEY_PREFETCH < n {
             ahead(j + KEY_PREFETCH);
         }
+        super::prefetch_part(side, j, n);
         let mut acc = [_mm512_setzero_ps(); G];
         for i in 0..nv {
             let kv = load(j, i, mask[i]);
@@ -1031,13 +1036,14 @@ unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load:
                 *a = _mm512_fmadd_ps(qm[i], kv, *a);
             }
         }
-        // SAFETY: avx512f (this fn's features).
-        let sums = unsafe { reduce4(core::array::from_fn(|m| if m < G { acc[m] } else { _mm512_setzero_ps() })) };
-        let mut lanes = [0f32; 16];
-        // SAFETY: lanes holds 16 floats.
-        unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), sums) };
+        // Queries 0-3, then 4-7 (G > 4), four sums side by side.
+        let mut lanes = [0f32; 32];
+        for (h, half) in lanes.chunks_exact_mut(16).enumerate().take(G.div_ceil(4)) {
+            // SAFETY: avx512f (this fn's features); `half` holds 16 floats.
+            unsafe { _mm512_storeu_ps(half.as_mut_ptr(), reduce4(core::array::from_fn(|m| if 4 * h + m < G { acc[4 * h + m] } else { _mm512_setzero_ps() }))) };
+        }
         for m in 0..G {
-            out[m * out_stride + j] = lanes[4 * m];
+            out[m * out_stride + j] = lanes[16 * (m / 4) + 4 * (m % 4)];
         }
     }
 }
@@ -1471,11 +1477,11 @@ unsafe fn axpy_rows_512_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: 
 /// The CPU must support avx512f, avx2 and fma.
 #[target_feature(enable = "avx512f,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn axpy_rows_512_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+pub unsafe fn axpy_rows_512_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
     // SAFETY: `row` holds n floats and `e + 16 <= n` (axpy_rows_512_group_by's contract).
     let load = |row: &[f32], e: usize| unsafe { _mm512_loadu_ps(row.as_ptr().add(e)) };
     // SAFETY: this fn's contract.
-    let done = unsafe { axpy_rows_512_group_by(coef, coef_stride, nk, x, stride, y, y_stride, n, g, load) };
+    let done = unsafe { axpy_rows_512_group_by(coef, coef_stride, nk, x, stride, y, y_stride, n, g, load, side) };
     // Lanes past the 64-lane blocks (none for 64-lane heads) per query.
     for m in 0..if done < n { g } else { 0 } {
         let ym = &mut y[m * y_stride..m * y_stride + n];
@@ -1491,11 +1497,11 @@ pub unsafe fn axpy_rows_512_group_f32(coef: &[f32], coef_stride: usize, nk: usiz
 /// The CPU must support avx512f, avx2, fma and f16c.
 #[target_feature(enable = "avx512f,avx2,fma,f16c")]
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn axpy_rows_512_group_f16(coef: &[f32], coef_stride: usize, nk: usize, w: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize) {
+pub unsafe fn axpy_rows_512_group_f16(coef: &[f32], coef_stride: usize, nk: usize, w: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
     // SAFETY: as in `axpy_rows_512_group_f32` (16 u16 = 256 bits at e).
     let load = |row: &[u16], e: usize| unsafe { _mm512_cvtph_ps(_mm256_loadu_si256(row.as_ptr().add(e) as *const __m256i)) };
     // SAFETY: this fn's contract.
-    let done = unsafe { axpy_rows_512_group_by(coef, coef_stride, nk, w, stride, y, y_stride, n, g, load) };
+    let done = unsafe { axpy_rows_512_group_by(coef, coef_stride, nk, w, stride, y, y_stride, n, g, load, side) };
     // Lanes past the 64-lane blocks (none for 64-lane heads) per query.
     for m in 0..if done < n { g } else { 0 } {
         let ym = &mut y[m * y_stride..m * y_stride + n];
@@ -1513,7 +1519,7 @@ pub unsafe fn axpy_rows_512_group_f16(coef: &[f32], coef_stride: usize, nk: usiz
 #[allow(clippy::too_many_arguments)]
 #[inline]
 #[target_feature(enable = "avx512f")]
-unsafe fn axpy_rows_512_group_by<E: Copy>(coef: &[f32], coef_stride: usize, nk: usize, rows: &[E], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, load: impl Fn(&[E], usize) -> __m512 + Copy) -> usize {
+unsafe fn axpy_rows_512_group_by<E: Copy>(coef: &[f32], coef_stride: usize, nk: usize, rows: &[E], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, load: impl Fn(&[E], usize) -> __m512 + Copy, side: &[u8]) -> usize {
     if n == 0 {
         return 0;
     }
@@ -1524,13 +1530,16 @@ unsafe fn axpy_rows_512_group_by<E: Copy>(coef: &[f32], coef_stride: usize, nk: 
     while m0 < g {
         let gm = (g - m0).min(super::QUERY_GROUP);
         let (coef, y) = (&coef[m0 * coef_stride..], &mut y[m0 * y_stride..]);
+        // The first block's pass over the rows prefetches `side`.
+        let side = if m0 == 0 { side } else { &[] };
         // SAFETY: this fn's contract.
         unsafe {
             match gm {
-                4 => axpy_block::<4, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load),
-                3 => axpy_block::<3, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load),
-                2 => axpy_block::<2, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load),
-                _ => axpy_block::<1, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load),
+                5 => axpy_block::<5, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
+                4 => axpy_block::<4, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
+                3 => axpy_block::<3, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
+                2 => axpy_block::<2, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
+                _ => axpy_block::<1, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
             }
         }
         m0 += gm;
@@ -1547,7 +1556,7 @@ unsafe fn axpy_rows_512_group_by<E: Copy>(coef: &[f32], coef_stride: usize, nk: 
 #[allow(clippy::too_many_arguments)]
 #[inline]
 #[target_feature(enable = "avx512f")]
-unsafe fn axpy_block<const G: usize, E: Copy>(coef: &[f32], coef_stride: usize, nk: usize, rows: &[E], stride: usize, y: &mut [f32], y_stride: usize, n: usize, done: usize, load: impl Fn(&[E], usize) -> __m512) {
+unsafe fn axpy_block<const G: usize, E: Copy>(coef: &[f32], coef_stride: usize, nk: usize, rows: &[E], stride: usize, y: &mut [f32], y_stride: usize, n: usize, done: usize, load: impl Fn(&[E], usize) -> __m512, side: &[u8]) {
     let coef = &coef[..(G - 1) * coef_stride + nk];
     let y = &mut y[..(G - 1) * y_stride + n];
     let mut e = 0;
@@ -1558,6 +1567,10 @@ unsafe fn axpy_block<const G: usize, E: Copy>(coef: &[f32], coef_stride: usize, 
             if j + KEY_PREFETCH < nk {
                 let a = (j + KEY_PREFETCH) * stride + e;
                 prefetch_span(&rows[a..a + 64]);
+            }
+            // `side` over the first 64-lane block's rows.
+            if e == 0 {
+                super::prefetch_part(side, j, nk);
             }
             let r = &rows[j * stride..j * stride + n];
             let v: [__m512; 4] = core::array::from_fn(|t| load(r, e + 16 * t));
