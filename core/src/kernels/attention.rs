@@ -87,7 +87,7 @@ const MAX_RUNS: usize = 64;
 pub const SPLIT_MAX_KEYS: usize = 1024;
 
 /// Floats of a thread's score buffer (8 KiB): two rows of
-/// [`SPLIT_MAX_KEYS`], or [`simd::QUERY_GROUP`] rows of up to 512 keys (a
+/// [`SPLIT_MAX_KEYS`], or [`simd::QUERY_GROUP`] rows of up to 409 keys (a
 /// query group needs one row of scores per member).
 const SPLIT_SCORES: usize = 2 * SPLIT_MAX_KEYS;
 
