@@ -179,7 +179,9 @@ pub fn block_kv(w: &BlockW<'_>, x: &[f32], ln: &mut [f32], k: &mut [f32], v: &mu
 /// Groups are independent (one streaming session's window or LAT each);
 /// every weight matrix is read once for all of them, and a row's result
 /// does not depend on the other groups (the kernels compute rows
-/// independently: `linear_rows_do_not_depend_on_the_batch`).
+/// independently: `linear_rows_do_not_depend_on_the_batch`). While group
+/// `g` attends, group `g + 1`'s keys and values (their first run) are
+/// prefetched (`attention_ahead`; no number depends on it).
 pub fn block_attend_groups<'k, M, F>(w: &BlockW<'_>, x: &mut [f32], bounds: &[usize], c: usize, n_head: usize, keys: F, s: &mut BlockScratch<'_>) -> Result<(), Error>
 where
     M: Mask,
@@ -205,10 +207,7 @@ where
             return Err(Error::Length { buffer: Buffer::Features, len: nk, expected: scores.len() });
         }
         // The next group's keys and values stream in while this one computes.
-        let ahead = match g + 1 < groups {
-            true => keys(g + 1).map(|(k, v, _)| [k.lead_bytes(), v.lead_bytes()])?,
-            false => [&[][..], &[][..]],
-        };
+        let ahead = if g + 1 < groups { keys(g + 1).map(|(k, v, _)| [k.lead_bytes(), v.lead_bytes()])? } else { [&[][..], &[][..]] };
         attention_ahead(&q[a * c..b * c], k, v, c, n_head, &mask, &mut scores[..nk], &mut att[a * c..b * c], ahead);
     }
     lin(att, &w.proj, ln, &mut p.panel);

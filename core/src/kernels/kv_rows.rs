@@ -105,9 +105,9 @@ impl<'a> KvRows<'a> {
     /// in `q`: query `m`'s score of key `j` goes to `out[m out_stride + j -
     /// a]` (`out_stride >= b - a`); each key row read once for the group
     /// where the ISA allows, bit for bit the per-query call.
-    #[allow(clippy::too_many_arguments)]
     /// `side`: bytes prefetched into L2 over the pass (the first non-empty
     /// run's call; [`simd::dot_rows_group`](super::simd::dot_rows_group)).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn dot_rows_group(&self, q: &[f32], hd: usize, q_stride: usize, g: usize, a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32], out_stride: usize, mut side: &[u8]) {
         for (part, lo, hi, at) in self.pieces(a, b, c) {
             let out = &mut out[at..];
@@ -123,8 +123,8 @@ impl<'a> KvRows<'a> {
     /// [`KvRows::axpy_rows`] for `g` queries: query `m`'s coefficient of
     /// row `j` is `coef[m coef_stride + j - a]`, its output `y[m y_stride
     /// ..][..n]`; bit for bit the per-query call.
-    #[allow(clippy::too_many_arguments)]
     /// `side` as in [`KvRows::dot_rows_group`].
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn axpy_rows_group(&self, coef: &[f32], coef_stride: usize, a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, mut side: &[u8]) {
         for (part, lo, hi, at) in self.pieces(a, b, c) {
             let (coef, s, e) = (&coef[at..], lo * c + h_off, hi.saturating_sub(1) * c + h_off + n);

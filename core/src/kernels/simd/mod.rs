@@ -929,7 +929,8 @@ pub const QUERY_GROUP: usize = 5;
 /// [`QUERY_GROUP`] queries (heads of at most 64 lanes), the others call
 /// [`dot_rows`] per query. `side`: bytes prefetched into L2 spread over
 /// the pass (key by key: the next attention's keys, read while this one
-/// computes; no result depends on it); only the AVX-512 kernels use it.
+/// computes; no result depends on it); only the AVX-512 kernels use it,
+/// for heads of at most 64 lanes.
 #[inline]
 #[allow(clippy::too_many_arguments)]
 pub fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
