@@ -160,7 +160,8 @@ impl<'a> Carve<'a> for Planner {
 /// for working memory that the phases of a step use in turn (a piece's
 /// contents are whatever the previous phase left; its users write before
 /// they read). Pieces are rounded like [`Arena`]'s, so a pool of
-/// `Planner::bytes() / 4` floats fits the same carve function. f32 only.
+/// `Planner::bytes() / 4` floats fits the same carve function. Integer
+/// pieces are the pool's floats viewed as integers (as unzeroed).
 pub struct Split<'a> {
     rest: &'a mut [f32],
 }
@@ -186,10 +187,12 @@ impl<'a> Carve<'a> for Split<'a> {
         self.rest = tail;
         Ok(&mut head[..n])
     }
+    /// The pool's floats, viewed as u32 (an int8 panel's values and corrections).
     fn u32(&mut self, n: usize) -> Result<&'a mut [u32], ArenaError> {
-        Err(ArenaError::OutOfMemory { needed: rounded(n, 4)?, available: 0 })
+        Ok(bytemuck::cast_slice_mut(self.f32(n)?))
     }
     fn u16(&mut self, n: usize) -> Result<&'a mut [u16], ArenaError> {
-        Err(ArenaError::OutOfMemory { needed: rounded(n, 2)?, available: 0 })
+        let b: &'a mut [u16] = bytemuck::cast_slice_mut(self.f32(n.div_ceil(2))?);
+        Ok(&mut b[..n])
     }
 }

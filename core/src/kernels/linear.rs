@@ -20,11 +20,13 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
 }
 
 /// [`linear`] with caller memory for the int8 activation panel: a call
-/// whose rows do not fit the stack panel ([`Q8_PANEL`] values) but fit
-/// more of them in `room` is quantised into `room`, so each weight tile
-/// (and its AMX operands) is read and prepared once per `room`'s rows
-/// rather than once per stack panel. The values are the same bit for bit
-/// (rows are computed independently); an empty `room` is [`linear`].
+/// whose rows `room` holds, or holds more of than the stack panel
+/// ([`Q8_PANEL`] values), is quantised into `room` (calls of at most
+/// 32 Ki values keep their small stack panel), so each weight
+/// tile (and its AMX operands) is read and prepared once per `room`'s rows
+/// rather than once per stack panel, and no stack panel is zeroed. The
+/// values are the same bit for bit (rows are computed independently); an
+/// empty `room` is [`linear`].
 pub fn linear_with(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], room: &mut Q8Room<'_>) {
     let (n_in, n_out) = (w.cols(), w.rows());
     if n_in == 0 || n_out == 0 {
@@ -315,7 +317,7 @@ fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Op
     let values = x.len().checked_div(n_in).map_or(0, |rows| rows * n_in);
     if values <= Q8_PANEL_SMALL {
         linear_q8_in::<W, N, Q8_PANEL_SMALL, { Q8_PANEL_SMALL / Q8_BLOCK }, { 2 * Q8_PANEL_SMALL / Q8_BLOCK }>(x, ws, bs, ys)
-    } else if values > Q8_PANEL && room.rows(n_in) > Q8_PANEL / n_in {
+    } else if room.rows(n_in) * n_in >= values || room.rows(n_in) > Q8_PANEL / n_in {
         linear_q8_on(x, ws, bs, ys, room.q, room.d, room.c)
     } else {
         linear_q8_in::<W, N, Q8_PANEL, Q8_PANEL_BLOCKS, { 2 * Q8_PANEL_BLOCKS }>(x, ws, bs, ys)

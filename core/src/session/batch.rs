@@ -22,7 +22,7 @@ use crate::config::ModelConfig;
 use crate::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::Error;
 use crate::gpt::{head_rows, logits_len};
-use crate::kernels::linear;
+use crate::kernels::{linear, Q8Room};
 use crate::model::Model;
 use crate::sampler::{argmax, top_k_by_id};
 use crate::session::config::{for_each_live_window, next_window, CacheSchedule, window_context, Sampling, Setting, MAX_WINDOWS};
@@ -155,16 +155,31 @@ impl<'s> StepScratch<'s> {
 /// scratch and the conv scratch for `dims`.
 fn pool_floats(d: &StepDims) -> Result<usize, ArenaError> {
     let mut blk = Planner::new();
-    BlockScratch::carve_keys(&mut blk, d.rows, d.keys, d.c)?;
+    carve_block(&mut blk, d)?;
     let mut conv = Planner::new();
     StreamScratch::carve(&mut conv, d.conv, d.n)?;
     Ok(Split::floats_for(&blk).max(Split::floats_for(&conv)))
 }
 
+/// The block scratch of dims `d`. A scratch for several sessions (a
+/// [`StepBatch`]'s, outside every session's arena) also carves an int8
+/// panel for all its rows x 4C, so each of a batch's GEMMs quantises its
+/// rows once and reads every weight tile once (the stack panel holds 64
+/// rows of the MLP's 3072-wide input: 16 sessions' 160 rows took 3 panels,
+/// each reading the weights again). A session's own scratch carves none
+/// (its arena stays as small as it is).
+fn carve_block<'x, A: Carve<'x>>(a: &mut A, d: &StepDims) -> Result<BlockScratch<'x>, ArenaError> {
+    let mut s = BlockScratch::carve_keys(a, d.rows, d.keys, d.c)?;
+    if d.n > 1 {
+        s.panel = Q8Room::carve(a, d.rows.checked_mul(4 * d.c).ok_or(ArenaError::Overflow)?)?;
+    }
+    Ok(s)
+}
+
 /// The block scratch (LAT pushes, GPT appends) over the pool of a
 /// [`StepScratch`] with dims `d`.
 pub fn block_scratch<'x>(pool: &'x mut [f32], d: &StepDims) -> Result<BlockScratch<'x>, Error> {
-    Ok(BlockScratch::carve_keys(&mut Split::new(pool), d.rows, d.keys, d.c)?)
+    Ok(carve_block(&mut Split::new(pool), d)?)
 }
 
 /// The conv scratch of the streaming VQ stacks of `d.n` sessions over the
