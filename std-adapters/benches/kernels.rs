@@ -199,7 +199,34 @@ fn main() {
                 attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]);
             }
         });
-        line += &format!("  [{isa:?}] {:.2} ms (the next cache prefetched meanwhile {:.2} ms: {:.2}x; one hot cache {:.2} ms: {:.2}x)", cold * 1e3, ahead * 1e3, ahead / cold, hot * 1e3, cold / hot);
+        // The same caches head-major (a session's GPT cache): each head's
+        // rows one contiguous stretch.
+        fn hm(d: &[u16], n: usize, hd: usize) -> KvRows<'_> {
+            KvRows::head_major(RowData::F16(d), n, n, hd).unwrap()
+        }
+        let cold_hm = time(reps, || {
+            for (kc, vc) in &caches {
+                attention(&q[..streams * c], hm(kc, n, c / nh), hm(vc, n, c / nh), c, nh, &mask, &mut scores, &mut out[..streams * c]);
+            }
+        });
+        let ahead_hm = time(reps, || {
+            for (i, (kc, vc)) in caches.iter().enumerate() {
+                let next = caches.get(i + 1).map_or([&[][..], &[][..]], |(kn, vn)| [bytemuck::cast_slice(kn), bytemuck::cast_slice(vn)]);
+                attention_ahead(&q[..streams * c], hm(kc, n, c / nh), hm(vc, n, c / nh), c, nh, &mask, &mut scores, &mut out[..streams * c], next);
+            }
+        });
+        line += &format!(
+            "  [{isa:?}] {:.2} ms (the next cache prefetched meanwhile {:.2} ms: {:.2}x; one hot cache {:.2} ms: {:.2}x; head-major {:.2} ms, prefetched {:.2} ms: {:.2}x / {:.2}x row-major)",
+            cold * 1e3,
+            ahead * 1e3,
+            ahead / cold,
+            hot * 1e3,
+            cold / hot,
+            cold_hm * 1e3,
+            ahead_hm * 1e3,
+            cold_hm / cold,
+            ahead_hm / ahead
+        );
     }
     println!("{line}");
     drop(caches);

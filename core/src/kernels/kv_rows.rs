@@ -28,34 +28,76 @@ impl RowData<'_> {
     }
 }
 
-/// `n` rows of width `C`: the rows of `parts[0]`, then those of `parts[1]`.
+/// `n` rows of width `C`: the rows of `parts[0]`, then those of `parts[1]`
+/// (row-major: row `j` at `j C`), or one head-major run ([`KvRows::head_major`]).
 #[derive(Clone, Copy, Debug)]
 pub struct KvRows<'a> {
     parts: [RowData<'a>; 2],
+    heads: Option<HeadMajor>,
+}
+
+/// Where a head-major run keeps its rows: head `h`'s `hd` lanes of row `j`
+/// at `(h cap + j) hd`; rows `0..rows` are visible.
+#[derive(Clone, Copy, Debug)]
+struct HeadMajor {
+    rows: usize,
+    cap: usize,
+    hd: usize,
 }
 
 impl<'a> KvRows<'a> {
     /// One run.
     pub fn one(d: RowData<'a>) -> Self {
-        KvRows { parts: [d, RowData::F32(&[])] }
+        KvRows { parts: [d, RowData::F32(&[])], heads: None }
     }
 
     /// `first`'s rows, then `second`'s (each a whole number of rows).
     pub fn two(first: RowData<'a>, second: RowData<'a>) -> Self {
-        KvRows { parts: [first, second] }
+        KvRows { parts: [first, second], heads: None }
     }
 
-    /// Whole rows of width `c` held (a part's partial last row is not one).
+    /// One head-major run: head `h`'s `hd` lanes of row `j` at `(h cap +
+    /// j) hd` of `d`, rows `0..rows` visible (`rows <= cap`). A pass over
+    /// one head's rows then reads one contiguous stretch, where row-major
+    /// rows put `hd` lanes of every `C` apart (a cold cache's reads: the
+    /// hardware prefetchers follow a stretch, not a stride). The heads
+    /// whose rows `d` holds in full are the heads there are: [`Self::rows`]
+    /// is 0 for a width `c` with more. None if `hd == 0` or `rows > cap`.
+    pub fn head_major(d: RowData<'a>, rows: usize, cap: usize, hd: usize) -> Option<Self> {
+        (hd > 0 && rows <= cap).then_some(KvRows { parts: [d, RowData::F32(&[])], heads: Some(HeadMajor { rows, cap, hd }) })
+    }
+
+    /// Whole rows of width `c` held (a part's partial last row is not one;
+    /// head-major: the visible rows if every head of `c` is held, else 0).
     pub fn rows(&self, c: usize) -> usize {
         if c == 0 {
             return 0;
         }
-        self.parts[0].len() / c + self.parts[1].len() / c
+        match self.heads {
+            None => self.parts[0].len() / c + self.parts[1].len() / c,
+            Some(hm) => {
+                let heads = c / hm.hd;
+                let whole = c % hm.hd == 0 && heads > 0 && (heads - 1) * hm.cap * hm.hd + hm.rows * hm.hd <= self.parts[0].len();
+                if whole { hm.rows } else { 0 }
+            }
+        }
     }
 
     /// Rows of the first run.
     fn split(&self, c: usize) -> usize {
-        self.parts[0].len() / c
+        match self.heads {
+            None => self.parts[0].len() / c,
+            Some(hm) => hm.rows,
+        }
+    }
+
+    /// Where lanes `h_off..` of row `lo` of a run start, and the distance
+    /// from one row to the next (`h_off`: a head's first lane, or inside it).
+    fn at(&self, lo: usize, c: usize, h_off: usize) -> (usize, usize) {
+        match self.heads {
+            None => (lo * c + h_off, c),
+            Some(hm) => ((h_off / hm.hd * hm.cap + lo) * hm.hd + h_off % hm.hd, hm.hd),
+        }
     }
 
     /// Rows `a..b` as at most two pieces, one per run: `(run, lo, hi, at)`,
@@ -72,10 +114,11 @@ impl<'a> KvRows<'a> {
     pub(crate) fn dot_rows(&self, qh: &[f32], a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32]) {
         for (part, lo, hi, at) in self.pieces(a, b, c) {
             let out = &mut out[at..at + (hi - lo)];
+            let (s, stride) = self.at(lo, c, h_off);
             match part {
                 _ if hi == lo => {}
-                RowData::F32(d) => dots(qh, &d[lo * c + h_off..], c, out),
-                RowData::F16(d) => dots(qh, &d[lo * c + h_off..], c, out),
+                RowData::F32(d) => dots(qh, &d[s..], stride, out),
+                RowData::F16(d) => dots(qh, &d[s..], stride, out),
             }
         }
     }
@@ -92,11 +135,12 @@ impl<'a> KvRows<'a> {
     pub(crate) fn axpy_rows(&self, coef: &[f32], a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32]) {
         let n = y.len();
         for (part, lo, hi, at) in self.pieces(a, b, c) {
-            let (coef, s, e) = (&coef[at..at + (hi - lo)], lo * c + h_off, hi.saturating_sub(1) * c + h_off + n);
+            let (s, stride) = self.at(lo, c, h_off);
+            let (coef, e) = (&coef[at..at + (hi - lo)], s + (hi - lo).saturating_sub(1) * stride + n);
             match part {
                 _ if hi == lo => {}
-                RowData::F32(d) => f32::axpy_rows(coef, &d[s..e], c, y),
-                RowData::F16(d) => u16::axpy_rows(coef, &d[s..e], c, y),
+                RowData::F32(d) => f32::axpy_rows(coef, &d[s..e], stride, y),
+                RowData::F16(d) => u16::axpy_rows(coef, &d[s..e], stride, y),
             }
         }
     }
@@ -111,10 +155,11 @@ impl<'a> KvRows<'a> {
     pub(crate) fn dot_rows_group(&self, q: &[f32], hd: usize, q_stride: usize, g: usize, a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32], out_stride: usize, mut side: &[u8]) {
         for (part, lo, hi, at) in self.pieces(a, b, c) {
             let out = &mut out[at..];
+            let (s, stride) = self.at(lo, c, h_off);
             match part {
                 _ if hi == lo => continue,
-                RowData::F32(d) => f32::dot_rows_group(q, hd, q_stride, g, &d[lo * c + h_off..], c, hi - lo, out, out_stride, side),
-                RowData::F16(d) => u16::dot_rows_group(q, hd, q_stride, g, &d[lo * c + h_off..], c, hi - lo, out, out_stride, side),
+                RowData::F32(d) => f32::dot_rows_group(q, hd, q_stride, g, &d[s..], stride, hi - lo, out, out_stride, side),
+                RowData::F16(d) => u16::dot_rows_group(q, hd, q_stride, g, &d[s..], stride, hi - lo, out, out_stride, side),
             }
             side = &[];
         }
@@ -127,18 +172,20 @@ impl<'a> KvRows<'a> {
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn axpy_rows_group(&self, coef: &[f32], coef_stride: usize, a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, mut side: &[u8]) {
         for (part, lo, hi, at) in self.pieces(a, b, c) {
-            let (coef, s, e) = (&coef[at..], lo * c + h_off, hi.saturating_sub(1) * c + h_off + n);
+            let (s, stride) = self.at(lo, c, h_off);
+            let (coef, e) = (&coef[at..], s + (hi - lo).saturating_sub(1) * stride + n);
             match part {
                 _ if hi == lo => continue,
-                RowData::F32(d) => f32::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], c, y, y_stride, n, g, side),
-                RowData::F16(d) => u16::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], c, y, y_stride, n, g, side),
+                RowData::F32(d) => f32::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], stride, y, y_stride, n, g, side),
+                RowData::F16(d) => u16::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], stride, y, y_stride, n, g, side),
             }
             side = &[];
         }
     }
 
-    /// The stored bytes of the first run (all the rows of a one-run set):
-    /// what a caller prefetches ahead of attending them.
+    /// The stored bytes of the first run (all the rows of a one-run set;
+    /// head-major: every head's, with the rows between them): what a
+    /// caller prefetches ahead of attending them.
     pub fn lead_bytes(&self) -> &'a [u8] {
         match self.parts[0] {
             RowData::F32(d) => bytemuck::cast_slice(d),

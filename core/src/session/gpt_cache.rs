@@ -6,7 +6,10 @@
 //! window start moves, the cache is cleared and the window re-prefilled.
 //!
 //! Layout: position-major, row `i * 10 + s` = window row `i`, stream `s`
-//! (`[music, L_up, L_down, L_lh, L_rh, F_up, F_down, F_lh, F_rh, F_transl]`).
+//! (`[music, L_up, L_down, L_lh, L_rh, F_up, F_down, F_lh, F_rh, F_transl]`);
+//! per layer head-major ([`KvRows::head_major`]): head `h`'s lanes of all
+//! rows side by side, so the attention's pass over one head reads one
+//! contiguous stretch of a cold cache, not `hd` lanes of every row.
 
 use crate::arena::{ArenaError, Carve};
 use crate::block::{block_attend_groups, block_kv, BlockScratch};
@@ -48,6 +51,8 @@ pub struct GptCache<'s> {
     /// Window rows a cache holds (`block_size - 1`).
     m: usize,
     c: usize,
+    /// Lanes of one head.
+    hd: usize,
     /// Window rows cached.
     rows: usize,
     /// Start (token index) of the cached window; None when empty.
@@ -55,9 +60,12 @@ pub struct GptCache<'s> {
 }
 
 impl<'s> GptCache<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, layers: usize, streams: usize, m: usize, c: usize) -> Result<Self, ArenaError> {
+    /// Per layer (heads, streams * m, C / n_head) keys and values.
+    #[allow(clippy::too_many_arguments)]
+    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, layers: usize, streams: usize, m: usize, c: usize, n_head: usize) -> Result<Self, ArenaError> {
         let n = layers.checked_mul(streams).and_then(|v| v.checked_mul(m)).and_then(|v| v.checked_mul(c)).ok_or(ArenaError::Overflow)?;
-        Ok(GptCache { k: KvBuf::carve(a, kv, n)?, v: KvBuf::carve(a, kv, n)?, layers, streams, m, c, rows: 0, lo: None })
+        let hd = c.checked_div(n_head).filter(|&hd| hd > 0 && hd * n_head == c).ok_or(ArenaError::Overflow)?;
+        Ok(GptCache { k: KvBuf::carve(a, kv, n)?, v: KvBuf::carve(a, kv, n)?, layers, streams, m, c, hd, rows: 0, lo: None })
     }
 
     pub fn reset(&mut self) {
@@ -82,23 +90,32 @@ impl<'s> GptCache<'s> {
     }
 
     /// This cache's K/V of layer `l`, rows `..r1` (streams-rows), read in
-    /// place (f32 or f16).
+    /// place (f32 or f16), head-major: the layer's stretch from its first
+    /// head's row 0 to its last head's row `r1`.
     fn visible(&self, l: usize, r1: usize) -> Result<(KvRows<'_>, KvRows<'_>), Error> {
-        let c = self.c;
-        let base = l * self.streams * self.m * c;
-        Ok((KvRows::one(self.k.view(base, base + r1 * c)?), KvRows::one(self.v.view(base, base + r1 * c)?)))
+        let (c, hd, cap) = (self.c, self.hd, self.streams * self.m);
+        let base = l * cap * c;
+        let end = base + (c - hd) * cap + r1 * hd;
+        let rows = |d| KvRows::head_major(d, r1, cap, hd).ok_or(Error::Context { c: r1, max: cap });
+        Ok((rows(self.k.view(base, end)?)?, rows(self.v.view(base, end)?)?))
     }
 
     /// Stores the new rows' K/V (`k`, `v`: (r1 - r0, C) f32) of layer `l`
-    /// at stream-rows `r0..r1` (an f16 cache rounds them).
+    /// at stream-rows `r0..r1`, each head's lanes at their head-major place
+    /// (an f16 cache rounds them).
     fn store(&mut self, l: usize, r0: usize, r1: usize, k: &[f32], v: &[f32]) -> Result<(), Error> {
-        let c = self.c;
-        let at = l * self.streams * self.m * c + r0 * c;
-        if k.len() != (r1 - r0) * c || v.len() != k.len() {
+        let (c, hd, cap) = (self.c, self.hd, self.streams * self.m);
+        if k.len() != (r1 - r0) * c || v.len() != k.len() || r1 > cap {
             return Err(Error::Length { buffer: Buffer::Features, len: k.len(), expected: (r1 - r0) * c });
         }
-        self.k.store(at, k)?;
-        self.v.store(at, v)
+        for (i, (kr, vr)) in k.chunks_exact(c).zip(v.chunks_exact(c)).enumerate() {
+            for (h, (kh, vh)) in kr.chunks_exact(hd).zip(vr.chunks_exact(hd)).enumerate() {
+                let at = l * cap * c + (h * cap + r0 + i) * hd;
+                self.k.store(at, kh)?;
+                self.v.store(at, vh)?;
+            }
+        }
+        Ok(())
     }
 
     /// Appends window rows to several caches at once (one per session of a

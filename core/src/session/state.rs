@@ -123,7 +123,7 @@ impl<'s> State<'s> {
         let n_caches = sc.schedule.caches(m, sc.shift as usize);
         let mut gpt = Vec::new();
         for _ in 0..n_caches.min(MAX_WINDOWS) {
-            let cache = GptCache::carve(a, sc.kv, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c)?;
+            let cache = GptCache::carve(a, sc.kv, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c, g.n_head as usize)?;
             gpt.push(cache).map_err(|_| ov())?;
         }
         let latency = sc.latency_frames(hop as u32) as usize;

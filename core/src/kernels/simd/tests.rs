@@ -1395,8 +1395,9 @@ fn f16_row_readers_equal_f32_kernels_on_widened_rows() {
     }
 }
 
-/// `attention` over key/value rows given as two runs (a ring's wrap), in
-/// f32 or f16, equals the call on one contiguous f32 copy bit for bit, for
+/// `attention` over key/value rows given as two runs (a ring's wrap) or
+/// head-major (a GPT cache), in f32 or f16, equals the call on one
+/// contiguous f32 copy bit for bit, for
 /// every split point (band, tiled-causal and many-run masks; the values
 /// are f16-exact so the f16 storage holds the same numbers), and so does
 /// `attention_ahead` with bytes to prefetch meanwhile.
@@ -1418,12 +1419,35 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
         let mut scores = vec![0f32; nk];
         let mut want = vec![f32::NAN; nq * c];
         m(&q, KvRows::from(&k[..]), KvRows::from(&v[..]), &mut scores, &mut want);
+        // Head-major copies (a session's GPT cache): 3 rows of room beyond
+        // the visible ones, NaN, so a misread row shows; the run ends at the
+        // last head's last visible row.
+        let (hd, cap) = (c / nh, nk + 3);
+        let head_major = |src: &[f32]| -> Vec<f32> {
+            let mut d = vec![f32::NAN; nh * cap * hd];
+            for j in 0..nk {
+                for h in 0..nh {
+                    d[(h * cap + j) * hd..][..hd].copy_from_slice(&src[j * c + h * hd..][..hd]);
+                }
+            }
+            d.truncate(((nh - 1) * cap + nk) * hd);
+            d
+        };
+        let (kh, vh) = (head_major(&k), head_major(&v));
+        let bits16 = |d: &[f32]| -> Vec<u16> { d.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect() };
+        let (kh16, vh16) = (bits16(&kh), bits16(&vh));
+        let hm = |d| KvRows::head_major(d, nk, cap, hd).unwrap();
+        assert_eq!(hm(RowData::F32(&kh)).rows(c + hd), 0, "a width of more heads than held has no rows");
+        assert_eq!(hm(RowData::F32(&kh[..kh.len() - 1])).rows(c), 0, "a short run has no rows");
+        assert!(KvRows::head_major(RowData::F32(&kh), cap + 1, cap, hd).is_none() && KvRows::head_major(RowData::F32(&kh), nk, cap, 0).is_none());
         for split in [0, 1, nk / 3, nk / 2, nk - 1, nk] {
             let cut = split * c;
             let cases = [
                 ("f32 two runs", KvRows::two(RowData::F32(&k[..cut]), RowData::F32(&k[cut..])), KvRows::two(RowData::F32(&v[..cut]), RowData::F32(&v[cut..]))),
                 ("f16 two runs", KvRows::two(RowData::F16(&k16[..cut]), RowData::F16(&k16[cut..])), KvRows::two(RowData::F16(&v16[..cut]), RowData::F16(&v16[cut..]))),
                 ("f16 one run", KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16))),
+                ("f32 head-major", hm(RowData::F32(&kh)), hm(RowData::F32(&vh))),
+                ("f16 head-major", hm(RowData::F16(&kh16)), hm(RowData::F16(&vh16))),
             ];
             for (name, kr, vr) in cases {
                 assert_eq!(kr.rows(c), nk);
