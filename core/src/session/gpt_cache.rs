@@ -136,13 +136,17 @@ impl<'s> GptCache<'s> {
         if gpt.base.len() + gpt.head.len() != layers || items.len() > MAX_BATCH {
             return Err(Error::Context { c: items.len(), max: MAX_BATCH });
         }
+        // The caches are head-major for heads of `hd` lanes: other heads would read across them.
+        if c.checked_div(n_head) != Some(first.cache.hd) || c % n_head != 0 {
+            return Err(Error::Length { buffer: Buffer::Features, len: n_head, expected: c / first.cache.hd });
+        }
         // Row bounds of the items in `x`, and each item's first cached row.
         let mut bounds: Vec<usize, { MAX_BATCH + 1 }> = Vec::new();
         bounds.push(0).map_err(|_| Error::State)?;
         let mut total = 0usize;
         for it in items.iter() {
             let ch = &it.cache;
-            if it.rows == 0 || ch.streams != st || ch.c != c || ch.layers != layers || ch.rows + it.rows > ch.m {
+            if it.rows == 0 || ch.streams != st || ch.c != c || ch.hd != first.cache.hd || ch.layers != layers || ch.rows + it.rows > ch.m {
                 return Err(Error::Context { c: ch.rows + it.rows, max: ch.m });
             }
             total += it.rows * st;
