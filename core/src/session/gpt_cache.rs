@@ -61,7 +61,6 @@ pub struct GptCache<'s> {
 
 impl<'s> GptCache<'s> {
     /// Per layer (heads, streams * m, C / n_head) keys and values.
-    #[allow(clippy::too_many_arguments)]
     pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, layers: usize, streams: usize, m: usize, c: usize, n_head: usize) -> Result<Self, ArenaError> {
         let n = layers.checked_mul(streams).and_then(|v| v.checked_mul(m)).and_then(|v| v.checked_mul(c)).ok_or(ArenaError::Overflow)?;
         let hd = c.checked_div(n_head).filter(|&hd| hd > 0 && hd * n_head == c).ok_or(ArenaError::Overflow)?;
@@ -136,8 +135,9 @@ impl<'s> GptCache<'s> {
         if gpt.base.len() + gpt.head.len() != layers || items.len() > MAX_BATCH {
             return Err(Error::Context { c: items.len(), max: MAX_BATCH });
         }
-        // The caches are head-major for heads of `hd` lanes: other heads would read across them.
-        if c.checked_div(n_head) != Some(first.cache.hd) || c % n_head != 0 {
+        // The caches are head-major for heads of `hd` lanes (carved with
+        // `hd * heads == c`): other heads would read across them.
+        if c.checked_div(n_head) != Some(first.cache.hd) {
             return Err(Error::Length { buffer: Buffer::Features, len: n_head, expected: c / first.cache.hd });
         }
         // Row bounds of the items in `x`, and each item's first cached row.
