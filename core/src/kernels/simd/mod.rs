@@ -493,8 +493,11 @@ pub fn q8_scale(amax: f32) -> (f32, f32) {
 pub fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f, avx2 and fma).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::quantise_q8_corr_512(x, q, d, c) },
+        #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (every x86 variant implies avx2 + fma).
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::quantise_q8_corr(x, q, d, c) },
+        Isa::Avx2 => unsafe { x86::quantise_q8_corr(x, q, d, c) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::quantise_q8_corr(x, q, d, c) },

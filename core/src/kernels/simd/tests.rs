@@ -123,7 +123,7 @@ fn variants() -> Vec<Variant> {
         if avx512 {
             v.push(Variant {
                 name: "avx512",
-                quantise: |x, q, d, c| unsafe { x86::quantise_q8_corr(x, q, d, c) },
+                quantise: |x, q, d, c| unsafe { x86::quantise_q8_corr_512(x, q, d, c) },
                 scales: |r, o| unsafe { x86::q8_scales(r, o) },
                 g1: |w, wd, q, d, c| unsafe { x86::gemm_q8_512(w, wd, q, d, c) },
                 g2: |w, wd, q, d, c| unsafe { x86::gemm_q8_512(w, wd, q, d, c) },
@@ -137,7 +137,7 @@ fn variants() -> Vec<Variant> {
         if avx512 && has!("avx512vnni") {
             v.push(Variant {
                 name: "avx512vnni",
-                quantise: |x, q, d, c| unsafe { x86::quantise_q8_corr(x, q, d, c) },
+                quantise: |x, q, d, c| unsafe { x86::quantise_q8_corr_512(x, q, d, c) },
                 scales: |r, o| unsafe { x86::q8_scales(r, o) },
                 g1: |w, wd, q, d, c| unsafe { x86::gemm_q8_vnni(w, wd, q, d, c) },
                 g2: |w, wd, q, d, c| unsafe { x86::gemm_q8_vnni(w, wd, q, d, c) },

@@ -550,6 +550,78 @@ pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [
     }
 }
 
+/// See [`super::quantise_q8_corr`]: [`quantise_q8_corr`]'s values, 16
+/// blocks at a time on 16 lanes. The per-block scalar steps of the AVX2
+/// kernel (the horizontal maximum, then two dependent IEEE divisions per
+/// block) become one vector division of the 16 blocks' maxima for the
+/// scales and one for their reciprocals (the same IEEE quotients, lane by
+/// lane: [`super::q8_scale`]'s zero and overflow rules as masks); each block
+/// is then scaled, rounded half away from zero ([`round_away_512`]),
+/// narrowed with signed saturation in order, and its parity corrections
+/// summed (exact integer sums). The last `blocks % 16` blocks take
+/// [`quantise_q8_corr`]. Bit for bit the AVX2 kernel and the scalar twin.
+///
+/// # Safety
+/// The CPU must support avx512f, avx2 and fma.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
+    let nb = (x.len() / Q8_BLOCK).min(q.len() / Q8_BLOCK).min(d.len()).min(c.len() / 2);
+    let whole = nb - nb % 16;
+    let zero = _mm512_setzero_ps();
+    for b0 in (0..whole).step_by(16) {
+        // Block maxima of |x| (a NaN lane keeps the running maximum: f32::max's rule).
+        let mut amax = [0f32; 16];
+        for (b, m) in amax.iter_mut().enumerate() {
+            // SAFETY: blocks b0 + b < nb: 32 floats each in `x`.
+            let (v0, v1) = unsafe { (_mm512_loadu_ps(x.as_ptr().add(32 * (b0 + b))), _mm512_loadu_ps(x.as_ptr().add(32 * (b0 + b) + 16))) };
+            *m = _mm512_reduce_max_ps(_mm512_max_ps(_mm512_abs_ps(v1), _mm512_max_ps(_mm512_abs_ps(v0), zero)));
+        }
+        // SAFETY: amax holds 16 floats.
+        let amax = unsafe { _mm512_loadu_ps(amax.as_ptr()) };
+        // q8_scale: scale = amax / 127; inv = 1 / scale where scale > 0; both 0 where inv overflows.
+        let scale = _mm512_div_ps(amax, _mm512_set1_ps(127.0));
+        let inv = _mm512_maskz_div_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(scale, zero), _mm512_set1_ps(1.0), scale);
+        let keep = _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(inv, _mm512_set1_ps(f32::INFINITY));
+        let (scale, inv) = (_mm512_maskz_mov_ps(keep, scale), _mm512_maskz_mov_ps(keep, inv));
+        // SAFETY: d holds blocks b0 .. b0 + 16.
+        unsafe { _mm512_storeu_ps(d.as_mut_ptr().add(b0), scale) };
+        let mut invs = [0f32; 16];
+        // SAFETY: invs holds 16 floats.
+        unsafe { _mm512_storeu_ps(invs.as_mut_ptr(), inv) };
+        for (b, &ib) in invs.iter().enumerate() {
+            let at = 32 * (b0 + b);
+            let ib = _mm512_set1_ps(ib);
+            // SAFETY: block b0 + b: 32 floats of `x`, 32 bytes of `q`, 2 corrections of `c`.
+            unsafe {
+                let r0 = round_away_512(_mm512_mul_ps(_mm512_loadu_ps(x.as_ptr().add(at)), ib));
+                let r1 = round_away_512(_mm512_mul_ps(_mm512_loadu_ps(x.as_ptr().add(at + 16)), ib));
+                let (i0, i1) = (_mm512_cvtps_epi32(r0), _mm512_cvtps_epi32(r1));
+                _mm_storeu_si128(q.as_mut_ptr().add(at) as *mut __m128i, _mm512_cvtsepi32_epi8(i0));
+                _mm_storeu_si128(q.as_mut_ptr().add(at + 16) as *mut __m128i, _mm512_cvtsepi32_epi8(i1));
+                // Value i is lane i % 16 of i0 / i1; its parity (i % 8) / 4 that of its lane.
+                let sum = _mm512_add_epi32(i0, i1);
+                *c.get_unchecked_mut(2 * (b0 + b)) = -128 * _mm512_mask_reduce_add_epi32(0x0F0F, sum);
+                *c.get_unchecked_mut(2 * (b0 + b) + 1) = -128 * _mm512_mask_reduce_add_epi32(0xF0F0, sum);
+            }
+        }
+    }
+    // SAFETY: this fn's contract covers the AVX2 kernel's.
+    unsafe { quantise_q8_corr(&x[32 * whole..32 * nb], &mut q[32 * whole..32 * nb], &mut d[whole..nb], &mut c[2 * whole..2 * nb]) };
+}
+
+/// [`round_away`] on 16 lanes: `roundf` (half away from zero), NaN to zero.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn round_away_512(t: __m512) -> __m512 {
+    let r = _mm512_roundscale_ps::<{ _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC }>(t);
+    let half = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(_mm512_abs_ps(_mm512_sub_ps(t, r)), _mm512_set1_ps(0.5));
+    // copysign(1, t)
+    let sign = _mm512_and_si512(_mm512_castps_si512(t), _mm512_set1_epi32(i32::MIN));
+    let one = _mm512_castsi512_ps(_mm512_or_si512(_mm512_castps_si512(_mm512_set1_ps(1.0)), sign));
+    let r = _mm512_mask_add_ps(r, half, r, one);
+    _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_ORD_Q>(t, t), r)
+}
+
 /// See [`super::q8_scales`] (F16C, 8 scales per conversion).
 ///
 /// # Safety
