@@ -1979,29 +1979,45 @@ pub unsafe fn gelu_inplace(x: &mut [f32]) {
 /// The CPU must support avx512f.
 #[target_feature(enable = "avx512f")]
 pub unsafe fn gelu_inplace_512(x: &mut [f32]) {
+    // Two vectors per step: their long dependency chains (a division, two
+    // polynomials) interleave.
+    let mut pairs = x.chunks_exact_mut(32);
+    for c in &mut pairs {
+        // SAFETY: c holds 32 floats.
+        unsafe {
+            let (a, b) = (_mm512_loadu_ps(c.as_ptr()), _mm512_loadu_ps(c.as_ptr().add(16)));
+            let (ga, gb) = (gelu16(a), gelu16(b));
+            _mm512_storeu_ps(c.as_mut_ptr(), ga);
+            _mm512_storeu_ps(c.as_mut_ptr().add(16), gb);
+        }
+    }
+    for c in pairs.into_remainder().chunks_mut(16) {
+        let m = lanes16(c.len());
+        // SAFETY: masked lanes < c.len() of c only.
+        unsafe { _mm512_mask_storeu_ps(c.as_mut_ptr(), m, gelu16(_mm512_maskz_loadu_ps(m, c.as_ptr()))) };
+    }
+}
+
+/// [`super::scalar::gelu`] on 16 lanes, operation for operation.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn gelu16(xv: __m512) -> __m512 {
     use super::scalar::erf_c::*;
     let sign = _mm512_set1_epi32(i32::MIN);
     let flip = |v: __m512| _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(v), sign));
-    for c in x.chunks_mut(16) {
-        let m = lanes16(c.len());
-        // SAFETY: masked lanes < c.len() of c only.
-        unsafe {
-            let xv = _mm512_maskz_loadu_ps(m, c.as_ptr());
-            let u = _mm512_mul_ps(xv, _mm512_set1_ps(core::f32::consts::FRAC_1_SQRT_2));
-            let neg = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(u, _mm512_setzero_ps());
-            let a = _mm512_mask_blend_ps(neg, u, flip(u));
-            let t = _mm512_div_ps(_mm512_set1_ps(1.0), _mm512_add_ps(_mm512_set1_ps(1.0), _mm512_mul_ps(_mm512_set1_ps(P), a)));
-            let mut y = _mm512_set1_ps(A[0]);
-            for &cf in &A[1..] {
-                y = _mm512_add_ps(_mm512_mul_ps(y, t), _mm512_set1_ps(cf));
-            }
-            let e = exp16(flip(_mm512_mul_ps(a, a)));
-            let e = _mm512_sub_ps(_mm512_set1_ps(1.0), _mm512_mul_ps(_mm512_mul_ps(y, t), e));
-            let erf = _mm512_mask_blend_ps(neg, e, flip(e));
-            let g = _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(0.5), xv), _mm512_add_ps(_mm512_set1_ps(1.0), erf));
-            _mm512_mask_storeu_ps(c.as_mut_ptr(), m, g);
-        }
+    let u = _mm512_mul_ps(xv, _mm512_set1_ps(core::f32::consts::FRAC_1_SQRT_2));
+    let neg = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(u, _mm512_setzero_ps());
+    let a = _mm512_mask_blend_ps(neg, u, flip(u));
+    let t = _mm512_div_ps(_mm512_set1_ps(1.0), _mm512_add_ps(_mm512_set1_ps(1.0), _mm512_mul_ps(_mm512_set1_ps(P), a)));
+    let mut y = _mm512_set1_ps(A[0]);
+    for &cf in &A[1..] {
+        y = _mm512_add_ps(_mm512_mul_ps(y, t), _mm512_set1_ps(cf));
     }
+    // SAFETY: exp16 needs avx512f (this fn's feature).
+    let e = unsafe { exp16(flip(_mm512_mul_ps(a, a))) };
+    let e = _mm512_sub_ps(_mm512_set1_ps(1.0), _mm512_mul_ps(_mm512_mul_ps(y, t), e));
+    let erf = _mm512_mask_blend_ps(neg, e, flip(e));
+    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(0.5), xv), _mm512_add_ps(_mm512_set1_ps(1.0), erf))
 }
 
 /// See [`super::narrow_f16`]: `vcvtps2ph` (round to nearest even) on 8
