@@ -439,8 +439,12 @@ unsafe fn seq_rows_512<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: u
                 *a = _mm512_fmadd_ps(xv, wv, *a);
             }
         }
-        for (o, a) in out.iter_mut().zip(acc) {
-            o[n] = _mm512_reduce_add_ps(a);
+        // The M sums at once ([`reduce4`]: each `_mm512_reduce_add_ps`, bit for bit).
+        let mut lanes = [0f32; 16];
+        // SAFETY: avx512f (this fn's features); lanes holds 16 floats.
+        unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), reduce4(core::array::from_fn(|m| if m < M { acc[m] } else { _mm512_setzero_ps() }))) };
+        for (m, o) in out.iter_mut().enumerate() {
+            o[n] = lanes[4 * m];
         }
     }
     out
@@ -478,7 +482,8 @@ unsafe fn rows_512<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize
             }
         }
     }
-    acc.map(|am| am.map(|a| _mm512_reduce_add_ps(a)))
+    // SAFETY: avx512f (this fn's features).
+    unsafe { reduce_tile(acc) }
 }
 
 /// `roundf` (half away from zero) of integral-range lanes, exactly as
@@ -711,7 +716,8 @@ pub unsafe fn gemm_q8_vnni<const M: usize>(
         }
         b += 2;
     }
-    let mut out = acc.map(|am| am.map(|a| _mm512_reduce_add_ps(a)));
+    // SAFETY: avx512f (this fn's features).
+    let mut out = unsafe { reduce_tile(acc) };
     if b < nb {
         let flip = _mm256_set1_epi8(-128);
         let wv: [__m256i; TN] = core::array::from_fn(|n| {
@@ -772,7 +778,8 @@ pub unsafe fn gemm_q8_512<const M: usize>(
         }
         b += 2;
     }
-    let mut out = acc.map(|am| am.map(|a| _mm512_reduce_add_ps(a)));
+    // SAFETY: avx512f (this fn's features).
+    let mut out = unsafe { reduce_tile(acc) };
     if b < nb {
         let tail = gemm_q8_avx2_from(w, wd, xq, xd, b, nb);
         for (o, t) in out.iter_mut().zip(tail) {
@@ -1118,6 +1125,23 @@ unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load:
             out[m * out_stride + j] = lanes[16 * (m / 4) + 4 * (m % 4)];
         }
     }
+}
+
+/// `_mm512_reduce_add_ps` of every accumulator of a tile, bit for bit: the
+/// [`TN`] sums of a row at once ([`reduce4`]) instead of one after another.
+///
+/// # Safety
+/// The CPU must support avx512f.
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn reduce_tile<const M: usize>(acc: [[__m512; TN]; M]) -> [[f32; TN]; M] {
+    const { assert!(TN == 4) };
+    acc.map(|am| {
+        let mut lanes = [0f32; 16];
+        // SAFETY: avx512f (this fn's features); lanes holds 16 floats.
+        unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), reduce4(am)) };
+        core::array::from_fn(|n| lanes[4 * n])
+    })
 }
 
 /// Four horizontal sums at once: lane `4 m` of the result is
