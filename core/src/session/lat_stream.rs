@@ -93,9 +93,15 @@ pub struct LatStream<'s> {
     /// 1: `past + fut + 1`), rings of (cap, C) in the session's `KvType`.
     k: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
     v: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
-    /// (fut + burst, C) residual inputs of layer 1 (a query waits `fut`
-    /// positions for its keys).
+    /// The last `fut + burst` positions' layer-1 inputs (a query waits
+    /// `fut` positions for its keys): (fut + burst, n_in) the LAT's own
+    /// inputs where they are narrower than C (the music LAT's 54-wide
+    /// frames; `cond_emb` is applied again when the query runs, row by row
+    /// the same numbers), else (fut + burst, C) the residual rows
+    /// `cond_emb(x)` themselves.
     h0: RowRing<'s>,
+    /// Whether `h0` holds the inputs (n_in < C) rather than the residual rows.
+    keeps_inputs: bool,
     /// (ds, C) last-layer outputs of the output row being assembled.
     last: &'s mut [f32],
     past: usize,
@@ -112,9 +118,10 @@ pub struct LatStream<'s> {
 
 impl<'s> LatStream<'s> {
     /// `past`, `fut`: band in LAT input units; `kv`: K/V storage type;
-    /// `burst` (>= 1): most positions one push carries.
+    /// `burst` (>= 1): most positions one push carries; `n_in`: width of
+    /// the LAT's inputs.
     #[allow(clippy::too_many_arguments)]
-    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, w_layers: usize, ds: usize, c: usize, past: usize, fut: usize, burst: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, w_layers: usize, ds: usize, c: usize, n_in: usize, past: usize, fut: usize, burst: usize) -> Result<Self, ArenaError> {
         let burst = burst.clamp(1, ds.max(1));
         let mut k = Vec::new();
         let mut v = Vec::new();
@@ -126,7 +133,8 @@ impl<'s> LatStream<'s> {
         Ok(LatStream {
             k,
             v,
-            h0: RowRing::carve(a, fut + burst, c)?,
+            h0: RowRing::carve(a, fut + burst, n_in.min(c))?,
+            keeps_inputs: n_in < c,
             last: a.f32(ds.checked_mul(c).ok_or(ArenaError::Overflow)?)?,
             past,
             fut,
@@ -199,6 +207,10 @@ impl<'s> LatStream<'s> {
             if cnt > lat.burst {
                 return Err(Error::Length { buffer: Buffer::Features, len: cnt, expected: lat.burst });
             }
+            // A LAT keeps inputs only narrower than C (they share `ln` below).
+            if lat.keeps_inputs && (n_in >= c || lat.h0.width() != n_in) {
+                return Err(Error::Length { buffer: Buffer::Features, len: n_in, expected: lat.h0.width() });
+            }
         }
         produced.fill(false);
         // (total, C) layer-1 inputs of the new positions, and their keys/values.
@@ -214,7 +226,11 @@ impl<'s> LatStream<'s> {
                 let r = row * c..(row + 1) * c;
                 lat.k[0].push(&s.k[r.clone()])?;
                 lat.v[0].push(&s.v[r.clone()])?;
-                lat.h0.push(&s.h[r])?;
+                if lat.keeps_inputs {
+                    lat.h0.push(&x[row * n_in..(row + 1) * n_in])?;
+                } else {
+                    lat.h0.push(&s.h[r])?;
+                }
                 lat.pushed += 1;
                 row += 1;
                 if let Some(p) = lat.pushed.checked_sub(1 + lat.fut) {
@@ -226,10 +242,30 @@ impl<'s> LatStream<'s> {
         if r == 0 {
             return Ok(());
         }
-        // (r, C) the ready positions, one row (= one attention group) each.
+        // (r, C) the ready positions, one row (= one attention group) each:
+        // their residual rows, or `cond_emb` of their inputs again (the
+        // layer-1 keys and values are in the rings; `ln` is free).
         let rc = r * c;
+        let mut inputs = 0;
+        for &(i, p) in ready.iter() {
+            if lats[i].keeps_inputs {
+                s.ln[inputs * n_in..(inputs + 1) * n_in].copy_from_slice(lats[i].h0.row(p)?);
+                inputs += 1;
+            }
+        }
+        if inputs > 0 {
+            // (inputs, C) at the end of `h`, then each to its row (ascending: no overlap).
+            let at = (r - inputs) * c;
+            linear(&s.ln[..inputs * n_in], &w.cond_emb.w, w.cond_emb.b, &mut s.h[at..rc]);
+        }
+        let mut from = r - inputs;
         for (g, &(i, p)) in ready.iter().enumerate() {
-            s.h[g * c..(g + 1) * c].copy_from_slice(lats[i].h0.row(p)?);
+            if lats[i].keeps_inputs {
+                s.h.copy_within(from * c..(from + 1) * c, g * c);
+                from += 1;
+            } else {
+                s.h[g * c..(g + 1) * c].copy_from_slice(lats[i].h0.row(p)?);
+            }
         }
         let mut bounds: Vec<usize, { MAX_LAT_ROWS + 1 }> = Vec::new();
         for g in 0..=r {

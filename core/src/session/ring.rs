@@ -40,6 +40,11 @@ impl<'s> RowRing<'s> {
         self.cap
     }
 
+    /// Floats per row.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
     /// Appends one row; the oldest falls out once `cap` are held.
     pub fn push(&mut self, row: &[f32]) -> Result<(), Error> {
         let w = self.width;
