@@ -605,8 +605,8 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
                 _mm_storeu_si128(q.as_mut_ptr().add(at + 16) as *mut __m128i, _mm512_cvtsepi32_epi8(i1));
                 // Value i is lane i % 16 of i0 / i1; its parity (i % 8) / 4 that of its lane.
                 let sum = _mm512_add_epi32(i0, i1);
-                *c.get_unchecked_mut(2 * (b0 + b)) = -128 * _mm512_mask_reduce_add_epi32(0x0F0F, sum);
-                *c.get_unchecked_mut(2 * (b0 + b) + 1) = -128 * _mm512_mask_reduce_add_epi32(0xF0F0, sum);
+                c[2 * (b0 + b)] = -128 * _mm512_mask_reduce_add_epi32(0x0F0F, sum);
+                c[2 * (b0 + b) + 1] = -128 * _mm512_mask_reduce_add_epi32(0xF0F0, sum);
             }
         }
     }
