@@ -21,6 +21,26 @@ pub trait Mask: Sync {
     fn period(&self) -> Option<usize> {
         None
     }
+    /// The runs of keys `0..nk` query `qi` may see, in closed form: what
+    /// scanning [`Mask::allowed`] key by key gives (ascending, maximal runs
+    /// of allowed keys), written to `runs` (as many as fit); returns how
+    /// many there are. `None` (the default): no closed form, the attention
+    /// scans. Only a shortcut: tests hold every implementation to the scan.
+    fn key_runs(&self, qi: usize, nk: usize, runs: &mut [(usize, usize)]) -> Option<usize> {
+        let _ = (qi, nk, runs);
+        None
+    }
+}
+
+/// Writes the single run `[a, b)` (none if empty); returns the count.
+pub(crate) fn one_run(a: usize, b: usize, runs: &mut [(usize, usize)]) -> usize {
+    if a >= b {
+        return 0;
+    }
+    if let Some(r) = runs.first_mut() {
+        *r = (a, b);
+    }
+    1
 }
 
 /// The LAT band (`get_subsequent_mask` in the original): query at
@@ -36,6 +56,16 @@ impl Mask for BandMask {
     #[inline]
     fn allowed(&self, qi: usize, kj: usize) -> bool {
         (self.q_pos0 + qi).abs_diff(self.k_pos0 + kj) <= self.radius
+    }
+    /// One run: the keys within `radius` of the query's position.
+    fn key_runs(&self, qi: usize, nk: usize, runs: &mut [(usize, usize)]) -> Option<usize> {
+        let qp = self.q_pos0.checked_add(qi)?;
+        let lo = qp.saturating_sub(self.radius).saturating_sub(self.k_pos0);
+        let hi = match qp.checked_add(self.radius)?.checked_sub(self.k_pos0) {
+            Some(last) => last.saturating_add(1).min(nk),
+            None => 0,
+        };
+        Some(one_run(lo, hi, runs))
     }
 }
 
@@ -60,6 +90,23 @@ impl Mask for TiledCausalMask {
     fn period(&self) -> Option<usize> {
         (self.t_q > 0).then_some(self.t_q)
     }
+    /// The first `pos + 1` keys of every stream of `t_k` (one run when
+    /// that is all of them).
+    fn key_runs(&self, qi: usize, nk: usize, runs: &mut [(usize, usize)]) -> Option<usize> {
+        if self.t_q == 0 || self.t_k == 0 {
+            return None;
+        }
+        let seen = self.q_pos0.checked_add(qi % self.t_q)?.saturating_add(1).min(self.t_k);
+        if seen == self.t_k {
+            return Some(one_run(0, nk, runs));
+        }
+        let streams = nk.div_ceil(self.t_k);
+        for (s, r) in runs.iter_mut().take(streams).enumerate() {
+            let a = s * self.t_k;
+            *r = (a, (a + seen).min(nk));
+        }
+        Some(streams)
+    }
 }
 
 /// A mask with its [`Mask::period`] hidden: [`attention`] takes every query
@@ -72,6 +119,9 @@ impl<M: Mask> Mask for Ungrouped<M> {
     #[inline]
     fn allowed(&self, qi: usize, kj: usize) -> bool {
         self.0.allowed(qi, kj)
+    }
+    fn key_runs(&self, qi: usize, nk: usize, runs: &mut [(usize, usize)]) -> Option<usize> {
+        self.0.key_runs(qi, nk, runs)
     }
 }
 
@@ -208,6 +258,9 @@ fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, 
 /// `runs`; returns their number (more than [`MAX_RUNS`]: only the first
 /// `MAX_RUNS` are written, and the caller goes key by key).
 fn key_runs<M: Mask>(mask: &M, qi: usize, nk: usize, runs: &mut [(usize, usize); MAX_RUNS]) -> usize {
+    if let Some(n) = mask.key_runs(qi, nk, runs) {
+        return n;
+    }
     let mut nr = 0;
     let mut kj = 0;
     while kj < nk && nr <= MAX_RUNS {

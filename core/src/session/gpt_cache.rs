@@ -40,6 +40,12 @@ impl Mask for RowCausal {
     fn period(&self) -> Option<usize> {
         Some(1)
     }
+    /// One run: the keys of the window rows up to the query's.
+    fn key_runs(&self, qi: usize, nk: usize, runs: &mut [(usize, usize)]) -> Option<usize> {
+        let row = self.q_row0.checked_add(qi)?.checked_div(self.streams)?;
+        let end = row.checked_add(1)?.checked_mul(self.streams)?.min(nk);
+        Some(crate::kernels::attention::one_run(0, end, runs))
+    }
 }
 
 /// Per-layer K/V of the current window.
@@ -236,6 +242,16 @@ mod tests {
     /// scored together) give every query what it gets alone, bit for bit:
     /// an append of one row, a chunk of rows (groups end at row ends), the
     /// last layer's 5 follower rows (not row-aligned), f32 and f16 keys.
+    /// The window-row causal mask's closed-form key runs equal the scan.
+    #[test]
+    fn row_causal_key_runs_equal_the_scan() {
+        for streams in [1usize, 3, 10] {
+            for q_row0 in [0usize, 1, 9, 10, 37] {
+                crate::tests::kernels::assert_key_runs_scan(&std::format!("row-causal streams={streams} q_row0={q_row0}"), &super::RowCausal { streams, q_row0 }, 2 * streams + 1, 6 * streams + 2);
+            }
+        }
+    }
+
     #[test]
     fn row_causal_groups_equal_queries_alone() {
         let mut seed = 0x9e37_79b9_u64;

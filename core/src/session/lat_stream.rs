@@ -43,6 +43,9 @@ impl Mask for Visible {
     fn allowed(&self, _: usize, _: usize) -> bool {
         true
     }
+    fn key_runs(&self, _: usize, nk: usize, runs: &mut [(usize, usize)]) -> Option<usize> {
+        Some(crate::kernels::attention::one_run(0, nk, runs))
+    }
 }
 
 /// Per-step working memory shared by all LATs, for up to `n` LAT pushes

@@ -398,3 +398,58 @@ fn linear_xw_equals_one_axpy_per_row_and_input() {
         }
     }
 }
+
+/// The runs of keys `0..nk` query `qi` may see, by scanning `allowed`.
+fn scanned_runs<M: Mask>(m: &M, qi: usize, nk: usize) -> Vec<(usize, usize)> {
+    let mut runs = Vec::new();
+    let mut kj = 0;
+    while kj < nk {
+        if m.allowed(qi, kj) {
+            let a = kj;
+            while kj < nk && m.allowed(qi, kj) {
+                kj += 1;
+            }
+            runs.push((a, kj));
+        } else {
+            kj += 1;
+        }
+    }
+    runs
+}
+
+/// A mask's closed-form `key_runs` equals scanning `allowed` for queries
+/// `0..nq` and `0..=nk_max` keys: the count, and the runs that fit in a
+/// buffer of 64 and of 2 (the first two).
+pub(crate) fn assert_key_runs_scan<M: Mask>(what: &str, m: &M, nq: usize, nk_max: usize) {
+    for nk in 0..=nk_max {
+        for qi in 0..nq {
+            let want = scanned_runs(m, qi, nk);
+            for cap in [64usize, 2] {
+                let mut got = vec![(usize::MAX, usize::MAX); cap];
+                let n = m.key_runs(qi, nk, &mut got).unwrap_or_else(|| panic!("{what}: no closed form"));
+                assert_eq!(n, want.len(), "{what} qi={qi} nk={nk}: count");
+                let k = n.min(cap);
+                assert_eq!(got[..k], want[..k], "{what} qi={qi} nk={nk} cap={cap}");
+            }
+        }
+    }
+}
+
+#[test]
+fn mask_key_runs_equal_the_scan() {
+    for radius in [0usize, 1, 3, 7, 116] {
+        for (q0, k0) in [(0usize, 0usize), (5, 0), (0, 5), (20, 3), (3, 40)] {
+            assert_key_runs_scan(&format!("band r={radius} q0={q0} k0={k0}"), &BandMask { radius, q_pos0: q0, k_pos0: k0 }, 12, 60);
+        }
+    }
+    for (t_q, t_k) in [(1usize, 1usize), (1, 4), (3, 8), (5, 5), (29, 29), (4, 3)] {
+        for q0 in [0usize, 1, 3, 7, 28, 40] {
+            let m = TiledCausalMask { t_q, t_k, q_pos0: q0 };
+            assert_key_runs_scan(&format!("tiled t_q={t_q} t_k={t_k} q0={q0}"), &m, 2 * t_q + 1, 3 * t_k + 2);
+            assert_key_runs_scan(&format!("ungrouped tiled t_q={t_q} t_k={t_k} q0={q0}"), &Ungrouped(m), t_q, 2 * t_k + 1);
+        }
+    }
+    // The R window: 10 streams of 29, 290 keys.
+    assert_key_runs_scan("R window", &TiledCausalMask { t_q: 29, t_k: 29, q_pos0: 0 }, 290, 290);
+    assert_key_runs_scan("LAT band", &crate::session::lat_stream::Visible, 3, 40);
+}

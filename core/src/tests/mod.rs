@@ -3,7 +3,7 @@
 //! accounting). Integration tests against ONNX/tract live in `tests/`.
 
 mod arena;
-mod kernels;
+pub(crate) mod kernels;
 mod engine;
 mod motion_sampler;
 mod rings;
