@@ -238,20 +238,20 @@ mod tests {
     use super::RowCausal;
     use crate::kernels::{attention, KvRows, RowData, Ungrouped};
 
-    /// The row-causal mask's query groups (`period`: a window row's streams
-    /// scored together) give every query what it gets alone, bit for bit:
-    /// an append of one row, a chunk of rows (groups end at row ends), the
-    /// last layer's 5 follower rows (not row-aligned), f32 and f16 keys.
     /// The window-row causal mask's closed-form key runs equal the scan.
     #[test]
     fn row_causal_key_runs_equal_the_scan() {
         for streams in [1usize, 3, 10] {
             for q_row0 in [0usize, 1, 9, 10, 37] {
-                crate::tests::kernels::assert_key_runs_scan(&std::format!("row-causal streams={streams} q_row0={q_row0}"), &super::RowCausal { streams, q_row0 }, 2 * streams + 1, 6 * streams + 2);
+                crate::tests::kernels::assert_key_runs_scan(&std::format!("row-causal streams={streams} q_row0={q_row0}"), &RowCausal { streams, q_row0 }, 2 * streams + 1, 6 * streams + 2);
             }
         }
     }
 
+    /// The row-causal mask's query groups (`period`: a window row's streams
+    /// scored together) give every query what it gets alone, bit for bit:
+    /// an append of one row, a chunk of rows (groups end at row ends), the
+    /// last layer's 5 follower rows (not row-aligned), f32 and f16 keys.
     #[test]
     fn row_causal_groups_equal_queries_alone() {
         let mut seed = 0x9e37_79b9_u64;
