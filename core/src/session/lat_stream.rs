@@ -103,8 +103,6 @@ pub struct LatStream<'s> {
     /// the same numbers), else (fut + burst, C) the residual rows
     /// `cond_emb(x)` themselves.
     h0: RowRing<'s>,
-    /// Whether `h0` holds the inputs (n_in < C) rather than the residual rows.
-    keeps_inputs: bool,
     /// (ds, C) last-layer outputs of the output row being assembled.
     last: &'s mut [f32],
     past: usize,
@@ -137,7 +135,6 @@ impl<'s> LatStream<'s> {
             k,
             v,
             h0: RowRing::carve(a, fut + burst, n_in.min(c))?,
-            keeps_inputs: n_in < c,
             last: a.f32(ds.checked_mul(c).ok_or(ArenaError::Overflow)?)?,
             past,
             fut,
@@ -147,6 +144,12 @@ impl<'s> LatStream<'s> {
             pushed: 0,
             rows: 0,
         })
+    }
+
+    /// Whether `h0` holds the inputs (narrower than C) rather than the
+    /// residual rows.
+    fn keeps_inputs(&self) -> bool {
+        self.h0.width() < self.c
     }
 
     pub fn reset(&mut self) {
@@ -210,8 +213,8 @@ impl<'s> LatStream<'s> {
             if cnt > lat.burst {
                 return Err(Error::Length { buffer: Buffer::Features, len: cnt, expected: lat.burst });
             }
-            // A LAT keeps inputs only narrower than C (they share `ln` below).
-            if lat.keeps_inputs && (n_in >= c || lat.h0.width() != n_in) {
+            // A LAT keeping inputs takes inputs of its width (narrower than C: they share `ln` below).
+            if lat.keeps_inputs() && lat.h0.width() != n_in {
                 return Err(Error::Length { buffer: Buffer::Features, len: n_in, expected: lat.h0.width() });
             }
         }
@@ -229,7 +232,7 @@ impl<'s> LatStream<'s> {
                 let r = row * c..(row + 1) * c;
                 lat.k[0].push(&s.k[r.clone()])?;
                 lat.v[0].push(&s.v[r.clone()])?;
-                if lat.keeps_inputs {
+                if lat.keeps_inputs() {
                     lat.h0.push(&x[row * n_in..(row + 1) * n_in])?;
                 } else {
                     lat.h0.push(&s.h[r])?;
@@ -251,7 +254,7 @@ impl<'s> LatStream<'s> {
         let rc = r * c;
         let mut inputs = 0;
         for &(i, p) in ready.iter() {
-            if lats[i].keeps_inputs {
+            if lats[i].keeps_inputs() {
                 s.ln[inputs * n_in..(inputs + 1) * n_in].copy_from_slice(lats[i].h0.row(p)?);
                 inputs += 1;
             }
@@ -263,7 +266,7 @@ impl<'s> LatStream<'s> {
         }
         let mut from = r - inputs;
         for (g, &(i, p)) in ready.iter().enumerate() {
-            if lats[i].keeps_inputs {
+            if lats[i].keeps_inputs() {
                 s.h.copy_within(from * c..(from + 1) * c, g * c);
                 from += 1;
             } else {

@@ -439,12 +439,11 @@ unsafe fn seq_rows_512<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: u
                 *a = _mm512_fmadd_ps(xv, wv, *a);
             }
         }
-        // The M sums at once ([`reduce4`]: each `_mm512_reduce_add_ps`, bit for bit).
-        let mut lanes = [0f32; 16];
-        // SAFETY: avx512f (this fn's features); lanes holds 16 floats.
-        unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), reduce4(core::array::from_fn(|m| if m < M { acc[m] } else { _mm512_setzero_ps() }))) };
-        for (m, o) in out.iter_mut().enumerate() {
-            o[n] = lanes[4 * m];
+        // The M sums at once (each `_mm512_reduce_add_ps`, bit for bit).
+        // SAFETY: avx512f (this fn's features).
+        let sums = unsafe { sums4(core::array::from_fn(|m| if m < M { acc[m] } else { _mm512_setzero_ps() })) };
+        for (o, v) in out.iter_mut().zip(sums) {
+            o[n] = v;
         }
     }
     out
@@ -1136,12 +1135,22 @@ unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load:
 #[target_feature(enable = "avx512f")]
 unsafe fn reduce_tile<const M: usize>(acc: [[__m512; TN]; M]) -> [[f32; TN]; M] {
     const { assert!(TN == 4) };
-    acc.map(|am| {
-        let mut lanes = [0f32; 16];
-        // SAFETY: avx512f (this fn's features); lanes holds 16 floats.
-        unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), reduce4(am)) };
-        core::array::from_fn(|n| lanes[4 * n])
-    })
+    // SAFETY: avx512f (this fn's features).
+    acc.map(|am| unsafe { sums4(am) })
+}
+
+/// `_mm512_reduce_add_ps` of each of four accumulators, bit for bit
+/// ([`reduce4`], lanes 0, 4, 8, 12 read out).
+///
+/// # Safety
+/// The CPU must support avx512f.
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn sums4(a: [__m512; 4]) -> [f32; 4] {
+    let mut lanes = [0f32; 16];
+    // SAFETY: avx512f (this fn's features); lanes holds 16 floats.
+    unsafe { _mm512_storeu_ps(lanes.as_mut_ptr(), reduce4(a)) };
+    core::array::from_fn(|n| lanes[4 * n])
 }
 
 /// Four horizontal sums at once: lane `4 m` of the result is
