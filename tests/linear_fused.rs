@@ -2,7 +2,8 @@
 //! projections) gives what one `linear` per matrix gives, bit for bit, and
 //! so do `linear_with` / `linear_each_with` quantising into caller memory
 //! (R mode's block scratch: one panel for a whole window, or panels of a
-//! room's rows), on
+//! room's rows); `linear_gelu_with` (GELU in the GEMM's epilogue) gives
+//! `linear_with` then `gelu_inplace`, with and without a bias, on
 //! every kernel set this CPU runs (the AMX tiles on and off where they run)
 //! and on one thread and two. Rows 1 to 290, so the unpacked and packed
 //! int8 tiles, the AMX row groups, the small and the full quantised panel
@@ -12,7 +13,7 @@
 use duolando::duo_writer::{quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd::{self, Isa};
 use duolando_core::arena::{Arena, Planner};
-use duolando_core::kernels::{linear, linear_each, linear_each_with, linear_with, F16Rows, Matrix, Q8Rows, Q8Room, X8Rows};
+use duolando_core::kernels::{gelu_inplace, linear, linear_each, linear_each_with, linear_gelu_with, linear_with, F16Rows, F32Rows, Matrix, Q8Rows, Q8Room, X8Rows};
 use duolando_tests::Rng;
 
 fn bits(v: &[f32]) -> Vec<u32> {
@@ -43,6 +44,7 @@ fn linear_each_equals_one_linear_per_matrix() {
             ("q4 x8", core::array::from_fn(|m| Matrix::X8(X8Rows::new_q4(&x4[m], outs[m], i).unwrap()))),
             ("int8 rows", core::array::from_fn(|m| Matrix::Q8(Q8Rows::new(&q8[m], outs[m], i).unwrap()))),
             ("f16", core::array::from_fn(|m| Matrix::F16(F16Rows::new(&h[m], outs[m], i).unwrap()))),
+            ("f32", core::array::from_fn(|m| Matrix::F32(F32Rows::new(&w[m], outs[m], i).unwrap()))),
         ];
         for n in [1usize, 3, 4, 10, 11, 16, 17, 160, 290] {
             let x = r.vec(n * i);
@@ -84,6 +86,15 @@ fn linear_each_equals_one_linear_per_matrix() {
                                 let mut y = vec![f32::NAN; n * outs[k]];
                                 linear_with(&x, &m[k], Some(&b[k]), &mut y, &mut room);
                                 assert_eq!(bits(&y), bits(&want[k]), "linear_with, {what}, matrix {k}");
+                                // GELU in the epilogue: the numbers of GELU after the GEMM, with a bias and without.
+                                for bias in [Some(&b[k][..]), None] {
+                                    let mut after = vec![f32::NAN; n * outs[k]];
+                                    linear_with(&x, &m[k], bias, &mut after, &mut room);
+                                    gelu_inplace(&mut after);
+                                    let mut y = vec![f32::NAN; n * outs[k]];
+                                    linear_gelu_with(&x, &m[k], bias, &mut y, &mut room);
+                                    assert_eq!(bits(&y), bits(&after), "linear_gelu_with, {what}, matrix {k}, bias {}", bias.is_some());
+                                }
                             }
                             let mut got: Vec<Vec<f32>> = outs.iter().map(|&o| vec![f32::NAN; n * o]).collect();
                             let [g0, g1, g2] = &mut got[..] else { unreachable!() };

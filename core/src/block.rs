@@ -4,7 +4,7 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
-use crate::kernels::{attention, attention_ahead, gelu_inplace, layernorm, linear_each, linear_each_with, linear_with, KvRows, Mask, Q8Room};
+use crate::kernels::{attention, attention_ahead, layernorm, linear_each, linear_each_with, linear_gelu_with, linear_with, KvRows, Mask, Q8Room};
 use crate::model::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
@@ -115,8 +115,8 @@ fn mlp(w: &BlockW<'_>, x: &mut [f32], s: &mut BlockScratch<'_>, nc: usize) {
     let (ln, hid, out, mut panel) = s.mlp_parts();
     let (ln, hid, out) = (&mut ln[..nc], &mut hid[..4 * nc], &mut out[..nc]);
     layernorm(x, w.ln2.w, w.ln2.b, ln);
-    lin(ln, &w.fc, hid, &mut panel);
-    gelu_inplace(hid);
+    // GELU as the GEMM writes each output segment (`linear_gelu_with`: the same bits as after it).
+    linear_gelu_with(ln, &w.fc.w, w.fc.b, hid, &mut panel);
     lin(hid, &w.fc_out, out, &mut panel);
     add(x, out);
 }

@@ -28,6 +28,40 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
 /// values are the same bit for bit (rows are computed independently); an
 /// empty `room` is [`linear`].
 pub fn linear_with(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], room: &mut Q8Room<'_>) {
+    linear_epilogue(x, w, Epilogue::bias(b), y, room)
+}
+
+/// `y = gelu(x W^T + b)`: [`linear_with`] then [`super::gelu_inplace`] of
+/// `y`, bit for bit, with GELU applied to each output segment as the GEMM
+/// writes it (while it is in L1, and on every thread of a split GEMM)
+/// instead of in a second pass over `y`.
+pub fn linear_gelu_with(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], room: &mut Q8Room<'_>) {
+    linear_epilogue(x, w, Epilogue { bias: b, gelu: true }, y, room)
+}
+
+/// What a GEMM does to its output values after the products (the usual
+/// GEMM term): `b + t` (`0 + t` without a bias), then GELU where `gelu`
+/// ([`simd::bias_act`]).
+#[derive(Clone, Copy, Default)]
+struct Epilogue<'b> {
+    bias: Option<&'b [f32]>,
+    gelu: bool,
+}
+
+impl<'b> Epilogue<'b> {
+    fn bias(bias: Option<&'b [f32]>) -> Self {
+        Epilogue { bias, gelu: false }
+    }
+
+    /// Writes `y = b[t0..] + t` (then GELU) for the output columns `t0 .. t0 + y.len()`.
+    #[inline]
+    fn put(self, y: &mut [f32], t0: usize, t: &[f32]) {
+        simd::bias_act(t, self.bias.map(|b| &b[t0..t0 + y.len()]), self.gelu, y)
+    }
+}
+
+/// [`linear_with`] with epilogue `e`.
+fn linear_epilogue(x: &[f32], w: &Matrix<'_>, e: Epilogue<'_>, y: &mut [f32], room: &mut Q8Room<'_>) {
     let (n_in, n_out) = (w.cols(), w.rows());
     if n_in == 0 || n_out == 0 {
         return;
@@ -39,14 +73,14 @@ pub fn linear_with(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], 
     let (x, y) = (&x[..n * n_in], &mut y[..n * n_out]);
     if takes_q8_panel(w) {
         match w {
-            Matrix::Q8(q) => return linear_q8(x, [q], [b], [y], room),
-            Matrix::X8(q) => return linear_q8(x, [q], [b], [y], room),
-            Matrix::Q4(q) => return linear_q8(x, [q], [b], [y], room),
+            Matrix::Q8(q) => return linear_q8(x, [q], [e], [y], room),
+            Matrix::X8(q) => return linear_q8(x, [q], [e], [y], room),
+            Matrix::Q4(q) => return linear_q8(x, [q], [e], [y], room),
             _ => {}
         }
     }
     let block = (BLOCK_BYTES / (w.weight_bytes() / n_out).max(1)).clamp(16, 1024);
-    split_cols(y, n_out, w.weight_bytes().saturating_mul(n), |cols| crate::with_rows!(w, m => linear_impl(x, m, b, cols, block)))
+    split_cols(y, n_out, w.weight_bytes().saturating_mul(n), |cols| crate::with_rows!(w, m => linear_impl(x, m, e, cols, block)))
 }
 
 /// Whether [`linear`] runs `w` on the int8 panel path ([`linear_q8`]).
@@ -80,13 +114,13 @@ pub fn linear_each_with<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Op
     if shared {
         let x = &x[..n * n_in];
         if let Some(m) = same_layout(ws, |w| if let Matrix::X8(q) = w { Some(q) } else { None }) {
-            return linear_q8(x, m, bs, ys, room);
+            return linear_q8(x, m, bs.map(Epilogue::bias), ys, room);
         }
         if let Some(m) = same_layout(ws, |w| if let Matrix::Q8(q) = w { Some(q) } else { None }) {
-            return linear_q8(x, m, bs, ys, room);
+            return linear_q8(x, m, bs.map(Epilogue::bias), ys, room);
         }
         if let Some(m) = same_layout(ws, |w| if let Matrix::Q4(q) = w { Some(q) } else { None }) {
-            return linear_q8(x, m, bs, ys, room);
+            return linear_q8(x, m, bs.map(Epilogue::bias), ys, room);
         }
     }
     for ((w, b), y) in ws.into_iter().zip(bs).zip(ys) {
@@ -312,29 +346,29 @@ impl Q8Source for X8Rows<'_> {
 /// `N` matrices of the same width over the same `n = x.len() / in` rows
 /// (each `y` holds `n` rows; [`linear_each`] checks it) share the
 /// quantised panel; each takes its own kernels, as if called alone.
-fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N], room: &mut Q8Room<'_>) {
+fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], es: [Epilogue<'_>; N], ys: [&mut [f32]; N], room: &mut Q8Room<'_>) {
     let n_in = ws.first().map_or(0, |w| w.cols());
     let values = x.len().checked_div(n_in).map_or(0, |rows| rows * n_in);
     if values <= Q8_PANEL_SMALL {
-        linear_q8_in::<W, N, Q8_PANEL_SMALL, { Q8_PANEL_SMALL / Q8_BLOCK }, { 2 * Q8_PANEL_SMALL / Q8_BLOCK }>(x, ws, bs, ys)
+        linear_q8_in::<W, N, Q8_PANEL_SMALL, { Q8_PANEL_SMALL / Q8_BLOCK }, { 2 * Q8_PANEL_SMALL / Q8_BLOCK }>(x, ws, es, ys)
     } else if room.rows(n_in) * n_in >= values || room.rows(n_in) > Q8_PANEL / n_in {
-        linear_q8_on(x, ws, bs, ys, room.q, room.d, room.c)
+        linear_q8_on(x, ws, es, ys, room.q, room.d, room.c)
     } else {
-        linear_q8_in::<W, N, Q8_PANEL, Q8_PANEL_BLOCKS, { 2 * Q8_PANEL_BLOCKS }>(x, ws, bs, ys)
+        linear_q8_in::<W, N, Q8_PANEL, Q8_PANEL_BLOCKS, { 2 * Q8_PANEL_BLOCKS }>(x, ws, es, ys)
     }
 }
 
 /// [`linear_q8`] with a stack panel of `Q` values (`B = Q / 32`, `C = 2 B`).
 #[inline(never)]
-fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usize, const C: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N]) {
+fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usize, const C: usize>(x: &[f32], ws: [&W; N], es: [Epilogue<'_>; N], ys: [&mut [f32]; N]) {
     let mut room = PanelRoom::<Q, B, C> { q: [0; Q], d: [0.0; B], c: [0; C] };
-    linear_q8_on(x, ws, bs, ys, &mut room.q, &mut room.d, &mut room.c)
+    linear_q8_on(x, ws, es, ys, &mut room.q, &mut room.d, &mut room.c)
 }
 
 /// [`linear_q8`] on panel memory `q` (values), `d` (block scales), `c`
 /// (corrections): the rows in panels of as many rows as it holds.
 #[inline(never)]
-fn linear_q8_on<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: [Option<&[f32]>; N], mut ys: [&mut [f32]; N], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
+fn linear_q8_on<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], es: [Epilogue<'_>; N], mut ys: [&mut [f32]; N], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
     let Some(n_in) = ws.first().map(|w| w.cols()).filter(|&c| c > 0) else { return };
     let n = x.len() / n_in;
     let nb = n_in / Q8_BLOCK;
@@ -359,14 +393,14 @@ fn linear_q8_on<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: 
         // stored packed tiles are faster from one row on.
         let packed = simd::packed_q8_fast() && (W::PREPACKED || (simd::q8_packing_pays() && p1 - p0 >= PACK_MIN_ROWS && nb <= simd::PACK_BLOCKS));
         let p = &Q8Panel { q: &*q, d: &*d, c: &*c };
-        for ((w, b), y) in ws.iter().zip(bs).zip(ys.iter_mut()) {
+        for ((w, e), y) in ws.iter().zip(es).zip(ys.iter_mut()) {
             let n_out = w.rows();
             let work = (n_out * nb * Q8_BLOCK_BYTES).saturating_mul(p1 - p0);
             split_cols(&mut y[p0 * n_out..p1 * n_out], n_out, work, |cols| {
                 if packed {
-                    q8_panel_packed(*w, b, cols, p, p1 - p0, n_in)
+                    q8_panel_packed(*w, e, cols, p, p1 - p0, n_in)
                 } else {
-                    q8_panel_tiles_for(*w, b, cols, p, p1 - p0, n_in)
+                    q8_panel_tiles_for(*w, e, cols, p, p1 - p0, n_in)
                 }
             });
         }
@@ -375,7 +409,7 @@ fn linear_q8_on<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], bs: 
 }
 
 /// Output columns `y.lo()..y.hi()` of the generic path (`n = x.len() / in` rows).
-fn linear_impl<W: RowMatrix>(x: &[f32], w: &W, b: Option<&[f32]>, mut y: Cols<'_>, block: usize) {
+fn linear_impl<W: RowMatrix>(x: &[f32], w: &W, e: Epilogue<'_>, mut y: Cols<'_>, block: usize) {
     let n_in = w.cols();
     let n = x.len() / n_in;
     let chunk = W::CHUNK.min(n_in);
@@ -391,7 +425,7 @@ fn linear_impl<W: RowMatrix>(x: &[f32], w: &W, b: Option<&[f32]>, mut y: Cols<'_
             let mt = TM.min(n - i0);
             for i in i0..i0 + mt {
                 let yi = y.seg(i, o0, o1);
-                match b {
+                match e.bias {
                     Some(b) => yi.copy_from_slice(&b[o0..o1]),
                     None => yi.fill(0.0),
                 }
@@ -423,6 +457,11 @@ fn linear_impl<W: RowMatrix>(x: &[f32], w: &W, b: Option<&[f32]>, mut y: Cols<'_
                     t0 += nt;
                 }
                 c0 = c1;
+            }
+            if e.gelu {
+                for i in i0..i0 + mt {
+                    simd::gelu_inplace(y.seg(i, o0, o1));
+                }
             }
             i0 += mt;
         }
@@ -464,11 +503,11 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
 /// at most `PACK_BLOCKS` blocks (every matrix of the model; 1.5 KiB zeroed
 /// per call) or the widest the panel takes (96 KiB). Off AVX512-VNNI every
 /// int8 GEMM of a streaming step runs here.
-fn q8_panel_tiles_for<W: Q8Source>(w: &W, b: Option<&[f32]>, y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
+fn q8_panel_tiles_for<W: Q8Source>(w: &W, e: Epilogue<'_>, y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
     if n_in / Q8_BLOCK <= simd::PACK_BLOCKS {
-        q8_panel_tiles::<W, { simd::PACK_BLOCKS }>(w, b, y, p, n_rows, n_in)
+        q8_panel_tiles::<W, { simd::PACK_BLOCKS }>(w, e, y, p, n_rows, n_in)
     } else {
-        q8_panel_tiles::<W, Q8_PANEL_BLOCKS>(w, b, y, p, n_rows, n_in)
+        q8_panel_tiles::<W, Q8_PANEL_BLOCKS>(w, e, y, p, n_rows, n_in)
     }
 }
 
@@ -477,7 +516,7 @@ fn q8_panel_tiles_for<W: Q8Source>(w: &W, b: Option<&[f32]>, y: Cols<'_>, p: &Q8
 /// with [`simd::gemm_q8`].
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_tiles<W: Q8Source, const WB: usize>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
+fn q8_panel_tiles<W: Q8Source, const WB: usize>(w: &W, e: Epilogue<'_>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
     let nb = n_in / Q8_BLOCK;
     let mut ws = [[0.0f32; WB]; TN];
     let mut buf = W::new_buf();
@@ -498,12 +537,7 @@ fn q8_panel_tiles<W: Q8Source, const WB: usize>(w: &W, b: Option<&[f32]>, mut y:
             let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
             let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
             let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
-            let mut put = |m: usize, t: [f32; TN]| {
-                let yr = y.seg(i0 + m, t0, t0 + nt);
-                for (j, (yo, v)) in yr.iter_mut().zip(t).enumerate() {
-                    *yo = b.map_or(0.0, |b| b[t0 + j]) + v;
-                }
-            };
+            let mut put = |m: usize, t: [f32; TN]| e.put(y.seg(i0 + m, t0, t0 + nt), t0, &t);
             match mt {
                 1 => {
                     let t = simd::gemm_q8::<1>(wr, wd, [q(0)], [d(0)], [c(0)]);
@@ -537,7 +571,7 @@ fn q8_panel_tiles<W: Q8Source, const WB: usize>(w: &W, b: Option<&[f32]>, mut y:
 /// bit; the rows after them stay on VNNI.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
+fn q8_panel_packed<W: Q8Source>(w: &W, e: Epilogue<'_>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
     const R: usize = simd::PACK_ROWS;
     let nb = n_in / Q8_BLOCK;
     let (mut pack, mut buf) = (None, None);
@@ -553,33 +587,33 @@ fn q8_panel_packed<W: Q8Source>(w: &W, b: Option<&[f32]>, mut y: Cols<'_>, p: &Q
         let ahead = if n_rows < AMX_MIN_ROWS && t0 + PREFETCH_TILES * R < y.hi() { w.stored_rows(t0 + PREFETCH_TILES * R, (t0 + (PREFETCH_TILES + 1) * R).min(y.hi())) } else { &[] };
         let prepared = amx_planned > 0 && amx.as_mut().is_some_and(|a| a.prepare(0, tile));
         let Some(a) = amx.as_mut().filter(|_| prepared) else {
-            vnni_rows(tile, p, 0, n_rows, n_in, ahead, |i, t| put_row(&mut y, b, i, t0, nt, t));
+            vnni_rows(tile, p, 0, n_rows, n_in, ahead, |i, t| put_row(&mut y, e, i, t0, nt, t));
             t0 += nt;
             continue;
         };
         // This tile's rows after the AMX rows, then the second tile's (or
         // this one again as a second operand whose results are dropped).
-        vnni_rows(tile, p, amx_planned, n_rows, n_in, &[], |i, t| put_row(&mut y, b, i, t0, nt, t));
+        vnni_rows(tile, p, amx_planned, n_rows, n_in, &[], |i, t| put_row(&mut y, e, i, t0, nt, t));
         let t1 = t0 + R;
         let nt1 = if t1 < y.hi() { R.min(y.hi() - t1) } else { 0 };
         if nt1 > 0 {
             let tile1 = w.packed_tile(t1, nb, &mut pack, &mut buf);
             a.prepare(1, tile1);
-            vnni_rows(tile1, p, amx_planned, n_rows, n_in, &[], |i, t| put_row(&mut y, b, i, t1, nt1, t));
+            vnni_rows(tile1, p, amx_planned, n_rows, n_in, &[], |i, t| put_row(&mut y, e, i, t1, nt1, t));
         } else {
             a.prepare(1, tile);
         }
         // The next pair's weights stream in (into L2) while this pair is multiplied.
         let ahead = w.stored_rows(t0 + 2 * R, (t0 + 4 * R).min(y.hi()));
         // The two tiles' columns are adjacent (t1 = t0 + 8): one segment per row.
-        let done = amx_pair(a, p, amx_planned, n_in, ahead, |i, t| put_row(&mut y, b, i, t0, nt + nt1, t));
+        let done = amx_pair(a, p, amx_planned, n_in, ahead, &mut y, e, t0, nt + nt1);
         if done < amx_planned {
             // Not reached (the extents were checked for the plan); kept so a
             // refusal never leaves outputs unwritten.
             for (tt, ntt) in [(t0, nt), (t1, nt1)] {
                 if ntt > 0 {
                     let tile = w.packed_tile(tt, nb, &mut pack, &mut buf);
-                    vnni_rows(tile, p, done, amx_planned, n_in, &[], |i, t| put_row(&mut y, b, i, tt, ntt, t));
+                    vnni_rows(tile, p, done, amx_planned, n_in, &[], |i, t| put_row(&mut y, e, i, tt, ntt, t));
                 }
             }
         }
@@ -595,14 +629,10 @@ const PREFETCH_TILES: usize = 2;
 /// VNNI rows with the next tile's prefetch are as fast: the S step's panels).
 const AMX_MIN_ROWS: usize = 16;
 
-/// `y[i][t0..t0 + nt] = b[t0..] + t[..nt]`.
+/// `y[i][t0..t0 + nt]` = the epilogue of `t[..nt]` ([`Epilogue::put`]).
 #[inline]
-fn put_row(y: &mut Cols<'_>, b: Option<&[f32]>, i: usize, t0: usize, nt: usize, t: &[f32]) {
-    let yr = y.seg(i, t0, t0 + nt);
-    match b {
-        Some(b) => yr.iter_mut().zip(t).zip(&b[t0..]).for_each(|((yo, v), bj)| *yo = bj + v),
-        None => yr.iter_mut().zip(t).for_each(|(yo, v)| *yo = 0.0 + v),
-    }
+fn put_row(y: &mut Cols<'_>, e: Epilogue<'_>, i: usize, t0: usize, nt: usize, t: &[f32]) {
+    e.put(y.seg(i, t0, t0 + nt), t0, &t[..nt])
 }
 
 /// Most activation rows per call of the packed int8 kernel. The rows of a
@@ -663,32 +693,14 @@ fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_
     });
 }
 
-/// The first `rows` activation rows of a panel (a multiple of
-/// [`simd::AMX_ROWS`]) against the two tiles prepared in `a`, on the AMX
-/// kernel (`put(row, values of both tiles)`), prefetching `ahead` over the
-/// calls; returns the rows done.
-fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel<'_>, rows: usize, n_in: usize, ahead: &[u8], mut put: impl FnMut(usize, &[f32; simd::AMX_COLS])) -> usize {
-    /// Activation rows per AMX call (its tile configuration is loaded once per call).
-    const CALL_ROWS: usize = 8 * simd::AMX_ROWS;
+/// The first `rows` activation rows of a panel (whole row groups:
+/// [`simd::amx_rows`]) against the two tiles prepared in `a`, on the AMX
+/// kernel in one call, which writes `y`'s columns `t0 .. t0 + cols` of
+/// those rows through the epilogue `e` itself, prefetching `ahead`;
+/// returns the rows done.
+#[allow(clippy::too_many_arguments)]
+fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel<'_>, rows: usize, n_in: usize, ahead: &[u8], y: &mut Cols<'_>, e: Epilogue<'_>, t0: usize, cols: usize) -> usize {
     let nb = n_in / Q8_BLOCK;
-    let mut out = [[0.0f32; simd::AMX_COLS]; CALL_ROWS];
-    let mut i0 = 0;
-    while i0 < rows {
-        // Calls of whole row groups: a last call of 4 rows would be left
-        // to VNNI (a tile group has 8 or 12 rows), so the call before it takes 12 fewer.
-        let left = rows - i0;
-        let k = if left == CALL_ROWS + 4 { CALL_ROWS - 12 } else { left.min(CALL_ROWS) };
-        // This call's share of `ahead`.
-        let (a0, a1) = simd::part_bytes(ahead.len(), i0 / CALL_ROWS, rows.div_ceil(CALL_ROWS));
-        let share = &ahead[a0..a1];
-        let done = simd::gemm_q8_packed_amx(a, &p.q[i0 * n_in..rows * n_in], n_in, &p.d[i0 * nb..rows * nb], &mut out[..k], share);
-        if done == 0 {
-            break;
-        }
-        for (m, t) in out[..done].iter().enumerate() {
-            put(i0 + m, t);
-        }
-        i0 += done;
-    }
-    i0
+    let bias = e.bias.map(|b| &b[t0..t0 + cols]);
+    simd::gemm_q8_packed_amx(a, &p.q[..rows * n_in], n_in, &p.d[..rows * nb], y.window(0, rows, t0, t0 + cols), bias, e.gelu, ahead)
 }

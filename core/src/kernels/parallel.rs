@@ -115,6 +115,60 @@ impl<'y> Cols<'y> {
     }
 }
 
+impl<'y> Cols<'y> {
+    /// Rows `i0 .. i0 + rows`, columns `a..b` of `y`: the block one kernel
+    /// call writes in place. Panics unless `lo <= a <= b <= hi` and the
+    /// rows lie in `y`.
+    pub fn window(&mut self, i0: usize, rows: usize, a: usize, b: usize) -> Window<'_> {
+        assert!(self.lo <= a && a <= b && b <= self.hi, "column range outside the task's share");
+        let end = (i0 + rows).checked_sub(1).map_or(Some(0), |last| last.checked_mul(self.stride).and_then(|o| o.checked_add(b)));
+        assert!(end.is_some_and(|e| e <= self.len), "rows outside the output");
+        // SAFETY: i0 * stride + a <= len (checked above when rows > 0; an
+        // empty window keeps the base pointer and is never written).
+        let ptr = if rows == 0 { self.ptr } else { unsafe { self.ptr.add(i0 * self.stride + a) } };
+        Window { ptr, stride: self.stride, rows, cols: b - a, _w: PhantomData }
+    }
+}
+
+/// `rows` rows of `cols` floats, row `m` at `m * stride` floats from the
+/// first: a block of a [`Cols`] view ([`Cols::window`]), borrowed from it
+/// alone.
+pub struct Window<'w> {
+    ptr: *mut f32,
+    stride: usize,
+    rows: usize,
+    cols: usize,
+    _w: PhantomData<&'w mut [f32]>,
+}
+
+impl<'w> Window<'w> {
+    /// Rows of the block.
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+    /// Floats per row.
+    pub fn cols(&self) -> usize {
+        self.cols
+    }
+    /// Row `m` (`cols` floats). Panics unless `m < rows`.
+    #[inline]
+    pub fn row(&mut self, m: usize) -> &mut [f32] {
+        assert!(m < self.rows, "row outside the window");
+        // SAFETY: rows m < rows of `cols` floats at m * stride lie in the
+        // view's columns of its output (checked by `Cols::window`), and
+        // `&mut self` keeps one row borrowed at a time.
+        unsafe { core::slice::from_raw_parts_mut(self.ptr.add(m * self.stride), self.cols) }
+    }
+    /// The first `k` rows and the rest (`k` clamped to `rows`).
+    pub fn split_rows(self, k: usize) -> (Window<'w>, Window<'w>) {
+        let k = k.min(self.rows);
+        // SAFETY: row k starts inside the window's rows when k < rows; at
+        // k == rows the rest is empty and keeps the base pointer.
+        let rest = if k < self.rows { unsafe { self.ptr.add(k * self.stride) } } else { self.ptr };
+        (Window { rows: k, ..self }, Window { ptr: rest, rows: self.rows - k, ..self })
+    }
+}
+
 /// The output of a split GEMM, shared by its tasks (each takes its own
 /// disjoint [`Cols`]).
 struct SharedOut<'y> {

@@ -30,6 +30,9 @@ use core::arch::asm;
 use core::arch::x86_64::*;
 use core::sync::atomic::{AtomicBool, Ordering};
 
+use crate::kernels::parallel::Window;
+
+use super::x86::gelu16;
 use super::{Isa, PackedQ8, PACK_BLOCKS, PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES, PACK_ROWS, Q8_BLOCK};
 
 /// Activation rows per tile multiply: groups of 12, and of [`ROWS_SMALL`]
@@ -197,22 +200,30 @@ unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], sca
     }
 }
 
-/// `out[m][8t + n]` for the `out.len() / 8 * 8` activation rows `m` (row
-/// `m`: `xq[m * stride..][..32 nb]`, `xd[m * nb..][..nb]`) and the weight
-/// rows `n` of the two tiles `t` prepared in `w` ([`AmxWeights::prepare`]):
-/// what [`super::gemm_q8_packed`] gives on AVX512-VNNI for each tile, bit
-/// for bit. Returns the rows written ([`amx_rows`]): 0 when the kernel does
-/// not run ([`enabled`]), the slices are short or `w` does not hold two
+/// Row `m` of `out`, column `8t + n` = `bias[8t + n] + y` (`0 + y`
+/// without a bias), then GELU of it where `gelu`
+/// ([`super::bias_act`]), with `y` what [`super::gemm_q8_packed`] gives on
+/// AVX512-VNNI for activation row `m` (`xq[m * stride..][..32 nb]`,
+/// `xd[m * nb..][..nb]`) and weight row `n` of tile `t` prepared in `w`
+/// ([`AmxWeights::prepare`]), bit for bit; for the first `out.cols()`
+/// (at most [`COLS`]) columns of the first whole row groups of `out`'s
+/// rows ([`amx_rows`]). The results go straight to `out` as each row group
+/// finishes, between the tile multiplies of the next (not in one burst
+/// after the call, whose stores to rows a window apart waited for their
+/// cache lines). Returns the rows written: 0 when the kernel does not run
+/// ([`enabled`]), the slices are short, `out` is wider than [`COLS`] or
+/// the bias than... shorter than `out.cols()`, or `w` does not hold two
 /// tiles of the same blocks. The lines of `ahead` (the weights the caller
 /// reads next) are prefetched into L2 a few per block pair, spread over the
 /// call, so their memory reads overlap the tile multiplies; no result
 /// depends on it.
-pub fn gemm_q8_packed_amx(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]], ahead: &[u8]) -> usize {
+#[allow(clippy::too_many_arguments)]
+pub fn gemm_q8_packed_amx(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: Window<'_>, bias: Option<&[f32]>, gelu: bool, ahead: &[u8]) -> usize {
     if !enabled() {
         return 0;
     }
     // SAFETY: `enabled` (see `enable`'s contract).
-    unsafe { gemm_q8_packed_amx_raw(w, xq, stride, xd, out, ahead) }
+    unsafe { gemm_q8_packed_amx_raw(w, xq, stride, xd, out, bias, gelu, ahead) }
 }
 
 /// The activation rows [`gemm_q8_packed_amx`] computes of `rows` rows of
@@ -234,22 +245,24 @@ pub fn amx_rows(nb: usize, xq_len: usize, stride: usize, xd_len: usize, rows: us
 /// The CPU must support amx-tile, amx-int8, avx512f/bw/dq/vl, avx2, fma and
 /// f16c, and the OS must have granted this process the tile data state
 /// ([`request_linux_permission`]).
-pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]], ahead: &[u8]) -> usize {
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: Window<'_>, bias: Option<&[f32]>, gelu: bool, ahead: &[u8]) -> usize {
     let nb = w.nb[0];
-    let rows = amx_rows(nb, xq.len(), stride, xd.len(), out.len());
-    if rows == 0 || w.nb[1] != nb {
+    let rows = amx_rows(nb, xq.len(), stride, xd.len(), out.rows());
+    if rows == 0 || w.nb[1] != nb || out.cols() > COLS || bias.is_some_and(|b| b.len() < out.cols()) {
         return 0;
     }
+    let e = Tail { bias, gelu };
     // SAFETY: the caller's features and permission; the operand extents
     // were checked by `amx_rows`: every row of every group lies within
     // `need_q` of xq, the weight operands are `nb * B_BLOCK` bytes of `w.b`.
     let big = groups(rows).0 * ROWS;
-    let (o_big, o_small) = out[..rows].split_at_mut(big);
+    let (o_big, o_small) = out.split_rows(big);
     // SAFETY: as above; the small groups' rows start `big` rows further in
     // `xq` and `xd` (inside the checked extents). `ahead` goes to the first call.
     unsafe {
-        tiles_q8::<ROWS>(&w.b[..nb * B_BLOCK], &w.s, nb, xq, stride, xd, o_big, ahead);
-        tiles_q8::<ROWS_SMALL>(&w.b[..nb * B_BLOCK], &w.s, nb, &xq[big * stride..], stride, &xd[big * nb..], o_small, if big > 0 { &[] } else { ahead });
+        tiles_q8::<ROWS>(&w.b[..nb * B_BLOCK], &w.s, nb, xq, stride, xd, o_big, e, ahead);
+        tiles_q8::<ROWS_SMALL>(&w.b[..nb * B_BLOCK], &w.s, nb, &xq[big * stride..], stride, &xd[big * nb..], o_small.split_rows(rows - big).0, e, if big > 0 { &[] } else { ahead });
     }
     rows
 }
@@ -283,6 +296,19 @@ pub fn request_linux_permission() -> bool {
             lateout("rcx") _, lateout("r11") _, options(nostack));
     }
     ret == 0
+}
+
+/// The epilogue [`gemm_q8_packed_amx`] applies to its results.
+#[derive(Clone, Copy)]
+struct Tail<'b> {
+    bias: Option<&'b [f32]>,
+    gelu: bool,
+}
+
+/// The first `n` (at most 16) lanes.
+#[inline]
+fn lanes(n: usize) -> __mmask16 {
+    ((1u32 << n.min(16)) - 1) as __mmask16
 }
 
 #[repr(C, align(64))]
@@ -369,20 +395,24 @@ unsafe fn store<const EVEN: bool>(c: &mut CPair, two: bool) {
 /// features, and the extents it checked.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,f16c")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: usize, xq: &[i8], stride: usize, xd: &[f32], out: &mut [[f32; COLS]], ahead: &[u8]) {
+unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: usize, xq: &[i8], stride: usize, xd: &[f32], mut out: Window<'_>, e: Tail<'_>, ahead: &[u8]) {
     // Result row m of a pair: tile t's lanes (2n, 2n + 1) = weight row 8t + n's sums of blocks (2p, 2p + 1).
     let ilv = [_mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23), _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31)];
     let np = nb.div_ceil(2);
     // `ahead`'s lines, spread evenly over the (row group, block pair) steps.
-    if out.len() < R {
+    if out.rows() < R {
         return;
     }
-    let (lines, steps) = (ahead.len().div_ceil(64), out.len() / R * np);
+    let (lines, steps) = (ahead.len().div_ceil(64), out.rows() / R * np);
+    // The window's columns (at most COLS) and their bias, as lanes.
+    let cols = lanes(out.cols());
+    // SAFETY: the masked lanes < out.cols() <= bias.len() (checked by the caller).
+    let bias = e.bias.map_or(_mm512_setzero_ps(), |b| unsafe { _mm512_maskz_loadu_ps(cols, b.as_ptr()) });
     let mut c = [CPair([[0; 16 * ROWS]; 2]), CPair([[0; 16 * ROWS]; 2])];
     let cfg = if R == ROWS { &CONFIG } else { &CONFIG_SMALL };
     // SAFETY: both are valid palette-1 configurations (R is one of their row counts).
     unsafe { asm!("ldtilecfg [{0}]", in(reg) cfg.0.as_ptr(), options(nostack, readonly)) };
-    for (t, ot) in out.chunks_exact_mut(R).enumerate() {
+    for t in 0..out.rows() / R {
         let a = &xq[t * R * stride..];
         let d = &xd[t * R * nb..(t + 1) * R * nb];
         let mut acc = [[_mm512_setzero_ps(); R]; 2];
@@ -446,11 +476,14 @@ unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: 
         }
         // Lane 2n of tile h's sums is weight row 8h + n: the even lanes of both, in order.
         let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
-        for (m, o) in ot.iter_mut().enumerate() {
+        for m in 0..R {
             // Lane pairs (2n, 2n + 1) are row n, as in the VNNI kernel.
             let pairs: [__m512; 2] = core::array::from_fn(|h| _mm512_add_ps(acc[h][m], _mm512_permute_ps::<0b10_11_00_01>(acc[h][m])));
-            // SAFETY: o holds COLS = 16 floats.
-            unsafe { _mm512_storeu_ps(o.as_mut_ptr(), _mm512_permutex2var_ps(pairs[0], even, pairs[1])) };
+            // The epilogue's operations (`bias_act`): b + y, then GELU.
+            let y = _mm512_add_ps(bias, _mm512_permutex2var_ps(pairs[0], even, pairs[1]));
+            let o = out.row(t * R + m);
+            // SAFETY: the masked lanes < out.cols() = o.len().
+            unsafe { _mm512_mask_storeu_ps(o.as_mut_ptr(), cols, if e.gelu { gelu16(y) } else { y }) };
         }
     }
     // SAFETY: tiles configured above; releasing returns them to the init state.

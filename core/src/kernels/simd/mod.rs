@@ -633,6 +633,31 @@ pub fn gelu_inplace(x: &mut [f32]) {
     }
 }
 
+/// A GEMM's epilogue over one output segment: `y[j] = b[j] + t[j]` (`0 +
+/// t[j]` without a bias), then [`gelu_inplace`] of it where `gelu`, over
+/// the shortest slice ([`scalar::bias_act`]). AVX-512 does both in one
+/// pass over 16 lanes; elsewhere the sum, then the ISA's GELU: each
+/// variant is bit-identical to the twin.
+#[inline]
+pub fn bias_act(t: &[f32], b: Option<&[f32]>, gelu: bool, y: &mut [f32]) {
+    if y.len() < 16 && !gelu {
+        // A small tile's few sums: the twin inline costs less than a call.
+        return scalar::bias_act(t, b, false, y);
+    }
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::bias_act_512(t, b, gelu, y) },
+        _ => {
+            scalar::bias_act(t, b, false, y);
+            if gelu {
+                let n = t.len().min(b.map_or(t.len(), <[f32]>::len)).min(y.len());
+                gelu_inplace(&mut y[..n]);
+            }
+        }
+    }
+}
+
 /// `out[j] = q . k[j * stride ..][..q.len()]` for `j < out.len()` (one
 /// attention query against a run of key rows of a strided matrix; `k`
 /// holds at least `(out.len() - 1) * stride + q.len()` floats when
@@ -1071,7 +1096,8 @@ mod no_amx {
         0
     }
     /// Always 0 rows.
-    pub fn gemm_q8_packed_amx(_: &AmxWeights, _: &[i8], _: usize, _: &[f32], _: &mut [[f32; COLS]], _: &[u8]) -> usize {
+    #[allow(clippy::too_many_arguments)]
+    pub fn gemm_q8_packed_amx(_: &AmxWeights, _: &[i8], _: usize, _: &[f32], _: crate::kernels::parallel::Window<'_>, _: Option<&[f32]>, _: bool, _: &[u8]) -> usize {
         0
     }
 }

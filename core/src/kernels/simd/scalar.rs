@@ -411,6 +411,20 @@ pub fn gelu_inplace(x: &mut [f32]) {
     }
 }
 
+/// Twin of [`super::bias_act`]: `y[j] = b[j] + t[j]` (`0 + t[j]` without
+/// a bias), then [`gelu`] of it where `gelu_too`, over the shortest slice.
+#[inline]
+pub fn bias_act(t: &[f32], b: Option<&[f32]>, gelu_too: bool, y: &mut [f32]) {
+    match b {
+        Some(b) => y.iter_mut().zip(t).zip(b).for_each(|((yo, v), bj)| *yo = bj + v),
+        None => y.iter_mut().zip(t).for_each(|(yo, v)| *yo = 0.0 + v),
+    }
+    if gelu_too {
+        let n = t.len().min(b.map_or(t.len(), <[f32]>::len)).min(y.len());
+        gelu_inplace(&mut y[..n]);
+    }
+}
+
 /// Twin of [`super::narrow_f16`]: `half::f16::from_f32` per value.
 #[inline]
 pub fn narrow_f16(src: &[f32], dst: &mut [u16]) {

@@ -1085,6 +1085,44 @@ fn gelu_matches_scalar_twin_and_libm() {
     }
 }
 
+/// The GEMM epilogue `bias_act` (AVX-512: the sum and GELU on 16 lanes,
+/// masked tails; the dispatcher on every variant this CPU runs) is
+/// bit-identical to its twin, with and without a bias and GELU, and
+/// writes nothing past the shortest slice.
+#[test]
+#[allow(unsafe_code)]
+fn bias_act_matches_scalar_twin() {
+    let mut r = Rng(0xb1a5);
+    let xs: std::vec::Vec<f32> = exp_inputs().into_iter().filter(|v| v.is_finite()).collect();
+    for n in (0..=20).chain([31, 32, 33, 48, 64, 65, xs.len()]) {
+        let t = &xs[..n];
+        let b = r.vec(n + 3);
+        for (bias, gelu) in [(None, false), (Some(&b[..n]), false), (Some(&b[..n]), true), (None, true)] {
+            let mut want = vec![0.0f32; n];
+            scalar::bias_act(t, bias, gelu, &mut want);
+            for (j, w) in want.iter().enumerate() {
+                let s = bias.map_or(0.0, |b| b[j]) + t[j];
+                assert_eq!(w.to_bits(), if gelu { scalar::gelu(s) } else { s }.to_bits(), "twin n={n} j={j}");
+            }
+            // One more output slot than values: it must stay as it was.
+            let mut got = vec![-3.0f32; n + 1];
+            super::bias_act(t, bias, gelu, &mut got);
+            assert_eq!(got[..n].iter().map(|v| v.to_bits()).collect::<Vec<_>>(), want.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), "dispatch n={n} bias={} gelu={gelu}", bias.is_some());
+            assert_eq!(got[n], -3.0);
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx512f") {
+                let mut got = vec![-3.0f32; n + 1];
+                // SAFETY: avx512f detected.
+                unsafe { super::x86::bias_act_512(t, bias, gelu, &mut got) };
+                for j in 0..n {
+                    assert_eq!(got[j].to_bits(), want[j].to_bits(), "avx512 n={n} j={j} bias={} gelu={gelu}", bias.is_some());
+                }
+                assert_eq!(got[n], -3.0, "avx512 wrote past the values");
+            }
+        }
+    }
+}
+
 /// `widen_f16` (F16C / NEON) is bit-identical to its twin on every binary16
 /// pattern (NaNs compared as NaN), at every tail length.
 #[test]
@@ -1693,6 +1731,7 @@ fn axpy_rows_equal_axpy_row_after_row() {
 fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     use super::amx::{self, AmxWeights};
     use super::{PackedQ8, Q8Pack8, PACK_BLOCKS, PACK_ROWS};
+    use crate::kernels::parallel::Cols;
     use std::is_x86_feature_detected as has;
     let vnni = has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") && has!("avx512vnni") && has!("avx2") && has!("fma") && has!("f16c");
     // SAFETY (whole test): the AMX calls run only where the CPU reports
@@ -1732,44 +1771,69 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
                 scalar::quantise_q8_corr(&x, &mut qs[m * n..(m + 1) * n], &mut ds[m * nb..(m + 1) * nb], &mut cs[m * 2 * nb..(m + 1) * 2 * nb]);
             }
             let row = |m: usize| (&qs[m * n..(m + 1) * n], &ds[m * nb..(m + 1) * nb], &cs[m * 2 * nb..(m + 1) * 2 * nb]);
+            // The epilogues: none, a bias, a bias and GELU, GELU alone; over
+            // 16 columns, and over 11 (the second tile partly outside the matrix).
+            let bias = r.vec(amx::COLS);
+            let epilogues: [(Option<&[f32]>, bool, usize); 4] = [(None, false, 16), (Some(&bias), false, 11), (Some(&bias), true, 16), (None, true, 11)];
+            // The window sits at columns 2.. of rows 20 wide; the rest must stay untouched.
+            const W: usize = 20;
+            const SENTINEL: f32 = -7.5;
             // (rows given, rows done: whole groups of 12 and 8).
             for (want_rows, want_done) in [(7usize, 0usize), (8, 8), (12, 12), (15, 12), (16, 16), (20, 20), (28, 28), (40, 40), (63, 60), (64, 64)] {
                 assert_eq!(amx::amx_rows(nb, qs.len(), n, ds.len(), want_rows), want_done);
-                let mut out = vec![[0f32; amx::COLS]; want_rows];
-                let done = unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, &mut out, rows[0][0].as_slice()) };
-                assert_eq!(done, want_done, "whole groups of 12 and 8 rows only");
-                for m0 in (0..done).step_by(8) {
-                    for (t, tl) in tile.iter().enumerate() {
-                        let v = unsafe { super::x86::gemm_q8_packed_vnni::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2)) };
-                        let s = scalar::gemm_q8_packed::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2));
-                        for m in 0..8.min(done - m0) {
-                            let got: [f32; 8] = core::array::from_fn(|j| out[m0 + m][8 * t + j]);
-                            assert_eq!(got.map(f32::to_bits), v[m].map(f32::to_bits), "q4={q4} nb={nb} tile {t} row {}", m0 + m);
-                            for j in 0..8 {
-                                let mag: f64 = (0..nb)
-                                    .map(|b| {
-                                        let a: i64 = (0..Q8_BLOCK).map(|i| (tl.value(b, j, i) as i64 * row(m0 + m).0[b * 32 + i] as i64).abs()).sum();
-                                        (super::f16_to_f32(tl.scale_bits(b, j)) as f64 * row(m0 + m).1[b] as f64).abs() * a as f64
-                                    })
-                                    .sum();
-                                check(&format!("amx q4={q4} nb={nb} tile {t} [{}][{j}]", m0 + m), got[j], s[m][j], mag, SIMD_VS_SCALAR_GEMM_Q8);
+                for &(b, gelu, cols) in &epilogues {
+                    let mut buf = vec![SENTINEL; want_rows * W];
+                    let done = unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, Cols::whole(&mut buf, W).window(0, want_rows, 2, 2 + cols), b, gelu, rows[0][0].as_slice()) };
+                    assert_eq!(done, want_done, "whole groups of 12 and 8 rows only");
+                    for (k, v) in buf.iter().enumerate() {
+                        let (m, j) = (k / W, k % W);
+                        if m >= done || j < 2 || j >= 2 + cols {
+                            assert_eq!(v.to_bits(), SENTINEL.to_bits(), "written outside the window: row {m} column {j}");
+                        }
+                    }
+                    for m0 in (0..done).step_by(8) {
+                        for (t, tl) in tile.iter().enumerate() {
+                            let v = unsafe { super::x86::gemm_q8_packed_vnni::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2)) };
+                            let s = scalar::gemm_q8_packed::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2));
+                            for m in 0..8.min(done - m0) {
+                                for j in (0..8).filter(|j| 8 * t + j < cols) {
+                                    let c = 8 * t + j;
+                                    let got = buf[(m0 + m) * W + 2 + c];
+                                    let mut want = [0f32];
+                                    scalar::bias_act(&[v[m][j]], b.map(|b| &b[c..c + 1]), gelu, &mut want);
+                                    assert_eq!(got.to_bits(), want[0].to_bits(), "q4={q4} nb={nb} bias={} gelu={gelu} tile {t} row {}", b.is_some(), m0 + m);
+                                    if b.is_none() && !gelu {
+                                        let mag: f64 = (0..nb)
+                                            .map(|bk| {
+                                                let a: i64 = (0..Q8_BLOCK).map(|i| (tl.value(bk, j, i) as i64 * row(m0 + m).0[bk * 32 + i] as i64).abs()).sum();
+                                                (super::f16_to_f32(tl.scale_bits(bk, j)) as f64 * row(m0 + m).1[bk] as f64).abs() * a as f64
+                                            })
+                                            .sum();
+                                        check(&format!("amx q4={q4} nb={nb} tile {t} [{}][{j}]", m0 + m), got, s[m][j], mag, SIMD_VS_SCALAR_GEMM_Q8);
+                                    }
+                                }
                             }
                         }
                     }
                 }
             }
-            // Short operands are refused, not read past.
-            let mut out = vec![[0f32; amx::COLS]; 8];
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs[..7 * n + n - 1], n, &ds, &mut out, &[]) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds[..8 * nb - 1], &mut out, &[]) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, &mut out[..7], &[]) }, 0);
+            // Short operands, a window wider than two tiles or a short bias are refused, not read past.
+            let mut buf = vec![0f32; 8 * 32];
+            let mut out = Cols::whole(&mut buf, 32);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs[..7 * n + n - 1], n, &ds, out.window(0, 8, 0, 16), None, false, &[]) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds[..8 * nb - 1], out.window(0, 8, 0, 16), None, false, &[]) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, out.window(0, 7, 0, 16), None, false, &[]) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, out.window(0, 8, 0, 17), None, false, &[]) }, 0);
+            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, out.window(0, 8, 0, 16), Some(&bias[..15]), false, &[]) }, 0);
+            assert!(buf.iter().all(|v| *v == 0.0), "a refused call wrote");
+            let mut out = Cols::whole(&mut buf, 32);
             // A second tile of other blocks: refused.
             if nb > 1 {
                 let zeros = vec![0u8; (nb - 1) * (256 + 16)];
                 let narrow = if q4 { PackedQ8::from_q4_group(&zeros, nb - 1) } else { PackedQ8::from_group(&zeros, nb - 1) }.unwrap();
                 let mut w2 = AmxWeights::new();
                 assert!(unsafe { w2.prepare_raw(0, tile[0]) && w2.prepare_raw(1, narrow) });
-                assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w2, &qs, n, &ds, &mut out, &[]) }, 0);
+                assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w2, &qs, n, &ds, out.window(0, 8, 0, 16), None, false, &[]) }, 0);
             }
         }
     }
@@ -1780,8 +1844,8 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     assert!(!unsafe { w.prepare_raw(2, PackedQ8::from_group(&wide, 1).unwrap()) });
     let qs = vec![0i8; 8 * (PACK_BLOCKS + 1) * 32];
     let ds = vec![0f32; 8 * (PACK_BLOCKS + 1)];
-    let mut out = vec![[0f32; amx::COLS]; 8];
-    assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, (PACK_BLOCKS + 1) * 32, &ds, &mut out, &[]) }, 0);
+    let mut buf = vec![0f32; 8 * 16];
+    assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, (PACK_BLOCKS + 1) * 32, &ds, Cols::whole(&mut buf, 16).window(0, 8, 0, 16), None, false, &[]) }, 0);
 }
 
 /// The query-group kernels (`dot_rows_group*`, `axpy_rows_group*`) of

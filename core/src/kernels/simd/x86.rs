@@ -2031,10 +2031,35 @@ pub unsafe fn gelu_inplace_512(x: &mut [f32]) {
     }
 }
 
+/// See [`super::bias_act`]: 16 lanes at a time, the tail masked; the sum
+/// and [`gelu16`] as the twin's operations, so bit-identical to it.
+///
+/// # Safety
+/// The CPU must support avx512f.
+#[target_feature(enable = "avx512f")]
+pub unsafe fn bias_act_512(t: &[f32], b: Option<&[f32]>, gelu: bool, y: &mut [f32]) {
+    let n = t.len().min(b.map_or(t.len(), <[f32]>::len)).min(y.len());
+    let mut j = 0;
+    while j < n {
+        let m = lanes16((n - j).min(16));
+        // SAFETY: the masked lanes j..min(j + 16, n) lie in t, b and y.
+        unsafe {
+            let tv = _mm512_maskz_loadu_ps(m, t.as_ptr().add(j));
+            let bv = match b {
+                Some(b) => _mm512_maskz_loadu_ps(m, b.as_ptr().add(j)),
+                None => _mm512_setzero_ps(),
+            };
+            let v = _mm512_add_ps(bv, tv);
+            _mm512_mask_storeu_ps(y.as_mut_ptr().add(j), m, if gelu { gelu16(v) } else { v });
+        }
+        j += 16;
+    }
+}
+
 /// [`super::scalar::gelu`] on 16 lanes, operation for operation.
 #[inline]
 #[target_feature(enable = "avx512f")]
-fn gelu16(xv: __m512) -> __m512 {
+pub(super) fn gelu16(xv: __m512) -> __m512 {
     use super::scalar::erf_c::*;
     let sign = _mm512_set1_epi32(i32::MIN);
     let flip = |v: __m512| _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(v), sign));
