@@ -90,8 +90,9 @@ pub fn enabled() -> bool {
 /// operand columns `8t .. 8t + 8`), per block 8 rows of 64 bytes (row `2g +
 /// h`, column `8t + n`: bytes `8g + 4h .. 8g + 4h + 4` of row `n`'s block;
 /// 4-bit tiles widened to signed bytes first), and their scales as the
-/// kernel multiplies them (per tile and block pair, lane `2n`: `s_n,2p`,
-/// lane `2n + 1`: `s_n,2p+1`). At most [`PACK_BLOCKS`] blocks.
+/// kernel multiplies them (per block parity `h` and pair `p`, lane `8t +
+/// n`: tile `t`'s `s_n,2p+h`, the scale of the block whose sums column
+/// `8t + n` of the C tile holds). At most [`PACK_BLOCKS`] blocks.
 #[repr(C, align(64))]
 pub struct AmxWeights {
     b: [u8; PACK_BLOCKS * B_BLOCK],
@@ -135,7 +136,7 @@ impl AmxWeights {
             return false;
         }
         // SAFETY: the caller's features; the extents were checked above.
-        unsafe { prepare_b(w, nb, half, &mut self.b, &mut self.s[half]) };
+        unsafe { prepare_b(w, nb, half, &mut self.b, &mut self.s) };
         self.nb[half] = nb;
         true
     }
@@ -153,7 +154,7 @@ impl Default for AmxWeights {
 /// avx512f, avx512bw and f16c; `w.v` holds `nb` blocks, `w.s` their scales,
 /// `out` `nb * B_BLOCK` bytes, `nb <= PACK_BLOCKS`.
 #[target_feature(enable = "avx512f,avx512bw,f16c")]
-unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], scales: &mut [[f32; 16]; PAIRS]) {
+unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], scales: &mut [[[f32; 16]; PAIRS]; 2]) {
     let low = _mm512_set1_epi8(0x0f);
     let eight = _mm512_set1_epi8(8);
     // Low half: the even dwords (h = 0) of a stored line, high half: the odd ones.
@@ -191,11 +192,9 @@ unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], sca
         }
         f
     };
-    for (p, sp) in scales.iter_mut().enumerate().take(nb.div_ceil(2)) {
-        let (e, o) = (scale(2 * p), scale(2 * p + 1));
-        for n in 0..PACK_ROWS {
-            sp[2 * n] = e[n];
-            sp[2 * n + 1] = o[n];
+    for p in 0..nb.div_ceil(2) {
+        for (h, sh) in scales.iter_mut().enumerate() {
+            sh[p][PACK_ROWS * half..PACK_ROWS * (half + 1)].copy_from_slice(&scale(2 * p + h));
         }
     }
 }
@@ -396,8 +395,9 @@ unsafe fn store<const EVEN: bool>(c: &mut CPair, two: bool) {
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,f16c")]
 #[allow(clippy::too_many_arguments)]
 unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: usize, xq: &[i8], stride: usize, xd: &[f32], mut out: Window<'_>, e: Tail<'_>, ahead: &[u8]) {
-    // Result row m of a pair: tile t's lanes (2n, 2n + 1) = weight row 8t + n's sums of blocks (2p, 2p + 1).
-    let ilv = [_mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23), _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31)];
+    // Row m of a pair's C tile h: lane 8t + n = weight row 8t + n's sums of block 2p + h, which
+    // the VNNI kernel keeps in lane 2n (h = 0) or 2n + 1 (h = 1) of tile t's accumulator: the same
+    // FMAs lane for lane in acc[h], whose lanes the VNNI kernel adds at the end, even + odd.
     let np = nb.div_ceil(2);
     // `ahead`'s lines, spread evenly over the (row group, block pair) steps.
     if out.rows() < R {
@@ -444,43 +444,23 @@ unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: 
                 unsafe { _mm_prefetch::<_MM_HINT_T1>(ahead.as_ptr().add(64 * l) as *const i8) };
             }
             let cp = &c[p % 2].0;
-            // SAFETY: the pair's scales: 16 floats per tile.
-            let sv: [__m512; 2] = core::array::from_fn(|h| unsafe { _mm512_loadu_ps(sc[h][p].as_ptr()) });
-            if two(p) {
+            // The blocks of the pair: 2p, and 2p + 1 if there is one.
+            let parities = if two(p) { 2 } else { 1 };
+            for (h, cph) in cp.iter().enumerate().take(parities) {
+                // SAFETY: the pair's scales of this parity: 16 floats.
+                let sv = unsafe { _mm512_loadu_ps(sc[h][p].as_ptr()) };
                 for m in 0..R {
-                    // SAFETY: row m of each stored tile: 16 i32 at 16m (aligned);
-                    // d holds blocks 2p and 2p + 1 of row m (2p + 1 < nb).
-                    let (r0, r1, xdv) = unsafe {
-                        (
-                            _mm512_load_si512(cp[0][16 * m..].as_ptr() as *const _),
-                            _mm512_load_si512(cp[1][16 * m..].as_ptr() as *const _),
-                            _mm512_castsi512_ps(_mm512_set1_epi64((d.as_ptr().add(m * nb + 2 * p) as *const i64).read_unaligned())),
-                        )
-                    };
-                    for h in 0..2 {
-                        let sums = _mm512_permutex2var_epi32(r0, ilv[h], r1);
-                        acc[h][m] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv[h], xdv), acc[h][m]);
-                    }
-                }
-            } else {
-                for m in 0..R {
-                    // SAFETY: row m of the stored tile, as above.
-                    let r0 = unsafe { _mm512_load_si512(cp[0][16 * m..].as_ptr() as *const _) };
-                    let xdv = _mm512_set1_ps(d[m * nb + 2 * p]);
-                    for h in 0..2 {
-                        let sums = _mm512_permutexvar_epi32(ilv[h], r0);
-                        acc[h][m] = _mm512_mask3_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv[h], xdv), acc[h][m], 0x5555);
-                    }
+                    // SAFETY: row m of the stored tile: 16 i32 at 16m (aligned).
+                    let sums = unsafe { _mm512_load_si512(cph[16 * m..].as_ptr() as *const _) };
+                    let xdv = _mm512_set1_ps(d[m * nb + 2 * p + h]);
+                    acc[h][m] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv, xdv), acc[h][m]);
                 }
             }
         }
-        // Lane 2n of tile h's sums is weight row 8h + n: the even lanes of both, in order.
-        let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
         for m in 0..R {
-            // Lane pairs (2n, 2n + 1) are row n, as in the VNNI kernel.
-            let pairs: [__m512; 2] = core::array::from_fn(|h| _mm512_add_ps(acc[h][m], _mm512_permute_ps::<0b10_11_00_01>(acc[h][m])));
-            // The epilogue's operations (`bias_act`): b + y, then GELU.
-            let y = _mm512_add_ps(bias, _mm512_permutex2var_ps(pairs[0], even, pairs[1]));
+            // Each weight row's even and odd block sums, added as the VNNI kernel adds its lane pairs;
+            // then the epilogue's operations (`bias_act`): b + y, then GELU.
+            let y = _mm512_add_ps(bias, _mm512_add_ps(acc[0][m], acc[1][m]));
             let o = out.row(t * R + m);
             // SAFETY: the masked lanes < out.cols() = o.len().
             unsafe { _mm512_mask_storeu_ps(o.as_mut_ptr(), cols, if e.gelu { gelu16(y) } else { y }) };
