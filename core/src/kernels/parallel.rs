@@ -113,15 +113,13 @@ impl<'y> Cols<'y> {
         // `&mut self` keeps one segment alive at a time.
         unsafe { core::slice::from_raw_parts_mut(self.ptr.add(start), b - a) }
     }
-}
-
-impl<'y> Cols<'y> {
     /// Rows `i0 .. i0 + rows`, columns `a..b` of `y`: the block one kernel
     /// call writes in place. Panics unless `lo <= a <= b <= hi` and the
     /// rows lie in `y`.
     pub fn window(&mut self, i0: usize, rows: usize, a: usize, b: usize) -> Window<'_> {
         assert!(self.lo <= a && a <= b && b <= self.hi, "column range outside the task's share");
-        let end = (i0 + rows).checked_sub(1).map_or(Some(0), |last| last.checked_mul(self.stride).and_then(|o| o.checked_add(b)));
+        // One past the window's last float (nothing for no rows).
+        let end = if rows == 0 { Some(0) } else { i0.checked_add(rows - 1).and_then(|l| l.checked_mul(self.stride)).and_then(|o| o.checked_add(b)) };
         assert!(end.is_some_and(|e| e <= self.len), "rows outside the output");
         // SAFETY: i0 * stride + a <= len (checked above when rows > 0; an
         // empty window keeps the base pointer and is never written).

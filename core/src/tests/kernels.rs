@@ -453,3 +453,50 @@ fn mask_key_runs_equal_the_scan() {
     assert_key_runs_scan("R window", &TiledCausalMask { t_q: 29, t_k: 29, q_pos0: 0 }, 290, 290);
     assert_key_runs_scan("LAT band", &crate::session::lat_stream::Visible, 3, 40);
 }
+
+/// A `Cols` window covers exactly its rows and columns: rows read and
+/// written through it land at `i0 + m`, columns `a..b`; `split_rows`
+/// hands out the rows in order; windows past the output or outside the
+/// view's columns panic instead of reaching memory.
+#[test]
+fn cols_window_covers_its_block() {
+    use crate::kernels::parallel::Cols;
+    let (rows, stride) = (5usize, 7usize);
+    let mut y = std::vec![0.0f32; rows * stride];
+    {
+        let mut cols = Cols::whole(&mut y, stride);
+        let w = cols.window(1, 3, 2, 6);
+        assert_eq!((w.rows(), w.cols()), (3, 4));
+        let (mut top, mut rest) = w.split_rows(1);
+        assert_eq!((top.rows(), rest.rows()), (1, 2));
+        top.row(0).fill(1.0);
+        rest.row(0).fill(2.0);
+        rest.row(1).fill(3.0);
+        let (all, none) = rest.split_rows(9);
+        assert_eq!((all.rows(), none.rows()), (2, 0));
+        assert_eq!(cols.window(5, 0, 0, 7).rows(), 0);
+    }
+    for i in 0..rows {
+        for j in 0..stride {
+            let want = if (2..6).contains(&j) && (1..4).contains(&i) { i as f32 } else { 0.0 };
+            assert_eq!(y[i * stride + j], want, "[{i}][{j}]");
+        }
+    }
+    let outside = |i0: usize, n: usize, a: usize, b: usize| {
+        std::panic::catch_unwind(move || {
+            let mut y = std::vec![0.0f32; rows * stride];
+            Cols::whole(&mut y, stride).window(i0, n, a, b).rows()
+        })
+        .is_err()
+    };
+    assert!(outside(3, 3, 0, 7), "rows past the output");
+    assert!(outside(0, 1, 3, 8), "columns past the row");
+    assert!(outside(0, 1, 5, 4), "an inverted range");
+    assert!(outside(usize::MAX, 2, 0, 1), "an overflowing row index");
+    assert!(!outside(4, 1, 0, 7), "the last row");
+    let panics = std::panic::catch_unwind(|| {
+        let mut y = std::vec![0.0f32; rows * stride];
+        Cols::whole(&mut y, stride).window(0, 2, 0, 3).row(2).len()
+    });
+    assert!(panics.is_err(), "a row past the window");
+}
