@@ -457,10 +457,10 @@ unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: 
                 }
             }
         }
-        for m in 0..R {
+        for (m, (even, odd)) in acc[0].iter().zip(&acc[1]).enumerate() {
             // Each weight row's even and odd block sums, added as the VNNI kernel adds its lane pairs;
             // then the epilogue's operations (`bias_act`): b + y, then GELU.
-            let y = _mm512_add_ps(bias, _mm512_add_ps(acc[0][m], acc[1][m]));
+            let y = _mm512_add_ps(bias, _mm512_add_ps(*even, *odd));
             let o = out.row(t * R + m);
             // SAFETY: the masked lanes < out.cols() = o.len().
             unsafe { _mm512_mask_storeu_ps(o.as_mut_ptr(), cols, if e.gelu { gelu16(y) } else { y }) };
