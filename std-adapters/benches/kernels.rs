@@ -9,8 +9,12 @@
 //! int8 is measured in both stored layouts: `Q8Block32` rows (`int8`) and
 //! `Q8Block32x8` row groups (`int8x8`, what `convert --dtype int8` writes).
 //!
+//! The int8 activation quantiser at the R step's and the S step's shapes
+//! comes first.
+//!
 //! `cargo bench -p duolando --bench kernels` (`-- quick` for fewer repeats,
-//! `-- attention` for the attention lines alone).
+//! `-- attention` for the attention lines alone, `-- quantiser` for the
+//! quantiser's).
 
 use std::time::Instant;
 
@@ -35,6 +39,29 @@ fn time(reps: usize, mut f: impl FnMut()) -> f64 {
     t[t.len() / 2]
 }
 
+/// `simd::quantise_q8_corr` over R-step and S-step shapes (rows x width),
+/// ns per value under each ISA and the ratio to the first (best) one.
+fn quantiser_lines(isas: &[Isa], reps: usize, r: &mut Rng) {
+    for &(n, i) in &[(290usize, 768usize), (290, 3072), (10, 3072)] {
+        let x = r.vec(n * i);
+        let (mut q, mut d, mut c) = (vec![0i8; n * i], vec![0f32; n * i / 32], vec![0i32; n * i / 16]);
+        let mut line = format!("quantise_q8_corr {n}x{i}:");
+        let mut best = None;
+        for &isa in isas {
+            // SAFETY: `supported` lists only ISAs this CPU has.
+            unsafe { simd::set_isa(isa) };
+            let t = time(reps.max(5) * 4, || {
+                simd::quantise_q8_corr(&x, &mut q, &mut d, &mut c);
+                std::hint::black_box(&q);
+            });
+            let b = *best.get_or_insert(t);
+            line += &format!("  [{isa:?}] {:.3} ns/value ({:.2}x)", t * 1e9 / (n * i) as f64, t / b);
+        }
+        println!("{line}");
+    }
+    duolando::simd::init();
+}
+
 fn main() {
     let quick = std::env::args().any(|a| a == "quick");
     let reps = if quick { 3 } else { 7 };
@@ -48,6 +75,14 @@ fn main() {
         variants.insert(0, (Isa::Avx512Vnni, true));
     }
     let mut r = Rng(0x1234_5678);
+    // The int8 activation quantiser (every int8 GEMM's input rows, once per call), per ISA.
+    let only_quantiser = std::env::args().any(|a| a == "quantiser");
+    if !only_attention {
+        quantiser_lines(&isas, reps, &mut r);
+    }
+    if only_quantiser {
+        return;
+    }
     // (out, in): the MLP's two matrices (the largest of the model).
     for &(o, i) in if only_attention { &[][..] } else { &[(3072usize, 768usize), (768, 3072)][..] } {
         // 64 MB of f32 weights per set: beyond the last-level cache.

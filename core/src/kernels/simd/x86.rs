@@ -573,15 +573,16 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
     let whole = nb - nb % 16;
     let zero = _mm512_setzero_ps();
     for b0 in (0..whole).step_by(16) {
-        // Block maxima of |x| (a NaN lane keeps the running maximum: f32::max's rule).
-        let mut amax = [0f32; 16];
-        for (b, m) in amax.iter_mut().enumerate() {
+        // Lane maxima of |x| per block (a NaN lane keeps the running maximum, f32::max's
+        // rule: `vmaxps` returns its second operand where either is NaN), then the 16
+        // blocks' maxima in one vector by a transposing tree: no NaN is left, so any
+        // order of maxima gives the same bits.
+        let lane_max: [__m512; 16] = core::array::from_fn(|b| {
             // SAFETY: blocks b0 + b < nb: 32 floats each in `x`.
             let (v0, v1) = unsafe { (_mm512_loadu_ps(x.as_ptr().add(32 * (b0 + b))), _mm512_loadu_ps(x.as_ptr().add(32 * (b0 + b) + 16))) };
-            *m = _mm512_reduce_max_ps(_mm512_max_ps(_mm512_abs_ps(v1), _mm512_max_ps(_mm512_abs_ps(v0), zero)));
-        }
-        // SAFETY: amax holds 16 floats.
-        let amax = unsafe { _mm512_loadu_ps(amax.as_ptr()) };
+            _mm512_max_ps(_mm512_abs_ps(v1), _mm512_max_ps(_mm512_abs_ps(v0), zero))
+        });
+        let amax = fold16_ps(lane_max, |a, b| _mm512_max_ps(a, b))[0];
         // q8_scale: scale = amax / 127; inv = 1 / scale where scale > 0; both 0 where inv overflows.
         let scale = _mm512_div_ps(amax, _mm512_set1_ps(127.0));
         let inv = _mm512_maskz_div_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(scale, zero), _mm512_set1_ps(1.0), scale);
@@ -592,10 +593,10 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
         let mut invs = [0f32; 16];
         // SAFETY: invs holds 16 floats.
         unsafe { _mm512_storeu_ps(invs.as_mut_ptr(), inv) };
-        for (b, &ib) in invs.iter().enumerate() {
+        let sums: [__m512i; 16] = core::array::from_fn(|b| {
             let at = 32 * (b0 + b);
-            let ib = _mm512_set1_ps(ib);
-            // SAFETY: block b0 + b: 32 floats of `x`, 32 bytes of `q`, 2 corrections of `c`.
+            let ib = _mm512_set1_ps(invs[b]);
+            // SAFETY: block b0 + b: 32 floats of `x`, 32 bytes of `q`.
             unsafe {
                 let r0 = round_away_512(_mm512_mul_ps(_mm512_loadu_ps(x.as_ptr().add(at)), ib));
                 let r1 = round_away_512(_mm512_mul_ps(_mm512_loadu_ps(x.as_ptr().add(at + 16)), ib));
@@ -603,14 +604,79 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
                 _mm_storeu_si128(q.as_mut_ptr().add(at) as *mut __m128i, _mm512_cvtsepi32_epi8(i0));
                 _mm_storeu_si128(q.as_mut_ptr().add(at + 16) as *mut __m128i, _mm512_cvtsepi32_epi8(i1));
                 // Value i is lane i % 16 of i0 / i1; its parity (i % 8) / 4 that of its lane.
-                let sum = _mm512_add_epi32(i0, i1);
-                c[2 * (b0 + b)] = -128 * _mm512_mask_reduce_add_epi32(0x0F0F, sum);
-                c[2 * (b0 + b) + 1] = -128 * _mm512_mask_reduce_add_epi32(0xF0F0, sum);
+                _mm512_add_epi32(i0, i1)
             }
+        });
+        // Per block, the sums of lanes 0-3 and 8-11 (even parity) and of 4-7 and 12-15 (odd):
+        // the tree's first three levels keep the parities apart and leave them side by side,
+        // (c[2b], c[2b + 1]) for 8 blocks per vector (integer sums: any order is exact).
+        let [lo, hi, ..] = fold16_epi32(sums);
+        let k = _mm512_set1_epi32(-128);
+        // SAFETY: c holds the 32 corrections of blocks b0 .. b0 + 16.
+        unsafe {
+            _mm512_storeu_si512(c.as_mut_ptr().add(2 * b0) as *mut _, _mm512_mullo_epi32(lo, k));
+            _mm512_storeu_si512(c.as_mut_ptr().add(2 * b0 + 16) as *mut _, _mm512_mullo_epi32(hi, k));
         }
     }
     // SAFETY: this fn's contract covers the AVX2 kernel's.
     unsafe { quantise_q8_corr(&x[32 * whole..32 * nb], &mut q[32 * whole..32 * nb], &mut d[whole..nb], &mut c[2 * whole..2 * nb]) };
+}
+
+/// Lane pairs of the quantiser's transposing trees: per level, the two
+/// `vpermt2ps` / `vpermt2d` index vectors over a pair of vectors `a`, `b`
+/// (indices 16 and up are `b`'s lanes); output lane `i` combines lane
+/// `first[i]` with lane `second[i]` of the pair. Level 0: lane `h` of each
+/// 8-lane half with lane `h + 8` (a block's 16 lanes to 8, `a`'s block in
+/// lanes 0-7, `b`'s in 8-15); level 1: in each group of 4 lanes, lanes 0
+/// and 1 with lanes 2 and 3 (8 to 4 per block); levels 2 and 3: each even
+/// lane with the odd lane after it (4 to 2, 2 to 1). Lanes 0-3 and 8-11 of
+/// a block (one parity of `quantise_q8_corr`'s corrections) only ever meet
+/// each other until level 2, and so do lanes 4-7 and 12-15.
+const FOLD: [([i32; 16], [i32; 16]); 4] = {
+    let mut f = [([0i32; 16], [0i32; 16]); 4];
+    let mut i = 0;
+    while i < 16 {
+        let (v, h) = ((i / 8) as i32 * 16, (i % 8) as i32);
+        f[0].0[i] = v + h;
+        f[0].1[i] = v + h + 8;
+        let (g, r) = ((i / 2) as i32, (i % 2) as i32);
+        f[1].0[i] = 4 * g + r;
+        f[1].1[i] = 4 * g + r + 2;
+        f[2].0[i] = 2 * i as i32;
+        f[2].1[i] = 2 * i as i32 + 1;
+        f[3].0[i] = 2 * i as i32;
+        f[3].1[i] = 2 * i as i32 + 1;
+        i += 1;
+    }
+    f
+};
+
+/// Folds 16 vectors (one per block) into 1 with `op` (exact and
+/// order-free on the values given): lane `b` = `op` over vector `b`'s lanes.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn fold16_ps(v: [__m512; 16], op: impl Fn(__m512, __m512) -> __m512) -> [__m512; 1] {
+    // SAFETY: FOLD's rows are 16 i32 each.
+    let idx = |l: usize, h: usize| unsafe { _mm512_loadu_si512(if h == 0 { FOLD[l].0.as_ptr() } else { FOLD[l].1.as_ptr() } as *const _) };
+    let level = |l: usize, a: __m512, b: __m512| op(_mm512_permutex2var_ps(a, idx(l, 0), b), _mm512_permutex2var_ps(a, idx(l, 1), b));
+    let v: [__m512; 8] = core::array::from_fn(|i| level(0, v[2 * i], v[2 * i + 1]));
+    let v: [__m512; 4] = core::array::from_fn(|i| level(1, v[2 * i], v[2 * i + 1]));
+    let v: [__m512; 2] = core::array::from_fn(|i| level(2, v[2 * i], v[2 * i + 1]));
+    [level(3, v[0], v[1])]
+}
+
+/// The first three levels of [`fold16_ps`]'s tree as integer sums: per
+/// block `b` (vector `b / 8`, lanes `2 (b % 8)` and `2 (b % 8) + 1`), the
+/// sum of its vector's lanes 0-3 and 8-11, and of lanes 4-7 and 12-15.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn fold16_epi32(v: [__m512i; 16]) -> [__m512i; 2] {
+    // SAFETY: FOLD's rows are 16 i32 each.
+    let idx = |l: usize, h: usize| unsafe { _mm512_loadu_si512(if h == 0 { FOLD[l].0.as_ptr() } else { FOLD[l].1.as_ptr() } as *const _) };
+    let level = |l: usize, a: __m512i, b: __m512i| _mm512_add_epi32(_mm512_permutex2var_epi32(a, idx(l, 0), b), _mm512_permutex2var_epi32(a, idx(l, 1), b));
+    let v: [__m512i; 8] = core::array::from_fn(|i| level(0, v[2 * i], v[2 * i + 1]));
+    let v: [__m512i; 4] = core::array::from_fn(|i| level(1, v[2 * i], v[2 * i + 1]));
+    core::array::from_fn(|i| level(2, v[2 * i], v[2 * i + 1]))
 }
 
 /// [`round_away`] on 16 lanes: `roundf` (half away from zero), NaN to zero.
