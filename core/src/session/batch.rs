@@ -27,7 +27,7 @@ use crate::model::Model;
 use crate::sampler::{argmax, top_k_by_id};
 use crate::session::config::{for_each_live_window, next_window, CacheSchedule, window_context, Sampling, Setting, MAX_WINDOWS};
 use crate::session::gpt_cache::{GptCache, GptItem};
-use crate::session::lat_stream::{max_keys, LatStepScratch, LatStream};
+use crate::session::lat_stream::{max_keys, LatInputs, LatStepScratch, LatStream};
 use crate::session::state::State;
 use crate::session::{vq_stream, Session, SessionConfig};
 use crate::stream_conv::{ScratchNeed, StreamScratch};
@@ -58,9 +58,12 @@ pub struct StepDims {
     /// Attention keys of one query: a LAT's band or a whole GPT window.
     pub keys: usize,
     pub c: usize,
-    /// Widest LAT input of one push (C for the leader LATs, `music_burst`
-    /// x n_music for the music LAT).
+    /// Input floats of one session's music-LAT push (`music_burst` x
+    /// n_music; the leader LATs take token ids).
     pub lat_in: usize,
+    /// Widest LAT input row (the music frames' n_music; token inputs are
+    /// embedding rows, C wide, which the LAT scratch always holds).
+    pub lat_width: usize,
     /// Music frames one music-LAT push carries per session
     /// ([`music_burst`]).
     pub music_burst: usize,
@@ -88,7 +91,8 @@ impl StepDims {
             rows: chunk.max(n.checked_mul(streams).ok_or(ArenaError::Overflow)?),
             keys: keys.max(window),
             c: g.n_embd as usize,
-            lat_in: (g.n_embd as usize).max(music_burst(cfg) * g.music.n_in as usize),
+            lat_in: music_burst(cfg) * g.music.n_in as usize,
+            lat_width: g.music.n_in as usize,
             music_burst: music_burst(cfg),
             ds_max: lds.max(mds),
             logits: logits_len(cfg),
@@ -103,6 +107,7 @@ impl StepDims {
             && self.rows >= need.rows
             && self.keys >= need.keys
             && self.lat_in >= need.lat_in
+            && self.lat_width >= need.lat_width
             && self.music_burst >= need.music_burst
             && self.ds_max >= need.ds_max
             && self.logits >= need.logits
@@ -124,7 +129,7 @@ pub struct StepScratch<'s> {
     /// [`conv_scratch`]): the larger of the two, not their sum.
     pub pool: &'s mut [f32],
     pub lat: LatStepScratch<'s>,
-    /// (n, lat_in) LAT inputs (a session's positions of one push side by
+    /// (n, lat_in) music-LAT inputs (a session's positions of one push side by
     /// side); (n, C) LAT outputs.
     pub lat_in: &'s mut [f32],
     pub lat_out: &'s mut [f32],
@@ -136,13 +141,13 @@ pub struct StepScratch<'s> {
 
 impl<'s> StepScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, dims: StepDims) -> Result<Self, ArenaError> {
-        let StepDims { n, rows, keys: _, c, lat_in, music_burst, ds_max, logits, conv: _ } = dims;
+        let StepDims { n, rows, keys: _, c, lat_in, lat_width: _, music_burst, ds_max, logits, conv: _ } = dims;
         let mul = |x: usize, y: usize| x.checked_mul(y).ok_or(ArenaError::Overflow);
         Ok(StepScratch {
             dims,
             x: a.f32(mul(rows, c)?)?,
             pool: a.f32(pool_floats(&dims)?)?,
-            lat: LatStepScratch::carve(a, c, ds_max, n, mul(n, music_burst)?)?,
+            lat: LatStepScratch::carve(a, c, ds_max, n, mul(n, music_burst)?, dims.lat_width)?,
             lat_in: a.f32(mul(n, lat_in)?)?,
             lat_out: a.f32(mul(n, c)?)?,
             heads_in: a.f32(mul(mul(5, n)?, c)?)?,
@@ -292,15 +297,14 @@ fn leader_lat(ss: &mut [&mut Session<'_>], p: usize, sc: &mut StepScratch<'_>) -
     let n = sc.dims.n;
     for_chunks(ss, n, |s| s.code.is_some(), |ss, chunk| {
         let model = ss[chunk[0]].model;
-        let e = model.cfg.gpt.n_embd as usize;
-        let x = &mut sc.lat_in[..chunk.len() * e];
+        let mut codes = [0u32; MAX_BATCH];
         for (j, &i) in chunk.iter().enumerate() {
-            // Leader part p is embedded with the follower table of the same part.
-            let code = ss[i].code.ok_or((i, Error::State))?;
-            model.gpt.tok_emb[p].row_into(code[p] as usize, &mut x[j * e..(j + 1) * e]);
+            codes[j] = ss[i].code.ok_or((i, Error::State))?[p];
         }
+        // Leader part p is embedded with the follower table of the same part.
+        let inputs = LatInputs::Tokens(&codes[..chunk.len()], &model.gpt.tok_emb[p]);
         let ones = [1usize; MAX_BATCH];
-        lat_push(ss, chunk, &ones[..chunk.len()], sc, Lat::Leader(p), &model.gpt.leaders[p], e)
+        lat_push(ss, chunk, &ones[..chunk.len()], sc, Lat::Leader(p), &model.gpt.leaders[p], inputs)
     })
 }
 
@@ -312,10 +316,10 @@ enum Lat {
     Leader(usize),
 }
 
-/// One LAT push of `counts[j]` positions per session `chunk[j]` (inputs
-/// in `sc.lat_in`, rows `n_in` wide, one session's after another); produced
-/// rows go to the LAT's condition stream.
-fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: &mut StepScratch<'_>, which: Lat, w: &crate::model::LatW<'_>, n_in: usize) -> Result<(), BatchError> {
+/// One LAT push of `counts[j]` positions per session `chunk[j]` (`inputs`:
+/// one session's positions after another); produced rows go to the LAT's
+/// condition stream.
+fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: &mut StepScratch<'_>, which: Lat, w: &crate::model::LatW<'_>, inputs: LatInputs<'_, '_>) -> Result<(), BatchError> {
     let cond = match which {
         Lat::Music => 0,
         Lat::Leader(p) => 1 + p,
@@ -334,8 +338,7 @@ fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: 
             lats.push(lat).map_err(|_| (first, Error::State))?;
             produced.push(false).map_err(|_| (first, Error::State))?;
         }
-        let total: usize = counts.iter().sum();
-        LatStream::push_many(w, &mut lats, counts, &sc.lat_in[..total * n_in], &mut sc.lat, &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
+        LatStream::push_many(w, &mut lats, counts, inputs, &mut sc.lat, &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
     }
     for (j, &i) in chunk.iter().enumerate() {
         if produced[j] {
@@ -395,7 +398,11 @@ pub(super) fn run_steps(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -
                         row += 1;
                     }
                 }
-                lat_push(ss, chunk, &counts[..chunk.len()], sc, Lat::Music, &model.gpt.music, n_music)
+                // The rows stay in `lat_in` (taken out of `sc` for the call).
+                let x = core::mem::take(&mut sc.lat_in);
+                let r = lat_push(ss, chunk, &counts[..chunk.len()], sc, Lat::Music, &model.gpt.music, LatInputs::Rows(&x[..row * n_music]));
+                sc.lat_in = x;
+                r
             })?;
         }
         let mut ready: Vec<usize, MAX_BATCH> = Vec::new();

@@ -23,11 +23,11 @@ use heapless::Vec;
 use crate::arena::{ArenaError, Carve};
 use crate::block::{block_attend_groups, block_kv, BlockScratch};
 use crate::error::{check_len, Buffer, Error};
-use crate::kernels::{linear, Mask};
+use crate::kernels::{linear, Mask, Matrix};
 use crate::limits::MAX_LAT_LAYERS;
 use crate::model::LatW;
 use crate::session::kv_store::{KvRing, KvType};
-use crate::session::ring::RowRing;
+use crate::session::ring::{RowRing, TokenRing};
 use crate::session::MAX_BATCH;
 
 /// Most positions one [`LatStream::push_many`] call carries over all its
@@ -53,13 +53,18 @@ impl Mask for Visible {
 /// positions in all.
 #[derive(Default)]
 pub struct LatStepScratch<'s> {
-    /// (rows, C) the positions being pushed / processed.
+    /// (2 rows, C) the positions being pushed, then the positions whose
+    /// queries run (`cond_emb` of both in one call), then the latter alone.
     pub h: &'s mut [f32],
     /// (rows, C) their K and V.
     pub k: &'s mut [f32],
     pub v: &'s mut [f32],
     /// (rows, C) LayerNorm output.
     pub ln: &'s mut [f32],
+    /// The inputs of `h`'s first rows: the new positions', then those of
+    /// the positions whose queries run; room for twice the larger of `n`
+    /// C-wide rows (one token a push) and `rows` rows `in_width` wide.
+    pub xin: &'s mut [f32],
     /// (n, ds_max * C) concatenated last-layer rows.
     pub cat: &'s mut [f32],
     /// Pushes (LATs) it holds.
@@ -69,20 +74,65 @@ pub struct LatStepScratch<'s> {
 }
 
 impl<'s> LatStepScratch<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, c: usize, ds_max: usize, n: usize, rows: usize) -> Result<Self, ArenaError> {
+    /// Room for `n` pushes of `rows` positions in all: rows of inputs at
+    /// most `in_width` wide, or one token a push (a C-wide embedding row).
+    pub fn carve<A: Carve<'s>>(a: &mut A, c: usize, ds_max: usize, n: usize, rows: usize, in_width: usize) -> Result<Self, ArenaError> {
         let rows = rows.max(n);
-        let nc = n.checked_mul(c).ok_or(ArenaError::Overflow)?;
-        let rc = rows.checked_mul(c).ok_or(ArenaError::Overflow)?;
+        let mul = |x: usize, y: usize| x.checked_mul(y).ok_or(ArenaError::Overflow);
+        let rc = mul(rows, c)?;
         Ok(LatStepScratch {
-            h: a.f32(rc)?,
+            h: a.f32(mul(2, rc)?)?,
             k: a.f32(rc)?,
             v: a.f32(rc)?,
             ln: a.f32(rc)?,
-            cat: a.f32(ds_max.checked_mul(nc).ok_or(ArenaError::Overflow)?)?,
+            xin: a.f32(mul(2, mul(n, c)?.max(mul(rows, in_width)?))?)?,
+            cat: a.f32(mul(ds_max, mul(n, c)?)?)?,
             n,
             rows,
         })
     }
+}
+
+/// What a LAT's inputs are, chosen when it is carved.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LatIn {
+    /// Rows of this many floats (the music LAT's 54-wide frames).
+    Rows(usize),
+    /// Token ids, each input the row of an embedding table (the leader
+    /// LATs: a leader code embedded with its part's table).
+    Tokens,
+}
+
+/// The new positions of one [`LatStream::push_many`] call, all LATs'
+/// in order.
+#[derive(Clone, Copy)]
+pub enum LatInputs<'x, 'w> {
+    /// (positions, n_in) input rows.
+    Rows(&'x [f32]),
+    /// One token id per position and the table that embeds them.
+    Tokens(&'x [u32], &'x Matrix<'w>),
+}
+
+impl LatInputs<'_, '_> {
+    /// Input row `j` into `out` (n_in floats).
+    fn row_into(&self, j: usize, out: &mut [f32]) {
+        match self {
+            LatInputs::Rows(x) => out.copy_from_slice(&x[j * out.len()..(j + 1) * out.len()]),
+            LatInputs::Tokens(ids, table) => table.row_into(ids[j] as usize, out),
+        }
+    }
+}
+
+/// What a LAT holds of the positions waiting `fut` pushes for their keys:
+/// enough to give their layer-1 residual rows when their queries run.
+enum Held<'s> {
+    /// Their input rows, narrower than C; `cond_emb` runs on them again.
+    Inputs(RowRing<'s>),
+    /// Their token ids (4 bytes a position); embedded and `cond_emb` again.
+    Tokens(TokenRing<'s>),
+    /// Their residual rows `cond_emb(x)` themselves, C wide (inputs at
+    /// least as wide as C).
+    Residuals(RowRing<'s>),
 }
 
 /// Keys a query of one LAT may see at most (the attention scratch size).
@@ -97,12 +147,12 @@ pub struct LatStream<'s> {
     k: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
     v: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
     /// The last `fut + burst` positions' layer-1 inputs (a query waits
-    /// `fut` positions for its keys): (fut + burst, n_in) the LAT's own
-    /// inputs where they are narrower than C (the music LAT's 54-wide
-    /// frames; `cond_emb` is applied again when the query runs, row by row
-    /// the same numbers), else (fut + burst, C) the residual rows
-    /// `cond_emb(x)` themselves.
-    h0: RowRing<'s>,
+    /// `fut` positions for its keys), as [`Held`]: token ids (the leader
+    /// LATs), (fut + burst, n_in) input rows narrower than C (the music
+    /// LAT's 54-wide frames; `cond_emb` is applied again when the query
+    /// runs, row by row the same numbers), else (fut + burst, C) the
+    /// residual rows `cond_emb(x)` themselves.
+    h0: Held<'s>,
     /// (ds, C) last-layer outputs of the output row being assembled.
     last: &'s mut [f32],
     past: usize,
@@ -119,10 +169,11 @@ pub struct LatStream<'s> {
 
 impl<'s> LatStream<'s> {
     /// `past`, `fut`: band in LAT input units; `kv`: K/V storage type;
-    /// `burst` (>= 1): most positions one push carries; `n_in`: width of
-    /// the LAT's inputs.
+    /// `burst` (>= 1): most positions one push carries; `input`: what the
+    /// LAT's inputs are (rows held as rows where narrower than C, else as
+    /// residual rows; tokens held as ids).
     #[allow(clippy::too_many_arguments)]
-    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, w_layers: usize, ds: usize, c: usize, n_in: usize, past: usize, fut: usize, burst: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, w_layers: usize, ds: usize, c: usize, input: LatIn, past: usize, fut: usize, burst: usize) -> Result<Self, ArenaError> {
         let burst = burst.clamp(1, ds.max(1));
         let mut k = Vec::new();
         let mut v = Vec::new();
@@ -134,7 +185,11 @@ impl<'s> LatStream<'s> {
         Ok(LatStream {
             k,
             v,
-            h0: RowRing::carve(a, fut + burst, n_in.min(c))?,
+            h0: match input {
+                LatIn::Tokens => Held::Tokens(TokenRing::carve(a, fut + burst, 1)?),
+                LatIn::Rows(n_in) if n_in < c => Held::Inputs(RowRing::carve(a, fut + burst, n_in)?),
+                LatIn::Rows(_) => Held::Residuals(RowRing::carve(a, fut + burst, c)?),
+            },
             last: a.f32(ds.checked_mul(c).ok_or(ArenaError::Overflow)?)?,
             past,
             fut,
@@ -146,17 +201,14 @@ impl<'s> LatStream<'s> {
         })
     }
 
-    /// Whether `h0` holds the inputs (narrower than C) rather than the
-    /// residual rows.
-    fn keeps_inputs(&self) -> bool {
-        self.h0.width() < self.c
-    }
-
     pub fn reset(&mut self) {
         for r in self.k.iter_mut().chain(self.v.iter_mut()) {
             r.clear();
         }
-        self.h0.clear();
+        match &mut self.h0 {
+            Held::Inputs(r) | Held::Residuals(r) => r.clear(),
+            Held::Tokens(t) => t.clear(),
+        }
         self.pushed = 0;
         self.rows = 0;
     }
@@ -186,13 +238,14 @@ impl<'s> LatStream<'s> {
 
     /// Pushes `counts[i]` consecutive input positions into `lats[i]`, for
     /// several LATs with the same weights `w` (one per session of a batch):
-    /// `x` (sum counts, n_in) holds LAT 0's rows, then LAT 1's, ... Where a
-    /// push completes an output row, it is written to row `i` of `out`
-    /// (n, C) and `produced[i]` is set (else cleared). Every weight matrix
-    /// is read once for all positions; each LAT's result is what pushing
-    /// its positions one at a time would give.
+    /// `inputs` holds LAT 0's positions, then LAT 1's, ... (rows `n_in`
+    /// wide, or token ids and their table). Where a push completes an
+    /// output row, it is written to row `i` of `out` (n, C) and
+    /// `produced[i]` is set (else cleared). Every weight matrix is read once
+    /// for all positions; each LAT's result is what pushing its positions
+    /// one at a time would give.
     #[allow(clippy::too_many_arguments)]
-    pub fn push_many(w: &LatW<'_>, lats: &mut [&mut LatStream<'_>], counts: &[usize], x: &[f32], s: &mut LatStepScratch<'_>, blk: &mut BlockScratch<'_>, out: &mut [f32], produced: &mut [bool]) -> Result<(), Error> {
+    pub fn push_many(w: &LatW<'_>, lats: &mut [&mut LatStream<'_>], counts: &[usize], inputs: LatInputs<'_, '_>, s: &mut LatStepScratch<'_>, blk: &mut BlockScratch<'_>, out: &mut [f32], produced: &mut [bool]) -> Result<(), Error> {
         let n = lats.len();
         let Some(first) = lats.first() else { return Ok(()) };
         let (c, ds) = (first.c, first.ds);
@@ -200,10 +253,19 @@ impl<'s> LatStream<'s> {
         let n_in = w.cond_emb.w.cols();
         let total: usize = counts.iter().sum();
         check_len(Buffer::Features, counts.len(), n)?;
-        check_len(Buffer::Features, x.len(), total * n_in)?;
+        match inputs {
+            LatInputs::Rows(x) => check_len(Buffer::Features, x.len(), total * n_in)?,
+            LatInputs::Tokens(ids, table) => {
+                check_len(Buffer::Tokens, ids.len(), total)?;
+                check_len(Buffer::Features, table.cols(), n_in)?;
+                if let Some(&id) = ids.iter().find(|&&id| id as usize >= table.rows()) {
+                    return Err(Error::Token { stream: 0, token: id, vocab: table.rows().min(u32::MAX as usize) as u32 });
+                }
+            }
+        }
         check_len(Buffer::Output, out.len(), n * c)?;
         check_len(Buffer::Output, produced.len(), n)?;
-        if n > s.n || n > MAX_BATCH || total > s.rows || total > MAX_LAT_ROWS {
+        if n > s.n || n > MAX_BATCH || total > s.rows || total > MAX_LAT_ROWS || total.saturating_mul(2 * n_in) > s.xin.len() {
             return Err(Error::Length { buffer: Buffer::Features, len: total, expected: s.rows.min(MAX_LAT_ROWS) });
         }
         for (lat, &cnt) in lats.iter().zip(counts) {
@@ -213,29 +275,28 @@ impl<'s> LatStream<'s> {
             if cnt > lat.burst {
                 return Err(Error::Length { buffer: Buffer::Features, len: cnt, expected: lat.burst });
             }
-            // A LAT keeping inputs takes inputs of its width (narrower than C: they share `ln` below).
-            if lat.keeps_inputs() && lat.h0.width() != n_in {
-                return Err(Error::Length { buffer: Buffer::Features, len: n_in, expected: lat.h0.width() });
+            // What a LAT holds must be what it is given: rows of its width, or tokens.
+            let fits = match (&lat.h0, inputs) {
+                (Held::Inputs(r), LatInputs::Rows(_)) => r.width() == n_in,
+                (Held::Tokens(_), LatInputs::Tokens(..)) | (Held::Residuals(_), _) => true,
+                _ => false,
+            };
+            if !fits {
+                return Err(Error::Length { buffer: Buffer::Features, len: n_in, expected: c });
             }
         }
         produced.fill(false);
-        // (total, C) layer-1 inputs of the new positions, and their keys/values.
-        let tc = total * c;
-        linear(x, &w.cond_emb.w, w.cond_emb.b, &mut s.h[..tc]);
-        block_kv(&w.blocks[0], &s.h[..tc], &mut s.ln[..tc], &mut s.k[..tc], &mut s.v[..tc]);
-        // The positions whose layer-1 keys are now all present: (index
-        // into `lats`, position), each LAT's in order.
+        // The new positions held; the positions whose layer-1 keys are then
+        // all present: (index into `lats`, position), each LAT's in order.
         let mut ready: Vec<(usize, usize), MAX_LAT_ROWS> = Vec::new();
         let mut row = 0;
         for (i, (lat, &cnt)) in lats.iter_mut().zip(counts).enumerate() {
             for _ in 0..cnt {
-                let r = row * c..(row + 1) * c;
-                lat.k[0].push(&s.k[r.clone()])?;
-                lat.v[0].push(&s.v[r.clone()])?;
-                if lat.keeps_inputs() {
-                    lat.h0.push(&x[row * n_in..(row + 1) * n_in])?;
-                } else {
-                    lat.h0.push(&s.h[r])?;
+                match (&mut lat.h0, inputs) {
+                    (Held::Inputs(h0), LatInputs::Rows(x)) => h0.push(&x[row * n_in..(row + 1) * n_in])?,
+                    (Held::Tokens(h0), LatInputs::Tokens(ids, _)) => h0.push(&ids[row..row + 1])?,
+                    // Residual rows are held once computed, below.
+                    _ => {}
                 }
                 lat.pushed += 1;
                 row += 1;
@@ -244,33 +305,55 @@ impl<'s> LatStream<'s> {
                 }
             }
         }
+        // (total + again, n_in) inputs: the new positions', then those of the
+        // ready positions whose residual rows are not held (`again` of them).
+        let tc = total * c;
+        let xin = &mut s.xin[..];
+        for j in 0..total {
+            inputs.row_into(j, &mut xin[j * n_in..(j + 1) * n_in]);
+        }
+        let mut again = 0;
+        for &(i, p) in ready.iter() {
+            let x = &mut xin[(total + again) * n_in..(total + again + 1) * n_in];
+            match (&lats[i].h0, inputs) {
+                (Held::Inputs(h0), _) => x.copy_from_slice(h0.row(p)?),
+                (Held::Tokens(h0), LatInputs::Tokens(_, table)) => table.row_into(h0.row(p)?[0] as usize, x),
+                _ => continue,
+            }
+            again += 1;
+        }
+        // One `cond_emb` for both: (total + again, C) layer-1 residual rows
+        // (row by row what each alone gives), then the new positions'
+        // keys and values.
+        linear(&xin[..(total + again) * n_in], &w.cond_emb.w, w.cond_emb.b, &mut s.h[..tc + again * c]);
+        block_kv(&w.blocks[0], &s.h[..tc], &mut s.ln[..tc], &mut s.k[..tc], &mut s.v[..tc]);
+        let mut row = 0;
+        for (lat, &cnt) in lats.iter_mut().zip(counts) {
+            for _ in 0..cnt {
+                let r = row * c..(row + 1) * c;
+                lat.k[0].push(&s.k[r.clone()])?;
+                lat.v[0].push(&s.v[r.clone()])?;
+                if let Held::Residuals(h0) = &mut lat.h0 {
+                    h0.push(&s.h[r])?;
+                }
+                row += 1;
+            }
+        }
         let r = ready.len();
         if r == 0 {
             return Ok(());
         }
-        // (r, C) the ready positions, one row (= one attention group) each:
-        // their residual rows, or `cond_emb` of their inputs again (the
-        // layer-1 keys and values are in the rings; `ln` is free).
+        // (r, C) the ready positions, one row (= one attention group) each,
+        // moved to the front in order. Row g comes from row total + (its
+        // index among the recomputed) >= g, or from the held residuals.
         let rc = r * c;
-        let mut inputs = 0;
-        for &(i, p) in ready.iter() {
-            if lats[i].keeps_inputs() {
-                s.ln[inputs * n_in..(inputs + 1) * n_in].copy_from_slice(lats[i].h0.row(p)?);
-                inputs += 1;
-            }
-        }
-        if inputs > 0 {
-            // (inputs, C) at the end of `h`, then each to its row (ascending: no overlap).
-            let at = (r - inputs) * c;
-            linear(&s.ln[..inputs * n_in], &w.cond_emb.w, w.cond_emb.b, &mut s.h[at..rc]);
-        }
-        let mut from = r - inputs;
+        let mut from = total;
         for (g, &(i, p)) in ready.iter().enumerate() {
-            if lats[i].keeps_inputs() {
+            if let Held::Residuals(h0) = &lats[i].h0 {
+                s.h[g * c..(g + 1) * c].copy_from_slice(h0.row(p)?);
+            } else {
                 s.h.copy_within(from * c..(from + 1) * c, g * c);
                 from += 1;
-            } else {
-                s.h[g * c..(g + 1) * c].copy_from_slice(lats[i].h0.row(p)?);
             }
         }
         let mut bounds: Vec<usize, { MAX_LAT_ROWS + 1 }> = Vec::new();

@@ -11,7 +11,7 @@ use crate::session::config::{SessionConfig, MAX_WINDOWS};
 use heapless::Vec;
 use crate::session::gpt_cache::GptCache;
 use crate::session::batch::music_burst;
-use crate::session::lat_stream::LatStream;
+use crate::session::lat_stream::{LatIn, LatStream};
 use crate::session::ring::{RowRing, TokenRing};
 use crate::stream_conv::{StackKind, StreamStack};
 
@@ -98,10 +98,10 @@ impl<'s> State<'s> {
         let [e0, e1, e2, e3] = enc;
         let enc = [e0?, e1?, e2?, e3?];
         let lat_layers = |l: &crate::config::LatConfig| l.n_layer as usize;
-        let leader_lat = [0, 1, 2, 3].map(|_| LatStream::carve(a, sc.kv, lat_layers(&g.leader), lds, c, g.leader.n_in as usize, past * lds, la * lds, 1));
+        let leader_lat = [0, 1, 2, 3].map(|_| LatStream::carve(a, sc.kv, lat_layers(&g.leader), lds, c, LatIn::Tokens, past * lds, la * lds, 1));
         let [l0, l1, l2, l3] = leader_lat;
         let leader_lat = [l0?, l1?, l2?, l3?];
-        let music_lat = LatStream::carve(a, sc.kv, lat_layers(&g.music), mds, c, g.music.n_in as usize, past * mds, am * mds, music_burst(cfg))?;
+        let music_lat = LatStream::carve(a, sc.kv, lat_layers(&g.music), mds, c, LatIn::Rows(g.music.n_in as usize), past * mds, am * mds, music_burst(cfg))?;
         let cond_slack = am + 10;
         let cond_cap = m.checked_add(cond_slack).ok_or(ov())?;
         let cond = [0, 1, 2, 3, 4].map(|_| RowRing::carve(a, cond_cap, c));
