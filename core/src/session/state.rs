@@ -39,7 +39,8 @@ pub struct State<'s> {
     pub music: RowRing<'s>,
     // --- GPT ---
     /// Frozen condition rows per stream (music, L_up, L_down, L_lh, L_rh):
-    /// (m + cond_slack, C) each (plain rings).
+    /// (m + 1, C) for the music, (m + cond_slack, C) for each leader part
+    /// (plain rings).
     pub cond: [RowRing<'s>; 5],
     /// Leader rows that may wait for music before leader pushes are refused.
     pub cond_slack: usize,
@@ -104,7 +105,10 @@ impl<'s> State<'s> {
         let music_lat = LatStream::carve(a, sc.kv, lat_layers(&g.music), mds, c, LatIn::Rows(g.music.n_in as usize), past * mds, am * mds, music_burst(cfg))?;
         let cond_slack = am + 10;
         let cond_cap = m.checked_add(cond_slack).ok_or(ov())?;
-        let cond = [0, 1, 2, 3, 4].map(|_| RowRing::carve(a, cond_cap, c));
+        // The music row of step k is made only once step k wants it (rows
+        // <= k: the window's m), leader rows as leader codes come (up to
+        // `cond_slack` ahead of the step).
+        let cond = [0, 1, 2, 3, 4].map(|s| RowRing::carve(a, if s == 0 { m + 1 } else { cond_cap }, c));
         let [c0, c1, c2, c3, c4] = cond;
         let cond = [c0?, c1?, c2?, c3?, c4?];
         let dec_pos = [0, 1, 2, 3, 4].map(|p| {
