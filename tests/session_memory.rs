@@ -395,3 +395,70 @@ fn step_many_allocates_nothing_and_its_batch_arena_is_exact() {
     assert_eq!(allocs, 0, "{allocs} heap allocations while stepping {n} sessions together");
     assert!(pulled > 3 * 100, "only {pulled} frames pulled");
 }
+
+/// Leader codes ahead of the music wait in the session (as codes, not as
+/// condition rows) up to the `Backlog { Music }` refusal; music pushed then
+/// lets them through. The follower equals that of a caller pushing music
+/// and leader frames in step (every frame, bit for bit).
+#[test]
+fn leader_codes_waiting_for_music_up_to_the_refusal_are_all_kept() {
+    let c = clip();
+    for (name, preset) in [("tiny", "reference"), ("tiny2", "reference"), ("tiny", "live")] {
+        let file = ModelFile::open(fixture(&format!("{name}/model.duo"))).unwrap();
+        let duo = file.duo().unwrap();
+        let model = Model::from_duo(&duo).unwrap();
+        let mut sc = match preset {
+            "reference" => SessionConfig::reference(&model.cfg),
+            _ => SessionConfig::with(&model.cfg, 1, 0, 0, SessionConfig::reference(&model.cfg).shift),
+        };
+        // Room for every frame of the clip: the follower backlog never refuses first.
+        sc.pending_frames = 1 << 12;
+        let n_music = model.cfg.gpt.music.n_in as usize;
+        let frames = (c.leader.len() / 165).min(c.music.len() / n_music);
+        let music = |t: usize| &c.music[t * n_music..(t + 1) * n_music];
+        let leader = |t: usize| &c.leader[t * 165..(t + 1) * 165];
+        let mut pull_all = |s: &mut Session<'_>, out: &mut Vec<Vec<f32>>| {
+            let mut f = FollowerFrame::default();
+            while s.pull_follower_frame(&mut f).unwrap() {
+                out.push(f.positions.iter().chain(&f.rotations).copied().collect());
+            }
+        };
+        // In step: music frame t, then leader frame t.
+        let mut arena = vec![0u8; model.session_bytes(&sc).unwrap()];
+        let mut s = Session::new(&model, &mut arena, &sc, [0, 0, 0, 0, 0]).unwrap();
+        let mut want = Vec::new();
+        for t in 0..frames {
+            s.push_music_frame(music(t)).unwrap();
+            s.push_leader_frame(leader(t)).unwrap();
+        }
+        pull_all(&mut s, &mut want);
+        // Leader frames first, up to the refusal; then music until it takes more.
+        let mut arena = vec![0u8; model.session_bytes(&sc).unwrap()];
+        let mut s = Session::new(&model, &mut arena, &sc, [0, 0, 0, 0, 0]).unwrap();
+        let (mut got, mut m, mut refusals) = (Vec::new(), 0, 0);
+        for t in 0..frames {
+            loop {
+                match s.push_leader_frame(leader(t)) {
+                    Ok(()) => break,
+                    Err(Error::Backlog { buffer: Buffer::Music, held, capacity }) => {
+                        assert_eq!(held, capacity, "{name} {preset}: frame {t}");
+                        refusals += 1;
+                        assert!(m < frames, "{name} {preset}: refused with every music frame in");
+                        s.push_music_frame(music(m)).unwrap();
+                        m += 1;
+                    }
+                    Err(e) => panic!("{name} {preset}: frame {t}: {e:?}"),
+                }
+            }
+        }
+        while m < frames {
+            s.push_music_frame(music(m)).unwrap();
+            m += 1;
+        }
+        pull_all(&mut s, &mut got);
+        assert!(refusals > 0, "{name} {preset}: the music backlog was never reached");
+        assert!(want.len() > 100, "{name} {preset}: {} frames", want.len());
+        assert_eq!(got.len(), want.len(), "{name} {preset}");
+        assert!(got == want, "{name} {preset}: frames differ");
+    }
+}

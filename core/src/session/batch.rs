@@ -238,16 +238,10 @@ pub(super) fn at(i: usize) -> impl Fn(Error) -> BatchError {
 }
 
 /// The sessions `ss` (one model, each fitting `sc`) have accepted their
-/// inputs: runs the encoders on the tokens completed, the leader LATs on
-/// the new leader codes, then every step whose inputs exist.
+/// inputs: runs the encoders on the tokens completed (their codes wait in
+/// `State::codes`), then the LAT pushes and every step whose inputs exist.
 pub(super) fn advance(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
     vq_stream::encode(ss, sc)?;
-    for p in 0..4 {
-        leader_lat(ss, p, sc)?;
-    }
-    for s in ss.iter_mut() {
-        s.code = None;
-    }
     run_steps(ss, sc)
 }
 
@@ -292,19 +286,36 @@ pub fn music_burst(cfg: &ModelConfig) -> usize {
     (cfg.gpt.music.downsample_rate as usize).clamp(1, 4)
 }
 
-/// Leader LAT of part `p` for every session holding a new leader code.
-fn leader_lat(ss: &mut [&mut Session<'_>], p: usize, sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+/// A leader code waits to enter the leader LATs, and its position's
+/// output row (position - look-ahead) is at most step `k`'s: one push
+/// (all 4 parts) wanted.
+fn leader_wanted(s: &Session<'_>) -> bool {
+    let lat = &s.st.leader_lat[0];
+    lat.pushed() < s.codes && lat.pushes_before_row(s.k) > 0
+}
+
+/// One leader-LAT position (the oldest waiting code) into all 4 parts'
+/// LATs of every session that wants it ([`leader_wanted`]).
+fn leader_lats(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
     let n = sc.dims.n;
-    for_chunks(ss, n, |s| s.code.is_some(), |ss, chunk| {
+    for_chunks(ss, n, leader_wanted, |ss, chunk| {
         let model = ss[chunk[0]].model;
-        let mut codes = [0u32; MAX_BATCH];
+        let mut codes = [[0u32; 4]; MAX_BATCH];
         for (j, &i) in chunk.iter().enumerate() {
-            codes[j] = ss[i].code.ok_or((i, Error::State))?[p];
+            let s = &ss[i];
+            codes[j].copy_from_slice(s.st.codes.row(s.st.leader_lat[0].pushed()).map_err(at(i))?);
         }
-        // Leader part p is embedded with the follower table of the same part.
-        let inputs = LatInputs::Tokens(&codes[..chunk.len()], &model.gpt.tok_emb[p]);
         let ones = [1usize; MAX_BATCH];
-        lat_push(ss, chunk, &ones[..chunk.len()], sc, Lat::Leader(p), &model.gpt.leaders[p], inputs)
+        for p in 0..4 {
+            let mut ids = [0u32; MAX_BATCH];
+            for (id, code) in ids.iter_mut().zip(&codes[..chunk.len()]) {
+                *id = code[p];
+            }
+            // Leader part p is embedded with the follower table of the same part.
+            let inputs = LatInputs::Tokens(&ids[..chunk.len()], &model.gpt.tok_emb[p]);
+            lat_push(ss, chunk, &ones[..chunk.len()], sc, Lat::Leader(p), &model.gpt.leaders[p], inputs)?;
+        }
+        Ok(())
     })
 }
 
@@ -375,6 +386,10 @@ fn music_frames_wanted(s: &Session<'_>) -> usize {
 /// Runs every step whose inputs exist, in every session.
 pub(super) fn run_steps(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
     loop {
+        // Leader codes into the leader LATs up to step k's row.
+        while ss.iter().any(|s| leader_wanted(s)) {
+            leader_lats(ss, sc)?;
+        }
         // Music LAT pushes until each session's step k has its music row
         // or runs out of music frames.
         while ss.iter().any(|s| music_wanted(s)) {

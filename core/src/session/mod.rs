@@ -135,8 +135,6 @@ pub struct Session<'a> {
     /// Leader codes emitted.
     codes: usize,
     last_code: Option<[u32; 4]>,
-    /// A leader code not yet pushed into the leader LATs.
-    code: Option<[u32; 4]>,
     /// Next step, its GPT appends and the window rows they computed.
     k: usize,
     appends: heapless::Vec<Append, MAX_WINDOWS>,
@@ -173,7 +171,6 @@ impl<'a> Session<'a> {
             music_frames: 0,
             codes: 0,
             last_code: None,
-            code: None,
             k: 0,
             appends: heapless::Vec::new(),
             rows_computed: 0,
@@ -208,7 +205,6 @@ impl<'a> Session<'a> {
         self.music_frames = 0;
         self.codes = 0;
         self.last_code = None;
-        self.code = None;
         self.k = 0;
         self.appends.clear();
         self.rows_computed = 0;
@@ -379,7 +375,9 @@ impl<'a> Session<'a> {
         if held >= cap {
             return Err(Error::Backlog { buffer: Buffer::FollowerPos3d, held, capacity: cap });
         }
-        let waiting = self.st.leader_lat[0].rows() - self.k;
+        // Leader rows there would be with every code in the LATs (codes
+        // minus the look-ahead), beyond step k's.
+        let waiting = self.codes.saturating_sub(self.cfg.lookahead as usize).saturating_sub(self.k);
         if waiting >= self.st.cond_slack {
             return Err(Error::Backlog { buffer: Buffer::Music, held: waiting, capacity: self.st.cond_slack });
         }

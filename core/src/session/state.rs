@@ -39,11 +39,14 @@ pub struct State<'s> {
     pub music: RowRing<'s>,
     // --- GPT ---
     /// Frozen condition rows per stream (music, L_up, L_down, L_lh, L_rh):
-    /// (m + 1, C) for the music, (m + cond_slack, C) for each leader part
-    /// (plain rings).
+    /// (m + 1, C) each (plain rings): rows up to the next step's.
     pub cond: [RowRing<'s>; 5],
     /// Leader rows that may wait for music before leader pushes are refused.
     pub cond_slack: usize,
+    /// (cond_slack + 1, 4) leader codes not yet in the leader LATs: those
+    /// whose condition rows would lie beyond the next step's (they wait,
+    /// 16 bytes each, instead of C-wide rows).
+    pub codes: TokenRing<'s>,
     /// (m + 1, 5) follower history.
     pub toks: TokenRing<'s>,
     /// GPT K/V caches: one (re-prefill schedule) or one per live window
@@ -104,11 +107,11 @@ impl<'s> State<'s> {
         let leader_lat = [l0?, l1?, l2?, l3?];
         let music_lat = LatStream::carve(a, sc.kv, lat_layers(&g.music), mds, c, LatIn::Rows(g.music.n_in as usize), past * mds, am * mds, music_burst(cfg))?;
         let cond_slack = am + 10;
-        let cond_cap = m.checked_add(cond_slack).ok_or(ov())?;
-        // The music row of step k is made only once step k wants it (rows
-        // <= k: the window's m), leader rows as leader codes come (up to
-        // `cond_slack` ahead of the step).
-        let cond = [0, 1, 2, 3, 4].map(|s| RowRing::carve(a, if s == 0 { m + 1 } else { cond_cap }, c));
+        let codes_cap = cond_slack.checked_add(1).ok_or(ov())?;
+        // Every condition row of step k is made once step k may use it (rows
+        // <= k: the window's m): the music row when step k wants it, a leader
+        // row when its code comes (codes further ahead wait in `codes`).
+        let cond = [0, 1, 2, 3, 4].map(|_| RowRing::carve(a, m + 1, c));
         let [c0, c1, c2, c3, c4] = cond;
         let cond = [c0?, c1?, c2?, c3?, c4?];
         let dec_pos = [0, 1, 2, 3, 4].map(|p| {
@@ -151,6 +154,7 @@ impl<'s> State<'s> {
             music: RowRing::carve(a, sc.music_buffer_frames as usize, g.music.n_in as usize)?,
             cond,
             cond_slack,
+            codes: TokenRing::carve(a, codes_cap, 4)?,
             toks: TokenRing::carve(a, m + 1, 5)?,
             gpt,
             dec_pos,
@@ -184,6 +188,7 @@ impl<'s> State<'s> {
         for r in self.cond.iter_mut() {
             r.clear();
         }
+        self.codes.clear();
         self.toks.clear();
         for g in self.gpt.iter_mut() {
             g.reset();

@@ -88,7 +88,7 @@ pub(super) fn encode(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> R
             let s = &mut *ss[i];
             s.codes += 1;
             s.last_code = Some(codes[j]);
-            s.code = Some(codes[j]);
+            s.st.codes.push(&codes[j]).map_err(at(i))?;
         }
         Ok(())
     })
