@@ -417,7 +417,7 @@ fn leader_codes_waiting_for_music_up_to_the_refusal_are_all_kept() {
         let frames = (c.leader.len() / 165).min(c.music.len() / n_music);
         let music = |t: usize| &c.music[t * n_music..(t + 1) * n_music];
         let leader = |t: usize| &c.leader[t * 165..(t + 1) * 165];
-        let mut pull_all = |s: &mut Session<'_>, out: &mut Vec<Vec<f32>>| {
+        let pull_all = |s: &mut Session<'_>, out: &mut Vec<Vec<f32>>| {
             let mut f = FollowerFrame::default();
             while s.pull_follower_frame(&mut f).unwrap() {
                 out.push(f.positions.iter().chain(&f.rotations).copied().collect());
@@ -461,4 +461,80 @@ fn leader_codes_waiting_for_music_up_to_the_refusal_are_all_kept() {
         assert_eq!(got.len(), want.len(), "{name} {preset}");
         assert!(got == want, "{name} {preset}: frames differ");
     }
+}
+
+/// A session made by `Session::new_batched` holds its state alone
+/// (`Model::batched_session_bytes`, exact at the worst alignment, one line
+/// less refused) and steps in a `StepBatch`'s memory: through `step_many`
+/// or inside `with_batch`, without allocating. Alone, every call that could
+/// run a step answers `Error::State` and changes nothing. Its frames equal
+/// those of a session with its own step memory, bit for bit.
+#[test]
+fn a_batched_session_holds_its_state_alone() {
+    use duolando_core::session::StepBatch;
+    let file = ModelFile::open(fixture("tiny/model.duo")).unwrap();
+    let duo = file.duo().unwrap();
+    let model = Model::from_duo(&duo).unwrap();
+    let n_music = model.cfg.gpt.music.n_in as usize;
+    let c = clip();
+    let sc = live_config(&model);
+    let (own, alone) = (model.session_bytes(&sc).unwrap(), model.batched_session_bytes(&sc).unwrap());
+    let batch_bytes = StepBatch::bytes(&model.cfg, &sc, 2).unwrap();
+    assert!(alone + 1024 < own, "state alone {alone} B, with step memory {own} B");
+    // (A batch made for another model, declared first: a session and the
+    // batches it borrows share one lifetime.)
+    let other = duolando_core::presets::duolando_published();
+    let other_sc = SessionConfig::minimum(&other);
+    let mut ob = vec![0u8; StepBatch::bytes(&other, &other_sc, 1).unwrap()];
+    let mut other_batch = StepBatch::new(&other, &other_sc, 1, &mut ob).unwrap();
+    let mut batch_buf = vec![0u8; batch_bytes + 64];
+    let mut batch = StepBatch::new(&model.cfg, &sc, 2, worst_aligned(&mut batch_buf, batch_bytes)).unwrap();
+    let mut small = vec![0u8; alone];
+    assert!(matches!(Session::new_batched(&model, line_aligned(&mut small, alone - 127), &sc, [0, 1, 2, 3, 4], &mut batch), Err(Error::Arena(_))));
+    let mut buf = vec![0u8; alone + 64];
+    let mut s = Session::new_batched(&model, worst_aligned(&mut buf, alone), &sc, [0, 1, 2, 3, 4], &mut batch).unwrap();
+    let mut own_buf = vec![0u8; own];
+    let mut twin = Session::new(&model, &mut own_buf, &sc, [0, 1, 2, 3, 4]).unwrap();
+    assert!(!s.has_step_memory() && twin.has_step_memory());
+    // Alone: refused, nothing changes.
+    let x = &c.leader[..165];
+    assert_eq!(s.push_leader_frame(x), Err(Error::State));
+    assert_eq!(s.push_music_frame(&c.music[..n_music]), Err(Error::State));
+    assert_eq!(s.set_music_track(&c.music), Err(Error::State));
+    assert_eq!(s.reset([1, 1, 1, 1, 1]), Err(Error::State));
+    assert_eq!((s.frames_pushed(), s.steps()), (0, 0));
+    // A batch made for another model does not fit.
+    assert_eq!(s.with_batch(&mut other_batch, |s| s.push_music_frame(&c.music[..n_music])).err(), Some(Error::State));
+    let frames = c.leader.len() / 165;
+    // Room for every frame beforehand: the test's own vectors must not allocate inside the count.
+    let (mut got, mut want) = (Vec::with_capacity(frames * 660), Vec::with_capacity(frames * 660));
+    let mut f = FollowerFrame::default();
+    let allocs = allocations_during(|| {
+        for t in 0..frames {
+            let m = &c.music[t * n_music..(t + 1) * n_music];
+            s.with_batch(&mut batch, |s| s.push_music_frame(m)).unwrap().unwrap();
+            twin.push_music_frame(m).unwrap();
+            let x = &c.leader[t * 165..(t + 1) * 165];
+            // Even frames through step_many (both kinds in one batch), odd ones inside with_batch.
+            if t % 2 == 0 {
+                Session::step_many(&mut [&mut s], &[x], &mut batch).unwrap();
+            } else {
+                s.with_batch(&mut batch, |s| s.push_leader_frame(x)).unwrap().unwrap();
+            }
+            twin.push_leader_frame(x).unwrap();
+            while s.pull_follower_frame(&mut f).unwrap() {
+                got.extend(f.positions.iter().chain(&f.rotations).map(|v| v.to_bits()));
+            }
+            while twin.pull_follower_frame(&mut f).unwrap() {
+                want.extend(f.positions.iter().chain(&f.rotations).map(|v| v.to_bits()));
+            }
+        }
+    });
+    assert_eq!(allocs, 0, "{allocs} heap allocations while stepping a batched session");
+    assert!(want.len() > 100 * (165 + 495), "only {} values pulled", want.len());
+    assert!(got == want, "a batched session's frames differ from its twin's");
+    assert!(!s.has_step_memory(), "the batch's memory was given back");
+    // Reset inside with_batch runs again from the start.
+    s.with_batch(&mut batch, |s| s.reset([0, 1, 2, 3, 4])).unwrap().unwrap();
+    assert_eq!((s.frames_pushed(), s.steps()), (0, 0));
 }

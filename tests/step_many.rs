@@ -104,23 +104,34 @@ fn run_in(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: 
     let n_music = model.cfg.gpt.music.n_in as usize;
     let leaders: Vec<Vec<f32>> = (0..n).map(|i| leader_of(c, i)).collect();
     let cfgs: Vec<SessionConfig> = (0..n).map(|i| config_of(base, i)).collect();
-    let mut arenas: Vec<Vec<u8>> = cfgs.iter().map(|sc| vec![0u8; model.session_bytes(sc).unwrap()]).collect();
-    let mut sessions: Vec<Session<'_>> = arenas.iter_mut().zip(&cfgs).enumerate().map(|(i, (a, sc))| Session::new(model, a, sc, seed_of(i)).unwrap()).collect();
+    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, base, cap).unwrap()];
+    let mut batch = StepBatch::new(&model.cfg, base, cap, &mut batch_arena).unwrap();
+    // In the batched run, the odd sessions have no step memory of their own
+    // (`Session::new_batched`): both kinds in one batch.
+    let own = |i: usize| !batched || i % 2 == 0;
+    let mut arenas: Vec<Vec<u8>> = cfgs.iter().enumerate().map(|(i, sc)| vec![0u8; if own(i) { model.session_bytes(sc) } else { model.batched_session_bytes(sc) }.unwrap()]).collect();
+    let mut sessions: Vec<Session<'_>> = Vec::new();
+    for (i, (a, sc)) in arenas.iter_mut().zip(&cfgs).enumerate() {
+        sessions.push(if own(i) { Session::new(model, a, sc, seed_of(i)) } else { Session::new_batched(model, a, sc, seed_of(i), &mut batch) }.unwrap());
+    }
     let live = base.music_lookahead == 0;
     if !live {
         for s in sessions.iter_mut() {
-            s.set_music_track(&c.music).unwrap();
+            s.with_batch(&mut batch, |s| s.set_music_track(&c.music)).unwrap().unwrap();
         }
     }
-    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, base, cap).unwrap()];
-    let mut batch = StepBatch::new(&model.cfg, base, cap, &mut batch_arena).unwrap();
     let mut traces: Vec<Trace> = (0..n).map(|_| Trace { steps: Vec::new(), frames: Vec::new() }).collect();
     let frames = c.leader.len() / 165;
     let mut f = FollowerFrame::default();
     for t in 0..frames {
         if live {
             for s in sessions.iter_mut() {
-                s.push_music_frame(&c.music[t * n_music..(t + 1) * n_music]).unwrap();
+                let m = &c.music[t * n_music..(t + 1) * n_music];
+                if s.has_step_memory() {
+                    s.push_music_frame(m).unwrap();
+                } else {
+                    s.with_batch(&mut batch, |s| s.push_music_frame(m)).unwrap().unwrap();
+                }
             }
         }
         let rows: Vec<&[f32]> = leaders.iter().map(|l| &l[t * 165..(t + 1) * 165]).collect();

@@ -320,11 +320,13 @@ mod published {
         let f16kv = session_bytes_for(&cfg, &SessionConfig { kv: KvType::F16, ..r }).unwrap();
         let stag = session_bytes_for(&cfg, &SessionConfig { schedule: CacheSchedule::Staggered, ..r }).unwrap();
         let min = session_bytes_for(&cfg, &SessionConfig::minimum(&cfg)).unwrap();
+        let batched = crate::session::batched_session_bytes_for(&cfg, &SessionConfig { kv: KvType::F16, ..r }).unwrap();
+        assert!(batched + 1_000_000 < f16kv, "{batched} vs {f16kv}");
         // One f32 cache is 12 layers x 2 x (10 x 29 x 768) floats = 21.4 MB (§4).
         let cache = 12 * 2 * 10 * 29 * 768 * 4;
         assert!(f32kv > cache && f32kv < cache + 40_000_000, "{f32kv}");
         assert!(f16kv < f32kv - cache / 3, "{f16kv} vs {f32kv}");
         assert!(stag > f32kv + 3 * cache, "{stag}");
-        std::println!("published arena: reference f32 KV {f32kv} B, f16 KV {f16kv} B, staggered f32 {stag} B, minimum {min} B");
+        std::println!("published arena: reference f32 KV {f32kv} B, f16 KV {f16kv} B (state alone, Session::new_batched: {batched} B), staggered f32 {stag} B, minimum {min} B");
     }
 }

@@ -87,6 +87,24 @@ impl Model<'_> {
     }
 }
 
+impl Model<'_> {
+    /// Arena bytes [`Session::new_batched`] needs for `cfg`: the session's
+    /// state alone (caches, rings, LAT and conv state), without the working
+    /// memory of a step, which a [`StepBatch`] lends it. Exact, for a buffer
+    /// at any address.
+    pub fn batched_session_bytes(&self, cfg: &SessionConfig) -> Result<usize, Error> {
+        batched_session_bytes_for(&self.cfg, cfg)
+    }
+}
+
+/// [`Model::batched_session_bytes`] from the model's config alone.
+pub fn batched_session_bytes_for(model: &ModelConfig, cfg: &SessionConfig) -> Result<usize, Error> {
+    check_config(model, cfg)?;
+    let mut p = Planner::new();
+    State::carve(&mut p, model, cfg)?;
+    p.total_for_any_base().ok_or(Error::Arena(crate::arena::ArenaError::Overflow))
+}
+
 /// [`Model::session_bytes`] from the model's config alone (no weights):
 /// for sizing before a model is loaded, `inspect` and `bench`.
 pub fn session_bytes_for(model: &ModelConfig, cfg: &SessionConfig) -> Result<usize, Error> {
@@ -153,11 +171,36 @@ impl<'a> Session<'a> {
     /// seeded with follower tokens `seed` (up, down, lhand, rhand, transl;
     /// from frames: [`crate::exact::seed_tokens`]).
     pub fn new(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 5]) -> Result<Self, Error> {
+        let mut s = Self::carve(model, arena, cfg, seed, true)?;
+        s.restart()?;
+        Ok(s)
+    }
+
+    /// A session without step memory of its own, in `arena` (>=
+    /// [`Model::batched_session_bytes`]: the state alone, 1.8 MB less than
+    /// [`Model::session_bytes`] at full size): for many sessions stepped
+    /// together ([`Session::step_many`]), which all run in one
+    /// [`StepBatch`]'s memory. Everything else that may run a step (the
+    /// seed's decoding here; [`Session::push_music_frame`],
+    /// [`Session::set_music_track`], [`Session::reset`],
+    /// [`Session::push_leader_frame`]) runs inside [`Session::with_batch`]:
+    /// called alone, they answer [`Error::State`] and change nothing. The
+    /// numbers are those of [`Session::new`]'s session, bit for bit.
+    pub fn new_batched(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 5], batch: &mut StepBatch<'a>) -> Result<Self, Error> {
+        let mut s = Self::carve(model, arena, cfg, seed, false)?;
+        s.with_batch(batch, |s| s.restart())??;
+        Ok(s)
+    }
+
+    /// The state, and the session's own step scratch where `own_scratch`
+    /// (else none: its dims only, for [`StepBatch`] checks).
+    fn carve(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 5], own_scratch: bool) -> Result<Self, Error> {
         check_config(&model.cfg, cfg)?;
         check_seed(model, &seed)?;
         let mut a = Arena::new(arena);
         let st = State::carve(&mut a, &model.cfg, cfg)?;
-        let sc = StepScratch::carve(&mut a, StepDims::new(&model.cfg, cfg, 1)?)?;
+        let dims = StepDims::new(&model.cfg, cfg, 1)?;
+        let sc = if own_scratch { StepScratch::carve(&mut a, dims)? } else { StepScratch { dims, ..StepScratch::default() } };
         let mut s = Session {
             model,
             cfg: *cfg,
@@ -181,13 +224,44 @@ impl<'a> Session<'a> {
             root0: [0.0; 3],
         };
         s.st.init_codebooks(model);
-        s.restart()?;
         Ok(s)
+    }
+
+    /// Runs `f` on this session with `batch`'s memory as its step memory
+    /// (lent for the call, then given back), and returns what `f` returns:
+    /// how a session made by [`Session::new_batched`] pushes music, sets a
+    /// track, resets or steps alone. [`Error::State`] (and `f` not run)
+    /// if `batch` is smaller than the session needs (made for another
+    /// config).
+    pub fn with_batch<R>(&mut self, batch: &mut StepBatch<'a>, f: impl FnOnce(&mut Self) -> R) -> Result<R, Error> {
+        if !batch.sc.dims.holds(&self.sc.dims) {
+            return Err(Error::State);
+        }
+        core::mem::swap(&mut self.sc, &mut batch.sc);
+        let r = f(self);
+        core::mem::swap(&mut self.sc, &mut batch.sc);
+        Ok(r)
+    }
+
+    /// [`Error::State`] where the session has no step memory now.
+    fn check_step_memory(&self) -> Result<(), Error> {
+        if self.has_step_memory() {
+            Ok(())
+        } else {
+            Err(Error::State)
+        }
+    }
+
+    /// Whether the session holds step memory now: its own, or a batch's
+    /// lent by [`Session::with_batch`].
+    pub fn has_step_memory(&self) -> bool {
+        !self.sc.x.is_empty()
     }
 
     /// Back to the start with a new seed (forced history and music track
     /// are dropped). Nothing allocates.
     pub fn reset(&mut self, seed: [u32; 5]) -> Result<(), Error> {
+        self.check_step_memory()?;
         check_seed(self.model, &seed)?;
         self.seed = seed;
         self.forced = None;
@@ -277,6 +351,7 @@ impl<'a> Session<'a> {
     /// of [`Session::push_music_frame`]. The session borrows it. Only before
     /// any music frame was pushed.
     pub fn set_music_track(&mut self, track: &'a [f32]) -> Result<(), Error> {
+        self.check_step_memory()?;
         let n_music = self.model.cfg.gpt.music.n_in as usize;
         if self.music_frames > 0 || self.track.is_some() {
             return Err(Error::State);
@@ -295,6 +370,7 @@ impl<'a> Session<'a> {
     /// and leave the session unchanged; so does a
     /// full music buffer (`Backlog`: push leader frames first).
     pub fn push_music_frame(&mut self, features: &[f32]) -> Result<(), Error> {
+        self.check_step_memory()?;
         if self.track.is_some() {
             return Err(Error::State);
         }
@@ -319,6 +395,7 @@ impl<'a> Session<'a> {
     /// its last good frame instead); so does a full output buffer
     /// (`Backlog`: pull follower frames first).
     pub fn push_leader_frame(&mut self, pos3d: &[f32]) -> Result<(), Error> {
+        self.check_step_memory()?;
         self.check_leader_frame(pos3d)?;
         self.accept_leader_frame(pos3d)?;
         self.with_own_scratch(batch::advance)
@@ -358,8 +435,10 @@ impl<'a> Session<'a> {
         batch::advance(sessions, &mut batch.sc)
     }
 
-    /// Runs `f` over this session alone with its own step scratch.
+    /// Runs `f` over this session alone with its step scratch ([`Error::State`]
+    /// where it has none: [`Session::new_batched`] outside [`Session::with_batch`]).
     fn with_own_scratch(&mut self, f: impl FnOnce(&mut [&mut Session<'a>], &mut StepScratch<'a>) -> Result<(), BatchError>) -> Result<(), Error> {
+        self.check_step_memory()?;
         let mut sc = core::mem::take(&mut self.sc);
         let r = f(&mut [&mut *self], &mut sc);
         self.sc = sc;

@@ -260,6 +260,9 @@ struct DtypeResult {
     weight_bytes: usize,
     model_bytes: usize,
     arena_bytes: usize,
+    /// The same session's state alone (`Model::batched_session_bytes`: a
+    /// session stepped only through a `StepBatch`).
+    state_bytes: usize,
     /// Per session count: one `step_many` call that steps every session.
     batch: Vec<(usize, Stats)>,
     /// The same with spread GPT caches, after start-up.
@@ -375,14 +378,16 @@ fn s_steps(model: &Model<'_>, schedule: &str, warmup: usize, steps: usize) -> an
 /// times the calls that run a step in every session (one thread).
 fn batched_steps(model: &Model<'_>, schedule: &str, n: usize, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
     let cfg = s_config(model, schedule);
-    let bytes = model.session_bytes(&cfg).map_err(|e| anyhow!("session bytes: {e:?}"))?;
+    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, &cfg, n).map_err(|e| anyhow!("batch bytes: {e:?}"))?];
+    let mut batch = StepBatch::new(&model.cfg, &cfg, n, &mut batch_arena).map_err(|e| anyhow!("batch: {e:?}"))?;
+    // Sessions stepped only together hold their state alone (`new_batched`):
+    // every step runs in the batch's memory.
+    let bytes = model.batched_session_bytes(&cfg).map_err(|e| anyhow!("session bytes: {e:?}"))?;
     let mut arenas: Vec<Vec<u8>> = (0..n).map(|_| vec![0u8; bytes]).collect();
     let mut sessions = Vec::with_capacity(n);
     for a in arenas.iter_mut() {
-        sessions.push(Session::new(model, a, &cfg, [0; 5]).map_err(|e| anyhow!("session: {e:?}"))?);
+        sessions.push(Session::new_batched(model, a, &cfg, [0; 5], &mut batch).map_err(|e| anyhow!("session: {e:?}"))?);
     }
-    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, &cfg, n).map_err(|e| anyhow!("batch bytes: {e:?}"))?];
-    let mut batch = StepBatch::new(&model.cfg, &cfg, n, &mut batch_arena).map_err(|e| anyhow!("batch: {e:?}"))?;
     let n_music = model.cfg.gpt.music.n_in as usize;
     let mut rng = Rng(11);
     let mut music = vec![0.0f32; n_music];
@@ -394,7 +399,8 @@ fn batched_steps(model: &Model<'_>, schedule: &str, n: usize, warmup: usize, ste
     while times.len() < warmup + steps && frames < max_frames {
         for s in sessions.iter_mut() {
             music.iter_mut().for_each(|v| *v = rng.next());
-            let _ = s.push_music_frame(&music);
+            // A refusal (music too far ahead) is fine: the frame is dropped.
+            let _ = s.with_batch(&mut batch, |s| s.push_music_frame(&music)).map_err(|e| anyhow!("music push: {e:?}"))?;
         }
         for (i, v) in leaders.iter_mut().enumerate() {
             *v = 0.3 * rng.next() + if i % 3 == 1 { 1.0 } else { 0.0 };
@@ -467,6 +473,7 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
         s.push((t, stats(times)));
     }
     let arena_bytes = model.session_bytes(&s_config(&model, "reprefill")).map_err(|e| anyhow!("{e:?}"))?;
+    let state_bytes = model.batched_session_bytes(&s_config(&model, "reprefill")).map_err(|e| anyhow!("{e:?}"))?;
     let mut batch = Vec::new();
     let mut schedules = Vec::new();
     let mut batch_spread = Vec::new();
@@ -489,7 +496,7 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
             batch_spread.push((n, stats(times)));
         }
     }
-    Ok(DtypeResult { name, r, s, weight_bytes: r_step_weight_bytes(&model, inp.c), model_bytes: rm.weight_bytes(), arena_bytes, batch, batch_spread, schedules })
+    Ok(DtypeResult { name, r, s, weight_bytes: r_step_weight_bytes(&model, inp.c), model_bytes: rm.weight_bytes(), arena_bytes, state_bytes, batch, batch_spread, schedules })
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -533,7 +540,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for (t, st) in &r.s {
             let gbps = r.model_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
             println!(
-                "S step {:>4} t{t} (reference budget, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy, {:.0}% of read)  arena {:.1} MB",
+                "S step {:>4} t{t} (reference budget, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy, {:.0}% of read)  arena {:.2} MB ({:.2} MB stepped only in a StepBatch)",
                 r.name,
                 st.median_ms,
                 st.p99_ms,
@@ -543,7 +550,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 gbps,
                 100.0 * gbps / memcpy,
                 100.0 * gbps / read,
-                r.arena_bytes as f64 / 1e6
+                r.arena_bytes as f64 / 1e6,
+                r.state_bytes as f64 / 1e6
             );
         }
         for (sched, st, bytes) in &r.schedules {
@@ -638,6 +646,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             j.insert(format!("r_step_weight_bytes_{}", r.name), r.weight_bytes.into());
             j.insert(format!("s_step_weight_bytes_{}", r.name), r.model_bytes.into());
             j.insert("arena_bytes_f16kv".into(), r.arena_bytes.into());
+            j.insert("batched_session_bytes_f16kv".into(), r.state_bytes.into());
             for (sched, st, bytes) in &r.schedules {
                 j.insert(format!("s_step_ms_{}_t1_{sched}", r.name), st.median_ms.into());
                 j.insert(format!("s_step_p99_ms_{}_t1_{sched}", r.name), st.p99_ms.into());
