@@ -29,7 +29,8 @@ impl RowData<'_> {
 }
 
 /// `n` rows of width `C`: the rows of `parts[0]`, then those of `parts[1]`
-/// (row-major: row `j` at `j C`), or one head-major run ([`KvRows::head_major`]).
+/// (row-major: row `j` at `j C`; `parts[0]` may be head-major instead:
+/// [`KvRows::head_major`], [`KvRows::head_major_then`]).
 #[derive(Clone, Copy, Debug)]
 pub struct KvRows<'a> {
     parts: [RowData<'a>; 2],
@@ -67,8 +68,16 @@ impl<'a> KvRows<'a> {
         (hd > 0 && rows <= cap).then_some(KvRows { parts: [d, RowData::F32(&[])], heads: Some(HeadMajor { rows, cap, hd }) })
     }
 
+    /// [`Self::head_major`]'s rows, then the row-major rows of `tail`
+    /// (whole rows of the width; the GPT cache's newest rows, read only by
+    /// the call that makes them). None as for `head_major`.
+    pub fn head_major_then(d: RowData<'a>, rows: usize, cap: usize, hd: usize, tail: RowData<'a>) -> Option<Self> {
+        Self::head_major(d, rows, cap, hd).map(|k| KvRows { parts: [k.parts[0], tail], ..k })
+    }
+
     /// Whole rows of width `c` held (a part's partial last row is not one;
-    /// head-major: the visible rows if every head of `c` is held, else 0).
+    /// head-major: the visible rows if every head of `c` is held, else 0,
+    /// and the tail's whole rows).
     pub fn rows(&self, c: usize) -> usize {
         if c == 0 {
             return 0;
@@ -78,7 +87,7 @@ impl<'a> KvRows<'a> {
             Some(hm) => {
                 let heads = c / hm.hd;
                 let whole = c % hm.hd == 0 && heads > 0 && (heads - 1) * hm.cap * hm.hd + hm.rows * hm.hd <= self.parts[0].len();
-                if whole { hm.rows } else { 0 }
+                if whole { hm.rows + self.parts[1].len() / c } else { 0 }
             }
         }
     }
@@ -91,12 +100,13 @@ impl<'a> KvRows<'a> {
         }
     }
 
-    /// Where lanes `h_off..` of row `lo` of a run start, and the distance
-    /// from one row to the next (`h_off`: a head's first lane, or inside it).
-    fn at(&self, lo: usize, c: usize, h_off: usize) -> (usize, usize) {
+    /// Where lanes `h_off..` of row `lo` of run `run` start, and the
+    /// distance from one row to the next (`h_off`: a head's first lane, or
+    /// inside it). Only the first run may be head-major.
+    fn at(&self, run: usize, lo: usize, c: usize, h_off: usize) -> (usize, usize) {
         match self.heads {
-            None => (lo * c + h_off, c),
-            Some(hm) => ((h_off / hm.hd * hm.cap + lo) * hm.hd + h_off % hm.hd, hm.hd),
+            Some(hm) if run == 0 => ((h_off / hm.hd * hm.cap + lo) * hm.hd + h_off % hm.hd, hm.hd),
+            _ => (lo * c + h_off, c),
         }
     }
 
@@ -112,9 +122,9 @@ impl<'a> KvRows<'a> {
     /// `out[j - a] = qh . row j [h_off .. h_off + qh.len()]` for keys
     /// `a..b` (`b <= rows(c)`, `h_off + qh.len() <= c`; `out`: b - a).
     pub(crate) fn dot_rows(&self, qh: &[f32], a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32]) {
-        for (part, lo, hi, at) in self.pieces(a, b, c) {
+        for (run, (part, lo, hi, at)) in self.pieces(a, b, c).into_iter().enumerate() {
             let out = &mut out[at..at + (hi - lo)];
-            let (s, stride) = self.at(lo, c, h_off);
+            let (s, stride) = self.at(run, lo, c, h_off);
             match part {
                 _ if hi == lo => {}
                 RowData::F32(d) => dots(qh, &d[s..], stride, out),
@@ -134,8 +144,8 @@ impl<'a> KvRows<'a> {
     /// turn, bit for bit, in one kernel call per run.
     pub(crate) fn axpy_rows(&self, coef: &[f32], a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32]) {
         let n = y.len();
-        for (part, lo, hi, at) in self.pieces(a, b, c) {
-            let (s, stride) = self.at(lo, c, h_off);
+        for (run, (part, lo, hi, at)) in self.pieces(a, b, c).into_iter().enumerate() {
+            let (s, stride) = self.at(run, lo, c, h_off);
             let (coef, e) = (&coef[at..at + (hi - lo)], s + (hi - lo).saturating_sub(1) * stride + n);
             match part {
                 _ if hi == lo => {}
@@ -153,9 +163,9 @@ impl<'a> KvRows<'a> {
     /// run's call; [`simd::dot_rows_group`](super::simd::dot_rows_group)).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn dot_rows_group(&self, q: &[f32], hd: usize, q_stride: usize, g: usize, a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32], out_stride: usize, mut side: &[u8]) {
-        for (part, lo, hi, at) in self.pieces(a, b, c) {
+        for (run, (part, lo, hi, at)) in self.pieces(a, b, c).into_iter().enumerate() {
             let out = &mut out[at..];
-            let (s, stride) = self.at(lo, c, h_off);
+            let (s, stride) = self.at(run, lo, c, h_off);
             match part {
                 _ if hi == lo => continue,
                 RowData::F32(d) => f32::dot_rows_group(q, hd, q_stride, g, &d[s..], stride, hi - lo, out, out_stride, side),
@@ -171,8 +181,8 @@ impl<'a> KvRows<'a> {
     /// `side` as in [`KvRows::dot_rows_group`].
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn axpy_rows_group(&self, coef: &[f32], coef_stride: usize, a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, mut side: &[u8]) {
-        for (part, lo, hi, at) in self.pieces(a, b, c) {
-            let (s, stride) = self.at(lo, c, h_off);
+        for (run, (part, lo, hi, at)) in self.pieces(a, b, c).into_iter().enumerate() {
+            let (s, stride) = self.at(run, lo, c, h_off);
             let (coef, e) = (&coef[at..], s + (hi - lo).saturating_sub(1) * stride + n);
             match part {
                 _ if hi == lo => continue,

@@ -10,6 +10,14 @@
 //! per layer head-major ([`KvRows::head_major`]): head `h`'s lanes of all
 //! rows side by side, so the attention's pass over one head reads one
 //! contiguous stretch of a cold cache, not `hd` lanes of every row.
+//!
+//! The window's last row (`m - 1`, a full window) is kept apart, in a tail
+//! of one window row reused by every layer: its keys are seen only by its
+//! own queries (the mask is causal in rows), which run in the call that
+//! makes them, and the window jumps at the next step. So a cache holds
+//! `m - 1` rows per layer and one row (`tail_k`, `tail_v`) for all layers:
+//! the attention reads the cached rows, then the tail's, in place
+//! ([`KvRows::head_major_then`]), the same numbers as one stretch.
 
 use crate::arena::{ArenaError, Carve};
 use crate::block::{block_attend_groups, block_kv, BlockScratch};
@@ -50,8 +58,13 @@ impl Mask for RowCausal {
 
 /// Per-layer K/V of the current window.
 pub struct GptCache<'s> {
+    /// Per layer (heads, streams * (m - 1), C / n_head) keys and values.
     k: KvBuf<'s>,
     v: KvBuf<'s>,
+    /// (streams, C) the keys and values of window row `m - 1` (row-major),
+    /// of the layer being run.
+    tail_k: KvBuf<'s>,
+    tail_v: KvBuf<'s>,
     layers: usize,
     streams: usize,
     /// Window rows a cache holds (`block_size - 1`).
@@ -66,11 +79,18 @@ pub struct GptCache<'s> {
 }
 
 impl<'s> GptCache<'s> {
-    /// Per layer (heads, streams * m, C / n_head) keys and values.
+    /// Per layer (heads, streams * (m - 1), C / n_head) keys and values,
+    /// and one window row's (the tail).
     pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, layers: usize, streams: usize, m: usize, c: usize, n_head: usize) -> Result<Self, ArenaError> {
-        let n = layers.checked_mul(streams).and_then(|v| v.checked_mul(m)).and_then(|v| v.checked_mul(c)).ok_or(ArenaError::Overflow)?;
+        let n = layers.checked_mul(streams).and_then(|v| v.checked_mul(m.saturating_sub(1))).and_then(|v| v.checked_mul(c)).ok_or(ArenaError::Overflow)?;
+        let t = streams.checked_mul(c).ok_or(ArenaError::Overflow)?;
         let hd = c.checked_div(n_head).filter(|&hd| hd > 0 && hd * n_head == c).ok_or(ArenaError::Overflow)?;
-        Ok(GptCache { k: KvBuf::carve(a, kv, n)?, v: KvBuf::carve(a, kv, n)?, layers, streams, m, c, hd, rows: 0, lo: None })
+        Ok(GptCache { k: KvBuf::carve(a, kv, n)?, v: KvBuf::carve(a, kv, n)?, tail_k: KvBuf::carve(a, kv, t)?, tail_v: KvBuf::carve(a, kv, t)?, layers, streams, m, c, hd, rows: 0, lo: None })
+    }
+
+    /// Stream-rows cached per layer (all but the window's last row).
+    fn cap(&self) -> usize {
+        self.streams * self.m.saturating_sub(1)
     }
 
     pub fn reset(&mut self) {
@@ -95,27 +115,38 @@ impl<'s> GptCache<'s> {
     }
 
     /// This cache's K/V of layer `l`, rows `..r1` (streams-rows), read in
-    /// place (f32 or f16), head-major: the layer's stretch from its first
-    /// head's row 0 to its last head's row `r1`.
+    /// place (f32 or f16): head-major, the layer's stretch from its first
+    /// head's row 0 to its last head's row `min(r1, cap)`, then the tail's
+    /// rows up to `r1` (window row `m - 1`, stored by this layer's `store`).
     fn visible(&self, l: usize, r1: usize) -> Result<(KvRows<'_>, KvRows<'_>), Error> {
-        let (c, hd, cap) = (self.c, self.hd, self.streams * self.m);
+        let (c, hd, cap) = (self.c, self.hd, self.cap());
+        let (rc, rt) = (r1.min(cap), r1.saturating_sub(cap));
+        if rt > self.streams {
+            return Err(Error::Context { c: r1, max: cap + self.streams });
+        }
         let base = l * cap * c;
-        let end = base + (c - hd) * cap + r1 * hd;
-        let rows = |d| KvRows::head_major(d, r1, cap, hd).ok_or(Error::Context { c: r1, max: cap });
-        Ok((rows(self.k.view(base, end)?)?, rows(self.v.view(base, end)?)?))
+        let end = base + (c - hd) * cap + rc * hd;
+        let rows = |d, tail| KvRows::head_major_then(d, rc, cap, hd, tail).ok_or(Error::Context { c: r1, max: cap });
+        Ok((rows(self.k.view(base, end)?, self.tail_k.view(0, rt * c)?)?, rows(self.v.view(base, end)?, self.tail_v.view(0, rt * c)?)?))
     }
 
     /// Stores the new rows' K/V (`k`, `v`: (r1 - r0, C) f32) of layer `l`
-    /// at stream-rows `r0..r1`, each head's lanes at their head-major place
-    /// (an f16 cache rounds them).
+    /// at stream-rows `r0..r1`, each head's lanes at their head-major place,
+    /// window row `m - 1`'s in the tail (an f16 cache rounds them).
     fn store(&mut self, l: usize, r0: usize, r1: usize, k: &[f32], v: &[f32]) -> Result<(), Error> {
-        let (c, hd, cap) = (self.c, self.hd, self.streams * self.m);
-        if k.len() != (r1 - r0) * c || v.len() != k.len() || r1 > cap {
+        let (c, hd, cap) = (self.c, self.hd, self.cap());
+        if k.len() != (r1 - r0) * c || v.len() != k.len() || r1 > cap + self.streams {
             return Err(Error::Length { buffer: Buffer::Features, len: k.len(), expected: (r1 - r0) * c });
         }
         for (i, (kr, vr)) in k.chunks_exact(c).zip(v.chunks_exact(c)).enumerate() {
+            let r = r0 + i;
+            if r >= cap {
+                self.tail_k.store((r - cap) * c, kr)?;
+                self.tail_v.store((r - cap) * c, vr)?;
+                continue;
+            }
             for (h, (kh, vh)) in kr.chunks_exact(hd).zip(vr.chunks_exact(hd)).enumerate() {
-                let at = l * cap * c + (h * cap + r0 + i) * hd;
+                let at = l * cap * c + (h * cap + r) * hd;
                 self.k.store(at, kh)?;
                 self.v.store(at, vh)?;
             }

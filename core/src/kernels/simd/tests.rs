@@ -1479,14 +1479,40 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
         assert_eq!(hm(RowData::F32(&kh)).rows(c + hd), 0, "a width of more heads than held has no rows");
         assert_eq!(hm(RowData::F32(&kh[..kh.len() - 1])).rows(c), 0, "a short run has no rows");
         assert!(KvRows::head_major(RowData::F32(&kh), cap + 1, cap, hd).is_none() && KvRows::head_major(RowData::F32(&kh), nk, cap, 0).is_none());
-        for split in [0, 1, nk / 3, nk / 2, nk - 1, nk] {
+        // Head-major copies of the first `split` rows alone (NaN beyond), per split.
+        let splits = [0, 1, nk / 3, nk / 2, nk - 1, nk];
+        let head_major_first = |src: &[f32], split: usize| -> Vec<f32> {
+            let mut d = head_major(src);
+            for h in 0..nh {
+                for j in split..nk {
+                    if let Some(x) = d.get_mut((h * cap + j) * hd..(h * cap + j + 1) * hd) {
+                        x.fill(f32::NAN);
+                    }
+                }
+            }
+            d
+        };
+        let (mut hk, mut hv) = (vec![Vec::new(); nk + 1], vec![Vec::new(); nk + 1]);
+        let (mut hk16, mut hv16) = (vec![Vec::new(); nk + 1], vec![Vec::new(); nk + 1]);
+        for &sp in &splits {
+            hk[sp] = head_major_first(&k, sp);
+            hv[sp] = head_major_first(&v, sp);
+            hk16[sp] = bits16(&hk[sp]);
+            hv16[sp] = bits16(&hv[sp]);
+        }
+        for split in splits {
             let cut = split * c;
+            let hmt = |d, tail| KvRows::head_major_then(d, split, cap, hd, tail).unwrap();
             let cases = [
                 ("f32 two runs", KvRows::two(RowData::F32(&k[..cut]), RowData::F32(&k[cut..])), KvRows::two(RowData::F32(&v[..cut]), RowData::F32(&v[cut..]))),
                 ("f16 two runs", KvRows::two(RowData::F16(&k16[..cut]), RowData::F16(&k16[cut..])), KvRows::two(RowData::F16(&v16[..cut]), RowData::F16(&v16[cut..]))),
                 ("f16 one run", KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16))),
                 ("f32 head-major", hm(RowData::F32(&kh)), hm(RowData::F32(&vh))),
                 ("f16 head-major", hm(RowData::F16(&kh16)), hm(RowData::F16(&vh16))),
+                // The first `split` rows head-major, the rest row-major after them (a GPT cache and its newest rows).
+                ("f16 head-major then f16 rows", hmt(RowData::F16(&hk16[split]), RowData::F16(&k16[cut..])), hmt(RowData::F16(&hv16[split]), RowData::F16(&v16[cut..]))),
+                ("f16 head-major then f32 rows", hmt(RowData::F16(&hk16[split]), RowData::F32(&k[cut..])), hmt(RowData::F16(&hv16[split]), RowData::F32(&v[cut..]))),
+                ("f32 head-major then f32 rows", hmt(RowData::F32(&hk[split]), RowData::F32(&k[cut..])), hmt(RowData::F32(&hv[split]), RowData::F32(&v[cut..]))),
             ];
             for (name, kr, vr) in cases {
                 assert_eq!(kr.rows(c), nk);
