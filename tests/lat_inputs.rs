@@ -17,18 +17,24 @@ use duolando_core::session::kv_store::KvType;
 use duolando_core::session::lat_stream::{max_keys, LatIn, LatInputs, LatStepScratch, LatStream};
 use duolando_tests::{demo_model, restore_as, Rng};
 
+/// `f` on the demo model in f16 and again re-stored as int8 (the kernels this CPU selects).
+fn each_demo_model(f: impl Fn(&str, &Model<'_>)) {
+    duolando::simd::init();
+    let f16 = demo_model();
+    let int8 = restore_as(&f16, &|spec| storage_for(StoreAs::Q8Block32, spec));
+    for (name, file) in [("f16", &f16), ("int8", &int8)] {
+        let duo = file.duo().unwrap();
+        f(name, &Model::from_duo(&duo).unwrap());
+    }
+}
+
 fn bits(v: &[f32]) -> Vec<u32> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
 #[test]
 fn kept_inputs_give_the_rows_of_kept_residuals() {
-    duolando::simd::init();
-    let f16 = demo_model();
-    let int8 = restore_as(&f16, &|spec| storage_for(StoreAs::Q8Block32, spec));
-    for (name, file) in [("f16", &f16), ("int8", &int8)] {
-        let duo = file.duo().unwrap();
-        let model = Model::from_duo(&duo).unwrap();
+    each_demo_model(|name, model| {
         let w = &model.gpt.music;
         let (c, n_in) = (model.cfg.gpt.n_embd as usize, w.cfg.n_in as usize);
         assert!(n_in < c, "the demo model's music inputs are narrower than C");
@@ -75,17 +81,12 @@ fn kept_inputs_give_the_rows_of_kept_residuals() {
         }
         assert_eq!(inputs.pushed(), pushed);
         assert!(rows >= 4, "{name}: {rows} rows");
-    }
+    });
 }
 
 #[test]
 fn kept_tokens_give_the_rows_of_kept_residuals() {
-    duolando::simd::init();
-    let f16 = demo_model();
-    let int8 = restore_as(&f16, &|spec| storage_for(StoreAs::Q8Block32, spec));
-    for (name, file) in [("f16", &f16), ("int8", &int8)] {
-        let duo = file.duo().unwrap();
-        let model = Model::from_duo(&duo).unwrap();
+    each_demo_model(|name, model| {
         for part in 0..4 {
             let w = &model.gpt.leaders[part];
             let table = &model.gpt.tok_emb[part];
@@ -137,5 +138,5 @@ fn kept_tokens_give_the_rows_of_kept_residuals() {
             let e = LatStream::push_many(w, &mut [&mut tokens], &[1], LatInputs::Tokens(&[vocab], table), &mut s, &mut blk, &mut out, &mut [false]);
             assert!(e.is_err(), "{name} part {part}: token {vocab} of {vocab}");
         }
-    }
+    });
 }
