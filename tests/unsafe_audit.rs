@@ -38,6 +38,7 @@ const ALLOWED: &[&str] = &[
     "ffi/src/frames.rs",
     "ffi/src/result.rs",
     "ffi/src/session.rs",
+    "ffi/src/batch.rs",
     "ffi/tests/header.rs",
     "ffi/tests/session_golden.rs",
     "tests/session_memory.rs",

@@ -3,7 +3,8 @@
 //!
 //! Objects: [`model`] (`duo_model`, immutable, shared by threads and
 //! sessions) and `session` (`duo_session`, one dancer, one thread at a
-//! time); [`frames`] (blittable frame structs, coordinate conversions);
+//! time); [`batch`] (`duo_step_batch`, sessions of one model stepped
+//! together); [`frames`] (blittable frame structs, coordinate conversions);
 //! [`result`] (result codes, the thread-local last error, the panic
 //! boundary). Every entry point catches panics: no unwinding crosses the C
 //! boundary. Outputs are written only on success.
@@ -11,11 +12,13 @@
 use std::ffi::c_char;
 use std::panic::catch_unwind;
 
+pub mod batch;
 pub mod frames;
 pub mod model;
 pub mod result;
 pub mod session;
 
+pub use batch::DuoStepBatch;
 pub use frames::{DuoFollowerFrame, DuoLeaderFrame, DuoQuat, DuoVec3};
 pub use model::{DuoModel, DuoModelInfo};
 pub use result::DuoResult;

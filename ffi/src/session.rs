@@ -128,7 +128,7 @@ impl DuoSessionConfig {
 /// What a `duo_session *` points to.
 pub struct SessionInner {
     /// Borrows `model` and the arena; declared first, dropped first.
-    session: Session<'static>,
+    pub(crate) session: Session<'static>,
     /// The counted model reference that keeps the weights alive.
     _model: Arc<ModelInner>,
     /// Library-allocated arena (`duo_session_new`); None in caller memory.
@@ -140,12 +140,12 @@ pub struct SessionInner {
 /// Opaque `duo_session`.
 pub type DuoSession = SessionInner;
 
-fn model_ref<'x>(model: *const DuoModel) -> Result<&'x ModelInner, Failure> {
+pub(crate) fn model_ref<'x>(model: *const DuoModel) -> Result<&'x ModelInner, Failure> {
     // SAFETY: NULL or a live handle (the documented contract).
     unsafe { model.as_ref() }.ok_or_else(|| Failure::null("model"))
 }
 
-fn config_ref(model: &ModelInner, config: *const DuoSessionConfig) -> Result<SessionConfig, Failure> {
+pub(crate) fn config_ref(model: &ModelInner, config: *const DuoSessionConfig) -> Result<SessionConfig, Failure> {
     // SAFETY: NULL or a valid struct (contract).
     let c = unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
     let core = c.to_core()?;
@@ -383,6 +383,19 @@ fn reject(what: &str, i: usize, v: f32, limit: f32, unit: &str) -> Failure {
     Failure::new(DuoResult::NonFiniteInput, msg)
 }
 
+/// The 165 floats of a leader frame, refused (`DUO_NON_FINITE_INPUT`) if
+/// a coordinate is non-finite or above [`MAX_POSITION_M`].
+pub(crate) fn leader_pos3d(f: &DuoLeaderFrame) -> Result<[f32; POSE_DIM], Failure> {
+    let mut pos = [0.0f32; POSE_DIM];
+    for (j, v) in f.joints.iter().enumerate() {
+        pos[3 * j..3 * j + 3].copy_from_slice(&[v.x, v.y, v.z]);
+    }
+    if let Some((i, v)) = first_bad(&pos, MAX_POSITION_M) {
+        return Err(reject("leader frame", i, v, MAX_POSITION_M, " m"));
+    }
+    Ok(pos)
+}
+
 /// Pushes one leader frame (SMPL-X, metres).
 ///
 /// # Safety
@@ -393,14 +406,7 @@ pub unsafe extern "C" fn duo_session_push_leader(session: *mut DuoSession, frame
         let s = session_mut(session)?;
         // SAFETY: NULL or valid (contract).
         let f = unsafe { frame.as_ref() }.ok_or_else(|| Failure::null("frame"))?;
-        let mut pos = [0.0f32; POSE_DIM];
-        for (j, v) in f.joints.iter().enumerate() {
-            pos[3 * j..3 * j + 3].copy_from_slice(&[v.x, v.y, v.z]);
-        }
-        if let Some((i, v)) = first_bad(&pos, MAX_POSITION_M) {
-            return Err(reject("leader frame", i, v, MAX_POSITION_M, " m"));
-        }
-        s.session.push_leader_frame(&pos)?;
+        s.session.push_leader_frame(&leader_pos3d(f)?)?;
         Ok(DuoResult::Ok)
     })
 }

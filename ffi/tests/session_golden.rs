@@ -13,6 +13,7 @@ use std::ptr;
 use duolando::frames::{DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
 use duolando::model::*;
 use duolando::result::{duo_last_error_message, DuoResult};
+use duolando::batch::*;
 use duolando::session::*;
 use duolando_std::npy::{read_f32_2d, read_i64_2d};
 use duolando_std::skeleton::rotation::{mat_from_quat, nearest_rotation};
@@ -309,4 +310,202 @@ fn staggered_cache_and_f16_cache_settings() {
     assert_eq!(unsafe { duo_session_bytes(m.0, &DuoSessionConfig { kv: KV_F16, ..base }, &mut b16) }, DuoResult::Ok);
     assert!(b16 < b32, "f16 cache is smaller: {b16} vs {b32}");
     unsafe { duo_model_free(m.0) };
+}
+
+/// The golden's leader frames moved: session `k` of a batch dances to
+/// its own leader (x mirrored for odd `k`, raised `0.05 k` m).
+fn leader_of(g: &Golden, k: usize) -> Vec<DuoLeaderFrame> {
+    let mut v = g.leader.clone();
+    for f in &mut v {
+        for j in &mut f.joints {
+            if k % 2 == 1 {
+                j.x = -j.x;
+            }
+            j.y += 0.05 * k as f32;
+        }
+    }
+    v
+}
+
+/// Pulls every ready frame of `s` into `out`.
+fn pull_all(s: *mut DuoSession, out: &mut Vec<DuoFollowerFrame>) {
+    // SAFETY: `s` is a live session of the caller.
+    let mut f = DuoFollowerFrame::default();
+    loop {
+        match unsafe { duo_session_pull_follower(s, &mut f) } {
+            DuoResult::Ok => out.push(f),
+            DuoResult::NotReady => break,
+            r => panic!("pull: {r:?} {}", last_error()),
+        }
+    }
+}
+
+/// Sessions stepped through a `duo_step_batch` give, bit for bit, the
+/// frames of the same sessions stepped alone; session 0 (the golden's
+/// leader) matches the golden. Library and caller memory for the batch
+/// and the sessions; a bad frame in the batch's call changes no session.
+#[test]
+fn sessions_stepped_in_a_batch_equal_sessions_alone() {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
+    let g = golden();
+    let m = open();
+    let c = config(&m, &g);
+    const N: usize = 3;
+    let leaders: Vec<Vec<DuoLeaderFrame>> = (0..N).map(|k| leader_of(&g, k)).collect();
+    // Alone.
+    let alone: Vec<Vec<DuoFollowerFrame>> = leaders
+        .iter()
+        .map(|l| {
+            let mut s = ptr::null_mut();
+            assert_eq!(unsafe { duo_session_new(m.0, &c, g.seed.as_ptr(), &mut s) }, DuoResult::Ok);
+            let out = drive(s, &Golden { leader: l.clone(), ..golden() }, Noise::None);
+            unsafe { duo_session_free(s) };
+            out
+        })
+        .collect();
+    check_against_golden(&alone[0], &g);
+    assert!(alone[1] != alone[0] && alone[2] != alone[0], "the leaders should give different dances");
+
+    for caller_memory in [false, true] {
+        let mut session_mem = Vec::new();
+        let mut batch_mem;
+        let mut batch = ptr::null_mut();
+        if caller_memory {
+            let mut bytes = 0usize;
+            assert_eq!(unsafe { duo_step_batch_bytes(m.0, &c, N, &mut bytes) }, DuoResult::Ok, "{}", last_error());
+            batch_mem = vec![0u8; bytes + 1];
+            let small = unsafe { duo_step_batch_new_in(m.0, &c, N, batch_mem.as_mut_ptr().add(1), bytes - 1, &mut batch) };
+            assert_eq!(small, DuoResult::BufferTooSmall);
+            assert!(batch.is_null());
+            assert_eq!(unsafe { duo_step_batch_new_in(m.0, &c, N, batch_mem.as_mut_ptr().add(1), bytes, &mut batch) }, DuoResult::Ok, "{}", last_error());
+        } else {
+            assert_eq!(unsafe { duo_step_batch_new(m.0, &c, N, &mut batch) }, DuoResult::Ok, "{}", last_error());
+        }
+        let sessions: Vec<*mut DuoSession> = (0..N)
+            .map(|k| {
+                let mut s = ptr::null_mut();
+                if caller_memory && k == 1 {
+                    let mut bytes = 0usize;
+                    assert_eq!(unsafe { duo_session_bytes(m.0, &c, &mut bytes) }, DuoResult::Ok);
+                    session_mem = vec![0u8; bytes];
+                    assert_eq!(unsafe { duo_session_new_in(m.0, &c, g.seed.as_ptr(), session_mem.as_mut_ptr(), bytes, &mut s) }, DuoResult::Ok);
+                } else {
+                    assert_eq!(unsafe { duo_session_new(m.0, &c, g.seed.as_ptr(), &mut s) }, DuoResult::Ok);
+                }
+                assert_eq!(unsafe { duo_session_set_music_track(s, g.music.as_ptr(), g.music.len()) }, DuoResult::Ok);
+                s
+            })
+            .collect();
+        let mut out: Vec<Vec<DuoFollowerFrame>> = vec![Vec::new(); N];
+        for i in 0..g.leader.len() {
+            let frames: Vec<DuoLeaderFrame> = leaders.iter().map(|l| l[i]).collect();
+            if i % 5 == 2 {
+                // A bad frame for session 1: refused, naming it; nobody changes.
+                let mut bad = frames.clone();
+                bad[1].joints[3].z = f32::NAN;
+                let mut failed = 0usize;
+                assert_eq!(unsafe { duo_step_batch_push_leader(batch, sessions.as_ptr(), bad.as_ptr(), N, &mut failed) }, DuoResult::NonFiniteInput);
+                assert_eq!(failed, 1);
+            }
+            let mut failed = 0usize;
+            match unsafe { duo_step_batch_push_leader(batch, sessions.as_ptr(), frames.as_ptr(), N, &mut failed) } {
+                DuoResult::Ok => assert_eq!(failed, duolando::batch::NO_SESSION),
+                // Past the track's end no frame comes out (as in `drive`).
+                DuoResult::Backlog if out[0].len() == g.frames => {
+                    assert_eq!(failed, 0);
+                    break;
+                }
+                r => panic!("frame {i}: {r:?} {}", last_error()),
+            }
+            for (s, o) in sessions.iter().zip(&mut out) {
+                pull_all(*s, o);
+            }
+        }
+        for k in 0..N {
+            assert!(out[k] == alone[k], "session {k} (caller memory {caller_memory}): batched frames differ from the session alone");
+        }
+        unsafe { duo_step_batch_free(batch) };
+        for s in sessions {
+            unsafe { duo_session_free(s) };
+        }
+    }
+    unsafe { duo_model_free(m.0) };
+}
+
+/// Every refusal of `duo_step_batch_push_leader` and of the batch
+/// constructors, each leaving the sessions unchanged.
+#[test]
+fn step_batch_argument_checks() {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
+    let g = golden();
+    let m = open();
+    let other = open();
+    let c = config(&m, &g);
+    let header = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../include/duolando.h")).unwrap();
+    assert!(header.contains(&format!("#define DUO_MAX_BATCH {}", duolando_core::session::MAX_BATCH)));
+    assert!(header.contains("#define DUO_NO_SESSION ((size_t)-1)") && duolando::batch::NO_SESSION == usize::MAX);
+
+    let mut batch = ptr::null_mut();
+    let mut bytes = 0usize;
+    for n in [0, duolando_core::session::MAX_BATCH + 1] {
+        assert_eq!(unsafe { duo_step_batch_new(m.0, &c, n, &mut batch) }, DuoResult::InvalidArgument);
+        assert!(last_error().contains("DUO_MAX_BATCH"), "{}", last_error());
+        assert_eq!(unsafe { duo_step_batch_bytes(m.0, &c, n, &mut bytes) }, DuoResult::InvalidArgument);
+    }
+    assert_eq!(unsafe { duo_step_batch_new(ptr::null(), &c, 2, &mut batch) }, DuoResult::NullParameter);
+    assert_eq!(unsafe { duo_step_batch_new(m.0, ptr::null(), 2, &mut batch) }, DuoResult::NullParameter);
+    assert_eq!(unsafe { duo_step_batch_new(m.0, &c, 2, ptr::null_mut()) }, DuoResult::NullParameter);
+    assert_eq!(unsafe { duo_step_batch_bytes(m.0, &c, 2, ptr::null_mut()) }, DuoResult::NullParameter);
+    assert_eq!(unsafe { duo_step_batch_new_in(m.0, &c, 2, ptr::null_mut(), 1 << 20, &mut batch) }, DuoResult::NullParameter);
+    assert_eq!(unsafe { duo_step_batch_new(m.0, &DuoSessionConfig { shift: 0, ..c }, 2, &mut batch) }, DuoResult::InvalidArgument);
+    assert!(batch.is_null());
+    assert_eq!(unsafe { duo_step_batch_new(m.0, &c, 2, &mut batch) }, DuoResult::Ok);
+
+    let new = |model: &Model, cfg: &DuoSessionConfig| {
+        let mut s = ptr::null_mut();
+        assert_eq!(unsafe { duo_session_new(model.0, cfg, g.seed.as_ptr(), &mut s) }, DuoResult::Ok, "{}", last_error());
+        assert_eq!(unsafe { duo_session_set_music_track(s, g.music.as_ptr(), g.music.len()) }, DuoResult::Ok);
+        s
+    };
+    let (a, b) = (new(&m, &c), new(&m, &c));
+    let on_other = new(&other, &c);
+    let frames = [g.leader[0], g.leader[0]];
+    let push = |ss: &[*mut DuoSession], fr: *const DuoLeaderFrame, n: usize| {
+        let mut failed = 12345usize;
+        let r = unsafe { duo_step_batch_push_leader(batch, ss.as_ptr(), fr, n, &mut failed) };
+        (r, failed)
+    };
+    let none = duolando::batch::NO_SESSION;
+    assert_eq!(push(&[a, b], frames.as_ptr(), 0), (DuoResult::Ok, none));
+    assert_eq!(push(&[a, b, a], [g.leader[0]; 3].as_ptr(), 3), (DuoResult::InvalidArgument, none));
+    assert_eq!(push(&[a, a], frames.as_ptr(), 2), (DuoResult::InvalidArgument, 1));
+    assert!(last_error().contains("sessions[1] is sessions[0] again"), "{}", last_error());
+    assert_eq!(push(&[a, ptr::null_mut()], frames.as_ptr(), 2), (DuoResult::NullParameter, 1));
+    assert_eq!(push(&[a, on_other], frames.as_ptr(), 2), (DuoResult::InvalidArgument, 1));
+    assert!(last_error().contains("another model"), "{}", last_error());
+    let mut bad = frames;
+    bad[0].joints[0].x = 1e9;
+    assert_eq!(push(&[a, b], bad.as_ptr(), 2), (DuoResult::NonFiniteInput, 0));
+    assert_eq!(push(&[a, b], ptr::null(), 2), (DuoResult::NullParameter, none));
+    let mut failed = 7usize;
+    assert_eq!(unsafe { duo_step_batch_push_leader(batch, ptr::null(), frames.as_ptr(), 2, &mut failed) }, DuoResult::NullParameter);
+    assert_eq!(failed, none);
+    assert_eq!(unsafe { duo_step_batch_push_leader(ptr::null_mut(), [a, b].as_ptr(), frames.as_ptr(), 2, ptr::null_mut()) }, DuoResult::NullParameter);
+    // None of the refused calls took a frame: `a` still has its whole run ahead, as a fresh session.
+    let fresh = new(&m, &c);
+    let mut outs = [Vec::new(), Vec::new()];
+    for (i, frame) in g.leader.iter().enumerate().take(40) {
+        assert_eq!(push(&[a, b], [*frame; 2].as_ptr(), 2), (DuoResult::Ok, none), "frame {i}: {}", last_error());
+        assert_eq!(unsafe { duo_session_push_leader(fresh, frame) }, DuoResult::Ok);
+        pull_all(a, &mut outs[0]);
+        pull_all(fresh, &mut outs[1]);
+    }
+    assert!(!outs[0].is_empty() && outs[0] == outs[1]);
+    for s in [a, b, on_other, fresh] {
+        unsafe { duo_session_free(s) };
+    }
+    unsafe { duo_step_batch_free(batch) };
+    unsafe { duo_step_batch_free(ptr::null_mut()) };
+    unsafe { duo_model_free(m.0) };
+    unsafe { duo_model_free(other.0) };
 }

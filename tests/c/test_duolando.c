@@ -409,6 +409,90 @@ static void test_sessions(duo_model *m) {
   free(out);
 }
 
+/* Two sessions stepped together through a duo_step_batch (the second on
+ * the x-mirrored leader, in caller memory) equal the same sessions stepped
+ * alone, byte for byte; refusals name the session and change nothing. */
+static void test_step_batch(duo_model *m) {
+  duo_session_config c;
+  duo_session *ss[2] = {NULL, NULL}, *alone = NULL;
+  duo_step_batch *b = NULL;
+  duo_leader_frame *mirrored = (duo_leader_frame *)malloc(n_frames * sizeof *mirrored);
+  duo_follower_frame *out[2], *want = (duo_follower_frame *)malloc(n_frames * sizeof *want);
+  size_t got[2] = {0, 0}, want_n, i, k, bytes = 0, failed = 0;
+  unsigned char *mem;
+  duo_follower_frame f;
+  int done = 0;
+
+  out[0] = (duo_follower_frame *)malloc(n_frames * sizeof *out[0]);
+  out[1] = (duo_follower_frame *)malloc(n_frames * sizeof *out[1]);
+  for (i = 0; i < n_frames; i++) {
+    mirrored[i] = leader[i];
+    for (k = 0; k < DUO_JOINTS; k++) mirrored[i].joints[k].x = -mirrored[i].joints[k].x;
+  }
+  EXPECT(duo_session_config_minimum(m, &c), DUO_OK);
+  /* The mirrored dancer alone. */
+  {
+    duo_leader_frame *saved = leader;
+    EXPECT(duo_session_new(m, &c, seed, &alone), DUO_OK);
+    leader = mirrored;
+    want_n = drive(alone, want, n_frames, 0);
+    leader = saved;
+    duo_session_free(alone);
+  }
+  CHECK(want_n == reference_n && !same_frames(want, reference, want_n));
+
+  EXPECT(duo_step_batch_new(m, &c, 0, &b), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_step_batch_bytes(m, &c, 2, &bytes), DUO_OK);
+  mem = (unsigned char *)malloc(bytes + 5);
+  EXPECT(duo_step_batch_new_in(m, &c, 2, mem + 5, bytes - 1, &b), DUO_BUFFER_TOO_SMALL);
+  CHECK(b == NULL);
+  EXPECT(duo_step_batch_new_in(m, &c, 2, mem + 5, bytes, &b), DUO_OK);
+  EXPECT(duo_session_new(m, &c, seed, &ss[0]), DUO_OK);
+  EXPECT(duo_session_new(m, &c, seed, &ss[1]), DUO_OK);
+  for (k = 0; k < 2; k++) EXPECT(duo_session_set_music_track(ss[k], music, n_frames * 54), DUO_OK);
+  for (i = 0; i < n_frames && !done; i++) {
+    duo_leader_frame two[2];
+    duo_session *same[2];
+    duo_result r;
+    two[0] = leader[i];
+    two[1] = mirrored[i];
+    if (i % 6 == 1) {
+      same[0] = ss[1];
+      same[1] = ss[1];
+      EXPECT(duo_step_batch_push_leader(b, same, two, 2, &failed), DUO_INVALID_ARGUMENT);
+      CHECK(failed == 1);
+      two[1].joints[7].y = (float)NAN;
+      EXPECT(duo_step_batch_push_leader(b, ss, two, 2, &failed), DUO_NON_FINITE_INPUT);
+      CHECK(failed == 1);
+      EXPECT(duo_step_batch_push_leader(b, ss, two, 3, &failed), DUO_INVALID_ARGUMENT);
+      CHECK(failed == DUO_NO_SESSION);
+      two[1] = mirrored[i];
+    }
+    r = duo_step_batch_push_leader(b, ss, two, 2, &failed);
+    if (r == DUO_BACKLOG) break; /* the music track's end, as in drive() */
+    CHECK(r == DUO_OK && failed == DUO_NO_SESSION);
+    for (k = 0; k < 2; k++) {
+      while ((r = duo_session_pull_follower(ss[k], &f)) == DUO_OK) {
+        if (got[k] < n_frames) out[k][got[k]] = f;
+        got[k]++;
+      }
+      CHECK(r == DUO_NOT_READY);
+      if (got[k] > n_frames) done = 1;
+    }
+  }
+  CHECK(got[0] == reference_n && same_frames(out[0], reference, reference_n));
+  CHECK(got[1] == want_n && same_frames(out[1], want, want_n));
+  duo_step_batch_free(b);
+  duo_step_batch_free(NULL);
+  free(mem);
+  duo_session_free(ss[0]);
+  duo_session_free(ss[1]);
+  free(out[0]);
+  free(out[1]);
+  free(want);
+  free(mirrored);
+}
+
 struct worker {
   duo_model *model;
   int ok;
@@ -492,6 +576,7 @@ int main(int argc, char **argv) {
   test_model_open(&m);
   test_session_errors(m);
   test_sessions(m);
+  test_step_batch(m);
   test_threads(m);
   test_model_freed_first();
   duo_model_free(m);

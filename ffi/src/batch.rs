@@ -1,0 +1,271 @@
+//! `duo_step_batch`: several dancers on one model stepped together
+//! (`duolando_core::session::Session::step_many`): one leader frame per
+//! session per call, and each weight matrix of the LATs, the GPT and the
+//! heads read once for all of them. Every session ends exactly as after
+//! its own `duo_session_push_leader` (bit for bit); only the time differs
+//! (docs/PERFORMANCE.md: 16 sessions in ~4.4x the time of one at full
+//! size).
+//!
+//! A batch is scratch memory only (no session state, no model reference):
+//! it is sized for a session configuration and a number of sessions, and
+//! steps any sessions of one model whose configurations need no more than
+//! that one. Sessions keep their own handles (`duo_session_new` /
+//! `duo_session_new_in`) and every other call (music, pulls, reset) as
+//! before.
+//!
+//! Thread rule: a batch is used by one thread at a time, and the sessions
+//! of a call are not used by any other thread during it.
+
+use duolando_core::config::ModelConfig;
+use duolando_core::session::{Session, SessionConfig, StepBatch, MAX_BATCH};
+use duolando_core::Error;
+
+use crate::frames::DuoLeaderFrame;
+use crate::model::DuoModel;
+use crate::result::{guard, DuoResult, Failure};
+use crate::session::{config_ref, leader_pos3d, model_ref, DuoSession, DuoSessionConfig};
+
+/// `DUO_NO_SESSION`: the `failed_session` of a call that succeeded, or whose
+/// failure concerns no single session.
+pub const NO_SESSION: usize = usize::MAX;
+
+/// What a `duo_step_batch *` points to.
+pub struct StepBatchInner {
+    /// Carved from the arena below (or the caller's memory); declared first, dropped first.
+    batch: StepBatch<'static>,
+    /// Library-allocated arena (`duo_step_batch_new`); None in caller memory.
+    _arena: Option<Box<[u8]>>,
+    /// True when this struct lives in caller memory (`duo_step_batch_new_in`).
+    in_caller_memory: bool,
+}
+
+/// Opaque `duo_step_batch`.
+pub type DuoStepBatch = StepBatchInner;
+
+/// Alignment slack and size of the handle placed at the start of caller memory.
+const HANDLE_BYTES: usize = std::mem::size_of::<StepBatchInner>() + std::mem::align_of::<StepBatchInner>();
+
+/// Arena bytes of a batch of `max_sessions` sessions of `config` on `model`.
+///
+/// # Safety
+/// `model` NULL or live; `config` NULL or valid.
+unsafe fn arena_bytes<'x>(model: *const DuoModel, config: *const DuoSessionConfig, max_sessions: usize) -> Result<(usize, SessionConfig, &'x ModelConfig), Failure> {
+    let m = model_ref(model)?;
+    let cfg = config_ref(m, config)?;
+    if max_sessions == 0 || max_sessions > MAX_BATCH {
+        return Err(Failure::invalid(format!("max_sessions is {max_sessions}; a batch steps 1 to {MAX_BATCH} sessions (DUO_MAX_BATCH)")));
+    }
+    let model_cfg = m.model().config();
+    let n = StepBatch::bytes(model_cfg, &cfg, max_sessions)?;
+    Ok((n, cfg, model_cfg))
+}
+
+/// Bytes `duo_step_batch_new_in` needs for `max_sessions` sessions of
+/// `config` (any address).
+///
+/// # Safety
+/// Pointers NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn duo_step_batch_bytes(model: *const DuoModel, config: *const DuoSessionConfig, max_sessions: usize, out_bytes: *mut usize) -> DuoResult {
+    guard("duo_step_batch_bytes", || {
+        // SAFETY: the caller's contract.
+        let (n, _, _) = unsafe { arena_bytes(model, config, max_sessions) }?;
+        if out_bytes.is_null() {
+            return Err(Failure::null("out_bytes"));
+        }
+        let total = n.checked_add(HANDLE_BYTES).ok_or_else(|| Failure::invalid("batch size overflows size_t"))?;
+        // SAFETY: checked non-NULL.
+        unsafe { *out_bytes = total };
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// A batch in library memory (allocated here, once) for up to
+/// `max_sessions` sessions of `model` whose configurations need no more
+/// than `config`.
+///
+/// # Safety
+/// `model` NULL or live; `config` NULL or valid; `out_batch` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn duo_step_batch_new(model: *const DuoModel, config: *const DuoSessionConfig, max_sessions: usize, out_batch: *mut *mut DuoStepBatch) -> DuoResult {
+    guard("duo_step_batch_new", || {
+        // SAFETY: the caller's contract.
+        let (n, cfg, model_cfg) = unsafe { arena_bytes(model, config, max_sessions) }?;
+        if out_batch.is_null() {
+            return Err(Failure::null("out_batch"));
+        }
+        let mut arena = vec![0u8; n].into_boxed_slice();
+        // SAFETY: the boxed bytes stay at one address until the
+        // StepBatchInner drops them, after the batch.
+        let bytes: &'static mut [u8] = unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
+        let batch = StepBatch::new(model_cfg, &cfg, max_sessions, bytes)?;
+        let inner = Box::new(StepBatchInner { batch, _arena: Some(arena), in_caller_memory: false });
+        // SAFETY: checked non-NULL.
+        unsafe { *out_batch = Box::into_raw(inner) };
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// A batch placed entirely in caller memory (`memory`, `len` >=
+/// `duo_step_batch_bytes`; any alignment). No allocation.
+///
+/// # Safety
+/// As `duo_step_batch_new`; `memory` NULL or `len` writable bytes that
+/// stay valid, unmoved and otherwise untouched until `duo_step_batch_free`.
+#[no_mangle]
+pub unsafe extern "C" fn duo_step_batch_new_in(
+    model: *const DuoModel,
+    config: *const DuoSessionConfig,
+    max_sessions: usize,
+    memory: *mut u8,
+    len: usize,
+    out_batch: *mut *mut DuoStepBatch,
+) -> DuoResult {
+    guard("duo_step_batch_new_in", || {
+        // SAFETY: the caller's contract.
+        let (n, cfg, model_cfg) = unsafe { arena_bytes(model, config, max_sessions) }?;
+        if out_batch.is_null() {
+            return Err(Failure::null("out_batch"));
+        }
+        if memory.is_null() {
+            return Err(Failure::null("memory"));
+        }
+        let need = n.saturating_add(HANDLE_BYTES);
+        if len < need {
+            return Err(Failure::new(DuoResult::BufferTooSmall, format!("memory has {len} bytes, this batch needs {need} (duo_step_batch_bytes)")));
+        }
+        let pad = memory.align_offset(std::mem::align_of::<StepBatchInner>());
+        if pad == usize::MAX || pad + std::mem::size_of::<StepBatchInner>() > len {
+            return Err(Failure::new(DuoResult::BufferTooSmall, "memory cannot hold the batch handle"));
+        }
+        // SAFETY: [pad, pad + size) lies in the caller's `len` bytes and is
+        // aligned for StepBatchInner; the arena is the rest, disjoint.
+        let (slot, arena) = unsafe {
+            let slot = memory.add(pad).cast::<StepBatchInner>();
+            let start = pad + std::mem::size_of::<StepBatchInner>();
+            (slot, std::slice::from_raw_parts_mut(memory.add(start), len - start))
+        };
+        let batch = StepBatch::new(model_cfg, &cfg, max_sessions, arena)?;
+        // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
+        unsafe {
+            slot.write(StepBatchInner { batch, _arena: None, in_caller_memory: true });
+            *out_batch = slot;
+        }
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Frees a batch. NULL is ignored. The sessions it stepped are untouched.
+/// For `duo_step_batch_new_in`, the caller's memory may be released
+/// afterwards.
+///
+/// # Safety
+/// `batch` NULL or a live handle, freed once, not used afterwards.
+#[no_mangle]
+pub unsafe extern "C" fn duo_step_batch_free(batch: *mut DuoStepBatch) {
+    let _ = guard("duo_step_batch_free", || {
+        if batch.is_null() {
+            return Ok(DuoResult::Ok);
+        }
+        // SAFETY: a live handle (contract); read the flag before dropping.
+        unsafe {
+            if (*batch).in_caller_memory {
+                std::ptr::drop_in_place(batch);
+            } else {
+                drop(Box::from_raw(batch));
+            }
+        }
+        Ok(DuoResult::Ok)
+    });
+}
+
+/// Pushes `frames[i]` into `sessions[i]` for every `i < n` and runs the
+/// steps that become possible, the sessions' weight-heavy work together.
+/// Each session ends as after its own `duo_session_push_leader`.
+///
+/// Refused before anything changes (no session changes; `*failed_session` =
+/// the session concerned): a NULL session, a session given twice, sessions
+/// of different models, a session whose configuration needs more than the
+/// batch was made for (`DUO_INVALID_ARGUMENT`), a frame the session would
+/// refuse (`DUO_NON_FINITE_INPUT`, `DUO_BACKLOG`: the first such session).
+/// `n` above the batch's `max_sessions` is `DUO_INVALID_ARGUMENT` with
+/// `DUO_NO_SESSION`. `n == 0` does nothing.
+///
+/// `failed_session` (NULL or writable) is written on every return: the index
+/// of the session a failure concerns, else `DUO_NO_SESSION`.
+///
+/// # Safety
+/// `batch` NULL or live; `sessions` NULL or `n` readable pointers, each
+/// NULL or a live session not used by another thread during the call;
+/// `frames` NULL or `n` readable frames; `failed_session` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn duo_step_batch_push_leader(
+    batch: *mut DuoStepBatch,
+    sessions: *const *mut DuoSession,
+    frames: *const DuoLeaderFrame,
+    n: usize,
+    failed_session: *mut usize,
+) -> DuoResult {
+    let mut failed = NO_SESSION;
+    // SAFETY: the caller's contract (see push_leader_many).
+    let r = guard("duo_step_batch_push_leader", || unsafe { push_leader_many(batch, sessions, frames, n, &mut failed) });
+    if !failed_session.is_null() {
+        // SAFETY: non-NULL and writable (contract).
+        unsafe { *failed_session = failed };
+    }
+    r
+}
+
+/// The body of [`duo_step_batch_push_leader`]; `failed` = the session a
+/// failure concerns.
+///
+/// # Safety
+/// As [`duo_step_batch_push_leader`].
+unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSession, frames: *const DuoLeaderFrame, n: usize, failed: &mut usize) -> Result<DuoResult, Failure> {
+    // SAFETY: NULL or a live handle used by one thread at a time (contract).
+    let b = unsafe { batch.as_mut() }.ok_or_else(|| Failure::null("batch"))?;
+    if n == 0 {
+        return Ok(DuoResult::Ok);
+    }
+    if n > b.batch.capacity() {
+        return Err(Failure::invalid(format!("{n} sessions given to a batch made for at most {}", b.batch.capacity())));
+    }
+    if sessions.is_null() {
+        return Err(Failure::null("sessions"));
+    }
+    if frames.is_null() {
+        return Err(Failure::null("frames"));
+    }
+    // SAFETY: `n` readable pointers and `n` readable frames (contract).
+    let (ptrs, frames) = unsafe { (std::slice::from_raw_parts(sessions, n), std::slice::from_raw_parts(frames, n)) };
+    for (i, &p) in ptrs.iter().enumerate() {
+        *failed = i;
+        if p.is_null() {
+            return Err(Failure::null(&format!("sessions[{i}]")));
+        }
+        if let Some(j) = ptrs[..i].iter().position(|&q| std::ptr::eq(q, p)) {
+            return Err(Failure::invalid(format!("sessions[{i}] is sessions[{j}] again; a session takes one frame per call")));
+        }
+    }
+    let mut rows = Vec::with_capacity(n);
+    for (i, f) in frames.iter().enumerate() {
+        *failed = i;
+        rows.push(leader_pos3d(f)?);
+    }
+    *failed = NO_SESSION;
+    // SAFETY: every pointer is a live session (contract), and they are
+    // pairwise distinct (checked above): one `&mut` each.
+    let mut refs: Vec<&mut Session<'static>> = ptrs.iter().map(|&p| unsafe { &mut (*p).session }).collect();
+    let row_refs: Vec<&[f32]> = rows.iter().map(|r| &r[..]).collect();
+    Session::step_many(&mut refs, &row_refs, &mut b.batch).map_err(|(i, e)| {
+        *failed = i;
+        match e {
+            // The checks before anything changes: another model, or needs beyond the batch's.
+            Error::State => Failure::invalid(format!(
+                "sessions[{i}] cannot be stepped with sessions[0] in this batch: another model, or a configuration that needs more than the batch was made for"
+            )),
+            e => Failure::from(e),
+        }
+    })?;
+    Ok(DuoResult::Ok)
+}
