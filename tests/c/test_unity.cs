@@ -1,7 +1,8 @@
 // Smoke test of the Unity wrapper (integrations/unity/Duolando.cs) under
 // Mono against libduolando.so: struct layouts, errors as exceptions, a
 // session fed the fixture leader (with NaN glitches replaced by the last
-// good frame) producing finite frames, converted to Unity coordinates.
+// good frame) producing finite frames, converted to Unity coordinates; two
+// sessions stepped through a StepBatch equal to each stepped alone.
 // Built and run by .ci/ffi.sh when mcs/mono are present.
 // usage: mono test_unity.exe <repo root>
 using System;
@@ -97,11 +98,85 @@ static class TestUnity
                 }
                 session.Reset(seed);
             }
+            // Two sessions (the second on the x-mirrored leader) stepped through a StepBatch
+            // give the frames of the same sessions stepped alone, bit for bit.
+            SessionConfig greedy = model.MinimumConfig();
+            FollowerFrame[][] alone = new FollowerFrame[2][];
+            for (int k = 0; k < 2; k++)
+            {
+                using (Session s = new Session(model, greedy, seed))
+                {
+                    s.SetMusicTrack(track);
+                    var got = new System.Collections.Generic.List<FollowerFrame>();
+                    FollowerFrame f = new FollowerFrame();
+                    for (int i = 0; i < frames; i++)
+                    {
+                        LeaderFrame fr = FixtureFrame(leader, i, k == 1);
+                        if (s.PushLeader(ref fr) == DuoResult.Backlog) break;
+                        while (s.TryPull(ref f)) got.Add(f);
+                    }
+                    alone[k] = got.ToArray();
+                }
+            }
+            using (StepBatch batch = new StepBatch(model, greedy, 2))
+            using (Session a = new Session(model, greedy, seed))
+            using (Session b = new Session(model, greedy, seed))
+            {
+                Session[] both = { a, b };
+                var got = new[] { new System.Collections.Generic.List<FollowerFrame>(), new System.Collections.Generic.List<FollowerFrame>() };
+                a.SetMusicTrack(track);
+                b.SetMusicTrack(track);
+                FollowerFrame f = new FollowerFrame();
+                int failed;
+                for (int i = 0; i < frames; i++)
+                {
+                    LeaderFrame[] two = { FixtureFrame(leader, i, false), FixtureFrame(leader, i, true) };
+                    if (i == 3)
+                    {
+                        LeaderFrame[] bad = { two[0], two[1] };
+                        bad[1].Set(2, float.NaN, 0, 0);
+                        Check(batch.PushLeader(both, bad, out failed) == DuoResult.NonFiniteInput && failed == 1, "a NaN frame names session 1");
+                        try { batch.PushLeader(new[] { a, a }, two, out failed); Check(false, "a session given twice throws"); }
+                        catch (DuolandoException e) { Check(e.Result == DuoResult.InvalidArgument, "twice: " + e.Message); }
+                    }
+                    DuoResult r = batch.PushLeader(both, two, out failed);
+                    if (r == DuoResult.Backlog) break;
+                    Check(r == DuoResult.Ok && failed == -1, "batched push " + i + ": " + r);
+                    for (int k = 0; k < 2; k++)
+                        while (both[k].TryPull(ref f)) got[k].Add(f);
+                }
+                for (int k = 0; k < 2; k++)
+                    Check(SameFrames(got[k].ToArray(), alone[k]), "batched session " + k + " equals the session alone (" + got[k].Count + " frames)");
+                Check(!SameFrames(alone[0], alone[1]), "the two leaders give two dances");
+            }
         }
         Check(pulled > frames / 2, "frames pulled: " + pulled);
         Check(rejected > 0, "NaN frames rejected");
         Console.WriteLine("test_unity: " + pulled + " follower frames, " + rejected + " NaN frames rejected, " + failures + " failures");
         return failures == 0 ? 0 : 1;
+    }
+
+    static LeaderFrame FixtureFrame(float[] leader, int i, bool mirrored)
+    {
+        LeaderFrame fr = new LeaderFrame();
+        for (int j = 0; j < 55; j++)
+            fr.Set(j, mirrored ? -leader[i * 165 + 3 * j] : leader[i * 165 + 3 * j], leader[i * 165 + 3 * j + 1], leader[i * 165 + 3 * j + 2]);
+        return fr;
+    }
+
+    static unsafe bool SameFrames(FollowerFrame[] x, FollowerFrame[] y)
+    {
+        if (x.Length != y.Length || x.Length == 0) return false;
+        int size = Marshal.SizeOf(typeof(FollowerFrame));
+        for (int i = 0; i < x.Length; i++)
+        {
+            FollowerFrame p = x[i], q = y[i];
+            byte* a = (byte*)&p;
+            byte* b = (byte*)&q;
+            for (int k = 0; k < size; k++)
+                if (a[k] != b[k]) return false;
+        }
+        return true;
     }
 
     static float[] SubArray(float[] a, int start, int n)
