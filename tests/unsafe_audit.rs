@@ -41,6 +41,7 @@ const ALLOWED: &[&str] = &[
     "ffi/src/batch.rs",
     "ffi/tests/header.rs",
     "ffi/tests/session_golden.rs",
+    "ffi/tests/no_alloc.rs",
     "tests/session_memory.rs",
     "tests/step_many.rs",
     "tests/amx.rs",

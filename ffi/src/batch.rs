@@ -247,17 +247,21 @@ unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSe
             return Err(Failure::invalid(format!("sessions[{i}] is sessions[{j}] again; a session takes one frame per call")));
         }
     }
-    let mut rows = Vec::with_capacity(n);
+    // Nothing allocates: the frames are read in place, the lists live on
+    // the stack (n <= capacity <= MAX_BATCH).
+    let mut rows: heapless::Vec<&[f32], MAX_BATCH> = heapless::Vec::new();
     for (i, f) in frames.iter().enumerate() {
         *failed = i;
-        rows.push(leader_pos3d(f)?);
+        rows.push(leader_pos3d(f)?).map_err(|_| Failure::invalid("more frames than DUO_MAX_BATCH"))?;
     }
     *failed = NO_SESSION;
-    // SAFETY: every pointer is a live session (contract), and they are
-    // pairwise distinct (checked above): one `&mut` each.
-    let mut refs: Vec<&mut Session<'static>> = ptrs.iter().map(|&p| unsafe { &mut (*p).session }).collect();
-    let row_refs: Vec<&[f32]> = rows.iter().map(|r| &r[..]).collect();
-    Session::step_many(&mut refs, &row_refs, &mut b.batch).map_err(|(i, e)| {
+    let mut refs: heapless::Vec<&mut Session<'static>, MAX_BATCH> = heapless::Vec::new();
+    for &p in ptrs {
+        // SAFETY: every pointer is a live session (contract), and they are
+        // pairwise distinct (checked above): one `&mut` each.
+        refs.push(unsafe { &mut (*p).session }).map_err(|_| Failure::invalid("more sessions than DUO_MAX_BATCH"))?;
+    }
+    Session::step_many(&mut refs, &rows, &mut b.batch).map_err(|(i, e)| {
         *failed = i;
         match e {
             // The checks before anything changes: another model, or needs beyond the batch's.

@@ -14,7 +14,7 @@
 //! `(-P q.xyz, q.w)`. The same formula holds for world and local (parent
 //! relative) rotations, since conjugation commutes with the joint chain.
 
-use duolando_core::config::N_JOINTS;
+use duolando_core::config::{N_JOINTS, POSE_DIM};
 use duolando_std::skeleton::math::Mat3;
 use duolando_std::skeleton::rotation::{nearest_rotation, quat_from_mat};
 
@@ -48,6 +48,21 @@ pub struct DuoLeaderFrame {
 impl Default for DuoLeaderFrame {
     fn default() -> Self {
         DuoLeaderFrame { joints: [DuoVec3::default(); N_JOINTS] }
+    }
+}
+
+// 55 joints x 3 floats, no padding: the layout `DuoLeaderFrame::pos3d` reads.
+const _: () = assert!(std::mem::size_of::<DuoVec3>() == 12 && std::mem::size_of::<DuoLeaderFrame>() == POSE_DIM * 4);
+const _: () = assert!(std::mem::align_of::<DuoLeaderFrame>() == std::mem::align_of::<f32>());
+
+impl DuoLeaderFrame {
+    /// The frame's 165 floats in place (x, y, z of each joint, in joint
+    /// order): what the engine takes, without a copy.
+    pub fn pos3d(&self) -> &[f32; POSE_DIM] {
+        // SAFETY: `DuoLeaderFrame` is `repr(C)` over `[DuoVec3; 55]`, and
+        // `DuoVec3` is `repr(C)` over three f32: 165 f32 with no padding
+        // (both sizes asserted above), aligned as f32; the borrow is `self`'s.
+        unsafe { &*(self as *const DuoLeaderFrame).cast::<[f32; POSE_DIM]>() }
     }
 }
 

@@ -383,14 +383,12 @@ fn reject(what: &str, i: usize, v: f32, limit: f32, unit: &str) -> Failure {
     Failure::new(DuoResult::NonFiniteInput, msg)
 }
 
-/// The 165 floats of a leader frame, refused (`DUO_NON_FINITE_INPUT`) if
-/// a coordinate is non-finite or above [`MAX_POSITION_M`].
-pub(crate) fn leader_pos3d(f: &DuoLeaderFrame) -> Result<[f32; POSE_DIM], Failure> {
-    let mut pos = [0.0f32; POSE_DIM];
-    for (j, v) in f.joints.iter().enumerate() {
-        pos[3 * j..3 * j + 3].copy_from_slice(&[v.x, v.y, v.z]);
-    }
-    if let Some((i, v)) = first_bad(&pos, MAX_POSITION_M) {
+/// The 165 floats of a leader frame (in place), refused
+/// (`DUO_NON_FINITE_INPUT`) if a coordinate is non-finite or above
+/// [`MAX_POSITION_M`].
+pub(crate) fn leader_pos3d(f: &DuoLeaderFrame) -> Result<&[f32; POSE_DIM], Failure> {
+    let pos = f.pos3d();
+    if let Some((i, v)) = first_bad(pos, MAX_POSITION_M) {
         return Err(reject("leader frame", i, v, MAX_POSITION_M, " m"));
     }
     Ok(pos)
@@ -406,7 +404,7 @@ pub unsafe extern "C" fn duo_session_push_leader(session: *mut DuoSession, frame
         let s = session_mut(session)?;
         // SAFETY: NULL or valid (contract).
         let f = unsafe { frame.as_ref() }.ok_or_else(|| Failure::null("frame"))?;
-        s.session.push_leader_frame(&leader_pos3d(f)?)?;
+        s.session.push_leader_frame(leader_pos3d(f)?)?;
         Ok(DuoResult::Ok)
     })
 }
