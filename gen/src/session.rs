@@ -13,7 +13,10 @@
 //! - pulled frames are always finite and their indices consecutive from 0
 //!   after every reset;
 //! - afterwards the session is usable: a reset and a clean drive produce
-//!   finite frames.
+//!   finite frames;
+//! - a batched twin that gets every operation, its leader frames through
+//!   `Session::step_many` (a one-session `StepBatch`), answers every call
+//!   as the session does and pulls bit-identical frames.
 
 use arbitrary::Arbitrary;
 use duolando_core::config::{POSE_DIM, ROT_DIM};
@@ -22,7 +25,7 @@ use duolando_core::input;
 use duolando_core::model::Model;
 use duolando_core::sampler::MAX_TOP_K;
 use duolando_core::session::config::MAX_BUFFER_FRAMES;
-use duolando_core::session::{dec_future_max, enc_future_max, CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig};
+use duolando_core::session::{dec_future_max, enc_future_max, CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig, StepBatch};
 
 use crate::fixture::Clip;
 use crate::floats::{synthetic_leader, Hostile};
@@ -212,12 +215,26 @@ fn over_limit(buffer: Buffer, x: &[f32]) -> bool {
     x.iter().all(|v| v.is_finite()) && x.iter().any(|v| v.abs() > lim)
 }
 
+/// One leader frame into `s`: alone, or through `batch` (`Session::step_many`
+/// with `s` alone in it).
+pub fn push_leader<'a>(s: &mut Session<'a>, batch: Option<&mut StepBatch<'_>>, leader: &[f32]) -> Result<(), Error> {
+    match batch {
+        Some(b) => Session::step_many(&mut [s], &[leader], b).map_err(|(i, e)| {
+            assert_eq!(i, 0, "step_many of one session blamed session {i}");
+            e
+        }),
+        None => s.push_leader_frame(leader),
+    }
+}
+
 /// A clean tick: music pushed ahead (until refused or `a_m + 3` tokens
 /// ahead), one leader frame (pulling / pushing music on backlog), then
 /// every ready frame pulled into `sink`. `Ok(false)`: the session is stuck
 /// (track or forced history exhausted).
-pub fn tick(
-    s: &mut Session<'_>,
+#[allow(clippy::too_many_arguments)]
+pub fn tick<'a>(
+    s: &mut Session<'a>,
+    mut batch: Option<&mut StepBatch<'_>>,
     clip: &Clip,
     leader: &[f32],
     music_t: &mut usize,
@@ -235,7 +252,7 @@ pub fn tick(
     }
     let mut pushed = false;
     for _ in 0..4 {
-        match s.push_leader_frame(leader) {
+        match push_leader(s, batch.as_deref_mut(), leader) {
             Ok(()) => {
                 pushed = true;
                 break;
@@ -324,6 +341,11 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
         .collect();
     let mut arena_a = vec![0u8; bytes];
     let mut arena_b = vec![0u8; bytes];
+    let mut arena_c = vec![0u8; bytes];
+    // The batched twin `c`: every operation `a` gets, its leader frames
+    // through a one-session `StepBatch` (`Session::step_many`).
+    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, &cfg, 1).expect("a valid config has a batch size")];
+    let mut batch = StepBatch::new(&model.cfg, &cfg, 1, &mut batch_arena).expect("batch of one");
     let seed = seed_of(input.seed, model, clip);
     let (mut a, mut b) = match (Session::new(model, &mut arena_a, &cfg, seed), Session::new(model, &mut arena_b, &cfg, seed)) {
         (Ok(a), Ok(b)) => (a, b),
@@ -335,9 +357,10 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
         }
         (r1, r2) => panic!("two identical Session::new calls disagree: {:?} vs {:?}", r1.err(), r2.err()),
     };
+    let mut c = Session::new(model, &mut arena_c, &cfg, seed).expect("a third identical Session::new");
     let base = clip.leader_frame(0).to_vec();
     let (mut leader_t, mut music_t, mut next_index) = (0usize, 0usize, 0u64);
-    let (mut fa, mut fb) = (FollowerFrame::default(), FollowerFrame::default());
+    let (mut fa, mut fb, mut fc) = (FollowerFrame::default(), FollowerFrame::default(), FollowerFrame::default());
     let mut buf = Vec::with_capacity(1024);
     // Checks one pulled pair.
     let pulled = |fa: &FollowerFrame, fb: &FollowerFrame, next_index: &mut u64, rep: &mut Report| {
@@ -354,6 +377,8 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                 let rec = if is_leader { clip.leader_frame(leader_t) } else { clip.music_frame(music_t) };
                 make_frame(*g, rec, if is_leader { &base } else { &[] }, &mut buf);
                 let ra = if is_leader { a.push_leader_frame(&buf) } else { a.push_music_frame(&buf) };
+                let rc = if is_leader { push_leader(&mut c, Some(&mut batch), &buf) } else { c.push_music_frame(&buf) };
+                assert_eq!(ra, rc, "op {i}: the batched twin answered differently");
                 let want_len = if is_leader { POSE_DIM } else { n_music };
                 let which = if is_leader { Buffer::LeaderPos3d } else { Buffer::Music };
                 match ra {
@@ -385,6 +410,8 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                 for _ in 0..*n {
                     let (ra, rb) = (a.pull_follower_frame(&mut fa), b.pull_follower_frame(&mut fb));
                     assert_eq!(ra, rb, "pull differs from the shadow");
+                    assert_eq!(ra, c.pull_follower_frame(&mut fc), "pull differs from the batched twin");
+                    assert!(ra != Ok(true) || frame_bits(&fa).eq(frame_bits(&fc)), "frame {} differs from the batched twin's", fa.index);
                     match ra {
                         Ok(true) => pulled(&fa, &fb, &mut next_index, &mut rep),
                         Ok(false) => break,
@@ -395,6 +422,8 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
             Op::PullAll => loop {
                 let (ra, rb) = (a.pull_follower_frame(&mut fa), b.pull_follower_frame(&mut fb));
                 assert_eq!(ra, rb, "pull differs from the shadow");
+                assert_eq!(ra, c.pull_follower_frame(&mut fc), "pull differs from the batched twin");
+                assert!(ra != Ok(true) || frame_bits(&fa).eq(frame_bits(&fc)), "frame {} differs from the batched twin's", fa.index);
                 match ra {
                     Ok(true) => pulled(&fa, &fb, &mut next_index, &mut rep),
                     Ok(false) => break,
@@ -404,13 +433,16 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
             Op::Ticks(n) => {
                 for _ in 0..(*n % 64) {
                     let lf = clip.leader_frame(leader_t).to_vec();
-                    let (mut ma, mut mb) = (music_t, music_t);
-                    let (mut va, mut vb) = (Vec::new(), Vec::new());
-                    let ra = tick(&mut a, clip, &lf, &mut ma, leader_t, &mut fa, &mut |f| va.push(*f));
-                    let rb = tick(&mut b, clip, &lf, &mut mb, leader_t, &mut fb, &mut |f| vb.push(*f));
+                    let (mut ma, mut mb, mut mc) = (music_t, music_t, music_t);
+                    let (mut va, mut vb, mut vc) = (Vec::new(), Vec::new(), Vec::new());
+                    let ra = tick(&mut a, None, clip, &lf, &mut ma, leader_t, &mut fa, &mut |f| va.push(*f));
+                    let rb = tick(&mut b, None, clip, &lf, &mut mb, leader_t, &mut fb, &mut |f| vb.push(*f));
+                    let rc = tick(&mut c, Some(&mut batch), clip, &lf, &mut mc, leader_t, &mut fc, &mut |f| vc.push(*f));
                     assert_eq!(ra, rb, "tick differs from the shadow");
-                    assert_eq!(ma, mb);
+                    assert_eq!(ra, rc, "tick differs from the batched twin");
+                    assert_eq!((ma, ma), (mb, mc));
                     assert_eq!(va.len(), vb.len());
+                    assert!(va.len() == vc.len() && va.iter().zip(&vc).all(|(x, y)| frame_bits(x).eq(frame_bits(y))), "tick frames differ from the batched twin's");
                     for (x, y) in va.iter().zip(&vb) {
                         pulled(x, y, &mut next_index, &mut rep);
                     }
@@ -426,6 +458,7 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                 let seed = seed_of(*g, model, clip);
                 let (ra, rb) = (a.reset(seed), b.reset(seed));
                 assert_eq!(ra, rb);
+                assert_eq!(ra, c.reset(seed));
                 match ra {
                     Ok(()) => {
                         next_index = 0;
@@ -437,6 +470,7 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
             }
             Op::Force { .. } => {
                 let ra = a.force_history(&forced[i]);
+                assert_eq!(ra, c.force_history(&forced[i]), "force_history differs from the batched twin");
                 if ra.is_ok() {
                     assert_eq!(b.force_history(&forced[i]), Ok(()));
                 } else {
@@ -445,6 +479,7 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
             }
             Op::Track { .. } => {
                 let ra = a.set_music_track(&owned[i]);
+                assert_eq!(ra, c.set_music_track(&owned[i]), "set_music_track differs from the batched twin");
                 match ra {
                     Ok(()) => assert_eq!(b.set_music_track(&owned[i]), Ok(())),
                     Err(e) => {
@@ -475,7 +510,7 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
             }
             index += 1;
         };
-        match tick(&mut a, clip, &lf, &mut music_t, t, &mut fa, &mut sink) {
+        match tick(&mut a, None, clip, &lf, &mut music_t, t, &mut fa, &mut sink) {
             Ok(true) => {}
             Ok(false) => {
                 stuck = true;

@@ -97,7 +97,7 @@ fn main() {
             }
             next_index = f.index + 1;
         };
-        match tick(&mut s, clip, &leader, &mut music_t, frames_in as usize, &mut out, &mut sink) {
+        match tick(&mut s, None, clip, &leader, &mut music_t, frames_in as usize, &mut out, &mut sink) {
             Ok(true) => {}
             Ok(false) => {
                 stuck = true;
