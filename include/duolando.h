@@ -401,7 +401,7 @@ void duo_session_free(duo_session *session);
 
 /* Scratch memory for stepping several sessions of one model in one call:
  * each weight matrix of the heavy part of a step is then read once for
- * all of them (16 sessions of the full model take about 4.4x the time of
+ * all of them (16 sessions of the full model take 4.4-4.6x the time of
  * one, not 16x). Every session ends exactly as after its own
  * duo_session_push_leader, bit for bit. A batch holds no session state
  * and no model reference: it is sized for a configuration and a number of

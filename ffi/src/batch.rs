@@ -3,7 +3,7 @@
 //! session per call, and each weight matrix of the LATs, the GPT and the
 //! heads read once for all of them. Every session ends exactly as after
 //! its own `duo_session_push_leader` (bit for bit); only the time differs
-//! (docs/PERFORMANCE.md: 16 sessions in ~4.4x the time of one at full
+//! (docs/PERFORMANCE.md: 16 sessions in 4.4-4.6x the time of one at full
 //! size).
 //!
 //! A batch is scratch memory only (no session state, no model reference):

@@ -374,7 +374,7 @@ namespace Duolando
     }
 
     /// <summary>Several sessions of one model stepped together: each weight matrix is read
-    /// once for all of them (16 full-size sessions take about 4.4x the time of one).
+    /// once for all of them (16 full-size sessions take 4.4-4.6x the time of one).
     /// Every session ends as after its own PushLeader, bit for bit. One thread at a time,
     /// and the sessions of a call are not used elsewhere during it.</summary>
     public sealed class StepBatch : IDisposable
