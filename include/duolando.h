@@ -441,9 +441,10 @@ duo_result duo_step_batch_new_in(const duo_model *model, const duo_session_confi
  * Refused before any session changes, with *failed_session = the session
  * concerned: a NULL session (DUO_NULL_PARAMETER); a session given twice,
  * sessions of different models, a session whose configuration needs more
- * than the batch's (DUO_INVALID_ARGUMENT); the first frame its session
- * would refuse (DUO_NON_FINITE_INPUT, DUO_BACKLOG, as
- * duo_session_push_leader). n above the batch's max_sessions:
+ * than the batch's (DUO_INVALID_ARGUMENT); the first frame holding NaN,
+ * infinity or |value| > DUO_MAX_POSITION_M (DUO_NON_FINITE_INPUT), else
+ * the first session that would refuse its frame for backlog (DUO_BACKLOG,
+ * as duo_session_push_leader). n above the batch's max_sessions:
  * DUO_INVALID_ARGUMENT with DUO_NO_SESSION. n == 0 does nothing.
  * failed_session (NULL or writable) is written on EVERY return: the index
  * of the session a failure concerns, else DUO_NO_SESSION. */

@@ -186,8 +186,10 @@ pub unsafe extern "C" fn duo_step_batch_free(batch: *mut DuoStepBatch) {
 /// Refused before anything changes (no session changes; `*failed_session` =
 /// the session concerned): a NULL session, a session given twice, sessions
 /// of different models, a session whose configuration needs more than the
-/// batch was made for (`DUO_INVALID_ARGUMENT`), a frame the session would
-/// refuse (`DUO_NON_FINITE_INPUT`, `DUO_BACKLOG`: the first such session).
+/// batch was made for (`DUO_INVALID_ARGUMENT`), a frame with a non-finite
+/// or out-of-range value (`DUO_NON_FINITE_INPUT`: the first such frame,
+/// all frames checked before the sessions), a session that would refuse its
+/// frame for backlog (`DUO_BACKLOG`: the first such session).
 /// `n` above the batch's `max_sessions` is `DUO_INVALID_ARGUMENT` with
 /// `DUO_NO_SESSION`. `n == 0` does nothing.
 ///
