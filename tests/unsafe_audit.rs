@@ -39,6 +39,7 @@ const ALLOWED: &[&str] = &[
     "ffi/src/result.rs",
     "ffi/src/session.rs",
     "ffi/src/batch.rs",
+    "ffi/src/handle.rs",
     "ffi/tests/header.rs",
     "ffi/tests/session_golden.rs",
     "ffi/tests/no_alloc.rs",

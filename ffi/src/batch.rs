@@ -21,6 +21,7 @@ use duolando_core::session::{Session, SessionConfig, StepBatch, MAX_BATCH};
 use duolando_core::Error;
 
 use crate::frames::DuoLeaderFrame;
+use crate::handle::{caller_slot, drop_handle, handle_bytes};
 use crate::model::DuoModel;
 use crate::result::{guard, DuoResult, Failure};
 use crate::session::{config_ref, leader_pos3d, model_ref, DuoSession, DuoSessionConfig};
@@ -43,7 +44,7 @@ pub struct StepBatchInner {
 pub type DuoStepBatch = StepBatchInner;
 
 /// Alignment slack and size of the handle placed at the start of caller memory.
-const HANDLE_BYTES: usize = std::mem::size_of::<StepBatchInner>() + std::mem::align_of::<StepBatchInner>();
+const HANDLE_BYTES: usize = handle_bytes::<StepBatchInner>();
 
 /// Arena bytes of a batch of `max_sessions` sessions of `config` on `model`.
 ///
@@ -130,21 +131,8 @@ pub unsafe extern "C" fn duo_step_batch_new_in(
         if memory.is_null() {
             return Err(Failure::null("memory"));
         }
-        let need = n.saturating_add(HANDLE_BYTES);
-        if len < need {
-            return Err(Failure::new(DuoResult::BufferTooSmall, format!("memory has {len} bytes, this batch needs {need} (duo_step_batch_bytes)")));
-        }
-        let pad = memory.align_offset(std::mem::align_of::<StepBatchInner>());
-        if pad == usize::MAX || pad + std::mem::size_of::<StepBatchInner>() > len {
-            return Err(Failure::new(DuoResult::BufferTooSmall, "memory cannot hold the batch handle"));
-        }
-        // SAFETY: [pad, pad + size) lies in the caller's `len` bytes and is
-        // aligned for StepBatchInner; the arena is the rest, disjoint.
-        let (slot, arena) = unsafe {
-            let slot = memory.add(pad).cast::<StepBatchInner>();
-            let start = pad + std::mem::size_of::<StepBatchInner>();
-            (slot, std::slice::from_raw_parts_mut(memory.add(start), len - start))
-        };
+        // SAFETY: `memory` non-NULL (checked) with `len` bytes kept for the batch (contract).
+        let (slot, arena) = unsafe { caller_slot::<StepBatchInner>(memory, len, n.saturating_add(HANDLE_BYTES), "duo_step_batch_bytes") }?;
         let batch = StepBatch::new(model_cfg, &cfg, max_sessions, arena)?;
         // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
         unsafe {
@@ -164,17 +152,8 @@ pub unsafe extern "C" fn duo_step_batch_new_in(
 #[no_mangle]
 pub unsafe extern "C" fn duo_step_batch_free(batch: *mut DuoStepBatch) {
     let _ = guard("duo_step_batch_free", || {
-        if batch.is_null() {
-            return Ok(DuoResult::Ok);
-        }
-        // SAFETY: a live handle (contract); read the flag before dropping.
-        unsafe {
-            if (*batch).in_caller_memory {
-                std::ptr::drop_in_place(batch);
-            } else {
-                drop(Box::from_raw(batch));
-            }
-        }
+        // SAFETY: NULL or a live handle, freed once (contract).
+        unsafe { drop_handle(batch, |b| b.in_caller_memory) };
         Ok(DuoResult::Ok)
     });
 }

@@ -14,6 +14,7 @@ use std::panic::catch_unwind;
 
 pub mod batch;
 pub mod frames;
+mod handle;
 pub mod model;
 pub mod result;
 pub mod session;

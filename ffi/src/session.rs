@@ -20,6 +20,7 @@ use duolando_core::config::{N_JOINTS, POSE_DIM};
 use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Sampling, Session, SessionConfig};
 
 use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
+use crate::handle::{caller_slot, drop_handle, handle_bytes};
 use crate::model::{share, DuoModel, ModelInner};
 use crate::result::{guard, DuoResult, Failure};
 
@@ -207,7 +208,7 @@ pub unsafe extern "C" fn duo_session_config_minimum(model: *const DuoModel, out_
 }
 
 /// Alignment slack and size of the handle placed at the start of caller memory.
-const HANDLE_BYTES: usize = std::mem::size_of::<SessionInner>() + std::mem::align_of::<SessionInner>();
+const HANDLE_BYTES: usize = handle_bytes::<SessionInner>();
 
 /// Bytes `duo_session_new_in` needs for `config` (any address).
 ///
@@ -298,23 +299,8 @@ pub unsafe extern "C" fn duo_session_new_in(
             return Err(Failure::null("memory"));
         }
         let need = m.model().session_bytes(&cfg)?.saturating_add(HANDLE_BYTES);
-        if len < need {
-            return Err(Failure::new(
-                DuoResult::BufferTooSmall,
-                format!("memory has {len} bytes, this configuration needs {need} (duo_session_bytes)"),
-            ));
-        }
-        let pad = memory.align_offset(std::mem::align_of::<SessionInner>());
-        if pad == usize::MAX || pad + std::mem::size_of::<SessionInner>() > len {
-            return Err(Failure::new(DuoResult::BufferTooSmall, "memory cannot hold the session handle"));
-        }
-        // SAFETY: [pad, pad + size) lies in the caller's `len` bytes and is
-        // aligned for SessionInner; the arena is the rest, disjoint.
-        let (slot, arena) = unsafe {
-            let slot = memory.add(pad).cast::<SessionInner>();
-            let start = pad + std::mem::size_of::<SessionInner>();
-            (slot, std::slice::from_raw_parts_mut(memory.add(start), len - start))
-        };
+        // SAFETY: `memory` non-NULL (checked) with `len` bytes kept for the session (contract).
+        let (slot, arena) = unsafe { caller_slot::<SessionInner>(memory, len, need, "duo_session_bytes") }?;
         // SAFETY: `model` is a live handle (contract).
         let arc = unsafe { share(model) };
         let session = start(&arc, arena, &cfg, seed)?;
@@ -335,17 +321,8 @@ pub unsafe extern "C" fn duo_session_new_in(
 #[no_mangle]
 pub unsafe extern "C" fn duo_session_free(session: *mut DuoSession) {
     let _ = guard("duo_session_free", || {
-        if session.is_null() {
-            return Ok(DuoResult::Ok);
-        }
-        // SAFETY: a live handle (contract); read the flag before dropping.
-        unsafe {
-            if (*session).in_caller_memory {
-                std::ptr::drop_in_place(session);
-            } else {
-                drop(Box::from_raw(session));
-            }
-        }
+        // SAFETY: NULL or a live handle, freed once (contract).
+        unsafe { drop_handle(session, |s| s.in_caller_memory) };
         Ok(DuoResult::Ok)
     });
 }

@@ -114,7 +114,6 @@ fn drive(s: *mut DuoSession, g: &Golden, noise: Noise) -> Vec<DuoFollowerFrame> 
     // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     assert_eq!(unsafe { duo_session_set_music_track(s, g.music.as_ptr(), g.music.len()) }, DuoResult::Ok, "{}", last_error());
     let mut out = Vec::new();
-    let mut f = DuoFollowerFrame::default();
     for (i, frame) in g.leader.iter().enumerate() {
         if noise == Noise::BadFrames && i % 7 == 3 {
             let mut bad = *frame;
@@ -129,13 +128,7 @@ fn drive(s: *mut DuoSession, g: &Golden, noise: Noise) -> Vec<DuoFollowerFrame> 
             DuoResult::Backlog if out.len() == g.frames => break,
             r => panic!("frame {i}: {r:?} {}", last_error()),
         }
-        loop {
-            match unsafe { duo_session_pull_follower(s, &mut f) } {
-                DuoResult::Ok => out.push(f),
-                DuoResult::NotReady => break,
-                r => panic!("pull: {r:?} {}", last_error()),
-            }
-        }
+        pull_all(s, &mut out);
     }
     out
 }
