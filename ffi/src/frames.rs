@@ -15,8 +15,8 @@
 //! relative) rotations, since conjugation commutes with the joint chain.
 
 use duolando_core::config::{N_JOINTS, POSE_DIM};
-use duolando_std::skeleton::math::Mat3;
-use duolando_std::skeleton::rotation::{nearest_rotation, quat_from_mat};
+use duolando_runtime::skeleton::math::Mat3;
+use duolando_runtime::skeleton::rotation::{nearest_rotation, quat_from_mat};
 
 /// `duo_vec3`: x, y, z.
 #[repr(C)]
@@ -244,8 +244,8 @@ pub unsafe extern "C" fn duo_leader_frame_convert(frame: *mut DuoLeaderFrame, co
 #[cfg(test)]
 mod tests {
     use super::*;
-    use duolando_std::skeleton::math::{axis_angle, mat_vec};
-    use duolando_std::skeleton::rotation::mat_from_quat;
+    use duolando_runtime::skeleton::math::{axis_angle, mat_vec};
+    use duolando_runtime::skeleton::rotation::mat_from_quat;
 
     fn v(x: f32, y: f32, z: f32) -> DuoVec3 {
         DuoVec3 { x, y, z }

@@ -58,7 +58,7 @@ pub extern "C" fn duo_set_threads(threads: u32) -> DuoResult {
         if threads > MAX_THREADS {
             return Err(result::Failure::new(DuoResult::InvalidArgument, format!("{threads} threads: at most {MAX_THREADS}")));
         }
-        duolando_std::workers::set_threads(threads as usize)
+        duolando_runtime::workers::set_threads(threads as usize)
             .map_err(|e| result::Failure::new(DuoResult::Io, format!("could not start {threads} threads: {e}")))?;
         Ok(DuoResult::Ok)
     })
@@ -67,7 +67,7 @@ pub extern "C" fn duo_set_threads(threads: u32) -> DuoResult {
 /// The thread count set by [`duo_set_threads`] (1 when unset). Thread-safe.
 #[no_mangle]
 pub extern "C" fn duo_get_threads() -> u32 {
-    catch_unwind(|| duolando_std::workers::threads() as u32).unwrap_or(1)
+    catch_unwind(|| duolando_runtime::workers::threads() as u32).unwrap_or(1)
 }
 
 #[cfg(test)]

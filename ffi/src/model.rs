@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use duolando_core::format::DuoFile;
 use duolando_core::Model;
-use duolando_std::model_file::{explain, AlignedBytes, ModelFile, ModelFileError};
+use duolando_runtime::model_file::{explain, AlignedBytes, ModelFile, ModelFileError};
 
 use crate::result::{guard, DuoResult, Failure};
 
@@ -66,12 +66,12 @@ pub type DuoModel = ModelInner;
 fn bind(duo: &DuoFile<'static>, origin: &str) -> Result<Model<'static>, Failure> {
     static KERNELS: std::sync::Once = std::sync::Once::new();
     KERNELS.call_once(|| {
-        duolando_std::simd::init();
+        duolando_runtime::simd::init();
     });
     Model::from_duo(duo).map_err(|e| {
         Failure::new(
             DuoResult::BadModel,
-            format!("{origin}: invalid .duo model: {}", duolando_std::engine_errors::describe(&duolando_core::Error::from(e))),
+            format!("{origin}: invalid .duo model: {}", duolando_runtime::engine_errors::describe(&duolando_core::Error::from(e))),
         )
     })
 }

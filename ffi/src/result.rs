@@ -112,7 +112,7 @@ pub fn code_of(e: &Error) -> DuoResult {
 
 impl From<Error> for Failure {
     fn from(e: Error) -> Self {
-        Failure::new(code_of(&e), duolando_std::engine_errors::describe(&e))
+        Failure::new(code_of(&e), duolando_runtime::engine_errors::describe(&e))
     }
 }
 

@@ -6,19 +6,19 @@
 // pool (tests/unsafe_audit.rs).
 #![deny(unsafe_code)]
 
+// The small std layer shared with the C library (duolando-runtime),
+// re-exported under its old paths.
+pub use duolando_runtime::{engine_errors, model_file, simd, workers};
+
 pub mod agreement;
 pub mod audio;
 pub mod cli;
 pub mod convert;
 pub mod duo_writer;
-pub mod engine_errors;
 pub mod export;
-pub mod model_file;
 pub mod music;
 pub mod npy;
-pub mod simd;
 pub mod streaming;
 pub mod skeleton;
 pub mod synth;
 pub mod viewer;
-pub mod workers;

@@ -11,10 +11,10 @@
 
 pub mod fk;
 pub mod ik;
-pub mod math;
 pub mod rest;
 pub mod retarget;
-pub mod rotation;
+// Rotation helpers shared with the C library (duolando-runtime).
+pub use duolando_runtime::skeleton::{math, rotation};
 
 pub use fk::forward_kinematics;
 pub use math::{Mat3, Vec3};

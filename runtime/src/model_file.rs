@@ -1,6 +1,8 @@
 //! Opening `.duo` files: a 64-byte aligned buffer (mmap, or an aligned copy)
 //! plus a validated [`DuoFile`] view, with errors that name the file, the
-//! tensor and the expected vs found values.
+//! tensor and the expected vs found values. Opening a model also selects the
+//! fastest kernels this CPU supports, once per process
+//! ([`crate::simd::ensure_init`]).
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -80,6 +82,7 @@ impl ModelFile {
         };
         let mf = ModelFile { storage, origin };
         mf.duo()?;
+        crate::simd::ensure_init();
         Ok(mf)
     }
 
@@ -92,6 +95,7 @@ impl ModelFile {
     pub fn from_aligned(bytes: AlignedBytes, origin: &str) -> Result<ModelFile, ModelFileError> {
         let mf = ModelFile { storage: Storage::Owned(bytes), origin: origin.to_string() };
         mf.duo()?;
+        crate::simd::ensure_init();
         Ok(mf)
     }
 

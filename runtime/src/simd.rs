@@ -1,8 +1,11 @@
 //! Run-time selection of the core's SIMD kernels (`duolando_core::kernels::simd`).
 //! Core (no_std) can only use what the compile-time target features
 //! guarantee; the std side detects the CPU once and switches the
-//! process-wide kernel table. Call [`init`] once at start-up (the CLI
-//! commands that run the model do).
+//! process-wide kernel table. Nobody has to ask: the first model opened
+//! through [`crate::model_file::ModelFile`] (every std entry point: the CLI,
+//! the Rust API, the C library) selects the detected kernels
+//! ([`ensure_init`]). [`init`] does the same explicitly (and again, after a
+//! change of `DUOLANDO_ISA`).
 //!
 //! `DUOLANDO_ISA=scalar|avx2|avx512|avx512vnni|avx512amx|neon|neondot` caps
 //! the choice (an ISA this CPU lacks selects scalar), for comparisons.
@@ -14,7 +17,13 @@
 //! `duolando_core::kernels::simd::amx`). `DUOLANDO_ISA=avx512vnni` keeps
 //! it off; unset or `avx512amx` allows it.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Once;
+
 use duolando_core::kernels::simd::{self, Isa};
+
+/// Set once [`init`] has run (explicitly or through [`ensure_init`]).
+static SELECTED: AtomicBool = AtomicBool::new(false);
 
 /// Every ISA this CPU supports that the core has kernels for, best first.
 pub fn supported() -> Vec<Isa> {
@@ -74,6 +83,7 @@ pub fn parse(name: &str) -> Option<Isa> {
 /// AMX tiles where [`amx_usable`] (unless `DUOLANDO_ISA` names another ISA
 /// than `avx512amx`); returns the ISA.
 pub fn init() -> Isa {
+    SELECTED.store(true, Ordering::Release);
     let isa = detect();
     // SAFETY: `detect` returned `isa` only from `supported`, which checked
     // that this CPU supports every feature its kernels are compiled for.
@@ -91,6 +101,41 @@ pub fn init() -> Isa {
         };
     }
     isa
+}
+
+/// Selects the detected kernels ([`init`]) unless a selection was already
+/// made in this process; returns the ISA running now. Called by every
+/// constructor of [`crate::model_file::ModelFile`], so that no std caller
+/// runs the scalar kernels by forgetting a call. A selection made earlier
+/// (an explicit [`init`], or a test that pinned an ISA and then called
+/// [`init`]) is kept.
+pub fn ensure_init() -> Isa {
+    static ONCE: Once = Once::new();
+    if !SELECTED.load(Ordering::Acquire) {
+        ONCE.call_once(|| {
+            init();
+        });
+    }
+    simd::isa()
+}
+
+/// The ISA whose kernels run now (scalar until [`init`] or [`ensure_init`]).
+pub fn active() -> Isa {
+    simd::isa()
+}
+
+/// The lower-case name of an ISA, as [`parse`] reads it; `avx512amx` where
+/// the AMX tile kernel is on.
+pub fn name(isa: Isa) -> &'static str {
+    match isa {
+        Isa::Scalar => "scalar",
+        Isa::Avx2 => "avx2",
+        Isa::Avx512 => "avx512",
+        Isa::Avx512Vnni if amx_active() => "avx512amx",
+        Isa::Avx512Vnni => "avx512vnni",
+        Isa::Neon => "neon",
+        Isa::NeonDot => "neondot",
+    }
 }
 
 /// Whether the AMX tile kernel runs now (after [`init`]).
