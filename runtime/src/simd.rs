@@ -119,6 +119,20 @@ pub fn ensure_init() -> Isa {
     simd::isa()
 }
 
+/// Pins the scalar kernels for the whole process (`duolando bench
+/// --scalar`); models opened afterwards keep them ([`ensure_init`] sees a
+/// selection made).
+pub fn force_scalar() {
+    SELECTED.store(true, Ordering::Release);
+    simd::force_scalar();
+}
+
+/// The kernels running now in words, as the CLI prints them: `Avx512Vnni`,
+/// `Avx512Vnni+AMX`, `Avx2`, `Neon`, `Scalar`, ...
+pub fn describe() -> String {
+    format!("{:?}{}", simd::isa(), if amx_active() { "+AMX" } else { "" })
+}
+
 /// The ISA whose kernels run now (scalar until [`init`] or [`ensure_init`]).
 pub fn active() -> Isa {
     simd::isa()

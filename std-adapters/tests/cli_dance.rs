@@ -173,7 +173,7 @@ fn dance_with_audio_music_and_the_default_seed() {
 #[test]
 fn dance_with_a_bvh_leader() {
     let dir = tmp("bvh");
-    let take = duolando::synth::demo_take(3, 6.0);
+    let take = duolando::synth::demo_take(3, 10.0);
     let leader = dir.join("leader_in.bvh");
     bvh::write(&leader, &Motion::from_track(&take.leader), 30.0, bvh::Units::Centimetres).unwrap();
     let music = dir.join("music.npy");
@@ -181,18 +181,82 @@ fn dance_with_a_bvh_leader() {
     let o = dance_tiny(&dir.join("out"), &leader, &music, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("out/summary.json")).unwrap()).unwrap();
-    assert_eq!(s["leader"]["source"], "bvh (centimetres)");
+    assert_eq!(s["leader"]["source"], "bvh, SMPL-X, centimetres");
     assert_eq!(s["leader"]["frames"], take.frames);
     // The leader read back from BVH is the take's leader (cm text round-off).
     let got = read_f32_2d(&dir.join("out/leader_pos3d.npy"), Some(165), "leader").unwrap();
     let err = got.data.iter().zip(&take.leader.positions).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
     assert!(err < 1e-3, "BVH leader vs take: {err} m");
 
-    // 60 fps BVH: rejected, naming the file and the expected frame time.
+    // The same frames labelled 60 fps: resampled to 30 fps, frame k is the
+    // take's frame 2k.
     let fast = dir.join("leader_60fps.bvh");
     let text = std::fs::read_to_string(&leader).unwrap().replace("Frame Time: 0.0333333", "Frame Time: 0.0166667");
     std::fs::write(&fast, text).unwrap();
-    assert_fails(&dance_tiny(&dir.join("out2"), &fast, &music, &[]), &fast, "30 fps");
+    let o = dance_tiny(&dir.join("out2"), &fast, &music, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("out2/summary.json")).unwrap()).unwrap();
+    assert_eq!(s["leader"]["frames"], (take.frames - 1) / 2 + 1);
+    assert!(s["leader"]["source"].as_str().unwrap().contains("60.00 fps resampled to 30"), "{}", s["leader"]["source"]);
+    let got = read_f32_2d(&dir.join("out2/leader_pos3d.npy"), Some(165), "leader").unwrap();
+    for k in 0..got.rows {
+        let want = &take.leader.positions[2 * k * 165..(2 * k + 1) * 165];
+        let err = got.data[k * 165..(k + 1) * 165].iter().zip(want).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+        assert!(err < 1e-3, "60 fps frame {} vs take: {err} m", 2 * k);
+    }
+
+    // Mixamo joint names (the body; this rig's fingers keep SMPL-X names,
+    // which Mixamo does not read, so they are placed at the wrists).
+    let mixamo = dir.join("leader_mixamo.bvh");
+    let mut text = std::fs::read_to_string(&leader).unwrap();
+    for (smplx, mixamo) in [
+        ("left_hip", "LeftUpLeg"), ("right_hip", "RightUpLeg"), ("spine1", "Spine"), ("left_knee", "LeftLeg"),
+        ("right_knee", "RightLeg"), ("spine2", "Spine1"), ("left_ankle", "LeftFoot"), ("right_ankle", "RightFoot"),
+        ("spine3", "Spine2"), ("left_foot", "LeftToeBase"), ("right_foot", "RightToeBase"), ("neck", "Neck"),
+        ("left_collar", "LeftShoulder"), ("right_collar", "RightShoulder"), ("head", "Head"),
+        ("left_shoulder", "LeftArm"), ("right_shoulder", "RightArm"), ("left_elbow", "LeftForeArm"),
+        ("right_elbow", "RightForeArm"), ("left_wrist", "LeftHand"), ("right_wrist", "RightHand"), ("pelvis", "Hips"),
+    ] {
+        text = text.replace(&format!("JOINT {smplx}\n"), &format!("JOINT mixamorig:{mixamo}\n"));
+        text = text.replace(&format!("ROOT {smplx}\n"), &format!("ROOT mixamorig:{mixamo}\n"));
+    }
+    assert!(text.contains("mixamorig:LeftForeArm") && text.contains("ROOT mixamorig:Hips"), "renamed");
+    std::fs::write(&mixamo, text).unwrap();
+    let o = dance_tiny(&dir.join("out3"), &mixamo, &music, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let got = read_f32_2d(&dir.join("out3/leader_pos3d.npy"), Some(165), "leader").unwrap();
+    for t in 0..got.rows {
+        for j in 0..55 {
+            let src = match j {
+                22..=24 => 15,  // jaw, eyes: at the head
+                25..=39 => 20,  // left fingers: at the wrist
+                40..=54 => 21,  // right fingers
+                _ => j,
+            };
+            for c in 0..3 {
+                let (a, b) = (got.data[t * 165 + j * 3 + c], take.leader.positions[t * 165 + src * 3 + c]);
+                assert!((a - b).abs() < 1e-3, "Mixamo frame {t} joint {j}: {a} vs {b}");
+            }
+        }
+    }
+}
+
+#[test]
+fn music_shorter_than_the_leader_cuts_the_leader() {
+    let dir = tmp("shortmusic");
+    let r = roll();
+    let short = dir.join("music_300.npy");
+    let music = read_f32_2d(&r.join("music.npy"), Some(54), "music").unwrap();
+    write_f32(&short, &music.data[..300 * 54], &[300, 54]).unwrap();
+    let o = dance_tiny(&dir.join("out"), &r.join("leader_pos3d.npy"), &short, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("the leader is cut to the music"), "{}", stderr(&o));
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("out/summary.json")).unwrap()).unwrap();
+    assert_eq!(s["leader"]["frames"], 300);
+    assert!(s["follower_frames"].as_u64().unwrap() <= 300);
+    let leader = read_f32_2d(&dir.join("out/leader_pos3d.npy"), Some(165), "leader").unwrap();
+    let full = read_f32_2d(&r.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
+    assert_eq!(leader.data[..], full.data[..leader.data.len()], "the leader's first frames, unchanged");
 }
 
 #[test]
@@ -211,10 +275,10 @@ fn bad_inputs_fail_naming_the_file() {
     let m53 = dir.join("music_53.npy");
     write_f32(&m53, &vec![0.0; 600 * 53], &[600, 53]).unwrap();
     assert_fails(&dance_tiny(&out, &leader, &m53, &[]), &m53, "54");
-    // Music shorter than the leader.
+    // Music too short even for a leader cut to it.
     let short = dir.join("music_short.npy");
-    write_f32(&short, &vec![0.0; 300 * 54], &[300, 54]).unwrap();
-    assert_fails(&dance_tiny(&out, &leader, &short, &[]), &short, "cover");
+    write_f32(&short, &vec![0.0; 40 * 54], &[40, 54]).unwrap();
+    assert_fails(&dance_tiny(&out, &leader, &short, &[]), &leader, "at least");
     // Leader too short for the model.
     let tiny_clip = dir.join("leader_short.npy");
     write_f32(&tiny_clip, &vec![0.0; 40 * 165], &[40, 165]).unwrap();

@@ -500,13 +500,12 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let isa = if args.scalar {
-        duolando_core::kernels::simd::force_scalar();
-        duolando_core::kernels::simd::Isa::Scalar
+    if args.scalar {
+        crate::simd::force_scalar();
     } else {
-        crate::simd::init()
-    };
-    let isa = format!("{isa:?}{}", if crate::simd::amx_active() { "+AMX" } else { "" });
+        crate::simd::init();
+    }
+    let isa = crate::simd::describe();
     let memcpy = memcpy_gbps(1);
     let memcpy_t2 = memcpy_gbps(2);
     let read = read_gbps();

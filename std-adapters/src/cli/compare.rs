@@ -68,12 +68,12 @@ fn open(path: &PathBuf) -> Result<ModelFile> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    crate::simd::init();
     let model_path = match &args.model {
         Some(p) => p.clone(),
         None => require_asset(DEMO_MODEL, "model")?,
     };
     let file = open(&model_path)?;
+    super::print_kernels();
     let duo = file.duo()?;
     let model = Model::from_duo(&duo).map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", model_path.display()))?;
     let n_music = model.cfg.gpt.music.n_in as usize;

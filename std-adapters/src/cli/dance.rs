@@ -9,6 +9,7 @@
 //! under the workspace the binary was compiled in).
 
 pub mod inputs;
+pub mod leader_bvh;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -145,6 +146,26 @@ fn check_lengths(cfg: &ModelConfig, leader: &Leader, leader_path: &Path, music: 
     Ok(shape)
 }
 
+/// Music shorter than the leader clip: the dance ends with the music, so the
+/// leader is cut to the music's length (a note says so) instead of refused.
+/// Whether what is left is long enough is [`check_lengths`]'s question.
+fn cut_leader_to_music(leader: &mut Leader, leader_path: &Path, music: &Music, music_path: &Path) {
+    if music.frames >= leader.frames {
+        return;
+    }
+    eprintln!(
+        "      note: the music {} has {} frames ({:.1} s), the leader {} has {} ({:.1} s): the leader is cut to the music",
+        music_path.display(),
+        music.frames,
+        music.frames as f64 / 30.0,
+        leader_path.display(),
+        leader.frames,
+        leader.frames as f64 / 30.0
+    );
+    leader.frames = music.frames;
+    leader.pos3d.truncate(music.frames * POSE_DIM);
+}
+
 /// Copies the audio next to the viewer as `music.<ext>`; returns the name.
 fn copy_audio(src: &Path, dir: &Path) -> Result<String> {
     let ext: String = inputs::extension(src).chars().filter(char::is_ascii_alphanumeric).collect();
@@ -189,6 +210,7 @@ pub fn run(args: Args) -> Result<()> {
     stage(1, &format!("model {}, {threads} thread(s)", model_path.display()));
     let t = Instant::now();
     let file = ModelFile::open(&model_path)?;
+    super::print_kernels();
     let duo = file.duo()?;
     let model = Model::from_duo(&duo)
         .map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", model_path.display()))?;
@@ -197,8 +219,9 @@ pub fn run(args: Args) -> Result<()> {
 
     stage(2, &format!("inputs: leader {}, music {}", leader_path.display(), music_path.display()));
     let t = Instant::now();
-    let leader = inputs::load_leader(&leader_path)?;
+    let mut leader = inputs::load_leader(&leader_path)?;
     let music = inputs::load_music(&music_path, cfg.gpt.music.n_in as usize, &model_path)?;
+    cut_leader_to_music(&mut leader, &leader_path, &music, &music_path);
     let shape = check_lengths(&cfg, &leader, &leader_path, &music, &music_path, &model_path)?;
     let (seed, seed_text) = choose_seed(&args, demo, &leader, &cfg, &model_path)?;
     eprintln!(
@@ -287,6 +310,8 @@ pub fn run(args: Args) -> Result<()> {
     let summary = json!({
         "model": model_path.display().to_string(),
         "mode": "exact (R)",
+        "kernels": crate::simd::describe(),
+        "threads": threads,
         "fps": 30,
         "leader": {
             "file": leader_path.display().to_string(),

@@ -184,10 +184,10 @@ pub fn write_outputs(dir: &Path, g: &Generated) -> Result<()> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    crate::simd::init();
     let threads = args.threads.map_or_else(crate::workers::default_threads, |n| n as usize);
     crate::workers::set_threads(threads).with_context(|| format!("starting {threads} threads"))?;
     let file = ModelFile::open(&args.model)?;
+    super::print_kernels();
     let duo = file.duo()?;
     let model = Model::from_duo(&duo)
         .map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", args.model.display()))?;

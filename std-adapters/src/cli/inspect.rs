@@ -269,6 +269,7 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
 
 pub fn run(args: Args) -> Result<()> {
     let r = report(&args.model, args.frames)?;
+    super::print_kernels();
     let out = if args.json {
         serde_json::to_string_pretty(&r)? + "\n"
     } else {

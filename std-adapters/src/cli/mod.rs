@@ -68,6 +68,14 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// Prints the kernels that run the model (`kernels: Avx512Vnni+AMX`) to
+/// stderr. Commands that run a model call it after opening it: opening
+/// selected the fastest kernels this CPU supports (`simd::ensure_init`),
+/// or those `DUOLANDO_ISA` caps it to.
+pub(crate) fn print_kernels() {
+    eprintln!("kernels: {}", crate::simd::describe());
+}
+
 /// Parses `std::env::args` and runs the chosen subcommand.
 pub fn run() -> anyhow::Result<()> {
     Cli::parse().command.run()

@@ -7,10 +7,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use duolando_core::config::POSE_DIM;
 
-use crate::export::bvh;
 use crate::music::{Extractor, SAMPLE_RATE};
 use crate::npy::read_f32_2d;
-use crate::skeleton::{JOINTS, JOINT_NAMES};
 
 /// Frames per second of the model's motion and music.
 pub const FPS: f64 = 30.0;
@@ -58,7 +56,7 @@ pub fn extension(p: &Path) -> String {
 }
 
 /// Fails with the file, frame and channel of the first non-finite value.
-fn check_finite(path: &Path, data: &[f32], cols: usize, what: &str) -> Result<()> {
+pub(crate) fn check_finite(path: &Path, data: &[f32], cols: usize, what: &str) -> Result<()> {
     if let Some(i) = data.iter().position(|v| !v.is_finite()) {
         bail!("{}: {what}[{}, {}] is not finite ({}); expected finite values", path.display(), i / cols, i % cols, data[i]);
     }
@@ -66,6 +64,7 @@ fn check_finite(path: &Path, data: &[f32], cols: usize, what: &str) -> Result<()
 }
 
 /// The leader clip: (frames, 165) world joint positions, metres, 30 fps.
+#[derive(Debug)]
 pub struct Leader {
     pub pos3d: Vec<f32>,
     pub frames: usize,
@@ -84,59 +83,12 @@ pub fn load_leader(path: &Path) -> Result<Leader> {
             check_finite(path, &a.data, POSE_DIM, "leader")?;
             Ok(Leader { pos3d: a.data, frames: a.rows, source: "npy".into() })
         }
-        "bvh" => load_bvh(path),
+        "bvh" => super::leader_bvh::load(path),
         other => bail!(
-            "{}: unknown leader format '.{other}'; expected .npy (T, 165) joint positions or .bvh with the SMPL-X joint names",
+            "{}: unknown leader format '.{other}'; expected .npy (T, 165) joint positions or .bvh (SMPL-X or Mixamo joint names, any frame rate; docs/LEADER_INPUT.md)",
             path.display()
         ),
     }
-}
-
-/// Reads a BVH leader: 30 fps, the 55 SMPL-X joint names (as `duolando`
-/// writes them), centimetres or metres (taken as centimetres when the
-/// first frame is taller than 5 units).
-fn load_bvh(path: &Path) -> Result<Leader> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let what = path.display().to_string();
-    let clip = bvh::parse(&text, &what)?;
-    let ft = clip.frame_time as f64;
-    if !(ft.is_finite() && ft > 0.0 && (ft * FPS - 1.0).abs() <= FRAME_TIME_TOLERANCE) {
-        bail!(
-            "{what}: Frame Time {} s ({:.3} fps); the model runs at 30 fps (Frame Time 0.0333333). \
-             Resample the clip to 30 fps (e.g. in Blender) or pass (T, 165) positions at 30 fps as .npy",
-            clip.frame_time,
-            if ft > 0.0 { 1.0 / ft } else { 0.0 }
-        );
-    }
-    if clip.frames == 0 {
-        bail!("{what}: the BVH has 0 frames; expected a clip at 30 fps");
-    }
-    let index: Vec<Option<usize>> = JOINT_NAMES.iter().map(|n| clip.joints.iter().position(|j| j.name == *n)).collect();
-    let missing: Vec<&str> = JOINT_NAMES.iter().zip(&index).filter(|(_, i)| i.is_none()).map(|(n, _)| *n).collect();
-    if !missing.is_empty() {
-        bail!(
-            "{what}: {} of the {JOINTS} SMPL-X joints are missing (first: {}); expected a BVH with the SMPL-X joint names \
-             (pelvis, left_hip, right_hip, ...) as `duolando dance` writes them",
-            missing.len(),
-            missing.iter().take(5).copied().collect::<Vec<_>>().join(", ")
-        );
-    }
-    let mut pos3d = Vec::with_capacity(clip.frames * POSE_DIM);
-    for t in 0..clip.frames {
-        let world = clip.positions(t);
-        for i in index.iter().flatten() {
-            pos3d.extend_from_slice(&world[*i]);
-        }
-    }
-    let ys = pos3d.chunks_exact(3).take(JOINTS).map(|p| p[1]);
-    let height = ys.clone().fold(f32::MIN, f32::max) - ys.fold(f32::MAX, f32::min);
-    let cm = height > 5.0;
-    if cm {
-        pos3d.iter_mut().for_each(|v| *v /= 100.0);
-    }
-    check_finite(path, &pos3d, POSE_DIM, "leader positions")?;
-    let source = format!("bvh ({})", if cm { "centimetres" } else { "metres" });
-    Ok(Leader { pos3d, frames: clip.frames, source })
 }
 
 /// The music: (frames, n_music) features at 30 fps.
