@@ -269,6 +269,9 @@ fn rejects_bad_magic() {
     let mut bytes = valid_bytes();
     bytes[1] = b'X';
     assert!(matches!(parse(&bytes), Err(FormatError::BadMagic { found }) if found[1] == b'X'));
+    let msg = parse(&bytes).unwrap_err().to_string();
+    let want = format!("0x{:02x}58", bytes[0]);
+    assert!(msg.contains(&want) && msg.contains("not a .duo file"), "{msg}: the magic as 0x-prefixed hex");
 }
 
 #[test]

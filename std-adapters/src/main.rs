@@ -3,7 +3,7 @@
 
 fn main() {
     if let Err(err) = duolando::cli::run() {
-        eprintln!("error: {err:#}");
+        eprintln!("error: {}", duolando::cli::error_chain(&err));
         std::process::exit(1);
     }
 }

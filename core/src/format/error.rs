@@ -145,7 +145,17 @@ impl fmt::Display for FormatError {
                 f,
                 "model buffer is not 64-byte aligned in memory (address % 64 = {addr_mod_64}); copy it to an aligned buffer"
             ),
-            BadMagic { found } => write!(f, "not a .duo file: magic {found:02x?}, expected {:02x?}", super::MAGIC),
+            BadMagic { found } => {
+                // Bytes in file order, as a hex dump shows them.
+                let hex = |f: &mut fmt::Formatter<'_>, bytes: &[u8]| -> fmt::Result {
+                    f.write_str("0x")?;
+                    bytes.iter().try_for_each(|b| write!(f, "{b:02x}"))
+                };
+                f.write_str("not a .duo file: its first 8 bytes (the magic) are ")?;
+                hex(f, &found)?;
+                f.write_str(", a .duo file starts with ")?;
+                hex(f, &super::MAGIC)
+            }
             UnsupportedVersion { found, supported } => {
                 write!(f, ".duo format version {found} is not supported (this decoder reads version {supported})")
             }

@@ -12,7 +12,7 @@ use anyhow::anyhow;
 pub const DEFAULT_ONNX: &str = "/tmp/duolando_full/full_r_step.onnx";
 
 /// How to make the file, for the bench's messages.
-pub const HOW: &str = "/work/venv/bin/python -m tools.reference.export_full_r_step (from the repository root; ~0.8 GB, a few minutes), then `cargo run --release -p duolando --features tract -- bench`";
+pub const HOW: &str = "python3 -m tools.reference.export_full_r_step from the repository root, with torch installed (pip install -r tools/requirements.txt; ~0.8 GB written, a few minutes), then `cargo run --release -p duolando --features tract -- bench`";
 
 /// The ONNX file to use: the given one, else the default if it exists.
 pub fn onnx_path(given: Option<&Path>) -> Option<PathBuf> {

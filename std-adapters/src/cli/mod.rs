@@ -76,6 +76,24 @@ pub(crate) fn print_kernels() {
     eprintln!("kernels: {}", crate::simd::describe());
 }
 
+/// An error and its causes on one line, `a: b: c`, each cause once: a
+/// cause whose text its parent's message already includes (errors that
+/// print their source, as `io::Error` wrappers often do) is not repeated.
+pub fn error_chain(err: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
 /// Parses `std::env::args` and runs the chosen subcommand.
 pub fn run() -> anyhow::Result<()> {
     Cli::parse().command.run()

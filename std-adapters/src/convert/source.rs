@@ -25,7 +25,7 @@ impl<'a> Source<'a> {
     /// the `module.` prefix or that all lack it.
     pub fn parse(path: &Path, bytes: &'a [u8]) -> Result<Source<'a>, ConvertError> {
         let st = SafeTensors::deserialize(bytes)
-            .map_err(|e| ConvertError::Safetensors { path: path.into(), detail: e.to_string() })?;
+            .map_err(|e| ConvertError::Safetensors { path: path.into(), detail: explain(bytes, &e) })?;
         let all = st.tensors();
         let with = all.iter().find(|(n, _)| n.starts_with(DATA_PARALLEL_PREFIX));
         let without = all.iter().find(|(n, _)| !n.starts_with(DATA_PARALLEL_PREFIX));
@@ -78,4 +78,32 @@ pub fn upcast(view: &TensorView<'_>) -> Option<Vec<f32>> {
         Dtype::BF16 => data.chunks_exact(2).map(|c| half::bf16::from_le_bytes([c[0], c[1]]).to_f32()).collect(),
         _ => return None,
     })
+}
+
+/// A safetensors parse failure in words, with the numbers behind it.
+fn explain(bytes: &[u8], e: &safetensors::SafeTensorError) -> String {
+    use safetensors::SafeTensorError as E;
+    let hint = "a safetensors file starts with an 8-byte little-endian header length and a JSON header; \
+                PyTorch checkpoints (.pt, .pth, .bin) must be turned into safetensors first: tools/pt_to_safetensors.py";
+    let header_len = bytes.get(..8).map(|b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])));
+    match (e, header_len) {
+        (E::HeaderTooSmall, _) => format!("the file has {} bytes, fewer than the 8 of a header length; {hint}", bytes.len()),
+        (E::HeaderTooLarge | E::InvalidHeaderLength, Some(n)) => format!(
+            "the first 8 bytes give a header of {n} bytes, but the file has {} bytes (and headers are at most 100 MB): \
+             not a safetensors file, or a truncated one; {hint}",
+            bytes.len()
+        ),
+        (E::InvalidHeader, _) => format!("the header is not UTF-8 text; {hint}"),
+        (E::InvalidHeaderStart, _) => format!("the header does not start with `{{`; {hint}"),
+        (E::InvalidHeaderDeserialization, _) | (E::JsonError(_), _) => format!("the header is not the JSON a safetensors file holds ({e:?}); {hint}"),
+        (E::MetadataIncompleteBuffer, _) => format!(
+            "the tensors listed in the header do not cover the file's {} data bytes exactly (truncated or padded file)",
+            bytes.len().saturating_sub(8 + header_len.unwrap_or(0) as usize)
+        ),
+        (E::InvalidOffset(name), _) => format!("tensor `{name}`: its data offsets in the header are out of order or out of the file"),
+        (E::TensorInvalidInfo, _) | (E::ValidationOverflow, _) => {
+            format!("a tensor's shape, dtype and data offsets disagree ({e:?})")
+        }
+        _ => format!("{e:?}"),
+    }
 }
