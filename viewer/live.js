@@ -17,7 +17,7 @@
     hello: null, end: null, status: "connecting",
     events: 0, lastId: -1, outOfOrder: 0,
     leaderFrame: -1, followerFrame: -1, followerFrames: 0,
-    latencyFrames: null, latencyMs: null, stepMs: null, tickMs: null, steps: 0, late: 0,
+    latencyFrames: null, latencyMs: null, stepMs: null, tickMs: null, steps: 0, late: 0, refusedFrom: null,
     stepSum: 0, stepCount: 0, stepMax: 0,
   };
   let J = 55, ROW = 165, parents = null, fps = 30;
@@ -210,6 +210,10 @@
     live.tickMs = ev.tick_ms;
     live.steps = ev.steps;
     if (ev.late) live.late++;
+    if (ev.refused && live.refusedFrom == null) {
+      live.refusedFrom = ev.i;
+      note.textContent = "the session refuses leader frames from frame " + ev.i + " on: its steps wait for music past the end of the track";
+    }
     if (ev.stepped > 0) {
       live.stepMs = ev.tick_ms;
       live.stepSum += ev.tick_ms; live.stepCount++; live.stepMax = Math.max(live.stepMax, ev.tick_ms);
@@ -219,7 +223,7 @@
   function onEnd(e) {
     live.end = e;
     live.status = "clip ended: " + e.follower_frames + " follower frames for " + e.frames + " leader frames";
-    if (e.follower_frames_pending > 0) note.textContent = "the last " + e.follower_frames_pending + " follower frames need a drain at the end of the leader (not in this session yet)";
+    if (e.follower_frames_pending > 0 && live.refusedFrom == null) note.textContent = "the last " + e.follower_frames_pending + " follower frames need a drain at the end of the leader (not in this session yet)";
     source.close();
   }
 

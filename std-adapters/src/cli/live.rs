@@ -149,17 +149,24 @@ struct Tick<'a> {
     follower_frames: usize,
     /// The tick started later than its slot (1/30 s each) by more than one frame.
     late: bool,
+    /// The session refused this leader frame (backlog: no step can run).
+    refused: bool,
 }
 
 /// The last event.
 #[derive(Serialize)]
 struct End {
+    /// Leader frames streamed, and those the session accepted.
     frames: usize,
+    frames_accepted: usize,
     follower_frames: usize,
-    /// Follower frames that a drain at the end of the leader would give.
+    /// Follower frames of accepted leader frames that did not come out (a
+    /// drain at the end of the leader would give them).
     follower_frames_pending: usize,
     steps: usize,
     latency_frames: u32,
+    /// The first leader frame the session refused (every later one was refused too).
+    refused_from: Option<usize>,
     step_ms: Stats,
     tick_ms: Stats,
     late_ticks: usize,
@@ -260,7 +267,8 @@ pub fn run(args: Args) -> Result<()> {
         SeedChoice::Tokens(t) => seed_tokens(&model, Seed::Tokens(*t), &leader.pos3d)?,
         SeedChoice::Frames(f) => seed_tokens(&model, Seed::FollowerFrames(f), &leader.pos3d)?,
     };
-    let track = &music.features[..n * music.cols];
+    // The whole track, known ahead (also past the frames streamed).
+    let track = &music.features[..music.frames * music.cols];
     let bytes = model.session_bytes(&sc).map_err(|e| anyhow::anyhow!("the streaming session cannot be set up: {}", describe(&e)))?;
     let mut arena = vec![0u8; bytes];
     let mut s = Session::new(&model, &mut arena, &sc, seed)
@@ -316,6 +324,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut out: Vec<(u64, [f32; POSE_DIM])> = Vec::new();
     let (mut step_times, mut tick_times) = (Vec::new(), Vec::with_capacity(n));
     let (mut last_step_ms, mut last_latency, mut late_ticks, mut pulled) = (None, None, 0usize, 0usize);
+    let mut refused_from: Option<usize> = None;
     for i in 0..n {
         let slot = start + tick * i as u32;
         let mut late = false;
@@ -331,11 +340,27 @@ pub fn run(args: Args) -> Result<()> {
         let t0 = Instant::now();
         tick_at.push(t0);
         let steps_before = s.steps();
-        match s.push_leader_frame(&leader.pos3d[i * POSE_DIM..(i + 1) * POSE_DIM]) {
-            Ok(()) => {}
-            Err(e @ Error::Backlog { .. }) => bail!("leader frame {i}: the session refused it: {}", describe(&e)),
+        let refused = match s.push_leader_frame(&leader.pos3d[i * POSE_DIM..(i + 1) * POSE_DIM]) {
+            Ok(()) => false,
+            // No step can run any more (the steps wait for music past the end
+            // of the track): the session keeps refusing, unchanged; the
+            // engine keeps ticking and the page keeps showing the leader.
+            Err(e @ Error::Backlog { .. }) => {
+                if refused_from.is_none() {
+                    refused_from = Some(i);
+                    eprintln!(
+                        "      note: from leader frame {i} on, the session refuses leader frames ({}): its steps need music up to {} frames \
+                         ahead (--music-lookahead {}) and the track has {} frames",
+                        describe(&e),
+                        sc.music_lookahead as usize * hop,
+                        sc.music_lookahead,
+                        music.frames
+                    );
+                }
+                true
+            }
             Err(e) => bail!("{}: leader frame {i} was refused: {}", leader_path.display(), describe(&e)),
-        }
+        };
         out.clear();
         loop {
             match s.pull_follower_frame(&mut frame) {
@@ -370,16 +395,20 @@ pub fn run(args: Args) -> Result<()> {
             latency_ms: last_latency.map(|l| l.1),
             follower_frames: pulled,
             late,
+            refused,
         };
         server.publish("frame", &serde_json::to_string(&ev)?);
     }
     let seconds = start.elapsed().as_secs_f64();
+    let accepted = refused_from.unwrap_or(n);
     let end = End {
         frames: n,
         follower_frames: pulled,
-        follower_frames_pending: n.saturating_sub(pulled),
+        frames_accepted: accepted,
+        follower_frames_pending: accepted.saturating_sub(pulled),
         steps: s.steps(),
         latency_frames: latency,
+        refused_from,
         step_ms: stats(&step_times),
         tick_ms: stats(&tick_times),
         late_ticks,
@@ -388,7 +417,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     server.publish("end", &serde_json::to_string(&end)?);
     eprintln!(
-        "clip ended after {seconds:.1} s: {n} leader frames in, {pulled} follower frames out ({} more wait for a drain at the end of the leader), \
+        "clip ended after {seconds:.1} s: {accepted} of {n} leader frames in, {pulled} follower frames out ({} more wait for a drain at the end of the leader), \
          {} steps of {:.2} ms on average (max {:.2} ms), {late_ticks} late ticks",
         end.follower_frames_pending,
         end.steps,
