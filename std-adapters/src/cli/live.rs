@@ -140,9 +140,10 @@ struct Tick<'a> {
     tick_ms: f64,
     /// Wall time of the latest tick that ran a step, ms (None before the first).
     step_ms: Option<f64>,
-    /// Latency of the newest follower frame out so far: `i - index` frames
-    /// (None before the first), and the measured wall time from the tick
-    /// that pushed its leader frame to now, ms.
+    /// How far the follower trails now: `i` minus the newest follower
+    /// index out so far (None before the first), and the measured wall time
+    /// from the tick that pushed that frame's leader frame to the end of
+    /// this tick, ms.
     latency_frames: Option<usize>,
     latency_ms: Option<f64>,
     /// Follower frames out so far.
@@ -323,7 +324,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut frame = FollowerFrame::default();
     let mut out: Vec<(u64, [f32; POSE_DIM])> = Vec::new();
     let (mut step_times, mut tick_times) = (Vec::new(), Vec::with_capacity(n));
-    let (mut last_step_ms, mut last_latency, mut late_ticks, mut pulled) = (None, None, 0usize, 0usize);
+    let (mut last_step_ms, mut newest, mut late_ticks, mut pulled) = (None, None, 0usize, 0usize);
     let mut refused_from: Option<usize> = None;
     for i in 0..n {
         let slot = start + tick * i as u32;
@@ -378,9 +379,8 @@ pub fn run(args: Args) -> Result<()> {
             last_step_ms = Some(tick_ms);
         }
         pulled += out.len();
-        let latency_ms = out.last().map(|(j, _)| ms(done - tick_at[*j as usize]));
         if let Some((j, _)) = out.last() {
-            last_latency = Some((i - *j as usize, latency_ms.unwrap_or_default()));
+            newest = Some(*j as usize);
         }
         let ev = Tick {
             i,
@@ -391,8 +391,8 @@ pub fn run(args: Args) -> Result<()> {
             steps: s.steps(),
             tick_ms,
             step_ms: last_step_ms,
-            latency_frames: last_latency.map(|l| l.0),
-            latency_ms: last_latency.map(|l| l.1),
+            latency_frames: newest.map(|j| i - j),
+            latency_ms: newest.map(|j| ms(done - tick_at[j])),
             follower_frames: pulled,
             late,
             refused,
