@@ -1,6 +1,6 @@
 // Headless-Chromium test of the live page of `duolando live` (run by run.sh).
 //
-//   node live_test.mjs --bin PATH/duolando [-- extra live flags]
+//   node live_test.mjs --bin PATH/duolando [--shot OUT.png] [-- extra live flags]
 //
 // Starts `duolando live --port 0` (paced, 30 fps) with a short latency
 // budget, reads the URL it prints, opens the page in Debian's chromium through
@@ -20,14 +20,15 @@ import { inflateSync } from "node:zlib";
 
 // ---- arguments ----
 const argv = process.argv.slice(2);
-const opt = { bin: null, extra: [] };
+const opt = { bin: null, shot: null, extra: [] };
 for (let i = 0; i < argv.length; i++) {
   const a = argv[i];
   if (a === "--bin") opt.bin = argv[++i];
+  else if (a === "--shot") opt.shot = argv[++i];
   else if (a === "--") { opt.extra = argv.slice(i + 1); break; }
   else { console.error(`unexpected argument ${a}`); process.exit(2); }
 }
-if (!opt.bin) { console.error("usage: node live_test.mjs --bin PATH/duolando [-- extra live flags]"); process.exit(2); }
+if (!opt.bin) { console.error("usage: node live_test.mjs --bin PATH/duolando [--shot OUT.png] [-- extra live flags]"); process.exit(2); }
 
 // ---- named limits ----
 const FRAMES = 300;          // leader frames streamed (10 s at 30 fps)
@@ -189,6 +190,11 @@ try {
   check(`leader drawn in ${colors.leader}`, la.count >= LIMITS.minDancerPixels, `${la.count} px`);
   check("follower frames keep arriving (about 30 a second)", fB - fA >= LIMITS.minAdvance, `follower frame ${fA} -> ${fB} in 1 s`);
   check("the follower figure moves on screen", changed >= LIMITS.minChangedPixels, `${changed} follower pixels changed between frames ${fA} and ${fB}`);
+  if (opt.shot) {
+    const hb = await page.locator("header").boundingBox(), mb = await page.locator("main").boundingBox();
+    await page.screenshot({ path: opt.shot, clip: { x: mb.x, y: hb.y, width: mb.width, height: mb.y + mb.height - hb.y } });
+    console.log(`screenshot: ${opt.shot}`);
+  }
   // Hiding the follower removes its colour (the pixels above are the follower's).
   await page.click("#show-follower");
   await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
