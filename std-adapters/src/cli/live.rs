@@ -399,6 +399,10 @@ pub fn run(args: Args) -> Result<()> {
         };
         server.publish("frame", &serde_json::to_string(&ev)?);
     }
+    // The end of the leader. Once the session has a drain (end of leader
+    // input, core/src/session), call it here and pull and publish the
+    // follower frames it releases (the `follower_frames_pending` below),
+    // before the `end` event.
     let seconds = start.elapsed().as_secs_f64();
     let accepted = refused_from.unwrap_or(n);
     let end = End {
