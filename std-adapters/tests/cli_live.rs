@@ -451,3 +451,29 @@ fn live_bad_inputs_and_a_busy_port_are_named_errors() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn live_paces_one_leader_frame_per_tick() {
+    // Paced (no --no-pace): frame i is pushed no earlier than i / 30 s after
+    // the clock starts, which --wait holds until this stream opens.
+    let mut a = tiny_args(&["--preset", "minimum", "--frames", "45", "--linger", "120", "--wait"]);
+    a.retain(|s| s != "--no-pace");
+    let mut live = Live::start(&a);
+    let t0 = Instant::now();
+    let (code, _, body) = get(live.port, "/events", &[]);
+    let wall = t0.elapsed();
+    assert_eq!(code, 200);
+    let ev = parse_sse(&body);
+    assert_eq!(ev.len(), 47);
+    assert_eq!(ev[0].data["paced"], Value::Bool(true));
+    let slot_ms = 1000.0 / 30.0;
+    let mut prev = -1.0;
+    for (i, e) in ev[1..46].iter().enumerate() {
+        let t = e.data["t_ms"].as_f64().unwrap();
+        assert!(t >= i as f64 * slot_ms - 1.0 && t > prev, "frame {i} pushed at {t} ms, its slot starts at {:.1} ms", i as f64 * slot_ms);
+        prev = t;
+    }
+    assert!(wall >= Duration::from_millis(44 * 1000 / 30), "45 paced frames streamed in {wall:?}");
+    let (ok, err) = live.wait_exit(Duration::from_secs(60));
+    assert!(ok, "{err}");
+}
