@@ -286,8 +286,10 @@ pub fn run(args: Args) -> Result<()> {
 
     let server = LiveServer::bind(args.port)?;
     let url = server.url();
-    println!("{url}");
-    std::io::stdout().flush().context("writing the URL to stdout")?;
+    // Not println!: a closed stdout is an error here, not a panic.
+    let mut stdout = std::io::stdout().lock();
+    writeln!(stdout, "{url}").and_then(|()| stdout.flush()).context("writing the URL to stdout")?;
+    drop(stdout);
     let hello = Hello {
         title: format!("duolando live: {} + {}", file_name(&leader_path), file_name(&music_path)),
         fps: FPS,
