@@ -16,6 +16,7 @@ pub mod cli;
 pub mod convert;
 pub mod duo_writer;
 pub mod export;
+pub mod live;
 pub mod music;
 pub mod npy;
 pub mod streaming;

@@ -51,3 +51,9 @@ if [ -n "${VIEWER_SHOT:-}" ]; then
 fi
 node "$here/viewer_test.mjs" --page "$tmp/page/index.html" --frames "$frames" --audio "${shot[@]}"
 say "done"
+
+# The live page of `duolando live` (docs/VIEWER.md, "The live page"): the server streams the demo at 30 fps.
+say "building duolando; testing the live page in headless Chromium"
+(cd "$root" && cargo build -q -p duolando --bin duolando)
+node "$here/live_test.mjs" --bin "${CARGO_TARGET_DIR:-$root/target}/debug/duolando"
+say "done (live)"

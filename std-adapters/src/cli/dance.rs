@@ -20,11 +20,11 @@ use duolando_core::exact::{self, Seed};
 use duolando_core::model::Model;
 use serde_json::json;
 
-use self::inputs::{Leader, Music};
-use crate::cli::generate::{generate_exact, parse_seed_tokens, Generated};
+use self::inputs::{Leader, Music, SeedChoice};
+use crate::cli::generate::{generate_exact, Generated};
 use crate::export::{write_all, Motion};
 use crate::model_file::ModelFile;
-use crate::npy::{read_f32_2d, write_f32};
+use crate::npy::write_f32;
 use crate::viewer::{write_index_html, ViewerData};
 
 pub use inputs::{find_asset, face_to_face_start, COMPILED_ASSETS, DEFAULT_SEED_DISTANCE_M};
@@ -65,57 +65,9 @@ fn stage(n: usize, what: &str) {
     eprintln!("[{n}/5] {what}");
 }
 
-/// How the follower starts, with a line saying so.
-enum SeedChoice {
-    Tokens([u32; 5]),
-    Frames(Vec<f32>),
-}
-
-/// Picks the seed: --seed-tokens, --follower-start, the demo start (demo
-/// clip only), else [`face_to_face_start`]. Returns it and a description.
+/// Picks the seed from `args` (see [`inputs::choose_seed`]).
 fn choose_seed(args: &Args, demo: bool, leader: &Leader, cfg: &ModelConfig, model: &Path) -> Result<(SeedChoice, String)> {
-    let hop = cfg.hop();
-    if let Some(s) = &args.seed_tokens {
-        let t = parse_seed_tokens(s)?;
-        const NAMES: [&str; 5] = ["up", "down", "lhand", "rhand", "transl"];
-        for i in 0..5 {
-            if t[i] >= cfg.gpt.vocab[i] {
-                bail!(
-                    "--seed-tokens: the {} token {} is out of range for the model {} (vocabulary {}; expected 0..{})",
-                    NAMES[i],
-                    t[i],
-                    model.display(),
-                    cfg.gpt.vocab[i],
-                    cfg.gpt.vocab[i] - 1
-                );
-            }
-        }
-        return Ok((SeedChoice::Tokens(t), format!("tokens {s} (--seed-tokens)")));
-    }
-    let (path, why) = match &args.follower_start {
-        Some(p) => (p.clone(), "--follower-start"),
-        None if demo => (inputs::require_asset(inputs::DEMO_FOLLOWER_START, "follower start")?, "the demo's follower start"),
-        None => {
-            let how = format!(
-                "default: the leader's first {hop} frames turned 180 degrees about the vertical axis, face to face, {DEFAULT_SEED_DISTANCE_M} m in front of the leader \
-                 (pass --follower-start or --seed-tokens to choose)"
-            );
-            return Ok((SeedChoice::Frames(face_to_face_start(&leader.pos3d, hop)), how));
-        }
-    };
-    let a = read_f32_2d(&path, Some(POSE_DIM), "follower start frames (F, 165), metres")?;
-    if a.rows < hop || a.rows > leader.frames {
-        bail!(
-            "{}: {} follower start frames; expected between {hop} (one token) and {} (the leader's length)",
-            path.display(),
-            a.rows,
-            leader.frames
-        );
-    }
-    if a.data.iter().any(|v| !v.is_finite()) {
-        bail!("{}: follower start frames hold non-finite values; expected finite positions", path.display());
-    }
-    Ok((SeedChoice::Frames(a.data), format!("{} frames from {} ({why})", a.rows, path.display())))
+    inputs::choose_seed(args.seed_tokens.as_deref(), args.follower_start.as_deref(), demo, leader, cfg, model)
 }
 
 /// Checks that the leader and music are long enough and cover each other.

@@ -58,6 +58,8 @@ commands! {
     Inspect => inspect,
     /// Agreement of streaming (S) with exact (R) mode, or of two models (e.g. int8 vs f32): tokens and joints.
     Compare => compare,
+    /// Stream a leader clip through a session at 30 fps and watch the follower live in the browser (127.0.0.1).
+    Live => live,
 }
 
 /// `duolando <command> [flags]`.

@@ -5,7 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use duolando_core::config::POSE_DIM;
+use duolando_core::config::{ModelConfig, POSE_DIM};
+
+use crate::cli::generate::parse_seed_tokens;
 
 use crate::music::{Extractor, SAMPLE_RATE};
 use crate::npy::read_f32_2d;
@@ -152,6 +154,68 @@ pub fn face_to_face_start(leader: &[f32], hop: usize) -> Vec<f32> {
         p[2] = 2.0 * cz - p[2];
     }
     out
+}
+
+/// How the follower starts.
+pub enum SeedChoice {
+    Tokens([u32; 5]),
+    Frames(Vec<f32>),
+}
+
+/// Picks the seed (shared by `dance` and `live`): `seed_tokens`
+/// (--seed-tokens), `follower_start` (--follower-start), the demo start
+/// (demo clip only), else [`face_to_face_start`]. Returns it and a line
+/// describing it.
+pub fn choose_seed(
+    seed_tokens: Option<&str>,
+    follower_start: Option<&Path>,
+    demo: bool,
+    leader: &Leader,
+    cfg: &ModelConfig,
+    model: &Path,
+) -> Result<(SeedChoice, String)> {
+    let hop = cfg.hop();
+    if let Some(s) = seed_tokens {
+        let t = parse_seed_tokens(s)?;
+        const NAMES: [&str; 5] = ["up", "down", "lhand", "rhand", "transl"];
+        for i in 0..5 {
+            if t[i] >= cfg.gpt.vocab[i] {
+                bail!(
+                    "--seed-tokens: the {} token {} is out of range for the model {} (vocabulary {}; expected 0..{})",
+                    NAMES[i],
+                    t[i],
+                    model.display(),
+                    cfg.gpt.vocab[i],
+                    cfg.gpt.vocab[i] - 1
+                );
+            }
+        }
+        return Ok((SeedChoice::Tokens(t), format!("tokens {s} (--seed-tokens)")));
+    }
+    let (path, why) = match follower_start {
+        Some(p) => (p.to_path_buf(), "--follower-start"),
+        None if demo => (require_asset(DEMO_FOLLOWER_START, "follower start")?, "the demo's follower start"),
+        None => {
+            let how = format!(
+                "default: the leader's first {hop} frames turned 180 degrees about the vertical axis, face to face, {DEFAULT_SEED_DISTANCE_M} m in front of the leader \
+                 (pass --follower-start or --seed-tokens to choose)"
+            );
+            return Ok((SeedChoice::Frames(face_to_face_start(&leader.pos3d, hop)), how));
+        }
+    };
+    let a = read_f32_2d(&path, Some(POSE_DIM), "follower start frames (F, 165), metres")?;
+    if a.rows < hop || a.rows > leader.frames {
+        bail!(
+            "{}: {} follower start frames; expected between {hop} (one token) and {} (the leader's length)",
+            path.display(),
+            a.rows,
+            leader.frames
+        );
+    }
+    if a.data.iter().any(|v| !v.is_finite()) {
+        bail!("{}: follower start frames hold non-finite values; expected finite positions", path.display());
+    }
+    Ok((SeedChoice::Frames(a.data), format!("{} frames from {} ({why})", a.rows, path.display())))
 }
 
 #[cfg(test)]
