@@ -81,9 +81,20 @@ fn commands(out: &Path) -> Vec<(&'static str, Vec<String>)> {
     compare.push(p(&model));
     compare.extend(io("compare")[..4].iter().cloned());
     compare.extend(s(&["--seed-tokens", "1,2,3,4,5"]));
+    let mut live = s(&["live", "--model"]);
+    live.push(p(&model));
+    live.extend(io("live")[..4].iter().cloned());
+    live.extend(s(&["--seed-tokens", "1,2,3,4,5", "--no-pace", "--port", "0", "--linger", "0"]));
     let mut inspect = s(&["inspect"]);
     inspect.push(p(&model));
-    vec![("dance", dance), ("generate exact", generate), ("generate streaming", streaming), ("compare", compare), ("inspect", inspect)]
+    vec![
+        ("dance", dance),
+        ("generate exact", generate),
+        ("generate streaming", streaming),
+        ("compare", compare),
+        ("live", live),
+        ("inspect", inspect),
+    ]
 }
 
 #[test]

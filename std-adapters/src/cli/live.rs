@@ -232,6 +232,7 @@ pub fn run(args: Args) -> Result<()> {
 
     eprintln!("[1/3] model {}, {threads} thread(s)", model_path.display());
     let file = ModelFile::open(&model_path)?;
+    super::print_kernels();
     let duo = file.duo()?;
     let model = Model::from_duo(&duo)
         .map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", model_path.display()))?;
