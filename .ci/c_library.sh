@@ -15,7 +15,8 @@
 #   bitcode the prebuilt compiler_builtins objects embed: 2 MB that only a
 #   Rust LTO link reads; C linkers ignore it), the shared library with
 #   `strip` (all symbols but the dynamic ones).
-# - The shared library of a cross target needs CARGO_TARGET_<TRIPLE>_LINKER.
+# - The shared library gets SONAME libduolando.so (macOS: install name
+#   @rpath/libduolando.dylib). A cross target needs CARGO_TARGET_<TRIPLE>_LINKER.
 # Prints the native libraries to link with the archive and both sizes in
 # bytes ("size: FILE BYTES" lines, read by .ci/size.sh and .ci/cross.sh).
 # Honours CARGO_TARGET_DIR.
@@ -59,7 +60,15 @@ echo "size: $DIST/libduolando.a $(stat -c %s "$DIST/libduolando.a")"
 
 if [ "$KINDS" = both ]; then
     t0=$(date +%s)
-    cargo rustc -p duolando-ffi --profile ffi --lib --crate-type cdylib "${TARGET_ARGS[@]}"
+    # An install name / SONAME without the build machine's path, so that
+    # engines linking the file record just its name (and find it next to
+    # their binaries: Unreal's RuntimeDependencies, Unity's Plugins).
+    case "$TRIPLE" in
+        *-apple-*) NAME_ARG=(-C link-arg=-Wl,-install_name,@rpath/libduolando.dylib) ;;
+        *-windows-*) NAME_ARG=() ;;
+        *) NAME_ARG=(-C link-arg=-Wl,-soname,libduolando.so) ;;
+    esac
+    cargo rustc -p duolando-ffi --profile ffi --lib --crate-type cdylib "${TARGET_ARGS[@]}" -- "${NAME_ARG[@]}"
     "$STRIP" -o "$DIST/$SHARED" "$BUILT/$SHARED"
     echo "cdylib $TRIPLE: $(( $(date +%s) - t0 ))s"
     echo "size: $DIST/$SHARED $(stat -c %s "$DIST/$SHARED")"

@@ -43,6 +43,8 @@ echo "--- C host test against the stripped libraries (static link line of docs/C
 CFLAGS="-std=c99 -Wall -Wextra -Werror -pedantic -O2 -Iinclude"
 gcc $CFLAGS tests/c/test_duolando.c "$DIST/libduolando.a" -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc -o "$OUT/test_static"
 gcc $CFLAGS tests/c/test_duolando.c -L"$DIST" -lduolando -lpthread -lm -Wl,-rpath,"$DIST" -o "$OUT/test_dynamic"
+readelf -d "$DIST/libduolando.so" | grep -q 'SONAME.*\[libduolando.so\]' || { echo "libduolando.so has no SONAME libduolando.so"; exit 1; }
+readelf -d "$OUT/test_dynamic" | grep -q 'NEEDED.*\[libduolando.so\]' || { echo "test_dynamic does not need plain libduolando.so"; exit 1; }
 ldd "$OUT/test_dynamic" | grep -q "$DIST/libduolando.so"
 "$OUT/test_static" "$ROOT"
 "$OUT/test_dynamic" "$ROOT"
