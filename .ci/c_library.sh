@@ -51,8 +51,15 @@ case "$TRIPLE" in
     *) SHARED=libduolando.so ;;
 esac
 
+# Tier-3 targets (visionOS) have no prebuilt std: nightly builds it from
+# source (rustup component add rust-src --toolchain nightly).
+case "$TRIPLE" in
+    *-visionos*) CARGO=(cargo +nightly rustc -Z build-std=std,panic_unwind) ;;
+    *) CARGO=(cargo rustc) ;;
+esac
+
 t0=$(date +%s)
-cargo rustc -p duolando-ffi --profile ffi --lib --crate-type staticlib "${TARGET_ARGS[@]}" \
+"${CARGO[@]}" -p duolando-ffi --profile ffi --lib --crate-type staticlib "${TARGET_ARGS[@]}" \
     -- --print native-static-libs
 "$STRIP" --strip-debug "${BITCODE[@]}" -o "$DIST/libduolando.a" "$BUILT/libduolando.a"
 echo "staticlib $TRIPLE: $(( $(date +%s) - t0 ))s"
@@ -68,7 +75,7 @@ if [ "$KINDS" = both ]; then
         *-windows-*) NAME_ARG=() ;;
         *) NAME_ARG=(-C link-arg=-Wl,-soname,libduolando.so) ;;
     esac
-    cargo rustc -p duolando-ffi --profile ffi --lib --crate-type cdylib "${TARGET_ARGS[@]}" -- "${NAME_ARG[@]}"
+    "${CARGO[@]}" -p duolando-ffi --profile ffi --lib --crate-type cdylib "${TARGET_ARGS[@]}" -- "${NAME_ARG[@]}"
     "$STRIP" -o "$DIST/$SHARED" "$BUILT/$SHARED"
     echo "cdylib $TRIPLE: $(( $(date +%s) - t0 ))s"
     echo "size: $DIST/$SHARED $(stat -c %s "$DIST/$SHARED")"

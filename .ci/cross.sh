@@ -11,6 +11,9 @@
 #   aarch64-apple-ios          staticlib (needs no Apple linker): duo_*
 #                              symbols (llvm-nm, Mach-O) == the header,
 #                              size <= 4 MB. Not linked, not run.
+#   aarch64-apple-visionos     opt-in (DUO_CROSS_VISIONOS=1): staticlib with
+#                              nightly -Z build-std (tier-3 target), symbols,
+#                              size. Not linked, not run.
 #   aarch64-unknown-linux-gnu  staticlib + shared library (linker
 #                              aarch64-linux-gnu-gcc): symbols, sizes, the
 #                              C host test linked against each stripped
@@ -68,6 +71,19 @@ timed bash .ci/c_library.sh aarch64-apple-ios static
 D=$TARGET/dist/aarch64-apple-ios
 check_symbols "$D/libduolando.a" "_"   # Mach-O prefixes C names with _
 check_size "$D/libduolando.a" $A_MAX
+
+if [ "${DUO_CROSS_VISIONOS:-0}" = 1 ]; then
+    # Opt-in: a tier-3 target, built with nightly -Z build-std (std from
+    # source: ~80 s of CPU more); a nightly change can break it, so .ci/run
+    # leaves it off.
+    echo "=== aarch64-apple-visionos (Apple Vision Pro): staticlib, nightly -Z build-std"
+    rustup toolchain install nightly --profile minimal >/dev/null 2>&1
+    rustup component add rust-src --toolchain nightly >/dev/null
+    timed bash .ci/c_library.sh aarch64-apple-visionos static
+    D=$TARGET/dist/aarch64-apple-visionos
+    check_symbols "$D/libduolando.a" "_"
+    check_size "$D/libduolando.a" $A_MAX
+fi
 
 echo "=== aarch64-unknown-linux-gnu: staticlib + shared library, C host test under qemu-user"
 export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc

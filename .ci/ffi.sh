@@ -78,7 +78,7 @@ g++ $UEFLAGS tests/unreal/test_component.cpp $UEMOD/Private/DuolandoFollowerComp
     -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_component"
 "$OUT/test_component" "$ROOT"
 
-echo "--- Unity wrapper: compiled with Mono's C# compiler, run under Mono against libduolando.so"
+# Mono's C# compiler and runtime (Unity wrapper, build rules), python3 (JSON checks).
 if ! command -v mcs >/dev/null || ! command -v mono >/dev/null || ! command -v python3 >/dev/null; then
     SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
     $SUDO apt-get update -qq
@@ -103,6 +103,7 @@ mcs -warnaserror -r:"$OUT/ubt/UnrealBuildTool.dll" -out:"$OUT/ubt/test_build_rul
     $UE/Source/ThirdParty/DuolandoLibrary/DuolandoLibrary.Build.cs tests/unreal/test_build_rules.cs
 (cd "$OUT/ubt" && mono test_build_rules.exe "$ROOT/$UE/Source/ThirdParty/DuolandoLibrary")
 
+echo "--- Unity wrapper: compiled with Mono's C# compiler, run under Mono against libduolando.so"
 UNITY=integrations/unity
 SAMPLE="$UNITY/Samples~/HumanoidFollower/DuolandoHumanoidFollower.cs"
 mcs -unsafe -target:library -warnaserror -out:"$OUT/Duolando.dll" $UNITY/Runtime/Duolando.cs

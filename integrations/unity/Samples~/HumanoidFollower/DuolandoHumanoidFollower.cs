@@ -168,7 +168,8 @@ namespace Duolando.Samples
             positionScale = hipHeight > 0.1f ? hipHeight / modelHipHeight : 1f;
 
             running = true;
-            worker = new Thread(Work) { IsBackground = true, Name = "Duolando follower" };
+            // A session step needs ~600 KiB of stack: ask for 2 MiB rather than the platform default.
+            worker = new Thread(Work, 2 * 1024 * 1024) { IsBackground = true, Name = "Duolando follower" };
             worker.Start();
         }
 
