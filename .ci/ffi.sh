@@ -1,14 +1,20 @@
 #!/usr/bin/env bash
 # The C ABI (issue #5): header vs exported symbols, header compiled as C99
 # and C++17 (included twice), the C host test linked against the static and
-# the dynamic library and run under valgrind, the C++ session runner of the
-# Unreal plugin run under valgrind, the Unity wrapper compiled and run under
-# Mono, and, opt-in with DUO_FFI_AARCH64=1, the C host test for aarch64
-# under qemu-user (it cross-builds std-adapters: ~12 min, too long for the
-# 45-min CI budget, so .ci/run leaves it off). Debian/Ubuntu; installs valgrind, mono-mcs,
-# gcc-aarch64-linux-gnu and qemu-user when missing (root or sudo). The Rust
-# tests of the crate run with `cargo test --workspace`. Honours
-# CARGO_TARGET_DIR. Called by .ci/run.
+# the dynamic library and run under valgrind; the engine integrations
+# (issue #36 §6): the Unreal plugin's session runner under valgrind, its
+# module + component compiled against TEST STUB engine headers
+# (tests/unreal/stub) and run against the library, its .uplugin checked and
+# Build.cs rules compiled against a TEST STUB UnrealBuildTool and evaluated
+# per platform; the Unity wrapper compiled and run under Mono, the Unity
+# package layout checked, its runtime and sample compiled against a TEST
+# STUB UnityEngine (tests/unity) and the sample run under Mono. None of this
+# runs Unity or Unreal (docs/PLATFORMS.md). Opt-in with DUO_FFI_AARCH64=1:
+# the debug C host test for aarch64 under qemu-user (.ci/cross.sh runs it
+# against the shipped aarch64 library in CI). Debian/Ubuntu; installs
+# valgrind, mono-mcs, python3, gcc-aarch64-linux-gnu and qemu-user when
+# missing (root or sudo). The Rust tests of the crate run with
+# `cargo test --workspace`. Honours CARGO_TARGET_DIR. Called by .ci/run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -57,22 +63,86 @@ echo "--- valgrind: static"
 echo "--- valgrind: dynamic"
 "${VALGRIND[@]}" "$OUT/test_dynamic" "$ROOT"
 
-if [ -f integrations/unreal/Source/Duolando/Public/DuolandoRunner.h ]; then
-    echo "--- Unreal plugin: the engine-independent session runner (C++17, threads) under valgrind"
-    g++ -std=c++17 -Wall -Wextra -Werror -pedantic -g -Iinclude -Iintegrations/unreal/Source/Duolando/Public \
-        tests/c/test_runner.cpp -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_runner"
-    "${VALGRIND[@]}" "$OUT/test_runner" "$ROOT"
-fi
+UE=integrations/unreal
+UEMOD=$UE/Source/Duolando
+echo "--- Unreal plugin: the engine-independent session runner (C++17, threads) under valgrind"
+g++ -std=c++17 -Wall -Wextra -Werror -pedantic -g -Iinclude -I$UEMOD/Public \
+    tests/c/test_runner.cpp -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_runner"
+"${VALGRIND[@]}" "$OUT/test_runner" "$ROOT"
 
-echo "--- Unity wrapper: compiled with Mono's C# compiler, run under Mono against libduolando.so"
-if ! command -v mcs >/dev/null || ! command -v mono >/dev/null; then
+echo "--- Unreal plugin: module + component compiled against TEST STUB engine headers (tests/unreal/stub) and run"
+# Not Unreal Engine: the stubs only let g++ check and run the plugin's own C++.
+UEFLAGS="-std=c++17 -Wall -Wextra -Werror -g -DDUOLANDO_API= -Itests/unreal/stub -Iinclude -I$UEMOD/Public -I$UEMOD/Private"
+g++ $UEFLAGS -fsyntax-only -DPLATFORM_WINDOWS=1 $UEMOD/Private/DuolandoModule.cpp   # the Windows DLL-loading branch
+g++ $UEFLAGS tests/unreal/test_component.cpp $UEMOD/Private/DuolandoFollowerComponent.cpp $UEMOD/Private/DuolandoModule.cpp \
+    -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_component"
+"$OUT/test_component" "$ROOT"
+
+# Mono's C# compiler and runtime (Unity wrapper, build rules), python3 (JSON checks).
+if ! command -v mcs >/dev/null || ! command -v mono >/dev/null || ! command -v python3 >/dev/null; then
     SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
     $SUDO apt-get update -qq
-    $SUDO apt-get install -y -qq mono-mcs
+    $SUDO apt-get install -y -qq mono-mcs python3
 fi
-mcs -unsafe -target:library -warnaserror -out:"$OUT/Duolando.dll" integrations/unity/Duolando.cs
-mcs -unsafe -warnaserror -out:"$OUT/test_unity.exe" integrations/unity/Duolando.cs tests/c/test_unity.cs
+echo "--- Unreal plugin: .uplugin, Build.cs rules compiled against a TEST STUB UnrealBuildTool (tests/unreal) and evaluated per platform"
+python3 - "$UE" <<'PY'
+import json, os, sys
+root = sys.argv[1]
+plugin = json.load(open(os.path.join(root, "Duolando.uplugin")))
+assert plugin["FileVersion"] == 3 and plugin["Modules"], plugin
+for m in plugin["Modules"]:
+    rules = os.path.join(root, "Source", m["Name"], m["Name"] + ".Build.cs")
+    assert os.path.isfile(rules), rules
+    for sub in ("Public", "Private"):
+        assert os.path.isdir(os.path.join(root, "Source", m["Name"], sub)), sub
+print("Duolando.uplugin: modules", [m["Name"] for m in plugin["Modules"]], "platforms", plugin["Modules"][0]["PlatformAllowList"])
+PY
+mkdir -p "$OUT/ubt"
+mcs -target:library -warnaserror -out:"$OUT/ubt/UnrealBuildTool.dll" tests/unreal/UnrealBuildToolStub.cs
+mcs -warnaserror -r:"$OUT/ubt/UnrealBuildTool.dll" -out:"$OUT/ubt/test_build_rules.exe" $UEMOD/Duolando.Build.cs \
+    $UE/Source/ThirdParty/DuolandoLibrary/DuolandoLibrary.Build.cs tests/unreal/test_build_rules.cs
+(cd "$OUT/ubt" && mono test_build_rules.exe "$ROOT/$UE/Source/ThirdParty/DuolandoLibrary")
+
+echo "--- Unity wrapper: compiled with Mono's C# compiler, run under Mono against libduolando.so"
+UNITY=integrations/unity
+SAMPLE="$UNITY/Samples~/HumanoidFollower/DuolandoHumanoidFollower.cs"
+mcs -unsafe -target:library -warnaserror -out:"$OUT/Duolando.dll" $UNITY/Runtime/Duolando.cs
+mcs -unsafe -warnaserror -out:"$OUT/test_unity.exe" $UNITY/Runtime/Duolando.cs tests/c/test_unity.cs
 LD_LIBRARY_PATH="$LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" mono "$OUT/test_unity.exe" "$ROOT"
+
+echo "--- Unity package: layout, runtime + sample against a TEST STUB UnityEngine (tests/unity), sample run under Mono"
+for f in package.json Runtime/Duolando.Runtime.asmdef Runtime/Duolando.cs Runtime/Plugins/x86_64/README.md \
+         Runtime/Plugins/Android/arm64-v8a/README.md Runtime/Plugins/iOS/README.md \
+         Samples~/HumanoidFollower/Duolando.Samples.HumanoidFollower.asmdef "${SAMPLE#$UNITY/}"; do
+    [ -f "$UNITY/$f" ] || { echo "Unity package: $f missing"; exit 1; }
+done
+python3 - "$UNITY" <<'PY'
+import json, os, sys
+root = sys.argv[1]
+pkg = json.load(open(os.path.join(root, "package.json")))
+assert pkg["name"] == pkg["name"].lower() and pkg["name"].startswith("com."), pkg["name"]
+for key in ("version", "displayName", "unity", "description"):
+    assert pkg.get(key), key
+for sample in pkg["samples"]:
+    assert os.path.isdir(os.path.join(root, sample["path"])), sample["path"]
+rt = json.load(open(os.path.join(root, "Runtime/Duolando.Runtime.asmdef")))
+assert rt["name"] == "Duolando.Runtime" and rt["allowUnsafeCode"] is True
+sm = json.load(open(os.path.join(root, "Samples~/HumanoidFollower/Duolando.Samples.HumanoidFollower.asmdef")))
+assert rt["name"] in sm["references"], sm["references"]
+print("package.json and assembly definitions: OK")
+PY
+U=$OUT/unity
+mkdir -p "$U"
+mcs -target:library -warnaserror -out:"$U/UnityEngine.dll" tests/unity/UnityEngineStub.cs
+# The runtime as Unity compiles it (UNITY_5_3_OR_NEWER: the Vector3/Quaternion helpers).
+mcs -unsafe -target:library -warnaserror -define:UNITY_5_3_OR_NEWER -r:"$U/UnityEngine.dll" \
+    -out:"$U/Duolando.Runtime.dll" $UNITY/Runtime/Duolando.cs
+# The sample's Android path (StreamingAssets through UnityWebRequest): compiled only.
+mcs -target:library -warnaserror -define:UNITY_5_3_OR_NEWER -define:UNITY_ANDROID -r:"$U/UnityEngine.dll" \
+    -r:"$U/Duolando.Runtime.dll" -out:"$U/SampleAndroid.dll" "$SAMPLE"
+mcs -warnaserror -define:UNITY_5_3_OR_NEWER -r:"$U/UnityEngine.dll" -r:"$U/Duolando.Runtime.dll" \
+    -out:"$U/test_sample.exe" "$SAMPLE" tests/unity/test_sample.cs
+(cd "$U" && LD_LIBRARY_PATH="$LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" mono test_sample.exe "$ROOT")
 if [ "${DUO_FFI_AARCH64:-0}" = 1 ]; then
     echo "--- aarch64-unknown-linux-gnu: libduolando cross-built, the C host test run under qemu-user"
     if ! command -v aarch64-linux-gnu-gcc >/dev/null || ! command -v qemu-aarch64 >/dev/null; then

@@ -1,7 +1,7 @@
 //! include/duolando.h is hand-written: check it against the Rust side.
 //! - the functions it declares = the `extern "C"` functions of ffi/src
 //!   (.ci/ffi.sh checks the same list against `nm` on the built libraries);
-//! - the C# wrapper (integrations/unity/Duolando.cs) binds only declared
+//! - the C# wrapper (integrations/unity/Runtime/Duolando.cs) binds only declared
 //!   functions;
 //! - the result codes and struct sizes it states match the Rust types.
 
@@ -93,8 +93,9 @@ fn header_declares_exactly_the_exported_functions() {
 
 #[test]
 fn csharp_wrapper_binds_declared_functions_only() {
-    let path = root().join("integrations/unity/Duolando.cs");
-    let Ok(cs) = std::fs::read_to_string(&path) else { return };
+    let path = root().join("integrations/unity/Runtime/Duolando.cs");
+    // A moved wrapper must fail here, not skip the check.
+    let cs = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let header = std::fs::read_to_string(root().join("include/duolando.h")).unwrap();
     let declared = header_functions(&header);
     let mut bound = BTreeSet::new();

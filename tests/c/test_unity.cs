@@ -1,4 +1,4 @@
-// Smoke test of the Unity wrapper (integrations/unity/Duolando.cs) under
+// Smoke test of the Unity wrapper (integrations/unity/Runtime/Duolando.cs) under
 // Mono against libduolando.so: struct layouts, errors as exceptions, a
 // session fed the fixture leader (with NaN glitches replaced by the last
 // good frame) producing finite frames, converted to Unity coordinates; two

@@ -1,5 +1,10 @@
 using UnrealBuildTool;
 
+// Runtime module: UDuolandoFollowerComponent, the session runner
+// (Public/DuolandoRunner.h) and the module that loads the library.
+// The library itself is the External module DuolandoLibrary
+// (Source/ThirdParty/DuolandoLibrary: header, per-platform binaries,
+// RuntimeDependencies).
 public class Duolando : ModuleRules
 {
 	public Duolando(ReadOnlyTargetRules Target) : base(Target)
@@ -7,5 +12,6 @@ public class Duolando : ModuleRules
 		PCHUsage = PCHUsageMode.UseExplicitOrSharedPCHs;
 		CppStandard = CppStandardVersion.Cpp17;
 		PublicDependencyModuleNames.AddRange(new string[] { "Core", "CoreUObject", "Engine", "DuolandoLibrary" });
+		PrivateDependencyModuleNames.AddRange(new string[] { "Projects" });   // IPluginManager: the plugin's Binaries folder
 	}
 }

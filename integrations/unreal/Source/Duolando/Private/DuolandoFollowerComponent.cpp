@@ -1,11 +1,9 @@
 #include "DuolandoFollowerComponent.h"
 
+#include "DuolandoLog.h"
 #include "DuolandoRunner.h"
-#include "Modules/ModuleManager.h"
-
-IMPLEMENT_MODULE(FDefaultModuleImpl, Duolando)
-
-DEFINE_LOG_CATEGORY_STATIC(LogDuolando, Log, All);
+#include "Misc/FileHelper.h"
+#include "Misc/Paths.h"
 
 static FString LastError()
 {
@@ -14,19 +12,41 @@ static FString LastError()
 	return UTF8_TO_TCHAR(Buf);
 }
 
+// Memory-mapped when the model is a plain file, else read through Unreal's
+// file system (pak, APK) and copied into native memory.
+static duo_model* OpenModel(const FString& File)
+{
+	FString Path = File;
+	if (FPaths::IsRelative(Path))
+		Path = FPaths::Combine(FPaths::ProjectContentDir(), Path);
+	duo_model* Opened = nullptr;
+	if (duo_model_open_file(TCHAR_TO_UTF8(*Path), &Opened) == DUO_OK)
+		return Opened;
+	FString Reason = LastError();
+	TArray<uint8> Bytes;
+	if (FFileHelper::LoadFileToArray(Bytes, *Path))
+	{
+		if (duo_model_open_copy(Bytes.GetData(), static_cast<size_t>(Bytes.Num()), &Opened) == DUO_OK)
+			return Opened;
+		Reason = LastError();
+	}
+	UE_LOG(LogDuolando, Error, TEXT("Duolando: cannot open the model %s: %s"), *Path, *Reason);
+	return nullptr;
+}
+
 UDuolandoFollowerComponent::UDuolandoFollowerComponent()
 {
 	PrimaryComponentTick.bCanEverTick = true;
 }
 
+UDuolandoFollowerComponent::~UDuolandoFollowerComponent() = default;
+
 void UDuolandoFollowerComponent::BeginPlay()
 {
 	Super::BeginPlay();
-	if (duo_model_open_file(TCHAR_TO_UTF8(*ModelFile.FilePath), &Model) != DUO_OK)
-	{
-		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s"), *LastError());
+	Model = OpenModel(ModelFile.FilePath);
+	if (!Model)
 		return;
-	}
 	duo_session_config Config;
 	if (bLowLatency)
 		duo_session_config_minimum(Model, &Config);
@@ -65,7 +85,8 @@ void UDuolandoFollowerComponent::SubmitLeaderPose(const TArray<FVector>& JointsW
 		Frame.joints[j] = {static_cast<float>(JointsWorld[j].X), static_cast<float>(JointsWorld[j].Y), static_cast<float>(JointsWorld[j].Z)};
 	}
 	duo_leader_frame_convert(&Frame, DUO_COORDS_UNREAL);  // -> SMPL-X metres
-	Runner->Submit(Frame);
+	if (!Runner->Submit(Frame))
+		++Dropped;   // the input ring overwrote its oldest pose
 }
 
 void UDuolandoFollowerComponent::TickComponent(float DeltaTime, ELevelTick TickType, FActorComponentTickFunction* ThisTickFunction)
@@ -86,6 +107,7 @@ void UDuolandoFollowerComponent::TickComponent(float DeltaTime, ELevelTick TickT
 			FollowerLocalRotations[j] = FQuat(F.rotations[j].x, F.rotations[j].y, F.rotations[j].z, F.rotations[j].w);
 		}
 		FollowerRoot = FVector(F.root.x, F.root.y, F.root.z);
+		++Published;
 		OnFollowerFrame.Broadcast(static_cast<int64>(F.index));
 	}
 }

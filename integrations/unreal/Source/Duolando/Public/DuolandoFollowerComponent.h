@@ -26,8 +26,12 @@ class DUOLANDO_API UDuolandoFollowerComponent : public UActorComponent
 
 public:
 	UDuolandoFollowerComponent();
+	~UDuolandoFollowerComponent();   // out of line: SessionRunner is incomplete here
 
-	/** The .duo model file (memory-mapped; components opening the same file share its pages). */
+	/** The .duo model file: absolute, or relative to the project's Content folder. A plain file
+	 *  (editor; packaged: "Additional Non-Asset Directories to Copy") is memory-mapped and its pages
+	 *  shared by every component opening it; otherwise (a .pak, an APK) it is read through Unreal's
+	 *  file system into one native copy. */
 	UPROPERTY(EditAnywhere, Category = "Duolando")
 	FFilePath ModelFile;
 
@@ -62,7 +66,16 @@ public:
 	virtual void EndPlay(const EEndPlayReason::Type Reason) override;
 	virtual void TickComponent(float DeltaTime, ELevelTick TickType, FActorComponentTickFunction* ThisTickFunction) override;
 
+	/** Follower frames published so far (OnFollowerFrame broadcasts). */
+	int64 FramesPublished() const { return Published; }
+	/** Leader poses dropped because the worker fell more than 64 frames behind (oldest first). */
+	int64 DroppedLeaderFrames() const { return Dropped; }
+	/** True between a successful BeginPlay and EndPlay. */
+	bool IsRunning() const { return Runner != nullptr; }
+
 private:
 	duo_model* Model = nullptr;
 	std::unique_ptr<duolando::SessionRunner> Runner;
+	int64 Published = 0;
+	int64 Dropped = 0;
 };

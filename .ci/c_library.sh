@@ -1,0 +1,82 @@
+#!/usr/bin/env bash
+# Builds libduolando as it ships to engines (docs/C_API.md "Build and link"):
+#
+#   bash .ci/c_library.sh [TRIPLE] [static|both]     # default: host, both
+#
+# - Profile `ffi` (workspace Cargo.toml): release + fat LTO over every crate
+#   including std, one codegen unit, no debug info, panic = unwind.
+# - Cargo runs no LTO for a library whose crate-type list holds `rlib`
+#   (duolando-ffi's does: its Rust tests link it), so each kind is built on
+#   its own with `cargo rustc --crate-type`: staticlib, then cdylib ("both").
+#   A plain `cargo build -p duolando-ffi --profile ffi` gives a 7 MB
+#   stripped archive instead of 3 MB.
+# - Stripped copies go to $TARGET/dist/TRIPLE/: the archive with
+#   `strip --strip-debug -R .llvmbc -R .llvmcmd` (debug info and the LLVM
+#   bitcode the prebuilt compiler_builtins objects embed: 2 MB that only a
+#   Rust LTO link reads; C linkers ignore it), the shared library with
+#   `strip` (all symbols but the dynamic ones).
+# - The shared library gets SONAME libduolando.so (macOS: install name
+#   @rpath/libduolando.dylib). A cross target needs CARGO_TARGET_<TRIPLE>_LINKER.
+# Prints the native libraries to link with the archive and both sizes in
+# bytes ("size: FILE BYTES" lines, read by .ci/size.sh and .ci/cross.sh).
+# Honours CARGO_TARGET_DIR.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+TARGET=${CARGO_TARGET_DIR:-$ROOT/target}
+HOST=$(rustc -vV | sed -n 's/^host: //p')
+TRIPLE=${1:-$HOST}
+KINDS=${2:-both}
+
+if [ "$TRIPLE" = "$HOST" ]; then
+    TARGET_ARGS=()
+    BUILT=$TARGET/ffi
+else
+    TARGET_ARGS=(--target "$TRIPLE")
+    BUILT=$TARGET/$TRIPLE/ffi
+fi
+DIST=$TARGET/dist/$TRIPLE
+mkdir -p "$DIST"
+
+# GNU strip for the host; llvm-strip (Debian package llvm) reads every
+# target's objects (aarch64 ELF, Mach-O).
+if [ "$TRIPLE" = "$HOST" ]; then STRIP=strip; else STRIP=llvm-strip; fi
+case "$TRIPLE" in
+    *-apple-*) BITCODE=(-R __LLVM,__bitcode -R __LLVM,__cmdline) ;;
+    *) BITCODE=(-R .llvmbc -R .llvmcmd) ;;
+esac
+case "$TRIPLE" in
+    *-apple-*) SHARED=libduolando.dylib ;;
+    *-windows-*) SHARED=duolando.dll ;;
+    *) SHARED=libduolando.so ;;
+esac
+
+# Tier-3 targets (visionOS) have no prebuilt std: nightly builds it from
+# source (rustup component add rust-src --toolchain nightly).
+case "$TRIPLE" in
+    *-visionos*) CARGO=(cargo +nightly rustc -Z build-std=std,panic_unwind) ;;
+    *) CARGO=(cargo rustc) ;;
+esac
+
+t0=$(date +%s)
+"${CARGO[@]}" -p duolando-ffi --profile ffi --lib --crate-type staticlib "${TARGET_ARGS[@]}" \
+    -- --print native-static-libs
+"$STRIP" --strip-debug "${BITCODE[@]}" -o "$DIST/libduolando.a" "$BUILT/libduolando.a"
+echo "staticlib $TRIPLE: $(( $(date +%s) - t0 ))s"
+echo "size: $DIST/libduolando.a $(stat -c %s "$DIST/libduolando.a")"
+
+if [ "$KINDS" = both ]; then
+    t0=$(date +%s)
+    # An install name / SONAME without the build machine's path, so that
+    # engines linking the file record just its name (and find it next to
+    # their binaries: Unreal's RuntimeDependencies, Unity's Plugins).
+    case "$TRIPLE" in
+        *-apple-*) NAME_ARG=(-C link-arg=-Wl,-install_name,@rpath/libduolando.dylib) ;;
+        *-windows-*) NAME_ARG=() ;;
+        *) NAME_ARG=(-C link-arg=-Wl,-soname,libduolando.so) ;;
+    esac
+    "${CARGO[@]}" -p duolando-ffi --profile ffi --lib --crate-type cdylib "${TARGET_ARGS[@]}" -- "${NAME_ARG[@]}"
+    "$STRIP" -o "$DIST/$SHARED" "$BUILT/$SHARED"
+    echo "cdylib $TRIPLE: $(( $(date +%s) - t0 ))s"
+    echo "size: $DIST/$SHARED $(stat -c %s "$DIST/$SHARED")"
+fi

@@ -1,0 +1,137 @@
+// Runs the Unreal plugin's UDuolandoFollowerComponent and module
+// (integrations/unreal/Source/Duolando/Private/*.cpp, compiled unchanged)
+// against the real libduolando and the TEST STUB engine headers in
+// tests/unreal/stub/ (not Unreal Engine: flat std:: stand-ins, no UObject
+// system, no game thread). What it checks: the model is found relative to
+// the (stub) project Content folder, BeginPlay starts the runner, 30 fps
+// leader poses in Unreal coordinates go in, TickComponent publishes
+// follower frames (delegate, positions in cm, unit rotations, rising
+// indices), a missing model fails cleanly, EndPlay joins and frees.
+// Usage: test_component <repo root>   (.ci/ffi.sh)
+#include "DuolandoFollowerComponent.h"
+#include "Misc/Paths.h"
+#include "Modules/ModuleManager.h"
+#include "duolando.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
+
+IModuleInterface* StubCreateModule_Duolando();
+
+static int failures = 0;
+#define CHECK(c)                                                         \
+  do {                                                                   \
+    if (!(c)) {                                                          \
+      std::fprintf(stderr, "FAIL %s:%d: %s\n", __FILE__, __LINE__, #c); \
+      ++failures;                                                        \
+    }                                                                    \
+  } while (0)
+
+// A 2-D little-endian float32 .npy (numpy format 1.0).
+static std::vector<float> ReadNpy(const std::string& path, size_t* rows, size_t* cols) {
+  std::vector<float> out;
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return out;
+  unsigned char head[10];
+  if (std::fread(head, 1, 10, f) != 10 || std::memcmp(head, "\x93NUMPY", 6) != 0 || head[6] != 1) {
+    std::fclose(f);
+    return out;
+  }
+  size_t hlen = head[8] | (head[9] << 8);
+  std::string h(hlen, '\0');
+  if (std::fread(&h[0], 1, hlen, f) != hlen || h.find("'<f4'") == std::string::npos) {
+    std::fclose(f);
+    return out;
+  }
+  size_t open = h.find('(', h.find("'shape'"));
+  std::sscanf(h.c_str() + open, "(%zu, %zu)", rows, cols);
+  out.resize(*rows * *cols);
+  if (std::fread(out.data(), 4, out.size(), f) != out.size()) out.clear();
+  std::fclose(f);
+  return out;
+}
+
+int main(int argc, char** argv) {
+  if (argc < 2) return 2;
+  const std::string root = argv[1];
+  size_t lr = 0, lc = 0, mr = 0, mc = 0;
+  std::vector<float> leader = ReadNpy(root + "/assets/demo_leader_pos3d.npy", &lr, &lc);
+  std::vector<float> music = ReadNpy(root + "/assets/demo_music.npy", &mr, &mc);
+  CHECK(lc == 165 && mc == 54 && lr > 200 && !leader.empty() && !music.empty());
+  if (failures) return 1;
+
+  IModuleInterface* Module = StubCreateModule_Duolando();
+  Module->StartupModule();
+
+  FPaths::StubProjectContentDir = FString(root + "/assets");
+  {
+    UDuolandoFollowerComponent C;
+    CHECK(C.PrimaryComponentTick.bCanEverTick);
+    C.ModelFile.FilePath = "demo.duo";  // relative: the project's Content folder
+    for (float v : music) C.MusicFeatures.Add(v);
+    int64 Broadcasts = 0, LastIndex = -1;
+    bool Rising = true;
+    C.OnFollowerFrame.AddStub([&](int64 Index) {
+      Rising = Rising && Index > LastIndex;
+      LastIndex = Index;
+      ++Broadcasts;
+    });
+    C.BeginPlay();
+    CHECK(C.IsRunning());
+    const int Frames = 200;
+    for (int t = 0; t < Frames; ++t) {
+      TArray<FVector> Joints;
+      for (int j = 0; j < DUO_JOINTS; ++j) {
+        const float* p = &leader[static_cast<size_t>(t) * 165 + 3 * j];
+        duo_vec3 u = duo_vec3_to_unreal(duo_vec3{p[0], p[1], p[2]});
+        Joints.Add(FVector(u.x, u.y, u.z));
+      }
+      C.SubmitLeaderPose(Joints);
+      C.TickComponent(1.0f / 30, LEVELTICK_All, &C.PrimaryComponentTick);
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    const int64 Dropped = C.DroppedLeaderFrames();
+    for (int i = 0; i < 1000 && LastIndex + 1 + Dropped < Frames; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      C.TickComponent(1.0f / 30, LEVELTICK_All, &C.PrimaryComponentTick);
+    }
+    std::printf("component: %d leader poses submitted, %lld dropped (worker behind), %lld frames published, last index %lld\n",
+                Frames, (long long)Dropped, (long long)C.FramesPublished(), (long long)LastIndex);
+    CHECK(C.FramesPublished() > 0 && Broadcasts == C.FramesPublished() && Rising);
+    // Latency 0: every pose the runner kept comes out as one follower frame.
+    CHECK(LastIndex + 1 + Dropped == Frames);
+    CHECK(C.FollowerPositions.Num() == DUO_JOINTS && C.FollowerLocalRotations.Num() == DUO_JOINTS);
+    double Lowest = 1e9, Highest = -1e9;
+    for (int j = 0; j < DUO_JOINTS; ++j) {
+      const FVector& P = C.FollowerPositions[j];
+      CHECK(std::isfinite(P.X) && std::isfinite(P.Y) && std::isfinite(P.Z));
+      Lowest = std::fmin(Lowest, P.Z);
+      Highest = std::fmax(Highest, P.Z);
+      const FQuat& Q = C.FollowerLocalRotations[j];
+      CHECK(std::fabs(std::sqrt(Q.X * Q.X + Q.Y * Q.Y + Q.Z * Q.Z + Q.W * Q.W) - 1) < 1e-3);
+    }
+    std::printf("component: follower z from %.1f to %.1f cm (Unreal z up, cm)\n", Lowest, Highest);
+    CHECK(Highest - Lowest > 100 && Highest - Lowest < 250);  // a standing dancer, in centimetres
+    CHECK(std::fabs(C.FollowerRoot.Z - C.FollowerPositions[0].Z) < 1e-3);
+    C.EndPlay(EEndPlayReason::Quit);
+    CHECK(!C.IsRunning());
+  }
+  {
+    UDuolandoFollowerComponent Missing;
+    Missing.ModelFile.FilePath = FString(root + "/assets/no_such_model.duo");
+    Missing.BeginPlay();  // logs an error
+    CHECK(!Missing.IsRunning());
+    Missing.TickComponent(1.0f / 30, LEVELTICK_All, &Missing.PrimaryComponentTick);
+    CHECK(Missing.FramesPublished() == 0);
+    Missing.EndPlay(EEndPlayReason::Quit);
+  }
+  Module->ShutdownModule();
+  delete Module;
+  if (failures == 0) std::printf("test_component: all checks passed\n");
+  return failures == 0 ? 0 : 1;
+}
