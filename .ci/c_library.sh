@@ -8,8 +8,8 @@
 # - Cargo runs no LTO for a library whose crate-type list holds `rlib`
 #   (duolando-ffi's does: its Rust tests link it), so each kind is built on
 #   its own with `cargo rustc --crate-type`: staticlib, then cdylib ("both").
-#   A plain `cargo build -p duolando-ffi --profile ffi` gives a 7 MB
-#   stripped archive instead of 3 MB.
+#   A plain `cargo build -p duolando-ffi --profile ffi` gives a 6.2 MB
+#   stripped archive instead of 3.2 MB.
 # - Stripped copies go to $TARGET/dist/TRIPLE/: the archive with
 #   `strip --strip-debug -R .llvmbc -R .llvmcmd` (debug info and the LLVM
 #   bitcode the prebuilt compiler_builtins objects embed: 2 MB that only a
