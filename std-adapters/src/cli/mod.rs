@@ -58,6 +58,8 @@ commands! {
     Inspect => inspect,
     /// Agreement of streaming (S) with exact (R) mode, or of two models (e.g. int8 vs f32): tokens and joints.
     Compare => compare,
+    /// The papers' motion metrics (FID_k/g/cd, Div, BAS, BED, foot skating) of generated vs real motion folders.
+    Eval => eval,
 }
 
 /// `duolando <command> [flags]`.
