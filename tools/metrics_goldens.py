@@ -13,14 +13,15 @@ command line. Nothing of it is copied; nothing is fetched. Requirements: numpy, 
 The motion set is not committed: it is rebuilt bit for bit from a small integer recipe by
 this script and by the Rust tests (`duolando::eval::testset`, same recipe): float64 arithmetic
 with only +, *, / and `sin` (glibc's, through Python's `math.sin` and Rust's `f64::sin`),
-rounded once to float32. Every file's checksum (the float64 sum of its float32 values, in
-row-major order) goes into the JSON, and the Rust test checks it before any metric.
+rounded once to float32. Every file's checksum (the bits of the float64 sum of its float32
+values, in row-major order) goes into the JSON, and the Rust test checks it before any metric.
 Layout (as the authors' eval folders): DIR/{real,gen}/<G>_<CC>_<TT>_00.npy (follower, dancer
 under test), _01.npy (leader), DIR/music/<G>_<CC>_<TT>.npy ((T, 54), beat column 53).
 """
 import argparse
 import json
 import math
+import struct
 import os
 import sys
 import tempfile
@@ -111,10 +112,12 @@ def name(set_id, k):
 
 
 def checksum(a):
+    """The float64 sum of the float32 values in row-major order, as its IEEE bits (an integer:
+    JSON readers need not round decimal floats to the nearest double)."""
     s = 0.0
     for v in np.asarray(a, dtype=np.float32).reshape(-1).tolist():
         s += v
-    return s
+    return struct.unpack("<Q", struct.pack("<d", s))[0]
 
 
 def build(root, pose_mm):

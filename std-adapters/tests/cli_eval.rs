@@ -55,7 +55,7 @@ fn build(dir: &Path) -> Value {
     let want = g["checksums"].as_object().unwrap();
     assert_eq!(sums.len(), want.len());
     for (file, sum) in sums {
-        assert_eq!(sum, want[&file].as_f64().unwrap(), "{file}: the recipe set differs from the script's");
+        assert_eq!(sum, want[&file].as_u64().unwrap(), "{file}: the recipe set differs from the script's");
     }
     g
 }

@@ -57,9 +57,9 @@ fn recipe_motions_are_bit_identical_to_the_scripts() {
             let f = r.motion(set, k, 0);
             let l = r.motion(set, k, 1);
             let m = r.music(set, k, f.len() / 165);
-            assert_eq!(checksum(&f), sums[&format!("{sub}/{nm}_00.npy")].as_f64().unwrap(), "{nm} follower");
-            assert_eq!(checksum(&l), sums[&format!("{sub}/{nm}_01.npy")].as_f64().unwrap(), "{nm} leader");
-            assert_eq!(checksum(&m), sums[&format!("music/{nm}.npy")].as_f64().unwrap(), "{nm} music");
+            assert_eq!(checksum(&f), sums[&format!("{sub}/{nm}_00.npy")].as_u64().unwrap(), "{nm} follower");
+            assert_eq!(checksum(&l), sums[&format!("{sub}/{nm}_01.npy")].as_u64().unwrap(), "{nm} leader");
+            assert_eq!(checksum(&m), sums[&format!("music/{nm}.npy")].as_u64().unwrap(), "{nm} music");
         }
     }
 }
@@ -117,3 +117,4 @@ fn fid_and_div_match_the_authors_code() {
         assert!(rel(s.div_real, dr) <= FID_REL_TOL, "case {i}: real Div {} vs {dr}", s.div_real);
     }
 }
+

@@ -71,7 +71,9 @@ enum U {
 #[derive(Clone, Copy, Debug)]
 enum Test {
     /// Velocity of c relative to a, along b - a, above k units per second.
-    Along(P, P, P, f64, U),
+    /// The fourth point is named by the authors' table but never read
+    /// (so "belly, chest, chest, rwrist" tests the chest, not the wrist).
+    Along(P, P, P, P, f64, U),
     /// Velocity of d relative to a, along the normal (c - a) x (b - a), above k.
     AlongNormal(P, P, P, P, f64, U),
     /// Signed distance of d from the plane through a, b, c (normal (c-a) x (b-a)) above k.
@@ -94,14 +96,14 @@ const TESTS: [Test; DIM] = [
     AlongNormal(J(NECK), J(LHIP), J(RHIP), J(LWRIST), 1.8, Humerus),
     NormalPlane(J(CHEST), J(NECK), J(NECK), J(RWRIST), 0.2, Humerus),
     NormalPlane(J(CHEST), J(NECK), J(NECK), J(LWRIST), 0.2, Humerus),
-    Along(J(BELLY), J(CHEST), J(RWRIST), 1.8, Humerus),
-    Along(J(BELLY), J(CHEST), J(LWRIST), 1.8, Humerus),
+    Along(J(BELLY), J(CHEST), J(CHEST), J(RWRIST), 1.8, Humerus),
+    Along(J(BELLY), J(CHEST), J(CHEST), J(LWRIST), 1.8, Humerus),
     Angle(J(RELBOW), J(RSHOULDER), J(RELBOW), J(RWRIST), 0.0, 110.0),
     Angle(J(LELBOW), J(LSHOULDER), J(LELBOW), J(LWRIST), 0.0, 110.0),
     NormalPlane(J(LSHOULDER), J(RSHOULDER), J(LWRIST), J(RWRIST), 2.5, Shoulders),
-    Along(J(LWRIST), J(RWRIST), J(RWRIST), 1.4, Humerus),
-    Along(J(RWRIST), J(ROOT), J(LWRIST), 1.4, Humerus),
-    Along(J(LWRIST), J(ROOT), J(RWRIST), 1.4, Humerus),
+    Along(J(LWRIST), J(RWRIST), J(RWRIST), J(LWRIST), 1.4, Humerus),
+    Along(J(RWRIST), J(ROOT), J(LWRIST), J(ROOT), 1.4, Humerus),
+    Along(J(LWRIST), J(ROOT), J(RWRIST), J(ROOT), 1.4, Humerus),
     Fast(J(RWRIST), 2.5, Humerus),
     Fast(J(LWRIST), 2.5, Humerus),
     Plane(J(ROOT), J(LHIP), J(LTOES), J(RANKLE), 0.38, Humerus),
@@ -165,7 +167,7 @@ fn along(cur: &[V3; 24], prev: &[V3; 24], a: P, p: P, dir: V3) -> f64 {
 
 fn holds(t: Test, cur: &[V3; 24], prev: &[V3; 24], u: &Units) -> bool {
     match t {
-        Along(a, b, c, k, unit) => {
+        Along(a, b, c, _unused, k, unit) => {
             let dir = sub(at(cur, b), at(cur, a));
             along(cur, prev, a, c, dir) > u.of(k, unit)
         }

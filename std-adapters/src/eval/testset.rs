@@ -100,7 +100,7 @@ impl Recipe {
 
     /// Writes DIR/{real,gen}/<name>_{00,01}.npy and DIR/music/<name>.npy;
     /// returns (relative path, checksum) per file.
-    pub fn write(&self, dir: &Path) -> Result<Vec<(String, f64)>> {
+    pub fn write(&self, dir: &Path) -> Result<Vec<(String, u64)>> {
         let mut sums = Vec::new();
         std::fs::create_dir_all(dir.join("music"))?;
         for (set, sub, n) in [(0u64, "real", self.n_real), (1, "gen", self.n_gen)] {
@@ -122,7 +122,7 @@ impl Recipe {
     }
 }
 
-/// The float64 sum of f32 values in order (the JSON's checksums).
-pub fn checksum(v: &[f32]) -> f64 {
-    v.iter().fold(0.0f64, |s, &x| s + x as f64)
+/// The bits of the float64 sum of f32 values in order (the JSON's checksums).
+pub fn checksum(v: &[f32]) -> u64 {
+    v.iter().fold(0.0f64, |s, &x| s + x as f64).to_bits()
 }
