@@ -41,10 +41,9 @@ fn mean(v: &[f64]) -> Option<f64> {
 
 /// Runs `duolando eval`.
 pub fn run(args: Args) -> Result<()> {
-    let (gen, extra) = sets::compute(&args.gen, args.music.as_deref())?;
     let real = match (&args.real, &args.real_stats) {
         (Some(dir), _) => {
-            let (r, _) = sets::compute(dir, None).context("real set")?;
+            let (r, _) = sets::compute(dir, None, false).context("real set")?;
             if let Some(path) = &args.save_real {
                 sets::save(&r, path)?;
                 eprintln!("saved the real set's features ({} clips) to {}", r.clips.len(), path.display());
@@ -54,6 +53,7 @@ pub fn run(args: Args) -> Result<()> {
         (None, Some(path)) => Some(sets::load_stats(path)?),
         (None, None) => None,
     };
+    let (gen, extra) = sets::compute(&args.gen, args.music.as_deref(), true)?;
     let mut out = Map::new();
     let mut notes = Vec::new();
     out.insert("clips_gen".into(), json!(gen.clips.len()));
@@ -82,17 +82,19 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         notes.push("FID and Div need --real DIR or --real-stats FILE".to_string());
     }
-    match mean(&extra.bas) {
-        Some(v) => {
+    match (&extra.bas_error, mean(&extra.bas)) {
+        (Some(e), _) => notes.push(format!("BAS: {e}")),
+        (None, Some(v)) => {
             out.insert("bas".into(), json!(v));
         }
-        None => notes.push("BAS needs --music DIR".into()),
+        (None, None) => notes.push("BAS needs --music DIR".into()),
     }
-    match mean(&extra.bed) {
-        Some(v) => {
+    match (&extra.bed_error, mean(&extra.bed)) {
+        (Some(e), _) => notes.push(format!("BED: {e}")),
+        (None, Some(v)) => {
             out.insert("bed".into(), json!(v));
         }
-        None => notes.push("BED needs <name>_01 leader files next to the _00 clips".into()),
+        (None, None) => notes.push("BED needs <name>_01 leader files next to the _00 clips".into()),
     }
     if extra.fs_all.is_empty() {
         notes.push("foot skating is counted on .npy files only".into());

@@ -41,6 +41,10 @@ pub const STATS_FORMAT: &str = "duolando-eval-features/1";
 pub struct SetExtras {
     /// BED per duet.
     pub bed: Vec<f64>,
+    /// The first duet whose BED is undefined, and why.
+    pub bed_error: Option<String>,
+    /// The first clip whose BAS is undefined, and why.
+    pub bas_error: Option<String>,
     /// BAS per clip (when music was given).
     pub bas: Vec<f64>,
     /// Foot-skating counts over every `.npy` motion in the folder.
@@ -73,9 +77,11 @@ pub fn music_path(music_dir: &Path, clip: &str) -> Result<PathBuf> {
     Ok(music_dir.join(format!("{}_{}_{}.npy", fields[0], fields[1], fields[2])))
 }
 
-/// Reads every clip of `dir` and computes its features (and, with
-/// `music`, its BAS).
-pub fn compute(dir: &Path, music: Option<&Path>) -> Result<(SetFeatures, SetExtras)> {
+/// Reads every clip of `dir` and computes its features; with `scores`
+/// also BED, foot skating and (with `music`) BAS, which the authors compute
+/// on the generated set only. A clip without beats leaves BAS or BED
+/// uncomputed (the reason in `bas_error` / `bed_error`), not the features.
+pub fn compute(dir: &Path, music: Option<&Path>, scores: bool) -> Result<(SetFeatures, SetExtras)> {
     let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("cannot read the motion folder {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -89,7 +95,7 @@ pub fn compute(dir: &Path, music: Option<&Path>) -> Result<(SetFeatures, SetExtr
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or_default();
         let pos = load(path)?;
         let shown = path.display().to_string();
-        if ext == "npy" {
+        if scores && ext == "npy" {
             let counts = footskate::clip_counts(&pos).with_context(|| shown.clone())?;
             extra.fs_all.push(counts);
             if stem.ends_with("_00") {
@@ -105,16 +111,25 @@ pub fn compute(dir: &Path, music: Option<&Path>) -> Result<(SetFeatures, SetExtr
             let leader = load(&leader_path)?;
             set.duets.push(name.to_string());
             set.cd.push(cd::features(&pos, &leader).with_context(|| format!("{shown}: cross-distance features"))?);
-            extra.bed.push(
-                bed::duet_score(&pos, &leader)
-                    .with_context(|| format!("{shown} with {}: beat echo degree", leader_path.display()))?,
-            );
+            if scores {
+                match bed::duet_score(&pos, &leader) {
+                    Ok(v) => extra.bed.push(v),
+                    Err(e) => {
+                        extra.bed_error.get_or_insert(format!("{shown} with {}: {e}", leader_path.display()));
+                    }
+                }
+            }
         }
-        if let Some(mdir) = music {
+        if let (true, Some(mdir)) = (scores, music) {
             let mpath = music_path(mdir, name)?;
             let m = read_f32_2d(&mpath, Some(bas::MUSIC_DIM), "music features (T, 54), beat in column 53")
                 .with_context(|| format!("music of {shown}"))?;
-            extra.bas.push(bas::clip_score(&pos, &m.data, m.cols).with_context(|| format!("{shown}: beat align score"))?);
+            match bas::clip_score(&pos, &m.data, m.cols) {
+                Ok(v) => extra.bas.push(v),
+                Err(e) => {
+                    extra.bas_error.get_or_insert(format!("{shown}: {e}"));
+                }
+            }
         }
     }
     if set.clips.is_empty() {
