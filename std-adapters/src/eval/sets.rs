@@ -170,3 +170,42 @@ pub fn load_stats(path: &Path) -> Result<SetFeatures> {
     }
     Ok(set)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn music_file_is_named_by_the_first_three_fields() {
+        let p = music_path(Path::new("m"), "Waltz_05_03").unwrap();
+        assert_eq!(p, Path::new("m/Waltz_05_03.npy"));
+        let p = music_path(Path::new("m"), "Waltz_05_03_extra").unwrap();
+        assert_eq!(p, Path::new("m/Waltz_05_03.npy"));
+        let err = music_path(Path::new("m"), "clip").unwrap_err().to_string();
+        assert!(err.contains("fewer than three"), "{err}");
+    }
+
+    #[test]
+    fn stats_round_trip_and_inconsistent_files_are_rejected() {
+        let dir = std::env::temp_dir().join(format!("duo-eval-stats-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("s.json");
+        let mut set = SetFeatures {
+            format: STATS_FORMAT.into(),
+            clips: vec!["a".into()],
+            kinetic: vec![vec![0.25; kinetic::DIM]],
+            geometric: vec![vec![0.5; manual::DIM]],
+            duets: vec![],
+            cd: vec![],
+        };
+        save(&set, &path).unwrap();
+        assert_eq!(load_stats(&path).unwrap().kinetic, set.kinetic);
+        set.geometric[0].pop();
+        save(&set, &path).unwrap();
+        assert!(load_stats(&path).unwrap_err().to_string().contains("inconsistent statistics"));
+        set.format = "other".into();
+        save(&set, &path).unwrap();
+        assert!(load_stats(&path).unwrap_err().to_string().contains("expected 'duolando-eval-features/1'"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
