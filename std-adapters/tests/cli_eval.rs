@@ -164,3 +164,47 @@ fn bad_inputs_fail_with_named_errors() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a real-set statistics file"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// BVH clips are read through `duolando dance`'s leader loader: the
+/// features of a BVH duet set are those of the same takes as npy, up to the
+/// BVH text's round-off (centimetres, 6 decimals of degrees).
+#[test]
+fn bvh_clips_give_the_features_of_their_npy() {
+    use duolando::export::{bvh, Motion};
+    /// Largest relative difference of a kinetic feature (npy vs BVH); observed 1.5e-5.
+    const KINETIC_REL: f64 = 1e-3;
+    /// Largest difference of a geometric feature (a fraction of 179 frames:
+    /// one test flipping on one frame); observed 0.
+    const GEOMETRIC_ABS: f64 = 0.006;
+    let dir = tmp("bvh");
+    let (npy_dir, bvh_dir) = (dir.join("npy"), dir.join("bvh"));
+    std::fs::create_dir_all(&npy_dir).unwrap();
+    std::fs::create_dir_all(&bvh_dir).unwrap();
+    for seed in [3u64, 4, 5] {
+        let take = duolando::synth::demo_take(seed, 6.0);
+        for (role, track) in [("00", &take.follower), ("01", &take.leader)] {
+            let name = format!("Take_{seed:02}_00_{role}");
+            duolando::npy::write_f32(&npy_dir.join(format!("{name}.npy")), &track.positions, &[take.frames, 165]).unwrap();
+            bvh::write(&bvh_dir.join(format!("{name}.bvh")), &Motion::from_track(track), 30.0, bvh::Units::Centimetres)
+                .unwrap();
+        }
+    }
+    let stats = |real: &Path, out: &str| -> Value {
+        let file = dir.join(out);
+        let json = dir.join(format!("{out}.figures.json"));
+        run_json(&["eval", "--gen", s(&npy_dir), "--real", s(real), "--save-real", s(&file), "--json", s(&json)], &json);
+        serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap()
+    };
+    let (a, b) = (stats(&npy_dir, "npy.json"), stats(&bvh_dir, "bvh.json"));
+    assert_eq!(a["clips"], b["clips"]);
+    assert_eq!(a["duets"], b["duets"]);
+    let rows = |v: &Value| -> Vec<f64> { v.as_array().unwrap().iter().flat_map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap())).collect() };
+    let (ka, kb) = (rows(&a["kinetic"]), rows(&b["kinetic"]));
+    let kin = ka.iter().zip(&kb).map(|(x, y)| (x - y).abs() / x.abs().max(1e-3)).fold(0.0, f64::max);
+    let (ga, gb) = (rows(&a["geometric"]), rows(&b["geometric"]));
+    let geo = ga.iter().zip(&gb).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    eprintln!("npy vs BVH: kinetic max rel {kin:.2e}, geometric max abs {geo:.3}");
+    assert!(kin <= KINETIC_REL, "kinetic features npy vs BVH: {kin}");
+    assert!(geo <= GEOMETRIC_ABS, "geometric features npy vs BVH: {geo}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
