@@ -9,8 +9,10 @@ use std::path::Path;
 use anyhow::Result;
 
 const MASK_MUL: u64 = 1_000_003;
-const TWO_PI: f64 = 6.283185307179586;
-const FOUR_PI: f64 = 12.566370614359172;
+/// 2 pi (the script writes the literal 6.283185307179586: the same double).
+const TWO_PI: f64 = std::f64::consts::TAU;
+/// 4 pi, exactly 2 x TWO_PI (the script's 12.566370614359172).
+const FOUR_PI: f64 = 2.0 * std::f64::consts::TAU;
 
 /// The recipe's parameters (the JSON's `recipe`).
 #[derive(Clone, Debug)]
