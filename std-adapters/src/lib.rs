@@ -15,6 +15,7 @@ pub mod audio;
 pub mod cli;
 pub mod convert;
 pub mod duo_writer;
+pub mod eval;
 pub mod export;
 pub mod live;
 pub mod music;

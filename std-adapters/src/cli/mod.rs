@@ -60,6 +60,8 @@ commands! {
     Compare => compare,
     /// Stream a leader clip through a session at 30 fps and watch the follower live in the browser (127.0.0.1).
     Live => live,
+    /// The papers' motion metrics (FID_k/g/cd, Div, BAS, BED, foot skating) of generated vs real motion folders.
+    Eval => eval,
 }
 
 /// `duolando <command> [flags]`.
