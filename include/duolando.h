@@ -81,7 +81,11 @@ typedef enum duo_result {
    * object of the call must not be used again, except to free it. */
   DUO_PANIC = 9,
   /* An internal invariant failed (a bug: please report it). */
-  DUO_INTERNAL = 10
+  DUO_INTERNAL = 10,
+  /* The session was told the leader has ended (duo_session_finish): it
+   * takes no more leader frames until duo_session_reset. The session is
+   * unchanged. */
+  DUO_ENDED = 11
 } duo_result;
 
 /* The name of a result code ("DUO_OK", ...; "DUO_UNKNOWN" for other
