@@ -607,6 +607,15 @@ impl<'a> Session<'a> {
         self.with_own_scratch(batch::pump)
     }
 
+    /// Follower token row `j` of the history (row 0 the seed, row `k + 1`
+    /// appended by step `k`), while the session still holds it (the
+    /// newest `block_size` rows; [`Error::Evicted`] otherwise).
+    pub fn history_row(&self, j: usize) -> Result<[u32; 5], Error> {
+        let mut t = [0u32; 5];
+        t.copy_from_slice(self.st.toks.row(j)?);
+        Ok(t)
+    }
+
     /// Whether [`Session::finish`] was called (since the last reset).
     pub fn is_finished(&self) -> bool {
         self.ended
