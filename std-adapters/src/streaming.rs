@@ -131,7 +131,13 @@ pub fn run_streaming_with(
         progress(f + 1, t4);
     }
     if drain {
+        // The drained steps run as their frames are pulled.
         s.finish()?;
+        while s.pull_follower_frame(&mut frame)? {
+            run.pos.extend_from_slice(&frame.positions);
+            run.rot.extend_from_slice(&frame.rotations);
+            run.frame_ready.push(run.frames_in);
+        }
         let m = model.cfg.gpt.block_size as usize - 1;
         for k in run.step_ready.len()..s.steps() {
             let c = duolando_core::session::window_context(k, m, cfg.shift as usize);
@@ -139,13 +145,7 @@ pub fn run_streaming_with(
             run.context.push(c);
             run.window_lo.push(k + 1 - c);
             run.rows_computed.push(0);
-            let row = s.history_row(k + 1)?;
-            run.tokens.extend_from_slice(&row);
-        }
-        while s.pull_follower_frame(&mut frame)? {
-            run.pos.extend_from_slice(&frame.positions);
-            run.rot.extend_from_slice(&frame.rotations);
-            run.frame_ready.push(run.frames_in);
+            run.tokens.extend_from_slice(&s.history_row(k + 1)?);
         }
     }
     debug_assert_eq!(run.pos.len(), run.frame_ready.len() * POSE_DIM);

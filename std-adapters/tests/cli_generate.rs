@@ -161,9 +161,10 @@ fn every_listed_preset_is_accepted_by_every_command() {
     let core: Vec<&str> = duolando_core::session::Preset::ALL.iter().map(|p| p.name()).collect();
     assert_eq!(listed, core);
     assert!(listed.iter().any(|n| n == "interactive") && listed.iter().any(|n| n == "live-music"));
+    let (leader, music) = (roll.join("leader_pos3d.npy"), roll.join("music.npy"));
     for name in &listed {
         let out = tmp(&format!("preset-{name}"));
-        let common = ["--model", p(&model), "--leader", p(&roll.join("leader_pos3d.npy")), "--music", p(&roll.join("music.npy")), "--seed-tokens", &seed, "--preset", name];
+        let common = ["--model", p(&model), "--leader", p(&leader), "--music", p(&music), "--seed-tokens", &seed, "--preset", name];
         let mut args = vec!["generate", "--mode", "streaming", "--out", p(&out)];
         args.extend_from_slice(&common);
         let o = duolando(&args);
@@ -189,9 +190,10 @@ fn generate_streaming_drains_to_r_frame_count() {
     let fx = fixtures();
     let roll = fx.join("rollout_tiny_long");
     let model = fx.join("tiny/model.duo");
+    let (leader, music, start) = (roll.join("leader_pos3d.npy"), roll.join("music.npy"), roll.join("follower_start.npy"));
     let run = |extra: &[&str], name: &str| {
         let out = tmp(name);
-        let mut args = vec!["generate", "--mode", "streaming", "--model", p(&model), "--leader", p(&roll.join("leader_pos3d.npy")), "--music", p(&roll.join("music.npy")), "--follower-start", p(&roll.join("follower_start.npy")), "--out", p(&out)];
+        let mut args = vec!["generate", "--mode", "streaming", "--model", p(&model), "--leader", p(&leader), "--music", p(&music), "--follower-start", p(&start), "--out", p(&out)];
         args.extend_from_slice(extra);
         let o = duolando(&args);
         assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));

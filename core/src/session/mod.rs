@@ -542,9 +542,15 @@ impl<'a> Session<'a> {
     /// (`out` untouched).
     pub fn pull_follower_frame(&mut self, out: &mut FollowerFrame) -> Result<bool, Error> {
         let f = self.emitted;
-        if f >= self.decoded && f < self.frames && self.tail_left() {
-            // Drained: the next token's frames from the decoders' final prefix.
-            self.with_own_scratch(|ss, sc| vq_stream::decode_end(ss, sc))?;
+        if self.ended && f >= self.decoded && f < self.frames {
+            // Drained: the steps left, as many as the frame ring holds,
+            // then the next token's frames from the decoders' final prefix.
+            if self.steps_left() {
+                self.with_own_scratch(batch::pump)?;
+            }
+            if f >= self.decoded && self.tail_left() {
+                self.with_own_scratch(|ss, sc| vq_stream::decode_end(ss, sc))?;
+            }
         }
         if f >= self.decoded || f >= self.frames {
             return Ok(false);
@@ -588,6 +594,10 @@ impl<'a> Session<'a> {
     /// - then the frames of the last `d` tokens are decoded from the whole
     ///   token sequence (R's decoding of its end), pulled as usual.
     ///
+    /// The steps left run here and in [`Session::pull_follower_frame`], as
+    /// many at a time as the decoded-frame ring has room for (no leader
+    /// push paces them any more), so pull until it answers `false`.
+    ///
     /// So a drained session outputs `hop (K + 1)` frames, R's count
     /// (`music_lookahead = look_forward`); fewer than `hop` leader frames
     /// give only the seed token's frames up to `T`. Afterwards leader
@@ -625,13 +635,22 @@ impl<'a> Session<'a> {
     /// forced history ended) still has decoded frames to compute.
     fn tail_left(&self) -> bool {
         let hop = self.model.cfg.hop();
-        self.ended && !self.step_possible() && self.decoded < hop * self.dec_fed
+        self.ended && !self.steps_left() && self.decoded < hop * self.dec_fed
     }
 
-    /// Step `k` may still run (the limit of a drained session, the forced
+    /// Steps are left to run (the limit of a drained session, the forced
     /// history), inputs aside.
-    pub(crate) fn step_possible(&self) -> bool {
+    fn steps_left(&self) -> bool {
         self.k < self.step_limit && self.forced.is_none_or(|f| self.k + 1 < f.len() / 5)
+    }
+
+    /// Step `k` may run now, inputs aside: steps are left and, in a
+    /// drained session (whose steps no leader push paces any more), the
+    /// frames it completes fit the frame ring: the rest run as frames are
+    /// pulled.
+    pub(crate) fn step_possible(&self) -> bool {
+        let room = !self.ended || self.decoded - self.emitted + self.model.cfg.hop() <= self.st.pending.capacity();
+        self.steps_left() && room
     }
 
     /// A drained session wants its next leader code (the steps left need
