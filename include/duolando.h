@@ -398,6 +398,7 @@ duo_result duo_session_push_music(duo_session *session, const float *features, s
  *   30 fps clock, push your last good frame instead.
  * DUO_BACKLOG: latency + 1 + pending_frames follower frames wait unpulled
  *   (pull them first), or the music is too far behind; session unchanged.
+ * DUO_ENDED: after duo_session_finish (until duo_session_reset).
  * DUO_NULL_PARAMETER. */
 duo_result duo_session_push_leader(duo_session *session, const duo_leader_frame *frame);
 

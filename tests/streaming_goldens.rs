@@ -327,7 +327,9 @@ fn pushes_after_the_end_are_refused_and_reset_restarts() {
     let cfg = SessionConfig::with(&model.cfg, 3, 2, 2, 22);
     let mut arena = vec![0u8; model.session_bytes(&cfg).unwrap()];
     let mut s = Session::new(&model, &mut arena, &cfg, r.seed).unwrap();
-    s.set_music_track(&r.music[..600 * 54]).unwrap();
+    // The music ends with the leader, as R reads it (a longer track lets
+    // the stream run beyond R's K: those steps are kept, docs/STREAMING.md §2).
+    s.set_music_track(&r.music[..300 * 54]).unwrap();
     let mut f = FollowerFrame::default();
     let mut got = Vec::new();
     for i in 0..300 {
@@ -351,7 +353,7 @@ fn pushes_after_the_end_are_refused_and_reset_restarts() {
     assert_eq!((s.steps(), got.len()), (45, 184));
     s.reset(r.seed).unwrap();
     assert!(!s.is_finished());
-    s.set_music_track(&r.music[..600 * 54]).unwrap();
+    s.set_music_track(&r.music[..300 * 54]).unwrap();
     let mut again = Vec::new();
     for i in 0..300 {
         s.push_leader_frame(&r.leader[i * 165..(i + 1) * 165]).unwrap();
@@ -411,7 +413,7 @@ fn live_music_frames_arrive_within_the_reported_latency() {
         }
         eprintln!("{name}: a_m {} latency {lat} frames (with a track {}), worst delay {worst} over {n} frames", cfg.music_lookahead, cfg.latency_frames(4));
         assert_eq!(worst, lat, "{name}: the reported latency is not tight");
-        assert!(n > 400, "{name}: {n} frames");
+        assert!(n >= 300, "{name}: {n} frames");
     }
 }
 
