@@ -308,6 +308,27 @@ mod tests {
     use super::*;
 
     #[test]
+    fn presets_are_one_named_list_and_live_latency_covers_the_music() {
+        let cfg = crate::presets::duolando_published();
+        for p in Preset::ALL {
+            assert_eq!(Preset::from_name(p.name()), Some(p));
+            assert!(SessionConfig::preset(&cfg, p).check(&cfg).is_ok(), "{p:?}");
+        }
+        assert_eq!(Preset::from_name("fastest"), None);
+        let lat = |p: Preset| {
+            let c = SessionConfig::preset(&cfg, p);
+            (c.latency_frames(4), c.live_latency_frames(4), c.music_lookahead)
+        };
+        assert_eq!(lat(Preset::Reference), (291, 291, 29));
+        assert_eq!(lat(Preset::Interactive), (31, 31, 29));
+        assert_eq!(lat(Preset::LiveMusic), (31, 31, 0));
+        // a + e = 0: step k waits for music frame 4(k + 2 + a_m) - 1, 4 (d + 1) - 1 after the leader's.
+        assert_eq!(lat(Preset::Minimum), (0, 3, 29));
+        assert_eq!(SessionConfig::with(&cfg, 0, 0, 5, 22).live_latency_frames(4), 23);
+        assert_eq!(SessionConfig::with(&cfg, 1, 0, 5, 22).live_latency_frames(4), 23);
+    }
+
+    #[test]
     fn next_window_finds_each_jump() {
         // m = 29, s = 22: lo 0 on steps 0..28, 1 at step 29, 9 on 30..37, 17 from 38.
         assert_eq!(next_window(0, 29, 22), (29, 1));
