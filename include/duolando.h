@@ -81,7 +81,11 @@ typedef enum duo_result {
    * object of the call must not be used again, except to free it. */
   DUO_PANIC = 9,
   /* An internal invariant failed (a bug: please report it). */
-  DUO_INTERNAL = 10
+  DUO_INTERNAL = 10,
+  /* The session was told the leader has ended (duo_session_finish): it
+   * takes no more leader frames until duo_session_reset. The session is
+   * unchanged. */
+  DUO_ENDED = 11
 } duo_result;
 
 /* The name of a result code ("DUO_OK", ...; "DUO_UNKNOWN" for other
@@ -323,6 +327,14 @@ typedef struct duo_session_config {
  * 9.7 s for the full model). DUO_NULL_PARAMETER. Thread-safe. */
 duo_result duo_session_config_reference(const duo_model *model, duo_session_config *out_config);
 
+/* The named preset `name` (NUL-terminated; the list `duolando inspect`
+ * shows and `--preset` takes): "reference", "interactive" (leader
+ * look-ahead 4, enc/dec future 2: 31 frames), "live-music" (interactive
+ * with music_lookahead 0: music pushed in lockstep with the leader),
+ * "minimum". DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (no such preset).
+ * Thread-safe. */
+duo_result duo_session_config_preset(const duo_model *model, const char *name, duo_session_config *out_config);
+
 /* The lowest-latency configuration: no leader look-ahead, no encoder or
  * decoder future context (latency 0 frames), music look-ahead kept.
  * DUO_NULL_PARAMETER. Thread-safe. */
@@ -351,7 +363,14 @@ duo_result duo_session_new_in(const duo_model *model, const duo_session_config *
                               duo_session **out_session);
 
 /* *out_frames = delay in frames between a leader frame and the follower
- * frame of the same index (with music known ahead). DUO_NULL_PARAMETER. */
+ * frame of the same index: every follower frame f is ready once leader
+ * frame f + *out_frames is pushed. With a track (duo_session_set_music_track)
+ * max(0, 4 (lookahead + enc_future + dec_future) - 1); otherwise, for music
+ * pushed exactly music_lookahead tokens ahead (music frame f + 4
+ * music_lookahead in before leader frame f; lockstep for 0), at least
+ * 4 (dec_future + 1) - 1: the music of a step is that of the next token
+ * (the model reads music from frame 4), so with lookahead + enc_future = 0
+ * the music, not the leader, sets the delay. DUO_NULL_PARAMETER. */
 duo_result duo_session_latency_frames(const duo_session *session, uint32_t *out_frames);
 
 /* Gives the session a whole music track known in advance: frames x
@@ -364,7 +383,9 @@ duo_result duo_session_set_music_track(duo_session *session, const float *track,
 
 /* Pushes one music feature frame (n_features = music_features floats,
  * copied). Push music at least music_lookahead tokens ahead of the leader
- * for the stated latency. DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (wrong
+ * for the latency of duo_session_latency_frames. At most
+ * music_buffer_frames frames are held (pushed, not yet read by the model;
+ * the first 4 of a session count until it starts reading). DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (wrong
  * count; a track was given), DUO_NON_FINITE_INPUT and DUO_BACKLOG (music
  * buffer full: push leader frames first); both leave the session
  * unchanged. */
@@ -377,8 +398,20 @@ duo_result duo_session_push_music(duo_session *session, const float *features, s
  *   30 fps clock, push your last good frame instead.
  * DUO_BACKLOG: latency + 1 + pending_frames follower frames wait unpulled
  *   (pull them first), or the music is too far behind; session unchanged.
+ * DUO_ENDED: after duo_session_finish (until duo_session_reset).
  * DUO_NULL_PARAMETER. */
 duo_result duo_session_push_leader(duo_session *session, const duo_leader_frame *frame);
+
+/* The leader has ended: the session decodes what its look-ahead allows,
+ * as the offline model does at the end of a clip (docs/STREAMING.md §2
+ * "Drain"); pull the remaining frames as usual: with T leader frames,
+ * 4 (K + 1) frames in all, K = (T - T % 4 - 4) / 4 - 29 (the offline
+ * model's count; more if music_lookahead < 29 already ran further).
+ * Steps still wait for their music: push it up to the leader's end if it
+ * is not a track. Afterwards duo_session_push_leader answers DUO_ENDED
+ * (session unchanged) until duo_session_reset; music may still be pushed;
+ * calling it again does nothing. DUO_NULL_PARAMETER. */
+duo_result duo_session_finish(duo_session *session);
 
 /* Pulls the next follower frame: DUO_OK (*out_frame written) or
  * DUO_NOT_READY (nothing ready; *out_frame untouched). Frame f becomes

@@ -54,6 +54,10 @@ pub enum Error {
     /// The operation does not fit the session's state (e.g. a music track
     /// set after music frames were pushed).
     State,
+    /// A streaming session was told the leader has ended
+    /// (`Session::finish`, after `frames` leader frames): no leader frame
+    /// (or forced history) is taken any more until `Session::reset`.
+    Ended { frames: usize },
 }
 
 impl From<ArenaError> for Error {

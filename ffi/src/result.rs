@@ -49,6 +49,9 @@ pub enum DuoResult {
     Panic = 9,
     /// An internal invariant failed (a bug: please report it).
     Internal = 10,
+    /// The session was told the leader has ended (`duo_session_finish`): it
+    /// takes no more leader frames until `duo_session_reset`. Unchanged.
+    Ended = 11,
 }
 
 impl DuoResult {
@@ -66,6 +69,7 @@ impl DuoResult {
             DuoResult::Io => "DUO_IO",
             DuoResult::Panic => "DUO_PANIC",
             DuoResult::Internal => "DUO_INTERNAL",
+            DuoResult::Ended => "DUO_ENDED",
         }
     }
 }
@@ -95,6 +99,7 @@ pub fn code_of(e: &Error) -> DuoResult {
     match e {
         Error::NonFinite { .. } | Error::OutOfRange { .. } => DuoResult::NonFiniteInput,
         Error::Backlog { .. } => DuoResult::Backlog,
+        Error::Ended { .. } => DuoResult::Ended,
         Error::Evicted { .. } => DuoResult::Internal,
         Error::Setting { .. } | Error::State => DuoResult::InvalidArgument,
         Error::Arena(ArenaError::OutOfMemory { .. }) => DuoResult::BufferTooSmall,
@@ -217,6 +222,7 @@ pub extern "C" fn duo_result_name(result: i32) -> *const c_char {
             8 => c"DUO_IO",
             9 => c"DUO_PANIC",
             10 => c"DUO_INTERNAL",
+            11 => c"DUO_ENDED",
             _ => c"DUO_UNKNOWN",
         };
         s.as_ptr()
@@ -283,6 +289,7 @@ mod tests {
             DuoResult::Io,
             DuoResult::Panic,
             DuoResult::Internal,
+            DuoResult::Ended,
         ]
         .into_iter()
         .enumerate()

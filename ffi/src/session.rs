@@ -17,7 +17,7 @@
 use std::sync::Arc;
 
 use duolando_core::config::{N_JOINTS, POSE_DIM};
-use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Sampling, Session, SessionConfig};
+use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Preset, Sampling, Session, SessionConfig};
 
 use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
 use crate::handle::{caller_slot, drop_handle, handle_bytes};
@@ -207,6 +207,34 @@ pub unsafe extern "C" fn duo_session_config_minimum(model: *const DuoModel, out_
     guard("duo_session_config_minimum", || unsafe { config_default(model, out_config, false) })
 }
 
+/// The named preset `name` (NUL-terminated: "reference", "interactive",
+/// "live-music", "minimum": `duolando_core::session::Preset::ALL`, the
+/// list the CLI takes) into `out_config`.
+///
+/// # Safety
+/// `model` NULL or live; `name` NULL or a NUL-terminated string;
+/// `out_config` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_config_preset(model: *const DuoModel, name: *const std::ffi::c_char, out_config: *mut DuoSessionConfig) -> DuoResult {
+    guard("duo_session_config_preset", || {
+        let m = model_ref(model)?;
+        if name.is_null() {
+            return Err(Failure::null("name"));
+        }
+        if out_config.is_null() {
+            return Err(Failure::null("out_config"));
+        }
+        // SAFETY: NULL checked; NUL-terminated (contract).
+        let n = unsafe { std::ffi::CStr::from_ptr(name) }.to_string_lossy();
+        let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
+        let p = Preset::from_name(&n).ok_or_else(|| Failure::invalid(format!("no preset named '{n}' (presets: {})", names.join(", "))))?;
+        let c = SessionConfig::preset(m.model().config(), p);
+        // SAFETY: checked non-NULL.
+        unsafe { *out_config = DuoSessionConfig::from_core(&c) };
+        Ok(DuoResult::Ok)
+    })
+}
+
 /// Alignment slack and size of the handle placed at the start of caller memory.
 const HANDLE_BYTES: usize = handle_bytes::<SessionInner>();
 
@@ -328,7 +356,9 @@ pub unsafe extern "C" fn duo_session_free(session: *mut DuoSession) {
 }
 
 /// `*out_frames` = frames between a leader frame and the follower frame
-/// of the same index (with music known ahead).
+/// of the same index: with a music track, `Session::latency_frames`;
+/// without one (music pushed `music_lookahead` tokens ahead) the live
+/// latency, which is longer when lookahead + enc_future is 0.
 ///
 /// # Safety
 /// Pointers NULL or valid.
@@ -382,6 +412,23 @@ pub unsafe extern "C" fn duo_session_push_leader(session: *mut DuoSession, frame
         // SAFETY: NULL or valid (contract).
         let f = unsafe { frame.as_ref() }.ok_or_else(|| Failure::null("frame"))?;
         s.session.push_leader_frame(leader_pos3d(f)?)?;
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// The leader has ended (`Session::finish`): the session decodes what the
+/// look-ahead allows, as the offline model does at the end of a clip; pull
+/// the remaining frames as usual (as many in all as the offline model
+/// outputs). Afterwards `duo_session_push_leader` answers `DUO_ENDED`
+/// until `duo_session_reset`; calling it again does nothing.
+///
+/// # Safety
+/// `session` NULL or live (one thread at a time).
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_finish(session: *mut DuoSession) -> DuoResult {
+    guard("duo_session_finish", || {
+        let s = session_mut(session)?;
+        s.session.finish()?;
         Ok(DuoResult::Ok)
     })
 }

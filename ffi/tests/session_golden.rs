@@ -176,8 +176,12 @@ fn library_session_matches_the_golden_and_ignores_bad_frames() {
     assert_eq!(unsafe { duo_session_new(m.0, &c, g.seed.as_ptr(), &mut s) }, DuoResult::Ok, "{}", last_error());
     let mut lat = 99;
     assert_eq!(unsafe { duo_session_latency_frames(s, &mut lat) }, DuoResult::Ok);
-    assert_eq!(lat as u64, 0);
+    // No track yet: the latency with music pushed music_lookahead tokens
+    // ahead, 4 (d + 1) - 1 = 3 at the minimum budget (0 with the track).
+    assert_eq!(lat as u64, 3);
     let clean = drive(s, &g, Noise::None);
+    assert_eq!(unsafe { duo_session_latency_frames(s, &mut lat) }, DuoResult::Ok);
+    assert_eq!(lat as u64, 0);
     check_against_golden(&clean, &g);
     // Reset: the same run again, now with rejected bad frames interleaved.
     assert_eq!(unsafe { duo_session_reset(s, g.seed.as_ptr()) }, DuoResult::Ok);

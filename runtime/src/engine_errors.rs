@@ -64,6 +64,9 @@ pub fn describe(e: &Error) -> String {
         Error::Evicted { index, oldest, len } => format!(
             "internal error: a session buffer was read at {index}, outside the rows it holds ({oldest}..{len}); please report this"
         ),
+        Error::Ended { frames } => format!(
+            "the leader has ended (finish() after {frames} leader frames): the session takes no more leader frames; pull the remaining follower frames, or reset it to start again"
+        ),
         Error::State => "the call does not fit the session's state (music track after music frames, forced history after the first frame, a forced history whose first row is not the seed, a session in step_many or with_batch of another model or needing a larger StepBatch, or a session made by Session::new_batched called outside with_batch / step_many)".to_string(),
     }
 }

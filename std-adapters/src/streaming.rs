@@ -48,6 +48,8 @@ impl StreamRun {
 /// preloaded track, both truncated to `T4 = T - T mod hop` frames as R
 /// does. `forced`: (n, 5) forced history (row 0 = `seed`).
 /// `progress(frames_pushed, total)` is called after every push.
+/// Without drain: the leader frames as a live session gets them and no
+/// end (the S goldens).
 pub fn run_streaming(
     model: &Model<'_>,
     leader: &[f32],
@@ -55,6 +57,27 @@ pub fn run_streaming(
     cfg: &SessionConfig,
     seed: [u32; 5],
     forced: Option<&[u32]>,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<StreamRun, Error> {
+    run_streaming_with(model, leader, music, cfg, seed, forced, false, progress)
+}
+
+/// [`run_streaming`], then, with `drain`, [`Session::finish`] after the
+/// last leader frame (or the first one the session refused for backlog:
+/// the track's end stops the steps) and every remaining follower frame
+/// pulled: R's frame count (docs/STREAMING.md §2 "Drain"). Steps run by
+/// the drain have `step_ready` = `frames_in` and `rows_computed` 0 (not
+/// reported per step) and no `pred` row (`pred` covers the streamed
+/// steps); drained frames have `frame_ready` = `frames_in`.
+#[allow(clippy::too_many_arguments)]
+pub fn run_streaming_with(
+    model: &Model<'_>,
+    leader: &[f32],
+    music: &[f32],
+    cfg: &SessionConfig,
+    seed: [u32; 5],
+    forced: Option<&[u32]>,
+    drain: bool,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<StreamRun, Error> {
     let hop = model.cfg.hop();
@@ -106,6 +129,24 @@ pub fn run_streaming(
             run.frame_ready.push(f);
         }
         progress(f + 1, t4);
+    }
+    if drain {
+        // The drained steps run as their frames are pulled.
+        s.finish()?;
+        while s.pull_follower_frame(&mut frame)? {
+            run.pos.extend_from_slice(&frame.positions);
+            run.rot.extend_from_slice(&frame.rotations);
+            run.frame_ready.push(run.frames_in);
+        }
+        let m = model.cfg.gpt.block_size as usize - 1;
+        for k in run.step_ready.len()..s.steps() {
+            let c = duolando_core::session::window_context(k, m, cfg.shift as usize);
+            run.step_ready.push(run.frames_in);
+            run.context.push(c);
+            run.window_lo.push(k + 1 - c);
+            run.rows_computed.push(0);
+            run.tokens.extend_from_slice(&s.history_row(k + 1)?);
+        }
     }
     debug_assert_eq!(run.pos.len(), run.frame_ready.len() * POSE_DIM);
     debug_assert_eq!(run.rot.len(), run.frame_ready.len() * ROT_DIM);

@@ -142,3 +142,82 @@ fn bad_inputs_fail_with_messages_naming_the_file() {
         &["music.npy"],
     );
 }
+
+/// Every preset of the one list (`Preset::ALL`, what `duolando inspect`
+/// lists) is accepted by every command that takes `--preset` (generate in
+/// streaming mode, compare); a name outside the list is refused naming it.
+#[test]
+fn every_listed_preset_is_accepted_by_every_command() {
+    let fx = fixtures();
+    let roll = fx.join("rollout_tiny_short");
+    let seed = read_i64_2d(&roll.join("seed_tokens.npy"), Some(5), "seed").unwrap();
+    let seed: Vec<String> = seed.data.iter().map(|t| t.to_string()).collect();
+    let seed = seed.join(",");
+    let model = fx.join("tiny/model.duo");
+    let o = duolando(&["inspect", p(&model), "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let listed: Vec<String> = v["streaming"]["budgets"].as_array().unwrap().iter().map(|b| b["budget"].as_str().unwrap().to_string()).collect();
+    let core: Vec<&str> = duolando_core::session::Preset::ALL.iter().map(|p| p.name()).collect();
+    assert_eq!(listed, core);
+    assert!(listed.iter().any(|n| n == "interactive") && listed.iter().any(|n| n == "live-music"));
+    let (leader, music) = (roll.join("leader_pos3d.npy"), roll.join("music.npy"));
+    for name in &listed {
+        let out = tmp(&format!("preset-{name}"));
+        let common = ["--model", p(&model), "--leader", p(&leader), "--music", p(&music), "--seed-tokens", &seed, "--preset", name];
+        let mut args = vec!["generate", "--mode", "streaming", "--out", p(&out)];
+        args.extend_from_slice(&common);
+        let o = duolando(&args);
+        assert!(o.status.success(), "generate --preset {name}: {}", String::from_utf8_lossy(&o.stderr));
+        let mut args = vec!["compare"];
+        args.extend_from_slice(&common);
+        let o = duolando(&args);
+        assert!(o.status.success(), "compare --preset {name}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    let out = tmp("preset-bad");
+    let o = duolando(&["generate", "--mode", "streaming", "--model", p(&model), "--leader", p(&roll.join("leader_pos3d.npy")), "--music", p(&roll.join("music.npy")), "--seed-tokens", &seed, "--preset", "fastest", "--out", p(&out)]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("fastest") && err.contains("live-music"), "{err}");
+}
+
+/// `generate --mode streaming` drains by default: as many frames and
+/// token rows as R on the same clip (rollout_tiny_long: K = 120, 484
+/// frames) wherever the music look-ahead is R's; without the drain, the frames a session that never learns the
+/// end gives, which are the first frames of the drained run.
+#[test]
+fn generate_streaming_drains_to_r_frame_count() {
+    let fx = fixtures();
+    let roll = fx.join("rollout_tiny_long");
+    let model = fx.join("tiny/model.duo");
+    let (leader, music, start) = (roll.join("leader_pos3d.npy"), roll.join("music.npy"), roll.join("follower_start.npy"));
+    let run = |extra: &[&str], name: &str| {
+        let out = tmp(name);
+        let mut args = vec!["generate", "--mode", "streaming", "--model", p(&model), "--leader", p(&leader), "--music", p(&music), "--follower-start", p(&start), "--out", p(&out)];
+        args.extend_from_slice(extra);
+        let o = duolando(&args);
+        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        let pos = read_f32_2d(&out.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
+        let tok = read_i64_2d(&out.join("tokens.npy"), Some(5), "tokens").unwrap();
+        (pos, tok)
+    };
+    let want = read_f32_2d(&roll.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
+    let want_tok = read_i64_2d(&roll.join("tokens.npy"), Some(5), "tokens").unwrap();
+    for preset in ["reference", "interactive", "live-music", "minimum"] {
+        let (pos, tok) = run(&["--preset", preset], &format!("drain-{preset}"));
+        let (pos0, tok0) = run(&["--preset", preset, "--no-drain"], &format!("nodrain-{preset}"));
+        eprintln!("{preset}: drained {} frames / {} token rows, without drain {} / {}; R {} / {}", pos.rows, tok.rows, pos0.rows, tok0.rows, want.rows, want_tok.rows);
+        // live-music (music look-ahead 0 < look_forward) already streamed more
+        // steps than R's K (K_S = Q - a - e = 150 - 6 = 144): the drain keeps
+        // them and decodes their tail, 4 (144 + 1) frames; every other preset
+        // ends on R's count.
+        let expect = if preset == "live-music" { (580, 145) } else { (want.rows, want_tok.rows) };
+        assert_eq!((pos.rows, tok.rows), expect, "{preset}: drained run vs R ({} frames)", want.rows);
+        assert!(pos0.rows <= pos.rows && tok0.rows <= tok.rows);
+        assert_eq!(&tok.data[..tok0.data.len()], &tok0.data[..], "{preset}: the drain changed streamed tokens");
+        assert_eq!(&pos.data[..pos0.data.len()], &pos0.data[..], "{preset}: the drain changed streamed frames");
+        if preset == "reference" {
+            assert!(pos0.rows < pos.rows, "the reference budget loses its tail without the drain");
+        }
+    }
+}

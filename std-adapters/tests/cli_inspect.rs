@@ -55,9 +55,13 @@ fn inspect_json_parses_and_agrees_with_the_file() {
     // The tiny fixture has the published geometry: e_max = d_max = 22 (docs/STREAMING.md §1).
     assert_eq!((v["streaming"]["enc_future_max"].as_u64(), v["streaming"]["dec_future_max"].as_u64()), (Some(22), Some(22)));
     let b = &v["streaming"]["budgets"];
+    // Preset::ALL: reference, interactive, live-music, minimum.
+    let names: Vec<&str> = b.as_array().unwrap().iter().map(|x| x["budget"].as_str().unwrap()).collect();
+    assert_eq!(names, ["reference", "interactive", "live-music", "minimum"]);
     assert_eq!(b[0]["latency_frames"], 291);
     assert_eq!(b[1]["latency_frames"], 31);
-    assert_eq!(b[2]["latency_frames"], 0);
+    assert_eq!((b[2]["latency_frames"].as_u64(), b[2]["live_latency_frames"].as_u64(), b[2]["music_lookahead"].as_u64()), (Some(31), Some(31), Some(0)));
+    assert_eq!((b[3]["latency_frames"].as_u64(), b[3]["live_latency_frames"].as_u64()), (Some(0), Some(3)));
     // The arena figure is Model::session_bytes of that budget.
     let file = duolando::model_file::ModelFile::open(&m).unwrap();
     let duo = file.duo().unwrap();

@@ -306,7 +306,8 @@ static void test_session_errors(duo_model *m) {
 
   EXPECT(duo_session_new(m, &c, seed, &s), DUO_OK);
   EXPECT(duo_session_latency_frames(s, &lat), DUO_OK);
-  CHECK(lat == 0);
+  /* No track: music pushed music_lookahead tokens ahead, 4 (d + 1) - 1. */
+  CHECK(lat == 3);
   EXPECT(duo_session_latency_frames(NULL, &lat), DUO_NULL_PARAMETER);
   EXPECT(duo_session_latency_frames(s, NULL), DUO_NULL_PARAMETER);
   f.index = 4242;
@@ -336,6 +337,8 @@ static void test_session_errors(duo_model *m) {
     size_t i, pushed = 0, pulled = 0;
     duo_result r = DUO_OK;
     EXPECT(duo_session_set_music_track(s, music, n_frames * 54), DUO_OK);
+    EXPECT(duo_session_latency_frames(s, &lat), DUO_OK);
+    CHECK(lat == 0); /* with the track */
     for (i = 0; i < n_frames && r == DUO_OK; i++) {
       r = duo_session_push_leader(s, &leader[i]);
       if (r == DUO_OK) pushed++;
@@ -355,6 +358,62 @@ static void test_session_errors(duo_model *m) {
   EXPECT(duo_model_seed_tokens(m, (const float *)leader, (const float *)leader, 8, NULL), DUO_NULL_PARAMETER);
   duo_session_free(s);
   duo_session_free(NULL);
+}
+
+/* The drain (duo_session_finish), DUO_ENDED, the music buffer and the
+ * presets (issues #36 §3, #37 §1). */
+static void test_finish(duo_model *m) {
+  duo_session_config c, p;
+  duo_session *s = NULL;
+  duo_follower_frame f;
+  uint32_t seed[5] = {0, 0, 0, 0, 0};
+  size_t i, got = 0;
+  float feat[54];
+  duo_result r;
+  EXPECT(duo_session_config_preset(m, "reference", &c), DUO_OK);
+  EXPECT(duo_session_new(m, &c, seed, &s), DUO_OK);
+  EXPECT(duo_session_set_music_track(s, music, n_frames * 54), DUO_OK);
+  for (i = 0; i < n_frames; i++) {
+    r = duo_session_push_leader(s, &leader[i]);
+    CHECK(r == DUO_OK);
+    while (duo_session_pull_follower(s, &f) == DUO_OK) got++;
+  }
+  /* Without the end the reference budget's last frames never come. */
+  CHECK(got < 4 * ((n_frames - 4) / 4 - 29 + 1));
+  EXPECT(duo_session_finish(s), DUO_OK);
+  EXPECT(duo_session_finish(s), DUO_OK);
+  EXPECT(duo_session_push_leader(s, &leader[0]), DUO_ENDED);
+  while ((r = duo_session_pull_follower(s, &f)) == DUO_OK) {
+    CHECK(f.index == got);
+    CHECK(frame_finite(&f));
+    got++;
+  }
+  CHECK(r == DUO_NOT_READY);
+  /* The offline model's count: 4 (K + 1), K = (T4 - 4) / 4 - 29 (32 here). */
+  CHECK(got == 4 * ((n_frames - 4) / 4 - 29 + 1));
+  CHECK(strcmp(duo_result_name(DUO_ENDED), "DUO_ENDED") == 0);
+  EXPECT(duo_session_finish(NULL), DUO_NULL_PARAMETER);
+  /* The music buffer holds music_buffer_frames frames, no more. */
+  EXPECT(duo_session_reset(s, seed), DUO_OK);
+  memset(feat, 0, sizeof feat);
+  CHECK(c.music_buffer_frames == 440);
+  for (i = 0; i < 1000; i++)
+    if ((r = duo_session_push_music(s, feat, 54)) != DUO_OK) break;
+  CHECK(i == 440);
+  CHECK(r == DUO_BACKLOG);
+  EXPECT(duo_session_push_leader(s, &leader[0]), DUO_OK); /* taken again after the reset */
+  duo_session_free(s);
+  /* Presets: the list the CLI takes. */
+  EXPECT(duo_session_config_preset(m, "live-music", &p), DUO_OK);
+  CHECK(p.music_lookahead == 0 && p.lookahead == 4 && p.enc_future == 2 && p.dec_future == 2);
+  EXPECT(duo_session_config_preset(m, "interactive", &p), DUO_OK);
+  CHECK(p.music_lookahead == 29 && p.lookahead == 4);
+  EXPECT(duo_session_config_preset(m, "minimum", &p), DUO_OK);
+  CHECK(p.lookahead == 0 && p.enc_future == 0 && p.dec_future == 0);
+  EXPECT(duo_session_config_preset(m, "fastest", &p), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_config_preset(m, NULL, &p), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_config_preset(NULL, "minimum", &p), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_config_preset(m, "minimum", NULL), DUO_NULL_PARAMETER);
 }
 
 /* Reference output of one clean run, for comparisons. */
@@ -575,6 +634,7 @@ int main(int argc, char **argv) {
   test_conversions();
   test_model_open(&m);
   test_session_errors(m);
+  test_finish(m);
   test_sessions(m);
   test_step_batch(m);
   test_threads(m);

@@ -65,8 +65,10 @@ static class TestUnity
             uint[] seed = model.SeedTokens(SubArray(leader, 0, 8 * 165), SubArray(leader, 0, 8 * 165));
             using (Session session = new Session(model, config, seed))
             {
-                Check(session.LatencyFrames == 0, "latency 0");
+                // Without a track the latency is the live-music one (3 frames at the minimum budget).
+                Check(session.LatencyFrames == 3, "latency 3 before the track");
                 session.SetMusicTrack(track);
+                Check(session.LatencyFrames == 0, "latency 0");
                 LeaderFrame frame = new LeaderFrame();
                 LeaderFrame lastGood = new LeaderFrame();
                 FollowerFrame f = new FollowerFrame();

@@ -359,9 +359,10 @@ fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: 
     Ok(())
 }
 
-/// Step `k`'s leader row exists and the forced history (if any) goes on.
+/// Step `k`'s leader row exists and step `k` may run (the forced history,
+/// if any, goes on; a drained session's step limit).
 fn leader_ready(s: &Session<'_>) -> bool {
-    s.st.leader_lat[0].rows() > s.k && s.forced.is_none_or(|f| s.k + 1 < f.len() / 5)
+    s.st.leader_lat[0].rows() > s.k && s.step_possible()
 }
 
 /// Step `k` still lacks its music row and a music frame for it is there.
@@ -381,6 +382,27 @@ fn music_frames_wanted(s: &Session<'_>) -> usize {
     let need = lat.pushes_before_row(s.k);
     let there = s.music_frames.saturating_sub(lat.pushed() + mmr);
     need.min(there).min(lat.burst())
+}
+
+/// [`run_steps`], and for drained sessions ([`Session::finish`]) the
+/// leader codes that the end of the leader makes computable, as many as
+/// the steps left need and the code ring holds, until nothing changes.
+pub(super) fn pump(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+    loop {
+        let mut more = false;
+        for (i, s) in ss.iter_mut().enumerate() {
+            while s.end_code_wanted() {
+                vq_stream::encode_end(s, sc).map_err(at(i))?;
+                more = true;
+            }
+        }
+        let before: usize = ss.iter().map(|s| s.k).sum();
+        run_steps(ss, sc)?;
+        let after: usize = ss.iter().map(|s| s.k).sum();
+        if !more && after == before {
+            return Ok(());
+        }
+    }
 }
 
 /// Runs every step whose inputs exist, in every session.

@@ -220,10 +220,74 @@ impl SessionConfig {
     }
 
     /// Delay between a leader frame and the follower frame of the same
-    /// index, with music known ahead: `max(0, 4(a+e+d) - 1)` frames
-    /// (docs/STREAMING.md §2). `hop` = frames per token.
+    /// index, with music known ahead (a track): `max(0, 4(a+e+d) - 1)`
+    /// frames (docs/STREAMING.md §2). `hop` = frames per token.
     pub fn latency_frames(&self, hop: u32) -> u32 {
         (hop * (self.lookahead + self.enc_future + self.dec_future)).saturating_sub(1)
+    }
+
+    /// The same delay with music pushed frame by frame exactly
+    /// `music_lookahead` tokens ahead of the leader (music frame
+    /// `f + hop a_m` in before leader frame `f`; `a_m = 0`: in lockstep):
+    /// `max(latency_frames, hop (d + 1) - 1)`. The music row of step `k` is
+    /// the music of token `k + 1` (R feeds music from frame
+    /// `music_motion_rate`), so step `k` waits for music frame
+    /// `hop (k + 2 + a_m) - 1`, one token after leader token `k + a_m`:
+    /// with `a + e = 0` this, not the leader, sets the delay
+    /// (docs/STREAMING.md §2).
+    pub fn live_latency_frames(&self, hop: u32) -> u32 {
+        self.latency_frames(hop).max((hop * (self.dec_future + 1)).saturating_sub(1))
+    }
+
+    /// The named budget `preset` for `cfg` ([`Preset::ALL`] lists them).
+    pub fn preset(cfg: &ModelConfig, preset: Preset) -> Self {
+        let r = Self::reference(cfg);
+        let lf = cfg.gpt.look_forward;
+        match preset {
+            Preset::Reference => r,
+            Preset::Interactive => Self::with(cfg, 4.min(lf), 2.min(enc_future_max(cfg)), 2.min(dec_future_max(cfg)), r.shift),
+            Preset::LiveMusic => SessionConfig { music_lookahead: 0, ..Self::preset(cfg, Preset::Interactive) },
+            Preset::Minimum => Self::minimum(cfg),
+        }
+    }
+}
+
+/// The named streaming budgets, one list for every front end (`duolando
+/// inspect`, `generate`, `compare`, the C ABI's `duo_session_config_preset`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    /// Closest to R: full look-ahead and conv context (291 frames = 9.7 s
+    /// on the published model), music known ahead (a track).
+    Reference,
+    /// An example interactive budget: `a = 4`, `e = d = 2` (31 frames,
+    /// 1.0 s), music known ahead (a track).
+    Interactive,
+    /// Live music: the interactive budget with `music_lookahead = 0`, for
+    /// music pushed in lockstep with the leader (one music frame with each
+    /// leader frame, no look-ahead); since `a + e > 0` the music never
+    /// delays a step, so the latency is the interactive one (31 frames).
+    LiveMusic,
+    /// No look-ahead, no conv future context: latency 0 frames with a track.
+    Minimum,
+}
+
+impl Preset {
+    /// Every preset, in the order front ends list them.
+    pub const ALL: [Preset; 4] = [Preset::Reference, Preset::Interactive, Preset::LiveMusic, Preset::Minimum];
+
+    /// The preset's name on the command line and in the C ABI.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Reference => "reference",
+            Preset::Interactive => "interactive",
+            Preset::LiveMusic => "live-music",
+            Preset::Minimum => "minimum",
+        }
+    }
+
+    /// The preset called `name` ([`Preset::name`]), if any.
+    pub fn from_name(name: &str) -> Option<Preset> {
+        Preset::ALL.iter().copied().find(|p| p.name() == name)
     }
 }
 
@@ -242,6 +306,27 @@ pub fn window_context(k: usize, m: usize, s: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn presets_are_one_named_list_and_live_latency_covers_the_music() {
+        let cfg = crate::presets::duolando_published();
+        for p in Preset::ALL {
+            assert_eq!(Preset::from_name(p.name()), Some(p));
+            assert!(SessionConfig::preset(&cfg, p).check(&cfg).is_ok(), "{p:?}");
+        }
+        assert_eq!(Preset::from_name("fastest"), None);
+        let lat = |p: Preset| {
+            let c = SessionConfig::preset(&cfg, p);
+            (c.latency_frames(4), c.live_latency_frames(4), c.music_lookahead)
+        };
+        assert_eq!(lat(Preset::Reference), (291, 291, 29));
+        assert_eq!(lat(Preset::Interactive), (31, 31, 29));
+        assert_eq!(lat(Preset::LiveMusic), (31, 31, 0));
+        // a + e = 0: step k waits for music frame 4(k + 2 + a_m) - 1, 4 (d + 1) - 1 after the leader's.
+        assert_eq!(lat(Preset::Minimum), (0, 3, 29));
+        assert_eq!(SessionConfig::with(&cfg, 0, 0, 5, 22).live_latency_frames(4), 23);
+        assert_eq!(SessionConfig::with(&cfg, 1, 0, 5, 22).live_latency_frames(4), 23);
+    }
 
     #[test]
     fn next_window_finds_each_jump() {

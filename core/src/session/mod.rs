@@ -28,7 +28,7 @@ mod vq_stream;
 
 pub use batch::{BatchError, StepBatch, StepDims, StepScratch, MAX_BATCH, REPREFILL_CHUNK};
 pub use gpt_cache::KvType;
-pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, CacheSchedule, Sampling, SessionConfig, Setting, MAX_WINDOWS};
+pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, CacheSchedule, Preset, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
 use crate::arena::{Arena, Planner};
 use crate::config::{ModelConfig, POSE_DIM, ROT_DIM};
@@ -164,6 +164,11 @@ pub struct Session<'a> {
     decoded: usize,
     emitted: usize,
     root0: [f32; 3],
+    /// The leader has ended ([`Session::finish`]): no more leader frames;
+    /// steps run up to `step_limit`, then the decoders' tail is decoded.
+    ended: bool,
+    /// Steps a drained session runs in all (`usize::MAX` while streaming).
+    step_limit: usize,
 }
 
 impl<'a> Session<'a> {
@@ -222,6 +227,8 @@ impl<'a> Session<'a> {
             decoded: 0,
             emitted: 0,
             root0: [0.0; 3],
+            ended: false,
+            step_limit: usize::MAX,
         };
         s.st.init_codebooks(model);
         Ok(s)
@@ -287,6 +294,8 @@ impl<'a> Session<'a> {
         self.decoded = 0;
         self.emitted = 0;
         self.root0 = [0.0; 3];
+        self.ended = false;
+        self.step_limit = usize::MAX;
         let seed = self.seed;
         self.st.toks.push(&seed)?;
         self.with_own_scratch(|ss, sc| vq_stream::decode(ss, &[0], &[seed], sc))
@@ -297,9 +306,18 @@ impl<'a> Session<'a> {
     }
 
     /// Delay in frames between a leader frame and the follower frame of
-    /// the same index (music known ahead): `max(0, hop (a + e + d) - 1)`.
+    /// the same index: with a music track ([`Session::set_music_track`]),
+    /// [`SessionConfig::latency_frames`] = `max(0, hop (a + e + d) - 1)`;
+    /// otherwise (music pushed frame by frame, at least `music_lookahead`
+    /// tokens ahead of the leader) [`SessionConfig::live_latency_frames`]
+    /// = `max(that, hop (d + 1) - 1)`. Every follower frame `f` is
+    /// ready once leader frame `f + latency_frames` is pushed (tested).
     pub fn latency_frames(&self) -> u32 {
-        self.cfg.latency_frames(self.model.cfg.hop() as u32)
+        let hop = self.model.cfg.hop() as u32;
+        match self.track {
+            Some(_) => self.cfg.latency_frames(hop),
+            None => self.cfg.live_latency_frames(hop),
+        }
     }
 
     /// Leader frames pushed so far.
@@ -328,6 +346,9 @@ impl<'a> Session<'a> {
     /// reports its own choice, but appends `tokens[k + 1]`. Steps stop at
     /// `n - 1`. Only before the first leader frame.
     pub fn force_history(&mut self, tokens: &'a [u32]) -> Result<(), Error> {
+        if self.ended {
+            return Err(Error::Ended { frames: self.frames });
+        }
         if self.frames > 0 || self.k > 0 {
             return Err(Error::State);
         }
@@ -362,7 +383,7 @@ impl<'a> Session<'a> {
         input::check(Buffer::Music, track)?;
         self.track = Some(track);
         self.music_frames = track.len() / n_music;
-        self.with_own_scratch(batch::run_steps)
+        self.with_own_scratch(batch::pump)
     }
 
     /// Appends one music feature frame (n_music). Non-finite values are
@@ -376,16 +397,29 @@ impl<'a> Session<'a> {
         }
         check_len(Buffer::Music, features.len(), self.model.cfg.gpt.music.n_in as usize)?;
         input::check(Buffer::Music, features)?;
-        let mmr = self.model.cfg.music_motion_rate as usize;
-        let next_needed = self.st.music_lat.pushed() + mmr;
-        let held = self.music_frames.saturating_sub(next_needed);
+        let held = self.music_held();
         let cap = self.st.music.capacity();
         if held >= cap {
             return Err(Error::Backlog { buffer: Buffer::Music, held, capacity: cap });
         }
         self.st.music.push(features)?;
         self.music_frames += 1;
-        self.with_own_scratch(batch::run_steps)
+        self.with_own_scratch(batch::pump)
+    }
+
+    /// Music frames the session holds: pushed and not yet read by the
+    /// music LAT. The LAT reads from frame `music_motion_rate` on (R's
+    /// offset); the frames before it count as held until it starts
+    /// reading, so at most `music_buffer_frames` frames are ever pushed
+    /// beyond those read (before: `music_motion_rate` more in a fresh
+    /// session).
+    pub fn music_held(&self) -> usize {
+        let mmr = self.model.cfg.music_motion_rate as usize;
+        let read = match self.st.music_lat.pushed() {
+            0 => 0,
+            p => p + mmr,
+        };
+        self.music_frames.saturating_sub(read)
     }
 
     /// Appends one leader frame (165 floats: 55 joints x xyz, metres, world
@@ -447,6 +481,9 @@ impl<'a> Session<'a> {
 
     /// Every refusal of [`Session::push_leader_frame`], changing nothing.
     fn check_leader_frame(&self, pos3d: &[f32]) -> Result<(), Error> {
+        if self.ended {
+            return Err(Error::Ended { frames: self.frames });
+        }
         check_len(Buffer::LeaderPos3d, pos3d.len(), POSE_DIM)?;
         input::check(Buffer::LeaderPos3d, pos3d)?;
         let held = self.frames - self.emitted;
@@ -505,6 +542,16 @@ impl<'a> Session<'a> {
     /// (`out` untouched).
     pub fn pull_follower_frame(&mut self, out: &mut FollowerFrame) -> Result<bool, Error> {
         let f = self.emitted;
+        if self.ended && f >= self.decoded && f < self.frames {
+            // Drained: the steps left, as many as the frame ring holds,
+            // then the next token's frames from the decoders' final prefix.
+            if self.steps_left() {
+                self.with_own_scratch(batch::pump)?;
+            }
+            if f >= self.decoded && self.tail_left() {
+                self.with_own_scratch(|ss, sc| vq_stream::decode_end(ss, sc))?;
+            }
+        }
         if f >= self.decoded || f >= self.frames {
             return Ok(false);
         }
@@ -531,5 +578,89 @@ impl<'a> Session<'a> {
     /// Follower frames pulled so far.
     pub fn frames_pulled(&self) -> usize {
         self.emitted
+    }
+
+    /// The leader has ended: decode what the look-ahead allows, as R does
+    /// at the end of a clip (docs/STREAMING.md §2 "Drain"). With `T`
+    /// leader frames pushed (`Q = T / hop` whole tokens):
+    /// - the last leader codes (those still waiting for `e` tokens of
+    ///   future) come from the encoders run on all `Q` tokens, with the end
+    ///   padding there (S's definition, `n_q = min(T4, ...)`: R's codes);
+    /// - steps run up to R's step count for `T` frames, `K = (T4 - 4) / 4 -
+    ///   29` ([`crate::exact::output_shape`]), or the steps already run if
+    ///   more (music pushed with less look-ahead than `look_forward`); as
+    ///   ever each step waits for its music (push the music up to frame
+    ///   `T4` if it is not a track; R needs it too);
+    /// - then the frames of the last `d` tokens are decoded from the whole
+    ///   token sequence (R's decoding of its end), pulled as usual.
+    ///
+    /// The steps left run here and in [`Session::pull_follower_frame`], as
+    /// many at a time as the decoded-frame ring has room for (no leader
+    /// push paces them any more), so pull until it answers `false`.
+    ///
+    /// So a drained session outputs `hop (K + 1)` frames, R's count
+    /// (`music_lookahead = look_forward`); fewer than `hop` leader frames
+    /// give only the seed token's frames up to `T`. Afterwards leader
+    /// frames and forced history answer [`Error::Ended`] (the session
+    /// unchanged) until [`Session::reset`]; music may still be pushed.
+    /// Calling it again does nothing. A session of
+    /// [`Session::new_batched`] finishes and pulls its drained frames
+    /// inside [`Session::with_batch`] ([`Error::State`] otherwise).
+    pub fn finish(&mut self) -> Result<(), Error> {
+        self.check_step_memory()?;
+        if self.ended {
+            return Ok(());
+        }
+        let r_steps = crate::exact::output_shape(&self.model.cfg, self.frames).map_or(0, |sh| sh.steps);
+        self.ended = true;
+        self.step_limit = self.k.max(r_steps);
+        self.with_own_scratch(batch::pump)
+    }
+
+    /// Follower token row `j` of the history (row 0 the seed, row `k + 1`
+    /// appended by step `k`), while the session still holds it (the
+    /// newest `block_size` rows; [`Error::Evicted`] otherwise).
+    pub fn history_row(&self, j: usize) -> Result<[u32; 5], Error> {
+        let mut t = [0u32; 5];
+        t.copy_from_slice(self.st.toks.row(j)?);
+        Ok(t)
+    }
+
+    /// Whether [`Session::finish`] was called (since the last reset).
+    pub fn is_finished(&self) -> bool {
+        self.ended
+    }
+
+    /// A drained session whose steps are all done (or cannot run: the
+    /// forced history ended) still has decoded frames to compute.
+    fn tail_left(&self) -> bool {
+        let hop = self.model.cfg.hop();
+        self.ended && !self.steps_left() && self.decoded < hop * self.dec_fed
+    }
+
+    /// Steps are left to run (the limit of a drained session, the forced
+    /// history), inputs aside.
+    fn steps_left(&self) -> bool {
+        self.k < self.step_limit && self.forced.is_none_or(|f| self.k + 1 < f.len() / 5)
+    }
+
+    /// Step `k` may run now, inputs aside: steps are left and, in a
+    /// drained session (whose steps no leader push paces any more), the
+    /// frames it completes fit the frame ring: the rest run as frames are
+    /// pulled.
+    pub(crate) fn step_possible(&self) -> bool {
+        let room = !self.ended || self.decoded - self.emitted + self.model.cfg.hop() <= self.st.pending.capacity();
+        self.steps_left() && room
+    }
+
+    /// A drained session wants its next leader code (the steps left need
+    /// it, and it fits the code ring: the push-time rule of
+    /// [`Session::push_leader_frame`]).
+    pub(crate) fn end_code_wanted(&self) -> bool {
+        let hop = self.model.cfg.hop();
+        let a = self.cfg.lookahead as usize;
+        let need = (self.frames / hop).min(self.step_limit.saturating_add(a));
+        let waiting = self.codes.saturating_sub(a).saturating_sub(self.k);
+        self.ended && self.codes < need && waiting < self.st.cond_slack
     }
 }

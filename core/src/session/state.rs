@@ -133,15 +133,21 @@ impl<'s> State<'s> {
             let cache = GptCache::carve(a, sc.kv, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c, g.n_head as usize)?;
             gpt.push(cache).map_err(|_| ov())?;
         }
-        let latency = sc.latency_frames(hop as u32) as usize;
+        // The backlog refusal admits `latency + 1 + pending_frames` unpulled
+        // leader frames, `latency` the session's (with music pushed live
+        // it may be the live latency: `Session::latency_frames`).
+        let latency = sc.live_latency_frames(hop as u32) as usize;
+        let extra = latency - sc.latency_frames(hop as u32) as usize;
         let roots_cap = latency + 2 + sc.pending_frames as usize;
         // Decoded, unpulled frames. Step k runs once leader frame
         // hop(k + a + e + 1) - 1 is in and then completes the frames of token
         // k + 1 - d, so at most hop(1 - a - e - d) frames are decoded beyond
         // those pushed; with at most latency + 1 + pending_frames pushed and
         // unpulled (the backlog refusal), at most pending_frames + hop + 1
-        // decoded frames wait (the +1: latency 0 is not hop(a+e+d) - 1).
-        let pending_cap = (sc.pending_frames as usize).checked_add(hop + 1).ok_or(ov())?;
+        // decoded frames wait (the +1: latency 0 is not hop(a+e+d) - 1);
+        // with music pushed live the refusal comes `extra` frames later
+        // (the live latency), and as many more may wait.
+        let pending_cap = (sc.pending_frames as usize).checked_add(hop + 1 + extra).ok_or(ov())?;
         Ok(State {
             block: a.f32(hop.checked_mul(POSE_DIM).ok_or(ov())?)?,
             part_in: a.f32(hop.checked_mul(pos).ok_or(ov())?)?,

@@ -143,10 +143,16 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], chunk: &[usize], toks: &[[u32;
             ts.push(hop * q).map_err(|_| (i, Error::State))?;
         }
     }
-    if ready.is_empty() {
-        return Ok(());
-    }
-    let mut sts = states(ss, &ready)?;
+    frames_of(ss, &ready, &ts, conv)
+}
+
+/// The `hop` frames `[ts[j], ts[j] + hop)` of session `ready[j]` from its 9
+/// decoders' current prefix, assembled and pushed to its pending ring.
+fn frames_of(ss: &mut [&mut Session<'_>], ready: &[usize], ts: &[usize], conv: &mut crate::stream_conv::StreamScratch<'_>) -> Result<(), BatchError> {
+    let Some(&g) = ready.first() else { return Ok(()) };
+    let model = ss[g].model;
+    let hop = model.cfg.hop();
+    let mut sts = states(ss, ready)?;
     // (hop, FRAME_WIDTH) rows: normalised pose (165) | rotations (495) | translation (3).
     for st in sts.iter_mut() {
         st.frames[..hop * FRAME_WIDTH].fill(0.0);
@@ -154,7 +160,7 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], chunk: &[usize], toks: &[[u32;
     for (p, part) in Part::ALL.iter().enumerate() {
         let vq = &model.parts[p];
         let w = vq.cfg.in_channels as usize;
-        decoder_frames(&mut sts, p, false, StackW::Decoder(&vq.pos), &ts, hop, hop * w, conv).map_err(at(ready[0]))?;
+        decoder_frames(&mut sts, p, false, StackW::Decoder(&vq.pos), ts, hop, hop * w, conv).map_err(at(ready[0]))?;
         for st in sts.iter_mut() {
             for f in 0..hop {
                 scatter_part(*part, 3, &st.dec_out[f * w..(f + 1) * w], &mut st.frames[f * FRAME_WIDTH..f * FRAME_WIDTH + POSE_DIM]);
@@ -162,7 +168,7 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], chunk: &[usize], toks: &[[u32;
         }
         if let Some(rot) = vq.rot.as_ref() {
             let r = vq.cfg.rot_channels as usize;
-            decoder_frames(&mut sts, p, true, StackW::Decoder(rot), &ts, hop, hop * r, conv).map_err(at(ready[0]))?;
+            decoder_frames(&mut sts, p, true, StackW::Decoder(rot), ts, hop, hop * r, conv).map_err(at(ready[0]))?;
             for st in sts.iter_mut() {
                 for f in 0..hop {
                     let dst = &mut st.frames[f * FRAME_WIDTH + POSE_DIM..f * FRAME_WIDTH + POSE_DIM + ROT_DIM];
@@ -171,7 +177,7 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], chunk: &[usize], toks: &[[u32;
             }
         }
     }
-    decoder_frames(&mut sts, 4, false, StackW::Decoder(&model.transl.pos), &ts, hop, hop * 3, conv).map_err(at(ready[0]))?;
+    decoder_frames(&mut sts, 4, false, StackW::Decoder(&model.transl.pos), ts, hop, hop * 3, conv).map_err(at(ready[0]))?;
     for (st, &i) in sts.iter_mut().zip(ready.iter()) {
         let State { frames, dec_out, pending, .. } = &mut **st;
         for f in 0..hop {
@@ -185,6 +191,39 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], chunk: &[usize], toks: &[[u32;
         ss[i].decoded += hop;
     }
     Ok(())
+}
+
+/// A drained session ([`Session::finish`]): leader code `codes` (the
+/// next) from the 4 part encoders run on every whole token pushed, with
+/// the end padding there (S's truncated prefix at the sequence end).
+pub(super) fn encode_end(s: &mut Session<'_>, sc: &mut StepScratch<'_>) -> Result<(), Error> {
+    let model = s.model;
+    let q = s.codes;
+    let conv = &mut conv_scratch(sc.pool, &sc.dims)?;
+    let mut code = [0u32; 4];
+    for (p, c) in code.iter_mut().enumerate() {
+        let vq = &model.parts[p];
+        let emb = vq.cfg.emb_width as usize;
+        let State { enc, feat, kk, kk_stride, .. } = &mut s.st;
+        StreamStack::output_many(&[&enc[p]], StackW::Encoder(&vq.encoder), &[q], 1, conv, &mut [&mut feat[..emb]])?;
+        *c = nearest(&vq.codebook, &kk[p * *kk_stride..(p + 1) * *kk_stride], &feat[..emb]);
+    }
+    s.codes += 1;
+    s.last_code = Some(code);
+    s.st.codes.push(&code)
+}
+
+/// A drained session whose steps are done: the frames of the next token
+/// not yet decoded, from the decoders run on the whole token sequence
+/// (R's decoding of its end).
+pub(super) fn decode_end(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+    if ss.len() != 1 {
+        return Err((0, Error::State));
+    }
+    let hop = ss[0].model.cfg.hop();
+    let t = ss[0].decoded / hop * hop;
+    let conv = &mut conv_scratch(sc.pool, &sc.dims).map_err(at(0))?;
+    frames_of(ss, &[0], &[t], conv)
 }
 
 /// Frames `[ts[j], ts[j] + hop)` of decoder `p` (position, or rotation if

@@ -30,6 +30,7 @@ namespace Duolando
         Io = 8,
         Panic = 9,
         Internal = 10,
+        Ended = 11,
     }
 
     public enum Coords : uint

@@ -5,20 +5,22 @@ use anyhow::{bail, Result};
 use clap::ValueEnum;
 use duolando_core::config::ModelConfig;
 use duolando_core::session::{CacheSchedule, Sampling, SessionConfig};
+// One list of presets for every command and the C ABI (core/src/session/config.rs).
+pub use duolando_core::session::Preset;
 
-#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
-pub enum Preset {
-    /// Closest to R: full look-ahead and conv context (latency 291 frames = 9.7 s on the published model).
-    Reference,
-    /// No look-ahead, no conv future context: latency 0 frames.
-    Minimum,
+/// `--preset` values: the names of [`Preset::ALL`], checked by clap (listed in `--help`).
+fn preset_parser() -> impl clap::builder::TypedValueParser<Value = Preset> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Preset::ALL.map(Preset::name)).try_map(|s: String| Preset::from_name(&s).ok_or("not a preset"))
 }
 
 /// `--preset` and per-setting overrides (docs/STREAMING.md §2).
 #[derive(clap::Args, Debug, Clone)]
 pub struct BudgetArgs {
-    /// Starting point of the streaming budget; the flags below override single settings.
-    #[arg(long, value_enum, default_value = "reference")]
+    /// Starting point of the streaming budget (`duolando inspect` lists each
+    /// preset's settings and latency); the flags below override single settings.
+    /// live-music: music pushed in lockstep with the leader, no music look-ahead.
+    #[arg(long, default_value = "reference", value_parser = preset_parser())]
     pub preset: Preset,
     /// Leader look-ahead in tokens (4 frames each), 0..=look_forward.
     #[arg(long)]
@@ -65,17 +67,14 @@ pub enum Kv {
 impl BudgetArgs {
     /// The session configuration for `cfg`, checked.
     pub fn config(&self, cfg: &ModelConfig) -> Result<SessionConfig> {
-        let base = match self.preset {
-            Preset::Reference => SessionConfig::reference(cfg),
-            Preset::Minimum => SessionConfig::minimum(cfg),
+        let base = SessionConfig::preset(cfg, self.preset);
+        let mut sc = SessionConfig {
+            lookahead: self.lookahead.unwrap_or(base.lookahead),
+            enc_future: self.enc_future.unwrap_or(base.enc_future),
+            dec_future: self.dec_future.unwrap_or(base.dec_future),
+            shift: self.shift.unwrap_or(base.shift),
+            ..base
         };
-        let mut sc = SessionConfig::with(
-            cfg,
-            self.lookahead.unwrap_or(base.lookahead),
-            self.enc_future.unwrap_or(base.enc_future),
-            self.dec_future.unwrap_or(base.dec_future),
-            self.shift.unwrap_or(base.shift),
-        );
         if let Some(m) = self.music_lookahead {
             sc.music_lookahead = m;
         }

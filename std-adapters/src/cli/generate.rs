@@ -19,7 +19,7 @@ use duolando_core::session::SessionConfig;
 use crate::engine_errors::describe;
 use crate::model_file::ModelFile;
 use crate::npy::{read_f32_2d, write_f32, write_i64};
-use crate::streaming::run_streaming;
+use crate::streaming::run_streaming_with;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Mode {
@@ -51,6 +51,12 @@ pub struct Args {
     /// Streaming budget (with --mode streaming).
     #[command(flatten)]
     pub budget: crate::cli::budget::BudgetArgs,
+    /// With --mode streaming: stop at the last leader frame like a live
+    /// session that never learns the leader ended, instead of draining
+    /// (by default the session is told the leader ended and outputs R's
+    /// frame count, docs/STREAMING.md §2 "Drain").
+    #[arg(long)]
+    pub no_drain: bool,
     /// Output directory (created).
     #[arg(long, short)]
     pub out: PathBuf,    /// Threads the large matrix products are split over (the output does not
@@ -138,10 +144,13 @@ pub fn seed_tokens(model: &Model<'_>, seed: Seed<'_>, leader: &[f32]) -> Result<
 
 /// Runs S mode on in-memory inputs (a session fed frame by frame), with a
 /// progress bar on a terminal.
-pub fn generate_streaming(model: &Model<'_>, leader: &[f32], music: &[f32], sc: &SessionConfig, seed: [u32; 5]) -> Result<Generated> {
+/// With `drain`, the session is told the leader ended after the last frame
+/// ([`duolando_core::session::Session::finish`]) and every frame it then
+/// outputs is kept.
+pub fn generate_streaming(model: &Model<'_>, leader: &[f32], music: &[f32], sc: &SessionConfig, seed: [u32; 5], drain: bool) -> Result<Generated> {
     let t = leader.len() / POSE_DIM;
     let bar = progress_bar(t as u64, "streaming", "frames");
-    let run = run_streaming(model, leader, music, sc, seed, None, &mut |done, _| {
+    let run = run_streaming_with(model, leader, music, sc, seed, None, drain, &mut |done, _| {
         if let Some(b) = &bar {
             b.set_position(done as u64);
         }
@@ -220,7 +229,7 @@ pub fn run(args: Args) -> Result<()> {
         Mode::Streaming => {
             let sc = args.budget.config(&model.cfg)?;
             let seed = seed_tokens(&model, seed, &leader.data)?;
-            let g = generate_streaming(&model, &leader.data[..t4 * POSE_DIM], &music.data, &sc, seed)?;
+            let g = generate_streaming(&model, &leader.data[..t4 * POSE_DIM], &music.data, &sc, seed, !args.no_drain)?;
             eprintln!("streaming: latency {} frames ({:.2} s at 30 fps)", sc.latency_frames(model.cfg.hop() as u32), sc.latency_frames(model.cfg.hop() as u32) as f64 / 30.0);
             g
         }

@@ -14,7 +14,7 @@ use anyhow::{Context, Result};
 use duolando_core::config::{LatConfig, ModelConfig, VqConfig};
 use duolando_core::exact;
 use duolando_core::model::Model;
-use duolando_core::session::{dec_future_max, enc_future_max, SessionConfig};
+use duolando_core::session::{dec_future_max, enc_future_max, Preset, SessionConfig};
 use duolando_core::tensor::DType;
 use serde_json::{json, Value};
 
@@ -117,19 +117,18 @@ pub fn report(model: &std::path::Path, frames: usize) -> Result<Value> {
 }
 
 /// Latency and session arena per streaming budget (docs/STREAMING.md §2):
-/// the reference preset, an interactive example, the minimum.
+/// every preset of the one list (`Preset::ALL`, what `--preset` takes).
 fn streaming(duo: &duolando_core::format::DuoFile<'_>) -> Result<Value> {
     let model = Model::from_duo(duo).map_err(|e| anyhow::anyhow!("the model cannot be bound: {e:?}"))?;
     let cfg = &model.cfg;
     let hop = cfg.hop() as u32;
-    let reference = SessionConfig::reference(cfg);
-    let interactive = SessionConfig::with(cfg, 4.min(cfg.gpt.look_forward), 2.min(enc_future_max(cfg)), 2.min(dec_future_max(cfg)), reference.shift);
-    let budgets: Vec<Value> = [("reference", reference), ("interactive", interactive), ("minimum", SessionConfig::minimum(cfg))]
+    let budgets: Vec<Value> = Preset::ALL
         .iter()
-        .map(|(name, sc)| {
+        .map(|&p| {
+            let sc = SessionConfig::preset(cfg, p);
             let lat = sc.latency_frames(hop);
             json!({
-                "budget": name,
+                "budget": p.name(),
                 "lookahead": sc.lookahead,
                 "enc_future": sc.enc_future,
                 "dec_future": sc.dec_future,
@@ -137,14 +136,15 @@ fn streaming(duo: &duolando_core::format::DuoFile<'_>) -> Result<Value> {
                 "music_lookahead": sc.music_lookahead,
                 "latency_frames": lat,
                 "latency_seconds": lat as f64 / FPS as f64,
-                "arena_bytes": model.session_bytes(sc).ok(),
+                "live_latency_frames": sc.live_latency_frames(hop),
+                "arena_bytes": model.session_bytes(&sc).ok(),
             })
         })
         .collect();
     Ok(json!({
         "enc_future_max": enc_future_max(cfg),
         "dec_future_max": dec_future_max(cfg),
-        "latency": "hop * (lookahead + enc_future + dec_future) - 1 frames (at least 0), with music known ahead",
+        "latency": "hop * (lookahead + enc_future + dec_future) - 1 frames (at least 0) with a music track; with music pushed live music_lookahead tokens ahead, at least hop * (dec_future + 1) - 1",
         "budgets": budgets,
     }))
 }
@@ -253,7 +253,7 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
     ));
     for b in st["budgets"].as_array().into_iter().flatten() {
         line(format!(
-            "  {:<12} a {} e {} d {} shift {}: latency {} frames ({:.2} s), session arena {}",
+            "  {:<12} a {} e {} d {} shift {}: latency {} frames ({:.2} s), session arena {}; music look-ahead {}, latency with music pushed live {} frames",
             b["budget"].as_str().unwrap_or(""),
             b["lookahead"],
             b["enc_future"],
@@ -261,7 +261,9 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
             b["shift"],
             b["latency_frames"],
             b["latency_seconds"].as_f64().unwrap_or(0.0),
-            b["arena_bytes"].as_u64().map(mib).unwrap_or_else(|| "?".into())
+            b["arena_bytes"].as_u64().map(mib).unwrap_or_else(|| "?".into()),
+            b["music_lookahead"],
+            b["live_latency_frames"]
         ));
     }
     s
