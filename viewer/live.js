@@ -17,7 +17,7 @@
     hello: null, end: null, status: "connecting",
     events: 0, lastId: -1, outOfOrder: 0,
     leaderFrame: -1, followerFrame: -1, followerFrames: 0,
-    latencyFrames: null, latencyMs: null, stepMs: null, tickMs: null, steps: 0, late: 0, refusedFrom: null,
+    drainEvents: 0, latencyFrames: null, latencyMs: null, stepMs: null, tickMs: null, steps: 0, late: 0, refusedFrom: null,
     stepSum: 0, stepCount: 0, stepMax: 0,
   };
   let J = 55, ROW = 165, parents = null, fps = 30;
@@ -220,10 +220,24 @@
     }
     live.status = live.followerFrame >= 0 ? "streaming" : "streaming (the follower starts after the latency)";
   }
+  function onDrain(ev) {
+    for (const fr of ev.follower) {
+      if (fr.index !== live.followerFrame + 1) live.outOfOrder++;
+      const fp = Float32Array.from(fr.pos);
+      dancers[1].pos = fp;
+      live.followerFrame = fr.index;
+      grow(fp);
+    }
+    live.drainEvents++;
+    live.followerFrames = ev.follower_frames;
+    live.steps = ev.steps;
+    live.latencyFrames = live.leaderFrame - live.followerFrame;
+    live.status = "the leader ended: the follower finishes (drain)";
+  }
   function onEnd(e) {
     live.end = e;
     live.status = "clip ended: " + e.follower_frames + " follower frames for " + e.frames + " leader frames";
-    if (e.follower_frames_pending > 0 && live.refusedFrom == null) note.textContent = "the last " + e.follower_frames_pending + " follower frames need a drain at the end of the leader (not in this session yet)";
+    if (e.drained_frames > 0 && live.refusedFrom == null) note.textContent = "after the leader ended, the drain gave the follower's last " + e.drained_frames + " frames";
     source.close();
   }
 
@@ -240,6 +254,7 @@
   }
   handler("hello", onHello);
   handler("frame", onFrame);
+  handler("drain", onDrain);
   handler("end", onEnd);
   source.onerror = () => {
     if (live.end) return;
@@ -282,6 +297,7 @@
     get hello() { return live.hello; },
     get end() { return live.end; },
     get events() { return live.events; },
+    get drainEvents() { return live.drainEvents; },
     get outOfOrder() { return live.outOfOrder; },
     get leaderFrame() { return live.leaderFrame; },
     get followerFrame() { return live.followerFrame; },

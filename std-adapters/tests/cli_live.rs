@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use duolando::cli::generate::seed_tokens;
 use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, write_f32};
-use duolando::streaming::run_streaming;
+use duolando::streaming::run_streaming_with;
 use duolando_core::exact::Seed;
 use duolando_core::model::Model;
 use duolando_core::session::SessionConfig;
@@ -225,7 +225,7 @@ fn reference_run(cfg_of: impl Fn(&duolando_core::config::ModelConfig) -> Session
     let start = read_f32_2d(&roll().join("follower_start.npy"), Some(ROW), "start").unwrap();
     let seed = seed_tokens(&model, Seed::FollowerFrames(&start.data), &leader.data).unwrap();
     let sc = cfg_of(&model.cfg);
-    run_streaming(&model, &leader.data, &music.data, &sc, seed, None, &mut |_, _| {}).unwrap()
+    run_streaming_with(&model, &leader.data, &music.data, &sc, seed, None, true, &mut |_, _| {}).unwrap()
 }
 
 #[test]
@@ -255,7 +255,9 @@ fn live_streams_the_sessions_frames_in_order() {
     let run = reference_run(|c| SessionConfig::with(c, 4, 2, 2, SessionConfig::reference(c).shift));
     let leader = read_f32_2d(&roll().join("leader_pos3d.npy"), Some(ROW), "leader").unwrap();
     let t = leader.rows;
-    assert_eq!(events.len(), t + 2, "hello, one frame event per leader frame, end");
+    let drained = run.frame_ready.iter().filter(|&&f| f == run.frames_in).count();
+    assert!(drained > 0, "the drain gives frames");
+    assert_eq!(events.len(), t + 2 + drained, "hello, one frame event per leader frame, one drain event per drained frame, end");
 
     let hello = &events[0];
     assert_eq!(hello.kind, "hello");
@@ -298,6 +300,18 @@ fn live_streams_the_sessions_frames_in_order() {
         }
     }
 
+    // After the leader: the drained frames, one per event.
+    let ticked = follower.len();
+    for (d, e) in events[t + 1..t + 1 + drained].iter().enumerate() {
+        assert_eq!(e.kind, "drain");
+        assert_eq!(uint(&e.data, "d"), d);
+        let fs = e.data["follower"].as_array().unwrap();
+        assert_eq!(fs.len(), 1, "one drained frame per tick");
+        assert_eq!(uint(&fs[0], "index"), follower.len(), "drained frames in order");
+        follower.push((run.frames_in, pose(&fs[0]["pos"], "follower")));
+        assert_eq!(uint(&e.data, "follower_frames"), follower.len());
+    }
+
     // The session took the leader frames run_streaming could push (it stops
     // at the first backlog: music past the end of the track), then refused
     // every later one.
@@ -305,7 +319,8 @@ fn live_streams_the_sessions_frames_in_order() {
     // Exactly the session's frames, at the same leader frames.
     assert_eq!(follower.len(), run.frames_out(), "follower frame count");
     assert!(follower.len() > t / 2, "{} follower frames for {t} leader frames", follower.len());
-    assert_eq!(steps, run.steps(), "steps");
+    assert_eq!(uint(&events[t + drained].data, "steps"), run.steps(), "steps, the drain's included");
+    assert!(steps <= run.steps());
     let mut worst = 0.0f32;
     for (j, (at, pos)) in follower.iter().enumerate() {
         assert_eq!(*at, run.frame_ready[j], "follower frame {j} came with leader frame {at}, the session had it after {}", run.frame_ready[j]);
@@ -316,17 +331,18 @@ fn live_streams_the_sessions_frames_in_order() {
     assert_eq!(worst, 0.0, "follower positions differ from the session's by up to {worst}");
     // The follower trails by at most the session's latency, and by all of it
     // at the last frame of each token (frames come out a token, 4 frames, at a time).
-    let lat: Vec<usize> = follower.iter().enumerate().map(|(j, (at, _))| at - j).collect();
+    let lat: Vec<usize> = follower[..ticked].iter().enumerate().map(|(j, (at, _))| at - j).collect();
     assert!(lat.iter().all(|&l| l <= 31) && lat.iter().max() == Some(&31), "latencies: {:?}", &lat[..lat.len().min(40)]);
 
-    let end = &events[t + 1];
+    let end = &events[t + 1 + drained];
     assert_eq!(end.kind, "end");
     assert_eq!(uint(&end.data, "frames"), t);
     assert_eq!(uint(&end.data, "follower_frames"), follower.len());
     assert_eq!(uint(&end.data, "frames_accepted"), run.frames_in);
-    assert_eq!(uint(&end.data, "follower_frames_pending"), run.frames_in - follower.len());
+    assert_eq!(uint(&end.data, "drained_frames"), drained);
+    assert_eq!(uint(&end.data, "follower_frames_pending"), run.frames_in.saturating_sub(follower.len()));
     assert_eq!(uint(&end.data, "steps"), run.steps());
-    assert_eq!(uint(&end.data["step_ms"], "count"), run.steps());
+    assert_eq!(uint(&end.data["step_ms"], "count"), steps, "step times of the ticks that stepped");
 
     // Its one stream got everything: it exits by itself, long before --linger 120.
     let (ok, err) = live.wait_exit(Duration::from_secs(60));
@@ -382,11 +398,15 @@ fn live_without_flags_streams_the_bundled_demo() {
     assert!(hello["leader"].as_str().unwrap().ends_with("demo_leader_pos3d.npy"), "{hello}");
     let frames = uint(hello, "frames");
     assert_eq!(frames, 748);
-    assert_eq!(ev.len(), frames + 2);
-    let end = &ev[frames + 1].data;
+    let end = &ev.last().unwrap().data;
+    let drained = uint(end, "drained_frames");
+    assert_eq!(ev.len(), frames + 2 + drained, "hello, frames, drain, end");
     let latency = uint(hello, "latency_frames");
     assert_eq!(latency, 291, "the reference preset by default");
-    assert!(uint(end, "follower_frames") >= frames - latency - 4, "{end}");
+    // Drained, the follower has R's frame count: 4 (K + 1), K = (T4 - 4) / 4 - 29.
+    let k = (frames / 4 * 4 - 4) / 4 - 29;
+    assert_eq!(uint(end, "follower_frames"), 4 * (k + 1), "{end}");
+    assert!(drained > 0 && drained <= latency, "the drain gives at most what the latency held back: {end}");
     let (ok, err) = live.wait_exit(Duration::from_secs(60));
     assert!(ok, "{err}");
 }

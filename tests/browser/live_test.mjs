@@ -146,7 +146,7 @@ try {
     const d = window.__duolandoLive;
     const t = (id) => document.getElementById(id).textContent;
     return {
-      status: d.status, events: d.events, outOfOrder: d.outOfOrder, leaderFrame: d.leaderFrame, followerFrame: d.followerFrame,
+      status: d.status, events: d.events, drainEvents: d.drainEvents, outOfOrder: d.outOfOrder, leaderFrame: d.leaderFrame, followerFrame: d.followerFrame,
       latencyFrames: d.latencyFrames, hello: d.hello, end: d.end,
       overlay: { latencyFrames: t("live-latency-frames"), latencyMs: t("live-latency-ms"), latencyWall: t("live-latency-wall"),
         stepMs: t("live-step-ms"), stepMean: t("live-step-mean"), stepMax: t("live-step-max"), leader: t("live-leader"), follower: t("live-follower") },
@@ -205,9 +205,11 @@ try {
   // The end of the clip: every frame in order, the end event, the server exits 0.
   await page.waitForFunction(() => window.__duolandoLive.end != null, null, { timeout: 60_000 });
   const s2 = await live();
-  check("every event arrived, in order", s2.outOfOrder === 0 && s2.events === FRAMES + 2 && s2.leaderFrame === FRAMES - 1, `events ${s2.events}, out of order ${s2.outOfOrder}`);
-  check("end: follower frames as the session gave them", s2.end.follower_frames === s2.followerFrame + 1 && s2.end.follower_frames >= FRAMES - LATENCY - 4,
-    `${s2.end.follower_frames} follower frames, last index ${s2.followerFrame}`);
+  check("every event arrived, in order (hello, a frame per leader frame, a drain per drained frame, end)",
+    s2.outOfOrder === 0 && s2.events === FRAMES + 2 + s2.drainEvents && s2.drainEvents === s2.end.drained_frames && s2.leaderFrame === FRAMES - 1,
+    `events ${s2.events}, drain events ${s2.drainEvents}, out of order ${s2.outOfOrder}`);
+  check("end: follower frames as the session gave them, the drain included", s2.end.follower_frames === s2.followerFrame + 1 && s2.end.drained_frames > 0
+    && s2.end.follower_frames >= FRAMES - LATENCY - 4 + s2.end.drained_frames, `${s2.end.follower_frames} follower frames (${s2.end.drained_frames} drained), last index ${s2.followerFrame}`);
   check("the page says the clip ended", /^clip ended/.test(s2.status), s2.status);
   const ex = await Promise.race([exited, sleep(30_000).then(() => null)]);
   check("duolando live exits 0 once the page has everything", ex && ex.code === 0, ex ? `code ${ex.code} signal ${ex.signal}` : "still running after 30 s");

@@ -8,9 +8,9 @@
 //! ends, once the pages have the last event (or after `--linger`).
 //! See docs/CLI.md and docs/VIEWER.md.
 //!
-//! The session has no end-of-leader drain yet: when the clip ends the
-//! command stops, and the follower's last `latency` frames never come out
-//! (the `end` event says how many).
+//! When the clip ends the session is told (`Session::finish`): the follower
+//! frames its look-ahead held back come out one per tick in `drain` events
+//! (R's frame count in all), then the `end` event.
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -154,6 +154,19 @@ struct Tick<'a> {
     refused: bool,
 }
 
+/// One tick after the leader's end: a follower frame the drain gave.
+#[derive(Serialize)]
+struct Drain<'a> {
+    /// Drain tick, from 0.
+    d: usize,
+    t_ms: f64,
+    follower: Vec<FollowerOut<'a>>,
+    stepped: usize,
+    steps: usize,
+    tick_ms: f64,
+    follower_frames: usize,
+}
+
 /// The last event.
 #[derive(Serialize)]
 struct End {
@@ -161,9 +174,12 @@ struct End {
     frames: usize,
     frames_accepted: usize,
     follower_frames: usize,
-    /// Follower frames of accepted leader frames that did not come out (a
-    /// drain at the end of the leader would give them).
+    /// Follower frames of accepted leader frames that did not come out even
+    /// after the drain (R too gives none for the leader's last frames: they
+    /// are look-ahead only).
     follower_frames_pending: usize,
+    /// Follower frames given by the drain, after the leader's last frame.
+    drained_frames: usize,
     steps: usize,
     latency_frames: u32,
     /// The first leader frame the session refused (every later one was refused too).
@@ -402,10 +418,43 @@ pub fn run(args: Args) -> Result<()> {
         };
         server.publish("frame", &serde_json::to_string(&ev)?);
     }
-    // The end of the leader. Once the session has a drain (end of leader
-    // input, core/src/session), call it here and pull and publish the
-    // follower frames it releases (the `follower_frames_pending` below),
-    // before the `end` event.
+    // The end of the leader: the session is told (Session::finish) and gives
+    // what its look-ahead held back (R's frame count, docs/STREAMING.md §2
+    // "Drain"), one follower frame per tick as a player would show them,
+    // each in a `drain` event.
+    s.finish().map_err(|e| anyhow::anyhow!("ending the leader (drain): {}", describe(&e)))?;
+    let mut drained = 0usize;
+    for d in 0.. {
+        let slot = start + tick * (n + d) as u32;
+        if !args.no_pace {
+            let now = Instant::now();
+            if now < slot {
+                std::thread::sleep(slot - now);
+            }
+        }
+        let t0 = Instant::now();
+        let steps_before = s.steps();
+        let got = match s.pull_follower_frame(&mut frame) {
+            Ok(got) => got,
+            Err(e) => bail!("pulling a drained follower frame: {}", describe(&e)),
+        };
+        if !got {
+            break;
+        }
+        let tick_ms = ms(Instant::now() - t0);
+        drained += 1;
+        pulled += 1;
+        let ev = Drain {
+            d,
+            t_ms: ms(t0 - start),
+            follower: vec![FollowerOut { index: frame.index, pos: &frame.positions }],
+            stepped: s.steps() - steps_before,
+            steps: s.steps(),
+            tick_ms,
+            follower_frames: pulled,
+        };
+        server.publish("drain", &serde_json::to_string(&ev)?);
+    }
     let seconds = start.elapsed().as_secs_f64();
     let accepted = refused_from.unwrap_or(n);
     let end = End {
@@ -413,6 +462,7 @@ pub fn run(args: Args) -> Result<()> {
         follower_frames: pulled,
         frames_accepted: accepted,
         follower_frames_pending: accepted.saturating_sub(pulled),
+        drained_frames: drained,
         steps: s.steps(),
         latency_frames: latency,
         refused_from,
@@ -424,7 +474,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     server.publish("end", &serde_json::to_string(&end)?);
     eprintln!(
-        "clip ended after {seconds:.1} s: {accepted} of {n} leader frames in, {pulled} follower frames out ({} more wait for a drain at the end of the leader), \
+        "clip ended after {seconds:.1} s: {accepted} of {n} leader frames in, {pulled} follower frames out ({drained} of them drained after the leader's end, {} not given), \
          {} steps of {:.2} ms on average (max {:.2} ms), {late_ticks} late ticks",
         end.follower_frames_pending,
         end.steps,
