@@ -98,7 +98,9 @@ fn from_model_file(mf: ModelFile, origin: &str, out: *mut *mut DuoModel) -> Resu
     // SAFETY: the bytes live in `mf` (mmap or heap: fixed addresses), which
     // is moved into the same ModelInner as the model and dropped after it.
     let bytes = unsafe { forever(mf.bytes()) };
-    let duo = DuoFile::parse(bytes)
+    // `mf` passed the full `DuoFile::parse` (weights included) when it was
+    // made; its bytes are immutable since: the table alone is read again.
+    let duo = DuoFile::parse_without_weight_scan(bytes)
         .map_err(|e| Failure::new(DuoResult::BadModel, format!("{origin}: invalid .duo model: {}", explain(bytes, &e))))?;
     let model = bind(&duo, origin)?;
     publish(ModelInner { model, storage: Storage::File(mf) }, out)
