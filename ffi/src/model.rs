@@ -114,21 +114,6 @@ fn file_failure(e: ModelFileError) -> Failure {
     Failure::new(code, e.to_string())
 }
 
-/// Checks `bytes`/`len` (NULL + 0 is an empty buffer) and returns the slice.
-///
-/// # Safety
-/// `bytes` must be NULL or point to `len` readable bytes.
-pub unsafe fn byte_slice<'x>(bytes: *const u8, len: usize, what: &str) -> Result<&'x [u8], Failure> {
-    if bytes.is_null() {
-        if len == 0 {
-            return Ok(&[]);
-        }
-        return Err(Failure::null(what));
-    }
-    // SAFETY: per the function contract.
-    Ok(unsafe { std::slice::from_raw_parts(bytes, len) })
-}
-
 /// Opens a model from caller memory without copying.
 ///
 /// # Safety
@@ -142,7 +127,7 @@ pub unsafe extern "C" fn duo_model_open_bytes(bytes: *const u8, len: usize, out_
             return Err(Failure::null("out_model"));
         }
         // SAFETY: caller contract.
-        let b = unsafe { byte_slice(bytes, len, "bytes") }?;
+        let b = unsafe { crate::handle::buffer(bytes, len, "bytes") }?;
         let addr = b.as_ptr() as usize;
         if !b.is_empty() && addr & 63 != 0 {
             return Err(Failure::invalid(format!(
@@ -174,7 +159,7 @@ pub unsafe extern "C" fn duo_model_open_copy(bytes: *const u8, len: usize, out_m
             return Err(Failure::null("out_model"));
         }
         // SAFETY: caller contract.
-        let b = unsafe { byte_slice(bytes, len, "bytes") }?;
+        let b = unsafe { crate::handle::buffer(bytes, len, "bytes") }?;
         let mf = ModelFile::from_aligned(AlignedBytes::copy_from(b), "<memory>").map_err(file_failure)?;
         from_model_file(mf, "<memory>", out_model)
     })

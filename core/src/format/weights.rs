@@ -52,7 +52,7 @@ impl Bits for u32 {
     #[inline(always)]
     fn flag(self) -> u32 {
         // <= 0x7fff_ffff + 0x0080_0000: never overflows.
-        (self & 0x7fff_ffff) + 0x0080_0000
+        (self & 0x7fff_ffff).wrapping_add(0x0080_0000)
     }
     #[inline(always)]
     fn or(self, o: u32) -> u32 {
@@ -83,7 +83,7 @@ impl Bits for u16 {
     #[inline(always)]
     fn flag(self) -> u16 {
         // <= 0x7fff + 0x0400: never overflows.
-        (self & 0x7fff) + 0x0400
+        (self & 0x7fff).wrapping_add(0x0400)
     }
     #[inline(always)]
     fn or(self, o: u16) -> u16 {
