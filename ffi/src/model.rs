@@ -128,6 +128,12 @@ pub unsafe extern "C" fn duo_model_open_bytes(bytes: *const u8, len: usize, out_
         }
         // SAFETY: caller contract.
         let b = unsafe { crate::handle::buffer(bytes, len, "bytes") }?;
+        // An empty buffer, NULL or not, at any address, is one answer:
+        // too short (parse would check the address of an empty slice).
+        #[repr(C, align(64))]
+        struct Empty([u8; 0]);
+        static EMPTY: Empty = Empty([]);
+        let b = if b.is_empty() { &EMPTY.0[..] } else { b };
         let addr = b.as_ptr() as usize;
         if !b.is_empty() && addr & 63 != 0 {
             return Err(Failure::invalid(format!(
