@@ -583,16 +583,16 @@ fn every_buffer_follows_the_null_rule() {
     assert_eq!(buf, [0x55 as c_char; 4]);
 
     // Models from empty bytes: not a model, NULL or not.
-    for open_fn in [duo_model_open_bytes, duo_model_open_copy] {
+    for opener in [duo_model_open_bytes, duo_model_open_copy] {
         let mut out = sentinel;
-        assert_eq!(unsafe { open_fn(ptr::null(), 0, &mut out) }, DuoResult::BadModel);
+        assert_eq!(unsafe { opener(ptr::null(), 0, &mut out) }, DuoResult::BadModel);
         let null_msg = last_error();
         assert!(null_msg.ends_with("buffer of 0 bytes is shorter than the 24-byte .duo prefix"), "{null_msg}");
         for p in [aligned.as_bytes().as_ptr(), nothing[1..].as_ptr()] {
-            assert_eq!(unsafe { open_fn(p, 0, &mut out) }, DuoResult::BadModel);
+            assert_eq!(unsafe { opener(p, 0, &mut out) }, DuoResult::BadModel);
             assert_eq!(last_error(), null_msg);
         }
-        assert_eq!(unsafe { open_fn(ptr::null(), 64, &mut out) }, DuoResult::NullParameter);
+        assert_eq!(unsafe { opener(ptr::null(), 64, &mut out) }, DuoResult::NullParameter);
         assert!(last_error().ends_with("bytes is NULL"), "{}", last_error());
         assert_eq!(out, sentinel);
     }
