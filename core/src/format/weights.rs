@@ -43,7 +43,7 @@ trait Bits: Copy + bytemuck::Pod {
     /// A little-endian word from its bytes (the unaligned fallback).
     fn read(c: &[u8]) -> Self;
     /// The stored (little-endian) word as a number.
-    fn from_le(self) -> Self;
+    fn le(self) -> Self;
     /// Sign bit set when the value is NaN or infinite.
     fn flag(self) -> Self;
     fn or(self, o: Self) -> Self;
@@ -58,7 +58,7 @@ impl Bits for u32 {
         u32::from_le_bytes([c[0], c[1], c[2], c[3]])
     }
     #[inline(always)]
-    fn from_le(self) -> u32 {
+    fn le(self) -> u32 {
         u32::from_le(self)
     }
     #[inline(always)]
@@ -92,7 +92,7 @@ impl Bits for u16 {
         u16::from_le_bytes([c[0], c[1]])
     }
     #[inline(always)]
-    fn from_le(self) -> u16 {
+    fn le(self) -> u16 {
         u16::from_le(self)
     }
     #[inline(always)]
@@ -122,7 +122,7 @@ impl Bits for u16 {
 
 #[inline(always)]
 fn fold<T: Bits>(words: &[T]) -> T {
-    words.iter().fold(T::zero(), |acc, &w| acc.or(w.from_le().flag()))
+    words.iter().fold(T::zero(), |acc, &w| acc.or(w.le().flag()))
 }
 
 /// The first NaN or infinite element of `bytes` (whole elements of `T`).
@@ -148,8 +148,8 @@ fn first_bad<T: Bits>(bytes: &[u8]) -> Option<(u64, NonFiniteKind)> {
         Some(h) => h,
         None => (words.len() / per_block * per_block, blocks.remainder()),
     };
-    let i = rest.iter().position(|w| w.from_le().flag().is_flagged())?;
-    Some(((base + i) as u64, rest[i].from_le().kind()))
+    let i = rest.iter().position(|w| w.le().flag().is_flagged())?;
+    Some(((base + i) as u64, rest[i].le().kind()))
 }
 
 /// The first non-finite element of a payload of `dtype`, if that dtype
