@@ -19,8 +19,15 @@
  *   - Output parameters (out_*) are written only when DUO_OK is returned
  *     (failed_session of duo_step_batch_push_leader, not an out_ parameter,
  *     is written on every return).
- *   - A NULL required pointer gives DUO_NULL_PARAMETER. A NULL buffer with
- *     length 0 is accepted as empty where a buffer is taken.
+ *   - A NULL required pointer gives DUO_NULL_PARAMETER. Buffers (a pointer
+ *     with an element count: bytes/len, memory/len, features/n_features,
+ *     track/n_floats, the two pos3d/n_frames, sessions and frames/n)
+ *     follow one rule: NULL with count 0 is an empty buffer, answered
+ *     exactly as a non-NULL one with count 0 (e.g. a wrong count is
+ *     DUO_INVALID_ARGUMENT, empty session memory DUO_BUFFER_TOO_SMALL);
+ *     NULL with a count above 0 is DUO_NULL_PARAMETER.
+ *     (duo_last_error_message, which returns a length, writes nothing to a
+ *     NULL buf whatever len.)
  *   - No function unwinds or aborts on bad input: a bug inside the library
  *     is caught and returned as DUO_PANIC.
  *   - Coordinates are SMPL-X unless a function says otherwise:
@@ -61,7 +68,8 @@ typedef enum duo_result {
    * aligned, an invalid session configuration. */
   DUO_INVALID_ARGUMENT = 2,
   /* The bytes or file are not a valid .duo model (the message names the
-   * reason: magic, version, truncation, tensor, shape, non-finite scale). */
+   * reason: magic, version, truncation, tensor, shape, non-finite scale,
+   * a NaN or infinite weight with its tensor's name and element index). */
   DUO_BAD_MODEL = 3,
   /* A caller buffer is too small (session memory). */
   DUO_BUFFER_TOO_SMALL = 4,
@@ -226,6 +234,10 @@ typedef struct duo_model_info {
  * duo_model_open_copy for arbitrary memory such as a managed byte[]).
  * Ownership: the caller keeps the bytes valid and unmodified until the
  * model and every session made from it are freed.
+ * Opening validates the whole file, every f32/f16 weight included (NaN or
+ * infinity is refused by tensor name and element index: no model that
+ * opens computes NaN from its weights); zero bytes after the data (asset
+ * padding) are accepted (docs/FORMAT.md).
  * Results: DUO_OK (*out_model set), DUO_NULL_PARAMETER (out_model, or
  * bytes with len > 0), DUO_INVALID_ARGUMENT (misaligned), DUO_BAD_MODEL
  * (including NULL/0 and truncated input). Thread-safe. */
@@ -256,8 +268,9 @@ void duo_model_free(duo_model *model);
  * 165 floats each (SMPL-X metres), a multiple of frames_per_token is used
  * (at least one token's worth). Allocates temporary memory. Writes 5
  * tokens (up, down, lhand, rhand, transl) to out_tokens.
- * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (too few frames),
- * DUO_NON_FINITE_INPUT. Thread-safe. */
+ * DUO_NULL_PARAMETER (model, out_tokens, or a NULL pos3d with
+ * n_frames > 0), DUO_INVALID_ARGUMENT (too few frames, n_frames 0
+ * included), DUO_NON_FINITE_INPUT. Thread-safe. */
 duo_result duo_model_seed_tokens(const duo_model *model, const float *follower_pos3d,
                                  const float *leader_pos3d, size_t n_frames,
                                  uint32_t *out_tokens);
@@ -306,8 +319,9 @@ typedef struct duo_session_config {
   uint32_t shift;               /* GPT window chunk shift, 1..block_size-1 */
   uint32_t music_lookahead;     /* music look-ahead, 0..look_forward */
   uint32_t lat_past;            /* past band of the look-ahead transformers */
-  uint32_t pending_frames;      /* follower frames that may wait unpulled
-                                   beyond the latency before DUO_BACKLOG */
+  uint32_t pending_frames;      /* leader frames pushed and not yet pulled
+                                   as follower frames, beyond latency + 1,
+                                   before DUO_BACKLOG */
   uint32_t music_buffer_frames; /* music frames that may wait before
                                    DUO_BACKLOG */
   uint32_t sampling;            /* a duo_sampling value */
@@ -357,7 +371,8 @@ duo_result duo_session_new(const duo_model *model, const duo_session_config *con
 /* Creates a session entirely inside caller memory: `memory` (any
  * alignment), `len` >= duo_session_bytes(). No allocation. The memory
  * must stay valid, unmoved and untouched until duo_session_free; free it
- * yourself afterwards. DUO_BUFFER_TOO_SMALL, and as duo_session_new. */
+ * yourself afterwards. DUO_BUFFER_TOO_SMALL (NULL/0 included),
+ * DUO_NULL_PARAMETER (memory NULL with len > 0), and as duo_session_new. */
 duo_result duo_session_new_in(const duo_model *model, const duo_session_config *config,
                               const uint32_t *seed_tokens, void *memory, size_t len,
                               duo_session **out_session);
@@ -376,19 +391,23 @@ duo_result duo_session_latency_frames(const duo_session *session, uint32_t *out_
 /* Gives the session a whole music track known in advance: frames x
  * music_features floats (30 fps), BORROWED: keep it valid and unmodified
  * until the session is reset or freed. Use instead of
- * duo_session_push_music, before any music frame is pushed.
- * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (not whole frames; music
- * already given), DUO_NON_FINITE_INPUT. */
+ * duo_session_push_music, before any music frame is pushed. An empty
+ * track (NULL or not, n_floats 0) is a track of 0 frames: accepted, and
+ * music is then given.
+ * DUO_NULL_PARAMETER (session, or track NULL with n_floats > 0),
+ * DUO_INVALID_ARGUMENT (not whole frames; music already given),
+ * DUO_NON_FINITE_INPUT. */
 duo_result duo_session_set_music_track(duo_session *session, const float *track, size_t n_floats);
 
 /* Pushes one music feature frame (n_features = music_features floats,
  * copied). Push music at least music_lookahead tokens ahead of the leader
  * for the latency of duo_session_latency_frames. At most
  * music_buffer_frames frames are held (pushed, not yet read by the model;
- * the first 4 of a session count until it starts reading). DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (wrong
- * count; a track was given), DUO_NON_FINITE_INPUT and DUO_BACKLOG (music
- * buffer full: push leader frames first); both leave the session
- * unchanged. */
+ * the first 4 of a session count until it starts reading).
+ * DUO_NULL_PARAMETER (session, or features NULL with n_features > 0),
+ * DUO_INVALID_ARGUMENT (wrong count, 0 included; a track was given),
+ * DUO_NON_FINITE_INPUT and DUO_BACKLOG (music buffer full: push leader
+ * frames first); both leave the session unchanged. */
 duo_result duo_session_push_music(duo_session *session, const float *features, size_t n_features);
 
 /* Pushes one leader frame (copied). May run one model step (the costly
@@ -396,8 +415,9 @@ duo_result duo_session_push_music(duo_session *session, const float *features, s
  * DUO_NON_FINITE_INPUT: NaN, infinity, or |value| > DUO_MAX_POSITION_M;
  *   the frame is rejected and the session is unchanged. To keep the
  *   30 fps clock, push your last good frame instead.
- * DUO_BACKLOG: latency + 1 + pending_frames follower frames wait unpulled
- *   (pull them first), or the music is too far behind; session unchanged.
+ * DUO_BACKLOG: the leader frames pushed minus the follower frames pulled
+ *   reach latency + 1 + pending_frames (pull ready frames first), or the
+ *   music is too far behind; session unchanged.
  * DUO_ENDED: after duo_session_finish (until duo_session_reset).
  * DUO_NULL_PARAMETER. */
 duo_result duo_session_push_leader(duo_session *session, const duo_leader_frame *frame);
@@ -463,7 +483,8 @@ duo_result duo_step_batch_new(const duo_model *model, const duo_session_config *
 /* Creates a batch entirely inside caller memory: `memory` (any
  * alignment), `len` >= duo_step_batch_bytes(). No allocation. The memory
  * must stay valid, unmoved and untouched until duo_step_batch_free.
- * DUO_BUFFER_TOO_SMALL, and as duo_step_batch_new. */
+ * DUO_BUFFER_TOO_SMALL (NULL/0 included), DUO_NULL_PARAMETER (memory NULL
+ * with len > 0), and as duo_step_batch_new. */
 duo_result duo_step_batch_new_in(const duo_model *model, const duo_session_config *config,
                                  size_t max_sessions, void *memory, size_t len,
                                  duo_step_batch **out_batch);
@@ -471,14 +492,21 @@ duo_result duo_step_batch_new_in(const duo_model *model, const duo_session_confi
 /* Pushes frames[i] into sessions[i] for every i < n and runs the steps
  * that become possible, the sessions together (the costly call: run it
  * off the render thread). Pull each session's frames afterwards as usual.
- * Refused before any session changes, with *failed_session = the session
- * concerned: a NULL session (DUO_NULL_PARAMETER); a session given twice,
- * sessions of different models, a session whose configuration needs more
- * than the batch's (DUO_INVALID_ARGUMENT); the first frame holding NaN,
- * infinity or |value| > DUO_MAX_POSITION_M (DUO_NON_FINITE_INPUT), else
- * the first session that would refuse its frame for backlog (DUO_BACKLOG,
- * as duo_session_push_leader). n above the batch's max_sessions:
- * DUO_INVALID_ARGUMENT with DUO_NO_SESSION. n == 0 does nothing.
+ * Refused before any session changes. The checks run in this order and
+ * the first refusal answers, *failed_session naming the session concerned:
+ *   1. the call (DUO_NO_SESSION): batch NULL (DUO_NULL_PARAMETER); n == 0
+ *      does nothing (DUO_OK, sessions and frames may be NULL); n above the
+ *      batch's max_sessions (DUO_INVALID_ARGUMENT); sessions or frames
+ *      NULL (DUO_NULL_PARAMETER);
+ *   2. each session, by index: NULL (DUO_NULL_PARAMETER); given twice, of
+ *      another model than sessions[0], or with a configuration that needs
+ *      more than the batch's (DUO_INVALID_ARGUMENT);
+ *   3. each frame, by index: NaN, infinity or |value| >
+ *      DUO_MAX_POSITION_M (DUO_NON_FINITE_INPUT);
+ *   4. each session, by index: it would refuse its frame for backlog
+ *      (DUO_BACKLOG, as duo_session_push_leader).
+ * So a session of another model at index 4 is reported before a bad frame
+ * at index 0, and a bad frame at index 3 before a backlogged session 1.
  * failed_session (NULL or writable) is written on EVERY return: the index
  * of the session a failure concerns, else DUO_NO_SESSION. */
 duo_result duo_step_batch_push_leader(duo_step_batch *batch, duo_session *const *sessions,

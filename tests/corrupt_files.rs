@@ -10,7 +10,7 @@ use duolando::duo_writer::{assemble, assemble_raw, write_duo, Header, HeaderEntr
 use duolando::model_file::{AlignedBytes, ModelFile, ModelFileError};
 use duolando_core::config::{GptConfig, LatConfig, ModelConfig, Part, VqConfig};
 use duolando_core::format::{
-    schema_tensor, DuoFile, FormatError, HeaderField, Shape, MAX_DIM, MAX_HEADER_LEN, MAX_NAME_LEN, MAX_TENSORS,
+    schema_tensor, DuoFile, FormatError, HeaderField, NonFiniteKind, Shape, MAX_DIM, MAX_HEADER_LEN, MAX_NAME_LEN, MAX_TENSORS,
 };
 use duolando_core::limits::{ConfigError, ConfigField};
 use duolando_core::schema::{for_each_tensor, tensor_count, Role, SchemaError, TensorSpec};
@@ -240,8 +240,11 @@ fn first_non_finite_finds_a_nan_weight() {
     let at = p.header.tensors[i].offset as usize + 4;
     p.data[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     let bytes = rebuild(&p);
+    assert_eq!(parse(&bytes), Err(FormatError::NonFiniteWeight { index: i as u32, element: 1, kind: NonFiniteKind::Nan }));
+    // The table-only parse (for bytes that passed `parse` before) does not
+    // read the weights; `first_non_finite` finds it there.
     let aligned = AlignedBytes::copy_from(&bytes);
-    let duo = DuoFile::parse(aligned.as_bytes()).expect("f32 weights are not scanned by parse");
+    let duo = DuoFile::parse_without_weight_scan(aligned.as_bytes()).expect("the structure is valid");
     assert_eq!(duo.first_non_finite(), Some((i as u32, 1)));
 }
 
@@ -506,15 +509,37 @@ fn rejects_truncated_data() {
     assert!(matches!(parse(cut), Err(FormatError::DataOutOfRange { index, .. }) if index == last));
 }
 
+/// Asset pipelines pad files: zero bytes after the data section are
+/// accepted, in any number; the model is the same.
+#[test]
+fn accepts_zero_padding_after_the_data() {
+    let bytes = valid_bytes();
+    for pad in [1usize, 63, 64, 4096 - bytes.len() % 4096, 100_000] {
+        let mut padded = bytes.clone();
+        padded.resize(bytes.len() + pad, 0);
+        let aligned = AlignedBytes::copy_from(&padded);
+        let duo = DuoFile::parse(aligned.as_bytes()).unwrap_or_else(|e| panic!("{pad} zero bytes: {e}"));
+        assert_eq!(duo.len(), tensor_count(duo.config()));
+        let mf = ModelFile::from_bytes(padded).unwrap_or_else(|e| panic!("{pad} zero bytes: {e}"));
+        assert_eq!(mf.bytes().len(), bytes.len() + pad);
+    }
+}
+
 #[test]
 fn rejects_trailing_data() {
-    let mut bytes = valid_bytes();
-    let data_len_before = take_apart(&bytes).data.len() as u64;
-    bytes.extend_from_slice(&[0u8; 64]);
-    assert_eq!(
-        parse(&bytes),
-        Err(FormatError::TrailingData { expected_len: data_len_before, data_len: data_len_before + 64 })
-    );
+    let bytes = valid_bytes();
+    // A non-zero byte anywhere after the data section, first or last or
+    // after zeros, is named by its file offset.
+    for (pad, at) in [(1usize, 0usize), (64, 0), (64, 63), (5000, 4097)] {
+        let mut b = bytes.clone();
+        b.resize(bytes.len() + pad, 0);
+        b[bytes.len() + at] = 0x5a;
+        assert_eq!(parse(&b), Err(FormatError::TrailingData { offset: (bytes.len() + at) as u64 }), "pad {pad} at {at}");
+    }
+    // Another model appended (not zeros): refused at its first byte.
+    let mut twice = bytes.clone();
+    twice.extend_from_slice(&bytes);
+    assert_eq!(parse(&twice), Err(FormatError::TrailingData { offset: bytes.len() as u64 }));
 }
 
 #[test]
@@ -761,6 +786,113 @@ fn rejects_x8_payload_short_of_its_groups() {
     }
 }
 
+// ------------------------------------- non-finite f32 / f16 weights (rule 15)
+
+/// A valid file of `store_as` weights with `bits` (one element's little-endian
+/// bytes) written at element `element` of table entry `index`.
+fn poisoned(store_as: StoreAs, plants: &[(usize, usize, &[u8])]) -> Vec<u8> {
+    let cfg = tiny_config();
+    let mut bytes = write_duo(&cfg, &seeded_tensors(&cfg, 5, store_as)).unwrap();
+    let p = take_apart(&bytes);
+    let data_start = bytes.len() - p.data.len();
+    for &(index, element, bits) in plants {
+        let e = &p.header.tensors[index];
+        let at = data_start + e.offset as usize + element * bits.len();
+        assert!(element * bits.len() < e.nbytes as usize, "element {element} inside tensor {index}");
+        bytes[at..at + bits.len()].copy_from_slice(bits);
+    }
+    bytes
+}
+
+/// Table entries to poison: the first, the last, and the largest (with
+/// elements in its first, a middle and its last block of the scan).
+fn poison_sites() -> Vec<(usize, usize)> {
+    let p = valid_parts();
+    let numel = |e: &HeaderEntry| e.shape.iter().map(|&d| d as usize).product::<usize>();
+    let last = p.header.tensors.len() - 1;
+    let big = (0..=last).max_by_key(|&i| numel(&p.header.tensors[i])).unwrap();
+    let n_big = numel(&p.header.tensors[big]);
+    assert!(n_big > 600, "the largest tiny tensor spans several scan blocks ({n_big} elements)");
+    vec![(0, 0), (last, numel(&p.header.tensors[last]) - 1), (big, 0), (big, 257), (big, n_big / 2 + 1), (big, n_big - 1)]
+}
+
+#[test]
+fn rejects_nan_and_infinite_f32_weights() {
+    let cases: [(f32, NonFiniteKind); 4] = [
+        (f32::NAN, NonFiniteKind::Nan),
+        (f32::from_bits(0xffc0_0001), NonFiniteKind::Nan),
+        (f32::INFINITY, NonFiniteKind::PosInf),
+        (f32::NEG_INFINITY, NonFiniteKind::NegInf),
+    ];
+    for (index, element) in poison_sites() {
+        for (v, kind) in cases {
+            let bytes = poisoned(StoreAs::F32, &[(index, element, &v.to_le_bytes())]);
+            assert_eq!(
+                parse(&bytes),
+                Err(FormatError::NonFiniteWeight { index: index as u32, element: element as u64, kind }),
+                "f32 {v:?} in tensor {index} element {element}"
+            );
+        }
+    }
+    // The largest finite values are weights like any other.
+    let bytes = poisoned(StoreAs::F32, &[(0, 0, &f32::MAX.to_le_bytes()), (1, 0, &f32::MIN.to_le_bytes())]);
+    assert_eq!(parse(&bytes), Ok(()));
+}
+
+#[test]
+fn rejects_nan_and_infinite_f16_weights() {
+    let cases: [(u16, NonFiniteKind); 4] = [
+        (0x7e00, NonFiniteKind::Nan),
+        (0xfd01, NonFiniteKind::Nan),
+        (0x7c00, NonFiniteKind::PosInf),
+        (0xfc00, NonFiniteKind::NegInf),
+    ];
+    let p = take_apart(&poisoned(StoreAs::F16, &[]));
+    for (index, element) in poison_sites() {
+        assert_eq!(p.header.tensors[index].dtype, DType::F16 as u8);
+        for (bits, kind) in cases {
+            let bytes = poisoned(StoreAs::F16, &[(index, element, &bits.to_le_bytes())]);
+            assert_eq!(
+                parse(&bytes),
+                Err(FormatError::NonFiniteWeight { index: index as u32, element: element as u64, kind }),
+                "f16 {bits:#06x} in tensor {index} element {element}"
+            );
+        }
+    }
+    // 65504, the largest finite f16.
+    assert_eq!(parse(&poisoned(StoreAs::F16, &[(0, 0, &0x7bffu16.to_le_bytes())])), Ok(()));
+}
+
+#[test]
+fn the_first_non_finite_weight_in_table_order_is_named() {
+    let sites = poison_sites();
+    let (last, big) = (sites[1], sites[2]);
+    let bytes = poisoned(StoreAs::F32, &[(last.0, last.1, &f32::NAN.to_le_bytes()), (big.0, 9, &f32::INFINITY.to_le_bytes())]);
+    let first = last.0.min(big.0);
+    let want = if first == big.0 {
+        FormatError::NonFiniteWeight { index: big.0 as u32, element: 9, kind: NonFiniteKind::PosInf }
+    } else {
+        FormatError::NonFiniteWeight { index: last.0 as u32, element: last.1 as u64, kind: NonFiniteKind::Nan }
+    };
+    assert_eq!(parse(&bytes), Err(want));
+}
+
+#[test]
+fn std_message_names_the_non_finite_weight() {
+    let sites = poison_sites();
+    let (index, element) = sites[4];
+    let name = valid_parts().header.tensors[index].name.clone();
+    let bytes = poisoned(StoreAs::F16, &[(index, element, &0x7c00u16.to_le_bytes())]);
+    let path = std::env::temp_dir().join(format!("duolando-inf-weight-{}.duo", std::process::id()));
+    std::fs::write(&path, &bytes).unwrap();
+    let err = ModelFile::open(&path).err().expect("rejected at open");
+    std::fs::remove_file(&path).ok();
+    assert!(matches!(err, ModelFileError::Format { error: FormatError::NonFiniteWeight { .. }, .. }));
+    let msg = err.to_string();
+    assert!(msg.contains(&path.display().to_string()), "{msg}");
+    assert!(msg.contains(&format!("tensor #{index} `{name}`: weight element {element} is +inf")), "{msg}");
+}
+
 // ------------------------------------------------------ std-side messages
 
 #[test]
@@ -867,5 +999,94 @@ proptest! {
         bytes.extend_from_slice(&tail);
         let _ = parse(&bytes);
         let _ = ModelFile::from_bytes(bytes).map_err(|e| e.to_string());
+    }
+}
+
+// ------------------------------------------------- cost of rule 15 at full size
+
+/// A full-size `.duo` (the published config, every tensor `dtype`: f32 or
+/// f16), pseudo-random weights in [-0.05, 0.05), 64-byte aligned.
+fn full_size_file(dtype: DType) -> AlignedBytes {
+    let cfg = duolando_core::presets::duolando_published();
+    let mut specs: Vec<TensorSpec> = Vec::new();
+    for_each_tensor::<SchemaError>(&cfg, &mut |s| {
+        specs.push(s.clone());
+        Ok(())
+    })
+    .unwrap();
+    specs.sort_by(|a, b| a.name.as_str().as_bytes().cmp(b.name.as_str().as_bytes()));
+    let width = if dtype == DType::F32 { 4 } else { 2 };
+    let mut tensors = Vec::new();
+    let mut off = 0u64;
+    for s in &specs {
+        let numel: u64 = s.dims().iter().map(|&d| d as u64).product();
+        tensors.push(HeaderEntry { name: s.name.as_str().to_string(), dtype: dtype as u8, shape: s.dims().to_vec(), offset: off, nbytes: numel * width });
+        off = (off + numel * width).next_multiple_of(64);
+    }
+    let mut data = vec![0u8; off as usize];
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    for c in data.chunks_exact_mut(4) {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        let v = ((state >> 40) as f32 / (1u64 << 23) as f32 - 1.0) * 0.05;
+        if width == 4 {
+            c.copy_from_slice(&v.to_le_bytes());
+        } else {
+            let h = half::f16::from_f32(v).to_le_bytes();
+            c.copy_from_slice(&[h[0], h[1], h[0], h[1]]);
+        }
+    }
+    let bytes = assemble(&Header { config: cfg, tensors }, &data).unwrap();
+    drop(data);
+    AlignedBytes::copy_from(&bytes)
+}
+
+fn median_ms(mut f: impl FnMut()) -> f64 {
+    let mut t: Vec<f64> = (0..7)
+        .map(|_| {
+            let s = std::time::Instant::now();
+            f();
+            s.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    t.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    t[3]
+}
+
+/// Rule 15's scan at full size against reading the same bytes (a wrapping
+/// u32 sum, one pass) and copying them (memcpy): the figures of
+/// docs/FORMAT.md §7. Run: `cargo test --release -p duolando-tests --test
+/// corrupt_files -- --ignored --nocapture weight_scan_cost`.
+#[test]
+#[ignore = "builds 1.8 GB of full-size models; a measurement, run by hand"]
+fn weight_scan_cost_at_full_size() {
+    for dtype in [DType::F16, DType::F32] {
+        let file = full_size_file(dtype);
+        let b = file.as_bytes();
+        let table = median_ms(|| {
+            std::hint::black_box(DuoFile::parse_without_weight_scan(std::hint::black_box(b)).unwrap());
+        });
+        let full = median_ms(|| {
+            std::hint::black_box(DuoFile::parse(std::hint::black_box(b)).unwrap());
+        });
+        let sum = median_ms(|| {
+            let s = std::hint::black_box(b).chunks_exact(4).fold(0u32, |a, c| a.wrapping_add(u32::from_le_bytes([c[0], c[1], c[2], c[3]])));
+            std::hint::black_box(s);
+        });
+        let mut dst = vec![0u8; b.len()];
+        let copy = median_ms(|| {
+            dst.copy_from_slice(std::hint::black_box(b));
+            std::hint::black_box(&dst);
+        });
+        let mb = b.len() as f64 / 1e6;
+        let scan = full - table;
+        println!(
+            "{dtype:?}: {mb:.0} MB; parse {full:.1} ms = table {table:.2} ms + scan {scan:.1} ms ({:.1} GB/s); read (u32 sum) {sum:.1} ms ({:.1} GB/s); memcpy {copy:.1} ms; scan / read {:.2}, scan / memcpy {:.2}",
+            mb / scan,
+            mb / sum,
+            scan / sum,
+            scan / copy
+        );
     }
 }

@@ -17,14 +17,14 @@
 //! of a call are not used by any other thread during it.
 
 use duolando_core::config::ModelConfig;
-use duolando_core::session::{Session, SessionConfig, StepBatch, MAX_BATCH};
+use duolando_core::session::{Session, SessionConfig, StepBatch, StepDims, MAX_BATCH};
 use duolando_core::Error;
 
 use crate::frames::DuoLeaderFrame;
-use crate::handle::{caller_slot, drop_handle, handle_bytes};
+use crate::handle::{buffer_mut, caller_slot, drop_handle, handle_bytes};
 use crate::model::DuoModel;
 use crate::result::{guard, DuoResult, Failure};
-use crate::session::{config_ref, leader_pos3d, model_ref, DuoSession, DuoSessionConfig};
+use crate::session::{config_ref, leader_pos3d, model_ref, DuoSession, DuoSessionConfig, SessionInner};
 
 /// `DUO_NO_SESSION`: the `failed_session` of a call that succeeded, or whose
 /// failure concerns no single session.
@@ -34,6 +34,8 @@ pub const NO_SESSION: usize = usize::MAX;
 pub struct StepBatchInner {
     /// Carved from the arena below (or the caller's memory); declared first, dropped first.
     batch: StepBatch<'static>,
+    /// The step memory it holds (what a session's `dims` must fit in).
+    dims: StepDims,
     /// Library-allocated arena (`duo_step_batch_new`); None in caller memory.
     _arena: Option<Box<[u8]>>,
     /// True when this struct lives in caller memory (`duo_step_batch_new_in`).
@@ -100,7 +102,8 @@ pub unsafe extern "C" fn duo_step_batch_new(model: *const DuoModel, config: *con
         // StepBatchInner drops them, after the batch.
         let bytes: &'static mut [u8] = unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
         let batch = StepBatch::new(model_cfg, &cfg, max_sessions, bytes)?;
-        let inner = Box::new(StepBatchInner { batch, _arena: Some(arena), in_caller_memory: false });
+        let dims = StepDims::new(model_cfg, &cfg, max_sessions).map_err(Error::Arena)?;
+        let inner = Box::new(StepBatchInner { batch, dims, _arena: Some(arena), in_caller_memory: false });
         // SAFETY: checked non-NULL.
         unsafe { *out_batch = Box::into_raw(inner) };
         Ok(DuoResult::Ok)
@@ -128,15 +131,14 @@ pub unsafe extern "C" fn duo_step_batch_new_in(
         if out_batch.is_null() {
             return Err(Failure::null("out_batch"));
         }
-        if memory.is_null() {
-            return Err(Failure::null("memory"));
-        }
-        // SAFETY: `memory` non-NULL (checked) with `len` bytes kept for the batch (contract).
-        let (slot, arena) = unsafe { caller_slot::<StepBatchInner>(memory, len, n.saturating_add(HANDLE_BYTES), "duo_step_batch_bytes") }?;
+        // SAFETY: NULL or `len` writable bytes kept for the batch (contract).
+        let memory = unsafe { buffer_mut(memory, len, "memory") }?;
+        let (slot, arena) = caller_slot::<StepBatchInner>(memory, n.saturating_add(HANDLE_BYTES), "duo_step_batch_bytes")?;
         let batch = StepBatch::new(model_cfg, &cfg, max_sessions, arena)?;
+        let dims = StepDims::new(model_cfg, &cfg, max_sessions).map_err(Error::Arena)?;
         // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
         unsafe {
-            slot.write(StepBatchInner { batch, _arena: None, in_caller_memory: true });
+            slot.write(StepBatchInner { batch, dims, _arena: None, in_caller_memory: true });
             *out_batch = slot;
         }
         Ok(DuoResult::Ok)
@@ -162,15 +164,20 @@ pub unsafe extern "C" fn duo_step_batch_free(batch: *mut DuoStepBatch) {
 /// steps that become possible, the sessions' weight-heavy work together.
 /// Each session ends as after its own `duo_session_push_leader`.
 ///
-/// Refused before anything changes (no session changes; `*failed_session` =
-/// the session concerned): a NULL session, a session given twice, sessions
-/// of different models, a session whose configuration needs more than the
-/// batch was made for (`DUO_INVALID_ARGUMENT`), a frame with a non-finite
-/// or out-of-range value (`DUO_NON_FINITE_INPUT`: the first such frame,
-/// all frames checked before the sessions), a session that would refuse its
-/// frame for backlog (`DUO_BACKLOG`: the first such session).
-/// `n` above the batch's `max_sessions` is `DUO_INVALID_ARGUMENT` with
-/// `DUO_NO_SESSION`. `n == 0` does nothing.
+/// Refusals, in this order, the first one found answering (no session
+/// changes; `*failed_session` = the session concerned, else
+/// `DUO_NO_SESSION`):
+/// 1. the call: `batch` NULL (`DUO_NULL_PARAMETER`); `n == 0` does nothing
+///    (`DUO_OK`, whatever `sessions` and `frames` are); `n` above the
+///    batch's `max_sessions` (`DUO_INVALID_ARGUMENT`); `sessions` or
+///    `frames` NULL (`DUO_NULL_PARAMETER`) — all with `DUO_NO_SESSION`;
+/// 2. the sessions, by index: the first that is NULL (`DUO_NULL_PARAMETER`),
+///    given twice, of another model than `sessions[0]`, or needing more
+///    step memory than the batch holds (`DUO_INVALID_ARGUMENT`);
+/// 3. the frames, by index: the first with a non-finite or out-of-range
+///    value (`DUO_NON_FINITE_INPUT`);
+/// 4. the sessions, by index: the first that would refuse its frame for
+///    backlog (`DUO_BACKLOG`).
 ///
 /// `failed_session` (NULL or writable) is written on every return: the index
 /// of the session a failure concerns, else `DUO_NO_SESSION`.
@@ -219,17 +226,27 @@ unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSe
     }
     // SAFETY: `n` readable pointers and `n` readable frames (contract).
     let (ptrs, frames) = unsafe { (std::slice::from_raw_parts(sessions, n), std::slice::from_raw_parts(frames, n)) };
+    // 2. The sessions themselves.
+    let mut first: Option<&SessionInner> = None;
     for (i, &p) in ptrs.iter().enumerate() {
         *failed = i;
-        if p.is_null() {
-            return Err(Failure::null(&format!("sessions[{i}]")));
-        }
+        // SAFETY: NULL or a live session (contract); read only here.
+        let s = unsafe { p.as_ref() }.ok_or_else(|| Failure::null(&format!("sessions[{i}]")))?;
         if let Some(j) = ptrs[..i].iter().position(|&q| std::ptr::eq(q, p)) {
             return Err(Failure::invalid(format!("sessions[{i}] is sessions[{j}] again; a session takes one frame per call")));
         }
+        let s0 = *first.get_or_insert(s);
+        if !std::sync::Arc::ptr_eq(&s.model, &s0.model) {
+            return Err(Failure::invalid(format!("sessions[{i}] is a session of another model than sessions[0]")));
+        }
+        if !b.dims.holds(&s.dims) {
+            return Err(Failure::invalid(format!(
+                "sessions[{i}] needs more step memory than this batch holds: its configuration needs more than the batch's (duo_step_batch_new)"
+            )));
+        }
     }
-    // Nothing allocates: the frames are read in place, the lists live on
-    // the stack (n <= capacity <= MAX_BATCH).
+    // 3. The frames' values. Nothing allocates: the frames are read in
+    // place, the lists live on the stack (n <= capacity <= MAX_BATCH).
     let mut rows: heapless::Vec<&[f32], MAX_BATCH> = heapless::Vec::new();
     for (i, f) in frames.iter().enumerate() {
         *failed = i;
@@ -242,10 +259,12 @@ unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSe
         // pairwise distinct (checked above): one `&mut` each.
         refs.push(unsafe { &mut (*p).session }).map_err(|_| Failure::invalid("more sessions than DUO_MAX_BATCH"))?;
     }
+    // 4. Backlog: `step_many` checks every session (model, step memory,
+    // frame, backlog: the first three passed above) before it changes any.
     Session::step_many(&mut refs, &rows, &mut b.batch).map_err(|(i, e)| {
         *failed = i;
         match e {
-            // The checks before anything changes: another model, or needs beyond the batch's.
+            // Caught above; kept should core's checks ever be wider.
             Error::State => Failure::invalid(format!(
                 "sessions[{i}] cannot be stepped with sessions[0] in this batch: another model, or a configuration that needs more than the batch was made for"
             )),

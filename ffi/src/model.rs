@@ -98,7 +98,9 @@ fn from_model_file(mf: ModelFile, origin: &str, out: *mut *mut DuoModel) -> Resu
     // SAFETY: the bytes live in `mf` (mmap or heap: fixed addresses), which
     // is moved into the same ModelInner as the model and dropped after it.
     let bytes = unsafe { forever(mf.bytes()) };
-    let duo = DuoFile::parse(bytes)
+    // `mf` passed the full `DuoFile::parse` (weights included) when it was
+    // made; its bytes are immutable since: the table alone is read again.
+    let duo = DuoFile::parse_without_weight_scan(bytes)
         .map_err(|e| Failure::new(DuoResult::BadModel, format!("{origin}: invalid .duo model: {}", explain(bytes, &e))))?;
     let model = bind(&duo, origin)?;
     publish(ModelInner { model, storage: Storage::File(mf) }, out)
@@ -110,21 +112,6 @@ fn file_failure(e: ModelFileError) -> Failure {
         ModelFileError::Format { .. } => DuoResult::BadModel,
     };
     Failure::new(code, e.to_string())
-}
-
-/// Checks `bytes`/`len` (NULL + 0 is an empty buffer) and returns the slice.
-///
-/// # Safety
-/// `bytes` must be NULL or point to `len` readable bytes.
-pub unsafe fn byte_slice<'x>(bytes: *const u8, len: usize, what: &str) -> Result<&'x [u8], Failure> {
-    if bytes.is_null() {
-        if len == 0 {
-            return Ok(&[]);
-        }
-        return Err(Failure::null(what));
-    }
-    // SAFETY: per the function contract.
-    Ok(unsafe { std::slice::from_raw_parts(bytes, len) })
 }
 
 /// Opens a model from caller memory without copying.
@@ -140,7 +127,13 @@ pub unsafe extern "C" fn duo_model_open_bytes(bytes: *const u8, len: usize, out_
             return Err(Failure::null("out_model"));
         }
         // SAFETY: caller contract.
-        let b = unsafe { byte_slice(bytes, len, "bytes") }?;
+        let b = unsafe { crate::handle::buffer(bytes, len, "bytes") }?;
+        // An empty buffer, NULL or not, at any address, is one answer:
+        // too short (parse would check the address of an empty slice).
+        #[repr(C, align(64))]
+        struct Empty([u8; 0]);
+        static EMPTY: Empty = Empty([]);
+        let b = if b.is_empty() { &EMPTY.0[..] } else { b };
         let addr = b.as_ptr() as usize;
         if !b.is_empty() && addr & 63 != 0 {
             return Err(Failure::invalid(format!(
@@ -172,7 +165,7 @@ pub unsafe extern "C" fn duo_model_open_copy(bytes: *const u8, len: usize, out_m
             return Err(Failure::null("out_model"));
         }
         // SAFETY: caller contract.
-        let b = unsafe { byte_slice(bytes, len, "bytes") }?;
+        let b = unsafe { crate::handle::buffer(bytes, len, "bytes") }?;
         let mf = ModelFile::from_aligned(AlignedBytes::copy_from(b), "<memory>").map_err(file_failure)?;
         from_model_file(mf, "<memory>", out_model)
     })

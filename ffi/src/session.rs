@@ -17,10 +17,10 @@
 use std::sync::Arc;
 
 use duolando_core::config::{N_JOINTS, POSE_DIM};
-use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Preset, Sampling, Session, SessionConfig};
+use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Preset, Sampling, Session, SessionConfig, StepDims};
 
 use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
-use crate::handle::{caller_slot, drop_handle, handle_bytes};
+use crate::handle::{buffer, buffer_mut, caller_slot, drop_handle, handle_bytes};
 use crate::model::{share, DuoModel, ModelInner};
 use crate::result::{guard, DuoResult, Failure};
 
@@ -131,7 +131,10 @@ pub struct SessionInner {
     /// Borrows `model` and the arena; declared first, dropped first.
     pub(crate) session: Session<'static>,
     /// The counted model reference that keeps the weights alive.
-    _model: Arc<ModelInner>,
+    pub(crate) model: Arc<ModelInner>,
+    /// The step memory the session needs (`StepDims::new(.., 1)`): what a
+    /// `duo_step_batch` must hold to step it.
+    pub(crate) dims: StepDims,
     /// Library-allocated arena (`duo_session_new`); None in caller memory.
     _arena: Option<Box<[u8]>>,
     /// True when this struct lives in caller memory (`duo_session_new_in`).
@@ -294,7 +297,8 @@ pub unsafe extern "C" fn duo_session_new(
         // SAFETY: `model` is a live handle (contract).
         let arc = unsafe { share(model) };
         let session = start(&arc, bytes, &cfg, seed)?;
-        let inner = Box::new(SessionInner { session, _model: arc, _arena: Some(arena), in_caller_memory: false });
+        let dims = StepDims::new(m.model().config(), &cfg, 1).map_err(duolando_core::Error::Arena)?;
+        let inner = Box::new(SessionInner { session, model: arc, dims, _arena: Some(arena), in_caller_memory: false });
         // SAFETY: checked non-NULL.
         unsafe { *out_session = Box::into_raw(inner) };
         Ok(DuoResult::Ok)
@@ -323,18 +327,17 @@ pub unsafe extern "C" fn duo_session_new_in(
         if out_session.is_null() {
             return Err(Failure::null("out_session"));
         }
-        if memory.is_null() {
-            return Err(Failure::null("memory"));
-        }
+        // SAFETY: NULL or `len` writable bytes kept for the session (contract).
+        let memory = unsafe { buffer_mut(memory, len, "memory") }?;
         let need = m.model().session_bytes(&cfg)?.saturating_add(HANDLE_BYTES);
-        // SAFETY: `memory` non-NULL (checked) with `len` bytes kept for the session (contract).
-        let (slot, arena) = unsafe { caller_slot::<SessionInner>(memory, len, need, "duo_session_bytes") }?;
+        let (slot, arena) = caller_slot::<SessionInner>(memory, need, "duo_session_bytes")?;
         // SAFETY: `model` is a live handle (contract).
         let arc = unsafe { share(model) };
         let session = start(&arc, arena, &cfg, seed)?;
+        let dims = StepDims::new(m.model().config(), &cfg, 1).map_err(duolando_core::Error::Arena)?;
         // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
         unsafe {
-            slot.write(SessionInner { session, _model: arc, _arena: None, in_caller_memory: true });
+            slot.write(SessionInner { session, model: arc, dims, _arena: None, in_caller_memory: true });
             *out_session = slot;
         }
         Ok(DuoResult::Ok)
@@ -441,11 +444,8 @@ pub unsafe extern "C" fn duo_session_finish(session: *mut DuoSession) -> DuoResu
 pub unsafe extern "C" fn duo_session_push_music(session: *mut DuoSession, features: *const f32, n_features: usize) -> DuoResult {
     guard("duo_session_push_music", || {
         let s = session_mut(session)?;
-        if features.is_null() {
-            return Err(Failure::null("features"));
-        }
-        // SAFETY: contract.
-        let x = unsafe { std::slice::from_raw_parts(features, n_features) };
+        // SAFETY: NULL or `n_features` readable floats (contract).
+        let x = unsafe { buffer(features, n_features, "features") }?;
         if let Some((i, v)) = first_bad(x, MAX_MUSIC_FEATURE) {
             return Err(reject("music frame", i, v, MAX_MUSIC_FEATURE, ""));
         }
@@ -464,11 +464,9 @@ pub unsafe extern "C" fn duo_session_push_music(session: *mut DuoSession, featur
 pub unsafe extern "C" fn duo_session_set_music_track(session: *mut DuoSession, track: *const f32, n_floats: usize) -> DuoResult {
     guard("duo_session_set_music_track", || {
         let s = session_mut(session)?;
-        if track.is_null() {
-            return Err(Failure::null("track"));
-        }
-        // SAFETY: contract: valid until reset/free, which drop the borrow.
-        let x: &'static [f32] = unsafe { std::slice::from_raw_parts(track, n_floats) };
+        // SAFETY: NULL or `n_floats` readable floats valid until reset/free,
+        // which drop the borrow (contract).
+        let x: &'static [f32] = unsafe { buffer(track, n_floats, "track") }?;
         if let Some((i, v)) = first_bad(x, MAX_MUSIC_FEATURE) {
             return Err(reject("music track", i, v, MAX_MUSIC_FEATURE, ""));
         }
@@ -542,25 +540,24 @@ pub unsafe extern "C" fn duo_model_seed_tokens(
 ) -> DuoResult {
     guard("duo_model_seed_tokens", || {
         let m = model_ref(model)?;
-        if follower_pos3d.is_null() {
-            return Err(Failure::null("follower_pos3d"));
-        }
-        if leader_pos3d.is_null() {
-            return Err(Failure::null("leader_pos3d"));
-        }
         if out_tokens.is_null() {
             return Err(Failure::null("out_tokens"));
         }
         let n = n_frames.checked_mul(POSE_DIM).ok_or_else(|| Failure::invalid("n_frames too large"))?;
-        // SAFETY: contract.
-        let (f, l) = unsafe { (std::slice::from_raw_parts(follower_pos3d, n), std::slice::from_raw_parts(leader_pos3d, n)) };
+        // SAFETY: each NULL or `n_frames * 165` readable floats (contract).
+        let (f, l) = unsafe { (buffer(follower_pos3d, n, "follower_pos3d")?, buffer(leader_pos3d, n, "leader_pos3d")?) };
         for (what, x) in [("follower frames", f), ("leader frames", l)] {
             if let Some((i, v)) = first_bad(x, MAX_POSITION_M) {
                 return Err(reject(what, i, v, MAX_POSITION_M, " m"));
             }
         }
-        let bytes = duolando_core::exact::seed_scratch_bytes(m.model().config(), n_frames)
-            .ok_or_else(|| Failure::invalid("n_frames too large"))?;
+        let cfg = m.model().config();
+        let bytes = match duolando_core::exact::seed_scratch_bytes(cfg, n_frames) {
+            Some(b) => b,
+            // Too few frames (0 included): core says so before any scratch is used.
+            None if n_frames < cfg.hop() => 0,
+            None => return Err(Failure::invalid("n_frames too large")),
+        };
         let mut scratch = vec![0u8; bytes];
         let t = duolando_core::exact::seed_tokens(m.model(), f, l, &mut scratch)?;
         // SAFETY: checked non-NULL; 5 writable u32 (contract).

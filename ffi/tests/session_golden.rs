@@ -262,7 +262,8 @@ fn session_argument_checks() {
     assert_eq!(f.index, 77);
     let music = vec![0.0f32; 54];
     assert_eq!(unsafe { duo_session_push_music(s, music.as_ptr(), 53) }, DuoResult::InvalidArgument);
-    assert_eq!(unsafe { duo_session_push_music(s, ptr::null(), 0) }, DuoResult::NullParameter);
+    assert_eq!(unsafe { duo_session_push_music(s, ptr::null(), 0) }, DuoResult::InvalidArgument);
+    assert_eq!(unsafe { duo_session_push_music(s, ptr::null(), 54) }, DuoResult::NullParameter);
     let mut nan = music.clone();
     nan[5] = f32::NAN;
     assert_eq!(unsafe { duo_session_push_music(s, nan.as_ptr(), 54) }, DuoResult::NonFiniteInput);
@@ -505,4 +506,276 @@ fn step_batch_argument_checks() {
     unsafe { duo_step_batch_free(ptr::null_mut()) };
     unsafe { duo_model_free(m.0) };
     unsafe { duo_model_free(other.0) };
+}
+
+/// `text` with C comments removed.
+fn strip_c_comments(text: &str) -> String {
+    let mut out = String::new();
+    let mut rest = text;
+    while let Some(i) = rest.find("/*") {
+        out.push_str(&rest[..i]);
+        rest = rest[i..].find("*/").map_or("", |j| &rest[i + j + 2..]);
+    }
+    out.push_str(rest);
+    out
+}
+
+/// The header's functions with a buffer: a pointer parameter directly
+/// followed by a `size_t` one (its element count), as (function, pointer
+/// parameter) pairs.
+fn header_buffers() -> std::collections::BTreeSet<(String, String)> {
+    let header = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../include/duolando.h")).unwrap();
+    let code: String = strip_c_comments(&header).lines().filter(|l| !l.trim_start().starts_with('#')).map(|l| format!("{l}\n")).collect();
+    let mut out = std::collections::BTreeSet::new();
+    for decl in code.split(';') {
+        let Some(open) = decl.find('(') else { continue };
+        let name = decl[..open].split_whitespace().last().unwrap_or("").trim_start_matches('*');
+        if !name.starts_with("duo_") || decl.contains("typedef") {
+            continue;
+        }
+        let params: Vec<&str> = decl[open + 1..decl.rfind(')').unwrap()].split(',').map(str::trim).collect();
+        for w in params.windows(2) {
+            if w[0].contains('*') && w[1].starts_with("size_t ") && !w[1].contains('*') {
+                let p = w[0].rsplit(['*', ' ']).next().unwrap();
+                out.insert((name.to_string(), p.to_string()));
+            }
+        }
+    }
+    out
+}
+
+/// The header's rule, "NULL with count 0 is an empty buffer, answered
+/// exactly as a non-NULL one with count 0; NULL with a count is
+/// DUO_NULL_PARAMETER", on every function of the header that takes a
+/// buffer (found in the header, so a new one fails this test until it is
+/// listed and checked here).
+#[test]
+fn every_buffer_follows_the_null_rule() {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
+    let checked: &[(&str, &str)] = &[
+        ("duo_last_error_message", "buf"),
+        ("duo_model_open_bytes", "bytes"),
+        ("duo_model_open_copy", "bytes"),
+        ("duo_model_seed_tokens", "leader_pos3d"),
+        ("duo_session_new_in", "memory"),
+        ("duo_session_set_music_track", "track"),
+        ("duo_session_push_music", "features"),
+        ("duo_step_batch_new_in", "memory"),
+        ("duo_step_batch_push_leader", "frames"),
+    ];
+    // A struct pointer followed by a count that is not its length.
+    let not_buffers: &[(&str, &str)] = &[("duo_step_batch_bytes", "config"), ("duo_step_batch_new", "config"), ("duo_step_batch_new_in", "config")];
+    let want: std::collections::BTreeSet<(String, String)> =
+        checked.iter().chain(not_buffers).map(|(f, p)| (f.to_string(), p.to_string())).collect();
+    assert_eq!(header_buffers(), want, "a function of the header takes a buffer: check it here");
+
+    let g = golden();
+    let m = open();
+    let c = config(&m, &g);
+    let nothing = [0u8; 64];
+    let aligned = duolando_runtime::model_file::AlignedBytes::copy_from(&[0u8; 64]);
+    let mut dummy = 0u8;
+    let sentinel = (&mut dummy as *mut u8).cast::<DuoModel>();
+
+    // duo_last_error_message: NULL buf writes nothing, whatever len.
+    assert_eq!(unsafe { duo_session_push_music(ptr::null_mut(), ptr::null(), 0) }, DuoResult::NullParameter);
+    let full = unsafe { duo_last_error_message(ptr::null_mut(), 0) };
+    assert!(full > 0);
+    assert_eq!(unsafe { duo_last_error_message(ptr::null_mut(), 100) }, full);
+    let mut buf = [0x55 as c_char; 4];
+    assert_eq!(unsafe { duo_last_error_message(buf.as_mut_ptr(), 0) }, full);
+    assert_eq!(buf, [0x55 as c_char; 4]);
+
+    // Models from empty bytes: not a model, NULL or not.
+    for opener in [duo_model_open_bytes, duo_model_open_copy] {
+        let mut out = sentinel;
+        assert_eq!(unsafe { opener(ptr::null(), 0, &mut out) }, DuoResult::BadModel);
+        let null_msg = last_error();
+        assert!(null_msg.ends_with("buffer of 0 bytes is shorter than the 24-byte .duo prefix"), "{null_msg}");
+        for p in [aligned.as_bytes().as_ptr(), nothing[1..].as_ptr()] {
+            assert_eq!(unsafe { opener(p, 0, &mut out) }, DuoResult::BadModel);
+            assert_eq!(last_error(), null_msg);
+        }
+        assert_eq!(unsafe { opener(ptr::null(), 64, &mut out) }, DuoResult::NullParameter);
+        assert!(last_error().ends_with("bytes is NULL"), "{}", last_error());
+        assert_eq!(out, sentinel);
+    }
+
+    // Seed tokens from no frames: too few frames, NULL or not.
+    let mut tokens = [7u32; 5];
+    let flat = vec![0.0f32; 8 * 165];
+    let empty = [0.0f32; 1];
+    for (f, l) in [(ptr::null(), ptr::null()), (empty.as_ptr(), empty.as_ptr()), (ptr::null(), empty.as_ptr()), (empty.as_ptr(), ptr::null())] {
+        assert_eq!(unsafe { duo_model_seed_tokens(m.0, f, l, 0, tokens.as_mut_ptr()) }, DuoResult::InvalidArgument, "{}", last_error());
+        assert!(last_error().contains("0 frames"), "{}", last_error());
+    }
+    assert_eq!(unsafe { duo_model_seed_tokens(m.0, ptr::null(), flat.as_ptr(), 8, tokens.as_mut_ptr()) }, DuoResult::NullParameter);
+    assert!(last_error().ends_with("follower_pos3d is NULL"), "{}", last_error());
+    assert_eq!(unsafe { duo_model_seed_tokens(m.0, flat.as_ptr(), ptr::null(), 8, tokens.as_mut_ptr()) }, DuoResult::NullParameter);
+    assert!(last_error().ends_with("leader_pos3d is NULL"), "{}", last_error());
+    assert_eq!(tokens, [7; 5]);
+
+    // Caller memory of 0 bytes: too small, NULL or not; NULL with a length: NULL.
+    let mut bytes = 0usize;
+    assert_eq!(unsafe { duo_session_bytes(m.0, &c, &mut bytes) }, DuoResult::Ok);
+    let mut mem = nothing;
+    let mut s = ptr::null_mut();
+    assert_eq!(unsafe { duo_session_new_in(m.0, &c, g.seed.as_ptr(), ptr::null_mut(), 0, &mut s) }, DuoResult::BufferTooSmall);
+    assert_eq!(unsafe { duo_session_new_in(m.0, &c, g.seed.as_ptr(), mem.as_mut_ptr(), 0, &mut s) }, DuoResult::BufferTooSmall);
+    assert_eq!(unsafe { duo_session_new_in(m.0, &c, g.seed.as_ptr(), ptr::null_mut(), bytes, &mut s) }, DuoResult::NullParameter);
+    assert!(last_error().ends_with("memory is NULL"), "{}", last_error());
+    let mut batch = ptr::null_mut();
+    assert_eq!(unsafe { duo_step_batch_bytes(m.0, &c, 2, &mut bytes) }, DuoResult::Ok);
+    assert_eq!(unsafe { duo_step_batch_new_in(m.0, &c, 2, ptr::null_mut(), 0, &mut batch) }, DuoResult::BufferTooSmall);
+    assert_eq!(unsafe { duo_step_batch_new_in(m.0, &c, 2, mem.as_mut_ptr(), 0, &mut batch) }, DuoResult::BufferTooSmall);
+    assert_eq!(unsafe { duo_step_batch_new_in(m.0, &c, 2, ptr::null_mut(), bytes, &mut batch) }, DuoResult::NullParameter);
+    assert!(s.is_null() && batch.is_null());
+
+    let new = || {
+        let mut s = ptr::null_mut();
+        assert_eq!(unsafe { duo_session_new(m.0, &c, g.seed.as_ptr(), &mut s) }, DuoResult::Ok);
+        s
+    };
+    // Music frames of 0 floats: a wrong count, NULL or not.
+    let (a, b) = (new(), new());
+    let music = [0.0f32; 54];
+    assert_eq!(unsafe { duo_session_push_music(a, ptr::null(), 0) }, DuoResult::InvalidArgument);
+    let null_msg = last_error();
+    assert_eq!(unsafe { duo_session_push_music(a, music.as_ptr(), 0) }, DuoResult::InvalidArgument);
+    assert_eq!(last_error(), null_msg);
+    assert!(null_msg.contains("has 0 values, 54 expected"), "{null_msg}");
+    assert_eq!(unsafe { duo_session_push_music(a, ptr::null(), 54) }, DuoResult::NullParameter);
+    // An empty track: what `(s, buf, 0)` does, NULL or not (accepted, and
+    // music is then given), and both sessions then answer alike.
+    let r_null = unsafe { duo_session_set_music_track(a, ptr::null(), 0) };
+    let r_buf = unsafe { duo_session_set_music_track(b, music.as_ptr(), 0) };
+    assert_eq!((r_null, r_buf), (DuoResult::Ok, DuoResult::Ok), "{}", last_error());
+    for s in [a, b] {
+        assert_eq!(unsafe { duo_session_set_music_track(s, g.music.as_ptr(), g.music.len()) }, DuoResult::InvalidArgument);
+        assert_eq!(unsafe { duo_session_push_music(s, music.as_ptr(), 54) }, DuoResult::InvalidArgument);
+    }
+    assert_eq!(unsafe { duo_session_set_music_track(a, ptr::null(), 54) }, DuoResult::NullParameter);
+
+    // A batch call of 0 sessions does nothing, NULL lists or not.
+    assert_eq!(unsafe { duo_step_batch_new(m.0, &c, 2, &mut batch) }, DuoResult::Ok);
+    let frames = [g.leader[0]; 2];
+    for (ss, fr) in [(ptr::null(), ptr::null()), ([a, b].as_ptr(), frames.as_ptr()), (ptr::null(), frames.as_ptr())] {
+        let mut failed = 0usize;
+        assert_eq!(unsafe { duo_step_batch_push_leader(batch, ss, fr, 0, &mut failed) }, DuoResult::Ok);
+        assert_eq!(failed, NO_SESSION);
+    }
+    let mut failed = 0usize;
+    assert_eq!(unsafe { duo_step_batch_push_leader(batch, [a, b].as_ptr(), ptr::null(), 2, &mut failed) }, DuoResult::NullParameter);
+    assert_eq!(unsafe { duo_step_batch_push_leader(batch, ptr::null(), frames.as_ptr(), 2, &mut failed) }, DuoResult::NullParameter);
+    unsafe { duo_step_batch_free(batch) };
+    for s in [a, b] {
+        unsafe { duo_session_free(s) };
+    }
+    unsafe { duo_model_free(m.0) };
+}
+
+/// `duo_step_batch_push_leader` checks in one order (the header): the
+/// call, then every session (NULL, twice, another model), then every
+/// frame, then every session's backlog; each case below has refusals of
+/// two classes where index order and class order disagree.
+#[test]
+fn step_batch_refusals_come_in_the_stated_order() {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
+    let g = golden();
+    let m = open();
+    let other = open();
+    let c = config(&m, &g);
+    let new = |model: &Model| {
+        let mut s = ptr::null_mut();
+        assert_eq!(unsafe { duo_session_new(model.0, &c, g.seed.as_ptr(), &mut s) }, DuoResult::Ok, "{}", last_error());
+        assert_eq!(unsafe { duo_session_set_music_track(s, g.music.as_ptr(), g.music.len()) }, DuoResult::Ok);
+        s
+    };
+    // Session 1 and 3 backlogged: leader frames pushed, none pulled, up to the refusal.
+    let s: Vec<*mut DuoSession> = (0..5).map(|i| if i == 4 { new(&other) } else { new(&m) }).collect();
+    for &k in &[s[1], s[3]] {
+        let mut pushed = 0;
+        while unsafe { duo_session_push_leader(k, &g.leader[pushed]) } == DuoResult::Ok {
+            pushed += 1;
+            assert!(pushed < g.leader.len(), "no backlog before the golden's end");
+        }
+        assert_eq!(unsafe { duo_session_push_leader(k, &g.leader[pushed]) }, DuoResult::Backlog);
+    }
+    let mut batch = ptr::null_mut();
+    assert_eq!(unsafe { duo_step_batch_new(m.0, &c, 5, &mut batch) }, DuoResult::Ok);
+    let push = |ss: &[*mut DuoSession], fr: &[DuoLeaderFrame]| {
+        let mut failed = 12345usize;
+        let r = unsafe { duo_step_batch_push_leader(batch, ss.as_ptr(), fr.as_ptr(), ss.len(), &mut failed) };
+        (r, failed, last_error())
+    };
+    let good = [g.leader[0]; 5];
+    let bad_at = |i: usize| {
+        let mut f = good;
+        f[i].joints[7].y = f32::INFINITY;
+        f
+    };
+    let dup = [s[0], s[1], s[2], s[0], s[4]];
+    // Another model at 4 before a backlogged session 1.
+    let (r, f, msg) = push(&s, &good);
+    assert_eq!((r, f), (DuoResult::InvalidArgument, 4), "{msg}");
+    assert!(msg.contains("sessions[4]") && msg.contains("another model"), "{msg}");
+    // Another model at 4 before a bad frame 0.
+    let (r, f, _) = push(&s, &bad_at(0));
+    assert_eq!((r, f), (DuoResult::InvalidArgument, 4));
+    // A repeated session at 3 before a bad frame 0 and another model at 4.
+    let (r, f, msg) = push(&dup, &bad_at(0));
+    assert_eq!((r, f), (DuoResult::InvalidArgument, 3), "{msg}");
+    assert!(msg.contains("sessions[3] is sessions[0] again"), "{msg}");
+    // A NULL session at 2 before another model at 4 and a bad frame 0.
+    let (r, f, _) = push(&[s[0], s[1], ptr::null_mut(), s[3], s[4]], &bad_at(0));
+    assert_eq!((r, f), (DuoResult::NullParameter, 2));
+    // Without the stranger: a bad frame 3 before the backlogged session 1.
+    let four = &s[..4];
+    let (r, f, msg) = push(four, &bad_at(3)[..4]);
+    assert_eq!((r, f), (DuoResult::NonFiniteInput, 3), "{msg}");
+    // Good frames: the first backlogged session, 1 (not 3).
+    let (r, f, msg) = push(four, &good[..4]);
+    assert_eq!((r, f), (DuoResult::Backlog, 1), "{msg}");
+    // Nobody changed: session 0 and 2 then step as fresh sessions do.
+    let fresh = new(&m);
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for frame in g.leader.iter().take(24) {
+        assert_eq!(push(&[s[0], s[2]], &[*frame; 2]).0, DuoResult::Ok);
+        assert_eq!(unsafe { duo_session_push_leader(fresh, frame) }, DuoResult::Ok);
+        pull_all(s[0], &mut a);
+        pull_all(fresh, &mut b);
+    }
+    assert!(!a.is_empty() && a == b);
+    unsafe { duo_step_batch_free(batch) };
+    for k in s.into_iter().chain([fresh]) {
+        unsafe { duo_session_free(k) };
+    }
+    unsafe { duo_model_free(m.0) };
+    unsafe { duo_model_free(other.0) };
+}
+
+/// Messages of the C API use the C names (`config.top_k`, not `topk`).
+#[test]
+fn messages_name_the_c_fields() {
+    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
+    let g = golden();
+    let m = open();
+    let c = DuoSessionConfig { sampling: SAMPLING_TOP_K, top_k: 0, ..config(&m, &g) };
+    let mut bytes = 0usize;
+    assert_eq!(unsafe { duo_session_bytes(m.0, &c, &mut bytes) }, DuoResult::InvalidArgument);
+    let msg = last_error();
+    assert!(msg.contains("top_k = 0") && !msg.contains("topk"), "{msg}");
+    for (field, bad) in [
+        ("lookahead", DuoSessionConfig { lookahead: 999, ..c }),
+        ("music_lookahead", DuoSessionConfig { music_lookahead: 999, ..c }),
+        ("lat_past", DuoSessionConfig { lat_past: 999, ..c }),
+        ("shift", DuoSessionConfig { shift: 0, ..c }),
+        ("pending_frames", DuoSessionConfig { pending_frames: u32::MAX, ..c }),
+        ("music_buffer_frames", DuoSessionConfig { music_buffer_frames: u32::MAX, ..c }),
+    ] {
+        let bad = DuoSessionConfig { top_k: 4, ..bad };
+        assert_eq!(unsafe { duo_session_bytes(m.0, &bad, &mut bytes) }, DuoResult::InvalidArgument, "{field}");
+        assert!(last_error().contains(&format!("{field} = ")), "{field}: {}", last_error());
+    }
+    unsafe { duo_model_free(m.0) };
 }

@@ -8,6 +8,7 @@ use duolando::duo_writer::{assemble, Header, HeaderEntry};
 use duolando::model_file::AlignedBytes;
 use duolando_core::format::{align_up, DuoFile, FormatError, PREFIX_LEN};
 use duolando_core::model::{BindError, Model};
+use duolando_core::tensor::DType;
 
 use crate::bytes::{apply_all, varint_len, ByteMutation, Int, Regions};
 
@@ -43,6 +44,67 @@ pub enum DuoInput {
     Raw(Vec<u8>),
     /// The base file with these edits (config, table, then bytes).
     Edited { config: Vec<ConfigEdit>, table: Vec<EntryEdit>, bytes: Vec<ByteMutation> },
+    /// The base file with weights overwritten by edge bit patterns (NaN,
+    /// infinities, the largest finite values, subnormals): see [`poison`].
+    Weights(Vec<WeightEdit>),
+}
+
+/// One f32 / f16 weight of the base file overwritten: element `element`
+/// (wrapping) of table entry `entry` (wrapping; entries of other dtypes are
+/// left alone) becomes bit pattern `pattern` (wrapping over
+/// [`F32_PATTERNS`] / [`F16_PATTERNS`]).
+#[derive(Arbitrary, Clone, Copy, Debug)]
+pub struct WeightEdit {
+    pub entry: u16,
+    pub element: u32,
+    pub pattern: u8,
+}
+
+/// f32 patterns: the first [`NON_FINITE`] are NaN (quiet, negative,
+/// signalling, all ones) or infinite, the rest finite edge values (MAX,
+/// MIN, the smallest subnormal, -0).
+pub const F32_PATTERNS: [u32; 10] =
+    [0x7fc0_0000, 0xffc0_0000, 0x7f80_0001, 0xffff_ffff, 0x7f80_0000, 0xff80_0000, 0x7f7f_ffff, 0xff7f_ffff, 0x0000_0001, 0x8000_0000];
+/// The f16 patterns, in the same classes.
+pub const F16_PATTERNS: [u16; 10] = [0x7e00, 0xfe00, 0x7c01, 0xffff, 0x7c00, 0xfc00, 0x7bff, 0xfbff, 0x0001, 0x8000];
+/// Patterns `0..NON_FINITE` of both lists are NaN or infinite.
+pub const NON_FINITE: usize = 6;
+
+/// The base file with `edits` applied to its data section (at most 16),
+/// and the weight `parse` must name: the first non-finite one in table
+/// order, then element order (`None`: every weight finite, the file valid).
+pub fn poison(edits: &[WeightEdit], base: &Parts) -> (Vec<u8>, Option<(u32, u64)>) {
+    let mut data = base.data.clone();
+    let n = base.entries.len();
+    let mut planted: Vec<(u32, u64, bool)> = Vec::new();
+    for w in edits.iter().take(16) {
+        let Some(i) = at(n, w.entry) else { continue };
+        let e = &base.entries[i];
+        let width = match e.dtype {
+            0 => 4,
+            1 => 2,
+            _ => continue,
+        };
+        let numel = e.nbytes / width;
+        if numel == 0 {
+            continue;
+        }
+        let el = w.element as u64 % numel;
+        let k = w.pattern as usize % F32_PATTERNS.len();
+        let at = (e.offset + el * width) as usize;
+        if width == 4 {
+            data[at..at + 4].copy_from_slice(&F32_PATTERNS[k].to_le_bytes());
+        } else {
+            data[at..at + 2].copy_from_slice(&F16_PATTERNS[k].to_le_bytes());
+        }
+        // A later edit of the same element replaces an earlier one.
+        planted.retain(|&(pi, pe, _)| (pi, pe) != (i as u32, el));
+        planted.push((i as u32, el, k < NON_FINITE));
+    }
+    let want = planted.iter().filter(|p| p.2).map(|&(i, el, _)| (i, el)).min();
+    let p = Parts { data, ..base.clone() };
+    let header = header_bytes(&p);
+    (duolando::duo_writer::assemble_raw(&header, &p.data).expect("assemble"), want)
 }
 
 /// The pieces of a valid `.duo` file, editable.
@@ -197,7 +259,26 @@ pub fn build(input: &DuoInput, base: &Parts) -> Vec<u8> {
             apply_all(&mut out, Regions { prefix: PREFIX_LEN, header_end }, &bytes[..bytes.len().min(16)]);
             out
         }
+        DuoInput::Weights(edits) => poison(edits, base).0,
     }
+}
+
+/// [`check_duo`] on the bytes of `input`, plus, for [`DuoInput::Weights`],
+/// the answer it must give: the first non-finite weight named by table
+/// index and element (`FormatError::NonFiniteWeight`), else the base
+/// file's (bound). Panics on a violation.
+pub fn check_input(input: &DuoInput, base: &Parts) -> DuoOutcome {
+    let DuoInput::Weights(edits) = input else { return check_duo(&build(input, base)) };
+    let (bytes, want) = poison(edits, base);
+    let outcome = check_duo(&bytes);
+    match want {
+        Some((index, element)) => assert!(
+            matches!(outcome, DuoOutcome::Rejected(FormatError::NonFiniteWeight { index: i, element: e, .. }) if (i, e) == (index, element)),
+            "a NaN or infinite weight at tensor #{index} element {element}: {outcome:?}"
+        ),
+        None => assert_eq!(outcome, DuoOutcome::Bound, "only finite weights written"),
+    }
+    outcome
 }
 
 /// How far an input got.
@@ -211,8 +292,8 @@ pub enum DuoOutcome {
 
 /// The decoder invariant: on any bytes, `DuoFile::parse` answers without
 /// panicking; when it accepts, every listed tensor is readable with its
-/// listed dtype and payload size, and `Model::from_duo` answers without
-/// panicking. Panics (the fuzz/test failure) on a violation.
+/// listed dtype and payload size, every f32 / f16 weight is finite, and
+/// `Model::from_duo` answers without panicking. Panics (the fuzz/test failure) on a violation.
 pub fn check_duo(bytes: &[u8]) -> DuoOutcome {
     let aligned = AlignedBytes::copy_from(bytes);
     let file = match DuoFile::parse(aligned.as_bytes()) {
@@ -223,6 +304,14 @@ pub fn check_duo(bytes: &[u8]) -> DuoOutcome {
         let t = file.tensor(entry.name).expect("a listed tensor must be readable");
         assert_eq!(t.dtype, entry.dtype, "{}", entry.name);
         assert_eq!(t.dims(), entry.dims(), "{}", entry.name);
+        // An accepted file holds finite weights only (checked here by
+        // value, independently of parse's bit test).
+        let finite = match t.dtype {
+            DType::F32 => t.data.chunks_exact(4).all(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite()),
+            DType::F16 => t.data.chunks_exact(2).all(|c| half::f16::from_le_bytes([c[0], c[1]]).is_finite()),
+            _ => true,
+        };
+        assert!(finite, "{}: a NaN or infinite weight was accepted", entry.name);
     }
     let outcome = match Model::from_duo(&file) {
         Ok(_) => DuoOutcome::Bound,

@@ -1,5 +1,5 @@
 //! Smoke tests of the generators on the tiny2 fixture.
-use duolando_gen::duo::{check_duo, DuoOutcome};
+use duolando_gen::duo::{check_duo, check_input, split, DuoInput, DuoOutcome, WeightEdit, NON_FINITE};
 use duolando_gen::fixture::{tiny2_clip, tiny2_duo_bytes, tiny2_model};
 use duolando_gen::session::{run_ops, ConfigGen, Field, FrameGen, Op, SeedGen, SessionInput};
 use duolando_gen::floats::Hostile;
@@ -17,4 +17,22 @@ fn nan_leader_frame_is_refused_and_shadow_agrees() {
     let rep = run_ops(tiny2_model(), tiny2_clip(), &SessionInput { config, seed: SeedGen::Clip, ops });
     assert_eq!(rep.non_finite_refused, 1);
     assert!(rep.pulled > 0 && rep.recovered > 0, "{rep:?}");
+}
+
+/// The weight edits of the `duo_struct` fuzz target: every NaN / infinity
+/// pattern is refused naming the first one, finite edge values are not.
+#[test]
+fn poisoned_weights_are_refused_by_name() {
+    let base = split(tiny2_duo_bytes());
+    let f32_entries: Vec<u16> = base.entries.iter().enumerate().filter(|(_, e)| e.dtype <= 1).map(|(i, _)| i as u16).collect();
+    assert!(f32_entries.len() > 3, "tiny2 has float tensors");
+    let (a, b) = (f32_entries[1], f32_entries[f32_entries.len() - 1]);
+    for pattern in 0..10u8 {
+        let edits = vec![WeightEdit { entry: b, element: 5, pattern }, WeightEdit { entry: a, element: 77, pattern }];
+        let out = check_input(&DuoInput::Weights(edits), &base);
+        assert_eq!(matches!(out, DuoOutcome::Rejected(_)), (pattern as usize) < NON_FINITE, "pattern {pattern}: {out:?}");
+    }
+    // A NaN overwritten by a finite value is gone.
+    let edits = vec![WeightEdit { entry: a, element: 3, pattern: 0 }, WeightEdit { entry: a, element: 3, pattern: 7 }];
+    assert_eq!(check_input(&DuoInput::Weights(edits), &base), DuoOutcome::Bound);
 }

@@ -80,7 +80,7 @@ fn setting_name(s: duolando_core::session::Setting) -> &'static str {
         Shift => "shift",
         MusicLookahead => "music_lookahead",
         LatPast => "lat_past",
-        TopK => "topk",
+        TopK => "top_k",
         PendingFrames => "pending_frames",
         MusicBuffer => "music_buffer_frames",
         Windows => "staggered (GPT caches needed)",

@@ -81,7 +81,7 @@ impl ModelFile {
             }
         };
         let mf = ModelFile { storage, origin };
-        mf.duo()?;
+        mf.validate()?;
         crate::simd::ensure_init();
         Ok(mf)
     }
@@ -94,7 +94,7 @@ impl ModelFile {
     /// Validates an already aligned buffer; `origin` names it in messages.
     pub fn from_aligned(bytes: AlignedBytes, origin: &str) -> Result<ModelFile, ModelFileError> {
         let mf = ModelFile { storage: Storage::Owned(bytes), origin: origin.to_string() };
-        mf.duo()?;
+        mf.validate()?;
         crate::simd::ensure_init();
         Ok(mf)
     }
@@ -112,16 +112,24 @@ impl ModelFile {
         matches!(self.storage, Storage::Mapped(_))
     }
 
-    /// The validated view. Re-runs `DuoFile::parse` (cheap: header and
-    /// table only, milliseconds for the full model); it succeeded when the
-    /// `ModelFile` was made, and the bytes are immutable since.
+    /// Every rule of `DuoFile::parse`, the weight scan included (once, when
+    /// the `ModelFile` is made).
+    fn validate(&self) -> Result<(), ModelFileError> {
+        let bytes = self.bytes();
+        DuoFile::parse(bytes).map(|_| ()).map_err(|error| self.format_error(bytes, error))
+    }
+
+    /// The validated view. Re-runs `DuoFile::parse_without_weight_scan`
+    /// (cheap: header and table only, milliseconds for the full model):
+    /// the full `parse`, weights included, succeeded when the `ModelFile`
+    /// was made, and the bytes are immutable since.
     pub fn duo(&self) -> Result<DuoFile<'_>, ModelFileError> {
         let bytes = self.bytes();
-        DuoFile::parse(bytes).map_err(|error| ModelFileError::Format {
-            origin: self.origin.clone(),
-            detail: explain(bytes, &error),
-            error,
-        })
+        DuoFile::parse_without_weight_scan(bytes).map_err(|error| self.format_error(bytes, error))
+    }
+
+    fn format_error(&self, bytes: &[u8], error: FormatError) -> ModelFileError {
+        ModelFileError::Format { origin: self.origin.clone(), detail: explain(bytes, &error), error }
     }
 }
 
@@ -183,7 +191,8 @@ pub fn explain(bytes: &[u8], error: &FormatError) -> String {
         | FormatError::Overlap { index, .. }
         | FormatError::DataOutOfRange { index, .. }
         | FormatError::UnknownTensor { index }
-        | FormatError::NonFiniteScale { index, .. } => {
+        | FormatError::NonFiniteScale { index, .. }
+        | FormatError::NonFiniteWeight { index, .. } => {
             // The core message starts with "tensor #i"; name it.
             let msg = error.to_string();
             let head = format!("tensor #{index}");

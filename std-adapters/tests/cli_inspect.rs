@@ -83,3 +83,44 @@ fn inspect_names_a_bad_file() {
         assert!(e.contains(path.to_str().unwrap()) && !e.contains("panicked"), "{e}");
     }
 }
+
+/// A model with a NaN (then an infinite) weight: `inspect` and `generate`
+/// refuse it at open, naming the tensor and the element (docs/FORMAT.md
+/// rule 15), where before it opened and generated NaN frames.
+#[test]
+fn inspect_and_generate_refuse_a_non_finite_weight_by_name() {
+    let fx = tiny().parent().unwrap().parent().unwrap().to_path_buf();
+    let mut bytes = std::fs::read(tiny()).unwrap();
+    // The last tensor's last non-zero byte (zero padding follows); the
+    // tiny fixture is all f32 and payloads are 64-byte aligned.
+    let last = bytes.iter().rposition(|&b| b != 0).unwrap();
+    let at = last & !3;
+    let dir = std::env::temp_dir().join(format!("duo-nan-weight-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (value, word) in [(f32::NAN, "NaN"), (f32::NEG_INFINITY, "-inf")] {
+        bytes[at..at + 4].copy_from_slice(&value.to_le_bytes());
+        let bad = dir.join("nan.duo");
+        std::fs::write(&bad, &bytes).unwrap();
+        let roll = fx.join("rollout_tiny_long");
+        let gen_out = dir.join("out");
+        let runs = [
+            inspect(&[bad.to_str().unwrap()]),
+            Command::new(env!("CARGO_BIN_EXE_duolando"))
+                .args(["generate", "--model", bad.to_str().unwrap()])
+                .args(["--leader", roll.join("leader_pos3d.npy").to_str().unwrap()])
+                .args(["--music", roll.join("music.npy").to_str().unwrap()])
+                .args(["--follower-start", roll.join("follower_start.npy").to_str().unwrap()])
+                .args(["--out", gen_out.to_str().unwrap()])
+                .output()
+                .unwrap(),
+        ];
+        for o in runs {
+            let e = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(1), "{e}");
+            assert!(e.contains(bad.to_str().unwrap()) && e.contains("weight element") && e.contains(&format!("is {word}")), "{e}");
+            assert!(e.contains('`') && !e.contains("panicked"), "the tensor is named: {e}");
+        }
+        assert!(!gen_out.join("follower_pos3d.npy").exists(), "nothing generated");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -206,6 +206,136 @@ static void test_conversions(void) {
   EXPECT(duo_leader_frame_convert(NULL, DUO_COORDS_UNITY), DUO_NULL_PARAMETER);
 }
 
+/* Asset padding and non-finite weights (docs/FORMAT.md rules 13, 15). */
+static void test_model_padding_and_weights(const unsigned char *bytes, size_t len) {
+  const size_t pad = 4096 + 7;
+  unsigned char *p = NULL;
+  duo_model *m = NULL, *sentinel = (duo_model *)&m;
+  size_t last = len - 1, at;
+  char msg[512];
+  const unsigned char nan_le[4] = {0x00, 0x00, 0xc0, 0x7f};
+  CHECK(posix_memalign((void **)&p, 64, len + pad) == 0);
+  /* Zero bytes after the data: the same model. */
+  memcpy(p, bytes, len);
+  memset(p + len, 0, pad);
+  EXPECT(duo_model_open_bytes(p, len + pad, &m), DUO_OK);
+  duo_model_free(m);
+  EXPECT(duo_model_open_copy(p, len + 1, &m), DUO_OK);
+  duo_model_free(m);
+  /* A non-zero byte after them: refused, by file offset. */
+  m = sentinel;
+  p[len + 100] = 1;
+  EXPECT(duo_model_open_bytes(p, len + pad, &m), DUO_BAD_MODEL);
+  duo_last_error_message(msg, sizeof msg);
+  CHECK(strstr(msg, "non-zero byte at file offset") != NULL);
+  CHECK(m == sentinel);
+  /* A NaN in the last tensor's last non-zero f32 element (the data ends
+   * with it, then zero padding; payloads are 64-byte aligned). */
+  while (last > 0 && bytes[last] == 0) last--;
+  at = last & ~(size_t)3;
+  memcpy(p, bytes, len);
+  memcpy(p + at, nan_le, 4);
+  EXPECT(duo_model_open_bytes(p, len, &m), DUO_BAD_MODEL);
+  duo_last_error_message(msg, sizeof msg);
+  CHECK(strstr(msg, "weight element") != NULL && strstr(msg, "is NaN") != NULL && strchr(msg, '`') != NULL);
+  EXPECT(duo_model_open_copy(p, len, &m), DUO_BAD_MODEL);
+  /* +inf there too. */
+  p[at + 2] = 0x80;
+  EXPECT(duo_model_open_bytes(p, len, &m), DUO_BAD_MODEL);
+  duo_last_error_message(msg, sizeof msg);
+  CHECK(strstr(msg, "is +inf") != NULL);
+  CHECK(m == sentinel);
+  free(p);
+}
+
+/* The header's buffer rule: NULL with count 0 is answered as a non-NULL
+ * empty buffer; NULL with a count is DUO_NULL_PARAMETER. */
+static void test_buffer_rule(duo_model *m) {
+  duo_session_config c;
+  duo_session *s = NULL, *t = NULL, *sentinel = (duo_session *)&c;
+  duo_step_batch *b = NULL, *bsentinel = (duo_step_batch *)&c;
+  uint32_t tokens[5] = {9, 9, 9, 9, 9};
+  unsigned char mem[64];
+  float feat[54];
+  size_t failed = 0, bytes = 0;
+  duo_model *msentinel = (duo_model *)&c, *mm = msentinel;
+  memset(feat, 0, sizeof feat);
+  EXPECT(duo_session_config_minimum(m, &c), DUO_OK);
+  EXPECT(duo_model_open_bytes(NULL, 0, &mm), DUO_BAD_MODEL);
+  EXPECT(duo_model_open_copy(NULL, 0, &mm), DUO_BAD_MODEL);
+  EXPECT(duo_model_open_copy(mem, 0, &mm), DUO_BAD_MODEL);
+  EXPECT(duo_model_open_copy(NULL, 64, &mm), DUO_NULL_PARAMETER);
+  CHECK(mm == msentinel);
+  EXPECT(duo_model_seed_tokens(m, NULL, NULL, 0, tokens), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_model_seed_tokens(m, feat, feat, 0, tokens), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_model_seed_tokens(m, (const float *)leader, NULL, 8, tokens), DUO_NULL_PARAMETER);
+  CHECK(tokens[0] == 9);
+  s = sentinel;
+  EXPECT(duo_session_new_in(m, &c, seed, NULL, 0, &s), DUO_BUFFER_TOO_SMALL);
+  EXPECT(duo_session_new_in(m, &c, seed, mem, 0, &s), DUO_BUFFER_TOO_SMALL);
+  CHECK(s == sentinel);
+  EXPECT(duo_step_batch_bytes(m, &c, 2, &bytes), DUO_OK);
+  b = bsentinel;
+  EXPECT(duo_step_batch_new_in(m, &c, 2, NULL, 0, &b), DUO_BUFFER_TOO_SMALL);
+  EXPECT(duo_step_batch_new_in(m, &c, 2, mem, 0, &b), DUO_BUFFER_TOO_SMALL);
+  EXPECT(duo_step_batch_new_in(m, &c, 2, NULL, bytes, &b), DUO_NULL_PARAMETER);
+  CHECK(b == bsentinel);
+  EXPECT(duo_session_new(m, &c, seed, &s), DUO_OK);
+  EXPECT(duo_session_new(m, &c, seed, &t), DUO_OK);
+  EXPECT(duo_session_push_music(s, NULL, 0), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_push_music(s, feat, 0), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_push_music(s, NULL, 54), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_set_music_track(s, NULL, 0), DUO_OK);
+  EXPECT(duo_session_set_music_track(t, feat, 0), DUO_OK);
+  EXPECT(duo_session_set_music_track(s, music, 54), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_set_music_track(t, music, 54), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_step_batch_new(m, &c, 2, &b), DUO_OK);
+  EXPECT(duo_step_batch_push_leader(b, NULL, NULL, 0, &failed), DUO_OK);
+  CHECK(failed == DUO_NO_SESSION);
+  EXPECT(duo_step_batch_push_leader(b, NULL, leader, 2, &failed), DUO_NULL_PARAMETER);
+  duo_step_batch_free(b);
+  duo_session_free(s);
+  duo_session_free(t);
+}
+
+/* duo_step_batch_push_leader's order: the sessions (NULL, twice, another
+ * model) before the frames before the backlog, each by index. */
+static void test_batch_order(duo_model *m) {
+  duo_session_config c;
+  duo_model *other = NULL;
+  duo_session *ss[5];
+  duo_step_batch *b = NULL;
+  duo_leader_frame fr[5];
+  size_t i, failed = 0;
+  EXPECT(duo_session_config_minimum(m, &c), DUO_OK);
+  EXPECT(duo_model_open_file(model_path, &other), DUO_OK);
+  for (i = 0; i < 5; i++) {
+    EXPECT(duo_session_new(i == 4 ? other : m, &c, seed, &ss[i]), DUO_OK);
+    EXPECT(duo_session_set_music_track(ss[i], music, n_frames * 54), DUO_OK);
+    fr[i] = leader[0];
+  }
+  /* Session 1 backlogged. */
+  for (i = 0; i < n_frames && duo_session_push_leader(ss[1], &leader[i]) == DUO_OK; i++) {
+  }
+  CHECK(i < n_frames);
+  EXPECT(duo_step_batch_new(m, &c, 5, &b), DUO_OK);
+  EXPECT(duo_step_batch_push_leader(b, ss, fr, 5, &failed), DUO_INVALID_ARGUMENT);
+  CHECK(failed == 4); /* another model at 4 before the backlog at 1 */
+  fr[0].joints[3].x = (float)NAN;
+  EXPECT(duo_step_batch_push_leader(b, ss, fr, 5, &failed), DUO_INVALID_ARGUMENT);
+  CHECK(failed == 4); /* before a bad frame 0 */
+  fr[0] = leader[0];
+  fr[3].joints[3].x = (float)INFINITY;
+  EXPECT(duo_step_batch_push_leader(b, ss, fr, 4, &failed), DUO_NON_FINITE_INPUT);
+  CHECK(failed == 3); /* a bad frame 3 before the backlog at 1 */
+  fr[3] = leader[0];
+  EXPECT(duo_step_batch_push_leader(b, ss, fr, 4, &failed), DUO_BACKLOG);
+  CHECK(failed == 1);
+  duo_step_batch_free(b);
+  for (i = 0; i < 5; i++) duo_session_free(ss[i]);
+  duo_model_free(other);
+}
+
 static void test_model_open(duo_model **out_file_model) {
   size_t len = 0;
   unsigned char *bytes = read_file(model_path, &len);
@@ -261,6 +391,7 @@ static void test_model_open(duo_model **out_file_model) {
   CHECK(m == sentinel);
   duo_model_free(NULL);
   free(aligned);
+  test_model_padding_and_weights(bytes, len);
   free(bytes);
 }
 
@@ -326,7 +457,10 @@ static void test_session_errors(duo_model *m) {
   feat[3] = 0.0f;
   EXPECT(duo_session_push_music(s, feat, 54), DUO_OK);
   EXPECT(duo_session_set_music_track(s, music, 53), DUO_INVALID_ARGUMENT);
-  EXPECT(duo_session_set_music_track(s, NULL, 0), DUO_NULL_PARAMETER);
+  /* Music was pushed: a track, empty or not, NULL or not, is refused alike. */
+  EXPECT(duo_session_set_music_track(s, NULL, 0), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_set_music_track(s, music, 0), DUO_INVALID_ARGUMENT);
+  EXPECT(duo_session_set_music_track(s, NULL, 54), DUO_NULL_PARAMETER);
   EXPECT(duo_session_reset(s, big_seed), DUO_INVALID_ARGUMENT);
   EXPECT(duo_session_reset(s, NULL), DUO_NULL_PARAMETER);
   EXPECT(duo_session_reset(NULL, seed), DUO_NULL_PARAMETER);
@@ -635,6 +769,8 @@ int main(int argc, char **argv) {
   test_model_open(&m);
   test_session_errors(m);
   test_finish(m);
+  test_buffer_rule(m);
+  test_batch_order(m);
   test_sessions(m);
   test_step_batch(m);
   test_threads(m);

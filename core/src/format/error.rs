@@ -9,6 +9,8 @@ use crate::limits::ConfigError;
 use crate::schema::SchemaError;
 use crate::tensor::MAX_RANK;
 
+pub use super::weights::NonFiniteKind;
+
 /// A tensor shape as stored in errors: `rank` dims, the rest unused (1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Shape {
@@ -117,8 +119,10 @@ pub enum FormatError {
     /// A payload ending past the end of the data section (truncated file or
     /// an out-of-range offset).
     DataOutOfRange { index: u32, end: u64, data_len: u64 },
-    /// Bytes after the last payload beyond its 64-byte padding.
-    TrailingData { expected_len: u64, data_len: u64 },
+    /// A non-zero byte after the data section (the last payload's end
+    /// rounded up to 64): trailing bytes are accepted only as zero padding.
+    /// `offset` is the byte's file offset.
+    TrailingData { offset: u64 },
     /// The config failed `ModelConfig::validate` (sizes over the caps, or
     /// inconsistent).
     InvalidConfig(ConfigError),
@@ -130,6 +134,9 @@ pub enum FormatError {
     ShapeMismatch { index: u32, expected: Shape, found: Shape },
     /// A quantization scale that is NaN or infinite.
     NonFiniteScale { index: u32, block: u64 },
+    /// An `F32` / `F16` weight that is NaN or infinite: element `element`
+    /// (row-major) of tensor `index`.
+    NonFiniteWeight { index: u32, element: u64, kind: NonFiniteKind },
     /// A schema name outgrew its buffer (impossible for a validated config).
     Schema(SchemaError),
     /// `DuoFile::tensor(name)`: no tensor with that name.
@@ -187,9 +194,10 @@ impl fmt::Display for FormatError {
                 f,
                 "tensor #{index}: data ends at {end} but the data section has only {data_len} bytes (truncated file?)"
             ),
-            TrailingData { expected_len, data_len } => {
-                write!(f, "data section is {data_len} bytes, expected {expected_len} (trailing bytes)")
-            }
+            TrailingData { offset } => write!(
+                f,
+                "non-zero byte at file offset {offset} after the data section (trailing bytes are accepted only as zero padding)"
+            ),
             InvalidConfig(e) => write!(f, "invalid model config: {e:?}"),
             MissingTensor { schema_index } => write!(f, "schema tensor #{schema_index} is missing"),
             UnknownTensor { index } => write!(f, "tensor #{index} is not part of the model schema"),
@@ -197,6 +205,7 @@ impl fmt::Display for FormatError {
                 write!(f, "tensor #{index}: shape {found}, the config requires {expected}")
             }
             NonFiniteScale { index, block } => write!(f, "tensor #{index}: quantization scale of block {block} is NaN or infinite"),
+            NonFiniteWeight { index, element, kind } => write!(f, "tensor #{index}: weight element {element} is {kind}"),
             Schema(e) => write!(f, "schema error: {e:?}"),
             NotFound => write!(f, "no tensor with that name"),
         }

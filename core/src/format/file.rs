@@ -33,9 +33,22 @@ const SKIP: usize = 64;
 
 impl<'a> DuoFile<'a> {
     /// Validates `bytes` completely (prefix, header, table, offsets, config,
-    /// schema). Never panics and never allocates, whatever `bytes` holds.
-    /// `bytes` must start on a 64-byte boundary in memory.
+    /// schema, then every f32 / f16 weight finite: one pass over the data,
+    /// docs/FORMAT.md §5 rule 15). Never panics and never allocates,
+    /// whatever `bytes` holds. `bytes` must start on a 64-byte boundary in
+    /// memory.
     pub fn parse(bytes: &'a [u8]) -> Result<DuoFile<'a>, FormatError> {
+        let file = Self::parse_without_weight_scan(bytes)?;
+        file.check_weights()?;
+        Ok(file)
+    }
+
+    /// Every rule of [`DuoFile::parse`] but the weight scan (rule 15): the
+    /// header and table only, milliseconds for the full model. For bytes
+    /// that passed `parse` and have not changed since (a `ModelFile`
+    /// re-creating its view); on other bytes a NaN or infinite weight goes
+    /// unnoticed (memory safety does not depend on it: only the numbers).
+    pub fn parse_without_weight_scan(bytes: &'a [u8]) -> Result<DuoFile<'a>, FormatError> {
         let prefix = Prefix::parse(bytes)?;
         // Prefix::parse proved data_start <= bytes.len(), so these fit usize.
         let header_end = PREFIX_LEN + prefix.header_len as usize;
@@ -100,10 +113,15 @@ impl<'a> DuoFile<'a> {
         if !cur.rest.is_empty() {
             return Err(FormatError::TrailingHeaderBytes { count: cur.rest.len() });
         }
-        // The data section ends at the last payload padded to 64 bytes.
+        // The data section ends at the last payload padded to 64 bytes; zero
+        // bytes may follow (asset pipelines pad files), nothing else.
         let expected_len = align_up(prev_end).unwrap_or(u64::MAX);
         if data_len > expected_len {
-            return Err(FormatError::TrailingData { expected_len, data_len });
+            // expected_len < data_len, a usize.
+            let tail = data.get(expected_len as usize..).unwrap_or(&[]);
+            if let Some(i) = tail.iter().position(|&b| b != 0) {
+                return Err(FormatError::TrailingData { offset: prefix.data_start + expected_len + i as u64 });
+            }
         }
         if data_len < expected_len {
             return Err(FormatError::DataOutOfRange {
@@ -190,27 +208,26 @@ impl<'a> DuoFile<'a> {
         TensorRef { dtype: e.dtype, rank: e.rank, shape: e.shape, data: payload(self.data, e) }
     }
 
-    /// The first f32/f16 weight that is NaN or infinite, as (table index,
-    /// element index). Not part of `parse` (it reads every byte of the
-    /// file); the converter runs it, and hosts may (docs/FORMAT.md §NaN).
-    pub fn first_non_finite(&self) -> Option<(u32, u64)> {
+    /// Rule 15: every `F32` / `F16` element finite (the first one that is
+    /// not, by table index and row-major element index). One vectorised
+    /// pass over those payloads (docs/FORMAT.md §4 "Non-finite values").
+    pub fn check_weights(&self) -> Result<(), FormatError> {
         for (index, e) in self.tensors().enumerate() {
-            let bytes = payload(self.data, &e);
-            let bad = match e.dtype {
-                DType::F32 => bytes
-                    .chunks_exact(4)
-                    .position(|c| !f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite()),
-                DType::F16 => bytes
-                    .chunks_exact(2)
-                    .position(|c| !half::f16::from_le_bytes([c[0], c[1]]).is_finite()),
-                // Scales were checked by parse; int8 / int4 values are always finite.
-                DType::Q8Block32 | DType::Q4Block32 | DType::Q8Block32x8 | DType::Q4Block32x8 => None,
-            };
-            if let Some(i) = bad {
-                return Some((index as u32, i as u64));
+            if let Some((element, kind)) = super::weights::first_non_finite(e.dtype, payload(self.data, &e)) {
+                return Err(FormatError::NonFiniteWeight { index: index as u32, element, kind });
             }
         }
-        None
+        Ok(())
+    }
+
+    /// The first f32/f16 weight that is NaN or infinite, as (table index,
+    /// element index): [`DuoFile::check_weights`] as an option (always
+    /// None for a file from `parse`, which runs it).
+    pub fn first_non_finite(&self) -> Option<(u32, u64)> {
+        match self.check_weights() {
+            Err(FormatError::NonFiniteWeight { index, element, .. }) => Some((index, element)),
+            _ => None,
+        }
     }
 }
 

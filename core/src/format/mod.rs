@@ -8,12 +8,15 @@
 //!       24   header       postcard: ModelConfig, then the tensor table
 //!            padding      zero bytes up to the next multiple of 64
 //!  data_start data        tensor payloads, each 64-byte aligned, in table order
+//!            padding      zero bytes up to the next multiple of 64, then any
+//!                         number of zero bytes (asset-pipeline padding)
 //! ```
 //!
 //! [`DuoFile::parse`] validates everything up front, without allocating and
 //! without panicking on any input; afterwards every [`TensorRef`] it hands
 //! out is in range, correctly sized, aligned, and shaped as the schema
-//! (`crate::schema`) requires for the file's config.
+//! (`crate::schema`) requires for the file's config, and every float it
+//! holds (f32 / f16 weights, quantisation scales) is finite.
 //!
 //! [`TensorRef`]: crate::tensor::TensorRef
 
@@ -22,8 +25,9 @@ mod file;
 mod prefix;
 mod schema_check;
 mod table;
+mod weights;
 
-pub use error::{FormatError, HeaderField, Shape};
+pub use error::{FormatError, HeaderField, NonFiniteKind, Shape};
 pub use file::{DuoFile, Tensors};
 pub use prefix::Prefix;
 pub use schema_check::schema_tensor;

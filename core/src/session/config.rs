@@ -36,8 +36,9 @@ pub struct SessionConfig {
     /// original band is `look_forward`).
     pub lat_past: u32,
     pub sampling: Sampling,
-    /// Follower frames the caller may leave unpulled beyond the latency
-    /// before `push_leader_frame` answers `Backlog`.
+    /// Slack of the backlog rule: `push_leader_frame` answers `Backlog`
+    /// when the leader frames pushed minus the follower frames pulled reach
+    /// `latency + 1 + pending_frames` (pull ready frames first).
     pub pending_frames: u32,
     /// Music frames that may wait in the session (pushed, not yet read by
     /// the music LAT) before `push_music_frame` answers `Backlog`.
