@@ -21,7 +21,7 @@ use serde_json::json;
 
 use self::inputs::{Leader, Music};
 use crate::cli::generate::{generate_exact, parse_seed_tokens, Generated};
-use crate::export::{write_all, Motion};
+use crate::export::{write_all, GroupErrors, Motion};
 use crate::model_file::ModelFile;
 use crate::npy::{read_f32_2d, write_f32};
 use crate::viewer::{write_index_html, ViewerData};
@@ -50,13 +50,40 @@ pub struct Args {
     pub seed_tokens: Option<String>,
     /// Output directory (created; existing files of the same names are replaced).
     #[arg(long, short)]
-    pub out: PathBuf,    /// Threads the large matrix products are split over (the output does not
+    pub out: PathBuf,
+    /// Where the follower's rotations in follower.glb / follower.bvh / follower_rotmat.npy come from:
+    /// `fitted` (default) fits them to the decoded positions the viewer shows, one length per bone;
+    /// `decoder` uses the model's rotation decoder (projected to rotations), which can disagree
+    /// with the positions.
+    #[arg(long, value_enum, default_value_t = FollowerRotations::Fitted)]
+    pub follower_rotations: FollowerRotations,
+    /// Threads the large matrix products are split over (the output does not
     /// depend on it). Default: every core, at most 8.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub threads: Option<u32>,
 }
 
-/// A rig fit worse than this (metres) is pointed out on stderr.
+/// Where the exported follower's rotations come from (`--follower-rotations`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FollowerRotations {
+    /// Fitted to the decoded positions (what the viewer shows) on a rigid rig
+    /// with the clip's median bone lengths.
+    Fitted,
+    /// The rotation decoder's output, projected to the nearest rotations.
+    Decoder,
+}
+
+impl FollowerRotations {
+    fn name(self) -> &'static str {
+        match self {
+            FollowerRotations::Fitted => "fitted",
+            FollowerRotations::Decoder => "decoder",
+        }
+    }
+}
+
+/// An export farther than this (metres, worst joint) from the positions the
+/// viewer shows is pointed out on stderr.
 const FIT_WARN_M: f32 = 0.05;
 
 /// Prints a numbered stage line on stderr.
@@ -228,7 +255,14 @@ pub fn run(args: Args) -> Result<()> {
     let duet = g.frames.min(leader.frames);
     let leader_duet = &leader.pos3d[..duet * POSE_DIM];
     let leader_motion = Motion::from_positions(leader_duet, &format!("leader {}", leader_path.display()))?;
-    let follower_motion = Motion::from_decoded(&g.follower_pos3d, Some(&g.follower_rotmat), "generated follower")?;
+    let follower_motion = match args.follower_rotations {
+        FollowerRotations::Fitted => Motion::from_positions(&g.follower_pos3d, "generated follower")?,
+        FollowerRotations::Decoder => Motion::from_decoded(&g.follower_pos3d, Some(&g.follower_rotmat), "generated follower")?,
+    };
+    // How far each exported rig (FK of the glb/bvh rotations) lands from the
+    // positions the viewer shows.
+    let leader_err = GroupErrors::between(&leader_motion.positions, leader_duet);
+    let follower_err = GroupErrors::between(&follower_motion.positions, &g.follower_pos3d);
     write_all(dir, Some(&leader_motion), &follower_motion)?;
     // The npy files hold the model's own outputs and the leader as given;
     // the rotmat files hold the proper rotations the glb/bvh use.
@@ -237,12 +271,17 @@ pub fn run(args: Args) -> Result<()> {
     write_f32(&dir.join("follower_rotmat_raw.npy"), &g.follower_rotmat, &[g.frames, ROT_DIM])?;
     let tokens: Vec<i64> = g.tokens.iter().map(|&t| t as i64).collect();
     crate::npy::write_i64(&dir.join("tokens.npy"), &tokens, &[g.token_rows, 5])?;
-    for (who, m) in [("leader", &leader_motion), ("follower", &follower_motion)] {
-        if m.fit_error_m > FIT_WARN_M {
+    for (who, err) in [("leader", &leader_err), ("follower", &follower_err)] {
+        if err.all.max > FIT_WARN_M {
+            let why = if who == "follower" && args.follower_rotations == FollowerRotations::Decoder {
+                "its rotations come from the rotation decoder (--follower-rotations decoder); the default `fitted` follows the positions"
+            } else {
+                "the rig keeps one length per bone, and the positions stretch or shrink bones from frame to frame"
+            };
             eprintln!(
-                "      note: the {who} in follower.glb / {who}.bvh is up to {:.2} m from its positions (the rig cannot follow them; \
-                 an untrained model or non-skeletal input); index.html and {who}_pos3d.npy show the positions themselves",
-                m.fit_error_m
+                "      note: the {who} in follower.glb / {who}.bvh is {:.3} m from its positions on average, up to {:.2} m ({why}); \
+                 index.html and {who}_pos3d.npy show the positions themselves",
+                err.all.mean, err.all.max
             );
         }
     }
@@ -307,7 +346,9 @@ pub fn run(args: Args) -> Result<()> {
         "follower_frames": g.frames,
         "seconds": g.frames as f64 / 30.0,
         "distinct_tokens": { "up_down_lhand_rhand_transl": distinct_tokens(&g) },
+        "follower_rotations": args.follower_rotations.name(),
         "fit_error_m": { "leader": leader_motion.fit_error_m, "follower": follower_motion.fit_error_m },
+        "export_error_m": { "leader": leader_err, "follower": follower_err },
         "timings_s": {
             "model": t_model, "inputs": t_inputs, "generate": t_generate, "export": t_export, "viewer": t_viewer,
             "total": t_all.elapsed().as_secs_f64(),

@@ -174,3 +174,97 @@ pub fn parse(bytes: &[u8], what: &str) -> Result<(Value, Vec<u8>)> {
     let bin_end = (json_end + 8).checked_add(bin_len).filter(|&e| e == bytes.len()).with_context(|| format!("{what}: BIN chunk length does not match the file"))?;
     Ok((doc, bytes[json_end + 8..bin_end].to_vec()))
 }
+
+/// The float data of accessor `i` (FLOAT components, tightly packed):
+/// (values, count, components). Every index and range is checked.
+fn read_accessor(doc: &Value, bin: &[u8], i: usize, what: &str) -> Result<(Vec<f32>, usize, usize)> {
+    let a = doc["accessors"].get(i).with_context(|| format!("{what}: no accessor {i}"))?;
+    let comps = match a["type"].as_str() {
+        Some("SCALAR") => 1,
+        Some("VEC3") => 3,
+        Some("VEC4") => 4,
+        t => bail!("{what}: accessor {i} has type {t:?}; expected SCALAR, VEC3 or VEC4"),
+    };
+    if a["componentType"].as_u64() != Some(FLOAT as u64) {
+        bail!("{what}: accessor {i} is not FLOAT");
+    }
+    let count = a["count"].as_u64().with_context(|| format!("{what}: accessor {i} has no count"))? as usize;
+    let vi = a["bufferView"].as_u64().with_context(|| format!("{what}: accessor {i} has no bufferView"))? as usize;
+    let v = doc["bufferViews"].get(vi).with_context(|| format!("{what}: no bufferView {vi}"))?;
+    let start = (v["byteOffset"].as_u64().unwrap_or(0) as usize).checked_add(a["byteOffset"].as_u64().unwrap_or(0) as usize);
+    let len = count.checked_mul(4 * comps);
+    let end = start.zip(len).and_then(|(s, l)| s.checked_add(l));
+    let (Some(start), Some(end)) = (start, end) else { bail!("{what}: accessor {i} range overflows") };
+    let view_end = (v["byteOffset"].as_u64().unwrap_or(0) as usize).saturating_add(v["byteLength"].as_u64().unwrap_or(0) as usize);
+    if end > view_end || end > bin.len() {
+        bail!("{what}: accessor {i} reads past its bufferView or the BIN chunk");
+    }
+    let vals = bin[start..end].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    Ok((vals, count, comps))
+}
+
+/// World joint positions (T, 165) of dancer `name` in a parsed .glb as this
+/// module writes it, by FK over its animation: joint nodes `<name>_<joint>`
+/// with their rest translations, the per-joint rotation channels and the
+/// pelvis translation channel, sampled at the keyframes (no interpolation).
+/// Fails, naming what is missing, on a file of another layout.
+pub fn dancer_positions(doc: &Value, bin: &[u8], name: &str, what: &str) -> Result<Vec<f32>> {
+    use crate::skeleton::math::{add, mat_mul, mat_vec};
+    use crate::skeleton::{mat_from_quat, parent, POS_DIM};
+    let nodes = doc["nodes"].as_array().with_context(|| format!("{what}: no nodes"))?;
+    let mut index = [0usize; JOINTS];
+    let mut rest = [[0.0f32; 3]; JOINTS];
+    for j in 0..JOINTS {
+        let node_name = format!("{name}_{}", JOINT_NAMES[j]);
+        index[j] = nodes.iter().position(|n| n["name"].as_str() == Some(&node_name)).with_context(|| format!("{what}: no node {node_name}"))?;
+        let t = nodes[index[j]]["translation"].as_array().filter(|t| t.len() == 3).with_context(|| format!("{what}: node {node_name} has no translation"))?;
+        for k in 0..3 {
+            rest[j][k] = t[k].as_f64().with_context(|| format!("{what}: node {node_name}: bad translation"))? as f32;
+        }
+    }
+    let anim = doc["animations"].get(0).with_context(|| format!("{what}: no animation"))?;
+    let channels = anim["channels"].as_array().with_context(|| format!("{what}: animation without channels"))?;
+    let mut rot: Vec<Option<Vec<f32>>> = vec![None; JOINTS];
+    let mut root: Option<Vec<f32>> = None;
+    let mut frames: Option<usize> = None;
+    for ch in channels {
+        let Some(node) = ch["target"]["node"].as_u64() else { continue };
+        let Some(j) = index.iter().position(|&n| n as u64 == node) else { continue };
+        let s = ch["sampler"].as_u64().and_then(|s| anim["samplers"].get(s as usize)).with_context(|| format!("{what}: channel without a sampler"))?;
+        let out = s["output"].as_u64().with_context(|| format!("{what}: sampler without output"))? as usize;
+        let (data, count, comps) = read_accessor(doc, bin, out, what)?;
+        if *frames.get_or_insert(count) != count {
+            bail!("{what}: {name}: channels with different keyframe counts");
+        }
+        match (ch["target"]["path"].as_str(), comps) {
+            (Some("rotation"), 4) => rot[j] = Some(data),
+            (Some("translation"), 3) if j == 0 => root = Some(data),
+            (p, c) => bail!("{what}: unexpected channel {p:?} with {c} components on {name}_{}", JOINT_NAMES[j]),
+        }
+    }
+    let frames = frames.with_context(|| format!("{what}: {name} is not animated"))?;
+    let root = root.with_context(|| format!("{what}: {name}_pelvis has no translation channel"))?;
+    let mut out = Vec::with_capacity(frames * POS_DIM);
+    for t in 0..frames {
+        let mut world = [[[0.0f32; 3]; 3]; JOINTS];
+        let mut pos = [[0.0f32; 3]; JOINTS];
+        for j in 0..JOINTS {
+            let r = match &rot[j] {
+                Some(q) => mat_from_quat([q[4 * t], q[4 * t + 1], q[4 * t + 2], q[4 * t + 3]]),
+                None => crate::skeleton::math::IDENTITY,
+            };
+            match parent(j) {
+                None => {
+                    pos[j] = [root[3 * t], root[3 * t + 1], root[3 * t + 2]];
+                    world[j] = r;
+                }
+                Some(p) => {
+                    pos[j] = add(pos[p], mat_vec(&world[p], rest[j]));
+                    world[j] = mat_mul(&world[p], &r);
+                }
+            }
+        }
+        out.extend(pos.iter().flatten());
+    }
+    Ok(out)
+}

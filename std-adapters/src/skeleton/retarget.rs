@@ -90,20 +90,28 @@ fn best_twist(g: &Mat3, skel: &Skeleton, axis: Vec3, ks: &[usize], positions: &[
 }
 
 /// A rig whose bone directions are `template`'s and whose bone lengths are
-/// the mean lengths measured in `clip` ((T, 55, 3) positions), so that FK
-/// of retargeted rotations reproduces the clip's joints. Bones that are
-/// degenerate in the clip keep the template length.
+/// the median lengths measured in `clip` ((T, 55, 3) positions): one length
+/// per bone for the whole clip (the rig stays rigid), so that FK of
+/// retargeted rotations reproduces a rigid clip's joints exactly and a
+/// non-rigid one (decoded positions) as closely as fixed bones allow. The
+/// median ignores the frames where a decoder stretches a bone. Bones that
+/// are degenerate in the clip keep the template length.
 pub fn measure_skeleton(template: &Skeleton, clip: &[[Vec3; JOINTS]]) -> Skeleton {
     let mut out = *template;
     if clip.is_empty() {
         return out;
     }
+    let mut lengths: Vec<f32> = Vec::with_capacity(clip.len());
     for j in 1..JOINTS {
         let p = parent(j).unwrap_or(0);
-        let mean: f32 = clip.iter().map(|f| norm(sub(f[j], f[p]))).sum::<f32>() / clip.len() as f32;
+        lengths.clear();
+        lengths.extend(clip.iter().map(|f| norm(sub(f[j], f[p]))));
+        lengths.sort_unstable_by(f32::total_cmp);
+        let n = lengths.len();
+        let median = if n % 2 == 1 { lengths[n / 2] } else { 0.5 * (lengths[n / 2 - 1] + lengths[n / 2]) };
         let len = norm(template.offsets[j]);
-        if mean.is_finite() && mean > 1e-5 && len > 1e-9 {
-            out.offsets[j] = scale(template.offsets[j], mean / len);
+        if median.is_finite() && median > 1e-5 && len > 1e-9 {
+            out.offsets[j] = scale(template.offsets[j], median / len);
         }
     }
     out
