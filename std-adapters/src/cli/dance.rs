@@ -21,7 +21,10 @@ use serde_json::json;
 
 use self::inputs::{Leader, Music};
 use crate::cli::generate::{generate_exact, parse_seed_tokens, Generated};
-use crate::export::{write_all, GroupErrors, Motion};
+use crate::export::{as_frames, write_all, GroupErrors, Motion};
+use crate::skeleton::body::{interpenetration, radius_scale, CLOSE_PELVIS_M};
+use crate::skeleton::retarget::measure_skeleton;
+use crate::skeleton::Skeleton;
 use crate::model_file::ModelFile;
 use crate::npy::{read_f32_2d, write_f32};
 use crate::viewer::{write_index_html, ViewerData};
@@ -57,6 +60,11 @@ pub struct Args {
     /// with the positions.
     #[arg(long, value_enum, default_value_t = FollowerRotations::Fitted)]
     pub follower_rotations: FollowerRotations,
+    /// The true follower of the same take, (T', 165) float .npy with T' >= the duet's frames (world
+    /// positions, frame-aligned with the leader), e.g. from `duolando synth`: its interpenetration with
+    /// the leader is reported next to the model's in summary.json.
+    #[arg(long)]
+    pub true_follower: Option<PathBuf>,
     /// Threads the large matrix products are split over (the output does not
     /// depend on it). Default: every core, at most 8.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
@@ -285,6 +293,39 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
+    // How much the bodies interpenetrate (docs/DEMO_MODEL.md): the model's
+    // follower, as the viewer shows it, and the true follower when given.
+    let rig_scale = |pos: &[f32]| radius_scale(&measure_skeleton(&Skeleton::default(), &as_frames(pos)));
+    let leader_scale = radius_scale(&leader_motion.skeleton);
+    let contact = interpenetration(leader_duet, &g.follower_pos3d, leader_scale, rig_scale(&g.follower_pos3d));
+    let true_contact = match &args.true_follower {
+        None => None,
+        Some(path) => {
+            let a = read_f32_2d(path, Some(POSE_DIM), "true follower joint positions (T, 165), metres, 30 fps")?;
+            if a.rows < duet {
+                bail!("{}: the true follower has {} frames; expected at least the duet's {duet}", path.display(), a.rows);
+            }
+            if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
+                bail!("{}: true follower[{}, {}] is not finite; expected finite positions", path.display(), i / POSE_DIM, i % POSE_DIM);
+            }
+            let truth = &a.data[..duet * POSE_DIM];
+            Some((path.display().to_string(), interpenetration(leader_duet, truth, leader_scale, rig_scale(truth))))
+        }
+    };
+    eprintln!(
+        "      bodies: pelvis distance min {:.2} m, under {CLOSE_PELVIS_M} m in {:.0} % of frames; trunk/legs/head capsules overlap in {:.0} % (deepest {:.2} m){}",
+        contact.pelvis_distance_m.min,
+        100.0 * contact.frames_pelvis_under_0_25_m,
+        100.0 * contact.body_capsules.frames_overlapping,
+        contact.body_capsules.depth_max_m,
+        true_contact.as_ref().map_or(String::new(), |(_, c)| format!(
+            "; true follower: min {:.2} m, {:.0} %, overlap {:.0} % (deepest {:.2} m)",
+            c.pelvis_distance_m.min,
+            100.0 * c.frames_pelvis_under_0_25_m,
+            100.0 * c.body_capsules.frames_overlapping,
+            c.body_capsules.depth_max_m
+        ))
+    );
     let t_export = t.elapsed().as_secs_f64();
 
     stage(5, "writing the viewer and summary");
@@ -349,6 +390,10 @@ pub fn run(args: Args) -> Result<()> {
         "follower_rotations": args.follower_rotations.name(),
         "fit_error_m": { "leader": leader_motion.fit_error_m, "follower": follower_motion.fit_error_m },
         "export_error_m": { "leader": leader_err, "follower": follower_err },
+        "interpenetration": {
+            "follower": contact,
+            "true_follower": true_contact.as_ref().map(|(f, c)| json!({"file": f, "measure": c})),
+        },
         "timings_s": {
             "model": t_model, "inputs": t_inputs, "generate": t_generate, "export": t_export, "viewer": t_viewer,
             "total": t_all.elapsed().as_secs_f64(),

@@ -1,9 +1,12 @@
-//! glTF 2.0 binary (.glb) export: each dancer is a skin-less node
-//! hierarchy of the SMPL-X joint tree under a group node named after the
-//! dancer. Joint nodes are named `<dancer>_<joint>` (unique), carry the
-//! rest offsets as translations, and are animated by one animation
+//! glTF 2.0 binary (.glb) export: each dancer is a node hierarchy of the
+//! SMPL-X joint tree under a group node named after the dancer, plus a
+//! skinned mannequin mesh (export::mannequin) on a root node
+//! `<dancer>_mesh`. Joint nodes are named `<dancer>_<joint>` (unique), carry
+//! the rest offsets as translations, and are animated by one animation
 //! ("dance"): a LINEAR rotation channel (quaternion x, y, z, w) per joint
-//! and a translation channel on the pelvis. Metres, y up, 30 fps.
+//! and a translation channel on the pelvis. The skin binds the mesh in the
+//! rest pose (pelvis at the origin, every rotation identity), so inverse
+//! bind matrices are translations. Metres, y up, 30 fps.
 
 use std::path::Path;
 
@@ -19,9 +22,45 @@ const GLB_MAGIC: u32 = 0x4654_6C67; // "glTF"
 const CHUNK_JSON: u32 = 0x4E4F_534A; // "JSON"
 const CHUNK_BIN: u32 = 0x004E_4942; // "BIN\0"
 const FLOAT: u32 = 5126;
+const UNSIGNED_BYTE: u32 = 5121;
+const UNSIGNED_SHORT: u32 = 5123;
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
 
-/// Nodes per dancer: the group node plus 55 joints.
-pub const NODES_PER_DANCER: usize = JOINTS + 1;
+/// Nodes per dancer: the group node, 55 joints, then the mesh node.
+pub const NODES_PER_DANCER: usize = JOINTS + 2;
+
+/// Base colour (linear RGBA) of a dancer's mannequin: the viewer's colours
+/// (leader #3ea6ff, follower #ff7a1a) converted from sRGB; grey otherwise.
+fn colour(name: &str) -> [f32; 4] {
+    let srgb = match name {
+        "leader" => [0x3e, 0xa6, 0xff],
+        "follower" => [0xff, 0x7a, 0x1a],
+        _ => [0xb0, 0xb0, 0xb0],
+    };
+    let lin = |c: u8| {
+        let c = c as f32 / 255.0;
+        if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+    };
+    [lin(srgb[0]), lin(srgb[1]), lin(srgb[2]), 1.0]
+}
+
+fn push_view(views: &mut Vec<Value>, bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>) -> usize {
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let mut v = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
+    if let Some(t) = target {
+        v["target"] = json!(t);
+    }
+    bin.extend_from_slice(bytes);
+    views.push(v);
+    views.len() - 1
+}
+
+fn f32_bytes<'a>(vals: impl IntoIterator<Item = &'a f32>) -> Vec<u8> {
+    vals.into_iter().flat_map(|v| v.to_le_bytes()).collect()
+}
 
 /// Per-joint quaternions (x, y, z, w) over the clip, sign-continuous so that
 /// linear/slerp interpolation between frames takes the short way.
@@ -65,6 +104,9 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
     let mut nodes: Vec<Value> = Vec::new();
     let mut samplers: Vec<Value> = Vec::new();
     let mut channels: Vec<Value> = Vec::new();
+    let mut meshes: Vec<Value> = Vec::new();
+    let mut skins: Vec<Value> = Vec::new();
+    let mut materials: Vec<Value> = Vec::new();
 
     // Keyframe times (T,), accessor 0 with the min/max the spec requires.
     let times: Vec<f32> = (0..frames).map(|t| t as f32 / fps).collect();
@@ -109,12 +151,54 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
             samplers.push(json!({"input": 0, "output": acc, "interpolation": "LINEAR"}));
             channels.push(json!({"sampler": samplers.len() - 1, "target": {"node": base + 1 + j, "path": "rotation"}}));
         }
+        // The mannequin: mesh, skin (bind pose = rest pose) and material.
+        let mesh = super::mannequin::mesh(&m.skeleton);
+        let n = mesh.positions.len();
+        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+        for p in &mesh.positions {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let v = push_view(&mut views, &mut bin, &f32_bytes(mesh.positions.iter().flatten()), Some(ARRAY_BUFFER));
+        let pos_acc = accessors.len();
+        accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": n, "type": "VEC3", "min": lo, "max": hi}));
+        let v = push_view(&mut views, &mut bin, &f32_bytes(mesh.normals.iter().flatten()), Some(ARRAY_BUFFER));
+        accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": n, "type": "VEC3"}));
+        let joints: Vec<u8> = mesh.joints.iter().flat_map(|&j| [j, 0, 0, 0]).collect();
+        let v = push_view(&mut views, &mut bin, &joints, Some(ARRAY_BUFFER));
+        accessors.push(json!({"bufferView": v, "componentType": UNSIGNED_BYTE, "count": n, "type": "VEC4"}));
+        let weights: Vec<u8> = (0..n).flat_map(|_| [255u8, 0, 0, 0]).collect();
+        let v = push_view(&mut views, &mut bin, &weights, Some(ARRAY_BUFFER));
+        accessors.push(json!({"bufferView": v, "componentType": UNSIGNED_BYTE, "normalized": true, "count": n, "type": "VEC4"}));
+        let idx: Vec<u8> = mesh.indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let v = push_view(&mut views, &mut bin, &idx, Some(ELEMENT_ARRAY_BUFFER));
+        let idx_acc = accessors.len();
+        accessors.push(json!({"bufferView": v, "componentType": UNSIGNED_SHORT, "count": mesh.indices.len(), "type": "SCALAR"}));
+        let rest = m.skeleton.rest_positions();
+        let ibm: Vec<f32> = rest.iter().flat_map(|p| [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -p[0], -p[1], -p[2], 1.0]).collect();
+        let v = push_view(&mut views, &mut bin, &f32_bytes(ibm.iter()), None);
+        let ibm_acc = accessors.len();
+        accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": JOINTS, "type": "MAT4"}));
+        materials.push(json!({"name": format!("{name}_material"), "pbrMetallicRoughness": {
+            "baseColorFactor": colour(name), "metallicFactor": 0.0, "roughnessFactor": 0.7}}));
+        meshes.push(json!({"name": format!("{name}_mannequin"), "primitives": [{
+            "attributes": {"POSITION": pos_acc, "NORMAL": pos_acc + 1, "JOINTS_0": pos_acc + 2, "WEIGHTS_0": pos_acc + 3},
+            "indices": idx_acc, "material": materials.len() - 1, "mode": 4}]}));
+        skins.push(json!({"name": format!("{name}_skin"), "inverseBindMatrices": ibm_acc, "skeleton": base + 1,
+            "joints": (base + 1..base + 1 + JOINTS).collect::<Vec<_>>()}));
+        nodes.push(json!({"name": format!("{name}_mesh"), "mesh": meshes.len() - 1, "skin": skins.len() - 1}));
+        scene_nodes.push(base + NODES_PER_DANCER - 1);
     }
     let doc = json!({
         "asset": {"version": "2.0", "generator": "duolando export::glb"},
         "scene": 0,
         "scenes": [{"name": "duet", "nodes": scene_nodes}],
         "nodes": nodes,
+        "meshes": meshes,
+        "skins": skins,
+        "materials": materials,
         "animations": [{"name": "dance", "samplers": samplers, "channels": channels}],
         "accessors": accessors,
         "bufferViews": views,

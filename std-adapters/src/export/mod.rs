@@ -10,6 +10,7 @@
 
 pub mod bvh;
 pub mod glb;
+pub mod mannequin;
 pub mod npy;
 
 use std::path::{Path, PathBuf};
@@ -52,7 +53,8 @@ fn frames_of(len: usize, width: usize, what: &str) -> Result<usize> {
     Ok(len / width)
 }
 
-fn as_frames(positions: &[f32]) -> Vec<[Vec3; JOINTS]> {
+/// (T, 165) positions as T frames of 55 joints.
+pub fn as_frames(positions: &[f32]) -> Vec<[Vec3; JOINTS]> {
     positions
         .chunks_exact(POS_DIM)
         .map(|row| {
