@@ -137,6 +137,45 @@ fn dance_writes_every_file_and_matches_the_golden_tokens() {
     }
 }
 
+/// summary.json measures how much the bodies interpenetrate; a "true
+/// follower" that is the leader itself overlaps everywhere, at distance 0.
+#[test]
+fn interpenetration_is_reported() {
+    let out = tmp("contact");
+    let r = roll();
+    let leader = r.join("leader_pos3d.npy");
+    let o = dance_tiny(&out, &leader, &r.join("music.npy"), &["--true-follower", p(&leader)]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains("pelvis distance") && e.contains("true follower"), "{e}");
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let f = &s["interpenetration"]["follower"];
+    let num = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"));
+    assert_eq!(f["frames"], 484);
+    let d = &f["pelvis_distance_m"];
+    assert!(num(&d["min"]) <= num(&d["p5"]) && num(&d["p5"]) <= num(&d["mean"]), "{d}");
+    for g in ["trunk_capsules", "body_capsules", "all_capsules"] {
+        let c = &f[g];
+        assert!((0.0..=1.0).contains(&num(&c["frames_overlapping"])) && num(&c["frames_over_2cm"]) <= num(&c["frames_overlapping"]), "{c}");
+        assert!(num(&c["depth_mean_m"]) <= num(&c["depth_p95_m"]) + 1e-6 && num(&c["depth_p95_m"]) <= num(&c["depth_max_m"]), "{c}");
+    }
+    // More capsules can only overlap more.
+    assert!(num(&f["trunk_capsules"]["depth_max_m"]) <= num(&f["body_capsules"]["depth_max_m"]));
+    assert!(num(&f["body_capsules"]["depth_max_m"]) <= num(&f["all_capsules"]["depth_max_m"]));
+    let t = &s["interpenetration"]["true_follower"];
+    assert!(t["file"].as_str().unwrap().ends_with("leader_pos3d.npy"));
+    let m = &t["measure"];
+    assert_eq!((num(&m["pelvis_distance_m"]["min"]), num(&m["pelvis_distance_m"]["mean"])), (0.0, 0.0), "{m}");
+    assert_eq!(num(&m["frames_pelvis_under_0_25_m"]), 1.0);
+    assert_eq!(num(&m["trunk_capsules"]["frames_overlapping"]), 1.0);
+    assert!(num(&m["trunk_capsules"]["depth_p95_m"]) > 0.1, "{m}");
+
+    // A true follower shorter than the duet is refused, naming the file.
+    let short = out.join("short.npy");
+    write_f32(&short, &vec![0.0; 100 * 165], &[100, 165]).unwrap();
+    assert_fails(&dance_tiny(&out.join("x"), &leader, &r.join("music.npy"), &["--true-follower", p(&short)]), &short, "at least");
+}
+
 /// A 21 s mono WAV: clicks at 120 BPM over a quiet tone.
 fn write_wav(path: &Path) {
     let sr = 22050u32;

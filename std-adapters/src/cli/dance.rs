@@ -313,15 +313,19 @@ pub fn run(args: Args) -> Result<()> {
         }
     };
     eprintln!(
-        "      bodies: pelvis distance min {:.2} m, under {CLOSE_PELVIS_M} m in {:.0} % of frames; trunk/legs/head capsules overlap in {:.0} % (deepest {:.2} m){}",
+        "      bodies: pelvis distance min {:.2} m, under {CLOSE_PELVIS_M} m in {:.1} % of frames; capsules overlap: trunk/head {:.0} % of frames (deepest {:.2} m), with legs {:.0} % ({:.2} m){}",
         contact.pelvis_distance_m.min,
         100.0 * contact.frames_pelvis_under_0_25_m,
+        100.0 * contact.trunk_capsules.frames_overlapping,
+        contact.trunk_capsules.depth_max_m,
         100.0 * contact.body_capsules.frames_overlapping,
         contact.body_capsules.depth_max_m,
         true_contact.as_ref().map_or(String::new(), |(_, c)| format!(
-            "; true follower: min {:.2} m, {:.0} %, overlap {:.0} % (deepest {:.2} m)",
+            "; true follower: min {:.2} m, {:.1} %; {:.0} % ({:.2} m), {:.0} % ({:.2} m)",
             c.pelvis_distance_m.min,
             100.0 * c.frames_pelvis_under_0_25_m,
+            100.0 * c.trunk_capsules.frames_overlapping,
+            c.trunk_capsules.depth_max_m,
             100.0 * c.body_capsules.frames_overlapping,
             c.body_capsules.depth_max_m
         ))

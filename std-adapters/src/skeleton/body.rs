@@ -25,8 +25,10 @@ pub enum End {
 /// Which part of the body a capsule belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Part {
-    /// Pelvis, spine, collars, shoulders, neck, head, legs and feet.
-    Body,
+    /// Pelvis, spine, collars, shoulders, neck and head.
+    Trunk,
+    /// Thighs, shins and feet.
+    Leg,
     /// Upper arms, forearms and hands (arms reach the partner in a hold).
     Arm,
 }
@@ -49,27 +51,27 @@ const fn bone(parent: usize, child: usize, radius: f32, part: Part) -> Capsule {
 /// The mannequin: 47 capsules (trunk, head, legs, arms, palms and finger
 /// bones; the jaw and eyes have none). Radii are for the adult rig.
 pub const CAPSULES: [Capsule; 47] = {
-    use Part::{Arm, Body};
+    use Part::{Arm, Leg, Trunk};
     [
-        bone(0, 1, 0.085, Body),  // pelvis -> left hip
-        bone(0, 2, 0.085, Body),  // pelvis -> right hip
-        bone(0, 3, 0.11, Body),   // pelvis -> spine1
-        bone(3, 6, 0.11, Body),   // spine1 -> spine2
-        bone(6, 9, 0.12, Body),   // spine2 -> spine3
-        bone(9, 12, 0.06, Body),  // spine3 -> neck
-        bone(9, 13, 0.06, Body),  // spine3 -> left collar
-        bone(9, 14, 0.06, Body),  // spine3 -> right collar
-        bone(13, 16, 0.055, Body), // collar -> shoulder
-        bone(14, 17, 0.055, Body),
-        bone(12, 15, 0.05, Body), // neck -> head
+        bone(0, 1, 0.085, Trunk),  // pelvis -> left hip
+        bone(0, 2, 0.085, Trunk),  // pelvis -> right hip
+        bone(0, 3, 0.11, Trunk),   // pelvis -> spine1
+        bone(3, 6, 0.11, Trunk),   // spine1 -> spine2
+        bone(6, 9, 0.12, Trunk),   // spine2 -> spine3
+        bone(9, 12, 0.06, Trunk),  // spine3 -> neck
+        bone(9, 13, 0.06, Trunk),  // spine3 -> left collar
+        bone(9, 14, 0.06, Trunk),  // spine3 -> right collar
+        bone(13, 16, 0.055, Trunk), // collar -> shoulder
+        bone(14, 17, 0.055, Trunk),
+        bone(12, 15, 0.05, Trunk), // neck -> head
         // The skull: the neck -> head bone continued by its own length.
-        Capsule { a: End::Joint(15), b: End::Beyond { from: 12, to: 15, k: 1.0 }, radius: 0.095, bind: 12, part: Body },
-        bone(1, 4, 0.075, Body),  // thighs
-        bone(2, 5, 0.075, Body),
-        bone(4, 7, 0.055, Body),  // shins
-        bone(5, 8, 0.055, Body),
-        bone(7, 10, 0.045, Body), // feet
-        bone(8, 11, 0.045, Body),
+        Capsule { a: End::Joint(15), b: End::Beyond { from: 12, to: 15, k: 1.0 }, radius: 0.095, bind: 12, part: Trunk },
+        bone(1, 4, 0.075, Leg),  // thighs
+        bone(2, 5, 0.075, Leg),
+        bone(4, 7, 0.055, Leg),  // shins
+        bone(5, 8, 0.055, Leg),
+        bone(7, 10, 0.045, Leg), // feet
+        bone(8, 11, 0.045, Leg),
         bone(16, 18, 0.045, Arm), // upper arms
         bone(17, 19, 0.045, Arm),
         bone(18, 20, 0.038, Arm), // forearms
@@ -234,7 +236,9 @@ pub struct Interpenetration {
     pub pelvis_distance_m: DistanceStats,
     /// Share of frames with the pelvises closer than [`CLOSE_PELVIS_M`].
     pub frames_pelvis_under_0_25_m: f32,
-    /// Capsules of the trunk, head and legs ([`Part::Body`]) only.
+    /// Capsules of the trunk and head ([`Part::Trunk`]) only.
+    pub trunk_capsules: OverlapStats,
+    /// Trunk, head and legs ([`Part::Trunk`], [`Part::Leg`]).
     pub body_capsules: OverlapStats,
     /// Every capsule, arms and hands included (a dance hold touches the
     /// partner by design, so some overlap here is expected).
@@ -275,8 +279,9 @@ pub fn interpenetration(a: &[f32], b: &[f32], scale_a: f32, scale_b: f32) -> Int
         frames,
         pelvis_distance_m: DistanceStats { min: pelvis[0], p5: nearest_rank(&pelvis, 0.05), mean },
         frames_pelvis_under_0_25_m: close,
-        body_capsules: overlap_stats(overlap_depths(a, b, scale_a, scale_b, &[Part::Body])),
-        all_capsules: overlap_stats(overlap_depths(a, b, scale_a, scale_b, &[Part::Body, Part::Arm])),
+        trunk_capsules: overlap_stats(overlap_depths(a, b, scale_a, scale_b, &[Part::Trunk])),
+        body_capsules: overlap_stats(overlap_depths(a, b, scale_a, scale_b, &[Part::Trunk, Part::Leg])),
+        all_capsules: overlap_stats(overlap_depths(a, b, scale_a, scale_b, &[Part::Trunk, Part::Leg, Part::Arm])),
     }
 }
 
@@ -316,12 +321,12 @@ mod tests {
         let rest = Skeleton::default().rest_positions();
         let row = |dz: f32| -> Vec<f32> { rest.iter().flat_map(|p| [p[0], p[1], p[2] + dz]).collect() };
         // The same body twice: the deepest pair is the chest (2 x 0.12).
-        let same = overlap_depths(&row(0.0), &row(0.0), 1.0, 1.0, &[Part::Body]);
+        let same = overlap_depths(&row(0.0), &row(0.0), 1.0, 1.0, &[Part::Trunk]);
         assert!((same[0] - 0.24).abs() < 1e-5, "{same:?}");
         // 2 m apart: none.
-        assert_eq!(overlap_depths(&row(0.0), &row(2.0), 1.0, 1.0, &[Part::Body, Part::Arm]), vec![0.0]);
+        assert_eq!(overlap_depths(&row(0.0), &row(2.0), 1.0, 1.0, &[Part::Trunk, Part::Leg, Part::Arm]), vec![0.0]);
         // 0.2 m apart in z: the chest capsules (0.24) overlap by ~0.04 (the spine3 tilt aside).
-        let near = overlap_depths(&row(0.0), &row(0.2), 1.0, 1.0, &[Part::Body])[0];
+        let near = overlap_depths(&row(0.0), &row(0.2), 1.0, 1.0, &[Part::Trunk])[0];
         assert!(near > 0.03 && near < 0.06, "{near}");
         // Over a clip: one frame 0.2 m apart, three 2 m apart.
         let a: Vec<f32> = (0..4).flat_map(|_| row(0.0)).collect();
@@ -329,7 +334,8 @@ mod tests {
         let r = interpenetration(&a, &b, 1.0, 1.0);
         assert_eq!(r.frames, 4);
         assert!((r.pelvis_distance_m.min - 0.2).abs() < 1e-6 && (r.frames_pelvis_under_0_25_m - 0.25).abs() < 1e-6, "{r:?}");
-        assert!((r.body_capsules.frames_overlapping - 0.25).abs() < 1e-6 && (r.body_capsules.depth_max_m - near).abs() < 1e-6, "{r:?}");
-        assert!((r.body_capsules.depth_mean_m - near / 4.0).abs() < 1e-6, "{r:?}");
+        assert!((r.trunk_capsules.frames_overlapping - 0.25).abs() < 1e-6 && (r.trunk_capsules.depth_max_m - near).abs() < 1e-6, "{r:?}");
+        assert!(r.body_capsules.depth_max_m >= near && r.all_capsules.depth_max_m >= r.body_capsules.depth_max_m, "{r:?}");
+        assert!((r.trunk_capsules.depth_mean_m - near / 4.0).abs() < 1e-6, "{r:?}");
     }
 }
