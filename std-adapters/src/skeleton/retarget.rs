@@ -116,3 +116,34 @@ pub fn measure_skeleton(template: &Skeleton, clip: &[[Vec3; JOINTS]]) -> Skeleto
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn measured_bones_take_the_median_length_and_ignore_stretched_frames() {
+        let rig = Skeleton::adult(1.0);
+        let rest = rig.rest_positions();
+        // 7 frames at rest; in 3 of them the right forearm is stretched to
+        // twice its length (the wrist and hand pushed out along the bone).
+        let fore = sub(rest[21], rest[19]);
+        let clip: Vec<[Vec3; JOINTS]> = (0..7)
+            .map(|t| {
+                let mut f = rest;
+                if t % 2 == 1 {
+                    for j in [21usize].into_iter().chain(40..55) {
+                        f[j] = crate::skeleton::math::add(f[j], fore);
+                    }
+                }
+                f
+            })
+            .collect();
+        let m = measure_skeleton(&Skeleton::default(), &clip);
+        assert!((m.bone_length(21) - rig.bone_length(21)).abs() < 1e-6, "{} vs {}", m.bone_length(21), rig.bone_length(21));
+        assert!((m.bone_length(19) - rig.bone_length(19)).abs() < 1e-6);
+        // An even count takes the middle two's mean: 2 at rest, 2 stretched.
+        let m = measure_skeleton(&Skeleton::default(), &clip[..4]);
+        assert!((m.bone_length(21) - 1.5 * rig.bone_length(21)).abs() < 1e-5, "{}", m.bone_length(21));
+    }
+}
