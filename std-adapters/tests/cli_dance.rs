@@ -174,6 +174,12 @@ fn interpenetration_is_reported() {
     let short = out.join("short.npy");
     write_f32(&short, &vec![0.0; 100 * 165], &[100, 165]).unwrap();
     assert_fails(&dance_tiny(&out.join("x"), &leader, &r.join("music.npy"), &["--true-follower", p(&short)]), &short, "at least");
+    let nan = out.join("nan.npy");
+    let mut v = vec![0.0f32; 600 * 165];
+    v[3 * 165 + 1] = f32::NAN;
+    write_f32(&nan, &v, &[600, 165]).unwrap();
+    assert_fails(&dance_tiny(&out.join("x"), &leader, &r.join("music.npy"), &["--true-follower", p(&nan)]), &nan, "[3, 1]");
+    assert!(!out.join("x").join("follower.glb").exists(), "a refused true follower writes nothing");
 }
 
 /// A 21 s mono WAV: clicks at 120 BPM over a quiet tone.

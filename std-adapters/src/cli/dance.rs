@@ -236,6 +236,17 @@ pub fn run(args: Args) -> Result<()> {
     let music = inputs::load_music(&music_path, cfg.gpt.music.n_in as usize, &model_path)?;
     let shape = check_lengths(&cfg, &leader, &leader_path, &music, &music_path, &model_path)?;
     let (seed, seed_text) = choose_seed(&args, demo, &leader, &cfg, &model_path)?;
+    // Read before generating, so that a bad file fails before any output.
+    let true_follower = match &args.true_follower {
+        None => None,
+        Some(path) => {
+            let a = read_f32_2d(path, Some(POSE_DIM), "true follower joint positions (T, 165), metres, 30 fps")?;
+            if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
+                bail!("{}: true follower[{}, {}] is not finite; expected finite positions", path.display(), i / POSE_DIM, i % POSE_DIM);
+            }
+            Some((path.clone(), a))
+        }
+    };
     eprintln!(
         "      leader {} frames ({}), music {} frames{}; seed: {seed_text}",
         leader.frames,
@@ -261,6 +272,11 @@ pub fn run(args: Args) -> Result<()> {
     // The duet is as long as the follower: the leader's last frames were
     // look-ahead only (no follower token is generated for them).
     let duet = g.frames.min(leader.frames);
+    if let Some((path, a)) = &true_follower {
+        if a.rows < duet {
+            bail!("{}: the true follower has {} frames; expected at least the duet's {duet}", path.display(), a.rows);
+        }
+    }
     let leader_duet = &leader.pos3d[..duet * POSE_DIM];
     let leader_motion = Motion::from_positions(leader_duet, &format!("leader {}", leader_path.display()))?;
     let follower_motion = match args.follower_rotations {
@@ -298,16 +314,9 @@ pub fn run(args: Args) -> Result<()> {
     let rig_scale = |pos: &[f32]| radius_scale(&measure_skeleton(&Skeleton::default(), &as_frames(pos)));
     let leader_scale = radius_scale(&leader_motion.skeleton);
     let contact = interpenetration(leader_duet, &g.follower_pos3d, leader_scale, rig_scale(&g.follower_pos3d));
-    let true_contact = match &args.true_follower {
+    let true_contact = match &true_follower {
         None => None,
-        Some(path) => {
-            let a = read_f32_2d(path, Some(POSE_DIM), "true follower joint positions (T, 165), metres, 30 fps")?;
-            if a.rows < duet {
-                bail!("{}: the true follower has {} frames; expected at least the duet's {duet}", path.display(), a.rows);
-            }
-            if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
-                bail!("{}: true follower[{}, {}] is not finite; expected finite positions", path.display(), i / POSE_DIM, i % POSE_DIM);
-            }
+        Some((path, a)) => {
             let truth = &a.data[..duet * POSE_DIM];
             Some((path.display().to_string(), interpenetration(leader_duet, truth, leader_scale, rig_scale(truth))))
         }
