@@ -220,3 +220,66 @@ fn write_all_writes_the_export_set() {
         std::fs::remove_dir_all(&dir).ok();
     }
 }
+
+/// Bytes of accessor `i` (offset into BIN and element count).
+fn accessor_bytes<'a>(doc: &Value, bin: &'a [u8], i: usize, elem: usize) -> (&'a [u8], usize) {
+    let a = &doc["accessors"][i];
+    let v = &doc["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
+    let count = a["count"].as_u64().unwrap() as usize;
+    let off = v["byteOffset"].as_u64().unwrap() as usize + a["byteOffset"].as_u64().unwrap_or(0) as usize;
+    assert!(off + elem * count <= v["byteOffset"].as_u64().unwrap() as usize + v["byteLength"].as_u64().unwrap() as usize);
+    (&bin[off..off + elem * count], count)
+}
+
+/// The mannequin mesh: a skin over the 55 joint nodes, rigid weights, and,
+/// skinned by hand with the animation's FK, every vertex sits on its
+/// capsule's surface around the FK joint positions (the capsules of the
+/// interpenetration measure) at every sampled frame.
+#[test]
+fn glb_mannequin_is_skinned_to_the_animation() {
+    use duolando::skeleton::body::{end_point, radius_scale, CAPSULES};
+    use duolando::skeleton::fk::{forward_kinematics, frame_rotations};
+    let (l, f) = motions();
+    let (doc, bin) = glb::parse(&glb::to_bytes(&[("leader", &l), ("follower", &f)], 30.0).unwrap(), "t.glb").unwrap();
+    assert_eq!(doc["skins"].as_array().unwrap().len(), 2);
+    assert_eq!(doc["meshes"].as_array().unwrap().len(), 2);
+    for (d, m) in [&l, &f].iter().enumerate() {
+        let base = d * glb::NODES_PER_DANCER;
+        let mesh_node = &doc["nodes"][base + glb::NODES_PER_DANCER - 1];
+        assert!(doc["scenes"][0]["nodes"].as_array().unwrap().iter().any(|n| n.as_u64() == Some((base + glb::NODES_PER_DANCER - 1) as u64)), "mesh node is a scene root");
+        assert!(mesh_node.get("translation").is_none() && mesh_node.get("rotation").is_none());
+        let skin = &doc["skins"][mesh_node["skin"].as_u64().unwrap() as usize];
+        let joints: Vec<usize> = skin["joints"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
+        assert_eq!(joints, (base + 1..base + 1 + JOINTS).collect::<Vec<_>>());
+        let prim = &doc["meshes"][mesh_node["mesh"].as_u64().unwrap() as usize]["primitives"][0];
+        let attr = |k: &str| prim["attributes"][k].as_u64().unwrap() as usize;
+        let (pos, n) = accessor(&doc, &bin, attr("POSITION"));
+        let (jb, nj) = accessor_bytes(&doc, &bin, attr("JOINTS_0"), 4);
+        let (wb, nw) = accessor_bytes(&doc, &bin, attr("WEIGHTS_0"), 4);
+        assert_eq!((nj, nw), (n, n));
+        let (ibm_b, ni) = accessor_bytes(&doc, &bin, skin["inverseBindMatrices"].as_u64().unwrap() as usize, 64);
+        assert_eq!(ni, JOINTS);
+        let ibm: Vec<f32> = ibm_b.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
+        let per = n / CAPSULES.len();
+        assert_eq!(per * CAPSULES.len(), n);
+        let k = radius_scale(&m.skeleton).clamp(0.25, 4.0);
+        let mut worst = 0.0f32;
+        for t in (0..m.frames).step_by(17) {
+            let root = [m.roots[3 * t], m.roots[3 * t + 1], m.roots[3 * t + 2]];
+            let pose = forward_kinematics(&m.skeleton, root, &frame_rotations(&m.rotmats, t));
+            for (i, c) in CAPSULES.iter().enumerate() {
+                let (a, b) = (end_point(c.a, &pose.positions), end_point(c.b, &pose.positions));
+                for v in i * per..(i + 1) * per {
+                    assert_eq!((jb[4 * v] as usize, &wb[4 * v..4 * v + 4]), (c.bind, &[255u8, 0, 0, 0][..]), "vertex {v}");
+                    let j = c.bind;
+                    let local = [pos[3 * v] + ibm[16 * j + 12], pos[3 * v + 1] + ibm[16 * j + 13], pos[3 * v + 2] + ibm[16 * j + 14]];
+                    let world = add(pose.positions[j], mat_vec(&pose.world[j], local));
+                    let dist = duolando::skeleton::body::segment_distance(world, world, a, b);
+                    worst = worst.max((dist - c.radius * k).abs());
+                }
+            }
+        }
+        println!("dancer {d}: {n} vertices, worst distance from the capsule surface {worst:.2e} m");
+        assert!(worst < 1e-4, "{worst}");
+    }
+}

@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
-# Headless-Chromium test of the viewer page (docs/VIEWER.md). Called by .ci/run.
+# Headless-Chromium test of the viewer page (docs/VIEWER.md), and of the exported
+# follower.glb: Khronos glTF validator + a three.js glTF viewer. Called by .ci/run.
 #
 #   tests/browser/run.sh                       # install what is missing, build the fixture page, test it
 #   VIEWER_SHOT=docs/viewer.png tests/browser/run.sh   # also write the README screenshot
 #   CHROMIUM=/path/to/chromium tests/browser/run.sh    # another Chromium binary
 #
 # Installs Debian's chromium (apt) when $CHROMIUM (default /usr/bin/chromium) is
-# absent, and playwright-core from the committed package-lock.json (npm ci; no
-# browser download). Exits non-zero on any failure.
+# absent, and playwright-core, three and gltf-validator from the committed
+# package-lock.json (npm ci; no browser download). Exits non-zero on any failure.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
@@ -50,6 +51,14 @@ if [ -n "${VIEWER_SHOT:-}" ]; then
   shot=(--shot "$VIEWER_SHOT")
 fi
 node "$here/viewer_test.mjs" --page "$tmp/page/index.html" --frames "$frames" --audio "${shot[@]}"
+
+# The exported follower.glb (bundled demo model; the tiny fixture without assets/).
+dance=(); [ -f "$root/assets/demo.duo" ] || dance=(--model tests/fixtures/tiny/model.duo \
+  --leader tests/fixtures/rollout_tiny_long/leader_pos3d.npy --music tests/fixtures/rollout_tiny_long/music.npy)
+say "duolando dance ${dance[*]} (follower.glb): gltf-validator, then a three.js viewer in headless Chromium"
+(cd "$root" && cargo run -q -p duolando -- dance "${dance[@]}" --out "$tmp/dance" 2>"$tmp/dance.log") || { cat "$tmp/dance.log" >&2; exit 1; }
+node "$here/validate_glb.mjs" "$tmp/dance/follower.glb"
+node "$here/glb_test.mjs" --glb "$tmp/dance/follower.glb"
 say "done"
 
 # The live page of `duolando live` (docs/VIEWER.md, "The live page"): the server streams the demo at 30 fps.

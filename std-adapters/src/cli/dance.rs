@@ -22,7 +22,11 @@ use serde_json::json;
 
 use self::inputs::{Leader, Music, SeedChoice};
 use crate::cli::generate::{generate_exact, Generated};
-use crate::export::{write_all, Motion};
+use crate::npy::read_f32_2d;
+use crate::export::{as_frames, write_all, GroupErrors, Motion};
+use crate::skeleton::body::{interpenetration, radius_scale, CLOSE_PELVIS_M};
+use crate::skeleton::retarget::measure_skeleton;
+use crate::skeleton::Skeleton;
 use crate::model_file::ModelFile;
 use crate::npy::write_f32;
 use crate::viewer::{write_index_html, ViewerData};
@@ -51,13 +55,45 @@ pub struct Args {
     pub seed_tokens: Option<String>,
     /// Output directory (created; existing files of the same names are replaced).
     #[arg(long, short)]
-    pub out: PathBuf,    /// Threads the large matrix products are split over (the output does not
+    pub out: PathBuf,
+    /// Where the follower's rotations in follower.glb / follower.bvh / follower_rotmat.npy come from:
+    /// `fitted` (default) fits them to the decoded positions the viewer shows, one length per bone;
+    /// `decoder` uses the model's rotation decoder (projected to rotations), which can disagree
+    /// with the positions.
+    #[arg(long, value_enum, default_value_t = FollowerRotations::Fitted)]
+    pub follower_rotations: FollowerRotations,
+    /// The true follower of the same take, (T', 165) float .npy with T' >= the duet's frames (world
+    /// positions, frame-aligned with the leader), e.g. from `duolando synth`: its interpenetration with
+    /// the leader is reported next to the model's in summary.json.
+    #[arg(long)]
+    pub true_follower: Option<PathBuf>,
+    /// Threads the large matrix products are split over (the output does not
     /// depend on it). Default: every core, at most 8.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub threads: Option<u32>,
 }
 
-/// A rig fit worse than this (metres) is pointed out on stderr.
+/// Where the exported follower's rotations come from (`--follower-rotations`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FollowerRotations {
+    /// Fitted to the decoded positions (what the viewer shows) on a rigid rig
+    /// with the clip's median bone lengths.
+    Fitted,
+    /// The rotation decoder's output, projected to the nearest rotations.
+    Decoder,
+}
+
+impl FollowerRotations {
+    fn name(self) -> &'static str {
+        match self {
+            FollowerRotations::Fitted => "fitted",
+            FollowerRotations::Decoder => "decoder",
+        }
+    }
+}
+
+/// An export farther than this (metres, worst joint) from the positions the
+/// viewer shows is pointed out on stderr.
 const FIT_WARN_M: f32 = 0.05;
 
 /// Prints a numbered stage line on stderr.
@@ -176,6 +212,17 @@ pub fn run(args: Args) -> Result<()> {
     cut_leader_to_music(&mut leader, &leader_path, &music, &music_path);
     let shape = check_lengths(&cfg, &leader, &leader_path, &music, &music_path, &model_path)?;
     let (seed, seed_text) = choose_seed(&args, demo, &leader, &cfg, &model_path)?;
+    // Read before generating, so that a bad file fails before any output.
+    let true_follower = match &args.true_follower {
+        None => None,
+        Some(path) => {
+            let a = read_f32_2d(path, Some(POSE_DIM), "true follower joint positions (T, 165), metres, 30 fps")?;
+            if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
+                bail!("{}: true follower[{}, {}] is not finite; expected finite positions", path.display(), i / POSE_DIM, i % POSE_DIM);
+            }
+            Some((path.clone(), a))
+        }
+    };
     eprintln!(
         "      leader {} frames ({}), music {} frames{}; seed: {seed_text}",
         leader.frames,
@@ -201,9 +248,21 @@ pub fn run(args: Args) -> Result<()> {
     // The duet is as long as the follower: the leader's last frames were
     // look-ahead only (no follower token is generated for them).
     let duet = g.frames.min(leader.frames);
+    if let Some((path, a)) = &true_follower {
+        if a.rows < duet {
+            bail!("{}: the true follower has {} frames; expected at least the duet's {duet}", path.display(), a.rows);
+        }
+    }
     let leader_duet = &leader.pos3d[..duet * POSE_DIM];
     let leader_motion = Motion::from_positions(leader_duet, &format!("leader {}", leader_path.display()))?;
-    let follower_motion = Motion::from_decoded(&g.follower_pos3d, Some(&g.follower_rotmat), "generated follower")?;
+    let follower_motion = match args.follower_rotations {
+        FollowerRotations::Fitted => Motion::from_positions(&g.follower_pos3d, "generated follower")?,
+        FollowerRotations::Decoder => Motion::from_decoded(&g.follower_pos3d, Some(&g.follower_rotmat), "generated follower")?,
+    };
+    // How far each exported rig (FK of the glb/bvh rotations) lands from the
+    // positions the viewer shows.
+    let leader_err = GroupErrors::between(&leader_motion.positions, leader_duet);
+    let follower_err = GroupErrors::between(&follower_motion.positions, &g.follower_pos3d);
     write_all(dir, Some(&leader_motion), &follower_motion)?;
     // The npy files hold the model's own outputs and the leader as given;
     // the rotmat files hold the proper rotations the glb/bvh use.
@@ -212,15 +271,50 @@ pub fn run(args: Args) -> Result<()> {
     write_f32(&dir.join("follower_rotmat_raw.npy"), &g.follower_rotmat, &[g.frames, ROT_DIM])?;
     let tokens: Vec<i64> = g.tokens.iter().map(|&t| t as i64).collect();
     crate::npy::write_i64(&dir.join("tokens.npy"), &tokens, &[g.token_rows, 5])?;
-    for (who, m) in [("leader", &leader_motion), ("follower", &follower_motion)] {
-        if m.fit_error_m > FIT_WARN_M {
+    for (who, err) in [("leader", &leader_err), ("follower", &follower_err)] {
+        if err.all.max > FIT_WARN_M {
+            let why = if who == "follower" && args.follower_rotations == FollowerRotations::Decoder {
+                "its rotations come from the rotation decoder (--follower-rotations decoder); the default `fitted` follows the positions"
+            } else {
+                "the rig keeps one length per bone, and the positions stretch or shrink bones from frame to frame"
+            };
             eprintln!(
-                "      note: the {who} in follower.glb / {who}.bvh is up to {:.2} m from its positions (the rig cannot follow them; \
-                 an untrained model or non-skeletal input); index.html and {who}_pos3d.npy show the positions themselves",
-                m.fit_error_m
+                "      note: the {who} in follower.glb / {who}.bvh is {:.3} m from its positions on average, up to {:.2} m ({why}); \
+                 index.html and {who}_pos3d.npy show the positions themselves",
+                err.all.mean, err.all.max
             );
         }
     }
+    // How much the bodies interpenetrate (docs/DEMO_MODEL.md): the model's
+    // follower, as the viewer shows it, and the true follower when given.
+    let rig_scale = |pos: &[f32]| radius_scale(&measure_skeleton(&Skeleton::default(), &as_frames(pos)));
+    let leader_scale = radius_scale(&leader_motion.skeleton);
+    let contact = interpenetration(leader_duet, &g.follower_pos3d, leader_scale, rig_scale(&g.follower_pos3d));
+    let true_contact = match &true_follower {
+        None => None,
+        Some((path, a)) => {
+            let truth = &a.data[..duet * POSE_DIM];
+            Some((path.display().to_string(), interpenetration(leader_duet, truth, leader_scale, rig_scale(truth))))
+        }
+    };
+    eprintln!(
+        "      bodies: pelvis distance min {:.2} m, under {CLOSE_PELVIS_M} m in {:.1} % of frames; capsules overlap: trunk/head {:.0} % of frames (deepest {:.2} m), with legs {:.0} % ({:.2} m){}",
+        contact.pelvis_distance_m.min,
+        100.0 * contact.frames_pelvis_under_0_25_m,
+        100.0 * contact.trunk_capsules.frames_overlapping,
+        contact.trunk_capsules.depth_max_m,
+        100.0 * contact.body_capsules.frames_overlapping,
+        contact.body_capsules.depth_max_m,
+        true_contact.as_ref().map_or(String::new(), |(_, c)| format!(
+            "; true follower: min {:.2} m, {:.1} %; {:.0} % ({:.2} m), {:.0} % ({:.2} m)",
+            c.pelvis_distance_m.min,
+            100.0 * c.frames_pelvis_under_0_25_m,
+            100.0 * c.trunk_capsules.frames_overlapping,
+            c.trunk_capsules.depth_max_m,
+            100.0 * c.body_capsules.frames_overlapping,
+            c.body_capsules.depth_max_m
+        ))
+    );
     let t_export = t.elapsed().as_secs_f64();
 
     stage(5, "writing the viewer and summary");
@@ -284,7 +378,13 @@ pub fn run(args: Args) -> Result<()> {
         "follower_frames": g.frames,
         "seconds": g.frames as f64 / 30.0,
         "distinct_tokens": { "up_down_lhand_rhand_transl": distinct_tokens(&g) },
+        "follower_rotations": args.follower_rotations.name(),
         "fit_error_m": { "leader": leader_motion.fit_error_m, "follower": follower_motion.fit_error_m },
+        "export_error_m": { "leader": leader_err, "follower": follower_err },
+        "interpenetration": {
+            "follower": contact,
+            "true_follower": true_contact.as_ref().map(|(f, c)| json!({"file": f, "measure": c})),
+        },
         "timings_s": {
             "model": t_model, "inputs": t_inputs, "generate": t_generate, "export": t_export, "viewer": t_viewer,
             "total": t_all.elapsed().as_secs_f64(),

@@ -1,9 +1,12 @@
-//! glTF 2.0 binary (.glb) export: each dancer is a skin-less node
-//! hierarchy of the SMPL-X joint tree under a group node named after the
-//! dancer. Joint nodes are named `<dancer>_<joint>` (unique), carry the
-//! rest offsets as translations, and are animated by one animation
+//! glTF 2.0 binary (.glb) export: each dancer is a node hierarchy of the
+//! SMPL-X joint tree under a group node named after the dancer, plus a
+//! skinned mannequin mesh (export::mannequin) on a root node
+//! `<dancer>_mesh`. Joint nodes are named `<dancer>_<joint>` (unique), carry
+//! the rest offsets as translations, and are animated by one animation
 //! ("dance"): a LINEAR rotation channel (quaternion x, y, z, w) per joint
-//! and a translation channel on the pelvis. Metres, y up, 30 fps.
+//! and a translation channel on the pelvis. The skin binds the mesh in the
+//! rest pose (pelvis at the origin, every rotation identity), so inverse
+//! bind matrices are translations. Metres, y up, 30 fps.
 
 use std::path::Path;
 
@@ -19,9 +22,45 @@ const GLB_MAGIC: u32 = 0x4654_6C67; // "glTF"
 const CHUNK_JSON: u32 = 0x4E4F_534A; // "JSON"
 const CHUNK_BIN: u32 = 0x004E_4942; // "BIN\0"
 const FLOAT: u32 = 5126;
+const UNSIGNED_BYTE: u32 = 5121;
+const UNSIGNED_SHORT: u32 = 5123;
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
 
-/// Nodes per dancer: the group node plus 55 joints.
-pub const NODES_PER_DANCER: usize = JOINTS + 1;
+/// Nodes per dancer: the group node, 55 joints, then the mesh node.
+pub const NODES_PER_DANCER: usize = JOINTS + 2;
+
+/// Base colour (linear RGBA) of a dancer's mannequin: the viewer's colours
+/// (leader #3ea6ff, follower #ff7a1a) converted from sRGB; grey otherwise.
+fn colour(name: &str) -> [f32; 4] {
+    let srgb = match name {
+        "leader" => [0x3e, 0xa6, 0xff],
+        "follower" => [0xff, 0x7a, 0x1a],
+        _ => [0xb0, 0xb0, 0xb0],
+    };
+    let lin = |c: u8| {
+        let c = c as f32 / 255.0;
+        if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+    };
+    [lin(srgb[0]), lin(srgb[1]), lin(srgb[2]), 1.0]
+}
+
+fn push_view(views: &mut Vec<Value>, bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>) -> usize {
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let mut v = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
+    if let Some(t) = target {
+        v["target"] = json!(t);
+    }
+    bin.extend_from_slice(bytes);
+    views.push(v);
+    views.len() - 1
+}
+
+fn f32_bytes<'a>(vals: impl IntoIterator<Item = &'a f32>) -> Vec<u8> {
+    vals.into_iter().flat_map(|v| v.to_le_bytes()).collect()
+}
 
 /// Per-joint quaternions (x, y, z, w) over the clip, sign-continuous so that
 /// linear/slerp interpolation between frames takes the short way.
@@ -65,6 +104,9 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
     let mut nodes: Vec<Value> = Vec::new();
     let mut samplers: Vec<Value> = Vec::new();
     let mut channels: Vec<Value> = Vec::new();
+    let mut meshes: Vec<Value> = Vec::new();
+    let mut skins: Vec<Value> = Vec::new();
+    let mut materials: Vec<Value> = Vec::new();
 
     // Keyframe times (T,), accessor 0 with the min/max the spec requires.
     let times: Vec<f32> = (0..frames).map(|t| t as f32 / fps).collect();
@@ -109,12 +151,54 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
             samplers.push(json!({"input": 0, "output": acc, "interpolation": "LINEAR"}));
             channels.push(json!({"sampler": samplers.len() - 1, "target": {"node": base + 1 + j, "path": "rotation"}}));
         }
+        // The mannequin: mesh, skin (bind pose = rest pose) and material.
+        let mesh = super::mannequin::mesh(&m.skeleton);
+        let n = mesh.positions.len();
+        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+        for p in &mesh.positions {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let v = push_view(&mut views, &mut bin, &f32_bytes(mesh.positions.iter().flatten()), Some(ARRAY_BUFFER));
+        let pos_acc = accessors.len();
+        accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": n, "type": "VEC3", "min": lo, "max": hi}));
+        let v = push_view(&mut views, &mut bin, &f32_bytes(mesh.normals.iter().flatten()), Some(ARRAY_BUFFER));
+        accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": n, "type": "VEC3"}));
+        let joints: Vec<u8> = mesh.joints.iter().flat_map(|&j| [j, 0, 0, 0]).collect();
+        let v = push_view(&mut views, &mut bin, &joints, Some(ARRAY_BUFFER));
+        accessors.push(json!({"bufferView": v, "componentType": UNSIGNED_BYTE, "count": n, "type": "VEC4"}));
+        let weights: Vec<u8> = (0..n).flat_map(|_| [255u8, 0, 0, 0]).collect();
+        let v = push_view(&mut views, &mut bin, &weights, Some(ARRAY_BUFFER));
+        accessors.push(json!({"bufferView": v, "componentType": UNSIGNED_BYTE, "normalized": true, "count": n, "type": "VEC4"}));
+        let idx: Vec<u8> = mesh.indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let v = push_view(&mut views, &mut bin, &idx, Some(ELEMENT_ARRAY_BUFFER));
+        let idx_acc = accessors.len();
+        accessors.push(json!({"bufferView": v, "componentType": UNSIGNED_SHORT, "count": mesh.indices.len(), "type": "SCALAR"}));
+        let rest = m.skeleton.rest_positions();
+        let ibm: Vec<f32> = rest.iter().flat_map(|p| [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -p[0], -p[1], -p[2], 1.0]).collect();
+        let v = push_view(&mut views, &mut bin, &f32_bytes(ibm.iter()), None);
+        let ibm_acc = accessors.len();
+        accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": JOINTS, "type": "MAT4"}));
+        materials.push(json!({"name": format!("{name}_material"), "pbrMetallicRoughness": {
+            "baseColorFactor": colour(name), "metallicFactor": 0.0, "roughnessFactor": 0.7}}));
+        meshes.push(json!({"name": format!("{name}_mannequin"), "primitives": [{
+            "attributes": {"POSITION": pos_acc, "NORMAL": pos_acc + 1, "JOINTS_0": pos_acc + 2, "WEIGHTS_0": pos_acc + 3},
+            "indices": idx_acc, "material": materials.len() - 1, "mode": 4}]}));
+        skins.push(json!({"name": format!("{name}_skin"), "inverseBindMatrices": ibm_acc, "skeleton": base + 1,
+            "joints": (base + 1..base + 1 + JOINTS).collect::<Vec<_>>()}));
+        nodes.push(json!({"name": format!("{name}_mesh"), "mesh": meshes.len() - 1, "skin": skins.len() - 1}));
+        scene_nodes.push(base + NODES_PER_DANCER - 1);
     }
     let doc = json!({
         "asset": {"version": "2.0", "generator": "duolando export::glb"},
         "scene": 0,
         "scenes": [{"name": "duet", "nodes": scene_nodes}],
         "nodes": nodes,
+        "meshes": meshes,
+        "skins": skins,
+        "materials": materials,
         "animations": [{"name": "dance", "samplers": samplers, "channels": channels}],
         "accessors": accessors,
         "bufferViews": views,
@@ -173,4 +257,98 @@ pub fn parse(bytes: &[u8], what: &str) -> Result<(Value, Vec<u8>)> {
     }
     let bin_end = (json_end + 8).checked_add(bin_len).filter(|&e| e == bytes.len()).with_context(|| format!("{what}: BIN chunk length does not match the file"))?;
     Ok((doc, bytes[json_end + 8..bin_end].to_vec()))
+}
+
+/// The float data of accessor `i` (FLOAT components, tightly packed):
+/// (values, count, components). Every index and range is checked.
+fn read_accessor(doc: &Value, bin: &[u8], i: usize, what: &str) -> Result<(Vec<f32>, usize, usize)> {
+    let a = doc["accessors"].get(i).with_context(|| format!("{what}: no accessor {i}"))?;
+    let comps = match a["type"].as_str() {
+        Some("SCALAR") => 1,
+        Some("VEC3") => 3,
+        Some("VEC4") => 4,
+        t => bail!("{what}: accessor {i} has type {t:?}; expected SCALAR, VEC3 or VEC4"),
+    };
+    if a["componentType"].as_u64() != Some(FLOAT as u64) {
+        bail!("{what}: accessor {i} is not FLOAT");
+    }
+    let count = a["count"].as_u64().with_context(|| format!("{what}: accessor {i} has no count"))? as usize;
+    let vi = a["bufferView"].as_u64().with_context(|| format!("{what}: accessor {i} has no bufferView"))? as usize;
+    let v = doc["bufferViews"].get(vi).with_context(|| format!("{what}: no bufferView {vi}"))?;
+    let start = (v["byteOffset"].as_u64().unwrap_or(0) as usize).checked_add(a["byteOffset"].as_u64().unwrap_or(0) as usize);
+    let len = count.checked_mul(4 * comps);
+    let end = start.zip(len).and_then(|(s, l)| s.checked_add(l));
+    let (Some(start), Some(end)) = (start, end) else { bail!("{what}: accessor {i} range overflows") };
+    let view_end = (v["byteOffset"].as_u64().unwrap_or(0) as usize).saturating_add(v["byteLength"].as_u64().unwrap_or(0) as usize);
+    if end > view_end || end > bin.len() {
+        bail!("{what}: accessor {i} reads past its bufferView or the BIN chunk");
+    }
+    let vals = bin[start..end].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    Ok((vals, count, comps))
+}
+
+/// World joint positions (T, 165) of dancer `name` in a parsed .glb as this
+/// module writes it, by FK over its animation: joint nodes `<name>_<joint>`
+/// with their rest translations, the per-joint rotation channels and the
+/// pelvis translation channel, sampled at the keyframes (no interpolation).
+/// Fails, naming what is missing, on a file of another layout.
+pub fn dancer_positions(doc: &Value, bin: &[u8], name: &str, what: &str) -> Result<Vec<f32>> {
+    use crate::skeleton::math::{add, mat_mul, mat_vec};
+    use crate::skeleton::{mat_from_quat, parent, POS_DIM};
+    let nodes = doc["nodes"].as_array().with_context(|| format!("{what}: no nodes"))?;
+    let mut index = [0usize; JOINTS];
+    let mut rest = [[0.0f32; 3]; JOINTS];
+    for j in 0..JOINTS {
+        let node_name = format!("{name}_{}", JOINT_NAMES[j]);
+        index[j] = nodes.iter().position(|n| n["name"].as_str() == Some(&node_name)).with_context(|| format!("{what}: no node {node_name}"))?;
+        let t = nodes[index[j]]["translation"].as_array().filter(|t| t.len() == 3).with_context(|| format!("{what}: node {node_name} has no translation"))?;
+        for k in 0..3 {
+            rest[j][k] = t[k].as_f64().with_context(|| format!("{what}: node {node_name}: bad translation"))? as f32;
+        }
+    }
+    let anim = doc["animations"].get(0).with_context(|| format!("{what}: no animation"))?;
+    let channels = anim["channels"].as_array().with_context(|| format!("{what}: animation without channels"))?;
+    let mut rot: Vec<Option<Vec<f32>>> = vec![None; JOINTS];
+    let mut root: Option<Vec<f32>> = None;
+    let mut frames: Option<usize> = None;
+    for ch in channels {
+        let Some(node) = ch["target"]["node"].as_u64() else { continue };
+        let Some(j) = index.iter().position(|&n| n as u64 == node) else { continue };
+        let s = ch["sampler"].as_u64().and_then(|s| anim["samplers"].get(s as usize)).with_context(|| format!("{what}: channel without a sampler"))?;
+        let out = s["output"].as_u64().with_context(|| format!("{what}: sampler without output"))? as usize;
+        let (data, count, comps) = read_accessor(doc, bin, out, what)?;
+        if *frames.get_or_insert(count) != count {
+            bail!("{what}: {name}: channels with different keyframe counts");
+        }
+        match (ch["target"]["path"].as_str(), comps) {
+            (Some("rotation"), 4) => rot[j] = Some(data),
+            (Some("translation"), 3) if j == 0 => root = Some(data),
+            (p, c) => bail!("{what}: unexpected channel {p:?} with {c} components on {name}_{}", JOINT_NAMES[j]),
+        }
+    }
+    let frames = frames.with_context(|| format!("{what}: {name} is not animated"))?;
+    let root = root.with_context(|| format!("{what}: {name}_pelvis has no translation channel"))?;
+    let mut out = Vec::with_capacity(frames * POS_DIM);
+    for t in 0..frames {
+        let mut world = [[[0.0f32; 3]; 3]; JOINTS];
+        let mut pos = [[0.0f32; 3]; JOINTS];
+        for j in 0..JOINTS {
+            let r = match &rot[j] {
+                Some(q) => mat_from_quat([q[4 * t], q[4 * t + 1], q[4 * t + 2], q[4 * t + 3]]),
+                None => crate::skeleton::math::IDENTITY,
+            };
+            match parent(j) {
+                None => {
+                    pos[j] = [root[3 * t], root[3 * t + 1], root[3 * t + 2]];
+                    world[j] = r;
+                }
+                Some(p) => {
+                    pos[j] = add(pos[p], mat_vec(&world[p], rest[j]));
+                    world[j] = mat_mul(&world[p], &r);
+                }
+            }
+        }
+        out.extend(pos.iter().flatten());
+    }
+    Ok(out)
 }

@@ -10,6 +10,7 @@
 
 pub mod bvh;
 pub mod glb;
+pub mod mannequin;
 pub mod npy;
 
 use std::path::{Path, PathBuf};
@@ -52,7 +53,8 @@ fn frames_of(len: usize, width: usize, what: &str) -> Result<usize> {
     Ok(len / width)
 }
 
-fn as_frames(positions: &[f32]) -> Vec<[Vec3; JOINTS]> {
+/// (T, 165) positions as T frames of 55 joints.
+pub fn as_frames(positions: &[f32]) -> Vec<[Vec3; JOINTS]> {
     positions
         .chunks_exact(POS_DIM)
         .map(|row| {
@@ -69,9 +71,71 @@ fn max_distance(a: &[f32], b: &[f32]) -> f32 {
     a.chunks_exact(3).zip(b.chunks_exact(3)).map(|(p, q)| norm(sub([p[0], p[1], p[2]], [q[0], q[1], q[2]]))).fold(0.0, f32::max)
 }
 
+/// Joint groups of the SMPL-X layout for error reports: `body` = joints
+/// 0..=24 (trunk, legs, arms to the wrists, head, jaw, eyes), `hands` =
+/// 25..=54 (fingers).
+pub const BODY_JOINTS: std::ops::Range<usize> = 0..25;
+pub const HAND_JOINTS: std::ops::Range<usize> = 25..JOINTS;
+
+/// Distances between two (T, 165) position arrays over a set of joints:
+/// mean, 95th percentile (nearest rank) and maximum, in metres.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ErrorStats {
+    pub mean: f32,
+    pub p95: f32,
+    pub max: f32,
+}
+
+impl ErrorStats {
+    /// Over `joints` of every frame of `a` and `b` ((T, 165) each; the
+    /// shorter length is used). All zero when there is nothing to compare.
+    pub fn between(a: &[f32], b: &[f32], joints: std::ops::Range<usize>) -> ErrorStats {
+        let mut d: Vec<f32> = a
+            .chunks_exact(POS_DIM)
+            .zip(b.chunks_exact(POS_DIM))
+            .flat_map(|(fa, fb)| {
+                joints.clone().map(move |j| norm(sub([fa[3 * j], fa[3 * j + 1], fa[3 * j + 2]], [fb[3 * j], fb[3 * j + 1], fb[3 * j + 2]])))
+            })
+            .collect();
+        ErrorStats::of(&mut d)
+    }
+
+    /// Mean, p95 (nearest rank) and max of `values` (sorted in place).
+    pub fn of(values: &mut [f32]) -> ErrorStats {
+        if values.is_empty() {
+            return ErrorStats::default();
+        }
+        values.sort_unstable_by(f32::total_cmp);
+        let n = values.len();
+        let mean = (values.iter().map(|&v| v as f64).sum::<f64>() / n as f64) as f32;
+        let rank = ((0.95 * n as f64).ceil() as usize).clamp(1, n);
+        ErrorStats { mean, p95: values[rank - 1], max: values[n - 1] }
+    }
+}
+
+/// [`ErrorStats`] per joint group (`body`, `hands`, `all`) between an
+/// export's FK positions and the positions it should reproduce.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct GroupErrors {
+    pub body: ErrorStats,
+    pub hands: ErrorStats,
+    pub all: ErrorStats,
+}
+
+impl GroupErrors {
+    pub fn between(a: &[f32], b: &[f32]) -> GroupErrors {
+        GroupErrors {
+            body: ErrorStats::between(a, b, BODY_JOINTS),
+            hands: ErrorStats::between(a, b, HAND_JOINTS),
+            all: ErrorStats::between(a, b, 0..JOINTS),
+        }
+    }
+}
+
 impl Motion {
     /// From raw world joint positions (T, 165) in metres: the rig takes our
-    /// rest directions with the clip's mean bone lengths, rotations come
+    /// rest directions with the clip's median bone lengths (one per bone for
+    /// the whole clip), rotations come
     /// from [`retarget`]. `what` names the input in errors.
     pub fn from_positions(positions: &[f32], what: &str) -> Result<Motion> {
         let frames = frames_of(positions.len(), POS_DIM, what)?;

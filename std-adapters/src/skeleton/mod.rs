@@ -9,6 +9,7 @@
 //! `P[j] = P[parent] + G[parent] offset[j]`, and `P[0]` (pelvis) is the
 //! root translation.
 
+pub mod body;
 pub mod fk;
 pub mod ik;
 pub mod rest;

@@ -90,21 +90,60 @@ fn best_twist(g: &Mat3, skel: &Skeleton, axis: Vec3, ks: &[usize], positions: &[
 }
 
 /// A rig whose bone directions are `template`'s and whose bone lengths are
-/// the mean lengths measured in `clip` ((T, 55, 3) positions), so that FK
-/// of retargeted rotations reproduces the clip's joints. Bones that are
-/// degenerate in the clip keep the template length.
+/// the median lengths measured in `clip` ((T, 55, 3) positions): one length
+/// per bone for the whole clip (the rig stays rigid), so that FK of
+/// retargeted rotations reproduces a rigid clip's joints exactly and a
+/// non-rigid one (decoded positions) as closely as fixed bones allow. The
+/// median ignores the frames where a decoder stretches a bone. Bones that
+/// are degenerate in the clip keep the template length.
 pub fn measure_skeleton(template: &Skeleton, clip: &[[Vec3; JOINTS]]) -> Skeleton {
     let mut out = *template;
     if clip.is_empty() {
         return out;
     }
+    let mut lengths: Vec<f32> = Vec::with_capacity(clip.len());
     for j in 1..JOINTS {
         let p = parent(j).unwrap_or(0);
-        let mean: f32 = clip.iter().map(|f| norm(sub(f[j], f[p]))).sum::<f32>() / clip.len() as f32;
+        lengths.clear();
+        lengths.extend(clip.iter().map(|f| norm(sub(f[j], f[p]))));
+        lengths.sort_unstable_by(f32::total_cmp);
+        let n = lengths.len();
+        let median = if n % 2 == 1 { lengths[n / 2] } else { 0.5 * (lengths[n / 2 - 1] + lengths[n / 2]) };
         let len = norm(template.offsets[j]);
-        if mean.is_finite() && mean > 1e-5 && len > 1e-9 {
-            out.offsets[j] = scale(template.offsets[j], mean / len);
+        if median.is_finite() && median > 1e-5 && len > 1e-9 {
+            out.offsets[j] = scale(template.offsets[j], median / len);
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn measured_bones_take_the_median_length_and_ignore_stretched_frames() {
+        let rig = Skeleton::adult(1.0);
+        let rest = rig.rest_positions();
+        // 7 frames at rest; in 3 of them the right forearm is stretched to
+        // twice its length (the wrist and hand pushed out along the bone).
+        let fore = sub(rest[21], rest[19]);
+        let clip: Vec<[Vec3; JOINTS]> = (0..7)
+            .map(|t| {
+                let mut f = rest;
+                if t % 2 == 1 {
+                    for j in [21usize].into_iter().chain(40..55) {
+                        f[j] = crate::skeleton::math::add(f[j], fore);
+                    }
+                }
+                f
+            })
+            .collect();
+        let m = measure_skeleton(&Skeleton::default(), &clip);
+        assert!((m.bone_length(21) - rig.bone_length(21)).abs() < 1e-6, "{} vs {}", m.bone_length(21), rig.bone_length(21));
+        assert!((m.bone_length(19) - rig.bone_length(19)).abs() < 1e-6);
+        // An even count takes the middle two's mean: 2 at rest, 2 stretched.
+        let m = measure_skeleton(&Skeleton::default(), &clip[..4]);
+        assert!((m.bone_length(21) - 1.5 * rig.bone_length(21)).abs() < 1e-5, "{}", m.bone_length(21));
+    }
 }
