@@ -34,7 +34,13 @@ fn the_readme_example_runs_the_detected_kernels() -> Result<(), Box<dyn std::err
             pulled += 1;
         }
     }
+    let before_finish = pulled;
+    s.finish().map_err(|e| format!("{e:?}"))?;
+    while s.pull_follower_frame(&mut frame).map_err(|e| format!("{e:?}"))? {
+        pulled += 1;
+    }
     // --- end ---
+    assert!(pulled > before_finish, "the drain gives the held-back frames");
 
     assert!(pulled > 0, "frames came out");
     let want = duolando::simd::detect();
