@@ -22,6 +22,27 @@ fn run(args: &[&str]) -> (Option<i32>, String) {
     (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
+/// `duolando convert` of the tiny fixture with `config` and `gpt` in place
+/// of its own, writing into `dir`.
+fn convert(config: &Path, gpt: &Path, dir: &Path) -> (Option<i32>, String) {
+    let t = fixtures().join("tiny");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let args = [
+        "convert".to_string(),
+        "--config".into(),
+        s(config),
+        "--gpt".into(),
+        s(gpt),
+        "--vqvae".into(),
+        s(&t.join("vqvae.safetensors")),
+        "--transl".into(),
+        s(&t.join("transl.safetensors")),
+        "-o".into(),
+        s(&dir.join("m.duo")),
+    ];
+    run(&args.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
 #[test]
 fn usage_errors_exit_2_and_errors_exit_1() {
     let (code, e) = run(&["generate", "--model"]);
@@ -37,19 +58,7 @@ fn an_os_error_is_printed_once() {
     let dir = tmp("os");
     let yaml = dir.join("missing.yaml");
     let t = fixtures().join("tiny");
-    let (code, e) = run(&[
-        "convert",
-        "--config",
-        yaml.to_str().unwrap(),
-        "--gpt",
-        t.join("gpt.safetensors").to_str().unwrap(),
-        "--vqvae",
-        t.join("vqvae.safetensors").to_str().unwrap(),
-        "--transl",
-        t.join("transl.safetensors").to_str().unwrap(),
-        "-o",
-        dir.join("m.duo").to_str().unwrap(),
-    ]);
+    let (code, e) = convert(&yaml, &t.join("gpt.safetensors"), &dir);
     assert_eq!(code, Some(1), "{e}");
     assert!(e.contains("missing.yaml"), "{e}");
     assert_eq!(e.matches("os error 2").count(), 1, "the OS error once: {e}");
@@ -65,19 +74,7 @@ fn a_file_that_is_not_safetensors_says_why() {
     let mut bytes = b"PK\x03\x04\x14\x00\x00\x00".to_vec();
     bytes.extend_from_slice(&[0u8; 100]);
     std::fs::write(&fake, &bytes).unwrap();
-    let (code, e) = run(&[
-        "convert",
-        "--config",
-        t.join("follower_gpt.yaml").to_str().unwrap(),
-        "--gpt",
-        fake.to_str().unwrap(),
-        "--vqvae",
-        t.join("vqvae.safetensors").to_str().unwrap(),
-        "--transl",
-        t.join("transl.safetensors").to_str().unwrap(),
-        "-o",
-        dir.join("m.duo").to_str().unwrap(),
-    ]);
+    let (code, e) = convert(&t.join("follower_gpt.yaml"), &fake, &dir);
     assert_eq!(code, Some(1), "{e}");
     let n = u64::from_le_bytes(bytes[..8].try_into().unwrap());
     assert!(e.contains(&format!("header of {n} bytes")) && e.contains("108 bytes"), "{e}");
