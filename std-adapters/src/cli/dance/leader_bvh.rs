@@ -44,16 +44,6 @@ fn mixamo(j: usize) -> (&'static str, Option<usize>) {
     const HEAD: usize = 15;
     const L_WRIST: usize = 20;
     const R_WRIST: usize = 21;
-    const BODY: [&str; 22] = [
-        "Hips", "LeftUpLeg", "RightUpLeg", "Spine", "LeftLeg", "RightLeg", "Spine1", "LeftFoot", "RightFoot",
-        "Spine2", "LeftToeBase", "RightToeBase", "Neck", "LeftShoulder", "RightShoulder", "Head", "LeftArm",
-        "RightArm", "LeftForeArm", "RightForeArm", "LeftHand", "RightHand",
-    ];
-    // SMPL-X finger order per hand: index, middle, pinky, ring, thumb (1..3).
-    const FINGERS: [&str; 15] = [
-        "Index1", "Index2", "Index3", "Middle1", "Middle2", "Middle3", "Pinky1", "Pinky2", "Pinky3", "Ring1",
-        "Ring2", "Ring3", "Thumb1", "Thumb2", "Thumb3",
-    ];
     const LEFT: [&str; 15] = [
         "LeftHandIndex1", "LeftHandIndex2", "LeftHandIndex3", "LeftHandMiddle1", "LeftHandMiddle2",
         "LeftHandMiddle3", "LeftHandPinky1", "LeftHandPinky2", "LeftHandPinky3", "LeftHandRing1", "LeftHandRing2",
@@ -64,15 +54,16 @@ fn mixamo(j: usize) -> (&'static str, Option<usize>) {
         "RightHandMiddle3", "RightHandPinky1", "RightHandPinky2", "RightHandPinky3", "RightHandRing1",
         "RightHandRing2", "RightHandRing3", "RightHandThumb1", "RightHandThumb2", "RightHandThumb3",
     ];
-    debug_assert!(LEFT.iter().zip(FINGERS).all(|(l, f)| l.ends_with(f)));
     match j {
-        0..=21 => (BODY[j], None),
+        0..=21 => (MIXAMO_BODY[j], None),
         22..=24 => ("", Some(HEAD)), // jaw, eyes: Mixamo has none
         25..=39 => (LEFT[j - 25], Some(L_WRIST)),
         _ => (RIGHT[j - 40], Some(R_WRIST)),
     }
 }
 
+/// Mixamo's names of SMPL-X joints 0..=21 (the body), in SMPL-X order: all
+/// required of a Mixamo rig.
 const MIXAMO_BODY: [&str; 22] = [
     "Hips", "LeftUpLeg", "RightUpLeg", "Spine", "LeftLeg", "RightLeg", "Spine1", "LeftFoot", "RightFoot", "Spine2",
     "LeftToeBase", "RightToeBase", "Neck", "LeftShoulder", "RightShoulder", "Head", "LeftArm", "RightArm",
