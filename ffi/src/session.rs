@@ -384,6 +384,17 @@ fn first_bad(x: &[f32], limit: f32) -> Option<(usize, f32)> {
     x.iter().position(|v| !v.is_finite() || v.abs() > limit).map(|i| (i, x[i]))
 }
 
+/// A core refusal, with the offending value in the message when core
+/// refused a value of `x` (non-finite or above `limit`).
+fn rejected_value(e: duolando_core::Error, x: &[f32], what: &str, limit: f32) -> Failure {
+    match e {
+        duolando_core::Error::NonFinite { index, .. } | duolando_core::Error::OutOfRange { index, .. } if index < x.len() => {
+            reject(what, index, x[index], limit, "")
+        }
+        e => e.into(),
+    }
+}
+
 fn reject(what: &str, i: usize, v: f32, limit: f32, unit: &str) -> Failure {
     let msg = if v.is_finite() {
         format!("{what} value {v:e} at flat index {i} exceeds {limit:e}{unit}; frame rejected, session unchanged")
@@ -446,10 +457,9 @@ pub unsafe extern "C" fn duo_session_push_music(session: *mut DuoSession, featur
         let s = session_mut(session)?;
         // SAFETY: NULL or `n_features` readable floats (contract).
         let x = unsafe { buffer(features, n_features, "features") }?;
-        if let Some((i, v)) = first_bad(x, MAX_MUSIC_FEATURE) {
-            return Err(reject("music frame", i, v, MAX_MUSIC_FEATURE, ""));
-        }
-        s.session.push_music_frame(x)?;
+        // Core checks state, then the length, then the values: a frame of
+        // the wrong length is refused as such whatever it holds.
+        s.session.push_music_frame(x).map_err(|e| rejected_value(e, x, "music frame", MAX_MUSIC_FEATURE))?;
         Ok(DuoResult::Ok)
     })
 }
@@ -467,10 +477,7 @@ pub unsafe extern "C" fn duo_session_set_music_track(session: *mut DuoSession, t
         // SAFETY: NULL or `n_floats` readable floats valid until reset/free,
         // which drop the borrow (contract).
         let x: &'static [f32] = unsafe { buffer(track, n_floats, "track") }?;
-        if let Some((i, v)) = first_bad(x, MAX_MUSIC_FEATURE) {
-            return Err(reject("music track", i, v, MAX_MUSIC_FEATURE, ""));
-        }
-        s.session.set_music_track(x)?;
+        s.session.set_music_track(x).map_err(|e| rejected_value(e, x, "music track", MAX_MUSIC_FEATURE))?;
         Ok(DuoResult::Ok)
     })
 }

@@ -267,6 +267,18 @@ fn session_argument_checks() {
     let mut nan = music.clone();
     nan[5] = f32::NAN;
     assert_eq!(unsafe { duo_session_push_music(s, nan.as_ptr(), 54) }, DuoResult::NonFiniteInput);
+    assert!(last_error().contains("NaN at flat index 5"), "{}", last_error());
+    // The length is checked before any value: a bad value past the frame
+    // (or anywhere in a frame of the wrong length) is refused as a length.
+    let mut long = vec![0.0f32; 55];
+    long[54] = f32::NAN;
+    assert_eq!(unsafe { duo_session_push_music(s, long.as_ptr(), 55) }, DuoResult::InvalidArgument, "{}", last_error());
+    long[54] = 1e22;
+    assert_eq!(unsafe { duo_session_set_music_track(s, long.as_ptr(), 55) }, DuoResult::InvalidArgument, "{}", last_error());
+    let mut track = vec![0.0f32; 108];
+    track[60] = 1e22;
+    assert_eq!(unsafe { duo_session_set_music_track(s, track.as_ptr(), 108) }, DuoResult::NonFiniteInput);
+    assert!(last_error().contains("music track value 1e22 at flat index 60"), "{}", last_error());
     assert_eq!(unsafe { duo_session_push_leader(s, ptr::null()) }, DuoResult::NullParameter);
     assert_eq!(unsafe { duo_session_push_leader(ptr::null_mut(), &g.leader[0]) }, DuoResult::NullParameter);
     assert_eq!(unsafe { duo_session_reset(s, big.as_ptr()) }, DuoResult::InvalidArgument);

@@ -401,7 +401,7 @@ static void test_session_errors(duo_model *m) {
   duo_follower_frame f;
   size_t bytes = 0;
   unsigned char *mem;
-  float feat[54];
+  float feat[55]; /* 55 readable: the wrong-length call below passes 55 */
   const uint32_t big_seed[5] = {100000, 0, 0, 0, 0};
   uint32_t tokens[5], lat = 77;
 
