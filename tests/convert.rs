@@ -12,7 +12,7 @@ use duolando::convert::{convert_bytes, parse_config, ConvertError, Sources};
 use duolando::convert::yaml::Yaml;
 use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
-use duolando_core::schema::tensor_count;
+use duolando_core::duolando::schema::tensor_count;
 use duolando_core::tensor::DType;
 use safetensors::tensor::TensorView;
 use safetensors::{Dtype, SafeTensors};
@@ -362,9 +362,10 @@ fn yaml_syntax_error_names_the_file() {
 /// x8 is the same); every int8 tensor's row a multiple of 32.
 #[test]
 fn int8_storage_by_role_on_the_published_config() {
-    use duolando_core::schema::{for_each_tensor, Role, SchemaError};
+    use duolando_core::duolando::schema::for_each_tensor;
+use duolando_core::nn::names::{Role, SchemaError};
     use duolando_core::tensor::block_row;
-    let cfg = duolando_core::presets::duolando_published();
+    let cfg = duolando_core::duolando::presets::duolando_published();
     let mut by_role: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = Default::default();
     for_each_tensor::<SchemaError>(&cfg, &mut |s| {
         let got = duolando::convert::storage_for(StoreAs::Q8Block32, s);

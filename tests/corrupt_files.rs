@@ -8,12 +8,14 @@
 
 use duolando::duo_writer::{assemble, assemble_raw, write_duo, Header, HeaderEntry, StoreAs, Tensor};
 use duolando::model_file::{AlignedBytes, ModelFile, ModelFileError};
-use duolando_core::config::{GptConfig, LatConfig, ModelConfig, Part, VqConfig};
+use duolando_core::duolando::config::{GptConfig, LatConfig, ModelConfig, Part};
+use duolando_core::nn::vq_config::VqConfig;
 use duolando_core::format::{
     schema_tensor, DuoFile, FormatError, HeaderField, NonFiniteKind, Shape, MAX_DIM, MAX_HEADER_LEN, MAX_NAME_LEN, MAX_TENSORS,
 };
 use duolando_core::limits::{ConfigError, ConfigField};
-use duolando_core::schema::{for_each_tensor, tensor_count, Role, SchemaError, TensorSpec};
+use duolando_core::duolando::schema::{for_each_tensor, tensor_count};
+use duolando_core::nn::names::{Role, SchemaError, TensorSpec};
 use duolando_core::tensor::DType;
 use proptest::prelude::*;
 
@@ -1007,7 +1009,7 @@ proptest! {
 /// A full-size `.duo` (the published config, every tensor `dtype`: f32 or
 /// f16), pseudo-random weights in [-0.05, 0.05), 64-byte aligned.
 fn full_size_file(dtype: DType) -> AlignedBytes {
-    let cfg = duolando_core::presets::duolando_published();
+    let cfg = duolando_core::duolando::presets::duolando_published();
     let mut specs: Vec<TensorSpec> = Vec::new();
     for_each_tensor::<SchemaError>(&cfg, &mut |s| {
         specs.push(s.clone());

@@ -11,10 +11,10 @@
 use duolando::convert::storage_for;
 use duolando::duo_writer::StoreAs;
 use duolando_core::arena::{Arena, Planner};
-use duolando_core::block::BlockScratch;
-use duolando_core::model::Model;
-use duolando_core::session::kv_store::KvType;
-use duolando_core::session::lat_stream::{max_keys, LatIn, LatInputs, LatStepScratch, LatStream};
+use duolando_core::nn::block::BlockScratch;
+use duolando_core::duolando::model::Model;
+use duolando_core::nn::kv_store::KvType;
+use duolando_core::duolando::session::lat_stream::{max_keys, LatIn, LatInputs, LatStepScratch, LatStream};
 use duolando_tests::{demo_model, restore_as, Rng};
 
 /// `f` on the demo model in f16 and again re-stored as int8 (the kernels this CPU selects).

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, read_i64_2d};
-use duolando_core::exact::{self, ExactInputs, ExactOutputs, Seed};
-use duolando_core::model::Model;
+use duolando_core::duolando::exact::{self, ExactInputs, ExactOutputs, Seed};
+use duolando_core::duolando::model::Model;
 use tract_onnx::prelude::*;
 
 /// `tests/fixtures/`.
@@ -234,12 +234,12 @@ pub fn convert_fixture(model: &str, store_as: duolando::duo_writer::StoreAs) -> 
 /// A dense (f32/f16) `.duo` re-stored: every tensor read back as f32 and
 /// written as `store(spec)` (e.g. `convert::storage_for`, as the converter
 /// would from the f32 checkpoints; here from the stored values).
-pub fn restore_as(file: &ModelFile, store: &dyn Fn(&duolando_core::schema::TensorSpec) -> duolando::duo_writer::StoreAs) -> ModelFile {
+pub fn restore_as(file: &ModelFile, store: &dyn Fn(&duolando_core::nn::names::TensorSpec) -> duolando::duo_writer::StoreAs) -> ModelFile {
     use duolando_core::tensor::DType;
     let duo = file.duo().unwrap();
     let cfg = *duo.config();
     let mut tensors = Vec::new();
-    duolando_core::schema::for_each_tensor::<duolando_core::schema::SchemaError>(&cfg, &mut |spec| {
+    duolando_core::duolando::schema::for_each_tensor::<duolando_core::nn::names::SchemaError>(&cfg, &mut |spec| {
         let t = duo.tensor(&spec.name).unwrap();
         let values: Vec<f32> = match t.dtype {
             DType::F32 => t.data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),

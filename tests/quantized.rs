@@ -156,11 +156,11 @@ const Q4_MIN_AGREE: f64 = 0.25;
 /// within the decoder limit.
 #[test]
 fn int8_vq_decoders_on_the_demo_model() {
-    use duolando_core::model::Model;
+    use duolando_core::duolando::model::Model;
     use duolando_core::tensor::DType;
     duolando::simd::init();
     let f16_file = duolando_tests::demo_model();
-    let decoders_int8 = |spec: &duolando_core::schema::TensorSpec| {
+    let decoders_int8 = |spec: &duolando_core::nn::names::TensorSpec| {
         if spec.name.contains(".decoders") {
             duolando::convert::storage_for(StoreAs::Q8Block32, spec)
         } else {
@@ -198,10 +198,10 @@ fn int8_vq_decoders_on_the_demo_model() {
 
 /// Every VQ decoder of `m` (4 parts x positions / rotations, then the
 /// translation) fed the same 64 codes: (label, output frames).
-fn every_decoder(m: &duolando_core::model::Model<'_>) -> Vec<(String, Vec<f32>)> {
-    use duolando_core::config::Part;
+fn every_decoder(m: &duolando_core::duolando::model::Model<'_>) -> Vec<(String, Vec<f32>)> {
+    use duolando_core::duolando::config::Part;
     use duolando_core::limits::VqWhich;
-    use duolando_core::vq_decoder::{decode_codes, scratch_bytes, Output};
+    use duolando_core::duolando::vq_decoder::{decode_codes, scratch_bytes, Output};
     let cfg = m.cfg;
     let n = 64usize;
     let mut scratch = vec![0u8; scratch_bytes(&cfg, n).unwrap()];
@@ -230,8 +230,9 @@ fn every_decoder(m: &duolando_core::model::Model<'_>) -> Vec<(String, Vec<f32>)>
 #[test]
 fn conv_transpose_gemm_order_decodes_as_pytorch_order() {
     use duolando::duo_writer::{write_duo, Tensor};
-    use duolando_core::model::Model;
-    use duolando_core::schema::{for_each_tensor, Role, SchemaError};
+    use duolando_core::duolando::model::Model;
+    use duolando_core::duolando::schema::for_each_tensor;
+use duolando_core::nn::names::{Role, SchemaError};
     duolando::simd::init();
     let f32_file = duolando_tests::restore_as(&duolando_tests::demo_model(), &|_| StoreAs::F32);
     let duo = f32_file.duo().unwrap();

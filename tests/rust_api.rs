@@ -5,7 +5,7 @@
 
 use duolando::model_file::ModelFile;
 use duolando_core::kernels::simd::{self, Isa};
-use duolando_core::{model::Model, session::{FollowerFrame, Session, SessionConfig}};
+use duolando_core::duolando::{model::Model, session::{FollowerFrame, Session, SessionConfig}};
 
 fn asset(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets").join(name)

@@ -9,8 +9,8 @@ use std::cell::Cell;
 use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
 use duolando_core::error::{Buffer, Error};
-use duolando_core::model::Model;
-use duolando_core::session::{CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::{CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig};
 use duolando_tests::fixture;
 
 /// Counts heap allocations made by the current thread while enabled.
@@ -358,7 +358,7 @@ fn frames_backed_up_to_the_refusal_are_all_kept() {
 
 #[test]
 fn step_many_allocates_nothing_and_its_batch_arena_is_exact() {
-    use duolando_core::session::StepBatch;
+    use duolando_core::duolando::session::StepBatch;
     let file = ModelFile::open(fixture("tiny/model.duo")).unwrap();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
@@ -471,7 +471,7 @@ fn leader_codes_waiting_for_music_up_to_the_refusal_are_all_kept() {
 /// those of a session with its own step memory, bit for bit.
 #[test]
 fn a_batched_session_holds_its_state_alone() {
-    use duolando_core::session::StepBatch;
+    use duolando_core::duolando::session::StepBatch;
     let file = ModelFile::open(fixture("tiny/model.duo")).unwrap();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
@@ -483,7 +483,7 @@ fn a_batched_session_holds_its_state_alone() {
     assert!(alone + 1024 < own, "state alone {alone} B, with step memory {own} B");
     // (A batch made for another model, declared first: a session and the
     // batches it borrows share one lifetime.)
-    let other = duolando_core::presets::duolando_published();
+    let other = duolando_core::duolando::presets::duolando_published();
     let other_sc = SessionConfig::minimum(&other);
     let mut ob = vec![0u8; StepBatch::bytes(&other, &other_sc, 1).unwrap()];
     let mut other_batch = StepBatch::new(&other, &other_sc, 1, &mut ob).unwrap();

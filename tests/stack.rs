@@ -8,8 +8,8 @@
 
 use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
-use duolando_core::model::Model;
-use duolando_core::session::{FollowerFrame, Session, SessionConfig, StepBatch};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::{FollowerFrame, Session, SessionConfig, StepBatch};
 use duolando_tests::fixture;
 
 /// The stack of the stepping thread: 1 MiB, or `STACK_KIB` KiB (to find the

@@ -10,8 +10,8 @@ use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
 use duolando_core::error::{Buffer, Error};
-use duolando_core::model::Model;
-use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Sampling, Session, SessionConfig, Setting, StepBatch, StepReport};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::{CacheSchedule, FollowerFrame, KvType, Sampling, Session, SessionConfig, Setting, StepBatch, StepReport};
 use duolando_tests::fixture;
 
 fn convert(model: &str, store_as: StoreAs) -> ModelFile {
@@ -213,7 +213,7 @@ fn each_case(cases: &[(&str, StoreAs, &str)]) {
 #[test]
 fn chunked_reprefill_matches_one_call_bit_for_bit() {
     let _kernels = detected_kernels();
-    use duolando_core::session::REPREFILL_CHUNK;
+    use duolando_core::duolando::session::REPREFILL_CHUNK;
     for (name, store, rollout) in [("tiny", StoreAs::F32, "rollout_tiny_long"), ("tiny", StoreAs::Q8Block32, "rollout_tiny_long")] {
         let file = convert(name, store);
         let duo = file.duo().unwrap();

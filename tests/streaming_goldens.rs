@@ -7,10 +7,10 @@
 use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, read_i64_2d};
 use duolando::streaming::run_streaming;
-use duolando_core::model::Model;
+use duolando_core::duolando::model::Model;
 // The GPT cache schedules: the same values under each.
-use duolando_core::session::CacheSchedule as Schedule;
-use duolando_core::session::{Sampling, SessionConfig};
+use duolando_core::duolando::session::CacheSchedule as Schedule;
+use duolando_core::duolando::session::{Sampling, SessionConfig};
 use duolando_tests::{fixture, max_errors, Tol};
 use serde_json::Value;
 
@@ -54,7 +54,7 @@ fn f16_kv_cache_tracks_the_goldens() {
         let get = |k: &str| c[k].as_u64().unwrap() as u32;
         let mut cfg = SessionConfig::with(&model.cfg, get("lookahead"), get("enc_future"), get("dec_future"), get("shift"));
         let f32_bytes = model.session_bytes(&cfg).unwrap();
-        cfg.kv = duolando_core::session::KvType::F16;
+        cfg.kv = duolando_core::duolando::session::KvType::F16;
         let f16_bytes = model.session_bytes(&cfg).unwrap();
         assert!(f16_bytes < f32_bytes, "{name}: f16 K/V arena {f16_bytes} >= f32 {f32_bytes}");
         let seed: [u32; 5] = ints(&dir, "seed_tokens.npy").iter().map(|&t| t as u32).collect::<Vec<_>>().try_into().unwrap();
@@ -114,8 +114,8 @@ fn check_schedule(name: &str, schedule: Schedule) {
         ints(&inputs, "seed_tokens.npy").iter().map(|&t| t as u32).collect::<Vec<_>>().try_into().unwrap()
     } else {
         let start = read_f32_2d(&inputs.join("follower_start.npy"), Some(165), "start").unwrap();
-        let mut scratch = vec![0u8; duolando_core::exact::seed_scratch_bytes(&model.cfg, start.rows).unwrap()];
-        duolando_core::exact::seed_tokens(&model, &start.data, &leader.data, &mut scratch).unwrap()
+        let mut scratch = vec![0u8; duolando_core::duolando::exact::seed_scratch_bytes(&model.cfg, start.rows).unwrap()];
+        duolando_core::duolando::exact::seed_tokens(&model, &start.data, &leader.data, &mut scratch).unwrap()
     };
     let run = run_streaming(&model, &leader.data[..t4 * 165], &music.data, &cfg, seed, forced.as_deref(), &mut |_, _| {}).unwrap();
 
@@ -319,7 +319,7 @@ fn drained_free_running_sessions_output_r_frame_count() {
 #[test]
 fn pushes_after_the_end_are_refused_and_reset_restarts() {
     use duolando_core::error::Error;
-    use duolando_core::session::{FollowerFrame, Session};
+    use duolando_core::duolando::session::{FollowerFrame, Session};
     let file = tiny_model();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
@@ -385,7 +385,7 @@ fn pushes_after_the_end_are_refused_and_reset_restarts() {
 /// reported 0 frames and gave frames 3 late.
 #[test]
 fn live_music_frames_arrive_within_the_reported_latency() {
-    use duolando_core::session::{FollowerFrame, Preset, Session};
+    use duolando_core::duolando::session::{FollowerFrame, Preset, Session};
     let file = tiny_model();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
@@ -433,7 +433,7 @@ fn live_music_frames_arrive_within_the_reported_latency() {
 #[test]
 fn music_buffer_holds_the_configured_number() {
     use duolando_core::error::{Buffer, Error};
-    use duolando_core::session::Session;
+    use duolando_core::duolando::session::Session;
     let file = tiny_model();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();

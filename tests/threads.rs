@@ -10,8 +10,8 @@ use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
 use duolando::workers;
-use duolando_core::model::Model;
-use duolando_core::session::{FollowerFrame, Session, SessionConfig};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::{FollowerFrame, Session, SessionConfig};
 use duolando_tests::{assets_dir, demo_model, restore_as, run_demo_clip};
 
 /// Every follower frame of a streaming session over the first `frames`

@@ -1,7 +1,7 @@
 //! The engine's error type: enums with numeric context, no strings.
 
 use crate::arena::ArenaError;
-use crate::model::BindError;
+use crate::nn::bind::BindError;
 
 /// A caller buffer or input whose length is wrong.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,7 +43,7 @@ pub enum Error {
     /// (`input::limit_of`) at flat index `index`.
     OutOfRange { buffer: Buffer, index: usize },
     /// A streaming-session setting outside `0..=max` (or `1..=max`).
-    Setting { setting: crate::session::Setting, value: u32, max: u32 },
+    Setting { setting: crate::duolando::session::Setting, value: u32, max: u32 },
     /// A streaming session refused an input because its buffers are full
     /// (follower frames not pulled, or music pushed too far ahead); the
     /// session is unchanged: pull frames (or push leader frames) and retry.

@@ -4,17 +4,19 @@
 //! published model's rings vs docs/STREAMING.md §3.2/§3.7); errors.
 
 use duolando_core::arena::{Arena, Carve, Planner};
-use duolando_core::config::{ModelConfig, Part, VqConfig};
-use duolando_core::conv_stack::ConvScratch;
+use duolando_core::duolando::config::{ModelConfig, Part};
+use duolando_core::nn::vq_config::VqConfig;
+use duolando_core::nn::conv_stack::ConvScratch;
 use duolando_core::error::Error;
 use duolando_core::format::DuoFile;
 use duolando_core::kernels::{ConvGeom, ConvTWeight, DenseRows, Matrix};
-use duolando_core::model::{ConvTW, ConvW, DecoderW, EncoderW, Model, ResBlockW, ResnetW, VqW};
-use duolando_core::presets::duolando_published;
-use duolando_core::quantizer::dequantise;
-use duolando_core::stream_conv::{future_max, StackKind, StackPlan, StackW, StreamScratch, StreamStack};
-use duolando_core::vq_decoder::{decode, Output};
-use duolando_core::vq_encoder::encode_features;
+use duolando_core::nn::weights::{ConvTW, ConvW, DecoderW, EncoderW, ResBlockW, ResnetW, VqW};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::presets::duolando_published;
+use duolando_core::nn::quantizer::dequantise;
+use duolando_core::nn::stream_conv::{future_max, StackKind, StackPlan, StackW, StreamScratch, StreamStack};
+use duolando_core::duolando::vq_decoder::{decode, Output};
+use duolando_core::duolando::vq_encoder::encode_features;
 
 /// A fixture model, bound from a 64-byte aligned copy of its `.duo` file
 /// (the decoder requires the alignment; leaked for the test's lifetime).
@@ -110,7 +112,7 @@ fn run_encoder(mcfg: &ModelConfig, vq: &VqW<'static>, lag: usize, seed: u64) -> 
     let mut a = Arena::new(&mut mem);
     let mut s = StreamScratch::for_model(&mut a, mcfg).unwrap();
     let mut st = StreamStack::carve(&mut a, cfg, StackKind::Encoder, lag).unwrap();
-    let mut full_mem = vec![0u8; duolando_core::vq_encoder::scratch_bytes(mcfg, n_push * hop).unwrap()];
+    let mut full_mem = vec![0u8; duolando_core::duolando::vq_encoder::scratch_bytes(mcfg, n_push * hop).unwrap()];
     let mut fa = Arena::new(&mut full_mem);
     let mut fs = ConvScratch::carve(&mut fa, mcfg, n_push * hop).unwrap();
     let mut rng = Rng(seed);
@@ -149,7 +151,7 @@ fn run_decoder(mcfg: &ModelConfig, vq: &VqW<'static>, which: Output, stream: u8,
     let mut a = Arena::new(&mut mem);
     let mut s = StreamScratch::for_model(&mut a, mcfg).unwrap();
     let mut st = StreamStack::carve(&mut a, cfg, StackKind::Decoder, lag).unwrap();
-    let mut full_mem = vec![0u8; duolando_core::vq_decoder::scratch_bytes(mcfg, n_push).unwrap()];
+    let mut full_mem = vec![0u8; duolando_core::duolando::vq_decoder::scratch_bytes(mcfg, n_push).unwrap()];
     let mut fa = Arena::new(&mut full_mem);
     let mut fs = ConvScratch::carve(&mut fa, mcfg, n_push * hop).unwrap();
     let mut rng = Rng(seed);
@@ -351,7 +353,7 @@ fn errors_not_panics() {
     // Too small a scratch: an error before anything changes.
     let mut small = vec![0u8; 4096];
     let mut sa = Arena::new(&mut small);
-    let mut tiny_s = StreamScratch::for_model(&mut sa, &duolando_core::presets::duolando_published()).err();
+    let mut tiny_s = StreamScratch::for_model(&mut sa, &duolando_core::duolando::presets::duolando_published()).err();
     assert!(tiny_s.take().is_some(), "a 4 KiB arena cannot hold the published scratch");
     let mut p = Planner::new();
     let _ = StreamScratch::for_model(&mut p, &m.cfg).unwrap();

@@ -1,5 +1,5 @@
 //! `duo_step_batch`: several dancers on one model stepped together
-//! (`duolando_core::session::Session::step_many`): one leader frame per
+//! (`duolando_core::duolando::session::Session::step_many`): one leader frame per
 //! session per call, and each weight matrix of the LATs, the GPT and the
 //! heads read once for all of them. Every session ends exactly as after
 //! its own `duo_session_push_leader` (bit for bit); only the time differs
@@ -16,8 +16,8 @@
 //! Thread rule: a batch is used by one thread at a time, and the sessions
 //! of a call are not used by any other thread during it.
 
-use duolando_core::config::ModelConfig;
-use duolando_core::session::{Session, SessionConfig, StepBatch, StepDims, MAX_BATCH};
+use duolando_core::duolando::config::ModelConfig;
+use duolando_core::duolando::session::{Session, SessionConfig, StepBatch, StepDims, MAX_BATCH};
 use duolando_core::Error;
 
 use crate::frames::DuoLeaderFrame;

@@ -14,7 +14,7 @@
 //! `(-P q.xyz, q.w)`. The same formula holds for world and local (parent
 //! relative) rotations, since conjugation commutes with the joint chain.
 
-use duolando_core::config::{N_JOINTS, POSE_DIM};
+use duolando_core::duolando::config::{N_JOINTS, POSE_DIM};
 use duolando_runtime::skeleton::math::Mat3;
 use duolando_runtime::skeleton::rotation::{nearest_rotation, quat_from_mat};
 

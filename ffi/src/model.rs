@@ -259,7 +259,7 @@ pub unsafe extern "C" fn duo_model_get_info(model: *const DuoModel, out_info: *m
         }
         let cfg = m.model().config();
         let info = DuoModelInfo {
-            joints: duolando_core::config::N_JOINTS as u32,
+            joints: duolando_core::duolando::config::N_JOINTS as u32,
             music_features: cfg.gpt.music.n_in,
             fps: 30,
             frames_per_token: cfg.parts[0].hop().unwrap_or(0),

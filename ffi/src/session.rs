@@ -1,5 +1,5 @@
 //! `duo_session`: one follower dancer over a shared `duo_model`
-//! (`duolando_core::session::Session`), in library memory
+//! (`duolando_core::duolando::session::Session`), in library memory
 //! (`duo_session_new`) or in caller memory (`duo_session_bytes` +
 //! `duo_session_new_in`: no allocation at all).
 //!
@@ -16,8 +16,8 @@
 
 use std::sync::Arc;
 
-use duolando_core::config::{N_JOINTS, POSE_DIM};
-use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Preset, Sampling, Session, SessionConfig, StepDims};
+use duolando_core::duolando::config::{N_JOINTS, POSE_DIM};
+use duolando_core::duolando::session::{CacheSchedule, FollowerFrame, KvType, Preset, Sampling, Session, SessionConfig, StepDims};
 
 use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
 use crate::handle::{buffer, buffer_mut, caller_slot, drop_handle, handle_bytes};
@@ -37,7 +37,7 @@ pub const SAMPLING_TOP_K: u32 = 1;
 pub const KV_F32: u32 = 0;
 pub const KV_F16: u32 = 1;
 
-/// `duo_session_config`: mirrors `duolando_core::session::SessionConfig`
+/// `duo_session_config`: mirrors `duolando_core::duolando::session::SessionConfig`
 /// (counts in tokens of 4 frames unless named frames). 56 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -211,7 +211,7 @@ pub unsafe extern "C" fn duo_session_config_minimum(model: *const DuoModel, out_
 }
 
 /// The named preset `name` (NUL-terminated: "reference", "interactive",
-/// "live-music", "minimum": `duolando_core::session::Preset::ALL`, the
+/// "live-music", "minimum": `duolando_core::duolando::session::Preset::ALL`, the
 /// list the CLI takes) into `out_config`.
 ///
 /// # Safety
@@ -559,14 +559,14 @@ pub unsafe extern "C" fn duo_model_seed_tokens(
             }
         }
         let cfg = m.model().config();
-        let bytes = match duolando_core::exact::seed_scratch_bytes(cfg, n_frames) {
+        let bytes = match duolando_core::duolando::exact::seed_scratch_bytes(cfg, n_frames) {
             Some(b) => b,
             // Too few frames (0 included): core says so before any scratch is used.
             None if n_frames < cfg.hop() => 0,
             None => return Err(Failure::invalid("n_frames too large")),
         };
         let mut scratch = vec![0u8; bytes];
-        let t = duolando_core::exact::seed_tokens(m.model(), f, l, &mut scratch)?;
+        let t = duolando_core::duolando::exact::seed_tokens(m.model(), f, l, &mut scratch)?;
         // SAFETY: checked non-NULL; 5 writable u32 (contract).
         unsafe { std::ptr::write_unaligned(out_tokens.cast::<[u32; 5]>(), t) };
         Ok(DuoResult::Ok)

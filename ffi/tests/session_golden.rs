@@ -452,12 +452,12 @@ fn step_batch_argument_checks() {
     let other = open();
     let c = config(&m, &g);
     let header = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../include/duolando.h")).unwrap();
-    assert!(header.contains(&format!("#define DUO_MAX_BATCH {}", duolando_core::session::MAX_BATCH)));
+    assert!(header.contains(&format!("#define DUO_MAX_BATCH {}", duolando_core::duolando::session::MAX_BATCH)));
     assert!(header.contains("#define DUO_NO_SESSION ((size_t)-1)") && duolando::batch::NO_SESSION == usize::MAX);
 
     let mut batch = ptr::null_mut();
     let mut bytes = 0usize;
-    for n in [0, duolando_core::session::MAX_BATCH + 1] {
+    for n in [0, duolando_core::duolando::session::MAX_BATCH + 1] {
         assert_eq!(unsafe { duo_step_batch_new(m.0, &c, n, &mut batch) }, DuoResult::InvalidArgument);
         assert!(last_error().contains("DUO_MAX_BATCH"), "{}", last_error());
         assert_eq!(unsafe { duo_step_batch_bytes(m.0, &c, n, &mut bytes) }, DuoResult::InvalidArgument);

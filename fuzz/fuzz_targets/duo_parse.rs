@@ -3,7 +3,7 @@
 #![no_main]
 
 use duolando_core::format::DuoFile;
-use duolando_core::model::Model;
+use duolando_core::duolando::model::Model;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

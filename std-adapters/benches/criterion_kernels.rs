@@ -12,8 +12,8 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Through
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando::model_file::ModelFile;
 use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, X8Rows, TiledCausalMask};
-use duolando_core::model::Model;
-use duolando_core::session::{Session, SessionConfig};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::{Session, SessionConfig};
 
 mod common;
 use common::Rng;
@@ -87,7 +87,7 @@ fn streaming_step_tiny(c: &mut Criterion) {
     let base: Vec<f32> = (0..165).map(|j| (j % 3) as f32 * 0.3 + r.f() * 0.05).collect();
     let mut s = Session::new(&model, &mut arena, &sc, [0, 0, 0, 0, 0]).unwrap();
     s.set_music_track(&music).unwrap();
-    let mut frame = duolando_core::session::FollowerFrame::default();
+    let mut frame = duolando_core::duolando::session::FollowerFrame::default();
     let mut leader = base.clone();
     let mut t = 0u64;
     let mut g = c.benchmark_group("session");

@@ -6,7 +6,7 @@
 use std::fmt;
 use std::path::Path;
 
-use duolando_core::config::ModelConfig;
+use duolando_core::duolando::config::ModelConfig;
 use duolando_core::format::{align_up, ALIGN, MAGIC, PREFIX_LEN, VERSION};
 use duolando_core::tensor::DType;
 use serde::Serialize;

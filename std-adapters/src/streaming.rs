@@ -4,10 +4,10 @@
 //! runner of `duolando generate --mode streaming`, `duolando compare` and
 //! the S golden tests.
 
-use duolando_core::config::{POSE_DIM, ROT_DIM};
+use duolando_core::duolando::config::{POSE_DIM, ROT_DIM};
 use duolando_core::error::Error;
-use duolando_core::model::Model;
-use duolando_core::session::{FollowerFrame, Session, SessionConfig};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::{FollowerFrame, Session, SessionConfig};
 
 /// Everything a streaming run produced, with readiness.
 #[derive(Clone, Debug, Default)]
@@ -140,7 +140,7 @@ pub fn run_streaming_with(
         }
         let m = model.cfg.gpt.block_size as usize - 1;
         for k in run.step_ready.len()..s.steps() {
-            let c = duolando_core::session::window_context(k, m, cfg.shift as usize);
+            let c = duolando_core::duolando::session::window_context(k, m, cfg.shift as usize);
             run.step_ready.push(run.frames_in);
             run.context.push(c);
             run.window_lo.push(k + 1 - c);

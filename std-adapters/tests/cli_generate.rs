@@ -158,7 +158,7 @@ fn every_listed_preset_is_accepted_by_every_command() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let listed: Vec<String> = v["streaming"]["budgets"].as_array().unwrap().iter().map(|b| b["budget"].as_str().unwrap().to_string()).collect();
-    let core: Vec<&str> = duolando_core::session::Preset::ALL.iter().map(|p| p.name()).collect();
+    let core: Vec<&str> = duolando_core::duolando::session::Preset::ALL.iter().map(|p| p.name()).collect();
     assert_eq!(listed, core);
     assert!(listed.iter().any(|n| n == "interactive") && listed.iter().any(|n| n == "live-music"));
     let (leader, music) = (roll.join("leader_pos3d.npy"), roll.join("music.npy"));

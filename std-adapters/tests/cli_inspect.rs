@@ -65,8 +65,8 @@ fn inspect_json_parses_and_agrees_with_the_file() {
     // The arena figure is Model::session_bytes of that budget.
     let file = duolando::model_file::ModelFile::open(&m).unwrap();
     let duo = file.duo().unwrap();
-    let model = duolando_core::model::Model::from_duo(&duo).unwrap();
-    let sc = duolando_core::session::SessionConfig::reference(&model.cfg);
+    let model = duolando_core::duolando::model::Model::from_duo(&duo).unwrap();
+    let sc = duolando_core::duolando::session::SessionConfig::reference(&model.cfg);
     assert_eq!(b[0]["arena_bytes"].as_u64(), Some(model.session_bytes(&sc).unwrap() as u64));
 }
 

@@ -16,9 +16,9 @@ use duolando::cli::generate::seed_tokens;
 use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, write_f32};
 use duolando::streaming::run_streaming_with;
-use duolando_core::exact::Seed;
-use duolando_core::model::Model;
-use duolando_core::session::SessionConfig;
+use duolando_core::duolando::exact::Seed;
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::SessionConfig;
 use serde_json::Value;
 
 const ROW: usize = 165;
@@ -216,7 +216,7 @@ fn uint(v: &Value, key: &str) -> usize {
 }
 
 /// The same session driven in this process: (run, latency frames).
-fn reference_run(cfg_of: impl Fn(&duolando_core::config::ModelConfig) -> SessionConfig) -> duolando::streaming::StreamRun {
+fn reference_run(cfg_of: impl Fn(&duolando_core::duolando::config::ModelConfig) -> SessionConfig) -> duolando::streaming::StreamRun {
     let file = ModelFile::open(tiny()).unwrap();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();

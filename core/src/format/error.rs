@@ -6,7 +6,7 @@
 use core::fmt;
 
 use crate::limits::ConfigError;
-use crate::schema::SchemaError;
+use crate::nn::names::SchemaError;
 use crate::tensor::MAX_RANK;
 
 pub use super::weights::NonFiniteKind;

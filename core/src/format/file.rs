@@ -3,7 +3,7 @@
 use super::prefix::Prefix;
 use super::table::{decode_entry, Cursor, TensorEntry};
 use super::{align_up, schema_check, FormatError, HeaderField, MAX_TENSORS, PREFIX_LEN};
-use crate::config::ModelConfig;
+use crate::duolando::config::ModelConfig;
 use crate::kernels::simd::{PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES};
 use crate::tensor::{block_row, DType, TensorRef};
 

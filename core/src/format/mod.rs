@@ -15,7 +15,7 @@
 //! [`DuoFile::parse`] validates everything up front, without allocating and
 //! without panicking on any input; afterwards every [`TensorRef`] it hands
 //! out is in range, correctly sized, aligned, and shaped as the schema
-//! (`crate::schema`) requires for the file's config, and every float it
+//! (`crate::duolando::schema`) requires for the file's config, and every float it
 //! holds (f32 / f16 weights, quantisation scales) is finite.
 //!
 //! [`TensorRef`]: crate::tensor::TensorRef

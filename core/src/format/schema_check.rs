@@ -3,7 +3,8 @@
 //! (a ConvTranspose1d weight in either order: `TensorSpec::accepts`).
 
 use super::{DuoFile, FormatError, Shape};
-use crate::schema::{for_each_tensor, SchemaError, TensorSpec};
+use crate::duolando::schema::for_each_tensor;
+use crate::nn::names::{SchemaError, TensorSpec};
 
 impl From<SchemaError> for FormatError {
     fn from(e: SchemaError) -> FormatError {
@@ -66,7 +67,7 @@ fn in_schema(file: &DuoFile<'_>, name: &str) -> bool {
 // The spec travels by value through the visitor's error channel once, on
 // an error path; boxing it would need alloc.
 #[allow(clippy::result_large_err)]
-pub fn schema_tensor(cfg: &crate::config::ModelConfig, schema_index: u32) -> Option<TensorSpec> {
+pub fn schema_tensor(cfg: &crate::duolando::config::ModelConfig, schema_index: u32) -> Option<TensorSpec> {
     enum Stop {
         Found(TensorSpec),
         Schema,

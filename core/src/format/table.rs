@@ -105,7 +105,7 @@ pub fn entry_name(bytes: &[u8], index: u32) -> Option<&str> {
     let header_len = usize::try_from(u64::from_le_bytes(len)).ok()?;
     let header = bytes.get(super::PREFIX_LEN..super::PREFIX_LEN.checked_add(header_len)?)?;
     let mut cur = Cursor::new(header);
-    cur.take::<crate::config::ModelConfig>(HeaderField::Config).ok()?;
+    cur.take::<crate::duolando::config::ModelConfig>(HeaderField::Config).ok()?;
     let count: u64 = cur.take(HeaderField::TensorCount).ok()?;
     if index as u64 >= count {
         return None;

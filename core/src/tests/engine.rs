@@ -2,12 +2,14 @@
 //! synthetic model, within its planned scratch, and rejects bad input.
 use std::collections::HashMap;
 
-use crate::config::ModelConfig;
+use crate::duolando::config::ModelConfig;
 use crate::error::{Buffer, Error};
-use crate::exact::{generate, output_shape, scratch_bytes, ExactInputs, ExactOutputs, Seed};
-use crate::model::{BindError, Model, TensorSource};
-use crate::presets::{duolando_published, published_vq};
-use crate::schema::{for_each_tensor, SchemaError};
+use crate::duolando::exact::{generate, output_shape, scratch_bytes, ExactInputs, ExactOutputs, Seed};
+use crate::nn::bind::{BindError, TensorSource};
+use crate::duolando::model::Model;
+use crate::duolando::presets::{duolando_published, published_vq};
+use crate::duolando::schema::for_each_tensor;
+use crate::nn::names::SchemaError;
 use crate::tensor::{DType, TensorRef};
 
 fn tiny() -> ModelConfig {
@@ -19,12 +21,12 @@ fn tiny() -> ModelConfig {
     c.gpt.block_size = 6;
     c.gpt.look_forward = 3;
     c.gpt.vocab = [8; 5];
-    c.gpt.music = crate::config::LatConfig { n_in: 5, n_layer: 1, n_head: 2, downsample_rate: 4 };
-    c.gpt.leader = crate::config::LatConfig { n_in: 16, n_layer: 1, n_head: 4, downsample_rate: 1 };
+    c.gpt.music = crate::duolando::config::LatConfig { n_in: 5, n_layer: 1, n_head: 2, downsample_rate: 4 };
+    c.gpt.leader = crate::duolando::config::LatConfig { n_in: 16, n_layer: 1, n_head: 4, downsample_rate: 1 };
     c.gpt.music.n_in = 5;
     for vq in c.parts.iter_mut().chain(core::iter::once(&mut c.transl)) {
         let base = published_vq(vq.in_channels, vq.rot_channels);
-        *vq = crate::config::VqConfig { width: 8, emb_width: 4, l_bins: 8, depth: 2, ..base };
+        *vq = crate::duolando::config::VqConfig { width: 8, emb_width: 4, l_bins: 8, depth: 2, ..base };
     }
     c
 }

@@ -451,7 +451,7 @@ fn mask_key_runs_equal_the_scan() {
     }
     // The R window: 10 streams of 29, 290 keys.
     assert_key_runs_scan("R window", &TiledCausalMask { t_q: 29, t_k: 29, q_pos0: 0 }, 290, 290);
-    assert_key_runs_scan("LAT band", &crate::session::lat_stream::Visible, 3, 40);
+    assert_key_runs_scan("LAT band", &crate::duolando::session::lat_stream::Visible, 3, 40);
 }
 
 /// A `Cols` window covers exactly its rows and columns: rows read and

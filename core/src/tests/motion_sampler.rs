@@ -1,6 +1,6 @@
-use crate::config::{Part, POSE_DIM};
-use crate::motion::{denormalise, gather_part, normalise, scatter_part};
-use crate::sampler::{argmax, top_k, Rng};
+use crate::duolando::config::{Part, POSE_DIM};
+use crate::duolando::motion::{denormalise, gather_part, normalise, scatter_part};
+use crate::nn::sampler::{argmax, top_k, Rng};
 
 fn pose(seed: u32) -> Vec<f32> {
     (0..POSE_DIM).map(|i| (((i as u32).wrapping_mul(2654435761u32) ^ seed) % 2000) as f32 / 1000.0 - 1.0).collect()

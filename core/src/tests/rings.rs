@@ -4,8 +4,8 @@
 
 use crate::arena::Arena;
 use crate::error::Error;
-use crate::session::kv_store::{KvRing, KvType};
-use crate::session::ring::RowRing;
+use crate::nn::kv_store::{KvRing, KvType};
+use crate::nn::ring::RowRing;
 
 fn row(i: usize, w: usize) -> Vec<f32> {
     // f16-exact values (small integers and halves).

@@ -1,9 +1,10 @@
-use crate::config::Part;
+use crate::duolando::config::Part;
 use crate::limits::{ConfigError, ConfigField, LatField, LatWhich, VqField, VqWhich};
-use crate::presets::duolando_published;
-use crate::schema::{for_each_tensor, tensor_count, SchemaError, TensorSpec};
+use crate::duolando::presets::duolando_published;
+use crate::duolando::schema::{for_each_tensor, tensor_count};
+use crate::nn::names::{SchemaError, TensorSpec};
 
-fn specs(cfg: &crate::config::ModelConfig) -> std::vec::Vec<TensorSpec> {
+fn specs(cfg: &crate::duolando::config::ModelConfig) -> std::vec::Vec<TensorSpec> {
     let mut v = std::vec::Vec::new();
     for_each_tensor::<SchemaError>(cfg, &mut |s| {
         v.push(s.clone());
@@ -179,7 +180,7 @@ fn block_rows_span_all_axes_but_the_first() {
     // Roles: the published model's first decoder conv is a Conv, the
     // first encoder conv an EncoderConv, a decoder upsampler a ConvTranspose.
     let v = specs(&duolando_published());
-    use crate::schema::Role;
+    use crate::nn::names::Role;
     assert_eq!(find(&v, "motion.vqvae_up.decoders.0.out.weight").role, Role::Conv);
     assert_eq!(find(&v, "motion.vqvae_up.encoders.0.level_blocks.0.model.0.0.weight").role, Role::EncoderConv);
     assert_eq!(find(&v, "motion.vqvae_up.decoders.0.level_blocks.0.model.1.1.weight").role, Role::ConvTranspose);

@@ -24,11 +24,13 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context};
-use duolando_core::gpt::{self, Window};
-use duolando_core::model::{BindError, Model, TensorSource};
-use duolando_core::presets::duolando_published;
-use duolando_core::schema::{for_each_tensor, SchemaError, TensorSpec};
-use duolando_core::session::{CacheSchedule, FollowerFrame, KvType, Session, SessionConfig, StepBatch};
+use duolando_core::duolando::gpt::{self, Window};
+use duolando_core::nn::bind::{BindError, TensorSource};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::presets::duolando_published;
+use duolando_core::duolando::schema::for_each_tensor;
+use duolando_core::nn::names::{SchemaError, TensorSpec};
+use duolando_core::duolando::session::{CacheSchedule, FollowerFrame, KvType, Session, SessionConfig, StepBatch};
 use duolando_core::tensor::{block_row, DType, TensorRef, MAX_RANK};
 
 use crate::convert::{storage_for, stored_dims};
@@ -233,11 +235,11 @@ impl<'a> TensorSource<'a> for &'a RandomModel {
 /// coordinated-attention blocks, the 5 heads (matrices + f32 biases and
 /// LayerNorm), the embedding rows it looks up and the `pos_emb` rows.
 fn r_step_weight_bytes(m: &Model<'_>, c: usize) -> usize {
-    let lin = |l: &duolando_core::model::Linear<'_>| l.w.weight_bytes() + l.b.map_or(0, |b| b.len() * 4);
-    let block = |b: &duolando_core::model::BlockW<'_>| {
+    let lin = |l: &duolando_core::nn::weights::Linear<'_>| l.w.weight_bytes() + l.b.map_or(0, |b| b.len() * 4);
+    let block = |b: &duolando_core::nn::weights::BlockW<'_>| {
         lin(&b.query) + lin(&b.key) + lin(&b.value) + lin(&b.proj) + lin(&b.fc) + lin(&b.fc_out) + 4 * 4 * b.ln1.w.len()
     };
-    let lat = |l: &duolando_core::model::LatW<'_>| lin(&l.cond_emb) + lin(&l.downsample) + l.blocks.iter().map(block).sum::<usize>();
+    let lat = |l: &duolando_core::duolando::model::LatW<'_>| lin(&l.cond_emb) + lin(&l.downsample) + l.blocks.iter().map(block).sum::<usize>();
     let g = &m.gpt;
     let n_embd = m.cfg.gpt.n_embd as usize;
     let lf = m.cfg.gpt.look_forward as usize;

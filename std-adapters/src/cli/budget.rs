@@ -3,10 +3,10 @@
 
 use anyhow::{bail, Result};
 use clap::ValueEnum;
-use duolando_core::config::ModelConfig;
-use duolando_core::session::{CacheSchedule, Sampling, SessionConfig};
-// One list of presets for every command and the C ABI (core/src/session/config.rs).
-pub use duolando_core::session::Preset;
+use duolando_core::duolando::config::ModelConfig;
+use duolando_core::duolando::session::{CacheSchedule, Sampling, SessionConfig};
+// One list of presets for every command and the C ABI (core/src/duolando/session/config.rs).
+pub use duolando_core::duolando::session::Preset;
 
 /// `--preset` values: the names of [`Preset::ALL`], checked by clap (listed in `--help`).
 fn preset_parser() -> impl clap::builder::TypedValueParser<Value = Preset> {
@@ -84,8 +84,8 @@ impl BudgetArgs {
             (false, false) => CacheSchedule::Reprefill,
         };
         sc.kv = match self.kv {
-            Kv::F32 => duolando_core::session::KvType::F32,
-            Kv::F16 => duolando_core::session::KvType::F16,
+            Kv::F32 => duolando_core::duolando::session::KvType::F32,
+            Kv::F16 => duolando_core::duolando::session::KvType::F16,
         };
         if let Some(k) = self.topk {
             sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };
@@ -97,8 +97,8 @@ impl BudgetArgs {
     }
 }
 
-fn flag(s: duolando_core::session::Setting) -> &'static str {
-    use duolando_core::session::Setting::*;
+fn flag(s: duolando_core::duolando::session::Setting) -> &'static str {
+    use duolando_core::duolando::session::Setting::*;
     match s {
         Lookahead => "lookahead",
         EncFuture => "enc-future",

@@ -12,9 +12,9 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use duolando_core::config::POSE_DIM;
-use duolando_core::exact::Seed;
-use duolando_core::model::Model;
+use duolando_core::duolando::config::POSE_DIM;
+use duolando_core::duolando::exact::Seed;
+use duolando_core::duolando::model::Model;
 use serde_json::{json, Map, Value};
 
 use crate::agreement::{free_run, joint_error_mm, one_step, TokenAgreement, STREAMS};

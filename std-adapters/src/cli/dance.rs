@@ -15,9 +15,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use duolando_core::config::{ModelConfig, POSE_DIM, ROT_DIM};
-use duolando_core::exact::{self, Seed};
-use duolando_core::model::Model;
+use duolando_core::duolando::config::{ModelConfig, POSE_DIM, ROT_DIM};
+use duolando_core::duolando::exact::{self, Seed};
+use duolando_core::duolando::model::Model;
 use serde_json::json;
 
 use self::inputs::{Leader, Music, SeedChoice};

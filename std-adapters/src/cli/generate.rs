@@ -11,10 +11,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
-use duolando_core::config::{POSE_DIM, ROT_DIM};
-use duolando_core::exact::{self, ExactInputs, ExactOutputs, Seed};
-use duolando_core::model::Model;
-use duolando_core::session::SessionConfig;
+use duolando_core::duolando::config::{POSE_DIM, ROT_DIM};
+use duolando_core::duolando::exact::{self, ExactInputs, ExactOutputs, Seed};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::SessionConfig;
 
 use crate::engine_errors::describe;
 use crate::model_file::ModelFile;
@@ -145,7 +145,7 @@ pub fn seed_tokens(model: &Model<'_>, seed: Seed<'_>, leader: &[f32]) -> Result<
 /// Runs S mode on in-memory inputs (a session fed frame by frame), with a
 /// progress bar on a terminal.
 /// With `drain`, the session is told the leader ended after the last frame
-/// ([`duolando_core::session::Session::finish`]) and every frame it then
+/// ([`duolando_core::duolando::session::Session::finish`]) and every frame it then
 /// outputs is kept.
 pub fn generate_streaming(model: &Model<'_>, leader: &[f32], music: &[f32], sc: &SessionConfig, seed: [u32; 5], drain: bool) -> Result<Generated> {
     let t = leader.len() / POSE_DIM;

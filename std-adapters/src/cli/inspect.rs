@@ -11,10 +11,11 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use duolando_core::config::{LatConfig, ModelConfig, VqConfig};
-use duolando_core::exact;
-use duolando_core::model::Model;
-use duolando_core::session::{dec_future_max, enc_future_max, Preset, SessionConfig};
+use duolando_core::duolando::config::{LatConfig, ModelConfig};
+use duolando_core::nn::vq_config::VqConfig;
+use duolando_core::duolando::exact;
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::{dec_future_max, enc_future_max, Preset, SessionConfig};
 use duolando_core::tensor::DType;
 use serde_json::{json, Value};
 

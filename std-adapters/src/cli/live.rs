@@ -17,11 +17,11 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use duolando_core::config::POSE_DIM;
+use duolando_core::duolando::config::POSE_DIM;
 use duolando_core::error::Error;
-use duolando_core::exact::Seed;
-use duolando_core::model::Model;
-use duolando_core::session::{FollowerFrame, Session, SessionConfig};
+use duolando_core::duolando::exact::Seed;
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::{FollowerFrame, Session, SessionConfig};
 use serde::Serialize;
 
 use crate::cli::budget::BudgetArgs;

@@ -17,7 +17,8 @@
 
 use std::path::{Path, PathBuf};
 
-use duolando_core::config::{GptConfig, LatConfig, ModelConfig, VqConfig};
+use duolando_core::duolando::config::{GptConfig, LatConfig, ModelConfig};
+use duolando_core::nn::vq_config::VqConfig;
 
 use super::error::ConvertError;
 use super::yaml::Yaml;

@@ -4,7 +4,7 @@
 //! Inputs: the follower-GPT YAML (original key structure, any sizes) and
 //! three safetensors files holding the original `state_dict`s (GPT2nt,
 //! SepVQVAEXM, translation VQVAE; made from the `.pt` checkpoints by
-//! `tools/pt_to_safetensors.py`). The schema (`duolando_core::schema`)
+//! `tools/pt_to_safetensors.py`). The schema (`duolando_core::duolando::schema`)
 //! drives everything: each required `.duo` tensor is pulled from its
 //! component's file by its original name, shape-checked and upcast to f32;
 //! leftovers must be known-unused (`skipped`), else the conversion fails.
@@ -24,8 +24,9 @@ pub mod yaml;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-use duolando_core::config::ModelConfig;
-use duolando_core::schema::{for_each_tensor, Role, SchemaError, TensorSpec};
+use duolando_core::duolando::config::ModelConfig;
+use duolando_core::duolando::schema::for_each_tensor;
+use duolando_core::nn::names::{Role, SchemaError, TensorSpec};
 use duolando_core::tensor::block_row;
 
 pub use config::{load_config, parse_config};

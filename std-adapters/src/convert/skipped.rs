@@ -6,7 +6,7 @@
 //! config; they are not stored (the engine builds them), but their values
 //! are checked here so a checkpoint trained with different masks is caught.
 
-use duolando_core::config::ModelConfig;
+use duolando_core::duolando::config::ModelConfig;
 
 use super::error::ConvertError;
 use super::source::{upcast, Source};

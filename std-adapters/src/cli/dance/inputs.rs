@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use duolando_core::config::{ModelConfig, POSE_DIM};
+use duolando_core::duolando::config::{ModelConfig, POSE_DIM};
 
 use crate::cli::generate::parse_seed_tokens;
 

@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
-use duolando_core::config::POSE_DIM;
+use duolando_core::duolando::config::POSE_DIM;
 
 use super::inputs::{check_finite, Leader, FPS, FRAME_TIME_TOLERANCE};
 use crate::export::bvh::{self, BvhClip};

@@ -2,13 +2,14 @@
 //! `[Conv1d(k=2s, s, p=s/2) -> Resnet1D] x down_t -> Conv1d(k3, p1)`,
 //! then the quantiser. Time-major activations (T, C).
 
-use crate::conv_stack::{conv, resnet, ConvScratch};
+use crate::nn::conv_stack::{conv, resnet, ConvScratch};
 use crate::error::{check_len, Buffer, Error};
 use crate::arena::{Arena, Planner};
-use crate::config::ModelConfig;
+use crate::duolando::config::ModelConfig;
 use crate::limits::VqWhich;
-use crate::model::{Model, VqW};
-use crate::quantizer::quantise;
+use crate::duolando::model::Model;
+use crate::nn::weights::VqW;
+use crate::nn::quantizer::quantise;
 
 /// Pre-quantisation features of `x` (T, in_channels) into `feat`
 /// (T / hop, emb_width). `T` must be a positive multiple of the hop and at
@@ -66,7 +67,7 @@ pub fn scratch_bytes(cfg: &ModelConfig, frames: usize) -> Option<usize> {
 
 /// One VQ-VAE encoder + quantiser with byte scratch: `x` (T, in_channels)
 /// as given (the pipeline's first-joint zeroing is NOT applied here; see
-/// [`crate::motion::gather_part`]) -> `feat` (T/hop, emb), `codes` (T/hop).
+/// [`crate::duolando::motion::gather_part`]) -> `feat` (T/hop, emb), `codes` (T/hop).
 pub fn encode_part(model: &Model<'_>, which: VqWhich, x: &[f32], scratch: &mut [u8], feat: &mut [f32], codes: &mut [u32]) -> Result<(), Error> {
     let vq = model.vq(which);
     let frames = x.len() / (vq.cfg.in_channels as usize).max(1);

@@ -2,7 +2,8 @@
 //! `follower_gpt_beta0.9_final.yaml`, `sep_vqvaexm_full_final.yaml`,
 //! `transl_vqvaex_final.yaml`), for tests, docs and size planning.
 
-use crate::config::{GptConfig, LatConfig, ModelConfig, Part, VqConfig};
+use crate::duolando::config::{GptConfig, LatConfig, ModelConfig, Part};
+use crate::nn::vq_config::VqConfig;
 
 /// A part or translation VQ-VAE of the published model (width 512, depth 3,
 /// growth 3, one stride-2 stage pair, 512 x 512 codebook).

@@ -17,20 +17,20 @@
 use heapless::Vec;
 
 use crate::arena::{ArenaError, Carve, Planner, Split};
-use crate::block::BlockScratch;
-use crate::config::ModelConfig;
-use crate::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
+use crate::nn::block::BlockScratch;
+use crate::duolando::config::ModelConfig;
+use crate::duolando::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::Error;
-use crate::gpt::{head_rows, logits_len};
+use crate::duolando::gpt::{head_rows, logits_len};
 use crate::kernels::{linear, Q8Room};
-use crate::model::Model;
-use crate::sampler::{argmax, top_k_by_id};
-use crate::session::config::{for_each_live_window, next_window, CacheSchedule, window_context, Sampling, Setting, MAX_WINDOWS};
-use crate::session::gpt_cache::{GptCache, GptItem};
-use crate::session::lat_stream::{max_keys, LatInputs, LatStepScratch, LatStream};
-use crate::session::state::State;
-use crate::session::{vq_stream, Session, SessionConfig};
-use crate::stream_conv::{ScratchNeed, StreamScratch};
+use crate::duolando::model::Model;
+use crate::nn::sampler::{argmax, top_k_by_id};
+use crate::duolando::session::config::{for_each_live_window, next_window, CacheSchedule, window_context, Sampling, Setting, MAX_WINDOWS};
+use crate::duolando::session::gpt_cache::{GptCache, GptItem};
+use crate::duolando::session::lat_stream::{max_keys, LatInputs, LatStepScratch, LatStream};
+use crate::duolando::session::state::State;
+use crate::duolando::session::{vq_stream, Session, SessionConfig};
+use crate::nn::stream_conv::{ScratchNeed, StreamScratch};
 
 /// Most sessions stepped together (and most LAT pushes / GPT windows in
 /// one batched call).
@@ -330,7 +330,7 @@ enum Lat {
 /// One LAT push of `counts[j]` positions per session `chunk[j]` (`inputs`:
 /// one session's positions after another); produced rows go to the LAT's
 /// condition stream.
-fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: &mut StepScratch<'_>, which: Lat, w: &crate::model::LatW<'_>, inputs: LatInputs<'_, '_>) -> Result<(), BatchError> {
+fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: &mut StepScratch<'_>, which: Lat, w: &crate::duolando::model::LatW<'_>, inputs: LatInputs<'_, '_>) -> Result<(), BatchError> {
     let cond = match which {
         Lat::Music => 0,
         Lat::Leader(p) => 1 + p,

@@ -6,10 +6,10 @@
 //! the mask is the `t x t` lower triangle tiled 10 x 10 (a token at
 //! position i sees every stream at positions <= i). No final LayerNorm.
 
-use crate::block::{block_forward, block_forward_rows, BlockScratch};
+use crate::nn::block::{block_forward, block_forward_rows, BlockScratch};
 use crate::error::Error;
 use crate::kernels::TiledCausalMask;
-use crate::model::GptW;
+use crate::duolando::model::GptW;
 
 /// First follower stream (F_up); follower streams are 5..10.
 pub const FIRST_FOLLOWER_STREAM: usize = 5;

@@ -1,25 +1,13 @@
-//! The single source of truth for which weight tensors a [`ModelConfig`]
-//! needs, their names and their shapes.
-//!
-//! Names are the ORIGINAL PyTorch `state_dict` names (no DataParallel
-//! `module.` prefix) with a component prefix: `gpt.` (GPT2nt), `motion.`
-//! (SepVQVAEXM), `transl.` (the translation VQVAE). Shapes are PyTorch
-//! order: `Linear.weight (out, in)`, `Conv1d.weight (out, in, k)`,
-//! `ConvTranspose1d.weight (in, out, k)`, `Embedding.weight (rows, dim)`.
-//!
-//! Only what the inference path reads is listed: no `attn.mask` buffers,
-//! no LAT `pos_emb` (unused by the original forward), no
-//! `gpt_base.cond_*emb*` (constructed but never called), no
-//! `vqvae_down.decoders_root` (training-only root-velocity head).
-//!
-//! Users: the `.duo` decoder checks every stored shape against
-//! [`for_each_tensor`]; the converter pulls exactly these names from the
-//! safetensors; [`crate::model`] binds weights with the same name builders
-//! (`name`, [`TensorName`]) and its tests check it consumes this list.
+//! Tensor names and specs of the shared building blocks: the name builder
+//! ([`name`], [`TensorName`], no allocation), [`TensorSpec`] and its
+//! [`Role`], the VQ-VAE module names of the authors' `encdec.py` lineage
+//! (Duolando's VQ-VAE grew from Bailando's), and [`Emit`], which lists a
+//! block's or a VQ-VAE's tensors. Each family's `schema` lists its whole
+//! model with these.
 
 use core::fmt::Write;
 
-use crate::config::{LatConfig, ModelConfig, Part, VqConfig};
+use crate::nn::vq_config::VqConfig;
 
 /// Capacity of a tensor name in bytes (the longest full-model name is ~85).
 pub const TENSOR_NAME_CAP: usize = 128;
@@ -99,35 +87,6 @@ pub fn name(args: core::fmt::Arguments<'_>) -> Result<TensorName, SchemaError> {
     Ok(s)
 }
 
-/// Prefix of a LAT in the GPT: `gpt.music_trans` or `gpt.leader_<part>_trans`.
-pub fn lat_prefix(which: Option<Part>) -> Result<TensorName, SchemaError> {
-    match which {
-        None => name(format_args!("gpt.music_trans")),
-        Some(p) => name(format_args!("gpt.leader_{}_trans", p.name())),
-    }
-}
-
-/// Token embedding table of a stream (0..4 = up, down, lhand, rhand, 4 = transl).
-pub fn tok_emb_name(stream: usize) -> Result<TensorName, SchemaError> {
-    name(format_args!("gpt.tok_emb_{}.weight", STREAM_NAMES[stream.min(4)]))
-}
-
-/// Output head of a follower stream (0..4 = up, down, lhand, rhand, transl).
-pub fn head_name(stream: usize) -> Result<TensorName, SchemaError> {
-    name(format_args!("gpt.gpt_head.head_{}.weight", STREAM_NAMES[stream.min(4)]))
-}
-
-/// Stream names in token order.
-pub const STREAM_NAMES: [&str; 5] = ["up", "down", "lhand", "rhand", "transl"];
-
-/// Prefix of a VQ-VAE: `motion.vqvae_<part>` or `transl`.
-pub fn vq_prefix(which: Option<Part>) -> Result<TensorName, SchemaError> {
-    match which {
-        Some(p) => name(format_args!("motion.vqvae_{}", p.name())),
-        None => name(format_args!("transl")),
-    }
-}
-
 /// Which decoder of a VQ-VAE: positions (`decoders`) or rotations (`decoders_rot`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DecoderKind {
@@ -180,23 +139,25 @@ pub fn dilation(vq: &VqConfig, d: u32, reversed: bool) -> u32 {
     vq.dilation_growth_rate.saturating_pow(e)
 }
 
-struct Emit<'f, E> {
-    f: &'f mut dyn FnMut(&TensorSpec) -> Result<(), E>,
+/// Emits [`TensorSpec`]s of the shared building blocks to a callback;
+/// each family's schema lists its modules with these.
+pub struct Emit<'f, E> {
+    pub f: &'f mut dyn FnMut(&TensorSpec) -> Result<(), E>,
 }
 
 impl<E: From<SchemaError>> Emit<'_, E> {
-    fn t(&mut self, name: TensorName, dims: &[u32], role: Role) -> Result<(), E> {
+    pub fn t(&mut self, name: TensorName, dims: &[u32], role: Role) -> Result<(), E> {
         let mut shape = [1u32; 4];
         shape[..dims.len()].copy_from_slice(dims);
         (self.f)(&TensorSpec { name, rank: dims.len() as u8, shape, role })
     }
     /// `<prefix>.weight` (`w`, read as `role`) and `<prefix>.bias` (`bias`).
-    fn wb(&mut self, prefix: &str, w: &[u32], bias: u32, role: Role) -> Result<(), E> {
+    pub fn wb(&mut self, prefix: &str, w: &[u32], bias: u32, role: Role) -> Result<(), E> {
         self.t(name(format_args!("{prefix}.weight"))?, w, role)?;
         self.t(name(format_args!("{prefix}.bias"))?, &[bias], Role::Vector)
     }
     /// A pre-LN transformer block (`MusicBlock` or `Block`) of width `c`.
-    fn block(&mut self, prefix: &str, c: u32) -> Result<(), E> {
+    pub fn block(&mut self, prefix: &str, c: u32) -> Result<(), E> {
         self.wb(&name(format_args!("{prefix}.ln1"))?, &[c], c, Role::Vector)?;
         self.wb(&name(format_args!("{prefix}.ln2"))?, &[c], c, Role::Vector)?;
         for p in ["key", "query", "value", "proj"] {
@@ -205,15 +166,8 @@ impl<E: From<SchemaError>> Emit<'_, E> {
         self.wb(&name(format_args!("{prefix}.mlp.0"))?, &[4 * c, c], 4 * c, Role::Linear)?;
         self.wb(&name(format_args!("{prefix}.mlp.2"))?, &[c, 4 * c], c, Role::Linear)
     }
-    fn lat(&mut self, prefix: &str, lat: &LatConfig, c: u32) -> Result<(), E> {
-        self.wb(&name(format_args!("{prefix}.cond_emb"))?, &[c, lat.n_in], c, Role::Linear)?;
-        for i in 0..lat.n_layer {
-            self.block(&name(format_args!("{prefix}.blocks.{i}"))?, c)?;
-        }
-        self.wb(&name(format_args!("{prefix}.downsample"))?, &[c, c * lat.downsample_rate], c, Role::Linear)
-    }
     /// A Resnet1D whose convs are read as `conv` (encoder or decoder).
-    fn resnet(&mut self, stage: &str, vq: &VqConfig, conv: Role) -> Result<(), E> {
+    pub fn resnet(&mut self, stage: &str, vq: &VqConfig, conv: Role) -> Result<(), E> {
         let (w, inner) = (vq.width, vq.res_inner().unwrap_or(0));
         for d in 0..vq.depth {
             let blk = name(format_args!("{stage}.model.{d}.model"))?;
@@ -222,7 +176,7 @@ impl<E: From<SchemaError>> Emit<'_, E> {
         }
         Ok(())
     }
-    fn vq(&mut self, vq_name: &str, vq: &VqConfig) -> Result<(), E> {
+    pub fn vq(&mut self, vq_name: &str, vq: &VqConfig) -> Result<(), E> {
         let (w, k) = (vq.width, 2 * vq.stride_t);
         for i in 0..vq.down_t {
             let stage = encoder_stage(vq_name, i)?;
@@ -248,50 +202,4 @@ impl<E: From<SchemaError>> Emit<'_, E> {
         }
         Ok(())
     }
-}
-
-/// Calls `f` once per tensor the config needs, in a fixed order (GPT,
-/// then the four part VQ-VAEs, then the translation VQ-VAE). The config
-/// should have passed [`ModelConfig::validate`] (sizes are not re-checked
-/// here; unvalidated configs may produce absurd shapes, never a panic).
-pub fn for_each_tensor<E: From<SchemaError>>(
-    cfg: &ModelConfig,
-    f: &mut dyn FnMut(&TensorSpec) -> Result<(), E>,
-) -> Result<(), E> {
-    let mut e = Emit { f };
-    let g = &cfg.gpt;
-    let c = g.n_embd;
-    e.lat(&lat_prefix(None)?, &g.music, c)?;
-    for p in Part::ALL {
-        e.lat(&lat_prefix(Some(p))?, &g.leader, c)?;
-    }
-    for s in 0..5 {
-        e.t(tok_emb_name(s)?, &[g.vocab[s], c], Role::Embedding)?;
-    }
-    e.t(name(format_args!("gpt.gpt_base.pos_emb"))?, &[1, g.block_size.saturating_mul(g.n_streams), c], Role::PosEmb)?;
-    for i in 0..g.n_layer_base {
-        e.block(&name(format_args!("gpt.gpt_base.blocks.{i}"))?, c)?;
-    }
-    for i in 0..g.n_layer_head {
-        e.block(&name(format_args!("gpt.gpt_head.blocks.{i}"))?, c)?;
-    }
-    // Quirk of the original: head_lhand has vocab_up rows, head_rhand vocab_down rows.
-    let head_rows = [g.vocab[0], g.vocab[1], g.vocab[0], g.vocab[1], g.vocab[4]];
-    for (s, rows) in head_rows.iter().enumerate() {
-        e.t(head_name(s)?, &[*rows, c], Role::Linear)?;
-    }
-    for (i, p) in Part::ALL.iter().enumerate() {
-        e.vq(&vq_prefix(Some(*p))?, &cfg.parts[i])?;
-    }
-    e.vq(&vq_prefix(None)?, &cfg.transl)
-}
-
-/// Number of tensors the config needs.
-pub fn tensor_count(cfg: &ModelConfig) -> usize {
-    let mut n = 0usize;
-    let _ = for_each_tensor::<SchemaError>(cfg, &mut |_| {
-        n += 1;
-        Ok(())
-    });
-    n
 }

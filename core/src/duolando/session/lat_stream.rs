@@ -21,14 +21,14 @@
 use heapless::Vec;
 
 use crate::arena::{ArenaError, Carve};
-use crate::block::{block_attend_groups, block_kv, BlockScratch};
+use crate::nn::block::{block_attend_groups, block_kv, BlockScratch};
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::{linear, Mask, Matrix};
 use crate::limits::MAX_LAT_LAYERS;
-use crate::model::LatW;
-use crate::session::kv_store::{KvRing, KvType};
-use crate::session::ring::{RowRing, TokenRing};
-use crate::session::MAX_BATCH;
+use crate::duolando::model::LatW;
+use crate::nn::kv_store::{KvRing, KvType};
+use crate::nn::ring::{RowRing, TokenRing};
+use crate::duolando::session::MAX_BATCH;
 
 /// Most positions one [`LatStream::push_many`] call carries over all its
 /// LATs (a batch of [`MAX_BATCH`] sessions, 4 music frames each).

@@ -10,11 +10,11 @@
 //! `[:L, :L]`), so a window's LAT output depends on where the window starts.
 
 use crate::arena::{Arena, ArenaError, Carve, Planner};
-use crate::config::{ModelConfig, Part};
-use crate::block::{block_forward, BlockScratch};
+use crate::duolando::config::{ModelConfig, Part};
+use crate::nn::block::{block_forward, BlockScratch};
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::{linear, BandMask, Matrix};
-use crate::model::{LatW, Model};
+use crate::duolando::model::{LatW, Model};
 
 /// What a LAT reads.
 #[derive(Clone, Copy)]
@@ -109,7 +109,7 @@ pub fn lat_forward(
 }
 
 /// Input rows a LAT reads for context `c`: `(c + look_forward) * ds`.
-pub fn input_rows(cfg: &ModelConfig, lat: &crate::config::LatConfig, c: usize) -> Option<usize> {
+pub fn input_rows(cfg: &ModelConfig, lat: &crate::duolando::config::LatConfig, c: usize) -> Option<usize> {
     c.checked_add(cfg.gpt.look_forward as usize)?.checked_mul(lat.downsample_rate as usize)
 }
 

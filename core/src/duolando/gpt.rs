@@ -3,13 +3,13 @@
 //! window position of each follower stream.
 
 use crate::arena::{ArenaError, Carve};
-use crate::block::BlockScratch;
-use crate::config::ModelConfig;
-use crate::coordinated_attention::{add_positions, embed_followers, forward_last, FOLLOWER_STREAMS};
+use crate::nn::block::BlockScratch;
+use crate::duolando::config::ModelConfig;
+use crate::duolando::coordinated_attention::{add_positions, embed_followers, forward_last, FOLLOWER_STREAMS};
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::linear;
-use crate::lat::{lat_forward, LatInput, LatScratch};
-use crate::model::Model;
+use crate::duolando::lat::{lat_forward, LatInput, LatScratch};
+use crate::duolando::model::Model;
 
 /// One GPT window: `c` follower tokens per stream and the conditioning
 /// that covers them plus the look-ahead.

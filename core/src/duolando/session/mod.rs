@@ -4,8 +4,8 @@
 //! step.
 //!
 //! Data flow of one leader frame (one file per concept):
-//! normalise ([`crate::motion`]) -> every `hop` frames, the streaming VQ
-//! encoders ([`crate::stream_conv`]) + quantiser give leader code `q` ->
+//! normalise ([`crate::duolando::motion`]) -> every `hop` frames, the streaming VQ
+//! encoders ([`crate::nn::stream_conv`]) + quantiser give leader code `q` ->
 //! the leader LATs ([`lat_stream`]) give condition row `q - a` -> when
 //! step `k`'s rows exist (and music row `k`, from the music LAT), the
 //! GPT over its chunked window with a K/V cache ([`gpt_cache`]) gives
@@ -20,9 +20,7 @@
 pub mod batch;
 pub mod config;
 pub mod gpt_cache;
-pub mod kv_store;
 pub mod lat_stream;
-pub mod ring;
 mod state;
 mod vq_stream;
 
@@ -31,12 +29,12 @@ pub use gpt_cache::KvType;
 pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, CacheSchedule, Preset, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
 use crate::arena::{Arena, Planner};
-use crate::config::{ModelConfig, POSE_DIM, ROT_DIM};
+use crate::duolando::config::{ModelConfig, POSE_DIM, ROT_DIM};
 use crate::error::{check_len, Buffer, Error};
 use crate::input;
-use crate::model::Model;
-use crate::motion::{denormalise, normalise};
-use crate::sampler::Rng;
+use crate::duolando::model::Model;
+use crate::duolando::motion::{denormalise, normalise};
+use crate::nn::sampler::Rng;
 use batch::Append;
 use state::State;
 
@@ -116,7 +114,7 @@ pub fn session_bytes_for(model: &ModelConfig, cfg: &SessionConfig) -> Result<usi
 }
 
 pub(crate) fn check_config(model: &ModelConfig, cfg: &SessionConfig) -> Result<(), Error> {
-    model.validate().map_err(|e| Error::Bind(crate::model::BindError::Config(e)))?;
+    model.validate().map_err(|e| Error::Bind(crate::nn::bind::BindError::Config(e)))?;
     cfg.check(model).map_err(|(setting, value, max)| Error::Setting { setting, value, max })?;
     gpt_cache::check_layout(model.gpt.n_streams as usize)
 }
@@ -174,7 +172,7 @@ pub struct Session<'a> {
 impl<'a> Session<'a> {
     /// A session of `model` in `arena` (>= [`Model::session_bytes`]),
     /// seeded with follower tokens `seed` (up, down, lhand, rhand, transl;
-    /// from frames: [`crate::exact::seed_tokens`]).
+    /// from frames: [`crate::duolando::exact::seed_tokens`]).
     pub fn new(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 5]) -> Result<Self, Error> {
         let mut s = Self::carve(model, arena, cfg, seed, true)?;
         s.restart()?;
@@ -587,7 +585,7 @@ impl<'a> Session<'a> {
     ///   future) come from the encoders run on all `Q` tokens, with the end
     ///   padding there (S's definition, `n_q = min(T4, ...)`: R's codes);
     /// - steps run up to R's step count for `T` frames, `K = (T4 - 4) / 4 -
-    ///   29` ([`crate::exact::output_shape`]), or the steps already run if
+    ///   29` ([`crate::duolando::exact::output_shape`]), or the steps already run if
     ///   more (music pushed with less look-ahead than `look_forward`); as
     ///   ever each step waits for its music (push the music up to frame
     ///   `T4` if it is not a track; R needs it too);
@@ -611,7 +609,7 @@ impl<'a> Session<'a> {
         if self.ended {
             return Ok(());
         }
-        let r_steps = crate::exact::output_shape(&self.model.cfg, self.frames).map_or(0, |sh| sh.steps);
+        let r_steps = crate::duolando::exact::output_shape(&self.model.cfg, self.frames).map_or(0, |sh| sh.steps);
         self.ended = true;
         self.step_limit = self.k.max(r_steps);
         self.with_own_scratch(batch::pump)

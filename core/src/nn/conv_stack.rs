@@ -2,9 +2,9 @@
 //! decoders (`Resnet1D` of `ResConv1DBlock`s).
 
 use crate::arena::{ArenaError, Carve};
-use crate::config::ModelConfig;
+use crate::duolando::config::ModelConfig;
 use crate::kernels::{conv1d, conv1d_col_len, convt_z_len, relu_inplace, relu_into};
-use crate::model::{ConvW, ResnetW};
+use crate::nn::weights::{ConvW, ResnetW};
 
 /// Buffers for any VQ-VAE of a model over at most `rows` time steps.
 pub struct ConvScratch<'s> {

@@ -5,7 +5,7 @@
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
 use crate::kernels::{attention, attention_ahead, layernorm, linear_each, linear_each_with, linear_gelu_with, linear_with, KvRows, Mask, Q8Room};
-use crate::model::{BlockW, Linear};
+use crate::nn::weights::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
 ///

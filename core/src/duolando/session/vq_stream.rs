@@ -9,14 +9,14 @@
 
 use heapless::Vec;
 
-use crate::config::{Part, POSE_DIM, ROT_DIM};
+use crate::duolando::config::{Part, POSE_DIM, ROT_DIM};
 use crate::error::Error;
-use crate::motion::{gather_part, scatter_part};
-use crate::quantizer::{dequantise, nearest};
-use crate::session::batch::{at, conv_scratch, for_chunks, states, BatchError, StepScratch, MAX_BATCH};
-use crate::session::state::{State, FRAME_WIDTH};
-use crate::session::Session;
-use crate::stream_conv::{StackW, StreamStack};
+use crate::duolando::motion::{gather_part, scatter_part};
+use crate::nn::quantizer::{dequantise, nearest};
+use crate::duolando::session::batch::{at, conv_scratch, for_chunks, states, BatchError, StepScratch, MAX_BATCH};
+use crate::duolando::session::state::{State, FRAME_WIDTH};
+use crate::duolando::session::Session;
+use crate::nn::stream_conv::{StackW, StreamStack};
 
 /// Every session holding a complete token its encoders have not seen:
 /// pushes the token's `hop` frames into the 4 part encoders and, once
@@ -148,7 +148,7 @@ pub(super) fn decode(ss: &mut [&mut Session<'_>], chunk: &[usize], toks: &[[u32;
 
 /// The `hop` frames `[ts[j], ts[j] + hop)` of session `ready[j]` from its 9
 /// decoders' current prefix, assembled and pushed to its pending ring.
-fn frames_of(ss: &mut [&mut Session<'_>], ready: &[usize], ts: &[usize], conv: &mut crate::stream_conv::StreamScratch<'_>) -> Result<(), BatchError> {
+fn frames_of(ss: &mut [&mut Session<'_>], ready: &[usize], ts: &[usize], conv: &mut crate::nn::stream_conv::StreamScratch<'_>) -> Result<(), BatchError> {
     let Some(&g) = ready.first() else { return Ok(()) };
     let model = ss[g].model;
     let hop = model.cfg.hop();
@@ -229,7 +229,7 @@ pub(super) fn decode_end(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) 
 /// Frames `[ts[j], ts[j] + hop)` of decoder `p` (position, or rotation if
 /// `rot`) of every state into its `dec_out[..len]`.
 #[allow(clippy::too_many_arguments)]
-fn decoder_frames(sts: &mut [&mut State<'_>], p: usize, rot: bool, w: StackW<'_, '_>, ts: &[usize], hop: usize, len: usize, conv: &mut crate::stream_conv::StreamScratch<'_>) -> Result<(), Error> {
+fn decoder_frames(sts: &mut [&mut State<'_>], p: usize, rot: bool, w: StackW<'_, '_>, ts: &[usize], hop: usize, len: usize, conv: &mut crate::nn::stream_conv::StreamScratch<'_>) -> Result<(), Error> {
     let mut stacks: Vec<&StreamStack<'_>, MAX_BATCH> = Vec::new();
     let mut outs: Vec<&mut [f32], MAX_BATCH> = Vec::new();
     for st in sts.iter_mut() {

@@ -20,14 +20,14 @@
 //! ([`KvRows::head_major_then`]), the same numbers as one stretch.
 
 use crate::arena::{ArenaError, Carve};
-use crate::block::{block_attend_groups, block_kv, BlockScratch};
-use crate::coordinated_attention::{FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
+use crate::nn::block::{block_attend_groups, block_kv, BlockScratch};
+use crate::duolando::coordinated_attention::{FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::{Buffer, Error};
 use crate::kernels::{KvRows, Mask};
-use crate::model::GptW;
-use crate::session::kv_store::KvBuf;
-pub use crate::session::kv_store::KvType;
-use crate::session::MAX_BATCH;
+use crate::duolando::model::GptW;
+use crate::nn::kv_store::KvBuf;
+pub use crate::nn::kv_store::KvType;
+use crate::duolando::session::MAX_BATCH;
 use heapless::Vec;
 
 /// Causal over window rows for a position-major layout: query row `qi`

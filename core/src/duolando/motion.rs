@@ -7,7 +7,7 @@
 //! Parts are gathered by their joint lists (`Part::joints`), and the
 //! pipeline zeroes each part's first joint before encoding.
 
-use crate::config::{Part, N_JOINTS, POSE_DIM};
+use crate::duolando::config::{Part, N_JOINTS, POSE_DIM};
 
 /// Left and right wrist joints (hand roots).
 pub const LEFT_WRIST: usize = 20;

@@ -41,12 +41,13 @@
 use heapless::Vec;
 
 use crate::arena::{ArenaError, Carve};
-use crate::config::{ModelConfig, VqConfig};
+use crate::duolando::config::ModelConfig;
+use crate::nn::vq_config::VqConfig;
 use crate::error::{Buffer, Error};
 use crate::kernels::{conv1d, conv1d_col_len, conv1d_segs, conv_transpose1d_segs, convt_z_len, relu_inplace, ConvGeom, ConvSeg, Matrix};
 use crate::limits::{MAX_DEPTH, MAX_DILATION, MAX_DOWNSAMPLE, MAX_DOWN_T, MAX_STRIDE, MAX_WIDTH};
-use crate::model::{ConvTW, ConvW, DecoderW, EncoderW, ResBlockW};
-use crate::schema::dilation;
+use crate::nn::weights::{ConvTW, ConvW, DecoderW, EncoderW, ResBlockW};
+use crate::nn::names::dilation;
 
 /// Most stacks one [`StreamStack::push_many`] / [`StreamStack::output_many`]
 /// computes together (the sessions of a batch).
@@ -1180,7 +1181,7 @@ fn cols_at(b: &mut [f32], at: usize, n: usize, c: usize) -> Result<&mut [f32], E
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::presets::duolando_published;
+    use crate::duolando::presets::duolando_published;
 
     /// Geometries beyond the fixtures': stride 4, three stages, deep resnets.
     fn configs() -> [VqConfig; 4] {

@@ -2,9 +2,9 @@
 //! the arithmetic every part of S shares: step readiness, window
 //! schedule, latency in frames.
 
-use crate::config::ModelConfig;
-use crate::session::gpt_cache::KvType;
-use crate::stream_conv::{future_max, StackKind};
+use crate::duolando::config::ModelConfig;
+use crate::duolando::session::gpt_cache::KvType;
+use crate::nn::stream_conv::{future_max, StackKind};
 
 /// How the follower token of each head is chosen.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -207,7 +207,7 @@ impl SessionConfig {
         range(Setting::MusicLookahead, self.music_lookahead, 0, lf)?;
         range(Setting::LatPast, self.lat_past, 0, lf)?;
         if let Sampling::TopK { k, .. } = self.sampling {
-            range(Setting::TopK, k, 1, crate::sampler::MAX_TOP_K as u32)?;
+            range(Setting::TopK, k, 1, crate::nn::sampler::MAX_TOP_K as u32)?;
         }
         range(Setting::PendingFrames, self.pending_frames, 0, MAX_BUFFER_FRAMES)?;
         // The music LAT reads 4 frames per step ahead of what it has consumed.
@@ -310,7 +310,7 @@ mod tests {
 
     #[test]
     fn presets_are_one_named_list_and_live_latency_covers_the_music() {
-        let cfg = crate::presets::duolando_published();
+        let cfg = crate::duolando::presets::duolando_published();
         for p in Preset::ALL {
             assert_eq!(Preset::from_name(p.name()), Some(p));
             assert!(SessionConfig::preset(&cfg, p).check(&cfg).is_ok(), "{p:?}");
@@ -394,19 +394,19 @@ mod tests {
 #[cfg(test)]
 mod published {
     use super::*;
-    use crate::session::{session_bytes_for, KvType};
+    use crate::duolando::session::{session_bytes_for, KvType};
 
     /// Arena of a full-size (published config) session, from the config
     /// alone; figures quoted in docs/STREAMING.md §4.
     #[test]
     fn published_session_arena() {
-        let cfg = crate::presets::duolando_published();
+        let cfg = crate::duolando::presets::duolando_published();
         let r = SessionConfig::reference(&cfg);
         let f32kv = session_bytes_for(&cfg, &r).unwrap();
         let f16kv = session_bytes_for(&cfg, &SessionConfig { kv: KvType::F16, ..r }).unwrap();
         let stag = session_bytes_for(&cfg, &SessionConfig { schedule: CacheSchedule::Staggered, ..r }).unwrap();
         let min = session_bytes_for(&cfg, &SessionConfig::minimum(&cfg)).unwrap();
-        let batched = crate::session::batched_session_bytes_for(&cfg, &SessionConfig { kv: KvType::F16, ..r }).unwrap();
+        let batched = crate::duolando::session::batched_session_bytes_for(&cfg, &SessionConfig { kv: KvType::F16, ..r }).unwrap();
         assert!(batched + 1_000_000 < f16kv, "{batched} vs {f16kv}");
         // One f32 cache is 12 layers x 2 x (10 x 29 x 768) floats = 21.4 MB (§4).
         let cache = 12 * 2 * 10 * 29 * 768 * 4;

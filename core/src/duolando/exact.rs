@@ -3,7 +3,7 @@
 //! the test loader of datasets/dd100lf_all2.py), greedy.
 //!
 //! 1. Truncate to `T4 = T - T % hop` frames (the loader's `seq_len//4*4`).
-//! 2. Normalise the leader ([`crate::motion`]) and encode each part over the
+//! 2. Normalise the leader ([`crate::duolando::motion`]) and encode each part over the
 //!    whole sequence -> leader tokens `(T4/hop)` per part.
 //! 3. Seed: 5 tokens, or the follower's first frames: body tokens = code 0
 //!    of encoding the first `hop` frames; translation token = code 0 of
@@ -19,16 +19,16 @@
 //!    finally every joint `+ root_l[0]` (the leader's input coordinates).
 
 use crate::arena::{Arena, ArenaError, Carve, Planner};
-use crate::config::{ModelConfig, Part, POSE_DIM, ROT_DIM};
-use crate::conv_stack::ConvScratch;
+use crate::duolando::config::{ModelConfig, Part, POSE_DIM, ROT_DIM};
+use crate::nn::conv_stack::ConvScratch;
 use crate::error::{check_at_least, check_len, Buffer, Error};
 use crate::input;
-use crate::gpt::{head_rows, logits_len, max_context, window_logits, GptScratch, Window};
-use crate::model::Model;
-use crate::motion::{denormalise, gather_part, normalise, scatter_part};
-use crate::sampler::argmax;
-use crate::vq_decoder::{decode, Output};
-use crate::vq_encoder::encode;
+use crate::duolando::gpt::{head_rows, logits_len, max_context, window_logits, GptScratch, Window};
+use crate::duolando::model::Model;
+use crate::duolando::motion::{denormalise, gather_part, normalise, scatter_part};
+use crate::nn::sampler::argmax;
+use crate::duolando::vq_decoder::{decode, Output};
+use crate::duolando::vq_encoder::encode;
 
 /// Follower tokens per row: up, down, lhand, rhand, transl.
 pub const TOKEN_COLUMNS: usize = 5;

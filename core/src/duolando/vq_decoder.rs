@@ -2,14 +2,15 @@
 //! rows -> `Conv1d(k3) -> [Resnet1D (reversed dilations) ->
 //! ConvTranspose1d(k=2s, s, p=s/2)] x down_t -> Conv1d(k3)`.
 
-use crate::conv_stack::{conv, resnet, ConvScratch};
+use crate::nn::conv_stack::{conv, resnet, ConvScratch};
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::conv_transpose1d;
 use crate::arena::{Arena, Planner};
-use crate::config::ModelConfig;
+use crate::duolando::config::ModelConfig;
 use crate::limits::VqWhich;
-use crate::model::{DecoderW, Model, VqW};
-use crate::quantizer::dequantise;
+use crate::nn::weights::{DecoderW, VqW};
+use crate::duolando::model::Model;
+use crate::nn::quantizer::dequantise;
 
 /// Which decoder of a VQ-VAE to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -3,17 +3,17 @@
 //! an [`Arena`](crate::arena::Arena) the state itself).
 
 use crate::arena::{ArenaError, Carve};
-use crate::config::{ModelConfig, POSE_DIM, ROT_DIM};
+use crate::duolando::config::{ModelConfig, POSE_DIM, ROT_DIM};
 use crate::error::Error;
-use crate::model::Model;
-use crate::quantizer::codebook_norms;
-use crate::session::config::{SessionConfig, MAX_WINDOWS};
+use crate::duolando::model::Model;
+use crate::nn::quantizer::codebook_norms;
+use crate::duolando::session::config::{SessionConfig, MAX_WINDOWS};
 use heapless::Vec;
-use crate::session::gpt_cache::GptCache;
-use crate::session::batch::music_burst;
-use crate::session::lat_stream::{LatIn, LatStream};
-use crate::session::ring::{RowRing, TokenRing};
-use crate::stream_conv::{StackKind, StreamStack};
+use crate::duolando::session::gpt_cache::GptCache;
+use crate::duolando::session::batch::music_burst;
+use crate::duolando::session::lat_stream::{LatIn, LatStream};
+use crate::nn::ring::{RowRing, TokenRing};
+use crate::nn::stream_conv::{StackKind, StreamStack};
 
 /// Floats of one decoded follower frame waiting to be pulled:
 /// normalised pose (165) | rotation matrices (495) | translation (3).
@@ -101,7 +101,7 @@ impl<'s> State<'s> {
         let enc = [0, 1, 2, 3].map(|p| StreamStack::carve(a, &cfg.parts[p], StackKind::Encoder, e));
         let [e0, e1, e2, e3] = enc;
         let enc = [e0?, e1?, e2?, e3?];
-        let lat_layers = |l: &crate::config::LatConfig| l.n_layer as usize;
+        let lat_layers = |l: &crate::duolando::config::LatConfig| l.n_layer as usize;
         let leader_lat = [0, 1, 2, 3].map(|_| LatStream::carve(a, sc.kv, lat_layers(&g.leader), lds, c, LatIn::Tokens, past * lds, la * lds, 1));
         let [l0, l1, l2, l3] = leader_lat;
         let leader_lat = [l0?, l1?, l2?, l3?];
