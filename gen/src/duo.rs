@@ -7,7 +7,8 @@ use arbitrary::Arbitrary;
 use duolando::duo_writer::{assemble, Header, HeaderEntry};
 use duolando::model_file::AlignedBytes;
 use duolando_core::format::{align_up, DuoFile, FormatError, PREFIX_LEN};
-use duolando_core::model::{BindError, Model};
+use duolando_core::nn::bind::BindError;
+use duolando_core::duolando::model::Model;
 use duolando_core::tensor::DType;
 
 use crate::bytes::{apply_all, varint_len, ByteMutation, Int, Regions};

@@ -7,7 +7,7 @@ use std::sync::OnceLock;
 use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, read_i64_2d};
 use duolando_core::format::DuoFile;
-use duolando_core::model::Model;
+use duolando_core::duolando::model::Model;
 
 /// `tests/fixtures/` of the workspace.
 pub fn fixtures_dir() -> PathBuf {

@@ -19,13 +19,13 @@
 //!   as the session does and pulls bit-identical frames.
 
 use arbitrary::Arbitrary;
-use duolando_core::config::{POSE_DIM, ROT_DIM};
+use duolando_core::duolando::config::{POSE_DIM, ROT_DIM};
 use duolando_core::error::{Buffer, Error};
 use duolando_core::input;
-use duolando_core::model::Model;
-use duolando_core::sampler::MAX_TOP_K;
-use duolando_core::session::config::MAX_BUFFER_FRAMES;
-use duolando_core::session::{dec_future_max, enc_future_max, CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig, StepBatch};
+use duolando_core::duolando::model::Model;
+use duolando_core::nn::sampler::MAX_TOP_K;
+use duolando_core::duolando::session::config::MAX_BUFFER_FRAMES;
+use duolando_core::duolando::session::{dec_future_max, enc_future_max, CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig, StepBatch};
 
 use crate::fixture::Clip;
 use crate::floats::{synthetic_leader, Hostile};

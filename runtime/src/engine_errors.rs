@@ -71,8 +71,8 @@ pub fn describe(e: &Error) -> String {
     }
 }
 
-fn setting_name(s: duolando_core::session::Setting) -> &'static str {
-    use duolando_core::session::Setting::*;
+fn setting_name(s: duolando_core::duolando::session::Setting) -> &'static str {
+    use duolando_core::duolando::session::Setting::*;
     match s {
         Lookahead => "lookahead",
         EncFuture => "enc_future",

@@ -13,7 +13,7 @@
 
 use std::time::{Duration, Instant};
 
-use duolando_core::session::{FollowerFrame, Sampling, Session, SessionConfig};
+use duolando_core::duolando::session::{FollowerFrame, Sampling, Session, SessionConfig};
 use duolando_gen::fixture::{tiny2_clip, tiny2_model};
 use duolando_gen::floats::synthetic_leader;
 use duolando_gen::session::{frame_finite, tick};
