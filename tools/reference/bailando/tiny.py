@@ -6,7 +6,7 @@ import copy
 import numpy as np
 import torch
 
-from ..tiny import init_random  # noqa: F401  (our Duolando init: same parameter-name rules)
+from ..tiny import init_random  # our Duolando init: the same parameter-name rules fit Bailando
 from . import synth
 
 # hop = strides_t ** downs_t dance frames per token; window = block_size - 1
