@@ -4,7 +4,7 @@
 //! Layout: the shared parts once ([`kernels`] math, [`nn`] building
 //! blocks, [`format`] the `.duo` container, [`arena`] memory, [`input`]
 //! policy, [`limits`] caps), each family in its own folder named after its
-//! paper's concepts ([`duolando`]; Bailando and Transflower follow).
+//! paper's concepts ([`duolando`], [`bailando`]; Transflower follows).
 #![cfg_attr(not(test), no_std)]
 // Unsafe code is denied everywhere except `kernels::simd` (intrinsics) and
 // `kernels::parallel` (split-GEMM output views), which allow it with a
@@ -12,6 +12,7 @@
 #![deny(unsafe_code)]
 
 pub mod arena;
+pub mod bailando;
 pub mod duolando;
 pub mod error;
 pub mod format;

@@ -102,11 +102,13 @@ pub enum ConfigField {
     NStreams,
     FinalLn,
     MusicMotionRate,
+    /// Music feature width (Bailando `n_music`).
+    NMusic,
     Lat(LatWhich, LatField),
     Vq(VqWhich, VqField),
 }
 
-/// Why a a model config (Duolando: [`crate::duolando::config::ModelConfig`]) was rejected. Values are the offending numbers.
+/// Why a model config (Duolando: [`crate::duolando::config::ModelConfig`]) was rejected. Values are the offending numbers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ConfigError {
     /// A size that must be positive is 0.

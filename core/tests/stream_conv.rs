@@ -114,7 +114,7 @@ fn run_encoder(mcfg: &ModelConfig, vq: &VqW<'static>, lag: usize, seed: u64) -> 
     let mut st = StreamStack::carve(&mut a, cfg, StackKind::Encoder, lag).unwrap();
     let mut full_mem = vec![0u8; duolando_core::duolando::vq_encoder::scratch_bytes(mcfg, n_push * hop).unwrap()];
     let mut fa = Arena::new(&mut full_mem);
-    let mut fs = ConvScratch::carve(&mut fa, mcfg, n_push * hop).unwrap();
+    let mut fs = ConvScratch::carve(&mut fa, &mcfg.vqs(), n_push * hop).unwrap();
     let mut rng = Rng(seed);
     let x: Vec<f32> = (0..n_push * hop * c_in).map(|_| rng.sym()).collect();
     let w = StackW::Encoder(&vq.encoder);
@@ -153,7 +153,7 @@ fn run_decoder(mcfg: &ModelConfig, vq: &VqW<'static>, which: Output, stream: u8,
     let mut st = StreamStack::carve(&mut a, cfg, StackKind::Decoder, lag).unwrap();
     let mut full_mem = vec![0u8; duolando_core::duolando::vq_decoder::scratch_bytes(mcfg, n_push).unwrap()];
     let mut fa = Arena::new(&mut full_mem);
-    let mut fs = ConvScratch::carve(&mut fa, mcfg, n_push * hop).unwrap();
+    let mut fs = ConvScratch::carve(&mut fa, &mcfg.vqs(), n_push * hop).unwrap();
     let mut rng = Rng(seed);
     let codes: Vec<u32> = (0..n_push).map(|_| (rng.next() % cfg.l_bins as u64) as u32).collect();
     let w = StackW::Decoder(dec);

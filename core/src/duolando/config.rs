@@ -64,6 +64,14 @@ pub struct ModelConfig {
     pub music_motion_rate: u32,
 }
 
+impl ModelConfig {
+    /// Every VQ-VAE config: the four parts (up, down, lhand, rhand), then
+    /// the translation.
+    pub fn vqs(&self) -> [VqConfig; 5] {
+        [self.parts[0], self.parts[1], self.parts[2], self.parts[3], self.transl]
+    }
+}
+
 /// Body parts in token-stream order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Part {

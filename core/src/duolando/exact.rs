@@ -157,7 +157,7 @@ impl<'s> EncodePhase<'s> {
             part: a.f32(t.checked_mul(pos).ok_or(ov)?)?,
             feat: a.f32(sh.leader_tokens.checked_mul(emb).ok_or(ov)?)?,
             codes: a.u32(sh.leader_tokens)?,
-            conv: ConvScratch::carve(a, cfg, t)?,
+            conv: ConvScratch::carve(a, &cfg.vqs(), t)?,
         })
     }
 }
@@ -195,7 +195,7 @@ impl<'s> DecodePhase<'s> {
             codes: a.u32(sh.token_rows)?,
             out: a.f32(f.checked_mul(pos.max(rot)).ok_or(ov)?)?,
             transl: a.f32(f.checked_mul(3).ok_or(ov)?)?,
-            conv: ConvScratch::carve(a, cfg, f)?,
+            conv: ConvScratch::carve(a, &cfg.vqs(), f)?,
         })
     }
 }
@@ -352,7 +352,7 @@ impl<'s> SeedPhase<'s> {
             part: a.f32(frames.checked_mul(pos.max(3)).ok_or(ov)?)?,
             feat: a.f32(n.checked_mul(emb).ok_or(ov)?)?,
             codes: a.u32(n)?,
-            conv: ConvScratch::carve(a, cfg, frames)?,
+            conv: ConvScratch::carve(a, &cfg.vqs(), frames)?,
         })
     }
 }

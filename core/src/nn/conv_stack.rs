@@ -2,11 +2,11 @@
 //! decoders (`Resnet1D` of `ResConv1DBlock`s).
 
 use crate::arena::{ArenaError, Carve};
-use crate::duolando::config::ModelConfig;
 use crate::kernels::{conv1d, conv1d_col_len, convt_z_len, relu_inplace, relu_into};
+use crate::nn::vq_config::VqConfig;
 use crate::nn::weights::{ConvW, ResnetW};
 
-/// Buffers for any VQ-VAE of a model over at most `rows` time steps.
+/// Buffers for any of a model's VQ-VAEs over at most `rows` time steps.
 pub struct ConvScratch<'s> {
     /// (rows, ch) ping-pong activations.
     pub a: &'s mut [f32],
@@ -25,13 +25,13 @@ pub struct ConvScratch<'s> {
     pub ch: usize,
 }
 
-/// Widest channel count and largest kernel/stride over every VQ-VAE of `cfg`.
-fn dims(cfg: &ModelConfig) -> (usize, usize, usize, usize) {
+/// Widest channel count and largest kernel/stride over `vqs`.
+fn dims(vqs: &[VqConfig]) -> (usize, usize, usize, usize) {
     let mut ch = 0u32;
     let mut k = 3u32;
     let mut s = 1u32;
     let mut bins = 0u32;
-    for vq in cfg.parts.iter().chain(core::iter::once(&cfg.transl)) {
+    for vq in vqs {
         let inner = vq.res_inner().unwrap_or(0);
         ch = ch.max(vq.width).max(inner).max(vq.emb_width).max(vq.in_channels).max(vq.rot_channels);
         k = k.max(2 * vq.stride_t);
@@ -42,8 +42,9 @@ fn dims(cfg: &ModelConfig) -> (usize, usize, usize, usize) {
 }
 
 impl<'s> ConvScratch<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, rows: usize) -> Result<Self, ArenaError> {
-        let (ch, k, s, bins) = dims(cfg);
+    /// Scratch for every VQ-VAE in `vqs` (a model's whole set).
+    pub fn carve<A: Carve<'s>>(a: &mut A, vqs: &[VqConfig], rows: usize) -> Result<Self, ArenaError> {
+        let (ch, k, s, bins) = dims(vqs);
         let n = rows.checked_mul(ch).ok_or(ArenaError::Overflow)?;
         Ok(ConvScratch {
             a: a.f32(n)?,

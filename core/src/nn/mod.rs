@@ -13,5 +13,8 @@ pub mod quantizer;
 pub mod ring;
 pub mod sampler;
 pub mod stream_conv;
+pub mod streams;
 pub mod vq_config;
+pub mod vq_decoder;
+pub mod vq_encoder;
 pub mod weights;

@@ -92,13 +92,20 @@ pub fn name(args: core::fmt::Arguments<'_>) -> Result<TensorName, SchemaError> {
 pub enum DecoderKind {
     Position,
     Rotation,
+    /// `decoders_root`: Bailando's root-velocity decoder of the down part
+    /// ([`ROOT_CHANNELS`] per frame).
+    Root,
 }
+
+/// Output channels of a root-velocity decoder (xyz).
+pub const ROOT_CHANNELS: u32 = 3;
 
 impl DecoderKind {
     pub const fn module(self) -> &'static str {
         match self {
             DecoderKind::Position => "decoders",
             DecoderKind::Rotation => "decoders_rot",
+            DecoderKind::Root => "decoders_root",
         }
     }
 }
@@ -129,6 +136,7 @@ pub fn decoder_channels(vq: &VqConfig, kind: DecoderKind) -> u32 {
     match kind {
         DecoderKind::Position => vq.in_channels,
         DecoderKind::Rotation => vq.rot_channels,
+        DecoderKind::Root => ROOT_CHANNELS,
     }
 }
 
@@ -187,19 +195,23 @@ impl<E: From<SchemaError>> Emit<'_, E> {
         self.wb(&encoder_stage(vq_name, vq.down_t)?, &[vq.emb_width, w, 3], vq.emb_width, Role::EncoderConv)?;
         self.t(codebook_name(vq_name)?, &[vq.l_bins, vq.emb_width], Role::Codebook)?;
         for kind in [DecoderKind::Position, DecoderKind::Rotation] {
-            let c_out = decoder_channels(vq, kind);
-            if c_out == 0 {
-                continue;
+            if decoder_channels(vq, kind) > 0 {
+                self.decoder(vq_name, vq, kind)?;
             }
-            self.wb(&decoder_stage(vq_name, kind, 0)?, &[w, vq.emb_width, 3], w, Role::Conv)?;
-            for i in 0..vq.down_t {
-                let stage = decoder_stage(vq_name, kind, i + 1)?;
-                self.resnet(&name(format_args!("{stage}.0"))?, vq, Role::Conv)?;
-                let out = if i + 1 == vq.down_t { vq.emb_width } else { w };
-                self.wb(&name(format_args!("{stage}.1"))?, &[w, out, k], out, Role::ConvTranspose)?;
-            }
-            self.wb(&decoder_out(vq_name, kind)?, &[c_out, vq.emb_width, 3], c_out, Role::Conv)?;
         }
         Ok(())
+    }
+    /// Decoder `kind` of the VQ-VAE `vq_name`.
+    pub fn decoder(&mut self, vq_name: &str, vq: &VqConfig, kind: DecoderKind) -> Result<(), E> {
+        let (w, k) = (vq.width, 2 * vq.stride_t);
+        let c_out = decoder_channels(vq, kind);
+        self.wb(&decoder_stage(vq_name, kind, 0)?, &[w, vq.emb_width, 3], w, Role::Conv)?;
+        for i in 0..vq.down_t {
+            let stage = decoder_stage(vq_name, kind, i + 1)?;
+            self.resnet(&name(format_args!("{stage}.0"))?, vq, Role::Conv)?;
+            let out = if i + 1 == vq.down_t { vq.emb_width } else { w };
+            self.wb(&name(format_args!("{stage}.1"))?, &[w, out, k], out, Role::ConvTranspose)?;
+        }
+        self.wb(&decoder_out(vq_name, kind)?, &[c_out, vq.emb_width, 3], c_out, Role::Conv)
     }
 }

@@ -17,6 +17,7 @@
 
 use std::path::{Path, PathBuf};
 
+use duolando_core::bailando::config::{BailandoConfig, GptConfig as BGptConfig, DOWN_JOINTS, UP_JOINTS};
 use duolando_core::duolando::config::{GptConfig, LatConfig, ModelConfig};
 use duolando_core::nn::vq_config::VqConfig;
 
@@ -38,6 +39,30 @@ pub fn parse_config(path: &Path, text: &str) -> Result<ModelConfig, ConvertError
         error,
         detail: format!("{error:?}"),
     })?;
+    Ok(cfg)
+}
+
+/// Which family a YAML describes: Bailando's `actor_critic*.yaml` names
+/// `SepVQVAER` and `CrossCondGPT2AC`; everything else is read as Duolando's.
+pub fn is_bailando(text: &str) -> bool {
+    match Yaml::parse(text) {
+        Ok(root) => {
+            let name = |k: &str| root.get(k).and_then(|s| s.get("name")).cloned();
+            name("structure") == Some(Yaml::Str("SepVQVAER".into())) || name("structure_generate") == Some(Yaml::Str("CrossCondGPT2AC".into()))
+        }
+        Err(_) => false,
+    }
+}
+
+/// Maps Bailando's YAML (`configs/actor_critic.yaml` structure: `structure`
+/// = SepVQVAER up_half/down_half, `structure_generate` = CrossCondGPT2AC
+/// base/head; `critic_net` is training-only and not read); `path` only
+/// labels errors.
+pub fn parse_bailando_config(path: &Path, text: &str) -> Result<BailandoConfig, ConvertError> {
+    let root = Yaml::parse(text).map_err(|source| ConvertError::Yaml { path: path.into(), source })?;
+    let keys = Keys { path: path.to_path_buf() };
+    let cfg = keys.bailando(&root)?;
+    cfg.validate().map_err(|error| ConvertError::Config { path: path.into(), error, detail: format!("{error:?}") })?;
     Ok(cfg)
 }
 
@@ -106,19 +131,31 @@ impl Keys {
 
     fn model(&self, root: &Yaml) -> Result<ModelConfig, ConvertError> {
         let parts = [
-            self.vq(root, "structure.up_half", "pos_channel", Some("rot_channel"))?,
-            self.vq(root, "structure.down_half", "pos_channel", Some("rot_channel"))?,
-            self.vq(root, "structure.lhand", "pos_channel", Some("rot_channel"))?,
-            self.vq(root, "structure.rhand", "pos_channel", Some("rot_channel"))?,
+            self.vq_keys(root, "structure.up_half", "pos_channel", Some("rot_channel"))?,
+            self.vq_keys(root, "structure.down_half", "pos_channel", Some("rot_channel"))?,
+            self.vq_keys(root, "structure.lhand", "pos_channel", Some("rot_channel"))?,
+            self.vq_keys(root, "structure.rhand", "pos_channel", Some("rot_channel"))?,
         ];
-        let transl = self.vq(root, "structure_transl_vqvae", "input_dim", None)?;
+        let transl = self.vq_keys(root, "structure_transl_vqvae", "input_dim", None)?;
         let gpt = self.gpt(root)?;
         let music_motion_rate = self.uint(root, "music_motion_rate")?;
         Ok(ModelConfig { gpt, parts, transl, music_motion_rate })
     }
 
-    /// One VQ-VAE section at `sec` (a dotted path).
-    fn vq(&self, root: &Yaml, sec: &str, in_key: &str, rot_key: Option<&str>) -> Result<VqConfig, ConvertError> {
+    /// One VQ-VAE section at `sec` (a dotted path) whose channel counts
+    /// are the keys `in_key` and `rot_key`.
+    fn vq_keys(&self, root: &Yaml, sec: &str, in_key: &str, rot_key: Option<&str>) -> Result<VqConfig, ConvertError> {
+        let k = |name: &str| format!("{sec}.{name}");
+        let in_channels = self.uint(root, &k(in_key))?;
+        let rot_channels = match rot_key {
+            Some(r) => self.uint(root, &k(r))?,
+            None => 0,
+        };
+        self.vq(root, sec, in_channels, rot_channels)
+    }
+
+    /// One VQ-VAE section at `sec` (a dotted path) with the given channels.
+    fn vq(&self, root: &Yaml, sec: &str, in_channels: u32, rot_channels: u32) -> Result<VqConfig, ConvertError> {
         let k = |name: &str| format!("{sec}.{name}");
         let levels = self.uint(root, &k("levels"))?;
         if levels != 1 {
@@ -146,11 +183,8 @@ impl Keys {
         let (m_conv_num, m_conv_den) = ratio(self.float(root, &k("m_conv"))?)
             .ok_or_else(|| self.err(&k("m_conv"), "must be a positive ratio with denominator <= 64 (e.g. 1.0, 0.5, 0.75)"))?;
         Ok(VqConfig {
-            in_channels: self.uint(root, &k(in_key))?,
-            rot_channels: match rot_key {
-                Some(r) => self.uint(root, &k(r))?,
-                None => 0,
-            },
+            in_channels,
+            rot_channels,
             width: scaled("width", width)?,
             depth: scaled("depth", depth)?,
             dilation_growth_rate: self.uint(root, &k("dilation_growth_rate"))?,
@@ -161,6 +195,37 @@ impl Keys {
             m_conv_num,
             m_conv_den,
         })
+    }
+
+    fn bailando(&self, root: &Yaml) -> Result<BailandoConfig, ConvertError> {
+        let part = |sec: &str, joints: usize| -> Result<VqConfig, ConvertError> {
+            let jc = self.uint(root, &format!("{sec}.joint_channel"))?;
+            if jc != 3 {
+                return Err(self.err(&format!("{sec}.joint_channel"), format!("must be 3 (joint positions), found {jc}")));
+            }
+            self.vq(root, sec, (joints * 3) as u32, 0)
+        };
+        let parts = [part("structure.up_half", UP_JOINTS.len())?, part("structure.down_half", DOWN_JOINTS.len())?];
+        let g = |name: &str| format!("structure_generate.{name}");
+        let n_embd = self.same(root, &g("base.n_embd"), &g("head.n_embd"))?;
+        self.same(root, &g("base.n_embd"), &g("base.n_music_emb"))?;
+        let block_size = self.same(root, &g("block_size"), &g("base.block_size"))?;
+        self.same(root, &g("block_size"), &g("head.block_size"))?;
+        let n_head = self.same(root, &g("base.n_head"), &g("head.n_head"))?;
+        let vocab = [
+            self.same(root, &g("base.vocab_size_up"), &g("head.vocab_size_up"))?,
+            self.same(root, &g("base.vocab_size_down"), &g("head.vocab_size_down"))?,
+        ];
+        let gpt = BGptConfig {
+            n_embd,
+            n_head,
+            n_layer_base: self.uint(root, &g("base.n_layer"))?,
+            n_layer_head: self.uint(root, &g("head.n_layer"))?,
+            block_size,
+            vocab,
+            n_music: self.uint(root, &g("base.n_music"))?,
+        };
+        Ok(BailandoConfig { gpt, parts })
     }
 
     fn lat(&self, root: &Yaml, sec: &str) -> Result<LatConfig, ConvertError> {

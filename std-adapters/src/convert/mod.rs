@@ -29,7 +29,7 @@ use duolando_core::duolando::schema::for_each_tensor;
 use duolando_core::nn::names::{Role, SchemaError, TensorSpec};
 use duolando_core::tensor::block_row;
 
-pub use config::{load_config, parse_config};
+pub use config::{is_bailando, load_config, parse_bailando_config, parse_config};
 pub use error::ConvertError;
 use skipped::{check_mask, classify, Component, Skip};
 use source::Source;
