@@ -228,3 +228,42 @@ fn bad_music_seed_and_tokens_are_refused() {
     let mut ds = vec![0u8; dance_scratch_bytes(&cfg, 1).unwrap()];
     assert!(matches!(seed_from_dance(&model, &[0.0; POSE_DIM - 1], &mut ds), Err(Error::Ragged { .. })));
 }
+
+/// The authors' checkpoints through `convert` (format version 2, family
+/// Bailando; the critic skipped and counted, the masks checked) give a
+/// `.duo` whose model samples the same tokens; a Duolando binder refuses
+/// it by family.
+#[test]
+fn converted_file_samples_the_same_tokens() {
+    use duolando::convert::bailando::convert_bailando;
+    use duolando::duo_writer::StoreAs;
+    use duolando::model_file::ModelFile;
+    use duolando_core::family::Family;
+    use duolando_core::nn::bind::BindError;
+    let dir = fixture("bailando_btiny");
+    let cfg = config("btiny", "actor_critic.yaml");
+    let (g, v) = (std::fs::read(dir.join("gpt.safetensors")).unwrap(), std::fs::read(dir.join("vqvae.safetensors")).unwrap());
+    let (bytes, r) = convert_bailando(&cfg, (&dir.join("gpt.safetensors"), &g), (&dir.join("vqvae.safetensors"), &v), StoreAs::F32, Path::new("<memory>")).unwrap();
+    assert_eq!(r.critic_skipped, 21, "the critic_net tensors of the btiny checkpoint");
+    assert_eq!(r.report.masks_checked, 2);
+    let file = ModelFile::from_bytes(bytes).unwrap();
+    let duo = file.duo().unwrap();
+    assert_eq!(duo.prefix().version, 2);
+    assert_eq!(duo.config().family(), Family::Bailando);
+    assert_eq!(duo.config().bailando(), Some(&cfg));
+    match duolando_core::duolando::model::Model::from_duo(&duo) {
+        Err(BindError::Family { expected: Family::Duolando, found: Family::Bailando }) => {}
+        other => panic!("expected a family refusal, got {:?}", other.map(|_| ())),
+    }
+    let model = Model::from_duo(&duo).unwrap();
+    let rdir = fixture("bailando_rollout_btiny_demo_odd");
+    let music = read_f32_2d(&rdir.join("music.npy"), None, "music").unwrap();
+    let meta: serde_json::Value = serde_json::from_slice(&std::fs::read(rdir.join("meta.json")).unwrap()).unwrap();
+    let seed = [meta["seed_tokens"][0].as_u64().unwrap() as u32, meta["seed_tokens"][1].as_u64().unwrap() as u32];
+    let k = steps(MusicPadding::Demo, music.rows);
+    let mut tokens = vec![0u32; (k + 1) * 2];
+    let mut s = vec![0u8; sample_scratch_bytes(&cfg).unwrap()];
+    sample(&model, &music.data, music.cols, MusicPadding::Demo, seed, &mut s, &mut tokens).unwrap();
+    let want = read_i64_2d(&rdir.join("tokens.npy"), Some(2), "tokens").unwrap();
+    assert_eq!(tokens.iter().map(|&t| t as i64).collect::<Vec<_>>(), want.data);
+}

@@ -12,7 +12,6 @@ use duolando::convert::{convert_bytes, parse_config, ConvertError, Sources};
 use duolando::convert::yaml::Yaml;
 use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
-use duolando_core::duolando::schema::tensor_count;
 use duolando_core::tensor::DType;
 use safetensors::tensor::TensorView;
 use safetensors::{Dtype, SafeTensors};
@@ -100,7 +99,7 @@ fn fixtures_convert_to_the_committed_models() {
         let bytes = fx.convert(StoreAs::F32).unwrap_or_else(|e| panic!("{m}: {e}"));
         let mf = ModelFile::from_bytes(bytes.clone()).unwrap();
         let duo = mf.duo().unwrap();
-        assert_eq!(duo.len(), tensor_count(duo.config()));
+        assert_eq!(duo.len(), duo.config().tensor_count());
         let committed = std::fs::read(fx.dir.join("model.duo")).unwrap();
         assert!(
             bytes == committed,

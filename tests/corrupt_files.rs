@@ -115,7 +115,7 @@ fn take_apart(bytes: &[u8]) -> Parts {
         })
         .collect();
     let data = bytes[duo.prefix().data_start as usize..].to_vec();
-    Parts { header: Header { config: *duo.config(), tensors }, data }
+    Parts { header: Header { config: *duo.config().duolando().expect("a Duolando fixture"), tensors }, data }
 }
 
 fn valid_parts() -> Parts {
@@ -174,7 +174,7 @@ fn valid_file_parses_and_round_trips_values() {
     let bytes = write_duo(&cfg, &tensors).unwrap();
     let aligned = AlignedBytes::copy_from(&bytes);
     let duo = DuoFile::parse(aligned.as_bytes()).unwrap();
-    assert_eq!(*duo.config(), cfg);
+    assert_eq!(*duo.config(), cfg.into());
     assert_eq!(duo.len(), tensor_count(&cfg));
     assert_eq!(duo.tensors().count(), tensors.len());
     for t in &tensors {
@@ -209,7 +209,7 @@ fn committed_fixture_models_open_mapped() {
         let mf = ModelFile::open(&path).unwrap_or_else(|e| panic!("{e}"));
         assert!(mf.is_mapped());
         let duo = mf.duo().unwrap();
-        assert_eq!(duo.len(), tensor_count(duo.config()));
+        assert_eq!(duo.len(), duo.config().tensor_count());
     }
 }
 
@@ -281,9 +281,70 @@ fn rejects_bad_magic() {
 
 #[test]
 fn rejects_future_version() {
+    for v in [0, 3, u32::MAX] {
+        let mut bytes = valid_bytes();
+        set_u32(&mut bytes, 8, v);
+        assert_eq!(parse(&bytes), Err(FormatError::UnsupportedVersion { found: v, supported: 2 }));
+    }
+}
+
+/// Version 1 (a Duolando config first) read as version 2 (a family tag
+/// first) is refused, never misread: the config's first varint is not a
+/// known family with a config that fits, or the rest does not parse.
+#[test]
+fn rejects_version_1_header_under_version_2() {
     let mut bytes = valid_bytes();
     set_u32(&mut bytes, 8, 2);
-    assert_eq!(parse(&bytes), Err(FormatError::UnsupportedVersion { found: 2, supported: 1 }));
+    assert!(parse(&bytes).is_err());
+}
+
+/// Version 2: a Duolando model written with its family tag opens as the
+/// same model (same config, same tensors); an unknown family tag is
+/// refused by number; a Duolando config under the Bailando tag does not
+/// pass as a Bailando model.
+#[test]
+fn version_2_families() {
+    use duolando::duo_writer::{assemble_raw_version, write_model_version};
+    use duolando_core::family::{Family, FamilyConfig};
+    let v1 = valid_bytes();
+    let a = AlignedBytes::copy_from(&v1);
+    let duo1 = DuoFile::parse(a.as_bytes()).unwrap();
+    assert_eq!(duo1.prefix().version, 1);
+    let p = valid_parts();
+    let cfg = FamilyConfig::Duolando(p.header.config);
+    // Re-encode every tensor of the fixture as it is (f32).
+    let tensors: Vec<Tensor> = duo1
+        .tensors()
+        .map(|e| {
+            let t = duo1.tensor(e.name).unwrap();
+            Tensor { name: e.name.to_string(), shape: e.dims().to_vec(), values: t.as_f32().unwrap().to_vec(), store_as: StoreAs::F32 }
+        })
+        .collect();
+    let v2 = write_model_version(&cfg, &tensors, 2).unwrap();
+    let b = AlignedBytes::copy_from(&v2);
+    let duo2 = DuoFile::parse(b.as_bytes()).unwrap();
+    assert_eq!(duo2.prefix().version, 2);
+    assert_eq!(duo2.config(), duo1.config());
+    assert_eq!(duo2.config().family(), Family::Duolando);
+    assert_eq!(duo2.len(), duo1.len());
+    duolando_core::duolando::model::Model::from_duo(&duo2).unwrap();
+    // The header of v2 starts with the tag: patch it.
+    for (tag, want_unknown) in [(2u8, true), (127, true), (1, false)] {
+        let mut bad = v2.clone();
+        assert_eq!(bad[24], 0, "Duolando's tag");
+        bad[24] = tag;
+        let r = parse(&bad);
+        if want_unknown {
+            assert_eq!(r, Err(FormatError::UnknownFamily { tag: tag as u32 }));
+            let msg = r.unwrap_err().to_string();
+            assert!(msg.contains(&format!("model family {tag}")) && msg.contains("Bailando"), "{msg}");
+        } else {
+            assert!(r.is_err(), "a Duolando config under the Bailando tag must not parse: {r:?}");
+        }
+    }
+    // A version-2 header cut inside the tag.
+    let bytes = assemble_raw_version(2, &[], &[]).unwrap();
+    assert_eq!(parse(&bytes), Err(FormatError::MalformedHeader { field: duolando_core::format::HeaderField::Family, offset: 0 }));
 }
 
 #[test]
@@ -521,7 +582,7 @@ fn accepts_zero_padding_after_the_data() {
         padded.resize(bytes.len() + pad, 0);
         let aligned = AlignedBytes::copy_from(&padded);
         let duo = DuoFile::parse(aligned.as_bytes()).unwrap_or_else(|e| panic!("{pad} zero bytes: {e}"));
-        assert_eq!(duo.len(), tensor_count(duo.config()));
+        assert_eq!(duo.len(), duo.config().tensor_count());
         let mf = ModelFile::from_bytes(padded).unwrap_or_else(|e| panic!("{pad} zero bytes: {e}"));
         assert_eq!(mf.bytes().len(), bytes.len() + pad);
     }
@@ -550,7 +611,7 @@ fn rejects_missing_tensor() {
     let removed = p.header.tensors.remove(0);
     let err = parse(&rebuild(&p)).unwrap_err();
     let FormatError::MissingTensor { schema_index } = err else { panic!("expected MissingTensor, got {err:?}") };
-    let spec = schema_tensor(&p.header.config, schema_index).unwrap();
+    let spec = schema_tensor(&p.header.config.into(), schema_index).unwrap();
     assert_eq!(spec.name.as_str(), removed.name);
 }
 

@@ -239,7 +239,7 @@ pub fn restore_as(file: &ModelFile, store: &dyn Fn(&duolando_core::nn::names::Te
     let duo = file.duo().unwrap();
     let cfg = *duo.config();
     let mut tensors = Vec::new();
-    duolando_core::duolando::schema::for_each_tensor::<duolando_core::nn::names::SchemaError>(&cfg, &mut |spec| {
+    cfg.for_each_tensor::<duolando_core::nn::names::SchemaError>(&mut |spec| {
         let t = duo.tensor(&spec.name).unwrap();
         let values: Vec<f32> = match t.dtype {
             DType::F32 => t.data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),
@@ -252,5 +252,5 @@ pub fn restore_as(file: &ModelFile, store: &dyn Fn(&duolando_core::nn::names::Te
         Ok(())
     })
     .unwrap();
-    ModelFile::from_bytes(duolando::duo_writer::write_duo(&cfg, &tensors).unwrap()).unwrap()
+    ModelFile::from_bytes(duolando::duo_writer::write_model(&cfg, &tensors).unwrap()).unwrap()
 }

@@ -236,7 +236,7 @@ use duolando_core::nn::names::{Role, SchemaError};
     duolando::simd::init();
     let f32_file = duolando_tests::restore_as(&duolando_tests::demo_model(), &|_| StoreAs::F32);
     let duo = f32_file.duo().unwrap();
-    let cfg = *duo.config();
+    let cfg = *duo.config().duolando().unwrap();
     let mut tensors = Vec::new();
     let mut n_gemm = 0;
     for_each_tensor::<SchemaError>(&cfg, &mut |spec| {

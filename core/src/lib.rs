@@ -15,6 +15,7 @@ pub mod arena;
 pub mod bailando;
 pub mod duolando;
 pub mod error;
+pub mod family;
 pub mod format;
 pub mod input;
 pub mod kernels;

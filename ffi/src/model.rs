@@ -69,10 +69,13 @@ fn bind(duo: &DuoFile<'static>, origin: &str) -> Result<Model<'static>, Failure>
         duolando_runtime::simd::init();
     });
     Model::from_duo(duo).map_err(|e| {
-        Failure::new(
-            DuoResult::BadModel,
-            format!("{origin}: invalid .duo model: {}", duolando_runtime::engine_errors::describe(&duolando_core::Error::from(e))),
-        )
+        let msg = match e {
+            // A valid file of another family: say which (this library's C
+            // sessions run Duolando models so far).
+            duolando_core::nn::bind::BindError::Family { .. } => format!("{origin}: {}", duolando_runtime::engine_errors::describe_bind(&e)),
+            _ => format!("{origin}: invalid .duo model: {}", duolando_runtime::engine_errors::describe(&duolando_core::Error::from(e))),
+        };
+        Failure::new(DuoResult::BadModel, msg)
     })
 }
 

@@ -45,6 +45,10 @@ pub enum DuoInput {
     Raw(Vec<u8>),
     /// The base file with these edits (config, table, then bytes).
     Edited { config: Vec<ConfigEdit>, table: Vec<EntryEdit>, bytes: Vec<ByteMutation> },
+    /// The base file re-encoded as format version 2 under family tag `tag`
+    /// (0 Duolando, 1 Bailando: a config of one family under the other's
+    /// tag; 2..: unknown families), then these edits.
+    Family { tag: u8, config: Vec<ConfigEdit>, bytes: Vec<ByteMutation> },
     /// The base file with weights overwritten by edge bit patterns (NaN,
     /// infinities, the largest finite values, subnormals): see [`poison`].
     Weights(Vec<WeightEdit>),
@@ -105,12 +109,15 @@ pub fn poison(edits: &[WeightEdit], base: &Parts) -> (Vec<u8>, Option<(u32, u64)
     let want = planted.iter().filter(|p| p.2).map(|&(i, el, _)| (i, el)).min();
     let p = Parts { data, ..base.clone() };
     let header = header_bytes(&p);
-    (duolando::duo_writer::assemble_raw(&header, &p.data).expect("assemble"), want)
+    (duolando::duo_writer::assemble_raw_version(p.version, &header, &p.data).expect("assemble"), want)
 }
 
 /// The pieces of a valid `.duo` file, editable.
 #[derive(Clone, Debug)]
 pub struct Parts {
+    /// Format version of the prefix (1: `config_bytes` is a Duolando
+    /// config; 2: the family tag varint, then that family's config).
+    pub version: u32,
     pub config_bytes: Vec<u8>,
     pub entries: Vec<HeaderEntry>,
     pub data: Vec<u8>,
@@ -120,14 +127,19 @@ pub struct Parts {
 pub fn split(bytes: &[u8]) -> Parts {
     let aligned = AlignedBytes::copy_from(bytes);
     let file = DuoFile::parse(aligned.as_bytes()).expect("base .duo parses");
-    let config_bytes = postcard::to_stdvec(file.config()).expect("config encodes");
+    let version = file.prefix().version;
+    let config_bytes = match (version, file.config().duolando()) {
+        (duolando_core::format::VERSION_DUOLANDO, Some(c)) => postcard::to_stdvec(c),
+        _ => postcard::to_stdvec(file.config()),
+    }
+    .expect("config encodes");
     let entries = file
         .tensors()
         .map(|e| HeaderEntry { name: e.name.to_string(), dtype: e.dtype as u8, shape: e.dims().to_vec(), offset: e.offset, nbytes: e.nbytes })
         .collect();
     let header_len = u64::from_le_bytes(bytes[16..24].try_into().unwrap());
     let data_start = align_up(PREFIX_LEN as u64 + header_len).unwrap() as usize;
-    Parts { config_bytes, entries, data: bytes[data_start..].to_vec() }
+    Parts { version, config_bytes, entries, data: bytes[data_start..].to_vec() }
 }
 
 fn at(n: usize, i: u16) -> Option<usize> {
@@ -256,7 +268,24 @@ pub fn build(input: &DuoInput, base: &Parts) -> Vec<u8> {
             }
             let header = header_bytes(&p);
             let header_end = PREFIX_LEN + header.len();
-            let mut out = duolando::duo_writer::assemble_raw(&header, &p.data).expect("assemble");
+            let mut out = duolando::duo_writer::assemble_raw_version(p.version, &header, &p.data).expect("assemble");
+            apply_all(&mut out, Regions { prefix: PREFIX_LEN, header_end }, &bytes[..bytes.len().min(16)]);
+            out
+        }
+        DuoInput::Family { tag, config, bytes } => {
+            let mut p = base.clone();
+            if p.version == duolando_core::format::VERSION_DUOLANDO {
+                p.config_bytes.insert(0, 0);
+                p.version = duolando_core::format::VERSION;
+            }
+            // One-byte varint tags: 0..=127 (the tiny2 base's tag is 0).
+            p.config_bytes[0] = tag % 128;
+            for c in config.iter().take(16) {
+                c.apply(&mut p.config_bytes);
+            }
+            let header = header_bytes(&p);
+            let header_end = PREFIX_LEN + header.len();
+            let mut out = duolando::duo_writer::assemble_raw_version(p.version, &header, &p.data).expect("assemble");
             apply_all(&mut out, Regions { prefix: PREFIX_LEN, header_end }, &bytes[..bytes.len().min(16)]);
             out
         }

@@ -22,12 +22,34 @@ pub fn buffer_name(b: Buffer) -> &'static str {
     }
 }
 
+/// One sentence describing why a model could not be bound.
+pub fn describe_bind(b: &duolando_core::nn::bind::BindError) -> String {
+    use duolando_core::nn::bind::BindError;
+    match b {
+        BindError::Family { expected, found } => format!(
+            "this is a {} model ({}); a {} model ({}) is needed here",
+            found.name(),
+            what(*found),
+            expected.name(),
+            what(*expected)
+        ),
+        other => format!("the model cannot be bound: {other:?}"),
+    }
+}
+
+fn what(f: duolando_core::family::Family) -> &'static str {
+    match f {
+        duolando_core::family::Family::Duolando => "a follower that dances with a leader to music",
+        duolando_core::family::Family::Bailando => "a solo dancer to music",
+    }
+}
+
 /// One sentence describing a core error.
 pub fn describe(e: &Error) -> String {
     const STREAMS: [&str; 5] = ["up", "down", "lhand", "rhand", "transl"];
     match e {
         Error::Arena(a) => format!("scratch memory too small ({a:?})"),
-        Error::Bind(b) => format!("the model cannot be bound: {b:?}"),
+        Error::Bind(b) => describe_bind(b),
         Error::Length { buffer, len, expected } => {
             format!("{} has {len} values, {expected} expected", buffer_name(*buffer))
         }

@@ -206,8 +206,14 @@ pub fn explain(bytes: &[u8], error: &FormatError) -> String {
 }
 
 /// The config of a `.duo` header, if it decodes (for messages).
-fn header_config(bytes: &[u8]) -> Option<duolando_core::duolando::config::ModelConfig> {
+fn header_config(bytes: &[u8]) -> Option<duolando_core::family::FamilyConfig> {
+    use duolando_core::family::FamilyConfig;
+    let version = u32::from_le_bytes(bytes.get(8..12)?.try_into().ok()?);
     let len = u64::from_le_bytes(bytes.get(16..24)?.try_into().ok()?);
     let header = bytes.get(24..24usize.checked_add(usize::try_from(len).ok()?)?)?;
-    postcard::take_from_bytes(header).ok().map(|(c, _)| c)
+    if version == duolando_core::format::VERSION_DUOLANDO {
+        postcard::take_from_bytes(header).ok().map(|(c, _)| FamilyConfig::Duolando(c))
+    } else {
+        postcard::take_from_bytes(header).ok().map(|(c, _)| c)
+    }
 }

@@ -7,7 +7,8 @@ use std::fmt;
 use std::path::Path;
 
 use duolando_core::duolando::config::ModelConfig;
-use duolando_core::format::{align_up, ALIGN, MAGIC, PREFIX_LEN, VERSION};
+use duolando_core::family::{Family, FamilyConfig};
+use duolando_core::format::{align_up, ALIGN, MAGIC, PREFIX_LEN, VERSION, VERSION_DUOLANDO};
 use duolando_core::tensor::DType;
 use serde::Serialize;
 
@@ -135,6 +136,14 @@ pub struct Header {
     pub tensors: Vec<HeaderEntry>,
 }
 
+/// A version-2 header (docs/FORMAT.md §2): the family's config (its tag,
+/// then the config), then the tensor table.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeaderV2 {
+    pub config: FamilyConfig,
+    pub tensors: Vec<HeaderEntry>,
+}
+
 /// Why a set of tensors could not be written.
 #[derive(Debug)]
 pub enum WriteError {
@@ -179,13 +188,24 @@ pub fn assemble(header: &Header, data: &[u8]) -> Result<Vec<u8>, WriteError> {
     assemble_raw(&header_bytes, data)
 }
 
-/// [`assemble`] with already-encoded header bytes.
+/// [`assemble`] of a version-2 header (any family).
+pub fn assemble_v2(header: &HeaderV2, data: &[u8]) -> Result<Vec<u8>, WriteError> {
+    let header_bytes = postcard::to_stdvec(header).map_err(WriteError::Encode)?;
+    assemble_raw_version(VERSION, &header_bytes, data)
+}
+
+/// [`assemble`] with already-encoded version-1 header bytes.
 pub fn assemble_raw(header_bytes: &[u8], data: &[u8]) -> Result<Vec<u8>, WriteError> {
+    assemble_raw_version(VERSION_DUOLANDO, header_bytes, data)
+}
+
+/// Prefix of `version` + `header_bytes` + zero padding + `data`.
+pub fn assemble_raw_version(version: u32, header_bytes: &[u8], data: &[u8]) -> Result<Vec<u8>, WriteError> {
     let header_end = (PREFIX_LEN + header_bytes.len()) as u64;
     let data_start = align_up(header_end).unwrap_or(header_end) as usize;
     let mut out = Vec::with_capacity(data_start + data.len());
     out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&version.to_le_bytes());
     out.extend_from_slice(&0u32.to_le_bytes());
     out.extend_from_slice(&(header_bytes.len() as u64).to_le_bytes());
     out.extend_from_slice(header_bytes);
@@ -194,9 +214,22 @@ pub fn assemble_raw(header_bytes: &[u8], data: &[u8]) -> Result<Vec<u8>, WriteEr
     Ok(out)
 }
 
-/// Encodes `tensors` (any order) under `config` into `.duo` bytes and
-/// validates them with `DuoFile::parse` (schema and shapes included).
+/// Encodes `tensors` (any order) under a Duolando `config` into `.duo`
+/// bytes (format version 1, as Duolando models have always been written)
+/// and validates them with `DuoFile::parse` (schema and shapes included).
 pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, WriteError> {
+    write_model(&FamilyConfig::Duolando(*config), tensors)
+}
+
+/// [`write_duo`] for any family: Duolando models as version 1 (bytes
+/// unchanged since before families), every other family as version 2.
+pub fn write_model(config: &FamilyConfig, tensors: &[Tensor]) -> Result<Vec<u8>, WriteError> {
+    write_model_version(config, tensors, if config.family() == Family::Duolando { VERSION_DUOLANDO } else { VERSION })
+}
+
+/// [`write_model`] in a given format version (2 for any family, 1 only for
+/// Duolando); tests write Duolando models as version 2 with it.
+pub fn write_model_version(config: &FamilyConfig, tensors: &[Tensor], version: u32) -> Result<Vec<u8>, WriteError> {
     let mut order: Vec<&Tensor> = tensors.iter().collect();
     order.sort_by(|a, b| a.name.as_bytes().cmp(b.name.as_bytes()));
     for pair in order.windows(2) {
@@ -255,7 +288,10 @@ pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, Wr
         data.resize(data.len().next_multiple_of(ALIGN), 0);
         entries.push(HeaderEntry { name: t.name.clone(), dtype: dtype as u8, shape: t.shape.clone(), offset, nbytes });
     }
-    let bytes = assemble(&Header { config: *config, tensors: entries }, &data)?;
+    let bytes = match (version, config) {
+        (VERSION_DUOLANDO, FamilyConfig::Duolando(c)) => assemble(&Header { config: *c, tensors: entries }, &data)?,
+        _ => assemble_v2(&HeaderV2 { config: *config, tensors: entries }, &data)?,
+    };
     ModelFile::from_aligned(AlignedBytes::copy_from(&bytes), "<written model>").map_err(WriteError::Rejected)?;
     Ok(bytes)
 }
@@ -264,7 +300,12 @@ pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, Wr
 /// the same directory, renamed into place, so a failed write leaves no
 /// half-written model behind).
 pub fn write_duo_to_path(config: &ModelConfig, tensors: &[Tensor], path: &Path) -> Result<(), WriteError> {
-    let bytes = write_duo(config, tensors)?;
+    write_model_to_path(&FamilyConfig::Duolando(*config), tensors, path)
+}
+
+/// [`write_model`], then writes the bytes to `path` as [`write_duo_to_path`] does.
+pub fn write_model_to_path(config: &FamilyConfig, tensors: &[Tensor], path: &Path) -> Result<(), WriteError> {
+    let bytes = write_model(config, tensors)?;
     let io = |source| WriteError::Io { path: path.display().to_string(), source };
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".partial");

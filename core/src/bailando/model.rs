@@ -69,6 +69,15 @@ impl<'a> Model<'a> {
         Ok(Model { cfg: *cfg, gpt, parts: [up, down], root })
     }
 
+    /// Binds every weight of a parsed `.duo` file; a file of another
+    /// family is refused ([`BindError::Family`]).
+    pub fn from_duo(file: &crate::format::DuoFile<'a>) -> Result<Model<'a>, BindError> {
+        match file.config() {
+            crate::family::FamilyConfig::Bailando(cfg) => Model::bind(cfg, file),
+            other => Err(BindError::Family { expected: crate::family::Family::Bailando, found: other.family() }),
+        }
+    }
+
     pub fn config(&self) -> &BailandoConfig {
         &self.cfg
     }

@@ -92,8 +92,12 @@ const _: () = {
 impl<'a> Model<'a> {
     /// Binds every weight of a parsed `.duo` file (its config was validated
     /// by the decoder and is validated again here).
+    /// A file of another family is refused ([`BindError::Family`]).
     pub fn from_duo(file: &crate::format::DuoFile<'a>) -> Result<Model<'a>, BindError> {
-        Model::bind(file.config(), file)
+        match file.config() {
+            crate::family::FamilyConfig::Duolando(cfg) => Model::bind(cfg, file),
+            other => Err(BindError::Family { expected: crate::family::Family::Duolando, found: other.family() }),
+        }
     }
 }
 

@@ -42,6 +42,8 @@ impl fmt::Display for Shape {
 /// Which postcard field of the header failed to decode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum HeaderField {
+    /// The family tag of a version-2 header.
+    Family,
     Config,
     TensorCount,
     Name,
@@ -55,6 +57,7 @@ pub enum HeaderField {
 impl fmt::Display for HeaderField {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
+            HeaderField::Family => "model family tag",
             HeaderField::Config => "model config",
             HeaderField::TensorCount => "tensor count",
             HeaderField::Name => "tensor name",
@@ -79,6 +82,8 @@ pub enum FormatError {
     BadMagic { found: [u8; 8] },
     /// A format version this decoder does not read.
     UnsupportedVersion { found: u32, supported: u32 },
+    /// A version-2 header names a family this build does not read.
+    UnknownFamily { tag: u32 },
     /// Flag bits that v1 does not define.
     UnknownFlags { flags: u32 },
     /// The header length is over [`super::MAX_HEADER_LEN`].
@@ -164,9 +169,13 @@ impl fmt::Display for FormatError {
                 hex(f, &super::MAGIC)
             }
             UnsupportedVersion { found, supported } => {
-                write!(f, ".duo format version {found} is not supported (this decoder reads version {supported})")
+                write!(f, ".duo format version {found} is not supported (this decoder reads versions 1 to {supported})")
             }
-            UnknownFlags { flags } => write!(f, "unknown flag bits {flags:#010x} (version 1 defines none)"),
+            UnknownFamily { tag } => write!(
+                f,
+                "model family {tag} is not one this build reads (0 Duolando, 1 Bailando); a newer duolando may read it"
+            ),
+            UnknownFlags { flags } => write!(f, "unknown flag bits {flags:#010x} (versions 1 and 2 define none)"),
             HeaderTooLarge { header_len, max } => write!(f, "header length {header_len} exceeds the cap of {max} bytes"),
             HeaderPastEnd { header_end, file_len } => {
                 write!(f, "header ends at byte {header_end} but the file has only {file_len} bytes")

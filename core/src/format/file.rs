@@ -4,6 +4,8 @@ use super::prefix::Prefix;
 use super::table::{decode_entry, Cursor, TensorEntry};
 use super::{align_up, schema_check, FormatError, HeaderField, MAX_TENSORS, PREFIX_LEN};
 use crate::duolando::config::ModelConfig;
+use crate::bailando::config::BailandoConfig;
+use crate::family::{Family, FamilyConfig};
 use crate::kernels::simd::{PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES};
 use crate::tensor::{block_row, DType, TensorRef};
 
@@ -14,7 +16,7 @@ use crate::tensor::{block_row, DType, TensorRef};
 #[derive(Clone, Copy, Debug)]
 pub struct DuoFile<'a> {
     prefix: Prefix,
-    config: ModelConfig,
+    config: FamilyConfig,
     /// Header bytes holding the tensor entries (after the config and count).
     table: &'a [u8],
     count: u32,
@@ -62,7 +64,16 @@ impl<'a> DuoFile<'a> {
         let data_len = data.len() as u64;
 
         let mut cur = Cursor::new(header);
-        let config: ModelConfig = cur.take(HeaderField::Config)?;
+        let config = if prefix.version == super::VERSION_DUOLANDO {
+            FamilyConfig::Duolando(cur.take::<ModelConfig>(HeaderField::Config)?)
+        } else {
+            let tag: u32 = cur.take(HeaderField::Family)?;
+            match Family::from_tag(tag) {
+                Some(Family::Duolando) => FamilyConfig::Duolando(cur.take::<ModelConfig>(HeaderField::Config)?),
+                Some(Family::Bailando) => FamilyConfig::Bailando(cur.take::<BailandoConfig>(HeaderField::Config)?),
+                None => return Err(FormatError::UnknownFamily { tag }),
+            }
+        };
         config.validate().map_err(FormatError::InvalidConfig)?;
         let count: u64 = cur.take(HeaderField::TensorCount)?;
         if count > MAX_TENSORS as u64 {
@@ -136,8 +147,8 @@ impl<'a> DuoFile<'a> {
         Ok(file)
     }
 
-    /// The model configuration (already validated).
-    pub fn config(&self) -> &ModelConfig {
+    /// The model's family and configuration (already validated).
+    pub fn config(&self) -> &FamilyConfig {
         &self.config
     }
 

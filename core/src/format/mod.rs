@@ -1,11 +1,11 @@
-//! The `.duo` model file, version 1 (byte layout and every rule: docs/FORMAT.md).
+//! The `.duo` model file, versions 1 and 2 (byte layout and every rule: docs/FORMAT.md).
 //!
 //! ```text
 //! offset 0   magic        8 bytes  89 44 55 4F 0D 0A 1A 0A  ("\x89DUO\r\n\x1a\n")
-//!        8   version      u32 LE   1
+//!        8   version      u32 LE   1 (Duolando) or 2 (any family)
 //!       12   flags        u32 LE   0 (no flag defined in v1; any set bit is rejected)
 //!       16   header_len   u64 LE   bytes of the postcard header that follows
-//!       24   header       postcard: ModelConfig, then the tensor table
+//!       24   header       postcard: v1 ModelConfig / v2 FamilyConfig, then the tensor table
 //!            padding      zero bytes up to the next multiple of 64
 //!  data_start data        tensor payloads, each 64-byte aligned, in table order
 //!            padding      zero bytes up to the next multiple of 64, then any
@@ -36,8 +36,13 @@ pub use table::{entry_name, TensorEntry};
 /// First 8 bytes of every `.duo` file. The high first byte and the CR LF /
 /// ^Z / LF tail catch 7-bit and newline-translating transfers (as PNG does).
 pub const MAGIC: [u8; 8] = *b"\x89DUO\r\n\x1a\n";
-/// The format version this decoder reads (and the writer writes).
-pub const VERSION: u32 = 1;
+/// The newest format version this decoder reads: version 2 (any family;
+/// the header starts with the family tag). Version 1 files (the header
+/// starts with a Duolando config) are read as Duolando models, and the
+/// writer still writes Duolando models as version 1 (docs/FORMAT.md §1).
+pub const VERSION: u32 = 2;
+/// The version of Duolando-only headers (before families).
+pub const VERSION_DUOLANDO: u32 = 1;
 /// Bytes of the fixed prefix: magic, version, flags, header length.
 pub const PREFIX_LEN: usize = 24;
 /// Alignment of the data section, of every tensor payload, and of the model

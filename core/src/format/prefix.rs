@@ -1,6 +1,6 @@
 //! The fixed 24-byte little-endian prefix and the layout it implies.
 
-use super::{align_up, FormatError, ALIGN, MAGIC, MAX_HEADER_LEN, PREFIX_LEN, VERSION};
+use super::{align_up, FormatError, ALIGN, MAGIC, MAX_HEADER_LEN, PREFIX_LEN, VERSION, VERSION_DUOLANDO};
 
 /// The decoded prefix plus the derived section boundaries (all checked).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,7 +46,7 @@ impl Prefix {
             return Err(FormatError::BadMagic { found });
         }
         let version = u32_at(bytes, 8);
-        if version != VERSION {
+        if !(VERSION_DUOLANDO..=VERSION).contains(&version) {
             return Err(FormatError::UnsupportedVersion { found: version, supported: VERSION });
         }
         let flags = u32_at(bytes, 12);

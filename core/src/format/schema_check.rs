@@ -3,7 +3,7 @@
 //! (a ConvTranspose1d weight in either order: `TensorSpec::accepts`).
 
 use super::{DuoFile, FormatError, Shape};
-use crate::duolando::schema::for_each_tensor;
+use crate::family::FamilyConfig;
 use crate::nn::names::{SchemaError, TensorSpec};
 
 impl From<SchemaError> for FormatError {
@@ -16,7 +16,7 @@ impl From<SchemaError> for FormatError {
 /// weight's GEMM-order shape); nothing else present.
 pub(super) fn check(file: &DuoFile<'_>) -> Result<(), FormatError> {
     let mut schema_index: u32 = 0;
-    for_each_tensor::<FormatError>(file.config(), &mut |spec: &TensorSpec| {
+    file.config().for_each_tensor::<FormatError>(&mut |spec: &TensorSpec| {
         let (index, e) = file.find(spec.name.as_str()).ok_or(FormatError::MissingTensor { schema_index })?;
         if !spec.accepts(e.dims()) {
             return Err(FormatError::ShapeMismatch {
@@ -52,7 +52,7 @@ fn in_schema(file: &DuoFile<'_>, name: &str) -> bool {
             Stop::Schema
         }
     }
-    let r = for_each_tensor::<Stop>(file.config(), &mut |spec: &TensorSpec| {
+    let r = file.config().for_each_tensor::<Stop>(&mut |spec: &TensorSpec| {
         if spec.name.as_str() == name {
             Err(Stop::Found)
         } else {
@@ -67,7 +67,7 @@ fn in_schema(file: &DuoFile<'_>, name: &str) -> bool {
 // The spec travels by value through the visitor's error channel once, on
 // an error path; boxing it would need alloc.
 #[allow(clippy::result_large_err)]
-pub fn schema_tensor(cfg: &crate::duolando::config::ModelConfig, schema_index: u32) -> Option<TensorSpec> {
+pub fn schema_tensor(cfg: &FamilyConfig, schema_index: u32) -> Option<TensorSpec> {
     enum Stop {
         Found(TensorSpec),
         Schema,
@@ -78,7 +78,7 @@ pub fn schema_tensor(cfg: &crate::duolando::config::ModelConfig, schema_index: u
         }
     }
     let mut i = 0u32;
-    let r = for_each_tensor::<Stop>(cfg, &mut |spec: &TensorSpec| {
+    let r = cfg.for_each_tensor::<Stop>(&mut |spec: &TensorSpec| {
         if i == schema_index {
             return Err(Stop::Found(spec.clone()));
         }

@@ -34,6 +34,8 @@ pub enum BindError {
     Misaligned { name: TensorName },
     /// A layer count above its fixed capacity (caught by validate first).
     Capacity,
+    /// The file holds a model of another family than the one asked for.
+    Family { expected: crate::family::Family, found: crate::family::Family },
 }
 
 impl From<SchemaError> for BindError {

@@ -75,7 +75,7 @@ pub fn run(args: Args) -> Result<()> {
     let file = open(&model_path)?;
     super::print_kernels();
     let duo = file.duo()?;
-    let model = Model::from_duo(&duo).map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", model_path.display()))?;
+    let model = Model::from_duo(&duo).map_err(|e| anyhow::anyhow!("{}: {}", model_path.display(), crate::engine_errors::describe_bind(&e)))?;
     let n_music = model.cfg.gpt.music.n_in as usize;
     let demo_inputs = args.leader.is_none() && args.music.is_none();
     let leader_path = match &args.leader {
@@ -139,7 +139,7 @@ pub fn run(args: Args) -> Result<()> {
         Some(b_path) => {
             let b_file = open(b_path)?;
             let b_duo = b_file.duo()?;
-            let b = Model::from_duo(&b_duo).map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", b_path.display()))?;
+            let b = Model::from_duo(&b_duo).map_err(|e| anyhow::anyhow!("{}: {}", b_path.display(), crate::engine_errors::describe_bind(&e)))?;
             if b.cfg != model.cfg {
                 bail!("{} and {} have different configs; compare conversions of the same checkpoint", model_path.display(), b_path.display());
             }

@@ -199,7 +199,7 @@ pub fn run(args: Args) -> Result<()> {
     super::print_kernels();
     let duo = file.duo()?;
     let model = Model::from_duo(&duo)
-        .map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", args.model.display()))?;
+        .map_err(|e| anyhow::anyhow!("{}: {}", args.model.display(), crate::engine_errors::describe_bind(&e)))?;
     let n_music = model.cfg.gpt.music.n_in as usize;
     let leader = read_f32_2d(&args.leader, Some(POSE_DIM), "leader joint positions (T, 165)")?;
     let music = read_f32_2d(&args.music, Some(n_music), &format!("music features (T, {n_music})"))?;

@@ -11,7 +11,9 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use duolando_core::bailando::config::BailandoConfig;
 use duolando_core::duolando::config::{LatConfig, ModelConfig};
+use duolando_core::family::FamilyConfig;
 use duolando_core::nn::vq_config::VqConfig;
 use duolando_core::duolando::exact;
 use duolando_core::duolando::model::Model;
@@ -65,7 +67,6 @@ pub fn report(model: &std::path::Path, frames: usize) -> Result<Value> {
     let file_size = std::fs::metadata(model).with_context(|| format!("cannot read {}", model.display()))?.len();
     let file = ModelFile::open(model)?;
     let duo = file.duo()?;
-    let cfg = *duo.config();
     let mut per: BTreeMap<&'static str, DtypeStats> = BTreeMap::new();
     let mut params: u64 = 0;
     for e in duo.tensors() {
@@ -80,6 +81,96 @@ pub fn report(model: &std::path::Path, frames: usize) -> Result<Value> {
         .iter()
         .map(|(k, s)| (k.to_string(), json!({ "tensors": s.tensors, "params": s.params, "bytes": s.bytes })))
         .collect();
+    let prefix = duo.prefix();
+    let common = json!({
+        "model": model.display().to_string(),
+        "family": duo.config().family().name(),
+        "format_version": prefix.version,
+        "file_bytes": file_size,
+        "data_start": prefix.data_start,
+        "tensors": duo.len(),
+        "params": params,
+        "dtypes": dtypes,
+    });
+    let specific = match duo.config() {
+        FamilyConfig::Duolando(cfg) => duolando_report(&duo, cfg, frames)?,
+        FamilyConfig::Bailando(cfg) => bailando_report(cfg, frames),
+    };
+    let mut all = common;
+    if let (Some(a), Value::Object(b)) = (all.as_object_mut(), specific) {
+        a.extend(b);
+    }
+    Ok(all)
+}
+
+/// Bailando: config, frame and token rates, R mode's sizes for `rows`
+/// music rows (7.5 per second) on the demo path. S mode is not built yet.
+fn bailando_report(cfg: &BailandoConfig, rows: usize) -> Value {
+    use duolando_core::bailando::exact;
+    let run = |r: usize| -> Value {
+        let k = exact::steps(exact::MusicPadding::Demo, r.max(1));
+        json!({
+            "music_rows": r,
+            "steps": k,
+            "token_rows": k + 1,
+            "output_frames": (k + 1) * cfg.hop(),
+            "scratch_bytes": exact::sample_scratch_bytes(cfg).zip(exact::decode_scratch_bytes(cfg, k + 1)).map(|(a, b)| a.max(b)),
+        })
+    };
+    json!({
+        "config": cfg,
+        "derived": {
+            "fps": duolando_core::bailando::config::FPS,
+            "joints": duolando_core::bailando::config::N_JOINTS,
+            "frames_per_token": cfg.hop(),
+            "music_features": cfg.gpt.n_music,
+            "window_tokens": cfg.gpt.block_size - 1,
+        },
+        "r_mode": {
+            "one_minute": run(BAILANDO_MUSIC_ROWS_PER_MINUTE),
+            "requested": run(rows),
+            "latency": "R mode is offline: it needs the whole music before the first output frame",
+        },
+        "streaming": Value::Null,
+    })
+}
+
+/// Music rows of one minute at Bailando's 7.5 rows per second.
+const BAILANDO_MUSIC_ROWS_PER_MINUTE: usize = 450;
+
+fn bailando_text(r: &Value, cfg: &BailandoConfig) -> String {
+    let g = &cfg.gpt;
+    let mut s = head_text(r);
+    let mut line = |l: String| {
+        s.push_str(&l);
+        s.push('\n');
+    };
+    line("config (Bailando)".into());
+    line(format!(
+        "  gpt n_embd {} heads {} base {} head {} block_size {} vocab up/down {:?} n_music {}",
+        g.n_embd, g.n_head, g.n_layer_base, g.n_layer_head, g.block_size, g.vocab, g.n_music
+    ));
+    for (name, v) in ["up", "down"].iter().zip(&cfg.parts) {
+        line(vq_line(name, v));
+    }
+    line(format!("  {} frames per token at 60 fps, SMPL 24 joints", cfg.hop()));
+    line("R mode (exact, demo path)".into());
+    for (label, key) in [("1 min", "one_minute"), ("--frames (music rows)", "requested")] {
+        let x = &r["r_mode"][key];
+        line(format!(
+            "  {label}: {} music rows -> {} steps, {} output frames; scratch {}",
+            x["music_rows"],
+            x["steps"],
+            x["output_frames"],
+            x["scratch_bytes"].as_u64().map(mib).unwrap_or_else(|| "overflow".into())
+        ));
+    }
+    line("streaming (S): not built yet for Bailando".into());
+    s
+}
+
+fn duolando_report(duo: &duolando_core::format::DuoFile<'_>, cfg: &ModelConfig, frames: usize) -> Result<Value> {
+    let cfg = *cfg;
     let run = |t: usize| -> Value {
         match exact::output_shape(&cfg, t) {
             Some(sh) => json!({
@@ -93,15 +184,7 @@ pub fn report(model: &std::path::Path, frames: usize) -> Result<Value> {
             None => json!({ "input_frames": t, "error": format!("fewer than {} frames (one token)", cfg.hop()) }),
         }
     };
-    let prefix = duo.prefix();
     Ok(json!({
-        "model": model.display().to_string(),
-        "format_version": prefix.version,
-        "file_bytes": file_size,
-        "data_start": prefix.data_start,
-        "tensors": duo.len(),
-        "params": params,
-        "dtypes": dtypes,
         "config": cfg,
         "derived": {
             "fps": FPS,
@@ -113,14 +196,14 @@ pub fn report(model: &std::path::Path, frames: usize) -> Result<Value> {
             "requested": run(frames),
             "latency": "R mode is offline: it needs the whole leader clip and music before the first output frame",
         },
-        "streaming": streaming(&duo)?,
+        "streaming": streaming(duo)?,
     }))
 }
 
 /// Latency and session arena per streaming budget (docs/STREAMING.md §2):
 /// every preset of the one list (`Preset::ALL`, what `--preset` takes).
 fn streaming(duo: &duolando_core::format::DuoFile<'_>) -> Result<Value> {
-    let model = Model::from_duo(duo).map_err(|e| anyhow::anyhow!("the model cannot be bound: {e:?}"))?;
+    let model = Model::from_duo(duo).map_err(|e| anyhow::anyhow!("{}", crate::engine_errors::describe_bind(&e)))?;
     let cfg = &model.cfg;
     let hop = cfg.hop() as u32;
     let budgets: Vec<Value> = Preset::ALL
@@ -196,9 +279,8 @@ fn run_lines(r: &Value) -> String {
     }
 }
 
-/// The human-readable form of [`report`].
-fn text(r: &Value, cfg: &ModelConfig) -> String {
-    let g = &cfg.gpt;
+/// The lines every family's text starts with: file, format, dtypes.
+fn head_text(r: &Value) -> String {
     let mut s = String::new();
     let mut line = |l: String| {
         s.push_str(&l);
@@ -206,7 +288,8 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
     };
     line(r["model"].as_str().unwrap_or("").to_string());
     line(format!(
-        "  file {} ({} bytes), format v{}, {} tensors, {} parameters",
+        "  {} model, file {} ({} bytes), format v{}, {} tensors, {} parameters",
+        r["family"].as_str().unwrap_or("?"),
         mib(r["file_bytes"].as_u64().unwrap_or(0)),
         r["file_bytes"],
         r["format_version"],
@@ -223,6 +306,17 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
             ));
         }
     }
+    s
+}
+
+/// The human-readable form of [`report`] for a Duolando model.
+fn text(r: &Value, cfg: &ModelConfig) -> String {
+    let g = &cfg.gpt;
+    let mut s = head_text(r);
+    let mut line = |l: String| {
+        s.push_str(&l);
+        s.push('\n');
+    };
     line("config".into());
     line(format!(
         "  gpt n_embd {} heads {} base {} head {} block_size {} look_forward {} streams {} final_ln {}",
@@ -276,8 +370,13 @@ pub fn run(args: Args) -> Result<()> {
     let out = if args.json {
         serde_json::to_string_pretty(&r)? + "\n"
     } else {
-        let cfg: ModelConfig = serde_json::from_value(r["config"].clone()).context("internal: config round trip")?;
-        text(&r, &cfg)
+        if r["family"] == "Bailando" {
+            let cfg: BailandoConfig = serde_json::from_value(r["config"].clone()).context("internal: config round trip")?;
+            bailando_text(&r, &cfg)
+        } else {
+            let cfg: ModelConfig = serde_json::from_value(r["config"].clone()).context("internal: config round trip")?;
+            text(&r, &cfg)
+        }
     };
     print_stdout(&out)
 }

@@ -251,7 +251,7 @@ pub fn run(args: Args) -> Result<()> {
     super::print_kernels();
     let duo = file.duo()?;
     let model = Model::from_duo(&duo)
-        .map_err(|e| anyhow::anyhow!("{}: the model cannot be bound: {e:?}", model_path.display()))?;
+        .map_err(|e| anyhow::anyhow!("{}: {}", model_path.display(), crate::engine_errors::describe_bind(&e)))?;
     let cfg = model.cfg;
     let hop = cfg.hop();
     let sc: SessionConfig = args.budget.config(&cfg)?;

@@ -15,6 +15,7 @@
 //! - `skipped`: tensors that are not stored, and the mask checks.
 //! - `error`: `ConvertError`.
 
+pub mod bailando;
 pub mod config;
 pub mod error;
 pub mod skipped;
@@ -238,12 +239,18 @@ pub fn convert_files(
     let (m_gpt, m_vq, m_tr) = (map(gpt)?, map(vqvae)?, map(transl)?);
     let sources = Sources { gpt: (gpt, &m_gpt), vqvae: (vqvae, &m_vq), transl: (transl, &m_tr) };
     let (bytes, report) = convert_with_config(&cfg, &sources, store_as, out)?;
+    write_atomically(out, &bytes)?;
+    Ok(report)
+}
+
+/// Writes `bytes` to `out` via a temporary file renamed into place (a
+/// failed write leaves no half-written model).
+pub fn write_atomically(out: &Path, bytes: &[u8]) -> Result<(), ConvertError> {
     let io = |source| ConvertError::Io { path: out.into(), source };
     let mut tmp = out.as_os_str().to_owned();
     tmp.push(".partial");
-    std::fs::write(&tmp, &bytes).map_err(io)?;
-    std::fs::rename(&tmp, out).map_err(io)?;
-    Ok(report)
+    std::fs::write(&tmp, bytes).map_err(io)?;
+    std::fs::rename(&tmp, out).map_err(io)
 }
 
 /// Read-only map of a source file (an empty file maps to nothing).

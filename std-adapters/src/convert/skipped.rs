@@ -94,6 +94,12 @@ pub fn check_mask(src: &Source<'_>, name: &str, kind: MaskKind, cfg: &ModelConfi
             ((g.block_size as u64 + g.look_forward as u64) * ds as u64, Some(g.look_forward as u64 * ds as u64))
         }
     };
+    check_mask_values(src, name, len, band)
+}
+
+/// Checks a `(1, 1, len, len)` mask: ones where `|i - j| <= band`, or on
+/// and below the diagonal when `band` is None (causal).
+pub fn check_mask_values(src: &Source<'_>, name: &str, len: u64, band: Option<u64>) -> Result<(), ConvertError> {
     let view = src.tensors.get(name).ok_or_else(|| ConvertError::Missing {
         path: src.path.clone(),
         tensor: name.to_string(),

@@ -1,0 +1,139 @@
+//! The model families and the one place that dispatches on them: a `.duo`
+//! file's config is a [`FamilyConfig`]; the format's schema check, the
+//! converters and the host interfaces ask it for the family's tensors,
+//! skeleton and music width, and bind the family's own `Model` from it.
+
+use serde::{Deserialize, Serialize};
+
+use crate::bailando::config::BailandoConfig;
+use crate::duolando::config::ModelConfig;
+use crate::limits::ConfigError;
+use crate::nn::names::{SchemaError, TensorSpec};
+
+/// A model family (one per paper). The discriminant is the family's tag in
+/// a version-2 `.duo` header (docs/FORMAT.md §2) and in the C ABI.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum Family {
+    /// Duolando (ICLR 2024): a follower dancing with a leader to music.
+    Duolando = 0,
+    /// Bailando (CVPR 2022): a solo dancer to music.
+    Bailando = 1,
+}
+
+impl Family {
+    /// Every family this build reads, in tag order.
+    pub const ALL: [Family; 2] = [Family::Duolando, Family::Bailando];
+
+    pub const fn name(self) -> &'static str {
+        match self {
+            Family::Duolando => "Duolando",
+            Family::Bailando => "Bailando",
+        }
+    }
+
+    /// The family of a header tag, None for a tag this build does not know.
+    pub const fn from_tag(tag: u32) -> Option<Family> {
+        match tag {
+            0 => Some(Family::Duolando),
+            1 => Some(Family::Bailando),
+            _ => None,
+        }
+    }
+
+    /// Joints of the family's skeleton (SMPL-X 55 for Duolando, SMPL 24 for Bailando).
+    pub const fn joints(self) -> usize {
+        match self {
+            Family::Duolando => crate::duolando::config::N_JOINTS,
+            Family::Bailando => crate::bailando::config::N_JOINTS,
+        }
+    }
+
+    /// Motion frames per second.
+    pub const fn fps(self) -> u32 {
+        match self {
+            Family::Duolando => 30,
+            Family::Bailando => crate::bailando::config::FPS,
+        }
+    }
+
+    /// Whether the family dances with a leader (takes leader frames).
+    pub const fn has_leader(self) -> bool {
+        matches!(self, Family::Duolando)
+    }
+}
+
+/// A family's whole configuration, as a version-2 `.duo` header holds it
+/// (postcard: the family tag as a varint, then that family's config).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum FamilyConfig {
+    Duolando(ModelConfig),
+    Bailando(BailandoConfig),
+}
+
+impl FamilyConfig {
+    pub fn family(&self) -> Family {
+        match self {
+            FamilyConfig::Duolando(_) => Family::Duolando,
+            FamilyConfig::Bailando(_) => Family::Bailando,
+        }
+    }
+
+    /// The family's own validation (caps, head split, channel counts).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        match self {
+            FamilyConfig::Duolando(c) => c.validate(),
+            FamilyConfig::Bailando(c) => c.validate(),
+        }
+    }
+
+    /// The tensors the family's schema lists for this config.
+    pub fn for_each_tensor<E: From<SchemaError>>(&self, f: &mut dyn FnMut(&TensorSpec) -> Result<(), E>) -> Result<(), E> {
+        match self {
+            FamilyConfig::Duolando(c) => crate::duolando::schema::for_each_tensor(c, f),
+            FamilyConfig::Bailando(c) => crate::bailando::schema::for_each_tensor(c, f),
+        }
+    }
+
+    /// Number of tensors the config needs.
+    pub fn tensor_count(&self) -> usize {
+        match self {
+            FamilyConfig::Duolando(c) => crate::duolando::schema::tensor_count(c),
+            FamilyConfig::Bailando(c) => crate::bailando::schema::tensor_count(c),
+        }
+    }
+
+    /// Music features per frame the model reads.
+    pub fn music_features(&self) -> u32 {
+        match self {
+            FamilyConfig::Duolando(c) => c.gpt.music.n_in,
+            FamilyConfig::Bailando(c) => c.gpt.n_music,
+        }
+    }
+
+    pub fn duolando(&self) -> Option<&ModelConfig> {
+        match self {
+            FamilyConfig::Duolando(c) => Some(c),
+            _ => None,
+        }
+    }
+
+    pub fn bailando(&self) -> Option<&BailandoConfig> {
+        match self {
+            FamilyConfig::Bailando(c) => Some(c),
+            _ => None,
+        }
+    }
+}
+
+impl From<ModelConfig> for FamilyConfig {
+    fn from(c: ModelConfig) -> Self {
+        FamilyConfig::Duolando(c)
+    }
+}
+
+impl From<BailandoConfig> for FamilyConfig {
+    fn from(c: BailandoConfig) -> Self {
+        FamilyConfig::Bailando(c)
+    }
+}
