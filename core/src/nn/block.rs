@@ -10,12 +10,18 @@ use crate::nn::weights::{BlockW, Linear};
 /// Working memory of one block over at most `rows` rows of width `c`.
 ///
 /// The MLP hidden rows reuse the memory of the query, key and value rows:
-/// those are dead once the attention has run, before the MLP starts.
+/// those are dead once the attention has run, before the MLP starts. The
+/// MLP output reuses `ln` (dead once the hidden rows are computed). A
+/// streaming session's scratch ([`BlockScratch::carve_keys`]) has no `att`:
+/// [`block_attend_groups`] writes the attention output over `ln` (dead once
+/// the queries are computed) and the projection over the queries.
 #[derive(Default)]
 pub struct BlockScratch<'s> {
-    /// (rows, C) LayerNorm output, then projection output.
+    /// (rows, C) LayerNorm output, then projection output (R mode), or
+    /// attention output (a session's groups); the MLP output.
     pub ln: &'s mut [f32],
-    /// (rows, C) attention output, then MLP output.
+    /// (rows, C) attention output (R mode's `block_forward`,
+    /// `block_forward_rows`); empty in a session's scratch.
     pub att: &'s mut [f32],
     /// (rows, 4C): query | key | value, (rows, C) each, during the
     /// attention; the MLP hidden rows (rows, 4C) after it.
@@ -47,17 +53,20 @@ impl<'s> BlockScratch<'s> {
     /// rows are quantised once per GEMM, each weight tile read once).
     pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, c: usize) -> Result<Self, ArenaError> {
         let mut s = Self::carve_keys(a, rows, rows, c)?;
+        s.att = a.f32(rows.checked_mul(c).ok_or(ArenaError::Overflow)?)?;
         let values = rows.checked_mul(c).and_then(|v| v.checked_mul(4)).ok_or(ArenaError::Overflow)?;
         s.panel = Q8Room::carve(a, values)?;
         Ok(s)
     }
-    /// For blocks over at most `rows` rows whose queries see at most
-    /// `keys` keys (a chunk of rows attending a longer cache).
+    /// For [`block_attend_groups`] over at most `rows` rows whose queries
+    /// see at most `keys` keys (a chunk of rows attending a longer cache):
+    /// a streaming session's, without `att` (the attention output goes
+    /// over `ln`).
     pub fn carve_keys<A: Carve<'s>>(a: &mut A, rows: usize, keys: usize, c: usize) -> Result<Self, ArenaError> {
         let rc = rows.checked_mul(c).ok_or(ArenaError::Overflow)?;
         Ok(BlockScratch {
             ln: a.f32(rc)?,
-            att: a.f32(rc)?,
+            att: &mut [],
             work: a.f32(rc.checked_mul(4).ok_or(ArenaError::Overflow)?)?,
             scores: a.f32(rows.max(keys))?,
             panel: Q8Room::default(),
@@ -78,9 +87,9 @@ impl<'s> BlockScratch<'s> {
         QkvParts { ln: self.ln, q, k, v: &mut rest[..rc], att: self.att, scores: self.scores, panel: self.panel.reborrow() }
     }
 
-    /// The MLP-phase buffers: LayerNorm output, hidden rows (rows, 4C), output, int8 panel.
-    fn mlp_parts(&mut self) -> (&mut [f32], &mut [f32], &mut [f32], Q8Room<'_>) {
-        (self.ln, self.work, self.att, self.panel.reborrow())
+    /// The MLP-phase buffers: LayerNorm output (then the MLP output), hidden rows (rows, 4C), int8 panel.
+    fn mlp_parts(&mut self) -> (&mut [f32], &mut [f32], Q8Room<'_>) {
+        (self.ln, self.work, self.panel.reborrow())
     }
 }
 
@@ -112,13 +121,14 @@ pub fn block_forward<M: Mask>(w: &BlockW<'_>, x: &mut [f32], c: usize, n_head: u
 /// `x += mlp.2(gelu(mlp.0(ln2 x)))` over the first `nc` floats of the
 /// scratch's MLP buffers (`x`: (n, C), `nc = n * C`).
 fn mlp(w: &BlockW<'_>, x: &mut [f32], s: &mut BlockScratch<'_>, nc: usize) {
-    let (ln, hid, out, mut panel) = s.mlp_parts();
-    let (ln, hid, out) = (&mut ln[..nc], &mut hid[..4 * nc], &mut out[..nc]);
+    let (ln, hid, mut panel) = s.mlp_parts();
+    let (ln, hid) = (&mut ln[..nc], &mut hid[..4 * nc]);
     layernorm(x, w.ln2.w, w.ln2.b, ln);
     // GELU as the GEMM writes each output segment (`linear_gelu_with`: the same bits as after it).
     linear_gelu_with(ln, &w.fc.w, w.fc.b, hid, &mut panel);
-    lin(hid, &w.fc_out, out, &mut panel);
-    add(x, out);
+    // The output over `ln`, dead once the hidden rows exist.
+    lin(hid, &w.fc_out, ln, &mut panel);
+    add(x, ln);
 }
 
 /// The block's output for selected query rows only (keys and values from
@@ -193,9 +203,12 @@ where
         return Err(Error::Length { buffer: Buffer::Features, len: nc, expected: bounds.last().copied().unwrap_or(0) * c });
     }
     let mut p = s.qkv();
-    let (ln, q, att, scores) = (&mut p.ln[..nc], &mut p.q[..nc], &mut p.att[..nc], p.scores);
+    let (ln, q, scores) = (&mut p.ln[..nc], &mut p.q[..nc], p.scores);
     layernorm(x, w.ln1.w, w.ln1.b, ln);
     lin(ln, &w.query, q, &mut p.panel);
+    // `ln` is dead once the queries exist: the attention output goes over
+    // it, the projection over the queries (no `att` rows).
+    let att = ln;
     for g in 0..groups {
         let (a, b) = (bounds[g], bounds[g + 1]);
         if b < a {
@@ -210,8 +223,8 @@ where
         let ahead = if g + 1 < groups { keys(g + 1).map(|(k, v, _)| [k.lead_bytes(), v.lead_bytes()])? } else { [&[][..], &[][..]] };
         attention_ahead(&q[a * c..b * c], k, v, c, n_head, &mask, &mut scores[..nk], &mut att[a * c..b * c], ahead);
     }
-    lin(att, &w.proj, ln, &mut p.panel);
-    add(x, ln);
+    lin(att, &w.proj, q, &mut p.panel);
+    add(x, q);
     mlp(w, x, s, nc);
     Ok(())
 }

@@ -440,8 +440,7 @@ impl ScratchNeed {
             && s.r.len() >= self.r
             && s.ta.len() >= self.t
             && s.tb.len() >= self.t
-            && s.col.len() >= self.col
-            && s.z.len() >= self.z
+            && s.tile.len() >= self.col.max(self.z)
     }
 }
 
@@ -592,10 +591,10 @@ pub struct StreamScratch<'s> {
     ta: &'s mut [f32],
     /// (cols, c_out) the other tail buffer.
     tb: &'s mut [f32],
-    /// im2col tile of `conv1d`.
-    col: &'s mut [f32],
-    /// Tile of `conv_transpose1d`.
-    z: &'s mut [f32],
+    /// The kernel tile of one unit: `conv1d`'s im2col tile or
+    /// `conv_transpose1d`'s (a unit is one or the other, so one region
+    /// of the larger size serves both).
+    tile: &'s mut [f32],
 }
 
 impl<'s> StreamScratch<'s> {
@@ -608,8 +607,7 @@ impl<'s> StreamScratch<'s> {
             r: a.f32(per(need.r)?)?,
             ta: a.f32(per(need.t)?)?,
             tb: a.f32(per(need.t)?)?,
-            col: a.f32(need.col)?,
-            z: a.f32(need.z)?,
+            tile: a.f32(need.col.max(need.z))?,
         })
     }
 }
@@ -623,7 +621,7 @@ impl<'s> StreamScratch<'s> {
 
 impl Default for StreamScratch<'_> {
     fn default() -> Self {
-        StreamScratch { g: &mut [], h: &mut [], r: &mut [], ta: &mut [], tb: &mut [], col: &mut [], z: &mut [] }
+        StreamScratch { g: &mut [], h: &mut [], r: &mut [], ta: &mut [], tb: &mut [], tile: &mut [] }
     }
 }
 
@@ -737,9 +735,10 @@ impl<'r, 'a> UnitW<'r, 'a> {
     /// all of them): job `j`'s outputs `[a, a + n_out)` from its `n_in`
     /// input columns gathered from `g0`, the jobs' inputs one after another
     /// in `x` (modified: ReLU in place for a residual block), their outputs
-    /// likewise in `y`. `h`, `r`: residual scratch; `col`, `z`: kernel tiles.
+    /// likewise in `y`. `h`, `r`: residual scratch; `tile`: the kernel tile
+    /// (im2col for a conv, the transposed conv's otherwise).
     #[allow(clippy::too_many_arguments)]
-    fn run(&self, u: &Unit, jobs: &[Job], x: &mut [f32], y: &mut [f32], h: &mut [f32], r: &mut [f32], col: &mut [f32], z: &mut [f32]) -> Result<(), Error> {
+    fn run(&self, u: &Unit, jobs: &[Job], x: &mut [f32], y: &mut [f32], h: &mut [f32], r: &mut [f32], tile: &mut [f32]) -> Result<(), Error> {
         let mut segs: Vec<ConvSeg, MAX_STACKS> = Vec::new();
         for j in jobs {
             let pad = u.local_pad(j.a, j.g0).ok_or(Error::Length { buffer: Buffer::Features, len: j.g0, expected: j.a })?;
@@ -751,16 +750,16 @@ impl<'r, 'a> UnitW<'r, 'a> {
             return Err(Error::Length { buffer: Buffer::Features, len: y.len(), expected: n_out * oc });
         }
         let geom = ConvGeom { kernel: u.kernel, stride: u.stride, pad: 0, dilation: u.dilation };
-        let tile = match self {
-            UnitW::ConvT(t) => convt_z_len(t.c_out, t.kernel).saturating_sub(z.len()),
-            _ => conv1d_col_len(u.c_in, u.kernel).saturating_sub(col.len()),
+        let need = match self {
+            UnitW::ConvT(t) => convt_z_len(t.c_out, t.kernel),
+            _ => conv1d_col_len(u.c_in, u.kernel),
         };
-        if tile > 0 {
-            return Err(Error::Length { buffer: Buffer::Features, len: col.len().min(z.len()), expected: tile });
+        if need > tile.len() {
+            return Err(Error::Length { buffer: Buffer::Features, len: tile.len(), expected: need });
         }
         match self {
-            UnitW::Conv(c) => conv1d_segs(x, c.c_in, &c.w, c.b, geom, &segs, y, col),
-            UnitW::ConvT(t) => conv_transpose1d_segs(x, &t.w, t.b, t.kernel, t.stride, &segs, y, z),
+            UnitW::Conv(c) => conv1d_segs(x, c.c_in, &c.w, c.b, geom, &segs, y, tile),
+            UnitW::ConvT(t) => conv_transpose1d_segs(x, &t.w, t.b, t.kernel, t.stride, &segs, y, tile),
             UnitW::Res(b) => {
                 let (w, inner) = (b.conv_dil.c_in, b.conv_dil.c_out);
                 // Identity: output a + t of a job is its gathered row a + t - g0.
@@ -774,11 +773,11 @@ impl<'r, 'a> UnitW<'r, 'a> {
                 }
                 relu_inplace(x);
                 let h = first(h, n_out * inner)?;
-                conv1d_segs(x, w, &b.conv_dil.w, b.conv_dil.b, geom, &segs, h, col);
+                conv1d_segs(x, w, &b.conv_dil.w, b.conv_dil.b, geom, &segs, h, tile);
                 relu_inplace(h);
                 let r = first(r, n_out * w)?;
                 let g1 = ConvGeom { kernel: 1, stride: 1, pad: 0, dilation: 1 };
-                conv1d(h, inner, &b.conv_1x1.w, b.conv_1x1.b, g1, r, col);
+                conv1d(h, inner, &b.conv_1x1.w, b.conv_1x1.b, g1, r, tile);
                 for (o, v) in y.iter_mut().zip(r.iter()) {
                     *o += v;
                 }
@@ -1045,7 +1044,7 @@ impl<'s> StreamStack<'s> {
             let oc = uw.c_out();
             let js: Vec<Job, MAX_STACKS> = jobs.iter().map(|&(_, j)| j).collect();
             let y = first(s.ta, yo * oc)?;
-            uw.run(&unit, &js, first(s.g, xo * unit.c_in)?, y, s.h, s.r, s.col, s.z)?;
+            uw.run(&unit, &js, first(s.g, xo * unit.c_in)?, y, s.h, s.r, s.tile)?;
             let mut rows = y.chunks_exact(oc);
             for &(i, j) in jobs.iter() {
                 let st = &mut *stacks[i];
@@ -1164,7 +1163,7 @@ impl<'s> StreamStack<'s> {
             }
             let oc = units[u].c_out();
             let y = first(cur, yo * oc)?;
-            units[u].run(&unit, &jobs, first(s.g, xo * unit.c_in)?, y, s.h, s.r, s.col, s.z)?;
+            units[u].run(&unit, &jobs, first(s.g, xo * unit.c_in)?, y, s.h, s.r, s.tile)?;
             core::mem::swap(&mut prev, &mut cur);
             core::mem::swap(&mut prev_at, &mut cur_at);
         }

@@ -124,11 +124,12 @@ pub struct StepScratch<'s> {
     /// (rows, C) GPT window rows of the items of one batched append,
     /// position-major per item.
     pub x: &'s mut [f32],
-    /// The block scratch of the LAT and GPT phases and the conv scratch of
+    /// The block scratch of the GPT phase, the LAT scratch and a block
+    /// scratch of the LAT rows of the LAT phase, and the conv scratch of
     /// the VQ encoder/decoder phases, in turn ([`block_scratch`],
-    /// [`conv_scratch`]): the larger of the two, not their sum.
+    /// [`lat_scratch`], [`conv_scratch`]): the largest of the three, not
+    /// their sum.
     pub pool: &'s mut [f32],
-    pub lat: LatStepScratch<'s>,
     /// (n, lat_in) music-LAT inputs (a session's positions of one push side by
     /// side); (n, C) LAT outputs.
     pub lat_in: &'s mut [f32],
@@ -141,13 +142,12 @@ pub struct StepScratch<'s> {
 
 impl<'s> StepScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, dims: StepDims) -> Result<Self, ArenaError> {
-        let StepDims { n, rows, keys: _, c, lat_in, lat_width: _, music_burst, ds_max, logits, conv: _ } = dims;
+        let StepDims { n, rows, keys: _, c, lat_in, lat_width: _, music_burst: _, ds_max: _, logits, conv: _ } = dims;
         let mul = |x: usize, y: usize| x.checked_mul(y).ok_or(ArenaError::Overflow);
         Ok(StepScratch {
             dims,
             x: a.f32(mul(rows, c)?)?,
             pool: a.f32(pool_floats(&dims)?)?,
-            lat: LatStepScratch::carve(a, c, ds_max, n, mul(n, music_burst)?, dims.lat_width)?,
             lat_in: a.f32(mul(n, lat_in)?)?,
             lat_out: a.f32(mul(n, c)?)?,
             heads_in: a.f32(mul(mul(5, n)?, c)?)?,
@@ -156,14 +156,36 @@ impl<'s> StepScratch<'s> {
     }
 }
 
-/// Floats of the shared pool of a [`StepScratch`]: the larger of the block
-/// scratch and the conv scratch for `dims`.
+/// Floats of the shared pool of a [`StepScratch`]: the largest of the
+/// GPT block scratch, the LAT phase's scratch and the conv scratch for
+/// `dims`.
 fn pool_floats(d: &StepDims) -> Result<usize, ArenaError> {
     let mut blk = Planner::new();
     carve_block(&mut blk, d)?;
+    let mut lat = Planner::new();
+    carve_lat(&mut lat, d)?;
     let mut conv = Planner::new();
     StreamScratch::carve(&mut conv, d.conv, d.n)?;
-    Ok(Split::floats_for(&blk).max(Split::floats_for(&conv)))
+    Ok(Split::floats_for(&blk).max(Split::floats_for(&lat)).max(Split::floats_for(&conv)))
+}
+
+/// The LAT phase's scratch of dims `d`: the LAT scratch for `d.n` pushes
+/// of up to `music_burst` positions each, and a block scratch for those
+/// rows (their queries see at most `d.keys` keys), with an int8 panel for
+/// them in a batch's scratch (as [`carve_block`]).
+fn carve_lat<'x, A: Carve<'x>>(a: &mut A, d: &StepDims) -> Result<(LatStepScratch<'x>, BlockScratch<'x>), ArenaError> {
+    let rows = d.n.checked_mul(d.music_burst).ok_or(ArenaError::Overflow)?;
+    let lat = LatStepScratch::carve(a, d.c, d.ds_max, d.n, rows, d.lat_width)?;
+    let mut s = BlockScratch::carve_keys(a, lat.rows, d.keys, d.c)?;
+    if d.n > 1 {
+        s.panel = Q8Room::carve(a, lat.rows.checked_mul(4 * d.c).ok_or(ArenaError::Overflow)?)?;
+    }
+    Ok((lat, s))
+}
+
+/// The LAT phase's scratch over the pool of a [`StepScratch`] with dims `d`.
+pub fn lat_scratch<'x>(pool: &'x mut [f32], d: &StepDims) -> Result<(LatStepScratch<'x>, BlockScratch<'x>), Error> {
+    Ok(carve_lat(&mut Split::new(pool), d)?)
 }
 
 /// The block scratch of dims `d`. A scratch for several sessions (a
@@ -349,7 +371,8 @@ fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: 
             lats.push(lat).map_err(|_| (first, Error::State))?;
             produced.push(false).map_err(|_| (first, Error::State))?;
         }
-        LatStream::push_many(w, &mut lats, counts, inputs, &mut sc.lat, &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
+        let (mut lat, mut blk) = lat_scratch(sc.pool, &sc.dims).map_err(at(first))?;
+        LatStream::push_many(w, &mut lats, counts, inputs, &mut lat, &mut blk, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
     }
     for (j, &i) in chunk.iter().enumerate() {
         if produced[j] {
