@@ -37,6 +37,12 @@ const DECODED_MFCC_ABS: f32 = 2.0;
 /// Chroma of the decoded file, interior frames (measured 9.5e-7).
 const DECODED_CHROMA_ABS: f32 = 1e-5;
 
+/// Streaming vs offline, default config: tempogram sum|d| / sum|offline|
+/// (measured 0.27-0.55 on the click signals, 0 where the onset is zero).
+const STREAM_TEMPOGRAM_REL: f64 = 0.7;
+/// Streaming vs offline, default config: chroma mean abs (measured max 3.1e-2).
+const STREAM_CHROMA_MEAN_ABS: f64 = 0.05;
+
 fn dir() -> PathBuf {
     music_util::dir().join("bailando")
 }
@@ -188,3 +194,97 @@ fn decoded_flac_matches_the_original_loader_path() {
     assert!(e.onset_rel <= ONSET_REL_PEAK && e.tempogram <= TEMPOGRAM_ABS, "{e:?}");
     assert!(e.beat_f >= BEAT_F_MIN, "{e:?}");
 }
+
+/// Mean |a - b|, max |a - b| and sum |a - b| / sum |a| over `cols` of (T, 438) rows.
+fn block_stats(want: &[f32], got: &[f32], cols: std::ops::Range<usize>) -> (f64, f64, f64) {
+    let (mut sum, mut max, mut norm, mut n) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+    for (w, g) in want.chunks_exact(FEATURE_DIM).zip(got.chunks_exact(FEATURE_DIM)) {
+        for c in cols.clone() {
+            let d = (w[c] - g[c]).abs() as f64;
+            sum += d;
+            max = max.max(d);
+            norm += w[c].abs() as f64;
+            n += 1;
+        }
+    }
+    (sum / n as f64, max, if norm > 0.0 { sum / norm } else { 0.0 })
+}
+
+/// Decaying 1.5 kHz bursts at 3840 Hz, `bpm(t)` beats per minute (as the goldens' clicks).
+fn clicks(seconds: f64, bpm: impl Fn(f64) -> f64) -> Vec<f32> {
+    let sr = bailando::SAMPLE_RATE as f64;
+    let n = (seconds * sr) as usize;
+    let mut y = vec![0.0f32; n];
+    let mut t = 0.25;
+    while t < seconds {
+        let i = (t * sr) as usize;
+        for j in 0..(0.02 * sr) as usize {
+            if i + j < n {
+                let s = j as f64 / sr;
+                y[i + j] += (0.8 * (2.0 * std::f64::consts::PI * 1500.0 * s).sin() * (-s * 200.0).exp()) as f32;
+            }
+        }
+        t += 60.0 / bpm(t);
+    }
+    y
+}
+
+fn tiled(name: &str, times: usize) -> Vec<f32> {
+    read_pcm16(name).repeat(times)
+}
+
+/// Streaming (`Streaming::bailando`) against the offline features on
+/// 50-90 s signals (the tempogram window is 51.2 s), pushed in 350-sample
+/// chunks: per block mean abs / max abs / relative (sum|d| / sum|offline|)
+/// error, beat F. Figures in docs/MUSIC.md (Bailando).
+#[test]
+fn streaming_tracks_offline_features() {
+    use duolando::music::{Streaming, StreamingConfig};
+    let ex = Extractor::bailando();
+    let signals: Vec<(&str, Vec<f32>, f64)> = vec![
+        // (name, samples, minimum beat F)
+        ("click_120 x11", tiled("click_120", 11), 0.9),
+        // HPSS with 6 of the 15 future frames its median wants moves the onset: F 0.57
+        ("clicks_chords x9", tiled("clicks_chords", 9), 0.5),
+        ("chords x15", tiled("chords", 15), 0.0),
+        ("clicks 90->140", clicks(90.0, |t| if t < 45.0 { 90.0 } else { 140.0 }), 0.5),
+        ("noise x15", tiled("noise", 15), 0.0),
+    ];
+    let blocks: [(&str, std::ops::Range<usize>); 6] =
+        [("mfcc", MFCC_COLS), ("mfcc1..", 1..20), ("delta", DELTA_COLS), ("chroma", CHROMA_COLS), ("onset", ONSET_COL..ONSET_COL + 1), ("tempogram", TEMPOGRAM_COLS)];
+    let la = |lookahead| StreamingConfig { lookahead, ..StreamingConfig::bailando() };
+    // lookahead 16: HPSS's time median (31 frames) sees all the future it needs
+    for (label, cfg) in [("default", StreamingConfig::bailando()), ("lookahead 16", la(16))] {
+        let s0 = Streaming::bailando(cfg);
+        eprintln!("config {label}: {cfg:?}, latency {} frames ({:.2} s)", s0.latency_frames(), s0.latency_frames() as f64 / bailando::FRAME_RATE);
+        for (name, y, f_min) in &signals {
+            let offline = ex.features(y).unwrap();
+            let mut s = Streaming::bailando(cfg);
+            let mut out = Vec::new();
+            for chunk in y.chunks(350) {
+                s.push(chunk, &mut out).unwrap();
+            }
+            s.finish(&mut out).unwrap();
+            assert_eq!(out.len(), offline.data.len(), "{name}: frames");
+            let mut line = format!("  {name:<17} T {:>3}", offline.frames);
+            for (b, cols) in &blocks {
+                let (mean, max, rel) = block_stats(&offline.data, &out, cols.clone());
+                line += &format!(" | {b} {mean:.2e} {max:.2e} {rel:.3}");
+            }
+            // tempogram away from the song's ends, where offline's windows reach the padding
+            let half = bailando::TEMPOGRAM_WIN / 2;
+            let (a, b) = (half * FEATURE_DIM, (offline.frames - half) * FEATURE_DIM);
+            let (_, _, tg_interior) = block_stats(&offline.data[a..b], &out[a..b], TEMPOGRAM_COLS);
+            let bf = beat_f(&beats(&offline.data), &beats(&out), BEAT_SLACK);
+            eprintln!("{line} | tempogram interior rel {tg_interior:.3} | beatF {bf:.2}");
+            if label == "default" {
+                assert!(bf >= *f_min, "{name}: beat F {bf}");
+                let (_, _, tg_rel) = block_stats(&offline.data, &out, TEMPOGRAM_COLS);
+                assert!(tg_rel <= STREAM_TEMPOGRAM_REL, "{name}: tempogram rel {tg_rel}");
+                let (chroma_mean, _, _) = block_stats(&offline.data, &out, CHROMA_COLS);
+                assert!(chroma_mean <= STREAM_CHROMA_MEAN_ABS, "{name}: chroma {chroma_mean}");
+            }
+        }
+    }
+}
+

@@ -7,7 +7,7 @@ use super::cqt::{chroma_from_cqt, CqtBank, BINS_PER_OCTAVE};
 use super::hpss::hpss;
 use super::mel::MelBank;
 use super::mfcc::{delta3, power_to_db_in_place, Dct, N_MFCC};
-use super::onset::{onset_strength, ONSET_FMAX, ONSET_MELS};
+use super::onset::{onset_strength_with_top, ONSET_FMAX, ONSET_MELS};
 use super::stft::{Stft, C32};
 use super::tempo::tempo;
 use super::tuning::estimate_tuning;
@@ -163,7 +163,14 @@ impl Extractor {
     /// As [`Extractor::parts`], with the dB reference of the MFCC spectrogram
     /// chosen by `reference(max mel power of y)` (offline: that max itself;
     /// streaming: a running max).
-    pub fn parts_with_reference(&self, y: &[f32], mut reference: impl FnMut(f32) -> f32) -> Result<Parts, MusicError> {
+    pub fn parts_with_reference(&self, y: &[f32], reference: impl FnMut(f32) -> f32) -> Result<Parts, MusicError> {
+        self.parts_with_levels(y, reference, |max_db| max_db)
+    }
+
+    /// As [`Extractor::parts_with_reference`], with the level the onset
+    /// spectrogram's 80 dB floor hangs from chosen by `onset_top(max dB of
+    /// y's onset mel spectrogram)` (offline: that max; streaming: a running max).
+    pub fn parts_with_levels(&self, y: &[f32], mut reference: impl FnMut(f32) -> f32, onset_top: impl FnOnce(f32) -> f32) -> Result<Parts, MusicError> {
         Self::validate(y)?;
         let nb = self.stft.n_bins();
         let mut d: Vec<C32> = Vec::new(); // (T, 1025)
@@ -207,7 +214,7 @@ impl Extractor {
         self.stft.forward(&percussive, &mut d);
         let power: Vec<f32> = d.iter().map(|c| c.norm() * c.norm()).collect();
         let mut onset = Vec::new(); // (T,)
-        onset_strength(&power, nb, &self.onset_mel, &mut onset);
+        onset_strength_with_top(&power, nb, &self.onset_mel, onset_top, &mut onset);
         let frame_rate = self.set.frame_rate();
         let tempo_bpm = if onset.iter().any(|&v| v != 0.0) { tempo(&onset, frame_rate) } else { 0.0 };
         let beats = beat_track(&onset, frame_rate, tempo_bpm);
