@@ -39,33 +39,33 @@ def features(audio, sr=SR):
     return np.ascontiguousarray(feat, dtype=np.float32), float(tempo), float(tuning)
 
 
-def clicks(n, bpm_at, amp=0.8):
+def clicks(n, bpm_at, amp=0.8, sr=SR):
     """Decaying 1.5 kHz bursts (20 ms) at beat times; bpm_at(t) gives the local tempo."""
     y = np.zeros(n)
     t = 0.25
-    burst = np.arange(int(0.02 * SR)) / SR
+    burst = np.arange(int(0.02 * sr)) / sr
     shape = np.sin(2 * np.pi * 1500 * burst) * np.exp(-burst * 200)
-    while t < n / SR:
-        i = int(t * SR)
+    while t < n / sr:
+        i = int(t * sr)
         m = min(len(shape), n - i)
         y[i:i + m] += amp * shape[:m]
         t += 60.0 / bpm_at(t)
     return y
 
 
-def tone(n, freqs, amp=0.15):
-    t = np.arange(n) / SR
+def tone(n, freqs, amp=0.15, sr=SR):
+    t = np.arange(n) / sr
     return sum(amp * np.sin(2 * np.pi * f * t) for f in freqs)
 
 
-def chord_progression(n, seconds_per_chord=1.5):
+def chord_progression(n, seconds_per_chord=1.5, sr=SR):
     chords = [[261.63, 329.63, 392.00], [196.00, 246.94, 293.66], [220.00, 261.63, 329.63], [174.61, 220.00, 261.63]]
     y = np.zeros(n)
-    step = int(seconds_per_chord * SR)
-    fade = np.minimum(1, np.minimum(np.arange(step), np.arange(step)[::-1]) / (0.02 * SR))
+    step = int(seconds_per_chord * sr)
+    fade = np.minimum(1, np.minimum(np.arange(step), np.arange(step)[::-1]) / (0.02 * sr))
     for k, i in enumerate(range(0, n, step)):
         m = min(step, n - i)
-        y[i:i + m] = tone(m, chords[k % len(chords)]) * fade[:m]
+        y[i:i + m] = tone(m, chords[k % len(chords)], sr=sr) * fade[:m]
     return y
 
 

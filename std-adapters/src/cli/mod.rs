@@ -48,7 +48,7 @@ commands! {
     Generate => generate,
     /// Write a procedural duet dataset in the original DD100 layout.
     Synth => synth,
-    /// Compute the 54-d music features of an audio file (WAV/MP3/OGG/FLAC) as a (T, 54) .npy.
+    /// Music features of an audio file (WAV/MP3/OGG/FLAC) as .npy: Duolando's (T, 54), or Bailando's (T, 438) with --for bailando.
     Features => features,
     /// Speed of the engine on a full-size model built from seeded random weights (f32/f16/int8).
     Bench => bench,

@@ -1,6 +1,6 @@
 //! Constant-Q transform and chroma as librosa 0.8.1 `chroma_cqt` computes
-//! them for Duolando: 7 octaves x 36 bins from C1 (shifted by the estimated
-//! tuning), multirate: the top octave's 36 filters are applied to the
+//! them for Duolando (7 octaves at 15360 Hz) and Bailando (5 octaves at
+//! 3840 Hz): octaves x 36 bins from C1 (shifted by the estimated tuning), multirate: the top octave's 36 filters are applied to the
 //! signal, which is halved (kaiser_fast) before each lower octave, with the
 //! hop halved too. Filters are Hann-windowed complex exponentials, L1
 //! normalised, FFT'd to 512 bins and sparsified (1% of each row's mass).
@@ -15,7 +15,7 @@ use super::stft::{periodic_hann, Stft, C32};
 
 /// CQT bins per octave in `chroma_cqt`.
 pub const BINS_PER_OCTAVE: usize = 36;
-/// Octaves (`n_octaves=7` at 15360 Hz in the original extractor).
+/// Octaves of Duolando's chroma (`n_octaves=7` at 15360 Hz in the original extractor).
 pub const N_OCTAVES: usize = 7;
 /// Pitch classes.
 pub const N_CHROMA: usize = 12;
@@ -37,11 +37,13 @@ struct SparseRow {
 /// The filter bank of one octave (reused for every octave: all are the same
 /// up to the per-octave gain) plus the final length normalisation.
 pub struct CqtBank {
-    /// 512 at 15360 Hz.
+    /// 512 at 15360 Hz (and at 3840 Hz: the top octave's filters have the same length in samples).
     n_fft: usize,
+    /// Octaves (7 for Duolando, 5 for Bailando).
+    n_octaves: usize,
     /// (36,) sparse filters, lowest first.
     rows: Vec<SparseRow>,
-    /// (252,) 1/sqrt(filter length) at the input rate.
+    /// (36 n_octaves,) 1/sqrt(filter length) at the input rate.
     inv_sqrt_len: Vec<f32>,
 }
 
@@ -50,10 +52,14 @@ fn q_factor() -> f64 {
 }
 
 impl CqtBank {
-    /// Builds the bank for `sr` and `tuning` (fraction of a 1/36-octave bin).
-    pub fn new(sr: f64, tuning: f64) -> Result<Self, super::MusicError> {
+    /// Builds the bank of `n_octaves` octaves from C1 for `sr` and `tuning`
+    /// (fraction of a 1/36-octave bin), for hop 512.
+    pub fn new(sr: f64, tuning: f64, n_octaves: usize) -> Result<Self, super::MusicError> {
+        if n_octaves == 0 || n_octaves > 10 {
+            return Err(super::MusicError::Unsupported("CQT octave count must be 1..=10 (hop 512 halves per octave)"));
+        }
         let bpo = BINS_PER_OCTAVE as f64;
-        let n_bins = BINS_PER_OCTAVE * N_OCTAVES;
+        let n_bins = BINS_PER_OCTAVE * n_octaves;
         let fmin = C1_HZ * 2f64.powf(tuning / bpo);
         let q = q_factor();
         let freq = |k: usize| fmin * 2f64.powf(k as f64 / bpo);
@@ -66,7 +72,7 @@ impl CqtBank {
         }
         let early = (((BW_FASTEST * nyquist / cutoff).log2().ceil() as i64) - 2).max(0);
         let twos = 9i64; // hop 512 = 2^9
-        if early.min((twos - N_OCTAVES as i64 + 1).max(0)) > 0 {
+        if early.min((twos - n_octaves as i64 + 1).max(0)) > 0 {
             return Err(super::MusicError::Unsupported("CQT early downsampling (sample rate too high for this port)"));
         }
         // filters of the top octave, at the input rate
@@ -80,7 +86,7 @@ impl CqtBank {
             rows.push(Self::filter_row(l, f, sr, n_fft, &mut fft));
         }
         let inv_sqrt_len = (0..n_bins).map(|k| (1.0 / (q * sr / freq(k)).sqrt()) as f32).collect();
-        Ok(Self { n_fft, rows, inv_sqrt_len })
+        Ok(Self { n_fft, n_octaves, rows, inv_sqrt_len })
     }
 
     /// One filter: windowed exponential, L1-normalised, centred in `n_fft`,
@@ -131,16 +137,22 @@ impl CqtBank {
         SparseRow { idx, w }
     }
 
-    /// |CQT| of `y` at hop 512: out becomes (T, 252) row-major, lowest bin first.
+    /// Octaves of the bank.
+    pub fn n_octaves(&self) -> usize {
+        self.n_octaves
+    }
+
+    /// |CQT| of `y` at hop 512: out becomes (T, 36 n_octaves) row-major, lowest bin first.
     pub fn magnitude(&self, y: &[f32], hop: usize, out: &mut Vec<f32>) {
-        let n_bins = BINS_PER_OCTAVE * N_OCTAVES;
+        let n_octaves = self.n_octaves;
+        let n_bins = BINS_PER_OCTAVE * n_octaves;
         let halver = Halver::new();
         let mut cur: Vec<f32> = y.to_vec();
         let mut next = Vec::new();
         let mut spec = Vec::new();
         // per octave responses, (T_i, 36) each, top octave first
-        let mut resp: Vec<(usize, Vec<C32>)> = Vec::with_capacity(N_OCTAVES);
-        for i in 0..N_OCTAVES {
+        let mut resp: Vec<(usize, Vec<C32>)> = Vec::with_capacity(n_octaves);
+        for i in 0..n_octaves {
             if i > 0 {
                 halver.halve(&cur, &mut next);
                 std::mem::swap(&mut cur, &mut next);
@@ -181,14 +193,14 @@ impl CqtBank {
     }
 }
 
-/// librosa `cq_to_chroma` + `normalize(norm=inf)`: `cqt` is (T, 252), `out` (T, 12).
-pub fn chroma_from_cqt(cqt: &[f32], out: &mut Vec<f32>) {
-    let n_bins = BINS_PER_OCTAVE * N_OCTAVES;
+/// librosa `cq_to_chroma` + `normalize(norm=inf)`: `cqt` is (T, 36 n_octaves), `out` (T, 12).
+pub fn chroma_from_cqt(cqt: &[f32], n_octaves: usize, out: &mut Vec<f32>) {
+    let n_bins = BINS_PER_OCTAVE * n_octaves;
     let t = cqt.len() / n_bins;
     out.clear();
     out.resize(t * N_CHROMA, 0.0);
     for (c, o) in cqt.chunks_exact(n_bins).zip(out.chunks_exact_mut(N_CHROMA)) {
-        for oct in 0..N_OCTAVES {
+        for oct in 0..n_octaves {
             let base = oct * BINS_PER_OCTAVE;
             for (p, v) in o.iter_mut().enumerate() {
                 // pitch class p gathers bins 3p-1, 3p, 3p+1 of each octave (wrapping in the octave)

@@ -8,14 +8,21 @@ pub const N_MFCC: usize = 20;
 /// matrix: `10 log10(max(amin, S)) - 10 log10(max(amin, ref))`, then floored
 /// at `max - top_db` (the max taken over the whole matrix).
 pub fn power_to_db_in_place(s: &mut [f32], reference: f32) {
+    power_to_db_with_top(s, reference, |top| top);
+}
+
+/// As [`power_to_db_in_place`], with the floor at `top(max) - top_db`:
+/// `top` maps the matrix's max dB to the level the floor hangs from
+/// (offline: that max; streaming: a running max).
+pub fn power_to_db_with_top(s: &mut [f32], reference: f32, top: impl FnOnce(f32) -> f32) {
     let amin = 1e-10f32;
     let ref_db = 10.0 * amin.max(reference).log10();
-    let mut top = f32::NEG_INFINITY;
+    let mut max = f32::NEG_INFINITY;
     for v in s.iter_mut() {
         *v = 10.0 * amin.max(*v).log10() - ref_db;
-        top = top.max(*v);
+        max = max.max(*v);
     }
-    let floor = top - 80.0;
+    let floor = top(max) - 80.0;
     for v in s.iter_mut() {
         *v = v.max(floor);
     }

@@ -7,8 +7,12 @@
 //! their delta (width 3), chroma_cqt 12 of the HPSS harmonic part (7
 //! octaves), onset strength 1 (median over mel bands) of the percussive
 //! part, beat one-hot 1 from `beat_track` on that envelope.
+//!
+//! The same building blocks make Bailando's 438-d features at 3840 Hz
+//! (7.5 frames/s): see [`bailando`] and [`FeatureSet`].
 //! See docs/MUSIC.md for the facts, the measured deviations and the speed.
 
+pub mod bailando;
 pub mod beat;
 pub mod cqt;
 mod error;
@@ -26,10 +30,10 @@ pub mod tempo;
 pub mod tuning;
 
 pub use error::MusicError;
-pub use extractor::Extractor;
+pub use extractor::{Extractor, FeatureSet};
 pub use streaming::{Streaming, StreamingConfig};
 
-/// Sample rate the features are defined at.
+/// Sample rate the Duolando features are defined at.
 pub const SAMPLE_RATE: u32 = 15360;
 /// Hop in samples (30 frames/s).
 pub const HOP: usize = 512;
@@ -37,7 +41,7 @@ pub const HOP: usize = 512;
 pub const N_FFT: usize = 2048;
 /// Mel bands of the MFCC spectrogram.
 pub const N_MELS: usize = 128;
-/// Width of one feature row.
+/// Width of one Duolando feature row.
 pub const FEATURE_DIM: usize = 54;
 /// Shortest accepted input: 3 frames (librosa's delta needs width 3 <= T).
 pub const MIN_SAMPLES: usize = 2 * HOP;
@@ -48,20 +52,23 @@ pub const CHROMA_COLS: std::ops::Range<usize> = 40..52;
 pub const ONSET_COL: usize = 52;
 pub const BEAT_COL: usize = 53;
 
-/// Features of one song: `frames` rows of [`FEATURE_DIM`] values.
+/// Features of one song: `frames` rows of `dim` values ([`FEATURE_DIM`] = 54
+/// for Duolando, [`bailando::FEATURE_DIM`] = 438 for Bailando).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Features {
     pub frames: usize,
-    /// (frames, 54) row-major.
+    /// Width of a row.
+    pub dim: usize,
+    /// (frames, dim) row-major.
     pub data: Vec<f32>,
     /// The global tempo `beat_track` used (0 when the onset envelope is all zero).
     pub tempo_bpm: f64,
 }
 
 impl Features {
-    /// Row `t` (54 values).
+    /// Row `t` (`dim` values).
     pub fn row(&self, t: usize) -> &[f32] {
-        &self.data[t * FEATURE_DIM..(t + 1) * FEATURE_DIM]
+        &self.data[t * self.dim..(t + 1) * self.dim]
     }
 }
 

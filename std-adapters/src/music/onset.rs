@@ -6,7 +6,7 @@
 //! centring `n_fft / (2 hop)`), zeros in front.
 
 use super::mel::MelBank;
-use super::mfcc::power_to_db_in_place;
+use super::mfcc::power_to_db_with_top;
 use super::tuning::median_f32;
 
 /// The onset mel bank's upper edge in librosa 0.8.1.
@@ -39,11 +39,17 @@ pub fn onset_from_mel_db(mel_db: &[f32], out: &mut Vec<f32>) {
 
 /// Onset envelope from a power spectrogram `power` (T, n_bins).
 pub fn onset_strength(power: &[f32], n_bins: usize, bank: &MelBank, out: &mut Vec<f32>) {
+    onset_strength_with_top(power, n_bins, bank, |top| top, out);
+}
+
+/// As [`onset_strength`], with the 80 dB floor hung from `top(max dB)`
+/// (offline: the max itself; streaming: a running max).
+pub fn onset_strength_with_top(power: &[f32], n_bins: usize, bank: &MelBank, top: impl FnOnce(f32) -> f32, out: &mut Vec<f32>) {
     let t = power.len() / n_bins;
     let mut mel = vec![0.0f32; t * ONSET_MELS]; // (T, 128)
     for (p, m) in power.chunks_exact(n_bins).zip(mel.chunks_exact_mut(ONSET_MELS)) {
         bank.apply(p, m);
     }
-    power_to_db_in_place(&mut mel, 1.0);
+    power_to_db_with_top(&mut mel, 1.0, top);
     onset_from_mel_db(&mel, out);
 }

@@ -2,9 +2,13 @@
 //! autocorrelation tempogram of the onset envelope (8 s Hann windows,
 //! centred with a linear ramp to zero, each frame's autocorrelation divided
 //! by its maximum), averaged over time, weighted by a log-normal prior
-//! around 120 BPM (one octave deviation), lags faster than 320 BPM excluded.
+//! around 120 BPM (one octave deviation), lags faster than 320 BPM excluded;
+//! and the per-frame tempogram itself (Bailando's 384 channels).
 
-use realfft::RealFftPlanner;
+use std::sync::Arc;
+
+use realfft::num_complex::Complex;
+use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 
 use super::stft::periodic_hann;
 
@@ -13,41 +17,99 @@ pub fn ac_window(frame_rate: f64) -> usize {
     (8.0 * frame_rate).floor() as usize
 }
 
-/// The tempogram averaged over time, (win,): `tg[lag]`.
-pub fn mean_tempogram(onset: &[f32], win: usize) -> Vec<f64> {
+/// The onset envelope padded by `half` frames each side with numpy's
+/// `linear_ramp` to zero (f32 like numpy on a float32 envelope): (n + 2 half,).
+pub fn ramp_padded(onset: &[f32], half: usize) -> Vec<f32> {
     let n = onset.len();
-    let half = win / 2;
-    // linear_ramp padding (f32 like numpy on a float32 envelope)
-    let mut padded = vec![0.0f32; n + 2 * half]; // (n + win,)
+    let mut padded = vec![0.0f32; n + 2 * half];
     let (first, last) = (onset[0], onset[n - 1]);
     for j in 0..half {
         padded[j] = first * (j as f32 / half as f32);
         padded[n + half + j] = last * ((half - 1 - j) as f32 / half as f32);
     }
     padded[half..half + n].copy_from_slice(onset);
-    let window = periodic_hann(win);
-    let nfft = (2 * win).next_power_of_two();
-    let mut planner = RealFftPlanner::<f64>::new();
-    let fwd = planner.plan_fft_forward(nfft);
-    let inv = planner.plan_fft_inverse(nfft);
-    let mut buf = fwd.make_input_vec(); // (nfft,)
-    let mut spec = fwd.make_output_vec(); // (nfft/2+1,)
+    padded
+}
+
+/// One column of librosa's autocorrelation tempogram: a `win`-frame segment
+/// of the envelope times a periodic Hann window, autocorrelated (lags
+/// 0..win, zero-padded FFT), divided by its largest magnitude
+/// (`normalize(norm=inf)`: an all-zero column stays zero).
+pub struct LocalAutocorr {
+    win: usize,
+    window: Vec<f64>,
+    fwd: Arc<dyn RealToComplex<f64>>,
+    inv: Arc<dyn ComplexToReal<f64>>,
+    /// (nfft,) time-domain scratch
+    buf: Vec<f64>,
+    /// (nfft/2+1,) spectrum scratch
+    spec: Vec<Complex<f64>>,
+}
+
+impl LocalAutocorr {
+    pub fn new(win: usize) -> Self {
+        let nfft = (2 * win).next_power_of_two();
+        let mut planner = RealFftPlanner::<f64>::new();
+        let fwd = planner.plan_fft_forward(nfft);
+        let inv = planner.plan_fft_inverse(nfft);
+        let (buf, spec) = (fwd.make_input_vec(), fwd.make_output_vec());
+        Self { win, window: periodic_hann(win), fwd, inv, buf, spec }
+    }
+
+    /// Window length in frames.
+    pub fn win(&self) -> usize {
+        self.win
+    }
+
+    /// `seg` is (win,) envelope frames; `out` (win,) receives the normalised autocorrelation.
+    pub fn column(&mut self, seg: &[f32], out: &mut [f64]) {
+        let win = self.win;
+        self.buf.iter_mut().for_each(|v| *v = 0.0);
+        for ((b, &x), &w) in self.buf.iter_mut().zip(&seg[..win]).zip(&self.window) {
+            *b = x as f64 * w;
+        }
+        self.fwd.process(&mut self.buf, &mut self.spec).expect("fixed fft size");
+        for c in self.spec.iter_mut() {
+            *c = Complex::new(c.norm_sqr(), 0.0);
+        }
+        self.inv.process(&mut self.spec, &mut self.buf).expect("fixed fft size");
+        let ac = &self.buf[..win];
+        let m = ac.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
+        // the inverse FFT is unnormalised; normalising by the max removes that scale too
+        let scale = if m < f64::MIN_POSITIVE { 1.0 } else { 1.0 / m };
+        for (o, &a) in out.iter_mut().zip(ac) {
+            *o = a * scale;
+        }
+    }
+}
+
+/// librosa `feature.tempogram(onset_envelope, win_length=win)` (centred,
+/// Hann, `norm=inf`): `out` becomes (T, win) row-major, one row per onset
+/// frame, lag 0 first.
+pub fn tempogram(onset: &[f32], win: usize, out: &mut Vec<f32>) {
+    let n = onset.len();
+    let padded = ramp_padded(onset, win / 2);
+    let mut ac = LocalAutocorr::new(win);
+    let mut col = vec![0.0f64; win]; // (win,)
+    out.clear();
+    out.reserve(n * win);
+    for t in 0..n {
+        ac.column(&padded[t..t + win], &mut col);
+        out.extend(col.iter().map(|&v| v as f32));
+    }
+}
+
+/// The tempogram averaged over time, (win,): `tg[lag]`.
+pub fn mean_tempogram(onset: &[f32], win: usize) -> Vec<f64> {
+    let n = onset.len();
+    let padded = ramp_padded(onset, win / 2);
+    let mut ac = LocalAutocorr::new(win);
+    let mut col = vec![0.0f64; win]; // (win,)
     let mut sum = vec![0.0f64; win]; // (win,)
     for t in 0..n {
-        buf.iter_mut().for_each(|v| *v = 0.0);
-        for (j, b) in buf.iter_mut().take(win).enumerate() {
-            *b = padded[t + j] as f64 * window[j];
-        }
-        fwd.process(&mut buf, &mut spec).expect("fixed fft size");
-        for c in spec.iter_mut() {
-            *c = realfft::num_complex::Complex::new(c.norm_sqr(), 0.0);
-        }
-        inv.process(&mut spec, &mut buf).expect("fixed fft size");
-        let ac = &buf[..win];
-        let m = ac.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
-        let scale = if m < f64::MIN_POSITIVE { 1.0 } else { 1.0 / m };
-        for (s, &a) in sum.iter_mut().zip(ac) {
-            *s += a * scale;
+        ac.column(&padded[t..t + win], &mut col);
+        for (s, &a) in sum.iter_mut().zip(&col) {
+            *s += a;
         }
     }
     sum.iter().map(|s| s / n as f64).collect()
