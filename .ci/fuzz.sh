@@ -25,6 +25,7 @@ for t in "${targets[@]}"; do
     # Whole valid files are large; take them from the fixtures, not seeds/.
     cp ../tests/fixtures/tiny/model.duo "corpus/$t/fixture-tiny.duo"
     cp ../tests/fixtures/tiny2/model.duo "corpus/$t/fixture-tiny2.duo"
+    cp ../tests/fixtures/bailando_btiny/model.duo "corpus/$t/fixture-btiny.duo"
   fi
   echo "--- fuzz $t for ${secs}s ($(ls "corpus/$t" | wc -l) inputs)"
   rm -rf "artifacts/$t"

@@ -246,6 +246,10 @@ fn converted_file_samples_the_same_tokens() {
     let (bytes, r) = convert_bailando(&cfg, (&dir.join("gpt.safetensors"), &g), (&dir.join("vqvae.safetensors"), &v), StoreAs::F32, Path::new("<memory>")).unwrap();
     assert_eq!(r.critic_skipped, 21, "the critic_net tensors of the btiny checkpoint");
     assert_eq!(r.report.masks_checked, 2);
+    // The committed model.duo (the fuzz targets' Bailando base) is this
+    // conversion, byte for byte: `duolando convert --config
+    // actor_critic.yaml --gpt gpt.safetensors --vqvae vqvae.safetensors`.
+    assert!(std::fs::read(dir.join("model.duo")).unwrap() == bytes, "tests/fixtures/bailando_btiny/model.duo is stale: regenerate it with duolando convert");
     let file = ModelFile::from_bytes(bytes).unwrap();
     let duo = file.duo().unwrap();
     assert_eq!(duo.prefix().version, 2);

@@ -1,8 +1,10 @@
 //! `.duo` decoding on arbitrary bytes: `DuoFile::parse` and, when it
-//! accepts, binding a `Model` and reading every tensor must never panic.
+//! accepts, binding either family's `Model` and reading every tensor
+//! must never panic.
 #![no_main]
 
 use duolando_core::format::DuoFile;
+use duolando_core::bailando::model::Model as BailandoModel;
 use duolando_core::duolando::model::Model;
 use libfuzzer_sys::fuzz_target;
 
@@ -18,5 +20,6 @@ fuzz_target!(|data: &[u8]| {
             assert_eq!(t.dtype, entry.dtype);
         }
         let _ = Model::from_duo(&file);
+        let _ = BailandoModel::from_duo(&file);
     }
 });

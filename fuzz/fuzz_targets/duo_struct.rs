@@ -1,5 +1,7 @@
 //! `.duo` decoding on structured inputs (`duolando_gen::duo::DuoInput`):
-//! semantic edits of the valid tiny2 file (config varints, tensor-table
+//! semantic edits of the valid tiny2 file (Duolando, format version 1) and
+//! of the btiny file (Bailando, version 2), each input on both (family
+//! tags, config varints, tensor-table
 //! entries, then bytes aimed at a region), weights overwritten with NaN,
 //! infinities and finite edge values, or raw bytes. The invariant is
 //! `check_input`'s: never a panic; an accepted file has every listed tensor
@@ -12,16 +14,18 @@ use std::sync::OnceLock;
 
 use arbitrary::{Arbitrary, Unstructured};
 use duolando_gen::duo::{check_input, split, DuoInput, Parts};
-use duolando_gen::fixture::tiny2_duo_bytes;
+use duolando_gen::fixture::{btiny_duo_bytes, tiny2_duo_bytes};
 use libfuzzer_sys::fuzz_target;
 
-fn base() -> &'static Parts {
-    static P: OnceLock<Parts> = OnceLock::new();
-    P.get_or_init(|| split(tiny2_duo_bytes()))
+fn bases() -> &'static [Parts; 2] {
+    static P: OnceLock<[Parts; 2]> = OnceLock::new();
+    P.get_or_init(|| [split(tiny2_duo_bytes()), split(btiny_duo_bytes())])
 }
 
 fuzz_target!(|data: &[u8]| {
     let mut u = Unstructured::new(data);
     let Ok(input) = DuoInput::arbitrary(&mut u) else { return };
-    let _ = check_input(&input, base());
+    for base in bases() {
+        let _ = check_input(&input, base);
+    }
 });

@@ -8,7 +8,9 @@ use duolando::duo_writer::{assemble, Header, HeaderEntry};
 use duolando::model_file::AlignedBytes;
 use duolando_core::format::{align_up, DuoFile, FormatError, PREFIX_LEN};
 use duolando_core::nn::bind::BindError;
+use duolando_core::bailando::model::Model as BailandoModel;
 use duolando_core::duolando::model::Model;
+use duolando_core::family::Family;
 use duolando_core::tensor::DType;
 
 use crate::bytes::{apply_all, varint_len, ByteMutation, Int, Regions};
@@ -343,11 +345,21 @@ pub fn check_duo(bytes: &[u8]) -> DuoOutcome {
         };
         assert!(finite, "{}: a NaN or infinite weight was accepted", entry.name);
     }
-    let outcome = match Model::from_duo(&file) {
-        Ok(_) => DuoOutcome::Bound,
-        Err(e) => DuoOutcome::Unbound(e),
+    // A parsed file binds as its own family (and is refused, by family,
+    // as the other).
+    let own = match file.config().family() {
+        Family::Duolando => Model::from_duo(&file).map(|_| ()),
+        Family::Bailando => BailandoModel::from_duo(&file).map(|_| ()),
     };
-    outcome
+    let other = match file.config().family() {
+        Family::Duolando => BailandoModel::from_duo(&file).map(|_| ()),
+        Family::Bailando => Model::from_duo(&file).map(|_| ()),
+    };
+    assert!(matches!(other, Err(BindError::Family { .. })), "a {:?} file bound as another family", file.config().family());
+    match own {
+        Ok(()) => DuoOutcome::Bound,
+        Err(e) => DuoOutcome::Unbound(e),
+    }
 }
 
 /// Re-export for tests that build headers by hand.

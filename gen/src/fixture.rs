@@ -25,6 +25,13 @@ pub fn tiny2_duo_bytes() -> &'static [u8] {
     B.get_or_init(|| read("tiny2/model.duo"))
 }
 
+/// The btiny Bailando model (format version 2), as bytes: `duolando
+/// convert` of tests/fixtures/bailando_btiny's checkpoints.
+pub fn btiny_duo_bytes() -> &'static [u8] {
+    static B: OnceLock<Vec<u8>> = OnceLock::new();
+    B.get_or_init(|| read("bailando_btiny/model.duo"))
+}
+
 /// The tiny2 model, bound once.
 pub fn tiny2_model() -> &'static Model<'static> {
     // Statics, not `Box::leak`: LeakSanitizer (fuzz targets) reports a
