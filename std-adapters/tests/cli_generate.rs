@@ -221,3 +221,63 @@ fn generate_streaming_drains_to_r_frame_count() {
         }
     }
 }
+
+/// A Bailando model through the binary: both of the authors' eval paths
+/// give the golden tokens and positions (AIST++ with --dance, demo with
+/// --seed-tokens), and the Duolando-only inputs are refused by name.
+#[test]
+fn generate_bailando_matches_the_goldens_on_both_paths() {
+    let fx = fixtures();
+    let model = fx.join("bailando_btiny/model.duo");
+    for (name, path_args) in [("btiny_aist_slide", "dance"), ("btiny_demo_odd", "seed")] {
+        let roll = fx.join(format!("bailando_rollout_{name}"));
+        let meta: serde_json::Value = serde_json::from_slice(&std::fs::read(roll.join("meta.json")).unwrap()).unwrap();
+        let out = tmp(name);
+        let seed = format!("{},{}", meta["seed_tokens"][0], meta["seed_tokens"][1]);
+        let music = roll.join("music.npy");
+        let mut args = vec!["generate", "--model", p(&model), "--music", p(&music), "--out", p(&out)];
+        let dance = roll.join("dance.npy");
+        if path_args == "dance" {
+            args.extend(["--dance", p(&dance)]);
+        } else {
+            args.extend(["--seed-tokens", &seed]);
+        }
+        let o = duolando(&args);
+        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        let got = read_i64_2d(&out.join("tokens.npy"), Some(2), "tokens").unwrap();
+        let want = read_i64_2d(&roll.join("tokens.npy"), Some(2), "tokens").unwrap();
+        assert_eq!(got.data, want.data, "{name}: tokens");
+        let got = read_f32_2d(&out.join("pos3d.npy"), Some(72), "pos3d").unwrap();
+        let want = read_f32_2d(&roll.join("pos3d.npy"), Some(72), "pos3d").unwrap();
+        assert_eq!(got.rows, want.rows, "{name}: frames");
+        let err = got.data.iter().zip(&want.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+        assert!(err <= 1e-5, "{name}: positions max abs err {err:e}");
+    }
+    let roll = fx.join("bailando_rollout_btiny_demo_odd");
+    let music = roll.join("music.npy");
+    let out = tmp("bailando-bad");
+    for (args, want) in [
+        (vec!["--seed-tokens", "1,2,3,4,5"], "two tokens"),
+        (vec!["--seed-tokens", "1,99"], "outside its vocabulary"),
+        (vec!["--leader", p(&music), "--seed-tokens", "1,2"], "takes no leader"),
+        (vec![], "give --dance"),
+        (vec!["--seed-tokens", "1,2", "--mode", "streaming"], "only --mode exact"),
+    ] {
+        let mut a = vec!["generate", "--model", p(&model), "--music", p(&music), "--out", p(&out)];
+        a.extend(args.iter().copied());
+        let o = duolando(&a);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    // Music narrower than the model reads.
+    let narrow = out.join("narrow.npy");
+    write_f32(&narrow, &[0.0; 20], &[2, 10]).unwrap();
+    let o = duolando(&["generate", "--model", p(&fx.join("bailando_btiny/model.duo")), "--music", p(&narrow), "--seed-tokens", "1,2", "--out", p(&out)]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("the model reads 438"), "{}", String::from_utf8_lossy(&o.stderr));
+    // A Duolando model given --dance, or no --leader.
+    let o = duolando(&["generate", "--model", p(&fx.join("tiny/model.duo")), "--music", p(&roll.join("music.npy")), "--dance", p(&roll.join("music.npy")), "--out", p(&out)]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--dance is for Bailando"), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = duolando(&["generate", "--model", p(&fx.join("tiny/model.duo")), "--music", p(&roll.join("music.npy")), "--seed-tokens", "1,2,3,4,5", "--out", p(&out)]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--leader"), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -34,15 +34,23 @@ pub struct Args {
     /// The `.duo` model.
     #[arg(long)]
     pub model: PathBuf,
-    /// Leader joint positions, (T, 165) float32, metres, SMPL-X order, 30 fps.
+    /// Duolando: leader joint positions, (T, 165) float32, metres, SMPL-X order, 30 fps.
     #[arg(long)]
-    pub leader: PathBuf,
-    /// Music features, (T, 54) float32 at 30 fps (`duolando features` makes them).
+    pub leader: Option<PathBuf>,
+    /// Music features: Duolando (T, 54) float32 at 30 fps; Bailando (R,
+    /// >= 438) at 7.5 fps, its first n_music columns read (`duolando
+    /// features --for duolando|bailando` makes them).
     #[arg(long)]
     pub music: PathBuf,
-    /// Seed tokens "up,down,lhand,rhand,transl".
-    #[arg(long, conflicts_with = "follower_start", required_unless_present = "follower_start")]
+    /// Seed tokens: Duolando "up,down,lhand,rhand,transl"; Bailando
+    /// "up,down", which selects the authors' music-only demo path (its
+    /// music padding; the authors' demo seed is 423,12).
+    #[arg(long, conflicts_with_all = ["follower_start", "dance"])]
     pub seed_tokens: Option<String>,
+    /// Bailando: a dance, (T, 72) float32 SMPL joint positions at 60 fps,
+    /// whose first codes seed the dancer: the authors' AIST++ test path.
+    #[arg(long, conflicts_with = "follower_start")]
+    pub dance: Option<PathBuf>,
     /// The follower's first frames, (F, 165) float32 (F >= 4; 4 as in the original eval).
     #[arg(long)]
     pub follower_start: Option<PathBuf>,
@@ -198,10 +206,22 @@ pub fn run(args: Args) -> Result<()> {
     let file = ModelFile::open(&args.model)?;
     super::print_kernels();
     let duo = file.duo()?;
+    if duo.config().family() == duolando_core::family::Family::Bailando {
+        return super::generate_solo::run_bailando(&args, &duo);
+    }
+    if args.dance.is_some() {
+        bail!("--dance is for Bailando models; {} is a Duolando model (give --leader and --seed-tokens or --follower-start)", args.model.display());
+    }
     let model = Model::from_duo(&duo)
         .map_err(|e| anyhow::anyhow!("{}: {}", args.model.display(), crate::engine_errors::describe_bind(&e)))?;
     let n_music = model.cfg.gpt.music.n_in as usize;
-    let leader = read_f32_2d(&args.leader, Some(POSE_DIM), "leader joint positions (T, 165)")?;
+    let Some(leader_path) = args.leader.as_ref() else {
+        bail!("{} is a Duolando model: --leader (the leader's joint positions) is required", args.model.display());
+    };
+    if args.seed_tokens.is_none() && args.follower_start.is_none() {
+        bail!("{} is a Duolando model: give --seed-tokens up,down,lhand,rhand,transl or --follower-start", args.model.display());
+    }
+    let leader = read_f32_2d(leader_path, Some(POSE_DIM), "leader joint positions (T, 165)")?;
     let music = read_f32_2d(&args.music, Some(n_music), &format!("music features (T, {n_music})"))?;
     let t4 = leader.rows / model.cfg.hop() * model.cfg.hop();
     if music.rows < t4 {

@@ -1,0 +1,86 @@
+//! `duolando generate` on a solo model (Bailando): R mode, the authors'
+//! `AC.eval()` token for token. `--dance` selects the AIST++ test path
+//! (the seed is the first codes of the encoded dance; the music gets one
+//! copy of its last row), `--seed-tokens up,down` the music-only demo path
+//! (the music padded to a multiple of 8 rows plus up to 8). Writes
+//! `tokens.npy` (K+1, 2: up, down; row 0 the seed) and `pos3d.npy`
+//! (N, 72): what the authors' eval saves as `pred_position`.
+
+use anyhow::{bail, Context, Result};
+use duolando_core::bailando::config::POSE_DIM;
+use duolando_core::bailando::exact::{self, MusicPadding};
+use duolando_core::bailando::model::Model;
+use duolando_core::format::DuoFile;
+
+use super::generate::{Args, Mode};
+use crate::engine_errors::describe;
+use crate::npy::{read_f32_2d, write_f32, write_i64};
+
+pub fn run_bailando(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
+    let model = Model::from_duo(duo).map_err(|e| anyhow::anyhow!("{}: {}", args.model.display(), crate::engine_errors::describe_bind(&e)))?;
+    let cfg = model.cfg;
+    if matches!(args.mode, Mode::Streaming) {
+        bail!("{} is a Bailando model: only --mode exact is built for it so far (streaming sessions for solo models are not yet)", args.model.display());
+    }
+    if args.leader.is_some() || args.follower_start.is_some() {
+        bail!("{} is a Bailando model (a solo dancer): it takes no leader; give --music and --dance or --seed-tokens up,down", args.model.display());
+    }
+    let nm = cfg.gpt.n_music as usize;
+    let music = read_f32_2d(&args.music, None, &format!("music features (R, >= {nm}) at 7.5 fps"))?;
+    if music.cols < nm {
+        bail!("{}: {} columns per row, the model reads {nm} (Bailando's features: `duolando features --for bailando`)", args.music.display(), music.cols);
+    }
+    if music.rows == 0 {
+        bail!("{}: no music rows", args.music.display());
+    }
+    let (padding, seed, path) = match (&args.dance, &args.seed_tokens) {
+        (Some(d), None) => {
+            let dance = read_f32_2d(d, Some(POSE_DIM), "dance joint positions (T, 72)")?;
+            if dance.rows == 0 {
+                bail!("{}: no dance frames", d.display());
+            }
+            let mut scratch = vec![0u8; exact::dance_scratch_bytes(&cfg, dance.rows).context("dance too long")?];
+            let seed = exact::seed_from_dance(&model, &dance.data, &mut scratch).map_err(|e| anyhow::anyhow!("{}: {}", d.display(), describe(&e)))?;
+            (MusicPadding::Aist, seed, "AIST++ test path (seed from the dance)")
+        }
+        (None, Some(s)) => (MusicPadding::Demo, parse_seed(s, cfg.gpt.vocab)?, "demo path (seed given)"),
+        _ => bail!("{} is a Bailando model: give --dance (the AIST++ test path) or --seed-tokens up,down (the demo path)", args.model.display()),
+    };
+    let k = exact::steps(padding, music.rows);
+    let mut tokens = vec![0u32; (k + 1) * 2];
+    let mut scratch = vec![0u8; exact::sample_scratch_bytes(&cfg).context("config too large")?];
+    exact::sample(&model, &music.data, music.cols, padding, seed, &mut scratch, &mut tokens)
+        .map_err(|e| anyhow::anyhow!("{}: {}", args.music.display(), describe(&e)))?;
+    let frames = (k + 1) * cfg.hop();
+    let mut pos = vec![0f32; frames * POSE_DIM];
+    let mut scratch = vec![0u8; exact::decode_scratch_bytes(&cfg, k + 1).context("too many tokens")?];
+    exact::decode(&model, &tokens, &mut scratch, &mut pos).map_err(|e| anyhow::anyhow!("decoding: {}", describe(&e)))?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    let toks: Vec<i64> = tokens.iter().map(|&t| t as i64).collect();
+    write_i64(&args.out.join("tokens.npy"), &toks, &[k + 1, 2])?;
+    write_f32(&args.out.join("pos3d.npy"), &pos, &[frames, POSE_DIM])?;
+    eprintln!(
+        "Bailando, {path}: {} music rows -> {k} steps, {} tokens, {frames} frames at 60 fps -> {}",
+        music.rows,
+        k + 1,
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// "up,down" within the vocabularies.
+fn parse_seed(s: &str, vocab: [u32; 2]) -> Result<[u32; 2]> {
+    let v: Vec<&str> = s.split(',').map(str::trim).collect();
+    if v.len() != 2 {
+        bail!("--seed-tokens {s:?}: a Bailando model takes two tokens, \"up,down\"");
+    }
+    let mut out = [0u32; 2];
+    for (i, x) in v.iter().enumerate() {
+        let t: u32 = x.parse().with_context(|| format!("--seed-tokens {s:?}: {x:?} is not a token number"))?;
+        if t >= vocab[i] {
+            bail!("--seed-tokens {s:?}: token {t} of the {} stream is outside its vocabulary 0..{}", ["up", "down"][i], vocab[i]);
+        }
+        out[i] = t;
+    }
+    Ok(out)
+}
