@@ -791,3 +791,18 @@ fn messages_name_the_c_fields() {
     }
     unsafe { duo_model_free(m.0) };
 }
+
+/// A valid Bailando file (format version 2) is refused by family, with
+/// the family named, and the output handle is left untouched; the C
+/// sessions run Duolando models so far (docs/BAILANDO.md).
+#[test]
+fn a_bailando_file_is_refused_by_family() {
+    let p = CString::new(fixtures().join("bailando_btiny/model.duo").to_str().unwrap()).unwrap();
+    let sentinel = 0x40 as *mut DuoModel;
+    let mut m = sentinel;
+    // SAFETY: a NUL-terminated path and a live out-pointer.
+    assert_eq!(unsafe { duo_model_open_file(p.as_ptr(), &mut m) }, DuoResult::BadModel);
+    assert_eq!(m, sentinel);
+    let e = last_error();
+    assert!(e.contains("this is a Bailando model") && e.contains("Duolando model"), "{e}");
+}

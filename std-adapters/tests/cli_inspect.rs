@@ -124,3 +124,30 @@ fn inspect_and_generate_refuse_a_non_finite_weight_by_name() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A Bailando model: its family, config, rates and R-mode sizes, in text
+/// and JSON.
+#[test]
+fn inspect_prints_a_bailando_model() {
+    let m = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/bailando_btiny/model.duo");
+    let o = inspect(&[m.to_str().unwrap()]);
+    let s = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for want in [
+        "Bailando model",
+        "format v2",
+        "gpt n_embd 32 heads 4 base 1 head 1 block_size 8 vocab up/down [24, 24] n_music 438",
+        "vq down   in 27 rot 0 width 16",
+        "8 frames per token at 60 fps, SMPL 24 joints",
+        "1 min: 450 music rows -> 455 steps, 3648 output frames",
+        "streaming (S): not built yet for Bailando",
+    ] {
+        assert!(s.contains(want), "missing {want:?} in:\n{s}");
+    }
+    let o = inspect(&[m.to_str().unwrap(), "--json"]);
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["family"], "Bailando");
+    assert_eq!(j["format_version"], 2);
+    assert_eq!(j["derived"]["joints"], 24);
+    assert_eq!(j["config"]["gpt"]["n_music"], 438);
+}
