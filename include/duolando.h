@@ -225,8 +225,15 @@ typedef struct duo_model_info {
   uint32_t block_size;       /* GPT window, tokens (30) */
   uint32_t look_forward;     /* trained leader/music look-ahead, tokens (29) */
   uint32_t mapped;           /* 1 if the weights are memory-mapped */
-  uint32_t reserved;         /* 0 */
+  uint32_t family;           /* DUO_FAMILY_*: the model family (was a reserved 0 before
+                                families: 0 is Duolando, so old readers stay right) */
 } duo_model_info;
+
+/* Model families (duo_model_info.family; the .duo header's family tag).
+ * The sessions of this library run Duolando models; opening a valid
+ * Bailando file answers DUO_BAD_MODEL naming its family (docs/BAILANDO.md). */
+#define DUO_FAMILY_DUOLANDO 0u
+#define DUO_FAMILY_BAILANDO 1u
 
 /* Opens a model from caller memory WITHOUT copying.
  * bytes: the whole .duo file, 64-byte aligned in memory (the weights are

@@ -244,8 +244,9 @@ pub struct DuoModelInfo {
     pub look_forward: u32,
     /// 1 when the weights are memory-mapped from a file, else 0.
     pub mapped: u32,
-    /// Reserved, 0.
-    pub reserved: u32,
+    /// The model family (`DUO_FAMILY_*`: 0 Duolando, 1 Bailando; the
+    /// field was a reserved 0 before families).
+    pub family: u32,
 }
 
 /// Fills `*out_info`.
@@ -269,7 +270,7 @@ pub unsafe extern "C" fn duo_model_get_info(model: *const DuoModel, out_info: *m
             block_size: cfg.gpt.block_size,
             look_forward: cfg.gpt.look_forward,
             mapped: m.is_mapped() as u32,
-            reserved: 0,
+            family: duolando_core::family::Family::Duolando as u32,
         };
         // SAFETY: checked non-NULL.
         unsafe { *out_info = info };

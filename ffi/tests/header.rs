@@ -138,3 +138,13 @@ fn header_result_codes_match() {
         assert_eq!(s.to_str().unwrap(), *name);
     }
 }
+
+/// The family codes of the header are the core's `Family` discriminants.
+#[test]
+fn header_family_codes_match() {
+    let h = std::fs::read_to_string(root().join("include/duolando.h")).unwrap();
+    for f in duolando_core::family::Family::ALL {
+        let line = format!("#define DUO_FAMILY_{} {}u", f.name().to_uppercase(), f as u32);
+        assert!(h.contains(&line), "missing `{line}` in include/duolando.h");
+    }
+}

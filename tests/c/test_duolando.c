@@ -349,6 +349,7 @@ static void test_model_open(duo_model **out_file_model) {
   EXPECT(duo_model_get_info(m, &info), DUO_OK);
   CHECK(info.joints == 55 && info.music_features == 54 && info.fps == 30);
   CHECK(info.frames_per_token == 4 && info.mapped == 1);
+  CHECK(info.family == DUO_FAMILY_DUOLANDO);
   *out_file_model = m;
   /* From aligned memory, without a copy. */
   CHECK(posix_memalign(&aligned, 64, len) == 0);
