@@ -14,8 +14,8 @@ use duolando_core::nn::names::TensorSpec;
 use super::error::ConvertError;
 use super::skipped::check_mask_values;
 use super::source::Source;
-use super::{storage_for, to_stored_order, Report};
-use crate::duo_writer::{write_model, StoreAs, Tensor};
+use super::{take_tensor, Report};
+use crate::duo_writer::{write_model, StoreAs};
 
 /// What a Bailando conversion did: the common report plus the critic's
 /// weights skipped.
@@ -35,21 +35,7 @@ pub fn convert_bailando(cfg: &BailandoConfig, gpt: (&Path, &[u8]), vqvae: (&Path
     let mut tensors = Vec::new();
     let family = FamilyConfig::Bailando(*cfg);
     family.for_each_tensor::<ConvertError>(&mut |spec: &TensorSpec| {
-        let duo_name = spec.name.as_str();
-        let (c, rest) = prefixes
-            .iter()
-            .enumerate()
-            .find_map(|(i, p)| duo_name.strip_prefix(p).map(|r| (i, r)))
-            .ok_or_else(|| ConvertError::ConfigKey { path: "<schema>".into(), key: duo_name.to_string(), problem: "schema name without a gpt./motion. prefix".into() })?;
-        let src = &sources[c];
-        let values = src.f32_values(rest, duo_name, spec.dims())?;
-        if let Some((index, &value)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(ConvertError::NonFinite { path: src.path.clone(), tensor: rest.to_string(), index, value });
-        }
-        used[c].insert(rest.to_string());
-        let stored = storage_for(store_as, spec);
-        let (shape, values) = to_stored_order(spec, stored, values);
-        tensors.push(Tensor { name: duo_name.to_string(), shape, values, store_as: stored });
+        tensors.push(take_tensor(spec, &sources, &prefixes, &mut used, store_as)?);
         Ok(())
     })?;
     let mut out = BailandoReport { report: Report { written: tensors.len(), ..Report::default() }, critic_skipped: 0 };

@@ -161,26 +161,9 @@ pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: Store
     ];
     let mut used: [BTreeSet<String>; 3] = Default::default();
     let mut tensors = Vec::new();
+    let prefixes = Component::ALL.map(|c| c.prefix());
     for_each_tensor::<ConvertError>(cfg, &mut |spec: &TensorSpec| {
-        let duo_name = spec.name.as_str();
-        let (c, rest) = Component::ALL
-            .iter()
-            .enumerate()
-            .find_map(|(i, c)| duo_name.strip_prefix(c.prefix()).map(|r| (i, r)))
-            .ok_or_else(|| ConvertError::ConfigKey {
-                path: PathBuf::from("<schema>"),
-                key: duo_name.to_string(),
-                problem: String::from("schema name without a gpt./motion./transl. prefix"),
-            })?;
-        let src = &parsed[c];
-        let values = src.f32_values(rest, duo_name, spec.dims())?;
-        if let Some((index, &value)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(ConvertError::NonFinite { path: src.path.clone(), tensor: rest.to_string(), index, value });
-        }
-        used[c].insert(rest.to_string());
-        let stored = storage_for(store_as, spec);
-        let (shape, values) = to_stored_order(spec, stored, values);
-        tensors.push(Tensor { name: duo_name.to_string(), shape, values, store_as: stored });
+        tensors.push(take_tensor(spec, &parsed, &prefixes, &mut used, store_as)?);
         Ok(())
     })?;
     let mut report = Report { written: tensors.len(), ..Report::default() };
@@ -203,6 +186,32 @@ pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: Store
         }
     }
     Ok((tensors, report))
+}
+
+/// The schema tensor `spec` out of the source whose component prefix
+/// (`prefixes[i]` for `sources[i]`) its name carries: checked against the
+/// schema shape, upcast to f32, refused if not finite, stored as
+/// [`storage_for`]`(store_as, spec)`; its source name is added to `used[i]`.
+pub fn take_tensor(spec: &TensorSpec, sources: &[Source<'_>], prefixes: &[&str], used: &mut [BTreeSet<String>], store_as: StoreAs) -> Result<Tensor, ConvertError> {
+    let duo_name = spec.name.as_str();
+    let (c, rest) = prefixes
+        .iter()
+        .enumerate()
+        .find_map(|(i, p)| duo_name.strip_prefix(p).map(|r| (i, r)))
+        .ok_or_else(|| ConvertError::ConfigKey {
+            path: PathBuf::from("<schema>"),
+            key: duo_name.to_string(),
+            problem: format!("schema name without one of the prefixes {prefixes:?}"),
+        })?;
+    let src = &sources[c];
+    let values = src.f32_values(rest, duo_name, spec.dims())?;
+    if let Some((index, &value)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(ConvertError::NonFinite { path: src.path.clone(), tensor: rest.to_string(), index, value });
+    }
+    used[c].insert(rest.to_string());
+    let stored = storage_for(store_as, spec);
+    let (shape, values) = to_stored_order(spec, stored, values);
+    Ok(Tensor { name: duo_name.to_string(), shape, values, store_as: stored })
 }
 
 /// The whole conversion in memory: YAML text (labelled by `config.0`) +
