@@ -43,7 +43,7 @@ pub enum Error {
     /// (`input::limit_of`) at flat index `index`.
     OutOfRange { buffer: Buffer, index: usize },
     /// A streaming-session setting outside `0..=max` (or `1..=max`).
-    Setting { setting: crate::duolando::session::Setting, value: u32, max: u32 },
+    Setting { setting: Setting, value: u32, max: u32 },
     /// A streaming session refused an input because its buffers are full
     /// (follower frames not pulled, or music pushed too far ahead); the
     /// session is unchanged: pull frames (or push leader frames) and retry.
@@ -86,4 +86,24 @@ pub fn check_at_least(buffer: Buffer, len: usize, expected: usize) -> Result<(),
         return Err(Error::Length { buffer, len, expected });
     }
     Ok(())
+}
+
+/// A streaming-session setting outside its range ([`Error::Setting`]): the
+/// names of the knobs a session of any family may have.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Setting {
+    Lookahead,
+    EncFuture,
+    DecFuture,
+    Shift,
+    MusicLookahead,
+    LatPast,
+    TopK,
+    PendingFrames,
+    MusicBuffer,
+    /// GPT caches a staggered schedule needs (value) above the session's
+    /// window capacity (Duolando: `MAX_WINDOWS`).
+    Windows,
+    /// Sessions of a step batch outside `1..=MAX_BATCH`.
+    Batch,
 }

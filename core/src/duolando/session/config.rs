@@ -125,23 +125,7 @@ pub fn window_pool(m: usize, s: usize) -> usize {
     most
 }
 
-/// A setting outside its range (`Error::Setting`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Setting {
-    Lookahead,
-    EncFuture,
-    DecFuture,
-    Shift,
-    MusicLookahead,
-    LatPast,
-    TopK,
-    PendingFrames,
-    MusicBuffer,
-    /// GPT caches a staggered schedule needs (value) above [`MAX_WINDOWS`].
-    Windows,
-    /// Sessions of a [`StepBatch`](super::StepBatch) outside `1..=MAX_BATCH`.
-    Batch,
-}
+pub use crate::error::Setting;
 
 /// Largest `pending_frames` / `music_buffer_frames` (keeps every size far
 /// from overflow; about 18 minutes at 30 fps).
