@@ -271,3 +271,30 @@ fn converted_file_samples_the_same_tokens() {
     let want = read_i64_2d(&rdir.join("tokens.npy"), Some(2), "tokens").unwrap();
     assert_eq!(tokens.iter().map(|&t| t as i64).collect::<Vec<_>>(), want.data);
 }
+
+/// The published config's schema holds exactly the authors' published
+/// parameter counts (tools/reference/bailando/README.md, from their
+/// classes on configs/actor_critic.yaml): the VQ-VAE's 65,068,619
+/// parameters plus its two 512 x 512 codebooks (buffers, not parameters);
+/// the GPT's 108,299,520 parameters less the critic's.
+#[test]
+fn published_config_has_the_published_sizes() {
+    let cfg = duolando_core::bailando::config::published();
+    cfg.validate().unwrap();
+    let (mut gpt, mut motion) = (0u64, 0u64);
+    duolando_core::bailando::schema::for_each_tensor::<duolando_core::nn::names::SchemaError>(&cfg, &mut |s| {
+        let n: u64 = s.dims().iter().map(|&d| d as u64).product();
+        if s.name.starts_with("gpt.") {
+            gpt += n;
+        } else {
+            motion += n;
+        }
+        Ok(())
+    })
+    .unwrap();
+    eprintln!("published Bailando: gpt {gpt}, motion {motion}");
+    assert_eq!(motion, 65_068_619 + 2 * 512 * 512);
+    // The reference README gives the critic as 21.3 M (rounded).
+    let critic = 108_299_520 - gpt;
+    assert!((21_250_000..21_350_000).contains(&critic), "critic {critic}");
+}

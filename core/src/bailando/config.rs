@@ -81,3 +81,27 @@ impl BailandoConfig {
         Ok(())
     }
 }
+
+/// The published model (the authors' `configs/actor_critic.yaml`): actor
+/// GPT n_embd 768, 12 heads, 6 + 6 layers, block_size 29, vocabularies 512,
+/// 438 music features; VQ-VAEs width 512, depth 3, dilation growth 3, three
+/// stride-2 stages (8 frames per token), 512 codes of 512.
+pub fn published() -> BailandoConfig {
+    let vq = |in_channels| VqConfig {
+        in_channels,
+        rot_channels: 0,
+        width: 512,
+        depth: 3,
+        dilation_growth_rate: 3,
+        down_t: 3,
+        stride_t: 2,
+        emb_width: 512,
+        l_bins: 512,
+        m_conv_num: 1,
+        m_conv_den: 1,
+    };
+    BailandoConfig {
+        gpt: GptConfig { n_embd: 768, n_head: 12, n_layer_base: 6, n_layer_head: 6, block_size: 29, vocab: [512, 512], n_music: 438 },
+        parts: [vq((UP_JOINTS.len() * 3) as u32), vq((DOWN_JOINTS.len() * 3) as u32)],
+    }
+}

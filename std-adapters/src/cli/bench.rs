@@ -28,7 +28,7 @@ use duolando_core::duolando::gpt::{self, Window};
 use duolando_core::nn::bind::{BindError, TensorSource};
 use duolando_core::duolando::model::Model;
 use duolando_core::duolando::presets::duolando_published;
-use duolando_core::duolando::schema::for_each_tensor;
+use duolando_core::family::FamilyConfig;
 use duolando_core::nn::names::{SchemaError, TensorSpec};
 use duolando_core::duolando::session::{CacheSchedule, FollowerFrame, KvType, Session, SessionConfig, StepBatch};
 use duolando_core::tensor::{block_row, DType, TensorRef, MAX_RANK};
@@ -58,6 +58,11 @@ pub struct Args {
     /// Use the scalar reference kernels instead of the detected SIMD ones.
     #[arg(long)]
     pub scalar: bool,
+    /// Which family's published model: duolando (default) or bailando (its
+    /// R step, the actor GPT over a full 28-token window; S mode is not
+    /// built for Bailando yet).
+    #[arg(long, default_value = "duolando")]
+    pub family: String,
     /// Session counts stepped together with `Session::step_many` (int8
     /// only; comma separated; `--batch` with no value skips them).
     #[arg(long, value_delimiter = ',', num_args = 0.., default_values_t = vec![1usize, 4, 16])]
@@ -157,10 +162,9 @@ impl Rng {
 }
 
 impl RandomModel {
-    fn build(requested: StoreAs, seed: u64) -> anyhow::Result<RandomModel> {
-        let cfg = duolando_published();
+    fn build(cfg: &FamilyConfig, requested: StoreAs, seed: u64) -> anyhow::Result<RandomModel> {
         let mut specs: Vec<TensorSpec> = Vec::new();
-        for_each_tensor::<SchemaError>(&cfg, &mut |s| {
+        cfg.for_each_tensor::<SchemaError>(&mut |s| {
             specs.push(s.clone());
             Ok(())
         })
@@ -462,7 +466,7 @@ where
 
 fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Result<DtypeResult> {
     let t0 = Instant::now();
-    let rm = RandomModel::build(store_as, 0x5eed_0000 ^ store_as as u64)?;
+    let rm = RandomModel::build(&duolando_published().into(), store_as, 0x5eed_0000 ^ store_as as u64)?;
     let model = Model::bind(&duolando_published(), &&rm).map_err(|e: BindError| anyhow!("bind: {e:?}"))?;
     eprintln!("{name}: model built and bound in {:.1} s", t0.elapsed().as_secs_f64());
     let inp = RInputs::new(&model);
@@ -515,6 +519,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "kernels: {isa}; threads: {:?}; memcpy bandwidth (256 MiB): {memcpy:.1} GB/s on 1 thread, {memcpy_t2:.1} GB/s on 2; read-only: {read:.1} GB/s on 1 thread",
         args.threads
     );
+    if args.family == "bailando" {
+        return bench_bailando(&args);
+    } else if args.family != "duolando" {
+        return Err(anyhow!("unknown family '{}' (duolando, bailando)", args.family));
+    }
     let mut results = Vec::new();
     for d in &args.dtypes {
         let (name, store_as) = match d.as_str() {
@@ -677,5 +686,67 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         std::fs::write(path, serde_json::to_string_pretty(&serde_json::Value::Object(j))?)
             .with_context(|| format!("writing {}", path.display()))?;
     }
+    Ok(())
+}
+
+/// Bailando's published model (`bailando::config::published`, seeded random
+/// weights) per weight type: one R step (the actor GPT over a full window of
+/// `block_size - 1` = 28 tokens and their music rows, as `AC.eval` runs it
+/// once the window slides) per thread count, against real time (one token
+/// per 8 frames at 60 fps: 133.3 ms) and against f32 in the same run.
+fn bench_bailando(args: &Args) -> anyhow::Result<()> {
+    use duolando_core::bailando::config::published;
+    use duolando_core::bailando::gpt::{logits_len, max_context, window_logits, GptScratch};
+    use duolando_core::bailando::model::Model as BModel;
+    let cfg = published();
+    let c = max_context(&cfg);
+    let nm = cfg.gpt.n_music as usize;
+    let mut rng = Rng(0xba11_a4d0);
+    let tokens: Vec<u32> = (0..2 * c).map(|i| ((rng.next() + 1.0) * 255.0) as u32 % cfg.gpt.vocab[i % 2]).collect();
+    let music: Vec<f32> = (0..c * nm).map(|_| rng.next()).collect();
+    let mut f32_median = std::collections::BTreeMap::new();
+    let real_time_ms = 1000.0 * cfg.hop() as f64 / duolando_core::bailando::config::FPS as f64;
+    for d in &args.dtypes {
+        let store_as = match d.as_str() {
+            "f32" => StoreAs::F32,
+            "f16" => StoreAs::F16,
+            "int8" => StoreAs::Q8Block32,
+            "q4" => StoreAs::Q4Block32,
+            other => return Err(anyhow!("unknown dtype '{other}' (f32, f16, int8, q4)")),
+        };
+        let t0 = Instant::now();
+        let rm = RandomModel::build(&cfg.into(), store_as, 0xba11_0000 ^ store_as as u64)?;
+        let model = BModel::bind(&cfg, &&rm).map_err(|e: BindError| anyhow!("bind: {e:?}"))?;
+        eprintln!("Bailando {d}: model built and bound in {:.1} s ({:.1} MB of weights)", t0.elapsed().as_secs_f64(), rm.weight_bytes() as f64 / 1e6);
+        for &t in &args.threads {
+            let times = on_threads(t, || {
+                let mut bytes = vec![0u8; duolando_core::bailando::exact::sample_scratch_bytes(&cfg).unwrap_or(0)];
+                let mut a = duolando_core::arena::Arena::new(&mut bytes);
+                let mut s = GptScratch::carve(&mut a, &cfg, c).map_err(|e| anyhow!("{e:?}"))?;
+                let mut logits = vec![0f32; logits_len(&cfg)];
+                let mut v = Vec::new();
+                for i in 0..args.warmup + args.runs {
+                    let t0 = Instant::now();
+                    window_logits(&model, &tokens, &music, &mut s, &mut logits).map_err(|e| anyhow!("{e:?}"))?;
+                    if i >= args.warmup {
+                        v.push(t0.elapsed());
+                    }
+                }
+                Ok(v)
+            })?;
+            let st = stats(times);
+            if d == "f32" {
+                f32_median.insert(t, st.median_ms);
+            }
+            let vs_f32 = f32_median.get(&t).map(|f| format!("; f32/{d} {:.2}x", f / st.median_ms)).unwrap_or_default();
+            println!(
+                "Bailando R step {d:>4} t{t} ({c}-token window): median {:8.1} ms  p99 {:8.1} ms  {:.2}x real time ({real_time_ms:.1} ms per token){vs_f32}",
+                st.median_ms,
+                st.p99_ms,
+                real_time_ms / st.median_ms
+            );
+        }
+    }
+    println!("Bailando: published config (actor_critic.yaml), seeded random weights; S mode not built yet, no ONNX baseline yet.");
     Ok(())
 }
