@@ -17,18 +17,31 @@ pub struct TokenAgreement {
 
 /// `a`, `b`: (rows, 5); compares the first `n` rows of each.
 pub fn token_agreement(a: &[u32], b: &[u32], n: usize) -> TokenAgreement {
-    let mut per = [0usize; 5];
+    let (all, per) = agreement_of(a, b, n, 5);
+    let mut per_stream = [0.0; 5];
+    per_stream.copy_from_slice(&per);
+    TokenAgreement { all, per_stream, rows: n }
+}
+
+/// Any number of streams: `a`, `b` (rows, `w`), the first `n` rows of
+/// each: (overall fraction of equal tokens, per stream).
+pub fn agreement_of(a: &[u32], b: &[u32], n: usize, w: usize) -> (f64, Vec<f64>) {
+    let mut per = vec![0usize; w];
     for r in 0..n {
-        for j in 0..5 {
-            per[j] += usize::from(a[r * 5 + j] == b[r * 5 + j]);
+        for (j, p) in per.iter_mut().enumerate() {
+            *p += usize::from(a[r * w + j] == b[r * w + j]);
         }
     }
     let d = n.max(1) as f64;
-    TokenAgreement {
-        all: per.iter().sum::<usize>() as f64 / (5.0 * d),
-        per_stream: per.map(|c| c as f64 / d),
-        rows: n,
-    }
+    (per.iter().sum::<usize>() as f64 / (w.max(1) as f64 * d), per.iter().map(|&c| c as f64 / d).collect())
+}
+
+/// [`free_run`] for `w` streams per row: rows 1..=n (row 0, the seed, is
+/// shared), n = min(rows) - 1: (overall, per stream, n).
+pub fn free_run_of(a: &[u32], b: &[u32], w: usize) -> (f64, Vec<f64>, usize) {
+    let n = (a.len() / w).min(b.len() / w).saturating_sub(1);
+    let (all, per) = agreement_of(&a[w.min(a.len())..], &b[w.min(b.len())..], n, w);
+    (all, per, n)
 }
 
 /// One-step agreement: `pred` (n, 5) choices made under the history of the
@@ -49,12 +62,18 @@ pub fn free_run(a: &[u32], b: &[u32]) -> TokenAgreement {
 /// Per-joint Euclidean distance (mm) between two (frames, 165) position
 /// arrays over the frames both have: (mean, max, frames).
 pub fn joint_error_mm(a: &[f32], b: &[f32]) -> (f64, f64, usize) {
-    let n = (a.len() / 165).min(b.len() / 165);
+    joint_error_mm_of(a, b, 55)
+}
+
+/// [`joint_error_mm`] for poses of `joints` joints ((frames, 3 * joints)).
+pub fn joint_error_mm_of(a: &[f32], b: &[f32], joints: usize) -> (f64, f64, usize) {
+    let row = 3 * joints.max(1);
+    let n = (a.len() / row).min(b.len() / row);
     let (mut sum, mut max) = (0.0f64, 0.0f64);
-    for i in 0..n * 55 {
+    for i in 0..n * joints {
         let d: f64 = (0..3).map(|c| (a[i * 3 + c] as f64 - b[i * 3 + c] as f64).powi(2)).sum::<f64>().sqrt() * 1000.0;
         sum += d;
         max = max.max(d);
     }
-    (sum / (n * 55).max(1) as f64, max, n)
+    (sum / (n * joints).max(1) as f64, max, n)
 }

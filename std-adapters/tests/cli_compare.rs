@@ -165,3 +165,42 @@ fn compare_rejects_a_budget_outside_the_model() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("--lookahead 99") && err.contains("largest allowed: 5"), "{err}");
 }
+
+/// Bailando models in exact mode: a model against itself agrees fully
+/// with zero joint error; its f16 conversion samples the same tokens
+/// (measured on this golden) with a small joint error; without --against
+/// (no S mode yet) or with a leader, a named refusal.
+#[test]
+fn compare_bailando_models() {
+    let fx = fixtures();
+    let dir = tmp("bailando");
+    let m = fx.join("bailando_btiny/model.duo");
+    let roll = fx.join("bailando_rollout_btiny_aist_slide");
+    let f16 = dir.join("f16.duo");
+    let b = fx.join("bailando_btiny");
+    let o = duolando(&["convert", "--config", &s(&b.join("actor_critic.yaml")), "--gpt", &s(&b.join("gpt.safetensors")), "--vqvae", &s(&b.join("vqvae.safetensors")), "--dtype", "f16", "-o", &s(&f16)].map(String::from));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = |against: &Path, name: &str| -> Value {
+        let json = dir.join(name);
+        let o = duolando(&["compare", "--model", &s(&m), "--against", &s(against), "--music", &s(&roll.join("music.npy")), "--dance", &s(&roll.join("dance.npy")), "--json", &s(&json)].map(String::from));
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap()
+    };
+    let same = run(&m, "same.json");
+    assert_eq!(same["free_run_agreement"], 1.0);
+    assert_eq!(same["mean_joint_err_mm"], 0.0);
+    assert_eq!(same["free_run_steps"], 37);
+    assert_eq!(same["joint_err_frames"], 304);
+    let half = run(&f16, "f16.json");
+    assert_eq!(half["free_run_agreement"], 1.0, "{half}");
+    let err = half["max_joint_err_mm"].as_f64().unwrap();
+    assert!(err > 0.0 && err < 5.0, "f16 max joint error {err} mm");
+    for (extra, want) in [(vec![], "needs --against"), (vec!["--against", "x.duo", "--leader", "l.npy"], "solo dancer")] {
+        let mut a = vec!["compare".to_string(), "--model".into(), s(&m), "--music".into(), s(&roll.join("music.npy")), "--dance".into(), s(&roll.join("dance.npy"))];
+        a.extend(extra.iter().map(|x| x.to_string()));
+        let o = duolando(&a);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{e}");
+        assert!(e.contains(want), "{e}");
+    }
+}

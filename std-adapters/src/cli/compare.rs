@@ -49,6 +49,11 @@ pub struct Args {
     /// The follower's first frames (F, 165) .npy (default with the demo clip: the bundled start).
     #[arg(long)]
     pub follower_start: Option<PathBuf>,
+    /// Bailando models (with --against, exact mode): the dance (T, 72)
+    /// whose first codes seed both runs (the AIST++ path); or give
+    /// --seed-tokens up,down (the demo path).
+    #[arg(long, conflicts_with = "follower_start")]
+    pub dance: Option<PathBuf>,
     #[command(flatten)]
     pub budget: BudgetArgs,
     /// Also write the figures as one flat JSON object.
@@ -75,6 +80,9 @@ pub fn run(args: Args) -> Result<()> {
     let file = open(&model_path)?;
     super::print_kernels();
     let duo = file.duo()?;
+    if duo.config().family() == duolando_core::family::Family::Bailando {
+        return compare_bailando(&args, &model_path, &duo);
+    }
     let model = Model::from_duo(&duo).map_err(|e| anyhow::anyhow!("{}: {}", model_path.display(), crate::engine_errors::describe_bind(&e)))?;
     let n_music = model.cfg.gpt.music.n_in as usize;
     let demo_inputs = args.leader.is_none() && args.music.is_none();
@@ -174,6 +182,49 @@ pub fn run(args: Args) -> Result<()> {
     for (k, v) in [("lookahead", sc.lookahead), ("enc_future", sc.enc_future), ("dec_future", sc.dec_future), ("shift", sc.shift)] {
         out.insert(k.into(), json!(v));
     }
+    for (k, v) in &out {
+        println!("  {k:<28} {v}");
+    }
+    if let Some(p) = &args.json {
+        std::fs::write(p, serde_json::to_string_pretty(&Value::Object(out))? + "\n").with_context(|| format!("cannot write {}", p.display()))?;
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+/// Two Bailando models (e.g. an int8 conversion against the f32 one) in R
+/// mode on one music track: free-running token agreement per stream and
+/// joint error (S mode is not built for Bailando yet, so there is no S vs
+/// R comparison).
+fn compare_bailando(args: &Args, model_path: &std::path::Path, duo: &duolando_core::format::DuoFile<'_>) -> Result<()> {
+    use duolando_core::bailando::model::Model as BModel;
+    let Some(b_path) = &args.against else {
+        bail!("{} is a Bailando model: streaming is not built for it yet, so compare needs --against B.duo (two models in exact mode)", model_path.display());
+    };
+    if args.leader.is_some() || args.follower_start.is_some() || matches!(args.mode, Mode::Streaming) {
+        bail!("{} is a Bailando model (a solo dancer): give --music with --dance or --seed-tokens up,down, exact mode only", model_path.display());
+    }
+    let Some(music) = &args.music else { bail!("{} is a Bailando model: --music (R, 438) is required", model_path.display()) };
+    let a = BModel::from_duo(duo).map_err(|e| anyhow::anyhow!("{}: {}", model_path.display(), crate::engine_errors::describe_bind(&e)))?;
+    let b_file = open(b_path)?;
+    let b_duo = b_file.duo()?;
+    let b = BModel::from_duo(&b_duo).map_err(|e| anyhow::anyhow!("{}: {}", b_path.display(), crate::engine_errors::describe_bind(&e)))?;
+    if a.cfg != b.cfg {
+        bail!("{} and {} have different configs; compare conversions of the same checkpoint", model_path.display(), b_path.display());
+    }
+    let run = |m: &BModel<'_>, p: &std::path::Path| super::generate_solo::bailando_exact(m, music, args.dance.as_deref(), args.seed_tokens.as_deref(), p);
+    let (ra, rb) = (run(&a, model_path)?, run(&b, b_path)?);
+    let (all, per, steps) = crate::agreement::free_run_of(&ra.tokens, &rb.tokens, 2);
+    let (mean, max, frames) = crate::agreement::joint_error_mm_of(&ra.pos3d, &rb.pos3d, duolando_core::bailando::config::N_JOINTS);
+    let mut out = Map::new();
+    out.insert("free_run_agreement".into(), json!(all));
+    out.insert("free_run_agreement_up".into(), json!(per[0]));
+    out.insert("free_run_agreement_down".into(), json!(per[1]));
+    out.insert("free_run_steps".into(), json!(steps));
+    out.insert("mean_joint_err_mm".into(), json!(mean));
+    out.insert("max_joint_err_mm".into(), json!(max));
+    out.insert("joint_err_frames".into(), json!(frames));
+    println!("{} vs {} (Bailando, exact mode, {}) on {}", model_path.display(), b_path.display(), ra.path, music.display());
     for (k, v) in &out {
         println!("  {k:<28} {v}");
     }

@@ -6,6 +6,8 @@
 //! `tokens.npy` (K+1, 2: up, down; row 0 the seed) and `pos3d.npy`
 //! (N, 72): what the authors' eval saves as `pred_position`.
 
+use std::path::Path;
+
 use anyhow::{bail, Context, Result};
 use duolando_core::bailando::config::POSE_DIM;
 use duolando_core::bailando::exact::{self, MusicPadding};
@@ -18,50 +20,21 @@ use crate::npy::{read_f32_2d, write_f32, write_i64};
 
 pub fn run_bailando(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
     let model = Model::from_duo(duo).map_err(|e| anyhow::anyhow!("{}: {}", args.model.display(), crate::engine_errors::describe_bind(&e)))?;
-    let cfg = model.cfg;
     if matches!(args.mode, Mode::Streaming) {
         bail!("{} is a Bailando model: only --mode exact is built for it so far (streaming sessions for solo models are not yet)", args.model.display());
     }
     if args.leader.is_some() || args.follower_start.is_some() {
         bail!("{} is a Bailando model (a solo dancer): it takes no leader; give --music and --dance or --seed-tokens up,down", args.model.display());
     }
-    let nm = cfg.gpt.n_music as usize;
-    let music = read_f32_2d(&args.music, None, &format!("music features (R, >= {nm}) at 7.5 fps"))?;
-    if music.cols < nm {
-        bail!("{}: {} columns per row, the model reads {nm} (Bailando's features: `duolando features --for bailando`)", args.music.display(), music.cols);
-    }
-    if music.rows == 0 {
-        bail!("{}: no music rows", args.music.display());
-    }
-    let (padding, seed, path) = match (&args.dance, &args.seed_tokens) {
-        (Some(d), None) => {
-            let dance = read_f32_2d(d, Some(POSE_DIM), "dance joint positions (T, 72)")?;
-            if dance.rows == 0 {
-                bail!("{}: no dance frames", d.display());
-            }
-            let mut scratch = vec![0u8; exact::dance_scratch_bytes(&cfg, dance.rows).context("dance too long")?];
-            let seed = exact::seed_from_dance(&model, &dance.data, &mut scratch).map_err(|e| anyhow::anyhow!("{}: {}", d.display(), describe(&e)))?;
-            (MusicPadding::Aist, seed, "AIST++ test path (seed from the dance)")
-        }
-        (None, Some(s)) => (MusicPadding::Demo, parse_seed(s, cfg.gpt.vocab)?, "demo path (seed given)"),
-        _ => bail!("{} is a Bailando model: give --dance (the AIST++ test path) or --seed-tokens up,down (the demo path)", args.model.display()),
-    };
-    let k = exact::steps(padding, music.rows);
-    let mut tokens = vec![0u32; (k + 1) * 2];
-    let mut scratch = vec![0u8; exact::sample_scratch_bytes(&cfg).context("config too large")?];
-    exact::sample(&model, &music.data, music.cols, padding, seed, &mut scratch, &mut tokens)
-        .map_err(|e| anyhow::anyhow!("{}: {}", args.music.display(), describe(&e)))?;
-    let frames = (k + 1) * cfg.hop();
-    let mut pos = vec![0f32; frames * POSE_DIM];
-    let mut scratch = vec![0u8; exact::decode_scratch_bytes(&cfg, k + 1).context("too many tokens")?];
-    exact::decode(&model, &tokens, &mut scratch, &mut pos).map_err(|e| anyhow::anyhow!("decoding: {}", describe(&e)))?;
+    let SoloRun { tokens, pos3d: pos, steps: k, frames, music_rows, path } =
+        bailando_exact(&model, &args.music, args.dance.as_deref(), args.seed_tokens.as_deref(), &args.model)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let toks: Vec<i64> = tokens.iter().map(|&t| t as i64).collect();
     write_i64(&args.out.join("tokens.npy"), &toks, &[k + 1, 2])?;
     write_f32(&args.out.join("pos3d.npy"), &pos, &[frames, POSE_DIM])?;
     eprintln!(
         "Bailando, {path}: {} music rows -> {k} steps, {} tokens, {frames} frames at 60 fps -> {}",
-        music.rows,
+        music_rows,
         k + 1,
         args.out.display()
     );
@@ -83,4 +56,55 @@ fn parse_seed(s: &str, vocab: [u32; 2]) -> Result<[u32; 2]> {
         out[i] = t;
     }
     Ok(out)
+}
+
+/// What R mode made of one music track on a Bailando model.
+pub struct SoloRun {
+    /// (K+1, 2) up, down; row 0 the seed.
+    pub tokens: Vec<u32>,
+    /// (frames, 72) `pred_position`.
+    pub pos3d: Vec<f32>,
+    pub steps: usize,
+    pub frames: usize,
+    pub music_rows: usize,
+    /// Which of the authors' eval paths ran, in words.
+    pub path: &'static str,
+}
+
+/// R mode on `music_path` (R, >= n_music) with the AIST++ path (`dance`:
+/// a (T, 72) .npy) or the demo path (`seed_tokens` "up,down"); every
+/// input error names its file. `model_path` labels messages.
+pub fn bailando_exact(model: &Model<'_>, music_path: &Path, dance: Option<&Path>, seed_tokens: Option<&str>, model_path: &Path) -> Result<SoloRun> {
+    let cfg = model.cfg;
+    let nm = cfg.gpt.n_music as usize;
+    let music = read_f32_2d(music_path, None, &format!("music features (R, >= {nm}) at 7.5 fps"))?;
+    if music.cols < nm {
+        bail!("{}: {} columns per row, the model reads {nm} (Bailando's features: `duolando features --for bailando`)", music_path.display(), music.cols);
+    }
+    if music.rows == 0 {
+        bail!("{}: no music rows", music_path.display());
+    }
+    let (padding, seed, path) = match (dance, seed_tokens) {
+        (Some(d), None) => {
+            let dance = read_f32_2d(d, Some(POSE_DIM), "dance joint positions (T, 72)")?;
+            if dance.rows == 0 {
+                bail!("{}: no dance frames", d.display());
+            }
+            let mut scratch = vec![0u8; exact::dance_scratch_bytes(&cfg, dance.rows).context("dance too long")?];
+            let seed = exact::seed_from_dance(model, &dance.data, &mut scratch).map_err(|e| anyhow::anyhow!("{}: {}", d.display(), describe(&e)))?;
+            (MusicPadding::Aist, seed, "AIST++ test path (seed from the dance)")
+        }
+        (None, Some(s)) => (MusicPadding::Demo, parse_seed(s, cfg.gpt.vocab)?, "demo path (seed given)"),
+        _ => bail!("{} is a Bailando model: give --dance (the AIST++ test path) or --seed-tokens up,down (the demo path)", model_path.display()),
+    };
+    let k = exact::steps(padding, music.rows);
+    let mut tokens = vec![0u32; (k + 1) * 2];
+    let mut scratch = vec![0u8; exact::sample_scratch_bytes(&cfg).context("config too large")?];
+    exact::sample(model, &music.data, music.cols, padding, seed, &mut scratch, &mut tokens)
+        .map_err(|e| anyhow::anyhow!("{}: {}", music_path.display(), describe(&e)))?;
+    let frames = (k + 1) * cfg.hop();
+    let mut pos = vec![0f32; frames * POSE_DIM];
+    let mut scratch = vec![0u8; exact::decode_scratch_bytes(&cfg, k + 1).context("too many tokens")?];
+    exact::decode(model, &tokens, &mut scratch, &mut pos).map_err(|e| anyhow::anyhow!("decoding: {}", describe(&e)))?;
+    Ok(SoloRun { tokens, pos3d: pos, steps: k, frames, music_rows: music.rows, path })
 }
