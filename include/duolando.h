@@ -52,6 +52,21 @@ extern "C" {
 /* Joints per pose (SMPL-X body, jaw, eyes, hands). */
 #define DUO_JOINTS 55
 
+/* Joint layouts per family (duo_model_info.family; positions are xyz per
+ * joint in this order).
+ * Duolando (DUO_JOINTS = 55, SMPL-X): 0 pelvis, 1 left_hip, 2 right_hip,
+ *   3 spine1, 4 left_knee, 5 right_knee, 6 spine2, 7 left_ankle,
+ *   8 right_ankle, 9 spine3, 10 left_foot, 11 right_foot, 12 neck,
+ *   13 left_collar, 14 right_collar, 15 head, 16 left_shoulder,
+ *   17 right_shoulder, 18 left_elbow, 19 right_elbow, 20 left_wrist,
+ *   21 right_wrist, 22 jaw, 23 left_eye, 24 right_eye, 25-39 left hand
+ *   (index1-3, middle1-3, pinky1-3, ring1-3, thumb1-3), 40-54 right hand
+ *   (same order).
+ * Bailando (DUO_BAILANDO_JOINTS = 24, SMPL, 60 fps): joints 0-21 as above,
+ *   22 left_hand, 23 right_hand. Its models open for inspection only so
+ *   far: the C sessions run Duolando models (docs/BAILANDO.md). */
+#define DUO_BAILANDO_JOINTS 24
+
 /* ------------------------------------------------------------------ */
 /* Results and errors                                                  */
 /* ------------------------------------------------------------------ */

@@ -148,3 +148,11 @@ fn header_family_codes_match() {
         assert!(h.contains(&line), "missing `{line}` in include/duolando.h");
     }
 }
+
+/// The per-family joint counts of the header are the core's.
+#[test]
+fn header_joint_counts_match() {
+    let h = std::fs::read_to_string(root().join("include/duolando.h")).unwrap();
+    assert!(h.contains(&format!("#define DUO_JOINTS {}\n", duolando_core::family::Family::Duolando.joints())));
+    assert!(h.contains(&format!("#define DUO_BAILANDO_JOINTS {}\n", duolando_core::family::Family::Bailando.joints())));
+}
