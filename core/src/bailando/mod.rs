@@ -5,10 +5,12 @@
 //! (music, up tokens, down tokens) built from the shared blocks
 //! (`nn::streams`). [`exact`] reproduces the authors' `AC.eval()` (greedy)
 //! token for token. Weights: [`model`] (names from [`schema`], config
-//! [`config`]).
+//! [`config`]). [`session`] is S mode: a streaming dancer on the same
+//! engine (shared GPT cache, window schedule and streaming decoders).
 
 pub mod config;
 pub mod exact;
 pub mod gpt;
 pub mod model;
 pub mod schema;
+pub mod session;

@@ -17,6 +17,14 @@ pub const FIRST_FOLLOWER_STREAM: usize = 5;
 /// Number of follower streams (up, down, lhand, rhand, transl).
 pub const FOLLOWER_STREAMS: usize = 5;
 
+/// Checks the stream layout a session assumes (music, 4 leader, 5 follower).
+pub fn check_layout(streams: usize) -> Result<(), Error> {
+    if streams != FIRST_FOLLOWER_STREAM + FOLLOWER_STREAMS {
+        return Err(Error::Length { buffer: crate::error::Buffer::Features, len: streams, expected: FIRST_FOLLOWER_STREAM + FOLLOWER_STREAMS });
+    }
+    Ok(())
+}
+
 /// Embedding table used for follower stream `j` (0..5): the original
 /// embeds follower right-hand tokens with the LEFT-hand table.
 pub const fn follower_table(j: usize) -> usize {

@@ -1,5 +1,5 @@
 //! Where the streaming session keeps keys and values: the GPT's K/V cache
-//! ([`crate::duolando::session::gpt_cache`]) and the LATs' K/V rings ([`KvRing`]) store each
+//! ([`crate::nn::gpt_cache`]) and the LATs' K/V rings ([`KvRing`]) store each
 //! row ONCE, in the session's [`KvType`], and hand the attention a
 //! [`KvRows`] view of them in place (no mirrored copy, no widened copy).
 

@@ -7,6 +7,7 @@
 pub mod bind;
 pub mod block;
 pub mod conv_stack;
+pub mod gpt_cache;
 pub mod kv_store;
 pub mod names;
 pub mod quantizer;
@@ -18,3 +19,4 @@ pub mod vq_config;
 pub mod vq_decoder;
 pub mod vq_encoder;
 pub mod weights;
+pub mod window;

@@ -106,3 +106,14 @@ pub fn top_k_by_id(logits: &[f32], k: usize, rng: &mut Rng) -> u32 {
     set.sort_unstable();
     set[r.min(n - 1)]
 }
+
+/// How a session chooses the token of each head.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sampling {
+    /// Argmax, lowest id on ties. No RNG draw.
+    Greedy,
+    /// Uniform over the `k` largest logits (the original `samplek`), the
+    /// set sorted by id (docs/STREAMING.md §3.6); SplitMix64 seeded with
+    /// `rng_seed`, one draw per head per step (Duolando 5, Bailando 2).
+    TopK { k: u32, rng_seed: u64 },
+}

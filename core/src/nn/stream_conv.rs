@@ -417,8 +417,14 @@ impl ScratchNeed {
     /// The largest need of any stack of `cfg` (every VQ-VAE, both kinds,
     /// every lag `0..=future_max`); None for a config outside the limits.
     pub fn for_model(cfg: &ModelConfig) -> Option<ScratchNeed> {
+        Self::for_vqs(&cfg.vqs())
+    }
+
+    /// The largest need of any stack of these VQ-VAEs (both kinds, every
+    /// lag `0..=future_max`).
+    pub fn for_vqs(vqs: &[VqConfig]) -> Option<ScratchNeed> {
         let mut need = ScratchNeed::default();
-        for vq in cfg.parts.iter().chain(core::iter::once(&cfg.transl)) {
+        for vq in vqs {
             for kind in [StackKind::Encoder, StackKind::Decoder] {
                 let g = Geometry::new(vq, kind)?;
                 let fmax = future_max_of(&g);

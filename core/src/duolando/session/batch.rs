@@ -26,7 +26,7 @@ use crate::kernels::{linear, Q8Room};
 use crate::duolando::model::Model;
 use crate::nn::sampler::{argmax, top_k_by_id};
 use crate::duolando::session::config::{for_each_live_window, next_window, CacheSchedule, window_context, Sampling, Setting, MAX_WINDOWS};
-use crate::duolando::session::gpt_cache::{GptCache, GptItem};
+use crate::nn::gpt_cache::{GptCache, GptItem};
 use crate::duolando::session::lat_stream::{max_keys, LatInputs, LatStepScratch, LatStream};
 use crate::duolando::session::state::State;
 use crate::duolando::session::{vq_stream, Session, SessionConfig};
@@ -34,7 +34,7 @@ use crate::nn::stream_conv::{ScratchNeed, StreamScratch};
 
 /// Most sessions stepped together (and most LAT pushes / GPT windows in
 /// one batched call).
-pub const MAX_BATCH: usize = 64;
+pub use crate::nn::gpt_cache::MAX_BATCH;
 
 /// Window rows one GPT call appends at most for a session alone: a
 /// re-prefill (up to `block_size - 1` rows at a window jump) runs in
@@ -682,7 +682,7 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
                         ci += 1;
                     }
                 }
-                GptCache::append_many(&model.gpt, g.n_head as usize, &mut items, &mut sc.x[..total * c], &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?).map_err(at(first))?;
+                GptCache::append_many(model.gpt.base.iter().chain(model.gpt.head.iter()), g.n_head as usize, FOLLOWER_STREAMS, &mut items, &mut sc.x[..total * c], &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?).map_err(at(first))?;
             }
             // Advance the cursors; the follower rows of the output items, to the heads' inputs.
             let mut j = 0;

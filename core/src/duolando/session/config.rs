@@ -3,19 +3,10 @@
 //! schedule, latency in frames.
 
 use crate::duolando::config::ModelConfig;
-use crate::duolando::session::gpt_cache::KvType;
+use crate::nn::kv_store::KvType;
 use crate::nn::stream_conv::{future_max, StackKind};
 
-/// How the follower token of each head is chosen.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Sampling {
-    /// Argmax, lowest id on ties. No RNG draw.
-    Greedy,
-    /// Uniform over the `k` largest logits (the original `samplek`), the
-    /// set sorted by id (docs/STREAMING.md §3.6); SplitMix64 seeded with
-    /// `rng_seed`, 5 draws per step.
-    TopK { k: u32, rng_seed: u64 },
-}
+pub use crate::nn::sampler::Sampling;
 
 /// Everything that shapes a session: its latency budget, window policy,
 /// sampling and buffer capacities. All counts are tokens (4 frames)
@@ -79,53 +70,8 @@ impl CacheSchedule {
 /// Most GPT caches a staggered session may hold.
 pub const MAX_WINDOWS: usize = 16;
 
-/// Start (token index) of the GPT window of step `k`.
-pub fn window_start(k: usize, m: usize, s: usize) -> usize {
-    k + 1 - window_context(k, m, s)
-}
-
-/// The first step after `k` whose window starts later than step `k`'s,
-/// and that start: `(k2, lo2)` (window starts never decrease and move at
-/// least every `m` steps).
-pub fn next_window(k: usize, m: usize, s: usize) -> (usize, usize) {
-    let lo = window_start(k, m, s);
-    let mut k2 = k + 1;
-    while window_start(k2, m, s) == lo && k2 <= k + m.max(1) {
-        k2 += 1;
-    }
-    (k2, window_start(k2, m, s))
-}
-
-/// Calls `f(lo)` for every window start `lo <= k` of a step `>= k`: the
-/// windows that contain token row `k` and are still to be used, in
-/// increasing order (the window starts never decrease).
-pub fn for_each_live_window(k: usize, m: usize, s: usize, mut f: impl FnMut(usize)) {
-    let mut last = None;
-    for k2 in k..k + m.max(1) {
-        let lo = window_start(k2, m, s);
-        if lo > k {
-            break;
-        }
-        if last != Some(lo) {
-            f(lo);
-            last = Some(lo);
-        }
-    }
-}
-
-/// Caches a staggered schedule needs: the most windows live at one step
-/// (the schedule is periodic after step `m`, so `3m + 2` steps cover it).
-pub fn window_pool(m: usize, s: usize) -> usize {
-    let mut most = 0;
-    for k in 0..3 * m + 2 {
-        let mut n = 0;
-        for_each_live_window(k, m, s, |_| n += 1);
-        most = most.max(n);
-    }
-    most
-}
-
 pub use crate::error::Setting;
+pub use crate::nn::window::{for_each_live_window, next_window, window_context, window_pool, window_start};
 
 /// Largest `pending_frames` / `music_buffer_frames` (keeps every size far
 /// from overflow; about 18 minutes at 30 fps).
@@ -276,18 +222,6 @@ impl Preset {
     }
 }
 
-/// Context length of GPT step `k` under the authors' chunked window
-/// (`sample(shift=s)`): `k+1` for `k < m`, then
-/// `s + (k - m - 1) mod (m - s + 1)` (Python modulo).
-pub fn window_context(k: usize, m: usize, s: usize) -> usize {
-    if k < m {
-        return k + 1;
-    }
-    let period = (m + 1).saturating_sub(s).max(1) as i64;
-    let r = (k as i64 - m as i64 - 1).rem_euclid(period);
-    s + r as usize
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -311,67 +245,6 @@ mod tests {
         assert_eq!(lat(Preset::Minimum), (0, 3, 29));
         assert_eq!(SessionConfig::with(&cfg, 0, 0, 5, 22).live_latency_frames(4), 23);
         assert_eq!(SessionConfig::with(&cfg, 1, 0, 5, 22).live_latency_frames(4), 23);
-    }
-
-    #[test]
-    fn next_window_finds_each_jump() {
-        // m = 29, s = 22: lo 0 on steps 0..28, 1 at step 29, 9 on 30..37, 17 from 38.
-        assert_eq!(next_window(0, 29, 22), (29, 1));
-        assert_eq!(next_window(28, 29, 22), (29, 1));
-        assert_eq!(next_window(29, 29, 22), (30, 9));
-        assert_eq!(next_window(30, 29, 22), (38, 17));
-        assert_eq!(next_window(37, 29, 22), (38, 17));
-        // s = m: a sliding window moves every step.
-        assert_eq!(next_window(40, 29, 29), (41, 13));
-    }
-
-    #[test]
-    fn window_schedule_matches_the_reference_formula() {
-        // m = 29, s = 22: 1..29 on steps 0..28, 29 at step 29, then chunks of 8 from 22.
-        let c: [usize; 40] = core::array::from_fn(|k| window_context(k, 29, 22));
-        assert_eq!(&c[..29], &core::array::from_fn::<usize, 29, _>(|k| k + 1));
-        assert_eq!(c[29], 29);
-        assert_eq!(&c[30..40], &[22, 23, 24, 25, 26, 27, 28, 29, 22, 23]);
-        // s = m: sliding window.
-        assert!((29..100).all(|k| window_context(k, 29, 29) == 29));
-    }
-
-    #[test]
-    fn live_windows_cover_every_step_that_reads_a_row() {
-        for (m, s) in [(29, 22), (29, 15), (29, 8), (29, 27), (7, 5), (7, 7), (29, 1)] {
-            let pool = window_pool(m, s);
-            for k in 0..200 {
-                let mut live: [usize; 64] = [usize::MAX; 64];
-                let mut n = 0;
-                for_each_live_window(k, m, s, |lo| {
-                    live[n] = lo;
-                    n += 1;
-                });
-                assert!(n <= pool, "m {m} s {s} k {k}: {n} > pool {pool}");
-                // Brute force: every later step whose window contains row k has its start listed.
-                for k2 in k..k + 2 * m {
-                    let lo = window_start(k2, m, s);
-                    if lo <= k {
-                        assert!(live[..n].contains(&lo), "m {m} s {s} k {k}: window {lo} of step {k2} missing");
-                    }
-                }
-                assert!(live[..n].contains(&window_start(k, m, s)));
-            }
-        }
-        // docs/STREAMING.md §3.5: ceil(m / (m - s + 1)) caches in steady state (4 at s = 22, 2 at
-        // s = 15 and 8, 10 at s = 27), one more during start-up for the one-step window of step 29.
-        let steady = |s: usize| {
-            (60..200)
-                .map(|k| {
-                    let mut n = 0;
-                    for_each_live_window(k, 29, s, |_| n += 1);
-                    n
-                })
-                .max()
-                .unwrap()
-        };
-        assert_eq!([steady(22), steady(15), steady(8), steady(27)], [4, 2, 2, 10]);
-        assert_eq!([window_pool(29, 22), window_pool(29, 15), window_pool(29, 8), window_pool(29, 27)], [5, 3, 3, 11]);
     }
 }
 

@@ -19,13 +19,13 @@
 
 pub mod batch;
 pub mod config;
-pub mod gpt_cache;
+
 pub mod lat_stream;
 mod state;
 mod vq_stream;
 
 pub use batch::{BatchError, StepBatch, StepDims, StepScratch, MAX_BATCH, REPREFILL_CHUNK};
-pub use gpt_cache::KvType;
+pub use crate::nn::kv_store::KvType;
 pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, CacheSchedule, Preset, Sampling, SessionConfig, Setting, MAX_WINDOWS};
 
 use crate::arena::{Arena, Planner};
@@ -116,7 +116,7 @@ pub fn session_bytes_for(model: &ModelConfig, cfg: &SessionConfig) -> Result<usi
 pub(crate) fn check_config(model: &ModelConfig, cfg: &SessionConfig) -> Result<(), Error> {
     model.validate().map_err(|e| Error::Bind(crate::nn::bind::BindError::Config(e)))?;
     cfg.check(model).map_err(|(setting, value, max)| Error::Setting { setting, value, max })?;
-    gpt_cache::check_layout(model.gpt.n_streams as usize)
+    crate::duolando::coordinated_attention::check_layout(model.gpt.n_streams as usize)
 }
 
 fn check_seed(model: &Model<'_>, seed: &[u32; 5]) -> Result<(), Error> {

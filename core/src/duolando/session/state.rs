@@ -9,7 +9,7 @@ use crate::duolando::model::Model;
 use crate::nn::quantizer::codebook_norms;
 use crate::duolando::session::config::{SessionConfig, MAX_WINDOWS};
 use heapless::Vec;
-use crate::duolando::session::gpt_cache::GptCache;
+use crate::nn::gpt_cache::GptCache;
 use crate::duolando::session::batch::music_burst;
 use crate::duolando::session::lat_stream::{LatIn, LatStream};
 use crate::nn::ring::{RowRing, TokenRing};

@@ -1,12 +1,15 @@
-//! The coordinated attention under S (docs/STREAMING.md §3.5): the GPT's
-//! base and head blocks over one chunked window, with a per-layer K/V
-//! cache. Within a window (fixed start `lo`) the inputs of every cached
+//! A streaming GPT's window under S (docs/STREAMING.md §3.5): the base
+//! and head blocks of a multi-stream GPT (Duolando's coordinated
+//! attention, Bailando's cross-conditional GPT) over one chunked window,
+//! with a per-layer K/V cache. Within a window (fixed start `lo`) the inputs of every cached
 //! row are unchanged and the mask is causal in rows, so appending the new
 //! row computes exactly what the full window forward computes; when the
 //! window start moves, the cache is cleared and the window re-prefilled.
 //!
-//! Layout: position-major, row `i * 10 + s` = window row `i`, stream `s`
-//! (`[music, L_up, L_down, L_lh, L_rh, F_up, F_down, F_lh, F_rh, F_transl]`);
+//! Layout: position-major, row `i * streams + s` = window row `i`, stream
+//! `s` (Duolando: `[music, L_up, L_down, L_lh, L_rh, F_up, F_down, F_lh,
+//! F_rh, F_transl]`; Bailando: `[music, up, down]`); the streams a family's
+//! heads read are the last `out_streams` of a row;
 //! per layer head-major ([`KvRows::head_major`]): head `h`'s lanes of all
 //! rows side by side, so the attention's pass over one head reads one
 //! contiguous stretch of a cold cache, not `hd` lanes of every row.
@@ -21,13 +24,15 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::nn::block::{block_attend_groups, block_kv, BlockScratch};
-use crate::duolando::coordinated_attention::{FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
 use crate::error::{Buffer, Error};
 use crate::kernels::{KvRows, Mask};
-use crate::duolando::model::GptW;
+use crate::nn::weights::BlockW;
 use crate::nn::kv_store::KvBuf;
 pub use crate::nn::kv_store::KvType;
-use crate::duolando::session::MAX_BATCH;
+
+/// Most caches one [`GptCache::append_many`] call appends to (the most
+/// sessions a step batch holds).
+pub const MAX_BATCH: usize = 64;
 use heapless::Vec;
 
 /// Causal over window rows for a position-major layout: query row `qi`
@@ -160,16 +165,20 @@ impl<'s> GptCache<'s> {
     /// inputs (position rows added) of item `i`'s `n_i = items[i].rows` new
     /// window rows, one item after another.
     ///
+    /// `blocks` are the GPT's base then head blocks, one per cached layer.
     /// On return, for the `j`-th item with `need_output` (in item order),
-    /// rows `j * FOLLOWER_STREAMS ..` of `x` hold the final hidden state of
-    /// the follower streams at its last new row (what the heads read);
+    /// rows `j * out_streams ..` of `x` hold the final hidden state of
+    /// the last `out_streams` streams at its last new row (what the heads read);
     /// items without it skip the last layer's attention and MLP (only its
     /// K/V are kept). Other rows of `x` are scratch. An item's result is
     /// what an append of its own would give.
-    pub fn append_many(gpt: &GptW<'_>, n_head: usize, items: &mut [GptItem<'_, '_>], x: &mut [f32], s: &mut BlockScratch<'_>) -> Result<(), Error> {
+    pub fn append_many<'w: 'b, 'b>(blocks: impl Iterator<Item = &'b BlockW<'w>> + Clone, n_head: usize, out_streams: usize, items: &mut [GptItem<'_, '_>], x: &mut [f32], s: &mut BlockScratch<'_>) -> Result<(), Error> {
         let Some(first) = items.first() else { return Ok(()) };
         let (st, c, layers) = (first.cache.streams, first.cache.c, first.cache.layers);
-        if gpt.base.len() + gpt.head.len() != layers || items.len() > MAX_BATCH {
+        if out_streams == 0 || out_streams > st {
+            return Err(Error::Length { buffer: Buffer::Features, len: out_streams, expected: st });
+        }
+        if blocks.clone().count() != layers || items.len() > MAX_BATCH {
             return Err(Error::Context { c: items.len(), max: MAX_BATCH });
         }
         // The caches are head-major for heads of `hd` lanes (carved with
@@ -193,7 +202,7 @@ impl<'s> GptCache<'s> {
             return Err(Error::Length { buffer: Buffer::Features, len: x.len(), expected: total * c });
         }
         let row0 = |it: &GptItem<'_, '_>| it.cache.rows * st;
-        for (l, b) in gpt.base.iter().chain(gpt.head.iter()).enumerate() {
+        for (l, b) in blocks.enumerate() {
             // (total, C) keys and values of every new row, in one pass.
             let p = s.qkv();
             let (kn, vn) = (&mut p.k[..total * c], &mut p.v[..total * c]);
@@ -213,7 +222,7 @@ impl<'s> GptCache<'s> {
                 };
                 block_attend_groups(b, x, &bounds, c, n_head, keys, s)?;
             } else {
-                // Last layer: only the follower rows of each output item's
+                // Last layer: only the output rows of each output item's
                 // last new row are read; they are gathered to the front.
                 let mut outs: Vec<usize, MAX_BATCH> = Vec::new();
                 let mut ob: Vec<usize, { MAX_BATCH + 1 }> = Vec::new();
@@ -221,10 +230,10 @@ impl<'s> GptCache<'s> {
                 for (i, it) in items_ro.iter().enumerate() {
                     if it.need_output {
                         let j = outs.len();
-                        let src = (bounds[i + 1] - FOLLOWER_STREAMS) * c;
-                        x.copy_within(src..src + FOLLOWER_STREAMS * c, j * FOLLOWER_STREAMS * c);
+                        let src = (bounds[i + 1] - out_streams) * c;
+                        x.copy_within(src..src + out_streams * c, j * out_streams * c);
                         outs.push(i).map_err(|_| Error::State)?;
-                        ob.push((j + 1) * FOLLOWER_STREAMS).map_err(|_| Error::State)?;
+                        ob.push((j + 1) * out_streams).map_err(|_| Error::State)?;
                     }
                 }
                 if !outs.is_empty() {
@@ -232,9 +241,9 @@ impl<'s> GptCache<'s> {
                         let it = &items_ro[outs[g]];
                         let r1 = row0(it) + it.rows * st;
                         let (k, v) = it.cache.visible(l, r1)?;
-                        Ok((k, v, RowCausal { streams: st, q_row0: r1 - FOLLOWER_STREAMS }))
+                        Ok((k, v, RowCausal { streams: st, q_row0: r1 - out_streams }))
                     };
-                    let xs = &mut x[..outs.len() * FOLLOWER_STREAMS * c];
+                    let xs = &mut x[..outs.len() * out_streams * c];
                     block_attend_groups(b, xs, &ob, c, n_head, keys, s)?;
                 }
             }
@@ -251,14 +260,6 @@ pub struct GptItem<'r, 's> {
     pub cache: &'r mut GptCache<'s>,
     pub rows: usize,
     pub need_output: bool,
-}
-
-/// Checks the stream layout this module assumes.
-pub fn check_layout(streams: usize) -> Result<(), Error> {
-    if streams != FIRST_FOLLOWER_STREAM + FOLLOWER_STREAMS {
-        return Err(Error::Length { buffer: Buffer::Features, len: streams, expected: FIRST_FOLLOWER_STREAM + FOLLOWER_STREAMS });
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -1,0 +1,220 @@
+//! One step of several Bailando sessions at once: the GPT's new window row
+//! of every session in one pass over the weights (`GptCache::append_many`),
+//! the heads, the sampler, and the streaming VQ decoders that turn tokens
+//! into frames. A session alone runs the same code as a batch of one.
+//!
+//! Step `k` of a session reads token `k` (up, down) and music row `k + 1`
+//! in window slot `k - lo` (`lo` = `window_start(k, m, shift)`, positions
+//! from 0 in every window, as R) and makes token `k + 1`.
+
+use heapless::Vec;
+
+use crate::bailando::config::{DOWN_JOINTS, N_STREAMS, POSE_DIM, UP_JOINTS};
+use crate::bailando::model::Model;
+use crate::bailando::session::config::window_rows;
+use crate::bailando::session::state::{StepScratch, PREFILL_CHUNK};
+use crate::bailando::session::Session;
+use crate::error::Error;
+use crate::kernels::{layernorm, linear};
+use crate::nn::gpt_cache::{GptCache, GptItem, MAX_BATCH};
+use crate::nn::quantizer::dequantise;
+use crate::nn::sampler::{argmax, top_k_by_id, Sampling};
+use crate::nn::stream_conv::StackW;
+use crate::nn::window::window_start;
+
+/// The index of the session an error is about, and the error.
+pub type BatchError = (usize, Error);
+
+fn at(i: usize) -> impl Fn(Error) -> BatchError {
+    move |e| (i, e)
+}
+
+/// The (3, C) input rows of token row `j` at window slot `p`: the music
+/// row through `cond_emb`, the two token embeddings, each plus its
+/// stream's position row `s * block_size + p`.
+fn embed_row(model: &Model<'_>, tok: &[u32], music: &[f32], p: usize, x: &mut [f32]) -> Result<(), Error> {
+    let g = &model.cfg.gpt;
+    let c = g.n_embd as usize;
+    let bs = g.block_size as usize;
+    linear(music, &model.gpt.cond_emb.w, model.gpt.cond_emb.b, &mut x[..c]);
+    for (j, table) in model.gpt.tok_emb.iter().enumerate() {
+        let t = tok[j];
+        if t as usize >= table.rows() {
+            return Err(Error::Token { stream: j as u8, token: t, vocab: table.rows() as u32 });
+        }
+        table.row_into(t as usize, &mut x[(1 + j) * c..(2 + j) * c]);
+    }
+    for s in 0..N_STREAMS {
+        let pos = &model.gpt.pos_emb[(s * bs + p) * c..(s * bs + p + 1) * c];
+        for (a, b) in x[s * c..(s + 1) * c].iter_mut().zip(pos) {
+            *a += b;
+        }
+    }
+    Ok(())
+}
+
+/// Rows `j` of `x` (n, 3C) for the session's tokens `from..to` at their
+/// slots of the window starting at `lo`.
+fn embed_rows(s: &Session<'_>, lo: usize, from: usize, to: usize, x: &mut [f32]) -> Result<(), Error> {
+    let w = N_STREAMS * s.model.cfg.gpt.n_embd as usize;
+    for (i, j) in (from..to).enumerate() {
+        let tok = s.st.toks.row(j)?;
+        let music = s.music_row(j + 1)?;
+        embed_row(s.model, tok, music, j - lo, &mut x[i * w..(i + 1) * w])?;
+    }
+    Ok(())
+}
+
+/// Steps every ready session of `ss` once (at most `sc.n` of them; the
+/// rest wait for the next call) and decodes the frames that became final.
+/// Returns how many sessions stepped.
+pub fn step_many(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<usize, BatchError> {
+    let mut ready: Vec<usize, MAX_BATCH> = Vec::new();
+    for (i, s) in ss.iter().enumerate() {
+        if ready.len() < sc.n.min(MAX_BATCH) && s.can_step() {
+            ready.push(i).map_err(|_| (i, Error::State))?;
+        }
+    }
+    let Some(&first) = ready.first() else { return Ok(0) };
+    let model = ss[first].model;
+    for &i in ready.iter().skip(1) {
+        if !core::ptr::eq(ss[i].model, model) {
+            return Err((i, Error::State));
+        }
+    }
+    let g = &model.cfg.gpt;
+    let c = g.n_embd as usize;
+    let nh = g.n_head as usize;
+    let m = window_rows(&model.cfg);
+    let w = N_STREAMS * c;
+    let blocks = || model.gpt.base.iter().chain(model.gpt.head.iter());
+
+    // Windows that jumped: re-prefill their rows before the new one.
+    for &i in ready.iter() {
+        let s = &mut *ss[i];
+        let k = s.steps;
+        let lo = window_start(k, m, s.cfg.shift as usize);
+        if s.st.gpt.window_start() == Some(lo) && s.st.gpt.rows() == k - lo {
+            continue;
+        }
+        s.st.gpt.restart(lo);
+        let mut from = lo;
+        while from < k {
+            let to = (from + PREFILL_CHUNK).min(k);
+            embed_rows(s, lo, from, to, &mut sc.x[..(to - from) * w]).map_err(at(i))?;
+            let mut items = [GptItem { cache: &mut s.st.gpt, rows: to - from, need_output: false }];
+            GptCache::append_many(blocks(), nh, 2, &mut items, &mut sc.x[..(to - from) * w], &mut sc.block).map_err(at(i))?;
+            from = to;
+        }
+        s.prefilled += k - lo;
+    }
+
+    // The new row of every ready session, through the GPT together.
+    for (j, &i) in ready.iter().enumerate() {
+        let s = &*ss[i];
+        let k = s.steps;
+        let lo = s.st.gpt.window_start().ok_or((i, Error::State))?;
+        embed_rows(s, lo, k, k + 1, &mut sc.x[j * w..(j + 1) * w]).map_err(at(i))?;
+    }
+    let n = ready.len();
+    {
+        let mut items: Vec<GptItem<'_, '_>, MAX_BATCH> = Vec::new();
+        for (i, s) in ss.iter_mut().enumerate() {
+            if ready.contains(&i) {
+                items.push(GptItem { cache: &mut s.st.gpt, rows: 1, need_output: true }).map_err(|_| (i, Error::State))?;
+            }
+        }
+        GptCache::append_many(blocks(), nh, 2, &mut items, &mut sc.x[..n * w], &mut sc.block).map_err(at(first))?;
+    }
+
+    // Heads and sampling: rows 2j, 2j + 1 of x are session j's up and down.
+    let vu = g.vocab[0] as usize;
+    for (j, &i) in ready.iter().enumerate() {
+        let s = &mut *ss[i];
+        let mut tok = [0u32; 2];
+        for h in 0..2 {
+            let row = &sc.x[(2 * j + h) * c..(2 * j + h + 1) * c];
+            layernorm(row, model.gpt.ln_f.w, model.gpt.ln_f.b, sc.ln);
+            let logits = if h == 0 { &mut sc.logits[..vu] } else { &mut sc.logits[vu..] };
+            linear(sc.ln, &model.gpt.heads[h], None, logits);
+            tok[h] = match s.cfg.sampling {
+                Sampling::Greedy => argmax(logits),
+                Sampling::TopK { k, .. } => top_k_by_id(logits, k as usize, &mut s.rng),
+            };
+        }
+        s.st.toks.push(&tok).map_err(at(i))?;
+        s.steps += 1;
+        decode(s, sc).map_err(at(i))?;
+    }
+    Ok(n)
+}
+
+/// Feeds the session's tokens not yet in its decoders one at a time,
+/// assembling the frames of every token that became final as soon as it
+/// is (token q's frames from the tokens `..=q + d`, S's truncated prefix).
+pub(super) fn decode(s: &mut Session<'_>, sc: &mut StepScratch<'_>) -> Result<(), Error> {
+    let model = s.model;
+    loop {
+        while s.frames_final() {
+            frames_of(s, sc)?;
+        }
+        if s.dec_fed >= s.steps + 1 {
+            return Ok(());
+        }
+        let tok = s.st.toks.row(s.dec_fed)?;
+        let tok = [tok[0], tok[1]];
+        for h in 0..2 {
+            let vq = &model.parts[h];
+            let emb = vq.cfg.emb_width as usize;
+            dequantise(&vq.codebook, &tok[h..h + 1], h as u8, &mut sc.feat[..emb])?;
+            s.st.dec[h].push(StackW::Decoder(&vq.pos), &sc.feat[..emb], &mut sc.conv)?;
+            if h == 1 {
+                s.st.dec[2].push(StackW::Decoder(&model.root), &sc.feat[..emb], &mut sc.conv)?;
+            }
+        }
+        s.dec_fed += 1;
+    }
+}
+
+/// The `hop` frames of the session's next token from its decoders'
+/// current prefix, assembled as R's `decode` does (the down half's pelvis
+/// slot replaced by the integrated root velocity, added to every joint),
+/// into the pending ring.
+fn frames_of(s: &mut Session<'_>, sc: &mut StepScratch<'_>) -> Result<(), Error> {
+    let model = s.model;
+    let hop = model.cfg.hop();
+    let t = s.decoded;
+    let st = &mut s.st;
+    let frames = &mut st.frames[..hop * POSE_DIM];
+    for (h, joints) in [&UP_JOINTS[..], &DOWN_JOINTS[..]].into_iter().enumerate() {
+        let w = joints.len() * 3;
+        let out = &mut st.dec_out[..hop * w];
+        st.dec[h].output(StackW::Decoder(&model.parts[h].pos), t, hop, &mut sc.conv, out)?;
+        for f in 0..hop {
+            for (i, &j) in joints.iter().enumerate() {
+                let j = j as usize;
+                frames[f * POSE_DIM + 3 * j..][..3].copy_from_slice(&out[f * w + 3 * i..][..3]);
+            }
+        }
+    }
+    let vel = &mut st.dec_out[..hop * 3];
+    st.dec[2].output(StackW::Decoder(&model.root), t, hop, &mut sc.conv, vel)?;
+    for f in 0..hop {
+        let r = s.root;
+        let row = &mut frames[f * POSE_DIM..(f + 1) * POSE_DIM];
+        row[..3].copy_from_slice(&r);
+        for j in 1..POSE_DIM / 3 {
+            for d in 0..3 {
+                row[3 * j + d] += r[d];
+            }
+        }
+        for d in 0..3 {
+            s.root[d] += vel[f * 3 + d];
+        }
+    }
+    for f in 0..hop {
+        st.pending.push(&frames[f * POSE_DIM..(f + 1) * POSE_DIM])?;
+    }
+    s.decoded += hop;
+    Ok(())
+}
