@@ -1,0 +1,1 @@
+"""Transflower reference: the authors' classes (vendored under authors/) and our driver."""

@@ -1,0 +1,1 @@
+from models.flowplusplus.flowplusplus import FlowPlusPlus
