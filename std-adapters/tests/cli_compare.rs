@@ -168,8 +168,11 @@ fn compare_rejects_a_budget_outside_the_model() {
 
 /// Bailando models in exact mode: a model against itself agrees fully
 /// with zero joint error; its f16 conversion samples the same tokens
-/// (measured on this golden) with a small joint error; without --against
-/// (no S mode yet) or with a leader, a named refusal.
+/// (measured on this golden) with a small joint error; without --against,
+/// S against R: at the exact preset equal, at a smaller decoder future the
+/// same tokens (the window slides) and a joint error, at a jumping window
+/// a one-step agreement below 1 on these random weights; a leader or a
+/// Duolando preset is a named refusal.
 #[test]
 fn compare_bailando_models() {
     let fx = fixtures();
@@ -195,7 +198,24 @@ fn compare_bailando_models() {
     assert_eq!(half["free_run_agreement"], 1.0, "{half}");
     let err = half["max_joint_err_mm"].as_f64().unwrap();
     assert!(err > 0.0 && err < 5.0, "f16 max joint error {err} mm");
-    for (extra, want) in [(vec![], "needs --against"), (vec!["--against", "x.duo", "--leader", "l.npy"], "solo dancer")] {
+    let sr = |extra: &[&str], name: &str| -> Value {
+        let json = dir.join(name);
+        let mut a = vec!["compare".to_string(), "--model".into(), s(&m), "--music".into(), s(&roll.join("music.npy")), "--dance".into(), s(&roll.join("dance.npy")), "--json".into(), s(&json)];
+        a.extend(extra.iter().map(|x| x.to_string()));
+        let o = duolando(&a);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(String::from_utf8_lossy(&o.stdout).contains("streaming"), "{}", String::from_utf8_lossy(&o.stdout));
+        serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap()
+    };
+    let exact = sr(&["--preset", "exact"], "s_exact.json");
+    assert_eq!((exact["one_step_agreement"].as_f64(), exact["free_run_agreement"].as_f64(), exact["max_joint_err_mm"].as_f64()), (Some(1.0), Some(1.0), Some(0.0)), "{exact}");
+    let d0 = sr(&["--preset", "exact", "--dec-future", "0"], "s_d0.json");
+    assert_eq!(d0["free_run_agreement"], 1.0, "{d0}");
+    assert!(d0["max_joint_err_mm"].as_f64().unwrap() > 0.0, "{d0}");
+    assert_eq!(d0["latency_frames"], 0);
+    let jump = sr(&["--preset", "reference"], "s_ref.json");
+    assert!(jump["one_step_agreement"].as_f64().unwrap() < 1.0, "{jump}");
+    for (extra, want) in [(vec!["--preset", "live-music"], "Duolando preset"), (vec!["--against", "x.duo", "--leader", "l.npy"], "solo dancer")] {
         let mut a = vec!["compare".to_string(), "--model".into(), s(&m), "--music".into(), s(&roll.join("music.npy")), "--dance".into(), s(&roll.join("dance.npy"))];
         a.extend(extra.iter().map(|x| x.to_string()));
         let o = duolando(&a);

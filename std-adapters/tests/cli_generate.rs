@@ -235,23 +235,27 @@ fn generate_bailando_matches_the_goldens_on_both_paths() {
         let out = tmp(name);
         let seed = format!("{},{}", meta["seed_tokens"][0], meta["seed_tokens"][1]);
         let music = roll.join("music.npy");
-        let mut args = vec!["generate", "--model", p(&model), "--music", p(&music), "--out", p(&out)];
-        let dance = roll.join("dance.npy");
-        if path_args == "dance" {
-            args.extend(["--dance", p(&dance)]);
-        } else {
-            args.extend(["--seed-tokens", &seed]);
+        // R, and S at its exact preset (the same numbers).
+        for mode in [&["--mode", "exact"][..], &["--mode", "streaming", "--preset", "exact"][..]] {
+            let mut args = vec!["generate", "--model", p(&model), "--music", p(&music), "--out", p(&out)];
+            args.extend(mode.iter().copied());
+            let dance = roll.join("dance.npy");
+            if path_args == "dance" {
+                args.extend(["--dance", p(&dance)]);
+            } else {
+                args.extend(["--seed-tokens", &seed]);
+            }
+            let o = duolando(&args);
+            assert!(o.status.success(), "{name} {mode:?}: {}", String::from_utf8_lossy(&o.stderr));
+            let got = read_i64_2d(&out.join("tokens.npy"), Some(2), "tokens").unwrap();
+            let want = read_i64_2d(&roll.join("tokens.npy"), Some(2), "tokens").unwrap();
+            assert_eq!(got.data, want.data, "{name} {mode:?}: tokens");
+            let got = read_f32_2d(&out.join("pos3d.npy"), Some(72), "pos3d").unwrap();
+            let want = read_f32_2d(&roll.join("pos3d.npy"), Some(72), "pos3d").unwrap();
+            assert_eq!(got.rows, want.rows, "{name} {mode:?}: frames");
+            let err = got.data.iter().zip(&want.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+            assert!(err <= 1e-5, "{name} {mode:?}: positions max abs err {err:e}");
         }
-        let o = duolando(&args);
-        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
-        let got = read_i64_2d(&out.join("tokens.npy"), Some(2), "tokens").unwrap();
-        let want = read_i64_2d(&roll.join("tokens.npy"), Some(2), "tokens").unwrap();
-        assert_eq!(got.data, want.data, "{name}: tokens");
-        let got = read_f32_2d(&out.join("pos3d.npy"), Some(72), "pos3d").unwrap();
-        let want = read_f32_2d(&roll.join("pos3d.npy"), Some(72), "pos3d").unwrap();
-        assert_eq!(got.rows, want.rows, "{name}: frames");
-        let err = got.data.iter().zip(&want.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-        assert!(err <= 1e-5, "{name}: positions max abs err {err:e}");
     }
     let roll = fx.join("bailando_rollout_btiny_demo_odd");
     let music = roll.join("music.npy");
@@ -261,7 +265,9 @@ fn generate_bailando_matches_the_goldens_on_both_paths() {
         (vec!["--seed-tokens", "1,99"], "outside its vocabulary"),
         (vec!["--leader", p(&music), "--seed-tokens", "1,2"], "takes no leader"),
         (vec![], "give --dance"),
-        (vec!["--seed-tokens", "1,2", "--mode", "streaming"], "only --mode exact"),
+        (vec!["--seed-tokens", "1,2", "--mode", "streaming", "--preset", "live-music"], "is a Duolando preset"),
+        (vec!["--seed-tokens", "1,2", "--mode", "streaming", "--lookahead", "2"], "--lookahead is a Duolando setting"),
+        (vec!["--seed-tokens", "1,2", "--mode", "streaming", "--shift", "99"], "--shift 99 is outside its range"),
     ] {
         let mut a = vec!["generate", "--model", p(&model), "--music", p(&music), "--out", p(&out)];
         a.extend(args.iter().copied());

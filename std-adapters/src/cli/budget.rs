@@ -7,11 +7,20 @@ use duolando_core::duolando::config::ModelConfig;
 use duolando_core::duolando::session::{CacheSchedule, Sampling, SessionConfig};
 // One list of presets for every command and the C ABI (core/src/duolando/session/config.rs).
 pub use duolando_core::duolando::session::Preset;
+use duolando_core::bailando::config::BailandoConfig;
+use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as SoloConfig};
 
-/// `--preset` values: the names of [`Preset::ALL`], checked by clap (listed in `--help`).
-fn preset_parser() -> impl clap::builder::TypedValueParser<Value = Preset> {
-    use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(Preset::ALL.map(Preset::name)).try_map(|s: String| Preset::from_name(&s).ok_or("not a preset"))
+/// `--preset` values: the names of every family's presets ([`Preset::ALL`],
+/// [`SoloPreset::ALL`]), checked by clap (listed in `--help`); each family
+/// refuses the names that are not its own by name.
+fn preset_parser() -> clap::builder::PossibleValuesParser {
+    let mut names: Vec<&'static str> = Preset::ALL.map(Preset::name).to_vec();
+    for p in SoloPreset::ALL {
+        if !names.contains(&p.name()) {
+            names.push(p.name());
+        }
+    }
+    clap::builder::PossibleValuesParser::new(names)
 }
 
 /// `--preset` and per-setting overrides (docs/STREAMING.md §2).
@@ -20,8 +29,9 @@ pub struct BudgetArgs {
     /// Starting point of the streaming budget (`duolando inspect` lists each
     /// preset's settings and latency); the flags below override single settings.
     /// live-music: music pushed in lockstep with the leader, no music look-ahead.
+    /// exact (Bailando): R's sliding window and full decoder future.
     #[arg(long, default_value = "reference", value_parser = preset_parser())]
-    pub preset: Preset,
+    pub preset: String,
     /// Leader look-ahead in tokens (4 frames each), 0..=look_forward.
     #[arg(long)]
     pub lookahead: Option<u32>,
@@ -67,7 +77,10 @@ pub enum Kv {
 impl BudgetArgs {
     /// The session configuration for `cfg`, checked.
     pub fn config(&self, cfg: &ModelConfig) -> Result<SessionConfig> {
-        let base = SessionConfig::preset(cfg, self.preset);
+        let Some(preset) = Preset::from_name(&self.preset) else {
+            bail!("--preset {} is a Bailando preset; a Duolando model takes {} (R itself: --mode exact)", self.preset, Preset::ALL.map(Preset::name).join(", "));
+        };
+        let base = SessionConfig::preset(cfg, preset);
         let mut sc = SessionConfig {
             lookahead: self.lookahead.unwrap_or(base.lookahead),
             enc_future: self.enc_future.unwrap_or(base.enc_future),
@@ -86,6 +99,34 @@ impl BudgetArgs {
         sc.kv = match self.kv {
             Kv::F32 => duolando_core::duolando::session::KvType::F32,
             Kv::F16 => duolando_core::duolando::session::KvType::F16,
+        };
+        if let Some(k) = self.topk {
+            sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };
+        }
+        if let Err((setting, value, max)) = sc.check(cfg) {
+            bail!("--{} {value} is outside its range for this model (largest allowed: {max})", flag(setting));
+        }
+        Ok(sc)
+    }
+}
+
+impl BudgetArgs {
+    /// The session configuration of a solo (Bailando) model, checked; the
+    /// settings a solo model does not have are refused by name.
+    pub fn solo_config(&self, cfg: &BailandoConfig) -> Result<SoloConfig> {
+        let Some(preset) = SoloPreset::from_name(&self.preset) else {
+            bail!("--preset {} is a Duolando preset; a Bailando model takes {}", self.preset, SoloPreset::ALL.map(SoloPreset::name).join(", "));
+        };
+        for (given, name) in [(self.lookahead.is_some(), "lookahead"), (self.enc_future.is_some(), "enc-future"), (self.music_lookahead.is_some(), "music-lookahead"), (self.staggered, "staggered"), (self.spread, "spread")] {
+            if given {
+                bail!("--{name} is a Duolando setting: a Bailando model has no leader and reads no music ahead (its settings: --preset, --dec-future, --shift, --topk, --kv)");
+            }
+        }
+        let base = SoloConfig::preset(cfg, preset);
+        let mut sc = SoloConfig { dec_future: self.dec_future.unwrap_or(base.dec_future), shift: self.shift.unwrap_or(base.shift), ..base };
+        sc.kv = match self.kv {
+            Kv::F32 => duolando_core::nn::kv_store::KvType::F32,
+            Kv::F16 => duolando_core::nn::kv_store::KvType::F16,
         };
         if let Some(k) = self.topk {
             sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };

@@ -192,27 +192,51 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// Two Bailando models (e.g. an int8 conversion against the f32 one) in R
-/// mode on one music track: free-running token agreement per stream and
-/// joint error (S mode is not built for Bailando yet, so there is no S vs
-/// R comparison).
+/// A Bailando model on one music track: without `--against`, S (the
+/// budget of `--preset` / `--dec-future` / `--shift`) against R, with the
+/// one-step agreement of S's window schedule on R's history; with
+/// `--against B.duo`, two models (e.g. an int8 conversion against the f32
+/// one) in one mode. Free-running token agreement per stream, joint error.
 fn compare_bailando(args: &Args, model_path: &std::path::Path, duo: &duolando_core::format::DuoFile<'_>) -> Result<()> {
     use duolando_core::bailando::model::Model as BModel;
-    let Some(b_path) = &args.against else {
-        bail!("{} is a Bailando model: streaming is not built for it yet, so compare needs --against B.duo (two models in exact mode)", model_path.display());
-    };
-    if args.leader.is_some() || args.follower_start.is_some() || matches!(args.mode, Mode::Streaming) {
-        bail!("{} is a Bailando model (a solo dancer): give --music with --dance or --seed-tokens up,down, exact mode only", model_path.display());
+    use super::generate_solo::{bailando_exact, bailando_streaming};
+    if args.leader.is_some() || args.follower_start.is_some() {
+        bail!("{} is a Bailando model (a solo dancer): it takes no leader; give --music with --dance or --seed-tokens up,down", model_path.display());
     }
     let Some(music) = &args.music else { bail!("{} is a Bailando model: --music (R, 438) is required", model_path.display()) };
     let a = BModel::from_duo(duo).map_err(|e| anyhow::anyhow!("{}: {}", model_path.display(), crate::engine_errors::describe_bind(&e)))?;
+    let (dance, seed) = (args.dance.as_deref(), args.seed_tokens.as_deref());
+    let Some(b_path) = &args.against else {
+        let sc = args.budget.solo_config(&a.cfg)?;
+        let (ra, rs) = (bailando_exact(&a, music, dance, seed, model_path)?, bailando_streaming(&a, music, dance, seed, model_path, &sc)?);
+        let one = solo_one_step(&a, &ra.tokens, sc.shift as usize, music)?;
+        let (all, per, steps) = crate::agreement::free_run_of(&rs.tokens, &ra.tokens, 2);
+        let (mean, max, frames) = crate::agreement::joint_error_mm_of(&rs.pos3d, &ra.pos3d, duolando_core::bailando::config::N_JOINTS);
+        let mut out = Map::new();
+        out.insert("one_step_agreement".into(), json!(one));
+        out.insert("free_run_agreement".into(), json!(all));
+        out.insert("free_run_agreement_up".into(), json!(per[0]));
+        out.insert("free_run_agreement_down".into(), json!(per[1]));
+        out.insert("free_run_steps".into(), json!(steps));
+        out.insert("mean_joint_err_mm".into(), json!(mean));
+        out.insert("max_joint_err_mm".into(), json!(max));
+        out.insert("joint_err_frames".into(), json!(frames));
+        out.insert("dec_future".into(), json!(sc.dec_future));
+        out.insert("shift".into(), json!(sc.shift));
+        out.insert("latency_frames".into(), json!(sc.latency_frames(a.cfg.hop() as u32)));
+        println!("{}: streaming (--preset {}, dec_future {}, shift {}) vs exact (Bailando, {}) on {}", model_path.display(), args.budget.preset, sc.dec_future, sc.shift, ra.path, music.display());
+        return print_json(out, args);
+    };
+    if matches!(args.mode, Mode::Streaming) {
+        bail!("{} is a Bailando model: --against compares two models in exact mode (S against R: leave out --against)", model_path.display());
+    }
     let b_file = open(b_path)?;
     let b_duo = b_file.duo()?;
     let b = BModel::from_duo(&b_duo).map_err(|e| anyhow::anyhow!("{}: {}", b_path.display(), crate::engine_errors::describe_bind(&e)))?;
     if a.cfg != b.cfg {
         bail!("{} and {} have different configs; compare conversions of the same checkpoint", model_path.display(), b_path.display());
     }
-    let run = |m: &BModel<'_>, p: &std::path::Path| super::generate_solo::bailando_exact(m, music, args.dance.as_deref(), args.seed_tokens.as_deref(), p);
+    let run = |m: &BModel<'_>, p: &std::path::Path| bailando_exact(m, music, dance, seed, p);
     let (ra, rb) = (run(&a, model_path)?, run(&b, b_path)?);
     let (all, per, steps) = crate::agreement::free_run_of(&ra.tokens, &rb.tokens, 2);
     let (mean, max, frames) = crate::agreement::joint_error_mm_of(&ra.pos3d, &rb.pos3d, duolando_core::bailando::config::N_JOINTS);
@@ -225,6 +249,10 @@ fn compare_bailando(args: &Args, model_path: &std::path::Path, duo: &duolando_co
     out.insert("max_joint_err_mm".into(), json!(max));
     out.insert("joint_err_frames".into(), json!(frames));
     println!("{} vs {} (Bailando, exact mode, {}) on {}", model_path.display(), b_path.display(), ra.path, music.display());
+    print_json(out, args)
+}
+
+fn print_json(out: Map<String, Value>, args: &Args) -> Result<()> {
     for (k, v) in &out {
         println!("  {k:<28} {v}");
     }
@@ -233,4 +261,39 @@ fn compare_bailando(args: &Args, model_path: &std::path::Path, duo: &duolando_co
         eprintln!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// One-step agreement of S's window schedule: at every step `k`, the
+/// greedy choice of the GPT over the window S uses (`window_context(k, m,
+/// shift)`; S computes exactly this window, tests/bailando_session.rs)
+/// fed R's own history, against R's token `k + 1` (both heads).
+fn solo_one_step(m: &duolando_core::bailando::model::Model<'_>, r_tokens: &[u32], shift: usize, music_path: &std::path::Path) -> Result<f64> {
+    use duolando_core::bailando::gpt::{logits_len, max_context, window_logits, GptScratch};
+    let cfg = &m.cfg;
+    let nm = cfg.gpt.n_music as usize;
+    let music = read_f32_2d(music_path, None, "music features")?;
+    let rows = music.rows;
+    let win = max_context(cfg);
+    let mut bytes = vec![0u8; duolando_core::bailando::exact::sample_scratch_bytes(cfg).context("config too large")?];
+    let mut a = duolando_core::arena::Arena::new(&mut bytes);
+    let mut gs = GptScratch::carve(&mut a, cfg, win).map_err(|e| anyhow::anyhow!("scratch: {e:?}"))?;
+    let mut logits = vec![0f32; logits_len(cfg)];
+    let vu = cfg.gpt.vocab[0] as usize;
+    let n = r_tokens.len() / 2;
+    let (mut same, mut total) = (0usize, 0usize);
+    let mut mus = Vec::with_capacity(win * nm);
+    for k in 0..n.saturating_sub(1) {
+        let c = duolando_core::nn::window::window_context(k, win, shift);
+        let lo = k + 1 - c;
+        mus.clear();
+        for j in lo..=k {
+            let r = (j + 1).min(rows - 1);
+            mus.extend_from_slice(&music.data[r * music.cols..r * music.cols + nm]);
+        }
+        window_logits(m, &r_tokens[2 * lo..2 * (k + 1)], &mus, &mut gs, &mut logits).map_err(|e| anyhow::anyhow!("{}", describe(&e)))?;
+        let pred = [duolando_core::nn::sampler::argmax(&logits[..vu]), duolando_core::nn::sampler::argmax(&logits[vu..])];
+        same += (0..2).filter(|&h| pred[h] == r_tokens[2 * (k + 1) + h]).count();
+        total += 2;
+    }
+    Ok(if total == 0 { 1.0 } else { same as f64 / total as f64 })
 }
