@@ -59,8 +59,8 @@ pub struct Args {
     #[arg(long)]
     pub scalar: bool,
     /// Which family's published model: duolando (default) or bailando (its
-    /// R step, the actor GPT over a full 28-token window; S mode is not
-    /// built for Bailando yet).
+    /// R step, the actor GPT over a full 28-token window, and its S step per
+    /// preset, f16 K/V, with the session arena).
     #[arg(long, default_value = "duolando")]
     pub family: String,
     /// Session counts stepped together with `Session::step_many` (int8
@@ -695,6 +695,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// once the window slides) per thread count, against real time (one token
 /// per 8 frames at 60 fps: 133.3 ms) and against f32 in the same run.
 fn bench_bailando(args: &Args) -> anyhow::Result<()> {
+    use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as SoloConfig};
     use duolando_core::bailando::config::published;
     use duolando_core::bailando::gpt::{logits_len, max_context, window_logits, GptScratch};
     use duolando_core::bailando::model::Model as BModel;
@@ -746,7 +747,53 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
                 real_time_ms / st.median_ms
             );
         }
+        for preset in [SoloPreset::Reference, SoloPreset::Interactive, SoloPreset::Minimum] {
+            let sc = SoloConfig { kv: duolando_core::nn::kv_store::KvType::F16, ..SoloConfig::preset(&cfg, preset) };
+            let bytes = duolando_core::bailando::session::session_bytes_for(&cfg, &sc).map_err(|e| anyhow!("{e:?}"))?;
+            // At least four window jumps (every block_size - shift steps), so p99 sees the re-prefills.
+            let period = (c + 1 - sc.shift as usize).max(1);
+            let n = (args.warmup + args.runs).max(c + 4 * period + args.warmup);
+            let times = on_threads(1, || solo_s_steps(&model, &sc, n, args.warmup, &music[..nm]))?;
+            let st = stats(times);
+            println!(
+                "Bailando S step {d:>4} t1 {:<11} (dec_future {:>2}, shift {}, f16 K/V): median {:8.2} ms  p99 {:8.2} ms  p99/median {:.1}  mean {:8.2} ms  {:.0}x real time  arena {:.2} MB",
+                preset.name(),
+                sc.dec_future,
+                sc.shift,
+                st.median_ms,
+                st.p99_ms,
+                st.p99_ms / st.median_ms,
+                st.mean_ms,
+                real_time_ms / st.median_ms,
+                bytes as f64 / 1e6
+            );
+        }
     }
-    println!("Bailando: published config (actor_critic.yaml), seeded random weights; S mode not built yet, no ONNX baseline yet.");
+    println!("Bailando: published config (actor_critic.yaml), seeded random weights; S step = one session step (GPT row or re-prefill at a window jump, heads, decoders), frames pulled; no ONNX baseline yet.");
     Ok(())
+}
+
+/// Times `n` steps of one Bailando session (after `warmup`), a music row
+/// pushed before each and every frame pulled after.
+fn solo_s_steps(model: &duolando_core::bailando::model::Model<'_>, sc: &duolando_core::bailando::session::SessionConfig, n: usize, warmup: usize, row: &[f32]) -> anyhow::Result<Vec<std::time::Duration>> {
+    use duolando_core::bailando::session::Session as SoloSession;
+    let mut arena = vec![0u8; model.session_bytes(sc).map_err(|e| anyhow!("{e:?}"))?];
+    let mut s = SoloSession::new(model, &mut arena, sc, [0, 0]).map_err(|e| anyhow!("{e:?}"))?;
+    s.push_music(row).map_err(|e| anyhow!("{e:?}"))?;
+    let mut f = [0f32; duolando_core::bailando::config::POSE_DIM];
+    let mut v = Vec::with_capacity(n);
+    for i in 0..n + warmup {
+        s.push_music(row).map_err(|e| anyhow!("{e:?}"))?;
+        let t0 = Instant::now();
+        let r = s.step().map_err(|e| anyhow!("{e:?}"))?;
+        let dt = t0.elapsed();
+        if r.is_none() {
+            return Err(anyhow!("the session did not step at {i}"));
+        }
+        if i >= warmup {
+            v.push(dt);
+        }
+        while s.pull(&mut f).map_err(|e| anyhow!("{e:?}"))?.is_some() {}
+    }
+    Ok(v)
 }
