@@ -1,14 +1,17 @@
 /* duolando.h — C ABI of the duolando engine (library `duolando`, crate duolando-ffi).
  *
  * Duolando generates a follower dancer's motion, frame by frame, from a
- * leader's joint positions and music features. Guide: docs/C_API.md.
+ * leader's joint positions and music features; a Bailando model (a solo
+ * dancer) from music features alone ("Solo models" below). Guide:
+ * docs/C_API.md.
  *
  * Objects
  *   duo_model    immutable weights (one .duo file). Opened once, shared by
  *                any number of sessions and threads. Reference counted:
  *                sessions keep their model alive, so models and sessions
  *                may be freed in any order.
- *   duo_session  one follower dancer: streaming state in fixed memory.
+ *   duo_session  one dancer (a follower, or a solo dancer on a Bailando
+ *                model): streaming state in fixed memory.
  *   duo_step_batch  scratch for stepping several sessions of one model
  *                together (one weight read for all of them).
  *
@@ -233,20 +236,41 @@ typedef struct duo_model duo_model;
 
 /* Sizes an engine needs, from duo_model_get_info. */
 typedef struct duo_model_info {
-  uint32_t joints;           /* joints per pose (55) */
-  uint32_t music_features;   /* floats per music frame (54) */
-  uint32_t fps;              /* frames per second of motion and music (30) */
-  uint32_t frames_per_token; /* motion frames per token (4) */
-  uint32_t block_size;       /* GPT window, tokens (30) */
-  uint32_t look_forward;     /* trained leader/music look-ahead, tokens (29) */
+  uint32_t joints;           /* joints per pose (55; Bailando 24) */
+  uint32_t music_features;   /* floats per music frame (54; Bailando 438) */
+  uint32_t fps;              /* frames per second of motion (30; Bailando 60); Duolando's
+                                music frames come at this rate, Bailando's music rows
+                                one per token (fps / frames_per_token = 7.5 per second) */
+  uint32_t frames_per_token; /* motion frames per token (4; Bailando 8) */
+  uint32_t block_size;       /* GPT window, tokens (30; Bailando 29) */
+  uint32_t look_forward;     /* trained leader/music look-ahead, tokens (29; Bailando 0) */
   uint32_t mapped;           /* 1 if the weights are memory-mapped */
   uint32_t family;           /* DUO_FAMILY_*: the model family (was a reserved 0 before
                                 families: 0 is Duolando, so old readers stay right) */
 } duo_model_info;
 
 /* Model families (duo_model_info.family; the .duo header's family tag).
- * The sessions of this library run Duolando models; opening a valid
- * Bailando file answers DUO_BAD_MODEL naming its family (docs/BAILANDO.md). */
+ *
+ * Solo models (DUO_FAMILY_BAILANDO): a session takes music only and gives
+ * joint positions. What differs from a Duolando session:
+ *   - seed_tokens are 2 tokens (up, down) instead of 5 (the authors' demo
+ *     uses 423, 12 for their model); duo_model_seed_tokens is Duolando's.
+ *   - duo_session_config: dec_future, shift, pending_frames,
+ *     music_buffer_frames (music ROWS that may wait unread), sampling,
+ *     top_k, kv and rng_seed apply; lookahead, enc_future,
+ *     music_lookahead, lat_past and staggered must be 0
+ *     (DUO_INVALID_ARGUMENT naming the field). Presets: "exact" (the
+ *     offline model's numbers), "reference", "interactive", "minimum".
+ *   - duo_session_push_music takes one or more whole rows (438 floats
+ *     each, one row per token: 7.5 rows per second); a step runs when its
+ *     row is there. duo_session_set_music_track copies the rows into the
+ *     session (music_buffer_frames must hold them).
+ *   - frames come from duo_session_pull_positions (24 joints x 3);
+ *     duo_session_push_leader, duo_session_pull_follower and
+ *     duo_step_batch_push_leader answer DUO_INVALID_ARGUMENT naming the
+ *     family; the session is unchanged.
+ *   - duo_session_finish pads the music as the authors' music-only demo
+ *     does and runs to its end; the root starts at the origin. */
 #define DUO_FAMILY_DUOLANDO 0u
 #define DUO_FAMILY_BAILANDO 1u
 
@@ -384,7 +408,7 @@ duo_result duo_session_bytes(const duo_model *model, const duo_session_config *c
 
 /* Creates a session in library memory (one allocation, here).
  * seed_tokens: 5 follower start tokens (up, down, lhand, rhand, transl),
- * e.g. from duo_model_seed_tokens.
+ * e.g. from duo_model_seed_tokens; 2 (up, down) for a solo model.
  * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (config or seed token out of
  * range). Thread-safe (takes a reference on the model). */
 duo_result duo_session_new(const duo_model *model, const duo_session_config *config,
@@ -458,11 +482,21 @@ duo_result duo_session_finish(duo_session *session);
 /* Pulls the next follower frame: DUO_OK (*out_frame written) or
  * DUO_NOT_READY (nothing ready; *out_frame untouched). Frame f becomes
  * ready once leader frame f + latency has been pushed. Pull in a loop
- * after each push until DUO_NOT_READY. DUO_NULL_PARAMETER. */
+ * after each push until DUO_NOT_READY. DUO_NULL_PARAMETER;
+ * DUO_INVALID_ARGUMENT on a solo model's session. */
 duo_result duo_session_pull_follower(duo_session *session, duo_follower_frame *out_frame);
 
-/* Back to the start (frame index 0) with new seed tokens; the music track
- * is dropped. No allocation. DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT. */
+/* Pulls the next frame's world joint positions (metres), for a session of
+ * any family: n_floats = duo_model_info.joints x 3 (165; Bailando 72).
+ * DUO_OK (out and *out_index written; out_index may be NULL) or
+ * DUO_NOT_READY (nothing written). A solo session with its music in runs
+ * the steps a frame needs here (the costly call: off the render thread).
+ * DUO_NULL_PARAMETER (session, out), DUO_INVALID_ARGUMENT (n_floats). */
+duo_result duo_session_pull_positions(duo_session *session, float *out, size_t n_floats,
+                                      uint64_t *out_index);
+
+/* Back to the start (frame index 0) with new seed tokens (5, or 2 for a
+ * solo model); the music track is dropped. No allocation. DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT. */
 duo_result duo_session_reset(duo_session *session, const uint32_t *seed_tokens);
 
 /* Frees a session and drops its model reference. NULL is ignored. For a

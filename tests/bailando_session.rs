@@ -39,6 +39,7 @@ thread_local! {
 // SAFETY: every method forwards to `System` unchanged (plus a thread-local
 // counter), so `System`'s guarantees are ours.
 unsafe impl GlobalAlloc for Counting {
+    // SAFETY (all methods): GlobalAlloc's contract, forwarded to `System`.
     unsafe fn alloc(&self, l: Layout) -> *mut u8 {
         if COUNTING.with(|c| c.get()) {
             COUNT.with(|c| c.set(c.get() + 1));
@@ -46,10 +47,12 @@ unsafe impl GlobalAlloc for Counting {
         // SAFETY: forwards the caller's layout to the system allocator unchanged.
         unsafe { System.alloc(l) }
     }
+    // SAFETY: see `alloc`.
     unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
         // SAFETY: `p` was allocated by `System` with layout `l`.
         unsafe { System.dealloc(p, l) }
     }
+    // SAFETY: see `alloc`.
     unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
         if COUNTING.with(|c| c.get()) {
             COUNT.with(|c| c.set(c.get() + 1));

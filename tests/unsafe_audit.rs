@@ -44,6 +44,8 @@ const ALLOWED: &[&str] = &[
     "ffi/tests/session_golden.rs",
     "ffi/tests/no_alloc.rs",
     "tests/session_memory.rs",
+    "tests/bailando_session.rs",
+    "ffi/tests/solo_session.rs",
     "tests/step_many.rs",
     "tests/amx.rs",
     "tests/int8_layouts.rs",

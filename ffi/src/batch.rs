@@ -58,7 +58,7 @@ unsafe fn arena_bytes<'x>(model: *const DuoModel, config: *const DuoSessionConfi
     if max_sessions == 0 || max_sessions > MAX_BATCH {
         return Err(Failure::invalid(format!("max_sessions is {max_sessions}; a batch steps 1 to {MAX_BATCH} sessions (DUO_MAX_BATCH)")));
     }
-    let model_cfg = m.model().config();
+    let model_cfg = m.duolando("a step batch")?.config();
     let n = StepBatch::bytes(model_cfg, &cfg, max_sessions)?;
     Ok((n, cfg, model_cfg))
 }
@@ -239,7 +239,13 @@ unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSe
         if !std::sync::Arc::ptr_eq(&s.model, &s0.model) {
             return Err(Failure::invalid(format!("sessions[{i}] is a session of another model than sessions[0]")));
         }
-        if !b.dims.holds(&s.dims) {
+        let dims = match &s.session {
+            crate::session::AnySession::Duolando { dims, .. } => dims,
+            crate::session::AnySession::Bailando(_) => {
+                return Err(crate::session::solo_refusal(&format!("sessions[{i}] in duo_step_batch_push_leader (solo sessions are stepped by their own pulls)")))
+            }
+        };
+        if !b.dims.holds(dims) {
             return Err(Failure::invalid(format!(
                 "sessions[{i}] needs more step memory than this batch holds: its configuration needs more than the batch's (duo_step_batch_new)"
             )));
@@ -257,7 +263,11 @@ unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSe
     for &p in ptrs {
         // SAFETY: every pointer is a live session (contract), and they are
         // pairwise distinct (checked above): one `&mut` each.
-        refs.push(unsafe { &mut (*p).session }).map_err(|_| Failure::invalid("more sessions than DUO_MAX_BATCH"))?;
+        let session = match unsafe { &mut (*p).session } {
+            crate::session::AnySession::Duolando { session, .. } => session,
+            crate::session::AnySession::Bailando(_) => return Err(crate::session::solo_refusal("duo_step_batch_push_leader")),
+        };
+        refs.push(session).map_err(|_| Failure::invalid("more sessions than DUO_MAX_BATCH"))?;
     }
     // 4. Backlog: `step_many` checks every session (model, step memory,
     // frame, backlog: the first three passed above) before it changes any.

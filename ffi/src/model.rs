@@ -13,6 +13,8 @@
 use std::ffi::{c_char, CStr};
 use std::sync::Arc;
 
+use duolando_core::bailando::model::Model as SoloModel;
+use duolando_core::family::{Family, FamilyConfig};
 use duolando_core::format::DuoFile;
 use duolando_core::Model;
 use duolando_runtime::model_file::{explain, AlignedBytes, ModelFile, ModelFileError};
@@ -29,12 +31,20 @@ enum Storage {
     File(ModelFile),
 }
 
+/// A bound model of any family.
+pub enum AnyModel {
+    /// A follower dancing with a leader to music.
+    Duolando(Model<'static>),
+    /// A solo dancer to music.
+    Bailando(SoloModel<'static>),
+}
+
 /// What a `duo_model *` points to (an `Arc<ModelInner>` turned into a raw
 /// pointer by [`Arc::into_raw`]).
 pub struct ModelInner {
     /// Bound weights viewing `storage` (or the caller's bytes). Declared
     /// first: dropped before the storage it borrows from.
-    model: Model<'static>,
+    model: AnyModel,
     storage: Storage,
 }
 
@@ -46,8 +56,24 @@ unsafe impl Send for ModelInner {}
 unsafe impl Sync for ModelInner {}
 
 impl ModelInner {
-    pub fn model(&self) -> &Model<'static> {
+    pub fn any(&self) -> &AnyModel {
         &self.model
+    }
+    /// The Duolando model, or a refusal naming this model's family for an
+    /// entry point only Duolando models take (`what`).
+    pub fn duolando(&self, what: &str) -> Result<&Model<'static>, Failure> {
+        match &self.model {
+            AnyModel::Duolando(m) => Ok(m),
+            AnyModel::Bailando(_) => Err(Failure::invalid(format!(
+                "{what} needs a Duolando model (a follower dancing with a leader); this is a Bailando model (a solo dancer to music): docs/C_API.md \"Solo models\""
+            ))),
+        }
+    }
+    pub fn family(&self) -> Family {
+        match &self.model {
+            AnyModel::Duolando(_) => Family::Duolando,
+            AnyModel::Bailando(_) => Family::Bailando,
+        }
     }
     pub fn is_mapped(&self) -> bool {
         matches!(&self.storage, Storage::File(f) if f.is_mapped())
@@ -63,20 +89,16 @@ pub type DuoModel = ModelInner;
 /// (`duolando::simd::init`, as the CLI does; bit-identical across thread
 /// counts, not across ISAs); a build without this would run the scalar
 /// kernels its compile-time target allows.
-fn bind(duo: &DuoFile<'static>, origin: &str) -> Result<Model<'static>, Failure> {
+fn bind(duo: &DuoFile<'static>, origin: &str) -> Result<AnyModel, Failure> {
     static KERNELS: std::sync::Once = std::sync::Once::new();
     KERNELS.call_once(|| {
         duolando_runtime::simd::init();
     });
-    Model::from_duo(duo).map_err(|e| {
-        let msg = match e {
-            // A valid file of another family: say which (this library's C
-            // sessions run Duolando models so far).
-            duolando_core::nn::bind::BindError::Family { .. } => format!("{origin}: {}", duolando_runtime::engine_errors::describe_bind(&e)),
-            _ => format!("{origin}: invalid .duo model: {}", duolando_runtime::engine_errors::describe(&duolando_core::Error::from(e))),
-        };
-        Failure::new(DuoResult::BadModel, msg)
-    })
+    let bad = |e: duolando_core::nn::bind::BindError| Failure::new(DuoResult::BadModel, format!("{origin}: invalid .duo model: {}", duolando_runtime::engine_errors::describe(&duolando_core::Error::from(e))));
+    match duo.config() {
+        FamilyConfig::Duolando(_) => Model::from_duo(duo).map(AnyModel::Duolando).map_err(bad),
+        FamilyConfig::Bailando(_) => SoloModel::from_duo(duo).map(AnyModel::Bailando).map_err(bad),
+    }
 }
 
 fn publish(inner: ModelInner, out: *mut *mut DuoModel) -> Result<DuoResult, Failure> {
@@ -261,16 +283,33 @@ pub unsafe extern "C" fn duo_model_get_info(model: *const DuoModel, out_info: *m
         if out_info.is_null() {
             return Err(Failure::null("out_info"));
         }
-        let cfg = m.model().config();
-        let info = DuoModelInfo {
-            joints: duolando_core::duolando::config::N_JOINTS as u32,
-            music_features: cfg.gpt.music.n_in,
-            fps: 30,
-            frames_per_token: cfg.parts[0].hop().unwrap_or(0),
-            block_size: cfg.gpt.block_size,
-            look_forward: cfg.gpt.look_forward,
-            mapped: m.is_mapped() as u32,
-            family: duolando_core::family::Family::Duolando as u32,
+        let info = match m.any() {
+            AnyModel::Duolando(model) => {
+                let cfg = model.config();
+                DuoModelInfo {
+                    joints: duolando_core::duolando::config::N_JOINTS as u32,
+                    music_features: cfg.gpt.music.n_in,
+                    fps: 30,
+                    frames_per_token: cfg.parts[0].hop().unwrap_or(0),
+                    block_size: cfg.gpt.block_size,
+                    look_forward: cfg.gpt.look_forward,
+                    mapped: m.is_mapped() as u32,
+                    family: Family::Duolando as u32,
+                }
+            }
+            AnyModel::Bailando(model) => {
+                let cfg = &model.cfg;
+                DuoModelInfo {
+                    joints: duolando_core::bailando::config::N_JOINTS as u32,
+                    music_features: cfg.gpt.n_music,
+                    fps: duolando_core::bailando::config::FPS,
+                    frames_per_token: cfg.hop() as u32,
+                    block_size: cfg.gpt.block_size,
+                    look_forward: 0,
+                    mapped: m.is_mapped() as u32,
+                    family: Family::Bailando as u32,
+                }
+            }
         };
         // SAFETY: checked non-NULL.
         unsafe { *out_info = info };

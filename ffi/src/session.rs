@@ -16,12 +16,14 @@
 
 use std::sync::Arc;
 
+use duolando_core::bailando::exact::MusicPadding;
+use duolando_core::bailando::session::{Preset as SoloPreset, Session as SoloSession, SessionConfig as SoloConfig};
 use duolando_core::duolando::config::{N_JOINTS, POSE_DIM};
 use duolando_core::duolando::session::{CacheSchedule, FollowerFrame, KvType, Preset, Sampling, Session, SessionConfig, StepDims};
 
 use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
 use crate::handle::{buffer, buffer_mut, caller_slot, drop_handle, handle_bytes};
-use crate::model::{share, DuoModel, ModelInner};
+use crate::model::{share, AnyModel, DuoModel, ModelInner};
 use crate::result::{guard, DuoResult, Failure};
 
 /// Largest accepted |coordinate| of a leader joint, metres
@@ -94,16 +96,7 @@ impl DuoSessionConfig {
     }
 
     fn to_core(self) -> Result<SessionConfig, Failure> {
-        let sampling = match self.sampling {
-            SAMPLING_GREEDY => Sampling::Greedy,
-            SAMPLING_TOP_K => Sampling::TopK { k: self.top_k, rng_seed: self.rng_seed },
-            s => return Err(Failure::invalid(format!("config.sampling {s} is not a duo_sampling value (0 greedy, 1 top-k)"))),
-        };
-        let kv = match self.kv {
-            KV_F32 => KvType::F32,
-            KV_F16 => KvType::F16,
-            k => return Err(Failure::invalid(format!("config.kv {k} is not a duo_kv value (0 f32, 1 f16)"))),
-        };
+        let (sampling, kv) = self.to_core_fields()?;
         let schedule = match self.staggered {
             0 => CacheSchedule::Reprefill,
             1 => CacheSchedule::Staggered,
@@ -126,19 +119,110 @@ impl DuoSessionConfig {
     }
 }
 
+/// A session configuration of either family.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum AnyConfig {
+    Duolando(SessionConfig),
+    Bailando(SoloConfig),
+}
+
+impl DuoSessionConfig {
+    fn from_solo(c: &SoloConfig) -> Self {
+        let (sampling, top_k, rng_seed) = match c.sampling {
+            Sampling::Greedy => (SAMPLING_GREEDY, 0, 0),
+            Sampling::TopK { k, rng_seed } => (SAMPLING_TOP_K, k, rng_seed),
+        };
+        DuoSessionConfig {
+            dec_future: c.dec_future,
+            shift: c.shift,
+            pending_frames: c.pending_frames,
+            music_buffer_frames: c.music_buffer_rows,
+            sampling,
+            top_k,
+            kv: match c.kv {
+                KvType::F32 => KV_F32,
+                KvType::F16 => KV_F16,
+            },
+            rng_seed,
+            ..DuoSessionConfig::default()
+        }
+    }
+
+    /// A solo model's configuration: the fields it has (dec_future, shift,
+    /// pending_frames, music_buffer_frames = music rows, sampling, top_k,
+    /// kv, rng_seed); the others must be 0 (refused by name).
+    fn to_solo(self) -> Result<SoloConfig, Failure> {
+        for (v, name) in [(self.lookahead, "lookahead"), (self.enc_future, "enc_future"), (self.music_lookahead, "music_lookahead"), (self.lat_past, "lat_past"), (self.staggered, "staggered")] {
+            if v != 0 {
+                return Err(Failure::invalid(format!(
+                    "config.{name} is {v}: a Bailando model (a solo dancer) has no {name}; leave it 0 (start from duo_session_config_preset)"
+                )));
+            }
+        }
+        let d = self.to_core_fields()?;
+        Ok(SoloConfig { dec_future: self.dec_future, shift: self.shift, sampling: d.0, pending_frames: self.pending_frames, music_buffer_rows: self.music_buffer_frames, kv: d.1 })
+    }
+
+    fn to_core_fields(self) -> Result<(Sampling, KvType), Failure> {
+        let sampling = match self.sampling {
+            SAMPLING_GREEDY => Sampling::Greedy,
+            SAMPLING_TOP_K => Sampling::TopK { k: self.top_k, rng_seed: self.rng_seed },
+            s => return Err(Failure::invalid(format!("config.sampling {s} is not a duo_sampling value (0 greedy, 1 top-k)"))),
+        };
+        let kv = match self.kv {
+            KV_F32 => KvType::F32,
+            KV_F16 => KvType::F16,
+            k => return Err(Failure::invalid(format!("config.kv {k} is not a duo_kv value (0 f32, 1 f16)"))),
+        };
+        Ok((sampling, kv))
+    }
+
+    fn from_any(c: &AnyConfig) -> Self {
+        match c {
+            AnyConfig::Duolando(c) => Self::from_core(c),
+            AnyConfig::Bailando(c) => Self::from_solo(c),
+        }
+    }
+}
+
+/// The session of either family behind a `duo_session`.
+pub(crate) enum AnySession {
+    Duolando {
+        session: Session<'static>,
+        /// The step memory the session needs (`StepDims::new(.., 1)`): what
+        /// a `duo_step_batch` must hold to step it.
+        dims: StepDims,
+    },
+    Bailando(SoloSession<'static>),
+}
+
 /// What a `duo_session *` points to.
 pub struct SessionInner {
     /// Borrows `model` and the arena; declared first, dropped first.
-    pub(crate) session: Session<'static>,
+    pub(crate) session: AnySession,
     /// The counted model reference that keeps the weights alive.
     pub(crate) model: Arc<ModelInner>,
-    /// The step memory the session needs (`StepDims::new(.., 1)`): what a
-    /// `duo_step_batch` must hold to step it.
-    pub(crate) dims: StepDims,
     /// Library-allocated arena (`duo_session_new`); None in caller memory.
     _arena: Option<Box<[u8]>>,
     /// True when this struct lives in caller memory (`duo_session_new_in`).
     in_caller_memory: bool,
+}
+
+impl SessionInner {
+    /// The Duolando session, or a refusal naming the solo family for `what`.
+    pub(crate) fn duolando(&mut self, what: &str) -> Result<&mut Session<'static>, Failure> {
+        match &mut self.session {
+            AnySession::Duolando { session, .. } => Ok(session),
+            AnySession::Bailando(_) => Err(solo_refusal(what)),
+        }
+    }
+}
+
+/// `what` is for Duolando sessions; this one dances solo to music.
+pub(crate) fn solo_refusal(what: &str) -> Failure {
+    Failure::invalid(format!(
+        "{what}: this session's model is a Bailando model (a solo dancer): it takes music only (duo_session_push_music) and gives positions (duo_session_pull_positions)"
+    ))
 }
 
 /// Opaque `duo_session`.
@@ -150,12 +234,58 @@ pub(crate) fn model_ref<'x>(model: *const DuoModel) -> Result<&'x ModelInner, Fa
 }
 
 pub(crate) fn config_ref(model: &ModelInner, config: *const DuoSessionConfig) -> Result<SessionConfig, Failure> {
+    let m = model.duolando("a step batch")?;
     // SAFETY: NULL or a valid struct (contract).
     let c = unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
     let core = c.to_core()?;
     // Validate now for a message naming the setting (also done by core).
-    model.model().session_bytes(&core)?;
+    m.session_bytes(&core)?;
     Ok(core)
+}
+
+/// The configuration for a session of `model`'s family, checked.
+pub(crate) fn any_config_ref(model: &ModelInner, config: *const DuoSessionConfig) -> Result<AnyConfig, Failure> {
+    // SAFETY: NULL or a valid struct (contract).
+    let c = unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
+    match model.any() {
+        AnyModel::Duolando(m) => {
+            let core = c.to_core()?;
+            m.session_bytes(&core)?;
+            Ok(AnyConfig::Duolando(core))
+        }
+        AnyModel::Bailando(m) => {
+            let core = c.to_solo()?;
+            m.session_bytes(&core)?;
+            Ok(AnyConfig::Bailando(core))
+        }
+    }
+}
+
+/// Arena bytes of a session of `cfg` on `model`.
+fn any_session_bytes(model: &ModelInner, cfg: &AnyConfig) -> Result<usize, Failure> {
+    Ok(match (model.any(), cfg) {
+        (AnyModel::Duolando(m), AnyConfig::Duolando(c)) => m.session_bytes(c)?,
+        (AnyModel::Bailando(m), AnyConfig::Bailando(c)) => m.session_bytes(c)?,
+        _ => return Err(Failure::invalid("configuration of another family")),
+    })
+}
+
+/// Seed tokens for `model`'s family: 5 (Duolando) or 2 (Bailando: up, down).
+#[derive(Clone, Copy)]
+pub(crate) enum AnySeed {
+    Duolando([u32; 5]),
+    Bailando([u32; 2]),
+}
+
+fn any_seed_ref(model: &ModelInner, seed: *const u32) -> Result<AnySeed, Failure> {
+    if seed.is_null() {
+        return Err(Failure::null("seed_tokens"));
+    }
+    Ok(match model.any() {
+        AnyModel::Duolando(_) => AnySeed::Duolando(seed_ref(seed)?),
+        // SAFETY: the contract: 2 readable u32 for a Bailando model.
+        AnyModel::Bailando(_) => AnySeed::Bailando(unsafe { std::ptr::read_unaligned(seed.cast::<[u32; 2]>()) }),
+    })
 }
 
 fn seed_ref(seed: *const u32) -> Result<[u32; 5], Failure> {
@@ -181,10 +311,15 @@ unsafe fn config_default(model: *const DuoModel, out: *mut DuoSessionConfig, ref
     if out.is_null() {
         return Err(Failure::null("out_config"));
     }
-    let cfg = m.model().config();
-    let c = if reference { SessionConfig::reference(cfg) } else { SessionConfig::minimum(cfg) };
+    let c = match m.any() {
+        AnyModel::Duolando(model) => {
+            let cfg = model.config();
+            AnyConfig::Duolando(if reference { SessionConfig::reference(cfg) } else { SessionConfig::minimum(cfg) })
+        }
+        AnyModel::Bailando(model) => AnyConfig::Bailando(SoloConfig::preset(&model.cfg, if reference { SoloPreset::Reference } else { SoloPreset::Minimum })),
+    };
     // SAFETY: checked non-NULL.
-    unsafe { *out = DuoSessionConfig::from_core(&c) };
+    unsafe { *out = DuoSessionConfig::from_any(&c) };
     Ok(DuoResult::Ok)
 }
 
@@ -229,11 +364,20 @@ pub unsafe extern "C" fn duo_session_config_preset(model: *const DuoModel, name:
         }
         // SAFETY: NULL checked; NUL-terminated (contract).
         let n = unsafe { std::ffi::CStr::from_ptr(name) }.to_string_lossy();
-        let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
-        let p = Preset::from_name(&n).ok_or_else(|| Failure::invalid(format!("no preset named '{n}' (presets: {})", names.join(", "))))?;
-        let c = SessionConfig::preset(m.model().config(), p);
+        let c = match m.any() {
+            AnyModel::Duolando(model) => {
+                let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
+                let p = Preset::from_name(&n).ok_or_else(|| Failure::invalid(format!("no preset named '{n}' for a Duolando model (presets: {})", names.join(", "))))?;
+                AnyConfig::Duolando(SessionConfig::preset(model.config(), p))
+            }
+            AnyModel::Bailando(model) => {
+                let names: Vec<&str> = SoloPreset::ALL.iter().map(|p| p.name()).collect();
+                let p = SoloPreset::from_name(&n).ok_or_else(|| Failure::invalid(format!("no preset named '{n}' for a Bailando model (presets: {})", names.join(", "))))?;
+                AnyConfig::Bailando(SoloConfig::preset(&model.cfg, p))
+            }
+        };
         // SAFETY: checked non-NULL.
-        unsafe { *out_config = DuoSessionConfig::from_core(&c) };
+        unsafe { *out_config = DuoSessionConfig::from_any(&c) };
         Ok(DuoResult::Ok)
     })
 }
@@ -249,11 +393,11 @@ const HANDLE_BYTES: usize = handle_bytes::<SessionInner>();
 pub unsafe extern "C" fn duo_session_bytes(model: *const DuoModel, config: *const DuoSessionConfig, out_bytes: *mut usize) -> DuoResult {
     guard("duo_session_bytes", || {
         let m = model_ref(model)?;
-        let cfg = config_ref(m, config)?;
+        let cfg = any_config_ref(m, config)?;
         if out_bytes.is_null() {
             return Err(Failure::null("out_bytes"));
         }
-        let n = m.model().session_bytes(&cfg)?;
+        let n = any_session_bytes(m, &cfg)?;
         let total = n.checked_add(HANDLE_BYTES).ok_or_else(|| Failure::invalid("session size overflows size_t"))?;
         // SAFETY: checked non-NULL.
         unsafe { *out_bytes = total };
@@ -263,11 +407,18 @@ pub unsafe extern "C" fn duo_session_bytes(model: *const DuoModel, config: *cons
 
 /// Builds the core session over `arena` (which must outlive it: the
 /// caller of this function guarantees it).
-fn start(model: &Arc<ModelInner>, arena: &'static mut [u8], cfg: &SessionConfig, seed: [u32; 5]) -> Result<Session<'static>, Failure> {
+fn start(model: &Arc<ModelInner>, arena: &'static mut [u8], cfg: &AnyConfig, seed: AnySeed) -> Result<AnySession, Failure> {
     // SAFETY: the model lives in the Arc, which the SessionInner keeps
     // (and drops after the session).
     let m: &'static ModelInner = unsafe { &*Arc::as_ptr(model) };
-    Ok(Session::new(m.model(), arena, cfg, seed)?)
+    Ok(match (m.any(), cfg, seed) {
+        (AnyModel::Duolando(model), AnyConfig::Duolando(c), AnySeed::Duolando(seed)) => {
+            let dims = StepDims::new(model.config(), c, 1).map_err(duolando_core::Error::Arena)?;
+            AnySession::Duolando { session: Session::new(model, arena, c, seed)?, dims }
+        }
+        (AnyModel::Bailando(model), AnyConfig::Bailando(c), AnySeed::Bailando(seed)) => AnySession::Bailando(SoloSession::new(model, arena, c, seed)?),
+        _ => return Err(Failure::invalid("configuration or seed of another family")),
+    })
 }
 
 /// A session in library memory (allocated here, once).
@@ -284,12 +435,12 @@ pub unsafe extern "C" fn duo_session_new(
 ) -> DuoResult {
     guard("duo_session_new", || {
         let m = model_ref(model)?;
-        let cfg = config_ref(m, config)?;
-        let seed = seed_ref(seed_tokens)?;
+        let cfg = any_config_ref(m, config)?;
+        let seed = any_seed_ref(m, seed_tokens)?;
         if out_session.is_null() {
             return Err(Failure::null("out_session"));
         }
-        let n = m.model().session_bytes(&cfg)?;
+        let n = any_session_bytes(m, &cfg)?;
         let mut arena = vec![0u8; n].into_boxed_slice();
         // SAFETY: the boxed bytes stay at one address until the
         // SessionInner drops them, after the session.
@@ -297,8 +448,7 @@ pub unsafe extern "C" fn duo_session_new(
         // SAFETY: `model` is a live handle (contract).
         let arc = unsafe { share(model) };
         let session = start(&arc, bytes, &cfg, seed)?;
-        let dims = StepDims::new(m.model().config(), &cfg, 1).map_err(duolando_core::Error::Arena)?;
-        let inner = Box::new(SessionInner { session, model: arc, dims, _arena: Some(arena), in_caller_memory: false });
+        let inner = Box::new(SessionInner { session, model: arc, _arena: Some(arena), in_caller_memory: false });
         // SAFETY: checked non-NULL.
         unsafe { *out_session = Box::into_raw(inner) };
         Ok(DuoResult::Ok)
@@ -322,22 +472,21 @@ pub unsafe extern "C" fn duo_session_new_in(
 ) -> DuoResult {
     guard("duo_session_new_in", || {
         let m = model_ref(model)?;
-        let cfg = config_ref(m, config)?;
-        let seed = seed_ref(seed_tokens)?;
+        let cfg = any_config_ref(m, config)?;
+        let seed = any_seed_ref(m, seed_tokens)?;
         if out_session.is_null() {
             return Err(Failure::null("out_session"));
         }
         // SAFETY: NULL or `len` writable bytes kept for the session (contract).
         let memory = unsafe { buffer_mut(memory, len, "memory") }?;
-        let need = m.model().session_bytes(&cfg)?.saturating_add(HANDLE_BYTES);
+        let need = any_session_bytes(m, &cfg)?.saturating_add(HANDLE_BYTES);
         let (slot, arena) = caller_slot::<SessionInner>(memory, need, "duo_session_bytes")?;
         // SAFETY: `model` is a live handle (contract).
         let arc = unsafe { share(model) };
         let session = start(&arc, arena, &cfg, seed)?;
-        let dims = StepDims::new(m.model().config(), &cfg, 1).map_err(duolando_core::Error::Arena)?;
         // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
         unsafe {
-            slot.write(SessionInner { session, model: arc, dims, _arena: None, in_caller_memory: true });
+            slot.write(SessionInner { session, model: arc, _arena: None, in_caller_memory: true });
             *out_session = slot;
         }
         Ok(DuoResult::Ok)
@@ -374,7 +523,12 @@ pub unsafe extern "C" fn duo_session_latency_frames(session: *const DuoSession, 
             return Err(Failure::null("out_frames"));
         }
         // SAFETY: checked non-NULL.
-        unsafe { *out_frames = s.session.latency_frames() };
+        let frames = match &s.session {
+            AnySession::Duolando { session, .. } => session.latency_frames(),
+            AnySession::Bailando(session) => session.latency_frames(),
+        };
+        // SAFETY: checked non-NULL.
+        unsafe { *out_frames = frames };
         Ok(DuoResult::Ok)
     })
 }
@@ -425,7 +579,7 @@ pub unsafe extern "C" fn duo_session_push_leader(session: *mut DuoSession, frame
         let s = session_mut(session)?;
         // SAFETY: NULL or valid (contract).
         let f = unsafe { frame.as_ref() }.ok_or_else(|| Failure::null("frame"))?;
-        s.session.push_leader_frame(leader_pos3d(f)?)?;
+        s.duolando("duo_session_push_leader")?.push_leader_frame(leader_pos3d(f)?)?;
         Ok(DuoResult::Ok)
     })
 }
@@ -442,7 +596,17 @@ pub unsafe extern "C" fn duo_session_push_leader(session: *mut DuoSession, frame
 pub unsafe extern "C" fn duo_session_finish(session: *mut DuoSession) -> DuoResult {
     guard("duo_session_finish", || {
         let s = session_mut(session)?;
-        s.session.finish()?;
+        match &mut s.session {
+            AnySession::Duolando { session, .. } => session.finish()?,
+            // The music-only path's end padding (copies of the last row to a
+            // whole number of tokens, at least one); again: nothing to do.
+            AnySession::Bailando(session) => match session.finish(MusicPadding::Demo) {
+                Ok(()) | Err(duolando_core::Error::State) if session.music_rows() > 0 => {}
+                Ok(()) => {}
+                Err(duolando_core::Error::State) => return Err(Failure::invalid("duo_session_finish before any music row: a solo dance needs music")),
+                Err(e) => return Err(e.into()),
+            },
+        }
         Ok(DuoResult::Ok)
     })
 }
@@ -459,7 +623,11 @@ pub unsafe extern "C" fn duo_session_push_music(session: *mut DuoSession, featur
         let x = unsafe { buffer(features, n_features, "features") }?;
         // Core checks state, then the length, then the values: a frame of
         // the wrong length is refused as such whatever it holds.
-        s.session.push_music_frame(x).map_err(|e| rejected_value(e, x, "music frame", MAX_MUSIC_FEATURE))?;
+        match &mut s.session {
+            AnySession::Duolando { session, .. } => session.push_music_frame(x),
+            AnySession::Bailando(session) => session.push_music(x),
+        }
+        .map_err(|e| rejected_value(e, x, "music frame", MAX_MUSIC_FEATURE))?;
         Ok(DuoResult::Ok)
     })
 }
@@ -477,7 +645,21 @@ pub unsafe extern "C" fn duo_session_set_music_track(session: *mut DuoSession, t
         // SAFETY: NULL or `n_floats` readable floats valid until reset/free,
         // which drop the borrow (contract).
         let x: &'static [f32] = unsafe { buffer(track, n_floats, "track") }?;
-        s.session.set_music_track(x).map_err(|e| rejected_value(e, x, "music track", MAX_MUSIC_FEATURE))?;
+        match &mut s.session {
+            AnySession::Duolando { session, .. } => session.set_music_track(x),
+            // A solo session copies the rows into its music buffer.
+            AnySession::Bailando(session) if x.is_empty() => {
+                let _ = session;
+                Ok(())
+            }
+            AnySession::Bailando(session) => {
+                if session.music_rows() > 0 {
+                    return Err(Failure::invalid("music already given: a track goes before any music row"));
+                }
+                session.push_music(x)
+            }
+        }
+        .map_err(|e| rejected_value(e, x, "music track", MAX_MUSIC_FEATURE))?;
         Ok(DuoResult::Ok)
     })
 }
@@ -506,13 +688,67 @@ pub unsafe extern "C" fn duo_session_pull_follower(session: *mut DuoSession, out
             return Err(Failure::null("out_frame"));
         }
         let mut f = FollowerFrame::default();
-        if !s.session.pull_follower_frame(&mut f)? {
+        if !s.duolando("duo_session_pull_follower")?.pull_follower_frame(&mut f)? {
             return Ok(DuoResult::NotReady);
         }
         let mut c = DuoFollowerFrame::default();
         to_c_frame(&f, &mut c);
         // SAFETY: checked non-NULL.
         unsafe { *out_frame = c };
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// Pulls the next frame's joint positions, for a session of any family:
+/// `n_floats` = joints x 3 (duo_model_info.joints), world positions in
+/// metres; `*out_index` (NULL or writable) gets the frame index. DUO_OK
+/// or DUO_NOT_READY (nothing written). `out` follows the buffer rule (NULL
+/// with 0 is an empty buffer: a wrong count).
+///
+/// # Safety
+/// `session` NULL or live; `out` NULL or `n_floats` writable floats;
+/// `out_index` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn duo_session_pull_positions(session: *mut DuoSession, out: *mut f32, n_floats: usize, out_index: *mut u64) -> DuoResult {
+    guard("duo_session_pull_positions", || {
+        let s = session_mut(session)?;
+        let joints = match &s.session {
+            AnySession::Duolando { .. } => N_JOINTS,
+            AnySession::Bailando(_) => duolando_core::bailando::config::N_JOINTS,
+        };
+        // SAFETY: NULL or `n_floats` writable floats (contract); the buffer
+        // rule: NULL with 0 is an empty buffer (a wrong count below).
+        let dst = unsafe { buffer_mut(out.cast::<u8>(), n_floats.saturating_mul(4), "out") }?;
+        if n_floats != joints * 3 {
+            return Err(Failure::invalid(format!("n_floats is {n_floats}; a frame of this model has {joints} joints x 3 = {} floats", joints * 3)));
+        }
+        // SAFETY: `dst` is `n_floats * 4` writable bytes at `out`, which the
+        // caller gives as floats (aligned for f32 by the contract).
+        let dst = unsafe { std::slice::from_raw_parts_mut(dst.as_mut_ptr().cast::<f32>(), n_floats) };
+        let index = match &mut s.session {
+            AnySession::Duolando { session, .. } => {
+                let mut f = FollowerFrame::default();
+                if !session.pull_follower_frame(&mut f)? {
+                    return Ok(DuoResult::NotReady);
+                }
+                dst.copy_from_slice(&f.positions);
+                f.index
+            }
+            AnySession::Bailando(session) => {
+                let mut f = [0f32; duolando_core::bailando::config::POSE_DIM];
+                match session.pull(&mut f)? {
+                    Some(i) => {
+                        dst.copy_from_slice(&f);
+                        i
+                    }
+                    None => return Ok(DuoResult::NotReady),
+                }
+            }
+        };
+        if !out_index.is_null() {
+            // SAFETY: non-NULL and writable (contract).
+            unsafe { *out_index = index };
+        }
         Ok(DuoResult::Ok)
     })
 }
@@ -525,8 +761,12 @@ pub unsafe extern "C" fn duo_session_pull_follower(session: *mut DuoSession, out
 pub unsafe extern "C" fn duo_session_reset(session: *mut DuoSession, seed_tokens: *const u32) -> DuoResult {
     guard("duo_session_reset", || {
         let s = session_mut(session)?;
-        let seed = seed_ref(seed_tokens)?;
-        s.session.reset(seed)?;
+        let seed = any_seed_ref(&s.model, seed_tokens)?;
+        match (&mut s.session, seed) {
+            (AnySession::Duolando { session, .. }, AnySeed::Duolando(seed)) => session.reset(seed)?,
+            (AnySession::Bailando(session), AnySeed::Bailando(seed)) => session.reset(seed)?,
+            _ => return Err(Failure::invalid("seed of another family")),
+        }
         Ok(DuoResult::Ok)
     })
 }
@@ -546,7 +786,7 @@ pub unsafe extern "C" fn duo_model_seed_tokens(
     out_tokens: *mut u32,
 ) -> DuoResult {
     guard("duo_model_seed_tokens", || {
-        let m = model_ref(model)?;
+        let m = model_ref(model)?.duolando("duo_model_seed_tokens (a Bailando session takes its 2 seed tokens, up and down, directly)")?;
         if out_tokens.is_null() {
             return Err(Failure::null("out_tokens"));
         }
@@ -558,7 +798,7 @@ pub unsafe extern "C" fn duo_model_seed_tokens(
                 return Err(reject(what, i, v, MAX_POSITION_M, " m"));
             }
         }
-        let cfg = m.model().config();
+        let cfg = m.config();
         let bytes = match duolando_core::duolando::exact::seed_scratch_bytes(cfg, n_frames) {
             Some(b) => b,
             // Too few frames (0 included): core says so before any scratch is used.
@@ -566,7 +806,7 @@ pub unsafe extern "C" fn duo_model_seed_tokens(
             None => return Err(Failure::invalid("n_frames too large")),
         };
         let mut scratch = vec![0u8; bytes];
-        let t = duolando_core::duolando::exact::seed_tokens(m.model(), f, l, &mut scratch)?;
+        let t = duolando_core::duolando::exact::seed_tokens(m, f, l, &mut scratch)?;
         // SAFETY: checked non-NULL; 5 writable u32 (contract).
         unsafe { std::ptr::write_unaligned(out_tokens.cast::<[u32; 5]>(), t) };
         Ok(DuoResult::Ok)

@@ -572,6 +572,7 @@ fn every_buffer_follows_the_null_rule() {
         ("duo_session_new_in", "memory"),
         ("duo_session_set_music_track", "track"),
         ("duo_session_push_music", "features"),
+        ("duo_session_pull_positions", "out"),
         ("duo_step_batch_new_in", "memory"),
         ("duo_step_batch_push_leader", "frames"),
     ];
@@ -667,6 +668,15 @@ fn every_buffer_follows_the_null_rule() {
         assert_eq!(unsafe { duo_session_push_music(s, music.as_ptr(), 54) }, DuoResult::InvalidArgument);
     }
     assert_eq!(unsafe { duo_session_set_music_track(a, ptr::null(), 54) }, DuoResult::NullParameter);
+    // Positions into 0 floats: a wrong count, NULL or not; NULL with a count: NULL.
+    let mut pos = [0.0f32; 165];
+    assert_eq!(unsafe { duo_session_pull_positions(a, ptr::null_mut(), 0, ptr::null_mut()) }, DuoResult::InvalidArgument);
+    let null_msg = last_error();
+    assert!(null_msg.contains("n_floats is 0; a frame of this model has 55 joints x 3 = 165 floats"), "{null_msg}");
+    assert_eq!(unsafe { duo_session_pull_positions(a, pos.as_mut_ptr(), 0, ptr::null_mut()) }, DuoResult::InvalidArgument);
+    assert_eq!(last_error(), null_msg);
+    assert_eq!(unsafe { duo_session_pull_positions(a, ptr::null_mut(), 165, ptr::null_mut()) }, DuoResult::NullParameter);
+    assert_eq!(unsafe { duo_session_pull_positions(a, pos.as_mut_ptr(), 165, ptr::null_mut()) }, DuoResult::NotReady);
 
     // A batch call of 0 sessions does nothing, NULL lists or not.
     assert_eq!(unsafe { duo_step_batch_new(m.0, &c, 2, &mut batch) }, DuoResult::Ok);
@@ -790,19 +800,4 @@ fn messages_name_the_c_fields() {
         assert!(last_error().contains(&format!("{field} = ")), "{field}: {}", last_error());
     }
     unsafe { duo_model_free(m.0) };
-}
-
-/// A valid Bailando file (format version 2) is refused by family, with
-/// the family named, and the output handle is left untouched; the C
-/// sessions run Duolando models so far (docs/BAILANDO.md).
-#[test]
-fn a_bailando_file_is_refused_by_family() {
-    let p = CString::new(fixtures().join("bailando_btiny/model.duo").to_str().unwrap()).unwrap();
-    let sentinel = 0x40 as *mut DuoModel;
-    let mut m = sentinel;
-    // SAFETY: a NUL-terminated path and a live out-pointer.
-    assert_eq!(unsafe { duo_model_open_file(p.as_ptr(), &mut m) }, DuoResult::BadModel);
-    assert_eq!(m, sentinel);
-    let e = last_error();
-    assert!(e.contains("this is a Bailando model") && e.contains("Duolando model"), "{e}");
 }

@@ -753,6 +753,71 @@ static void test_model_freed_first(void) {
   duo_session_free(s);
 }
 
+/* ---- a solo (Bailando) model ------------------------------------------ */
+
+/* The Bailando fixture: info, a session fed the golden music row by row
+ * and finished gives the authors' positions (within 1e-5 m); the
+ * Duolando-only calls are refused by name; freeing the model before the
+ * session is fine. */
+static void test_solo(void) {
+  char path[1200];
+  size_t n_music = 0, n_pos = 0, got = 0, i;
+  float *rows, *want, f[DUO_BAILANDO_JOINTS * 3];
+  duo_model *m = NULL;
+  duo_model_info info;
+  duo_session_config c;
+  duo_session *s = NULL;
+  duo_follower_frame ff;
+  uint64_t index = 0;
+  float worst = 0.0f;
+  char msg[512];
+  const uint32_t solo_seed[2] = {15, 14}; /* the golden's seed tokens (meta.json) */
+  sprintf(path, "%s/tests/fixtures/bailando_rollout_btiny_demo_odd/music.npy", root_dir);
+  rows = read_npy_f32(path, &n_music);
+  sprintf(path, "%s/tests/fixtures/bailando_rollout_btiny_demo_odd/pos3d.npy", root_dir);
+  want = read_npy_f32(path, &n_pos);
+  CHECK(rows != NULL && want != NULL);
+  if (!rows || !want) return;
+  sprintf(path, "%s/tests/fixtures/bailando_btiny/model.duo", root_dir);
+  EXPECT(duo_model_open_file(path, &m), DUO_OK);
+  EXPECT(duo_model_get_info(m, &info), DUO_OK);
+  CHECK(info.family == DUO_FAMILY_BAILANDO && info.joints == DUO_BAILANDO_JOINTS && info.music_features == 438 && info.fps == 60);
+  EXPECT(duo_session_config_preset(m, "exact", &c), DUO_OK);
+  EXPECT(duo_session_new(m, &c, solo_seed, &s), DUO_OK);
+  duo_model_free(m); /* the session keeps the weights alive */
+  EXPECT(duo_session_push_leader(s, &leader[0]), DUO_INVALID_ARGUMENT);
+  duo_last_error_message(msg, sizeof msg);
+  CHECK(strstr(msg, "Bailando") != NULL);
+  EXPECT(duo_session_pull_follower(s, &ff), DUO_INVALID_ARGUMENT);
+  for (i = 0; i + 438 <= n_music; i += 438) {
+    EXPECT(duo_session_push_music(s, rows + i, 438), DUO_OK);
+    while (duo_session_pull_positions(s, f, DUO_BAILANDO_JOINTS * 3, &index) == DUO_OK) {
+      size_t j;
+      CHECK(index == got);
+      for (j = 0; j < DUO_BAILANDO_JOINTS * 3 && (got + 1) * 72 <= n_pos; j++) {
+        float d = fabsf(f[j] - want[got * 72 + j]);
+        if (!(d <= worst)) worst = d;
+      }
+      got++;
+    }
+  }
+  EXPECT(duo_session_finish(s), DUO_OK);
+  while (duo_session_pull_positions(s, f, DUO_BAILANDO_JOINTS * 3, &index) == DUO_OK) {
+    size_t j;
+    for (j = 0; j < DUO_BAILANDO_JOINTS * 3 && (got + 1) * 72 <= n_pos; j++) {
+      float d = fabsf(f[j] - want[got * 72 + j]);
+      if (!(d <= worst)) worst = d;
+    }
+    got++;
+  }
+  CHECK(got * 72 == n_pos);
+  if (!(worst <= 1e-5f)) fprintf(stderr, "solo: max abs err %g over %zu frames\n", (double)worst, got);
+  CHECK(worst <= 1e-5f);
+  duo_session_free(s);
+  free(rows);
+  free(want);
+}
+
 int main(int argc, char **argv) {
   duo_model *m = NULL;
   if (argc < 2 || strlen(argv[1]) > 1000) {
@@ -776,6 +841,7 @@ int main(int argc, char **argv) {
   test_step_batch(m);
   test_threads(m);
   test_model_freed_first();
+  test_solo();
   duo_model_free(m);
   free(reference);
   free(leader);
