@@ -22,10 +22,17 @@
   }
 
   const J = data.joints, ROW = J * 3, parents = data.parents;
+  // A solo dancer (a Bailando model) has no leader: one dancer, drawn in
+  // the follower's colour; the leader's entry stays, empty and hidden.
+  const solo = !data.leader;
   const dancers = [
-    { name: "leader", pos: f32(data.leader.f32), frames: data.leader.frames, color: COLORS.leader, visible: true },
-    { name: "follower", pos: f32(data.follower.f32), frames: data.follower.frames, color: COLORS.follower, visible: true },
+    { name: "leader", pos: solo ? new Float32Array(0) : f32(data.leader.f32), frames: solo ? 0 : data.leader.frames, color: COLORS.leader, visible: !solo },
+    { name: solo ? "dancer" : "follower", pos: f32(data.follower.f32), frames: data.follower.frames, color: COLORS.follower, visible: true },
   ];
+  if (solo) {
+    const box = document.getElementById("show-leader");
+    if (box && box.parentElement) box.parentElement.style.display = "none";
+  }
   const beats = data.beats ? f32(data.beats.f32) : null;
   const tokens = data.tokens; // {rows, streams, frames_per_token, names, ids}
   const fps = data.fps;
@@ -185,7 +192,7 @@
     const heads = [];
     const px = H / 720; // line widths scale with the canvas
     for (const d of dancers) {
-      if (!d.visible) continue;
+      if (!d.visible || d.frames === 0) continue;
       const base = Math.min(frame, d.frames - 1) * ROW;
       const p = d.pos;
       // floor shadow (joints dropped to the floor), drawn first
@@ -391,7 +398,7 @@
     get time() { return state.t; },
     get renders() { return state.renders; },
     frames, fps, colors: COLORS,
-    leaderFrames: dancers[0].frames, followerFrames: dancers[1].frames,
+    leaderFrames: dancers[0].frames, followerFrames: dancers[1].frames, solo,
     tokenRows: tokens ? tokens.rows : 0, hasBeats: !!beats, hasAudio: !!audio,
     play, pause, seek,
     setVisible(name, on) {

@@ -216,7 +216,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &ViewerData {
             title: "duolando viewer fixture: synthetic leader and follower",
             fps: FPS,
-            leader_pos3d: &leader,
+            leader_pos3d: Some(&leader),
             follower_pos3d: &follower,
             beats: Some(&beats),
             tokens: Some(&tokens),

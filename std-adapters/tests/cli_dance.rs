@@ -514,3 +514,61 @@ fn without_demo_assets_the_error_says_how_to_pass_inputs() {
     let o = dance(&["--leader", "a.npy", "--out", "x"]);
     assert!(!o.status.success() && stderr(&o).contains("--music"), "{}", stderr(&o));
 }
+
+/// A solo dance (music, no leader) on a Bailando model: R's positions in
+/// `dancer_smpl24.npy` (the authors' golden within 1e-5), the viewer shows
+/// one dancer (no leader) at 60 fps on the SMPL-X rig whose joints 0-21
+/// are the model's, the BVH at 60 fps follows the viewer; from audio the
+/// features are Bailando's and the audio plays; duet-only inputs and a
+/// Duolando model without a leader are refused by name.
+#[test]
+fn solo_dance_to_music_alone() {
+    let out = tmp("solo");
+    let r = fixtures().join("bailando_rollout_btiny_demo_odd");
+    let bmodel = fixtures().join("bailando_btiny/model.duo");
+    let dir = out.join("npy");
+    let o = dance(&["--model", p(&bmodel), "--music", p(&r.join("music.npy")), "--seed-tokens", "15,14", "--out", p(&dir)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let got = read_f32_2d(&dir.join("dancer_smpl24.npy"), Some(72), "solo").unwrap();
+    let want = read_f32_2d(&r.join("pos3d.npy"), Some(72), "golden").unwrap();
+    assert_eq!(got.rows, want.rows);
+    let err = got.data.iter().zip(&want.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(err <= 1e-5, "max abs err {err}");
+    let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
+    assert!(html.contains("\"leader\":null") && html.contains("\"fps\":60"), "one dancer at 60 fps");
+    let shown = viewer_follower(&html);
+    assert_eq!(shown.len(), got.rows * 165);
+    for f in 0..got.rows {
+        for c in 0..66 {
+            assert_eq!(shown[f * 165 + c], got.data[f * 72 + c], "frame {f} channel {c}: joints 0-21 are the model's");
+        }
+    }
+    let bvh_text = std::fs::read_to_string(dir.join("dancer.bvh")).unwrap();
+    assert!(bvh_text.contains("Frame Time: 0.0166667"), "60 fps");
+    // The BVH is the fitted rig of dancer_pos3d.npy (how close that rig
+    // comes to the viewer's positions depends on the model: random tiny
+    // weights stretch bones freely; summary.json reports it).
+    let bvh = bvh_positions(&dir.join("dancer.bvh"));
+    let rig = read_f32_2d(&dir.join("dancer_pos3d.npy"), Some(165), "rig").unwrap();
+    let rig_err = bvh.iter().zip(&rig.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(rig_err < 1e-3, "dancer.bvh is {rig_err} m from dancer_pos3d.npy");
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!((s["family"].as_str(), s["frames"].as_u64()), (Some("bailando"), Some(got.rows as u64)));
+    assert!(s["export_error_m"]["all"]["max"].as_f64().unwrap() > 0.0);
+    // From audio.
+    let wav = out.join("song.wav");
+    write_wav(&wav);
+    let o = dance(&["--model", p(&bmodel), "--music", p(&wav), "--seed-tokens", "1,2", "--out", p(&out.join("wav"))]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("wav/summary.json")).unwrap()).unwrap();
+    // 21 s at 7.5 rows/s.
+    assert!((150..=160).contains(&s["music"]["rows"].as_u64().unwrap()), "{s}");
+    assert_eq!(s["music"]["audio"], "music.wav");
+    // Refusals.
+    let o = dance(&["--model", p(&bmodel), "--music", p(&r.join("music.npy")), "--follower-start", p(&r.join("music.npy")), "--out", p(&out.join("x"))]);
+    assert!(!o.status.success() && stderr(&o).contains("--follower-start is for a duet"), "{}", stderr(&o));
+    let o = dance(&["--model", p(&model()), "--music", p(&r.join("music.npy")), "--out", p(&out.join("y"))]);
+    assert!(!o.status.success() && stderr(&o).contains("Duolando"), "{}", stderr(&o));
+    let o = dance(&["--model", p(&bmodel), "--music", p(&r.join("music.npy")), "--seed-tokens", "1,2,3,4,5", "--out", p(&out.join("z"))]);
+    assert!(!o.status.success() && stderr(&o).contains("two tokens"), "{}", stderr(&o));
+}

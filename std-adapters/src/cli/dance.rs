@@ -10,6 +10,7 @@
 
 pub mod inputs;
 pub mod leader_bvh;
+pub mod solo;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -41,8 +42,9 @@ pub struct Args {
     #[arg(long, requires = "music")]
     pub leader: Option<PathBuf>,
     /// Music: an audio file (WAV, MP3, OGG Vorbis, FLAC) or (T, 54) features .npy at 30 fps.
-    /// Default: the bundled demo clip's music.
-    #[arg(long, requires = "leader")]
+    /// Default: the bundled demo clip's music. Without --leader: a solo dance to this music by a
+    /// Bailando model (default assets/bailando_demo.duo; features .npy (R, 438) at 7.5 rows/s).
+    #[arg(long)]
     pub music: Option<PathBuf>,
     /// The `.duo` model. Default: assets/demo.duo.
     #[arg(long)]
@@ -50,7 +52,7 @@ pub struct Args {
     /// The follower's first frames, (F, 165) float .npy, F >= 4.
     #[arg(long, conflicts_with = "seed_tokens")]
     pub follower_start: Option<PathBuf>,
-    /// Seed tokens "up,down,lhand,rhand,transl" instead of start frames.
+    /// Seed tokens "up,down,lhand,rhand,transl" instead of start frames ("up,down" for a solo dance).
     #[arg(long)]
     pub seed_tokens: Option<String>,
     /// Output directory (created; existing files of the same names are replaced).
@@ -155,7 +157,7 @@ fn cut_leader_to_music(leader: &mut Leader, leader_path: &Path, music: &Music, m
 }
 
 /// Copies the audio next to the viewer as `music.<ext>`; returns the name.
-fn copy_audio(src: &Path, dir: &Path) -> Result<String> {
+pub(crate) fn copy_audio(src: &Path, dir: &Path) -> Result<String> {
     let ext: String = inputs::extension(src).chars().filter(char::is_ascii_alphanumeric).collect();
     let name = if ext.is_empty() { "music".to_string() } else { format!("music.{ext}") };
     let dst = dir.join(&name);
@@ -180,6 +182,16 @@ fn distinct_tokens(g: &Generated) -> Vec<usize> {
 
 pub fn run(args: Args) -> Result<()> {
     let t_all = Instant::now();
+    if args.leader.is_none() && args.music.is_some() {
+        // Music without a leader: a solo dancer.
+        let (model_path, demo_model) = match &args.model {
+            Some(m) => (m.clone(), false),
+            None => (inputs::require_asset(solo::DEMO_SOLO_MODEL, "solo (Bailando) model")?, true),
+        };
+        let threads = args.threads.map_or_else(crate::workers::default_threads, |n| n as usize);
+        crate::workers::set_threads(threads).with_context(|| format!("starting {threads} threads"))?;
+        return solo::run(&args, &model_path, demo_model, threads, t_all);
+    }
     let demo = args.leader.is_none();
     let model_path = match &args.model {
         Some(m) => m.clone(),
@@ -335,7 +347,7 @@ pub fn run(args: Args) -> Result<()> {
         &ViewerData {
             title: &title,
             fps: 30.0,
-            leader_pos3d: leader_duet,
+            leader_pos3d: Some(leader_duet),
             follower_pos3d: &g.follower_pos3d,
             beats: beats.as_deref(),
             tokens: Some(&g.tokens),

@@ -49,7 +49,7 @@ pub fn run_bailando(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
 }
 
 /// "up,down" within the vocabularies.
-fn parse_seed(s: &str, vocab: [u32; 2]) -> Result<[u32; 2]> {
+pub fn parse_seed(s: &str, vocab: [u32; 2]) -> Result<[u32; 2]> {
     let v: Vec<&str> = s.split(',').map(str::trim).collect();
     if v.len() != 2 {
         bail!("--seed-tokens {s:?}: a Bailando model takes two tokens, \"up,down\"");
@@ -82,18 +82,30 @@ pub struct SoloRun {
 /// a (T, 72) .npy) or the demo path (`seed_tokens` "up,down"); every
 /// input error names its file. `model_path` labels messages.
 pub fn bailando_exact(model: &Model<'_>, music_path: &Path, dance: Option<&Path>, seed_tokens: Option<&str>, model_path: &Path) -> Result<SoloRun> {
-    let cfg = model.cfg;
     let SoloInputs { music, padding, seed, path } = solo_inputs(model, music_path, dance, seed_tokens, model_path)?;
-    let k = exact::steps(padding, music.rows);
+    let mut run = exact_rows(model, &music.data, music.cols, padding, seed).map_err(|e| anyhow::anyhow!("{}: {e:#}", music_path.display()))?;
+    run.path = path;
+    Ok(run)
+}
+
+/// R mode on music rows in memory (`music` (R, cols), the first
+/// `n_music` columns read).
+pub fn exact_rows(model: &Model<'_>, music: &[f32], cols: usize, padding: MusicPadding, seed: [u32; 2]) -> Result<SoloRun> {
+    let cfg = model.cfg;
+    let rows = music.len() / cols.max(1);
+    let k = exact::steps(padding, rows);
     let mut tokens = vec![0u32; (k + 1) * 2];
     let mut scratch = vec![0u8; exact::sample_scratch_bytes(&cfg).context("config too large")?];
-    exact::sample(model, &music.data, music.cols, padding, seed, &mut scratch, &mut tokens)
-        .map_err(|e| anyhow::anyhow!("{}: {}", music_path.display(), describe(&e)))?;
+    exact::sample(model, music, cols, padding, seed, &mut scratch, &mut tokens).map_err(|e| anyhow::anyhow!("{}", describe(&e)))?;
     let frames = (k + 1) * cfg.hop();
     let mut pos = vec![0f32; frames * POSE_DIM];
     let mut scratch = vec![0u8; exact::decode_scratch_bytes(&cfg, k + 1).context("too many tokens")?];
     exact::decode(model, &tokens, &mut scratch, &mut pos).map_err(|e| anyhow::anyhow!("decoding: {}", describe(&e)))?;
-    Ok(SoloRun { tokens, pos3d: pos, steps: k, frames, music_rows: music.rows, path })
+    let path = match padding {
+        MusicPadding::Aist => "AIST++ test path",
+        MusicPadding::Demo => "demo path (seed given)",
+    };
+    Ok(SoloRun { tokens, pos3d: pos, steps: k, frames, music_rows: rows, path })
 }
 
 /// S mode on the same inputs as [`bailando_exact`]: a session is given the

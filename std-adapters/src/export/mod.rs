@@ -210,19 +210,25 @@ impl Motion {
 /// hierarchies), `<name>.bvh` (centimetres) and `<name>_pos3d.npy` /
 /// `<name>_rotmat.npy` for each dancer. Returns the written paths.
 pub fn write_all(dir: &Path, leader: Option<&Motion>, follower: &Motion) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
     let mut dancers: Vec<(&str, &Motion)> = Vec::new();
     if let Some(l) = leader {
         dancers.push(("leader", l));
     }
     dancers.push(("follower", follower));
+    write_dancers(dir, "follower.glb", &dancers, FPS)
+}
+
+/// [`write_all`] for any named dancers at any frame rate: `glb` holds them
+/// all, each gets `<name>.bvh`, `<name>_pos3d.npy`, `<name>_rotmat.npy`.
+pub fn write_dancers(dir: &Path, glb: &str, dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
     let mut out = Vec::new();
-    let glb_path = dir.join("follower.glb");
-    glb::write(&glb_path, &dancers, FPS)?;
+    let glb_path = dir.join(glb);
+    glb::write(&glb_path, dancers, fps)?;
     out.push(glb_path);
-    for (name, m) in &dancers {
+    for (name, m) in dancers {
         let b = dir.join(format!("{name}.bvh"));
-        bvh::write(&b, m, FPS, bvh::Units::Centimetres)?;
+        bvh::write(&b, m, fps, bvh::Units::Centimetres)?;
         out.push(b);
         out.extend(npy::write(dir, name, m)?);
     }

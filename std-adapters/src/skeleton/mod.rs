@@ -14,6 +14,7 @@ pub mod fk;
 pub mod ik;
 pub mod rest;
 pub mod retarget;
+pub mod smpl24;
 // Rotation helpers shared with the C library (duolando-runtime).
 pub use duolando_runtime::skeleton::{math, rotation};
 

@@ -16,7 +16,7 @@
 //! let page = write_index_html(std::path::Path::new("out"), &ViewerData {
 //!     title: "demo",
 //!     fps: 30.0,
-//!     leader_pos3d: &leader,     // (T, 165)
+//!     leader_pos3d: Some(&leader), // (T, 165); None for a solo dancer
 //!     follower_pos3d: &follower, // (T2, 165)
 //!     beats: None,               // (T,) per-frame 0/1
 //!     tokens: None,              // (K, 5) follower tokens
@@ -65,11 +65,13 @@ pub struct ViewerData<'a> {
     pub title: &'a str,
     /// Frames per second of both motions (30 for Duolando).
     pub fps: f32,
-    /// Leader world joint positions, (T, 165), metres, y-up.
-    pub leader_pos3d: &'a [f32],
-    /// Follower world joint positions, (T2, 165), metres, y-up.
+    /// Leader world joint positions, (T, 165), metres, y-up; None for a
+    /// solo dancer (a Bailando model: the page shows one dancer).
+    pub leader_pos3d: Option<&'a [f32]>,
+    /// Follower (or solo dancer) world joint positions, (T2, 165), metres, y-up.
     pub follower_pos3d: &'a [f32],
-    /// Music beats per leader frame, (T,), 0 or 1 (the last column of the 54-d music features).
+    /// Music beats per leader frame (per dancer frame without a leader),
+    /// (T,), 0 or 1 (the last column of the 54-d music features).
     pub beats: Option<&'a [f32]>,
     /// Follower tokens, (K, 5) row-major, one row per 4 frames, streams in [`TOKEN_STREAM_NAMES`] order.
     pub tokens: Option<&'a [u32]>,
@@ -159,11 +161,12 @@ impl ViewerData<'_> {
         if !(self.fps.is_finite() && self.fps > 0.0 && self.fps <= MAX_FPS) {
             return Err(ViewerDataError::BadFps(self.fps));
         }
-        let leader_frames = check_motion("leader", self.leader_pos3d)?;
+        let leader_frames = self.leader_pos3d.map(|l| check_motion("leader", l)).transpose()?.unwrap_or(0);
         let follower_frames = check_motion("follower", self.follower_pos3d)?;
         if let Some(b) = self.beats {
-            if b.len() != leader_frames {
-                return Err(ViewerDataError::BeatsLength { len: b.len(), frames: leader_frames });
+            let frames = if self.leader_pos3d.is_some() { leader_frames } else { follower_frames };
+            if b.len() != frames {
+                return Err(ViewerDataError::BeatsLength { len: b.len(), frames });
             }
             if let Some(i) = b.iter().position(|v| !v.is_finite()) {
                 return Err(ViewerDataError::NonFiniteBeat { frame: i, value: b[i] });
@@ -271,12 +274,12 @@ fn data_json(d: &ViewerData, dims: &ViewerDims) -> String {
         "{{\"version\":1,\"title\":{title},\"fps\":{},\"joints\":{JOINTS},\"parents\":{:?},",
         d.fps, SMPLX_PARENTS
     );
-    let _ = write!(
-        s,
-        "\"leader\":{{\"frames\":{},\"f32\":\"{}\"}},",
-        dims.leader_frames,
-        base64_f32(d.leader_pos3d)
-    );
+    match d.leader_pos3d {
+        Some(l) => {
+            let _ = write!(s, "\"leader\":{{\"frames\":{},\"f32\":\"{}\"}},", dims.leader_frames, base64_f32(l));
+        }
+        None => s.push_str("\"leader\":null,"),
+    }
     let _ = write!(
         s,
         "\"follower\":{{\"frames\":{},\"f32\":\"{}\"}},",
@@ -392,7 +395,7 @@ mod tests {
     }
 
     fn data<'a>(l: &'a [f32], f: &'a [f32]) -> ViewerData<'a> {
-        ViewerData { title: "t", fps: 30.0, leader_pos3d: l, follower_pos3d: f, beats: None, tokens: None, audio_file: None }
+        ViewerData { title: "t", fps: 30.0, leader_pos3d: Some(l), follower_pos3d: f, beats: None, tokens: None, audio_file: None }
     }
 
     #[test]
