@@ -257,8 +257,8 @@ typedef struct duo_model_info {
  *     uses 423, 12 for their model); duo_model_seed_tokens is Duolando's.
  *   - duo_session_config: dec_future, shift, pending_frames,
  *     music_buffer_frames (music ROWS that may wait unread), sampling,
- *     top_k, kv and rng_seed apply; lookahead, enc_future,
- *     music_lookahead, lat_past and staggered must be 0
+ *     top_k, kv, rng_seed and staggered (0 or 2: two caches, spread) apply;
+ *     lookahead, enc_future, music_lookahead and lat_past must be 0
  *     (DUO_INVALID_ARGUMENT naming the field). Presets: "exact" (the
  *     offline model's numbers), "reference", "interactive", "minimum".
  *   - duo_session_push_music takes one or more whole rows (438 floats

@@ -21,7 +21,7 @@ use duolando_core::nn::conv_stack::ConvScratch;
 use duolando_core::nn::vq_decoder;
 use duolando_core::bailando::gpt::{logits_len, max_context, window_logits, GptScratch};
 use duolando_core::bailando::model::Model;
-use duolando_core::bailando::session::{dec_future_max, window_rows, Preset, Session, SessionConfig, StepBatch};
+use duolando_core::bailando::session::{dec_future_max, window_rows, CacheSchedule, Preset, Session, SessionConfig, StepBatch};
 use duolando_core::error::{Buffer, Error, Setting};
 use duolando_core::nn::kv_store::KvType;
 use duolando_core::nn::sampler::{argmax, Sampling};
@@ -247,15 +247,29 @@ fn budgets_equal_their_oracles() {
         let win = window_rows(&cfg) as u32;
         let dmax = dec_future_max(&cfg);
         for (d, shift) in [(0, 1), (1, win / 2), (dmax / 2, win - 1), (dmax, 3), (0, win)] {
-            let sc = SessionConfig { music_buffer_rows: rows as u32, ..SessionConfig::with(d, shift) };
-            let mut arena = vec![0u8; m.session_bytes(&sc).unwrap()];
-            let mut s = Session::new(&m, &mut arena, &sc, g.seed).unwrap();
-            let (tokens, frames) = run(&mut s, &g.music, nm, g.padding, true);
             let (want_t, want_f) = oracle(&m, &g.music, g.padding, g.seed, d as usize, shift as usize);
-            assert_eq!(&tokens[..], &want_t[want_t.len() - tokens.len()..], "{name} d {d} s {shift}: tokens");
-            let (abs, _) = max_errors(&frames, &want_f);
-            eprintln!("{name} d {d} shift {shift}: {} frames, max abs err vs oracle {abs:.2e}, prefilled rows {}", frames.len() / POSE_DIM, s.prefilled);
-            assert!(abs <= POS_TOL, "{name} d {d} s {shift}: positions max abs err {abs:e}");
+            let mut reprefill = None;
+            for schedule in [CacheSchedule::Reprefill, CacheSchedule::Spread] {
+                let sc = SessionConfig { music_buffer_rows: rows as u32, schedule, ..SessionConfig::with(d, shift) };
+                let mut arena = vec![0u8; m.session_bytes(&sc).unwrap()];
+                let mut s = Session::new(&m, &mut arena, &sc, g.seed).unwrap();
+                let (tokens, frames) = run(&mut s, &g.music, nm, g.padding, true);
+                assert_eq!(&tokens[..], &want_t[want_t.len() - tokens.len()..], "{name} d {d} s {shift} {schedule:?}: tokens");
+                let (abs, _) = max_errors(&frames, &want_f);
+                eprintln!("{name} d {d} shift {shift} {schedule:?}: {} frames, max abs err vs oracle {abs:.2e}, rows re-prefilled {}, appended ahead {}", frames.len() / POSE_DIM, s.prefilled, s.spread_rows);
+                assert!(abs <= POS_TOL, "{name} d {d} s {shift}: positions max abs err {abs:e}");
+                // The spread schedule computes the same numbers, re-prefilling
+                // (at most) the first jump's rows instead of every jump's.
+                match reprefill.take() {
+                    None => reprefill = Some((frames, s.prefilled)),
+                    Some((f, p)) => {
+                        assert!(f.iter().zip(&frames).all(|(a, b)| a.to_bits() == b.to_bits()), "{name} d {d} s {shift}: spread differs from reprefill");
+                        if p > 2 * win as usize {
+                            assert!(s.prefilled < p / 2, "{name} d {d} s {shift}: spread re-prefilled {} rows, reprefill {p}", s.prefilled);
+                        }
+                    }
+                }
+            }
         }
     }
 }
@@ -274,7 +288,7 @@ fn batched_sessions_equal_sessions_alone_without_allocating() {
     let win = window_rows(&cfg) as u32;
     let cfgs = [
         SessionConfig { kv: KvType::F16, ..SessionConfig::with(2, win / 2) },
-        SessionConfig { sampling: Sampling::TopK { k: 4, rng_seed: 7 }, ..SessionConfig::with(0, 1) },
+        SessionConfig { sampling: Sampling::TopK { k: 4, rng_seed: 7 }, schedule: CacheSchedule::Spread, ..SessionConfig::with(0, win - 2) },
         SessionConfig::with(dec_future_max(&cfg), win),
     ];
     let lens = [rows, rows - 3, rows / 2];

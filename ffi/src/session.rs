@@ -139,6 +139,7 @@ impl DuoSessionConfig {
             music_buffer_frames: c.music_buffer_rows,
             sampling,
             top_k,
+            staggered: if c.schedule == CacheSchedule::Spread { 2 } else { 0 },
             kv: match c.kv {
                 KvType::F32 => KV_F32,
                 KvType::F16 => KV_F16,
@@ -152,7 +153,7 @@ impl DuoSessionConfig {
     /// pending_frames, music_buffer_frames = music rows, sampling, top_k,
     /// kv, rng_seed); the others must be 0 (refused by name).
     fn to_solo(self) -> Result<SoloConfig, Failure> {
-        for (v, name) in [(self.lookahead, "lookahead"), (self.enc_future, "enc_future"), (self.music_lookahead, "music_lookahead"), (self.lat_past, "lat_past"), (self.staggered, "staggered")] {
+        for (v, name) in [(self.lookahead, "lookahead"), (self.enc_future, "enc_future"), (self.music_lookahead, "music_lookahead"), (self.lat_past, "lat_past"), (if self.staggered == 1 { 1 } else { 0 }, "staggered")] {
             if v != 0 {
                 return Err(Failure::invalid(format!(
                     "config.{name} is {v}: a Bailando model (a solo dancer) has no {name}; leave it 0 (start from duo_session_config_preset)"
@@ -160,7 +161,12 @@ impl DuoSessionConfig {
             }
         }
         let d = self.to_core_fields()?;
-        Ok(SoloConfig { dec_future: self.dec_future, shift: self.shift, sampling: d.0, pending_frames: self.pending_frames, music_buffer_rows: self.music_buffer_frames, kv: d.1 })
+        let schedule = match self.staggered {
+            0 => CacheSchedule::Reprefill,
+            2 => CacheSchedule::Spread,
+            v => return Err(Failure::invalid(format!("config.staggered is {v}: a Bailando model takes 0 (one cache) or 2 (two caches, spread)"))),
+        };
+        Ok(SoloConfig { dec_future: self.dec_future, shift: self.shift, sampling: d.0, pending_frames: self.pending_frames, music_buffer_rows: self.music_buffer_frames, kv: d.1, schedule })
     }
 
     fn to_core_fields(self) -> Result<(Sampling, KvType), Failure> {

@@ -30,9 +30,11 @@ use crate::nn::weights::BlockW;
 use crate::nn::kv_store::KvBuf;
 pub use crate::nn::kv_store::KvType;
 
-/// Most caches one [`GptCache::append_many`] call appends to (the most
-/// sessions a step batch holds).
+/// The most sessions a step batch holds.
 pub const MAX_BATCH: usize = 64;
+/// Most caches one [`GptCache::append_many`] call appends to (a batch's
+/// sessions, each with up to two windows).
+pub const MAX_ITEMS: usize = 2 * MAX_BATCH;
 use heapless::Vec;
 
 /// Causal over window rows for a position-major layout: query row `qi`
@@ -178,8 +180,8 @@ impl<'s> GptCache<'s> {
         if out_streams == 0 || out_streams > st {
             return Err(Error::Length { buffer: Buffer::Features, len: out_streams, expected: st });
         }
-        if blocks.clone().count() != layers || items.len() > MAX_BATCH {
-            return Err(Error::Context { c: items.len(), max: MAX_BATCH });
+        if blocks.clone().count() != layers || items.len() > MAX_ITEMS {
+            return Err(Error::Context { c: items.len(), max: MAX_ITEMS });
         }
         // The caches are head-major for heads of `hd` lanes (carved with
         // `hd * heads == c`): other heads would read across them.
@@ -187,7 +189,7 @@ impl<'s> GptCache<'s> {
             return Err(Error::Length { buffer: Buffer::Features, len: n_head, expected: c / first.cache.hd });
         }
         // Row bounds of the items in `x`, and each item's first cached row.
-        let mut bounds: Vec<usize, { MAX_BATCH + 1 }> = Vec::new();
+        let mut bounds: Vec<usize, { MAX_ITEMS + 1 }> = Vec::new();
         bounds.push(0).map_err(|_| Error::State)?;
         let mut total = 0usize;
         for it in items.iter() {
@@ -224,8 +226,8 @@ impl<'s> GptCache<'s> {
             } else {
                 // Last layer: only the output rows of each output item's
                 // last new row are read; they are gathered to the front.
-                let mut outs: Vec<usize, MAX_BATCH> = Vec::new();
-                let mut ob: Vec<usize, { MAX_BATCH + 1 }> = Vec::new();
+                let mut outs: Vec<usize, MAX_ITEMS> = Vec::new();
+                let mut ob: Vec<usize, { MAX_ITEMS + 1 }> = Vec::new();
                 ob.push(0).map_err(|_| Error::State)?;
                 for (i, it) in items_ro.iter().enumerate() {
                     if it.need_output {

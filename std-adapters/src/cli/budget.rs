@@ -117,13 +117,16 @@ impl BudgetArgs {
         let Some(preset) = SoloPreset::from_name(&self.preset) else {
             bail!("--preset {} is a Duolando preset; a Bailando model takes {}", self.preset, SoloPreset::ALL.map(SoloPreset::name).join(", "));
         };
-        for (given, name) in [(self.lookahead.is_some(), "lookahead"), (self.enc_future.is_some(), "enc-future"), (self.music_lookahead.is_some(), "music-lookahead"), (self.staggered, "staggered"), (self.spread, "spread")] {
+        for (given, name) in [(self.lookahead.is_some(), "lookahead"), (self.enc_future.is_some(), "enc-future"), (self.music_lookahead.is_some(), "music-lookahead"), (self.staggered, "staggered")] {
             if given {
-                bail!("--{name} is a Duolando setting: a Bailando model has no leader and reads no music ahead (its settings: --preset, --dec-future, --shift, --topk, --kv)");
+                bail!("--{name} is a Duolando setting: a Bailando model has no leader and reads no music ahead (its settings: --preset, --dec-future, --shift, --spread, --topk, --kv)");
             }
         }
         let base = SoloConfig::preset(cfg, preset);
         let mut sc = SoloConfig { dec_future: self.dec_future.unwrap_or(base.dec_future), shift: self.shift.unwrap_or(base.shift), ..base };
+        if self.spread {
+            sc.schedule = duolando_core::nn::window::CacheSchedule::Spread;
+        }
         sc.kv = match self.kv {
             Kv::F32 => duolando_core::nn::kv_store::KvType::F32,
             Kv::F16 => duolando_core::nn::kv_store::KvType::F16,

@@ -15,6 +15,7 @@ use crate::error::Setting;
 use crate::nn::kv_store::KvType;
 pub use crate::nn::sampler::Sampling;
 use crate::nn::stream_conv::{future_max, StackKind};
+pub use crate::nn::window::CacheSchedule;
 
 /// Largest `pending_frames` / `music_buffer_rows` (keeps every size far
 /// from overflow).
@@ -41,6 +42,11 @@ pub struct SessionConfig {
     pub music_buffer_rows: u32,
     /// Element type of the GPT K/V cache (f16: half the cache bytes).
     pub kv: KvType,
+    /// `Reprefill` (one cache, re-run at each window jump: a spike of
+    /// `shift - 1` rows) or `Spread` (two caches: the next window's rows
+    /// appended a few per step before its jump, in the same pass over the
+    /// weights; the same numbers). `Staggered` is Duolando's only.
+    pub schedule: CacheSchedule,
 }
 
 /// Named budgets.
@@ -90,7 +96,7 @@ impl SessionConfig {
     /// A budget: decoder future `dec_future`, window shift `shift`, greedy,
     /// f32 K/V, 64 pending frames, 64 music rows ahead.
     pub fn with(dec_future: u32, shift: u32) -> Self {
-        SessionConfig { dec_future, shift, sampling: Sampling::Greedy, pending_frames: 64, music_buffer_rows: 64, kv: KvType::F32 }
+        SessionConfig { dec_future, shift, sampling: Sampling::Greedy, pending_frames: 64, music_buffer_rows: 64, kv: KvType::F32, schedule: CacheSchedule::Reprefill }
     }
 
     pub fn preset(cfg: &BailandoConfig, preset: Preset) -> Self {
@@ -115,6 +121,9 @@ impl SessionConfig {
         }
         range(Setting::PendingFrames, self.pending_frames, 0, MAX_BUFFER)?;
         range(Setting::MusicBuffer, self.music_buffer_rows, 1, MAX_BUFFER)?;
+        if self.schedule == CacheSchedule::Staggered {
+            return Err((Setting::Windows, 0, 0));
+        }
         Ok(())
     }
 

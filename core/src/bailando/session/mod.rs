@@ -26,7 +26,7 @@ use crate::error::{check_len, Buffer, Error};
 use crate::input;
 use crate::nn::sampler::{Rng, Sampling, MAX_TOP_K};
 
-pub use config::{dec_future_max, window_rows, Preset, SessionConfig};
+pub use config::{dec_future_max, window_rows, CacheSchedule, Preset, SessionConfig};
 pub use state::{StepScratch, PREFILL_CHUNK};
 pub use step::{step_many, BatchError};
 
@@ -139,6 +139,8 @@ pub struct Session<'a> {
     pub(crate) root: [f32; 3],
     /// Window rows re-run at window jumps, in total (a cost measure).
     pub prefilled: usize,
+    /// Rows of next windows appended ahead (spread schedule), in total.
+    pub spread_rows: usize,
 }
 
 impl<'a> Session<'a> {
@@ -160,7 +162,7 @@ impl<'a> Session<'a> {
         let mut a = Arena::new(arena);
         let st = State::carve(&mut a, &model.cfg, cfg)?;
         let own = if own { Some(StepScratch::carve(&mut a, &model.cfg, 1)?) } else { None };
-        let mut s = Session { model, cfg: *cfg, st, own, seed, rng: Rng(0), steps: 0, rows: 0, end: None, dec_fed: 0, decoded: 0, pulled: 0, root: [0.0; 3], prefilled: 0 };
+        let mut s = Session { model, cfg: *cfg, st, own, seed, rng: Rng(0), steps: 0, rows: 0, end: None, dec_fed: 0, decoded: 0, pulled: 0, root: [0.0; 3], prefilled: 0, spread_rows: 0 };
         s.restart(seed)?;
         Ok(s)
     }
@@ -173,7 +175,7 @@ impl<'a> Session<'a> {
             Sampling::TopK { rng_seed, .. } => rng_seed,
             Sampling::Greedy => 0,
         });
-        (self.steps, self.rows, self.end, self.dec_fed, self.decoded, self.pulled, self.root, self.prefilled) = (0, 0, None, 0, 0, 0, [0.0; 3], 0);
+        (self.steps, self.rows, self.end, self.dec_fed, self.decoded, self.pulled, self.root, self.prefilled, self.spread_rows) = (0, 0, None, 0, 0, 0, [0.0; 3], 0, 0);
         Ok(())
     }
 

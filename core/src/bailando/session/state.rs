@@ -5,7 +5,7 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::bailando::config::{BailandoConfig, N_STREAMS, POSE_DIM, UP_JOINTS};
-use crate::bailando::session::config::{window_rows, SessionConfig};
+use crate::bailando::session::config::{window_rows, CacheSchedule, SessionConfig};
 use crate::error::Error;
 use crate::nn::block::BlockScratch;
 use crate::nn::gpt_cache::GptCache;
@@ -29,8 +29,9 @@ pub struct State<'s> {
     pub music: RowRing<'s>,
     /// (m + 1, 2) token history (up, down): the window's tokens.
     pub toks: TokenRing<'s>,
-    /// K/V of the current GPT window (re-prefilled when it jumps).
-    pub gpt: GptCache<'s>,
+    /// K/V of the current GPT window (re-prefilled when it jumps), and
+    /// with the spread schedule the next window's, filled ahead.
+    pub gpt: heapless::Vec<GptCache<'s>, 2>,
     /// Streaming decoders: up, down (positions), root velocity.
     pub dec: [StreamStack<'s>; DECODERS],
     /// (hop, 45) one decoder's frames (the up half is the widest).
@@ -54,7 +55,10 @@ impl<'s> State<'s> {
         let layers = (g.n_layer_base + g.n_layer_head) as usize;
         let music = RowRing::carve(a, m.checked_add(sc.music_buffer_rows as usize).ok_or(ov())?, g.n_music as usize)?;
         let toks = TokenRing::carve(a, m + 1, 2)?;
-        let gpt = GptCache::carve(a, sc.kv, layers, N_STREAMS, m, c, g.n_head as usize)?;
+        let mut gpt = heapless::Vec::new();
+        for _ in 0..if sc.schedule == CacheSchedule::Spread { 2 } else { 1 } {
+            gpt.push(GptCache::carve(a, sc.kv, layers, N_STREAMS, m, c, g.n_head as usize)?).map_err(|_| ov())?;
+        }
         let up = StreamStack::carve(a, &cfg.parts[0], StackKind::Decoder, d)?;
         let down = StreamStack::carve(a, &cfg.parts[1], StackKind::Decoder, d)?;
         let root = StreamStack::carve(a, &cfg.parts[1], StackKind::Decoder, d)?;
@@ -73,7 +77,9 @@ impl<'s> State<'s> {
     pub fn reset(&mut self) {
         self.music.clear();
         self.toks.clear();
-        self.gpt.reset();
+        for g in self.gpt.iter_mut() {
+            g.reset();
+        }
         for d in self.dec.iter_mut() {
             d.reset();
         }
@@ -85,9 +91,11 @@ impl<'s> State<'s> {
 pub struct StepScratch<'s> {
     /// Sessions a step may hold.
     pub n: usize,
-    /// (3 max(n, PREFILL_CHUNK), C) the GPT's new rows (position-major:
-    /// row `i * 3 + s`, stream s of new window row i); after the GPT the
-    /// first `2 n` rows hold the up and down streams' final hidden states.
+    /// (3 n (1 + PREFILL_CHUNK), C) the GPT's new rows (position-major:
+    /// row `i * 3 + s`, stream s of new window row i): each session's new
+    /// row and up to PREFILL_CHUNK rows of its next window (spread), or a
+    /// re-prefill chunk; after the GPT the first `2 n` rows hold the up and
+    /// down streams' final hidden states.
     pub x: &'s mut [f32],
     pub block: BlockScratch<'s>,
     /// (C) one row after `ln_f`.
@@ -105,7 +113,7 @@ impl<'s> StepScratch<'s> {
         let g = &cfg.gpt;
         let c = g.n_embd as usize;
         let m = window_rows(cfg);
-        let rows = n.max(PREFILL_CHUNK).checked_mul(N_STREAMS).ok_or(ov())?;
+        let rows = n.checked_mul(1 + PREFILL_CHUNK).and_then(|r| r.checked_mul(N_STREAMS)).ok_or(ov())?;
         let emb = cfg.parts.iter().map(|p| p.emb_width as usize).max().unwrap_or(0);
         let need = ScratchNeed::for_vqs(&cfg.vqs()).ok_or(ov())?;
         Ok(StepScratch {

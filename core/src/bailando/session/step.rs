@@ -16,11 +16,11 @@ use crate::bailando::session::state::{StepScratch, PREFILL_CHUNK};
 use crate::bailando::session::Session;
 use crate::error::Error;
 use crate::kernels::{layernorm, linear};
-use crate::nn::gpt_cache::{GptCache, GptItem, MAX_BATCH};
+use crate::nn::gpt_cache::{GptCache, GptItem, MAX_BATCH, MAX_ITEMS};
 use crate::nn::quantizer::dequantise;
 use crate::nn::sampler::{argmax, top_k_by_id, Sampling};
 use crate::nn::stream_conv::StackW;
-use crate::nn::window::window_start;
+use crate::nn::window::{next_window, window_start};
 
 /// The index of the session an error is about, and the error.
 pub type BatchError = (usize, Error);
@@ -89,43 +89,89 @@ pub fn step_many(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Resul
     let w = N_STREAMS * c;
     let blocks = || model.gpt.base.iter().chain(model.gpt.head.iter());
 
-    // Windows that jumped: re-prefill their rows before the new one.
+    // Each ready session's window cache (re-prefilled where the window
+    // jumped) and, with the spread schedule, the rows of its next window
+    // appended in this step: (cache, next cache, first row, rows, start).
+    let mut plan: Vec<(usize, Option<(usize, usize, usize, usize)>), MAX_BATCH> = Vec::new();
     for &i in ready.iter() {
         let s = &mut *ss[i];
         let k = s.steps;
-        let lo = window_start(k, m, s.cfg.shift as usize);
-        if s.st.gpt.window_start() == Some(lo) && s.st.gpt.rows() == k - lo {
-            continue;
+        let shift = s.cfg.shift as usize;
+        let lo = window_start(k, m, shift);
+        let cur = match s.st.gpt.iter().position(|g| g.window_start() == Some(lo)) {
+            Some(c) => c,
+            None => {
+                // The cache of an older window (or an empty one) starts this one.
+                let c = s.st.gpt.iter().position(|g| g.window_start().is_none_or(|x| x < lo)).ok_or((i, Error::State))?;
+                s.st.gpt[c].restart(lo);
+                c
+            }
+        };
+        // Rows of this window not yet in its cache (all of them after a jump,
+        // the rest of them where the spread fell behind).
+        let mut from = lo + s.st.gpt[cur].rows();
+        if from > k {
+            return Err((i, Error::State));
         }
-        s.st.gpt.restart(lo);
-        let mut from = lo;
         while from < k {
             let to = (from + PREFILL_CHUNK).min(k);
             embed_rows(s, lo, from, to, &mut sc.x[..(to - from) * w]).map_err(at(i))?;
-            let mut items = [GptItem { cache: &mut s.st.gpt, rows: to - from, need_output: false }];
+            let mut items = [GptItem { cache: &mut s.st.gpt[cur], rows: to - from, need_output: false }];
             GptCache::append_many(blocks(), nh, 2, &mut items, &mut sc.x[..(to - from) * w], &mut sc.block).map_err(at(i))?;
+            s.prefilled += to - from;
             from = to;
         }
-        s.prefilled += k - lo;
+        let next = if s.st.gpt.len() == 2 {
+            let (k2, lo2) = next_window(k, m, shift);
+            let nx = 1 - cur;
+            if s.st.gpt[nx].window_start() != Some(lo2) {
+                s.st.gpt[nx].restart(lo2);
+            }
+            // Rows lo2..k2 are wanted before step k2; rows <= k exist.
+            let have = lo2 + s.st.gpt[nx].rows();
+            let quota = k2.saturating_sub(have).div_ceil(k2 - k);
+            let q = quota.min((k + 1).min(k2).saturating_sub(have)).min(PREFILL_CHUNK);
+            s.spread_rows += q;
+            (q > 0).then_some((nx, have, q, lo2))
+        } else {
+            None
+        };
+        plan.push((cur, next)).map_err(|_| (i, Error::State))?;
     }
 
-    // The new row of every ready session, through the GPT together.
-    for (j, &i) in ready.iter().enumerate() {
+    // The new row of every ready session (and its next window's rows),
+    // through the GPT together.
+    let mut rows = 0;
+    for (&i, &(cur, next)) in ready.iter().zip(plan.iter()) {
         let s = &*ss[i];
         let k = s.steps;
-        let lo = s.st.gpt.window_start().ok_or((i, Error::State))?;
-        embed_rows(s, lo, k, k + 1, &mut sc.x[j * w..(j + 1) * w]).map_err(at(i))?;
+        let lo = s.st.gpt[cur].window_start().ok_or((i, Error::State))?;
+        embed_rows(s, lo, k, k + 1, &mut sc.x[rows * w..(rows + 1) * w]).map_err(at(i))?;
+        rows += 1;
+        if let Some((_, from, q, lo2)) = next {
+            embed_rows(s, lo2, from, from + q, &mut sc.x[rows * w..(rows + q) * w]).map_err(at(i))?;
+            rows += q;
+        }
     }
-    let n = ready.len();
     {
-        let mut items: Vec<GptItem<'_, '_>, MAX_BATCH> = Vec::new();
+        let mut items: Vec<GptItem<'_, '_>, MAX_ITEMS> = Vec::new();
+        let mut p = 0;
         for (i, s) in ss.iter_mut().enumerate() {
-            if ready.contains(&i) {
-                items.push(GptItem { cache: &mut s.st.gpt, rows: 1, need_output: true }).map_err(|_| (i, Error::State))?;
+            if !ready.contains(&i) {
+                continue;
+            }
+            let (cur, next) = plan[p];
+            p += 1;
+            let (a, b) = s.st.gpt.split_at_mut(1);
+            let (c, n) = if cur == 0 { (&mut a[0], b.first_mut()) } else { (&mut b[0], a.first_mut()) };
+            items.push(GptItem { cache: c, rows: 1, need_output: true }).map_err(|_| (i, Error::State))?;
+            if let (Some((_, _, q, _)), Some(n)) = (next, n) {
+                items.push(GptItem { cache: n, rows: q, need_output: false }).map_err(|_| (i, Error::State))?;
             }
         }
-        GptCache::append_many(blocks(), nh, 2, &mut items, &mut sc.x[..n * w], &mut sc.block).map_err(at(first))?;
+        GptCache::append_many(blocks(), nh, 2, &mut items, &mut sc.x[..rows * w], &mut sc.block).map_err(at(first))?;
     }
+    let n = ready.len();
 
     // Heads and sampling: rows 2j, 2j + 1 of x are session j's up and down.
     let vu = g.vocab[0] as usize;

@@ -40,32 +40,7 @@ pub struct SessionConfig {
     pub kv: KvType,
 }
 
-/// How a session keeps the GPT window's keys and values as the window moves.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum CacheSchedule {
-    /// One cache, re-prefilled when the window jumps (least memory, a spike
-    /// of `shift` rows every chunk).
-    #[default]
-    Reprefill,
-    /// One cache per live window, each fed one row per step (flat cost,
-    /// [`window_pool`] caches).
-    Staggered,
-    /// Two caches, the next window's rows appended a few per step over the
-    /// steps before its jump (flat cost at the re-prefill schedule's mean,
-    /// twice its cache memory; one re-prefill at step `m`, the first jump).
-    Spread,
-}
-
-impl CacheSchedule {
-    /// GPT caches a session with this schedule holds (`m` = block size - 1).
-    pub fn caches(self, m: usize, shift: usize) -> usize {
-        match self {
-            CacheSchedule::Reprefill => 1,
-            CacheSchedule::Staggered => window_pool(m, shift),
-            CacheSchedule::Spread => 2,
-        }
-    }
-}
+pub use crate::nn::window::CacheSchedule;
 
 /// Most GPT caches a staggered session may hold.
 pub const MAX_WINDOWS: usize = 16;
