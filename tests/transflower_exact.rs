@@ -120,10 +120,13 @@ impl Case {
         Case { dir, meta, cfg, weights, inputs }
     }
     fn inputs(&self) -> Vec<Input<'_>> {
-        self.inputs.iter().map(|x| match x {
-            Ok(rows) => Input::Rows(rows),
-            Err(label) => Input::Label(*label),
-        }).collect()
+        self.inputs
+            .iter()
+            .map(|x| match x {
+                Ok(rows) => Input::Rows(rows),
+                Err(label) => Input::Label(*label),
+            })
+            .collect()
     }
     fn model(&self) -> Model<'_> {
         Model::bind(&self.cfg, &&self.weights).unwrap()
@@ -489,4 +492,13 @@ fn published_paper_config_has_the_published_size() {
     })
     .unwrap();
     assert_eq!(params, 122_323_152);
+    // The arena of R mode at this size (a test that fails when it grows:
+    // docs/TRANSFLOWER.md): the transformer scratch over 260 rows x 800
+    // dominates.
+    let bytes = generate_scratch_bytes(&cfg).unwrap();
+    eprintln!("published paper config: generate scratch {bytes} bytes");
+    assert_eq!(bytes, PUBLISHED_SCRATCH_BYTES);
 }
+
+/// [`generate_scratch_bytes`] of the published paper config.
+const PUBLISHED_SCRATCH_BYTES: usize = 7_058_943;

@@ -397,7 +397,7 @@ impl TransflowerConfig {
             return u(Unsupported::InputTimeOffsets);
         }
         let mut inputs = [InputConfig::default(); MAX_INPUTS];
-        for i in 0..n {
+        for (i, slot) in inputs.iter_mut().enumerate().take(n) {
             let discrete = h.input_types_discrete.n > 0 && h.input_types_discrete.items[i];
             let single = h.input_fix_single.n > 0 && h.input_fix_single.items[i];
             if discrete != single {
@@ -407,7 +407,7 @@ impl TransflowerConfig {
             if discrete && tokens == 0 {
                 return Err(ConfigError::Zero { field: Field::InputTokens(i as u8) });
             }
-            inputs[i] = InputConfig { name: h.input_modalities.items[i], dim: h.dins.items[i], length: h.input_lengths.items[i], tokens };
+            *slot = InputConfig { name: h.input_modalities.items[i], dim: h.dins.items[i], length: h.input_lengths.items[i], tokens };
         }
         if h.douts.items[0] != inputs[output].dim {
             return u(Unsupported::OutputWidth);

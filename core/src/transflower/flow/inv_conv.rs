@@ -38,11 +38,8 @@ pub fn inverse_weight(conv: &InvConvW<'_>, c: usize, s: &mut InverseScratch<'_>,
             } else if i == j {
                 1.0
             } else {
-                let mut acc = 0.0f64;
-                for k in j..i {
-                    acc += conv.l[i * c + k] as f64 * col[k];
-                }
-                -acc
+                let row = &conv.l[i * c + j..i * c + i];
+                -row.iter().zip(&col[j..i]).fold(0.0f64, |acc, (&l, &x)| acc + l as f64 * x)
             };
         }
         for i in 0..c {
@@ -58,11 +55,8 @@ pub fn inverse_weight(conv: &InvConvW<'_>, c: usize, s: &mut InverseScratch<'_>,
             } else if i == j {
                 1.0 / diag(j)
             } else {
-                let mut acc = 0.0f64;
-                for k in i + 1..=j {
-                    acc += conv.u[i * c + k] as f64 * col[k];
-                }
-                -acc / diag(i)
+                let row = &conv.u[i * c + i + 1..=i * c + j];
+                -row.iter().zip(&col[i + 1..=j]).fold(0.0f64, |acc, (&u, &x)| acc + u as f64 * x) / diag(i)
             };
         }
         for i in 0..c {
