@@ -4,7 +4,7 @@
 //! Layout: the shared parts once ([`kernels`] math, [`nn`] building
 //! blocks, [`format`] the `.duo` container, [`arena`] memory, [`input`]
 //! policy, [`limits`] caps), each family in its own folder named after its
-//! paper's concepts ([`duolando`], [`bailando`]; Transflower follows).
+//! paper's concepts ([`duolando`], [`bailando`], [`transflower`]).
 #![cfg_attr(not(test), no_std)]
 // Unsafe code is denied everywhere except `kernels::simd` (intrinsics) and
 // `kernels::parallel` (split-GEMM output views), which allow it with a
@@ -22,6 +22,7 @@ pub mod kernels;
 pub mod limits;
 pub mod nn;
 pub mod tensor;
+pub mod transflower;
 
 pub use error::Error;
 pub use duolando::model::Model;

@@ -6,6 +6,7 @@
 
 pub mod bind;
 pub mod block;
+pub mod encoder_layer;
 pub mod conv_stack;
 pub mod gpt_cache;
 pub mod kv_store;

@@ -1,0 +1,179 @@
+//! torch's `nn.TransformerEncoderLayer` as its defaults build it
+//! (`norm_first=False`, ReLU, LayerNorm eps 1e-5, fused `in_proj`):
+//! the POST-LN layer
+//!
+//! ```text
+//! x = norm1(x + out_proj(MHA(x; in_proj) [+ bias in the scores]))
+//! x = norm2(x + linear2(relu(linear1(x))))
+//! ```
+//!
+//! with every row attending to every row (no mask), optionally with an
+//! additive score bias (L, L) shared by every head (torch's float
+//! `src_mask`). Transflower's transformers are stacks of it (DESIGN.md §7).
+//! Unlike [`crate::nn::block`] (pre-LN, GELU MLP x4, separate q/k/v) the
+//! FFN width is free (`dim_feedforward`) and q, k, v come from one GEMM.
+
+use crate::arena::{ArenaError, Carve};
+use crate::kernels::simd;
+use crate::kernels::{layernorm, linear, relu_inplace};
+use crate::nn::bind::{BindError, Binder, TensorSource};
+use crate::nn::names::{name, Emit, Role, SchemaError};
+use crate::nn::weights::{LayerNormW, Linear};
+
+/// One `TransformerEncoderLayer(d, nhead, dim_feedforward = f)`.
+#[derive(Clone, Copy, Debug)]
+pub struct EncoderLayerW<'a> {
+    /// `self_attn.in_proj_weight` (3d, d) / `in_proj_bias` (3d): q | k | v.
+    pub in_proj: Linear<'a>,
+    /// `self_attn.out_proj` (d, d).
+    pub out_proj: Linear<'a>,
+    /// `linear1` (f, d), `linear2` (d, f).
+    pub linear1: Linear<'a>,
+    pub linear2: Linear<'a>,
+    /// `norm1` (after attention), `norm2` (after the FFN).
+    pub norm1: LayerNormW<'a>,
+    pub norm2: LayerNormW<'a>,
+}
+
+/// Binds the layer under `prefix` (e.g. `...transformer_encoder.layers.0`).
+pub fn bind_encoder_layer<'a, S: TensorSource<'a>>(b: &Binder<'_, S>, prefix: &str, d: u32, f: u32) -> Result<EncoderLayerW<'a>, BindError> {
+    let p = |s: &str| name(format_args!("{prefix}.{s}"));
+    let d3 = d.checked_mul(3).ok_or(BindError::Capacity)?;
+    Ok(EncoderLayerW {
+        in_proj: Linear { w: b.matrix(p("self_attn.in_proj_weight")?, &[d3, d])?, b: Some(b.get(p("self_attn.in_proj_bias")?, &[d3])?) },
+        out_proj: b.linear(&p("self_attn.out_proj")?, d, d, true)?,
+        linear1: b.linear(&p("linear1")?, f, d, true)?,
+        linear2: b.linear(&p("linear2")?, d, f, true)?,
+        norm1: b.ln(&p("norm1")?, d)?,
+        norm2: b.ln(&p("norm2")?, d)?,
+    })
+}
+
+/// Lists the layer's tensors (the order of torch's `state_dict`).
+pub fn emit_encoder_layer<E: From<SchemaError>>(e: &mut Emit<'_, E>, prefix: &str, d: u32, f: u32) -> Result<(), E> {
+    let p = |s: &str| name(format_args!("{prefix}.{s}"));
+    e.t(p("self_attn.in_proj_weight")?, &[3 * d, d], Role::Linear)?;
+    e.t(p("self_attn.in_proj_bias")?, &[3 * d], Role::Vector)?;
+    e.wb(&p("self_attn.out_proj")?, &[d, d], d, Role::Linear)?;
+    e.wb(&p("linear1")?, &[f, d], f, Role::Linear)?;
+    e.wb(&p("linear2")?, &[d, f], d, Role::Linear)?;
+    e.wb(&p("norm1")?, &[d], d, Role::Vector)?;
+    e.wb(&p("norm2")?, &[d], d, Role::Vector)
+}
+
+/// Working memory of [`encoder_layer`] over at most `rows` rows of width
+/// `d` with FFN width `f`.
+pub struct EncoderLayerScratch<'s> {
+    /// (rows, 3d): q | k | v per row.
+    qkv: &'s mut [f32],
+    /// (rows, d): attention output, then the FFN output.
+    att: &'s mut [f32],
+    /// (rows, d): out_proj output + residual, then FFN output + residual.
+    sum: &'s mut [f32],
+    /// (rows, f): FFN hidden rows.
+    hid: &'s mut [f32],
+    /// (rows): one query's scores.
+    scores: &'s mut [f32],
+}
+
+impl<'s> EncoderLayerScratch<'s> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, d: usize, f: usize) -> Result<Self, ArenaError> {
+        let rd = rows.checked_mul(d).ok_or(ArenaError::Overflow)?;
+        Ok(EncoderLayerScratch {
+            qkv: a.f32(rd.checked_mul(3).ok_or(ArenaError::Overflow)?)?,
+            att: a.f32(rd)?,
+            sum: a.f32(rd)?,
+            hid: a.f32(rows.checked_mul(f).ok_or(ArenaError::Overflow)?)?,
+            scores: a.f32(rows)?,
+        })
+    }
+
+    /// Rows this scratch was carved for.
+    pub fn rows(&self) -> usize {
+        self.scores.len()
+    }
+}
+
+/// One layer over `x` (n, d) in place, n = `x.len() / d`, with `n_head`
+/// heads and an optional additive score bias `bias` (n, n): bias[i * n + j]
+/// is added to query i's score of key j (every head).
+///
+/// Only the first `keep` rows are computed through to the output (keys and
+/// values from all n rows): `x[..keep * d]` holds the layer's output, the
+/// rest of `x` is left as it was. `keep = n` is the whole layer; a smaller
+/// `keep` serves a last layer of which only the first rows are read (the
+/// cross-modal net's conditioning rows). The caller sizes the scratch
+/// (`n <= rows`) and checks `bias.len() == n * n`.
+pub fn encoder_layer(w: &EncoderLayerW<'_>, x: &mut [f32], d: usize, n_head: usize, bias: Option<&[f32]>, keep: usize, s: &mut EncoderLayerScratch<'_>) {
+    if d == 0 || n_head == 0 {
+        return;
+    }
+    let n = x.len() / d;
+    let keep = keep.min(n);
+    let f = w.linear1.w.rows();
+    let (nd, kd) = (n * d, keep * d);
+    // (n, 3d) = x in_proj^T + in_proj_bias.
+    let qkv = &mut s.qkv[..3 * nd];
+    linear(x, &w.in_proj.w, w.in_proj.b, qkv);
+    // (keep, d) attention output of the kept query rows.
+    let att = &mut s.att[..kd];
+    self_attention(qkv, n, d, n_head, bias, keep, &mut s.scores[..n], att);
+    // x = norm1(x + out_proj(att)) over the kept rows.
+    let sum = &mut s.sum[..kd];
+    linear(att, &w.out_proj.w, w.out_proj.b, sum);
+    add(sum, &x[..kd]);
+    layernorm(sum, w.norm1.w, w.norm1.b, &mut x[..kd]);
+    // x = norm2(x + linear2(relu(linear1(x)))).
+    let hid = &mut s.hid[..keep * f];
+    linear(&x[..kd], &w.linear1.w, w.linear1.b, hid);
+    relu_inplace(hid);
+    let ff = &mut s.att[..kd];
+    linear(hid, &w.linear2.w, w.linear2.b, ff);
+    add(ff, &x[..kd]);
+    layernorm(ff, w.norm2.w, w.norm2.b, &mut x[..kd]);
+}
+
+fn add(y: &mut [f32], x: &[f32]) {
+    for (a, b) in y.iter_mut().zip(x) {
+        *a += b;
+    }
+}
+
+/// Multi-head attention of query rows `0..keep` over all `n` rows, no mask:
+/// `qkv` (n, 3d) holds each row's q | k | v; `out` (keep, d). Scores are
+/// `q_i . k_j / sqrt(d / n_head) (+ bias[i, j])`, softmax over j, then the
+/// probability-weighted value rows (`simd::dot_rows`, `exp_shifted_sum`,
+/// `axpy_rows_f32`: the attention kernel's operations). `scores`: (n).
+#[allow(clippy::too_many_arguments)]
+fn self_attention(qkv: &[f32], n: usize, d: usize, n_head: usize, bias: Option<&[f32]>, keep: usize, scores: &mut [f32], out: &mut [f32]) {
+    let hd = d / n_head;
+    let scale = 1.0 / libm::sqrtf(hd as f32);
+    let stride = 3 * d;
+    for i in 0..keep {
+        for h in 0..n_head {
+            let q = &qkv[i * stride + h * hd..][..hd];
+            // Key j, head h: qkv[j * 3d + d + h * hd ..][..hd].
+            simd::dot_rows(q, &qkv[d + h * hd..], stride, scores);
+            let max = match bias {
+                None => simd::scale_max(scores, scale, f32::NEG_INFINITY),
+                Some(b) => {
+                    let mut max = f32::NEG_INFINITY;
+                    for (sc, &bj) in scores.iter_mut().zip(&b[i * n..(i + 1) * n]) {
+                        *sc = *sc * scale + bj;
+                        max = max.max(*sc);
+                    }
+                    max
+                }
+            };
+            let sum = simd::exp_shifted_sum(scores, max);
+            let inv = if sum > 0.0 { 1.0 / sum } else { 0.0 };
+            for sc in scores.iter_mut() {
+                *sc *= inv;
+            }
+            let o = &mut out[i * d + h * hd..][..hd];
+            o.fill(0.0);
+            // Value j, head h: qkv[j * 3d + 2d + h * hd ..][..hd].
+            simd::axpy_rows_f32(scores, &qkv[2 * d + h * hd..], stride, o);
+        }
+    }
+}

@@ -1,0 +1,44 @@
+//! The input encoders: one `BasicTransformerModel` per input modality
+//! (`net_input_<mod>`, 2 layers), each over its own window; their outputs
+//! are stacked in `input_modalities` order (motion rows first in the
+//! published configs) into the latent sequence the cross-modal
+//! transformer reads.
+
+use crate::transflower::model::Model;
+use crate::transflower::probe::{Net, Probe, Stage};
+use crate::transflower::transformer::{forward, stages, TransformerScratch};
+
+/// One input's window at a step.
+#[derive(Clone, Copy, Debug)]
+pub enum Window<'x> {
+    /// A continuous input's rows (L_i, d_i).
+    Rows(&'x [f32]),
+    /// A discrete input's label (`single`: one row for the whole sequence).
+    Label(u32),
+}
+
+/// `latent` (sum L_i, dhid) = every input transformer over its window,
+/// stacked. `emb`: (max discrete dim) scratch for an embedding row.
+/// Callers check the windows (lengths, labels in range).
+pub fn encode_inputs(model: &Model<'_>, windows: &[Window<'_>], s: &mut TransformerScratch<'_>, emb: &mut [f32], latent: &mut [f32], probe: &mut dyn FnMut(Probe, &[f32])) {
+    let d = model.cfg.dhid as usize;
+    let mut row = 0usize;
+    for (i, (net, win)) in model.inputs.iter().zip(windows).enumerate() {
+        let l = model.cfg.inputs[i].length as usize;
+        let input: &[f32] = match (*win, net.embedding.as_ref()) {
+            (Window::Label(label), Some(table)) => {
+                // `encoder` (Embedding): the label's row (1, dim).
+                let e = &mut emb[..net.din];
+                table.row_into(label as usize, e);
+                probe(Probe::Net { net: Net::Input(i as u8), stage: Stage::Encoder }, e);
+                e
+            }
+            (Window::Rows(rows), _) => rows,
+            // A label for a continuous input: refused by the caller.
+            (Window::Label(_), None) => &[],
+        };
+        let out = &mut latent[row * d..(row + l) * d];
+        forward(net, input, l, s, out, &mut stages(probe, Net::Input(i as u8)));
+        row += l;
+    }
+}

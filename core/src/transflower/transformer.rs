@@ -1,0 +1,62 @@
+//! The authors' `BasicTransformerModel` (models/transformer.py) forward,
+//! used by the input encoders, the cross-modal transformer and every
+//! coupling: `encoder1` -> [+ `pe`] -> post-LN encoder layers (every row
+//! sees every row; [+ `pos_emb` in the scores]) -> `decoder`. A discrete
+//! input's embedding lookup happens before (the caller passes the row).
+
+use crate::arena::{ArenaError, Carve};
+use crate::kernels::linear;
+use crate::nn::encoder_layer::{encoder_layer, EncoderLayerScratch};
+use crate::transflower::model::TransformerW;
+use crate::transflower::probe::{Probe, Stage};
+
+/// Working memory of [`forward`] over at most `rows` rows of width at most `d`.
+pub struct TransformerScratch<'s> {
+    /// (rows, d): the hidden rows.
+    x: &'s mut [f32],
+    layer: EncoderLayerScratch<'s>,
+}
+
+impl<'s> TransformerScratch<'s> {
+    pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, d: usize) -> Result<Self, ArenaError> {
+        Ok(TransformerScratch { x: a.f32(rows.checked_mul(d).ok_or(ArenaError::Overflow)?)?, layer: EncoderLayerScratch::carve(a, rows, d, d)? })
+    }
+}
+
+/// `out` (keep, dout) = the transformer over `input` (L, din), of whose
+/// output only the first `keep` rows are computed (the last layer's other
+/// rows are never read: the cross-modal net's conditioning rows, a
+/// coupling's frame rows). `probe(stage, rows)` sees every stage output
+/// (`Stage::Layer` of the last layer and `Stage::Decoder`: `keep` rows).
+/// Callers size the scratch and check `input.len() == L * din` with
+/// L matching `pe` / `pos_emb` rows (the config fixes both).
+pub fn forward<const N: usize>(w: &TransformerW<'_, N>, input: &[f32], keep: usize, s: &mut TransformerScratch<'_>, out: &mut [f32], probe: &mut dyn FnMut(Stage, &[f32])) {
+    let d = w.d;
+    let rows = input.len() / w.din.max(1);
+    // (L, d) = encoder1(input).
+    let x = &mut s.x[..rows * d];
+    linear(input, &w.encoder1.w, w.encoder1.b, x);
+    probe(Stage::Encoder1, x);
+    if let Some(pe) = w.pe {
+        // `pe` (L, 1, d): its rows are the config's L.
+        for (v, p) in x.iter_mut().zip(pe) {
+            *v += p;
+        }
+        probe(Stage::PosEncoder, x);
+    }
+    let n = w.layers.len();
+    for (i, layer) in w.layers.iter().enumerate() {
+        let k = if i + 1 == n { keep } else { rows };
+        encoder_layer(layer, x, d, w.n_head, w.bias, k, &mut s.layer);
+        probe(Stage::Layer(i as u32), &x[..k * d]);
+    }
+    let keep = if n == 0 { rows } else { keep.min(rows) };
+    let y = &mut out[..keep * w.dout];
+    linear(&x[..keep * d], &w.decoder.w, w.decoder.b, y);
+    probe(Stage::Decoder, y);
+}
+
+/// Adapts a [`Probe`] callback to one net's [`Stage`]s.
+pub fn stages<'p>(probe: &'p mut dyn FnMut(Probe, &[f32]), net: crate::transflower::probe::Net) -> impl FnMut(Stage, &[f32]) + 'p {
+    move |stage, v| probe(Probe::Net { net, stage }, v)
+}
