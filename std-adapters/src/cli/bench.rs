@@ -747,8 +747,10 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
                 real_time_ms / st.median_ms
             );
         }
-        for preset in [SoloPreset::Reference, SoloPreset::Interactive, SoloPreset::Minimum] {
-            let sc = SoloConfig { kv: duolando_core::nn::kv_store::KvType::F16, ..SoloConfig::preset(&cfg, preset) };
+        let schedules = [(SoloPreset::Reference, false), (SoloPreset::Reference, true), (SoloPreset::Interactive, false), (SoloPreset::Interactive, true), (SoloPreset::Minimum, false)];
+        for (preset, spread) in schedules {
+            let schedule = if spread { duolando_core::nn::window::CacheSchedule::Spread } else { duolando_core::nn::window::CacheSchedule::Reprefill };
+            let sc = SoloConfig { kv: duolando_core::nn::kv_store::KvType::F16, schedule, ..SoloConfig::preset(&cfg, preset) };
             let bytes = duolando_core::bailando::session::session_bytes_for(&cfg, &sc).map_err(|e| anyhow!("{e:?}"))?;
             // At least four window jumps (every block_size - shift steps), so p99 sees the re-prefills.
             let period = (c + 1 - sc.shift as usize).max(1);
@@ -756,8 +758,9 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
             let times = on_threads(1, || solo_s_steps(&model, &sc, n, args.warmup, &music[..nm]))?;
             let st = stats(times);
             println!(
-                "Bailando S step {d:>4} t1 {:<11} (dec_future {:>2}, shift {}, f16 K/V): median {:8.2} ms  p99 {:8.2} ms  p99/median {:.1}  mean {:8.2} ms  {:.0}x real time  arena {:.2} MB",
+                "Bailando S step {d:>4} t1 {:<11} {:<9} (dec_future {:>2}, shift {}, f16 K/V): median {:8.2} ms  p99 {:8.2} ms  p99/median {:.1}  mean {:8.2} ms  {:.0}x real time  arena {:.2} MB",
                 preset.name(),
+                if spread { "spread" } else { "reprefill" },
                 sc.dec_future,
                 sc.shift,
                 st.median_ms,
