@@ -67,6 +67,11 @@ pub struct Args {
     /// only; comma separated; `--batch` with no value skips them).
     #[arg(long, value_delimiter = ',', num_args = 0.., default_values_t = vec![1usize, 4, 16])]
     pub batch: Vec<usize>,
+    /// Bailando (`--family bailando`): onnxruntime's time for the same R
+    /// step, measured right before by tools/bailando_ort_r_step.py (its JSON);
+    /// the bench prints each weight type's ratio to it.
+    #[arg(long)]
+    pub ort_json: Option<std::path::PathBuf>,
     /// The full-size R step as ONNX (tools/reference/export_full_r_step.py),
     /// timed in tract in the same run (needs the `tract` cargo feature);
     /// default: /tmp/duolando_full/full_r_step.onnx when it exists.
@@ -707,6 +712,17 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
     let music: Vec<f32> = (0..c * nm).map(|_| rng.next()).collect();
     let mut f32_median = std::collections::BTreeMap::new();
     let real_time_ms = 1000.0 * cfg.hop() as f64 / duolando_core::bailando::config::FPS as f64;
+    let ort: Option<(f64, String)> = match &args.ort_json {
+        None => None,
+        Some(p) => {
+            let v: serde_json::Value = serde_json::from_slice(&std::fs::read(p).with_context(|| format!("reading {}", p.display()))?)
+                .with_context(|| format!("{}: not the JSON of tools/bailando_ort_r_step.py", p.display()))?;
+            let ms = v["median_ms"].as_f64().with_context(|| format!("{}: no median_ms", p.display()))?;
+            let label = format!("onnxruntime {} f32, {} thread(s), {}", v["onnxruntime"].as_str().unwrap_or("?"), v["threads"], v["cpu"].as_str().unwrap_or("?"));
+            println!("Bailando R step in {label}: median {ms:.1} ms, p99 {:.1} ms ({})", v["p99_ms"].as_f64().unwrap_or(f64::NAN), p.display());
+            Some((ms, label))
+        }
+    };
     for d in &args.dtypes {
         let store_as = match d.as_str() {
             "f32" => StoreAs::F32,
@@ -739,7 +755,10 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
             if d == "f32" {
                 f32_median.insert(t, st.median_ms);
             }
-            let vs_f32 = f32_median.get(&t).map(|f| format!("; f32/{d} {:.2}x", f / st.median_ms)).unwrap_or_default();
+            let mut vs_f32 = f32_median.get(&t).map(|f| format!("; f32/{d} {:.2}x", f / st.median_ms)).unwrap_or_default();
+            if let (Some((ms, _)), 1) = (&ort, t) {
+                vs_f32.push_str(&format!("; onnxruntime/this {:.2}x", ms / st.median_ms));
+            }
             println!(
                 "Bailando R step {d:>4} t{t} ({c}-token window): median {:8.1} ms  p99 {:8.1} ms  {:.2}x real time ({real_time_ms:.1} ms per token){vs_f32}",
                 st.median_ms,
@@ -772,7 +791,7 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
             );
         }
     }
-    println!("Bailando: published config (actor_critic.yaml), seeded random weights; S step = one session step (GPT row or re-prefill at a window jump, heads, decoders), frames pulled; no ONNX baseline yet.");
+    println!("Bailando: published config (actor_critic.yaml), seeded random weights; S step = one session step (GPT row or re-prefill at a window jump, heads, decoders), frames pulled; onnxruntime: --ort-json from tools/bailando_ort_r_step.py.");
     Ok(())
 }
 
