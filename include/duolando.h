@@ -66,8 +66,7 @@ extern "C" {
  *   (index1-3, middle1-3, pinky1-3, ring1-3, thumb1-3), 40-54 right hand
  *   (same order).
  * Bailando (DUO_BAILANDO_JOINTS = 24, SMPL, 60 fps): joints 0-21 as above,
- *   22 left_hand, 23 right_hand. Its models open for inspection only so
- *   far: the C sessions run Duolando models (docs/BAILANDO.md). */
+ *   22 left_hand, 23 right_hand (solo sessions: "Solo models" below). */
 #define DUO_BAILANDO_JOINTS 24
 
 /* ------------------------------------------------------------------ */

@@ -104,7 +104,8 @@ pub fn report(model: &std::path::Path, frames: usize) -> Result<Value> {
 }
 
 /// Bailando: config, frame and token rates, R mode's sizes for `rows`
-/// music rows (7.5 per second) on the demo path. S mode is not built yet.
+/// music rows (7.5 per second) on the demo path; S mode's latency and
+/// session arena per preset.
 fn bailando_report(cfg: &BailandoConfig, rows: usize) -> Value {
     use duolando_core::bailando::exact;
     let run = |r: usize| -> Value {
@@ -131,8 +132,32 @@ fn bailando_report(cfg: &BailandoConfig, rows: usize) -> Value {
             "requested": run(rows),
             "latency": "R mode is offline: it needs the whole music before the first output frame",
         },
-        "streaming": Value::Null,
+        "streaming": solo_streaming(cfg),
     })
+}
+
+/// Each solo preset's settings, latency and session arena (f32 and f16 K/V,
+/// one cache and spread).
+fn solo_streaming(cfg: &BailandoConfig) -> Value {
+    use duolando_core::bailando::session::{dec_future_max, session_bytes_for, CacheSchedule, Preset, SessionConfig};
+    use duolando_core::nn::kv_store::KvType;
+    let presets: Vec<Value> = Preset::ALL
+        .iter()
+        .map(|&p| {
+            let sc = SessionConfig::preset(cfg, p);
+            let bytes = |kv, schedule| session_bytes_for(cfg, &SessionConfig { kv, schedule, ..sc }).ok();
+            json!({
+                "preset": p.name(),
+                "dec_future": sc.dec_future,
+                "shift": sc.shift,
+                "latency_frames": sc.latency_frames(cfg.hop() as u32),
+                "arena_bytes_f32kv": bytes(KvType::F32, CacheSchedule::Reprefill),
+                "arena_bytes_f16kv": bytes(KvType::F16, CacheSchedule::Reprefill),
+                "arena_bytes_f16kv_spread": bytes(KvType::F16, CacheSchedule::Spread),
+            })
+        })
+        .collect();
+    json!({ "dec_future_max": dec_future_max(cfg), "presets": presets })
 }
 
 /// Music rows of one minute at Bailando's 7.5 rows per second.
@@ -165,7 +190,21 @@ fn bailando_text(r: &Value, cfg: &BailandoConfig) -> String {
             x["scratch_bytes"].as_u64().map(mib).unwrap_or_else(|| "overflow".into())
         ));
     }
-    line("streaming (S): not built yet for Bailando".into());
+    let st = &r["streaming"];
+    line(format!("streaming (S): latency = 8 x dec_future frames; dec_future_max {}", st["dec_future_max"]));
+    for p in st["presets"].as_array().into_iter().flatten() {
+        let b = |k: &str| p[k].as_u64().map(mib).unwrap_or_else(|| "-".into());
+        line(format!(
+            "  {:<11} dec_future {:>2} shift {:>2}: latency {:>3} frames; arena {} (f32 K/V), {} (f16), {} (f16, spread)",
+            p["preset"].as_str().unwrap_or("?"),
+            p["dec_future"],
+            p["shift"],
+            p["latency_frames"],
+            b("arena_bytes_f32kv"),
+            b("arena_bytes_f16kv"),
+            b("arena_bytes_f16kv_spread")
+        ));
+    }
     s
 }
 
