@@ -1,7 +1,11 @@
 // The Unreal plugin's engine-independent SessionRunner
 // (integrations/unreal/Source/Duolando/Public/DuolandoRunner.h): a game
 // thread submits leader frames (some NaN) and drains follower frames while
-// the worker thread runs the session; two runners share one model. Run
+// the worker thread runs the session; two runners share one model. The
+// SoloRunner on the Bailando fixture: music rows submitted a few at a time
+// (one NaN row replaced) with a small output ring the game thread drains,
+// then Finish: the golden positions within 1e-5 m; the same with the rows
+// given as a track; each runner refuses the other family's model. Run
 // under valgrind by .ci/ffi.sh. usage: test_runner <repo root>
 #include "DuolandoRunner.h"
 
@@ -21,6 +25,103 @@ static std::vector<float> ReadNpyF32(const std::string& path) {
   std::vector<float> out((raw.size() - header) / 4);
   std::memcpy(out.data(), raw.data() + header, out.size() * 4);
   return out;
+}
+
+// Takes every frame of a solo runner (the game thread) until it has ended;
+// returns the max abs error against `want` (72 floats per frame), counting
+// frames and checking their indices.
+static float TakeSolo(duolando::SoloRunner& r, const std::vector<float>& want, size_t* got, int* failures) {
+  float worst = 0;
+  duolando::SoloFrame frames[5];
+  for (int spins = 0; spins < 200000; ++spins) {
+    bool ended = r.Ended();  // before the Take: frames computed before it are taken below
+    size_t n = r.Take(frames, 5);
+    for (size_t k = 0; k < n; ++k) {
+      if (frames[k].index != *got) ++*failures;
+      for (size_t j = 0; j < DUO_BAILANDO_JOINTS * 3 && (*got + 1) * 72 <= want.size(); ++j) {
+        float d = std::fabs(frames[k].positions[j] - want[*got * 72 + j]);
+        if (!(d <= worst)) worst = d;
+      }
+      ++*got;
+    }
+    if (ended && n == 0) return worst;
+    if (n == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ++*failures;  // never ended
+  return worst;
+}
+
+static int TestSolo(const std::string& root) {
+  int failures = 0;
+  std::vector<float> rows = ReadNpyF32(root + "/tests/fixtures/bailando_rollout_btiny_demo_odd/music.npy");
+  std::vector<float> want = ReadNpyF32(root + "/tests/fixtures/bailando_rollout_btiny_demo_odd/pos3d.npy");
+  if (rows.size() != 21 * 438 || want.size() != 192 * 72) return 1;
+  const size_t n_rows = rows.size() / 438;
+  duo_model* solo = nullptr;
+  duo_model* duet = nullptr;
+  if (duo_model_open_file((root + "/tests/fixtures/bailando_btiny/model.duo").c_str(), &solo) != DUO_OK) return 1;
+  if (duo_model_open_file((root + "/tests/fixtures/tiny/model.duo").c_str(), &duet) != DUO_OK) return 1;
+  duo_session_config exact, duet_config;
+  if (duo_session_config_preset(solo, "exact", &exact) != DUO_OK) return 1;
+  duo_session_config_minimum(duet, &duet_config);
+  const uint32_t seed[2] = {15, 14};  // the golden's seed tokens (meta.json)
+  const uint32_t seed5[5] = {1, 2, 3, 4, 5};
+  {
+    // Each runner refuses the other family's model.
+    duolando::SoloRunner wrong_solo(duet, duet_config, seed5);
+    duolando::SessionRunner wrong_duet(solo, exact, seed5, nullptr, 0);
+    if (wrong_solo.Status() != DUO_INVALID_ARGUMENT || wrong_duet.Status() != DUO_INVALID_ARGUMENT) ++failures;
+  }
+  for (int with_nan = 0; with_nan < 2; ++with_nan) {
+    // Rows a few at a time (the queue holds 4), frames drained 5 at a time
+    // from a ring of 8 (the worker waits for room). Second pass: row 10 is
+    // NaN and is replaced by row 9 (the rows keep their clock: 192 frames,
+    // finite; the dance differs from the golden from there on).
+    duolando::SoloRunner r(solo, exact, seed, nullptr, 0, 4, 8);
+    if (r.Status() != DUO_OK) return 1;
+    if (r.MusicFeatures() != 438) ++failures;
+    std::vector<float> stream = rows;
+    if (with_nan) stream[10 * 438 + 3] = NAN;
+    size_t submitted = 0, got = 0;
+    float worst = 0;
+    bool finite = true;
+    duolando::SoloFrame frames[5];
+    while (submitted < n_rows) {
+      submitted += r.SubmitMusic(&stream[submitted * 438], std::min<size_t>(3, n_rows - submitted));
+      size_t n = r.Take(frames, 5);
+      for (size_t k = 0; k < n; ++k) {
+        if (frames[k].index != got) ++failures;
+        for (size_t j = 0; j < DUO_BAILANDO_JOINTS * 3 && (got + 1) * 72 <= want.size(); ++j) {
+          float d = std::fabs(frames[k].positions[j] - want[got * 72 + j]);
+          if (!(d <= worst)) worst = d;
+          finite = finite && std::isfinite(frames[k].positions[j]);
+        }
+        ++got;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    r.Finish();
+    if (r.SubmitMusic(rows.data(), 1) != 0) ++failures;  // after Finish: ignored
+    worst = std::fmax(worst, TakeSolo(r, want, &got, &failures));
+    std::printf("test_runner: solo, rows streamed%s: %zu frames, %llu row(s) replaced, max abs err %g m\n",
+                with_nan ? " (row 10 NaN)" : "", got, static_cast<unsigned long long>(r.RejectedRows()),
+                static_cast<double>(worst));
+    if (got != 192 || !finite || r.RejectedRows() != static_cast<uint64_t>(with_nan) || r.WorkerError() != DUO_OK) ++failures;
+    if (!with_nan && !(worst <= 1e-5f)) ++failures;
+    if (with_nan && !(worst > 1e-3f)) ++failures;  // row 9 twice is another dance
+  }
+  {
+    duolando::SoloRunner r(solo, exact, seed, rows.data(), rows.size(), 4, 8);
+    if (r.Status() != DUO_OK) return 1;
+    r.Finish();
+    size_t got = 0;
+    float worst = TakeSolo(r, want, &got, &failures);
+    std::printf("test_runner: solo, a track: %zu frames, max abs err %g m\n", got, static_cast<double>(worst));
+    if (got != 192 || !(worst <= 1e-5f) || r.WorkerError() != DUO_OK || r.RejectedRows() != 0) ++failures;
+  }
+  duo_model_free(solo);
+  duo_model_free(duet);
+  return failures;
 }
 
 int main(int argc, char** argv) {
@@ -67,5 +168,7 @@ int main(int argc, char** argv) {
     std::printf("test_runner: %zu follower frames per runner, %llu NaN frames replaced, %d failures\n", na,
                 static_cast<unsigned long long>(a.RejectedFrames()), failures);
   }
-  return failures ? 1 : 0;
+  int solo_failures = TestSolo(root);
+  std::printf("test_runner: solo runner, %d failures\n", solo_failures);
+  return failures || solo_failures ? 1 : 0;
 }

@@ -2,7 +2,12 @@
 // Mono against libduolando.so: struct layouts, errors as exceptions, a
 // session fed the fixture leader (with NaN glitches replaced by the last
 // good frame) producing finite frames, converted to Unity coordinates; two
-// sessions stepped through a StepBatch equal to each stepped alone.
+// sessions stepped through a StepBatch equal to each stepped alone; a solo
+// (Bailando) model: info, presets, a SoloSession fed the golden music row
+// by row (a NaN row refused on the way) and finished gives the golden
+// positions within 1e-5 m, again after Reset with the rows as a track; the
+// Duolando-only calls on it throw the library's message; positions pulled
+// from a Duolando session equal its follower frames'.
 // Built and run by .ci/ffi.sh when mcs/mono are present.
 // usage: mono test_unity.exe <repo root>
 using System;
@@ -152,10 +157,190 @@ static class TestUnity
                 Check(!SameFrames(alone[0], alone[1]), "the two leaders give two dances");
             }
         }
+        TestSolo(root);
+        TestPositionsOfAFollower(root, leader, track, frames);
         Check(pulled > frames / 2, "frames pulled: " + pulled);
         Check(rejected > 0, "NaN frames rejected");
         Console.WriteLine("test_unity: " + pulled + " follower frames, " + rejected + " NaN frames rejected, " + failures + " failures");
         return failures == 0 ? 0 : 1;
+    }
+
+    static void Throws(Action a, DuoResult want, string contains, string what)
+    {
+        try { a(); Check(false, what + " throws"); }
+        catch (DuolandoException e) { Check(e.Result == want && e.Message.Contains(contains), what + ": " + e.Message); }
+    }
+
+    static void ThrowsArgument(Action a, string what)
+    {
+        try { a(); Check(false, what + " throws"); }
+        catch (ArgumentException) { }
+    }
+
+    // Pulls every ready frame into all[got * Joints * 3 ...]; returns the new count.
+    static int PullAll(SessionBase s, float[] all, int got)
+    {
+        int n = s.Joints * 3;
+        float[] one = new float[n];
+        ulong index;
+        while (s.TryPullPositions(one, out index))
+        {
+            Check(index == (ulong)got, "solo frame index " + index + " == " + got);
+            if ((got + 1) * n <= all.Length) Array.Copy(one, 0, all, got * n, n);
+            got++;
+        }
+        return got;
+    }
+
+    static float MaxAbsDiff(float[] a, float[] b)
+    {
+        float worst = 0;
+        for (int i = 0; i < a.Length && i < b.Length; i++)
+        {
+            float d = Math.Abs(a[i] - b[i]);
+            if (!(d <= worst)) worst = d;   // NaN counts as worst
+        }
+        return worst;
+    }
+
+    // The Bailando fixture through SoloSession: the authors' positions within 1e-5 m.
+    static void TestSolo(string root)
+    {
+        string dir = Path.Combine(root, "tests/fixtures/bailando_rollout_btiny_demo_odd");
+        float[] rows = ReadNpyF32(Path.Combine(dir, "music.npy"));      // 21 x 438
+        float[] want = ReadNpyF32(Path.Combine(dir, "pos3d.npy"));      // 192 x 72
+        uint[] seed = { 15, 14 };                                        // meta.json seed_tokens
+        Check(rows.Length == 21 * 438 && want.Length == 192 * 72, "solo fixture shapes");
+        using (Model duet = Model.OpenFile(Path.Combine(root, "tests/fixtures/tiny/model.duo")))
+        {
+            Check(duet.Family == ModelFamily.Duolando && !duet.IsSolo && duet.SeedTokenCount == 5, "the tiny model is a Duolando model");
+            ThrowsArgument(() => new SoloSession(duet, duet.MinimumConfig(), new uint[] { 1, 2 }), "SoloSession on a Duolando model");
+            Check(duet.Preset("live-music").MusicLookahead == 0, "Duolando preset live-music");
+        }
+        using (Model model = Model.OpenFile(Path.Combine(root, "tests/fixtures/bailando_btiny/model.duo")))
+        {
+            ModelInfo info = model.Info;
+            Check(info.Family == ModelFamily.Bailando && model.IsSolo && model.Family == ModelFamily.Bailando, "family Bailando");
+            Check(info.Joints == 24 && info.MusicFeatures == 438 && info.Fps == 60 && info.FramesPerToken == 8, "solo info: " + info.Joints + " joints, " + info.MusicFeatures + " features, " + info.Fps + " fps");
+            Check(model.SeedTokenCount == 2, "2 seed tokens");
+            SessionConfig exact = model.Preset("exact");
+            Check(exact.Lookahead == 0 && exact.EncFuture == 0 && exact.MusicLookahead == 0 && exact.LatPast == 0 && exact.Staggered == 0, "solo preset: Duolando-only fields 0");
+            Throws(() => model.Preset("live-music"), DuoResult.InvalidArgument, "exact", "a Duolando-only preset on a solo model");
+            Throws(() => model.SeedTokens(new float[8 * 165], new float[8 * 165]), DuoResult.InvalidArgument, "Bailando", "SeedTokens on a solo model");
+            SessionConfig bad = exact;
+            bad.Lookahead = 1;
+            Throws(() => new SoloSession(model, bad, seed), DuoResult.InvalidArgument, "lookahead", "a solo config with lookahead");
+            ThrowsArgument(() => new SoloSession(model, exact, new uint[] { 1, 2, 3, 4, 5 }), "5 seed tokens for a solo model");
+
+            float[] got = new float[want.Length];
+            float[] again = new float[want.Length];
+            int n = 0, backlogs = 0;
+            using (SoloSession s = new SoloSession(model, exact, seed))
+            {
+                Check(s.Joints == SoloSession.SoloJoints && s.MusicFeatures == 438 && s.Fps == 60, "solo session sizes");
+                Check(s.LatencyFrames % 8 == 0, "solo latency " + s.LatencyFrames + " frames (whole tokens)");
+                float[] one = new float[72];
+                ulong index;
+                Check(!s.TryPullPositions(one, out index), "nothing before music");
+                Throws(() => s.Finish(), DuoResult.InvalidArgument, "music", "Finish before any music row");
+                ThrowsArgument(() => s.TryPullPositions(new float[71], out index), "a 71-float positions buffer");
+                Throws(() => s.PushMusic(new float[437]), DuoResult.InvalidArgument, "", "a 437-float music row");
+                for (int r = 0; r < 21; r++)
+                {
+                    if (r == 5)
+                    {
+                        float[] nan = new float[438];
+                        Array.Copy(rows, r * 438, nan, 0, 438);
+                        nan[100] = float.NaN;
+                        Check(s.PushMusic(nan) == DuoResult.NonFiniteInput, "a NaN row is refused");
+                    }
+                    DuoResult res = s.PushMusic(rows, r * 438, 438);
+                    if (res == DuoResult.Backlog) { backlogs++; n = PullAll(s, got, n); res = s.PushMusic(rows, r * 438, 438); }
+                    Check(res == DuoResult.Ok, "push row " + r + ": " + res);
+                    n = PullAll(s, got, n);
+                }
+                s.Finish();
+                s.Finish();   // again: nothing
+                n = PullAll(s, got, n);
+                Check(n == 192, "192 solo frames (got " + n + ")");
+                float err = MaxAbsDiff(got, want);
+                Console.WriteLine("test_unity: solo " + n + " frames pushed row by row, max abs err " + err.ToString("E2") + " m, latency " + s.LatencyFrames + " frames");
+                Check(err <= 1e-5f, "solo positions == golden within 1e-5 (max " + err + ")");
+                Check(!s.TryPullPositions(one, out index), "nothing after the end");
+
+                // Again from frame 0, the rows given as one track.
+                s.Reset(seed);
+                ThrowsArgument(() => s.Reset(new uint[] { 15 }), "a 1-token reset");
+                s.SetMusicTrack(rows);
+                s.Finish();
+                int m = PullAll(s, again, 0);
+                Check(m == 192 && MaxAbsDiff(again, got) == 0, "after Reset, the track gives the same dance (" + m + " frames)");
+
+                // Unity and Unreal axes.
+                float[] u = (float[])got.Clone(), e = (float[])got.Clone();
+                Positions.Convert(u, 72 * 10, 24, Coords.Unity);
+                Positions.Convert(e, 72 * 10, 24, Coords.Unreal);
+                bool axes = true;
+                for (int j = 0; j < 24; j++)
+                {
+                    Vec3 p = Positions.Get(got, 72 * 10, j), pu = Positions.Get(u, 72 * 10, j), pe = Positions.Get(e, 72 * 10, j);
+                    axes &= pu.X == -p.X && pu.Y == p.Y && pu.Z == p.Z;
+                    axes &= Math.Abs(pe.X - 100 * p.Z) < 1e-4 && Math.Abs(pe.Y + 100 * p.X) < 1e-4 && Math.Abs(pe.Z - 100 * p.Y) < 1e-4;
+                }
+                Check(axes && u[0] == got[0] && u[72 * 11] == got[72 * 11], "Positions.Convert: Unity (-x, y, z), Unreal 100 (z, -x, y), only the frame asked");
+            }
+            // A Session (the follower class) on the solo model: the Duolando-only calls throw
+            // the library's message; the solo calls work.
+            using (Session s = new Session(model, exact, seed))
+            {
+                LeaderFrame lf = new LeaderFrame();
+                FollowerFrame ff = new FollowerFrame();
+                Throws(() => s.PushLeader(ref lf), DuoResult.InvalidArgument, "Bailando", "PushLeader on a solo model");
+                Throws(() => s.TryPull(ref ff), DuoResult.InvalidArgument, "Bailando", "TryPull on a solo model");
+                Throws(() => new StepBatch(model, exact, 1), DuoResult.InvalidArgument, "Bailando", "a StepBatch of a solo model");
+                s.SetMusicTrack(rows);
+                s.Finish();
+                float[] third = new float[want.Length];
+                int k = PullAll(s, third, 0);
+                Check(k == 192 && MaxAbsDiff(third, got) == 0, "the solo calls of a Session on a solo model");
+            }
+            Console.WriteLine("test_unity: solo: " + backlogs + " music backlog(s)");
+        }
+    }
+
+    // TryPullPositions on a Duolando session gives its follower frames' positions.
+    static void TestPositionsOfAFollower(string root, float[] leader, float[] track, int frames)
+    {
+        using (Model model = Model.OpenFile(Path.Combine(root, "tests/fixtures/tiny/model.duo")))
+        using (Session a = new Session(model, model.MinimumConfig(), new uint[] { 1, 2, 3, 4, 5 }))
+        using (Session b = new Session(model, model.MinimumConfig(), new uint[] { 1, 2, 3, 4, 5 }))
+        {
+            ThrowsArgument(() => a.Reset(new uint[] { 1, 2 }), "a 2-token reset of a Duolando session");
+            a.SetMusicTrack(track);
+            b.SetMusicTrack(track);
+            FollowerFrame f = new FollowerFrame();
+            float[] p = new float[165];
+            ulong index;
+            int same = 0, total = 0;
+            for (int i = 0; i < frames && i < 40; i++)
+            {
+                LeaderFrame fr = FixtureFrame(leader, i, false);
+                if (a.PushLeader(ref fr) != DuoResult.Ok || b.PushLeader(ref fr) != DuoResult.Ok) break;
+                while (a.TryPull(ref f))
+                {
+                    Check(b.TryPullPositions(p, out index) && index == f.Index, "positions of follower frame " + f.Index);
+                    bool eq = true;
+                    for (int j = 0; j < 55; j++)
+                    {
+                        Vec3 v = f.Position(j);
+                        eq &= v.X == p[3 * j] && v.Y == p[3 * j + 1] && v.Z == p[3 * j + 2];
+                    }
+                    if (eq) same++;
+                    total++;
+                }
+            }
+            Check(total > 0 && same == total, "Duolando TryPullPositions == FollowerFrame positions (" + same + "/" + total + ")");
+        }
     }
 
     static LeaderFrame FixtureFrame(float[] leader, int i, bool mirrored)

@@ -7,8 +7,18 @@
 // leader poses in Unreal coordinates go in, TickComponent publishes
 // follower frames (delegate, positions in cm, unit rotations, rising
 // indices), a missing model fails cleanly, EndPlay joins and frees.
+// UDuolandoSoloDancerComponent on the Bailando fixture: the whole music
+// track in, ticks at 60 fps publish every frame once, in order, never
+// before its time, in Unreal coordinates equal to the golden positions
+// (within 1e-3 cm = 1e-5 m); Restart starts again from frame 0; each
+// component refuses the other family's model.
 // Usage: test_component <repo root>   (.ci/ffi.sh)
 #include "DuolandoFollowerComponent.h"
+#include "DuolandoSoloDancerComponent.h"
+// The solo component's source, compiled unchanged in this translation unit
+// (.ci/ffi.sh names the follower component's and the module's sources on
+// its command line; this one comes in here).
+#include "DuolandoSoloDancerComponent.cpp"
 #include "Misc/Paths.h"
 #include "Modules/ModuleManager.h"
 #include "duolando.h"
@@ -129,6 +139,74 @@ int main(int argc, char** argv) {
     Missing.TickComponent(1.0f / 30, LEVELTICK_All, &Missing.PrimaryComponentTick);
     CHECK(Missing.FramesPublished() == 0);
     Missing.EndPlay(EEndPlayReason::Quit);
+  }
+  {
+    size_t rr = 0, rc = 0, wr = 0, wc = 0;
+    std::vector<float> rows = ReadNpy(root + "/tests/fixtures/bailando_rollout_btiny_demo_odd/music.npy", &rr, &rc);
+    std::vector<float> want = ReadNpy(root + "/tests/fixtures/bailando_rollout_btiny_demo_odd/pos3d.npy", &wr, &wc);
+    CHECK(rc == 438 && rr == 21 && wc == 72 && wr == 192);
+    FPaths::StubProjectContentDir = FString(root + "/tests/fixtures");
+    UDuolandoSoloDancerComponent D;
+    CHECK(D.PrimaryComponentTick.bCanEverTick);
+    D.ModelFile.FilePath = "bailando_btiny/model.duo";  // relative: the project's Content folder
+    for (float v : rows) D.MusicRows.Add(v);
+    D.SeedTokens = {15, 14};  // the golden's (meta.json)
+    D.Preset = "exact";
+    std::vector<int64> Indices;
+    int Tick = 0;
+    bool Early = false;
+    double Worst = 0;
+    D.OnDancerFrame.AddStub([&](int64 Index) {
+      Indices.push_back(Index);
+      Early = Early || Index > Tick + 1;  // after tick t (1/60 s each) frames 0..t+1 are due
+      if (Index < 0 || static_cast<size_t>(Index) >= wr) return;
+      for (int j = 0; j < DUO_BAILANDO_JOINTS; ++j) {
+        const float* p = &want[static_cast<size_t>(Index) * 72 + 3 * j];
+        const FVector& U = D.DancerPositions[j];  // Unreal: 100 (z, -x, y) cm
+        Worst = std::fmax(Worst, std::fabs(U.X - 100.0 * p[2]));
+        Worst = std::fmax(Worst, std::fabs(U.Y + 100.0 * p[0]));
+        Worst = std::fmax(Worst, std::fabs(U.Z - 100.0 * p[1]));
+      }
+    });
+    D.BeginPlay();
+    CHECK(D.IsRunning());
+    for (Tick = 0; Tick < 20000 && !D.HasEnded(); ++Tick) {
+      D.TickComponent(1.0f / 60, LEVELTICK_All, &D.PrimaryComponentTick);
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    std::printf("solo component: %zu frames published over %d ticks (%lld late), max abs err %.2e cm\n", Indices.size(), Tick,
+                (long long)D.LateFrames(), Worst);
+    CHECK(D.HasEnded() && D.FramesPublished() == 192 && Indices.size() == 192);
+    for (size_t i = 0; i < Indices.size(); ++i) CHECK(Indices[i] == static_cast<int64>(i));
+    CHECK(!Early);
+    CHECK(Worst <= 1e-3);
+    // Again from frame 0.
+    Indices.clear();
+    D.Restart();
+    CHECK(D.IsRunning() && !D.HasEnded());
+    for (Tick = 0; Tick < 20000 && Indices.size() < 10; ++Tick) {
+      D.TickComponent(1.0f / 60, LEVELTICK_All, &D.PrimaryComponentTick);
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    CHECK(Indices.size() >= 10 && Indices[0] == 0 && Indices[9] == 9 && !Early);
+    D.EndPlay(EEndPlayReason::Quit);
+    CHECK(!D.IsRunning());
+  }
+  {
+    // Each component refuses the other family's model (an error logged, no runner).
+    UDuolandoSoloDancerComponent Duet;
+    Duet.ModelFile.FilePath = FString(root + "/assets/demo.duo");
+    Duet.MusicRows.Add(0.0f);
+    Duet.BeginPlay();
+    CHECK(!Duet.IsRunning());
+    Duet.TickComponent(1.0f / 60, LEVELTICK_All, &Duet.PrimaryComponentTick);
+    CHECK(Duet.FramesPublished() == 0);
+    Duet.EndPlay(EEndPlayReason::Quit);
+    UDuolandoFollowerComponent Solo;
+    Solo.ModelFile.FilePath = FString(root + "/tests/fixtures/bailando_btiny/model.duo");
+    Solo.BeginPlay();
+    CHECK(!Solo.IsRunning());
+    Solo.EndPlay(EEndPlayReason::Quit);
   }
   Module->ShutdownModule();
   delete Module;

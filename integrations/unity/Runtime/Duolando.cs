@@ -8,6 +8,12 @@
 // - Thread rules (from the header): a Model may be used from any number of
 //   threads; a Session from one thread at a time. Run PushLeader on a
 //   worker thread (it runs the model), not on Unity's main thread.
+// - Two model families (Model.Family): Duolando (a follower: Session,
+//   leader frames in, FollowerFrame out) and Bailando (a solo dancer to
+//   music: SoloSession, music rows in, 24 joint positions out; its
+//   TryPullPositions runs the model: a worker thread too). The
+//   Duolando-only calls on a solo model (PushLeader, TryPull, SeedTokens,
+//   StepBatch) throw DuolandoException with the library's message.
 // - Expected outcomes (NonFiniteInput, Backlog, NotReady) are returned as
 //   DuoResult values; anything else throws DuolandoException with the
 //   library's message.
@@ -129,10 +135,30 @@ namespace Duolando
         }
     }
 
+    /// <summary>duo_model_info.family (DUO_FAMILY_*).</summary>
+    public enum ModelFamily : uint
+    {
+        /// <summary>A follower dancing with a leader (55 SMPL-X joints, 30 fps): Session.</summary>
+        Duolando = 0,
+        /// <summary>A solo dancer to music (24 SMPL joints, 60 fps): SoloSession.</summary>
+        Bailando = 1,
+    }
+
+    /// <summary>duo_model_info (32 bytes).</summary>
     [StructLayout(LayoutKind.Sequential)]
     public struct ModelInfo
     {
-        public uint Joints, MusicFeatures, Fps, FramesPerToken, BlockSize, LookForward, Mapped, Reserved;
+        /// <summary>Joints per pose (55; Bailando 24).</summary>
+        public uint Joints;
+        /// <summary>Floats per music frame (54; Bailando 438, one row per token).</summary>
+        public uint MusicFeatures;
+        /// <summary>Motion frames per second (30; Bailando 60).</summary>
+        public uint Fps;
+        /// <summary>Motion frames per token (4; Bailando 8).</summary>
+        public uint FramesPerToken;
+        public uint BlockSize, LookForward, Mapped;
+        /// <summary>The model family (a ModelFamily value; 0 = Duolando).</summary>
+        public ModelFamily Family;
     }
 
     public enum KvType : uint
@@ -193,7 +219,7 @@ namespace Duolando
         protected override bool ReleaseHandle() { Marshal.FreeHGlobal(handle); return true; }
     }
 
-    internal static class Native
+    internal static unsafe class Native
     {
 #if UNITY_IOS && !UNITY_EDITOR
         const string Lib = "__Internal";
@@ -213,10 +239,15 @@ namespace Duolando
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_model_seed_tokens(ModelHandle model, float[] follower, float[] leader, UIntPtr frames, [Out] uint[] tokens);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_config_minimum(ModelHandle model, out SessionConfig config);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_config_reference(ModelHandle model, out SessionConfig config);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_config_preset(ModelHandle model, byte[] nameUtf8Nul, out SessionConfig config);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_new(ModelHandle model, ref SessionConfig config, uint[] seed, out SessionHandle session);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_latency_frames(SessionHandle session, out uint frames);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_set_music_track(SessionHandle session, NativeBuffer track, UIntPtr floats);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_set_music_track(SessionHandle session, float* track, UIntPtr floats);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_push_music(SessionHandle session, float[] features, UIntPtr n);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_push_music(SessionHandle session, float* features, UIntPtr n);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_finish(SessionHandle session);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_pull_positions(SessionHandle session, float* positions, UIntPtr n, out ulong index);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_push_leader(SessionHandle session, ref LeaderFrame frame);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_pull_follower(SessionHandle session, ref FollowerFrame frame);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_reset(SessionHandle session, uint[] seed);
@@ -226,6 +257,8 @@ namespace Duolando
         [DllImport(Lib, CallingConvention = CC)] public static extern void duo_step_batch_free(IntPtr batch);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_leader_frame_convert(ref LeaderFrame frame, uint coords);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_follower_frame_convert(ref FollowerFrame frame, uint coords);
+        [DllImport(Lib, CallingConvention = CC)] public static extern Vec3 duo_vec3_to_unity(Vec3 v);
+        [DllImport(Lib, CallingConvention = CC)] public static extern Vec3 duo_vec3_to_unreal(Vec3 v);
 
         public static string LastError()
         {
@@ -282,6 +315,27 @@ namespace Duolando
             get { ModelInfo i; Native.Check(Native.duo_model_get_info(Handle, out i)); return i; }
         }
 
+        /// <summary>Duolando (a follower: Session) or Bailando (a solo dancer to music: SoloSession).</summary>
+        public ModelFamily Family { get { return Info.Family; } }
+
+        /// <summary>True for a solo model (Bailando): music rows in, positions out (SoloSession).</summary>
+        public bool IsSolo { get { return Info.Family == ModelFamily.Bailando; } }
+
+        /// <summary>Seed tokens a session of this model takes: 5 (Duolando: up, down, lhand, rhand,
+        /// transl) or 2 (Bailando: up, down).</summary>
+        public int SeedTokenCount { get { return IsSolo ? 2 : 5; } }
+
+        /// <summary>A named budget (duo_session_config_preset). Duolando: "reference", "interactive",
+        /// "live-music", "minimum"; Bailando: "exact" (the offline model's numbers), "reference",
+        /// "interactive", "minimum". Another name throws (InvalidArgument, with the list).</summary>
+        public SessionConfig Preset(string name)
+        {
+            if (name == null) throw new ArgumentNullException("name");
+            SessionConfig c;
+            Native.Check(Native.duo_session_config_preset(Handle, Encoding.UTF8.GetBytes(name + "\0"), out c));
+            return c;
+        }
+
         public SessionConfig MinimumConfig()
         {
             SessionConfig c; Native.Check(Native.duo_session_config_minimum(Handle, out c)); return c;
@@ -292,7 +346,8 @@ namespace Duolando
             SessionConfig c; Native.Check(Native.duo_session_config_reference(Handle, out c)); return c;
         }
 
-        /// <summary>Seed tokens from follower and leader start frames (frames x 165 floats each, SMPL-X).</summary>
+        /// <summary>Seed tokens from follower and leader start frames (frames x 165 floats each, SMPL-X).
+        /// Duolando only: a solo model throws (its sessions take their 2 seed tokens directly).</summary>
         public uint[] SeedTokens(float[] followerPos3d, float[] leaderPos3d)
         {
             if (followerPos3d.Length != leaderPos3d.Length || followerPos3d.Length % 165 != 0)
@@ -306,26 +361,63 @@ namespace Duolando
         public void Dispose() { Handle.Dispose(); }
     }
 
-    /// <summary>One follower dancer. One thread at a time.</summary>
-    public sealed class Session : IDisposable
+    /// <summary>What Session (a follower) and SoloSession (a solo dancer) share: the native
+    /// session, its latency, music, Finish, positions, Reset, Dispose. One thread at a time.</summary>
+    public abstract class SessionBase : IDisposable
     {
         internal readonly SessionHandle handle;
         NativeBuffer track;
 
-        public Session(Model model, SessionConfig config, uint[] seedTokens)
+        /// <summary>The model family of this session.</summary>
+        public readonly ModelFamily Family;
+        /// <summary>Joints per frame (55; solo 24): TryPullPositions writes Joints x 3 floats.</summary>
+        public readonly int Joints;
+        /// <summary>Floats per music frame (54; solo 438 per row).</summary>
+        public readonly int MusicFeatures;
+        /// <summary>Motion frames per second (30; solo 60).</summary>
+        public readonly int Fps;
+        /// <summary>Seed tokens this session takes (5; solo 2).</summary>
+        public readonly int SeedTokenCount;
+
+        internal SessionBase(Model model, SessionConfig config, uint[] seedTokens)
         {
-            if (seedTokens == null || seedTokens.Length != 5) throw new ArgumentException("5 seed tokens");
+            if (model == null) throw new ArgumentNullException("model");
+            ModelInfo info = model.Info;
+            Family = info.Family;
+            Joints = (int)info.Joints;
+            MusicFeatures = (int)info.MusicFeatures;
+            Fps = (int)info.Fps;
+            SeedTokenCount = model.SeedTokenCount;
+            CheckSeed(seedTokens);
             Native.Check(Native.duo_session_new(model.Handle, ref config, seedTokens, out handle));
         }
 
+        // The library reads as many tokens as the family takes: never fewer in the array.
+        void CheckSeed(uint[] seedTokens)
+        {
+            if (seedTokens == null || seedTokens.Length != SeedTokenCount)
+                throw new ArgumentException(SeedTokenCount + " seed tokens for a " + Family + " model", "seedTokens");
+        }
+
+        /// <summary>Frames between the input that makes a frame final and that frame (duo_session_latency_frames).</summary>
         public uint LatencyFrames
         {
             get { uint n; Native.Check(Native.duo_session_latency_frames(handle, out n)); return n; }
         }
 
-        /// <summary>The whole music track (frames x 54 floats), copied to native memory the session reads.</summary>
-        public void SetMusicTrack(float[] features)
+        /// <summary>The whole music track, before any music is pushed: Duolando frames x 54 floats
+        /// (copied to native memory the session reads); solo rows x 438 floats (copied into the
+        /// session: its config's MusicBufferFrames must hold them all).</summary>
+        public unsafe void SetMusicTrack(float[] features)
         {
+            if (features == null) throw new ArgumentNullException("features");
+            if (Family == ModelFamily.Bailando)
+            {
+                fixed (float* p = features)
+                    Native.Check(Native.duo_session_set_music_track(handle, p, new UIntPtr((ulong)features.LongLength)));
+                if (track != null) { track.Dispose(); track = null; }
+                return;
+            }
             NativeBuffer b = new NativeBuffer(4L * features.LongLength);
             Marshal.Copy(features, 0, b.DangerousGetHandle(), features.Length);
             DuoResult r = Native.duo_session_set_music_track(handle, b, new UIntPtr((ulong)features.LongLength));
@@ -334,13 +426,83 @@ namespace Duolando
             track = b;
         }
 
-        /// <summary>Ok, NonFiniteInput or Backlog (pull first); throws on anything else.</summary>
+        /// <summary>One music frame (Duolando: 54 floats), or one or more whole rows (solo: n x 438
+        /// floats, one row per token). Ok, NonFiniteInput (session unchanged) or Backlog (the music
+        /// buffer is full: pull first); throws on anything else.</summary>
         public DuoResult PushMusic(float[] features)
         {
-            DuoResult r = Native.duo_session_push_music(handle, features, new UIntPtr((ulong)features.Length));
+            if (features == null) throw new ArgumentNullException("features");
+            return PushMusic(features, 0, features.Length);
+        }
+
+        /// <summary>As PushMusic(float[]) with `count` floats of `features` from `offset` (no copy:
+        /// push rows straight out of a whole track).</summary>
+        public unsafe DuoResult PushMusic(float[] features, int offset, int count)
+        {
+            if (features == null) throw new ArgumentNullException("features");
+            if (offset < 0 || count < 0 || offset > features.Length - count) throw new ArgumentOutOfRangeException("count");
+            DuoResult r;
+            fixed (float* p = features)
+                r = Native.duo_session_push_music(handle, count == 0 ? null : p + offset, new UIntPtr((ulong)count));
             if (r != DuoResult.Ok && r != DuoResult.NonFiniteInput && r != DuoResult.Backlog) Native.Check(r);
             return r;
         }
+
+        /// <summary>The input has ended (duo_session_finish): a follower decodes what its look-ahead
+        /// allows; a solo dancer pads the music as the authors' demo does and dances to its end.
+        /// Pull the remaining frames as usual. Until Reset, PushLeader answers Ended. Again: nothing.
+        /// A solo session throws before any music row.</summary>
+        public void Finish()
+        {
+            Native.Check(Native.duo_session_finish(handle));
+        }
+
+        /// <summary>True and `positions[0 .. Joints x 3)` written (world joint positions, metres,
+        /// SMPL-X axes; Positions.Convert for Unity or Unreal) with the frame's index when a frame is
+        /// ready; false when none is. Any family. On a solo session this runs the model steps the
+        /// frame needs (the costly call: a worker thread).</summary>
+        public bool TryPullPositions(float[] positions, out ulong index)
+        {
+            return TryPullPositions(positions, 0, out index);
+        }
+
+        /// <summary>As TryPullPositions(float[], out ulong), written from `offset` (e.g. frame i of a
+        /// whole clip at i x Joints x 3).</summary>
+        public unsafe bool TryPullPositions(float[] positions, int offset, out ulong index)
+        {
+            if (positions == null) throw new ArgumentNullException("positions");
+            int n = Joints * 3;
+            if (offset < 0 || offset > positions.Length - n)
+                throw new ArgumentException("positions needs " + n + " floats (" + Joints + " joints x 3) from offset " + offset, "positions");
+            DuoResult r;
+            fixed (float* p = positions)
+                r = Native.duo_session_pull_positions(handle, p + offset, new UIntPtr((ulong)n), out index);
+            if (r == DuoResult.NotReady) return false;
+            Native.Check(r);
+            return true;
+        }
+
+        /// <summary>Back to frame 0 with new seed tokens (5, or 2 for a solo model; the music track is dropped).</summary>
+        public void Reset(uint[] seedTokens)
+        {
+            CheckSeed(seedTokens);
+            Native.Check(Native.duo_session_reset(handle, seedTokens));
+            if (track != null) { track.Dispose(); track = null; }
+        }
+
+        public void Dispose()
+        {
+            handle.Dispose();   // first: the session borrows the track
+            if (track != null) track.Dispose();
+            track = null;
+        }
+    }
+
+    /// <summary>One follower dancer (a Duolando model). One thread at a time. On a solo model it
+    /// takes 2 seed tokens and PushLeader / TryPull throw (use SoloSession).</summary>
+    public sealed class Session : SessionBase
+    {
+        public Session(Model model, SessionConfig config, uint[] seedTokens) : base(model, config, seedTokens) { }
 
         /// <summary>Ok, NonFiniteInput (rejected, session unchanged: push your last good frame) or Backlog (pull first).</summary>
         public DuoResult PushLeader(ref LeaderFrame frame)
@@ -358,19 +520,56 @@ namespace Duolando
             Native.Check(r);
             return true;
         }
+    }
 
-        /// <summary>Back to frame 0 with new seed tokens (the music track is dropped).</summary>
-        public void Reset(uint[] seedTokens)
+    /// <summary>One solo dancer to music (a Bailando model: Model.IsSolo). Seed: 2 tokens (up,
+    /// down). Push music rows (438 floats each, one per token: 7.5 rows per second) with
+    /// PushMusic, or give them all with SetMusicTrack; pull frames (24 joints x 3 floats, 60 fps)
+    /// with TryPullPositions, which runs the model (a worker thread, not Unity's main thread);
+    /// Finish at the end of the music, then pull the last frames. One thread at a time.</summary>
+    public sealed class SoloSession : SessionBase
+    {
+        /// <summary>Joints of a solo frame (SMPL: 0-21 as SMPL-X's, 22 left_hand, 23 right_hand).</summary>
+        public const int SoloJoints = 24;
+
+        public SoloSession(Model model, SessionConfig config, uint[] seedTokens) : base(RequireSolo(model), config, seedTokens) { }
+
+        static Model RequireSolo(Model model)
         {
-            Native.Check(Native.duo_session_reset(handle, seedTokens));
-            if (track != null) { track.Dispose(); track = null; }
+            if (model == null) throw new ArgumentNullException("model");
+            if (!model.IsSolo)
+                throw new ArgumentException("SoloSession needs a solo model (family Bailando); this is a " + model.Family + " model: use Session", "model");
+            return model;
+        }
+    }
+
+    /// <summary>Joint positions as TryPullPositions writes them (x, y, z per joint, SMPL-X axes).</summary>
+    public static class Positions
+    {
+        /// <summary>Converts `joints` positions from `offset` in place from SMPL-X to `to` (Unity:
+        /// (-x, y, z); Unreal: 100 (z, -x, y), centimetres), with the library's conversions.</summary>
+        public static void Convert(float[] xyz, int offset, int joints, Coords to)
+        {
+            if (xyz == null) throw new ArgumentNullException("xyz");
+            if (offset < 0 || joints < 0 || offset > xyz.Length - 3 * joints) throw new ArgumentOutOfRangeException("joints");
+            if (to != Coords.SmplX && to != Coords.Unity && to != Coords.Unreal) throw new ArgumentOutOfRangeException("to");
+            for (int j = 0; j < joints; j++)
+            {
+                int o = offset + 3 * j;
+                Vec3 v = new Vec3(xyz[o], xyz[o + 1], xyz[o + 2]);
+                if (to == Coords.Unity) v = Native.duo_vec3_to_unity(v);
+                else if (to == Coords.Unreal) v = Native.duo_vec3_to_unreal(v);
+                xyz[o] = v.X;
+                xyz[o + 1] = v.Y;
+                xyz[o + 2] = v.Z;
+            }
         }
 
-        public void Dispose()
+        /// <summary>Joint j of a positions buffer.</summary>
+        public static Vec3 Get(float[] xyz, int offset, int joint)
         {
-            handle.Dispose();   // first: the session borrows the track
-            if (track != null) track.Dispose();
-            track = null;
+            int o = offset + 3 * joint;
+            return new Vec3(xyz[o], xyz[o + 1], xyz[o + 2]);
         }
     }
 

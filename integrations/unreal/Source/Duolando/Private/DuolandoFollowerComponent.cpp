@@ -1,38 +1,8 @@
 #include "DuolandoFollowerComponent.h"
 
 #include "DuolandoLog.h"
+#include "DuolandoModelFile.h"
 #include "DuolandoRunner.h"
-#include "Misc/FileHelper.h"
-#include "Misc/Paths.h"
-
-static FString LastError()
-{
-	char Buf[512];
-	duo_last_error_message(Buf, sizeof Buf);
-	return UTF8_TO_TCHAR(Buf);
-}
-
-// Memory-mapped when the model is a plain file, else read through Unreal's
-// file system (pak, APK) and copied into native memory.
-static duo_model* OpenModel(const FString& File)
-{
-	FString Path = File;
-	if (FPaths::IsRelative(Path))
-		Path = FPaths::Combine(FPaths::ProjectContentDir(), Path);
-	duo_model* Opened = nullptr;
-	if (duo_model_open_file(TCHAR_TO_UTF8(*Path), &Opened) == DUO_OK)
-		return Opened;
-	FString Reason = LastError();
-	TArray<uint8> Bytes;
-	if (FFileHelper::LoadFileToArray(Bytes, *Path))
-	{
-		if (duo_model_open_copy(Bytes.GetData(), static_cast<size_t>(Bytes.Num()), &Opened) == DUO_OK)
-			return Opened;
-		Reason = LastError();
-	}
-	UE_LOG(LogDuolando, Error, TEXT("Duolando: cannot open the model %s: %s"), *Path, *Reason);
-	return nullptr;
-}
 
 UDuolandoFollowerComponent::UDuolandoFollowerComponent()
 {
@@ -44,9 +14,17 @@ UDuolandoFollowerComponent::~UDuolandoFollowerComponent() = default;
 void UDuolandoFollowerComponent::BeginPlay()
 {
 	Super::BeginPlay();
-	Model = OpenModel(ModelFile.FilePath);
+	Model = DuolandoOpenModel(ModelFile.FilePath);
 	if (!Model)
 		return;
+	duo_model_info Info;
+	if (duo_model_get_info(Model, &Info) != DUO_OK || Info.family != DUO_FAMILY_DUOLANDO)
+	{
+		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s is a solo (Bailando) model: use UDuolandoSoloDancerComponent"), *ModelFile.FilePath);
+		duo_model_free(Model);
+		Model = nullptr;
+		return;
+	}
 	duo_session_config Config;
 	if (bLowLatency)
 		duo_session_config_minimum(Model, &Config);
@@ -60,7 +38,7 @@ void UDuolandoFollowerComponent::BeginPlay()
 	Runner = std::make_unique<duolando::SessionRunner>(Model, Config, Seed, Music, static_cast<size_t>(MusicFeatures.Num()));
 	if (Runner->Status() != DUO_OK)
 	{
-		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s"), *LastError());
+		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s"), *DuolandoLastError());
 		Runner.reset();
 	}
 	FollowerPositions.SetNum(DUO_JOINTS);
