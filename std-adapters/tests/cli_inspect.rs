@@ -141,7 +141,7 @@ fn inspect_prints_a_bailando_model() {
         "8 frames per token at 60 fps, SMPL 24 joints",
         "1 min: 450 music rows -> 455 steps, 3648 output frames",
         "streaming (S): latency = 8 x dec_future frames; dec_future_max 9",
-        "interactive dec_future 2 shift 5: latency  16 frames",
+        "interactive dec_future 2 shift 5: latency 16 frames",
     ] {
         assert!(s.contains(want), "missing {want:?} in:\n{s}");
     }
