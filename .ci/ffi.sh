@@ -74,7 +74,7 @@ echo "--- Unreal plugin: module + component compiled against TEST STUB engine he
 # Not Unreal Engine: the stubs only let g++ check and run the plugin's own C++.
 UEFLAGS="-std=c++17 -Wall -Wextra -Werror -g -DDUOLANDO_API= -Itests/unreal/stub -Iinclude -I$UEMOD/Public -I$UEMOD/Private"
 g++ $UEFLAGS -fsyntax-only -DPLATFORM_WINDOWS=1 $UEMOD/Private/DuolandoModule.cpp   # the Windows DLL-loading branch
-g++ $UEFLAGS tests/unreal/test_component.cpp $UEMOD/Private/DuolandoFollowerComponent.cpp $UEMOD/Private/DuolandoModule.cpp \
+g++ $UEFLAGS tests/unreal/test_component.cpp $UEMOD/Private/DuolandoFollowerComponent.cpp $UEMOD/Private/DuolandoSoloDancerComponent.cpp $UEMOD/Private/DuolandoModule.cpp \
     -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_component"
 "$OUT/test_component" "$ROOT"
 

@@ -15,10 +15,6 @@
 // Usage: test_component <repo root>   (.ci/ffi.sh)
 #include "DuolandoFollowerComponent.h"
 #include "DuolandoSoloDancerComponent.h"
-// The solo component's source, compiled unchanged in this translation unit
-// (.ci/ffi.sh names the follower component's and the module's sources on
-// its command line; this one comes in here).
-#include "DuolandoSoloDancerComponent.cpp"
 #include "Misc/Paths.h"
 #include "Modules/ModuleManager.h"
 #include "duolando.h"
