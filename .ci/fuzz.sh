@@ -16,7 +16,7 @@ rustup toolchain install nightly --profile minimal >/dev/null 2>&1
 if ! cargo +nightly fuzz --version >/dev/null 2>&1; then
   cargo install cargo-fuzz --locked
 fi
-targets=(duo_parse duo_struct convert session)
+targets=(duo_parse duo_struct convert session solo_session)
 cargo +nightly fuzz build -O
 for t in "${targets[@]}"; do
   mkdir -p "corpus/$t"
