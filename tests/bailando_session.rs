@@ -426,3 +426,30 @@ fn published_session_arena() {
         assert!(f16kv > 12 * 2 * 3 * 27 * 768 * 2 && f16kv < f32kv, "{f16kv}");
     }
 }
+
+/// Found by the solo fuzzer: with `dec_future` 0 the first step makes two
+/// tokens' frames (the seed's and token 1's); with `pending_frames` below
+/// `hop` the pending ring lost frame 0 (`Evicted`). Every small
+/// `pending_frames` now gives every frame.
+#[test]
+fn the_first_step_keeps_both_tokens_frames_at_any_pending_size() {
+    let (cfg, file) = model_file("btiny", "actor_critic.yaml");
+    let duo = file.duo().unwrap();
+    let m = Model::from_duo(&duo).unwrap();
+    let hop = cfg.hop();
+    for pending in 0..=hop as u32 {
+        let sc = SessionConfig { pending_frames: pending, ..SessionConfig::with(0, 1) };
+        let mut arena = vec![0u8; m.session_bytes(&sc).unwrap()];
+        let mut s = Session::new(&m, &mut arena, &sc, [1, 2]).unwrap();
+        s.push_music(&vec![0.25f32; cfg.gpt.n_music as usize]).unwrap();
+        s.finish(MusicPadding::Aist).unwrap();
+        let mut f = [0f32; POSE_DIM];
+        let mut n = 0;
+        while let Some(i) = s.pull(&mut f).unwrap() {
+            assert_eq!(i as usize, n);
+            n += 1;
+        }
+        assert_eq!(n, 2 * hop, "pending_frames {pending}");
+        assert!(s.done());
+    }
+}

@@ -26,9 +26,7 @@
 //! between main and twin; after `finish`, pulling drains to `done()` with
 //! exactly `padded_rows(padding, rows) * hop` frames pulled since the last
 //! reset (checked whenever a pull of an ended session answers `None`, and
-//! by a final drain of every run). Configs keep clear of one known core
-//! bug unless `DUO_FUZZ_KNOWN_BUGS` is set (`gate_known_bugs`);
-//! `DUO_FUZZ_TRACE` prints every operation and the counters after it.
+//! by a final drain of every run). `DUO_FUZZ_TRACE` prints every operation and the counters after it.
 #![no_main]
 
 use std::sync::OnceLock;
@@ -541,27 +539,10 @@ impl<'a> Run<'a> {
     }
 }
 
-/// Keeps configs away from a known core bug unless `DUO_FUZZ_KNOWN_BUGS`
-/// is set (docs/ROBUSTNESS.md §2): with `dec_future` 0 the first step
-/// makes two tokens' frames (the seed's and the first sampled token's),
-/// more than the pending ring of `pending_frames + hop` holds when
-/// `pending_frames < hop`, so the first frame is overwritten and `pull`
-/// answers `Evicted`.
-fn gate_known_bugs(cfg: &mut SessionConfig, m: &Model<'_>) {
-    static LIFTED: OnceLock<bool> = OnceLock::new();
-    if *LIFTED.get_or_init(|| std::env::var_os("DUO_FUZZ_KNOWN_BUGS").is_some()) {
-        return;
-    }
-    if cfg.dec_future == 0 {
-        cfg.pending_frames = cfg.pending_frames.max(m.cfg.hop() as u32);
-    }
-}
-
 fn run(u: &mut Unstructured<'_>) -> AResult<()> {
     let m = model();
     let vocab = m.cfg.gpt.vocab;
-    let mut cfg = config(u, m)?;
-    gate_known_bugs(&mut cfg, m);
+    let cfg = config(u, m)?;
 
     // An out-of-range setting: refused by every constructor, by name.
     if u.ratio(1u8, 8)? {
@@ -587,8 +568,7 @@ fn run(u: &mut Unstructured<'_>) -> AResult<()> {
     let off = u.int_in_range(0usize..=63)?;
     let n_batch = u.int_in_range(1usize..=3)?;
     let decoy_cfg = if u.arbitrary()? {
-        let mut c = config(u, m)?;
-        gate_known_bugs(&mut c, m);
+        let c = config(u, m)?;
         Some((c, u.arbitrary::<bool>()?))
     } else {
         None

@@ -33,8 +33,8 @@ pub struct SessionConfig {
     /// the window's keys and values between jumps.
     pub shift: u32,
     pub sampling: Sampling,
-    /// Decoded frames that may wait unpulled; a step that would exceed
-    /// them answers `Backlog` (pull first).
+    /// Decoded frames that may wait unpulled: with more waiting, no step
+    /// runs (`step` answers `Ok(None)`; pull first).
     pub pending_frames: u32,
     /// Music rows that may wait pushed and not yet read by a step before
     /// `push_music` answers `Backlog` (a whole track pushed ahead needs

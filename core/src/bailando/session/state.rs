@@ -38,10 +38,10 @@ pub struct State<'s> {
     pub dec_out: &'s mut [f32],
     /// (hop, 72) the frames of one token being assembled.
     pub frames: &'s mut [f32],
-    /// (pending_frames + hop (d + 1), 72) decoded frames waiting for a
-    /// pull: a step runs with at most `pending_frames` waiting and makes
-    /// one token's frames final, the last step of an ended session up to
-    /// `d + 1` tokens'.
+    /// (pending_frames + hop max(d + 1, 2), 72) decoded frames waiting for
+    /// a pull: a step runs with at most `pending_frames` waiting and makes
+    /// one token's frames final; the first step two (the seed's and token
+    /// 1's, when d = 0), the last step of an ended session up to `d + 1`.
     pub pending: RowRing<'s>,
 }
 
@@ -69,7 +69,7 @@ impl<'s> State<'s> {
             dec: [up, down, root],
             dec_out: a.f32(hop.checked_mul(UP_JOINTS.len() * 3).ok_or(ov())?)?,
             frames: a.f32(hop.checked_mul(POSE_DIM).ok_or(ov())?)?,
-            pending: RowRing::carve(a, hop.checked_mul(d + 1).and_then(|f| f.checked_add(sc.pending_frames as usize)).ok_or(ov())?, POSE_DIM)?,
+            pending: RowRing::carve(a, hop.checked_mul((d + 1).max(2)).and_then(|f| f.checked_add(sc.pending_frames as usize)).ok_or(ov())?, POSE_DIM)?,
         })
     }
 
