@@ -36,7 +36,7 @@ use duolando_core::bailando::config::POSE_DIM;
 use duolando_core::bailando::exact::{padded_rows, MusicPadding};
 use duolando_core::bailando::model::Model;
 use duolando_core::bailando::session::config::MAX_BUFFER;
-use duolando_core::bailando::session::{dec_future_max, window_rows, Session, SessionConfig, StepBatch};
+use duolando_core::bailando::session::{dec_future_max, window_rows, CacheSchedule, Session, SessionConfig, StepBatch};
 use duolando_core::error::{Buffer, Error, Setting};
 use duolando_core::format::DuoFile;
 use duolando_core::input::MAX_MUSIC_FEATURE;
@@ -191,13 +191,21 @@ fn config(u: &mut Unstructured<'_>, m: &Model<'_>) -> AResult<SessionConfig> {
     let dmax = dmax(m);
     let win = window_rows(&m.cfg) as u32;
     let kmax = m.cfg.gpt.vocab[0].min(m.cfg.gpt.vocab[1]);
+    let dec_future = u.int_in_range(0..=dmax)?;
+    let shift = u.int_in_range(1..=win)?;
+    let sampling = if u.arbitrary()? { Sampling::Greedy } else { Sampling::TopK { k: u.int_in_range(1..=kmax)?, rng_seed: u.arbitrary()? } };
+    let pending_frames = u.int_in_range(0..=24)?;
+    // The schedule (the same numbers either way) from a bit already drawn,
+    // so that the committed seeds decode as before: odd pending sizes spread.
+    let schedule = if pending_frames % 2 == 1 { CacheSchedule::Spread } else { CacheSchedule::Reprefill };
     Ok(SessionConfig {
-        dec_future: u.int_in_range(0..=dmax)?,
-        shift: u.int_in_range(1..=win)?,
-        sampling: if u.arbitrary()? { Sampling::Greedy } else { Sampling::TopK { k: u.int_in_range(1..=kmax)?, rng_seed: u.arbitrary()? } },
-        pending_frames: u.int_in_range(0..=24)?,
+        dec_future,
+        shift,
+        sampling,
+        pending_frames,
         music_buffer_rows: u.int_in_range(1..=8)?,
         kv: if u.arbitrary()? { KvType::F32 } else { KvType::F16 },
+        schedule,
     })
 }
 
