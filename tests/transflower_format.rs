@@ -29,11 +29,14 @@ use duolando_tests::fixture;
 /// difference on the case (as tests/transflower_exact.rs).
 const OUTPUT_TOL_FACTOR: f32 = 4.0;
 /// f16 weights (every matrix rounded to f16; vectors and the flow f32)
-/// vs the golden, measured on the four cases (max 2.4e-3, slide).
-const F16_TOL: f32 = 1e-2;
-/// int8 weights: only rows that are multiples of 32 are blocked (the tiny
-/// fixtures have few); the rest f16. Measured max 2.4e-3.
-const INT8_TOL: f32 = 3e-2;
+/// vs the golden, measured on the four cases (max 1.7e-3, slide).
+const F16_TOL: f32 = 5e-3;
+/// int8 on the fixtures: no row of theirs is a multiple of 32, so every
+/// matrix falls back to f16 (measured as f16).
+const INT8_FIXTURE_TOL: f32 = 5e-3;
+/// int8 (Q8Block32x8 matrices) vs f32 on a 32-wide model with seeded
+/// weights, 8 free-running frames: measured 1.8e-2.
+const INT8_TOL: f32 = 5e-2;
 
 const CASES: [&str; 4] = ["paper", "label", "min", "slide"];
 
@@ -216,7 +219,7 @@ fn config_round_trips_through_the_header() {
 #[test]
 fn f16_and_int8_weights_bind_and_run() {
     for case in CASES {
-        for (store, tol, label) in [(StoreAs::F16, F16_TOL, "f16"), (StoreAs::Q8Block32, INT8_TOL, "int8")] {
+        for (store, tol, label) in [(StoreAs::F16, F16_TOL, "f16"), (StoreAs::Q8Block32, INT8_FIXTURE_TOL, "int8")] {
             let (bytes, _) = convert(case, store);
             let file = ModelFile::from_bytes(bytes).unwrap();
             let duo = file.duo().unwrap();
@@ -290,4 +293,73 @@ fn converter_refusals_name_what_is_wrong() {
         Err(ConvertError::Shape { tensor, .. }) => assert_eq!(tensor, bias),
         other => panic!("{:?}", other.map(|_| ())),
     }
+}
+
+/// int8 where it applies: a 32-wide variant of the paper config (every
+/// transformer matrix a multiple of 32 wide) with seeded weights (valid
+/// flow values: `p` a permutation, `sign_s` +-1, positive scales) written
+/// as f32 and as int8; the int8 frames follow the f32 ones.
+#[test]
+fn int8_matrices_run_the_flow() {
+    use duolando::duo_writer::{write_model, Tensor};
+    use duolando_core::nn::names::{SchemaError, TensorSpec};
+    let text = std::fs::read_to_string(dir("paper").join("hparams.yaml")).unwrap();
+    let mut h = Hparams::parse(&text).unwrap();
+    for (k, v) in [("dhid", "64"), ("dhid_flow", "32"), ("num_heads_flow", "2"), ("dins", "11,32")] {
+        h.set(k, v).unwrap();
+    }
+    let cfg = TransflowerConfig::from_hparams(&h).unwrap();
+    let mut state = 0x9e3779b97f4a7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+    };
+    // (tensor, its spec's storage for int8)
+    let mut f32s: Vec<Tensor> = Vec::new();
+    let mut q8s: Vec<Tensor> = Vec::new();
+    FamilyConfig::Transflower(cfg)
+        .for_each_tensor::<SchemaError>(&mut |spec: &TensorSpec| {
+            let n: usize = spec.dims().iter().map(|&d| d as usize).product();
+            let name = spec.name.as_str();
+            let c = spec.dims()[0] as usize;
+            let values: Vec<f32> = if name.ends_with(".p") {
+                // The reversal permutation.
+                (0..n).map(|i| if i / c == c - 1 - i % c { 1.0 } else { 0.0 }).collect()
+            } else if name.ends_with(".sign_s") {
+                (0..n).map(|i| if i % 3 == 0 { -1.0 } else { 1.0 }).collect()
+            } else if ["gamma", "inv_std", "weight_v", "weight_g", "running_var", "norm1.weight", "norm2.weight"].iter().any(|k| name.ends_with(k)) {
+                (0..n).map(|_| 1.0 + 0.3 * next()).collect()
+            } else {
+                (0..n).map(|_| 0.3 * next()).collect()
+            };
+            let q8 = duolando::convert::storage_for(StoreAs::Q8Block32, spec);
+            let (shape, v) = duolando::convert::to_stored_order(spec, q8, values.clone());
+            q8s.push(Tensor { name: name.to_string(), shape, values: v, store_as: q8 });
+            f32s.push(Tensor { name: name.to_string(), shape: spec.dims().to_vec(), values, store_as: StoreAs::F32 });
+            Ok(())
+        })
+        .unwrap();
+    let fc = FamilyConfig::Transflower(cfg);
+    let (fa, qa) = (ModelFile::from_bytes(write_model(&fc, &f32s).unwrap()).unwrap(), ModelFile::from_bytes(write_model(&fc, &q8s).unwrap()).unwrap());
+    let (fd, qd) = (fa.duo().unwrap(), qa.duo().unwrap());
+    let blocked = qd.tensors().filter(|e| e.dtype == DType::Q8Block32x8).count();
+    assert!(blocked >= 20, "only {blocked} int8 matrices");
+    // Motion seed 12 rows x 11, audio 21 rows x 32: 8 steps, seeded base.
+    let mut r = duolando_tests::Rng(5);
+    let (motion, audio) = (r.vec(12 * 11), r.vec(21 * 32));
+    let ins = [Input::Rows(&motion), Input::Rows(&audio)];
+    let run = |m: &Model<'_>| {
+        let n = steps(&cfg, &ins).unwrap();
+        let mut scratch = vec![0u8; generate_scratch_bytes(&cfg).unwrap()];
+        let mut out = vec![0f32; n * cfg.channels()];
+        generate(m, &ins, &mut duolando_core::transflower::exact::Seeded::new(3, &cfg), &mut scratch, &mut out).unwrap();
+        out
+    };
+    let (a, b) = (run(&Model::from_duo(&fd).unwrap()), run(&Model::from_duo(&qd).unwrap()));
+    assert_eq!(a.len(), 8 * 11);
+    let e = rel_err(&b, &a);
+    eprintln!("int8 ({blocked} Q8Block32x8 matrices) vs f32: max rel err {e:.2e} over 8 frames");
+    assert!(e <= INT8_TOL, "{e:e}");
 }
