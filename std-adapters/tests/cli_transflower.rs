@@ -195,7 +195,7 @@ fn convert_refusals_are_named() {
     assert_eq!(code, Some(1));
     assert!(e.contains("--weights is for Transflower") && e.contains("Bailando"), "{e}");
     let residual = dir.join("hparams.yaml");
-    std::fs::write(&residual, std::fs::read_to_string(&c.join("hparams.yaml")).unwrap().replace("residual: false", "residual: true")).unwrap();
+    std::fs::write(&residual, std::fs::read_to_string(c.join("hparams.yaml")).unwrap().replace("residual: false", "residual: true")).unwrap();
     let (code, _, e) = duolando(&["convert", "--config", &p(&residual), "--weights", &w, "-o", &out]);
     assert_eq!(code, Some(1));
     assert!(e.contains("`residual: True`"), "{e}");
