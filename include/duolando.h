@@ -272,6 +272,9 @@ typedef struct duo_model_info {
  *     does and runs to its end; the root starts at the origin. */
 #define DUO_FAMILY_DUOLANDO 0u
 #define DUO_FAMILY_BAILANDO 1u
+/* Transflower (.duo family 2): not opened by this library yet; duo_model_open*
+ * return DUO_BAD_MODEL naming the family (the duolando CLI runs it). */
+#define DUO_FAMILY_TRANSFLOWER 2u
 
 /* Opens a model from caller memory WITHOUT copying.
  * bytes: the whole .duo file, 64-byte aligned in memory (the weights are

@@ -329,7 +329,7 @@ fn version_2_families() {
     assert_eq!(duo2.len(), duo1.len());
     duolando_core::duolando::model::Model::from_duo(&duo2).unwrap();
     // The header of v2 starts with the tag: patch it.
-    for (tag, want_unknown) in [(2u8, true), (127, true), (1, false)] {
+    for (tag, want_unknown) in [(3u8, true), (127, true), (1, false), (2, false)] {
         let mut bad = v2.clone();
         assert_eq!(bad[24], 0, "Duolando's tag");
         bad[24] = tag;
@@ -339,7 +339,7 @@ fn version_2_families() {
             let msg = r.unwrap_err().to_string();
             assert!(msg.contains(&format!("model family {tag}")) && msg.contains("Bailando"), "{msg}");
         } else {
-            assert!(r.is_err(), "a Duolando config under the Bailando tag must not parse: {r:?}");
+            assert!(r.is_err(), "a Duolando config under another family's tag ({tag}) must not parse: {r:?}");
         }
     }
     // A version-2 header cut inside the tag.
@@ -1152,4 +1152,112 @@ fn weight_scan_cost_at_full_size() {
             scan / copy
         );
     }
+}
+
+// ------------------------------------------------------ Transflower (tag 2)
+
+/// The committed Transflower paper model taken apart: its config and
+/// entries (a version-2 header) and its data section.
+fn transflower_parts() -> (duolando::duo_writer::HeaderV2, Vec<u8>) {
+    let bytes = std::fs::read(duolando_tests::fixture("transflower_paper/model.duo")).unwrap();
+    let aligned = AlignedBytes::copy_from(&bytes);
+    let duo = DuoFile::parse(aligned.as_bytes()).expect("the committed Transflower model parses");
+    let tensors = duo
+        .tensors()
+        .map(|e| HeaderEntry { name: e.name.to_string(), dtype: e.dtype as u8, shape: e.dims().to_vec(), offset: e.offset, nbytes: e.nbytes })
+        .collect();
+    (duolando::duo_writer::HeaderV2 { config: *duo.config(), tensors }, bytes[duo.prefix().data_start as usize..].to_vec())
+}
+
+fn transflower_with(edit: &dyn Fn(&mut duolando_core::transflower::config::TransflowerConfig)) -> Vec<u8> {
+    use duolando_core::family::FamilyConfig;
+    let (mut h, data) = transflower_parts();
+    let FamilyConfig::Transflower(mut cfg) = h.config else { panic!("a Transflower fixture") };
+    edit(&mut cfg);
+    h.config = FamilyConfig::Transflower(cfg);
+    duolando::duo_writer::assemble_v2(&h, &data).unwrap()
+}
+
+/// The committed Transflower model re-assembled unchanged parses (the
+/// builders above are faithful), and each config field a corrupt header
+/// could carry is checked by `TransflowerConfig::validate`, by name.
+#[test]
+fn rejects_invalid_transflower_config_fields() {
+    use duolando_core::transflower::config::{BaseDist, ConfigError as C, Field, InputConfig};
+    let tf = |e| Err(FormatError::InvalidTransflowerConfig(e));
+    assert!(parse(&transflower_with(&|_| {})).is_ok());
+    assert_eq!(parse(&transflower_with(&|c| c.n_inputs = 0)), tf(C::Zero { field: Field::Inputs }));
+    assert_eq!(parse(&transflower_with(&|c| c.n_inputs = 5)), tf(C::TooLarge { field: Field::Inputs, value: 5, max: 4 }));
+    assert_eq!(parse(&transflower_with(&|c| c.nhead = 3)), tf(C::NotDivisible { field: Field::Dhid, value: 16, divisor: 3 }));
+    assert_eq!(parse(&transflower_with(&|c| c.output = 2)), tf(C::TooLarge { field: Field::Output, value: 2, max: 1 }));
+    assert_eq!(parse(&transflower_with(&|c| c.inputs[1].length = 5000)), tf(C::TooLarge { field: Field::InputLength(1), value: 5000, max: 4096 }));
+    assert_eq!(parse(&transflower_with(&|c| c.cond_len = 5)), tf(C::Mismatch { field: Field::CondLen, value: 5, expected: 3 }));
+    assert_eq!(parse(&transflower_with(&|c| c.flow.steps = 33)), tf(C::TooLarge { field: Field::FlowSteps, value: 33, max: 32 }));
+    assert_eq!(parse(&transflower_with(&|c| c.flow.layers = 5)), tf(C::TooLarge { field: Field::CouplingLayers, value: 5, max: 4 }));
+    assert_eq!(parse(&transflower_with(&|c| c.flow.base = BaseDist::StudentT { df: 0 })), tf(C::Zero { field: Field::StudentTDf }));
+    assert_eq!(parse(&transflower_with(&|c| c.inputs[1].name = c.inputs[0].name)), tf(C::DuplicateName { input: 1, previous: 0 }));
+    assert_eq!(parse(&transflower_with(&|c| c.inputs[3] = c.inputs[0])), tf(C::UnusedInput { input: 3 }));
+    assert_eq!(parse(&transflower_with(&|c| c.inputs[0] = InputConfig { tokens: 4, ..c.inputs[0] })), tf(C::Unsupported(duolando_core::transflower::config::Unsupported::WindowType { input: 0 })));
+    let msg = parse(&transflower_with(&|c| c.nhead = 3)).unwrap_err().to_string();
+    assert!(msg.contains("invalid Transflower model config"), "{msg}");
+}
+
+/// A modality name is part of every tensor name: a header whose name
+/// bytes are not `[A-Za-z0-9_]` (patched in the encoded config) is
+/// refused before any name is built.
+#[test]
+fn rejects_corrupt_transflower_modality_name() {
+    use duolando_core::transflower::config::ConfigError as C;
+    let bytes = transflower_with(&|_| {});
+    let needle = b"expmap_scaled_20";
+    let at = bytes.windows(needle.len()).position(|w| w == needle).expect("the name in the header");
+    assert!(at < 24 + 400, "the first occurrence is the config's, at {at}");
+    let mut bad = bytes.clone();
+    bad[at + 6] = b'.';
+    assert_eq!(parse(&bad), Err(FormatError::InvalidTransflowerConfig(C::BadName { input: 0 })));
+    // A length byte over the 32-byte cap.
+    let mut bad = bytes.clone();
+    assert_eq!(bad[at - 1], needle.len() as u8, "the length byte before the name");
+    bad[at - 1] = 40;
+    assert_eq!(parse(&bad), Err(FormatError::InvalidTransflowerConfig(C::BadName { input: 0 })));
+}
+
+/// The config drives the schema: a Transflower config with one flow step
+/// fewer than its table holds finds unknown tensors; one more finds a
+/// missing tensor; the config cut short does not decode.
+#[test]
+fn rejects_transflower_table_config_disagreement() {
+    match parse(&transflower_with(&|c| c.flow.steps = 2)) {
+        Err(FormatError::UnknownTensor { .. }) => {}
+        other => panic!("{other:?}"),
+    }
+    match parse(&transflower_with(&|c| c.flow.steps = 4)) {
+        Err(FormatError::MissingTensor { .. }) => {}
+        other => panic!("{other:?}"),
+    }
+    match parse(&transflower_with(&|c| c.pos_emb_output = true)) {
+        Err(FormatError::MissingTensor { .. }) => {}
+        other => panic!("{other:?}"),
+    }
+    // Tag 2 followed by a config cut short.
+    let bytes = duolando::duo_writer::assemble_raw_version(2, &[2, 2], &[]).unwrap();
+    assert_eq!(parse(&bytes), Err(FormatError::MalformedHeader { field: HeaderField::Config, offset: 1 }));
+}
+
+/// The Transflower file under the other families' tags, and their configs
+/// under Transflower's: never read as the wrong family.
+#[test]
+fn transflower_tag_is_not_interchangeable() {
+    let v2 = transflower_with(&|_| {});
+    assert_eq!(v2[24], 2, "Transflower's tag");
+    for tag in [0u8, 1] {
+        let mut bad = v2.clone();
+        bad[24] = tag;
+        assert!(parse(&bad).is_err(), "a Transflower config under tag {tag} parsed");
+    }
+    let btiny = std::fs::read(duolando_tests::fixture("bailando_btiny/model.duo")).unwrap();
+    assert_eq!(btiny[24], 1);
+    let mut bad = btiny.clone();
+    bad[24] = 2;
+    assert!(parse(&bad).is_err(), "a Bailando config under the Transflower tag parsed");
 }

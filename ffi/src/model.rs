@@ -98,6 +98,11 @@ fn bind(duo: &DuoFile<'static>, origin: &str) -> Result<AnyModel, Failure> {
     match duo.config() {
         FamilyConfig::Duolando(_) => Model::from_duo(duo).map(AnyModel::Duolando).map_err(bad),
         FamilyConfig::Bailando(_) => SoloModel::from_duo(duo).map(AnyModel::Bailando).map_err(bad),
+        // C sessions for Transflower come later: refused by family, by name.
+        FamilyConfig::Transflower(_) => Err(Failure::new(
+            DuoResult::BadModel,
+            format!("{origin}: a Transflower model (family 2): the C library does not run this family yet (the duolando CLI does)"),
+        )),
     }
 }
 

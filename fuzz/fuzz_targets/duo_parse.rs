@@ -1,11 +1,12 @@
 //! `.duo` decoding on arbitrary bytes: `DuoFile::parse` and, when it
-//! accepts, binding either family's `Model` and reading every tensor
+//! accepts, binding every family's `Model` and reading every tensor
 //! must never panic.
 #![no_main]
 
 use duolando_core::format::DuoFile;
 use duolando_core::bailando::model::Model as BailandoModel;
 use duolando_core::duolando::model::Model;
+use duolando_core::transflower::model::Model as TransflowerModel;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
@@ -21,5 +22,6 @@ fuzz_target!(|data: &[u8]| {
         }
         let _ = Model::from_duo(&file);
         let _ = BailandoModel::from_duo(&file);
+        let _ = TransflowerModel::from_duo(&file);
     }
 });

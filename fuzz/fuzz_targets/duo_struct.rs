@@ -14,12 +14,12 @@ use std::sync::OnceLock;
 
 use arbitrary::{Arbitrary, Unstructured};
 use duolando_gen::duo::{check_input, split, DuoInput, Parts};
-use duolando_gen::fixture::{btiny_duo_bytes, tiny2_duo_bytes};
+use duolando_gen::fixture::{btiny_duo_bytes, tiny2_duo_bytes, transflower_duo_bytes};
 use libfuzzer_sys::fuzz_target;
 
-fn bases() -> &'static [Parts; 2] {
-    static P: OnceLock<[Parts; 2]> = OnceLock::new();
-    P.get_or_init(|| [split(tiny2_duo_bytes()), split(btiny_duo_bytes())])
+fn bases() -> &'static [Parts; 3] {
+    static P: OnceLock<[Parts; 3]> = OnceLock::new();
+    P.get_or_init(|| [split(tiny2_duo_bytes()), split(btiny_duo_bytes()), split(transflower_duo_bytes())])
 }
 
 fuzz_target!(|data: &[u8]| {

@@ -11,6 +11,7 @@ use duolando_core::nn::bind::BindError;
 use duolando_core::bailando::model::Model as BailandoModel;
 use duolando_core::duolando::model::Model;
 use duolando_core::family::Family;
+use duolando_core::transflower::model::{Model as TransflowerModel, ModelError as TransflowerError};
 use duolando_core::tensor::DType;
 
 use crate::bytes::{apply_all, varint_len, ByteMutation, Int, Regions};
@@ -319,6 +320,9 @@ pub enum DuoOutcome {
     Rejected(FormatError),
     /// Parsed and every tensor readable, but binding failed.
     Unbound(BindError),
+    /// A Transflower file parsed but its model refused a config or a flow
+    /// weight value (`transflower::model::ModelError` other than a bind error).
+    UnboundTransflower(TransflowerError),
     Bound,
 }
 
@@ -347,18 +351,29 @@ pub fn check_duo(bytes: &[u8]) -> DuoOutcome {
     }
     // A parsed file binds as its own family (and is refused, by family,
     // as the other).
+    // Transflower's binder has its own error (config and flow-value
+    // problems besides BindError).
+    let tf = || TransflowerModel::from_duo(&file).map(|_| ()).map_err(|e| match e {
+        TransflowerError::Bind(b) => DuoOutcome::Unbound(b),
+        other => DuoOutcome::UnboundTransflower(other),
+    });
+    let plain = |r: Result<(), BindError>| r.map_err(DuoOutcome::Unbound);
     let own = match file.config().family() {
-        Family::Duolando => Model::from_duo(&file).map(|_| ()),
-        Family::Bailando => BailandoModel::from_duo(&file).map(|_| ()),
+        Family::Duolando => plain(Model::from_duo(&file).map(|_| ())),
+        Family::Bailando => plain(BailandoModel::from_duo(&file).map(|_| ())),
+        Family::Transflower => tf(),
     };
-    let other = match file.config().family() {
-        Family::Duolando => BailandoModel::from_duo(&file).map(|_| ()),
-        Family::Bailando => Model::from_duo(&file).map(|_| ()),
+    let others: [Result<(), DuoOutcome>; 2] = match file.config().family() {
+        Family::Duolando => [plain(BailandoModel::from_duo(&file).map(|_| ())), tf()],
+        Family::Bailando => [plain(Model::from_duo(&file).map(|_| ())), tf()],
+        Family::Transflower => [plain(Model::from_duo(&file).map(|_| ())), plain(BailandoModel::from_duo(&file).map(|_| ()))],
     };
-    assert!(matches!(other, Err(BindError::Family { .. })), "a {:?} file bound as another family", file.config().family());
+    for other in others {
+        assert!(matches!(other, Err(DuoOutcome::Unbound(BindError::Family { .. }))), "a {:?} file bound as another family", file.config().family());
+    }
     match own {
         Ok(()) => DuoOutcome::Bound,
-        Err(e) => DuoOutcome::Unbound(e),
+        Err(e) => e,
     }
 }
 

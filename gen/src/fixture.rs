@@ -32,6 +32,13 @@ pub fn btiny_duo_bytes() -> &'static [u8] {
     B.get_or_init(|| read("bailando_btiny/model.duo"))
 }
 
+/// The tiny Transflower paper model (format version 2, family 2): `duolando
+/// convert` of tests/fixtures/transflower_paper's hparams.yaml and state dict.
+pub fn transflower_duo_bytes() -> &'static [u8] {
+    static B: OnceLock<Vec<u8>> = OnceLock::new();
+    B.get_or_init(|| read("transflower_paper/model.duo"))
+}
+
 /// The tiny2 model, bound once.
 pub fn tiny2_model() -> &'static Model<'static> {
     // Statics, not `Box::leak`: LeakSanitizer (fuzz targets) reports a

@@ -1,6 +1,6 @@
 //! Smoke tests of the generators on the tiny2 fixture.
 use duolando_gen::duo::{check_duo, check_input, split, DuoInput, DuoOutcome, WeightEdit, NON_FINITE};
-use duolando_gen::fixture::{btiny_duo_bytes, tiny2_clip, tiny2_duo_bytes, tiny2_model};
+use duolando_gen::fixture::{btiny_duo_bytes, tiny2_clip, tiny2_duo_bytes, tiny2_model, transflower_duo_bytes};
 use duolando_gen::session::{run_ops, ConfigGen, Field, FrameGen, Op, SeedGen, SessionInput};
 use duolando_gen::floats::Hostile;
 
@@ -8,20 +8,21 @@ use duolando_gen::floats::Hostile;
 fn fixture_model_binds() {
     assert_eq!(check_duo(tiny2_duo_bytes()), DuoOutcome::Bound);
     assert_eq!(check_duo(btiny_duo_bytes()), DuoOutcome::Bound);
+    assert_eq!(check_duo(transflower_duo_bytes()), DuoOutcome::Bound);
 }
 
-/// Family edits: each base re-encoded as version 2 under every tag either
+/// Family edits: each base (Duolando, Bailando, Transflower) re-encoded as version 2 under every tag either
 /// binds as its own family, or is refused (another family's tag, an
 /// unknown tag) without a panic.
 #[test]
 fn family_tags_on_both_bases() {
     use duolando_core::format::FormatError;
-    for (b, own) in [(split(tiny2_duo_bytes()), 0u8), (split(btiny_duo_bytes()), 1)] {
-        for tag in 0..5u8 {
+    for (b, own) in [(split(tiny2_duo_bytes()), 0u8), (split(btiny_duo_bytes()), 1), (split(transflower_duo_bytes()), 2)] {
+        for tag in 0..6u8 {
             let out = check_input(&DuoInput::Family { tag, config: vec![], bytes: vec![] }, &b);
             match tag {
                 t if t == own => assert_eq!(out, DuoOutcome::Bound, "own tag {t}"),
-                0 | 1 => assert!(matches!(out, DuoOutcome::Rejected(_)), "tag {tag} on base {own}: {out:?}"),
+                0..=2 => assert!(matches!(out, DuoOutcome::Rejected(_)), "tag {tag} on base {own}: {out:?}"),
                 t => assert_eq!(out, DuoOutcome::Rejected(FormatError::UnknownFamily { tag: t as u32 }), "tag {t}"),
             }
         }

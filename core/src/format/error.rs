@@ -131,6 +131,9 @@ pub enum FormatError {
     /// The config failed `ModelConfig::validate` (sizes over the caps, or
     /// inconsistent).
     InvalidConfig(ConfigError),
+    /// A Transflower config failed `TransflowerConfig::validate` (sizes
+    /// over the caps, inconsistent, or a corrupt modality name).
+    InvalidTransflowerConfig(crate::transflower::config::ConfigError),
     /// A tensor the schema requires is absent.
     MissingTensor { schema_index: u32 },
     /// A tensor the schema does not know (table `index`).
@@ -173,7 +176,7 @@ impl fmt::Display for FormatError {
             }
             UnknownFamily { tag } => write!(
                 f,
-                "model family {tag} is not one this build reads (0 Duolando, 1 Bailando); a newer duolando may read it"
+                "model family {tag} is not one this build reads (0 Duolando, 1 Bailando, 2 Transflower); a newer duolando may read it"
             ),
             UnknownFlags { flags } => write!(f, "unknown flag bits {flags:#010x} (versions 1 and 2 define none)"),
             HeaderTooLarge { header_len, max } => write!(f, "header length {header_len} exceeds the cap of {max} bytes"),
@@ -208,6 +211,7 @@ impl fmt::Display for FormatError {
                 "non-zero byte at file offset {offset} after the data section (trailing bytes are accepted only as zero padding)"
             ),
             InvalidConfig(e) => write!(f, "invalid model config: {e:?}"),
+            InvalidTransflowerConfig(e) => write!(f, "invalid Transflower model config: {e:?}"),
             MissingTensor { schema_index } => write!(f, "schema tensor #{schema_index} is missing"),
             UnknownTensor { index } => write!(f, "tensor #{index} is not part of the model schema"),
             ShapeMismatch { index, expected, found } => {

@@ -5,7 +5,8 @@ use super::table::{decode_entry, Cursor, TensorEntry};
 use super::{align_up, schema_check, FormatError, HeaderField, MAX_TENSORS, PREFIX_LEN};
 use crate::duolando::config::ModelConfig;
 use crate::bailando::config::BailandoConfig;
-use crate::family::{Family, FamilyConfig};
+use crate::family::{Family, FamilyConfig, FamilyConfigError};
+use crate::transflower::config::TransflowerConfig;
 use crate::kernels::simd::{PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES};
 use crate::tensor::{block_row, DType, TensorRef};
 
@@ -71,10 +72,14 @@ impl<'a> DuoFile<'a> {
             match Family::from_tag(tag) {
                 Some(Family::Duolando) => FamilyConfig::Duolando(cur.take::<ModelConfig>(HeaderField::Config)?),
                 Some(Family::Bailando) => FamilyConfig::Bailando(cur.take::<BailandoConfig>(HeaderField::Config)?),
+                Some(Family::Transflower) => FamilyConfig::Transflower(cur.take::<TransflowerConfig>(HeaderField::Config)?),
                 None => return Err(FormatError::UnknownFamily { tag }),
             }
         };
-        config.validate().map_err(FormatError::InvalidConfig)?;
+        config.validate().map_err(|e| match e {
+            FamilyConfigError::Config(e) => FormatError::InvalidConfig(e),
+            FamilyConfigError::Transflower(e) => FormatError::InvalidTransflowerConfig(e),
+        })?;
         let count: u64 = cur.take(HeaderField::TensorCount)?;
         if count > MAX_TENSORS as u64 {
             return Err(FormatError::TooManyTensors { count, max: MAX_TENSORS });

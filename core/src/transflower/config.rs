@@ -11,6 +11,10 @@ use serde::{Deserialize, Serialize};
 use crate::limits::{MAX_EMBD, MAX_HEADS, MAX_VOCAB};
 use crate::transflower::hparams::{DistOption, Hparams, NormOption};
 
+/// Frames per second of the published features (motion and audio at 20
+/// fps: the `*_scaled_20` arrays). Bookkeeping only: nothing computed
+/// depends on it.
+pub const FPS: u32 = 20;
 /// Most input modalities (published: 2 or 3).
 pub const MAX_INPUTS: usize = 4;
 /// Longest modality name in bytes (it is part of tensor names).
@@ -47,6 +51,12 @@ impl ModalityName {
         let mut bytes = [0u8; MODALITY_NAME_CAP];
         bytes[..b.len()].copy_from_slice(b);
         Some(ModalityName { len: b.len() as u8, bytes })
+    }
+    /// Whether the stored bytes are what [`ModalityName::new`] makes (a
+    /// name decoded from a file may not be: length over the cap, bytes
+    /// outside `[A-Za-z0-9_]`, or non-zero bytes past the length).
+    pub fn is_valid(&self) -> bool {
+        (self.len as usize) <= MODALITY_NAME_CAP && ModalityName::new(self.as_str()).as_ref() == Some(self)
     }
     pub fn as_str(&self) -> &str {
         // Only ASCII is ever stored (`new`); a corrupt value reads as "".
@@ -214,6 +224,14 @@ pub enum ConfigError {
     NotDivisible { field: Field, value: u32, divisor: u32 },
     Mismatch { field: Field, value: u32, expected: u32 },
     Unsupported(Unsupported),
+    /// Input `input`'s modality name is empty, too long or not
+    /// `[A-Za-z0-9_]` (only a corrupt `.duo` header can hold one).
+    BadName { input: u8 },
+    /// Inputs `input` and `previous` have the same modality name (their
+    /// tensor names would collide).
+    DuplicateName { input: u8, previous: u8 },
+    /// Slot `input` at or past `n_inputs` is not empty (all zero).
+    UnusedInput { input: u8 },
 }
 
 fn range(field: Field, value: u32, min: u32, max: u32) -> Result<(), ConfigError> {
@@ -293,7 +311,16 @@ impl TransflowerConfig {
     /// Checks every size against the engine's caps and the model's rules.
     pub fn validate(&self) -> Result<(), ConfigError> {
         range(Field::Inputs, self.n_inputs, 1, MAX_INPUTS as u32)?;
+        if let Some(k) = self.inputs[self.n_inputs as usize..].iter().position(|i| *i != InputConfig::default()) {
+            return Err(ConfigError::UnusedInput { input: (self.n_inputs as usize + k) as u8 });
+        }
         for (i, inp) in self.inputs().iter().enumerate() {
+            if !inp.name.is_valid() {
+                return Err(ConfigError::BadName { input: i as u8 });
+            }
+            if let Some(p) = self.inputs()[..i].iter().position(|q| q.name == inp.name) {
+                return Err(ConfigError::DuplicateName { input: i as u8, previous: p as u8 });
+            }
             let i = i as u8;
             range(Field::InputDim(i), inp.dim, 1, MAX_EMBD)?;
             range(Field::InputLength(i), inp.length, 1, MAX_WINDOW)?;

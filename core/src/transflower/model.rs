@@ -261,6 +261,15 @@ impl<'a> Model<'a> {
         Ok(Model { cfg: *cfg, inputs, cross_modal, flow })
     }
 
+    /// Binds every weight of a parsed `.duo` file (family Transflower); a
+    /// file of another family is refused with [`BindError::Family`].
+    pub fn from_duo(file: &crate::format::DuoFile<'a>) -> Result<Model<'a>, ModelError> {
+        match file.config() {
+            crate::family::FamilyConfig::Transflower(cfg) => Model::bind(cfg, file),
+            other => Err(ModelError::Bind(BindError::Family { expected: crate::family::Family::Transflower, found: other.family() })),
+        }
+    }
+
     pub fn config(&self) -> &TransflowerConfig {
         &self.cfg
     }

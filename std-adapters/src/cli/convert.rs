@@ -10,21 +10,27 @@ use crate::duo_writer::StoreAs;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The authors' YAML: Duolando's follower GPT config (e.g.
-    /// configs/follower_gpt_beta0.9_final.yaml) or Bailando's
-    /// (configs/actor_critic.yaml); the family is recognised from it.
+    /// configs/follower_gpt_beta0.9_final.yaml), Bailando's
+    /// (configs/actor_critic.yaml), or Transflower's checkpoint-directory
+    /// hparams.yaml; the family is recognised from it.
     #[arg(long)]
     pub config: PathBuf,
-    /// The GPT state_dict as safetensors (Duolando GPT2nt, Bailando
-    /// CrossCondGPT2AC whose critic is skipped); `module.` prefix optional.
+    /// Duolando, Bailando: the GPT state_dict as safetensors (Duolando
+    /// GPT2nt, Bailando CrossCondGPT2AC whose critic is skipped); `module.`
+    /// prefix optional.
     #[arg(long)]
-    pub gpt: PathBuf,
-    /// The motion VQ-VAE state_dict as safetensors (Duolando SepVQVAEXM,
-    /// Bailando SepVQVAER).
+    pub gpt: Option<PathBuf>,
+    /// Duolando, Bailando: the motion VQ-VAE state_dict as safetensors
+    /// (Duolando SepVQVAEXM, Bailando SepVQVAER).
     #[arg(long)]
-    pub vqvae: PathBuf,
+    pub vqvae: Option<PathBuf>,
     /// Duolando only: the relative-translation VQVAE state_dict as safetensors.
     #[arg(long)]
     pub transl: Option<PathBuf>,
+    /// Transflower only: the Lightning checkpoint's state_dict as
+    /// safetensors (tools/transflower_ckpt_to_safetensors.py).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
     /// Weight type stored in the `.duo`.
     #[arg(long, value_enum, default_value_t = WeightType::F32)]
     pub dtype: WeightType,
@@ -55,14 +61,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         WeightType::Q4 => StoreAs::Q4Block32,
     };
     let text = std::fs::read_to_string(&args.config).with_context(|| format!("cannot read {}", args.config.display()))?;
+    let cfg_path = args.config.display();
+    let read = |p: &std::path::Path| std::fs::read(p).with_context(|| format!("cannot read {}", p.display()));
+    if crate::convert::transflower::is_transflower(&text) {
+        for (flag, given) in [("--gpt", &args.gpt), ("--vqvae", &args.vqvae), ("--transl", &args.transl)] {
+            if let Some(p) = given {
+                bail!("{cfg_path} is a Transflower hparams.yaml: its weights are one state dict, given with --weights; drop {flag} {}", p.display());
+            }
+        }
+        let weights = args.weights.as_ref().with_context(|| format!("{cfg_path} is a Transflower hparams.yaml: --weights (the checkpoint's state_dict as safetensors, tools/transflower_ckpt_to_safetensors.py) is required"))?;
+        let cfg = crate::convert::transflower::parse_transflower_config(&args.config, &text)?;
+        let w = read(weights)?;
+        let (bytes, r) = crate::convert::transflower::convert_transflower(&cfg, (weights, &w), store_as, &args.out)?;
+        crate::convert::write_atomically(&args.out, &bytes)?;
+        println!(
+            "wrote {} (Transflower, {} tensors, {} bytes; skipped {} unused buffers: {} is_initialized, {} bounds)",
+            args.out.display(),
+            r.report.written,
+            r.report.bytes,
+            r.report.skipped,
+            r.is_initialized_skipped,
+            r.bounds_skipped
+        );
+        return Ok(());
+    }
+    if let Some(w) = &args.weights {
+        bail!("--weights is for Transflower checkpoints; {cfg_path} is a {} config: give --gpt and --vqvae{} instead of --weights {}", if crate::convert::is_bailando(&text) { "Bailando" } else { "Duolando" }, if crate::convert::is_bailando(&text) { "" } else { " and --transl" }, w.display());
+    }
+    let family = if crate::convert::is_bailando(&text) { "Bailando" } else { "Duolando" };
+    let gpt = args.gpt.as_ref().with_context(|| format!("{cfg_path} is a {family} config: --gpt (the GPT state_dict as safetensors) is required"))?;
+    let vqvae = args.vqvae.as_ref().with_context(|| format!("{cfg_path} is a {family} config: --vqvae (the motion VQ-VAE state_dict as safetensors) is required"))?;
     if crate::convert::is_bailando(&text) {
         if let Some(t) = &args.transl {
-            bail!("{} is a Bailando config, which has no translation VQ-VAE: drop --transl {}", args.config.display(), t.display());
+            bail!("{cfg_path} is a Bailando config, which has no translation VQ-VAE: drop --transl {}", t.display());
         }
         let cfg = crate::convert::parse_bailando_config(&args.config, &text)?;
-        let read = |p: &std::path::Path| std::fs::read(p).with_context(|| format!("cannot read {}", p.display()));
-        let (g, v) = (read(&args.gpt)?, read(&args.vqvae)?);
-        let (bytes, r) = crate::convert::bailando::convert_bailando(&cfg, (&args.gpt, &g), (&args.vqvae, &v), store_as, &args.out)?;
+        let (g, v) = (read(gpt)?, read(vqvae)?);
+        let (bytes, r) = crate::convert::bailando::convert_bailando(&cfg, (gpt, &g), (vqvae, &v), store_as, &args.out)?;
         crate::convert::write_atomically(&args.out, &bytes)?;
         println!(
             "wrote {} (Bailando, {} tensors, {} bytes; skipped {} training-only critic tensors, {} attention masks checked)",
@@ -74,8 +109,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         return Ok(());
     }
-    let transl = args.transl.as_ref().with_context(|| format!("{} is a Duolando config: --transl (the relative-translation VQ-VAE) is required", args.config.display()))?;
-    let report = crate::convert::convert_files(&args.config, &args.gpt, &args.vqvae, transl, store_as, &args.out)?;
+    let transl = args.transl.as_ref().with_context(|| format!("{cfg_path} is a Duolando config: --transl (the relative-translation VQ-VAE) is required"))?;
+    let report = crate::convert::convert_files(&args.config, gpt, vqvae, transl, store_as, &args.out)?;
     println!(
         "wrote {} ({} tensors, {} bytes; skipped {} unused source tensors, {} attention masks checked)",
         args.out.display(),

@@ -39,9 +39,24 @@ pub struct Args {
     pub leader: Option<PathBuf>,
     /// Music features: Duolando (T, 54) float32 at 30 fps; Bailando (R,
     /// >= 438) at 7.5 fps, its first n_music columns read (`duolando
-    /// features --for duolando|bailando` makes them).
+    /// features --for duolando|bailando` makes them). Transflower: use --input.
     #[arg(long)]
-    pub music: PathBuf,
+    pub music: Option<PathBuf>,
+    /// Transflower: one input modality's whole array, MODALITY=FILE.npy
+    /// (the scaled features, (T, d) float32, e.g.
+    /// `expmap_scaled_20=seq.expmap_scaled_20.npy`), or a style label
+    /// (MODALITY=FILE.npy of one integer, or MODALITY=N); once per input
+    /// modality of the model (`duolando inspect` lists them).
+    #[arg(long = "input", value_name = "MODALITY=FILE")]
+    pub input: Vec<String>,
+    /// Transflower: replay recorded base samples, (N, C, H) float32, one
+    /// per generated frame (the reference's noise.npy layout).
+    #[arg(long, conflicts_with = "seed")]
+    pub noise: Option<PathBuf>,
+    /// Transflower: seed of the engine's base-sample RNG (default 0;
+    /// deterministic, not the authors' torch streams).
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Seed tokens: Duolando "up,down,lhand,rhand,transl"; Bailando
     /// "up,down", which selects the authors' music-only demo path (its
     /// music padding; the authors' demo seed is 423,12).
@@ -200,14 +215,29 @@ pub fn write_outputs(dir: &Path, g: &Generated) -> Result<()> {
     Ok(())
 }
 
+/// Refuses Transflower's flags on a model of another family, by name.
+fn refuse_transflower_flags(args: &Args, family: &str) -> Result<()> {
+    for (flag, on) in [("--input", !args.input.is_empty()), ("--noise", args.noise.is_some()), ("--seed", args.seed.is_some())] {
+        if on {
+            bail!("{flag} is for Transflower models; {} is a {family} model (it takes --music{})", args.model.display(), if family == "Duolando" { ", --leader and --seed-tokens or --follower-start" } else { " and --dance or --seed-tokens" });
+        }
+    }
+    Ok(())
+}
+
 pub fn run(args: Args) -> Result<()> {
     let threads = args.threads.map_or_else(crate::workers::default_threads, |n| n as usize);
     crate::workers::set_threads(threads).with_context(|| format!("starting {threads} threads"))?;
     let file = ModelFile::open(&args.model)?;
     super::print_kernels();
     let duo = file.duo()?;
-    if duo.config().family() == duolando_core::family::Family::Bailando {
-        return super::generate_solo::run_bailando(&args, &duo);
+    match duo.config().family() {
+        duolando_core::family::Family::Bailando => {
+            refuse_transflower_flags(&args, "Bailando")?;
+            return super::generate_solo::run_bailando(&args, &duo);
+        }
+        duolando_core::family::Family::Transflower => return super::generate_transflower::run_transflower(&args, &duo),
+        duolando_core::family::Family::Duolando => refuse_transflower_flags(&args, "Duolando")?,
     }
     if args.dance.is_some() {
         bail!("--dance is for Bailando models; {} is a Duolando model (give --leader and --seed-tokens or --follower-start)", args.model.display());
@@ -222,12 +252,15 @@ pub fn run(args: Args) -> Result<()> {
         bail!("{} is a Duolando model: give --seed-tokens up,down,lhand,rhand,transl or --follower-start", args.model.display());
     }
     let leader = read_f32_2d(leader_path, Some(POSE_DIM), "leader joint positions (T, 165)")?;
-    let music = read_f32_2d(&args.music, Some(n_music), &format!("music features (T, {n_music})"))?;
+    let Some(music_path) = args.music.as_ref() else {
+        bail!("{} is a Duolando model: --music (music features (T, {n_music}) at 30 fps) is required", args.model.display());
+    };
+    let music = read_f32_2d(music_path, Some(n_music), &format!("music features (T, {n_music})"))?;
     let t4 = leader.rows / model.cfg.hop() * model.cfg.hop();
     if music.rows < t4 {
         bail!(
             "{}: {} music frames for {} leader frames ({} used after truncation to a multiple of {}); both are 30 fps and must cover the same time",
-            args.music.display(),
+            music_path.display(),
             music.rows,
             leader.rows,
             t4,

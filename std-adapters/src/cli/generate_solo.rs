@@ -26,11 +26,14 @@ pub fn run_bailando(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
     if args.leader.is_some() || args.follower_start.is_some() {
         bail!("{} is a Bailando model (a solo dancer): it takes no leader; give --music and --dance or --seed-tokens up,down", args.model.display());
     }
+    let Some(music) = args.music.as_ref() else {
+        bail!("{} is a Bailando model: --music (Bailando features (R, >= 438) at 7.5 fps) is required", args.model.display());
+    };
     let run = match args.mode {
-        Mode::Exact => bailando_exact(&model, &args.music, args.dance.as_deref(), args.seed_tokens.as_deref(), &args.model)?,
+        Mode::Exact => bailando_exact(&model, music, args.dance.as_deref(), args.seed_tokens.as_deref(), &args.model)?,
         Mode::Streaming => {
             let sc = args.budget.solo_config(&model.cfg)?;
-            bailando_streaming(&model, &args.music, args.dance.as_deref(), args.seed_tokens.as_deref(), &args.model, &sc)?
+            bailando_streaming(&model, music, args.dance.as_deref(), args.seed_tokens.as_deref(), &args.model, &sc)?
         }
     };
     let SoloRun { tokens, pos3d: pos, steps: k, frames, music_rows, path } = run;

@@ -19,6 +19,7 @@ use duolando_core::duolando::exact;
 use duolando_core::duolando::model::Model;
 use duolando_core::duolando::session::{dec_future_max, enc_future_max, Preset, SessionConfig};
 use duolando_core::tensor::DType;
+use duolando_core::transflower::config::TransflowerConfig;
 use serde_json::{json, Value};
 
 use crate::model_file::ModelFile;
@@ -95,6 +96,7 @@ pub fn report(model: &std::path::Path, frames: usize) -> Result<Value> {
     let specific = match duo.config() {
         FamilyConfig::Duolando(cfg) => duolando_report(&duo, cfg, frames)?,
         FamilyConfig::Bailando(cfg) => bailando_report(cfg, frames),
+        FamilyConfig::Transflower(cfg) => transflower_report(&duo, cfg, frames)?,
     };
     let mut all = common;
     if let (Some(a), Value::Object(b)) = (all.as_object_mut(), specific) {
@@ -158,6 +160,136 @@ fn solo_streaming(cfg: &BailandoConfig) -> Value {
         })
         .collect();
     json!({ "dec_future_max": dec_future_max(cfg), "presets": presets })
+}
+
+/// Transflower: config (in the authors' option names), inputs, the flow,
+/// R mode's sizes for `rows` rows of the last input (the audio, 20 per
+/// second). S mode is not built yet.
+fn transflower_report(duo: &duolando_core::format::DuoFile<'_>, cfg: &TransflowerConfig, rows: usize) -> Result<Value> {
+    use duolando_core::transflower::config::{BaseDist, NormLayer, FPS};
+    use duolando_core::transflower::exact::generate_scratch_bytes;
+    duolando_core::transflower::model::Model::from_duo(duo).map_err(|e| anyhow::anyhow!("{}", crate::engine_errors::describe_transflower_model(&e)))?;
+    let fps = FPS as usize;
+    let max_l = cfg.max_window();
+    let out = cfg.output as usize;
+    let inputs: Vec<Value> = cfg
+        .inputs()
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            json!({
+                "name": c.name.as_str(),
+                "kind": if c.is_discrete() { "label" } else if i == out { "motion (output, fed back)" } else { "features" },
+                "dim": c.dim,
+                "window_rows": c.length,
+                "labels": if c.is_discrete() { json!(c.tokens) } else { Value::Null },
+                "pos_emb_score_bias": cfg.input_has_bias(i),
+            })
+        })
+        .collect();
+    let f = &cfg.flow;
+    let scratch = generate_scratch_bytes(cfg);
+    let run = |r: usize| -> Value {
+        let n = (r + 1).saturating_sub(max_l);
+        json!({ "last_input_rows": r, "steps": n, "output_frames": n, "scratch_bytes": scratch })
+    };
+    Ok(json!({
+        "config": {
+            "input_modalities": inputs,
+            "output_modality": cfg.output_input().name.as_str(),
+            "douts": cfg.channels(),
+            "output_lengths": cfg.output_length,
+            "output_time_offsets": cfg.output_time_offset,
+            "conditioning_seq_lens": cfg.cond_len,
+            "dhid": cfg.dhid,
+            "nhead": cfg.nhead,
+            "nlayers": cfg.nlayers,
+            "use_rel_pos_emb_inputs": cfg.rel_pos_emb_inputs,
+            "use_pos_emb_output": cfg.pos_emb_output,
+            "flow": {
+                "steps": f.steps,
+                "glow_norm_layer": match f.norm { NormLayer::None => "none", NormLayer::BatchNorm => "batchnorm", NormLayer::ActNorm => "actnorm" },
+                "dhid_flow": f.dhid,
+                "num_heads_flow": f.heads,
+                "num_glow_coupling_blocks": f.layers,
+                "cond_concat_dims": f.concat_dims,
+                "use_pos_emb_coupling": f.pos_emb,
+                "flow_dist": match f.base { BaseDist::Normal => json!("normal"), BaseDist::StudentT { df } => json!({ "studentT": { "df": df } }) },
+            },
+        },
+        "derived": {
+            "fps": fps,
+            "latent_rows": cfg.latent_rows(),
+            "longest_window_rows": max_l,
+            "coupling_rows": cfg.coupling_rows(),
+            "coupling_in": cfg.coupling_in(),
+            "change_channels": cfg.change_channels(),
+        },
+        "r_mode": {
+            "one_minute": run(60 * fps),
+            "requested": run(rows),
+            "latency": format!(
+                "the first output frame needs {max_l} rows of the last input ({:.2} s at {fps} fps) and the motion seed's {} rows; then one frame per row",
+                max_l as f64 / fps as f64,
+                cfg.output_input().length
+            ),
+        },
+        "streaming": Value::Null,
+    }))
+}
+
+fn transflower_text(r: &Value) -> String {
+    let mut s = head_text(r);
+    let mut line = |l: String| {
+        s.push_str(&l);
+        s.push('\n');
+    };
+    let c = &r["config"];
+    let f = &c["flow"];
+    line("config (Transflower)".into());
+    for i in c["input_modalities"].as_array().into_iter().flatten() {
+        line(format!(
+            "  input {:<28} {:<26} dim {} window {} rows{}{}",
+            i["name"].as_str().unwrap_or(""),
+            i["kind"].as_str().unwrap_or(""),
+            i["dim"],
+            i["window_rows"],
+            if i["labels"].is_null() { String::new() } else { format!(", {} labels", i["labels"]) },
+            if i["pos_emb_score_bias"] == true { ", pos_emb score bias" } else { "" }
+        ));
+    }
+    line(format!(
+        "  output {} ({} channels), {} frames per flow sample (row 0 kept), offset {}, cond rows {}",
+        c["output_modality"].as_str().unwrap_or(""),
+        c["douts"],
+        c["output_lengths"],
+        c["output_time_offsets"],
+        c["conditioning_seq_lens"]
+    ));
+    line(format!("  transformers dhid {} heads {} cross-modal layers {} (inputs 2), post-LN, FFN = dhid", c["dhid"], c["nhead"], c["nlayers"]));
+    line(format!(
+        "  flow {} steps, norm {}, couplings {} layers x {} wide, {} heads, cond_concat_dims {}, base {}",
+        f["steps"],
+        f["glow_norm_layer"].as_str().unwrap_or(""),
+        f["num_glow_coupling_blocks"],
+        f["dhid_flow"],
+        f["num_heads_flow"],
+        f["cond_concat_dims"],
+        f["flow_dist"]
+    ));
+    line(format!("R mode (exact, {} fps)", r["derived"]["fps"]));
+    for (label, key) in [("1 min", "one_minute"), ("--frames (last input rows)", "requested")] {
+        let x = &r["r_mode"][key];
+        line(format!(
+            "  {label}: {} rows -> {} frames; scratch {}",
+            x["last_input_rows"],
+            x["output_frames"],
+            x["scratch_bytes"].as_u64().map(mib).unwrap_or_else(|| "overflow".into())
+        ));
+    }
+    line(format!("  latency: {}", r["r_mode"]["latency"].as_str().unwrap_or("")));
+    line("streaming (S): not built yet for Transflower".into());
+    s
 }
 
 /// Music rows of one minute at Bailando's 7.5 rows per second.
@@ -409,7 +541,9 @@ pub fn run(args: Args) -> Result<()> {
     let out = if args.json {
         serde_json::to_string_pretty(&r)? + "\n"
     } else {
-        if r["family"] == "Bailando" {
+        if r["family"] == "Transflower" {
+            transflower_text(&r)
+        } else if r["family"] == "Bailando" {
             let cfg: BailandoConfig = serde_json::from_value(r["config"].clone()).context("internal: config round trip")?;
             bailando_text(&r, &cfg)
         } else {

@@ -18,6 +18,7 @@ use clap::{Parser, Subcommand};
 pub mod budget;
 pub mod bench_tract;
 pub mod generate_solo;
+pub mod generate_transflower;
 
 /// Declares the subcommand modules, the [`Command`] enum and its dispatcher
 /// from one list, so that a new subcommand cannot be half-registered.

@@ -12,6 +12,11 @@ pub enum ConvertError {
     #[error("{}: {source}", path.display())]
     Io { path: PathBuf, source: std::io::Error },
 
+    /// A Transflower `hparams.yaml` whose options the engine refuses
+    /// (`TransflowerConfig::from_hparams`): the message names the option.
+    #[error("{}: the Transflower config is not supported: {detail}", path.display())]
+    TransflowerConfig { path: PathBuf, detail: String },
+
     #[error("{}: not valid YAML: {source}", path.display())]
     Yaml { path: PathBuf, source: serde_yaml::Error },
 

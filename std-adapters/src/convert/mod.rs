@@ -14,12 +14,16 @@
 //! - `source`: safetensors, `module.` prefix, dtype upcast.
 //! - `skipped`: tensors that are not stored, and the mask checks.
 //! - `error`: `ConvertError`.
+//!
+//! The other families: `bailando` (YAML + GPT + VQ-VAE safetensors) and
+//! `transflower` (the authors' `hparams.yaml` + one state dict).
 
 pub mod bailando;
 pub mod config;
 pub mod error;
 pub mod skipped;
 pub mod source;
+pub mod transflower;
 pub mod yaml;
 
 use std::collections::BTreeSet;
