@@ -10,7 +10,8 @@
 # /release/duolando, built if missing), CHECKOUT (lisiyao21/Bailando checkout with models/;
 # default /tmp/bailando, extracted from MIRROR=/work/.mirror/lisiyao21+Bailando/repo if absent),
 # MINUTES / SEED (synthetic data; default 40 / 1), SYNTH, DATA, WORK (default /tmp/bailando_*
-# names that include minutes and seed), VQ_STEPS / ROOT_STEPS / GPT_STEPS, DEMO_TAKE (held-out
+# names that include minutes and seed), VQ_STEPS / ROOT_STEPS / GPT_STEPS, GPT_ARGS (more
+# train_gpt.py options, e.g. "--skip-start 16 --repeat-weight 0.1,0.1"), DEMO_TAKE (held-out
 # take whose first 20 s of music ship as the demo music; default ChaCha_30_01), EVAL=0 to skip
 # the evaluation, INSTALL=1.
 # Every training stage: torch.set_num_threads(1) under nice -n 10.
@@ -47,7 +48,7 @@ cd "$T"
     --steps "${VQ_STEPS:-3000}" --root-steps "${ROOT_STEPS:-800}" 2>&1 | tee "$WORK/vqvae.log"
 stamp "VQ-VAE trained"
 [ -f "$WORK/gpt.pt" ] || $NICE "$PY" train_gpt.py --data "$DATA" --checkout "$CHECKOUT" --vqvae "$WORK/vqvae.pt" --out "$WORK/gpt.pt" \
-    --steps "${GPT_STEPS:-1500}" 2>&1 | tee "$WORK/gpt.log"
+    --steps "${GPT_STEPS:-1500}" ${GPT_ARGS:-} 2>&1 | tee "$WORK/gpt.log"
 stamp "GPT trained"
 "$PY" export.py --vqvae "$WORK/vqvae.pt" --gpt "$WORK/gpt.pt" --out "$WORK/export" --data "$DATA" --demo-take "$DEMO_TAKE"
 "$BIN" convert --config "$WORK/export/actor_critic_demo.yaml" --gpt "$WORK/export/gpt.safetensors" \
