@@ -20,7 +20,7 @@ pub mod export;
 pub mod live;
 pub mod music;
 pub mod npy;
-pub mod streaming;
 pub mod skeleton;
+pub mod streaming;
 pub mod synth;
 pub mod viewer;

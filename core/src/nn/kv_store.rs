@@ -25,7 +25,11 @@ pub enum KvBuf<'s> {
 }
 
 fn out_of_range(at: usize, len: usize) -> Error {
-    Error::Length { buffer: Buffer::Output, len: at, expected: len }
+    Error::Length {
+        buffer: Buffer::Output,
+        len: at,
+        expected: len,
+    }
 }
 
 impl<'s> KvBuf<'s> {
@@ -50,7 +54,10 @@ impl<'s> KvBuf<'s> {
 
     /// Stores `x` at elements `at .. at + x.len()` (f16: rounded to nearest).
     pub fn store(&mut self, at: usize, x: &[f32]) -> Result<(), Error> {
-        let end = at.checked_add(x.len()).filter(|&e| e <= self.len()).ok_or(out_of_range(at, self.len()))?;
+        let end = at
+            .checked_add(x.len())
+            .filter(|&e| e <= self.len())
+            .ok_or(out_of_range(at, self.len()))?;
         match self {
             KvBuf::F32(d) => d[at..end].copy_from_slice(x),
             KvBuf::F16(d) => crate::kernels::simd::narrow_f16(x, &mut d[at..end]),
@@ -85,9 +92,19 @@ pub struct KvRing<'s> {
 }
 
 impl<'s> KvRing<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, cap: usize, width: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        kv: KvType,
+        cap: usize,
+        width: usize,
+    ) -> Result<Self, ArenaError> {
         let n = cap.checked_mul(width).ok_or(ArenaError::Overflow)?;
-        Ok(KvRing { data: KvBuf::carve(a, kv, n)?, cap, width, len: 0 })
+        Ok(KvRing {
+            data: KvBuf::carve(a, kv, n)?,
+            cap,
+            width,
+            len: 0,
+        })
     }
 
     pub fn clear(&mut self) {
@@ -111,7 +128,11 @@ impl<'s> KvRing<'s> {
     pub fn push(&mut self, row: &[f32]) -> Result<(), Error> {
         let w = self.width;
         if row.len() != w || self.cap == 0 {
-            return Err(Error::Length { buffer: Buffer::Output, len: row.len(), expected: w });
+            return Err(Error::Length {
+                buffer: Buffer::Output,
+                len: row.len(),
+                expected: w,
+            });
         }
         self.data.store((self.len % self.cap) * w, row)?;
         self.len += 1;
@@ -123,7 +144,11 @@ impl<'s> KvRing<'s> {
     pub fn rows(&self, lo: usize, hi: usize) -> Result<KvRows<'_>, Error> {
         let oldest = self.len.saturating_sub(self.cap);
         if lo > hi || lo < oldest || hi > self.len {
-            return Err(Error::Evicted { index: lo, oldest, len: self.len });
+            return Err(Error::Evicted {
+                index: lo,
+                oldest,
+                len: self.len,
+            });
         }
         let w = self.width;
         if lo == hi {
@@ -133,7 +158,10 @@ impl<'s> KvRing<'s> {
         if s + n <= self.cap {
             Ok(KvRows::one(self.data.view(s * w, (s + n) * w)?))
         } else {
-            Ok(KvRows::two(self.data.view(s * w, self.cap * w)?, self.data.view(0, (s + n - self.cap) * w)?))
+            Ok(KvRows::two(
+                self.data.view(s * w, self.cap * w)?,
+                self.data.view(0, (s + n - self.cap) * w)?,
+            ))
         }
     }
 }

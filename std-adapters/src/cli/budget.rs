@@ -6,9 +6,9 @@ use clap::ValueEnum;
 use duolando_core::duolando::config::ModelConfig;
 use duolando_core::duolando::session::{CacheSchedule, Sampling, SessionConfig};
 // One list of presets for every command and the C ABI (core/src/duolando/session/config.rs).
-pub use duolando_core::duolando::session::Preset;
 use duolando_core::bailando::config::BailandoConfig;
 use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as SoloConfig};
+pub use duolando_core::duolando::session::Preset;
 
 /// `--preset` values: the names of every family's presets ([`Preset::ALL`],
 /// [`SoloPreset::ALL`]), checked by clap (listed in `--help`); each family
@@ -101,10 +101,16 @@ impl BudgetArgs {
             Kv::F16 => duolando_core::duolando::session::KvType::F16,
         };
         if let Some(k) = self.topk {
-            sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };
+            sc.sampling = Sampling::TopK {
+                k,
+                rng_seed: self.rng_seed,
+            };
         }
         if let Err((setting, value, max)) = sc.check(cfg) {
-            bail!("--{} {value} is outside its range for this model (largest allowed: {max})", flag(setting));
+            bail!(
+                "--{} {value} is outside its range for this model (largest allowed: {max})",
+                flag(setting)
+            );
         }
         Ok(sc)
     }
@@ -115,15 +121,28 @@ impl BudgetArgs {
     /// settings a solo model does not have are refused by name.
     pub fn solo_config(&self, cfg: &BailandoConfig) -> Result<SoloConfig> {
         let Some(preset) = SoloPreset::from_name(&self.preset) else {
-            bail!("--preset {} is a Duolando preset; a Bailando model takes {}", self.preset, SoloPreset::ALL.map(SoloPreset::name).join(", "));
+            bail!(
+                "--preset {} is a Duolando preset; a Bailando model takes {}",
+                self.preset,
+                SoloPreset::ALL.map(SoloPreset::name).join(", ")
+            );
         };
-        for (given, name) in [(self.lookahead.is_some(), "lookahead"), (self.enc_future.is_some(), "enc-future"), (self.music_lookahead.is_some(), "music-lookahead"), (self.staggered, "staggered")] {
+        for (given, name) in [
+            (self.lookahead.is_some(), "lookahead"),
+            (self.enc_future.is_some(), "enc-future"),
+            (self.music_lookahead.is_some(), "music-lookahead"),
+            (self.staggered, "staggered"),
+        ] {
             if given {
                 bail!("--{name} is a Duolando setting: a Bailando model has no leader and reads no music ahead (its settings: --preset, --dec-future, --shift, --spread, --topk, --kv)");
             }
         }
         let base = SoloConfig::preset(cfg, preset);
-        let mut sc = SoloConfig { dec_future: self.dec_future.unwrap_or(base.dec_future), shift: self.shift.unwrap_or(base.shift), ..base };
+        let mut sc = SoloConfig {
+            dec_future: self.dec_future.unwrap_or(base.dec_future),
+            shift: self.shift.unwrap_or(base.shift),
+            ..base
+        };
         if self.spread {
             sc.schedule = duolando_core::nn::window::CacheSchedule::Spread;
         }
@@ -132,10 +151,16 @@ impl BudgetArgs {
             Kv::F16 => duolando_core::nn::kv_store::KvType::F16,
         };
         if let Some(k) = self.topk {
-            sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };
+            sc.sampling = Sampling::TopK {
+                k,
+                rng_seed: self.rng_seed,
+            };
         }
         if let Err((setting, value, max)) = sc.check(cfg) {
-            bail!("--{} {value} is outside its range for this model (largest allowed: {max})", flag(setting));
+            bail!(
+                "--{} {value} is outside its range for this model (largest allowed: {max})",
+                flag(setting)
+            );
         }
         Ok(sc)
     }
@@ -155,5 +180,6 @@ fn flag(s: duolando_core::duolando::session::Setting) -> &'static str {
         MusicBuffer => "music-buffer-frames",
         Windows => "staggered",
         Batch => "sessions",
+        Refresh => "refresh",
     }
 }

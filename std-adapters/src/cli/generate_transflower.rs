@@ -18,7 +18,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use duolando_core::format::DuoFile;
 use duolando_core::transflower::config::TransflowerConfig;
-use duolando_core::transflower::exact::{generate, generate_scratch_bytes, steps, Input, Replay, Seeded};
+use duolando_core::transflower::exact::{
+    generate, generate_scratch_bytes, steps, Input, Replay, Seeded,
+};
 use duolando_core::transflower::model::Model;
 
 use super::generate::{Args, Mode};
@@ -27,7 +29,11 @@ use crate::npy::{read_f32_2d, read_i64_2d, write_f32};
 
 /// One `--input` value: a modality's whole array.
 enum Given {
-    Rows { path: PathBuf, data: Vec<f32>, rows: usize },
+    Rows {
+        path: PathBuf,
+        data: Vec<f32>,
+        rows: usize,
+    },
     Label(u32),
 }
 
@@ -83,17 +89,34 @@ fn read_inputs(args: &Args, cfg: &TransflowerConfig) -> Result<Vec<Given>> {
     let listing = || {
         cfg.inputs()
             .iter()
-            .map(|i| if i.is_discrete() { format!("{} (a style label 0..{})", i.name.as_str(), i.tokens) } else { format!("{} ({} columns, window {} rows)", i.name.as_str(), i.dim, i.length) })
+            .map(|i| {
+                if i.is_discrete() {
+                    format!("{} (a style label 0..{})", i.name.as_str(), i.tokens)
+                } else {
+                    format!(
+                        "{} ({} columns, window {} rows)",
+                        i.name.as_str(),
+                        i.dim,
+                        i.length
+                    )
+                }
+            })
             .collect::<Vec<_>>()
             .join(", ")
     };
     let mut given: Vec<Option<(String, &str)>> = vec![None; names.len()];
     for spec in &args.input {
         let Some((name, file)) = spec.split_once('=') else {
-            bail!("--input {spec:?}: expected MODALITY=FILE.npy; {model} takes {}", listing());
+            bail!(
+                "--input {spec:?}: expected MODALITY=FILE.npy; {model} takes {}",
+                listing()
+            );
         };
         let Some(i) = names.iter().position(|n| *n == name) else {
-            bail!("--input {spec:?}: {model} has no input modality `{name}`; it takes {}", listing());
+            bail!(
+                "--input {spec:?}: {model} has no input modality `{name}`; it takes {}",
+                listing()
+            );
         };
         if given[i].is_some() {
             bail!("--input {spec:?}: modality `{name}` is given twice");
@@ -109,15 +132,22 @@ fn read_inputs(args: &Args, cfg: &TransflowerConfig) -> Result<Vec<Given>> {
             let label: i64 = match file.parse::<i64>() {
                 Ok(v) => v,
                 Err(_) => {
-                    let a = read_i64_2d(Path::new(file), None, &format!("style label of `{name}`"))?;
+                    let a =
+                        read_i64_2d(Path::new(file), None, &format!("style label of `{name}`"))?;
                     if a.data.len() != 1 {
-                        bail!("{file}: the style label of `{name}` is one integer, found {} values", a.data.len());
+                        bail!(
+                            "{file}: the style label of `{name}` is one integer, found {} values",
+                            a.data.len()
+                        );
                     }
                     a.data[0]
                 }
             };
             if label < 0 || label >= c.tokens as i64 {
-                bail!("{file}: style label {label} of `{name}` is outside 0..{}", c.tokens);
+                bail!(
+                    "{file}: style label {label} of `{name}` is outside 0..{}",
+                    c.tokens
+                );
             }
             out.push(Given::Label(label as u32));
             continue;
@@ -126,9 +156,19 @@ fn read_inputs(args: &Args, cfg: &TransflowerConfig) -> Result<Vec<Given>> {
         let d = c.dim as usize;
         let a = read_f32_2d(&path, Some(d), &format!("`{name}` features (T, {d})"))?;
         if let Some(k) = a.data.iter().position(|v| !v.is_finite()) {
-            bail!("{}: `{name}` holds {} at row {}, column {} (inputs must be finite)", path.display(), a.data[k], k / d, k % d);
+            bail!(
+                "{}: `{name}` holds {} at row {}, column {} (inputs must be finite)",
+                path.display(),
+                a.data[k],
+                k / d,
+                k % d
+            );
         }
-        out.push(Given::Rows { path, data: a.data, rows: a.rows });
+        out.push(Given::Rows {
+            path,
+            data: a.data,
+            rows: a.rows,
+        });
     }
     // Rows: the output modality needs its whole window (the motion seed);
     // the last input sets the step count and needs the longest window; the
@@ -163,7 +203,12 @@ fn read_inputs(args: &Args, cfg: &TransflowerConfig) -> Result<Vec<Given>> {
         let need = c.length as usize + n - 1;
         if let (Some(r), false) = (row_count(i), i == m) {
             if r < need {
-                bail!("{}: `{}` has {r} rows; {n} steps (set by `{}`) need {need}", file_of(i), names[i], names[last]);
+                bail!(
+                    "{}: `{}` has {r} rows; {n} steps (set by `{}`) need {need}",
+                    file_of(i),
+                    names[i],
+                    names[last]
+                );
             }
         }
     }
@@ -174,7 +219,8 @@ fn read_inputs(args: &Args, cfg: &TransflowerConfig) -> Result<Vec<Given>> {
 fn read_noise(path: &Path, cfg: &TransflowerConfig, n: usize) -> Result<Vec<f32>> {
     let (c, h) = (cfg.channels(), cfg.output_length as usize);
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let npy = npyz::NpyFile::new(bytes.as_slice()).with_context(|| format!("{} is not a valid .npy file", path.display()))?;
+    let npy = npyz::NpyFile::new(bytes.as_slice())
+        .with_context(|| format!("{} is not a valid .npy file", path.display()))?;
     let shape = npy.shape().to_vec();
     let want = [n as u64, c as u64, h as u64];
     if shape != want {
@@ -184,17 +230,35 @@ fn read_noise(path: &Path, cfg: &TransflowerConfig, n: usize) -> Result<Vec<f32>
         );
     }
     let data: Vec<f32> = match npy.dtype() {
-        npyz::DType::Plain(ts) if ts.type_char() == npyz::TypeChar::Float && ts.size_field() == 4 => npy.into_vec::<f32>()?,
-        other => bail!("{}: expected float32 base samples, found dtype {}", path.display(), other.descr()),
+        npyz::DType::Plain(ts)
+            if ts.type_char() == npyz::TypeChar::Float && ts.size_field() == 4 =>
+        {
+            npy.into_vec::<f32>()?
+        }
+        other => bail!(
+            "{}: expected float32 base samples, found dtype {}",
+            path.display(),
+            other.descr()
+        ),
     };
     if let Some(k) = data.iter().position(|v| !v.is_finite()) {
-        bail!("{}: base sample value {} at flat index {k} is not finite", path.display(), data[k]);
+        bail!(
+            "{}: base sample value {} at flat index {k} is not finite",
+            path.display(),
+            data[k]
+        );
     }
     Ok(data)
 }
 
 pub fn run_transflower(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
-    let model = Model::from_duo(duo).map_err(|e| anyhow::anyhow!("{}: {}", args.model.display(), describe_transflower_model(&e)))?;
+    let model = Model::from_duo(duo).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: {}",
+            args.model.display(),
+            describe_transflower_model(&e)
+        )
+    })?;
     refuse_other_flags(args)?;
     if args.noise.is_some() && args.seed.is_some() {
         bail!("give --noise (recorded base samples) or --seed (the engine's seeded sampler), not both");
@@ -208,25 +272,42 @@ pub fn run_transflower(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
             Given::Label(v) => Input::Label(*v),
         })
         .collect();
-    let err = |e: duolando_core::error::Error| anyhow::anyhow!("{}", describe_transflower(&e, &cfg));
+    let err =
+        |e: duolando_core::error::Error| anyhow::anyhow!("{}", describe_transflower(&e, &cfg));
     let n = steps(&cfg, &inputs).map_err(err)?;
     let c = cfg.channels();
-    let mut scratch = vec![0u8; generate_scratch_bytes(&cfg).context("the model's scratch plan overflows")?];
+    let mut scratch =
+        vec![0u8; generate_scratch_bytes(&cfg).context("the model's scratch plan overflows")?];
     let mut out = vec![0f32; n * c];
     let started = std::time::Instant::now();
     let base = match &args.noise {
         Some(p) => {
             let noise = read_noise(p, &cfg, n)?;
-            generate(&model, &inputs, &mut Replay { noise: &noise }, &mut scratch, &mut out).map_err(err)?;
+            generate(
+                &model,
+                &inputs,
+                &mut Replay { noise: &noise },
+                &mut scratch,
+                &mut out,
+            )
+            .map_err(err)?;
             format!("base samples replayed from {}", p.display())
         }
         None => {
             let seed = args.seed.unwrap_or(0);
-            generate(&model, &inputs, &mut Seeded::new(seed, &cfg), &mut scratch, &mut out).map_err(err)?;
+            generate(
+                &model,
+                &inputs,
+                &mut Seeded::new(seed, &cfg),
+                &mut scratch,
+                &mut out,
+            )
+            .map_err(err)?;
             format!("base samples drawn with seed {seed}")
         }
     };
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
     write_f32(&args.out.join("output.npy"), &out, &[n, 1, c])?;
     eprintln!(
         "Transflower, exact mode: {n} frames of `{}` ({c} channels; frame 0 = song row {}), {base}; wrote {} in {:.1} s",
