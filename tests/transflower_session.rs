@@ -352,8 +352,8 @@ fn batched_sessions_equal_each_alone() {
     let ch = c.cfg.channels();
     let cfgs = [
         SessionConfig::preset(Preset::Exact),
-        SessionConfig::preset(Preset::Stale4),
-        SessionConfig::preset(Preset::Stale16),
+        SessionConfig::preset(Preset::Reference),
+        SessionConfig::preset(Preset::Realtime),
     ];
     let alone: Vec<Vec<f32>> = cfgs
         .iter()

@@ -134,6 +134,80 @@ fn generate_with_recorded_noise_matches_the_goldens() {
     }
 }
 
+/// `--mode streaming`: the exact preset is R bit for bit (noise replayed,
+/// and seeded); the stale-rows presets give as many finite frames, not R's;
+/// `--refresh 1` is the exact preset whatever the preset's other settings.
+#[test]
+fn streaming_exact_preset_is_r() {
+    let dir = tmp("stream");
+    for c in ["label", "slide"] {
+        let model = convert(c, &dir);
+        let run = |extra: &[&str], name: &str| {
+            let out = dir.join(format!("{c}-{name}"));
+            let (code, e) = generate(&model, &input_args(c), extra, &out);
+            assert_eq!(code, Some(0), "{c} {extra:?}: {e}");
+            std::fs::read(out.join("output.npy")).unwrap()
+        };
+        let noise = p(&case(c).join("noise.npy"));
+        let r = run(&["--noise", &noise], "r");
+        assert!(
+            r == run(
+                &[
+                    "--noise",
+                    &noise,
+                    "--mode",
+                    "streaming",
+                    "--preset",
+                    "exact"
+                ],
+                "s"
+            ),
+            "{c}: streaming exact != R"
+        );
+        assert!(
+            r == run(
+                &[
+                    "--noise",
+                    &noise,
+                    "--mode",
+                    "streaming",
+                    "--preset",
+                    "realtime",
+                    "--refresh",
+                    "1",
+                    "--kv",
+                    "f16"
+                ],
+                "s1"
+            ),
+            "{c}: refresh 1 != R"
+        );
+        assert!(
+            run(&["--seed", "3"], "r3")
+                == run(
+                    &["--seed", "3", "--mode", "streaming", "--preset", "exact"],
+                    "s3"
+                ),
+            "{c}: seeded streaming exact != R"
+        );
+        for preset in ["reference", "realtime"] {
+            let out = dir.join(format!("{c}-{preset}"));
+            let (code, e) = generate(
+                &model,
+                &input_args(c),
+                &["--noise", &noise, "--mode", "streaming", "--preset", preset],
+                &out,
+            );
+            assert_eq!(code, Some(0), "{e}");
+            assert!(e.contains(&format!("preset {preset}")), "{e}");
+            let (shape, v) = npy(&out.join("output.npy"));
+            let (want_shape, _) = npy(&case(c).join("output.npy"));
+            assert_eq!(shape, want_shape);
+            assert!(v.iter().all(|x| x.is_finite()));
+        }
+    }
+}
+
 /// `--seed`: the same seed, the same frames; another seed, others; no
 /// seed = seed 0.
 #[test]
@@ -286,8 +360,10 @@ fn bad_inputs_are_refused_by_name() {
                 audio.clone(),
                 "--mode".into(),
                 "streaming".into(),
+                "--preset".into(),
+                "live-music".into(),
             ],
-            "--mode streaming does not apply",
+            "--preset live-music is another family's preset; a Transflower model takes exact, reference, realtime",
         ),
         (
             vec![
@@ -298,7 +374,31 @@ fn bad_inputs_are_refused_by_name() {
                 "--lookahead".into(),
                 "3".into(),
             ],
-            "--lookahead is a streaming-budget flag",
+            "--lookahead is a Duolando / Bailando setting",
+        ),
+        (
+            vec![
+                "--input".into(),
+                motion.clone(),
+                "--input".into(),
+                audio.clone(),
+                "--refresh".into(),
+                "3".into(),
+            ],
+            "--preset, --refresh and --kv set a streaming session",
+        ),
+        (
+            vec![
+                "--input".into(),
+                motion.clone(),
+                "--input".into(),
+                audio.clone(),
+                "--mode".into(),
+                "streaming".into(),
+                "--refresh".into(),
+                "0".into(),
+            ],
+            "--refresh 0 is outside its range",
         ),
     ];
     for (i, (args, words)) in cases.iter().enumerate() {

@@ -36,6 +36,9 @@ use duolando_core::tensor::{block_row, DType, TensorRef, MAX_RANK};
 use crate::convert::{storage_for, stored_dims};
 use crate::duo_writer::{quantise_q4_block32, quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8, StoreAs};
 
+#[path = "bench_transflower.rs"]
+mod transflower;
+
 /// Flags of `duolando bench`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -58,9 +61,10 @@ pub struct Args {
     /// Use the scalar reference kernels instead of the detected SIMD ones.
     #[arg(long)]
     pub scalar: bool,
-    /// Which family's published model: duolando (default) or bailando (its
+    /// Which family's published model: duolando (default), bailando (its
     /// R step, the actor GPT over a full 28-token window, and its S step per
-    /// preset, f16 K/V, with the session arena).
+    /// preset, f16 K/V, with the session arena) or transflower (the paper
+    /// config's R step and its S step per session preset, with the arena).
     #[arg(long, default_value = "duolando")]
     pub family: String,
     /// Session counts stepped together with `Session::step_many` (int8
@@ -526,8 +530,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     if args.family == "bailando" {
         return bench_bailando(&args);
+    } else if args.family == "transflower" {
+        return transflower::run(&args);
     } else if args.family != "duolando" {
-        return Err(anyhow!("unknown family '{}' (duolando, bailando)", args.family));
+        return Err(anyhow!("unknown family '{}' (duolando, bailando, transflower)", args.family));
     }
     let mut results = Vec::new();
     for d in &args.dtypes {

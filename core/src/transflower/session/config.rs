@@ -31,19 +31,20 @@ pub enum Preset {
     /// R's numbers: every row recomputed at every step.
     Exact,
     /// Every row recomputed every 4th step; f32 keys and values.
-    Stale4,
-    /// Every row recomputed every 16th step; f16 keys and values.
-    Stale16,
+    Reference,
+    /// Every row recomputed every 16th step; f16 keys and values (the mean
+    /// step within real time at the published size on one core).
+    Realtime,
 }
 
 impl Preset {
-    pub const ALL: [Preset; 3] = [Preset::Exact, Preset::Stale4, Preset::Stale16];
+    pub const ALL: [Preset; 3] = [Preset::Exact, Preset::Reference, Preset::Realtime];
 
     pub fn name(self) -> &'static str {
         match self {
             Preset::Exact => "exact",
-            Preset::Stale4 => "stale4",
-            Preset::Stale16 => "stale16",
+            Preset::Reference => "reference",
+            Preset::Realtime => "realtime",
         }
     }
 
@@ -68,8 +69,8 @@ impl SessionConfig {
     pub fn preset(p: Preset) -> Self {
         let (refresh, kv) = match p {
             Preset::Exact => (1, KvType::F32),
-            Preset::Stale4 => (4, KvType::F32),
-            Preset::Stale16 => (16, KvType::F16),
+            Preset::Reference => (4, KvType::F32),
+            Preset::Realtime => (16, KvType::F16),
         };
         SessionConfig {
             refresh,

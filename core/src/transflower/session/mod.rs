@@ -233,6 +233,11 @@ impl<'a> Session<'a> {
         self.st.feeds.get(i).map_or(0, |f| f.held())
     }
 
+    /// Rows input `i` can take now (its capacity less what it holds).
+    pub fn room(&self, i: usize) -> usize {
+        self.st.feeds.get(i).map_or(0, |f| f.cap() - f.held())
+    }
+
     /// Appends rows (n, d_i) of sliding input `i` (the audio features,
     /// scaled). Refused, nothing kept: the output modality or a label
     /// ([`Error::State`]), a ragged or non-finite buffer, more rows than

@@ -30,7 +30,7 @@ impl<'s> Feed<'s> {
         })
     }
 
-    fn cap(&self) -> usize {
+    pub fn cap(&self) -> usize {
         self.rows.len().checked_div(self.d).unwrap_or(0)
     }
 
