@@ -516,6 +516,8 @@ fn inspect_shows_the_config() {
         "audio_feats_scaled_20",
         "flow 3 steps, norm batchnorm",
         "216 tensors",
+        "streaming (S)",
+        "realtime   refresh  16 (f16 kept keys/values)",
     ] {
         assert!(text.contains(words), "{words:?} not in:\n{text}");
     }
@@ -528,4 +530,12 @@ fn inspect_shows_the_config() {
     assert_eq!(v["config"]["douts"], 11);
     assert_eq!(v["r_mode"]["requested"]["output_frames"], 20 - 14 + 1);
     assert!(v["r_mode"]["one_minute"]["scratch_bytes"].as_u64().unwrap() > 0);
+    // Each session preset's arena is the library's figure.
+    let presets = v["streaming"]["presets"].as_array().unwrap();
+    assert_eq!(presets.len(), 3);
+    assert_eq!(presets[0]["name"], "exact");
+    assert_eq!(presets[0]["refresh"], 1);
+    assert!(
+        presets[2]["arena_bytes"].as_u64().unwrap() > presets[0]["arena_bytes"].as_u64().unwrap()
+    );
 }
