@@ -297,6 +297,9 @@ unsafe fn push_leader_many(
             crate::session::AnySession::Bailando(_) => {
                 return Err(crate::session::solo_refusal(&format!("sessions[{i}] in duo_step_batch_push_leader (solo sessions are stepped by their own pulls)")))
             }
+            crate::session::AnySession::Transflower(_) => {
+                return Err(crate::model::transflower_refusal(&format!("sessions[{i}] in duo_step_batch_push_leader")))
+            }
         };
         if !b.dims.holds(dims) {
             return Err(Failure::invalid(format!(
@@ -321,6 +324,11 @@ unsafe fn push_leader_many(
             crate::session::AnySession::Duolando { session, .. } => session,
             crate::session::AnySession::Bailando(_) => {
                 return Err(crate::session::solo_refusal("duo_step_batch_push_leader"))
+            }
+            crate::session::AnySession::Transflower(_) => {
+                return Err(crate::model::transflower_refusal(
+                    "duo_step_batch_push_leader",
+                ))
             }
         };
         refs.push(session)

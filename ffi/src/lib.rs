@@ -18,6 +18,7 @@ mod handle;
 pub mod model;
 pub mod result;
 pub mod session;
+pub mod transflower;
 
 pub use batch::DuoStepBatch;
 pub use frames::{DuoFollowerFrame, DuoLeaderFrame, DuoQuat, DuoVec3};

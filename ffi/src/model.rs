@@ -37,6 +37,8 @@ pub enum AnyModel {
     Duolando(Model<'static>),
     /// A solo dancer to music.
     Bailando(SoloModel<'static>),
+    /// A probabilistic solo dancer (motion features from audio features).
+    Transflower(duolando_core::transflower::model::Model<'static>),
 }
 
 /// What a `duo_model *` points to (an `Arc<ModelInner>` turned into a raw
@@ -67,17 +69,26 @@ impl ModelInner {
             AnyModel::Bailando(_) => Err(Failure::invalid(format!(
                 "{what} needs a Duolando model (a follower dancing with a leader); this is a Bailando model (a solo dancer to music): docs/C_API.md \"Solo models\""
             ))),
+            AnyModel::Transflower(_) => Err(transflower_refusal(what)),
         }
     }
     pub fn family(&self) -> Family {
         match &self.model {
             AnyModel::Duolando(_) => Family::Duolando,
             AnyModel::Bailando(_) => Family::Bailando,
+            AnyModel::Transflower(_) => Family::Transflower,
         }
     }
     pub fn is_mapped(&self) -> bool {
         matches!(&self.storage, Storage::File(f) if f.is_mapped())
     }
+}
+
+/// `what` is for Duolando / Bailando; Transflower has its own entry points.
+pub(crate) fn transflower_refusal(what: &str) -> Failure {
+    Failure::invalid(format!(
+        "{what}: this is a Transflower model (motion features from audio features): its sessions are made and used with the duo_transflower_* functions (duo_session_push_music, duo_session_free too): docs/C_API.md \"Transflower\""
+    ))
 }
 
 /// Opaque `duo_model` (never constructed; a pointer to [`ModelInner`]).
@@ -105,12 +116,20 @@ fn bind(duo: &DuoFile<'static>, origin: &str) -> Result<AnyModel, Failure> {
     };
     match duo.config() {
         FamilyConfig::Duolando(_) => Model::from_duo(duo).map(AnyModel::Duolando).map_err(bad),
-        FamilyConfig::Bailando(_) => SoloModel::from_duo(duo).map(AnyModel::Bailando).map_err(bad),
-        // C sessions for Transflower come later: refused by family, by name.
-        FamilyConfig::Transflower(_) => Err(Failure::new(
-            DuoResult::BadModel,
-            format!("{origin}: a Transflower model (family 2): the C library does not run this family yet (the duolando CLI does)"),
-        )),
+        FamilyConfig::Bailando(_) => SoloModel::from_duo(duo)
+            .map(AnyModel::Bailando)
+            .map_err(bad),
+        FamilyConfig::Transflower(_) => duolando_core::transflower::model::Model::from_duo(duo)
+            .map(AnyModel::Transflower)
+            .map_err(|e| {
+                Failure::new(
+                    DuoResult::BadModel,
+                    format!(
+                        "{origin}: invalid .duo model: {}",
+                        duolando_runtime::engine_errors::describe_transflower_model(&e)
+                    ),
+                )
+            }),
     }
 }
 
@@ -360,6 +379,21 @@ pub unsafe extern "C" fn duo_model_get_info(
                     look_forward: 0,
                     mapped: m.is_mapped() as u32,
                     family: Family::Bailando as u32,
+                }
+            }
+            AnyModel::Transflower(model) => {
+                let cfg = &model.cfg;
+                let last = &cfg.inputs()[cfg.inputs().len() - 1];
+                DuoModelInfo {
+                    joints: 0,
+                    music_features: if last.is_discrete() { 0 } else { last.dim },
+                    fps: duolando_core::transflower::config::FPS,
+                    frames_per_token: 1,
+                    block_size: cfg.max_window() as u32,
+                    look_forward: duolando_core::transflower::session::lookahead_rows(cfg).max(0)
+                        as u32,
+                    mapped: m.is_mapped() as u32,
+                    family: Family::Transflower as u32,
                 }
             }
         };

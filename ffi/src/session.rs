@@ -27,8 +27,9 @@ use duolando_core::duolando::session::{
 
 use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
 use crate::handle::{buffer, buffer_mut, caller_slot, drop_handle, handle_bytes};
-use crate::model::{share, AnyModel, DuoModel, ModelInner};
+use crate::model::{share, transflower_refusal, AnyModel, DuoModel, ModelInner};
 use crate::result::{guard, DuoResult, Failure};
+use duolando_core::transflower::session::Session as TfSession;
 
 /// Largest accepted |coordinate| of a leader joint, metres
 /// (`DUO_MAX_POSITION_M`).
@@ -237,6 +238,7 @@ pub(crate) enum AnySession {
         dims: StepDims,
     },
     Bailando(SoloSession<'static>),
+    Transflower(TfSession<'static>),
 }
 
 /// What a `duo_session *` points to.
@@ -252,11 +254,27 @@ pub struct SessionInner {
 }
 
 impl SessionInner {
+    /// A session in library memory: `session` borrows `arena` and `model`'s
+    /// weights, both kept here (and dropped after it).
+    pub(crate) fn owned(
+        session: AnySession,
+        model: Arc<ModelInner>,
+        arena: Box<[u8]>,
+    ) -> Box<SessionInner> {
+        Box::new(SessionInner {
+            session,
+            model,
+            _arena: Some(arena),
+            in_caller_memory: false,
+        })
+    }
+
     /// The Duolando session, or a refusal naming the solo family for `what`.
     pub(crate) fn duolando(&mut self, what: &str) -> Result<&mut Session<'static>, Failure> {
         match &mut self.session {
             AnySession::Duolando { session, .. } => Ok(session),
             AnySession::Bailando(_) => Err(solo_refusal(what)),
+            AnySession::Transflower(_) => Err(transflower_refusal(what)),
         }
     }
 }
@@ -307,6 +325,7 @@ pub(crate) fn any_config_ref(
             m.session_bytes(&core)?;
             Ok(AnyConfig::Bailando(core))
         }
+        AnyModel::Transflower(_) => Err(transflower_refusal("duo_session_config")),
     }
 }
 
@@ -336,6 +355,7 @@ fn any_seed_ref(model: &ModelInner, seed: *const u32) -> Result<AnySeed, Failure
         AnyModel::Bailando(_) => {
             AnySeed::Bailando(unsafe { std::ptr::read_unaligned(seed.cast::<[u32; 2]>()) })
         }
+        AnyModel::Transflower(_) => return Err(transflower_refusal("seed_tokens")),
     })
 }
 
@@ -347,7 +367,7 @@ fn seed_ref(seed: *const u32) -> Result<[u32; 5], Failure> {
     Ok(unsafe { std::ptr::read_unaligned(seed.cast::<[u32; 5]>()) })
 }
 
-fn session_mut<'x>(session: *mut DuoSession) -> Result<&'x mut SessionInner, Failure> {
+pub(crate) fn session_mut<'x>(session: *mut DuoSession) -> Result<&'x mut SessionInner, Failure> {
     // SAFETY: NULL or a live handle used by one thread at a time (contract).
     unsafe { session.as_mut() }.ok_or_else(|| Failure::null("session"))
 }
@@ -383,6 +403,13 @@ unsafe fn config_default(
                 SoloPreset::Minimum
             },
         )),
+        AnyModel::Transflower(_) => {
+            return Err(transflower_refusal(if reference {
+                "duo_session_config_reference"
+            } else {
+                "duo_session_config_minimum"
+            }))
+        }
     };
     // SAFETY: checked non-NULL.
     unsafe { *out = DuoSessionConfig::from_any(&c) };
@@ -464,6 +491,11 @@ pub unsafe extern "C" fn duo_session_config_preset(
                     ))
                 })?;
                 AnyConfig::Bailando(SoloConfig::preset(&model.cfg, p))
+            }
+            AnyModel::Transflower(_) => {
+                return Err(transflower_refusal(
+                    "duo_session_config_preset (Transflower: duo_transflower_config_preset)",
+                ))
             }
         };
         // SAFETY: checked non-NULL.
@@ -646,6 +678,7 @@ pub unsafe extern "C" fn duo_session_latency_frames(
         let frames = match &s.session {
             AnySession::Duolando { session, .. } => session.latency_frames(),
             AnySession::Bailando(session) => session.latency_frames(),
+            AnySession::Transflower(_) => return Err(transflower_refusal("duo_session_latency_frames (Transflower: duo_transflower_get_info's lookahead_rows)")),
         };
         // SAFETY: checked non-NULL.
         unsafe { *out_frames = frames };
@@ -739,6 +772,7 @@ pub unsafe extern "C" fn duo_session_finish(session: *mut DuoSession) -> DuoResu
                 }
                 Err(e) => return Err(e.into()),
             },
+            AnySession::Transflower(_) => return Err(transflower_refusal("duo_session_finish (a Transflower session has nothing to drain: each frame is final when its step runs)")),
         }
         Ok(DuoResult::Ok)
     })
@@ -763,6 +797,7 @@ pub unsafe extern "C" fn duo_session_push_music(
         match &mut s.session {
             AnySession::Duolando { session, .. } => session.push_music_frame(x),
             AnySession::Bailando(session) => session.push_music(x),
+            AnySession::Transflower(session) => crate::transflower::push_audio(session, x),
         }
         .map_err(|e| rejected_value(e, x, "music frame", MAX_MUSIC_FEATURE))?;
         Ok(DuoResult::Ok)
@@ -800,6 +835,11 @@ pub unsafe extern "C" fn duo_session_set_music_track(
                     ));
                 }
                 session.push_music(x)
+            }
+            AnySession::Transflower(_) => {
+                return Err(transflower_refusal(
+                    "duo_session_set_music_track (push the audio rows with duo_session_push_music)",
+                ))
             }
         }
         .map_err(|e| rejected_value(e, x, "music track", MAX_MUSIC_FEATURE))?;
@@ -877,6 +917,7 @@ pub unsafe extern "C" fn duo_session_pull_positions(
         let joints = match &s.session {
             AnySession::Duolando { .. } => N_JOINTS,
             AnySession::Bailando(_) => duolando_core::bailando::config::N_JOINTS,
+            AnySession::Transflower(_) => return Err(transflower_refusal("duo_session_pull_positions (its frames are motion features: duo_transflower_pull_frame)")),
         };
         // SAFETY: NULL or `n_floats` writable floats (contract); the buffer
         // rule: NULL with 0 is an empty buffer (a wrong count below).
@@ -910,6 +951,9 @@ pub unsafe extern "C" fn duo_session_pull_positions(
                     None => return Ok(DuoResult::NotReady),
                 }
             }
+            AnySession::Transflower(_) => {
+                return Err(transflower_refusal("duo_session_pull_positions"))
+            }
         };
         if !out_index.is_null() {
             // SAFETY: non-NULL and writable (contract).
@@ -930,6 +974,11 @@ pub unsafe extern "C" fn duo_session_reset(
 ) -> DuoResult {
     guard("duo_session_reset", || {
         let s = session_mut(session)?;
+        if let AnySession::Transflower(_) = s.session {
+            return Err(transflower_refusal(
+                "duo_session_reset (Transflower: duo_transflower_session_reset)",
+            ));
+        }
         let seed = any_seed_ref(&s.model, seed_tokens)?;
         match (&mut s.session, seed) {
             (AnySession::Duolando { session, .. }, AnySeed::Duolando(seed)) => {

@@ -974,6 +974,16 @@ fn every_buffer_follows_the_null_rule() {
         ("duo_step_batch_new_in", "memory"),
         ("duo_step_batch_push_leader", "frames"),
     ];
+    // Transflower's: checked in ffi/tests/transflower_session.rs
+    // (`buffers_follow_the_null_rule`, on a Transflower model).
+    let transflower: &[(&str, &str)] = &[
+        ("duo_transflower_session_new", "seed_motion"),
+        ("duo_transflower_session_new", "labels"),
+        ("duo_transflower_push_input", "rows"),
+        ("duo_transflower_pull_frame", "out"),
+        ("duo_transflower_pull_frame_with_noise", "noise"),
+        ("duo_transflower_pull_frame_with_noise", "out"),
+    ];
     // A struct pointer followed by a count that is not its length.
     let not_buffers: &[(&str, &str)] = &[
         ("duo_step_batch_bytes", "config"),
@@ -982,6 +992,7 @@ fn every_buffer_follows_the_null_rule() {
     ];
     let want: std::collections::BTreeSet<(String, String)> = checked
         .iter()
+        .chain(transflower)
         .chain(not_buffers)
         .map(|(f, p)| (f.to_string(), p.to_string()))
         .collect();

@@ -223,6 +223,11 @@ impl<'a> Session<'a> {
         &self.cfg
     }
 
+    /// The model's configuration.
+    pub fn config_model(&self) -> &TransflowerConfig {
+        &self.model.cfg
+    }
+
     /// Frames made so far (frame t is song row `output_time_offset + t`).
     pub fn steps(&self) -> usize {
         self.steps
