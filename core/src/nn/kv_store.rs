@@ -52,7 +52,8 @@ impl<'s> KvBuf<'s> {
         self.len() == 0
     }
 
-    /// Stores `x` at elements `at .. at + x.len()` (f16: rounded to nearest).
+    /// Stores `x` at elements `at .. at + x.len()` (f16: rounded to nearest,
+    /// finite values beyond its range saturated to +-65504).
     pub fn store(&mut self, at: usize, x: &[f32]) -> Result<(), Error> {
         let end = at
             .checked_add(x.len())
@@ -60,7 +61,19 @@ impl<'s> KvBuf<'s> {
             .ok_or(out_of_range(at, self.len()))?;
         match self {
             KvBuf::F32(d) => d[at..end].copy_from_slice(x),
-            KvBuf::F16(d) => crate::kernels::simd::narrow_f16(x, &mut d[at..end]),
+            KvBuf::F16(d) => {
+                let d = &mut d[at..end];
+                crate::kernels::simd::narrow_f16(x, d);
+                // A finite value beyond binary16's range is kept as the
+                // largest finite one of its sign, not infinity (an
+                // infinite key makes the softmax NaN): post-LN layers
+                // (Transflower) store keys of unnormalised rows.
+                for (h, &v) in d.iter_mut().zip(x) {
+                    if *h & 0x7fff == 0x7c00 && v.is_finite() {
+                        *h = (*h & 0x8000) | 0x7bff;
+                    }
+                }
+            }
         }
         Ok(())
     }
@@ -163,5 +176,24 @@ impl<'s> KvRing<'s> {
                 self.data.view(0, (s + n - self.cap) * w)?,
             ))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// f16 storage: values within range are rounded to nearest; finite
+    /// values beyond +-65504 are saturated (an infinite key would make the
+    /// softmax NaN); infinities and NaN stay what they are.
+    #[test]
+    fn f16_store_saturates_finite_overflow() {
+        let mut buf = [0u16; 6];
+        let mut kv = KvBuf::F16(&mut buf);
+        kv.store(0, &[1.0, -2.5, 1.0e6, -7.0e4, f32::INFINITY, 65504.0])
+            .unwrap();
+        let KvBuf::F16(d) = kv else { unreachable!() };
+        let back: [f32; 6] = core::array::from_fn(|i| crate::kernels::simd::f16_to_f32(d[i]));
+        assert_eq!(back, [1.0, -2.5, 65504.0, -65504.0, f32::INFINITY, 65504.0]);
     }
 }
