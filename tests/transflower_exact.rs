@@ -672,4 +672,4 @@ fn published_paper_config_has_the_published_size() {
 }
 
 /// [`generate_scratch_bytes`] of the published paper config.
-const PUBLISHED_SCRATCH_BYTES: usize = 7_058_943;
+const PUBLISHED_SCRATCH_BYTES: usize = 8_161_343;

@@ -69,6 +69,24 @@ impl Mask for BandMask {
     }
 }
 
+/// No mask: every query sees every key (torch's `TransformerEncoderLayer`
+/// without `src_mask`); all queries are one group ([`Mask::period`] 1).
+#[derive(Clone, Copy, Debug)]
+pub struct AllKeys;
+
+impl Mask for AllKeys {
+    #[inline]
+    fn allowed(&self, _: usize, _: usize) -> bool {
+        true
+    }
+    fn period(&self) -> Option<usize> {
+        Some(1)
+    }
+    fn key_runs(&self, _: usize, nk: usize, runs: &mut [(usize, usize)]) -> Option<usize> {
+        Some(one_run(0, nk, runs))
+    }
+}
+
 /// The coordinated-attention mask: streams laid out one after another,
 /// `t_q` query rows and `t_k` key rows per stream; a query at in-stream
 /// position `q_pos0 + qi % t_q` sees every key (any stream) whose

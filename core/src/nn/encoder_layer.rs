@@ -16,6 +16,7 @@
 use crate::arena::{ArenaError, Carve};
 use crate::kernels::simd;
 use crate::kernels::{layernorm, linear, relu_inplace, RowData};
+use crate::kernels::{F32Rows, Matrix};
 use crate::nn::bind::{BindError, Binder, TensorSource};
 use crate::nn::kv_store::{KvBuf, KvType};
 use crate::nn::names::{name, Emit, Role, SchemaError};
@@ -82,6 +83,11 @@ pub struct EncoderLayerScratch<'s> {
     qkv: &'s mut [f32],
     /// (rows, d): attention output, then the FFN output.
     att: &'s mut [f32],
+    /// (rows, d): the queries, head-major (head h: (rows, d / n_head)),
+    /// then each head's attention output in the same place.
+    q: &'s mut [f32],
+    /// (rows, rows): one head's attention probabilities.
+    probs: &'s mut [f32],
     /// (rows, d): out_proj output + residual, then FFN output + residual.
     sum: &'s mut [f32],
     /// (rows, f): FFN hidden rows.
@@ -101,6 +107,8 @@ impl<'s> EncoderLayerScratch<'s> {
         Ok(EncoderLayerScratch {
             qkv: a.f32(rd.checked_mul(3).ok_or(ArenaError::Overflow)?)?,
             att: a.f32(rd)?,
+            q: a.f32(rd)?,
+            probs: a.f32(rows.checked_mul(rows).ok_or(ArenaError::Overflow)?)?,
             sum: a.f32(rd)?,
             hid: a.f32(rows.checked_mul(f).ok_or(ArenaError::Overflow)?)?,
             scores: a.f32(rows)?,
@@ -150,8 +158,29 @@ pub fn encoder_layer(
     let qkv = &mut s.qkv[..3 * nd];
     linear(x, &w.in_proj.w, w.in_proj.b, qkv);
     // (keep, d) attention output of the kept query rows.
-    let att = &mut s.att[..kd];
-    self_attention(qkv, n, d, n_head, bias, keep, &mut s.scores[..n], att);
+    match bias {
+        Some(_) => self_attention(
+            qkv,
+            n,
+            d,
+            n_head,
+            bias,
+            keep,
+            &mut s.scores[..n],
+            &mut s.att[..kd],
+        ),
+        None if f >= d && s.probs.len() >= keep * n => attention_gemm(n, d, n_head, keep, s),
+        None => self_attention(
+            qkv,
+            n,
+            d,
+            n_head,
+            None,
+            keep,
+            &mut s.scores[..n],
+            &mut s.att[..kd],
+        ),
+    }
     after_attention(w, &mut x[..kd], d, f, s);
 }
 
@@ -304,6 +333,66 @@ pub fn encoder_layer_rows(
 fn add(y: &mut [f32], x: &[f32]) {
     for (a, b) in y.iter_mut().zip(x) {
         *a += b;
+    }
+}
+
+/// [`self_attention`] without a bias as GEMMs: per head, the scores
+/// (keep, n) = q_h k_h^T and the output (keep, hd) = p_h v_h through the
+/// f32 `linear` kernel (register tiles, threads), the softmax between as
+/// [`self_attention`] does it. Keys go head-major into `sum` (n, hd per
+/// head), values transposed into `hid` (hd, n per head), queries into `q`
+/// (keep, hd per head), where each head's output then lands; `att`
+/// (keep, d) gets them back row-major. `qkv` is left as it was
+/// ([`EncoderLayerScratch::qkv`]).
+fn attention_gemm(n: usize, d: usize, n_head: usize, keep: usize, s: &mut EncoderLayerScratch<'_>) {
+    let hd = d / n_head;
+    let scale = 1.0 / libm::sqrtf(hd as f32);
+    let qkv = &s.qkv[..3 * n * d];
+    let (q, k, vt) = (
+        &mut s.q[..keep * d],
+        &mut s.sum[..n * d],
+        &mut s.hid[..n * d],
+    );
+    for (j, row) in qkv.chunks_exact(3 * d).take(n).enumerate() {
+        for h in 0..n_head {
+            let (qh, kh, vh) = (
+                &row[h * hd..][..hd],
+                &row[d + h * hd..][..hd],
+                &row[2 * d + h * hd..][..hd],
+            );
+            if j < keep {
+                q[(h * keep + j) * hd..][..hd].copy_from_slice(qh);
+            }
+            k[(h * n + j) * hd..][..hd].copy_from_slice(kh);
+            for (t, &v) in vh.iter().enumerate() {
+                vt[(h * hd + t) * n + j] = v;
+            }
+        }
+    }
+    let probs = &mut s.probs[..keep * n];
+    for h in 0..n_head {
+        let (Some(kh), Some(vth)) = (
+            F32Rows::new(&k[h * n * hd..(h + 1) * n * hd], n, hd),
+            F32Rows::new(&vt[h * hd * n..(h + 1) * hd * n], hd, n),
+        ) else {
+            return;
+        };
+        let qh = &mut q[h * keep * hd..(h + 1) * keep * hd];
+        linear(qh, &Matrix::F32(kh), None, probs);
+        for p in probs.chunks_exact_mut(n) {
+            let max = simd::scale_max(p, scale, f32::NEG_INFINITY);
+            let sum = simd::exp_shifted_sum(p, max);
+            let inv = if sum > 0.0 { 1.0 / sum } else { 0.0 };
+            for v in p.iter_mut() {
+                *v *= inv;
+            }
+        }
+        linear(probs, &Matrix::F32(vth), None, qh);
+    }
+    for i in 0..keep {
+        for h in 0..n_head {
+            s.att[i * d + h * hd..][..hd].copy_from_slice(&q[(h * keep + i) * hd..][..hd]);
+        }
     }
 }
 
