@@ -11,7 +11,9 @@
 //!   bit, the steps between differ from it (the approximation is on), and
 //!   the distance of the whole run from R is printed;
 //! - the cached layer (`encoder_layer_rows`) over kept keys and values of
-//!   the same inputs equals the whole layer, with and without a score bias;
+//!   the same inputs equals the whole layer: bit for bit with a score bias
+//!   (the same attention loop), within `REORDER_TOL` without (the whole
+//!   layer's attention runs as GEMMs);
 //! - sessions stepped together in a `StepBatch` equal each alone;
 //! - refusals leave the session as it was.
 
@@ -282,8 +284,8 @@ fn stale_rows_refresh_steps_are_r_steps() {
 }
 
 /// The cached layer over keys and values kept from the same inputs is the
-/// whole layer (bit for bit with slots in window order), with a score bias
-/// too.
+/// whole layer (slots in window order): bit for bit with a score bias,
+/// within REORDER_TOL without one.
 #[test]
 fn cached_layer_equals_the_whole_layer() {
     let c = Case::load("label");
@@ -334,14 +336,29 @@ fn cached_layer_equals_the_whole_layer() {
         );
         for (r, &j) in slots.iter().enumerate() {
             let j = j as usize;
-            assert!(
-                rows[r * d..(r + 1) * d] == whole[j * d..(j + 1) * d],
-                "bias {}: row {j} differs",
-                bias.is_some()
-            );
+            let (got, want) = (&rows[r * d..(r + 1) * d], &whole[j * d..(j + 1) * d]);
+            match bias {
+                // The same per-query attention loop: bit for bit.
+                Some(_) => assert!(got == want, "bias: row {j} differs"),
+                // The whole layer's attention runs as GEMMs (another
+                // summation order): within REORDER_TOL.
+                None => {
+                    let e = rel_err(got, want);
+                    eprintln!("no bias: row {j} rel err {e:.2e}");
+                    assert!(
+                        e <= REORDER_TOL,
+                        "no bias: row {j} rel err {e:e} > {REORDER_TOL:e}"
+                    );
+                }
+            }
         }
     }
 }
+
+/// A layer's outputs (LayerNorm: |v| ~ 1) computed with the attention's
+/// sums in another order: ~n ulps of the score and value sums at worst
+/// (n = 12 keys here, 6e-8 each: 7e-7); measured 1.4e-7.
+const REORDER_TOL: f32 = 1e-6;
 
 /// Sessions in one StepBatch (different presets, seeds) = each alone.
 #[test]
