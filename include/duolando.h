@@ -545,12 +545,15 @@ typedef struct duo_transflower_info {
   uint32_t reserved;
 } duo_transflower_info;
 
-/* A Transflower session's settings. 24 bytes. */
+/* A Transflower session's settings. 32 bytes. */
 typedef struct duo_transflower_config {
   uint32_t refresh;           /* steps between recomputations of every row, 1..4096 (1: R) */
   uint32_t kv;                /* a duo_kv value: the kept keys and values (refresh > 1) */
   uint32_t input_buffer_rows; /* audio rows held beyond the window, 0..65536 */
   uint32_t pending_frames;    /* frames made and not pulled, 1..65536 */
+  uint32_t rolling;           /* 1: a share of the rows recomputed every step (a flat cost);
+                                 0: all of them every refresh-th step (a spike) */
+  uint32_t reserved;          /* 0 */
   uint64_t rng_seed;          /* the base samples' seed */
 } duo_transflower_config;
 
@@ -558,8 +561,8 @@ typedef struct duo_transflower_config {
  * Thread-safe. */
 duo_result duo_transflower_get_info(const duo_model *model, duo_transflower_info *out_info);
 
-/* The named preset: "exact" (refresh 1), "reference" (4, f32),
- * "realtime" (16, f16); rng_seed 0. DUO_NULL_PARAMETER,
+/* The named preset: "exact" (refresh 1), "reference" (4, f32, all rows
+ * every 4th step), "realtime" (16, f16, rolling); rng_seed 0. DUO_NULL_PARAMETER,
  * DUO_INVALID_ARGUMENT (no such preset, another family). Thread-safe. */
 duo_result duo_transflower_config_preset(const duo_model *model, const char *name,
                                          duo_transflower_config *out_config);

@@ -283,6 +283,74 @@ fn stale_rows_refresh_steps_are_r_steps() {
     }
 }
 
+/// The rolling schedule: with `refresh` 1 every row is recomputed at every
+/// step through the cached path, which is R's step on the session's window
+/// up to the attention's summation order (within the case's golden
+/// tolerance, as R itself is held to the authors'); with `refresh` k > 1
+/// the first step is R's step bit for bit, later ones differ from it and
+/// stay finite; the distance of the run from R is printed.
+#[test]
+fn rolling_schedule() {
+    for case in CASES {
+        let c = Case::load(case);
+        let model = c.model();
+        let f = feeds(&c);
+        let ch = c.cfg.channels();
+        let lm = c.cfg.output_input().length as usize;
+        let noise = c.noise();
+        let per_step = ch * c.cfg.output_length as usize;
+        let want = r_frames(&c, &model, None);
+        let tol = 4.0 * c.f32_vs_f64();
+        for (refresh, kv) in [(1, KvType::F32), (4, KvType::F32), (16, KvType::F16)] {
+            let cfg = SessionConfig {
+                refresh,
+                kv,
+                rolling: true,
+                ..SessionConfig::preset(Preset::Exact)
+            };
+            let got = run_session(&c, &model, &cfg, 3, Some(&noise), 0);
+            assert_eq!(got.len(), want.len(), "{case}: frames");
+            assert!(
+                got.iter().all(|v| v.is_finite()),
+                "{case}: non-finite frame"
+            );
+            let n = got.len() / ch;
+            let mut history = f.seed.clone();
+            history.extend_from_slice(&got);
+            let (mut one_step, mut differ) = (0f32, 0);
+            for t in 0..n {
+                let r = r_step(
+                    &c,
+                    &model,
+                    &f,
+                    &history[t * ch..(t + lm) * ch],
+                    t,
+                    &noise[t * per_step..(t + 1) * per_step],
+                );
+                let frame = &got[t * ch..(t + 1) * ch];
+                if t == 0 {
+                    assert!(
+                        frame == r.as_slice(),
+                        "{case} rolling {refresh}: the first step is not R's"
+                    );
+                } else {
+                    one_step = one_step.max(rel_err(frame, &r));
+                    differ += usize::from(frame != r.as_slice());
+                }
+            }
+            if refresh == 1 {
+                assert!(
+                    one_step <= tol,
+                    "{case} rolling 1: a step is {one_step:e} from R's step (tolerance {tol:e})"
+                );
+            } else {
+                assert!(n < 2 || differ > 0, "{case} rolling {refresh}: no step differs from R's: the stale rows are not used");
+            }
+            eprintln!("{case} rolling refresh {refresh} {kv:?}: {n} frames, one step vs R's step on the same window <= {one_step:.3e} ({differ} differ); whole run vs R {:.3e}", rel_err(&got, &want));
+        }
+    }
+}
+
 /// The cached layer over keys and values kept from the same inputs is the
 /// whole layer (slots in window order): bit for bit with a score bias,
 /// within REORDER_TOL without one.

@@ -51,7 +51,7 @@ pub struct DuoTransflowerInfo {
     pub reserved: u32,
 }
 
-/// `duo_transflower_config` (24 bytes).
+/// `duo_transflower_config` (32 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default)]
 pub struct DuoTransflowerConfig {
@@ -63,6 +63,11 @@ pub struct DuoTransflowerConfig {
     pub input_buffer_rows: u32,
     /// Frames made and not yet pulled (the session makes one per pull).
     pub pending_frames: u32,
+    /// 1: recompute a share of the rows every step (no cost spike); 0:
+    /// all of them every `refresh`-th step.
+    pub rolling: u32,
+    /// 0.
+    pub reserved: u32,
     /// The base samples' seed.
     pub rng_seed: u64,
 }
@@ -70,7 +75,7 @@ pub struct DuoTransflowerConfig {
 // The header's sizes (include/duolando.h), checked at compile time here
 // and by tests/c/header_c.c on the C side.
 const _: () = assert!(std::mem::size_of::<DuoTransflowerInfo>() == 48);
-const _: () = assert!(std::mem::size_of::<DuoTransflowerConfig>() == 24);
+const _: () = assert!(std::mem::size_of::<DuoTransflowerConfig>() == 32);
 
 impl DuoTransflowerConfig {
     fn from_core(c: &SessionConfig, rng_seed: u64) -> Self {
@@ -79,6 +84,8 @@ impl DuoTransflowerConfig {
             kv: matches!(c.kv, KvType::F16) as u32,
             input_buffer_rows: c.input_buffer_rows,
             pending_frames: c.pending_frames,
+            rolling: c.rolling as u32,
+            reserved: 0,
             rng_seed,
         }
     }
@@ -93,9 +100,21 @@ impl DuoTransflowerConfig {
                 )))
             }
         };
+        let rolling = match self.rolling {
+            0 => false,
+            1 => true,
+            v => return Err(Failure::invalid(format!("rolling is {v}; 0 or 1"))),
+        };
+        if self.reserved != 0 {
+            return Err(Failure::invalid(format!(
+                "reserved is {}; 0",
+                self.reserved
+            )));
+        }
         let c = SessionConfig {
             refresh: self.refresh,
             kv,
+            rolling,
             input_buffer_rows: self.input_buffer_rows,
             pending_frames: self.pending_frames,
         };

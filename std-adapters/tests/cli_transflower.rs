@@ -136,7 +136,8 @@ fn generate_with_recorded_noise_matches_the_goldens() {
 
 /// `--mode streaming`: the exact preset is R bit for bit (noise replayed,
 /// and seeded); the stale-rows presets give as many finite frames, not R's;
-/// `--refresh 1` is the exact preset whatever the preset's other settings.
+/// `--refresh 1` on the (not rolling) reference preset is the exact preset
+/// whatever the kept K/V type.
 #[test]
 fn streaming_exact_preset_is_r() {
     let dir = tmp("stream");
@@ -172,7 +173,7 @@ fn streaming_exact_preset_is_r() {
                     "--mode",
                     "streaming",
                     "--preset",
-                    "realtime",
+                    "reference",
                     "--refresh",
                     "1",
                     "--kv",
@@ -180,7 +181,7 @@ fn streaming_exact_preset_is_r() {
                 ],
                 "s1"
             ),
-            "{c}: refresh 1 != R"
+            "{c}: refresh 1 (not rolling) != R"
         );
         assert!(
             run(&["--seed", "3"], "r3")
@@ -517,7 +518,7 @@ fn inspect_shows_the_config() {
         "flow 3 steps, norm batchnorm",
         "216 tensors",
         "streaming (S)",
-        "realtime   refresh  16 (f16 kept keys/values)",
+        "realtime   refresh  16 rolling (f16 kept keys/values)",
     ] {
         assert!(text.contains(words), "{words:?} not in:\n{text}");
     }

@@ -8,7 +8,7 @@ int main(void) {
   (void)f;
   (void)c;
   return (int)sizeof(duo_leader_frame) == 660 && sizeof(duo_transflower_info) == 48 &&
-                 sizeof(duo_transflower_config) == 24
+                 sizeof(duo_transflower_config) == 32
              ? 0
              : 1;
 }

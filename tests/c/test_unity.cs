@@ -214,7 +214,7 @@ static class TestUnity
         float[] audio = ReadNpyF32(Path.Combine(dir, "in_audio_feats_scaled_20.npy"));
         float[] noise = ReadNpyF32(Path.Combine(dir, "noise.npy"));
         float[] want = ReadNpyF32(Path.Combine(dir, "output.npy"));
-        Check(Marshal.SizeOf(typeof(TransflowerInfo)) == 48 && Marshal.SizeOf(typeof(TransflowerConfig)) == 24, "Transflower struct sizes");
+        Check(Marshal.SizeOf(typeof(TransflowerInfo)) == 48 && Marshal.SizeOf(typeof(TransflowerConfig)) == 32, "Transflower struct sizes");
         using (Model duet = Model.OpenFile(Path.Combine(root, "tests/fixtures/tiny/model.duo")))
             ThrowsArgument(() => new TransflowerSession(duet, new TransflowerConfig(), motion, null), "TransflowerSession on a Duolando model");
         using (Model model = Model.OpenFile(Path.Combine(dir, "model.duo")))

@@ -172,7 +172,7 @@ namespace Duolando
         public uint Reserved;
     }
 
-    /// <summary>duo_transflower_config (24 bytes): start from TransflowerSession.Preset.</summary>
+    /// <summary>duo_transflower_config (32 bytes): start from TransflowerSession.Preset.</summary>
     [StructLayout(LayoutKind.Sequential)]
     public struct TransflowerConfig
     {
@@ -180,6 +180,9 @@ namespace Duolando
         public uint Refresh;
         public KvType Kv;
         public uint InputBufferRows, PendingFrames;
+        /// <summary>1: a share of the rows recomputed every step (flat cost); 0: all every Refresh-th step.</summary>
+        public uint Rolling;
+        public uint Reserved;
         /// <summary>The base samples' seed: another seed, another dance.</summary>
         public ulong RngSeed;
     }

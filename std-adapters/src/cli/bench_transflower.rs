@@ -183,9 +183,10 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
                 .with_context(|| format!("S step {}", preset.name()))?;
                 let st = stats(times);
                 println!(
-                    "Transflower S step {d:>4} t{t} {:<8} (refresh {:>2}, {:?} K/V): median {:8.2} ms  p99 {:8.2} ms  mean {:8.2} ms  {:.2}x real time (mean)  arena {:.2} MB",
+                    "Transflower S step {d:>4} t{t} {:<8} (refresh {:>2}{}, {:?} K/V): median {:8.2} ms  p99 {:8.2} ms  mean {:8.2} ms  {:.2}x real time (mean)  arena {:.2} MB",
                     preset.name(),
                     sc.refresh,
+                    if sc.rolling { " rolling" } else { "" },
                     sc.kv,
                     st.median_ms,
                     st.p99_ms,

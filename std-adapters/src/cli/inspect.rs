@@ -242,6 +242,7 @@ fn transflower_report(duo: &duolando_core::format::DuoFile<'_>, cfg: &Transflowe
                     "name": p.name(),
                     "refresh": sc.refresh,
                     "kv": format!("{:?}", sc.kv).to_lowercase(),
+                    "rolling": sc.rolling,
                     "arena_bytes": duolando_core::transflower::session::session_bytes(cfg, &sc).ok(),
                 })
             }).collect::<Vec<_>>(),
@@ -307,9 +308,10 @@ fn transflower_text(r: &Value) -> String {
     ));
     for p in st["presets"].as_array().into_iter().flatten() {
         line(format!(
-            "  {:<10} refresh {:>3} ({} kept keys/values): arena {}",
+            "  {:<10} refresh {:>3}{} ({} kept keys/values): arena {}",
             p["name"].as_str().unwrap_or(""),
             p["refresh"].as_u64().unwrap_or(0),
+            if p["rolling"] == true { " rolling" } else { "" },
             p["kv"].as_str().unwrap_or(""),
             p["arena_bytes"].as_u64().map(mib).unwrap_or_else(|| "overflow".into())
         ));

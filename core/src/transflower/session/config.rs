@@ -13,7 +13,8 @@
 //! other row had when it was last computed (stale rows). That is ~8x less
 //! work per in-between step at the published size (5 of 260 cross-modal
 //! rows), and an approximation whose distance from R is measured
-//! (docs/TRANSFLOWER.md "S mode").
+//! (docs/TRANSFLOWER.md "S mode"). `rolling` spreads the recomputation:
+//! a share of the rows every step instead of all of them every k-th step.
 
 use crate::error::Setting;
 use crate::nn::kv_store::KvType;
@@ -32,8 +33,8 @@ pub enum Preset {
     Exact,
     /// Every row recomputed every 4th step; f32 keys and values.
     Reference,
-    /// Every row recomputed every 16th step; f16 keys and values (the mean
-    /// step within real time at the published size on one core).
+    /// Every row recomputed within 16 steps, rolling (a share of the rows
+    /// every step: no spike); f16 keys and values.
     Realtime,
 }
 
@@ -59,6 +60,14 @@ pub struct SessionConfig {
     pub refresh: u32,
     /// Storage of the kept keys and values (only with `refresh > 1`).
     pub kv: KvType,
+    /// How rows are recomputed with `refresh > 1`: false = every row at
+    /// once every `refresh`-th step (a whole R step on the session's
+    /// window: a cost spike); true = rolling: after the first step, never
+    /// all at once, but every step also recomputes the next
+    /// `ceil(L_i / refresh)` rows of each input (round robin) through both
+    /// transformers against the kept rows, so no row is older than
+    /// `refresh` steps and every step costs about the same.
+    pub rolling: bool,
     /// Rows each sliding input (the audio) holds beyond its window.
     pub input_buffer_rows: u32,
     /// Frames held until pulled (a step that would exceed it is refused).
@@ -67,14 +76,15 @@ pub struct SessionConfig {
 
 impl SessionConfig {
     pub fn preset(p: Preset) -> Self {
-        let (refresh, kv) = match p {
-            Preset::Exact => (1, KvType::F32),
-            Preset::Reference => (4, KvType::F32),
-            Preset::Realtime => (16, KvType::F16),
+        let (refresh, kv, rolling) = match p {
+            Preset::Exact => (1, KvType::F32, false),
+            Preset::Reference => (4, KvType::F32, false),
+            Preset::Realtime => (16, KvType::F16, true),
         };
         SessionConfig {
             refresh,
             kv,
+            rolling,
             input_buffer_rows: 400,
             pending_frames: 64,
         }
@@ -96,7 +106,7 @@ impl SessionConfig {
 
     /// Whether the session keeps keys and values between steps.
     pub fn stale(&self) -> bool {
-        self.refresh > 1
+        self.refresh > 1 || self.rolling
     }
 }
 

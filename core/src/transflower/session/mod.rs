@@ -321,11 +321,9 @@ impl<'a> Session<'a> {
     fn run(&mut self, batch: Option<(&Prepared<'_>, &mut Scratch<'_>)>) {
         let model = self.model;
         match batch {
-            Some((p, s)) => step::step(model, p, self.cfg.refresh, &self.labels, &mut self.st, s),
+            Some((p, s)) => step::step(model, p, &self.cfg, &self.labels, &mut self.st, s),
             None => match self.own.as_mut() {
-                Some((p, s)) => {
-                    step::step(model, p, self.cfg.refresh, &self.labels, &mut self.st, s)
-                }
+                Some((p, s)) => step::step(model, p, &self.cfg, &self.labels, &mut self.st, s),
                 None => return,
             },
         }

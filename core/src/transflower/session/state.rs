@@ -94,7 +94,10 @@ pub struct Stale<'s> {
     /// (sum L): the latent position of each cross-modal slot (`offset_i + ipos`).
     pub xpos: &'s mut [u32],
     pub head: [usize; MAX_INPUTS],
-    /// Steps since everything was recomputed (0: recompute now).
+    /// The next slot of input i the rolling recomputation takes.
+    pub cursor: [usize; MAX_INPUTS],
+    /// Steps since everything was recomputed (0: recompute now; rolling:
+    /// only the first step).
     pub since: u32,
 }
 
@@ -127,6 +130,7 @@ impl<'s> Stale<'s> {
             ipos: a.u32(n)?,
             xpos: a.u32(n)?,
             head: [0; MAX_INPUTS],
+            cursor: [0; MAX_INPUTS],
             since: 0,
         })
     }
@@ -141,6 +145,7 @@ impl<'s> Stale<'s> {
                 self.xpos[off + j] = (off + j) as u32;
             }
             self.head[i] = 0;
+            self.cursor[i] = 0;
             off += l;
         }
     }

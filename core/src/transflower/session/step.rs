@@ -20,6 +20,7 @@ use crate::transflower::exact::{Prepared, StepScratch};
 use crate::transflower::flow;
 use crate::transflower::model::Model;
 use crate::transflower::probe;
+use crate::transflower::session::config::SessionConfig;
 use crate::transflower::session::state::{is_fed, need_rows, State};
 use crate::transflower::transformer::forward_rows;
 
@@ -30,6 +31,10 @@ pub struct Scratch<'s> {
     rows: &'s mut [f32],
     /// (sum L): their slots.
     slots: &'s mut [u32],
+    /// (sum L): the cross-modal slots recomputed besides the conditioning rows.
+    extra: &'s mut [u32],
+    /// (max L_i, max d_i): an input's rows recomputed by its net.
+    inrows: &'s mut [f32],
 }
 
 impl<'s> Scratch<'s> {
@@ -46,6 +51,19 @@ impl<'s> Scratch<'s> {
                     .ok_or(ArenaError::Overflow)?,
             )?,
             slots: a.u32(n)?,
+            extra: a.u32(n)?,
+            inrows: a.f32(if stale {
+                let l = cfg.max_window();
+                let din = cfg
+                    .inputs()
+                    .iter()
+                    .map(|i| i.dim as usize)
+                    .max()
+                    .unwrap_or(0);
+                l.checked_mul(din).ok_or(ArenaError::Overflow)?
+            } else {
+                0
+            })?,
         })
     }
 
@@ -60,7 +78,7 @@ impl<'s> Scratch<'s> {
 pub(crate) fn step(
     model: &Model<'_>,
     p: &Prepared<'_>,
-    refresh: u32,
+    sc: &SessionConfig,
     labels: &[u32; MAX_INPUTS],
     st: &mut State<'_>,
     s: &mut Scratch<'_>,
@@ -71,7 +89,7 @@ pub(crate) fn step(
     let whole = st
         .stale
         .as_ref()
-        .is_none_or(|x| x.since.is_multiple_of(refresh.max(1)));
+        .is_none_or(|x| x.since.is_multiple_of(sc.refresh.max(1)) && (!sc.rolling || x.since == 0));
     if whole {
         let mut windows = [Window::Label(0); MAX_INPUTS];
         for (i, ic) in cfg.inputs().iter().enumerate() {
@@ -138,46 +156,81 @@ pub(crate) fn step(
             }
         }
     } else if let Some(x) = st.stale.as_mut() {
-        // Each sliding input's newest row through its net, against the kept rows.
-        let mut newest = [usize::MAX; MAX_INPUTS];
+        // Each sliding input's newest row (and, rolling, its next share of
+        // rows) through its net, against the kept rows.
+        let share = |l: usize| {
+            if sc.rolling {
+                l.div_ceil(sc.refresh.max(1) as usize)
+            } else {
+                0
+            }
+        };
+        let mut extra = 0;
         let mut off = 0;
         for (i, ic) in cfg.inputs().iter().enumerate() {
             let l = ic.length as usize;
-            if !ic.is_discrete() {
-                let slot = x.slide(i, off, l);
-                newest[i] = off + slot;
+            if ic.is_discrete() {
+                if sc.rolling {
+                    s.extra[extra] = off as u32;
+                    extra += 1;
+                }
+                off += l;
+                continue;
+            }
+            let newest = x.slide(i, off, l);
+            let mut mi = 0;
+            s.slots[mi] = newest as u32;
+            mi += 1;
+            for _ in 0..share(l).min(l - 1) {
+                let mut j = x.cursor[i] % l;
+                if j == newest {
+                    j = (j + 1) % l;
+                }
+                x.cursor[i] = (j + 1) % l;
+                s.slots[mi] = j as u32;
+                mi += 1;
+            }
+            let din = ic.dim as usize;
+            for (r, &j) in s.slots[..mi].iter().enumerate() {
+                let pos = x.ipos[off + j as usize] as usize;
                 let row: &[f32] = if i == m {
-                    &st.window[(l - 1) * ic.dim as usize..]
+                    &st.window[pos * din..(pos + 1) * din]
                 } else {
-                    st.feeds[i].rows(l - 1, 1)
+                    st.feeds[i].rows(pos, 1)
                 };
-                s.slots[0] = slot as u32;
-                let kv =
-                    &mut x.input_kv[i * INPUT_LAYERS as usize..(i + 1) * INPUT_LAYERS as usize];
-                let out = &mut x.latent[(off + slot) * d..(off + slot + 1) * d];
-                forward_rows(
-                    &model.inputs[i],
-                    row,
-                    &s.slots[..1],
-                    &x.ipos[off..off + l],
-                    1,
-                    kv,
-                    &mut s.step.net,
-                    out,
-                );
+                s.inrows[r * din..(r + 1) * din].copy_from_slice(row);
+            }
+            let kv = &mut x.input_kv[i * INPUT_LAYERS as usize..(i + 1) * INPUT_LAYERS as usize];
+            forward_rows(
+                &model.inputs[i],
+                &s.inrows[..mi * din],
+                &s.slots[..mi],
+                &x.ipos[off..off + l],
+                mi,
+                kv,
+                &mut s.step.net,
+                &mut s.rows[..mi * d],
+            );
+            for (r, &j) in s.slots[..mi].iter().enumerate() {
+                let at = off + j as usize;
+                x.latent[at * d..(at + 1) * d].copy_from_slice(&s.rows[r * d..(r + 1) * d]);
+                s.extra[extra] = at as u32;
+                extra += 1;
             }
             off += l;
         }
-        // The cross-modal rows: the conditioning rows first, then the newest rows.
+        // The cross-modal rows: the conditioning rows first (their decoder
+        // output is `cond`), then the other recomputed rows, once each.
         let keep = cfg.cond_len as usize;
         let mut rows = 0;
         for p in 0..keep {
             s.slots[rows] = x.slot_of(cfg, p) as u32;
             rows += 1;
         }
-        for &slot in newest.iter().filter(|&&v| v != usize::MAX) {
-            if x.xpos[slot] as usize >= keep {
-                s.slots[rows] = slot as u32;
+        for k in 0..extra {
+            let slot = s.extra[k];
+            if x.xpos[slot as usize] as usize >= keep && !s.slots[keep..rows].contains(&slot) {
+                s.slots[rows] = slot;
                 rows += 1;
             }
         }
@@ -197,7 +250,11 @@ pub(crate) fn step(
         );
     }
     if let Some(x) = st.stale.as_mut() {
-        x.since = (x.since + 1) % refresh.max(1);
+        x.since = if sc.rolling {
+            1
+        } else {
+            (x.since + 1) % sc.refresh.max(1)
+        };
     }
     // The flow: z (C, H) -> frames (H, C).
     let (c, h) = (cfg.channels(), cfg.output_length as usize);
