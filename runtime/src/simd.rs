@@ -103,6 +103,45 @@ pub fn init() -> Isa {
     isa
 }
 
+/// Selects the ISA named `name` (as [`parse`] reads it; `avx512amx`: AVX512-VNNI
+/// with the AMX tiles, which must be usable) for the whole process, whatever
+/// `DUOLANDO_ISA` says; AMX stays off for every other name. Refuses, by
+/// name, an ISA this CPU lacks (`duolando bench --isa`).
+pub fn select(name: &str) -> Result<Isa, String> {
+    let isa = parse(name).ok_or_else(|| format!("unknown ISA '{name}' (scalar, avx2, avx512, avx512vnni, avx512amx, neon, neondot)"))?;
+    let all = supported();
+    let amx = name.eq_ignore_ascii_case("avx512amx");
+    if !all.contains(&isa) || (amx && !amx_usable()) {
+        let names: Vec<&str> = all.iter().map(|&i| name_plain(i)).collect();
+        return Err(format!("ISA '{name}': this CPU does not have it (it has: {}{})", names.join(", "), if amx_usable() { ", avx512amx" } else { "" }));
+    }
+    SELECTED.store(true, Ordering::Release);
+    // SAFETY: `supported` listed `isa`: this CPU has every feature its
+    // kernels are compiled for.
+    #[allow(unsafe_code)]
+    unsafe { simd::set_isa(isa) };
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: AMX only where `amx_usable` checked the CPU bits and got the
+    // tile permission, and the ISA is Avx512Vnni (parse maps avx512amx to it).
+    #[allow(unsafe_code)]
+    unsafe {
+        simd::amx::enable(amx)
+    };
+    Ok(isa)
+}
+
+/// The lower-case name of an ISA, AMX aside.
+fn name_plain(isa: Isa) -> &'static str {
+    match isa {
+        Isa::Scalar => "scalar",
+        Isa::Avx2 => "avx2",
+        Isa::Avx512 => "avx512",
+        Isa::Avx512Vnni => "avx512vnni",
+        Isa::Neon => "neon",
+        Isa::NeonDot => "neondot",
+    }
+}
+
 /// Selects the detected kernels ([`init`]) unless a selection was already
 /// made in this process; returns the ISA running now. Called by every
 /// constructor of [`crate::model_file::ModelFile`], so that no std caller

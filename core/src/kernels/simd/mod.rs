@@ -19,6 +19,7 @@
 
 use core::sync::atomic::{AtomicU8, Ordering};
 
+pub mod peak;
 pub mod scalar;
 #[cfg(test)]
 mod tests;
