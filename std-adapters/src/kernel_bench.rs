@@ -188,9 +188,12 @@ fn median_secs(reps: usize, mut f: impl FnMut()) -> f64 {
     t[t.len() / 2]
 }
 
+/// The distinct `Q8Block32x8` matrices of one (out, in) matrix shape.
+type WeightSet = ((usize, usize), Vec<Vec<u8>>);
+
 /// Weight sets, one per distinct (out, in), quantised once for every ISA.
 pub struct Weights {
-    sets: Vec<((usize, usize), Vec<Vec<u8>>)>,
+    sets: Vec<WeightSet>,
 }
 
 impl Weights {
@@ -198,7 +201,7 @@ impl Weights {
     /// [`SHAPES`] (`quick`: 16 MB).
     pub fn new(quick: bool) -> Weights {
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut sets: Vec<((usize, usize), Vec<Vec<u8>>)> = Vec::new();
+        let mut sets: Vec<WeightSet> = Vec::new();
         for s in SHAPES {
             if sets.iter().any(|(d, _)| *d == (s.out, s.inp)) {
                 continue;

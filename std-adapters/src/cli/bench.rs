@@ -539,7 +539,7 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let cpu = crate::kernel_bench::cpu_name();
-    anyhow::ensure!(!(args.scalar && !args.isa.is_empty()), "--scalar and --isa: give one (--isa scalar is --scalar)");
+    anyhow::ensure!(!args.scalar || args.isa.is_empty(), "--scalar and --isa: give one (--isa scalar is --scalar)");
     // Refuse every ISA this CPU lacks before anything runs.
     for name in &args.isa {
         crate::simd::select(name).map_err(|e| anyhow!("{e} [{cpu}]"))?;
