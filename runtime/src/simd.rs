@@ -103,6 +103,52 @@ pub fn init() -> Isa {
     isa
 }
 
+/// Whether this CPU runs the int8 MAC peak probe `p`
+/// (`duolando_core::kernels::simd::peak`).
+pub fn probe_supported(p: simd::peak::Probe) -> bool {
+    use simd::peak::Probe;
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::is_x86_feature_detected as has;
+        match p {
+            Probe::Scalar => true,
+            Probe::Avx2 => has!("avx2"),
+            Probe::Avx512Bw => has!("avx512f") && has!("avx512bw"),
+            Probe::Avx512Vnni => has!("avx512f") && has!("avx512bw") && has!("avx512vnni"),
+            Probe::AvxVnni => has!("avx2") && has!("avxvnni"),
+            Probe::NeonDot | Probe::NeonI8mm => false,
+        }
+    }
+    #[cfg(target_arch = "aarch64")]
+    {
+        use std::arch::is_aarch64_feature_detected as has;
+        match p {
+            Probe::Scalar => true,
+            Probe::NeonDot => cfg!(target_feature = "neon") && has!("dotprod"),
+            Probe::NeonI8mm => cfg!(target_feature = "neon") && has!("i8mm"),
+            _ => false,
+        }
+    }
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    {
+        let _ = p;
+        false
+    }
+}
+
+/// Runs the peak probe `p` for `iters` iterations (its checksum; see
+/// `simd::peak::run`); `None` where this CPU or build cannot run it.
+pub fn run_probe(p: simd::peak::Probe, iters: u64, o: &simd::peak::Operands) -> Option<i64> {
+    if !probe_supported(p) {
+        return None;
+    }
+    // SAFETY: `probe_supported` checked this CPU's features for `p`.
+    #[allow(unsafe_code)]
+    unsafe {
+        simd::peak::run(p, iters, o)
+    }
+}
+
 /// Selects the ISA named `name` (as [`parse`] reads it; `avx512amx`: AVX512-VNNI
 /// with the AMX tiles, which must be usable) for the whole process, whatever
 /// `DUOLANDO_ISA` says; AMX stays off for every other name. Refuses, by

@@ -73,33 +73,7 @@ pub fn probes() -> Vec<Probe> {
 }
 
 fn cpu_has(p: Probe) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::is_x86_feature_detected as has;
-        match p {
-            Probe::Scalar => true,
-            Probe::Avx2 => has!("avx2"),
-            Probe::Avx512Bw => has!("avx512f") && has!("avx512bw"),
-            Probe::Avx512Vnni => has!("avx512f") && has!("avx512bw") && has!("avx512vnni"),
-            Probe::AvxVnni => has!("avx2") && has!("avxvnni"),
-            Probe::NeonDot | Probe::NeonI8mm => false,
-        }
-    }
-    #[cfg(target_arch = "aarch64")]
-    {
-        use std::arch::is_aarch64_feature_detected as has;
-        match p {
-            Probe::Scalar => true,
-            Probe::NeonDot => cfg!(target_feature = "neon") && has!("dotprod"),
-            Probe::NeonI8mm => cfg!(target_feature = "neon") && has!("i8mm"),
-            _ => false,
-        }
-    }
-    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
-    {
-        let _ = p;
-        false
-    }
+    crate::simd::probe_supported(p)
 }
 
 /// The fixed operands the probes multiply (unsigned side below 128, as the
@@ -121,9 +95,7 @@ pub fn peak_gmacs(p: Probe) -> anyhow::Result<f64> {
     let o = operands();
     let time = |iters: u64| -> anyhow::Result<f64> {
         let s = Instant::now();
-        // SAFETY: `cpu_has(p)` checked the CPU's features for this probe.
-        #[allow(unsafe_code)]
-        let got = unsafe { peak::run(p, iters, std::hint::black_box(&o)) };
+        let got = crate::simd::run_probe(p, iters, std::hint::black_box(&o));
         let t = s.elapsed().as_secs_f64();
         let got = got.ok_or_else(|| anyhow::anyhow!("no {} probe in this build", p.name()))?;
         anyhow::ensure!(got == peak::twin(p, iters, &o), "{} probe: checksum {got} differs from its twin's", p.name());

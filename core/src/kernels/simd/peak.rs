@@ -250,13 +250,15 @@ mod x86 {
     #[inline]
     #[target_feature(enable = "avx2")]
     fn sum256(v: &[__m256i]) -> i64 {
-        v.iter().map(|&x| lane_sum(&unsafe { core::mem::transmute::<__m256i, [i32; 8]>(x) })).sum()
+        // SAFETY: __m256i and [i32; 8] are the same plain bytes.
+    v.iter().map(|&x| lane_sum(&unsafe { core::mem::transmute::<__m256i, [i32; 8]>(x) })).sum()
     }
 
     #[inline]
     #[target_feature(enable = "avx512f")]
     fn sum512(v: &[__m512i]) -> i64 {
-        v.iter().map(|&x| lane_sum(&unsafe { core::mem::transmute::<__m512i, [i32; 16]>(x) })).sum()
+        // SAFETY: __m512i and [i32; 16] are the same plain bytes.
+    v.iter().map(|&x| lane_sum(&unsafe { core::mem::transmute::<__m512i, [i32; 16]>(x) })).sum()
     }
 
     /// # Safety
@@ -454,6 +456,7 @@ mod arm {
                         )
                     };
                 }
+                // SAFETY: int32x4_t and [i32; 4] are the same plain bytes.
                 c.iter().map(|&v| lane_sum(&unsafe { core::mem::transmute::<int32x4_t, [i32; 4]>(v) })).sum()
             }
         };
