@@ -16,7 +16,7 @@ rustup toolchain install nightly --profile minimal >/dev/null 2>&1
 if ! cargo +nightly fuzz --version >/dev/null 2>&1; then
   cargo install cargo-fuzz --locked
 fi
-targets=(duo_parse duo_struct convert session solo_session)
+targets=(duo_parse duo_struct convert session solo_session transflower_session)
 cargo +nightly fuzz build -O
 for t in "${targets[@]}"; do
   mkdir -p "corpus/$t"
@@ -26,6 +26,7 @@ for t in "${targets[@]}"; do
     cp ../tests/fixtures/tiny/model.duo "corpus/$t/fixture-tiny.duo"
     cp ../tests/fixtures/tiny2/model.duo "corpus/$t/fixture-tiny2.duo"
     cp ../tests/fixtures/bailando_btiny/model.duo "corpus/$t/fixture-btiny.duo"
+    cp ../tests/fixtures/transflower_paper/model.duo "corpus/$t/fixture-transflower-paper.duo"
   fi
   echo "--- fuzz $t for ${secs}s ($(ls "corpus/$t" | wc -l) inputs)"
   rm -rf "artifacts/$t"

@@ -272,8 +272,13 @@ typedef struct duo_model_info {
  *     does and runs to its end; the root starts at the origin. */
 #define DUO_FAMILY_DUOLANDO 0u
 #define DUO_FAMILY_BAILANDO 1u
-/* Transflower (.duo family 2): not opened by this library yet; duo_model_open*
- * return DUO_BAD_MODEL naming the family (the duolando CLI runs it). */
+/* Transflower (.duo family 2): a probabilistic solo dancer. Its frames are
+ * the model's motion features (duo_transflower_info.channels floats, in
+ * the model's scaled feature space), made from audio feature rows, a
+ * motion seed and style labels; see "Transflower sessions" below.
+ * duo_model_get_info: joints 0, music_features = floats per audio row,
+ * fps 20, frames_per_token 1, block_size = audio rows a step reads,
+ * look_forward = audio rows read after a frame's own row. */
 #define DUO_FAMILY_TRANSFLOWER 2u
 
 /* Opens a model from caller memory WITHOUT copying.
@@ -505,6 +510,102 @@ duo_result duo_session_reset(duo_session *session, const uint32_t *seed_tokens);
  * session made by duo_session_new_in, release the memory afterwards. Each
  * session must be freed exactly once and not used afterwards. */
 void duo_session_free(duo_session *session);
+
+/* ------------------------------------------------------------------ */
+/* Transflower sessions                                                */
+/* ------------------------------------------------------------------ */
+
+/* A Transflower session (a duo_session): frame t is song row
+ * output_time_offset + t; its step reads audio rows t .. t + audio_window - 1
+ * (pushed with duo_session_push_music: one or more whole rows of
+ * audio_features floats, at most input_buffer_rows beyond the window held,
+ * else DUO_BACKLOG) and the session's own motion so far (the seed, then its
+ * frames). Base samples come from the session's seeded RNG
+ * (duo_transflower_pull_frame: a given rng_seed gives the same dance) or
+ * from the caller (duo_transflower_pull_frame_with_noise). With refresh 1
+ * the frames are the offline model's (R mode) bit for bit; refresh k > 1
+ * recomputes every row only every k-th step and in between only the newest
+ * and conditioning rows (faster, approximate: docs/TRANSFLOWER.md "S
+ * mode"). duo_session_push_music and duo_session_free apply; the other
+ * duo_session_* calls answer DUO_INVALID_ARGUMENT naming the family. */
+
+/* Sizes of a Transflower model. 48 bytes. */
+typedef struct duo_transflower_info {
+  uint32_t channels;           /* floats per frame */
+  uint32_t seed_rows;          /* rows of the motion seed (seed_rows x channels floats) */
+  uint32_t inputs;             /* input modalities (motion, audio, labels) */
+  uint32_t audio_features;     /* floats per audio row (duo_session_push_music) */
+  uint32_t audio_window;       /* audio rows a step reads */
+  uint32_t labels;             /* style labels a session takes */
+  uint32_t label_values;       /* values of the first style label (0 if none) */
+  uint32_t noise_floats;       /* floats of one base sample (channels x frames per sample) */
+  uint32_t fps;                /* frames per second (20) */
+  uint32_t output_time_offset; /* frame t is song row output_time_offset + t */
+  int32_t lookahead_rows;      /* audio rows after a frame's own row its step reads (19: 0.95 s) */
+  uint32_t reserved;
+} duo_transflower_info;
+
+/* A Transflower session's settings. 24 bytes. */
+typedef struct duo_transflower_config {
+  uint32_t refresh;           /* steps between recomputations of every row, 1..4096 (1: R) */
+  uint32_t kv;                /* a duo_kv value: the kept keys and values (refresh > 1) */
+  uint32_t input_buffer_rows; /* audio rows held beyond the window, 0..65536 */
+  uint32_t pending_frames;    /* frames made and not pulled, 1..65536 */
+  uint64_t rng_seed;          /* the base samples' seed */
+} duo_transflower_config;
+
+/* DUO_NULL_PARAMETER; DUO_INVALID_ARGUMENT on a model of another family.
+ * Thread-safe. */
+duo_result duo_transflower_get_info(const duo_model *model, duo_transflower_info *out_info);
+
+/* The named preset: "exact" (refresh 1), "reference" (4, f32),
+ * "realtime" (16, f16); rng_seed 0. DUO_NULL_PARAMETER,
+ * DUO_INVALID_ARGUMENT (no such preset, another family). Thread-safe. */
+duo_result duo_transflower_config_preset(const duo_model *model, const char *name,
+                                         duo_transflower_config *out_config);
+
+/* The session's memory for `config` (one allocation in
+ * duo_transflower_session_new). DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT
+ * (a setting out of range: the message names it). Thread-safe. */
+duo_result duo_transflower_session_bytes(const duo_model *model, const duo_transflower_config *config,
+                                         size_t *out_bytes);
+
+/* Creates a session: seed_motion = seed_rows x channels floats (the scaled
+ * motion features before the first frame), labels = `labels` values (one
+ * per style input, each below label_values; NULL with 0 when none).
+ * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (counts, settings, a label out
+ * of range, another family), DUO_NON_FINITE_INPUT. Thread-safe. */
+duo_result duo_transflower_session_new(const duo_model *model, const duo_transflower_config *config,
+                                       const float *seed_motion, size_t n_floats,
+                                       const uint32_t *labels, size_t n_labels,
+                                       duo_session **out_session);
+
+/* Rows of sliding input `index` for models with more than one (the audio,
+ * the last input, also takes duo_session_push_music). DUO_NULL_PARAMETER,
+ * DUO_INVALID_ARGUMENT (the motion or a label, not whole rows, n 0),
+ * DUO_NON_FINITE_INPUT, DUO_BACKLOG; each leaves the session unchanged. */
+duo_result duo_transflower_push_input(duo_session *session, uint32_t index, const float *rows,
+                                      size_t n_floats);
+
+/* The next frame (n_floats = channels): DUO_OK (out and *out_index
+ * written; out_index may be NULL) or DUO_NOT_READY (its audio is not in
+ * yet; nothing written). Runs the frame's step (the costly call: off the
+ * render thread) with the session's seeded base sample.
+ * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (n_floats, another family). */
+duo_result duo_transflower_pull_frame(duo_session *session, float *out, size_t n_floats,
+                                      uint64_t *out_index);
+
+/* As duo_transflower_pull_frame with the caller's base sample: noise =
+ * noise_floats floats, channel-major (channels x frames per sample), e.g.
+ * recorded noise to replay a dance; the RNG is not drawn.
+ * DUO_NON_FINITE_INPUT (noise), and as duo_transflower_pull_frame. */
+duo_result duo_transflower_pull_frame_with_noise(duo_session *session, const float *noise,
+                                                 size_t n_noise, float *out, size_t n_floats,
+                                                 uint64_t *out_index);
+
+/* Back to frame 0: the seed motion, no audio, the RNG reseeded.
+ * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (another family). */
+duo_result duo_transflower_session_reset(duo_session *session, uint64_t rng_seed);
 
 /* ------------------------------------------------------------------ */
 /* Sessions stepped together                                           */

@@ -9,9 +9,9 @@
 //! Its own test binary: it switches the process-wide kernels.
 
 use duolando::duo_writer::{quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8};
-use duolando_tests::Rng;
 use duolando_core::kernels::simd::{self, Isa};
 use duolando_core::kernels::{linear, Matrix, Q8Rows, X8Rows};
+use duolando_tests::Rng;
 
 fn bits(v: &[f32]) -> Vec<u32> {
     v.iter().map(|f| f.to_bits()).collect()
@@ -30,7 +30,11 @@ fn linear_with_amx_tiles_equals_linear_without() {
     let mut r = Rng(0xa11a);
     for &(i, o) in &[(768usize, 40usize), (3072, 24), (96, 8), (512, 17), (32, 9)] {
         let w = r.vec(o * i);
-        let (q8, x8, x4) = (quantise_q8_block32(&w), quantise_q8_block32x8(&w, i), quantise_q4_block32x8(&w, i));
+        let (q8, x8, x4) = (
+            quantise_q8_block32(&w),
+            quantise_q8_block32x8(&w, i),
+            quantise_q4_block32x8(&w, i),
+        );
         let cases = [
             ("int8 x8", Matrix::X8(X8Rows::new(&x8, o, i).unwrap())),
             ("q4 x8", Matrix::X8(X8Rows::new_q4(&x4, o, i).unwrap())),
@@ -50,8 +54,15 @@ fn linear_with_amx_tiles_equals_linear_without() {
                         assert_eq!(simd::amx::enabled(), on);
                         linear(&x, m, Some(&bias), y);
                     }
-                    assert!(got[0].iter().all(|v| v.is_finite()), "{name} ({o}, {i}) {n} rows");
-                    assert_eq!(bits(&got[1]), bits(&got[0]), "{name} ({o}, {i}), {n} rows, {threads} threads: AMX vs VNNI");
+                    assert!(
+                        got[0].iter().all(|v| v.is_finite()),
+                        "{name} ({o}, {i}) {n} rows"
+                    );
+                    assert_eq!(
+                        bits(&got[1]),
+                        bits(&got[0]),
+                        "{name} ({o}, {i}), {n} rows, {threads} threads: AMX vs VNNI"
+                    );
                 }
             }
         }

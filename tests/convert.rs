@@ -8,8 +8,8 @@
 
 use std::path::{Path, PathBuf};
 
-use duolando::convert::{convert_bytes, parse_config, ConvertError, Sources};
 use duolando::convert::yaml::Yaml;
+use duolando::convert::{convert_bytes, parse_config, ConvertError, Sources};
 use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
 use duolando_core::tensor::DType;
@@ -27,7 +27,9 @@ struct Fixture {
 
 fn fixture(model: &str) -> Fixture {
     let dir = duolando_tests::fixture(model);
-    let read = |f: &str| std::fs::read(dir.join(f)).unwrap_or_else(|e| panic!("{}: {e}", dir.join(f).display()));
+    let read = |f: &str| {
+        std::fs::read(dir.join(f)).unwrap_or_else(|e| panic!("{}: {e}", dir.join(f).display()))
+    };
     Fixture {
         yaml: String::from_utf8(read("follower_gpt.yaml")).unwrap(),
         gpt: read("gpt.safetensors"),
@@ -39,9 +41,22 @@ fn fixture(model: &str) -> Fixture {
 
 impl Fixture {
     fn convert(&self, store_as: StoreAs) -> Result<Vec<u8>, ConvertError> {
-        let (gp, vp, tp) = (self.dir.join("gpt.safetensors"), self.dir.join("vqvae.safetensors"), self.dir.join("transl.safetensors"));
-        let sources = Sources { gpt: (&gp, &self.gpt), vqvae: (&vp, &self.vqvae), transl: (&tp, &self.transl) };
-        convert_bytes((&self.dir.join("follower_gpt.yaml"), &self.yaml), &sources, store_as).map(|(b, _)| b)
+        let (gp, vp, tp) = (
+            self.dir.join("gpt.safetensors"),
+            self.dir.join("vqvae.safetensors"),
+            self.dir.join("transl.safetensors"),
+        );
+        let sources = Sources {
+            gpt: (&gp, &self.gpt),
+            vqvae: (&vp, &self.vqvae),
+            transl: (&tp, &self.transl),
+        };
+        convert_bytes(
+            (&self.dir.join("follower_gpt.yaml"), &self.yaml),
+            &sources,
+            store_as,
+        )
+        .map(|(b, _)| b)
     }
 }
 
@@ -74,7 +89,9 @@ fn edit(bytes: &mut Vec<u8>, f: impl FnOnce(&mut Records)) {
 }
 
 fn find<'r>(r: &'r mut Records, name: &str) -> &'r mut (String, Dtype, Vec<usize>, Vec<u8>) {
-    r.iter_mut().find(|t| t.0 == name).unwrap_or_else(|| panic!("fixture has `{name}`"))
+    r.iter_mut()
+        .find(|t| t.0 == name)
+        .unwrap_or_else(|| panic!("fixture has `{name}`"))
 }
 
 /// The error of a conversion that must fail (without dumping the bytes of
@@ -87,7 +104,10 @@ fn expect_err(r: Result<Vec<u8>, ConvertError>) -> ConvertError {
 }
 
 fn f32s(bytes: &[u8]) -> Vec<f32> {
-    bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect()
+    bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect()
 }
 
 // ------------------------------------------------------------ good inputs
@@ -96,7 +116,9 @@ fn f32s(bytes: &[u8]) -> Vec<f32> {
 fn fixtures_convert_to_the_committed_models() {
     for m in ["tiny", "tiny2"] {
         let fx = fixture(m);
-        let bytes = fx.convert(StoreAs::F32).unwrap_or_else(|e| panic!("{m}: {e}"));
+        let bytes = fx
+            .convert(StoreAs::F32)
+            .unwrap_or_else(|e| panic!("{m}: {e}"));
         let mf = ModelFile::from_bytes(bytes.clone()).unwrap();
         let duo = mf.duo().unwrap();
         assert_eq!(duo.len(), duo.config().tensor_count());
@@ -113,12 +135,43 @@ fn tiny_config_maps_the_yaml_sizes() {
     let fx = fixture("tiny");
     let cfg = parse_config(Path::new("follower_gpt.yaml"), &fx.yaml).unwrap();
     // Sizes of tests/fixtures/tiny/follower_gpt.yaml.
-    assert_eq!((cfg.gpt.n_embd, cfg.gpt.n_head, cfg.gpt.n_layer_base, cfg.gpt.n_layer_head), (32, 4, 2, 2));
-    assert_eq!((cfg.gpt.block_size, cfg.gpt.look_forward, cfg.gpt.vocab), (30, 29, [64; 5]));
-    assert_eq!((cfg.gpt.music.n_layer, cfg.gpt.leader.n_layer, cfg.gpt.music.downsample_rate), (2, 2, 4));
+    assert_eq!(
+        (
+            cfg.gpt.n_embd,
+            cfg.gpt.n_head,
+            cfg.gpt.n_layer_base,
+            cfg.gpt.n_layer_head
+        ),
+        (32, 4, 2, 2)
+    );
+    assert_eq!(
+        (cfg.gpt.block_size, cfg.gpt.look_forward, cfg.gpt.vocab),
+        (30, 29, [64; 5])
+    );
+    assert_eq!(
+        (
+            cfg.gpt.music.n_layer,
+            cfg.gpt.leader.n_layer,
+            cfg.gpt.music.downsample_rate
+        ),
+        (2, 2, 4)
+    );
     for vq in cfg.parts.iter().chain([&cfg.transl]) {
-        assert_eq!((vq.width, vq.depth, vq.emb_width, vq.l_bins, vq.down_t, vq.stride_t), (16, 3, 16, 64, 2, 2));
-        assert_eq!((vq.dilation_growth_rate, vq.m_conv_num, vq.m_conv_den), (3, 1, 1));
+        assert_eq!(
+            (
+                vq.width,
+                vq.depth,
+                vq.emb_width,
+                vq.l_bins,
+                vq.down_t,
+                vq.stride_t
+            ),
+            (16, 3, 16, 64, 2, 2)
+        );
+        assert_eq!(
+            (vq.dilation_growth_rate, vq.m_conv_num, vq.m_conv_den),
+            (3, 1, 1)
+        );
     }
     assert_eq!(cfg.parts.map(|p| p.in_channels), [48, 27, 45, 45]);
     assert_eq!(cfg.parts.map(|p| p.rot_channels), [144, 81, 135, 135]);
@@ -134,8 +187,16 @@ fn converted_values_equal_the_source_tensors() {
     let vq = records(&fx.vqvae);
     for (duo_name, recs, src) in [
         ("gpt.tok_emb_up.weight", &gpt, "module.tok_emb_up.weight"),
-        ("gpt.gpt_head.head_transl.weight", &gpt, "module.gpt_head.head_transl.weight"),
-        ("motion.vqvae_down.bottleneck.level_blocks.0.k", &vq, "vqvae_down.bottleneck.level_blocks.0.k"),
+        (
+            "gpt.gpt_head.head_transl.weight",
+            &gpt,
+            "module.gpt_head.head_transl.weight",
+        ),
+        (
+            "motion.vqvae_down.bottleneck.level_blocks.0.k",
+            &vq,
+            "vqvae_down.bottleneck.level_blocks.0.k",
+        ),
     ] {
         let src = recs.iter().find(|r| r.0 == src).unwrap();
         let t = duo.tensor(duo_name).unwrap();
@@ -151,13 +212,27 @@ fn f16_output_stores_rounded_weights() {
     // Weight matrices f16; vectors (biases, LayerNorm) and pos_emb stay f32
     // (the engine adds them as they are; `convert::storage_for`).
     for e in duo.tensors() {
-        let want = if e.rank < 2 || e.name.ends_with("pos_emb") { DType::F32 } else { DType::F16 };
+        let want = if e.rank < 2 || e.name.ends_with("pos_emb") {
+            DType::F32
+        } else {
+            DType::F16
+        };
         assert_eq!(e.dtype, want, "{}", e.name);
     }
-    let src = records(&fx.gpt).into_iter().find(|r| r.0 == "module.tok_emb_up.weight").unwrap();
+    let src = records(&fx.gpt)
+        .into_iter()
+        .find(|r| r.0 == "module.tok_emb_up.weight")
+        .unwrap();
     let t = duo.tensor("gpt.tok_emb_up.weight").unwrap();
-    let got: Vec<f32> = t.data.chunks_exact(2).map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32()).collect();
-    let want: Vec<f32> = f32s(&src.3).iter().map(|&v| half::f16::from_f32(v).to_f32()).collect();
+    let got: Vec<f32> = t
+        .data
+        .chunks_exact(2)
+        .map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32())
+        .collect();
+    let want: Vec<f32> = f32s(&src.3)
+        .iter()
+        .map(|&v| half::f16::from_f32(v).to_f32())
+        .collect();
     assert_eq!(got, want);
 }
 
@@ -182,22 +257,38 @@ fn accepts_f16_and_bf16_sources_by_upcasting() {
             let vals = f32s(&t.3);
             if i % 2 == 0 {
                 t.1 = Dtype::F16;
-                t.3 = vals.iter().flat_map(|&v| half::f16::from_f32(v).to_le_bytes()).collect();
+                t.3 = vals
+                    .iter()
+                    .flat_map(|&v| half::f16::from_f32(v).to_le_bytes())
+                    .collect();
             } else {
                 t.1 = Dtype::BF16;
-                t.3 = vals.iter().flat_map(|&v| half::bf16::from_f32(v).to_le_bytes()).collect();
+                t.3 = vals
+                    .iter()
+                    .flat_map(|&v| half::bf16::from_f32(v).to_le_bytes())
+                    .collect();
             }
         }
         let k = find(r, "vqvae_up.bottleneck.level_blocks.0.k");
         expected = match k.1 {
-            Dtype::F16 => k.3.chunks_exact(2).map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32()).collect(),
-            _ => k.3.chunks_exact(2).map(|c| half::bf16::from_le_bytes([c[0], c[1]]).to_f32()).collect(),
+            Dtype::F16 => {
+                k.3.chunks_exact(2)
+                    .map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32())
+                    .collect()
+            }
+            _ => {
+                k.3.chunks_exact(2)
+                    .map(|c| half::bf16::from_le_bytes([c[0], c[1]]).to_f32())
+                    .collect()
+            }
         };
         assert!(r.iter().any(|t| t.1 == Dtype::F16) && r.iter().any(|t| t.1 == Dtype::BF16));
     });
     let mf = ModelFile::from_bytes(fx.convert(StoreAs::F32).unwrap()).unwrap();
     let duo = mf.duo().unwrap();
-    let t = duo.tensor("motion.vqvae_up.bottleneck.level_blocks.0.k").unwrap();
+    let t = duo
+        .tensor("motion.vqvae_up.bottleneck.level_blocks.0.k")
+        .unwrap();
     assert_eq!(t.as_f32().unwrap(), &expected[..]);
 }
 
@@ -206,21 +297,48 @@ fn accepts_f16_and_bf16_sources_by_upcasting() {
 #[test]
 fn missing_tensor_is_named_with_its_expected_shape() {
     let mut fx = fixture("tiny");
-    edit(&mut fx.gpt, |r| r.retain(|t| t.0 != "module.gpt_head.head_up.weight"));
+    edit(&mut fx.gpt, |r| {
+        r.retain(|t| t.0 != "module.gpt_head.head_up.weight")
+    });
     let err = expect_err(fx.convert(StoreAs::F32));
-    let ConvertError::Missing { ref tensor, ref duo_name, ref expected, ref path } = err else { panic!("{err}") };
-    assert_eq!((tensor.as_str(), duo_name.as_str(), &expected[..]), ("gpt_head.head_up.weight", "gpt.gpt_head.head_up.weight", &[64, 32][..]));
+    let ConvertError::Missing {
+        ref tensor,
+        ref duo_name,
+        ref expected,
+        ref path,
+    } = err
+    else {
+        panic!("{err}")
+    };
+    assert_eq!(
+        (tensor.as_str(), duo_name.as_str(), &expected[..]),
+        (
+            "gpt_head.head_up.weight",
+            "gpt.gpt_head.head_up.weight",
+            &[64, 32][..]
+        )
+    );
     assert!(path.ends_with("gpt.safetensors"));
     let msg = err.to_string();
-    assert!(msg.contains("gpt.safetensors") && msg.contains("gpt_head.head_up.weight") && msg.contains("[64, 32]"), "{msg}");
+    assert!(
+        msg.contains("gpt.safetensors")
+            && msg.contains("gpt_head.head_up.weight")
+            && msg.contains("[64, 32]"),
+        "{msg}"
+    );
 }
 
 #[test]
 fn extra_tensor_is_named() {
     let mut fx = fixture("tiny");
-    edit(&mut fx.transl, |r| r.push(("surprise.weight".into(), Dtype::F32, vec![2], vec![0; 8])));
+    edit(&mut fx.transl, |r| {
+        r.push(("surprise.weight".into(), Dtype::F32, vec![2], vec![0; 8]))
+    });
     let err = expect_err(fx.convert(StoreAs::F32));
-    assert!(matches!(&err, ConvertError::Extra { tensors, path } if tensors == &["surprise.weight"] && path.ends_with("transl.safetensors")), "{err}");
+    assert!(
+        matches!(&err, ConvertError::Extra { tensors, path } if tensors == &["surprise.weight"] && path.ends_with("transl.safetensors")),
+        "{err}"
+    );
     assert!(err.to_string().contains("`surprise.weight`"));
 }
 
@@ -232,19 +350,41 @@ fn misshaped_tensor_names_expected_and_found() {
         t.2 = vec![t.2[1], t.2[0], t.2[2]];
     });
     let err = expect_err(fx.convert(StoreAs::F32));
-    let ConvertError::Shape { ref tensor, ref expected, ref found, .. } = err else { panic!("{err}") };
-    assert_eq!(tensor, "vqvae_lhand.encoders.0.level_blocks.0.model.0.0.weight");
-    assert_eq!(expected.iter().map(|&d| d as usize).collect::<Vec<_>>(), vec![found[1], found[0], found[2]]);
+    let ConvertError::Shape {
+        ref tensor,
+        ref expected,
+        ref found,
+        ..
+    } = err
+    else {
+        panic!("{err}")
+    };
+    assert_eq!(
+        tensor,
+        "vqvae_lhand.encoders.0.level_blocks.0.model.0.0.weight"
+    );
+    assert_eq!(
+        expected.iter().map(|&d| d as usize).collect::<Vec<_>>(),
+        vec![found[1], found[0], found[2]]
+    );
     let msg = err.to_string();
-    assert!(msg.contains(&format!("{found:?}")) && msg.contains(&format!("{expected:?}")), "{msg}");
+    assert!(
+        msg.contains(&format!("{found:?}")) && msg.contains(&format!("{expected:?}")),
+        "{msg}"
+    );
 }
 
 #[test]
 fn unsupported_source_dtype_is_named() {
     let mut fx = fixture("tiny");
-    edit(&mut fx.gpt, |r| find(r, "module.tok_emb_transl.weight").1 = Dtype::I32);
+    edit(&mut fx.gpt, |r| {
+        find(r, "module.tok_emb_transl.weight").1 = Dtype::I32
+    });
     let err = expect_err(fx.convert(StoreAs::F32));
-    assert!(matches!(&err, ConvertError::Dtype { tensor, found, .. } if tensor == "tok_emb_transl.weight" && found == "I32"), "{err}");
+    assert!(
+        matches!(&err, ConvertError::Dtype { tensor, found, .. } if tensor == "tok_emb_transl.weight" && found == "I32"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -281,7 +421,10 @@ fn non_finite_weight_is_rejected() {
         t.3[8..12].copy_from_slice(&f32::INFINITY.to_le_bytes());
     });
     let err = expect_err(fx.convert(StoreAs::F32));
-    assert!(matches!(&err, ConvertError::NonFinite { tensor, index: 2, .. } if tensor == "bottleneck.level_blocks.0.k"), "{err}");
+    assert!(
+        matches!(&err, ConvertError::NonFinite { tensor, index: 2, .. } if tensor == "bottleneck.level_blocks.0.k"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -289,7 +432,10 @@ fn garbage_safetensors_is_rejected() {
     let mut fx = fixture("tiny");
     fx.vqvae.truncate(100);
     let err = expect_err(fx.convert(StoreAs::F32));
-    assert!(matches!(&err, ConvertError::Safetensors { path, .. } if path.ends_with("vqvae.safetensors")), "{err}");
+    assert!(
+        matches!(&err, ConvertError::Safetensors { path, .. } if path.ends_with("vqvae.safetensors")),
+        "{err}"
+    );
 }
 
 // ------------------------------------------------------------- YAML rules
@@ -316,7 +462,9 @@ fn yaml_levels_other_than_one_are_rejected() {
 #[test]
 fn yaml_missing_key_is_named() {
     let fx = fixture("tiny");
-    let yaml = fx.yaml.replacen("music_motion_rate:", "music_motion_rate_renamed:", 1);
+    let yaml = fx
+        .yaml
+        .replacen("music_motion_rate:", "music_motion_rate_renamed:", 1);
     assert_ne!(yaml, fx.yaml);
     let err = yaml_err(&yaml);
     assert_eq!(key_of(&err), "music_motion_rate");
@@ -328,7 +476,10 @@ fn yaml_config_failing_validation_is_reported() {
     let fx = fixture("tiny");
     // A transl VQ-VAE with 4 input channels: validate wants 3.
     let root = Yaml::parse(&fx.yaml).unwrap();
-    let dim = match root.get("structure_transl_vqvae").and_then(|s| s.get("input_dim")) {
+    let dim = match root
+        .get("structure_transl_vqvae")
+        .and_then(|s| s.get("input_dim"))
+    {
         Some(Yaml::Int(d)) => *d,
         other => panic!("fixture input_dim: {other:?}"),
     };
@@ -362,10 +513,11 @@ fn yaml_syntax_error_names_the_file() {
 #[test]
 fn int8_storage_by_role_on_the_published_config() {
     use duolando_core::duolando::schema::for_each_tensor;
-use duolando_core::nn::names::{Role, SchemaError};
+    use duolando_core::nn::names::{Role, SchemaError};
     use duolando_core::tensor::block_row;
     let cfg = duolando_core::duolando::presets::duolando_published();
-    let mut by_role: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = Default::default();
+    let mut by_role: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> =
+        Default::default();
     for_each_tensor::<SchemaError>(&cfg, &mut |s| {
         let got = duolando::convert::storage_for(StoreAs::Q8Block32, s);
         let blockable = block_row(s.dims()) % 32 == 0;
@@ -380,28 +532,58 @@ use duolando_core::nn::names::{Role, SchemaError};
         // Written in GEMM order exactly when a ConvTranspose1d weight is blocked.
         let shape = duolando::convert::stored_dims(s, got);
         match (s.role, s.dims()) {
-            (Role::ConvTranspose, &[c_in, c_out, k]) => assert_eq!(shape, [c_out * k, c_in], "{}", s.name),
+            (Role::ConvTranspose, &[c_in, c_out, k]) => {
+                assert_eq!(shape, [c_out * k, c_in], "{}", s.name)
+            }
             _ => assert_eq!(shape, s.dims(), "{}", s.name),
         }
-        assert_eq!(duolando::convert::stored_dims(s, StoreAs::F16), s.dims(), "{} (f16)", s.name);
-        assert_eq!(duolando::convert::storage_for(StoreAs::Q8Block32x8, s), want, "{} (x8 requested)", s.name);
+        assert_eq!(
+            duolando::convert::stored_dims(s, StoreAs::F16),
+            s.dims(),
+            "{} (f16)",
+            s.name
+        );
+        assert_eq!(
+            duolando::convert::storage_for(StoreAs::Q8Block32x8, s),
+            want,
+            "{} (x8 requested)",
+            s.name
+        );
         // 4-bit: the same tensors, in the 4-bit layouts.
         let want4 = match want {
             StoreAs::Q8Block32 => StoreAs::Q4Block32,
             StoreAs::Q8Block32x8 => StoreAs::Q4Block32x8,
             other => other,
         };
-        assert_eq!(duolando::convert::storage_for(StoreAs::Q4Block32, s), want4, "{} (q4)", s.name);
-        by_role.entry(format!("{:?}", s.role)).or_default().insert(format!("{got:?}"));
+        assert_eq!(
+            duolando::convert::storage_for(StoreAs::Q4Block32, s),
+            want4,
+            "{} (q4)",
+            s.name
+        );
+        by_role
+            .entry(format!("{:?}", s.role))
+            .or_default()
+            .insert(format!("{got:?}"));
         Ok(())
     })
     .unwrap();
     // Every role occurs; the published decoders' convs are all blockable.
     assert_eq!(by_role.len(), 8, "{by_role:?}");
     assert_eq!(by_role["Conv"].iter().collect::<Vec<_>>(), ["Q8Block32x8"]);
-    assert_eq!(by_role["Linear"].iter().collect::<Vec<_>>(), ["F16", "Q8Block32x8"], "music_trans' input rows are not in blocks of 32");
-    assert_eq!(by_role["Embedding"].iter().collect::<Vec<_>>(), ["Q8Block32"]);
+    assert_eq!(
+        by_role["Linear"].iter().collect::<Vec<_>>(),
+        ["F16", "Q8Block32x8"],
+        "music_trans' input rows are not in blocks of 32"
+    );
+    assert_eq!(
+        by_role["Embedding"].iter().collect::<Vec<_>>(),
+        ["Q8Block32"]
+    );
     assert_eq!(by_role["EncoderConv"].iter().collect::<Vec<_>>(), ["F16"]);
-    assert_eq!(by_role["ConvTranspose"].iter().collect::<Vec<_>>(), ["Q8Block32x8"]);
+    assert_eq!(
+        by_role["ConvTranspose"].iter().collect::<Vec<_>>(),
+        ["Q8Block32x8"]
+    );
     assert_eq!(by_role["Codebook"].iter().collect::<Vec<_>>(), ["F16"]);
 }

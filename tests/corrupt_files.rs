@@ -6,16 +6,19 @@
 //!
 //! Run: `cargo test -p duolando-tests --test corrupt_files`.
 
-use duolando::duo_writer::{assemble, assemble_raw, write_duo, Header, HeaderEntry, StoreAs, Tensor};
+use duolando::duo_writer::{
+    assemble, assemble_raw, write_duo, Header, HeaderEntry, StoreAs, Tensor,
+};
 use duolando::model_file::{AlignedBytes, ModelFile, ModelFileError};
 use duolando_core::duolando::config::{GptConfig, LatConfig, ModelConfig, Part};
-use duolando_core::nn::vq_config::VqConfig;
+use duolando_core::duolando::schema::{for_each_tensor, tensor_count};
 use duolando_core::format::{
-    schema_tensor, DuoFile, FormatError, HeaderField, NonFiniteKind, Shape, MAX_DIM, MAX_HEADER_LEN, MAX_NAME_LEN, MAX_TENSORS,
+    schema_tensor, DuoFile, FormatError, HeaderField, NonFiniteKind, Shape, MAX_DIM,
+    MAX_HEADER_LEN, MAX_NAME_LEN, MAX_TENSORS,
 };
 use duolando_core::limits::{ConfigError, ConfigField};
-use duolando_core::duolando::schema::{for_each_tensor, tensor_count};
 use duolando_core::nn::names::{Role, SchemaError, TensorSpec};
+use duolando_core::nn::vq_config::VqConfig;
 use duolando_core::tensor::DType;
 use proptest::prelude::*;
 
@@ -49,12 +52,27 @@ fn tiny_config() -> ModelConfig {
             block_size: 4,
             look_forward: 2,
             vocab: [16; 5],
-            music: LatConfig { n_in: 6, n_layer: 1, n_head: 2, downsample_rate: 4 },
-            leader: LatConfig { n_in: 8, n_layer: 1, n_head: 2, downsample_rate: 1 },
+            music: LatConfig {
+                n_in: 6,
+                n_layer: 1,
+                n_head: 2,
+                downsample_rate: 4,
+            },
+            leader: LatConfig {
+                n_in: 8,
+                n_layer: 1,
+                n_head: 2,
+                downsample_rate: 1,
+            },
             n_streams: 10,
             final_ln: false,
         },
-        parts: [vq(Some(Part::Up)), vq(Some(Part::Down)), vq(Some(Part::LHand)), vq(Some(Part::RHand))],
+        parts: [
+            vq(Some(Part::Up)),
+            vq(Some(Part::Down)),
+            vq(Some(Part::LHand)),
+            vq(Some(Part::RHand)),
+        ],
         transl: vq(None),
         music_motion_rate: 4,
     }
@@ -90,7 +108,8 @@ fn valid_bytes() -> Vec<u8> {
     VALID
         .get_or_init(|| {
             let cfg = tiny_config();
-            write_duo(&cfg, &seeded_tensors(&cfg, 7, StoreAs::F32)).expect("the writer accepts a schema-complete model")
+            write_duo(&cfg, &seeded_tensors(&cfg, 7, StoreAs::F32))
+                .expect("the writer accepts a schema-complete model")
         })
         .clone()
 }
@@ -115,7 +134,13 @@ fn take_apart(bytes: &[u8]) -> Parts {
         })
         .collect();
     let data = bytes[duo.prefix().data_start as usize..].to_vec();
-    Parts { header: Header { config: *duo.config().duolando().expect("a Duolando fixture"), tensors }, data }
+    Parts {
+        header: Header {
+            config: *duo.config().duolando().expect("a Duolando fixture"),
+            tensors,
+        },
+        data,
+    }
 }
 
 fn valid_parts() -> Parts {
@@ -154,7 +179,11 @@ fn parse(bytes: &[u8]) -> Result<(), FormatError> {
 }
 
 fn index_of(p: &Parts, pred: impl Fn(&HeaderEntry) -> bool) -> usize {
-    p.header.tensors.iter().position(pred).expect("such a tensor exists in the tiny model")
+    p.header
+        .tensors
+        .iter()
+        .position(pred)
+        .expect("such a tensor exists in the tiny model")
 }
 
 fn set_u32(bytes: &mut [u8], at: usize, v: u32) {
@@ -180,10 +209,18 @@ fn valid_file_parses_and_round_trips_values() {
     for t in &tensors {
         let view = duo.tensor(&t.name).unwrap();
         assert_eq!(view.dims(), &t.shape[..], "{}", t.name);
-        assert_eq!(view.data.as_ptr() as usize % 64, 0, "{} payload aligned in memory", t.name);
+        assert_eq!(
+            view.data.as_ptr() as usize % 64,
+            0,
+            "{} payload aligned in memory",
+            t.name
+        );
         assert_eq!(view.as_f32().unwrap(), &t.values[..], "{}", t.name);
     }
-    assert_eq!(duo.tensor("gpt.no_such_tensor").unwrap_err(), FormatError::NotFound);
+    assert_eq!(
+        duo.tensor("gpt.no_such_tensor").unwrap_err(),
+        FormatError::NotFound
+    );
     assert_eq!(duo.first_non_finite(), None);
 }
 
@@ -197,8 +234,16 @@ fn valid_f16_file_parses_with_rounded_values() {
     let t = &tensors[0];
     let view = duo.tensor(&t.name).unwrap();
     assert_eq!(view.dtype, DType::F16);
-    let got: Vec<f32> = view.data.chunks_exact(2).map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32()).collect();
-    let want: Vec<f32> = t.values.iter().map(|&v| half::f16::from_f32(v).to_f32()).collect();
+    let got: Vec<f32> = view
+        .data
+        .chunks_exact(2)
+        .map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32())
+        .collect();
+    let want: Vec<f32> = t
+        .values
+        .iter()
+        .map(|&v| half::f16::from_f32(v).to_f32())
+        .collect();
     assert_eq!(got, want);
 }
 
@@ -222,7 +267,10 @@ fn find_locates_every_entry_and_nothing_else() {
         let mf = ModelFile::open(duolando_tests::fixture(&format!("{m}/model.duo"))).unwrap();
         let duo = mf.duo().unwrap();
         let names: Vec<&str> = duo.tensors().map(|e| e.name).collect();
-        assert!(names.len() > 64 * 2, "{m}: too few tensors to exercise the skip index");
+        assert!(
+            names.len() > 64 * 2,
+            "{m}: too few tensors to exercise the skip index"
+        );
         for (i, n) in names.iter().enumerate() {
             let (at, e) = duo.find(n).unwrap_or_else(|| panic!("{m}: {n} not found"));
             assert_eq!((at as usize, e.name), (i, *n));
@@ -242,11 +290,19 @@ fn first_non_finite_finds_a_nan_weight() {
     let at = p.header.tensors[i].offset as usize + 4;
     p.data[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     let bytes = rebuild(&p);
-    assert_eq!(parse(&bytes), Err(FormatError::NonFiniteWeight { index: i as u32, element: 1, kind: NonFiniteKind::Nan }));
+    assert_eq!(
+        parse(&bytes),
+        Err(FormatError::NonFiniteWeight {
+            index: i as u32,
+            element: 1,
+            kind: NonFiniteKind::Nan
+        })
+    );
     // The table-only parse (for bytes that passed `parse` before) does not
     // read the weights; `first_non_finite` finds it there.
     let aligned = AlignedBytes::copy_from(&bytes);
-    let duo = DuoFile::parse_without_weight_scan(aligned.as_bytes()).expect("the structure is valid");
+    let duo =
+        DuoFile::parse_without_weight_scan(aligned.as_bytes()).expect("the structure is valid");
     assert_eq!(duo.first_non_finite(), Some((i as u32, 1)));
 }
 
@@ -276,7 +332,10 @@ fn rejects_bad_magic() {
     assert!(matches!(parse(&bytes), Err(FormatError::BadMagic { found }) if found[1] == b'X'));
     let msg = parse(&bytes).unwrap_err().to_string();
     let want = format!("0x{:02x}58", bytes[0]);
-    assert!(msg.contains(&want) && msg.contains("not a .duo file"), "{msg}: the magic as 0x-prefixed hex");
+    assert!(
+        msg.contains(&want) && msg.contains("not a .duo file"),
+        "{msg}: the magic as 0x-prefixed hex"
+    );
 }
 
 #[test]
@@ -284,7 +343,13 @@ fn rejects_future_version() {
     for v in [0, 3, u32::MAX] {
         let mut bytes = valid_bytes();
         set_u32(&mut bytes, 8, v);
-        assert_eq!(parse(&bytes), Err(FormatError::UnsupportedVersion { found: v, supported: 2 }));
+        assert_eq!(
+            parse(&bytes),
+            Err(FormatError::UnsupportedVersion {
+                found: v,
+                supported: 2
+            })
+        );
     }
 }
 
@@ -317,7 +382,12 @@ fn version_2_families() {
         .tensors()
         .map(|e| {
             let t = duo1.tensor(e.name).unwrap();
-            Tensor { name: e.name.to_string(), shape: e.dims().to_vec(), values: t.as_f32().unwrap().to_vec(), store_as: StoreAs::F32 }
+            Tensor {
+                name: e.name.to_string(),
+                shape: e.dims().to_vec(),
+                values: t.as_f32().unwrap().to_vec(),
+                store_as: StoreAs::F32,
+            }
         })
         .collect();
     let v2 = write_model_version(&cfg, &tensors, 2).unwrap();
@@ -337,30 +407,54 @@ fn version_2_families() {
         if want_unknown {
             assert_eq!(r, Err(FormatError::UnknownFamily { tag: tag as u32 }));
             let msg = r.unwrap_err().to_string();
-            assert!(msg.contains(&format!("model family {tag}")) && msg.contains("Bailando"), "{msg}");
+            assert!(
+                msg.contains(&format!("model family {tag}")) && msg.contains("Bailando"),
+                "{msg}"
+            );
         } else {
-            assert!(r.is_err(), "a Duolando config under another family's tag ({tag}) must not parse: {r:?}");
+            assert!(
+                r.is_err(),
+                "a Duolando config under another family's tag ({tag}) must not parse: {r:?}"
+            );
         }
     }
     // A version-2 header cut inside the tag.
     let bytes = assemble_raw_version(2, &[], &[]).unwrap();
-    assert_eq!(parse(&bytes), Err(FormatError::MalformedHeader { field: duolando_core::format::HeaderField::Family, offset: 0 }));
+    assert_eq!(
+        parse(&bytes),
+        Err(FormatError::MalformedHeader {
+            field: duolando_core::format::HeaderField::Family,
+            offset: 0
+        })
+    );
 }
 
 #[test]
 fn rejects_unknown_flags() {
     let mut bytes = valid_bytes();
     set_u32(&mut bytes, 12, 0x10);
-    assert_eq!(parse(&bytes), Err(FormatError::UnknownFlags { flags: 0x10 }));
+    assert_eq!(
+        parse(&bytes),
+        Err(FormatError::UnknownFlags { flags: 0x10 })
+    );
 }
 
 #[test]
 fn rejects_header_length_over_cap() {
     let mut bytes = valid_bytes();
     set_u64(&mut bytes, 16, MAX_HEADER_LEN + 1);
-    assert_eq!(parse(&bytes), Err(FormatError::HeaderTooLarge { header_len: MAX_HEADER_LEN + 1, max: MAX_HEADER_LEN }));
+    assert_eq!(
+        parse(&bytes),
+        Err(FormatError::HeaderTooLarge {
+            header_len: MAX_HEADER_LEN + 1,
+            max: MAX_HEADER_LEN
+        })
+    );
     set_u64(&mut bytes, 16, u64::MAX);
-    assert!(matches!(parse(&bytes), Err(FormatError::HeaderTooLarge { .. })));
+    assert!(matches!(
+        parse(&bytes),
+        Err(FormatError::HeaderTooLarge { .. })
+    ));
 }
 
 #[test]
@@ -368,7 +462,9 @@ fn rejects_header_length_past_end() {
     let mut bytes = valid_bytes();
     let len = bytes.len() as u64;
     set_u64(&mut bytes, 16, len);
-    assert!(matches!(parse(&bytes), Err(FormatError::HeaderPastEnd { file_len, .. }) if file_len == len));
+    assert!(
+        matches!(parse(&bytes), Err(FormatError::HeaderPastEnd { file_len, .. }) if file_len == len)
+    );
 }
 
 #[test]
@@ -376,10 +472,18 @@ fn rejects_non_zero_padding() {
     let bytes = valid_bytes();
     let header_end = 24 + u64::from_le_bytes(bytes[16..24].try_into().unwrap()) as usize;
     let data_start = header_end.next_multiple_of(64);
-    assert!(data_start > header_end, "the tiny model's header leaves padding");
+    assert!(
+        data_start > header_end,
+        "the tiny model's header leaves padding"
+    );
     let mut bad = bytes.clone();
     bad[data_start - 1] = 1;
-    assert_eq!(parse(&bad), Err(FormatError::NonZeroPadding { offset: data_start as u64 - 1 }));
+    assert_eq!(
+        parse(&bad),
+        Err(FormatError::NonZeroPadding {
+            offset: data_start as u64 - 1
+        })
+    );
 }
 
 #[test]
@@ -387,7 +491,13 @@ fn rejects_truncated_config() {
     let p = valid_parts();
     let header = postcard::to_stdvec(&p.header).unwrap();
     let bytes = assemble_raw(&header[..5], &[]).unwrap();
-    assert_eq!(parse(&bytes), Err(FormatError::MalformedHeader { field: HeaderField::Config, offset: 0 }));
+    assert_eq!(
+        parse(&bytes),
+        Err(FormatError::MalformedHeader {
+            field: HeaderField::Config,
+            offset: 0
+        })
+    );
 }
 
 #[test]
@@ -404,7 +514,10 @@ fn rejects_config_over_the_caps() {
     p.header.config.gpt.n_layer_base = 100_000;
     assert!(matches!(
         parse(&rebuild(&p)),
-        Err(FormatError::InvalidConfig(ConfigError::TooLarge { field: ConfigField::NLayerBase, .. }))
+        Err(FormatError::InvalidConfig(ConfigError::TooLarge {
+            field: ConfigField::NLayerBase,
+            ..
+        }))
     ));
 }
 
@@ -414,7 +527,10 @@ fn rejects_inconsistent_config() {
     p.header.config.gpt.n_head = 3; // 8 % 3 != 0
     assert!(matches!(
         parse(&rebuild(&p)),
-        Err(FormatError::InvalidConfig(ConfigError::NotDivisible { field: ConfigField::NEmbd, .. }))
+        Err(FormatError::InvalidConfig(ConfigError::NotDivisible {
+            field: ConfigField::NEmbd,
+            ..
+        }))
     ));
 }
 
@@ -423,7 +539,13 @@ fn rejects_tensor_count_over_cap() {
     let p = valid_parts();
     let header = postcard::to_stdvec(&(p.header.config, MAX_TENSORS as u64 + 1)).unwrap();
     let bytes = assemble_raw(&header, &[]).unwrap();
-    assert_eq!(parse(&bytes), Err(FormatError::TooManyTensors { count: MAX_TENSORS as u64 + 1, max: MAX_TENSORS }));
+    assert_eq!(
+        parse(&bytes),
+        Err(FormatError::TooManyTensors {
+            count: MAX_TENSORS as u64 + 1,
+            max: MAX_TENSORS
+        })
+    );
 }
 
 #[test]
@@ -432,7 +554,13 @@ fn rejects_table_running_past_header() {
     let header = postcard::to_stdvec(&p.header).unwrap();
     let cut = header.len() - 3; // inside the last entry's varints
     let bytes = assemble_raw(&header[..cut], &p.data).unwrap();
-    assert!(matches!(parse(&bytes), Err(FormatError::MalformedHeader { field: HeaderField::Offset | HeaderField::ByteLen, .. })));
+    assert!(matches!(
+        parse(&bytes),
+        Err(FormatError::MalformedHeader {
+            field: HeaderField::Offset | HeaderField::ByteLen,
+            ..
+        })
+    ));
 }
 
 #[test]
@@ -440,10 +568,19 @@ fn rejects_invalid_utf8_name() {
     let p = valid_parts();
     let mut header = postcard::to_stdvec(&p.header).unwrap();
     let first = p.header.tensors[0].name.as_bytes();
-    let at = header.windows(first.len()).position(|w| w == first).unwrap();
+    let at = header
+        .windows(first.len())
+        .position(|w| w == first)
+        .unwrap();
     header[at] = 0xFF;
     let bytes = assemble_raw(&header, &p.data).unwrap();
-    assert!(matches!(parse(&bytes), Err(FormatError::MalformedHeader { field: HeaderField::Name, .. })));
+    assert!(matches!(
+        parse(&bytes),
+        Err(FormatError::MalformedHeader {
+            field: HeaderField::Name,
+            ..
+        })
+    ));
 }
 
 #[test]
@@ -452,14 +589,20 @@ fn rejects_trailing_header_bytes() {
     let mut header = postcard::to_stdvec(&p.header).unwrap();
     header.push(0);
     let bytes = assemble_raw(&header, &p.data).unwrap();
-    assert_eq!(parse(&bytes), Err(FormatError::TrailingHeaderBytes { count: 1 }));
+    assert_eq!(
+        parse(&bytes),
+        Err(FormatError::TrailingHeaderBytes { count: 1 })
+    );
 }
 
 #[test]
 fn rejects_empty_name() {
     let mut p = valid_parts();
     p.header.tensors[0].name.clear();
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::EmptyName { index: 0 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::EmptyName { index: 0 })
+    );
 }
 
 #[test]
@@ -468,56 +611,98 @@ fn rejects_name_over_cap() {
     p.header.tensors[0].name = "a".repeat(MAX_NAME_LEN + 1);
     assert_eq!(
         parse(&rebuild(&p)),
-        Err(FormatError::NameTooLong { index: 0, len: MAX_NAME_LEN + 1, max: MAX_NAME_LEN })
+        Err(FormatError::NameTooLong {
+            index: 0,
+            len: MAX_NAME_LEN + 1,
+            max: MAX_NAME_LEN
+        })
     );
 }
 
 #[test]
 fn rejects_unsorted_table() {
     let mut p = valid_parts();
-    let (a, b) = (p.header.tensors[0].name.clone(), p.header.tensors[1].name.clone());
+    let (a, b) = (
+        p.header.tensors[0].name.clone(),
+        p.header.tensors[1].name.clone(),
+    );
     p.header.tensors[0].name = b;
     p.header.tensors[1].name = a;
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::UnsortedTable { index: 1 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::UnsortedTable { index: 1 })
+    );
 }
 
 #[test]
 fn rejects_duplicate_tensor() {
     let mut p = valid_parts();
     p.header.tensors[1].name = p.header.tensors[0].name.clone();
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::DuplicateTensor { index: 1, previous: 0 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::DuplicateTensor {
+            index: 1,
+            previous: 0
+        })
+    );
 }
 
 #[test]
 fn rejects_unknown_dtype_code() {
     let mut p = valid_parts();
     p.header.tensors[2].dtype = 7;
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::UnknownDtype { index: 2, code: 7 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::UnknownDtype { index: 2, code: 7 })
+    );
 }
 
 #[test]
 fn rejects_rank_zero_and_rank_over_cap() {
     let mut p = valid_parts();
     p.header.tensors[2].shape = vec![];
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::BadRank { index: 2, rank: 0 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::BadRank { index: 2, rank: 0 })
+    );
     p.header.tensors[2].shape = vec![1; 5];
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::BadRank { index: 2, rank: 5 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::BadRank { index: 2, rank: 5 })
+    );
 }
 
 #[test]
 fn rejects_zero_and_oversized_dims() {
     let mut p = valid_parts();
     p.header.tensors[2].shape = vec![4, 0];
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::DimOutOfRange { index: 2, axis: 1, dim: 0 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::DimOutOfRange {
+            index: 2,
+            axis: 1,
+            dim: 0
+        })
+    );
     p.header.tensors[2].shape = vec![MAX_DIM + 1];
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::DimOutOfRange { index: 2, axis: 0, dim: MAX_DIM + 1 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::DimOutOfRange {
+            index: 2,
+            axis: 0,
+            dim: MAX_DIM + 1
+        })
+    );
 }
 
 #[test]
 fn rejects_dims_whose_product_overflows() {
     let mut p = valid_parts();
     p.header.tensors[2].shape = vec![MAX_DIM; 4]; // 2^96 elements
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::SizeOverflow { index: 2 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::SizeOverflow { index: 2 })
+    );
 }
 
 #[test]
@@ -526,7 +711,14 @@ fn rejects_byte_length_not_matching_dtype_and_shape() {
     let e = &mut p.header.tensors[2];
     let expected = e.nbytes;
     e.nbytes += 4;
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::ByteLenMismatch { index: 2, expected, found: expected + 4 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::ByteLenMismatch {
+            index: 2,
+            expected,
+            found: expected + 4
+        })
+    );
 }
 
 #[test]
@@ -535,14 +727,26 @@ fn rejects_unaligned_offset() {
     let last = p.header.tensors.len() - 1;
     p.header.tensors[last].offset += 4;
     let offset = p.header.tensors[last].offset;
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::UnalignedOffset { index: last as u32, offset }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::UnalignedOffset {
+            index: last as u32,
+            offset
+        })
+    );
 }
 
 #[test]
 fn rejects_overlapping_tensors() {
     let mut p = valid_parts();
     p.header.tensors[1].offset = p.header.tensors[0].offset;
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::Overlap { index: 1, previous: 0 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::Overlap {
+            index: 1,
+            previous: 0
+        })
+    );
 }
 
 #[test]
@@ -552,7 +756,14 @@ fn rejects_out_of_range_offset() {
     let data_len = p.data.len() as u64;
     p.header.tensors[last].offset = data_len + 64;
     let end = data_len + 64 + p.header.tensors[last].nbytes;
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::DataOutOfRange { index: last as u32, end, data_len }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::DataOutOfRange {
+            index: last as u32,
+            end,
+            data_len
+        })
+    );
 }
 
 #[test]
@@ -560,7 +771,10 @@ fn rejects_offset_plus_length_overflow() {
     let mut p = valid_parts();
     let last = p.header.tensors.len() - 1;
     p.header.tensors[last].offset = !63u64; // the largest aligned offset
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::SizeOverflow { index: last as u32 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::SizeOverflow { index: last as u32 })
+    );
 }
 
 #[test]
@@ -581,7 +795,8 @@ fn accepts_zero_padding_after_the_data() {
         let mut padded = bytes.clone();
         padded.resize(bytes.len() + pad, 0);
         let aligned = AlignedBytes::copy_from(&padded);
-        let duo = DuoFile::parse(aligned.as_bytes()).unwrap_or_else(|e| panic!("{pad} zero bytes: {e}"));
+        let duo =
+            DuoFile::parse(aligned.as_bytes()).unwrap_or_else(|e| panic!("{pad} zero bytes: {e}"));
         assert_eq!(duo.len(), duo.config().tensor_count());
         let mf = ModelFile::from_bytes(padded).unwrap_or_else(|e| panic!("{pad} zero bytes: {e}"));
         assert_eq!(mf.bytes().len(), bytes.len() + pad);
@@ -597,12 +812,23 @@ fn rejects_trailing_data() {
         let mut b = bytes.clone();
         b.resize(bytes.len() + pad, 0);
         b[bytes.len() + at] = 0x5a;
-        assert_eq!(parse(&b), Err(FormatError::TrailingData { offset: (bytes.len() + at) as u64 }), "pad {pad} at {at}");
+        assert_eq!(
+            parse(&b),
+            Err(FormatError::TrailingData {
+                offset: (bytes.len() + at) as u64
+            }),
+            "pad {pad} at {at}"
+        );
     }
     // Another model appended (not zeros): refused at its first byte.
     let mut twice = bytes.clone();
     twice.extend_from_slice(&bytes);
-    assert_eq!(parse(&twice), Err(FormatError::TrailingData { offset: bytes.len() as u64 }));
+    assert_eq!(
+        parse(&twice),
+        Err(FormatError::TrailingData {
+            offset: bytes.len() as u64
+        })
+    );
 }
 
 #[test]
@@ -610,7 +836,9 @@ fn rejects_missing_tensor() {
     let mut p = valid_parts();
     let removed = p.header.tensors.remove(0);
     let err = parse(&rebuild(&p)).unwrap_err();
-    let FormatError::MissingTensor { schema_index } = err else { panic!("expected MissingTensor, got {err:?}") };
+    let FormatError::MissingTensor { schema_index } = err else {
+        panic!("expected MissingTensor, got {err:?}")
+    };
     let spec = schema_tensor(&p.header.config.into(), schema_index).unwrap();
     assert_eq!(spec.name.as_str(), removed.name);
 }
@@ -620,9 +848,18 @@ fn rejects_unknown_tensor() {
     let mut p = valid_parts();
     let offset = p.data.len() as u64;
     p.data.extend_from_slice(&[0u8; 64]);
-    p.header.tensors.push(HeaderEntry { name: "zzz.extra".into(), dtype: 0, shape: vec![4], offset, nbytes: 16 });
+    p.header.tensors.push(HeaderEntry {
+        name: "zzz.extra".into(),
+        dtype: 0,
+        shape: vec![4],
+        offset,
+        nbytes: 16,
+    });
     let index = p.header.tensors.len() as u32 - 1;
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::UnknownTensor { index }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::UnknownTensor { index })
+    );
 }
 
 #[test]
@@ -635,11 +872,18 @@ fn rejects_shape_not_matching_the_config() {
     let shape = |d: &[u32]| {
         let mut dims = [1u32; 4];
         dims[..d.len()].copy_from_slice(d);
-        Shape { rank: d.len() as u8, dims }
+        Shape {
+            rank: d.len() as u8,
+            dims,
+        }
     };
     assert_eq!(
         parse(&rebuild(&p)),
-        Err(FormatError::ShapeMismatch { index: i as u32, expected: shape(&expected), found: shape(&found) })
+        Err(FormatError::ShapeMismatch {
+            index: i as u32,
+            expected: shape(&expected),
+            found: shape(&found)
+        })
     );
 }
 
@@ -661,7 +905,9 @@ fn first_conv_transpose(p: &Parts) -> (usize, TensorSpec) {
 fn accepts_conv_transpose_in_gemm_order() {
     let mut p = valid_parts();
     let (i, spec) = first_conv_transpose(&p);
-    let [c_in, c_out, k] = spec.dims() else { panic!("{spec:?}") };
+    let [c_in, c_out, k] = spec.dims() else {
+        panic!("{spec:?}")
+    };
     p.header.tensors[i].shape = vec![c_out * k, *c_in]; // same element count
     assert_eq!(parse(&rebuild(&p)), Ok(()));
 }
@@ -670,16 +916,31 @@ fn accepts_conv_transpose_in_gemm_order() {
 fn rejects_conv_transpose_in_other_rank2_shapes() {
     let mut p = valid_parts();
     let (i, spec) = first_conv_transpose(&p);
-    let [c_in, c_out, k] = *spec.dims() else { panic!("{spec:?}") };
-    for found in [vec![c_in, c_out * k], vec![c_out, k * c_in], vec![k * c_in, c_out]] {
+    let [c_in, c_out, k] = *spec.dims() else {
+        panic!("{spec:?}")
+    };
+    for found in [
+        vec![c_in, c_out * k],
+        vec![c_out, k * c_in],
+        vec![k * c_in, c_out],
+    ] {
         if found == [c_out * k, c_in] {
             continue;
         }
         p.header.tensors[i].shape = found.clone();
-        let Err(FormatError::ShapeMismatch { index, expected, found: got }) = parse(&rebuild(&p)) else {
+        let Err(FormatError::ShapeMismatch {
+            index,
+            expected,
+            found: got,
+        }) = parse(&rebuild(&p))
+        else {
             panic!("{found:?} accepted")
         };
-        assert_eq!((index, expected.rank, &expected.dims[..3], got.rank), (i as u32, 3, spec.dims(), 2), "{found:?}");
+        assert_eq!(
+            (index, expected.rank, &expected.dims[..3], got.rank),
+            (i as u32, 3, spec.dims(), 2),
+            "{found:?}"
+        );
     }
 }
 
@@ -713,7 +974,10 @@ fn accepts_q8_tensor_with_finite_scales() {
 fn rejects_nan_or_infinite_quantization_scale() {
     for scale in [half::f16::NAN, half::f16::INFINITY, half::f16::NEG_INFINITY] {
         let (bytes, i) = with_q8_tensor(scale);
-        assert_eq!(parse(&bytes), Err(FormatError::NonFiniteScale { index: i, block: 0 }));
+        assert_eq!(
+            parse(&bytes),
+            Err(FormatError::NonFiniteScale { index: i, block: 0 })
+        );
     }
 }
 
@@ -725,7 +989,11 @@ fn with_q4_tensor(scale: half::f16) -> (Vec<u8>, u32) {
     let i = index_of(&p, |e| e.shape == [8, 32]);
     let mut q = Vec::new();
     for block in 0..8u8 {
-        let s = if block == 5 { scale } else { half::f16::from_f32(0.01) };
+        let s = if block == 5 {
+            scale
+        } else {
+            half::f16::from_f32(0.01)
+        };
         q.extend_from_slice(&s.to_le_bytes());
         q.extend((0..16u8).map(|v| v.wrapping_mul(block)));
     }
@@ -748,7 +1016,10 @@ fn accepts_q4_tensor_with_finite_scales() {
 fn rejects_nan_or_infinite_q4_scale() {
     for scale in [half::f16::NAN, half::f16::INFINITY, half::f16::NEG_INFINITY] {
         let (bytes, i) = with_q4_tensor(scale);
-        assert_eq!(parse(&bytes), Err(FormatError::NonFiniteScale { index: i, block: 5 }));
+        assert_eq!(
+            parse(&bytes),
+            Err(FormatError::NonFiniteScale { index: i, block: 5 })
+        );
     }
 }
 
@@ -759,7 +1030,14 @@ fn rejects_q4_payload_of_q8_size() {
     let mut p = take_apart(&bytes);
     let i = index_of(&p, |e| e.shape == [8, 32]);
     p.header.tensors[i].dtype = DType::Q4Block32 as u8;
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::ByteLenMismatch { index: i as u32, expected: 8 * 18, found: 8 * 34 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::ByteLenMismatch {
+            index: i as u32,
+            expected: 8 * 18,
+            found: 8 * 34
+        })
+    );
 }
 
 #[test]
@@ -767,7 +1045,10 @@ fn rejects_q8_shape_not_in_whole_blocks() {
     let mut p = valid_parts();
     let i = index_of(&p, |e| e.shape == [8, 8]);
     p.header.tensors[i].dtype = DType::Q8Block32 as u8;
-    assert_eq!(parse(&rebuild(&p)), Err(FormatError::SizeOverflow { index: i as u32 }));
+    assert_eq!(
+        parse(&rebuild(&p)),
+        Err(FormatError::SizeOverflow { index: i as u32 })
+    );
 }
 
 /// A valid file with the (8, 32) tensor re-encoded as `dtype`
@@ -779,9 +1060,16 @@ fn with_x8_tensor(dtype: DType, scale: half::f16, bad_row: usize) -> (Vec<u8>, u
     let mut p = valid_parts();
     let mut pay = payloads(&p);
     let i = index_of(&p, |e| e.shape == [8, 32]);
-    let (rows, cols) = (p.header.tensors[i].shape[0] as usize, p.header.tensors[i].shape[1] as usize);
+    let (rows, cols) = (
+        p.header.tensors[i].shape[0] as usize,
+        p.header.tensors[i].shape[1] as usize,
+    );
     let nb = cols / 32;
-    let per_block = if dtype == DType::Q4Block32x8 { 128 } else { 256 };
+    let per_block = if dtype == DType::Q4Block32x8 {
+        128
+    } else {
+        256
+    };
     let group = nb * (per_block + 16);
     let groups = rows.div_ceil(8);
     let mut q = vec![0u8; groups * group];
@@ -792,7 +1080,11 @@ fn with_x8_tensor(dtype: DType, scale: half::f16, bad_row: usize) -> (Vec<u8>, u
         }
         for b in 0..nb {
             for n in 0..8 {
-                let s = if b == 0 && t * 8 + n == bad_row { scale } else { half::f16::from_f32(0.01) };
+                let s = if b == 0 && t * 8 + n == bad_row {
+                    scale
+                } else {
+                    half::f16::from_f32(0.01)
+                };
                 let at = nb * per_block + 16 * b + 2 * n;
                 g[at..at + 2].copy_from_slice(&s.to_le_bytes());
             }
@@ -814,18 +1106,32 @@ fn accepts_x8_tensors_with_finite_scales() {
         let duo = DuoFile::parse(aligned.as_bytes()).unwrap();
         let e = duo.tensors().nth(i as usize).unwrap();
         let nb = e.shape[1] as u64 / 32;
-        assert_eq!((e.dtype, e.nbytes), (dtype, rows.div_ceil(8) as u64 * 8 * nb * block_bytes));
+        assert_eq!(
+            (e.dtype, e.nbytes),
+            (dtype, rows.div_ceil(8) as u64 * 8 * nb * block_bytes)
+        );
     }
 }
 
 #[test]
 fn rejects_non_finite_x8_scale() {
     for (dtype, _) in X8 {
-        for (row, scale) in [(0, half::f16::NAN), (5, half::f16::INFINITY), (7, half::f16::NEG_INFINITY)] {
+        for (row, scale) in [
+            (0, half::f16::NAN),
+            (5, half::f16::INFINITY),
+            (7, half::f16::NEG_INFINITY),
+        ] {
             let (bytes, i, _) = with_x8_tensor(dtype, scale, row);
             // Blocks numbered group-major, then block, then row: block 0 of
             // row r < 8 of a one-block (8, 32) tensor is r.
-            assert_eq!(parse(&bytes), Err(FormatError::NonFiniteScale { index: i, block: row as u64 }), "{dtype:?} row {row}");
+            assert_eq!(
+                parse(&bytes),
+                Err(FormatError::NonFiniteScale {
+                    index: i,
+                    block: row as u64
+                }),
+                "{dtype:?} row {row}"
+            );
         }
     }
 }
@@ -843,7 +1149,11 @@ fn rejects_x8_payload_short_of_its_groups() {
         let data = relayout(&mut p.header, &pay);
         assert_eq!(
             parse(&assemble(&p.header, &data).unwrap()),
-            Err(FormatError::ByteLenMismatch { index: i as u32, expected: 8 * nb * block_bytes, found: rows as u64 * nb * block_bytes }),
+            Err(FormatError::ByteLenMismatch {
+                index: i as u32,
+                expected: 8 * nb * block_bytes,
+                found: rows as u64 * nb * block_bytes
+            }),
             "{dtype:?}"
         );
     }
@@ -861,7 +1171,10 @@ fn poisoned(store_as: StoreAs, plants: &[(usize, usize, &[u8])]) -> Vec<u8> {
     for &(index, element, bits) in plants {
         let e = &p.header.tensors[index];
         let at = data_start + e.offset as usize + element * bits.len();
-        assert!(element * bits.len() < e.nbytes as usize, "element {element} inside tensor {index}");
+        assert!(
+            element * bits.len() < e.nbytes as usize,
+            "element {element} inside tensor {index}"
+        );
         bytes[at..at + bits.len()].copy_from_slice(bits);
     }
     bytes
@@ -873,10 +1186,22 @@ fn poison_sites() -> Vec<(usize, usize)> {
     let p = valid_parts();
     let numel = |e: &HeaderEntry| e.shape.iter().map(|&d| d as usize).product::<usize>();
     let last = p.header.tensors.len() - 1;
-    let big = (0..=last).max_by_key(|&i| numel(&p.header.tensors[i])).unwrap();
+    let big = (0..=last)
+        .max_by_key(|&i| numel(&p.header.tensors[i]))
+        .unwrap();
     let n_big = numel(&p.header.tensors[big]);
-    assert!(n_big > 600, "the largest tiny tensor spans several scan blocks ({n_big} elements)");
-    vec![(0, 0), (last, numel(&p.header.tensors[last]) - 1), (big, 0), (big, 257), (big, n_big / 2 + 1), (big, n_big - 1)]
+    assert!(
+        n_big > 600,
+        "the largest tiny tensor spans several scan blocks ({n_big} elements)"
+    );
+    vec![
+        (0, 0),
+        (last, numel(&p.header.tensors[last]) - 1),
+        (big, 0),
+        (big, 257),
+        (big, n_big / 2 + 1),
+        (big, n_big - 1),
+    ]
 }
 
 #[test]
@@ -892,13 +1217,23 @@ fn rejects_nan_and_infinite_f32_weights() {
             let bytes = poisoned(StoreAs::F32, &[(index, element, &v.to_le_bytes())]);
             assert_eq!(
                 parse(&bytes),
-                Err(FormatError::NonFiniteWeight { index: index as u32, element: element as u64, kind }),
+                Err(FormatError::NonFiniteWeight {
+                    index: index as u32,
+                    element: element as u64,
+                    kind
+                }),
                 "f32 {v:?} in tensor {index} element {element}"
             );
         }
     }
     // The largest finite values are weights like any other.
-    let bytes = poisoned(StoreAs::F32, &[(0, 0, &f32::MAX.to_le_bytes()), (1, 0, &f32::MIN.to_le_bytes())]);
+    let bytes = poisoned(
+        StoreAs::F32,
+        &[
+            (0, 0, &f32::MAX.to_le_bytes()),
+            (1, 0, &f32::MIN.to_le_bytes()),
+        ],
+    );
     assert_eq!(parse(&bytes), Ok(()));
 }
 
@@ -917,25 +1252,46 @@ fn rejects_nan_and_infinite_f16_weights() {
             let bytes = poisoned(StoreAs::F16, &[(index, element, &bits.to_le_bytes())]);
             assert_eq!(
                 parse(&bytes),
-                Err(FormatError::NonFiniteWeight { index: index as u32, element: element as u64, kind }),
+                Err(FormatError::NonFiniteWeight {
+                    index: index as u32,
+                    element: element as u64,
+                    kind
+                }),
                 "f16 {bits:#06x} in tensor {index} element {element}"
             );
         }
     }
     // 65504, the largest finite f16.
-    assert_eq!(parse(&poisoned(StoreAs::F16, &[(0, 0, &0x7bffu16.to_le_bytes())])), Ok(()));
+    assert_eq!(
+        parse(&poisoned(StoreAs::F16, &[(0, 0, &0x7bffu16.to_le_bytes())])),
+        Ok(())
+    );
 }
 
 #[test]
 fn the_first_non_finite_weight_in_table_order_is_named() {
     let sites = poison_sites();
     let (last, big) = (sites[1], sites[2]);
-    let bytes = poisoned(StoreAs::F32, &[(last.0, last.1, &f32::NAN.to_le_bytes()), (big.0, 9, &f32::INFINITY.to_le_bytes())]);
+    let bytes = poisoned(
+        StoreAs::F32,
+        &[
+            (last.0, last.1, &f32::NAN.to_le_bytes()),
+            (big.0, 9, &f32::INFINITY.to_le_bytes()),
+        ],
+    );
     let first = last.0.min(big.0);
     let want = if first == big.0 {
-        FormatError::NonFiniteWeight { index: big.0 as u32, element: 9, kind: NonFiniteKind::PosInf }
+        FormatError::NonFiniteWeight {
+            index: big.0 as u32,
+            element: 9,
+            kind: NonFiniteKind::PosInf,
+        }
     } else {
-        FormatError::NonFiniteWeight { index: last.0 as u32, element: last.1 as u64, kind: NonFiniteKind::Nan }
+        FormatError::NonFiniteWeight {
+            index: last.0 as u32,
+            element: last.1 as u64,
+            kind: NonFiniteKind::Nan,
+        }
     };
     assert_eq!(parse(&bytes), Err(want));
 }
@@ -950,10 +1306,21 @@ fn std_message_names_the_non_finite_weight() {
     std::fs::write(&path, &bytes).unwrap();
     let err = ModelFile::open(&path).err().expect("rejected at open");
     std::fs::remove_file(&path).ok();
-    assert!(matches!(err, ModelFileError::Format { error: FormatError::NonFiniteWeight { .. }, .. }));
+    assert!(matches!(
+        err,
+        ModelFileError::Format {
+            error: FormatError::NonFiniteWeight { .. },
+            ..
+        }
+    ));
     let msg = err.to_string();
     assert!(msg.contains(&path.display().to_string()), "{msg}");
-    assert!(msg.contains(&format!("tensor #{index} `{name}`: weight element {element} is +inf")), "{msg}");
+    assert!(
+        msg.contains(&format!(
+            "tensor #{index} `{name}`: weight element {element} is +inf"
+        )),
+        "{msg}"
+    );
 }
 
 // ------------------------------------------------------ std-side messages
@@ -966,18 +1333,31 @@ fn std_message_names_file_tensor_and_shapes() {
     let s = p.header.tensors[i].shape.clone();
     p.header.tensors[i].shape = vec![s[1], s[0]];
     let err = ModelFile::from_bytes(rebuild(&p)).err().expect("rejected");
-    assert!(matches!(err, ModelFileError::Format { error: FormatError::ShapeMismatch { .. }, .. }));
+    assert!(matches!(
+        err,
+        ModelFileError::Format {
+            error: FormatError::ShapeMismatch { .. },
+            ..
+        }
+    ));
     let msg = err.to_string();
     assert!(msg.contains("<memory>"), "{msg}");
     assert!(msg.contains(&name), "{msg}");
-    assert!(msg.contains(&format!("[{}, {}]", s[1], s[0])) && msg.contains(&format!("[{}, {}]", s[0], s[1])), "{msg}");
+    assert!(
+        msg.contains(&format!("[{}, {}]", s[1], s[0]))
+            && msg.contains(&format!("[{}, {}]", s[0], s[1])),
+        "{msg}"
+    );
 }
 
 #[test]
 fn std_message_names_missing_tensor() {
     let mut p = valid_parts();
     let removed = p.header.tensors.remove(0);
-    let msg = ModelFile::from_bytes(rebuild(&p)).err().expect("rejected").to_string();
+    let msg = ModelFile::from_bytes(rebuild(&p))
+        .err()
+        .expect("rejected")
+        .to_string();
     assert!(msg.contains(&removed.name), "{msg}");
 }
 
@@ -989,7 +1369,10 @@ fn open_names_the_path_of_a_corrupt_file() {
     std::fs::write(&path, &bytes).unwrap();
     let msg = ModelFile::open(&path).err().expect("rejected").to_string();
     std::fs::remove_file(&path).ok();
-    assert!(msg.contains(&path.display().to_string()) && msg.contains("magic"), "{msg}");
+    assert!(
+        msg.contains(&path.display().to_string()) && msg.contains("magic"),
+        "{msg}"
+    );
 }
 
 // --------------------------------------------------------- never panics
@@ -1016,7 +1399,13 @@ fn mutation() -> impl Strategy<Value = Mutation> {
 fn apply(bytes: &mut Vec<u8>, m: &Mutation, header_end: usize) {
     // Bias positions towards the prefix and header, where the structure is.
     let n = bytes.len();
-    let pick = |pos: usize| if pos & 3 == 0 { pos % n } else { pos % header_end.clamp(1, n) };
+    let pick = |pos: usize| {
+        if pos & 3 == 0 {
+            pos % n
+        } else {
+            pos % header_end.clamp(1, n)
+        }
+    };
     match *m {
         Mutation::Flip { pos, mask } => {
             let at = pick(pos);
@@ -1083,7 +1472,13 @@ fn full_size_file(dtype: DType) -> AlignedBytes {
     let mut off = 0u64;
     for s in &specs {
         let numel: u64 = s.dims().iter().map(|&d| d as u64).product();
-        tensors.push(HeaderEntry { name: s.name.as_str().to_string(), dtype: dtype as u8, shape: s.dims().to_vec(), offset: off, nbytes: numel * width });
+        tensors.push(HeaderEntry {
+            name: s.name.as_str().to_string(),
+            dtype: dtype as u8,
+            shape: s.dims().to_vec(),
+            offset: off,
+            nbytes: numel * width,
+        });
         off = (off + numel * width).next_multiple_of(64);
     }
     let mut data = vec![0u8; off as usize];
@@ -1100,7 +1495,14 @@ fn full_size_file(dtype: DType) -> AlignedBytes {
             c.copy_from_slice(&[h[0], h[1], h[0], h[1]]);
         }
     }
-    let bytes = assemble(&Header { config: cfg, tensors }, &data).unwrap();
+    let bytes = assemble(
+        &Header {
+            config: cfg,
+            tensors,
+        },
+        &data,
+    )
+    .unwrap();
     drop(data);
     AlignedBytes::copy_from(&bytes)
 }
@@ -1128,13 +1530,17 @@ fn weight_scan_cost_at_full_size() {
         let file = full_size_file(dtype);
         let b = file.as_bytes();
         let table = median_ms(|| {
-            std::hint::black_box(DuoFile::parse_without_weight_scan(std::hint::black_box(b)).unwrap());
+            std::hint::black_box(
+                DuoFile::parse_without_weight_scan(std::hint::black_box(b)).unwrap(),
+            );
         });
         let full = median_ms(|| {
             std::hint::black_box(DuoFile::parse(std::hint::black_box(b)).unwrap());
         });
         let sum = median_ms(|| {
-            let s = std::hint::black_box(b).chunks_exact(4).fold(0u32, |a, c| a.wrapping_add(u32::from_le_bytes([c[0], c[1], c[2], c[3]])));
+            let s = std::hint::black_box(b).chunks_exact(4).fold(0u32, |a, c| {
+                a.wrapping_add(u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            });
             std::hint::black_box(s);
         });
         let mut dst = vec![0u8; b.len()];
@@ -1164,15 +1570,31 @@ fn transflower_parts() -> (duolando::duo_writer::HeaderV2, Vec<u8>) {
     let duo = DuoFile::parse(aligned.as_bytes()).expect("the committed Transflower model parses");
     let tensors = duo
         .tensors()
-        .map(|e| HeaderEntry { name: e.name.to_string(), dtype: e.dtype as u8, shape: e.dims().to_vec(), offset: e.offset, nbytes: e.nbytes })
+        .map(|e| HeaderEntry {
+            name: e.name.to_string(),
+            dtype: e.dtype as u8,
+            shape: e.dims().to_vec(),
+            offset: e.offset,
+            nbytes: e.nbytes,
+        })
         .collect();
-    (duolando::duo_writer::HeaderV2 { config: *duo.config(), tensors }, bytes[duo.prefix().data_start as usize..].to_vec())
+    (
+        duolando::duo_writer::HeaderV2 {
+            config: *duo.config(),
+            tensors,
+        },
+        bytes[duo.prefix().data_start as usize..].to_vec(),
+    )
 }
 
-fn transflower_with(edit: &dyn Fn(&mut duolando_core::transflower::config::TransflowerConfig)) -> Vec<u8> {
+fn transflower_with(
+    edit: &dyn Fn(&mut duolando_core::transflower::config::TransflowerConfig),
+) -> Vec<u8> {
     use duolando_core::family::FamilyConfig;
     let (mut h, data) = transflower_parts();
-    let FamilyConfig::Transflower(mut cfg) = h.config else { panic!("a Transflower fixture") };
+    let FamilyConfig::Transflower(mut cfg) = h.config else {
+        panic!("a Transflower fixture")
+    };
     edit(&mut cfg);
     h.config = FamilyConfig::Transflower(cfg);
     duolando::duo_writer::assemble_v2(&h, &data).unwrap()
@@ -1186,19 +1608,99 @@ fn rejects_invalid_transflower_config_fields() {
     use duolando_core::transflower::config::{BaseDist, ConfigError as C, Field, InputConfig};
     let tf = |e| Err(FormatError::InvalidTransflowerConfig(e));
     assert!(parse(&transflower_with(&|_| {})).is_ok());
-    assert_eq!(parse(&transflower_with(&|c| c.n_inputs = 0)), tf(C::Zero { field: Field::Inputs }));
-    assert_eq!(parse(&transflower_with(&|c| c.n_inputs = 5)), tf(C::TooLarge { field: Field::Inputs, value: 5, max: 4 }));
-    assert_eq!(parse(&transflower_with(&|c| c.nhead = 3)), tf(C::NotDivisible { field: Field::Dhid, value: 16, divisor: 3 }));
-    assert_eq!(parse(&transflower_with(&|c| c.output = 2)), tf(C::TooLarge { field: Field::Output, value: 2, max: 1 }));
-    assert_eq!(parse(&transflower_with(&|c| c.inputs[1].length = 5000)), tf(C::TooLarge { field: Field::InputLength(1), value: 5000, max: 4096 }));
-    assert_eq!(parse(&transflower_with(&|c| c.cond_len = 5)), tf(C::Mismatch { field: Field::CondLen, value: 5, expected: 3 }));
-    assert_eq!(parse(&transflower_with(&|c| c.flow.steps = 33)), tf(C::TooLarge { field: Field::FlowSteps, value: 33, max: 32 }));
-    assert_eq!(parse(&transflower_with(&|c| c.flow.layers = 5)), tf(C::TooLarge { field: Field::CouplingLayers, value: 5, max: 4 }));
-    assert_eq!(parse(&transflower_with(&|c| c.flow.base = BaseDist::StudentT { df: 0 })), tf(C::Zero { field: Field::StudentTDf }));
-    assert_eq!(parse(&transflower_with(&|c| c.inputs[1].name = c.inputs[0].name)), tf(C::DuplicateName { input: 1, previous: 0 }));
-    assert_eq!(parse(&transflower_with(&|c| c.inputs[3] = c.inputs[0])), tf(C::UnusedInput { input: 3 }));
-    assert_eq!(parse(&transflower_with(&|c| c.inputs[0] = InputConfig { tokens: 4, ..c.inputs[0] })), tf(C::Unsupported(duolando_core::transflower::config::Unsupported::WindowType { input: 0 })));
-    let msg = parse(&transflower_with(&|c| c.nhead = 3)).unwrap_err().to_string();
+    assert_eq!(
+        parse(&transflower_with(&|c| c.n_inputs = 0)),
+        tf(C::Zero {
+            field: Field::Inputs
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.n_inputs = 5)),
+        tf(C::TooLarge {
+            field: Field::Inputs,
+            value: 5,
+            max: 4
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.nhead = 3)),
+        tf(C::NotDivisible {
+            field: Field::Dhid,
+            value: 16,
+            divisor: 3
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.output = 2)),
+        tf(C::TooLarge {
+            field: Field::Output,
+            value: 2,
+            max: 1
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.inputs[1].length = 5000)),
+        tf(C::TooLarge {
+            field: Field::InputLength(1),
+            value: 5000,
+            max: 4096
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.cond_len = 5)),
+        tf(C::Mismatch {
+            field: Field::CondLen,
+            value: 5,
+            expected: 3
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.flow.steps = 33)),
+        tf(C::TooLarge {
+            field: Field::FlowSteps,
+            value: 33,
+            max: 32
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.flow.layers = 5)),
+        tf(C::TooLarge {
+            field: Field::CouplingLayers,
+            value: 5,
+            max: 4
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(
+            &|c| c.flow.base = BaseDist::StudentT { df: 0 }
+        )),
+        tf(C::Zero {
+            field: Field::StudentTDf
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.inputs[1].name = c.inputs[0].name)),
+        tf(C::DuplicateName {
+            input: 1,
+            previous: 0
+        })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.inputs[3] = c.inputs[0])),
+        tf(C::UnusedInput { input: 3 })
+    );
+    assert_eq!(
+        parse(&transflower_with(&|c| c.inputs[0] = InputConfig {
+            tokens: 4,
+            ..c.inputs[0]
+        })),
+        tf(C::Unsupported(
+            duolando_core::transflower::config::Unsupported::WindowType { input: 0 }
+        ))
+    );
+    let msg = parse(&transflower_with(&|c| c.nhead = 3))
+        .unwrap_err()
+        .to_string();
     assert!(msg.contains("invalid Transflower model config"), "{msg}");
 }
 
@@ -1210,16 +1712,36 @@ fn rejects_corrupt_transflower_modality_name() {
     use duolando_core::transflower::config::ConfigError as C;
     let bytes = transflower_with(&|_| {});
     let needle = b"expmap_scaled_20";
-    let at = bytes.windows(needle.len()).position(|w| w == needle).expect("the name in the header");
-    assert!(at < 24 + 400, "the first occurrence is the config's, at {at}");
+    let at = bytes
+        .windows(needle.len())
+        .position(|w| w == needle)
+        .expect("the name in the header");
+    assert!(
+        at < 24 + 400,
+        "the first occurrence is the config's, at {at}"
+    );
     let mut bad = bytes.clone();
     bad[at + 6] = b'.';
-    assert_eq!(parse(&bad), Err(FormatError::InvalidTransflowerConfig(C::BadName { input: 0 })));
+    assert_eq!(
+        parse(&bad),
+        Err(FormatError::InvalidTransflowerConfig(C::BadName {
+            input: 0
+        }))
+    );
     // A length byte over the 32-byte cap.
     let mut bad = bytes.clone();
-    assert_eq!(bad[at - 1], needle.len() as u8, "the length byte before the name");
+    assert_eq!(
+        bad[at - 1],
+        needle.len() as u8,
+        "the length byte before the name"
+    );
     bad[at - 1] = 40;
-    assert_eq!(parse(&bad), Err(FormatError::InvalidTransflowerConfig(C::BadName { input: 0 })));
+    assert_eq!(
+        parse(&bad),
+        Err(FormatError::InvalidTransflowerConfig(C::BadName {
+            input: 0
+        }))
+    );
 }
 
 /// The config drives the schema: a Transflower config with one flow step
@@ -1241,7 +1763,13 @@ fn rejects_transflower_table_config_disagreement() {
     }
     // Tag 2 followed by a config cut short.
     let bytes = duolando::duo_writer::assemble_raw_version(2, &[2, 2], &[]).unwrap();
-    assert_eq!(parse(&bytes), Err(FormatError::MalformedHeader { field: HeaderField::Config, offset: 1 }));
+    assert_eq!(
+        parse(&bytes),
+        Err(FormatError::MalformedHeader {
+            field: HeaderField::Config,
+            offset: 1
+        })
+    );
 }
 
 /// The Transflower file under the other families' tags, and their configs
@@ -1253,11 +1781,17 @@ fn transflower_tag_is_not_interchangeable() {
     for tag in [0u8, 1] {
         let mut bad = v2.clone();
         bad[24] = tag;
-        assert!(parse(&bad).is_err(), "a Transflower config under tag {tag} parsed");
+        assert!(
+            parse(&bad).is_err(),
+            "a Transflower config under tag {tag} parsed"
+        );
     }
     let btiny = std::fs::read(duolando_tests::fixture("bailando_btiny/model.duo")).unwrap();
     assert_eq!(btiny[24], 1);
     let mut bad = btiny.clone();
     bad[24] = 2;
-    assert!(parse(&bad).is_err(), "a Bailando config under the Transflower tag parsed");
+    assert!(
+        parse(&bad).is_err(),
+        "a Bailando config under the Transflower tag parsed"
+    );
 }

@@ -92,7 +92,11 @@ impl Onnx {
         let plan = model
             .into_runnable()
             .unwrap_or_else(|e| panic!("tract cannot plan {}: {e:?}", path.display()));
-        Onnx { plan, path: path.to_path_buf(), optimized }
+        Onnx {
+            plan,
+            path: path.to_path_buf(),
+            optimized,
+        }
     }
 
     /// Runs the graph; inputs in declaration order.
@@ -145,8 +149,10 @@ pub struct Rollout {
 
 /// The model (`tiny`, `tiny2`) a rollout fixture `rollout_<name>/` belongs to.
 pub fn rollout_model(name: &str) -> String {
-    let meta: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(fixture(&format!("rollout_{name}/meta.json"))).unwrap()).unwrap();
+    let meta: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(fixture(&format!("rollout_{name}/meta.json"))).unwrap(),
+    )
+    .unwrap();
     meta["model"].as_str().unwrap().to_string()
 }
 
@@ -155,7 +161,13 @@ pub fn rollout_model(name: &str) -> String {
 pub fn run_rollout(file: &ModelFile, name: &str) -> Rollout {
     let dir = fixture(&format!("rollout_{name}"));
     let seed_tokens = dir.join("seed_tokens.npy");
-    run_r(file, &dir.join("leader_pos3d.npy"), &dir.join("music.npy"), &dir.join("follower_start.npy"), &seed_tokens)
+    run_r(
+        file,
+        &dir.join("leader_pos3d.npy"),
+        &dir.join("music.npy"),
+        &dir.join("follower_start.npy"),
+        &seed_tokens,
+    )
 }
 
 /// The repository's `assets/` (the bundled demo model and clip).
@@ -171,12 +183,24 @@ pub fn demo_model() -> ModelFile {
 /// The bundled demo clip (`assets/demo_*.npy`) in R mode with `file`.
 pub fn run_demo_clip(file: &ModelFile) -> Rollout {
     let a = assets_dir();
-    run_r(file, &a.join("demo_leader_pos3d.npy"), &a.join("demo_music.npy"), &a.join("demo_follower_start.npy"), &a.join("-"))
+    run_r(
+        file,
+        &a.join("demo_leader_pos3d.npy"),
+        &a.join("demo_music.npy"),
+        &a.join("demo_follower_start.npy"),
+        &a.join("-"),
+    )
 }
 
 /// R mode over a leader clip and music, seeded from the follower start
 /// frames when `start` exists, else from the 5 tokens in `seed_tokens`.
-fn run_r(file: &ModelFile, leader: &Path, music: &Path, start_path: &Path, seed_tokens: &Path) -> Rollout {
+fn run_r(
+    file: &ModelFile,
+    leader: &Path,
+    music: &Path,
+    start_path: &Path,
+    seed_tokens: &Path,
+) -> Rollout {
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
     let leader = read_f32_2d(leader, Some(165), "leader").unwrap();
@@ -202,7 +226,11 @@ fn run_r(file: &ModelFile, leader: &Path, music: &Path, start_path: &Path, seed_
     let mut calls = 0;
     let summary = exact::generate(
         &model,
-        &ExactInputs { leader_pos3d: &leader.data, music: &music.data, seed },
+        &ExactInputs {
+            leader_pos3d: &leader.data,
+            music: &music.data,
+            seed,
+        },
         &mut scratch,
         &mut ExactOutputs {
             tokens: &mut run.tokens,
@@ -223,18 +251,38 @@ fn run_r(file: &ModelFile, leader: &Path, music: &Path, start_path: &Path, seed_
 pub fn convert_fixture(model: &str, store_as: duolando::duo_writer::StoreAs) -> ModelFile {
     let dir = fixture(model);
     let read = |f: &str| std::fs::read(dir.join(f)).unwrap();
-    let (g, v, t) = (read("gpt.safetensors"), read("vqvae.safetensors"), read("transl.safetensors"));
+    let (g, v, t) = (
+        read("gpt.safetensors"),
+        read("vqvae.safetensors"),
+        read("transl.safetensors"),
+    );
     let yaml = String::from_utf8(read("follower_gpt.yaml")).unwrap();
-    let (gp, vp, tp) = (dir.join("gpt.safetensors"), dir.join("vqvae.safetensors"), dir.join("transl.safetensors"));
-    let sources = duolando::convert::Sources { gpt: (&gp, &g), vqvae: (&vp, &v), transl: (&tp, &t) };
-    let (bytes, _) = duolando::convert::convert_bytes((&dir.join("follower_gpt.yaml"), &yaml), &sources, store_as).unwrap();
+    let (gp, vp, tp) = (
+        dir.join("gpt.safetensors"),
+        dir.join("vqvae.safetensors"),
+        dir.join("transl.safetensors"),
+    );
+    let sources = duolando::convert::Sources {
+        gpt: (&gp, &g),
+        vqvae: (&vp, &v),
+        transl: (&tp, &t),
+    };
+    let (bytes, _) = duolando::convert::convert_bytes(
+        (&dir.join("follower_gpt.yaml"), &yaml),
+        &sources,
+        store_as,
+    )
+    .unwrap();
     ModelFile::from_bytes(bytes).unwrap()
 }
 
 /// A dense (f32/f16) `.duo` re-stored: every tensor read back as f32 and
 /// written as `store(spec)` (e.g. `convert::storage_for`, as the converter
 /// would from the f32 checkpoints; here from the stored values).
-pub fn restore_as(file: &ModelFile, store: &dyn Fn(&duolando_core::nn::names::TensorSpec) -> duolando::duo_writer::StoreAs) -> ModelFile {
+pub fn restore_as(
+    file: &ModelFile,
+    store: &dyn Fn(&duolando_core::nn::names::TensorSpec) -> duolando::duo_writer::StoreAs,
+) -> ModelFile {
     use duolando_core::tensor::DType;
     let duo = file.duo().unwrap();
     let cfg = *duo.config();
@@ -242,13 +290,26 @@ pub fn restore_as(file: &ModelFile, store: &dyn Fn(&duolando_core::nn::names::Te
     cfg.for_each_tensor::<duolando_core::nn::names::SchemaError>(&mut |spec| {
         let t = duo.tensor(&spec.name).unwrap();
         let values: Vec<f32> = match t.dtype {
-            DType::F32 => t.data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),
-            DType::F16 => t.data.chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect(),
+            DType::F32 => t
+                .data
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+            DType::F16 => t
+                .data
+                .chunks_exact(2)
+                .map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32())
+                .collect(),
             d => panic!("{}: {d:?} is not a dense type", spec.name),
         };
         let store_as = store(spec);
         let (shape, values) = duolando::convert::to_stored_order(spec, store_as, values);
-        tensors.push(duolando::duo_writer::Tensor { name: spec.name.to_string(), shape, values, store_as });
+        tensors.push(duolando::duo_writer::Tensor {
+            name: spec.name.to_string(),
+            shape,
+            values,
+            store_as,
+        });
         Ok(())
     })
     .unwrap();

@@ -11,10 +11,10 @@ use duolando_core::arena::Arena;
 use duolando_core::duolando::config::Part;
 use duolando_core::duolando::gpt::{self, GptScratch, Window};
 use duolando_core::duolando::lat;
-use duolando_core::limits::VqWhich;
 use duolando_core::duolando::model::Model;
 use duolando_core::duolando::vq_decoder::{self, Output};
 use duolando_core::duolando::vq_encoder;
+use duolando_core::limits::VqWhich;
 use duolando_tests::*;
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
@@ -22,7 +22,10 @@ use proptest::test_runner::TestCaseError;
 /// Cases per module family (issue #2 asks for >= 256); `DUO_CASES` overrides
 /// it for quick local runs.
 fn cases() -> u32 {
-    std::env::var("DUO_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(256)
+    std::env::var("DUO_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(256)
 }
 
 /// A loaded fixture model: its bytes (kept alive for the borrowed `Model`)
@@ -40,8 +43,17 @@ impl Fixture {
     }
     /// Files whose name starts with `prefix`, with their input shapes.
     fn files(&self, prefix: &str) -> Vec<(String, Vec<Vec<usize>>)> {
-        let v: Vec<_> = self.index.iter().filter(|(f, _)| f.starts_with(prefix)).cloned().collect();
-        assert!(!v.is_empty(), "{}: no ONNX export starting with {prefix}", self.name);
+        let v: Vec<_> = self
+            .index
+            .iter()
+            .filter(|(f, _)| f.starts_with(prefix))
+            .cloned()
+            .collect();
+        assert!(
+            !v.is_empty(),
+            "{}: no ONNX export starting with {prefix}",
+            self.name
+        );
         v
     }
     fn onnx(&self, file: &str) -> &'static Onnx {
@@ -50,16 +62,23 @@ impl Fixture {
             OnceLock::new();
         let key = format!("{}/{file}", self.name);
         let mut map = CACHE.get_or_init(Default::default).lock().unwrap();
-        map.entry(key)
-            .or_insert_with(|| Box::leak(Box::new(Onnx::load(&fixture(&format!("{}/onnx/{file}", self.name))))))
+        map.entry(key).or_insert_with(|| {
+            Box::leak(Box::new(Onnx::load(&fixture(&format!(
+                "{}/onnx/{file}",
+                self.name
+            )))))
+        })
     }
 }
 
 fn load(name: &'static str) -> Fixture {
-    let file: &'static ModelFile =
-        Box::leak(Box::new(ModelFile::open(fixture(&format!("{name}/model.duo"))).unwrap()));
-    let index: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(fixture(&format!("{name}/onnx/index.json"))).unwrap()).unwrap();
+    let file: &'static ModelFile = Box::leak(Box::new(
+        ModelFile::open(fixture(&format!("{name}/model.duo"))).unwrap(),
+    ));
+    let index: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(fixture(&format!("{name}/onnx/index.json"))).unwrap(),
+    )
+    .unwrap();
     let index = index
         .as_array()
         .unwrap()
@@ -69,7 +88,14 @@ fn load(name: &'static str) -> Fixture {
                 .as_array()
                 .unwrap()
                 .iter()
-                .map(|i| i["shape"].as_array().unwrap().iter().map(|d| d.as_u64().unwrap() as usize).collect())
+                .map(|i| {
+                    i["shape"]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .map(|d| d.as_u64().unwrap() as usize)
+                        .collect()
+                })
                 .collect();
             (e["file"].as_str().unwrap().to_string(), shapes)
         })
@@ -103,7 +129,9 @@ impl Rng {
         (0..n).map(|_| self.normal() * scale).collect()
     }
     fn tokens(&mut self, n: usize, vocab: u32) -> Vec<u32> {
-        (0..n).map(|_| (self.next() % vocab as u64) as u32).collect()
+        (0..n)
+            .map(|_| (self.next() % vocab as u64) as u32)
+            .collect()
     }
     fn pick<'a, T>(&mut self, v: &'a [T]) -> &'a T {
         &v[(self.next() % v.len() as u64) as usize]
@@ -113,14 +141,18 @@ impl Rng {
 fn close(what: &str, actual: &[f32], expected: &[f32]) -> Result<(), TestCaseError> {
     let (abs, rel) = max_errors(actual, expected);
     // Report each new worst error per file (run with --nocapture to see the maxima).
-    static WORST: OnceLock<std::sync::Mutex<std::collections::HashMap<String, f32>>> = OnceLock::new();
+    static WORST: OnceLock<std::sync::Mutex<std::collections::HashMap<String, f32>>> =
+        OnceLock::new();
     let mut worst = WORST.get_or_init(Default::default).lock().unwrap();
     let w = worst.entry(what.to_string()).or_insert(-1.0);
     if rel > *w {
         *w = rel;
         eprintln!("worst so far {what}: rel {rel:.3e} abs {abs:.3e}");
     }
-    prop_assert!(rel <= Tol::ModuleRel.limit(), "{what}: rel err {rel:.3e} (abs {abs:.3e})");
+    prop_assert!(
+        rel <= Tol::ModuleRel.limit(),
+        "{what}: rel err {rel:.3e} (abs {abs:.3e})"
+    );
     Ok(())
 }
 
@@ -139,17 +171,23 @@ fn music_lat_case(fx: &Fixture, rng: &mut Rng) -> Result<(), TestCaseError> {
     let c = want.len() / e;
     let mut out = vec![0f32; c * e];
     let mut scratch = vec![0u8; lat::scratch_bytes(&model.cfg, c).unwrap()];
-    lat::music_lat(&model, &music, &mut scratch, &mut out).map_err(|e| TestCaseError::fail(format!("{e:?}")))?;
+    lat::music_lat(&model, &music, &mut scratch, &mut out)
+        .map_err(|e| TestCaseError::fail(format!("{e:?}")))?;
     close(&format!("{}/{file}", fx.name), &out, &want)
 }
 
 fn leader_lat_case(fx: &Fixture, rng: &mut Rng) -> Result<(), TestCaseError> {
     let model = fx.model();
     for part in Part::ALL {
-        let (file, shapes) = rng.pick(&fx.files(&format!("leader_lat_{}_", part.name()))).clone();
+        let (file, shapes) = rng
+            .pick(&fx.files(&format!("leader_lat_{}_", part.name())))
+            .clone();
         let n = shapes[0][1];
         let tokens = rng.tokens(n, model.cfg.gpt.vocab[part as usize]);
-        let want = as_f32(&fx.onnx(&file).run(vec![tensor_i64(&shapes[0], &i64s(&tokens))])[0]);
+        let want = as_f32(
+            &fx.onnx(&file)
+                .run(vec![tensor_i64(&shapes[0], &i64s(&tokens))])[0],
+        );
         let e = model.cfg.gpt.n_embd as usize;
         let c = want.len() / e;
         let mut out = vec![0f32; c * e];
@@ -170,7 +208,10 @@ fn gpt_step_case(fx: &Fixture, rng: &mut Rng) -> Result<(), TestCaseError> {
     let v = cfg.gpt.vocab;
     // Follower rhand is embedded with the lhand table: draw it within that vocabulary.
     let follower_vocab = [v[0], v[1], v[2], v[2].min(v[3]), v[4]];
-    let f: Vec<Vec<u32>> = follower_vocab.iter().map(|&voc| rng.tokens(c, voc)).collect();
+    let f: Vec<Vec<u32>> = follower_vocab
+        .iter()
+        .map(|&voc| rng.tokens(c, voc))
+        .collect();
     let scale = 0.5 + 2.0 * rng.uniform();
     let music = rng.normals(shapes[5][1] * shapes[5][2], scale);
     let l: Vec<Vec<u32>> = (0..4).map(|p| rng.tokens(shapes[6][1], v[p])).collect();
@@ -179,13 +220,21 @@ fn gpt_step_case(fx: &Fixture, rng: &mut Rng) -> Result<(), TestCaseError> {
     inputs.extend(l.iter().map(|t| tensor_i64(&shapes[6], &i64s(t))));
     inputs.push(tensor_f32(&[1], &[1.0])); // `one`: the runtime embedding tables' factor
     let want = as_f32(&fx.onnx(&file).run(inputs)[0]);
-    let follower: Vec<u32> = (0..c).flat_map(|i| (0..5).map(|s| f[s][i]).collect::<Vec<_>>()).collect();
-    let win = Window { c, music: &music, leader: [&l[0], &l[1], &l[2], &l[3]], follower: &follower };
+    let follower: Vec<u32> = (0..c)
+        .flat_map(|i| (0..5).map(|s| f[s][i]).collect::<Vec<_>>())
+        .collect();
+    let win = Window {
+        c,
+        music: &music,
+        leader: [&l[0], &l[1], &l[2], &l[3]],
+        follower: &follower,
+    };
     let mut buf = vec![0u8; gpt::scratch_bytes(cfg, c).unwrap()];
     let mut arena = Arena::new(&mut buf);
     let mut s = GptScratch::carve(&mut arena, cfg, c).unwrap();
     let mut logits = vec![0f32; gpt::logits_len(cfg)];
-    gpt::window_logits(&model, &win, &mut s, &mut logits).map_err(|e| TestCaseError::fail(format!("{e:?}")))?;
+    gpt::window_logits(&model, &win, &mut s, &mut logits)
+        .map_err(|e| TestCaseError::fail(format!("{e:?}")))?;
     prop_assert_eq!(logits.len(), want.len());
     close(&format!("{}/{file}", fx.name), &logits, &want)
 }
@@ -210,13 +259,24 @@ fn code_gap(codebook: &[f32], emb: usize, x: &[f32]) -> f32 {
 
 fn vq_names(which: VqWhich) -> (String, String) {
     match which {
-        VqWhich::Part(p) => (format!("vq_{}_", p.name()), format!("motion.vqvae_{}.bottleneck.level_blocks.0.k", p.name())),
-        VqWhich::Transl => ("transl_".to_string(), "transl.bottleneck.level_blocks.0.k".to_string()),
+        VqWhich::Part(p) => (
+            format!("vq_{}_", p.name()),
+            format!("motion.vqvae_{}.bottleneck.level_blocks.0.k", p.name()),
+        ),
+        VqWhich::Transl => (
+            "transl_".to_string(),
+            "transl.bottleneck.level_blocks.0.k".to_string(),
+        ),
     }
 }
 
-const ALL_VQ: [VqWhich; 5] =
-    [VqWhich::Part(Part::Up), VqWhich::Part(Part::Down), VqWhich::Part(Part::LHand), VqWhich::Part(Part::RHand), VqWhich::Transl];
+const ALL_VQ: [VqWhich; 5] = [
+    VqWhich::Part(Part::Up),
+    VqWhich::Part(Part::Down),
+    VqWhich::Part(Part::LHand),
+    VqWhich::Part(Part::RHand),
+    VqWhich::Transl,
+];
 
 fn encoder_case(fx: &Fixture, rng: &mut Rng, near_ties: &mut usize) -> Result<(), TestCaseError> {
     let model = fx.model();
@@ -242,7 +302,15 @@ fn encoder_case(fx: &Fixture, rng: &mut Rng, near_ties: &mut usize) -> Result<()
                 *near_ties += 1; // f32 round-off may legitimately pick either row
                 continue;
             }
-            prop_assert_eq!(got as i64, want, "{}/{} code {} (gap {:.2e})", fx.name, file, i, gap);
+            prop_assert_eq!(
+                got as i64,
+                want,
+                "{}/{} code {} (gap {:.2e})",
+                fx.name,
+                file,
+                i,
+                gap
+            );
         }
     }
     Ok(())
@@ -254,14 +322,21 @@ fn decoder_case(fx: &Fixture, rng: &mut Rng) -> Result<(), TestCaseError> {
         let (prefix, _) = vq_names(which);
         let outputs: &[(&str, Output)] = match which {
             VqWhich::Transl => &[("decoder_q", Output::Position)],
-            _ => &[("decoder_pos_q", Output::Position), ("decoder_rot_q", Output::Rotation)],
+            _ => &[
+                ("decoder_pos_q", Output::Position),
+                ("decoder_rot_q", Output::Rotation),
+            ],
         };
         for (suffix, output) in outputs {
             let (file, shapes) = rng.pick(&fx.files(&format!("{prefix}{suffix}"))).clone();
             let codes = rng.tokens(shapes[0][1], model.vq(which).cfg.l_bins);
-            let want = as_f32(&fx.onnx(&file).run(vec![tensor_i64(&shapes[0], &i64s(&codes))])[0]);
+            let want = as_f32(
+                &fx.onnx(&file)
+                    .run(vec![tensor_i64(&shapes[0], &i64s(&codes))])[0],
+            );
             let mut out = vec![0f32; want.len()];
-            let mut scratch = vec![0u8; vq_decoder::scratch_bytes(&model.cfg, codes.len()).unwrap()];
+            let mut scratch =
+                vec![0u8; vq_decoder::scratch_bytes(&model.cfg, codes.len()).unwrap()];
             vq_decoder::decode_codes(&model, which, *output, &codes, &mut scratch, &mut out)
                 .map_err(|e| TestCaseError::fail(format!("{e:?}")))?;
             close(&format!("{}/{file}", fx.name), &out, &want)?;

@@ -9,7 +9,9 @@ mod music_util;
 use std::path::PathBuf;
 
 use duolando::audio::load_mono;
-use duolando::music::bailando::{self, BEAT_COL, CHROMA_COLS, DELTA_COLS, FEATURE_DIM, MFCC_COLS, ONSET_COL, TEMPOGRAM_COLS};
+use duolando::music::bailando::{
+    self, BEAT_COL, CHROMA_COLS, DELTA_COLS, FEATURE_DIM, MFCC_COLS, ONSET_COL, TEMPOGRAM_COLS,
+};
 use duolando::music::{Extractor, FeatureSet};
 use music_util::{beat_f, read_npy_f32, BEAT_F_MIN, BEAT_SLACK};
 
@@ -61,14 +63,26 @@ fn manifest() -> Vec<Golden> {
         .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
         .map(|l| {
             let f: Vec<&str> = l.split_whitespace().collect();
-            Golden { name: f[0].into(), tempo: f[1].parse().unwrap(), tuning: f[2].parse().unwrap(), frames: f[3].parse().unwrap(), samples: f[4].parse().unwrap() }
+            Golden {
+                name: f[0].into(),
+                tempo: f[1].parse().unwrap(),
+                tuning: f[2].parse().unwrap(),
+                frames: f[3].parse().unwrap(),
+                samples: f[4].parse().unwrap(),
+            }
         })
         .collect()
 }
 
 fn read_pcm16(name: &str) -> Vec<f32> {
     let bytes = std::fs::read(dir().join(format!("{name}.pcm16.npy"))).unwrap();
-    npyz::NpyFile::new(&bytes[..]).unwrap().into_vec::<i16>().unwrap().into_iter().map(|v| v as f32 / 32768.0).collect()
+    npyz::NpyFile::new(&bytes[..])
+        .unwrap()
+        .into_vec::<i16>()
+        .unwrap()
+        .into_iter()
+        .map(|v| v as f32 / 32768.0)
+        .collect()
 }
 
 fn read_features(name: &str) -> Vec<f32> {
@@ -78,12 +92,24 @@ fn read_features(name: &str) -> Vec<f32> {
     data
 }
 
-fn max_abs(a: &[f32], b: &[f32], cols: std::ops::Range<usize>, frames: std::ops::Range<usize>) -> f32 {
-    frames.flat_map(|t| cols.clone().map(move |c| t * FEATURE_DIM + c)).map(|i| (a[i] - b[i]).abs()).fold(0.0, f32::max)
+fn max_abs(
+    a: &[f32],
+    b: &[f32],
+    cols: std::ops::Range<usize>,
+    frames: std::ops::Range<usize>,
+) -> f32 {
+    frames
+        .flat_map(|t| cols.clone().map(move |c| t * FEATURE_DIM + c))
+        .map(|i| (a[i] - b[i]).abs())
+        .fold(0.0, f32::max)
 }
 
 fn beats(f: &[f32]) -> Vec<usize> {
-    f.chunks_exact(FEATURE_DIM).enumerate().filter(|(_, r)| r[BEAT_COL] > 0.5).map(|(t, _)| t).collect()
+    f.chunks_exact(FEATURE_DIM)
+        .enumerate()
+        .filter(|(_, r)| r[BEAT_COL] > 0.5)
+        .map(|(t, _)| t)
+        .collect()
 }
 
 /// Per-block errors of `got` against `want`, both (T, 438).
@@ -101,8 +127,14 @@ struct BlockErrors {
 
 fn block_errors(want: &[f32], got: &[f32]) -> BlockErrors {
     let t = want.len() / FEATURE_DIM;
-    let interior = if t > 2 * CHROMA_EDGE { CHROMA_EDGE..t - CHROMA_EDGE } else { 0..0 };
-    let peak = (0..t).map(|i| want[i * FEATURE_DIM + ONSET_COL]).fold(0.0f32, f32::max);
+    let interior = if t > 2 * CHROMA_EDGE {
+        CHROMA_EDGE..t - CHROMA_EDGE
+    } else {
+        0..0
+    };
+    let peak = (0..t)
+        .map(|i| want[i * FEATURE_DIM + ONSET_COL])
+        .fold(0.0f32, f32::max);
     let onset = max_abs(want, got, ONSET_COL..ONSET_COL + 1, 0..t);
     let (wb, gb) = (beats(want), beats(got));
     BlockErrors {
@@ -123,12 +155,27 @@ fn check(name: &str, e: &BlockErrors, failures: &mut Vec<String>) {
             failures.push(format!("{name}: {what}"));
         }
     };
-    c(e.mfcc <= MFCC_ABS, format!("mfcc {:.3e} > {MFCC_ABS}", e.mfcc));
-    c(e.delta <= MFCC_ABS, format!("delta {:.3e} > {MFCC_ABS}", e.delta));
-    c(e.chroma_all <= CHROMA_ABS, format!("chroma {:.3e} > {CHROMA_ABS}", e.chroma_all));
-    c(e.onset_rel <= ONSET_REL_PEAK, format!("onset {:.3e} x peak > {ONSET_REL_PEAK}", e.onset_rel));
+    c(
+        e.mfcc <= MFCC_ABS,
+        format!("mfcc {:.3e} > {MFCC_ABS}", e.mfcc),
+    );
+    c(
+        e.delta <= MFCC_ABS,
+        format!("delta {:.3e} > {MFCC_ABS}", e.delta),
+    );
+    c(
+        e.chroma_all <= CHROMA_ABS,
+        format!("chroma {:.3e} > {CHROMA_ABS}", e.chroma_all),
+    );
+    c(
+        e.onset_rel <= ONSET_REL_PEAK,
+        format!("onset {:.3e} x peak > {ONSET_REL_PEAK}", e.onset_rel),
+    );
     c(e.beats_exact, "beats differ".into());
-    c(e.tempogram <= TEMPOGRAM_ABS, format!("tempogram {:.3e} > {TEMPOGRAM_ABS}", e.tempogram));
+    c(
+        e.tempogram <= TEMPOGRAM_ABS,
+        format!("tempogram {:.3e} > {TEMPOGRAM_ABS}", e.tempogram),
+    );
 }
 
 #[test]
@@ -138,19 +185,44 @@ fn every_golden_signal_matches_librosa_per_block() {
     let mut failures = Vec::new();
     eprintln!(
         "{:<14} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>9} {:>7} {:>7}",
-        "signal", "mfcc", "delta", "chroma_in", "chroma_all", "onset/pk", "beatF", "tempogram", "tempo", "tuning"
+        "signal",
+        "mfcc",
+        "delta",
+        "chroma_in",
+        "chroma_all",
+        "onset/pk",
+        "beatF",
+        "tempogram",
+        "tempo",
+        "tuning"
     );
     for g in manifest().into_iter().filter(|g| g.name != "stereo_44k") {
         let y = read_pcm16(&g.name);
         assert_eq!(y.len(), g.samples, "{}", g.name);
         let want = read_features(&g.name);
-        let f = ex.features(&y).unwrap_or_else(|e| panic!("{}: {e}", g.name));
-        assert_eq!((f.frames, f.dim), (g.frames, FEATURE_DIM), "{}: shape", g.name);
+        let f = ex
+            .features(&y)
+            .unwrap_or_else(|e| panic!("{}: {e}", g.name));
+        assert_eq!(
+            (f.frames, f.dim),
+            (g.frames, FEATURE_DIM),
+            "{}: shape",
+            g.name
+        );
         let e = block_errors(&want, &f.data);
         let tuning = ex.parts(&y).unwrap().tuning;
         eprintln!(
             "{:<14} {:>9.2e} {:>9.2e} {:>9.2e} {:>9.2e} {:>9.2e} {:>6.3} {:>9.2e} {:>7.2} {:>7.2}",
-            g.name, e.mfcc, e.delta, e.chroma_interior, e.chroma_all, e.onset_rel, e.beat_f, e.tempogram, f.tempo_bpm, tuning
+            g.name,
+            e.mfcc,
+            e.delta,
+            e.chroma_interior,
+            e.chroma_all,
+            e.onset_rel,
+            e.beat_f,
+            e.tempogram,
+            f.tempo_bpm,
+            tuning
         );
         check(&g.name, &e, &mut failures);
         if (f.tempo_bpm - g.tempo).abs() >= 1e-3 {
@@ -160,7 +232,11 @@ fn every_golden_signal_matches_librosa_per_block() {
             failures.push(format!("{}: tuning {} != {}", g.name, tuning, g.tuning));
         }
     }
-    assert!(failures.is_empty(), "golden mismatches:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "golden mismatches:\n{}",
+        failures.join("\n")
+    );
 }
 
 /// The original loader's view of the committed FLAC at 3840 Hz (channel mean,
@@ -168,7 +244,10 @@ fn every_golden_signal_matches_librosa_per_block() {
 /// resampler on the file.
 #[test]
 fn decoded_flac_matches_the_original_loader_path() {
-    let g = manifest().into_iter().find(|g| g.name == "stereo_44k").expect("stereo_44k in manifest");
+    let g = manifest()
+        .into_iter()
+        .find(|g| g.name == "stereo_44k")
+        .expect("stereo_44k in manifest");
     let (_, want_y) = read_npy_f32(&dir().join("stereo_44k_mono_3840.npy"));
     let golden = read_features("stereo_44k");
     let ex = Extractor::bailando();
@@ -179,26 +258,48 @@ fn decoded_flac_matches_the_original_loader_path() {
     check("stereo_44k (librosa's samples)", &e_same, &mut failures);
     assert!(failures.is_empty(), "{failures:?}");
 
-    let y = load_mono(music_util::dir().join("stereo_44k.flac"), bailando::SAMPLE_RATE).expect("decode flac");
+    let y = load_mono(
+        music_util::dir().join("stereo_44k.flac"),
+        bailando::SAMPLE_RATE,
+    )
+    .expect("decode flac");
     assert_eq!(y.len(), want_y.len(), "length after resampling to 3840 Hz");
     let edge = 64;
-    let resample_err = y[edge..y.len() - edge].iter().zip(&want_y[edge..want_y.len() - edge]).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
-    eprintln!("resampler vs libsamplerate sinc_medium at 3840 Hz: max abs {resample_err:.3e} (interior)");
+    let resample_err = y[edge..y.len() - edge]
+        .iter()
+        .zip(&want_y[edge..want_y.len() - edge])
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f32::max);
+    eprintln!(
+        "resampler vs libsamplerate sinc_medium at 3840 Hz: max abs {resample_err:.3e} (interior)"
+    );
     let f = ex.features(&y).unwrap();
     let e = block_errors(&golden, &f.data);
 
     eprintln!("decoded file, librosa's samples: {e_same:?}\ndecoded file, our loader: {e:?}");
-    assert!(resample_err <= RESAMPLE_ABS, "resampler deviation {resample_err}");
-    assert!(e.mfcc <= DECODED_MFCC_ABS && e.delta <= DECODED_MFCC_ABS, "{e:?}");
+    assert!(
+        resample_err <= RESAMPLE_ABS,
+        "resampler deviation {resample_err}"
+    );
+    assert!(
+        e.mfcc <= DECODED_MFCC_ABS && e.delta <= DECODED_MFCC_ABS,
+        "{e:?}"
+    );
     assert!(e.chroma_interior <= DECODED_CHROMA_ABS, "{e:?}");
-    assert!(e.onset_rel <= ONSET_REL_PEAK && e.tempogram <= TEMPOGRAM_ABS, "{e:?}");
+    assert!(
+        e.onset_rel <= ONSET_REL_PEAK && e.tempogram <= TEMPOGRAM_ABS,
+        "{e:?}"
+    );
     assert!(e.beat_f >= BEAT_F_MIN, "{e:?}");
 }
 
 /// Mean |a - b|, max |a - b| and sum |a - b| / sum |a| over `cols` of (T, 438) rows.
 fn block_stats(want: &[f32], got: &[f32], cols: std::ops::Range<usize>) -> (f64, f64, f64) {
     let (mut sum, mut max, mut norm, mut n) = (0.0f64, 0.0f64, 0.0f64, 0usize);
-    for (w, g) in want.chunks_exact(FEATURE_DIM).zip(got.chunks_exact(FEATURE_DIM)) {
+    for (w, g) in want
+        .chunks_exact(FEATURE_DIM)
+        .zip(got.chunks_exact(FEATURE_DIM))
+    {
         for c in cols.clone() {
             let d = (w[c] - g[c]).abs() as f64;
             sum += d;
@@ -207,7 +308,11 @@ fn block_stats(want: &[f32], got: &[f32], cols: std::ops::Range<usize>) -> (f64,
             n += 1;
         }
     }
-    (sum / n as f64, max, if norm > 0.0 { sum / norm } else { 0.0 })
+    (
+        sum / n as f64,
+        max,
+        if norm > 0.0 { sum / norm } else { 0.0 },
+    )
 }
 
 /// Decaying 1.5 kHz bursts at 3840 Hz, `bpm(t)` beats per minute (as the goldens' clicks).
@@ -221,7 +326,9 @@ fn clicks(seconds: f64, bpm: impl Fn(f64) -> f64) -> Vec<f32> {
         for j in 0..(0.02 * sr) as usize {
             if i + j < n {
                 let s = j as f64 / sr;
-                y[i + j] += (0.8 * (2.0 * std::f64::consts::PI * 1500.0 * s).sin() * (-s * 200.0).exp()) as f32;
+                y[i + j] += (0.8
+                    * (2.0 * std::f64::consts::PI * 1500.0 * s).sin()
+                    * (-s * 200.0).exp()) as f32;
             }
         }
         t += 60.0 / bpm(t);
@@ -247,16 +354,36 @@ fn streaming_tracks_offline_features() {
         // HPSS with 6 of the 15 future frames its median wants moves the onset: F 0.57
         ("clicks_chords x9", tiled("clicks_chords", 9), 0.5),
         ("chords x15", tiled("chords", 15), 0.0),
-        ("clicks 90->140", clicks(90.0, |t| if t < 45.0 { 90.0 } else { 140.0 }), 0.5),
+        (
+            "clicks 90->140",
+            clicks(90.0, |t| if t < 45.0 { 90.0 } else { 140.0 }),
+            0.5,
+        ),
         ("noise x15", tiled("noise", 15), 0.0),
     ];
-    let blocks: [(&str, std::ops::Range<usize>); 6] =
-        [("mfcc", MFCC_COLS), ("mfcc1..", 1..20), ("delta", DELTA_COLS), ("chroma", CHROMA_COLS), ("onset", ONSET_COL..ONSET_COL + 1), ("tempogram", TEMPOGRAM_COLS)];
-    let la = |lookahead| StreamingConfig { lookahead, ..StreamingConfig::bailando() };
+    let blocks: [(&str, std::ops::Range<usize>); 6] = [
+        ("mfcc", MFCC_COLS),
+        ("mfcc1..", 1..20),
+        ("delta", DELTA_COLS),
+        ("chroma", CHROMA_COLS),
+        ("onset", ONSET_COL..ONSET_COL + 1),
+        ("tempogram", TEMPOGRAM_COLS),
+    ];
+    let la = |lookahead| StreamingConfig {
+        lookahead,
+        ..StreamingConfig::bailando()
+    };
     // lookahead 16: HPSS's time median (31 frames) sees all the future it needs
-    for (label, cfg) in [("default", StreamingConfig::bailando()), ("lookahead 16", la(16))] {
+    for (label, cfg) in [
+        ("default", StreamingConfig::bailando()),
+        ("lookahead 16", la(16)),
+    ] {
         let s0 = Streaming::bailando(cfg);
-        eprintln!("config {label}: {cfg:?}, latency {} frames ({:.2} s)", s0.latency_frames(), s0.latency_frames() as f64 / bailando::FRAME_RATE);
+        eprintln!(
+            "config {label}: {cfg:?}, latency {} frames ({:.2} s)",
+            s0.latency_frames(),
+            s0.latency_frames() as f64 / bailando::FRAME_RATE
+        );
         for (name, y, f_min) in &signals {
             let offline = ex.features(y).unwrap();
             let mut s = Streaming::bailando(cfg);
@@ -280,11 +407,16 @@ fn streaming_tracks_offline_features() {
             if label == "default" {
                 assert!(bf >= *f_min, "{name}: beat F {bf}");
                 let (_, _, tg_rel) = block_stats(&offline.data, &out, TEMPOGRAM_COLS);
-                assert!(tg_rel <= STREAM_TEMPOGRAM_REL, "{name}: tempogram rel {tg_rel}");
+                assert!(
+                    tg_rel <= STREAM_TEMPOGRAM_REL,
+                    "{name}: tempogram rel {tg_rel}"
+                );
                 let (chroma_mean, _, _) = block_stats(&offline.data, &out, CHROMA_COLS);
-                assert!(chroma_mean <= STREAM_CHROMA_MEAN_ABS, "{name}: chroma {chroma_mean}");
+                assert!(
+                    chroma_mean <= STREAM_CHROMA_MEAN_ABS,
+                    "{name}: chroma {chroma_mean}"
+                );
             }
         }
     }
 }
-

@@ -26,9 +26,21 @@ fn flac_decodes_mixes_and_resamples_close_to_the_original_loader() {
     let (_, want) = read_npy_f32(&dir().join("stereo_44k_mono_15360.npy"));
     assert_eq!(y.len(), want.len(), "length after resampling");
     let edge = 64;
-    let err = y[edge..y.len() - edge].iter().zip(&want[edge..want.len() - edge]).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
-    let rms = (y.iter().zip(&want).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
-    eprintln!("resampler vs libsamplerate sinc_medium: max abs {err:.3e} (interior), rms {rms:.3e}");
+    let err = y[edge..y.len() - edge]
+        .iter()
+        .zip(&want[edge..want.len() - edge])
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f32::max);
+    let rms = (y
+        .iter()
+        .zip(&want)
+        .map(|(a, b)| ((a - b) as f64).powi(2))
+        .sum::<f64>()
+        / y.len() as f64)
+        .sqrt();
+    eprintln!(
+        "resampler vs libsamplerate sinc_medium: max abs {err:.3e} (interior), rms {rms:.3e}"
+    );
     assert!(err <= RESAMPLE_ABS, "resampler deviation {err}");
 
     let f = Extractor::new().features(&y).unwrap();
@@ -39,10 +51,21 @@ fn flac_decodes_mixes_and_resamples_close_to_the_original_loader() {
     let f_same = Extractor::new().features(&want).unwrap();
     let e_same = group_errors(&golden, &f_same.data);
     eprintln!("decoded file, our loader: {e:?}\ndecoded file, librosa's samples: {e_same:?}");
-    assert!(e_same.mfcc <= MFCC_ABS && e_same.delta <= MFCC_ABS && e_same.chroma_interior <= CHROMA_ABS && e_same.onset_rel <= ONSET_REL_PEAK);
+    assert!(
+        e_same.mfcc <= MFCC_ABS
+            && e_same.delta <= MFCC_ABS
+            && e_same.chroma_interior <= CHROMA_ABS
+            && e_same.onset_rel <= ONSET_REL_PEAK
+    );
     assert!(e_same.beats_exact);
-    assert!(e.mfcc <= DECODED_MFCC_ABS && e.delta <= DECODED_MFCC_ABS, "{e:?}");
-    assert!(e.chroma_interior <= DECODED_CHROMA_ABS && e.onset_rel <= DECODED_ONSET_REL, "{e:?}");
+    assert!(
+        e.mfcc <= DECODED_MFCC_ABS && e.delta <= DECODED_MFCC_ABS,
+        "{e:?}"
+    );
+    assert!(
+        e.chroma_interior <= DECODED_CHROMA_ABS && e.onset_rel <= DECODED_ONSET_REL,
+        "{e:?}"
+    );
     assert!(e.beat_f >= BEAT_F_MIN, "{e:?}");
 }
 
@@ -88,7 +111,11 @@ fn bad_files_are_errors_that_name_the_file() {
 
     let tmp = std::env::temp_dir();
     let garbage = tmp.join(format!("duolando_garbage_{}.mp3", std::process::id()));
-    std::fs::write(&garbage, b"this is not audio at all, just text bytes................").unwrap();
+    std::fs::write(
+        &garbage,
+        b"this is not audio at all, just text bytes................",
+    )
+    .unwrap();
     let e = load_mono(&garbage, SAMPLE_RATE).unwrap_err();
     assert!(e.to_string().contains("duolando_garbage_"), "{e}");
     assert!(e.to_string().contains("expected"), "{e}");
@@ -115,7 +142,11 @@ fn bad_files_are_errors_that_name_the_file() {
 fn mp3_is_trimmed_gaplessly_and_matches_the_source() {
     let y = load_mono(dir().join("stereo_44k.mp3"), SAMPLE_RATE).expect("decode mp3");
     let (_, want) = read_npy_f32(&dir().join("stereo_44k_mono_15360.npy"));
-    assert_eq!(y.len(), want.len(), "decoded MP3 length (encoder delay/padding not trimmed?)");
+    assert_eq!(
+        y.len(),
+        want.len(),
+        "decoded MP3 length (encoder delay/padding not trimmed?)"
+    );
     // The best alignment lag must be 0 (a leftover encoder delay would shift it by ~385 samples at 15360 Hz).
     let corr = |lag: isize| -> f64 {
         let mut s = 0f64;
@@ -127,11 +158,22 @@ fn mp3_is_trimmed_gaplessly_and_matches_the_source() {
         }
         s
     };
-    let best = (-600isize..=600).max_by(|&a, &b| corr(a).partial_cmp(&corr(b)).unwrap()).unwrap();
-    let rms_err = (y.iter().zip(&want).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
+    let best = (-600isize..=600)
+        .max_by(|&a, &b| corr(a).partial_cmp(&corr(b)).unwrap())
+        .unwrap();
+    let rms_err = (y
+        .iter()
+        .zip(&want)
+        .map(|(a, b)| ((a - b) as f64).powi(2))
+        .sum::<f64>()
+        / y.len() as f64)
+        .sqrt();
     let rms = (want.iter().map(|a| (*a as f64).powi(2)).sum::<f64>() / want.len() as f64).sqrt();
     eprintln!("mp3: best lag {best}, rms error {rms_err:.3e} vs signal rms {rms:.3e}");
     assert_eq!(best, 0, "decoded MP3 is shifted by {best} samples");
     // Lossy coding at 128 kb/s: error well below the signal (measured figure printed above).
-    assert!(rms_err < 0.1 * rms, "MP3 rms error {rms_err} vs signal rms {rms}");
+    assert!(
+        rms_err < 0.1 * rms,
+        "MP3 rms error {rms_err} vs signal rms {rms}"
+    );
 }

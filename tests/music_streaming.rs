@@ -24,7 +24,13 @@ fn streaming_tracks_offline_features() {
     // (138 BPM on tempo_change, whose first half is at 90 BPM); the streaming window
     // follows the local tempo, so it disagrees with offline there by design
     // (measured F 0.59). chords/noise have no beat to agree on.
-    for (name, f_min) in [("click_120", 0.9), ("clicks_chords", 0.9), ("chords", 0.0), ("tempo_change", 0.5), ("noise", 0.0)] {
+    for (name, f_min) in [
+        ("click_120", 0.9),
+        ("clicks_chords", 0.9),
+        ("chords", 0.0),
+        ("tempo_change", 0.5),
+        ("noise", 0.0),
+    ] {
         let y = read_pcm16(name);
         let offline = ex.features(&y).unwrap();
         let mut s = Streaming::new(cfg);

@@ -18,7 +18,9 @@ pub const BEAT_SLACK: usize = 1;
 pub const BEAT_F_MIN: f64 = 0.9;
 
 pub fn dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join("music")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join("music")
 }
 
 /// One manifest line.
@@ -60,7 +62,11 @@ pub fn read_pcm16(name: &str) -> Vec<f32> {
     let path = dir().join(format!("{name}.pcm16.npy"));
     let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let npy = npyz::NpyFile::new(&bytes[..]).unwrap();
-    npy.into_vec::<i16>().unwrap().into_iter().map(|v| v as f32 / 32768.0).collect()
+    npy.into_vec::<i16>()
+        .unwrap()
+        .into_iter()
+        .map(|v| v as f32 / 32768.0)
+        .collect()
 }
 
 /// Golden (T, 54) features.
@@ -72,7 +78,12 @@ pub fn read_features(name: &str) -> Vec<f32> {
 }
 
 /// Max abs difference over the given columns and frame range.
-pub fn max_abs(a: &[f32], b: &[f32], cols: std::ops::Range<usize>, frames: std::ops::Range<usize>) -> f32 {
+pub fn max_abs(
+    a: &[f32],
+    b: &[f32],
+    cols: std::ops::Range<usize>,
+    frames: std::ops::Range<usize>,
+) -> f32 {
     let mut m = 0.0f32;
     for t in frames {
         for c in cols.clone() {
@@ -83,7 +94,11 @@ pub fn max_abs(a: &[f32], b: &[f32], cols: std::ops::Range<usize>, frames: std::
 }
 
 pub fn beat_frames(f: &[f32]) -> Vec<usize> {
-    f.chunks_exact(FEATURE_DIM).enumerate().filter(|(_, r)| r[BEAT_COL] > 0.5).map(|(t, _)| t).collect()
+    f.chunks_exact(FEATURE_DIM)
+        .enumerate()
+        .filter(|(_, r)| r[BEAT_COL] > 0.5)
+        .map(|(t, _)| t)
+        .collect()
 }
 
 /// F-measure of `got` against `want` with a matching window of `slack` frames (greedy one-to-one).
@@ -124,8 +139,14 @@ pub const CHROMA_EDGE: usize = 24;
 
 pub fn group_errors(want: &[f32], got: &[f32]) -> GroupErrors {
     let t = want.len() / FEATURE_DIM;
-    let interior = if t > 2 * CHROMA_EDGE { CHROMA_EDGE..t - CHROMA_EDGE } else { 0..0 };
-    let peak = (0..t).map(|i| want[i * FEATURE_DIM + ONSET_COL]).fold(0.0f32, f32::max);
+    let interior = if t > 2 * CHROMA_EDGE {
+        CHROMA_EDGE..t - CHROMA_EDGE
+    } else {
+        0..0
+    };
+    let peak = (0..t)
+        .map(|i| want[i * FEATURE_DIM + ONSET_COL])
+        .fold(0.0f32, f32::max);
     let onset = max_abs(want, got, ONSET_COL..ONSET_COL + 1, 0..t);
     let (wb, gb) = (beat_frames(want), beat_frames(got));
     GroupErrors {

@@ -18,8 +18,12 @@ fn check_model(model: &str) -> usize {
             .unwrap()
             .iter()
             .map(|i| {
-                let shape: Vec<usize> =
-                    i["shape"].as_array().unwrap().iter().map(|d| d.as_u64().unwrap() as usize).collect();
+                let shape: Vec<usize> = i["shape"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|d| d.as_u64().unwrap() as usize)
+                    .collect();
                 let numel: usize = shape.iter().product();
                 match i["dtype"].as_str().unwrap() {
                     "float32" => tensor_f32(&shape, &vec![0.1f32; numel]),
@@ -29,10 +33,18 @@ fn check_model(model: &str) -> usize {
             })
             .collect();
         let outs = onnx.run(inputs);
-        assert_eq!(outs.len(), entry["outputs"].as_array().unwrap().len(), "{file}: output count");
+        assert_eq!(
+            outs.len(),
+            entry["outputs"].as_array().unwrap().len(),
+            "{file}: output count"
+        );
         for (o, want) in outs.iter().zip(entry["outputs"].as_array().unwrap()) {
-            let shape: Vec<usize> =
-                want["shape"].as_array().unwrap().iter().map(|d| d.as_u64().unwrap() as usize).collect();
+            let shape: Vec<usize> = want["shape"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|d| d.as_u64().unwrap() as usize)
+                .collect();
             assert_eq!(o.shape(), &shape[..], "{file}: output shape");
         }
         n += 1;

@@ -17,7 +17,13 @@ fn fixtures() -> PathBuf {
     duolando_tests::fixtures_dir()
 }
 
-const ROLLOUTS: [&str; 5] = ["tiny_long", "tiny_short", "tiny_odd", "tiny2_frames", "tiny2_tokens"];
+const ROLLOUTS: [&str; 5] = [
+    "tiny_long",
+    "tiny_short",
+    "tiny_odd",
+    "tiny2_frames",
+    "tiny2_tokens",
+];
 
 fn convert(model: &str, store_as: StoreAs) -> ModelFile {
     duolando_tests::convert_fixture(model, store_as)
@@ -119,7 +125,10 @@ fn compare(store_as: StoreAs, min_agree: f64) {
                 a.tokens.len()
             );
             assert_eq!(lead, 1.0, "{name}: leader tokens");
-            assert!(agree >= min_agree, "{name}: agreement {agree} < {min_agree}");
+            assert!(
+                agree >= min_agree,
+                "{name}: agreement {agree} < {min_agree}"
+            );
             if first.is_none() {
                 assert!(pe <= POS_LIMIT_M, "{name}: pos err {pe} > {POS_LIMIT_M}");
                 assert!(re <= ROT_LIMIT, "{name}: rot err {re} > {ROT_LIMIT}");
@@ -171,10 +180,23 @@ fn int8_vq_decoders_on_the_demo_model() {
     let (dq, df) = (q_file.duo().unwrap(), f16_file.duo().unwrap());
     // Every weight of the decoders is int8: the Conv1d weights (rank 3)
     // and the ConvTranspose1d weights, in GEMM order (rank 2).
-    let dec: Vec<(DType, u8)> = dq.tensors().filter(|t| t.name.contains(".decoders") && t.rank >= 2).map(|t| (t.dtype, t.rank)).collect();
-    let n_q8 = dec.iter().filter(|&&(d, _)| d == DType::Q8Block32x8).count();
-    let n_gemm = dec.iter().filter(|&&(d, r)| d == DType::Q8Block32x8 && r == 2).count();
-    eprintln!("demo decoders: {n_q8} of {} weights int8, {n_gemm} of them ConvTranspose1d in GEMM order", dec.len());
+    let dec: Vec<(DType, u8)> = dq
+        .tensors()
+        .filter(|t| t.name.contains(".decoders") && t.rank >= 2)
+        .map(|t| (t.dtype, t.rank))
+        .collect();
+    let n_q8 = dec
+        .iter()
+        .filter(|&&(d, _)| d == DType::Q8Block32x8)
+        .count();
+    let n_gemm = dec
+        .iter()
+        .filter(|&&(d, r)| d == DType::Q8Block32x8 && r == 2)
+        .count();
+    eprintln!(
+        "demo decoders: {n_q8} of {} weights int8, {n_gemm} of them ConvTranspose1d in GEMM order",
+        dec.len()
+    );
     assert_eq!(n_q8, dec.len(), "decoder weights: {dec:?}");
     assert!(n_gemm >= 16, "ConvTranspose1d weights: {dec:?}");
     let (mq, mf) = (Model::from_duo(&dq).unwrap(), Model::from_duo(&df).unwrap());
@@ -187,28 +209,47 @@ fn int8_vq_decoders_on_the_demo_model() {
     }
     eprintln!("demo decoders: worst max error relative to the output's max magnitude {worst:.3e}");
     assert!(worst <= DECODER_REL_LIMIT, "{worst} > {DECODER_REL_LIMIT}");
-    let (a, b) = (duolando_tests::run_demo_clip(&f16_file), duolando_tests::run_demo_clip(&q_file));
+    let (a, b) = (
+        duolando_tests::run_demo_clip(&f16_file),
+        duolando_tests::run_demo_clip(&q_file),
+    );
     let (pe, re) = (max_abs(&a.pos, &b.pos), max_abs(&a.rot, &b.rot));
-    let mean_pe = a.pos.iter().zip(&b.pos).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.pos.len() as f64;
+    let mean_pe = a
+        .pos
+        .iter()
+        .zip(&b.pos)
+        .map(|(x, y)| (x - y).abs() as f64)
+        .sum::<f64>()
+        / a.pos.len() as f64;
     eprintln!("demo clip R mode, int8 decoders vs f16: pos err mean {mean_pe:.3e} max {pe:.3e} m, max |rot err| {re:.3e}");
     assert_eq!(a.tokens, b.tokens, "follower tokens");
     assert_eq!(a.leader_tokens, b.leader_tokens, "leader tokens");
-    assert!(pe <= DEMO_POS_LIMIT_M && re <= DEMO_ROT_LIMIT, "pos {pe} rot {re}");
+    assert!(
+        pe <= DEMO_POS_LIMIT_M && re <= DEMO_ROT_LIMIT,
+        "pos {pe} rot {re}"
+    );
 }
 
 /// Every VQ decoder of `m` (4 parts x positions / rotations, then the
 /// translation) fed the same 64 codes: (label, output frames).
 fn every_decoder(m: &duolando_core::duolando::model::Model<'_>) -> Vec<(String, Vec<f32>)> {
     use duolando_core::duolando::config::Part;
-    use duolando_core::limits::VqWhich;
     use duolando_core::duolando::vq_decoder::{decode_codes, scratch_bytes, Output};
+    use duolando_core::limits::VqWhich;
     let cfg = m.cfg;
     let n = 64usize;
     let mut scratch = vec![0u8; scratch_bytes(&cfg, n).unwrap()];
     let mut outs = Vec::new();
-    for (which, vq) in Part::ALL.iter().map(|&p| (VqWhich::Part(p), cfg.parts[p as usize])).chain([(VqWhich::Transl, cfg.transl)]) {
+    for (which, vq) in Part::ALL
+        .iter()
+        .map(|&p| (VqWhich::Part(p), cfg.parts[p as usize]))
+        .chain([(VqWhich::Transl, cfg.transl)])
+    {
         let codes: Vec<u32> = (0..n as u32).map(|i| (i * 37 + 11) % vq.l_bins).collect();
-        for (out, ch) in [(Output::Position, vq.in_channels), (Output::Rotation, vq.rot_channels)] {
+        for (out, ch) in [
+            (Output::Position, vq.in_channels),
+            (Output::Rotation, vq.rot_channels),
+        ] {
             if ch == 0 {
                 continue;
             }
@@ -232,7 +273,7 @@ fn conv_transpose_gemm_order_decodes_as_pytorch_order() {
     use duolando::duo_writer::{write_duo, Tensor};
     use duolando_core::duolando::model::Model;
     use duolando_core::duolando::schema::for_each_tensor;
-use duolando_core::nn::names::{Role, SchemaError};
+    use duolando_core::nn::names::{Role, SchemaError};
     duolando::simd::init();
     let f32_file = duolando_tests::restore_as(&duolando_tests::demo_model(), &|_| StoreAs::F32);
     let duo = f32_file.duo().unwrap();
@@ -246,19 +287,30 @@ use duolando_core::nn::names::{Role, SchemaError};
             (Role::ConvTranspose, &[c_in, c_out, k]) => {
                 n_gemm += 1;
                 let (c_in, zk) = (c_in as usize, (c_out * k) as usize);
-                let t: Vec<f32> = (0..zk * c_in).map(|n| values[(n % c_in) * zk + n / c_in]).collect();
+                let t: Vec<f32> = (0..zk * c_in)
+                    .map(|n| values[(n % c_in) * zk + n / c_in])
+                    .collect();
                 (vec![c_out * k, c_in as u32], t)
             }
             _ => (spec.dims().to_vec(), values),
         };
-        tensors.push(Tensor { name: spec.name.to_string(), shape, values, store_as: StoreAs::F32 });
+        tensors.push(Tensor {
+            name: spec.name.to_string(),
+            shape,
+            values,
+            store_as: StoreAs::F32,
+        });
         Ok(())
     })
     .unwrap();
     assert!(n_gemm >= 16, "{n_gemm} ConvTranspose1d weights");
     let gemm_file = ModelFile::from_bytes(write_duo(&cfg, &tensors).unwrap()).unwrap();
     let (dg, df) = (gemm_file.duo().unwrap(), f32_file.duo().unwrap());
-    assert!(dg.tensors().any(|t| t.name.contains(".decoders") && t.rank == 2), "GEMM order stored");
+    assert!(
+        dg.tensors()
+            .any(|t| t.name.contains(".decoders") && t.rank == 2),
+        "GEMM order stored"
+    );
     let (mg, mf) = (Model::from_duo(&dg).unwrap(), Model::from_duo(&df).unwrap());
     let mut worst = 0.0f32;
     for ((_, a), (_, b)) in every_decoder(&mf).iter().zip(every_decoder(&mg)) {

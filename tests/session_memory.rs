@@ -8,9 +8,11 @@ use std::cell::Cell;
 
 use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
-use duolando_core::error::{Buffer, Error};
 use duolando_core::duolando::model::Model;
-use duolando_core::duolando::session::{CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig};
+use duolando_core::duolando::session::{
+    CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig,
+};
+use duolando_core::error::{Buffer, Error};
 use duolando_tests::fixture;
 
 /// Counts heap allocations made by the current thread while enabled.
@@ -66,8 +68,12 @@ struct Clip {
 fn clip() -> Clip {
     let d = fixture("rollout_tiny_long");
     Clip {
-        leader: read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader").unwrap().data,
-        music: read_f32_2d(&d.join("music.npy"), None, "music").unwrap().data,
+        leader: read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader")
+            .unwrap()
+            .data,
+        music: read_f32_2d(&d.join("music.npy"), None, "music")
+            .unwrap()
+            .data,
     }
 }
 
@@ -123,8 +129,16 @@ fn no_allocation_after_new_and_the_arena_is_exact() {
     let model = Model::from_duo(&duo).unwrap();
     let n_music = model.cfg.gpt.music.n_in as usize;
     let c = clip();
-    let staggered = SessionConfig { schedule: CacheSchedule::Staggered, ..SessionConfig::reference(&model.cfg) };
-    for sc in [SessionConfig::reference(&model.cfg), SessionConfig::minimum(&model.cfg), live_config(&model), staggered] {
+    let staggered = SessionConfig {
+        schedule: CacheSchedule::Staggered,
+        ..SessionConfig::reference(&model.cfg)
+    };
+    for sc in [
+        SessionConfig::reference(&model.cfg),
+        SessionConfig::minimum(&model.cfg),
+        live_config(&model),
+        staggered,
+    ] {
         let bytes = model.session_bytes(&sc).unwrap();
         // Exactly `bytes` at the worst alignment (63 bytes past a line) is enough.
         let mut buf = vec![0u8; bytes + 64];
@@ -144,7 +158,9 @@ fn no_allocation_after_new_and_the_arena_is_exact() {
         match Session::new(&model, line_aligned(&mut small, len), &sc, [1, 2, 3, 4, 5]) {
             Err(Error::Arena(_)) => {}
             Err(e) => panic!("{sc:?}: wrong error for a short arena: {e:?}"),
-            Ok(_) => panic!("{sc:?}: a session fit in {len} < {bytes} - 63 bytes: session_bytes is not exact"),
+            Ok(_) => panic!(
+                "{sc:?}: a session fit in {len} < {bytes} - 63 bytes: session_bytes is not exact"
+            ),
         };
     }
 }
@@ -167,7 +183,10 @@ fn reset_reproduces_the_first_run_without_allocating() {
     });
     assert_eq!(n, 0);
     assert!(!a.is_empty());
-    assert_eq!(a, b, "a reset session must replay bit for bit (same seed, same RNG seed)");
+    assert_eq!(
+        a, b,
+        "a reset session must replay bit for bit (same seed, same RNG seed)"
+    );
 }
 
 #[test]
@@ -178,8 +197,12 @@ fn one_model_serves_sessions_on_four_threads() {
     let n_music = model.cfg.gpt.music.n_in as usize;
     let d = fixture("rollout_tiny2_frames");
     let c = Clip {
-        leader: read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader").unwrap().data,
-        music: read_f32_2d(&d.join("music.npy"), None, "music").unwrap().data,
+        leader: read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader")
+            .unwrap()
+            .data,
+        music: read_f32_2d(&d.join("music.npy"), None, "music")
+            .unwrap()
+            .data,
     };
     let sc = live_config(&model);
     let single = {
@@ -204,7 +227,11 @@ fn one_model_serves_sessions_on_four_threads() {
             })
             .collect();
         for h in handles {
-            assert_eq!(h.join().unwrap(), single, "a session on another thread must give the same frames");
+            assert_eq!(
+                h.join().unwrap(),
+                single,
+                "a session on another thread must give the same frames"
+            );
         }
     });
 }
@@ -232,27 +259,53 @@ fn bad_frames_are_refused_and_leave_the_session_unchanged() {
     for i in 0..c.leader.len() / 165 {
         if i % 37 == 5 {
             bad[(i * 7) % 165] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][i % 3];
-            assert!(matches!(s.push_leader_frame(&bad), Err(Error::NonFinite { .. })));
+            assert!(matches!(
+                s.push_leader_frame(&bad),
+                Err(Error::NonFinite { .. })
+            ));
             let mut m = c.music[..n_music].to_vec();
             m[i % n_music] = f32::NAN;
-            assert!(matches!(s.push_music_frame(&m), Err(Error::NonFinite { .. })));
-            assert!(matches!(s.push_leader_frame(&bad[..100]), Err(Error::Length { .. })));
+            assert!(matches!(
+                s.push_music_frame(&m),
+                Err(Error::NonFinite { .. })
+            ));
+            assert!(matches!(
+                s.push_leader_frame(&bad[..100]),
+                Err(Error::Length { .. })
+            ));
             // Finite but out of range (input policy, docs/ROBUSTNESS.md §3).
             let mut huge = c.leader[i * 165..(i + 1) * 165].to_vec();
             huge[(i * 11) % 165] = [1e30, -2e4, f32::MAX][i % 3];
             let e = s.push_leader_frame(&huge);
-            assert_eq!(e, Err(Error::OutOfRange { buffer: Buffer::LeaderPos3d, index: (i * 11) % 165 }));
+            assert_eq!(
+                e,
+                Err(Error::OutOfRange {
+                    buffer: Buffer::LeaderPos3d,
+                    index: (i * 11) % 165
+                })
+            );
             let mut m = c.music[i * n_music..(i + 1) * n_music].to_vec();
             m[0] = -1e30;
-            assert_eq!(s.push_music_frame(&m), Err(Error::OutOfRange { buffer: Buffer::Music, index: 0 }));
+            assert_eq!(
+                s.push_music_frame(&m),
+                Err(Error::OutOfRange {
+                    buffer: Buffer::Music,
+                    index: 0
+                })
+            );
         }
-        s.push_music_frame(&c.music[i * n_music..(i + 1) * n_music]).unwrap();
-        s.push_leader_frame(&c.leader[i * 165..(i + 1) * 165]).unwrap();
+        s.push_music_frame(&c.music[i * n_music..(i + 1) * n_music])
+            .unwrap();
+        s.push_leader_frame(&c.leader[i * 165..(i + 1) * 165])
+            .unwrap();
         while s.pull_follower_frame(&mut f).unwrap() {
             out.extend_from_slice(&f.positions);
         }
     }
-    assert_eq!(out, clean, "refused frames must not change what the session computes");
+    assert_eq!(
+        out, clean,
+        "refused frames must not change what the session computes"
+    );
 }
 
 #[test]
@@ -265,7 +318,8 @@ fn unpulled_frames_back_up_into_a_clean_refusal() {
     let c = clip();
     let mut arena = vec![0u8; model.session_bytes(&sc).unwrap()];
     let mut s = Session::new(&model, &mut arena, &sc, [0, 0, 0, 0, 0]).unwrap();
-    s.set_music_track(&c.music[..600 * model.cfg.gpt.music.n_in as usize]).unwrap();
+    s.set_music_track(&c.music[..600 * model.cfg.gpt.music.n_in as usize])
+        .unwrap();
     let mut refused_at = None;
     for i in 0..100 {
         match s.push_leader_frame(&c.leader[i * 165..(i + 1) * 165]) {
@@ -297,14 +351,26 @@ fn unpulled_frames_back_up_into_a_clean_refusal() {
 #[test]
 fn frames_backed_up_to_the_refusal_are_all_kept() {
     let c = clip();
-    for (name, preset, pending) in [("tiny", "reference", 0u32), ("tiny", "reference", 5), ("tiny2", "minimum", 0), ("tiny2", "minimum", 3), ("tiny", "live", 2)] {
+    for (name, preset, pending) in [
+        ("tiny", "reference", 0u32),
+        ("tiny", "reference", 5),
+        ("tiny2", "minimum", 0),
+        ("tiny2", "minimum", 3),
+        ("tiny", "live", 2),
+    ] {
         let file = ModelFile::open(fixture(&format!("{name}/model.duo"))).unwrap();
         let duo = file.duo().unwrap();
         let model = Model::from_duo(&duo).unwrap();
         let mut sc = match preset {
             "reference" => SessionConfig::reference(&model.cfg),
             "minimum" => SessionConfig::minimum(&model.cfg),
-            _ => SessionConfig::with(&model.cfg, 1, 0, 0, SessionConfig::reference(&model.cfg).shift),
+            _ => SessionConfig::with(
+                &model.cfg,
+                1,
+                0,
+                0,
+                SessionConfig::reference(&model.cfg).shift,
+            ),
         };
         sc.pending_frames = pending;
         let n_music = model.cfg.gpt.music.n_in as usize;
@@ -326,7 +392,10 @@ fn frames_backed_up_to_the_refusal_are_all_kept() {
             while i < frames {
                 match s.push_leader_frame(&c.leader[i * 165..(i + 1) * 165]) {
                     Ok(()) => i += 1,
-                    Err(Error::Backlog { buffer: Buffer::FollowerPos3d, .. }) => {
+                    Err(Error::Backlog {
+                        buffer: Buffer::FollowerPos3d,
+                        ..
+                    }) => {
                         // Pulling frees the backlog, unless no step can run any
                         // more (the end of the music track).
                         let before = out.len();
@@ -337,7 +406,10 @@ fn frames_backed_up_to_the_refusal_are_all_kept() {
                         refusals += 1;
                         continue;
                     }
-                    Err(Error::Backlog { buffer: Buffer::Music, .. }) => break,
+                    Err(Error::Backlog {
+                        buffer: Buffer::Music,
+                        ..
+                    }) => break,
                     Err(e) => panic!("{name} {preset}: frame {i}: {e:?}"),
                 }
                 if eager {
@@ -345,14 +417,20 @@ fn frames_backed_up_to_the_refusal_are_all_kept() {
                 }
             }
             pull_all(&mut s, &mut out);
-            assert!(eager || refusals > 0, "{name} {preset} {pending}: the backlog was never reached");
+            assert!(
+                eager || refusals > 0,
+                "{name} {preset} {pending}: the backlog was never reached"
+            );
             out
         };
         let eager = run(true);
         let backed_up = run(false);
         assert!(eager.len() > 100, "{name} {preset}: {} frames", eager.len());
         assert_eq!(backed_up.len(), eager.len(), "{name} {preset} {pending}");
-        assert!(backed_up == eager, "{name} {preset} {pending}: frames differ");
+        assert!(
+            backed_up == eager,
+            "{name} {preset} {pending}: frames differ"
+        );
     }
 }
 
@@ -366,14 +444,23 @@ fn step_many_allocates_nothing_and_its_batch_arena_is_exact() {
     let c = clip();
     let sc = live_config(&model);
     let n = 3;
-    let mut arenas: Vec<Vec<u8>> = (0..n).map(|_| vec![0u8; model.session_bytes(&sc).unwrap()]).collect();
-    let mut sessions: Vec<Session<'_>> = arenas.iter_mut().enumerate().map(|(i, a)| Session::new(&model, a, &sc, [i as u32, 1, 2, 3, 4]).unwrap()).collect();
+    let mut arenas: Vec<Vec<u8>> = (0..n)
+        .map(|_| vec![0u8; model.session_bytes(&sc).unwrap()])
+        .collect();
+    let mut sessions: Vec<Session<'_>> = arenas
+        .iter_mut()
+        .enumerate()
+        .map(|(i, a)| Session::new(&model, a, &sc, [i as u32, 1, 2, 3, 4]).unwrap())
+        .collect();
     let bytes = StepBatch::bytes(&model.cfg, &sc, n).unwrap();
     // Exactly `bytes` at the worst alignment is enough; a 64-byte-aligned arena one line short of `bytes - 63` is not.
     let mut buf = vec![0u8; bytes + 64];
     let mut batch = StepBatch::new(&model.cfg, &sc, n, worst_aligned(&mut buf, bytes)).unwrap();
     let mut small = vec![0u8; bytes];
-    assert!(matches!(StepBatch::new(&model.cfg, &sc, n, line_aligned(&mut small, bytes - 127)), Err(Error::Arena(_))));
+    assert!(matches!(
+        StepBatch::new(&model.cfg, &sc, n, line_aligned(&mut small, bytes - 127)),
+        Err(Error::Arena(_))
+    ));
     let frames = c.leader.len() / 165;
     let mut refs: Vec<&mut Session<'_>> = sessions.iter_mut().collect();
     let mut f = FollowerFrame::default();
@@ -381,7 +468,8 @@ fn step_many_allocates_nothing_and_its_batch_arena_is_exact() {
     let allocs = allocations_during(|| {
         for t in 0..frames {
             for s in refs.iter_mut() {
-                s.push_music_frame(&c.music[t * n_music..(t + 1) * n_music]).unwrap();
+                s.push_music_frame(&c.music[t * n_music..(t + 1) * n_music])
+                    .unwrap();
             }
             let x = &c.leader[t * 165..(t + 1) * 165];
             Session::step_many(&mut refs, &[x, x, x], &mut batch).unwrap();
@@ -392,7 +480,10 @@ fn step_many_allocates_nothing_and_its_batch_arena_is_exact() {
             }
         }
     });
-    assert_eq!(allocs, 0, "{allocs} heap allocations while stepping {n} sessions together");
+    assert_eq!(
+        allocs, 0,
+        "{allocs} heap allocations while stepping {n} sessions together"
+    );
     assert!(pulled > 3 * 100, "only {pulled} frames pulled");
 }
 
@@ -403,13 +494,23 @@ fn step_many_allocates_nothing_and_its_batch_arena_is_exact() {
 #[test]
 fn leader_codes_waiting_for_music_up_to_the_refusal_are_all_kept() {
     let c = clip();
-    for (name, preset) in [("tiny", "reference"), ("tiny2", "reference"), ("tiny", "live")] {
+    for (name, preset) in [
+        ("tiny", "reference"),
+        ("tiny2", "reference"),
+        ("tiny", "live"),
+    ] {
         let file = ModelFile::open(fixture(&format!("{name}/model.duo"))).unwrap();
         let duo = file.duo().unwrap();
         let model = Model::from_duo(&duo).unwrap();
         let mut sc = match preset {
             "reference" => SessionConfig::reference(&model.cfg),
-            _ => SessionConfig::with(&model.cfg, 1, 0, 0, SessionConfig::reference(&model.cfg).shift),
+            _ => SessionConfig::with(
+                &model.cfg,
+                1,
+                0,
+                0,
+                SessionConfig::reference(&model.cfg).shift,
+            ),
         };
         // Room for every frame of the clip: the follower backlog never refuses first.
         sc.pending_frames = 1 << 12;
@@ -440,10 +541,17 @@ fn leader_codes_waiting_for_music_up_to_the_refusal_are_all_kept() {
             loop {
                 match s.push_leader_frame(leader(t)) {
                     Ok(()) => break,
-                    Err(Error::Backlog { buffer: Buffer::Music, held, capacity }) => {
+                    Err(Error::Backlog {
+                        buffer: Buffer::Music,
+                        held,
+                        capacity,
+                    }) => {
                         assert_eq!(held, capacity, "{name} {preset}: frame {t}");
                         refusals += 1;
-                        assert!(m < frames, "{name} {preset}: refused with every music frame in");
+                        assert!(
+                            m < frames,
+                            "{name} {preset}: refused with every music frame in"
+                        );
                         s.push_music_frame(music(m)).unwrap();
                         m += 1;
                     }
@@ -456,7 +564,10 @@ fn leader_codes_waiting_for_music_up_to_the_refusal_are_all_kept() {
             m += 1;
         }
         pull_all(&mut s, &mut got);
-        assert!(refusals > 0, "{name} {preset}: the music backlog was never reached");
+        assert!(
+            refusals > 0,
+            "{name} {preset}: the music backlog was never reached"
+        );
         assert!(want.len() > 100, "{name} {preset}: {} frames", want.len());
         assert_eq!(got.len(), want.len(), "{name} {preset}");
         assert!(got == want, "{name} {preset}: frames differ");
@@ -478,9 +589,15 @@ fn a_batched_session_holds_its_state_alone() {
     let n_music = model.cfg.gpt.music.n_in as usize;
     let c = clip();
     let sc = live_config(&model);
-    let (own, alone) = (model.session_bytes(&sc).unwrap(), model.batched_session_bytes(&sc).unwrap());
+    let (own, alone) = (
+        model.session_bytes(&sc).unwrap(),
+        model.batched_session_bytes(&sc).unwrap(),
+    );
     let batch_bytes = StepBatch::bytes(&model.cfg, &sc, 2).unwrap();
-    assert!(alone + 1024 < own, "state alone {alone} B, with step memory {own} B");
+    assert!(
+        alone + 1024 < own,
+        "state alone {alone} B, with step memory {own} B"
+    );
     // (A batch made for another model, declared first: a session and the
     // batches it borrows share one lifetime.)
     let other = duolando_core::duolando::presets::duolando_published();
@@ -488,11 +605,33 @@ fn a_batched_session_holds_its_state_alone() {
     let mut ob = vec![0u8; StepBatch::bytes(&other, &other_sc, 1).unwrap()];
     let mut other_batch = StepBatch::new(&other, &other_sc, 1, &mut ob).unwrap();
     let mut batch_buf = vec![0u8; batch_bytes + 64];
-    let mut batch = StepBatch::new(&model.cfg, &sc, 2, worst_aligned(&mut batch_buf, batch_bytes)).unwrap();
+    let mut batch = StepBatch::new(
+        &model.cfg,
+        &sc,
+        2,
+        worst_aligned(&mut batch_buf, batch_bytes),
+    )
+    .unwrap();
     let mut small = vec![0u8; alone];
-    assert!(matches!(Session::new_batched(&model, line_aligned(&mut small, alone - 127), &sc, [0, 1, 2, 3, 4], &mut batch), Err(Error::Arena(_))));
+    assert!(matches!(
+        Session::new_batched(
+            &model,
+            line_aligned(&mut small, alone - 127),
+            &sc,
+            [0, 1, 2, 3, 4],
+            &mut batch
+        ),
+        Err(Error::Arena(_))
+    ));
     let mut buf = vec![0u8; alone + 64];
-    let mut s = Session::new_batched(&model, worst_aligned(&mut buf, alone), &sc, [0, 1, 2, 3, 4], &mut batch).unwrap();
+    let mut s = Session::new_batched(
+        &model,
+        worst_aligned(&mut buf, alone),
+        &sc,
+        [0, 1, 2, 3, 4],
+        &mut batch,
+    )
+    .unwrap();
     let mut own_buf = vec![0u8; own];
     let mut twin = Session::new(&model, &mut own_buf, &sc, [0, 1, 2, 3, 4]).unwrap();
     assert!(!s.has_step_memory() && twin.has_step_memory());
@@ -504,22 +643,34 @@ fn a_batched_session_holds_its_state_alone() {
     assert_eq!(s.reset([1, 1, 1, 1, 1]), Err(Error::State));
     assert_eq!((s.frames_pushed(), s.steps()), (0, 0));
     // A batch made for another model does not fit.
-    assert_eq!(s.with_batch(&mut other_batch, |s| s.push_music_frame(&c.music[..n_music])).err(), Some(Error::State));
+    assert_eq!(
+        s.with_batch(&mut other_batch, |s| s
+            .push_music_frame(&c.music[..n_music]))
+            .err(),
+        Some(Error::State)
+    );
     let frames = c.leader.len() / 165;
     // Room for every frame beforehand: the test's own vectors must not allocate inside the count.
-    let (mut got, mut want) = (Vec::with_capacity(frames * 660), Vec::with_capacity(frames * 660));
+    let (mut got, mut want) = (
+        Vec::with_capacity(frames * 660),
+        Vec::with_capacity(frames * 660),
+    );
     let mut f = FollowerFrame::default();
     let allocs = allocations_during(|| {
         for t in 0..frames {
             let m = &c.music[t * n_music..(t + 1) * n_music];
-            s.with_batch(&mut batch, |s| s.push_music_frame(m)).unwrap().unwrap();
+            s.with_batch(&mut batch, |s| s.push_music_frame(m))
+                .unwrap()
+                .unwrap();
             twin.push_music_frame(m).unwrap();
             let x = &c.leader[t * 165..(t + 1) * 165];
             // Even frames through step_many (both kinds in one batch), odd ones inside with_batch.
             if t % 2 == 0 {
                 Session::step_many(&mut [&mut s], &[x], &mut batch).unwrap();
             } else {
-                s.with_batch(&mut batch, |s| s.push_leader_frame(x)).unwrap().unwrap();
+                s.with_batch(&mut batch, |s| s.push_leader_frame(x))
+                    .unwrap()
+                    .unwrap();
             }
             twin.push_leader_frame(x).unwrap();
             while s.pull_follower_frame(&mut f).unwrap() {
@@ -530,11 +681,23 @@ fn a_batched_session_holds_its_state_alone() {
             }
         }
     });
-    assert_eq!(allocs, 0, "{allocs} heap allocations while stepping a batched session");
-    assert!(want.len() > 100 * (165 + 495), "only {} values pulled", want.len());
-    assert!(got == want, "a batched session's frames differ from its twin's");
+    assert_eq!(
+        allocs, 0,
+        "{allocs} heap allocations while stepping a batched session"
+    );
+    assert!(
+        want.len() > 100 * (165 + 495),
+        "only {} values pulled",
+        want.len()
+    );
+    assert!(
+        got == want,
+        "a batched session's frames differ from its twin's"
+    );
     assert!(!s.has_step_memory(), "the batch's memory was given back");
     // Reset inside with_batch runs again from the start.
-    s.with_batch(&mut batch, |s| s.reset([0, 1, 2, 3, 4])).unwrap().unwrap();
+    s.with_batch(&mut batch, |s| s.reset([0, 1, 2, 3, 4]))
+        .unwrap()
+        .unwrap();
     assert_eq!((s.frames_pushed(), s.steps()), (0, 0));
 }

@@ -18,7 +18,11 @@ use duolando_tests::fixture;
 /// the AMX tile-pair kernel and the 192 KiB panel, and again on 2026-12-03 with 12-row AMX
 /// groups; the test profile: <= 768 KiB).
 fn stack() -> usize {
-    std::env::var("STACK_KIB").ok().and_then(|v| v.parse().ok()).unwrap_or(1024) * 1024
+    std::env::var("STACK_KIB")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1024)
+        * 1024
 }
 
 #[test]
@@ -27,8 +31,12 @@ fn sessions_and_batches_step_in_a_1_mib_stack() {
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
     let d = fixture("rollout_tiny2_frames");
-    let leader = read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader").unwrap().data;
-    let music = read_f32_2d(&d.join("music.npy"), None, "music").unwrap().data;
+    let leader = read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader")
+        .unwrap()
+        .data;
+    let music = read_f32_2d(&d.join("music.npy"), None, "music")
+        .unwrap()
+        .data;
     let sc = SessionConfig::reference(&model.cfg);
     for scalar in [false, true] {
         duolando::simd::init();
@@ -41,13 +49,21 @@ fn sessions_and_batches_step_in_a_1_mib_stack() {
                 .stack_size(stack())
                 .spawn_scoped(scope, move || {
                     let n = 4;
-                    let mut arenas: Vec<Vec<u8>> = (0..n).map(|_| vec![0u8; model.session_bytes(sc).unwrap()]).collect();
-                    let mut sessions: Vec<Session<'_>> = arenas.iter_mut().enumerate().map(|(i, a)| Session::new(model, a, sc, [i as u32, 1, 2, 3, 4]).unwrap()).collect();
+                    let mut arenas: Vec<Vec<u8>> = (0..n)
+                        .map(|_| vec![0u8; model.session_bytes(sc).unwrap()])
+                        .collect();
+                    let mut sessions: Vec<Session<'_>> = arenas
+                        .iter_mut()
+                        .enumerate()
+                        .map(|(i, a)| Session::new(model, a, sc, [i as u32, 1, 2, 3, 4]).unwrap())
+                        .collect();
                     for s in sessions.iter_mut() {
                         s.set_music_track(music).unwrap();
                     }
-                    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, sc, n - 1).unwrap()];
-                    let mut batch = StepBatch::new(&model.cfg, sc, n - 1, &mut batch_arena).unwrap();
+                    let mut batch_arena =
+                        vec![0u8; StepBatch::bytes(&model.cfg, sc, n - 1).unwrap()];
+                    let mut batch =
+                        StepBatch::new(&model.cfg, sc, n - 1, &mut batch_arena).unwrap();
                     let mut f = FollowerFrame::default();
                     let mut pulled = 0;
                     for t in 0..leader.len() / 165 {
@@ -73,6 +89,9 @@ fn sessions_and_batches_step_in_a_1_mib_stack() {
                 .join()
                 .unwrap()
         });
-        assert!(pulled > 4 * 20, "scalar={scalar}: only {pulled} frames pulled");
+        assert!(
+            pulled > 4 * 20,
+            "scalar={scalar}: only {pulled} frames pulled"
+        );
     }
 }

@@ -9,9 +9,12 @@
 use duolando::duo_writer::StoreAs;
 use duolando::model_file::ModelFile;
 use duolando::npy::read_f32_2d;
-use duolando_core::error::{Buffer, Error};
 use duolando_core::duolando::model::Model;
-use duolando_core::duolando::session::{CacheSchedule, FollowerFrame, KvType, Sampling, Session, SessionConfig, Setting, StepBatch, StepReport};
+use duolando_core::duolando::session::{
+    CacheSchedule, FollowerFrame, KvType, Sampling, Session, SessionConfig, Setting, StepBatch,
+    StepReport,
+};
+use duolando_core::error::{Buffer, Error};
 use duolando_tests::fixture;
 
 fn convert(model: &str, store_as: StoreAs) -> ModelFile {
@@ -26,8 +29,12 @@ struct Clip {
 fn clip(rollout: &str) -> Clip {
     let d = fixture(rollout);
     Clip {
-        leader: read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader").unwrap().data,
-        music: read_f32_2d(&d.join("music.npy"), None, "music").unwrap().data,
+        leader: read_f32_2d(&d.join("leader_pos3d.npy"), Some(165), "leader")
+            .unwrap()
+            .data,
+        music: read_f32_2d(&d.join("music.npy"), None, "music")
+            .unwrap()
+            .data,
     }
 }
 
@@ -38,7 +45,12 @@ fn leader_of(c: &Clip, i: usize) -> Vec<f32> {
     let mut out = Vec::with_capacity(c.leader.len());
     for t in 0..n {
         let f = (t + 5 * i) % n;
-        out.extend(c.leader[f * 165..(f + 1) * 165].iter().enumerate().map(|(j, v)| if j % 3 == 0 { v + 0.1 * i as f32 } else { *v }));
+        out.extend(
+            c.leader[f * 165..(f + 1) * 165]
+                .iter()
+                .enumerate()
+                .map(|(j, v)| if j % 3 == 0 { v + 0.1 * i as f32 } else { *v }),
+        );
     }
     out
 }
@@ -53,12 +65,26 @@ struct Trace {
 
 /// Where two traces first differ (a short message; the traces are long).
 fn first_difference(a: &Trace, b: &Trace) -> Option<String> {
-    if let Some(t) = (0..a.steps.len().max(b.steps.len())).find(|&t| a.steps.get(t) != b.steps.get(t)) {
-        return Some(format!("after leader frame {t}: step {:?} alone, {:?} batched", a.steps.get(t), b.steps.get(t)));
+    if let Some(t) =
+        (0..a.steps.len().max(b.steps.len())).find(|&t| a.steps.get(t) != b.steps.get(t))
+    {
+        return Some(format!(
+            "after leader frame {t}: step {:?} alone, {:?} batched",
+            a.steps.get(t),
+            b.steps.get(t)
+        ));
     }
-    if let Some(f) = (0..a.frames.len().max(b.frames.len())).find(|&f| a.frames.get(f) != b.frames.get(f)) {
+    if let Some(f) =
+        (0..a.frames.len().max(b.frames.len())).find(|&f| a.frames.get(f) != b.frames.get(f))
+    {
         let root = |t: &Trace| t.frames.get(f).map(|x| x.root);
-        return Some(format!("follower frame {f}: root {:?} alone, {:?} batched ({} / {} frames)", root(a), root(b), a.frames.len(), b.frames.len()));
+        return Some(format!(
+            "follower frame {f}: root {:?} alone, {:?} batched ({} / {} frames)",
+            root(a),
+            root(b),
+            a.frames.len(),
+            b.frames.len()
+        ));
     }
     None
 }
@@ -75,8 +101,21 @@ fn configs(model: &Model<'_>) -> Vec<(&'static str, SessionConfig)> {
         ("reference", reference),
         ("minimum+f16kv", f16kv),
         ("live+topk", live),
-        ("staggered+f16kv", SessionConfig { schedule: CacheSchedule::Staggered, kv: KvType::F16, ..reference }),
-        ("spread", SessionConfig { schedule: CacheSchedule::Spread, ..reference }),
+        (
+            "staggered+f16kv",
+            SessionConfig {
+                schedule: CacheSchedule::Staggered,
+                kv: KvType::F16,
+                ..reference
+            },
+        ),
+        (
+            "spread",
+            SessionConfig {
+                schedule: CacheSchedule::Spread,
+                ..reference
+            },
+        ),
     ]
 }
 
@@ -84,13 +123,22 @@ fn configs(model: &Model<'_>) -> Vec<(&'static str, SessionConfig)> {
 fn config_of(base: &SessionConfig, i: usize) -> SessionConfig {
     let mut sc = *base;
     if let Sampling::TopK { k, rng_seed } = sc.sampling {
-        sc.sampling = Sampling::TopK { k, rng_seed: rng_seed + 1000 * i as u64 };
+        sc.sampling = Sampling::TopK {
+            k,
+            rng_seed: rng_seed + 1000 * i as u64,
+        };
     }
     sc
 }
 
 fn seed_of(i: usize) -> [u32; 5] {
-    [i as u32 % 7, (2 * i as u32 + 1) % 7, 3, (i as u32 + 4) % 7, (5 * i as u32) % 7]
+    [
+        i as u32 % 7,
+        (2 * i as u32 + 1) % 7,
+        3,
+        (i as u32 + 4) % 7,
+        (5 * i as u32) % 7,
+    ]
 }
 
 /// Runs `n` sessions of `model` over the clip, alone or together
@@ -100,7 +148,14 @@ fn run(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: boo
 }
 
 /// [`run`] with a `StepBatch` of capacity `cap` (>= n) for the batched run.
-fn run_in(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: bool, cap: usize) -> Vec<Trace> {
+fn run_in(
+    model: &Model<'_>,
+    base: &SessionConfig,
+    c: &Clip,
+    n: usize,
+    batched: bool,
+    cap: usize,
+) -> Vec<Trace> {
     let n_music = model.cfg.gpt.music.n_in as usize;
     let leaders: Vec<Vec<f32>> = (0..n).map(|i| leader_of(c, i)).collect();
     let cfgs: Vec<SessionConfig> = (0..n).map(|i| config_of(base, i)).collect();
@@ -109,18 +164,46 @@ fn run_in(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: 
     // In the batched run, the odd sessions have no step memory of their own
     // (`Session::new_batched`): both kinds in one batch.
     let own = |i: usize| !batched || i % 2 == 0;
-    let mut arenas: Vec<Vec<u8>> = cfgs.iter().enumerate().map(|(i, sc)| vec![0u8; if own(i) { model.session_bytes(sc) } else { model.batched_session_bytes(sc) }.unwrap()]).collect();
+    let mut arenas: Vec<Vec<u8>> = cfgs
+        .iter()
+        .enumerate()
+        .map(|(i, sc)| {
+            vec![
+                0u8;
+                if own(i) {
+                    model.session_bytes(sc)
+                } else {
+                    model.batched_session_bytes(sc)
+                }
+                .unwrap()
+            ]
+        })
+        .collect();
     let mut sessions: Vec<Session<'_>> = Vec::new();
     for (i, (a, sc)) in arenas.iter_mut().zip(&cfgs).enumerate() {
-        sessions.push(if own(i) { Session::new(model, a, sc, seed_of(i)) } else { Session::new_batched(model, a, sc, seed_of(i), &mut batch) }.unwrap());
+        sessions.push(
+            if own(i) {
+                Session::new(model, a, sc, seed_of(i))
+            } else {
+                Session::new_batched(model, a, sc, seed_of(i), &mut batch)
+            }
+            .unwrap(),
+        );
     }
     let live = base.music_lookahead == 0;
     if !live {
         for s in sessions.iter_mut() {
-            s.with_batch(&mut batch, |s| s.set_music_track(&c.music)).unwrap().unwrap();
+            s.with_batch(&mut batch, |s| s.set_music_track(&c.music))
+                .unwrap()
+                .unwrap();
         }
     }
-    let mut traces: Vec<Trace> = (0..n).map(|_| Trace { steps: Vec::new(), frames: Vec::new() }).collect();
+    let mut traces: Vec<Trace> = (0..n)
+        .map(|_| Trace {
+            steps: Vec::new(),
+            frames: Vec::new(),
+        })
+        .collect();
     let frames = c.leader.len() / 165;
     let mut f = FollowerFrame::default();
     for t in 0..frames {
@@ -130,7 +213,9 @@ fn run_in(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: 
                 if s.has_step_memory() {
                     s.push_music_frame(m).unwrap();
                 } else {
-                    s.with_batch(&mut batch, |s| s.push_music_frame(m)).unwrap().unwrap();
+                    s.with_batch(&mut batch, |s| s.push_music_frame(m))
+                        .unwrap()
+                        .unwrap();
                 }
             }
         }
@@ -139,7 +224,11 @@ fn run_in(model: &Model<'_>, base: &SessionConfig, c: &Clip, n: usize, batched: 
             let mut refs: Vec<&mut Session<'_>> = sessions.iter_mut().collect();
             Session::step_many(&mut refs, &rows, &mut batch)
         } else {
-            sessions.iter_mut().zip(&rows).enumerate().try_for_each(|(i, (s, x))| s.push_leader_frame(x).map_err(|e| (i, e)))
+            sessions
+                .iter_mut()
+                .zip(&rows)
+                .enumerate()
+                .try_for_each(|(i, (s, x))| s.push_leader_frame(x).map_err(|e| (i, e)))
         };
         match r {
             // A preloaded track ends: its last tokens have no music look-ahead.
@@ -194,7 +283,11 @@ fn each_case(cases: &[(&str, StoreAs, &str)]) {
             let alone = run(&model, &sc, &c, n, false);
             let together = run(&model, &sc, &c, n, true);
             for i in 0..n {
-                assert!(alone[i].frames.len() > 20, "{name} {store:?} {label}: session {i} pulled only {} frames", alone[i].frames.len());
+                assert!(
+                    alone[i].frames.len() > 20,
+                    "{name} {store:?} {label}: session {i} pulled only {} frames",
+                    alone[i].frames.len()
+                );
                 assert!(alone[i].steps.iter().flatten().count() > 5);
                 if let Some(d) = first_difference(&alone[i], &together[i]) {
                     panic!("{name} {store:?} {label}: session {i} differs when stepped in a batch of {n}: {d}");
@@ -214,18 +307,28 @@ fn each_case(cases: &[(&str, StoreAs, &str)]) {
 fn chunked_reprefill_matches_one_call_bit_for_bit() {
     let _kernels = detected_kernels();
     use duolando_core::duolando::session::REPREFILL_CHUNK;
-    for (name, store, rollout) in [("tiny", StoreAs::F32, "rollout_tiny_long"), ("tiny", StoreAs::Q8Block32, "rollout_tiny_long")] {
+    for (name, store, rollout) in [
+        ("tiny", StoreAs::F32, "rollout_tiny_long"),
+        ("tiny", StoreAs::Q8Block32, "rollout_tiny_long"),
+    ] {
         let file = convert(name, store);
         let duo = file.duo().unwrap();
         let model = Model::from_duo(&duo).unwrap();
         let m = model.cfg.gpt.block_size as usize - 1;
         let c = clip(rollout);
         for (label, sc) in configs(&model) {
-            assert!(sc.shift as usize > REPREFILL_CHUNK || sc.schedule != CacheSchedule::Reprefill, "{label}: shift {} does not need chunks", sc.shift);
+            assert!(
+                sc.shift as usize > REPREFILL_CHUNK || sc.schedule != CacheSchedule::Reprefill,
+                "{label}: shift {} does not need chunks",
+                sc.shift
+            );
             assert!(32 >= m, "capacity 32 holds a window of {m} rows");
             let chunked = run(&model, &sc, &c, 1, false);
             let one_call = run_in(&model, &sc, &c, 1, true, 32);
-            assert!(chunked[0].steps.iter().flatten().count() > sc.shift as usize + 2, "{label}: too few steps to re-prefill");
+            assert!(
+                chunked[0].steps.iter().flatten().count() > sc.shift as usize + 2,
+                "{label}: too few steps to re-prefill"
+            );
             if let Some(d) = first_difference(&chunked[0], &one_call[0]) {
                 panic!("{name} {store:?} {label}: chunked re-prefill differs from one call: {d}");
             }
@@ -244,8 +347,13 @@ fn a_refused_frame_names_its_session_and_changes_none() {
     let file2 = ModelFile::open(fixture("tiny/model.duo")).unwrap();
     let duo2 = file2.duo().unwrap();
     let other = Model::from_duo(&duo2).unwrap();
-    let mut arenas: Vec<Vec<u8>> = (0..3).map(|_| vec![0u8; model.session_bytes(&sc).unwrap()]).collect();
-    let mut sessions: Vec<Session<'_>> = arenas.iter_mut().map(|a| Session::new(&model, a, &sc, [0; 5]).unwrap()).collect();
+    let mut arenas: Vec<Vec<u8>> = (0..3)
+        .map(|_| vec![0u8; model.session_bytes(&sc).unwrap()])
+        .collect();
+    let mut sessions: Vec<Session<'_>> = arenas
+        .iter_mut()
+        .map(|a| Session::new(&model, a, &sc, [0; 5]).unwrap())
+        .collect();
     for s in sessions.iter_mut() {
         s.set_music_track(&c.music).unwrap();
     }
@@ -256,29 +364,87 @@ fn a_refused_frame_names_its_session_and_changes_none() {
     bad[7] = f32::NAN;
     {
         let mut refs: Vec<&mut Session<'_>> = sessions.iter_mut().collect();
-        assert_eq!(Session::step_many(&mut refs, &[good, good, &bad], &mut batch), Err((2, Error::NonFinite { buffer: Buffer::LeaderPos3d, index: 7 })));
-        assert_eq!(Session::step_many(&mut refs, &[good, &good[..160], good], &mut batch), Err((1, Error::Length { buffer: Buffer::LeaderPos3d, len: 160, expected: 165 })));
-        assert!(matches!(Session::step_many(&mut refs, &[good, good], &mut batch), Err((0, Error::Length { .. }))));
+        assert_eq!(
+            Session::step_many(&mut refs, &[good, good, &bad], &mut batch),
+            Err((
+                2,
+                Error::NonFinite {
+                    buffer: Buffer::LeaderPos3d,
+                    index: 7
+                }
+            ))
+        );
+        assert_eq!(
+            Session::step_many(&mut refs, &[good, &good[..160], good], &mut batch),
+            Err((
+                1,
+                Error::Length {
+                    buffer: Buffer::LeaderPos3d,
+                    len: 160,
+                    expected: 165
+                }
+            ))
+        );
+        assert!(matches!(
+            Session::step_many(&mut refs, &[good, good], &mut batch),
+            Err((0, Error::Length { .. }))
+        ));
     }
-    assert!(sessions.iter().all(|s| s.frames_pushed() == 0), "a refused batch must change no session");
+    assert!(
+        sessions.iter().all(|s| s.frames_pushed() == 0),
+        "a refused batch must change no session"
+    );
     // More sessions than the batch holds.
-    let mut arenas4: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; model.session_bytes(&sc).unwrap()]).collect();
-    let mut four: Vec<Session<'_>> = arenas4.iter_mut().map(|a| Session::new(&model, a, &sc, [0; 5]).unwrap()).collect();
+    let mut arenas4: Vec<Vec<u8>> = (0..4)
+        .map(|_| vec![0u8; model.session_bytes(&sc).unwrap()])
+        .collect();
+    let mut four: Vec<Session<'_>> = arenas4
+        .iter_mut()
+        .map(|a| Session::new(&model, a, &sc, [0; 5]).unwrap())
+        .collect();
     let mut refs: Vec<&mut Session<'_>> = four.iter_mut().collect();
-    assert_eq!(Session::step_many(&mut refs, &[good; 4], &mut batch), Err((0, Error::Setting { setting: Setting::Batch, value: 4, max: 3 })));
+    assert_eq!(
+        Session::step_many(&mut refs, &[good; 4], &mut batch),
+        Err((
+            0,
+            Error::Setting {
+                setting: Setting::Batch,
+                value: 4,
+                max: 3
+            }
+        ))
+    );
     assert!(four.iter().all(|s| s.frames_pushed() == 0));
     // A session of another model (same config) does not join.
     {
-        let (mut aa, mut oa) = (vec![0u8; model.session_bytes(&sc).unwrap()], vec![0u8; other.session_bytes(&sc).unwrap()]);
+        let (mut aa, mut oa) = (
+            vec![0u8; model.session_bytes(&sc).unwrap()],
+            vec![0u8; other.session_bytes(&sc).unwrap()],
+        );
         let mut a = Session::new(&model, &mut aa, &sc, [0; 5]).unwrap();
         let mut o = Session::new(&other, &mut oa, &sc, [0; 5]).unwrap();
         let mut refs: Vec<&mut Session<'_>> = vec![&mut a, &mut o];
-        assert_eq!(Session::step_many(&mut refs, &[good, good], &mut batch), Err((1, Error::State)));
+        assert_eq!(
+            Session::step_many(&mut refs, &[good, good], &mut batch),
+            Err((1, Error::State))
+        );
         assert_eq!((a.frames_pushed(), o.frames_pushed()), (0, 0));
     }
     // A batch made for a smaller look-ahead cannot hold a session that needs more keys.
-    assert!(matches!(StepBatch::bytes(&model.cfg, &sc, 0), Err(Error::Setting { setting: Setting::Batch, .. })));
-    assert!(matches!(StepBatch::bytes(&model.cfg, &sc, 65), Err(Error::Setting { setting: Setting::Batch, .. })));
+    assert!(matches!(
+        StepBatch::bytes(&model.cfg, &sc, 0),
+        Err(Error::Setting {
+            setting: Setting::Batch,
+            ..
+        })
+    ));
+    assert!(matches!(
+        StepBatch::bytes(&model.cfg, &sc, 65),
+        Err(Error::Setting {
+            setting: Setting::Batch,
+            ..
+        })
+    ));
     // Accepted after all: the same frames one by one and together agree (smoke check).
     let mut refs: Vec<&mut Session<'_>> = sessions.iter_mut().collect();
     Session::step_many(&mut refs, &[good, good, good], &mut batch).unwrap();
@@ -293,37 +459,70 @@ fn a_refused_frame_names_its_session_and_changes_none() {
 #[test]
 fn mixed_budgets_and_phases_in_one_batch_match_their_own_runs() {
     let _kernels = detected_kernels();
-    for (name, store, rollout) in [("tiny", StoreAs::F32, "rollout_tiny_long"), ("tiny2", StoreAs::Q8Block32, "rollout_tiny2_frames")] {
+    for (name, store, rollout) in [
+        ("tiny", StoreAs::F32, "rollout_tiny_long"),
+        ("tiny2", StoreAs::Q8Block32, "rollout_tiny2_frames"),
+    ] {
         let file = convert(name, store);
         let duo = file.duo().unwrap();
         let model = Model::from_duo(&duo).unwrap();
         let c = clip(rollout);
         let r = SessionConfig::reference(&model.cfg);
-        let cfgs = [r, SessionConfig::with(&model.cfg, r.lookahead, r.enc_future / 2, 1, r.shift), SessionConfig::minimum(&model.cfg), r];
+        let cfgs = [
+            r,
+            SessionConfig::with(&model.cfg, r.lookahead, r.enc_future / 2, 1, r.shift),
+            SessionConfig::minimum(&model.cfg),
+            r,
+        ];
         let delay = [0usize, 0, 0, 2];
         let n = cfgs.len();
         let leaders: Vec<Vec<f32>> = (0..n).map(|i| leader_of(&c, i)).collect();
         // Stop well before the track ends (its last tokens lack music look-ahead).
         let frames = c.leader.len() / 165 * 3 / 4;
         let run = |batched: bool| -> Vec<Trace> {
-            let mut arenas: Vec<Vec<u8>> = cfgs.iter().map(|sc| vec![0u8; model.session_bytes(sc).unwrap()]).collect();
-            let mut sessions: Vec<Session<'_>> = arenas.iter_mut().zip(&cfgs).enumerate().map(|(i, (a, sc))| Session::new(&model, a, sc, seed_of(i)).unwrap()).collect();
+            let mut arenas: Vec<Vec<u8>> = cfgs
+                .iter()
+                .map(|sc| vec![0u8; model.session_bytes(sc).unwrap()])
+                .collect();
+            let mut sessions: Vec<Session<'_>> = arenas
+                .iter_mut()
+                .zip(&cfgs)
+                .enumerate()
+                .map(|(i, (a, sc))| Session::new(&model, a, sc, seed_of(i)).unwrap())
+                .collect();
             for s in sessions.iter_mut() {
                 s.set_music_track(&c.music).unwrap();
             }
             let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, &r, n).unwrap()];
             let mut batch = StepBatch::new(&model.cfg, &r, n, &mut batch_arena).unwrap();
-            let mut traces: Vec<Trace> = (0..n).map(|_| Trace { steps: Vec::new(), frames: Vec::new() }).collect();
+            let mut traces: Vec<Trace> = (0..n)
+                .map(|_| Trace {
+                    steps: Vec::new(),
+                    frames: Vec::new(),
+                })
+                .collect();
             let mut f = FollowerFrame::default();
             for t in 0..frames + 2 {
-                let active: Vec<usize> = (0..n).filter(|&i| t >= delay[i] && t - delay[i] < frames).collect();
-                let rows: Vec<&[f32]> = active.iter().map(|&i| &leaders[i][(t - delay[i]) * 165..(t - delay[i] + 1) * 165]).collect();
+                let active: Vec<usize> = (0..n)
+                    .filter(|&i| t >= delay[i] && t - delay[i] < frames)
+                    .collect();
+                let rows: Vec<&[f32]> = active
+                    .iter()
+                    .map(|&i| &leaders[i][(t - delay[i]) * 165..(t - delay[i] + 1) * 165])
+                    .collect();
                 if batched {
-                    let mut refs: Vec<&mut Session<'_>> = sessions.iter_mut().enumerate().filter(|(i, _)| active.contains(i)).map(|(_, s)| s).collect();
+                    let mut refs: Vec<&mut Session<'_>> = sessions
+                        .iter_mut()
+                        .enumerate()
+                        .filter(|(i, _)| active.contains(i))
+                        .map(|(_, s)| s)
+                        .collect();
                     Session::step_many(&mut refs, &rows, &mut batch).unwrap();
                 } else {
                     for (&i, x) in active.iter().zip(&rows) {
-                        sessions[i].push_leader_frame(x).unwrap_or_else(|e| panic!("session {i} at frame {t}: {e:?}"));
+                        sessions[i]
+                            .push_leader_frame(x)
+                            .unwrap_or_else(|e| panic!("session {i} at frame {t}: {e:?}"));
                     }
                 }
                 for &i in &active {
@@ -337,11 +536,18 @@ fn mixed_budgets_and_phases_in_one_batch_match_their_own_runs() {
         };
         let (alone, together) = (run(false), run(true));
         for i in 0..n {
-            assert!(alone[i].frames.len() > 20, "{name}: session {i} pulled only {} frames", alone[i].frames.len());
+            assert!(
+                alone[i].frames.len() > 20,
+                "{name}: session {i} pulled only {} frames",
+                alone[i].frames.len()
+            );
             if let Some(d) = first_difference(&alone[i], &together[i]) {
                 panic!("{name} {store:?}: session {i} ({:?}, {} frames late) differs in the mixed batch: {d}", cfgs[i], delay[i]);
             }
         }
-        assert_ne!(cfgs[1].enc_future, cfgs[0].enc_future, "{name}: the budgets must differ");
+        assert_ne!(
+            cfgs[1].enc_future, cfgs[0].enc_future,
+            "{name}: the budgets must differ"
+        );
     }
 }

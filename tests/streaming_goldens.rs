@@ -31,7 +31,10 @@ fn check(name: &str) {
 /// The golden's model, inputs, config and seed.
 fn setup(name: &str) -> (Value, std::path::PathBuf, std::path::PathBuf) {
     let dir = fixture(&format!("streaming_{name}"));
-    let text = std::fs::read_to_string(dir.join("meta.json")).unwrap().replace("-Infinity", "null").replace("Infinity", "null");
+    let text = std::fs::read_to_string(dir.join("meta.json"))
+        .unwrap()
+        .replace("-Infinity", "null")
+        .replace("Infinity", "null");
     let meta: Value = serde_json::from_str(&text).unwrap();
     let inputs = dir.join(meta["inputs"].as_str().unwrap());
     (meta, dir, inputs)
@@ -43,30 +46,70 @@ fn setup(name: &str) -> (Value, std::path::PathBuf, std::path::PathBuf) {
 #[test]
 fn f16_kv_cache_tracks_the_goldens() {
     let (mut agree, mut total, mut worst) = (0usize, 0usize, 0.0f32);
-    for name in ["tiny_default", "tiny_long_low", "tiny_minimum", "tiny_mid_odd", "tiny2_default"] {
+    for name in [
+        "tiny_default",
+        "tiny_long_low",
+        "tiny_minimum",
+        "tiny_mid_odd",
+        "tiny2_default",
+    ] {
         let (meta, dir, inputs) = setup(name);
-        let file = ModelFile::open(fixture(&format!("{}/model.duo", meta["model"].as_str().unwrap()))).unwrap();
+        let file = ModelFile::open(fixture(&format!(
+            "{}/model.duo",
+            meta["model"].as_str().unwrap()
+        )))
+        .unwrap();
         let duo = file.duo().unwrap();
         let model = Model::from_duo(&duo).unwrap();
         let leader = read_f32_2d(&inputs.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
         let music = read_f32_2d(&inputs.join("music.npy"), None, "music").unwrap();
         let c = &meta["config"];
         let get = |k: &str| c[k].as_u64().unwrap() as u32;
-        let mut cfg = SessionConfig::with(&model.cfg, get("lookahead"), get("enc_future"), get("dec_future"), get("shift"));
+        let mut cfg = SessionConfig::with(
+            &model.cfg,
+            get("lookahead"),
+            get("enc_future"),
+            get("dec_future"),
+            get("shift"),
+        );
         let f32_bytes = model.session_bytes(&cfg).unwrap();
         cfg.kv = duolando_core::duolando::session::KvType::F16;
         let f16_bytes = model.session_bytes(&cfg).unwrap();
-        assert!(f16_bytes < f32_bytes, "{name}: f16 K/V arena {f16_bytes} >= f32 {f32_bytes}");
-        let seed: [u32; 5] = ints(&dir, "seed_tokens.npy").iter().map(|&t| t as u32).collect::<Vec<_>>().try_into().unwrap();
+        assert!(
+            f16_bytes < f32_bytes,
+            "{name}: f16 K/V arena {f16_bytes} >= f32 {f32_bytes}"
+        );
+        let seed: [u32; 5] = ints(&dir, "seed_tokens.npy")
+            .iter()
+            .map(|&t| t as u32)
+            .collect::<Vec<_>>()
+            .try_into()
+            .unwrap();
         let t4 = meta["T4"].as_u64().unwrap() as usize;
-        let run = run_streaming(&model, &leader.data[..t4 * 165], &music.data, &cfg, seed, None, &mut |_, _| {}).unwrap();
+        let run = run_streaming(
+            &model,
+            &leader.data[..t4 * 165],
+            &music.data,
+            &cfg,
+            seed,
+            None,
+            &mut |_, _| {},
+        )
+        .unwrap();
         let want = ints(&dir, "tokens.npy");
         let got = as_i64(&run.tokens);
         let n = got.len().min(want.len());
-        let same = got[..n].iter().zip(&want[..n]).filter(|(a, b)| a == b).count();
+        let same = got[..n]
+            .iter()
+            .zip(&want[..n])
+            .filter(|(a, b)| a == b)
+            .count();
         let first = got.iter().zip(&want).position(|(a, b)| a != b);
         let pos = read_f32_2d(&dir.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
-        let (err, _) = max_errors(&run.pos[..run.pos.len().min(pos.data.len())], &pos.data[..run.pos.len().min(pos.data.len())]);
+        let (err, _) = max_errors(
+            &run.pos[..run.pos.len().min(pos.data.len())],
+            &pos.data[..run.pos.len().min(pos.data.len())],
+        );
         eprintln!("{name} f16 kv (arena {f16_bytes} vs {f32_bytes} bytes): {same}/{n} tokens equal (first difference at flat index {first:?}), max |pos err| {err:.2e} m");
         if first.is_none() {
             worst = worst.max(err);
@@ -87,9 +130,16 @@ fn f16_kv_cache_tracks_the_goldens() {
 fn check_schedule(name: &str, schedule: Schedule) {
     let dir = fixture(&format!("streaming_{name}"));
     // The generator writes Python's `Infinity` for "no top-k decision": not JSON.
-    let text = std::fs::read_to_string(dir.join("meta.json")).unwrap().replace("-Infinity", "null").replace("Infinity", "null");
+    let text = std::fs::read_to_string(dir.join("meta.json"))
+        .unwrap()
+        .replace("-Infinity", "null")
+        .replace("Infinity", "null");
     let meta: Value = serde_json::from_str(&text).unwrap();
-    let file = ModelFile::open(fixture(&format!("{}/model.duo", meta["model"].as_str().unwrap()))).unwrap();
+    let file = ModelFile::open(fixture(&format!(
+        "{}/model.duo",
+        meta["model"].as_str().unwrap()
+    )))
+    .unwrap();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
     let inputs = dir.join(meta["inputs"].as_str().unwrap());
@@ -98,41 +148,117 @@ fn check_schedule(name: &str, schedule: Schedule) {
     let t4 = meta["T4"].as_u64().unwrap() as usize;
     let c = &meta["config"];
     let get = |k: &str| c[k].as_u64().unwrap() as u32;
-    let mut cfg = SessionConfig::with(&model.cfg, get("lookahead"), get("enc_future"), get("dec_future"), get("shift"));
+    let mut cfg = SessionConfig::with(
+        &model.cfg,
+        get("lookahead"),
+        get("enc_future"),
+        get("dec_future"),
+        get("shift"),
+    );
     cfg.music_lookahead = get("music_lookahead");
     cfg.schedule = schedule;
     if let Some(tk) = meta["sampling"].get("topk") {
-        cfg.sampling = Sampling::TopK { k: tk.as_u64().unwrap() as u32, rng_seed: meta["sampling"]["rng_seed"].as_u64().unwrap() };
+        cfg.sampling = Sampling::TopK {
+            k: tk.as_u64().unwrap() as u32,
+            rng_seed: meta["sampling"]["rng_seed"].as_u64().unwrap(),
+        };
     }
     // The seed, in the contract's order of precedence.
-    let forced: Option<Vec<u32>> = meta["forced_file"].as_str().map(|f| ints(&dir, f).iter().map(|&t| t as u32).collect());
+    let forced: Option<Vec<u32>> = meta["forced_file"]
+        .as_str()
+        .map(|f| ints(&dir, f).iter().map(|&t| t as u32).collect());
     let seed: [u32; 5] = if let Some(f) = &forced {
         f[..5].try_into().unwrap()
     } else if dir.join("seed_tokens.npy").exists() {
-        ints(&dir, "seed_tokens.npy").iter().map(|&t| t as u32).collect::<Vec<_>>().try_into().unwrap()
+        ints(&dir, "seed_tokens.npy")
+            .iter()
+            .map(|&t| t as u32)
+            .collect::<Vec<_>>()
+            .try_into()
+            .unwrap()
     } else if inputs.join("seed_tokens.npy").exists() {
-        ints(&inputs, "seed_tokens.npy").iter().map(|&t| t as u32).collect::<Vec<_>>().try_into().unwrap()
+        ints(&inputs, "seed_tokens.npy")
+            .iter()
+            .map(|&t| t as u32)
+            .collect::<Vec<_>>()
+            .try_into()
+            .unwrap()
     } else {
         let start = read_f32_2d(&inputs.join("follower_start.npy"), Some(165), "start").unwrap();
-        let mut scratch = vec![0u8; duolando_core::duolando::exact::seed_scratch_bytes(&model.cfg, start.rows).unwrap()];
-        duolando_core::duolando::exact::seed_tokens(&model, &start.data, &leader.data, &mut scratch).unwrap()
+        let mut scratch =
+            vec![
+                0u8;
+                duolando_core::duolando::exact::seed_scratch_bytes(&model.cfg, start.rows).unwrap()
+            ];
+        duolando_core::duolando::exact::seed_tokens(&model, &start.data, &leader.data, &mut scratch)
+            .unwrap()
     };
-    let run = run_streaming(&model, &leader.data[..t4 * 165], &music.data, &cfg, seed, forced.as_deref(), &mut |_, _| {}).unwrap();
+    let run = run_streaming(
+        &model,
+        &leader.data[..t4 * 165],
+        &music.data,
+        &cfg,
+        seed,
+        forced.as_deref(),
+        &mut |_, _| {},
+    )
+    .unwrap();
 
-    assert_eq!(run.latency_frames as u64, meta["latency_frames"].as_u64().unwrap(), "{name}: latency");
-    assert_eq!(run.steps() as u64, meta["K"].as_u64().unwrap(), "{name}: steps");
-    assert_eq!(as_i64(&run.tokens), ints(&dir, "tokens.npy"), "{name}: tokens");
+    assert_eq!(
+        run.latency_frames as u64,
+        meta["latency_frames"].as_u64().unwrap(),
+        "{name}: latency"
+    );
+    assert_eq!(
+        run.steps() as u64,
+        meta["K"].as_u64().unwrap(),
+        "{name}: steps"
+    );
+    assert_eq!(
+        as_i64(&run.tokens),
+        ints(&dir, "tokens.npy"),
+        "{name}: tokens"
+    );
     if dir.join("pred.npy").exists() {
-        assert_eq!(as_i64(&run.pred), ints(&dir, "pred.npy"), "{name}: forced-mode predictions");
+        assert_eq!(
+            as_i64(&run.pred),
+            ints(&dir, "pred.npy"),
+            "{name}: forced-mode predictions"
+        );
     }
     let want_codes = ints(&dir, "leader_tokens.npy");
-    assert!(run.leader_codes.len() >= want_codes.len(), "{name}: {} leader codes, golden has {}", run.leader_codes.len() / 4, want_codes.len() / 4);
-    assert_eq!(as_i64(&run.leader_codes[..want_codes.len()]), want_codes, "{name}: leader codes");
+    assert!(
+        run.leader_codes.len() >= want_codes.len(),
+        "{name}: {} leader codes, golden has {}",
+        run.leader_codes.len() / 4,
+        want_codes.len() / 4
+    );
+    assert_eq!(
+        as_i64(&run.leader_codes[..want_codes.len()]),
+        want_codes,
+        "{name}: leader codes"
+    );
     let usz = |v: &[usize]| v.iter().map(|&x| x as i64).collect::<Vec<_>>();
-    assert_eq!(usz(&run.step_ready), ints(&dir, "step_ready.npy"), "{name}: step readiness");
-    assert_eq!(usz(&run.context), ints(&dir, "context.npy"), "{name}: window context");
-    assert_eq!(usz(&run.window_lo), ints(&dir, "window_lo.npy"), "{name}: window start");
-    assert_eq!(usz(&run.frame_ready), ints(&dir, "frame_ready.npy"), "{name}: frame readiness");
+    assert_eq!(
+        usz(&run.step_ready),
+        ints(&dir, "step_ready.npy"),
+        "{name}: step readiness"
+    );
+    assert_eq!(
+        usz(&run.context),
+        ints(&dir, "context.npy"),
+        "{name}: window context"
+    );
+    assert_eq!(
+        usz(&run.window_lo),
+        ints(&dir, "window_lo.npy"),
+        "{name}: window start"
+    );
+    assert_eq!(
+        usz(&run.frame_ready),
+        ints(&dir, "frame_ready.npy"),
+        "{name}: frame readiness"
+    );
     let want_pos = read_f32_2d(&dir.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
     assert_eq!(run.frames_out(), want_pos.rows, "{name}: follower frames");
     let (pos_err, _) = max_errors(&run.pos, &want_pos.data);
@@ -141,7 +267,11 @@ fn check_schedule(name: &str, schedule: Schedule) {
         Schedule::Staggered => " (staggered)",
         Schedule::Spread => " (spread)",
     };
-    let mut msg = format!("{name}{tag}: {} steps, {} frames, max |pos err| {pos_err:.2e} m", run.steps(), run.frames_out());
+    let mut msg = format!(
+        "{name}{tag}: {} steps, {} frames, max |pos err| {pos_err:.2e} m",
+        run.steps(),
+        run.frames_out()
+    );
     assert!(pos_err <= Tol::MotionAbs.limit(), "{msg}");
     if dir.join("follower_rotmat.npy").exists() {
         let want_rot = read_f32_2d(&dir.join("follower_rotmat.npy"), Some(495), "rot").unwrap();
@@ -151,8 +281,18 @@ fn check_schedule(name: &str, schedule: Schedule) {
     }
     let rows: usize = run.rows_computed.iter().sum();
     let m = model.cfg.gpt.block_size as usize - 1;
-    let most = run.rows_computed.iter().skip(run.steps().min(m + 2)).max().copied().unwrap_or(0);
-    eprintln!("{msg}; {:.2} GPT rows per step, at most {most} after start-up; arena {} bytes", rows as f64 / run.steps().max(1) as f64, run.arena_bytes);
+    let most = run
+        .rows_computed
+        .iter()
+        .skip(run.steps().min(m + 2))
+        .max()
+        .copied()
+        .unwrap_or(0);
+    eprintln!(
+        "{msg}; {:.2} GPT rows per step, at most {most} after start-up; arena {} bytes",
+        rows as f64 / run.steps().max(1) as f64,
+        run.arena_bytes
+    );
     if schedule == Schedule::Spread && run.steps() > m + 2 {
         let s = cfg.shift as usize;
         let p = m + 1 - s;
@@ -218,13 +358,28 @@ struct Roll {
 
 fn roll(name: &str) -> Roll {
     let dir = fixture(name);
-    let leader = read_f32_2d(&dir.join("leader_pos3d.npy"), Some(165), "leader").unwrap().data;
-    let music = read_f32_2d(&dir.join("music.npy"), None, "music").unwrap().data;
+    let leader = read_f32_2d(&dir.join("leader_pos3d.npy"), Some(165), "leader")
+        .unwrap()
+        .data;
+    let music = read_f32_2d(&dir.join("music.npy"), None, "music")
+        .unwrap()
+        .data;
     let tokens: Vec<u32> = ints(&dir, "tokens.npy").iter().map(|&t| t as u32).collect();
-    let pos = read_f32_2d(&dir.join("follower_pos3d.npy"), Some(165), "pos").unwrap().data;
-    let rot = read_f32_2d(&dir.join("follower_rotmat.npy"), Some(495), "rot").unwrap().data;
+    let pos = read_f32_2d(&dir.join("follower_pos3d.npy"), Some(165), "pos")
+        .unwrap()
+        .data;
+    let rot = read_f32_2d(&dir.join("follower_rotmat.npy"), Some(495), "rot")
+        .unwrap()
+        .data;
     let seed = tokens[..5].try_into().unwrap();
-    Roll { leader, music, tokens, pos, rot, seed }
+    Roll {
+        leader,
+        music,
+        tokens,
+        pos,
+        rot,
+        seed,
+    }
 }
 
 fn tiny_model() -> ModelFile {
@@ -247,8 +402,28 @@ fn drained_session_fed_r_tokens_outputs_r_frames() {
     let k_r = r.tokens.len() / 5 - 1;
     assert_eq!(k_r, 120);
     let cfg = SessionConfig::reference(&model.cfg);
-    let open = duolando::streaming::run_streaming_with(&model, &r.leader, &r.music, &cfg, r.seed, Some(&r.tokens), false, &mut |_, _| {}).unwrap();
-    let run = duolando::streaming::run_streaming_with(&model, &r.leader, &r.music, &cfg, r.seed, Some(&r.tokens), true, &mut |_, _| {}).unwrap();
+    let open = duolando::streaming::run_streaming_with(
+        &model,
+        &r.leader,
+        &r.music,
+        &cfg,
+        r.seed,
+        Some(&r.tokens),
+        false,
+        &mut |_, _| {},
+    )
+    .unwrap();
+    let run = duolando::streaming::run_streaming_with(
+        &model,
+        &r.leader,
+        &r.music,
+        &cfg,
+        r.seed,
+        Some(&r.tokens),
+        true,
+        &mut |_, _| {},
+    )
+    .unwrap();
     eprintln!("reference budget, R's tokens: {} steps / {} frames without the drain, {} / {} drained, R {} / {}", open.steps(), open.frames_out(), run.steps(), run.frames_out(), k_r, r.pos.len() / 165);
     assert_eq!(open.steps(), k_r - 21);
     assert_eq!(open.frames_out(), 4 * (k_r + 1 - 43));
@@ -264,14 +439,27 @@ fn drained_session_fed_r_tokens_outputs_r_frames() {
 
     let d = 5;
     let cfg = SessionConfig::with(&model.cfg, 5, 5, d, cfg.shift);
-    let run = duolando::streaming::run_streaming_with(&model, &r.leader, &r.music, &cfg, r.seed, Some(&r.tokens), true, &mut |_, _| {}).unwrap();
+    let run = duolando::streaming::run_streaming_with(
+        &model,
+        &r.leader,
+        &r.music,
+        &cfg,
+        r.seed,
+        Some(&r.tokens),
+        true,
+        &mut |_, _| {},
+    )
+    .unwrap();
     assert_eq!((run.steps(), run.frames_out()), (k_r, 4 * (k_r + 1)));
     let tail = 4 * (k_r + 1 - d as usize) * 165;
     let (tail_err, _) = max_errors(&run.pos[tail..], &r.pos[tail..]);
     let (head_err, _) = max_errors(&run.pos[..tail], &r.pos[..tail]);
     eprintln!("  a = e = d = 5: the last {d} tokens' frames vs R max |pos err| {tail_err:.2e} m; the frames before them (truncated prefix) {head_err:.2e} m");
     assert!(tail_err <= Tol::MotionAbs.limit());
-    assert!(head_err > 1e-3, "d = 5 < d_max should differ from R before the tail");
+    assert!(
+        head_err > 1e-3,
+        "d = 5 < d_max should differ from R before the tail"
+    );
 }
 
 /// Free-running (S's own tokens) on rollout_tiny_long: drained, every
@@ -292,15 +480,51 @@ fn drained_free_running_sessions_output_r_frame_count() {
         ("mid", SessionConfig::with(m, 5, 5, 5, s)),
         ("minimum", SessionConfig::minimum(m)),
     ] {
-        let open = run_streaming(&model, &r.leader, &r.music, &cfg, r.seed, None, &mut |_, _| {}).unwrap();
-        let run = duolando::streaming::run_streaming_with(&model, &r.leader, &r.music, &cfg, r.seed, None, true, &mut |_, _| {}).unwrap();
-        assert_eq!((run.steps(), run.frames_out()), (k_r, 4 * (k_r + 1)), "{name}");
+        let open = run_streaming(
+            &model,
+            &r.leader,
+            &r.music,
+            &cfg,
+            r.seed,
+            None,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let run = duolando::streaming::run_streaming_with(
+            &model,
+            &r.leader,
+            &r.music,
+            &cfg,
+            r.seed,
+            None,
+            true,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        assert_eq!(
+            (run.steps(), run.frames_out()),
+            (k_r, 4 * (k_r + 1)),
+            "{name}"
+        );
         assert_eq!(&run.tokens[..open.tokens.len()], &open.tokens[..], "{name}");
         let drained = open.steps()..k_r;
-        let same = drained.clone().filter(|&k| run.tokens[(k + 1) * 5..(k + 2) * 5] == r.tokens[(k + 1) * 5..(k + 2) * 5]).count();
-        let all = (0..k_r).filter(|&k| run.tokens[(k + 1) * 5..(k + 2) * 5] == r.tokens[(k + 1) * 5..(k + 2) * 5]).count();
+        let same = drained
+            .clone()
+            .filter(|&k| run.tokens[(k + 1) * 5..(k + 2) * 5] == r.tokens[(k + 1) * 5..(k + 2) * 5])
+            .count();
+        let all = (0..k_r)
+            .filter(|&k| run.tokens[(k + 1) * 5..(k + 2) * 5] == r.tokens[(k + 1) * 5..(k + 2) * 5])
+            .count();
         let tail = open.frames_out() * 165;
-        let mean = |a: &[f32], b: &[f32]| a.chunks(3).zip(b.chunks(3)).map(|(x, y)| ((x[0] - y[0]).powi(2) + (x[1] - y[1]).powi(2) + (x[2] - y[2]).powi(2)).sqrt()).sum::<f32>() / (a.len() / 3).max(1) as f32;
+        let mean = |a: &[f32], b: &[f32]| {
+            a.chunks(3)
+                .zip(b.chunks(3))
+                .map(|(x, y)| {
+                    ((x[0] - y[0]).powi(2) + (x[1] - y[1]).powi(2) + (x[2] - y[2]).powi(2)).sqrt()
+                })
+                .sum::<f32>()
+                / (a.len() / 3).max(1) as f32
+        };
         eprintln!(
             "{name}: {} -> {} frames (R {}), drained steps {} with {same} token rows equal to R's ({all}/{k_r} over all steps); mean joint distance to R {:.0} mm streamed, {:.0} mm drained tail",
             open.frames_out(),
@@ -318,8 +542,8 @@ fn drained_free_running_sessions_output_r_frame_count() {
 /// go on; `reset` starts a session that equals a fresh one.
 #[test]
 fn pushes_after_the_end_are_refused_and_reset_restarts() {
-    use duolando_core::error::Error;
     use duolando_core::duolando::session::{FollowerFrame, Session};
+    use duolando_core::error::Error;
     let file = tiny_model();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
@@ -354,7 +578,10 @@ fn pushes_after_the_end_are_refused_and_reset_restarts() {
     s.finish().unwrap();
     assert!(s.is_finished());
     let steps = s.steps();
-    assert_eq!(s.push_leader_frame(&r.leader[n * 165..(n + 1) * 165]), Err(Error::Ended { frames: n }));
+    assert_eq!(
+        s.push_leader_frame(&r.leader[n * 165..(n + 1) * 165]),
+        Err(Error::Ended { frames: n })
+    );
     assert_eq!(s.force_history(&r.tokens), Err(Error::Ended { frames: n }));
     s.finish().unwrap();
     assert_eq!((s.steps(), s.frames_pushed()), (steps, n));
@@ -363,7 +590,10 @@ fn pushes_after_the_end_are_refused_and_reset_restarts() {
     }
     // 300 frames of music: R's K = (300 - 4) / 4 - 29 = 45 steps, 184 frames
     // (the stream ran all 45 steps; the drain decodes the last d tokens).
-    eprintln!("{n} leader frames pushed, {} frames after the drain", got.len());
+    eprintln!(
+        "{n} leader frames pushed, {} frames after the drain",
+        got.len()
+    );
     assert_eq!((s.steps(), got.len()), (45, 184));
     s.reset(r.seed).unwrap();
     assert!(!s.is_finished());
@@ -392,9 +622,24 @@ fn live_music_frames_arrive_within_the_reported_latency() {
     let r = roll("rollout_tiny_long");
     let m = &model.cfg;
     let n_music = 54;
-    let mut cases: Vec<(String, SessionConfig)> = Preset::ALL.iter().map(|&p| (p.name().to_string(), SessionConfig::preset(m, p))).collect();
-    cases.push(("a0 e0 d2 a_m 3".into(), SessionConfig { music_lookahead: 3, ..SessionConfig::with(m, 0, 0, 2, 22) }));
-    cases.push(("a1 e0 d0 a_m 0".into(), SessionConfig { music_lookahead: 0, ..SessionConfig::with(m, 1, 0, 0, 22) }));
+    let mut cases: Vec<(String, SessionConfig)> = Preset::ALL
+        .iter()
+        .map(|&p| (p.name().to_string(), SessionConfig::preset(m, p)))
+        .collect();
+    cases.push((
+        "a0 e0 d2 a_m 3".into(),
+        SessionConfig {
+            music_lookahead: 3,
+            ..SessionConfig::with(m, 0, 0, 2, 22)
+        },
+    ));
+    cases.push((
+        "a1 e0 d0 a_m 0".into(),
+        SessionConfig {
+            music_lookahead: 0,
+            ..SessionConfig::with(m, 1, 0, 0, 22)
+        },
+    ));
     for (name, cfg) in cases {
         let lead = 4 * cfg.music_lookahead as usize;
         let mut arena = vec![0u8; model.session_bytes(&cfg).unwrap()];
@@ -405,7 +650,8 @@ fn live_music_frames_arrive_within_the_reported_latency() {
         let mut f = FollowerFrame::default();
         for x in 0..600 {
             while pushed <= (x + lead).min(599) {
-                s.push_music_frame(&r.music[pushed * n_music..(pushed + 1) * n_music]).unwrap();
+                s.push_music_frame(&r.music[pushed * n_music..(pushed + 1) * n_music])
+                    .unwrap();
                 pushed += 1;
             }
             match s.push_leader_frame(&r.leader[x * 165..(x + 1) * 165]) {
@@ -415,7 +661,11 @@ fn live_music_frames_arrive_within_the_reported_latency() {
             }
             while s.pull_follower_frame(&mut f).unwrap() {
                 let late = x - f.index as usize;
-                assert!(late <= lat, "{name}: frame {} ready at leader frame {x}, {late} > latency {lat}", f.index);
+                assert!(
+                    late <= lat,
+                    "{name}: frame {} ready at leader frame {x}, {late} > latency {lat}",
+                    f.index
+                );
                 worst = worst.max(late);
                 n += 1;
             }
@@ -432,8 +682,8 @@ fn live_music_frames_arrive_within_the_reported_latency() {
 /// again, never more than 440 beyond those read.
 #[test]
 fn music_buffer_holds_the_configured_number() {
-    use duolando_core::error::{Buffer, Error};
     use duolando_core::duolando::session::Session;
+    use duolando_core::error::{Buffer, Error};
     let file = tiny_model();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
@@ -448,10 +698,18 @@ fn music_buffer_holds_the_configured_number() {
         pushed += 1;
     }
     assert_eq!(pushed, 440);
-    assert_eq!(s.push_music_frame(frame(pushed)), Err(Error::Backlog { buffer: Buffer::Music, held: 440, capacity: 440 }));
+    assert_eq!(
+        s.push_music_frame(frame(pushed)),
+        Err(Error::Backlog {
+            buffer: Buffer::Music,
+            held: 440,
+            capacity: 440
+        })
+    );
     // Steps read music: minimum budget, step k reads music frames < 4 (k + 31).
     for i in 0..20 {
-        s.push_leader_frame(&r.leader[i * 165..(i + 1) * 165]).unwrap();
+        s.push_leader_frame(&r.leader[i * 165..(i + 1) * 165])
+            .unwrap();
     }
     let k = s.steps();
     assert_eq!(k, 5);
@@ -464,6 +722,8 @@ fn music_buffer_holds_the_configured_number() {
         pushed += 1;
         more += 1;
     }
-    eprintln!("music buffer 440: {pushed} frames taken, {read} read by the music LAT after {k} steps");
+    eprintln!(
+        "music buffer 440: {pushed} frames taken, {read} read by the music LAT after {k} steps"
+    );
     assert_eq!(pushed, read + 440, "{more} more frames after {k} steps");
 }

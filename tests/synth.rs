@@ -2,9 +2,9 @@
 //! rotation conversions, nearest-rotation properties, synth determinism
 //! and plausibility.
 
-#[path = "synth/skeleton.rs"]
-mod skeleton;
-#[path = "synth/plausibility.rs"]
-mod plausibility;
 #[path = "synth/dataset.rs"]
 mod dataset;
+#[path = "synth/plausibility.rs"]
+mod plausibility;
+#[path = "synth/skeleton.rs"]
+mod skeleton;

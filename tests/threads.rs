@@ -59,11 +59,26 @@ fn split_gemms_are_bit_identical_to_one_thread() {
             let split = workers::split_jobs() - jobs;
             workers::set_threads(1).unwrap();
             eprintln!("{name}, {n} threads: {split} GEMMs split");
-            assert!(split > 100, "{name}, {n} threads: only {split} GEMMs were split");
+            assert!(
+                split > 100,
+                "{name}, {n} threads: only {split} GEMMs were split"
+            );
             assert_eq!(rn.tokens, r1.tokens, "{name}, {n} threads: R tokens");
-            assert_eq!(bits(&rn.pos), bits(&r1.pos), "{name}, {n} threads: R positions");
-            assert_eq!(bits(&rn.rot), bits(&r1.rot), "{name}, {n} threads: R rotations");
-            assert_eq!(sn.len(), s1.len(), "{name}, {n} threads: streamed frame count");
+            assert_eq!(
+                bits(&rn.pos),
+                bits(&r1.pos),
+                "{name}, {n} threads: R positions"
+            );
+            assert_eq!(
+                bits(&rn.rot),
+                bits(&r1.rot),
+                "{name}, {n} threads: R rotations"
+            );
+            assert_eq!(
+                sn.len(),
+                s1.len(),
+                "{name}, {n} threads: streamed frame count"
+            );
             if let Some(i) = (0..s1.len()).find(|&i| s1[i] != sn[i]) {
                 panic!("{name}, {n} threads: streamed frame {i} differs from one thread's");
             }
@@ -75,11 +90,20 @@ fn split_gemms_are_bit_identical_to_one_thread() {
     // whenever it is busy; both still match one thread.
     workers::set_threads(2).unwrap();
     let both: Vec<Vec<FollowerFrame>> = std::thread::scope(|sc| {
-        let hs: Vec<_> = [&f16, &int8].map(|f| sc.spawn(move || stream(f, 400))).into_iter().collect();
+        let hs: Vec<_> = [&f16, &int8]
+            .map(|f| sc.spawn(move || stream(f, 400)))
+            .into_iter()
+            .collect();
         hs.into_iter().map(|h| h.join().unwrap()).collect()
     });
     workers::set_threads(1).unwrap();
-    assert!(both[0] == one_thread[0], "f16 session beside another thread differs");
-    assert!(both[1] == one_thread[1], "int8 session beside another thread differs");
+    assert!(
+        both[0] == one_thread[0],
+        "f16 session beside another thread differs"
+    );
+    assert!(
+        both[1] == one_thread[1],
+        "int8 session beside another thread differs"
+    );
     assert_eq!(workers::threads(), 1);
 }

@@ -66,9 +66,18 @@ fn config(case: &str) -> TransflowerConfig {
     parse_transflower_config(&p, &std::fs::read_to_string(&p).unwrap()).unwrap()
 }
 
-fn convert(case: &str, store_as: StoreAs) -> (Vec<u8>, duolando::convert::transflower::TransflowerReport) {
+fn convert(
+    case: &str,
+    store_as: StoreAs,
+) -> (Vec<u8>, duolando::convert::transflower::TransflowerReport) {
     let w = dir(case).join("model.safetensors");
-    convert_transflower(&config(case), (&w, &std::fs::read(&w).unwrap()), store_as, Path::new("<memory>")).unwrap()
+    convert_transflower(
+        &config(case),
+        (&w, &std::fs::read(&w).unwrap()),
+        store_as,
+        Path::new("<memory>"),
+    )
+    .unwrap()
 }
 
 /// The state dict as a tensor source (f32, names unchanged).
@@ -79,7 +88,12 @@ impl<'a> TensorSource<'a> for &'a Weights {
         let (shape, data) = self.0.get(name)?;
         let mut s = [1u32; 4];
         s[..shape.len()].copy_from_slice(shape);
-        Some(TensorRef { dtype: DType::F32, rank: shape.len() as u8, shape: s, data: bytemuck::cast_slice(data) })
+        Some(TensorRef {
+            dtype: DType::F32,
+            rank: shape.len() as u8,
+            shape: s,
+            data: bytemuck::cast_slice(data),
+        })
     }
 }
 
@@ -89,7 +103,18 @@ fn weights(case: &str) -> Weights {
     Weights(
         st.tensors()
             .into_iter()
-            .map(|(n, v)| (n, (v.shape().iter().map(|&d| d as u32).collect(), v.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())))
+            .map(|(n, v)| {
+                (
+                    n,
+                    (
+                        v.shape().iter().map(|&d| d as u32).collect(),
+                        v.data()
+                            .chunks_exact(4)
+                            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                            .collect(),
+                    ),
+                )
+            })
             .collect(),
     )
 }
@@ -102,7 +127,10 @@ fn inputs(case: &str, cfg: &TransflowerConfig) -> Vec<Result<Vec<f32>, u32>> {
             let p = dir(case).join(format!("in_{}.npy", i.name.as_str()));
             if i.is_discrete() {
                 let b = std::fs::read(p).unwrap();
-                Err(npyz::NpyFile::new(b.as_slice()).unwrap().into_vec::<i64>().unwrap()[0] as u32)
+                Err(npyz::NpyFile::new(b.as_slice())
+                    .unwrap()
+                    .into_vec::<i64>()
+                    .unwrap()[0] as u32)
             } else {
                 Ok(npy_f32(&p).1)
             }
@@ -113,18 +141,38 @@ fn inputs(case: &str, cfg: &TransflowerConfig) -> Vec<Result<Vec<f32>, u32>> {
 /// R mode of `model` on the case's inputs with its recorded noise.
 fn run(case: &str, model: &Model<'_>) -> Vec<f32> {
     let raw = inputs(case, &model.cfg);
-    let ins: Vec<Input<'_>> = raw.iter().map(|x| x.as_ref().map_or_else(|l| Input::Label(*l), |r| Input::Rows(r))).collect();
+    let ins: Vec<Input<'_>> = raw
+        .iter()
+        .map(|x| {
+            x.as_ref()
+                .map_or_else(|l| Input::Label(*l), |r| Input::Rows(r))
+        })
+        .collect();
     let n = steps(&model.cfg, &ins).unwrap();
     let noise = npy_f32(&dir(case).join("noise.npy")).1;
     let mut scratch = vec![0u8; generate_scratch_bytes(&model.cfg).unwrap()];
     let mut out = vec![0f32; n * model.cfg.channels()];
-    generate(model, &ins, &mut Replay { noise: &noise }, &mut scratch, &mut out).unwrap();
+    generate(
+        model,
+        &ins,
+        &mut Replay { noise: &noise },
+        &mut scratch,
+        &mut out,
+    )
+    .unwrap();
     out
 }
 
 fn golden_tol(case: &str) -> f32 {
-    let meta: serde_json::Value = serde_json::from_slice(&std::fs::read(dir(case).join("meta.json")).unwrap()).unwrap();
-    OUTPUT_TOL_FACTOR * meta["f32_vs_f64_output_max_rel_err_per_step"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).fold(0.0, f32::max)
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir(case).join("meta.json")).unwrap()).unwrap();
+    OUTPUT_TOL_FACTOR
+        * meta["f32_vs_f64_output_max_rel_err_per_step"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap() as f32)
+            .fold(0.0, f32::max)
 }
 
 /// Every case: the converted f32 file gives the same frames, bit for bit,
@@ -136,12 +184,23 @@ fn converted_models_reproduce_the_goldens() {
     for case in CASES {
         let cfg = config(case);
         let text = std::fs::read_to_string(dir(case).join("hparams.yaml")).unwrap();
-        assert_eq!(cfg, TransflowerConfig::from_hparams(&Hparams::parse(&text).unwrap()).unwrap(), "{case}");
+        assert_eq!(
+            cfg,
+            TransflowerConfig::from_hparams(&Hparams::parse(&text).unwrap()).unwrap(),
+            "{case}"
+        );
         let (bytes, r) = convert(case, StoreAs::F32);
         let w = weights(case);
-        let buffers = w.0.keys().filter(|k| k.ends_with(".is_initialized") || k.ends_with(".bounds")).count();
+        let buffers =
+            w.0.keys()
+                .filter(|k| k.ends_with(".is_initialized") || k.ends_with(".bounds"))
+                .count();
         assert_eq!(r.report.skipped, buffers, "{case}");
-        assert_eq!(r.is_initialized_skipped + r.bounds_skipped, buffers, "{case}");
+        assert_eq!(
+            r.is_initialized_skipped + r.bounds_skipped,
+            buffers,
+            "{case}"
+        );
         assert_eq!(r.report.written + r.report.skipped, w.0.len(), "{case}");
         let file = ModelFile::from_bytes(bytes).unwrap();
         let duo = file.duo().unwrap();
@@ -150,11 +209,24 @@ fn converted_models_reproduce_the_goldens() {
         assert_eq!(duo.config().transflower(), Some(&cfg));
         let from_file = run(case, &Model::from_duo(&duo).unwrap());
         let direct = run(case, &Model::bind(&cfg, &&w).unwrap());
-        assert!(from_file == direct, "{case}: the .duo model differs from the state dict's");
+        assert!(
+            from_file == direct,
+            "{case}: the .duo model differs from the state dict's"
+        );
         let (shape, want) = npy_f32(&dir(case).join("output.npy"));
-        assert_eq!(shape, [(from_file.len() / cfg.channels()) as u64, 1, cfg.channels() as u64]);
+        assert_eq!(
+            shape,
+            [
+                (from_file.len() / cfg.channels()) as u64,
+                1,
+                cfg.channels() as u64
+            ]
+        );
         let e = rel_err(&from_file, &want);
-        eprintln!("{case}: {} tensors, {} skipped, max rel err {e:.2e}", r.report.written, r.report.skipped);
+        eprintln!(
+            "{case}: {} tensors, {} skipped, max rel err {e:.2e}",
+            r.report.written, r.report.skipped
+        );
         assert!(e <= golden_tol(case), "{case}: {e:e}");
     }
 }
@@ -165,7 +237,10 @@ fn converted_models_reproduce_the_goldens() {
 #[test]
 fn committed_paper_model_is_the_conversion() {
     let (bytes, _) = convert("paper", StoreAs::F32);
-    assert!(std::fs::read(dir("paper").join("model.duo")).unwrap() == bytes, "tests/fixtures/transflower_paper/model.duo is stale: regenerate it with duolando convert");
+    assert!(
+        std::fs::read(dir("paper").join("model.duo")).unwrap() == bytes,
+        "tests/fixtures/transflower_paper/model.duo is stale: regenerate it with duolando convert"
+    );
 }
 
 /// A Transflower file binds only as Transflower; the other families'
@@ -177,24 +252,43 @@ fn families_refuse_each_other() {
     let tf = ModelFile::open(&dir("paper").join("model.duo")).unwrap();
     let duo = tf.duo().unwrap();
     match duolando_core::duolando::model::Model::from_duo(&duo) {
-        Err(BindError::Family { expected: Family::Duolando, found: Family::Transflower }) => {}
+        Err(BindError::Family {
+            expected: Family::Duolando,
+            found: Family::Transflower,
+        }) => {}
         other => panic!("{:?}", other.map(|_| ())),
     }
     match duolando_core::bailando::model::Model::from_duo(&duo) {
-        Err(BindError::Family { expected: Family::Bailando, found: Family::Transflower }) => {}
+        Err(BindError::Family {
+            expected: Family::Bailando,
+            found: Family::Transflower,
+        }) => {}
         other => panic!("{:?}", other.map(|_| ())),
     }
-    for (path, version, family) in [("tiny/model.duo", 1, Family::Duolando), ("bailando_btiny/model.duo", 2, Family::Bailando)] {
+    for (path, version, family) in [
+        ("tiny/model.duo", 1, Family::Duolando),
+        ("bailando_btiny/model.duo", 2, Family::Bailando),
+    ] {
         let f = ModelFile::open(&fixture(path)).unwrap();
         let d = f.duo().unwrap();
-        assert_eq!((d.prefix().version, d.config().family()), (version, family), "{path}");
+        assert_eq!(
+            (d.prefix().version, d.config().family()),
+            (version, family),
+            "{path}"
+        );
         let r = Model::from_duo(&d).map(|_| ());
         match r {
-            Err(ModelError::Bind(BindError::Family { expected: Family::Transflower, found })) => assert_eq!(found, family),
+            Err(ModelError::Bind(BindError::Family {
+                expected: Family::Transflower,
+                found,
+            })) => assert_eq!(found, family),
             other => panic!("{path}: {other:?}"),
         }
     }
-    assert_eq!(duolando_core::family::Family::from_tag(2), Some(Family::Transflower));
+    assert_eq!(
+        duolando_core::family::Family::from_tag(2),
+        Some(Family::Transflower)
+    );
     assert_eq!(Family::Transflower as u32, 2);
 }
 
@@ -210,7 +304,10 @@ fn config_round_trips_through_the_header() {
         let back: FamilyConfig = postcard::from_bytes(&bytes).unwrap();
         assert_eq!(back, fc, "{case}");
         assert!(back.validate().is_ok());
-        assert_eq!(fc.tensor_count(), duolando_core::transflower::schema::tensor_count(&config(case)));
+        assert_eq!(
+            fc.tensor_count(),
+            duolando_core::transflower::schema::tensor_count(&config(case))
+        );
     }
 }
 
@@ -219,7 +316,10 @@ fn config_round_trips_through_the_header() {
 #[test]
 fn f16_and_int8_weights_bind_and_run() {
     for case in CASES {
-        for (store, tol, label) in [(StoreAs::F16, F16_TOL, "f16"), (StoreAs::Q8Block32, INT8_FIXTURE_TOL, "int8")] {
+        for (store, tol, label) in [
+            (StoreAs::F16, F16_TOL, "f16"),
+            (StoreAs::Q8Block32, INT8_FIXTURE_TOL, "int8"),
+        ] {
             let (bytes, _) = convert(case, store);
             let file = ModelFile::from_bytes(bytes).unwrap();
             let duo = file.duo().unwrap();
@@ -252,9 +352,20 @@ fn converter_refusals_name_what_is_wrong() {
         ("model", "transformer", "`model` is not `transflower`"),
         ("nhead", "3", "`dhid` = 16 is not a multiple of 3"),
     ] {
-        let edited: String = text.lines().map(|l| if l.starts_with(&format!("{key}:")) { format!("{key}: {value}\n") } else { format!("{l}\n") }).collect();
+        let edited: String = text
+            .lines()
+            .map(|l| {
+                if l.starts_with(&format!("{key}:")) {
+                    format!("{key}: {value}\n")
+                } else {
+                    format!("{l}\n")
+                }
+            })
+            .collect();
         match parse_transflower_config(&p, &edited) {
-            Err(e @ ConvertError::TransflowerConfig { .. }) => assert!(e.to_string().contains(words), "{key}: {e}"),
+            Err(e @ ConvertError::TransflowerConfig { .. }) => {
+                assert!(e.to_string().contains(words), "{key}: {e}")
+            }
             other => panic!("{key}: {other:?}"),
         }
     }
@@ -268,17 +379,48 @@ fn converter_refusals_name_what_is_wrong() {
     let w = weights("paper");
     let save = |edit: &dyn Fn(&mut BTreeMap<String, (Vec<usize>, Vec<u8>)>)| -> Vec<u8> {
         let mut m: BTreeMap<String, (Vec<usize>, Vec<u8>)> =
-            w.0.iter().map(|(n, (s, v))| (n.clone(), (s.iter().map(|&d| d as usize).collect(), v.iter().flat_map(|x| x.to_le_bytes()).collect()))).collect();
+            w.0.iter()
+                .map(|(n, (s, v))| {
+                    (
+                        n.clone(),
+                        (
+                            s.iter().map(|&d| d as usize).collect(),
+                            v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+                        ),
+                    )
+                })
+                .collect();
         edit(&mut m);
-        let views: Vec<(String, safetensors::tensor::TensorView<'_>)> = m.iter().map(|(n, (s, b))| (n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b).unwrap())).collect();
+        let views: Vec<(String, safetensors::tensor::TensorView<'_>)> = m
+            .iter()
+            .map(|(n, (s, b))| {
+                (
+                    n.clone(),
+                    safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)
+                        .unwrap(),
+                )
+            })
+            .collect();
         safetensors::serialize(views, &None).unwrap()
     };
-    let conv = |bytes: &[u8]| convert_transflower(&cfg, (Path::new("w.safetensors"), bytes), StoreAs::F32, Path::new("<memory>"));
+    let conv = |bytes: &[u8]| {
+        convert_transflower(
+            &cfg,
+            (Path::new("w.safetensors"), bytes),
+            StoreAs::F32,
+            Path::new("<memory>"),
+        )
+    };
     let bias = "net_input_audio_feats_scaled_20.decoder.bias";
     match conv(&save(&|m| {
-        m.insert("net_output_expmap_scaled_20.mean_encoder.weight".into(), (vec![2], vec![0; 8]));
+        m.insert(
+            "net_output_expmap_scaled_20.mean_encoder.weight".into(),
+            (vec![2], vec![0; 8]),
+        );
     })) {
-        Err(ConvertError::Extra { tensors, .. }) => assert_eq!(tensors, ["net_output_expmap_scaled_20.mean_encoder.weight"]),
+        Err(ConvertError::Extra { tensors, .. }) => {
+            assert_eq!(tensors, ["net_output_expmap_scaled_20.mean_encoder.weight"])
+        }
         other => panic!("{:?}", other.map(|_| ())),
     }
     match conv(&save(&|m| {
@@ -305,7 +447,12 @@ fn int8_matrices_run_the_flow() {
     use duolando_core::nn::names::{SchemaError, TensorSpec};
     let text = std::fs::read_to_string(dir("paper").join("hparams.yaml")).unwrap();
     let mut h = Hparams::parse(&text).unwrap();
-    for (k, v) in [("dhid", "64"), ("dhid_flow", "32"), ("num_heads_flow", "2"), ("dins", "11,32")] {
+    for (k, v) in [
+        ("dhid", "64"),
+        ("dhid_flow", "32"),
+        ("num_heads_flow", "2"),
+        ("dins", "11,32"),
+    ] {
         h.set(k, v).unwrap();
     }
     let cfg = TransflowerConfig::from_hparams(&h).unwrap();
@@ -326,25 +473,56 @@ fn int8_matrices_run_the_flow() {
             let c = spec.dims()[0] as usize;
             let values: Vec<f32> = if name.ends_with(".p") {
                 // The reversal permutation.
-                (0..n).map(|i| if i / c == c - 1 - i % c { 1.0 } else { 0.0 }).collect()
+                (0..n)
+                    .map(|i| if i / c == c - 1 - i % c { 1.0 } else { 0.0 })
+                    .collect()
             } else if name.ends_with(".sign_s") {
-                (0..n).map(|i| if i % 3 == 0 { -1.0 } else { 1.0 }).collect()
-            } else if ["gamma", "inv_std", "weight_v", "weight_g", "running_var", "norm1.weight", "norm2.weight"].iter().any(|k| name.ends_with(k)) {
+                (0..n)
+                    .map(|i| if i % 3 == 0 { -1.0 } else { 1.0 })
+                    .collect()
+            } else if [
+                "gamma",
+                "inv_std",
+                "weight_v",
+                "weight_g",
+                "running_var",
+                "norm1.weight",
+                "norm2.weight",
+            ]
+            .iter()
+            .any(|k| name.ends_with(k))
+            {
                 (0..n).map(|_| 1.0 + 0.3 * next()).collect()
             } else {
                 (0..n).map(|_| 0.3 * next()).collect()
             };
             let q8 = duolando::convert::storage_for(StoreAs::Q8Block32, spec);
             let (shape, v) = duolando::convert::to_stored_order(spec, q8, values.clone());
-            q8s.push(Tensor { name: name.to_string(), shape, values: v, store_as: q8 });
-            f32s.push(Tensor { name: name.to_string(), shape: spec.dims().to_vec(), values, store_as: StoreAs::F32 });
+            q8s.push(Tensor {
+                name: name.to_string(),
+                shape,
+                values: v,
+                store_as: q8,
+            });
+            f32s.push(Tensor {
+                name: name.to_string(),
+                shape: spec.dims().to_vec(),
+                values,
+                store_as: StoreAs::F32,
+            });
             Ok(())
         })
         .unwrap();
     let fc = FamilyConfig::Transflower(cfg);
-    let (fa, qa) = (ModelFile::from_bytes(write_model(&fc, &f32s).unwrap()).unwrap(), ModelFile::from_bytes(write_model(&fc, &q8s).unwrap()).unwrap());
+    let (fa, qa) = (
+        ModelFile::from_bytes(write_model(&fc, &f32s).unwrap()).unwrap(),
+        ModelFile::from_bytes(write_model(&fc, &q8s).unwrap()).unwrap(),
+    );
     let (fd, qd) = (fa.duo().unwrap(), qa.duo().unwrap());
-    let blocked = qd.tensors().filter(|e| e.dtype == DType::Q8Block32x8).count();
+    let blocked = qd
+        .tensors()
+        .filter(|e| e.dtype == DType::Q8Block32x8)
+        .count();
     assert!(blocked >= 20, "only {blocked} int8 matrices");
     // Motion seed 12 rows x 11, audio 21 rows x 32: 8 steps, seeded base.
     let mut r = duolando_tests::Rng(5);
@@ -354,10 +532,20 @@ fn int8_matrices_run_the_flow() {
         let n = steps(&cfg, &ins).unwrap();
         let mut scratch = vec![0u8; generate_scratch_bytes(&cfg).unwrap()];
         let mut out = vec![0f32; n * cfg.channels()];
-        generate(m, &ins, &mut duolando_core::transflower::exact::Seeded::new(3, &cfg), &mut scratch, &mut out).unwrap();
+        generate(
+            m,
+            &ins,
+            &mut duolando_core::transflower::exact::Seeded::new(3, &cfg),
+            &mut scratch,
+            &mut out,
+        )
+        .unwrap();
         out
     };
-    let (a, b) = (run(&Model::from_duo(&fd).unwrap()), run(&Model::from_duo(&qd).unwrap()));
+    let (a, b) = (
+        run(&Model::from_duo(&fd).unwrap()),
+        run(&Model::from_duo(&qd).unwrap()),
+    );
     assert_eq!(a.len(), 8 * 11);
     let e = rel_err(&b, &a);
     eprintln!("int8 ({blocked} Q8Block32x8 matrices) vs f32: max rel err {e:.2e} over 8 frames");

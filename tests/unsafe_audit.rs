@@ -64,7 +64,10 @@ const ROOTS: &[(&str, &str)] = &[
 ];
 
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
 }
 
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -74,7 +77,10 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
         let name = e.file_name();
         let name = name.to_string_lossy();
         if p.is_dir() {
-            if !matches!(name.as_ref(), "target" | "fixtures" | "node_modules" | "corpus" | "artifacts") {
+            if !matches!(
+                name.as_ref(),
+                "target" | "fixtures" | "node_modules" | "corpus" | "artifacts"
+            ) {
                 rust_files(&p, out);
             }
         } else if name.ends_with(".rs") {
@@ -115,8 +121,12 @@ fn is_comment_or_attr(line: &str) -> bool {
 /// Site checks of one file; returns "file:line: problem" strings.
 fn audit_file(rel: &str, text: &str) -> Vec<String> {
     let lines: Vec<&str> = text.lines().collect();
-    let test_file = rel.starts_with("tests/") || rel.contains("/tests/") || rel.ends_with("/tests.rs");
-    let cfg_test_from = lines.iter().position(|l| l.trim_start().starts_with("#[cfg(test)]")).unwrap_or(usize::MAX);
+    let test_file =
+        rel.starts_with("tests/") || rel.contains("/tests/") || rel.ends_with("/tests.rs");
+    let cfg_test_from = lines
+        .iter()
+        .position(|l| l.trim_start().starts_with("#[cfg(test)]"))
+        .unwrap_or(usize::MAX);
     let mut bad = Vec::new();
     for (i, line) in lines.iter().enumerate() {
         if !has_unsafe(line) {
@@ -135,7 +145,10 @@ fn audit_file(rel: &str, text: &str) -> Vec<String> {
         // look at most 3 code lines up for the block above it.
         let mut k = i;
         for _ in 0..3 {
-            if k == 0 || code(lines[k - 1]).trim_end().ends_with(';') || code(lines[k - 1]).trim_end().ends_with('}') {
+            if k == 0
+                || code(lines[k - 1]).trim_end().ends_with(';')
+                || code(lines[k - 1]).trim_end().ends_with('}')
+            {
                 break;
             }
             k -= 1;
@@ -149,14 +162,21 @@ fn audit_file(rel: &str, text: &str) -> Vec<String> {
             block.contains("# Safety") || block.contains("SAFETY")
         } else if in_test {
             // From the enclosing fn (or closure table) line up to the site.
-            let start = (0..=i).rev().find(|&m| code(lines[m]).contains("fn ")).unwrap_or(0);
+            let start = (0..=i)
+                .rev()
+                .find(|&m| code(lines[m]).contains("fn "))
+                .unwrap_or(0);
             let from = start.saturating_sub(4);
             lines[from..=i].iter().any(|l| l.contains("SAFETY"))
         } else {
             block.contains("SAFETY") || stmt_block.contains("SAFETY")
         };
         if !ok {
-            let what = if is_fn { "`unsafe fn` without a `# Safety` section" } else { "`unsafe` without a SAFETY comment" };
+            let what = if is_fn {
+                "`unsafe fn` without a `# Safety` section"
+            } else {
+                "`unsafe` without a SAFETY comment"
+            };
             bad.push(format!("{rel}:{}: {what}: {}", i + 1, line.trim()));
         }
     }
@@ -167,14 +187,30 @@ fn audit_file(rel: &str, text: &str) -> Vec<String> {
 fn unsafe_only_where_allowed_and_always_justified() {
     let root = root();
     let mut files = Vec::new();
-    for d in ["core", "std-adapters", "ffi", "gen", "tests", "fuzz/fuzz_targets"] {
+    for d in [
+        "core",
+        "std-adapters",
+        "ffi",
+        "gen",
+        "tests",
+        "fuzz/fuzz_targets",
+    ] {
         rust_files(&root.join(d), &mut files);
     }
-    assert!(files.len() > 50, "found only {} files under {}", files.len(), root.display());
+    assert!(
+        files.len() > 50,
+        "found only {} files under {}",
+        files.len(),
+        root.display()
+    );
     let mut problems = Vec::new();
     let mut sites = 0;
     for p in &files {
-        let rel = p.strip_prefix(&root).unwrap().to_string_lossy().replace('\\', "/");
+        let rel = p
+            .strip_prefix(&root)
+            .unwrap()
+            .to_string_lossy()
+            .replace('\\', "/");
         let text = fs::read_to_string(p).unwrap();
         let n = text.lines().filter(|l| has_unsafe(l)).count();
         if n == 0 {
@@ -185,12 +221,19 @@ fn unsafe_only_where_allowed_and_always_justified() {
             continue; // its own test strings
         }
         if !ALLOWED.contains(&rel.as_str()) {
-            problems.push(format!("{rel}: {n} `unsafe` site(s) in a file outside the allow-list"));
+            problems.push(format!(
+                "{rel}: {n} `unsafe` site(s) in a file outside the allow-list"
+            ));
             continue;
         }
         problems.extend(audit_file(&rel, &text));
     }
-    assert!(problems.is_empty(), "{} problem(s) over {sites} unsafe sites:\n{}", problems.len(), problems.join("\n"));
+    assert!(
+        problems.is_empty(),
+        "{} problem(s) over {sites} unsafe sites:\n{}",
+        problems.len(),
+        problems.join("\n")
+    );
 }
 
 #[test]
@@ -198,7 +241,10 @@ fn crate_roots_set_their_unsafe_lint() {
     let root = root();
     for (file, attr) in ROOTS {
         let text = fs::read_to_string(root.join(file)).unwrap();
-        assert!(text.lines().any(|l| l.trim() == *attr), "{file} must carry `{attr}`");
+        assert!(
+            text.lines().any(|l| l.trim() == *attr),
+            "{file} must carry `{attr}`"
+        );
     }
 }
 
@@ -210,7 +256,8 @@ fn the_audit_catches_what_it_claims_to() {
     assert!(audit_file("core/src/x.rs", justified).is_empty());
     let bare_fn = "/// Adds.\n#[inline]\nunsafe fn h() {}\n";
     assert_eq!(audit_file("core/src/x.rs", bare_fn).len(), 1);
-    let doc_fn = "/// Adds.\n///\n/// # Safety\n/// The CPU has AVX2.\n#[inline]\nunsafe fn h() {}\n";
+    let doc_fn =
+        "/// Adds.\n///\n/// # Safety\n/// The CPU has AVX2.\n#[inline]\nunsafe fn h() {}\n";
     assert!(audit_file("core/src/x.rs", doc_fn).is_empty());
     assert!(!has_unsafe("#![deny(unsafe_code)]"));
     assert!(!has_unsafe("// unsafe { in a comment }"));

@@ -48,7 +48,9 @@ pub trait Carve<'a> {
 /// Bytes an allocation of `n` elements of `size` bytes occupies.
 fn rounded(n: usize, size: usize) -> Result<usize, ArenaError> {
     let b = n.checked_mul(size).ok_or(ArenaError::Overflow)?;
-    b.checked_add(ALIGN - 1).map(|v| v & !(ALIGN - 1)).ok_or(ArenaError::Overflow)
+    b.checked_add(ALIGN - 1)
+        .map(|v| v & !(ALIGN - 1))
+        .ok_or(ArenaError::Overflow)
 }
 
 /// A bump allocator over `&'a mut [u8]`. Buffers live as long as the
@@ -82,7 +84,10 @@ impl<'a> Arena<'a> {
     fn bytes(&mut self, n: usize, size: usize) -> Result<&'a mut [u8], ArenaError> {
         let take = rounded(n, size)?;
         if take > self.rest.len() {
-            return Err(ArenaError::OutOfMemory { needed: take, available: self.rest.len() });
+            return Err(ArenaError::OutOfMemory {
+                needed: take,
+                available: self.rest.len(),
+            });
         }
         let rest = core::mem::take(&mut self.rest);
         let (head, tail) = rest.split_at_mut(take);
@@ -181,7 +186,10 @@ impl<'a> Carve<'a> for Split<'a> {
     fn f32(&mut self, n: usize) -> Result<&'a mut [f32], ArenaError> {
         let take = rounded(n, 4)? / 4;
         if take > self.rest.len() {
-            return Err(ArenaError::OutOfMemory { needed: take * 4, available: self.rest.len() * 4 });
+            return Err(ArenaError::OutOfMemory {
+                needed: take * 4,
+                available: self.rest.len() * 4,
+            });
         }
         let (head, tail) = core::mem::take(&mut self.rest).split_at_mut(take);
         self.rest = tail;

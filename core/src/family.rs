@@ -110,7 +110,10 @@ impl FamilyConfig {
     }
 
     /// The tensors the family's schema lists for this config.
-    pub fn for_each_tensor<E: From<SchemaError>>(&self, f: &mut dyn FnMut(&TensorSpec) -> Result<(), E>) -> Result<(), E> {
+    pub fn for_each_tensor<E: From<SchemaError>>(
+        &self,
+        f: &mut dyn FnMut(&TensorSpec) -> Result<(), E>,
+    ) -> Result<(), E> {
         match self {
             FamilyConfig::Duolando(c) => crate::duolando::schema::for_each_tensor(c, f),
             FamilyConfig::Bailando(c) => crate::bailando::schema::for_each_tensor(c, f),

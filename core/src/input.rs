@@ -48,16 +48,40 @@ mod tests {
     #[test]
     fn non_finite_before_out_of_range() {
         let x = [0.0, 2e4, f32::NAN];
-        assert_eq!(check(Buffer::LeaderPos3d, &x), Err(Error::NonFinite { buffer: Buffer::LeaderPos3d, index: 2 }));
-        assert_eq!(check(Buffer::LeaderPos3d, &x[..2]), Err(Error::OutOfRange { buffer: Buffer::LeaderPos3d, index: 1 }));
+        assert_eq!(
+            check(Buffer::LeaderPos3d, &x),
+            Err(Error::NonFinite {
+                buffer: Buffer::LeaderPos3d,
+                index: 2
+            })
+        );
+        assert_eq!(
+            check(Buffer::LeaderPos3d, &x[..2]),
+            Err(Error::OutOfRange {
+                buffer: Buffer::LeaderPos3d,
+                index: 1
+            })
+        );
         // 2e4 is a valid music feature, 2e6 is not.
         assert_eq!(check(Buffer::Music, &x[..2]), Ok(()));
-        assert_eq!(check(Buffer::Music, &[2e6]), Err(Error::OutOfRange { buffer: Buffer::Music, index: 0 }));
+        assert_eq!(
+            check(Buffer::Music, &[2e6]),
+            Err(Error::OutOfRange {
+                buffer: Buffer::Music,
+                index: 0
+            })
+        );
     }
 
     #[test]
     fn limits_are_inclusive_and_symmetric() {
-        assert_eq!(check(Buffer::LeaderPos3d, &[MAX_POSITION_M, -MAX_POSITION_M, -0.0, f32::MIN_POSITIVE]), Ok(()));
+        assert_eq!(
+            check(
+                Buffer::LeaderPos3d,
+                &[MAX_POSITION_M, -MAX_POSITION_M, -0.0, f32::MIN_POSITIVE]
+            ),
+            Ok(())
+        );
         let above = f32::from_bits(MAX_POSITION_M.to_bits() + 1);
         assert!(check(Buffer::SeedFrames, &[-above]).is_err());
         assert_eq!(check(Buffer::Music, &[MAX_MUSIC_FEATURE]), Ok(()));

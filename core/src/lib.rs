@@ -24,8 +24,8 @@ pub mod nn;
 pub mod tensor;
 pub mod transflower;
 
-pub use error::Error;
 pub use duolando::model::Model;
+pub use error::Error;
 
 #[cfg(test)]
 mod tests;

@@ -114,14 +114,30 @@ pub enum ConfigError {
     /// A size that must be positive is 0.
     Zero { field: ConfigField },
     /// A size above its cap.
-    TooLarge { field: ConfigField, value: u32, max: u32 },
+    TooLarge {
+        field: ConfigField,
+        value: u32,
+        max: u32,
+    },
     /// A size below its minimum.
-    TooSmall { field: ConfigField, value: u32, min: u32 },
+    TooSmall {
+        field: ConfigField,
+        value: u32,
+        min: u32,
+    },
     /// `value` must be a multiple of `divisor` (e.g. n_embd of n_head).
-    NotDivisible { field: ConfigField, value: u32, divisor: u32 },
+    NotDivisible {
+        field: ConfigField,
+        value: u32,
+        divisor: u32,
+    },
     /// `value` must equal `expected` (e.g. vocab == l_bins of its VQ-VAE,
     /// in_channels == 3 x part joints).
-    Mismatch { field: ConfigField, value: u32, expected: u32 },
+    Mismatch {
+        field: ConfigField,
+        value: u32,
+        expected: u32,
+    },
     /// A value the engine does not implement (e.g. a final LayerNorm, an
     /// odd stride, a stream count other than 10).
     Unsupported { field: ConfigField, value: u32 },
@@ -142,14 +158,22 @@ pub(crate) fn range(field: ConfigField, value: u32, min: u32, max: u32) -> Resul
 
 pub(crate) fn equal(field: ConfigField, value: u32, expected: u32) -> Result<(), ConfigError> {
     if value != expected {
-        return Err(ConfigError::Mismatch { field, value, expected });
+        return Err(ConfigError::Mismatch {
+            field,
+            value,
+            expected,
+        });
     }
     Ok(())
 }
 
 pub(crate) fn divisible(field: ConfigField, value: u32, divisor: u32) -> Result<(), ConfigError> {
     if divisor == 0 || value % divisor != 0 {
-        return Err(ConfigError::NotDivisible { field, value, divisor });
+        return Err(ConfigError::NotDivisible {
+            field,
+            value,
+            divisor,
+        });
     }
     Ok(())
 }
@@ -157,18 +181,31 @@ pub(crate) fn divisible(field: ConfigField, value: u32, divisor: u32) -> Result<
 impl VqConfig {
     /// Checks one VQ-VAE config; `in_channels`/`rot_channels` are compared
     /// with the caller's expectation (3 x joints / 9 x joints of the part).
-    pub(crate) fn validate(&self, which: VqWhich, in_ch: u32, rot_ch: u32) -> Result<(), ConfigError> {
+    pub(crate) fn validate(
+        &self,
+        which: VqWhich,
+        in_ch: u32,
+        rot_ch: u32,
+    ) -> Result<(), ConfigError> {
         let f = |v| ConfigField::Vq(which, v);
         equal(f(VqField::InChannels), self.in_channels, in_ch)?;
         equal(f(VqField::RotChannels), self.rot_channels, rot_ch)?;
         range(f(VqField::Width), self.width, 1, MAX_WIDTH)?;
         range(f(VqField::Depth), self.depth, 1, MAX_DEPTH)?;
-        range(f(VqField::DilationGrowthRate), self.dilation_growth_rate, 1, MAX_DILATION)?;
+        range(
+            f(VqField::DilationGrowthRate),
+            self.dilation_growth_rate,
+            1,
+            MAX_DILATION,
+        )?;
         range(f(VqField::DownT), self.down_t, 1, MAX_DOWN_T)?;
         range(f(VqField::StrideT), self.stride_t, 2, MAX_STRIDE)?;
         // Conv(k=2s, s, p=s/2) maps L frames to exactly L/s only for even s.
         if self.stride_t % 2 != 0 {
-            return Err(ConfigError::Unsupported { field: f(VqField::StrideT), value: self.stride_t });
+            return Err(ConfigError::Unsupported {
+                field: f(VqField::StrideT),
+                value: self.stride_t,
+            });
         }
         range(f(VqField::EmbWidth), self.emb_width, 1, MAX_WIDTH)?;
         range(f(VqField::LBins), self.l_bins, 1, MAX_VOCAB)?;
@@ -185,4 +222,3 @@ impl VqConfig {
         Ok(())
     }
 }
-

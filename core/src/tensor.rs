@@ -81,7 +81,9 @@ impl DType {
                 if row == 0 || row % 32 != 0 || numel % row != 0 {
                     return None;
                 }
-                (numel / row).div_ceil(8).checked_mul(8 * (row / 32) * self.block_bytes())
+                (numel / row)
+                    .div_ceil(8)
+                    .checked_mul(8 * (row / 32) * self.block_bytes())
             }
         }
     }
@@ -96,7 +98,10 @@ pub fn block_row(dims: &[u32]) -> usize {
     match dims {
         [] => 0,
         [only] => *only as usize,
-        [_, rest @ ..] => rest.iter().try_fold(1usize, |p, &d| p.checked_mul(d as usize)).unwrap_or(0),
+        [_, rest @ ..] => rest
+            .iter()
+            .try_fold(1usize, |p, &d| p.checked_mul(d as usize))
+            .unwrap_or(0),
     }
 }
 

@@ -5,23 +5,28 @@
 
 use duolando_core::arena::{Arena, Carve, Planner};
 use duolando_core::duolando::config::{ModelConfig, Part};
-use duolando_core::nn::vq_config::VqConfig;
-use duolando_core::nn::conv_stack::ConvScratch;
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::presets::duolando_published;
+use duolando_core::duolando::vq_decoder::{decode, Output};
+use duolando_core::duolando::vq_encoder::encode_features;
 use duolando_core::error::Error;
 use duolando_core::format::DuoFile;
 use duolando_core::kernels::{ConvGeom, ConvTWeight, DenseRows, Matrix};
-use duolando_core::nn::weights::{ConvTW, ConvW, DecoderW, EncoderW, ResBlockW, ResnetW, VqW};
-use duolando_core::duolando::model::Model;
-use duolando_core::duolando::presets::duolando_published;
+use duolando_core::nn::conv_stack::ConvScratch;
 use duolando_core::nn::quantizer::dequantise;
-use duolando_core::nn::stream_conv::{future_max, StackKind, StackPlan, StackW, StreamScratch, StreamStack};
-use duolando_core::duolando::vq_decoder::{decode, Output};
-use duolando_core::duolando::vq_encoder::encode_features;
+use duolando_core::nn::stream_conv::{
+    future_max, StackKind, StackPlan, StackW, StreamScratch, StreamStack,
+};
+use duolando_core::nn::vq_config::VqConfig;
+use duolando_core::nn::weights::{ConvTW, ConvW, DecoderW, EncoderW, ResBlockW, ResnetW, VqW};
 
 /// A fixture model, bound from a 64-byte aligned copy of its `.duo` file
 /// (the decoder requires the alignment; leaked for the test's lifetime).
 fn model(name: &str) -> &'static Model<'static> {
-    let path = format!("{}/../tests/fixtures/{name}/model.duo", env!("CARGO_MANIFEST_DIR"));
+    let path = format!(
+        "{}/../tests/fixtures/{name}/model.duo",
+        env!("CARGO_MANIFEST_DIR")
+    );
     let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
     let buf: &'static mut [u8] = Vec::leak(vec![0u8; bytes.len() + 64]);
     let off = (64 - buf.as_ptr() as usize % 64) % 64;
@@ -50,7 +55,10 @@ impl Rng {
 
 /// The VQ-VAEs of a model with names: (name, vq, stream id).
 fn vqs<'m>(m: &'m Model<'static>) -> Vec<(&'static str, &'m VqW<'static>, u8)> {
-    let mut v: Vec<_> = Part::ALL.iter().map(|&p| (p.name(), &m.parts[p as usize], p as u8)).collect();
+    let mut v: Vec<_> = Part::ALL
+        .iter()
+        .map(|&p| (p.name(), &m.parts[p as usize], p as u8))
+        .collect();
     v.push(("transl", &m.transl, 4));
     v
 }
@@ -80,7 +88,11 @@ struct Err2 {
 impl Err2 {
     fn add(&mut self, settled: bool, a: &[f32], b: &[f32]) {
         assert_eq!(a.len(), b.len());
-        let e = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
+        let e = a
+            .iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f32, f32::max);
         assert!(a.iter().all(|v| v.is_finite()));
         if settled {
             self.settled = self.settled.max(e);
@@ -105,14 +117,19 @@ const TOL: f32 = 1e-5;
 /// `0..=lag` (the carved one and all smaller) equals the full prefix encode.
 fn run_encoder(mcfg: &ModelConfig, vq: &VqW<'static>, lag: usize, seed: u64) -> Err2 {
     let cfg = &vq.cfg;
-    let (hop, c_in, emb) = (cfg.hop().unwrap() as usize, cfg.in_channels as usize, cfg.emb_width as usize);
+    let (hop, c_in, emb) = (
+        cfg.hop().unwrap() as usize,
+        cfg.in_channels as usize,
+        cfg.emb_width as usize,
+    );
     let fmax = future_max(cfg, StackKind::Encoder);
     let n_push = pushes(fmax, lag);
     let mut mem = vec![0u8; 1 << 22];
     let mut a = Arena::new(&mut mem);
     let mut s = StreamScratch::for_model(&mut a, mcfg).unwrap();
     let mut st = StreamStack::carve(&mut a, cfg, StackKind::Encoder, lag).unwrap();
-    let mut full_mem = vec![0u8; duolando_core::duolando::vq_encoder::scratch_bytes(mcfg, n_push * hop).unwrap()];
+    let mut full_mem =
+        vec![0u8; duolando_core::duolando::vq_encoder::scratch_bytes(mcfg, n_push * hop).unwrap()];
     let mut fa = Arena::new(&mut full_mem);
     let mut fs = ConvScratch::carve(&mut fa, &mcfg.vqs(), n_push * hop).unwrap();
     let mut rng = Rng(seed);
@@ -121,14 +138,16 @@ fn run_encoder(mcfg: &ModelConfig, vq: &VqW<'static>, lag: usize, seed: u64) -> 
     let mut err = Err2::default();
     let mut got = vec![0f32; emb];
     for p in 1..=n_push {
-        st.push(w, &x[(p - 1) * hop * c_in..p * hop * c_in], &mut s).unwrap();
+        st.push(w, &x[(p - 1) * hop * c_in..p * hop * c_in], &mut s)
+            .unwrap();
         assert_eq!(st.pushed(), p);
         assert_eq!(st.len(), p);
         let mut feat = vec![0f32; p * emb];
         encode_features(vq, &x[..p * hop * c_in], &mut fs, &mut feat).unwrap();
         for l in 0..=lag.min(p - 1) {
             let q = p - 1 - l;
-            st.output(w, q, 1, &mut s, &mut got).unwrap_or_else(|e| panic!("push {p} lag {l}/{lag}: {e:?}"));
+            st.output(w, q, 1, &mut s, &mut got)
+                .unwrap_or_else(|e| panic!("push {p} lag {l}/{lag}: {e:?}"));
             err.add(q < st.settled(), &got, &feat[q * emb..(q + 1) * emb]);
             err.n_tail_at_lag += usize::from(l == lag && q >= st.settled());
         }
@@ -137,7 +156,14 @@ fn run_encoder(mcfg: &ModelConfig, vq: &VqW<'static>, lag: usize, seed: u64) -> 
 }
 
 /// One decoder at one lag, as [`run_encoder`].
-fn run_decoder(mcfg: &ModelConfig, vq: &VqW<'static>, which: Output, stream: u8, lag: usize, seed: u64) -> Err2 {
+fn run_decoder(
+    mcfg: &ModelConfig,
+    vq: &VqW<'static>,
+    which: Output,
+    stream: u8,
+    lag: usize,
+    seed: u64,
+) -> Err2 {
     let cfg = &vq.cfg;
     let (hop, emb) = (cfg.hop().unwrap() as usize, cfg.emb_width as usize);
     let dec = match which {
@@ -151,11 +177,14 @@ fn run_decoder(mcfg: &ModelConfig, vq: &VqW<'static>, which: Output, stream: u8,
     let mut a = Arena::new(&mut mem);
     let mut s = StreamScratch::for_model(&mut a, mcfg).unwrap();
     let mut st = StreamStack::carve(&mut a, cfg, StackKind::Decoder, lag).unwrap();
-    let mut full_mem = vec![0u8; duolando_core::duolando::vq_decoder::scratch_bytes(mcfg, n_push).unwrap()];
+    let mut full_mem =
+        vec![0u8; duolando_core::duolando::vq_decoder::scratch_bytes(mcfg, n_push).unwrap()];
     let mut fa = Arena::new(&mut full_mem);
     let mut fs = ConvScratch::carve(&mut fa, &mcfg.vqs(), n_push * hop).unwrap();
     let mut rng = Rng(seed);
-    let codes: Vec<u32> = (0..n_push).map(|_| (rng.next() % cfg.l_bins as u64) as u32).collect();
+    let codes: Vec<u32> = (0..n_push)
+        .map(|_| (rng.next() % cfg.l_bins as u64) as u32)
+        .collect();
     let w = StackW::Decoder(dec);
     let mut err = Err2::default();
     let (mut z, mut got) = (vec![0f32; emb], vec![0f32; hop * c_out]);
@@ -167,9 +196,14 @@ fn run_decoder(mcfg: &ModelConfig, vq: &VqW<'static>, which: Output, stream: u8,
         decode(vq, which, &codes[..p], stream, &mut fs, &mut frames).unwrap();
         for l in 0..=lag.min(p - 1) {
             let q = p - 1 - l;
-            st.output(w, hop * q, hop, &mut s, &mut got).unwrap_or_else(|e| panic!("push {p} lag {l}/{lag}: {e:?}"));
+            st.output(w, hop * q, hop, &mut s, &mut got)
+                .unwrap_or_else(|e| panic!("push {p} lag {l}/{lag}: {e:?}"));
             let settled = hop * (q + 1) <= st.settled();
-            err.add(settled, &got, &frames[hop * q * c_out..hop * (q + 1) * c_out]);
+            err.add(
+                settled,
+                &got,
+                &frames[hop * q * c_out..hop * (q + 1) * c_out],
+            );
             err.n_tail_at_lag += usize::from(l == lag && !settled);
         }
     }
@@ -201,12 +235,22 @@ fn streaming_encoders_equal_the_prefix_encoder() {
             for lag in lags(fmax) {
                 let e = run_encoder(&m.cfg, vq, lag, 1000 + i as u64 * 31 + lag as u64);
                 eprintln!("{name} enc {part:6} lag {lag:2}: settled max err {:.3e} ({} cols), tail {:.3e} ({} cols)", e.settled, e.n_settled, e.tail, e.n_tail);
-                assert!(e.settled <= TOL && e.tail <= TOL, "{name} {part} lag {lag}: {e:?}");
-                assert_eq!(e.n_tail_at_lag == 0, lag >= fmax, "{name} {part} lag {lag}: settled at the lag iff lag >= future_max");
+                assert!(
+                    e.settled <= TOL && e.tail <= TOL,
+                    "{name} {part} lag {lag}: {e:?}"
+                );
+                assert_eq!(
+                    e.n_tail_at_lag == 0,
+                    lag >= fmax,
+                    "{name} {part} lag {lag}: settled at the lag iff lag >= future_max"
+                );
                 all.merge(e);
             }
         }
-        eprintln!("{name} encoders: settled {:.3e} over {} cols, tail {:.3e} over {} cols", all.settled, all.n_settled, all.tail, all.n_tail);
+        eprintln!(
+            "{name} encoders: settled {:.3e} over {} cols, tail {:.3e} over {} cols",
+            all.settled, all.n_settled, all.tail, all.n_tail
+        );
         assert!(all.n_tail > 0 && all.n_settled > 0);
     }
 }
@@ -218,18 +262,39 @@ fn streaming_decoders_equal_the_prefix_decoder() {
         let mut all = Err2::default();
         for (i, (part, vq, stream)) in vqs(m).into_iter().enumerate() {
             let fmax = future_max(&vq.cfg, StackKind::Decoder);
-            let outs: &[Output] = if vq.rot.is_some() { &[Output::Position, Output::Rotation] } else { &[Output::Position] };
+            let outs: &[Output] = if vq.rot.is_some() {
+                &[Output::Position, Output::Rotation]
+            } else {
+                &[Output::Position]
+            };
             for &which in outs {
                 for lag in lags(fmax) {
-                    let e = run_decoder(&m.cfg, vq, which, stream, lag, 7000 + i as u64 * 17 + lag as u64);
+                    let e = run_decoder(
+                        &m.cfg,
+                        vq,
+                        which,
+                        stream,
+                        lag,
+                        7000 + i as u64 * 17 + lag as u64,
+                    );
                     eprintln!("{name} dec {part:6} {which:?} lag {lag:2}: settled max err {:.3e} ({} blocks), tail {:.3e} ({} blocks)", e.settled, e.n_settled, e.tail, e.n_tail);
-                    assert!(e.settled <= TOL && e.tail <= TOL, "{name} {part} {which:?} lag {lag}: {e:?}");
-                    assert_eq!(e.n_tail_at_lag == 0, lag >= fmax, "{name} {part} lag {lag}: settled at the lag iff lag >= future_max");
+                    assert!(
+                        e.settled <= TOL && e.tail <= TOL,
+                        "{name} {part} {which:?} lag {lag}: {e:?}"
+                    );
+                    assert_eq!(
+                        e.n_tail_at_lag == 0,
+                        lag >= fmax,
+                        "{name} {part} lag {lag}: settled at the lag iff lag >= future_max"
+                    );
                     all.merge(e);
                 }
             }
         }
-        eprintln!("{name} decoders: settled {:.3e} over {} blocks, tail {:.3e} over {} blocks", all.settled, all.n_settled, all.tail, all.n_tail);
+        eprintln!(
+            "{name} decoders: settled {:.3e} over {} blocks, tail {:.3e} over {} blocks",
+            all.settled, all.n_settled, all.tail, all.n_tail
+        );
         assert!(all.n_tail > 0 && all.n_settled > 0);
     }
 }
@@ -243,7 +308,11 @@ fn no_tail_at_future_max() {
             for kind in [StackKind::Encoder, StackKind::Decoder] {
                 let f = future_max(vq, kind);
                 let plan = StackPlan::new(vq, kind, f).unwrap();
-                assert!(plan.tails().iter().all(|&t| t == 0), "{kind:?} {:?}", plan.tails());
+                assert!(
+                    plan.tails().iter().all(|&t| t == 0),
+                    "{kind:?} {:?}",
+                    plan.tails()
+                );
                 assert!(plan.out_ring > 0);
                 let below = StackPlan::new(vq, kind, f - 1).unwrap();
                 assert!(below.tails().iter().any(|&t| t > 0));
@@ -289,12 +358,20 @@ fn published_sizes_match_the_doc() {
     let doc_enc_tail = [1, 2, 5, 14, 8, 9, 12, 21, 22];
     let doc_dec_ring = [3, 19, 7, 3, 2, 20, 8, 4, 3, 6];
     let doc_dec_tail = [1, 10, 13, 14, 29, 38, 41, 42, 85, 86];
-    for (kind, ring, tail) in [(StackKind::Encoder, &doc_enc_ring[..], &doc_enc_tail[..]), (StackKind::Decoder, &doc_dec_ring[..], &doc_dec_tail[..])] {
+    for (kind, ring, tail) in [
+        (StackKind::Encoder, &doc_enc_ring[..], &doc_enc_tail[..]),
+        (StackKind::Decoder, &doc_dec_ring[..], &doc_dec_tail[..]),
+    ] {
         for vq in p.parts.iter().chain([&p.transl]) {
             let fmax = future_max(vq, kind);
             for lag in [0, 2, 11, fmax] {
                 let plan = StackPlan::new(vq, kind, lag).unwrap();
-                eprintln!("published {kind:?} lag {lag:2}: rings {:?} out ring {} tails {:?}", plan.rings(), plan.out_ring, plan.tails());
+                eprintln!(
+                    "published {kind:?} lag {lag:2}: rings {:?} out ring {} tails {:?}",
+                    plan.rings(),
+                    plan.out_ring,
+                    plan.tails()
+                );
                 assert_eq!(plan.rings(), ring, "{kind:?} lag {lag}");
                 for (u, (&t, &d)) in plan.tails().iter().zip(tail).enumerate() {
                     assert!(t <= d, "{kind:?} lag {lag} unit {u}: tail {t} > doc {d}");
@@ -309,7 +386,11 @@ fn errors_not_panics() {
     let m = model("tiny2");
     let vq = &m.parts[0];
     let cfg = &vq.cfg;
-    let (hop, c_in, emb) = (cfg.hop().unwrap() as usize, cfg.in_channels as usize, cfg.emb_width as usize);
+    let (hop, c_in, emb) = (
+        cfg.hop().unwrap() as usize,
+        cfg.in_channels as usize,
+        cfg.emb_width as usize,
+    );
     let mut mem = vec![0u8; 1 << 22];
     let mut a = Arena::new(&mut mem);
     let mut s = StreamScratch::for_model(&mut a, &m.cfg).unwrap();
@@ -329,7 +410,15 @@ fn errors_not_panics() {
     // Wrong weights (kind, or another VQ-VAE's geometry).
     assert!(enc.push(wd, &x[..hop * c_in], &mut s).is_err());
     assert!(dec.push(we, &x[..emb], &mut s).is_err());
-    assert!(enc.push(StackW::Encoder(&m.parts[2].encoder), &x[..hop * c_in], &mut s).is_err() || m.parts[2].cfg == *cfg);
+    assert!(
+        enc.push(
+            StackW::Encoder(&m.parts[2].encoder),
+            &x[..hop * c_in],
+            &mut s
+        )
+        .is_err()
+            || m.parts[2].cfg == *cfg
+    );
     assert_eq!(enc.pushed(), 0);
     // Nothing pushed: no output.
     let mut out = vec![0f32; emb];
@@ -341,20 +430,31 @@ fn errors_not_panics() {
     // Past the end, wrong out length, far too old (evicted): errors.
     assert!(enc.output(we, 40, 1, &mut s, &mut out).is_err());
     assert!(enc.output(we, 39, 2, &mut s, &mut out).is_err());
-    assert!(enc.output(we, usize::MAX, 2, &mut s, &mut vec![0f32; 2 * emb]).is_err());
+    assert!(enc
+        .output(we, usize::MAX, 2, &mut s, &mut vec![0f32; 2 * emb])
+        .is_err());
     assert!(enc.output(we, 39, 1, &mut s, &mut out[..emb - 1]).is_err());
     assert!(enc.output(we, 0, 1, &mut s, &mut out).is_err());
     assert!(enc.output(we, 39, 1, &mut s, &mut out).is_ok());
     // Rotation weights after pushing with position weights: refused.
     let rot = vq.rot.as_ref().unwrap();
     let mut fr = vec![0f32; hop * rot.out.c_out];
-    assert!(dec.output(StackW::Decoder(rot), 0, hop, &mut s, &mut fr).is_err());
+    assert!(dec
+        .output(StackW::Decoder(rot), 0, hop, &mut s, &mut fr)
+        .is_err());
     assert!(dec.push(StackW::Decoder(rot), &x[..emb], &mut s).is_err());
     // Too small a scratch: an error before anything changes.
     let mut small = vec![0u8; 4096];
     let mut sa = Arena::new(&mut small);
-    let mut tiny_s = StreamScratch::for_model(&mut sa, &duolando_core::duolando::presets::duolando_published()).err();
-    assert!(tiny_s.take().is_some(), "a 4 KiB arena cannot hold the published scratch");
+    let mut tiny_s = StreamScratch::for_model(
+        &mut sa,
+        &duolando_core::duolando::presets::duolando_published(),
+    )
+    .err();
+    assert!(
+        tiny_s.take().is_some(),
+        "a 4 KiB arena cannot hold the published scratch"
+    );
     let mut p = Planner::new();
     let _ = StreamScratch::for_model(&mut p, &m.cfg).unwrap();
     // A stack carved by a Planner holds no memory: errors, no panic.
@@ -363,7 +463,10 @@ fn errors_not_panics() {
     assert!(ghost.push(we, &x[..hop * c_in], &mut s).is_err());
     let mut ghost_s = StreamScratch::for_model(&mut pl, &m.cfg).unwrap();
     assert!(enc.push(we, &x[..hop * c_in], &mut ghost_s).is_err());
-    assert!(enc.output(we, 39, 1, &mut ghost_s, &mut out).is_err(), "a tail needs scratch");
+    assert!(
+        enc.output(we, 39, 1, &mut ghost_s, &mut out).is_err(),
+        "a tail needs scratch"
+    );
     // reset: back to zero, works again.
     enc.reset();
     assert_eq!((enc.pushed(), enc.len()), (0, 0));
@@ -383,17 +486,38 @@ fn rand_leak(rng: &mut Rng, n: usize, scale: f32) -> &'static [f32] {
 fn synth_conv(rng: &mut Rng, c_out: usize, c_in: usize, geom: ConvGeom) -> ConvW<'static> {
     let k = geom.kernel;
     let data = rand_leak(rng, c_out * c_in * k, 1.5 / ((c_in * k) as f32).sqrt());
-    ConvW { w: Matrix::F32(DenseRows::new(data, c_out, c_in * k).unwrap()), b: rand_leak(rng, c_out, 0.3), c_in, c_out, geom }
+    ConvW {
+        w: Matrix::F32(DenseRows::new(data, c_out, c_in * k).unwrap()),
+        b: rand_leak(rng, c_out, 0.3),
+        c_in,
+        c_out,
+        geom,
+    }
 }
 
 fn synth_resnet(rng: &mut Rng, cfg: &VqConfig, reversed: bool) -> ResnetW<'static> {
     let (w, inner) = (cfg.width as usize, cfg.res_inner().unwrap() as usize);
     let mut v = ResnetW::new();
     for d in 0..cfg.depth {
-        let dil = cfg.dilation_growth_rate.pow(if reversed { cfg.depth - 1 - d } else { d }) as usize;
-        let g3 = ConvGeom { kernel: 3, stride: 1, pad: dil, dilation: dil };
-        let g1 = ConvGeom { kernel: 1, stride: 1, pad: 0, dilation: 1 };
-        let blk = ResBlockW { conv_dil: synth_conv(rng, inner, w, g3), conv_1x1: synth_conv(rng, w, inner, g1) };
+        let dil = cfg
+            .dilation_growth_rate
+            .pow(if reversed { cfg.depth - 1 - d } else { d }) as usize;
+        let g3 = ConvGeom {
+            kernel: 3,
+            stride: 1,
+            pad: dil,
+            dilation: dil,
+        };
+        let g1 = ConvGeom {
+            kernel: 1,
+            stride: 1,
+            pad: 0,
+            dilation: 1,
+        };
+        let blk = ResBlockW {
+            conv_dil: synth_conv(rng, inner, w, g3),
+            conv_1x1: synth_conv(rng, w, inner, g1),
+        };
         v.push(blk).ok().unwrap();
     }
     v
@@ -402,8 +526,17 @@ fn synth_resnet(rng: &mut Rng, cfg: &VqConfig, reversed: bool) -> ResnetW<'stati
 /// `gemm`: the ConvTranspose1d weights in GEMM order (as blocked files
 /// store them), else in PyTorch order.
 fn synth_decoder(rng: &mut Rng, cfg: &VqConfig, c_out: usize, gemm: bool) -> DecoderW<'static> {
-    let (w, s, emb) = (cfg.width as usize, cfg.stride_t as usize, cfg.emb_width as usize);
-    let g3 = ConvGeom { kernel: 3, stride: 1, pad: 1, dilation: 1 };
+    let (w, s, emb) = (
+        cfg.width as usize,
+        cfg.stride_t as usize,
+        cfg.emb_width as usize,
+    );
+    let g3 = ConvGeom {
+        kernel: 3,
+        stride: 1,
+        pad: 1,
+        dilation: 1,
+    };
     let input = synth_conv(rng, w, emb, g3);
     let mut stages = heapless::Vec::new();
     for i in 0..cfg.down_t {
@@ -425,7 +558,11 @@ fn synth_decoder(rng: &mut Rng, cfg: &VqConfig, c_out: usize, gemm: bool) -> Dec
         };
         stages.push((res, up)).ok().unwrap();
     }
-    DecoderW { input, stages, out: synth_conv(rng, c_out, emb, g3) }
+    DecoderW {
+        input,
+        stages,
+        out: synth_conv(rng, c_out, emb, g3),
+    }
 }
 
 /// A whole VQ-VAE with random weights in the layout `Model::bind` produces.
@@ -435,17 +572,42 @@ fn synth_vq(cfg: VqConfig, seed: u64) -> &'static VqW<'static> {
     let mut stages = heapless::Vec::new();
     for i in 0..cfg.down_t {
         let c_in = if i == 0 { cfg.in_channels as usize } else { w };
-        let g = ConvGeom { kernel: 2 * s, stride: s, pad: s / 2, dilation: 1 };
+        let g = ConvGeom {
+            kernel: 2 * s,
+            stride: s,
+            pad: s / 2,
+            dilation: 1,
+        };
         let conv = synth_conv(&mut rng, w, c_in, g);
-        stages.push((conv, synth_resnet(&mut rng, &cfg, false))).ok().unwrap();
+        stages
+            .push((conv, synth_resnet(&mut rng, &cfg, false)))
+            .ok()
+            .unwrap();
     }
-    let g3 = ConvGeom { kernel: 3, stride: 1, pad: 1, dilation: 1 };
+    let g3 = ConvGeom {
+        kernel: 3,
+        stride: 1,
+        pad: 1,
+        dilation: 1,
+    };
     let out = synth_conv(&mut rng, cfg.emb_width as usize, w, g3);
     let (bins, emb) = (cfg.l_bins as usize, cfg.emb_width as usize);
-    let codebook = Matrix::F32(DenseRows::new(rand_leak(&mut rng, bins * emb, 1.0), bins, emb).unwrap());
+    let codebook =
+        Matrix::F32(DenseRows::new(rand_leak(&mut rng, bins * emb, 1.0), bins, emb).unwrap());
     let pos = synth_decoder(&mut rng, &cfg, cfg.in_channels as usize, false);
-    let rot = Some(synth_decoder(&mut rng, &cfg, cfg.rot_channels as usize, true));
-    Box::leak(Box::new(VqW { cfg, encoder: EncoderW { stages, out }, codebook, pos, rot }))
+    let rot = Some(synth_decoder(
+        &mut rng,
+        &cfg,
+        cfg.rot_channels as usize,
+        true,
+    ));
+    Box::leak(Box::new(VqW {
+        cfg,
+        encoder: EncoderW { stages, out },
+        codebook,
+        pos,
+        rot,
+    }))
 }
 
 #[test]
@@ -465,9 +627,28 @@ fn other_geometries_equal_the_prefix_stacks() {
     };
     let cases = [
         base,
-        VqConfig { stride_t: 2, down_t: 3, depth: 1, ..base },
-        VqConfig { stride_t: 2, down_t: 1, depth: 4, dilation_growth_rate: 2, m_conv_num: 3, m_conv_den: 2, ..base },
-        VqConfig { stride_t: 6, down_t: 2, depth: 3, dilation_growth_rate: 1, ..base },
+        VqConfig {
+            stride_t: 2,
+            down_t: 3,
+            depth: 1,
+            ..base
+        },
+        VqConfig {
+            stride_t: 2,
+            down_t: 1,
+            depth: 4,
+            dilation_growth_rate: 2,
+            m_conv_num: 3,
+            m_conv_den: 2,
+            ..base
+        },
+        VqConfig {
+            stride_t: 6,
+            down_t: 2,
+            depth: 3,
+            dilation_growth_rate: 1,
+            ..base
+        },
     ];
     for (i, cfg) in cases.into_iter().enumerate() {
         let mut mcfg = duolando_published();
@@ -479,12 +660,21 @@ fn other_geometries_equal_the_prefix_stacks() {
             for lag in [0, fmax / 2, fmax] {
                 let errs = match kind {
                     StackKind::Encoder => vec![run_encoder(&mcfg, vq, lag, 5 + lag as u64)],
-                    StackKind::Decoder => [Output::Position, Output::Rotation].map(|o| run_decoder(&mcfg, vq, o, 0, lag, 9 + lag as u64)).to_vec(),
+                    StackKind::Decoder => [Output::Position, Output::Rotation]
+                        .map(|o| run_decoder(&mcfg, vq, o, 0, lag, 9 + lag as u64))
+                        .to_vec(),
                 };
                 for e in errs {
                     eprintln!("case {i} {kind:?} (future_max {fmax}) lag {lag:2}: settled {:.3e} ({}), tail {:.3e} ({})", e.settled, e.n_settled, e.tail, e.n_tail);
-                    assert!(e.settled <= TOL && e.tail <= TOL, "case {i} {kind:?} lag {lag}: {e:?}");
-                    assert_eq!(e.n_tail_at_lag == 0, lag >= fmax, "case {i} {kind:?} lag {lag}");
+                    assert!(
+                        e.settled <= TOL && e.tail <= TOL,
+                        "case {i} {kind:?} lag {lag}: {e:?}"
+                    );
+                    assert_eq!(
+                        e.n_tail_at_lag == 0,
+                        lag >= fmax,
+                        "case {i} {kind:?} lag {lag}"
+                    );
                 }
             }
         }
@@ -505,16 +695,26 @@ fn published_bytes_and_speed() {
         for kind in [StackKind::Encoder, StackKind::Decoder] {
             let mut pl = Planner::new();
             StreamStack::carve(&mut pl, &p.parts[0], kind, lag).unwrap();
-            eprintln!("published: {kind:?} stack (up) lag {lag}: {} bytes", pl.bytes());
+            eprintln!(
+                "published: {kind:?} stack (up) lag {lag}: {} bytes",
+                pl.bytes()
+            );
         }
     }
-    eprintln!("StreamStack struct: {} bytes", std::mem::size_of::<StreamStack<'static>>());
+    eprintln!(
+        "StreamStack struct: {} bytes",
+        std::mem::size_of::<StreamStack<'static>>()
+    );
     let mut mcfg = p;
     mcfg.parts = [p.parts[0]; 4];
     mcfg.transl = p.parts[0];
     let vq = synth_vq(p.parts[0], 3);
     let cfg = &vq.cfg;
-    let (hop, c_in, emb) = (cfg.hop().unwrap() as usize, cfg.in_channels as usize, cfg.emb_width as usize);
+    let (hop, c_in, emb) = (
+        cfg.hop().unwrap() as usize,
+        cfg.in_channels as usize,
+        cfg.emb_width as usize,
+    );
     let mut mem = vec![0u8; 64 << 20];
     let mut a = Arena::new(&mut mem);
     let mut s = StreamScratch::for_model(&mut a, &mcfg).unwrap();
@@ -537,7 +737,8 @@ fn published_bytes_and_speed() {
             let t1 = std::time::Instant::now();
             dec.push(wd, &z, &mut s).unwrap();
             if push > lag {
-                dec.output(wd, hop * (push - 1 - lag), hop, &mut s, &mut fr).unwrap();
+                dec.output(wd, hop * (push - 1 - lag), hop, &mut s, &mut fr)
+                    .unwrap();
             }
             let t2 = std::time::Instant::now();
             if push > 50 {
@@ -546,6 +747,10 @@ fn published_bytes_and_speed() {
             }
         }
         let k = (n - 50) as u32;
-        eprintln!("published width 512, lag {lag:2}: encoder {:?}/push+output, decoder {:?}/push+output", te / k, td / k);
+        eprintln!(
+            "published width 512, lag {lag:2}: encoder {:?}/push+output, decoder {:?}/push+output",
+            te / k,
+            td / k
+        );
     }
 }

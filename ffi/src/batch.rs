@@ -24,7 +24,9 @@ use crate::frames::DuoLeaderFrame;
 use crate::handle::{buffer_mut, caller_slot, drop_handle, handle_bytes};
 use crate::model::DuoModel;
 use crate::result::{guard, DuoResult, Failure};
-use crate::session::{config_ref, leader_pos3d, model_ref, DuoSession, DuoSessionConfig, SessionInner};
+use crate::session::{
+    config_ref, leader_pos3d, model_ref, DuoSession, DuoSessionConfig, SessionInner,
+};
 
 /// `DUO_NO_SESSION`: the `failed_session` of a call that succeeded, or whose
 /// failure concerns no single session.
@@ -52,7 +54,11 @@ const HANDLE_BYTES: usize = handle_bytes::<StepBatchInner>();
 ///
 /// # Safety
 /// `model` NULL or live; `config` NULL or valid.
-unsafe fn arena_bytes<'x>(model: *const DuoModel, config: *const DuoSessionConfig, max_sessions: usize) -> Result<(usize, SessionConfig, &'x ModelConfig), Failure> {
+unsafe fn arena_bytes<'x>(
+    model: *const DuoModel,
+    config: *const DuoSessionConfig,
+    max_sessions: usize,
+) -> Result<(usize, SessionConfig, &'x ModelConfig), Failure> {
     let m = model_ref(model)?;
     let cfg = config_ref(m, config)?;
     if max_sessions == 0 || max_sessions > MAX_BATCH {
@@ -69,14 +75,21 @@ unsafe fn arena_bytes<'x>(model: *const DuoModel, config: *const DuoSessionConfi
 /// # Safety
 /// Pointers NULL or valid.
 #[no_mangle]
-pub unsafe extern "C" fn duo_step_batch_bytes(model: *const DuoModel, config: *const DuoSessionConfig, max_sessions: usize, out_bytes: *mut usize) -> DuoResult {
+pub unsafe extern "C" fn duo_step_batch_bytes(
+    model: *const DuoModel,
+    config: *const DuoSessionConfig,
+    max_sessions: usize,
+    out_bytes: *mut usize,
+) -> DuoResult {
     guard("duo_step_batch_bytes", || {
         // SAFETY: the caller's contract.
         let (n, _, _) = unsafe { arena_bytes(model, config, max_sessions) }?;
         if out_bytes.is_null() {
             return Err(Failure::null("out_bytes"));
         }
-        let total = n.checked_add(HANDLE_BYTES).ok_or_else(|| Failure::invalid("batch size overflows size_t"))?;
+        let total = n
+            .checked_add(HANDLE_BYTES)
+            .ok_or_else(|| Failure::invalid("batch size overflows size_t"))?;
         // SAFETY: checked non-NULL.
         unsafe { *out_bytes = total };
         Ok(DuoResult::Ok)
@@ -90,7 +103,12 @@ pub unsafe extern "C" fn duo_step_batch_bytes(model: *const DuoModel, config: *c
 /// # Safety
 /// `model` NULL or live; `config` NULL or valid; `out_batch` NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_step_batch_new(model: *const DuoModel, config: *const DuoSessionConfig, max_sessions: usize, out_batch: *mut *mut DuoStepBatch) -> DuoResult {
+pub unsafe extern "C" fn duo_step_batch_new(
+    model: *const DuoModel,
+    config: *const DuoSessionConfig,
+    max_sessions: usize,
+    out_batch: *mut *mut DuoStepBatch,
+) -> DuoResult {
     guard("duo_step_batch_new", || {
         // SAFETY: the caller's contract.
         let (n, cfg, model_cfg) = unsafe { arena_bytes(model, config, max_sessions) }?;
@@ -100,10 +118,16 @@ pub unsafe extern "C" fn duo_step_batch_new(model: *const DuoModel, config: *con
         let mut arena = vec![0u8; n].into_boxed_slice();
         // SAFETY: the boxed bytes stay at one address until the
         // StepBatchInner drops them, after the batch.
-        let bytes: &'static mut [u8] = unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
+        let bytes: &'static mut [u8] =
+            unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
         let batch = StepBatch::new(model_cfg, &cfg, max_sessions, bytes)?;
         let dims = StepDims::new(model_cfg, &cfg, max_sessions).map_err(Error::Arena)?;
-        let inner = Box::new(StepBatchInner { batch, dims, _arena: Some(arena), in_caller_memory: false });
+        let inner = Box::new(StepBatchInner {
+            batch,
+            dims,
+            _arena: Some(arena),
+            in_caller_memory: false,
+        });
         // SAFETY: checked non-NULL.
         unsafe { *out_batch = Box::into_raw(inner) };
         Ok(DuoResult::Ok)
@@ -133,12 +157,21 @@ pub unsafe extern "C" fn duo_step_batch_new_in(
         }
         // SAFETY: NULL or `len` writable bytes kept for the batch (contract).
         let memory = unsafe { buffer_mut(memory, len, "memory") }?;
-        let (slot, arena) = caller_slot::<StepBatchInner>(memory, n.saturating_add(HANDLE_BYTES), "duo_step_batch_bytes")?;
+        let (slot, arena) = caller_slot::<StepBatchInner>(
+            memory,
+            n.saturating_add(HANDLE_BYTES),
+            "duo_step_batch_bytes",
+        )?;
         let batch = StepBatch::new(model_cfg, &cfg, max_sessions, arena)?;
         let dims = StepDims::new(model_cfg, &cfg, max_sessions).map_err(Error::Arena)?;
         // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
         unsafe {
-            slot.write(StepBatchInner { batch, dims, _arena: None, in_caller_memory: true });
+            slot.write(StepBatchInner {
+                batch,
+                dims,
+                _arena: None,
+                in_caller_memory: true,
+            });
             *out_batch = slot;
         }
         Ok(DuoResult::Ok)
@@ -196,7 +229,9 @@ pub unsafe extern "C" fn duo_step_batch_push_leader(
 ) -> DuoResult {
     let mut failed = NO_SESSION;
     // SAFETY: the caller's contract (see push_leader_many).
-    let r = guard("duo_step_batch_push_leader", || unsafe { push_leader_many(batch, sessions, frames, n, &mut failed) });
+    let r = guard("duo_step_batch_push_leader", || unsafe {
+        push_leader_many(batch, sessions, frames, n, &mut failed)
+    });
     if !failed_session.is_null() {
         // SAFETY: non-NULL and writable (contract).
         unsafe { *failed_session = failed };
@@ -209,14 +244,23 @@ pub unsafe extern "C" fn duo_step_batch_push_leader(
 ///
 /// # Safety
 /// As [`duo_step_batch_push_leader`].
-unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSession, frames: *const DuoLeaderFrame, n: usize, failed: &mut usize) -> Result<DuoResult, Failure> {
+unsafe fn push_leader_many(
+    batch: *mut DuoStepBatch,
+    sessions: *const *mut DuoSession,
+    frames: *const DuoLeaderFrame,
+    n: usize,
+    failed: &mut usize,
+) -> Result<DuoResult, Failure> {
     // SAFETY: NULL or a live handle used by one thread at a time (contract).
     let b = unsafe { batch.as_mut() }.ok_or_else(|| Failure::null("batch"))?;
     if n == 0 {
         return Ok(DuoResult::Ok);
     }
     if n > b.batch.capacity() {
-        return Err(Failure::invalid(format!("{n} sessions given to a batch made for at most {}", b.batch.capacity())));
+        return Err(Failure::invalid(format!(
+            "{n} sessions given to a batch made for at most {}",
+            b.batch.capacity()
+        )));
     }
     if sessions.is_null() {
         return Err(Failure::null("sessions"));
@@ -225,7 +269,12 @@ unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSe
         return Err(Failure::null("frames"));
     }
     // SAFETY: `n` readable pointers and `n` readable frames (contract).
-    let (ptrs, frames) = unsafe { (std::slice::from_raw_parts(sessions, n), std::slice::from_raw_parts(frames, n)) };
+    let (ptrs, frames) = unsafe {
+        (
+            std::slice::from_raw_parts(sessions, n),
+            std::slice::from_raw_parts(frames, n),
+        )
+    };
     // 2. The sessions themselves.
     let mut first: Option<&SessionInner> = None;
     for (i, &p) in ptrs.iter().enumerate() {
@@ -233,16 +282,23 @@ unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSe
         // SAFETY: NULL or a live session (contract); read only here.
         let s = unsafe { p.as_ref() }.ok_or_else(|| Failure::null(&format!("sessions[{i}]")))?;
         if let Some(j) = ptrs[..i].iter().position(|&q| std::ptr::eq(q, p)) {
-            return Err(Failure::invalid(format!("sessions[{i}] is sessions[{j}] again; a session takes one frame per call")));
+            return Err(Failure::invalid(format!(
+                "sessions[{i}] is sessions[{j}] again; a session takes one frame per call"
+            )));
         }
         let s0 = *first.get_or_insert(s);
         if !std::sync::Arc::ptr_eq(&s.model, &s0.model) {
-            return Err(Failure::invalid(format!("sessions[{i}] is a session of another model than sessions[0]")));
+            return Err(Failure::invalid(format!(
+                "sessions[{i}] is a session of another model than sessions[0]"
+            )));
         }
         let dims = match &s.session {
             crate::session::AnySession::Duolando { dims, .. } => dims,
             crate::session::AnySession::Bailando(_) => {
                 return Err(crate::session::solo_refusal(&format!("sessions[{i}] in duo_step_batch_push_leader (solo sessions are stepped by their own pulls)")))
+            }
+            crate::session::AnySession::Transflower(_) => {
+                return Err(crate::model::transflower_refusal(&format!("sessions[{i}] in duo_step_batch_push_leader")))
             }
         };
         if !b.dims.holds(dims) {
@@ -256,7 +312,8 @@ unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSe
     let mut rows: heapless::Vec<&[f32], MAX_BATCH> = heapless::Vec::new();
     for (i, f) in frames.iter().enumerate() {
         *failed = i;
-        rows.push(leader_pos3d(f)?).map_err(|_| Failure::invalid("more frames than DUO_MAX_BATCH"))?;
+        rows.push(leader_pos3d(f)?)
+            .map_err(|_| Failure::invalid("more frames than DUO_MAX_BATCH"))?;
     }
     *failed = NO_SESSION;
     let mut refs: heapless::Vec<&mut Session<'static>, MAX_BATCH> = heapless::Vec::new();
@@ -265,9 +322,17 @@ unsafe fn push_leader_many(batch: *mut DuoStepBatch, sessions: *const *mut DuoSe
         // pairwise distinct (checked above): one `&mut` each.
         let session = match unsafe { &mut (*p).session } {
             crate::session::AnySession::Duolando { session, .. } => session,
-            crate::session::AnySession::Bailando(_) => return Err(crate::session::solo_refusal("duo_step_batch_push_leader")),
+            crate::session::AnySession::Bailando(_) => {
+                return Err(crate::session::solo_refusal("duo_step_batch_push_leader"))
+            }
+            crate::session::AnySession::Transflower(_) => {
+                return Err(crate::model::transflower_refusal(
+                    "duo_step_batch_push_leader",
+                ))
+            }
         };
-        refs.push(session).map_err(|_| Failure::invalid("more sessions than DUO_MAX_BATCH"))?;
+        refs.push(session)
+            .map_err(|_| Failure::invalid("more sessions than DUO_MAX_BATCH"))?;
     }
     // 4. Backlog: `step_many` checks every session (model, step memory,
     // frame, backlog: the first three passed above) before it changes any.

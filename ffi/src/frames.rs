@@ -47,12 +47,16 @@ pub struct DuoLeaderFrame {
 
 impl Default for DuoLeaderFrame {
     fn default() -> Self {
-        DuoLeaderFrame { joints: [DuoVec3::default(); N_JOINTS] }
+        DuoLeaderFrame {
+            joints: [DuoVec3::default(); N_JOINTS],
+        }
     }
 }
 
 // 55 joints x 3 floats, no padding: the layout `DuoLeaderFrame::pos3d` reads.
-const _: () = assert!(std::mem::size_of::<DuoVec3>() == 12 && std::mem::size_of::<DuoLeaderFrame>() == POSE_DIM * 4);
+const _: () = assert!(
+    std::mem::size_of::<DuoVec3>() == 12 && std::mem::size_of::<DuoLeaderFrame>() == POSE_DIM * 4
+);
 const _: () = assert!(std::mem::align_of::<DuoLeaderFrame>() == std::mem::align_of::<f32>());
 
 impl DuoLeaderFrame {
@@ -87,7 +91,12 @@ impl Default for DuoFollowerFrame {
         DuoFollowerFrame {
             index: 0,
             positions: [DuoVec3::default(); N_JOINTS],
-            rotations: [DuoQuat { x: 0.0, y: 0.0, z: 0.0, w: 1.0 }; N_JOINTS],
+            rotations: [DuoQuat {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0,
+            }; N_JOINTS],
             root: DuoVec3::default(),
         }
     }
@@ -106,9 +115,18 @@ const _: () = {
 /// The unit quaternion of the proper rotation nearest to a raw row-major
 /// 3x3 matrix (SVD projection; a zero or non-finite matrix gives identity).
 pub fn quat_of_raw(m9: &[f32]) -> DuoQuat {
-    let m: Mat3 = [[m9[0], m9[1], m9[2]], [m9[3], m9[4], m9[5]], [m9[6], m9[7], m9[8]]];
+    let m: Mat3 = [
+        [m9[0], m9[1], m9[2]],
+        [m9[3], m9[4], m9[5]],
+        [m9[6], m9[7], m9[8]],
+    ];
     let q = quat_from_mat(&nearest_rotation(&m));
-    DuoQuat { x: q[0], y: q[1], z: q[2], w: q[3] }
+    DuoQuat {
+        x: q[0],
+        y: q[1],
+        z: q[2],
+        w: q[3],
+    }
 }
 
 /// Target coordinate systems (`duo_coords`).
@@ -117,28 +135,64 @@ pub const COORDS_UNITY: u32 = 1;
 pub const COORDS_UNREAL: u32 = 2;
 
 pub fn vec3_to_unity(v: DuoVec3) -> DuoVec3 {
-    DuoVec3 { x: -v.x, y: v.y, z: v.z }
+    DuoVec3 {
+        x: -v.x,
+        y: v.y,
+        z: v.z,
+    }
 }
 pub fn vec3_from_unity(v: DuoVec3) -> DuoVec3 {
-    DuoVec3 { x: -v.x, y: v.y, z: v.z }
+    DuoVec3 {
+        x: -v.x,
+        y: v.y,
+        z: v.z,
+    }
 }
 pub fn quat_to_unity(q: DuoQuat) -> DuoQuat {
-    DuoQuat { x: q.x, y: -q.y, z: -q.z, w: q.w }
+    DuoQuat {
+        x: q.x,
+        y: -q.y,
+        z: -q.z,
+        w: q.w,
+    }
 }
 pub fn quat_from_unity(q: DuoQuat) -> DuoQuat {
-    DuoQuat { x: q.x, y: -q.y, z: -q.z, w: q.w }
+    DuoQuat {
+        x: q.x,
+        y: -q.y,
+        z: -q.z,
+        w: q.w,
+    }
 }
 pub fn vec3_to_unreal(v: DuoVec3) -> DuoVec3 {
-    DuoVec3 { x: 100.0 * v.z, y: -100.0 * v.x, z: 100.0 * v.y }
+    DuoVec3 {
+        x: 100.0 * v.z,
+        y: -100.0 * v.x,
+        z: 100.0 * v.y,
+    }
 }
 pub fn vec3_from_unreal(v: DuoVec3) -> DuoVec3 {
-    DuoVec3 { x: -0.01 * v.y, y: 0.01 * v.z, z: 0.01 * v.x }
+    DuoVec3 {
+        x: -0.01 * v.y,
+        y: 0.01 * v.z,
+        z: 0.01 * v.x,
+    }
 }
 pub fn quat_to_unreal(q: DuoQuat) -> DuoQuat {
-    DuoQuat { x: -q.z, y: q.x, z: -q.y, w: q.w }
+    DuoQuat {
+        x: -q.z,
+        y: q.x,
+        z: -q.y,
+        w: q.w,
+    }
 }
 pub fn quat_from_unreal(q: DuoQuat) -> DuoQuat {
-    DuoQuat { x: q.y, y: -q.z, z: -q.x, w: q.w }
+    DuoQuat {
+        x: q.y,
+        y: -q.z,
+        z: -q.x,
+        w: q.w,
+    }
 }
 
 macro_rules! value_fn {
@@ -188,14 +242,20 @@ value_fn!(
 use crate::result::{guard, DuoResult, Failure};
 
 /// Position to, rotation to, position from a coordinate system.
-type CoordFns = (fn(DuoVec3) -> DuoVec3, fn(DuoQuat) -> DuoQuat, fn(DuoVec3) -> DuoVec3);
+type CoordFns = (
+    fn(DuoVec3) -> DuoVec3,
+    fn(DuoQuat) -> DuoQuat,
+    fn(DuoVec3) -> DuoVec3,
+);
 
 fn coords_fns(coords: u32) -> Result<CoordFns, Failure> {
     match coords {
         COORDS_SMPLX => Ok((|v| v, |q| q, |v| v)),
         COORDS_UNITY => Ok((vec3_to_unity, quat_to_unity, vec3_from_unity)),
         COORDS_UNREAL => Ok((vec3_to_unreal, quat_to_unreal, vec3_from_unreal)),
-        c => Err(Failure::invalid(format!("coords {c} is not a duo_coords value (0 SMPL-X, 1 Unity, 2 Unreal)"))),
+        c => Err(Failure::invalid(format!(
+            "coords {c} is not a duo_coords value (0 SMPL-X, 1 Unity, 2 Unreal)"
+        ))),
     }
 }
 
@@ -206,7 +266,10 @@ fn coords_fns(coords: u32) -> Result<CoordFns, Failure> {
 /// # Safety
 /// `frame` must be NULL or point to a valid, writable `duo_follower_frame`.
 #[no_mangle]
-pub unsafe extern "C" fn duo_follower_frame_convert(frame: *mut DuoFollowerFrame, coords: u32) -> DuoResult {
+pub unsafe extern "C" fn duo_follower_frame_convert(
+    frame: *mut DuoFollowerFrame,
+    coords: u32,
+) -> DuoResult {
     guard("duo_follower_frame_convert", || {
         let (pos, rot, _) = coords_fns(coords)?;
         // SAFETY: checked non-NULL; the caller promises a valid frame.
@@ -229,7 +292,10 @@ pub unsafe extern "C" fn duo_follower_frame_convert(frame: *mut DuoFollowerFrame
 /// # Safety
 /// `frame` must be NULL or point to a valid, writable `duo_leader_frame`.
 #[no_mangle]
-pub unsafe extern "C" fn duo_leader_frame_convert(frame: *mut DuoLeaderFrame, coords: u32) -> DuoResult {
+pub unsafe extern "C" fn duo_leader_frame_convert(
+    frame: *mut DuoLeaderFrame,
+    coords: u32,
+) -> DuoResult {
     guard("duo_leader_frame_convert", || {
         let (_, _, from) = coords_fns(coords)?;
         // SAFETY: checked non-NULL; the caller promises a valid frame.
@@ -255,7 +321,12 @@ mod tests {
     }
     fn q_of(m: &Mat3) -> DuoQuat {
         let q = quat_from_mat(m);
-        DuoQuat { x: q[0], y: q[1], z: q[2], w: q[3] }
+        DuoQuat {
+            x: q[0],
+            y: q[1],
+            z: q[2],
+            w: q[3],
+        }
     }
     fn rotate(q: DuoQuat, p: DuoVec3) -> DuoVec3 {
         let r = mat_from_quat([q.x, q.y, q.z, q.w]);
@@ -288,14 +359,22 @@ mod tests {
         let fwd = v(0.0, 0.0, 1.0);
         assert!(close(rotate(turn, fwd), v(1.0, 0.0, 0.0), 1e-6));
         let tu = duo_quat_to_unity(turn);
-        assert!(close(rotate(tu, duo_vec3_to_unity(fwd)), v(-1.0, 0.0, 0.0), 1e-6));
+        assert!(close(
+            rotate(tu, duo_vec3_to_unity(fwd)),
+            v(-1.0, 0.0, 0.0),
+            1e-6
+        ));
         // Unity's own convention: a positive angle about +y turns +z towards
         // +x (left-handed, clockwise from above), so turning left is -90.
         let expect = (-std::f32::consts::FRAC_PI_4).sin();
         assert!((tu.y - expect).abs() < 1e-6 && tu.x.abs() < 1e-7 && tu.z.abs() < 1e-7);
         // Unreal: facing left = -y (unit vectors in cm).
         let tr = duo_quat_to_unreal(turn);
-        assert!(close(rotate(tr, duo_vec3_to_unreal(fwd)), v(0.0, -100.0, 0.0), 1e-4));
+        assert!(close(
+            rotate(tr, duo_vec3_to_unreal(fwd)),
+            v(0.0, -100.0, 0.0),
+            1e-4
+        ));
         // Unreal yaw: positive about +z turns +x towards +y (right); left = -90.
         assert!((tr.z - expect).abs() < 1e-6 && tr.x.abs() < 1e-7 && tr.y.abs() < 1e-7);
     }
@@ -315,8 +394,16 @@ mod tests {
             let q = q_of(&axis_angle(axis, 3.0 * rnd()));
             let p = v(rnd(), rnd(), rnd());
             let qp = rotate(q, p);
-            assert!(close(duo_vec3_to_unity(qp), rotate(duo_quat_to_unity(q), duo_vec3_to_unity(p)), 1e-5));
-            assert!(close(duo_vec3_to_unreal(qp), rotate(duo_quat_to_unreal(q), duo_vec3_to_unreal(p)), 1e-3));
+            assert!(close(
+                duo_vec3_to_unity(qp),
+                rotate(duo_quat_to_unity(q), duo_vec3_to_unity(p)),
+                1e-5
+            ));
+            assert!(close(
+                duo_vec3_to_unreal(qp),
+                rotate(duo_quat_to_unreal(q), duo_vec3_to_unreal(p)),
+                1e-3
+            ));
             assert!(close(duo_vec3_from_unity(duo_vec3_to_unity(p)), p, 0.0));
             assert!(close(duo_vec3_from_unreal(duo_vec3_to_unreal(p)), p, 1e-6));
             assert_eq!(duo_quat_from_unity(duo_quat_to_unity(q)), q);
@@ -330,19 +417,47 @@ mod tests {
         let mut f = DuoFollowerFrame::default();
         f.positions[3] = v(1.0, 2.0, 3.0);
         f.root = v(0.5, 0.9, -0.25);
-        f.rotations[7] = DuoQuat { x: 0.5, y: 0.5, z: 0.5, w: 0.5 };
+        f.rotations[7] = DuoQuat {
+            x: 0.5,
+            y: 0.5,
+            z: 0.5,
+            w: 0.5,
+        };
         let before = f;
-        assert_eq!(unsafe { duo_follower_frame_convert(&mut f, COORDS_SMPLX) }, DuoResult::Ok);
+        assert_eq!(
+            unsafe { duo_follower_frame_convert(&mut f, COORDS_SMPLX) },
+            DuoResult::Ok
+        );
         assert_eq!(f, before);
-        assert_eq!(unsafe { duo_follower_frame_convert(&mut f, COORDS_UNREAL) }, DuoResult::Ok);
+        assert_eq!(
+            unsafe { duo_follower_frame_convert(&mut f, COORDS_UNREAL) },
+            DuoResult::Ok
+        );
         assert_eq!(f.positions[3], v(300.0, -100.0, 200.0));
         assert_eq!(f.root, v(-25.0, -50.0, 90.0));
-        assert_eq!(f.rotations[7], DuoQuat { x: -0.5, y: 0.5, z: -0.5, w: 0.5 });
-        assert_eq!(unsafe { duo_follower_frame_convert(&mut f, 3) }, DuoResult::InvalidArgument);
-        assert_eq!(unsafe { duo_follower_frame_convert(std::ptr::null_mut(), 1) }, DuoResult::NullParameter);
+        assert_eq!(
+            f.rotations[7],
+            DuoQuat {
+                x: -0.5,
+                y: 0.5,
+                z: -0.5,
+                w: 0.5
+            }
+        );
+        assert_eq!(
+            unsafe { duo_follower_frame_convert(&mut f, 3) },
+            DuoResult::InvalidArgument
+        );
+        assert_eq!(
+            unsafe { duo_follower_frame_convert(std::ptr::null_mut(), 1) },
+            DuoResult::NullParameter
+        );
         let mut l = DuoLeaderFrame::default();
         l.joints[0] = v(-100.0, 20.0, 50.0); // Unreal cm
-        assert_eq!(unsafe { duo_leader_frame_convert(&mut l, COORDS_UNREAL) }, DuoResult::Ok);
+        assert_eq!(
+            unsafe { duo_leader_frame_convert(&mut l, COORDS_UNREAL) },
+            DuoResult::Ok
+        );
         assert!(close(l.joints[0], v(-0.2, 0.5, -1.0), 1e-6));
     }
 
@@ -365,7 +480,23 @@ mod tests {
         }
         let n = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
         assert!((n - 1.0).abs() < 1e-6 && q.w >= 0.0);
-        assert_eq!(quat_of_raw(&[f32::NAN; 9]), DuoQuat { x: 0.0, y: 0.0, z: 0.0, w: 1.0 });
-        assert_eq!(quat_of_raw(&[0.0; 9]), DuoQuat { x: 0.0, y: 0.0, z: 0.0, w: 1.0 });
+        assert_eq!(
+            quat_of_raw(&[f32::NAN; 9]),
+            DuoQuat {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0
+            }
+        );
+        assert_eq!(
+            quat_of_raw(&[0.0; 9]),
+            DuoQuat {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0
+            }
+        );
     }
 }

@@ -20,7 +20,11 @@ pub const fn handle_bytes<T>() -> usize {
 /// `ptr` NULL, or `len` readable, aligned `T` that stay valid for `'x`.
 pub unsafe fn buffer<'x, T>(ptr: *const T, len: usize, what: &str) -> Result<&'x [T], Failure> {
     if ptr.is_null() {
-        return if len == 0 { Ok(&[]) } else { Err(Failure::null(what)) };
+        return if len == 0 {
+            Ok(&[])
+        } else {
+            Err(Failure::null(what))
+        };
     }
     // SAFETY: non-NULL with `len` readable elements (contract).
     Ok(unsafe { std::slice::from_raw_parts(ptr, len) })
@@ -31,9 +35,17 @@ pub unsafe fn buffer<'x, T>(ptr: *const T, len: usize, what: &str) -> Result<&'x
 /// # Safety
 /// `ptr` NULL, or `len` writable bytes that stay valid for `'x` and that
 /// nothing else uses meanwhile.
-pub unsafe fn buffer_mut<'x>(ptr: *mut u8, len: usize, what: &str) -> Result<&'x mut [u8], Failure> {
+pub unsafe fn buffer_mut<'x>(
+    ptr: *mut u8,
+    len: usize,
+    what: &str,
+) -> Result<&'x mut [u8], Failure> {
     if ptr.is_null() {
-        return if len == 0 { Ok(&mut []) } else { Err(Failure::null(what)) };
+        return if len == 0 {
+            Ok(&mut [])
+        } else {
+            Err(Failure::null(what))
+        };
     }
     // SAFETY: non-NULL with `len` writable bytes (contract).
     Ok(unsafe { std::slice::from_raw_parts_mut(ptr, len) })
@@ -44,14 +56,24 @@ pub unsafe fn buffer_mut<'x>(ptr: *mut u8, len: usize, what: &str) -> Result<&'x
 /// `T` and the bytes after it (the arena). `need` is what the object needs
 /// in all (its arena plus [`handle_bytes`]); `bytes_fn` names the function
 /// that tells it.
-pub fn caller_slot<T>(memory: &'static mut [u8], need: usize, bytes_fn: &str) -> Result<(*mut T, &'static mut [u8]), Failure> {
+pub fn caller_slot<T>(
+    memory: &'static mut [u8],
+    need: usize,
+    bytes_fn: &str,
+) -> Result<(*mut T, &'static mut [u8]), Failure> {
     let len = memory.len();
     if len < need {
-        return Err(Failure::new(DuoResult::BufferTooSmall, format!("memory has {len} bytes, this configuration needs {need} ({bytes_fn})")));
+        return Err(Failure::new(
+            DuoResult::BufferTooSmall,
+            format!("memory has {len} bytes, this configuration needs {need} ({bytes_fn})"),
+        ));
     }
     let pad = memory.as_ptr().align_offset(std::mem::align_of::<T>());
     if pad == usize::MAX || pad.saturating_add(std::mem::size_of::<T>()) > len {
-        return Err(Failure::new(DuoResult::BufferTooSmall, "memory cannot hold the handle"));
+        return Err(Failure::new(
+            DuoResult::BufferTooSmall,
+            "memory cannot hold the handle",
+        ));
     }
     let (head, arena) = memory.split_at_mut(pad + std::mem::size_of::<T>());
     Ok((head[pad..].as_mut_ptr().cast::<T>(), arena))

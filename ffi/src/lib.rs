@@ -18,6 +18,7 @@ mod handle;
 pub mod model;
 pub mod result;
 pub mod session;
+pub mod transflower;
 
 pub use batch::DuoStepBatch;
 pub use frames::{DuoFollowerFrame, DuoLeaderFrame, DuoQuat, DuoVec3};
@@ -56,10 +57,17 @@ pub const MAX_THREADS: u32 = 64;
 pub extern "C" fn duo_set_threads(threads: u32) -> DuoResult {
     result::guard("duo_set_threads", || {
         if threads > MAX_THREADS {
-            return Err(result::Failure::new(DuoResult::InvalidArgument, format!("{threads} threads: at most {MAX_THREADS}")));
+            return Err(result::Failure::new(
+                DuoResult::InvalidArgument,
+                format!("{threads} threads: at most {MAX_THREADS}"),
+            ));
         }
-        duolando_runtime::workers::set_threads(threads as usize)
-            .map_err(|e| result::Failure::new(DuoResult::Io, format!("could not start {threads} threads: {e}")))?;
+        duolando_runtime::workers::set_threads(threads as usize).map_err(|e| {
+            result::Failure::new(
+                DuoResult::Io,
+                format!("could not start {threads} threads: {e}"),
+            )
+        })?;
         Ok(DuoResult::Ok)
     })
 }
@@ -92,11 +100,20 @@ mod tests {
     #[test]
     fn version_matches_cargo_toml() {
         // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
-        let s = unsafe { std::ffi::CStr::from_ptr(duo_version()) }.to_str().unwrap();
+        let s = unsafe { std::ffi::CStr::from_ptr(duo_version()) }
+            .to_str()
+            .unwrap();
         assert_eq!(s, env!("CARGO_PKG_VERSION"));
-        assert_eq!(s, format!("{VERSION_MAJOR}.{VERSION_MINOR}.{VERSION_PATCH}"));
+        assert_eq!(
+            s,
+            format!("{VERSION_MAJOR}.{VERSION_MINOR}.{VERSION_PATCH}")
+        );
         let header = include_str!("../../include/duolando.h");
-        for (name, v) in [("MAJOR", VERSION_MAJOR), ("MINOR", VERSION_MINOR), ("PATCH", VERSION_PATCH)] {
+        for (name, v) in [
+            ("MAJOR", VERSION_MAJOR),
+            ("MINOR", VERSION_MINOR),
+            ("PATCH", VERSION_PATCH),
+        ] {
             assert!(
                 header.contains(&format!("#define DUOLANDO_VERSION_{name} {v}\n")),
                 "include/duolando.h: DUOLANDO_VERSION_{name} must be {v}"

@@ -37,6 +37,8 @@ pub enum AnyModel {
     Duolando(Model<'static>),
     /// A solo dancer to music.
     Bailando(SoloModel<'static>),
+    /// A probabilistic solo dancer (motion features from audio features).
+    Transflower(duolando_core::transflower::model::Model<'static>),
 }
 
 /// What a `duo_model *` points to (an `Arc<ModelInner>` turned into a raw
@@ -67,17 +69,26 @@ impl ModelInner {
             AnyModel::Bailando(_) => Err(Failure::invalid(format!(
                 "{what} needs a Duolando model (a follower dancing with a leader); this is a Bailando model (a solo dancer to music): docs/C_API.md \"Solo models\""
             ))),
+            AnyModel::Transflower(_) => Err(transflower_refusal(what)),
         }
     }
     pub fn family(&self) -> Family {
         match &self.model {
             AnyModel::Duolando(_) => Family::Duolando,
             AnyModel::Bailando(_) => Family::Bailando,
+            AnyModel::Transflower(_) => Family::Transflower,
         }
     }
     pub fn is_mapped(&self) -> bool {
         matches!(&self.storage, Storage::File(f) if f.is_mapped())
     }
+}
+
+/// `what` is for Duolando / Bailando; Transflower has its own entry points.
+pub(crate) fn transflower_refusal(what: &str) -> Failure {
+    Failure::invalid(format!(
+        "{what}: this is a Transflower model (motion features from audio features): its sessions are made and used with the duo_transflower_* functions (duo_session_push_music, duo_session_free too): docs/C_API.md \"Transflower\""
+    ))
 }
 
 /// Opaque `duo_model` (never constructed; a pointer to [`ModelInner`]).
@@ -94,15 +105,31 @@ fn bind(duo: &DuoFile<'static>, origin: &str) -> Result<AnyModel, Failure> {
     KERNELS.call_once(|| {
         duolando_runtime::simd::init();
     });
-    let bad = |e: duolando_core::nn::bind::BindError| Failure::new(DuoResult::BadModel, format!("{origin}: invalid .duo model: {}", duolando_runtime::engine_errors::describe(&duolando_core::Error::from(e))));
+    let bad = |e: duolando_core::nn::bind::BindError| {
+        Failure::new(
+            DuoResult::BadModel,
+            format!(
+                "{origin}: invalid .duo model: {}",
+                duolando_runtime::engine_errors::describe(&duolando_core::Error::from(e))
+            ),
+        )
+    };
     match duo.config() {
         FamilyConfig::Duolando(_) => Model::from_duo(duo).map(AnyModel::Duolando).map_err(bad),
-        FamilyConfig::Bailando(_) => SoloModel::from_duo(duo).map(AnyModel::Bailando).map_err(bad),
-        // C sessions for Transflower come later: refused by family, by name.
-        FamilyConfig::Transflower(_) => Err(Failure::new(
-            DuoResult::BadModel,
-            format!("{origin}: a Transflower model (family 2): the C library does not run this family yet (the duolando CLI does)"),
-        )),
+        FamilyConfig::Bailando(_) => SoloModel::from_duo(duo)
+            .map(AnyModel::Bailando)
+            .map_err(bad),
+        FamilyConfig::Transflower(_) => duolando_core::transflower::model::Model::from_duo(duo)
+            .map(AnyModel::Transflower)
+            .map_err(|e| {
+                Failure::new(
+                    DuoResult::BadModel,
+                    format!(
+                        "{origin}: invalid .duo model: {}",
+                        duolando_runtime::engine_errors::describe_transflower_model(&e)
+                    ),
+                )
+            }),
     }
 }
 
@@ -124,16 +151,30 @@ unsafe fn forever(bytes: &[u8]) -> &'static [u8] {
     unsafe { std::slice::from_raw_parts(bytes.as_ptr(), bytes.len()) }
 }
 
-fn from_model_file(mf: ModelFile, origin: &str, out: *mut *mut DuoModel) -> Result<DuoResult, Failure> {
+fn from_model_file(
+    mf: ModelFile,
+    origin: &str,
+    out: *mut *mut DuoModel,
+) -> Result<DuoResult, Failure> {
     // SAFETY: the bytes live in `mf` (mmap or heap: fixed addresses), which
     // is moved into the same ModelInner as the model and dropped after it.
     let bytes = unsafe { forever(mf.bytes()) };
     // `mf` passed the full `DuoFile::parse` (weights included) when it was
     // made; its bytes are immutable since: the table alone is read again.
-    let duo = DuoFile::parse_without_weight_scan(bytes)
-        .map_err(|e| Failure::new(DuoResult::BadModel, format!("{origin}: invalid .duo model: {}", explain(bytes, &e))))?;
+    let duo = DuoFile::parse_without_weight_scan(bytes).map_err(|e| {
+        Failure::new(
+            DuoResult::BadModel,
+            format!("{origin}: invalid .duo model: {}", explain(bytes, &e)),
+        )
+    })?;
     let model = bind(&duo, origin)?;
-    publish(ModelInner { model, storage: Storage::File(mf) }, out)
+    publish(
+        ModelInner {
+            model,
+            storage: Storage::File(mf),
+        },
+        out,
+    )
 }
 
 fn file_failure(e: ModelFileError) -> Failure {
@@ -151,7 +192,11 @@ fn file_failure(e: ModelFileError) -> Failure {
 /// and unmodified until the model and all its sessions are freed; `out`
 /// must be NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_model_open_bytes(bytes: *const u8, len: usize, out_model: *mut *mut DuoModel) -> DuoResult {
+pub unsafe extern "C" fn duo_model_open_bytes(
+    bytes: *const u8,
+    len: usize,
+    out_model: *mut *mut DuoModel,
+) -> DuoResult {
     guard("duo_model_open_bytes", || {
         if out_model.is_null() {
             return Err(Failure::null("out_model"));
@@ -175,10 +220,20 @@ pub unsafe extern "C" fn duo_model_open_bytes(bytes: *const u8, len: usize, out_
         // SAFETY: the caller keeps the bytes valid until the model and its
         // sessions are freed (the documented rule).
         let bytes = unsafe { forever(b) };
-        let duo = DuoFile::parse(bytes)
-            .map_err(|e| Failure::new(DuoResult::BadModel, format!("<memory>: invalid .duo model: {}", explain(bytes, &e))))?;
+        let duo = DuoFile::parse(bytes).map_err(|e| {
+            Failure::new(
+                DuoResult::BadModel,
+                format!("<memory>: invalid .duo model: {}", explain(bytes, &e)),
+            )
+        })?;
         let model = bind(&duo, "<memory>")?;
-        publish(ModelInner { model, storage: Storage::Borrowed }, out_model)
+        publish(
+            ModelInner {
+                model,
+                storage: Storage::Borrowed,
+            },
+            out_model,
+        )
     })
 }
 
@@ -189,14 +244,19 @@ pub unsafe extern "C" fn duo_model_open_bytes(bytes: *const u8, len: usize, out_
 /// `bytes` must be NULL or point to `len` readable bytes; `out_model` must
 /// be NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_model_open_copy(bytes: *const u8, len: usize, out_model: *mut *mut DuoModel) -> DuoResult {
+pub unsafe extern "C" fn duo_model_open_copy(
+    bytes: *const u8,
+    len: usize,
+    out_model: *mut *mut DuoModel,
+) -> DuoResult {
     guard("duo_model_open_copy", || {
         if out_model.is_null() {
             return Err(Failure::null("out_model"));
         }
         // SAFETY: caller contract.
         let b = unsafe { crate::handle::buffer(bytes, len, "bytes") }?;
-        let mf = ModelFile::from_aligned(AlignedBytes::copy_from(b), "<memory>").map_err(file_failure)?;
+        let mf = ModelFile::from_aligned(AlignedBytes::copy_from(b), "<memory>")
+            .map_err(file_failure)?;
         from_model_file(mf, "<memory>", out_model)
     })
 }
@@ -208,7 +268,10 @@ pub unsafe extern "C" fn duo_model_open_copy(bytes: *const u8, len: usize, out_m
 /// `path` must be NULL or a NUL-terminated string (UTF-8); `out_model`
 /// must be NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_model_open_file(path: *const c_char, out_model: *mut *mut DuoModel) -> DuoResult {
+pub unsafe extern "C" fn duo_model_open_file(
+    path: *const c_char,
+    out_model: *mut *mut DuoModel,
+) -> DuoResult {
     guard("duo_model_open_file", || {
         if out_model.is_null() {
             return Err(Failure::null("out_model"));
@@ -281,7 +344,10 @@ pub struct DuoModelInfo {
 /// # Safety
 /// `model` must be NULL or a live handle; `out_info` NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_model_get_info(model: *const DuoModel, out_info: *mut DuoModelInfo) -> DuoResult {
+pub unsafe extern "C" fn duo_model_get_info(
+    model: *const DuoModel,
+    out_info: *mut DuoModelInfo,
+) -> DuoResult {
     guard("duo_model_get_info", || {
         // SAFETY: caller contract.
         let m = unsafe { model.as_ref() }.ok_or_else(|| Failure::null("model"))?;
@@ -315,6 +381,21 @@ pub unsafe extern "C" fn duo_model_get_info(model: *const DuoModel, out_info: *m
                     family: Family::Bailando as u32,
                 }
             }
+            AnyModel::Transflower(model) => {
+                let cfg = &model.cfg;
+                let last = &cfg.inputs()[cfg.inputs().len() - 1];
+                DuoModelInfo {
+                    joints: 0,
+                    music_features: if last.is_discrete() { 0 } else { last.dim },
+                    fps: duolando_core::transflower::config::FPS,
+                    frames_per_token: 1,
+                    block_size: cfg.max_window() as u32,
+                    look_forward: duolando_core::transflower::session::lookahead_rows(cfg).max(0)
+                        as u32,
+                    mapped: m.is_mapped() as u32,
+                    family: Family::Transflower as u32,
+                }
+            }
         };
         // SAFETY: checked non-NULL.
         unsafe { *out_info = info };
@@ -328,14 +409,20 @@ pub(crate) mod tests {
     use std::ptr;
 
     pub fn fixture_path() -> String {
-        format!("{}/../tests/fixtures/tiny/model.duo", env!("CARGO_MANIFEST_DIR"))
+        format!(
+            "{}/../tests/fixtures/tiny/model.duo",
+            env!("CARGO_MANIFEST_DIR")
+        )
     }
 
     pub fn open_fixture() -> *mut DuoModel {
         // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         let p = std::ffi::CString::new(fixture_path()).unwrap();
         let mut m = ptr::null_mut();
-        assert_eq!(unsafe { duo_model_open_file(p.as_ptr(), &mut m) }, DuoResult::Ok);
+        assert_eq!(
+            unsafe { duo_model_open_file(p.as_ptr(), &mut m) },
+            DuoResult::Ok
+        );
         assert!(!m.is_null());
         m
     }
@@ -344,7 +431,10 @@ pub(crate) mod tests {
         // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
         let mut buf = vec![0 as c_char; 1024];
         unsafe { crate::result::duo_last_error_message(buf.as_mut_ptr(), buf.len()) };
-        unsafe { CStr::from_ptr(buf.as_ptr()) }.to_str().unwrap().to_string()
+        unsafe { CStr::from_ptr(buf.as_ptr()) }
+            .to_str()
+            .unwrap()
+            .to_string()
     }
 
     #[test]
@@ -353,12 +443,18 @@ pub(crate) mod tests {
         let m = open_fixture();
         let mut info = DuoModelInfo::default();
         assert_eq!(unsafe { duo_model_get_info(m, &mut info) }, DuoResult::Ok);
-        assert_eq!((info.joints, info.fps, info.frames_per_token, info.mapped), (55, 30, 4, 1));
+        assert_eq!(
+            (info.joints, info.fps, info.frames_per_token, info.mapped),
+            (55, 30, 4, 1)
+        );
         unsafe { duo_model_free(m) };
 
         let bytes = std::fs::read(fixture_path()).unwrap();
         let mut c = ptr::null_mut();
-        assert_eq!(unsafe { duo_model_open_copy(bytes.as_ptr(), bytes.len(), &mut c) }, DuoResult::Ok);
+        assert_eq!(
+            unsafe { duo_model_open_copy(bytes.as_ptr(), bytes.len(), &mut c) },
+            DuoResult::Ok
+        );
         let mut info2 = DuoModelInfo::default();
         assert_eq!(unsafe { duo_model_get_info(c, &mut info2) }, DuoResult::Ok);
         assert_eq!(info2, DuoModelInfo { mapped: 0, ..info });
@@ -366,7 +462,10 @@ pub(crate) mod tests {
 
         let aligned = AlignedBytes::copy_from(&bytes);
         let mut b = ptr::null_mut();
-        assert_eq!(unsafe { duo_model_open_bytes(aligned.as_bytes().as_ptr(), aligned.len(), &mut b) }, DuoResult::Ok);
+        assert_eq!(
+            unsafe { duo_model_open_bytes(aligned.as_bytes().as_ptr(), aligned.len(), &mut b) },
+            DuoResult::Ok
+        );
         unsafe { duo_model_free(b) };
     }
 
@@ -385,22 +484,45 @@ pub(crate) mod tests {
         assert!(last().contains("not 64-byte aligned"), "{}", last());
         assert_eq!(m, sentinel);
         // Truncated.
-        let r = unsafe { duo_model_open_bytes(aligned.as_bytes().as_ptr(), bytes.len() / 2, &mut m) };
+        let r =
+            unsafe { duo_model_open_bytes(aligned.as_bytes().as_ptr(), bytes.len() / 2, &mut m) };
         assert_eq!(r, DuoResult::BadModel);
         assert_eq!(m, sentinel);
         let r = unsafe { duo_model_open_copy(bytes.as_ptr(), 100, &mut m) };
         assert_eq!(r, DuoResult::BadModel);
-        assert!(last().starts_with("duo_model_open_copy: <memory>: invalid .duo model"), "{}", last());
+        assert!(
+            last().starts_with("duo_model_open_copy: <memory>: invalid .duo model"),
+            "{}",
+            last()
+        );
         // Empty and NULL.
-        assert_eq!(unsafe { duo_model_open_bytes(ptr::null(), 0, &mut m) }, DuoResult::BadModel);
-        assert_eq!(unsafe { duo_model_open_bytes(ptr::null(), 10, &mut m) }, DuoResult::NullParameter);
-        assert_eq!(unsafe { duo_model_open_bytes(aligned.as_bytes().as_ptr(), 10, ptr::null_mut()) }, DuoResult::NullParameter);
-        assert_eq!(unsafe { duo_model_open_file(ptr::null(), &mut m) }, DuoResult::NullParameter);
+        assert_eq!(
+            unsafe { duo_model_open_bytes(ptr::null(), 0, &mut m) },
+            DuoResult::BadModel
+        );
+        assert_eq!(
+            unsafe { duo_model_open_bytes(ptr::null(), 10, &mut m) },
+            DuoResult::NullParameter
+        );
+        assert_eq!(
+            unsafe { duo_model_open_bytes(aligned.as_bytes().as_ptr(), 10, ptr::null_mut()) },
+            DuoResult::NullParameter
+        );
+        assert_eq!(
+            unsafe { duo_model_open_file(ptr::null(), &mut m) },
+            DuoResult::NullParameter
+        );
         let missing = c"/nonexistent/model.duo";
-        assert_eq!(unsafe { duo_model_open_file(missing.as_ptr(), &mut m) }, DuoResult::Io);
+        assert_eq!(
+            unsafe { duo_model_open_file(missing.as_ptr(), &mut m) },
+            DuoResult::Io
+        );
         assert!(last().contains("/nonexistent/model.duo"), "{}", last());
         assert_eq!(m, sentinel);
-        assert_eq!(unsafe { duo_model_get_info(ptr::null(), &mut DuoModelInfo::default()) }, DuoResult::NullParameter);
+        assert_eq!(
+            unsafe { duo_model_get_info(ptr::null(), &mut DuoModelInfo::default()) },
+            DuoResult::NullParameter
+        );
         unsafe { duo_model_free(ptr::null_mut()) };
     }
 }

@@ -83,7 +83,10 @@ pub struct Failure {
 
 impl Failure {
     pub fn new(code: DuoResult, message: impl Into<String>) -> Self {
-        Failure { code, message: message.into() }
+        Failure {
+            code,
+            message: message.into(),
+        }
     }
     pub fn null(what: &str) -> Self {
         Failure::new(DuoResult::NullParameter, format!("{what} is NULL"))
@@ -162,7 +165,10 @@ where
             // Formatting may itself panic (out of memory is an abort, not a
             // panic); keep the boundary airtight.
             let _ = catch_unwind(AssertUnwindSafe(|| {
-                set_last_error(&format!("{what}: panic inside duolando: {}", panic_message(&*payload)))
+                set_last_error(&format!(
+                    "{what}: panic inside duolando: {}",
+                    panic_message(&*payload)
+                ))
             }));
             DuoResult::Panic
         }
@@ -240,15 +246,24 @@ mod tests {
         let mut buf = vec![0 as c_char; n + 1];
         let m = unsafe { duo_last_error_message(buf.as_mut_ptr(), buf.len()) };
         assert_eq!(m, n);
-        unsafe { std::ffi::CStr::from_ptr(buf.as_ptr()) }.to_str().unwrap().to_string()
+        unsafe { std::ffi::CStr::from_ptr(buf.as_ptr()) }
+            .to_str()
+            .unwrap()
+            .to_string()
     }
 
     #[test]
     fn guard_maps_failures_and_panics() {
         assert_eq!(guard("f", || Ok(DuoResult::Ok)), DuoResult::Ok);
-        assert_eq!(guard("f", || Err(Failure::null("out"))), DuoResult::NullParameter);
+        assert_eq!(
+            guard("f", || Err(Failure::null("out"))),
+            DuoResult::NullParameter
+        );
         assert_eq!(last(), "f: out is NULL");
-        assert_eq!(guard("g", || -> Result<DuoResult, Failure> { panic!("boom") }), DuoResult::Panic);
+        assert_eq!(
+            guard("g", || -> Result<DuoResult, Failure> { panic!("boom") }),
+            DuoResult::Panic
+        );
         assert_eq!(last(), "g: panic inside duolando: boom");
         // Success leaves the message.
         assert_eq!(guard("h", || Ok(DuoResult::Ok)), DuoResult::Ok);
@@ -269,9 +284,14 @@ mod tests {
         assert_eq!(n0, n);
         assert_eq!(buf[0] as u8, b'h');
         // Messages are per thread.
-        std::thread::spawn(|| assert_eq!(unsafe { duo_last_error_message(std::ptr::null_mut(), 0) }, 0))
-            .join()
-            .unwrap();
+        std::thread::spawn(|| {
+            assert_eq!(
+                unsafe { duo_last_error_message(std::ptr::null_mut(), 0) },
+                0
+            )
+        })
+        .join()
+        .unwrap();
     }
 
     #[test]

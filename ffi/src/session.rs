@@ -17,14 +17,19 @@
 use std::sync::Arc;
 
 use duolando_core::bailando::exact::MusicPadding;
-use duolando_core::bailando::session::{Preset as SoloPreset, Session as SoloSession, SessionConfig as SoloConfig};
+use duolando_core::bailando::session::{
+    Preset as SoloPreset, Session as SoloSession, SessionConfig as SoloConfig,
+};
 use duolando_core::duolando::config::{N_JOINTS, POSE_DIM};
-use duolando_core::duolando::session::{CacheSchedule, FollowerFrame, KvType, Preset, Sampling, Session, SessionConfig, StepDims};
+use duolando_core::duolando::session::{
+    CacheSchedule, FollowerFrame, KvType, Preset, Sampling, Session, SessionConfig, StepDims,
+};
 
 use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
 use crate::handle::{buffer, buffer_mut, caller_slot, drop_handle, handle_bytes};
-use crate::model::{share, AnyModel, DuoModel, ModelInner};
+use crate::model::{share, transflower_refusal, AnyModel, DuoModel, ModelInner};
 use crate::result::{guard, DuoResult, Failure};
+use duolando_core::transflower::session::Session as TfSession;
 
 /// Largest accepted |coordinate| of a leader joint, metres
 /// (`DUO_MAX_POSITION_M`).
@@ -101,7 +106,11 @@ impl DuoSessionConfig {
             0 => CacheSchedule::Reprefill,
             1 => CacheSchedule::Staggered,
             2 => CacheSchedule::Spread,
-            v => return Err(Failure::invalid(format!("config.staggered is {v}, not 0, 1 or 2"))),
+            v => {
+                return Err(Failure::invalid(format!(
+                    "config.staggered is {v}, not 0, 1 or 2"
+                )))
+            }
         };
         Ok(SessionConfig {
             lookahead: self.lookahead,
@@ -139,7 +148,11 @@ impl DuoSessionConfig {
             music_buffer_frames: c.music_buffer_rows,
             sampling,
             top_k,
-            staggered: if c.schedule == CacheSchedule::Spread { 2 } else { 0 },
+            staggered: if c.schedule == CacheSchedule::Spread {
+                2
+            } else {
+                0
+            },
             kv: match c.kv {
                 KvType::F32 => KV_F32,
                 KvType::F16 => KV_F16,
@@ -153,7 +166,13 @@ impl DuoSessionConfig {
     /// pending_frames, music_buffer_frames = music rows, sampling, top_k,
     /// kv, rng_seed); the others must be 0 (refused by name).
     fn to_solo(self) -> Result<SoloConfig, Failure> {
-        for (v, name) in [(self.lookahead, "lookahead"), (self.enc_future, "enc_future"), (self.music_lookahead, "music_lookahead"), (self.lat_past, "lat_past"), (if self.staggered == 1 { 1 } else { 0 }, "staggered")] {
+        for (v, name) in [
+            (self.lookahead, "lookahead"),
+            (self.enc_future, "enc_future"),
+            (self.music_lookahead, "music_lookahead"),
+            (self.lat_past, "lat_past"),
+            (if self.staggered == 1 { 1 } else { 0 }, "staggered"),
+        ] {
             if v != 0 {
                 return Err(Failure::invalid(format!(
                     "config.{name} is {v}: a Bailando model (a solo dancer) has no {name}; leave it 0 (start from duo_session_config_preset)"
@@ -166,19 +185,38 @@ impl DuoSessionConfig {
             2 => CacheSchedule::Spread,
             v => return Err(Failure::invalid(format!("config.staggered is {v}: a Bailando model takes 0 (one cache) or 2 (two caches, spread)"))),
         };
-        Ok(SoloConfig { dec_future: self.dec_future, shift: self.shift, sampling: d.0, pending_frames: self.pending_frames, music_buffer_rows: self.music_buffer_frames, kv: d.1, schedule })
+        Ok(SoloConfig {
+            dec_future: self.dec_future,
+            shift: self.shift,
+            sampling: d.0,
+            pending_frames: self.pending_frames,
+            music_buffer_rows: self.music_buffer_frames,
+            kv: d.1,
+            schedule,
+        })
     }
 
     fn to_core_fields(self) -> Result<(Sampling, KvType), Failure> {
         let sampling = match self.sampling {
             SAMPLING_GREEDY => Sampling::Greedy,
-            SAMPLING_TOP_K => Sampling::TopK { k: self.top_k, rng_seed: self.rng_seed },
-            s => return Err(Failure::invalid(format!("config.sampling {s} is not a duo_sampling value (0 greedy, 1 top-k)"))),
+            SAMPLING_TOP_K => Sampling::TopK {
+                k: self.top_k,
+                rng_seed: self.rng_seed,
+            },
+            s => {
+                return Err(Failure::invalid(format!(
+                    "config.sampling {s} is not a duo_sampling value (0 greedy, 1 top-k)"
+                )))
+            }
         };
         let kv = match self.kv {
             KV_F32 => KvType::F32,
             KV_F16 => KvType::F16,
-            k => return Err(Failure::invalid(format!("config.kv {k} is not a duo_kv value (0 f32, 1 f16)"))),
+            k => {
+                return Err(Failure::invalid(format!(
+                    "config.kv {k} is not a duo_kv value (0 f32, 1 f16)"
+                )))
+            }
         };
         Ok((sampling, kv))
     }
@@ -200,6 +238,7 @@ pub(crate) enum AnySession {
         dims: StepDims,
     },
     Bailando(SoloSession<'static>),
+    Transflower(TfSession<'static>),
 }
 
 /// What a `duo_session *` points to.
@@ -215,11 +254,27 @@ pub struct SessionInner {
 }
 
 impl SessionInner {
+    /// A session in library memory: `session` borrows `arena` and `model`'s
+    /// weights, both kept here (and dropped after it).
+    pub(crate) fn owned(
+        session: AnySession,
+        model: Arc<ModelInner>,
+        arena: Box<[u8]>,
+    ) -> Box<SessionInner> {
+        Box::new(SessionInner {
+            session,
+            model,
+            _arena: Some(arena),
+            in_caller_memory: false,
+        })
+    }
+
     /// The Duolando session, or a refusal naming the solo family for `what`.
     pub(crate) fn duolando(&mut self, what: &str) -> Result<&mut Session<'static>, Failure> {
         match &mut self.session {
             AnySession::Duolando { session, .. } => Ok(session),
             AnySession::Bailando(_) => Err(solo_refusal(what)),
+            AnySession::Transflower(_) => Err(transflower_refusal(what)),
         }
     }
 }
@@ -239,7 +294,10 @@ pub(crate) fn model_ref<'x>(model: *const DuoModel) -> Result<&'x ModelInner, Fa
     unsafe { model.as_ref() }.ok_or_else(|| Failure::null("model"))
 }
 
-pub(crate) fn config_ref(model: &ModelInner, config: *const DuoSessionConfig) -> Result<SessionConfig, Failure> {
+pub(crate) fn config_ref(
+    model: &ModelInner,
+    config: *const DuoSessionConfig,
+) -> Result<SessionConfig, Failure> {
     let m = model.duolando("a step batch")?;
     // SAFETY: NULL or a valid struct (contract).
     let c = unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
@@ -250,7 +308,10 @@ pub(crate) fn config_ref(model: &ModelInner, config: *const DuoSessionConfig) ->
 }
 
 /// The configuration for a session of `model`'s family, checked.
-pub(crate) fn any_config_ref(model: &ModelInner, config: *const DuoSessionConfig) -> Result<AnyConfig, Failure> {
+pub(crate) fn any_config_ref(
+    model: &ModelInner,
+    config: *const DuoSessionConfig,
+) -> Result<AnyConfig, Failure> {
     // SAFETY: NULL or a valid struct (contract).
     let c = unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
     match model.any() {
@@ -264,6 +325,7 @@ pub(crate) fn any_config_ref(model: &ModelInner, config: *const DuoSessionConfig
             m.session_bytes(&core)?;
             Ok(AnyConfig::Bailando(core))
         }
+        AnyModel::Transflower(_) => Err(transflower_refusal("duo_session_config")),
     }
 }
 
@@ -290,7 +352,10 @@ fn any_seed_ref(model: &ModelInner, seed: *const u32) -> Result<AnySeed, Failure
     Ok(match model.any() {
         AnyModel::Duolando(_) => AnySeed::Duolando(seed_ref(seed)?),
         // SAFETY: the contract: 2 readable u32 for a Bailando model.
-        AnyModel::Bailando(_) => AnySeed::Bailando(unsafe { std::ptr::read_unaligned(seed.cast::<[u32; 2]>()) }),
+        AnyModel::Bailando(_) => {
+            AnySeed::Bailando(unsafe { std::ptr::read_unaligned(seed.cast::<[u32; 2]>()) })
+        }
+        AnyModel::Transflower(_) => return Err(transflower_refusal("seed_tokens")),
     })
 }
 
@@ -302,7 +367,7 @@ fn seed_ref(seed: *const u32) -> Result<[u32; 5], Failure> {
     Ok(unsafe { std::ptr::read_unaligned(seed.cast::<[u32; 5]>()) })
 }
 
-fn session_mut<'x>(session: *mut DuoSession) -> Result<&'x mut SessionInner, Failure> {
+pub(crate) fn session_mut<'x>(session: *mut DuoSession) -> Result<&'x mut SessionInner, Failure> {
     // SAFETY: NULL or a live handle used by one thread at a time (contract).
     unsafe { session.as_mut() }.ok_or_else(|| Failure::null("session"))
 }
@@ -312,7 +377,11 @@ fn session_mut<'x>(session: *mut DuoSession) -> Result<&'x mut SessionInner, Fai
 /// # Safety
 /// `model` NULL or a live handle; `out` NULL or writable (the contract of
 /// the two public entry points below).
-unsafe fn config_default(model: *const DuoModel, out: *mut DuoSessionConfig, reference: bool) -> Result<DuoResult, Failure> {
+unsafe fn config_default(
+    model: *const DuoModel,
+    out: *mut DuoSessionConfig,
+    reference: bool,
+) -> Result<DuoResult, Failure> {
     let m = model_ref(model)?;
     if out.is_null() {
         return Err(Failure::null("out_config"));
@@ -320,9 +389,27 @@ unsafe fn config_default(model: *const DuoModel, out: *mut DuoSessionConfig, ref
     let c = match m.any() {
         AnyModel::Duolando(model) => {
             let cfg = model.config();
-            AnyConfig::Duolando(if reference { SessionConfig::reference(cfg) } else { SessionConfig::minimum(cfg) })
+            AnyConfig::Duolando(if reference {
+                SessionConfig::reference(cfg)
+            } else {
+                SessionConfig::minimum(cfg)
+            })
         }
-        AnyModel::Bailando(model) => AnyConfig::Bailando(SoloConfig::preset(&model.cfg, if reference { SoloPreset::Reference } else { SoloPreset::Minimum })),
+        AnyModel::Bailando(model) => AnyConfig::Bailando(SoloConfig::preset(
+            &model.cfg,
+            if reference {
+                SoloPreset::Reference
+            } else {
+                SoloPreset::Minimum
+            },
+        )),
+        AnyModel::Transflower(_) => {
+            return Err(transflower_refusal(if reference {
+                "duo_session_config_reference"
+            } else {
+                "duo_session_config_minimum"
+            }))
+        }
     };
     // SAFETY: checked non-NULL.
     unsafe { *out = DuoSessionConfig::from_any(&c) };
@@ -335,9 +422,14 @@ unsafe fn config_default(model: *const DuoModel, out: *mut DuoSessionConfig, ref
 /// # Safety
 /// `model` NULL or live; `out_config` NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_config_reference(model: *const DuoModel, out_config: *mut DuoSessionConfig) -> DuoResult {
+pub unsafe extern "C" fn duo_session_config_reference(
+    model: *const DuoModel,
+    out_config: *mut DuoSessionConfig,
+) -> DuoResult {
     // SAFETY: the caller's contract above is `config_default`'s.
-    guard("duo_session_config_reference", || unsafe { config_default(model, out_config, true) })
+    guard("duo_session_config_reference", || unsafe {
+        config_default(model, out_config, true)
+    })
 }
 
 /// The lowest-latency configuration (no leader look-ahead, no encoder or
@@ -346,9 +438,14 @@ pub unsafe extern "C" fn duo_session_config_reference(model: *const DuoModel, ou
 /// # Safety
 /// `model` NULL or live; `out_config` NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_config_minimum(model: *const DuoModel, out_config: *mut DuoSessionConfig) -> DuoResult {
+pub unsafe extern "C" fn duo_session_config_minimum(
+    model: *const DuoModel,
+    out_config: *mut DuoSessionConfig,
+) -> DuoResult {
     // SAFETY: the caller's contract above is `config_default`'s.
-    guard("duo_session_config_minimum", || unsafe { config_default(model, out_config, false) })
+    guard("duo_session_config_minimum", || unsafe {
+        config_default(model, out_config, false)
+    })
 }
 
 /// The named preset `name` (NUL-terminated: "reference", "interactive",
@@ -359,7 +456,11 @@ pub unsafe extern "C" fn duo_session_config_minimum(model: *const DuoModel, out_
 /// `model` NULL or live; `name` NULL or a NUL-terminated string;
 /// `out_config` NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_config_preset(model: *const DuoModel, name: *const std::ffi::c_char, out_config: *mut DuoSessionConfig) -> DuoResult {
+pub unsafe extern "C" fn duo_session_config_preset(
+    model: *const DuoModel,
+    name: *const std::ffi::c_char,
+    out_config: *mut DuoSessionConfig,
+) -> DuoResult {
     guard("duo_session_config_preset", || {
         let m = model_ref(model)?;
         if name.is_null() {
@@ -373,13 +474,28 @@ pub unsafe extern "C" fn duo_session_config_preset(model: *const DuoModel, name:
         let c = match m.any() {
             AnyModel::Duolando(model) => {
                 let names: Vec<&str> = Preset::ALL.iter().map(|p| p.name()).collect();
-                let p = Preset::from_name(&n).ok_or_else(|| Failure::invalid(format!("no preset named '{n}' for a Duolando model (presets: {})", names.join(", "))))?;
+                let p = Preset::from_name(&n).ok_or_else(|| {
+                    Failure::invalid(format!(
+                        "no preset named '{n}' for a Duolando model (presets: {})",
+                        names.join(", ")
+                    ))
+                })?;
                 AnyConfig::Duolando(SessionConfig::preset(model.config(), p))
             }
             AnyModel::Bailando(model) => {
                 let names: Vec<&str> = SoloPreset::ALL.iter().map(|p| p.name()).collect();
-                let p = SoloPreset::from_name(&n).ok_or_else(|| Failure::invalid(format!("no preset named '{n}' for a Bailando model (presets: {})", names.join(", "))))?;
+                let p = SoloPreset::from_name(&n).ok_or_else(|| {
+                    Failure::invalid(format!(
+                        "no preset named '{n}' for a Bailando model (presets: {})",
+                        names.join(", ")
+                    ))
+                })?;
                 AnyConfig::Bailando(SoloConfig::preset(&model.cfg, p))
+            }
+            AnyModel::Transflower(_) => {
+                return Err(transflower_refusal(
+                    "duo_session_config_preset (Transflower: duo_transflower_config_preset)",
+                ))
             }
         };
         // SAFETY: checked non-NULL.
@@ -396,7 +512,11 @@ const HANDLE_BYTES: usize = handle_bytes::<SessionInner>();
 /// # Safety
 /// Pointers NULL or valid.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_bytes(model: *const DuoModel, config: *const DuoSessionConfig, out_bytes: *mut usize) -> DuoResult {
+pub unsafe extern "C" fn duo_session_bytes(
+    model: *const DuoModel,
+    config: *const DuoSessionConfig,
+    out_bytes: *mut usize,
+) -> DuoResult {
     guard("duo_session_bytes", || {
         let m = model_ref(model)?;
         let cfg = any_config_ref(m, config)?;
@@ -404,7 +524,9 @@ pub unsafe extern "C" fn duo_session_bytes(model: *const DuoModel, config: *cons
             return Err(Failure::null("out_bytes"));
         }
         let n = any_session_bytes(m, &cfg)?;
-        let total = n.checked_add(HANDLE_BYTES).ok_or_else(|| Failure::invalid("session size overflows size_t"))?;
+        let total = n
+            .checked_add(HANDLE_BYTES)
+            .ok_or_else(|| Failure::invalid("session size overflows size_t"))?;
         // SAFETY: checked non-NULL.
         unsafe { *out_bytes = total };
         Ok(DuoResult::Ok)
@@ -413,16 +535,26 @@ pub unsafe extern "C" fn duo_session_bytes(model: *const DuoModel, config: *cons
 
 /// Builds the core session over `arena` (which must outlive it: the
 /// caller of this function guarantees it).
-fn start(model: &Arc<ModelInner>, arena: &'static mut [u8], cfg: &AnyConfig, seed: AnySeed) -> Result<AnySession, Failure> {
+fn start(
+    model: &Arc<ModelInner>,
+    arena: &'static mut [u8],
+    cfg: &AnyConfig,
+    seed: AnySeed,
+) -> Result<AnySession, Failure> {
     // SAFETY: the model lives in the Arc, which the SessionInner keeps
     // (and drops after the session).
     let m: &'static ModelInner = unsafe { &*Arc::as_ptr(model) };
     Ok(match (m.any(), cfg, seed) {
         (AnyModel::Duolando(model), AnyConfig::Duolando(c), AnySeed::Duolando(seed)) => {
             let dims = StepDims::new(model.config(), c, 1).map_err(duolando_core::Error::Arena)?;
-            AnySession::Duolando { session: Session::new(model, arena, c, seed)?, dims }
+            AnySession::Duolando {
+                session: Session::new(model, arena, c, seed)?,
+                dims,
+            }
         }
-        (AnyModel::Bailando(model), AnyConfig::Bailando(c), AnySeed::Bailando(seed)) => AnySession::Bailando(SoloSession::new(model, arena, c, seed)?),
+        (AnyModel::Bailando(model), AnyConfig::Bailando(c), AnySeed::Bailando(seed)) => {
+            AnySession::Bailando(SoloSession::new(model, arena, c, seed)?)
+        }
         _ => return Err(Failure::invalid("configuration or seed of another family")),
     })
 }
@@ -450,11 +582,17 @@ pub unsafe extern "C" fn duo_session_new(
         let mut arena = vec![0u8; n].into_boxed_slice();
         // SAFETY: the boxed bytes stay at one address until the
         // SessionInner drops them, after the session.
-        let bytes: &'static mut [u8] = unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
+        let bytes: &'static mut [u8] =
+            unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
         // SAFETY: `model` is a live handle (contract).
         let arc = unsafe { share(model) };
         let session = start(&arc, bytes, &cfg, seed)?;
-        let inner = Box::new(SessionInner { session, model: arc, _arena: Some(arena), in_caller_memory: false });
+        let inner = Box::new(SessionInner {
+            session,
+            model: arc,
+            _arena: Some(arena),
+            in_caller_memory: false,
+        });
         // SAFETY: checked non-NULL.
         unsafe { *out_session = Box::into_raw(inner) };
         Ok(DuoResult::Ok)
@@ -492,7 +630,12 @@ pub unsafe extern "C" fn duo_session_new_in(
         let session = start(&arc, arena, &cfg, seed)?;
         // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
         unsafe {
-            slot.write(SessionInner { session, model: arc, _arena: None, in_caller_memory: true });
+            slot.write(SessionInner {
+                session,
+                model: arc,
+                _arena: None,
+                in_caller_memory: true,
+            });
             *out_session = slot;
         }
         Ok(DuoResult::Ok)
@@ -521,7 +664,10 @@ pub unsafe extern "C" fn duo_session_free(session: *mut DuoSession) {
 /// # Safety
 /// Pointers NULL or valid.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_latency_frames(session: *const DuoSession, out_frames: *mut u32) -> DuoResult {
+pub unsafe extern "C" fn duo_session_latency_frames(
+    session: *const DuoSession,
+    out_frames: *mut u32,
+) -> DuoResult {
     guard("duo_session_latency_frames", || {
         // SAFETY: NULL or live (contract).
         let s = unsafe { session.as_ref() }.ok_or_else(|| Failure::null("session"))?;
@@ -532,6 +678,7 @@ pub unsafe extern "C" fn duo_session_latency_frames(session: *const DuoSession, 
         let frames = match &s.session {
             AnySession::Duolando { session, .. } => session.latency_frames(),
             AnySession::Bailando(session) => session.latency_frames(),
+            AnySession::Transflower(_) => return Err(transflower_refusal("duo_session_latency_frames (Transflower: duo_transflower_get_info's lookahead_rows)")),
         };
         // SAFETY: checked non-NULL.
         unsafe { *out_frames = frames };
@@ -541,14 +688,19 @@ pub unsafe extern "C" fn duo_session_latency_frames(session: *const DuoSession, 
 
 /// Index and value of the first value that is non-finite or above `limit`.
 fn first_bad(x: &[f32], limit: f32) -> Option<(usize, f32)> {
-    x.iter().position(|v| !v.is_finite() || v.abs() > limit).map(|i| (i, x[i]))
+    x.iter()
+        .position(|v| !v.is_finite() || v.abs() > limit)
+        .map(|i| (i, x[i]))
 }
 
 /// A core refusal, with the offending value in the message when core
 /// refused a value of `x` (non-finite or above `limit`).
 fn rejected_value(e: duolando_core::Error, x: &[f32], what: &str, limit: f32) -> Failure {
     match e {
-        duolando_core::Error::NonFinite { index, .. } | duolando_core::Error::OutOfRange { index, .. } if index < x.len() => {
+        duolando_core::Error::NonFinite { index, .. }
+        | duolando_core::Error::OutOfRange { index, .. }
+            if index < x.len() =>
+        {
             reject(what, index, x[index], limit, "")
         }
         e => e.into(),
@@ -580,12 +732,16 @@ pub(crate) fn leader_pos3d(f: &DuoLeaderFrame) -> Result<&[f32; POSE_DIM], Failu
 /// # Safety
 /// `session` NULL or live (one thread at a time); `frame` NULL or valid.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_push_leader(session: *mut DuoSession, frame: *const DuoLeaderFrame) -> DuoResult {
+pub unsafe extern "C" fn duo_session_push_leader(
+    session: *mut DuoSession,
+    frame: *const DuoLeaderFrame,
+) -> DuoResult {
     guard("duo_session_push_leader", || {
         let s = session_mut(session)?;
         // SAFETY: NULL or valid (contract).
         let f = unsafe { frame.as_ref() }.ok_or_else(|| Failure::null("frame"))?;
-        s.duolando("duo_session_push_leader")?.push_leader_frame(leader_pos3d(f)?)?;
+        s.duolando("duo_session_push_leader")?
+            .push_leader_frame(leader_pos3d(f)?)?;
         Ok(DuoResult::Ok)
     })
 }
@@ -609,9 +765,14 @@ pub unsafe extern "C" fn duo_session_finish(session: *mut DuoSession) -> DuoResu
             AnySession::Bailando(session) => match session.finish(MusicPadding::Demo) {
                 Ok(()) | Err(duolando_core::Error::State) if session.music_rows() > 0 => {}
                 Ok(()) => {}
-                Err(duolando_core::Error::State) => return Err(Failure::invalid("duo_session_finish before any music row: a solo dance needs music")),
+                Err(duolando_core::Error::State) => {
+                    return Err(Failure::invalid(
+                        "duo_session_finish before any music row: a solo dance needs music",
+                    ))
+                }
                 Err(e) => return Err(e.into()),
             },
+            AnySession::Transflower(_) => return Err(transflower_refusal("duo_session_finish (a Transflower session has nothing to drain: each frame is final when its step runs)")),
         }
         Ok(DuoResult::Ok)
     })
@@ -622,7 +783,11 @@ pub unsafe extern "C" fn duo_session_finish(session: *mut DuoSession) -> DuoResu
 /// # Safety
 /// `session` NULL or live; `features` NULL or `n_features` readable floats.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_push_music(session: *mut DuoSession, features: *const f32, n_features: usize) -> DuoResult {
+pub unsafe extern "C" fn duo_session_push_music(
+    session: *mut DuoSession,
+    features: *const f32,
+    n_features: usize,
+) -> DuoResult {
     guard("duo_session_push_music", || {
         let s = session_mut(session)?;
         // SAFETY: NULL or `n_features` readable floats (contract).
@@ -632,6 +797,7 @@ pub unsafe extern "C" fn duo_session_push_music(session: *mut DuoSession, featur
         match &mut s.session {
             AnySession::Duolando { session, .. } => session.push_music_frame(x),
             AnySession::Bailando(session) => session.push_music(x),
+            AnySession::Transflower(session) => crate::transflower::push_audio(session, x),
         }
         .map_err(|e| rejected_value(e, x, "music frame", MAX_MUSIC_FEATURE))?;
         Ok(DuoResult::Ok)
@@ -645,7 +811,11 @@ pub unsafe extern "C" fn duo_session_push_music(session: *mut DuoSession, featur
 /// `session` NULL or live; `track` NULL or `n_floats` readable floats that
 /// stay valid and unmodified until the session is reset or freed.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_set_music_track(session: *mut DuoSession, track: *const f32, n_floats: usize) -> DuoResult {
+pub unsafe extern "C" fn duo_session_set_music_track(
+    session: *mut DuoSession,
+    track: *const f32,
+    n_floats: usize,
+) -> DuoResult {
     guard("duo_session_set_music_track", || {
         let s = session_mut(session)?;
         // SAFETY: NULL or `n_floats` readable floats valid until reset/free,
@@ -660,9 +830,16 @@ pub unsafe extern "C" fn duo_session_set_music_track(session: *mut DuoSession, t
             }
             AnySession::Bailando(session) => {
                 if session.music_rows() > 0 {
-                    return Err(Failure::invalid("music already given: a track goes before any music row"));
+                    return Err(Failure::invalid(
+                        "music already given: a track goes before any music row",
+                    ));
                 }
                 session.push_music(x)
+            }
+            AnySession::Transflower(_) => {
+                return Err(transflower_refusal(
+                    "duo_session_set_music_track (push the audio rows with duo_session_push_music)",
+                ))
             }
         }
         .map_err(|e| rejected_value(e, x, "music track", MAX_MUSIC_FEATURE))?;
@@ -675,10 +852,18 @@ pub unsafe extern "C" fn duo_session_set_music_track(session: *mut DuoSession, t
 pub fn to_c_frame(f: &FollowerFrame, out: &mut DuoFollowerFrame) {
     out.index = f.index;
     for j in 0..N_JOINTS {
-        out.positions[j] = DuoVec3 { x: f.positions[3 * j], y: f.positions[3 * j + 1], z: f.positions[3 * j + 2] };
+        out.positions[j] = DuoVec3 {
+            x: f.positions[3 * j],
+            y: f.positions[3 * j + 1],
+            z: f.positions[3 * j + 2],
+        };
         out.rotations[j] = quat_of_raw(&f.rotations[9 * j..9 * j + 9]);
     }
-    out.root = DuoVec3 { x: f.root[0], y: f.root[1], z: f.root[2] };
+    out.root = DuoVec3 {
+        x: f.root[0],
+        y: f.root[1],
+        z: f.root[2],
+    };
 }
 
 /// Pulls the next follower frame: DUO_OK (written) or DUO_NOT_READY
@@ -687,14 +872,20 @@ pub fn to_c_frame(f: &FollowerFrame, out: &mut DuoFollowerFrame) {
 /// # Safety
 /// `session` NULL or live; `out_frame` NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_pull_follower(session: *mut DuoSession, out_frame: *mut DuoFollowerFrame) -> DuoResult {
+pub unsafe extern "C" fn duo_session_pull_follower(
+    session: *mut DuoSession,
+    out_frame: *mut DuoFollowerFrame,
+) -> DuoResult {
     guard("duo_session_pull_follower", || {
         let s = session_mut(session)?;
         if out_frame.is_null() {
             return Err(Failure::null("out_frame"));
         }
         let mut f = FollowerFrame::default();
-        if !s.duolando("duo_session_pull_follower")?.pull_follower_frame(&mut f)? {
+        if !s
+            .duolando("duo_session_pull_follower")?
+            .pull_follower_frame(&mut f)?
+        {
             return Ok(DuoResult::NotReady);
         }
         let mut c = DuoFollowerFrame::default();
@@ -715,22 +906,32 @@ pub unsafe extern "C" fn duo_session_pull_follower(session: *mut DuoSession, out
 /// `session` NULL or live; `out` NULL or `n_floats` writable floats;
 /// `out_index` NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_pull_positions(session: *mut DuoSession, out: *mut f32, n_floats: usize, out_index: *mut u64) -> DuoResult {
+pub unsafe extern "C" fn duo_session_pull_positions(
+    session: *mut DuoSession,
+    out: *mut f32,
+    n_floats: usize,
+    out_index: *mut u64,
+) -> DuoResult {
     guard("duo_session_pull_positions", || {
         let s = session_mut(session)?;
         let joints = match &s.session {
             AnySession::Duolando { .. } => N_JOINTS,
             AnySession::Bailando(_) => duolando_core::bailando::config::N_JOINTS,
+            AnySession::Transflower(_) => return Err(transflower_refusal("duo_session_pull_positions (its frames are motion features: duo_transflower_pull_frame)")),
         };
         // SAFETY: NULL or `n_floats` writable floats (contract); the buffer
         // rule: NULL with 0 is an empty buffer (a wrong count below).
         let dst = unsafe { buffer_mut(out.cast::<u8>(), n_floats.saturating_mul(4), "out") }?;
         if n_floats != joints * 3 {
-            return Err(Failure::invalid(format!("n_floats is {n_floats}; a frame of this model has {joints} joints x 3 = {} floats", joints * 3)));
+            return Err(Failure::invalid(format!(
+                "n_floats is {n_floats}; a frame of this model has {joints} joints x 3 = {} floats",
+                joints * 3
+            )));
         }
         // SAFETY: `dst` is `n_floats * 4` writable bytes at `out`, which the
         // caller gives as floats (aligned for f32 by the contract).
-        let dst = unsafe { std::slice::from_raw_parts_mut(dst.as_mut_ptr().cast::<f32>(), n_floats) };
+        let dst =
+            unsafe { std::slice::from_raw_parts_mut(dst.as_mut_ptr().cast::<f32>(), n_floats) };
         let index = match &mut s.session {
             AnySession::Duolando { session, .. } => {
                 let mut f = FollowerFrame::default();
@@ -750,6 +951,9 @@ pub unsafe extern "C" fn duo_session_pull_positions(session: *mut DuoSession, ou
                     None => return Ok(DuoResult::NotReady),
                 }
             }
+            AnySession::Transflower(_) => {
+                return Err(transflower_refusal("duo_session_pull_positions"))
+            }
         };
         if !out_index.is_null() {
             // SAFETY: non-NULL and writable (contract).
@@ -764,12 +968,22 @@ pub unsafe extern "C" fn duo_session_pull_positions(session: *mut DuoSession, ou
 /// # Safety
 /// `session` NULL or live; `seed_tokens` NULL or 5 readable u32.
 #[no_mangle]
-pub unsafe extern "C" fn duo_session_reset(session: *mut DuoSession, seed_tokens: *const u32) -> DuoResult {
+pub unsafe extern "C" fn duo_session_reset(
+    session: *mut DuoSession,
+    seed_tokens: *const u32,
+) -> DuoResult {
     guard("duo_session_reset", || {
         let s = session_mut(session)?;
+        if let AnySession::Transflower(_) = s.session {
+            return Err(transflower_refusal(
+                "duo_session_reset (Transflower: duo_transflower_session_reset)",
+            ));
+        }
         let seed = any_seed_ref(&s.model, seed_tokens)?;
         match (&mut s.session, seed) {
-            (AnySession::Duolando { session, .. }, AnySeed::Duolando(seed)) => session.reset(seed)?,
+            (AnySession::Duolando { session, .. }, AnySeed::Duolando(seed)) => {
+                session.reset(seed)?
+            }
             (AnySession::Bailando(session), AnySeed::Bailando(seed)) => session.reset(seed)?,
             _ => return Err(Failure::invalid("seed of another family")),
         }
@@ -796,9 +1010,16 @@ pub unsafe extern "C" fn duo_model_seed_tokens(
         if out_tokens.is_null() {
             return Err(Failure::null("out_tokens"));
         }
-        let n = n_frames.checked_mul(POSE_DIM).ok_or_else(|| Failure::invalid("n_frames too large"))?;
+        let n = n_frames
+            .checked_mul(POSE_DIM)
+            .ok_or_else(|| Failure::invalid("n_frames too large"))?;
         // SAFETY: each NULL or `n_frames * 165` readable floats (contract).
-        let (f, l) = unsafe { (buffer(follower_pos3d, n, "follower_pos3d")?, buffer(leader_pos3d, n, "leader_pos3d")?) };
+        let (f, l) = unsafe {
+            (
+                buffer(follower_pos3d, n, "follower_pos3d")?,
+                buffer(leader_pos3d, n, "leader_pos3d")?,
+            )
+        };
         for (what, x) in [("follower frames", f), ("leader frames", l)] {
             if let Some((i, v)) = first_bad(x, MAX_POSITION_M) {
                 return Err(reject(what, i, v, MAX_POSITION_M, " m"));

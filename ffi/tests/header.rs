@@ -26,11 +26,16 @@ fn strip_c_comments(text: &str) -> String {
         }
     }
     out.push_str(rest);
-    out.lines().map(|l| l.split("//").next().unwrap_or("")).collect::<Vec<_>>().join("\n")
+    out.lines()
+        .map(|l| l.split("//").next().unwrap_or(""))
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 fn ident_at(s: &str) -> &str {
-    let end = s.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).unwrap_or(s.len());
+    let end = s
+        .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .unwrap_or(s.len());
     &s[..end]
 }
 
@@ -40,7 +45,8 @@ pub fn header_functions(header: &str) -> BTreeSet<String> {
     let mut names = BTreeSet::new();
     let mut rest = code.as_str();
     while let Some(i) = rest.find("duo_") {
-        let before_ok = i == 0 || !rest.as_bytes()[i - 1].is_ascii_alphanumeric() && rest.as_bytes()[i - 1] != b'_';
+        let before_ok = i == 0
+            || !rest.as_bytes()[i - 1].is_ascii_alphanumeric() && rest.as_bytes()[i - 1] != b'_';
         let name = ident_at(&rest[i..]);
         let after = rest[i + name.len()..].trim_start();
         if before_ok && after.starts_with('(') {
@@ -88,7 +94,10 @@ fn header_declares_exactly_the_exported_functions() {
     assert!(declared.len() >= 10, "{declared:?}");
     let missing: Vec<_> = exported.difference(&declared).collect();
     let stale: Vec<_> = declared.difference(&exported).collect();
-    assert!(missing.is_empty() && stale.is_empty(), "exported but not in the header: {missing:?}; declared but not exported: {stale:?}");
+    assert!(
+        missing.is_empty() && stale.is_empty(),
+        "exported but not in the header: {missing:?}; declared but not exported: {stale:?}"
+    );
 }
 
 #[test]
@@ -109,7 +118,10 @@ fn csharp_wrapper_binds_declared_functions_only() {
     }
     assert!(!bound.is_empty());
     let unknown: Vec<_> = bound.difference(&declared).collect();
-    assert!(unknown.is_empty(), "Duolando.cs binds functions the header does not declare: {unknown:?}");
+    assert!(
+        unknown.is_empty(),
+        "Duolando.cs binds functions the header does not declare: {unknown:?}"
+    );
 }
 
 #[test]
@@ -133,7 +145,10 @@ fn header_result_codes_match() {
     .iter()
     .enumerate()
     {
-        assert!(code.contains(&format!("{name} = {i}")), "{name} = {i} not in the header");
+        assert!(
+            code.contains(&format!("{name} = {i}")),
+            "{name} = {i} not in the header"
+        );
         let s = unsafe { std::ffi::CStr::from_ptr(duolando::result::duo_result_name(i as i32)) };
         assert_eq!(s.to_str().unwrap(), *name);
     }
@@ -144,7 +159,11 @@ fn header_result_codes_match() {
 fn header_family_codes_match() {
     let h = std::fs::read_to_string(root().join("include/duolando.h")).unwrap();
     for f in duolando_core::family::Family::ALL {
-        let line = format!("#define DUO_FAMILY_{} {}u", f.name().to_uppercase(), f as u32);
+        let line = format!(
+            "#define DUO_FAMILY_{} {}u",
+            f.name().to_uppercase(),
+            f as u32
+        );
         assert!(h.contains(&line), "missing `{line}` in include/duolando.h");
     }
 }
@@ -153,6 +172,12 @@ fn header_family_codes_match() {
 #[test]
 fn header_joint_counts_match() {
     let h = std::fs::read_to_string(root().join("include/duolando.h")).unwrap();
-    assert!(h.contains(&format!("#define DUO_JOINTS {}\n", duolando_core::family::Family::Duolando.joints())));
-    assert!(h.contains(&format!("#define DUO_BAILANDO_JOINTS {}\n", duolando_core::family::Family::Bailando.joints())));
+    assert!(h.contains(&format!(
+        "#define DUO_JOINTS {}\n",
+        duolando_core::family::Family::Duolando.joints()
+    )));
+    assert!(h.contains(&format!(
+        "#define DUO_BAILANDO_JOINTS {}\n",
+        duolando_core::family::Family::Bailando.joints()
+    )));
 }

@@ -57,33 +57,60 @@ fn allocations() -> usize {
 fn pushes_pulls_and_batched_steps_allocate_nothing() {
     // SAFETY: every C entry point below is called with pointers to live locals of the documented sizes; handles come from the library and are freed once.
     let fx = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures");
-    let l = read_f32_2d(&fx.join("rollout_tiny_odd/leader_pos3d.npy"), Some(165), "leader").unwrap();
+    let l = read_f32_2d(
+        &fx.join("rollout_tiny_odd/leader_pos3d.npy"),
+        Some(165),
+        "leader",
+    )
+    .unwrap();
     let frames = l.rows / 4 * 4;
     let leader: Vec<DuoLeaderFrame> = (0..frames)
         .map(|f| {
             let mut fr = DuoLeaderFrame::default();
             for (j, v) in fr.joints.iter_mut().enumerate() {
                 let p = &l.data[f * 165 + 3 * j..];
-                *v = DuoVec3 { x: p[0], y: p[1], z: p[2] };
+                *v = DuoVec3 {
+                    x: p[0],
+                    y: p[1],
+                    z: p[2],
+                };
             }
             fr
         })
         .collect();
-    let music = read_f32_2d(&fx.join("rollout_tiny_odd/music.npy"), Some(54), "music").unwrap().data[..frames * 54].to_vec();
+    let music = read_f32_2d(&fx.join("rollout_tiny_odd/music.npy"), Some(54), "music")
+        .unwrap()
+        .data[..frames * 54]
+        .to_vec();
     let path = std::ffi::CString::new(fx.join("tiny/model.duo").to_str().unwrap()).unwrap();
     let mut m = ptr::null_mut();
-    assert_eq!(unsafe { duo_model_open_file(path.as_ptr(), &mut m) }, DuoResult::Ok);
+    assert_eq!(
+        unsafe { duo_model_open_file(path.as_ptr(), &mut m) },
+        DuoResult::Ok
+    );
     let mut c = DuoSessionConfig::default();
-    assert_eq!(unsafe { duo_session_config_minimum(m, &mut c) }, DuoResult::Ok);
+    assert_eq!(
+        unsafe { duo_session_config_minimum(m, &mut c) },
+        DuoResult::Ok
+    );
     let seed = [1u32, 2, 3, 4, 5];
     const N: usize = 3;
     let mut batch = ptr::null_mut();
-    assert_eq!(unsafe { duo_step_batch_new(m, &c, N, &mut batch) }, DuoResult::Ok);
+    assert_eq!(
+        unsafe { duo_step_batch_new(m, &c, N, &mut batch) },
+        DuoResult::Ok
+    );
     let sessions: Vec<*mut DuoSession> = (0..N)
         .map(|_| {
             let mut s = ptr::null_mut();
-            assert_eq!(unsafe { duo_session_new(m, &c, seed.as_ptr(), &mut s) }, DuoResult::Ok);
-            assert_eq!(unsafe { duo_session_set_music_track(s, music.as_ptr(), music.len()) }, DuoResult::Ok);
+            assert_eq!(
+                unsafe { duo_session_new(m, &c, seed.as_ptr(), &mut s) },
+                DuoResult::Ok
+            );
+            assert_eq!(
+                unsafe { duo_session_set_music_track(s, music.as_ptr(), music.len()) },
+                DuoResult::Ok
+            );
             s
         })
         .collect();
@@ -98,7 +125,9 @@ fn pushes_pulls_and_batched_steps_allocate_nothing() {
     let mut mark = allocations();
     for (i, row) in rows.iter().enumerate() {
         let mut failed = 0usize;
-        match unsafe { duo_step_batch_push_leader(batch, sessions.as_ptr(), row.as_ptr(), N, &mut failed) } {
+        match unsafe {
+            duo_step_batch_push_leader(batch, sessions.as_ptr(), row.as_ptr(), N, &mut failed)
+        } {
             DuoResult::Ok => {}
             DuoResult::Backlog => break,
             r => panic!("frame {i}: {r:?}"),
@@ -114,8 +143,14 @@ fn pushes_pulls_and_batched_steps_allocate_nothing() {
     // A session alone, after a reset.
     let s = sessions[0];
     mark = allocations();
-    assert_eq!(unsafe { duo_session_reset(s, seed.as_ptr()) }, DuoResult::Ok);
-    assert_eq!(unsafe { duo_session_set_music_track(s, music.as_ptr(), music.len()) }, DuoResult::Ok);
+    assert_eq!(
+        unsafe { duo_session_reset(s, seed.as_ptr()) },
+        DuoResult::Ok
+    );
+    assert_eq!(
+        unsafe { duo_session_set_music_track(s, music.as_ptr(), music.len()) },
+        DuoResult::Ok
+    );
     for frame in &leader {
         if unsafe { duo_session_push_leader(s, frame) } != DuoResult::Ok {
             break;
@@ -127,8 +162,14 @@ fn pushes_pulls_and_batched_steps_allocate_nothing() {
         mark = allocations();
     }
 
-    assert!(pulled > N * frames / 2 && alone > frames / 2, "{pulled} / {alone} frames");
-    assert_eq!(during, 0, "{during} allocations while stepping ({pulled} batched frames, {alone} alone)");
+    assert!(
+        pulled > N * frames / 2 && alone > frames / 2,
+        "{pulled} / {alone} frames"
+    );
+    assert_eq!(
+        during, 0,
+        "{during} allocations while stepping ({pulled} batched frames, {alone} alone)"
+    );
     for s in sessions {
         unsafe { duo_session_free(s) };
     }

@@ -78,7 +78,9 @@ impl Int {
     pub fn value(self) -> u64 {
         match self {
             Int::Edge(i) => INTERESTING[i as usize % INTERESTING.len()],
-            Int::EdgePlus(i, d) => INTERESTING[i as usize % INTERESTING.len()].wrapping_add(d as i64 as u64),
+            Int::EdgePlus(i, d) => {
+                INTERESTING[i as usize % INTERESTING.len()].wrapping_add(d as i64 as u64)
+            }
             Int::Raw(v) => v,
         }
     }
@@ -87,17 +89,44 @@ impl Int {
 /// One byte-level edit.
 #[derive(Arbitrary, Clone, Debug)]
 pub enum ByteMutation {
-    Flip { at: Pos, bit: u8 },
-    Set { at: Pos, value: u8 },
+    Flip {
+        at: Pos,
+        bit: u8,
+    },
+    Set {
+        at: Pos,
+        value: u8,
+    },
     /// Little-endian u32 / u64 written over the bytes at `at` (clipped at the end).
-    U32 { at: Pos, value: Int },
-    U64 { at: Pos, value: Int },
+    U32 {
+        at: Pos,
+        value: Int,
+    },
+    U64 {
+        at: Pos,
+        value: Int,
+    },
     /// A LEB128 varint (postcard's integer encoding) replacing the varint at `at`.
-    Varint { at: Pos, value: Int },
-    Truncate { at: Pos },
-    Insert { at: Pos, bytes: Vec<u8> },
-    Remove { at: Pos, len: u16 },
-    Copy { from: Pos, to: Pos, len: u16 },
+    Varint {
+        at: Pos,
+        value: Int,
+    },
+    Truncate {
+        at: Pos,
+    },
+    Insert {
+        at: Pos,
+        bytes: Vec<u8>,
+    },
+    Remove {
+        at: Pos,
+        len: u16,
+    },
+    Copy {
+        from: Pos,
+        to: Pos,
+        len: u16,
+    },
 }
 
 /// LEB128 encoding of `v` (what postcard writes for integers).
@@ -116,7 +145,10 @@ pub fn varint(mut v: u64, out: &mut Vec<u8>) {
 /// Length of the varint starting at `buf[0]` (at most 10 bytes; the rest of
 /// `buf` if it never ends).
 pub fn varint_len(buf: &[u8]) -> usize {
-    buf.iter().take(10).position(|b| b & 0x80 == 0).map_or(buf.len().min(10), |i| i + 1)
+    buf.iter()
+        .take(10)
+        .position(|b| b & 0x80 == 0)
+        .map_or(buf.len().min(10), |i| i + 1)
 }
 
 fn write_le(bytes: &mut [u8], at: usize, v: &[u8]) {

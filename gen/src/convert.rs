@@ -16,24 +16,65 @@ use crate::fixture::ConvertSources;
 
 /// Scalars YAML and the config mapping get wrong.
 pub const YAML_VALUES: [&str; 24] = [
-    "0", "-1", "1", "3", "4294967295", "4294967296", "18446744073709551616", "1e400", "-0.0", "0.5", ".nan", ".inf",
-    "~", "[]", "{}", "[1, 2", "\"a\"", "true", "&a 1", "*a", "!!binary AAAA", "0x10", "1_000", "999999999999",
+    "0",
+    "-1",
+    "1",
+    "3",
+    "4294967295",
+    "4294967296",
+    "18446744073709551616",
+    "1e400",
+    "-0.0",
+    "0.5",
+    ".nan",
+    ".inf",
+    "~",
+    "[]",
+    "{}",
+    "[1, 2",
+    "\"a\"",
+    "true",
+    "&a 1",
+    "*a",
+    "!!binary AAAA",
+    "0x10",
+    "1_000",
+    "999999999999",
 ];
 
 /// One edit of the YAML text (`line` wraps around the lines).
 #[derive(Arbitrary, Clone, Debug)]
 pub enum YamlEdit {
     /// The value after the first `:` of the line becomes a special scalar.
-    Value { line: u16, which: u8 },
+    Value {
+        line: u16,
+        which: u8,
+    },
     /// ... or an integer.
-    Int { line: u16, value: Int, neg: bool },
-    Delete { line: u16 },
-    Duplicate { line: u16 },
-    Indent { line: u16, delta: i8 },
-    Replace { line: u16, text: String },
+    Int {
+        line: u16,
+        value: Int,
+        neg: bool,
+    },
+    Delete {
+        line: u16,
+    },
+    Duplicate {
+        line: u16,
+    },
+    Indent {
+        line: u16,
+        delta: i8,
+    },
+    Replace {
+        line: u16,
+        text: String,
+    },
 }
 
-const DTYPES: [&str; 9] = ["F32", "F16", "BF16", "F64", "I64", "U8", "BOOL", "F8_E4M3", "Q"];
+const DTYPES: [&str; 9] = [
+    "F32", "F16", "BF16", "F64", "I64", "U8", "BOOL", "F8_E4M3", "Q",
+];
 
 /// One edit of a safetensors JSON header (`tensor` wraps around the entries
 /// in name order).
@@ -55,14 +96,31 @@ pub enum StEdit {
 /// A converter input.
 #[derive(Arbitrary, Clone, Debug)]
 pub enum ConvertInput {
-    Raw { yaml: String, gpt: Vec<u8>, vqvae: Vec<u8>, transl: Vec<u8>, store: u8 },
+    Raw {
+        yaml: String,
+        gpt: Vec<u8>,
+        vqvae: Vec<u8>,
+        transl: Vec<u8>,
+        store: u8,
+    },
     /// The tiny2 sources with edits; `file` picks the safetensors edited
     /// (0 gpt, 1 vqvae, 2 transl).
-    Edited { yaml: Vec<YamlEdit>, file: u8, header: Vec<StEdit>, bytes: Vec<ByteMutation>, store: u8 },
+    Edited {
+        yaml: Vec<YamlEdit>,
+        file: u8,
+        header: Vec<StEdit>,
+        bytes: Vec<ByteMutation>,
+        store: u8,
+    },
 }
 
 fn store_as(s: u8) -> StoreAs {
-    [StoreAs::F32, StoreAs::F16, StoreAs::Q8Block32, StoreAs::Q4Block32][s as usize % 4]
+    [
+        StoreAs::F32,
+        StoreAs::F16,
+        StoreAs::Q8Block32,
+        StoreAs::Q4Block32,
+    ][s as usize % 4]
 }
 
 fn line_idx(n: usize, l: u16) -> Option<usize> {
@@ -82,12 +140,17 @@ impl YamlEdit {
         match self {
             YamlEdit::Value { line, which } => {
                 if let Some(i) = line_idx(n, *line) {
-                    lines[i] = set_value(&lines[i], YAML_VALUES[*which as usize % YAML_VALUES.len()]);
+                    lines[i] =
+                        set_value(&lines[i], YAML_VALUES[*which as usize % YAML_VALUES.len()]);
                 }
             }
             YamlEdit::Int { line, value, neg } => {
                 if let Some(i) = line_idx(n, *line) {
-                    let v = if *neg { format!("-{}", value.value()) } else { value.value().to_string() };
+                    let v = if *neg {
+                        format!("-{}", value.value())
+                    } else {
+                        value.value().to_string()
+                    };
                     lines[i] = set_value(&lines[i], &v);
                 }
             }
@@ -149,7 +212,9 @@ fn num(v: u64) -> Value {
 
 impl StEdit {
     pub fn apply(&self, h: &mut serde_json::Map<String, Value>) {
-        let entry = |h: &mut serde_json::Map<String, Value>, t: u16| -> Option<(String, serde_json::Map<String, Value>)> {
+        let entry = |h: &mut serde_json::Map<String, Value>,
+                     t: u16|
+         -> Option<(String, serde_json::Map<String, Value>)> {
             let k = key_at(h, t)?;
             match h.get(&k)? {
                 Value::Object(o) => Some((k, o.clone())),
@@ -159,11 +224,18 @@ impl StEdit {
         match self {
             StEdit::Dtype { tensor, which } => {
                 if let Some((k, mut o)) = entry(h, *tensor) {
-                    o.insert("dtype".into(), Value::from(DTYPES[*which as usize % DTYPES.len()]));
+                    o.insert(
+                        "dtype".into(),
+                        Value::from(DTYPES[*which as usize % DTYPES.len()]),
+                    );
                     h.insert(k, Value::Object(o));
                 }
             }
-            StEdit::Dim { tensor, axis, value } => {
+            StEdit::Dim {
+                tensor,
+                axis,
+                value,
+            } => {
                 if let Some((k, mut o)) = entry(h, *tensor) {
                     if let Some(Value::Array(s)) = o.get_mut("shape") {
                         if !s.is_empty() {
@@ -213,7 +285,13 @@ impl StEdit {
             StEdit::Rename { tensor, suffix } => {
                 if let Some((k, o)) = entry(h, *tensor) {
                     h.remove(&k);
-                    h.insert(format!("{k}{}", ["_", ".weight", "x", ".0", ""][*suffix as usize % 5]), Value::Object(o));
+                    h.insert(
+                        format!(
+                            "{k}{}",
+                            ["_", ".weight", "x", ".0", ""][*suffix as usize % 5]
+                        ),
+                        Value::Object(o),
+                    );
                 }
             }
             StEdit::AddModulePrefix { tensor } => {
@@ -234,7 +312,10 @@ impl StEdit {
             }
             StEdit::Metadata { key, value } => {
                 let mut m = serde_json::Map::new();
-                m.insert(key.chars().take(64).collect(), Value::from(value.chars().take(64).collect::<String>()));
+                m.insert(
+                    key.chars().take(64).collect(),
+                    Value::from(value.chars().take(64).collect::<String>()),
+                );
                 h.insert("__metadata__".into(), Value::Object(m));
             }
         }
@@ -250,10 +331,24 @@ pub struct Built {
 
 pub fn build(input: &ConvertInput, base: &ConvertSources) -> Built {
     match input {
-        ConvertInput::Raw { yaml, gpt, vqvae, transl, store } => {
-            Built { yaml: yaml.clone(), files: [gpt.clone(), vqvae.clone(), transl.clone()], store: store_as(*store) }
-        }
-        ConvertInput::Edited { yaml, file, header, bytes, store } => {
+        ConvertInput::Raw {
+            yaml,
+            gpt,
+            vqvae,
+            transl,
+            store,
+        } => Built {
+            yaml: yaml.clone(),
+            files: [gpt.clone(), vqvae.clone(), transl.clone()],
+            store: store_as(*store),
+        },
+        ConvertInput::Edited {
+            yaml,
+            file,
+            header,
+            bytes,
+            store,
+        } => {
             let mut lines: Vec<String> = base.yaml.lines().map(str::to_string).collect();
             for e in yaml.iter().take(16) {
                 e.apply(&mut lines);
@@ -266,10 +361,21 @@ pub fn build(input: &ConvertInput, base: &ConvertSources) -> Built {
                     e.apply(&mut h);
                 }
                 let (mut out, header_end) = join_safetensors(&h, data);
-                apply_all(&mut out, Regions { prefix: 8, header_end }, &bytes[..bytes.len().min(16)]);
+                apply_all(
+                    &mut out,
+                    Regions {
+                        prefix: 8,
+                        header_end,
+                    },
+                    &bytes[..bytes.len().min(16)],
+                );
                 files[f] = out;
             }
-            Built { yaml: lines.join("\n"), files, store: store_as(*store) }
+            Built {
+                yaml: lines.join("\n"),
+                files,
+                store: store_as(*store),
+            }
         }
     }
 }
@@ -278,10 +384,22 @@ pub fn build(input: &ConvertInput, base: &ConvertSources) -> Built {
 /// `convert_bytes` answers without panicking; when it succeeds, its
 /// output is a `.duo` that parses and binds.
 pub fn check_convert(b: &Built) -> Result<usize, ConvertError> {
-    let (g, v, t) = (Path::new("gpt.safetensors"), Path::new("vqvae.safetensors"), Path::new("transl.safetensors"));
-    let sources = Sources { gpt: (g, &b.files[0]), vqvae: (v, &b.files[1]), transl: (t, &b.files[2]) };
+    let (g, v, t) = (
+        Path::new("gpt.safetensors"),
+        Path::new("vqvae.safetensors"),
+        Path::new("transl.safetensors"),
+    );
+    let sources = Sources {
+        gpt: (g, &b.files[0]),
+        vqvae: (v, &b.files[1]),
+        transl: (t, &b.files[2]),
+    };
     let (bytes, _) = convert_bytes((Path::new("follower_gpt.yaml"), &b.yaml), &sources, b.store)?;
     let outcome = check_duo(&bytes);
-    assert_eq!(outcome, DuoOutcome::Bound, "the converter wrote a .duo that does not bind");
+    assert_eq!(
+        outcome,
+        DuoOutcome::Bound,
+        "the converter wrote a .duo that does not bind"
+    );
     Ok(bytes.len())
 }

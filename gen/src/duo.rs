@@ -6,32 +6,71 @@
 use arbitrary::Arbitrary;
 use duolando::duo_writer::{assemble, Header, HeaderEntry};
 use duolando::model_file::AlignedBytes;
-use duolando_core::format::{align_up, DuoFile, FormatError, PREFIX_LEN};
-use duolando_core::nn::bind::BindError;
 use duolando_core::bailando::model::Model as BailandoModel;
 use duolando_core::duolando::model::Model;
 use duolando_core::family::Family;
-use duolando_core::transflower::model::{Model as TransflowerModel, ModelError as TransflowerError};
+use duolando_core::format::{align_up, DuoFile, FormatError, PREFIX_LEN};
+use duolando_core::nn::bind::BindError;
 use duolando_core::tensor::DType;
+use duolando_core::transflower::model::{
+    Model as TransflowerModel, ModelError as TransflowerError,
+};
 
 use crate::bytes::{apply_all, varint_len, ByteMutation, Int, Regions};
 
 /// One edit of the tensor table (`entry` indices wrap around the table).
 #[derive(Arbitrary, Clone, Debug)]
 pub enum EntryEdit {
-    Dtype { entry: u16, code: u8 },
-    Dim { entry: u16, axis: u8, value: Int },
-    Rank { entry: u16, rank: u8, fill: Int },
-    Offset { entry: u16, value: Int },
-    OffsetDelta { entry: u16, delta: i32 },
-    Nbytes { entry: u16, value: Int },
-    NbytesDelta { entry: u16, delta: i32 },
+    Dtype {
+        entry: u16,
+        code: u8,
+    },
+    Dim {
+        entry: u16,
+        axis: u8,
+        value: Int,
+    },
+    Rank {
+        entry: u16,
+        rank: u8,
+        fill: Int,
+    },
+    Offset {
+        entry: u16,
+        value: Int,
+    },
+    OffsetDelta {
+        entry: u16,
+        delta: i32,
+    },
+    Nbytes {
+        entry: u16,
+        value: Int,
+    },
+    NbytesDelta {
+        entry: u16,
+        delta: i32,
+    },
     /// Give `entry` the name of `other` (duplicates, or a missing tensor).
-    NameOf { entry: u16, other: u16 },
-    NameByte { entry: u16, at: u8, byte: u8 },
-    Remove { entry: u16 },
-    Swap { a: u16, b: u16 },
-    Duplicate { entry: u16 },
+    NameOf {
+        entry: u16,
+        other: u16,
+    },
+    NameByte {
+        entry: u16,
+        at: u8,
+        byte: u8,
+    },
+    Remove {
+        entry: u16,
+    },
+    Swap {
+        a: u16,
+        b: u16,
+    },
+    Duplicate {
+        entry: u16,
+    },
 }
 
 /// One edit of the postcard-encoded config: the `nth` varint (walking
@@ -47,11 +86,19 @@ pub struct ConfigEdit {
 pub enum DuoInput {
     Raw(Vec<u8>),
     /// The base file with these edits (config, table, then bytes).
-    Edited { config: Vec<ConfigEdit>, table: Vec<EntryEdit>, bytes: Vec<ByteMutation> },
+    Edited {
+        config: Vec<ConfigEdit>,
+        table: Vec<EntryEdit>,
+        bytes: Vec<ByteMutation>,
+    },
     /// The base file re-encoded as format version 2 under family tag `tag`
     /// (0 Duolando, 1 Bailando: a config of one family under the other's
     /// tag; 2..: unknown families), then these edits.
-    Family { tag: u8, config: Vec<ConfigEdit>, bytes: Vec<ByteMutation> },
+    Family {
+        tag: u8,
+        config: Vec<ConfigEdit>,
+        bytes: Vec<ByteMutation>,
+    },
     /// The base file with weights overwritten by edge bit patterns (NaN,
     /// infinities, the largest finite values, subnormals): see [`poison`].
     Weights(Vec<WeightEdit>),
@@ -71,10 +118,22 @@ pub struct WeightEdit {
 /// f32 patterns: the first [`NON_FINITE`] are NaN (quiet, negative,
 /// signalling, all ones) or infinite, the rest finite edge values (MAX,
 /// MIN, the smallest subnormal, -0).
-pub const F32_PATTERNS: [u32; 10] =
-    [0x7fc0_0000, 0xffc0_0000, 0x7f80_0001, 0xffff_ffff, 0x7f80_0000, 0xff80_0000, 0x7f7f_ffff, 0xff7f_ffff, 0x0000_0001, 0x8000_0000];
+pub const F32_PATTERNS: [u32; 10] = [
+    0x7fc0_0000,
+    0xffc0_0000,
+    0x7f80_0001,
+    0xffff_ffff,
+    0x7f80_0000,
+    0xff80_0000,
+    0x7f7f_ffff,
+    0xff7f_ffff,
+    0x0000_0001,
+    0x8000_0000,
+];
 /// The f16 patterns, in the same classes.
-pub const F16_PATTERNS: [u16; 10] = [0x7e00, 0xfe00, 0x7c01, 0xffff, 0x7c00, 0xfc00, 0x7bff, 0xfbff, 0x0001, 0x8000];
+pub const F16_PATTERNS: [u16; 10] = [
+    0x7e00, 0xfe00, 0x7c01, 0xffff, 0x7c00, 0xfc00, 0x7bff, 0xfbff, 0x0001, 0x8000,
+];
 /// Patterns `0..NON_FINITE` of both lists are NaN or infinite.
 pub const NON_FINITE: usize = 6;
 
@@ -109,10 +168,20 @@ pub fn poison(edits: &[WeightEdit], base: &Parts) -> (Vec<u8>, Option<(u32, u64)
         planted.retain(|&(pi, pe, _)| (pi, pe) != (i as u32, el));
         planted.push((i as u32, el, k < NON_FINITE));
     }
-    let want = planted.iter().filter(|p| p.2).map(|&(i, el, _)| (i, el)).min();
-    let p = Parts { data, ..base.clone() };
+    let want = planted
+        .iter()
+        .filter(|p| p.2)
+        .map(|&(i, el, _)| (i, el))
+        .min();
+    let p = Parts {
+        data,
+        ..base.clone()
+    };
     let header = header_bytes(&p);
-    (duolando::duo_writer::assemble_raw_version(p.version, &header, &p.data).expect("assemble"), want)
+    (
+        duolando::duo_writer::assemble_raw_version(p.version, &header, &p.data).expect("assemble"),
+        want,
+    )
 }
 
 /// The pieces of a valid `.duo` file, editable.
@@ -138,11 +207,22 @@ pub fn split(bytes: &[u8]) -> Parts {
     .expect("config encodes");
     let entries = file
         .tensors()
-        .map(|e| HeaderEntry { name: e.name.to_string(), dtype: e.dtype as u8, shape: e.dims().to_vec(), offset: e.offset, nbytes: e.nbytes })
+        .map(|e| HeaderEntry {
+            name: e.name.to_string(),
+            dtype: e.dtype as u8,
+            shape: e.dims().to_vec(),
+            offset: e.offset,
+            nbytes: e.nbytes,
+        })
         .collect();
     let header_len = u64::from_le_bytes(bytes[16..24].try_into().unwrap());
     let data_start = align_up(PREFIX_LEN as u64 + header_len).unwrap() as usize;
-    Parts { version, config_bytes, entries, data: bytes[data_start..].to_vec() }
+    Parts {
+        version,
+        config_bytes,
+        entries,
+        data: bytes[data_start..].to_vec(),
+    }
 }
 
 fn at(n: usize, i: u16) -> Option<usize> {
@@ -156,7 +236,12 @@ fn header_bytes(p: &Parts) -> Vec<u8> {
         tensors: &'a [HeaderEntry],
     }
     let mut out = p.config_bytes.clone();
-    out.extend(postcard::to_stdvec(&Table { tensors: &p.entries }).expect("table encodes"));
+    out.extend(
+        postcard::to_stdvec(&Table {
+            tensors: &p.entries,
+        })
+        .expect("table encodes"),
+    );
     out
 }
 
@@ -261,7 +346,11 @@ impl ConfigEdit {
 pub fn build(input: &DuoInput, base: &Parts) -> Vec<u8> {
     match input {
         DuoInput::Raw(b) => b.clone(),
-        DuoInput::Edited { config, table, bytes } => {
+        DuoInput::Edited {
+            config,
+            table,
+            bytes,
+        } => {
             let mut p = base.clone();
             for c in config.iter().take(16) {
                 c.apply(&mut p.config_bytes);
@@ -271,8 +360,16 @@ pub fn build(input: &DuoInput, base: &Parts) -> Vec<u8> {
             }
             let header = header_bytes(&p);
             let header_end = PREFIX_LEN + header.len();
-            let mut out = duolando::duo_writer::assemble_raw_version(p.version, &header, &p.data).expect("assemble");
-            apply_all(&mut out, Regions { prefix: PREFIX_LEN, header_end }, &bytes[..bytes.len().min(16)]);
+            let mut out = duolando::duo_writer::assemble_raw_version(p.version, &header, &p.data)
+                .expect("assemble");
+            apply_all(
+                &mut out,
+                Regions {
+                    prefix: PREFIX_LEN,
+                    header_end,
+                },
+                &bytes[..bytes.len().min(16)],
+            );
             out
         }
         DuoInput::Family { tag, config, bytes } => {
@@ -288,8 +385,16 @@ pub fn build(input: &DuoInput, base: &Parts) -> Vec<u8> {
             }
             let header = header_bytes(&p);
             let header_end = PREFIX_LEN + header.len();
-            let mut out = duolando::duo_writer::assemble_raw_version(p.version, &header, &p.data).expect("assemble");
-            apply_all(&mut out, Regions { prefix: PREFIX_LEN, header_end }, &bytes[..bytes.len().min(16)]);
+            let mut out = duolando::duo_writer::assemble_raw_version(p.version, &header, &p.data)
+                .expect("assemble");
+            apply_all(
+                &mut out,
+                Regions {
+                    prefix: PREFIX_LEN,
+                    header_end,
+                },
+                &bytes[..bytes.len().min(16)],
+            );
             out
         }
         DuoInput::Weights(edits) => poison(edits, base).0,
@@ -302,7 +407,9 @@ pub fn build(input: &DuoInput, base: &Parts) -> Vec<u8> {
 /// file's (bound; for Transflower, or a refusal of a flow weight's value).
 /// Panics on a violation.
 pub fn check_input(input: &DuoInput, base: &Parts) -> DuoOutcome {
-    let DuoInput::Weights(edits) = input else { return check_duo(&build(input, base)) };
+    let DuoInput::Weights(edits) = input else {
+        return check_duo(&build(input, base));
+    };
     let (bytes, want) = poison(edits, base);
     let outcome = check_duo(&bytes);
     match want {
@@ -315,7 +422,10 @@ pub fn check_input(input: &DuoInput, base: &Parts) -> DuoOutcome {
         // variance, a zero divisor, a non-permutation or a sign not +-1 by
         // tensor name (`ModelError::Value`).
         None => assert!(
-            matches!(outcome, DuoOutcome::Bound | DuoOutcome::UnboundTransflower(TransflowerError::Value { .. })),
+            matches!(
+                outcome,
+                DuoOutcome::Bound | DuoOutcome::UnboundTransflower(TransflowerError::Value { .. })
+            ),
             "only finite weights written: {outcome:?}"
         ),
     }
@@ -345,26 +455,42 @@ pub fn check_duo(bytes: &[u8]) -> DuoOutcome {
         Err(e) => return DuoOutcome::Rejected(e),
     };
     for entry in file.tensors() {
-        let t = file.tensor(entry.name).expect("a listed tensor must be readable");
+        let t = file
+            .tensor(entry.name)
+            .expect("a listed tensor must be readable");
         assert_eq!(t.dtype, entry.dtype, "{}", entry.name);
         assert_eq!(t.dims(), entry.dims(), "{}", entry.name);
         // An accepted file holds finite weights only (checked here by
         // value, independently of parse's bit test).
         let finite = match t.dtype {
-            DType::F32 => t.data.chunks_exact(4).all(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite()),
-            DType::F16 => t.data.chunks_exact(2).all(|c| half::f16::from_le_bytes([c[0], c[1]]).is_finite()),
+            DType::F32 => t
+                .data
+                .chunks_exact(4)
+                .all(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]).is_finite()),
+            DType::F16 => t
+                .data
+                .chunks_exact(2)
+                .all(|c| half::f16::from_le_bytes([c[0], c[1]]).is_finite()),
             _ => true,
         };
-        assert!(finite, "{}: a NaN or infinite weight was accepted", entry.name);
+        assert!(
+            finite,
+            "{}: a NaN or infinite weight was accepted",
+            entry.name
+        );
     }
     // A parsed file binds as its own family (and is refused, by family,
     // as the other).
     // Transflower's binder has its own error (config and flow-value
     // problems besides BindError).
-    let tf = || TransflowerModel::from_duo(&file).map(|_| ()).map_err(|e| match e {
-        TransflowerError::Bind(b) => DuoOutcome::Unbound(b),
-        other => DuoOutcome::UnboundTransflower(other),
-    });
+    let tf = || {
+        TransflowerModel::from_duo(&file)
+            .map(|_| ())
+            .map_err(|e| match e {
+                TransflowerError::Bind(b) => DuoOutcome::Unbound(b),
+                other => DuoOutcome::UnboundTransflower(other),
+            })
+    };
     let plain = |r: Result<(), BindError>| r.map_err(DuoOutcome::Unbound);
     let own = match file.config().family() {
         Family::Duolando => plain(Model::from_duo(&file).map(|_| ())),
@@ -374,10 +500,17 @@ pub fn check_duo(bytes: &[u8]) -> DuoOutcome {
     let others: [Result<(), DuoOutcome>; 2] = match file.config().family() {
         Family::Duolando => [plain(BailandoModel::from_duo(&file).map(|_| ())), tf()],
         Family::Bailando => [plain(Model::from_duo(&file).map(|_| ())), tf()],
-        Family::Transflower => [plain(Model::from_duo(&file).map(|_| ())), plain(BailandoModel::from_duo(&file).map(|_| ()))],
+        Family::Transflower => [
+            plain(Model::from_duo(&file).map(|_| ())),
+            plain(BailandoModel::from_duo(&file).map(|_| ())),
+        ],
     };
     for other in others {
-        assert!(matches!(other, Err(DuoOutcome::Unbound(BindError::Family { .. }))), "a {:?} file bound as another family", file.config().family());
+        assert!(
+            matches!(other, Err(DuoOutcome::Unbound(BindError::Family { .. }))),
+            "a {:?} file bound as another family",
+            file.config().family()
+        );
     }
     match own {
         Ok(()) => DuoOutcome::Bound,

@@ -6,12 +6,15 @@ use std::sync::OnceLock;
 
 use duolando::model_file::ModelFile;
 use duolando::npy::{read_f32_2d, read_i64_2d};
-use duolando_core::format::DuoFile;
 use duolando_core::duolando::model::Model;
+use duolando_core::format::DuoFile;
 
 /// `tests/fixtures/` of the workspace.
 pub fn fixtures_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("tests").join("fixtures")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("tests")
+        .join("fixtures")
 }
 
 fn read(rel: &str) -> Vec<u8> {
@@ -47,7 +50,9 @@ pub fn tiny2_model() -> &'static Model<'static> {
     static D: OnceLock<DuoFile<'static>> = OnceLock::new();
     static M: OnceLock<Model<'static>> = OnceLock::new();
     M.get_or_init(|| {
-        let mf = F.get_or_init(|| ModelFile::from_bytes(tiny2_duo_bytes().to_vec()).expect("tiny2 model.duo"));
+        let mf = F.get_or_init(|| {
+            ModelFile::from_bytes(tiny2_duo_bytes().to_vec()).expect("tiny2 model.duo")
+        });
         let duo = D.get_or_init(|| mf.duo().expect("tiny2 parses"));
         Model::from_duo(duo).expect("tiny2 binds")
     })
@@ -84,13 +89,37 @@ pub fn tiny2_clip() -> &'static Clip {
     static C: OnceLock<Clip> = OnceLock::new();
     C.get_or_init(|| {
         let d = fixtures_dir();
-        let leader = read_f32_2d(&d.join("rollout_tiny2_frames/leader_pos3d.npy"), Some(165), "leader").expect("leader").data;
-        let m = read_f32_2d(&d.join("rollout_tiny2_frames/music.npy"), None, "music").expect("music");
+        let leader = read_f32_2d(
+            &d.join("rollout_tiny2_frames/leader_pos3d.npy"),
+            Some(165),
+            "leader",
+        )
+        .expect("leader")
+        .data;
+        let m =
+            read_f32_2d(&d.join("rollout_tiny2_frames/music.npy"), None, "music").expect("music");
         let n_music = tiny2_model().cfg.gpt.music.n_in as usize;
         assert_eq!(m.data.len() % n_music, 0, "music width");
-        let s = read_i64_2d(&d.join("streaming_tiny2_default/seed_tokens.npy"), None, "seed").expect("seed").data;
-        let seed = [s[0] as u32, s[1] as u32, s[2] as u32, s[3] as u32, s[4] as u32];
-        Clip { leader, music: m.data, n_music, seed }
+        let s = read_i64_2d(
+            &d.join("streaming_tiny2_default/seed_tokens.npy"),
+            None,
+            "seed",
+        )
+        .expect("seed")
+        .data;
+        let seed = [
+            s[0] as u32,
+            s[1] as u32,
+            s[2] as u32,
+            s[3] as u32,
+            s[4] as u32,
+        ];
+        Clip {
+            leader,
+            music: m.data,
+            n_music,
+            seed,
+        }
     })
 }
 

@@ -30,8 +30,20 @@ impl Hostile {
             Hostile::NanBits(b) => f32::from_bits(0x7f80_0000 | (b & 0x807f_ffff) | 1),
             Hostile::PosInf => f32::INFINITY,
             Hostile::NegInf => f32::NEG_INFINITY,
-            Hostile::Huge(neg) => if neg { -1e30 } else { 1e30 },
-            Hostile::Max(neg) => if neg { f32::MIN } else { f32::MAX },
+            Hostile::Huge(neg) => {
+                if neg {
+                    -1e30
+                } else {
+                    1e30
+                }
+            }
+            Hostile::Max(neg) => {
+                if neg {
+                    f32::MIN
+                } else {
+                    f32::MAX
+                }
+            }
             Hostile::Denormal(m) => f32::from_bits(m & 0x807f_ffff),
             Hostile::NegZero => -0.0,
             Hostile::Bits(b) => f32::from_bits(b),
@@ -50,10 +62,12 @@ pub fn synthetic_leader(base: &[f32], t: u64, out: &mut [f32]) {
         let joint = (j / 3) as f32;
         let w = 0.7 + 0.13 * joint;
         let sway = 0.05 * (w * t + joint).sin();
-        *o = b + sway + match j % 3 {
-            0 => cx,
-            2 => cz,
-            _ => 0.0,
-        };
+        *o = b
+            + sway
+            + match j % 3 {
+                0 => cx,
+                2 => cz,
+                _ => 0.0,
+            };
     }
 }

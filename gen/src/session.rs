@@ -20,12 +20,15 @@
 
 use arbitrary::Arbitrary;
 use duolando_core::duolando::config::{POSE_DIM, ROT_DIM};
+use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::config::MAX_BUFFER_FRAMES;
+use duolando_core::duolando::session::{
+    dec_future_max, enc_future_max, CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig,
+    StepBatch,
+};
 use duolando_core::error::{Buffer, Error};
 use duolando_core::input;
-use duolando_core::duolando::model::Model;
 use duolando_core::nn::sampler::MAX_TOP_K;
-use duolando_core::duolando::session::config::MAX_BUFFER_FRAMES;
-use duolando_core::duolando::session::{dec_future_max, enc_future_max, CacheSchedule, FollowerFrame, Sampling, Session, SessionConfig, StepBatch};
 
 use crate::fixture::Clip;
 use crate::floats::{synthetic_leader, Hostile};
@@ -81,11 +84,18 @@ impl ConfigGen {
         s.lat_past = self.lat_past.get(0, lf);
         s.sampling = match self.top_k {
             None => Sampling::Greedy,
-            Some((k, rng_seed)) => Sampling::TopK { k: k.get(1, MAX_TOP_K as u32), rng_seed },
+            Some((k, rng_seed)) => Sampling::TopK {
+                k: k.get(1, MAX_TOP_K as u32),
+                rng_seed,
+            },
         };
         s.pending_frames = self.pending_frames.get(0, 512.min(MAX_BUFFER_FRAMES));
         s.music_buffer_frames = self.music_buffer_frames.get(min_music, 512.max(min_music));
-        s.schedule = if self.staggered { CacheSchedule::Staggered } else { CacheSchedule::Reprefill };
+        s.schedule = if self.staggered {
+            CacheSchedule::Staggered
+        } else {
+            CacheSchedule::Reprefill
+        };
         s
     }
 }
@@ -127,10 +137,19 @@ pub enum Op {
     Reset(SeedGen),
     /// A forced history of `rows` rows (row 0 the clip seed unless
     /// `wrong_seed`), tokens folded into the vocabularies unless `raw`.
-    Force { rows: u8, tokens: Vec<u32>, wrong_seed: bool, raw: bool },
+    Force {
+        rows: u8,
+        tokens: Vec<u32>,
+        wrong_seed: bool,
+        raw: bool,
+    },
     /// A preloaded music track of `frames` recorded frames, one value
     /// optionally replaced, optionally cut mid-row.
-    Track { frames: u16, poke: Option<(u16, Hostile)>, ragged: bool },
+    Track {
+        frames: u16,
+        poke: Option<(u16, Hostile)>,
+        ragged: bool,
+    },
 }
 
 /// A whole session input.
@@ -164,16 +183,31 @@ pub struct Report {
 fn documented(e: &Error) -> bool {
     matches!(
         e,
-        Error::NonFinite { .. } | Error::OutOfRange { .. } | Error::Length { .. } | Error::Backlog { .. } | Error::State | Error::Token { .. } | Error::Ragged { .. }
+        Error::NonFinite { .. }
+            | Error::OutOfRange { .. }
+            | Error::Length { .. }
+            | Error::Backlog { .. }
+            | Error::State
+            | Error::Token { .. }
+            | Error::Ragged { .. }
     )
 }
 
 fn frame_bits(f: &FollowerFrame) -> impl Iterator<Item = u32> + '_ {
-    f.positions.iter().chain(&f.rotations).chain(&f.root).map(|v| v.to_bits()).chain([f.index as u32, (f.index >> 32) as u32])
+    f.positions
+        .iter()
+        .chain(&f.rotations)
+        .chain(&f.root)
+        .map(|v| v.to_bits())
+        .chain([f.index as u32, (f.index >> 32) as u32])
 }
 
 pub fn frame_finite(f: &FollowerFrame) -> bool {
-    f.positions.iter().chain(&f.rotations).chain(&f.root).all(|v| v.is_finite())
+    f.positions
+        .iter()
+        .chain(&f.rotations)
+        .chain(&f.root)
+        .all(|v| v.is_finite())
 }
 
 fn seed_of(g: SeedGen, model: &Model<'_>, clip: &Clip) -> [u32; 5] {
@@ -217,7 +251,11 @@ fn over_limit(buffer: Buffer, x: &[f32]) -> bool {
 
 /// One leader frame into `s`: alone, or through `batch` (`Session::step_many`
 /// with `s` alone in it).
-pub fn push_leader<'a>(s: &mut Session<'a>, batch: Option<&mut StepBatch<'_>>, leader: &[f32]) -> Result<(), Error> {
+pub fn push_leader<'a>(
+    s: &mut Session<'a>,
+    batch: Option<&mut StepBatch<'_>>,
+    leader: &[f32],
+) -> Result<(), Error> {
     match batch {
         Some(b) => Session::step_many(&mut [s], &[leader], b).map_err(|(i, e)| {
             assert_eq!(i, 0, "step_many of one session blamed session {i}");
@@ -257,7 +295,10 @@ pub fn tick<'a>(
                 pushed = true;
                 break;
             }
-            Err(Error::Backlog { buffer: Buffer::FollowerPos3d, .. }) => {
+            Err(Error::Backlog {
+                buffer: Buffer::FollowerPos3d,
+                ..
+            }) => {
                 let mut any = false;
                 while s.pull_follower_frame(out)? {
                     sink(out);
@@ -289,7 +330,10 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
     let bytes = match model.session_bytes(&cfg) {
         Ok(b) => b,
         Err(e) => {
-            assert!(matches!(e, Error::Setting { .. }), "session_bytes: undocumented refusal {e:?} for {cfg:?}");
+            assert!(
+                matches!(e, Error::Setting { .. }),
+                "session_bytes: undocumented refusal {e:?} for {cfg:?}"
+            );
             rep.config_rejected = Some(e);
             return rep;
         }
@@ -305,7 +349,11 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
     let owned: Vec<Vec<f32>> = ops
         .iter()
         .map(|op| match op {
-            Op::Track { frames, poke, ragged } => {
+            Op::Track {
+                frames,
+                poke,
+                ragged,
+            } => {
                 let n = (*frames as usize % (clip.music_frames() * 2)) * n_music;
                 let mut t: Vec<f32> = (0..n).map(|i| clip.music[i % clip.music.len()]).collect();
                 if let (Some((at, v)), false) = (poke, t.is_empty()) {
@@ -323,9 +371,16 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
     let forced: Vec<Vec<u32>> = ops
         .iter()
         .map(|op| match op {
-            Op::Force { rows, tokens, wrong_seed, raw } => {
+            Op::Force {
+                rows,
+                tokens,
+                wrong_seed,
+                raw,
+            } => {
                 let rows = *rows as usize % 64;
-                let mut f: Vec<u32> = (0..rows * 5).map(|i| tokens.get(i).copied().unwrap_or(i as u32)).collect();
+                let mut f: Vec<u32> = (0..rows * 5)
+                    .map(|i| tokens.get(i).copied().unwrap_or(i as u32))
+                    .collect();
                 if !raw {
                     for (i, t) in f.iter_mut().enumerate() {
                         *t %= vocab[i % 5].max(1);
@@ -344,48 +399,96 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
     let mut arena_c = vec![0u8; bytes];
     // The batched twin `c`: every operation `a` gets, its leader frames
     // through a one-session `StepBatch` (`Session::step_many`).
-    let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, &cfg, 1).expect("a valid config has a batch size")];
+    let mut batch_arena =
+        vec![0u8; StepBatch::bytes(&model.cfg, &cfg, 1).expect("a valid config has a batch size")];
     let mut batch = StepBatch::new(&model.cfg, &cfg, 1, &mut batch_arena).expect("batch of one");
     let seed = seed_of(input.seed, model, clip);
-    let (mut a, mut b) = match (Session::new(model, &mut arena_a, &cfg, seed), Session::new(model, &mut arena_b, &cfg, seed)) {
+    let (mut a, mut b) = match (
+        Session::new(model, &mut arena_a, &cfg, seed),
+        Session::new(model, &mut arena_b, &cfg, seed),
+    ) {
         (Ok(a), Ok(b)) => (a, b),
         (Err(e1), Err(e2)) => {
             assert_eq!(e1, e2);
-            assert!(matches!(e1, Error::Token { .. }), "Session::new: undocumented refusal {e1:?}");
+            assert!(
+                matches!(e1, Error::Token { .. }),
+                "Session::new: undocumented refusal {e1:?}"
+            );
             rep.config_rejected = Some(e1);
             return rep;
         }
-        (r1, r2) => panic!("two identical Session::new calls disagree: {:?} vs {:?}", r1.err(), r2.err()),
+        (r1, r2) => panic!(
+            "two identical Session::new calls disagree: {:?} vs {:?}",
+            r1.err(),
+            r2.err()
+        ),
     };
-    let mut c = Session::new(model, &mut arena_c, &cfg, seed).expect("a third identical Session::new");
+    let mut c =
+        Session::new(model, &mut arena_c, &cfg, seed).expect("a third identical Session::new");
     let base = clip.leader_frame(0).to_vec();
     let (mut leader_t, mut music_t, mut next_index) = (0usize, 0usize, 0u64);
-    let (mut fa, mut fb, mut fc) = (FollowerFrame::default(), FollowerFrame::default(), FollowerFrame::default());
+    let (mut fa, mut fb, mut fc) = (
+        FollowerFrame::default(),
+        FollowerFrame::default(),
+        FollowerFrame::default(),
+    );
     let mut buf = Vec::with_capacity(1024);
     // Checks one pulled pair.
-    let pulled = |fa: &FollowerFrame, fb: &FollowerFrame, next_index: &mut u64, rep: &mut Report| {
-        assert!(frame_bits(fa).eq(frame_bits(fb)), "frame {} differs from the shadow session's", fa.index);
-        assert_eq!(fa.index, *next_index, "frame indices not consecutive");
-        *next_index += 1;
-        rep.pulled += 1;
-        assert!(frame_finite(fa), "non-finite follower frame {} from accepted input", fa.index);
-    };
+    let pulled =
+        |fa: &FollowerFrame, fb: &FollowerFrame, next_index: &mut u64, rep: &mut Report| {
+            assert!(
+                frame_bits(fa).eq(frame_bits(fb)),
+                "frame {} differs from the shadow session's",
+                fa.index
+            );
+            assert_eq!(fa.index, *next_index, "frame indices not consecutive");
+            *next_index += 1;
+            rep.pulled += 1;
+            assert!(
+                frame_finite(fa),
+                "non-finite follower frame {} from accepted input",
+                fa.index
+            );
+        };
     for (i, op) in ops.iter().enumerate() {
         match op {
             Op::Leader(g) | Op::Music(g) => {
                 let is_leader = matches!(op, Op::Leader(_));
-                let rec = if is_leader { clip.leader_frame(leader_t) } else { clip.music_frame(music_t) };
+                let rec = if is_leader {
+                    clip.leader_frame(leader_t)
+                } else {
+                    clip.music_frame(music_t)
+                };
                 make_frame(*g, rec, if is_leader { &base } else { &[] }, &mut buf);
-                let ra = if is_leader { a.push_leader_frame(&buf) } else { a.push_music_frame(&buf) };
-                let rc = if is_leader { push_leader(&mut c, Some(&mut batch), &buf) } else { c.push_music_frame(&buf) };
+                let ra = if is_leader {
+                    a.push_leader_frame(&buf)
+                } else {
+                    a.push_music_frame(&buf)
+                };
+                let rc = if is_leader {
+                    push_leader(&mut c, Some(&mut batch), &buf)
+                } else {
+                    c.push_music_frame(&buf)
+                };
                 assert_eq!(ra, rc, "op {i}: the batched twin answered differently");
                 let want_len = if is_leader { POSE_DIM } else { n_music };
-                let which = if is_leader { Buffer::LeaderPos3d } else { Buffer::Music };
+                let which = if is_leader {
+                    Buffer::LeaderPos3d
+                } else {
+                    Buffer::Music
+                };
                 match ra {
                     Ok(()) => {
-                        let rb = if is_leader { b.push_leader_frame(&buf) } else { b.push_music_frame(&buf) };
+                        let rb = if is_leader {
+                            b.push_leader_frame(&buf)
+                        } else {
+                            b.push_music_frame(&buf)
+                        };
                         assert_eq!(rb, Ok(()), "shadow refused what the session accepted");
-                        assert!(buf.len() == want_len && input::check(which, &buf).is_ok(), "accepted a bad frame");
+                        assert!(
+                            buf.len() == want_len && input::check(which, &buf).is_ok(),
+                            "accepted a bad frame"
+                        );
                         rep.pushed += 1;
                         if is_leader {
                             leader_t += 1;
@@ -396,9 +499,17 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                     Err(e) => {
                         assert!(documented(&e), "op {i}: undocumented refusal {e:?}");
                         let bad = buf.len() == want_len && buf.iter().any(|v| !v.is_finite());
-                        assert_eq!(matches!(e, Error::NonFinite { .. }), bad, "op {i}: NonFinite iff non-finite input ({e:?})");
+                        assert_eq!(
+                            matches!(e, Error::NonFinite { .. }),
+                            bad,
+                            "op {i}: NonFinite iff non-finite input ({e:?})"
+                        );
                         let over = buf.len() == want_len && over_limit(which, &buf);
-                        assert_eq!(matches!(e, Error::OutOfRange { .. }), over, "op {i}: OutOfRange iff finite over-limit input ({e:?})");
+                        assert_eq!(
+                            matches!(e, Error::OutOfRange { .. }),
+                            over,
+                            "op {i}: OutOfRange iff finite over-limit input ({e:?})"
+                        );
                         rep.refused += 1;
                         rep.non_finite_refused += bad as usize;
                         rep.out_of_range_refused += over as usize;
@@ -408,10 +519,21 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
             }
             Op::Pull(n) => {
                 for _ in 0..*n {
-                    let (ra, rb) = (a.pull_follower_frame(&mut fa), b.pull_follower_frame(&mut fb));
+                    let (ra, rb) = (
+                        a.pull_follower_frame(&mut fa),
+                        b.pull_follower_frame(&mut fb),
+                    );
                     assert_eq!(ra, rb, "pull differs from the shadow");
-                    assert_eq!(ra, c.pull_follower_frame(&mut fc), "pull differs from the batched twin");
-                    assert!(ra != Ok(true) || frame_bits(&fa).eq(frame_bits(&fc)), "frame {} differs from the batched twin's", fa.index);
+                    assert_eq!(
+                        ra,
+                        c.pull_follower_frame(&mut fc),
+                        "pull differs from the batched twin"
+                    );
+                    assert!(
+                        ra != Ok(true) || frame_bits(&fa).eq(frame_bits(&fc)),
+                        "frame {} differs from the batched twin's",
+                        fa.index
+                    );
                     match ra {
                         Ok(true) => pulled(&fa, &fb, &mut next_index, &mut rep),
                         Ok(false) => break,
@@ -420,10 +542,21 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                 }
             }
             Op::PullAll => loop {
-                let (ra, rb) = (a.pull_follower_frame(&mut fa), b.pull_follower_frame(&mut fb));
+                let (ra, rb) = (
+                    a.pull_follower_frame(&mut fa),
+                    b.pull_follower_frame(&mut fb),
+                );
                 assert_eq!(ra, rb, "pull differs from the shadow");
-                assert_eq!(ra, c.pull_follower_frame(&mut fc), "pull differs from the batched twin");
-                assert!(ra != Ok(true) || frame_bits(&fa).eq(frame_bits(&fc)), "frame {} differs from the batched twin's", fa.index);
+                assert_eq!(
+                    ra,
+                    c.pull_follower_frame(&mut fc),
+                    "pull differs from the batched twin"
+                );
+                assert!(
+                    ra != Ok(true) || frame_bits(&fa).eq(frame_bits(&fc)),
+                    "frame {} differs from the batched twin's",
+                    fa.index
+                );
                 match ra {
                     Ok(true) => pulled(&fa, &fb, &mut next_index, &mut rep),
                     Ok(false) => break,
@@ -435,14 +568,48 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
                     let lf = clip.leader_frame(leader_t).to_vec();
                     let (mut ma, mut mb, mut mc) = (music_t, music_t, music_t);
                     let (mut va, mut vb, mut vc) = (Vec::new(), Vec::new(), Vec::new());
-                    let ra = tick(&mut a, None, clip, &lf, &mut ma, leader_t, &mut fa, &mut |f| va.push(*f));
-                    let rb = tick(&mut b, None, clip, &lf, &mut mb, leader_t, &mut fb, &mut |f| vb.push(*f));
-                    let rc = tick(&mut c, Some(&mut batch), clip, &lf, &mut mc, leader_t, &mut fc, &mut |f| vc.push(*f));
+                    let ra = tick(
+                        &mut a,
+                        None,
+                        clip,
+                        &lf,
+                        &mut ma,
+                        leader_t,
+                        &mut fa,
+                        &mut |f| va.push(*f),
+                    );
+                    let rb = tick(
+                        &mut b,
+                        None,
+                        clip,
+                        &lf,
+                        &mut mb,
+                        leader_t,
+                        &mut fb,
+                        &mut |f| vb.push(*f),
+                    );
+                    let rc = tick(
+                        &mut c,
+                        Some(&mut batch),
+                        clip,
+                        &lf,
+                        &mut mc,
+                        leader_t,
+                        &mut fc,
+                        &mut |f| vc.push(*f),
+                    );
                     assert_eq!(ra, rb, "tick differs from the shadow");
                     assert_eq!(ra, rc, "tick differs from the batched twin");
                     assert_eq!((ma, ma), (mb, mc));
                     assert_eq!(va.len(), vb.len());
-                    assert!(va.len() == vc.len() && va.iter().zip(&vc).all(|(x, y)| frame_bits(x).eq(frame_bits(y))), "tick frames differ from the batched twin's");
+                    assert!(
+                        va.len() == vc.len()
+                            && va
+                                .iter()
+                                .zip(&vc)
+                                .all(|(x, y)| frame_bits(x).eq(frame_bits(y))),
+                        "tick frames differ from the batched twin's"
+                    );
                     for (x, y) in va.iter().zip(&vb) {
                         pulled(x, y, &mut next_index, &mut rep);
                     }
@@ -470,16 +637,27 @@ pub fn run_ops(model: &Model<'_>, clip: &Clip, input: &SessionInput) -> Report {
             }
             Op::Force { .. } => {
                 let ra = a.force_history(&forced[i]);
-                assert_eq!(ra, c.force_history(&forced[i]), "force_history differs from the batched twin");
+                assert_eq!(
+                    ra,
+                    c.force_history(&forced[i]),
+                    "force_history differs from the batched twin"
+                );
                 if ra.is_ok() {
                     assert_eq!(b.force_history(&forced[i]), Ok(()));
                 } else {
-                    assert!(documented(ra.as_ref().unwrap_err()), "force_history: {ra:?}");
+                    assert!(
+                        documented(ra.as_ref().unwrap_err()),
+                        "force_history: {ra:?}"
+                    );
                 }
             }
             Op::Track { .. } => {
                 let ra = a.set_music_track(&owned[i]);
-                assert_eq!(ra, c.set_music_track(&owned[i]), "set_music_track differs from the batched twin");
+                assert_eq!(
+                    ra,
+                    c.set_music_track(&owned[i]),
+                    "set_music_track differs from the batched twin"
+                );
                 match ra {
                     Ok(()) => assert_eq!(b.set_music_track(&owned[i]), Ok(())),
                     Err(e) => {

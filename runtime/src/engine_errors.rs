@@ -49,14 +49,18 @@ fn what(f: duolando_core::family::Family) -> &'static str {
 pub fn describe_transflower_model(e: &duolando_core::transflower::model::ModelError) -> String {
     use duolando_core::transflower::model::{ModelError, ValueProblem};
     match e {
-        ModelError::Config(c) => format!("the Transflower config is not supported: {}", describe_transflower_config(c)),
+        ModelError::Config(c) => format!(
+            "the Transflower config is not supported: {}",
+            describe_transflower_config(c)
+        ),
         ModelError::Bind(b) => describe_bind(b),
         ModelError::Value { name, problem } => format!(
             "flow weight `{}` {}",
             name.as_str(),
             match problem {
                 ValueProblem::NonFinite => "holds NaN or infinity",
-                ValueProblem::NotPermutation => "is not a permutation matrix (0/1, one 1 per row and column)",
+                ValueProblem::NotPermutation =>
+                    "is not a permutation matrix (0/1, one 1 per row and column)",
                 ValueProblem::SignNotUnit => "holds a value other than +1 or -1",
                 ValueProblem::Zero => "holds a zero the flow divides by",
                 ValueProblem::NegativeVariance => "holds a negative variance",
@@ -132,20 +136,35 @@ pub fn describe_transflower_config(e: &duolando_core::transflower::config::Confi
 
 /// The buffer a Transflower input error is about, in words naming the
 /// model's modalities (`core::transflower::exact::buffer_of`).
-fn transflower_buffer(b: Buffer, cfg: &duolando_core::transflower::config::TransflowerConfig) -> String {
+fn transflower_buffer(
+    b: Buffer,
+    cfg: &duolando_core::transflower::config::TransflowerConfig,
+) -> String {
     match b {
         Buffer::SeedFrames => format!("the motion seed `{}`", cfg.output_input().name.as_str()),
         Buffer::Tokens => "the style label".into(),
         Buffer::Features => {
-            let names: Vec<&str> = cfg.inputs().iter().enumerate().filter(|(i, c)| *i != cfg.output as usize && !c.is_discrete()).map(|(_, c)| c.name.as_str()).collect();
-            format!("the input features ({}) or the replayed noise", names.join(", "))
+            let names: Vec<&str> = cfg
+                .inputs()
+                .iter()
+                .enumerate()
+                .filter(|(i, c)| *i != cfg.output as usize && !c.is_discrete())
+                .map(|(_, c)| c.name.as_str())
+                .collect();
+            format!(
+                "the input features ({}) or the replayed noise",
+                names.join(", ")
+            )
         }
         other => buffer_name(other).to_string(),
     }
 }
 
 /// One sentence describing a core error of a Transflower run.
-pub fn describe_transflower(e: &Error, cfg: &duolando_core::transflower::config::TransflowerConfig) -> String {
+pub fn describe_transflower(
+    e: &Error,
+    cfg: &duolando_core::transflower::config::TransflowerConfig,
+) -> String {
     match *e {
         Error::TooShort { buffer, frames, min } => format!("{} has {frames} rows, at least {min} needed", transflower_buffer(buffer, cfg)),
         Error::Ragged { buffer, len, row } => format!("{} has {len} values, not a whole number of rows of {row}", transflower_buffer(buffer, cfg)),
@@ -227,5 +246,6 @@ fn setting_name(s: duolando_core::duolando::session::Setting) -> &'static str {
         MusicBuffer => "music_buffer_frames",
         Windows => "staggered (GPT caches needed)",
         Batch => "sessions in one step batch",
+        Refresh => "refresh",
     }
 }

@@ -27,7 +27,10 @@ impl AlignedBytes {
     pub fn copy_from(bytes: &[u8]) -> AlignedBytes {
         let mut lines = vec![Line([0; 64]); bytes.len().div_ceil(64)];
         bytemuck::cast_slice_mut::<Line, u8>(&mut lines)[..bytes.len()].copy_from_slice(bytes);
-        AlignedBytes { lines, len: bytes.len() }
+        AlignedBytes {
+            lines,
+            len: bytes.len(),
+        }
     }
     pub fn as_bytes(&self) -> &[u8] {
         &bytemuck::cast_slice::<Line, u8>(&self.lines)[..self.len]
@@ -63,7 +66,10 @@ impl ModelFile {
     pub fn open(path: impl AsRef<Path>) -> Result<ModelFile, ModelFileError> {
         let path = path.as_ref();
         let origin = path.display().to_string();
-        let io = |source| ModelFileError::Io { path: path.to_path_buf(), source };
+        let io = |source| ModelFileError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
         let file = std::fs::File::open(path).map_err(io)?;
         let len = file.metadata().map_err(io)?.len();
         let storage = if len == 0 {
@@ -93,7 +99,10 @@ impl ModelFile {
 
     /// Validates an already aligned buffer; `origin` names it in messages.
     pub fn from_aligned(bytes: AlignedBytes, origin: &str) -> Result<ModelFile, ModelFileError> {
-        let mf = ModelFile { storage: Storage::Owned(bytes), origin: origin.to_string() };
+        let mf = ModelFile {
+            storage: Storage::Owned(bytes),
+            origin: origin.to_string(),
+        };
         mf.validate()?;
         crate::simd::ensure_init();
         Ok(mf)
@@ -116,7 +125,9 @@ impl ModelFile {
     /// the `ModelFile` is made).
     fn validate(&self) -> Result<(), ModelFileError> {
         let bytes = self.bytes();
-        DuoFile::parse(bytes).map(|_| ()).map_err(|error| self.format_error(bytes, error))
+        DuoFile::parse(bytes)
+            .map(|_| ())
+            .map_err(|error| self.format_error(bytes, error))
     }
 
     /// The validated view. Re-runs `DuoFile::parse_without_weight_scan`
@@ -129,23 +140,36 @@ impl ModelFile {
     }
 
     fn format_error(&self, bytes: &[u8], error: FormatError) -> ModelFileError {
-        ModelFileError::Format { origin: self.origin.clone(), detail: explain(bytes, &error), error }
+        ModelFileError::Format {
+            origin: self.origin.clone(),
+            detail: explain(bytes, &error),
+            error,
+        }
     }
 }
 
 /// Why a model file could not be used.
 #[derive(Debug)]
 pub enum ModelFileError {
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     /// `detail` spells out `error` with tensor names and shapes resolved.
-    Format { origin: String, error: FormatError, detail: String },
+    Format {
+        origin: String,
+        error: FormatError,
+        detail: String,
+    },
 }
 
 impl fmt::Display for ModelFileError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             ModelFileError::Io { path, source } => write!(f, "{}: {source}", path.display()),
-            ModelFileError::Format { origin, detail, .. } => write!(f, "{origin}: invalid .duo model: {detail}"),
+            ModelFileError::Format { origin, detail, .. } => {
+                write!(f, "{origin}: invalid .duo model: {detail}")
+            }
         }
     }
 }
@@ -171,12 +195,23 @@ pub fn explain(bytes: &[u8], error: &FormatError) -> String {
         FormatError::MissingTensor { schema_index } => {
             let cfg = header_config(bytes);
             match cfg.as_ref().and_then(|c| schema_tensor(c, schema_index)) {
-                Some(spec) => format!("missing tensor `{}` (shape {:?})", spec.name.as_str(), spec.dims()),
+                Some(spec) => format!(
+                    "missing tensor `{}` (shape {:?})",
+                    spec.name.as_str(),
+                    spec.dims()
+                ),
                 None => error.to_string(),
             }
         }
-        FormatError::ShapeMismatch { index, expected, found } => {
-            format!("{}: shape {found}, the config requires {expected}", tensor(index))
+        FormatError::ShapeMismatch {
+            index,
+            expected,
+            found,
+        } => {
+            format!(
+                "{}: shape {found}, the config requires {expected}",
+                tensor(index)
+            )
         }
         FormatError::EmptyName { index }
         | FormatError::NameTooLong { index, .. }
@@ -212,7 +247,9 @@ fn header_config(bytes: &[u8]) -> Option<duolando_core::family::FamilyConfig> {
     let len = u64::from_le_bytes(bytes.get(16..24)?.try_into().ok()?);
     let header = bytes.get(24..24usize.checked_add(usize::try_from(len).ok()?)?)?;
     if version == duolando_core::format::VERSION_DUOLANDO {
-        postcard::take_from_bytes(header).ok().map(|(c, _)| FamilyConfig::Duolando(c))
+        postcard::take_from_bytes(header)
+            .ok()
+            .map(|(c, _)| FamilyConfig::Duolando(c))
     } else {
         postcard::take_from_bytes(header).ok().map(|(c, _)| c)
     }

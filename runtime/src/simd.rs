@@ -33,7 +33,8 @@ pub fn supported() -> Vec<Isa> {
     {
         use std::is_x86_feature_detected as has;
         let avx2 = has!("avx2") && has!("fma") && has!("f16c");
-        let avx512 = avx2 && has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl");
+        let avx512 =
+            avx2 && has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl");
         if avx512 && has!("avx512vnni") {
             v.push(Isa::Avx512Vnni);
         }
@@ -88,10 +89,13 @@ pub fn init() -> Isa {
     // SAFETY: `detect` returned `isa` only from `supported`, which checked
     // that this CPU supports every feature its kernels are compiled for.
     #[allow(unsafe_code)]
-    unsafe { simd::set_isa(isa) };
+    unsafe {
+        simd::set_isa(isa)
+    };
     #[cfg(target_arch = "x86_64")]
     {
-        let wanted = std::env::var("DUOLANDO_ISA").map_or(true, |s| s.eq_ignore_ascii_case("avx512amx"));
+        let wanted =
+            std::env::var("DUOLANDO_ISA").map_or(true, |s| s.eq_ignore_ascii_case("avx512amx"));
         let amx = isa == Isa::Avx512Vnni && wanted && amx_usable();
         // SAFETY: `amx_usable` checked the CPU's amx-tile and amx-int8 bits
         // and got the tile permission from the OS; the ISA is Avx512Vnni.
@@ -215,7 +219,11 @@ pub fn force_scalar() {
 /// The kernels running now in words, as the CLI prints them: `Avx512Vnni`,
 /// `Avx512Vnni+AMX`, `Avx2`, `Neon`, `Scalar`, ...
 pub fn describe() -> String {
-    format!("{:?}{}", simd::isa(), if amx_active() { "+AMX" } else { "" })
+    format!(
+        "{:?}{}",
+        simd::isa(),
+        if amx_active() { "+AMX" } else { "" }
+    )
 }
 
 /// The ISA whose kernels run now (scalar until [`init`] or [`ensure_init`]).

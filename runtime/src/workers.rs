@@ -73,7 +73,10 @@ struct Pool {
 impl Pool {
     fn new(threads: usize) -> Pool {
         let shared = Arc::new(Shared {
-            slot: Mutex::new(Slot { job: None, epoch: 0 }),
+            slot: Mutex::new(Slot {
+                job: None,
+                epoch: 0,
+            }),
             wake: Condvar::new(),
             epoch: AtomicU64::new(0),
             next: AtomicUsize::new(0),
@@ -82,7 +85,12 @@ impl Pool {
             panicked: AtomicBool::new(false),
             stop: AtomicBool::new(true),
         });
-        Pool { threads, shared, busy: Mutex::new(()), handles: Mutex::new(Vec::new()) }
+        Pool {
+            threads,
+            shared,
+            busy: Mutex::new(()),
+            handles: Mutex::new(Vec::new()),
+        }
     }
 
     /// Starts the workers (nothing when running); on failure none runs.
@@ -98,7 +106,10 @@ impl Pool {
         };
         for i in 1..self.threads {
             let sh = Arc::clone(&self.shared);
-            match std::thread::Builder::new().name(format!("duolando-gemm-{i}")).spawn(move || worker(&sh, seen)) {
+            match std::thread::Builder::new()
+                .name(format!("duolando-gemm-{i}"))
+                .spawn(move || worker(&sh, seen))
+            {
                 Ok(h) => hs.push(h),
                 Err(e) => {
                     drop(hs);
@@ -146,7 +157,10 @@ fn drain(sh: &Shared, job: Job) {
 fn worker(sh: &Shared, mut seen: u64) {
     loop {
         let mut spins = 0;
-        while sh.epoch.load(Ordering::Acquire) == seen && spins < IDLE_SPINS && !sh.stop.load(Ordering::Acquire) {
+        while sh.epoch.load(Ordering::Acquire) == seen
+            && spins < IDLE_SPINS
+            && !sh.stop.load(Ordering::Acquire)
+        {
             std::hint::spin_loop();
             spins += 1;
         }
@@ -206,7 +220,8 @@ unsafe impl Workers for Pool {
         // SAFETY: only the lifetime is erased; the job is unpublished and no
         // worker holds it when this function returns (below).
         #[allow(unsafe_code)]
-        let erased: &'static (dyn Fn(usize) + Sync + 'static) = unsafe { std::mem::transmute(task) };
+        let erased: &'static (dyn Fn(usize) + Sync + 'static) =
+            unsafe { std::mem::transmute(task) };
         let job = Job { task: erased, n };
         {
             let mut slot = sh.slot.lock().unwrap_or_else(|e| e.into_inner());
@@ -263,7 +278,10 @@ pub fn set_threads(n: usize) -> std::io::Result<()> {
         }
     }
     parallel::set_workers(installed);
-    for (p, _) in pools.iter().filter(|(p, _)| installed.is_none() || p.threads != n) {
+    for (p, _) in pools
+        .iter()
+        .filter(|(p, _)| installed.is_none() || p.threads != n)
+    {
         p.stop();
     }
     result
@@ -272,7 +290,9 @@ pub fn set_threads(n: usize) -> std::io::Result<()> {
 /// The CLI's default thread count: every core the process may use, at
 /// most 8 (results do not depend on it).
 pub fn default_threads() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get()).min(8)
+    std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(8)
 }
 
 /// Threads the GEMMs are split over now (1: no pool).

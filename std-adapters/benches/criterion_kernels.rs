@@ -11,9 +11,11 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando::model_file::ModelFile;
-use duolando_core::kernels::{attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, X8Rows, TiledCausalMask};
 use duolando_core::duolando::model::Model;
 use duolando_core::duolando::session::{Session, SessionConfig};
+use duolando_core::kernels::{
+    attention, linear, F16Rows, F32Rows, Matrix, Q8Rows, TiledCausalMask, X8Rows,
+};
 
 mod common;
 use common::Rng;
@@ -23,7 +25,10 @@ fn linear_mlp(c: &mut Criterion) {
     let (o, i) = (3072usize, 768usize);
     let mut r = Rng(0x5eed);
     let wf = r.vec(o * i);
-    let wh: Vec<u16> = wf.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+    let wh: Vec<u16> = wf
+        .iter()
+        .map(|&v| half::f16::from_f32(v).to_bits())
+        .collect();
     let wq = quantise_q8_block32(&wf);
     let wx = quantise_q8_block32x8(&wf, i);
     let b = r.vec(o);
@@ -57,14 +62,27 @@ fn attention_r_step(c: &mut Criterion) {
     let (t, c_dim, heads) = (290usize, 768usize, 12usize);
     let mut r = Rng(7);
     let (q, k, v) = (r.vec(t * c_dim), r.vec(t * c_dim), r.vec(t * c_dim));
-    let mask = TiledCausalMask { t_q: 29, t_k: 29, q_pos0: 0 };
+    let mask = TiledCausalMask {
+        t_q: 29,
+        t_k: 29,
+        q_pos0: 0,
+    };
     let mut scores = vec![0.0f32; t];
     let mut out = vec![0.0f32; t * c_dim];
     let mut g = c.benchmark_group("attention");
     g.sample_size(20);
     g.bench_function("r_step_290x290_c768_h12", |bch| {
         bch.iter(|| {
-            attention(&q, &k[..], &v[..], c_dim, heads, &mask, &mut scores, &mut out);
+            attention(
+                &q,
+                &k[..],
+                &v[..],
+                c_dim,
+                heads,
+                &mask,
+                &mut scores,
+                &mut out,
+            );
             std::hint::black_box(&out);
         })
     });
@@ -84,7 +102,9 @@ fn streaming_step_tiny(c: &mut Criterion) {
     let frames = 1 << 16;
     let mut r = Rng(3);
     let music: Vec<f32> = (0..frames * n_music).map(|_| r.f()).collect();
-    let base: Vec<f32> = (0..165).map(|j| (j % 3) as f32 * 0.3 + r.f() * 0.05).collect();
+    let base: Vec<f32> = (0..165)
+        .map(|j| (j % 3) as f32 * 0.3 + r.f() * 0.05)
+        .collect();
     let mut s = Session::new(&model, &mut arena, &sc, [0, 0, 0, 0, 0]).unwrap();
     s.set_music_track(&music).unwrap();
     let mut frame = duolando_core::duolando::session::FollowerFrame::default();

@@ -27,7 +27,10 @@ use std::time::Instant;
 
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd::{self, Isa};
-use duolando_core::kernels::{attention, attention_ahead, linear, linear_xw, F16Rows, F32Rows, KvRows, Matrix, Q8Rows, RowData, TiledCausalMask, Ungrouped, X8Rows};
+use duolando_core::kernels::{
+    attention, attention_ahead, linear, linear_xw, F16Rows, F32Rows, KvRows, Matrix, Q8Rows,
+    RowData, TiledCausalMask, Ungrouped, X8Rows,
+};
 
 mod common;
 use common::Rng;
@@ -51,7 +54,11 @@ fn time(reps: usize, mut f: impl FnMut()) -> f64 {
 fn quantiser_lines(isas: &[Isa], reps: usize, r: &mut Rng) {
     for &(n, i) in &[(290usize, 768usize), (290, 3072), (10, 3072)] {
         let x = r.vec(n * i);
-        let (mut q, mut d, mut c) = (vec![0i8; n * i], vec![0f32; n * i / 32], vec![0i32; n * i / 16]);
+        let (mut q, mut d, mut c) = (
+            vec![0i8; n * i],
+            vec![0f32; n * i / 32],
+            vec![0i32; n * i / 16],
+        );
         let mut line = format!("quantise_q8_corr {n}x{i}:");
         let mut best = None;
         for &isa in isas {
@@ -62,7 +69,11 @@ fn quantiser_lines(isas: &[Isa], reps: usize, r: &mut Rng) {
                 std::hint::black_box(&q);
             });
             let b = *best.get_or_insert(t);
-            line += &format!("  [{isa:?}] {:.3} ns/value ({:.2}x)", t * 1e9 / (n * i) as f64, t / b);
+            line += &format!(
+                "  [{isa:?}] {:.3} ns/value ({:.2}x)",
+                t * 1e9 / (n * i) as f64,
+                t / b
+            );
         }
         println!("{line}");
     }
@@ -119,11 +130,22 @@ fn main() {
         return;
     }
     // (out, in): the MLP's two matrices (the largest of the model).
-    for &(o, i) in if only_attention { &[][..] } else { &[(3072usize, 768usize), (768, 3072)][..] } {
+    for &(o, i) in if only_attention {
+        &[][..]
+    } else {
+        &[(3072usize, 768usize), (768, 3072)][..]
+    } {
         // 64 MB of f32 weights per set: beyond the last-level cache.
         let mats = (64 << 20) / (o * i * 4);
         let wf: Vec<Vec<f32>> = (0..mats).map(|_| r.vec(o * i)).collect();
-        let wh: Vec<Vec<u16>> = wf.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
+        let wh: Vec<Vec<u16>> = wf
+            .iter()
+            .map(|w| {
+                w.iter()
+                    .map(|&v| half::f16::from_f32(v).to_bits())
+                    .collect()
+            })
+            .collect();
         let wq: Vec<Vec<u8>> = wf.iter().map(|w| quantise_q8_block32(w)).collect();
         let wx: Vec<Vec<u8>> = wf.iter().map(|w| quantise_q8_block32x8(w, i)).collect();
         let b = r.vec(o);
@@ -141,7 +163,11 @@ fn main() {
                     simd::set_isa(isa);
                     amx_switch(amx);
                 }
-                let label = if amx { format!("{isa:?}+AMX") } else { format!("{isa:?}") };
+                let label = if amx {
+                    format!("{isa:?}+AMX")
+                } else {
+                    format!("{isa:?}")
+                };
                 let mut per = Vec::new();
                 for (name, pick) in [("f32", 0), ("f16", 1), ("int8", 2), ("int8x8", 3)] {
                     let t = time(reps_n, || {
@@ -162,7 +188,15 @@ fn main() {
                 base.get_or_insert(per.clone());
                 line += &format!(
                     "  [{label}] {}",
-                    per.iter().map(|(nm, t)| format!("{nm} {:.3} ms ({:.1} GMAC/s, {:.2}x f32)", t * 1e3, (n * o * i) as f64 / t / 1e9, f32t / t)).collect::<Vec<_>>().join(", ")
+                    per.iter()
+                        .map(|(nm, t)| format!(
+                            "{nm} {:.3} ms ({:.1} GMAC/s, {:.2}x f32)",
+                            t * 1e3,
+                            (n * o * i) as f64 / t / 1e9,
+                            f32t / t
+                        ))
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 );
             }
             println!("{line}");
@@ -176,10 +210,31 @@ fn main() {
     let (ci, zk) = (512usize, 2048usize);
     let mats = (64 << 20) / (ci * zk * 4);
     let wf: Vec<Vec<f32>> = (0..mats).map(|_| r.vec(ci * zk)).collect();
-    let wh: Vec<Vec<u16>> = wf.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
+    let wh: Vec<Vec<u16>> = wf
+        .iter()
+        .map(|w| {
+            w.iter()
+                .map(|&v| half::f16::from_f32(v).to_bits())
+                .collect()
+        })
+        .collect();
     // GEMM order (zk, ci) of the same values.
-    let wx: Vec<Vec<u8>> = wf.iter().map(|w| quantise_q8_block32x8(&(0..zk * ci).map(|k| w[(k % ci) * zk + k / ci]).collect::<Vec<f32>>(), ci)).collect();
-    for &n in if only_attention { &[][..] } else { &[1usize, 2, 16, 32][..] } {
+    let wx: Vec<Vec<u8>> = wf
+        .iter()
+        .map(|w| {
+            quantise_q8_block32x8(
+                &(0..zk * ci)
+                    .map(|k| w[(k % ci) * zk + k / ci])
+                    .collect::<Vec<f32>>(),
+                ci,
+            )
+        })
+        .collect();
+    for &n in if only_attention {
+        &[][..]
+    } else {
+        &[1usize, 2, 16, 32][..]
+    } {
         let x = r.vec(n * ci);
         let mut z = vec![0.0f32; n * zk];
         let mut line = format!("conv-transpose z {ci}->{zk} n={n:>2}:");
@@ -189,7 +244,11 @@ fn main() {
                 simd::set_isa(isa);
                 amx_switch(amx);
             }
-            let label = if amx { format!("{isa:?}+AMX") } else { format!("{isa:?}") };
+            let label = if amx {
+                format!("{isa:?}+AMX")
+            } else {
+                format!("{isa:?}")
+            };
             let rows = time(reps, || {
                 for w in &wh {
                     linear_xw(&x, &Matrix::F16(F16Rows::new(w, ci, zk).unwrap()), &mut z);
@@ -198,11 +257,21 @@ fn main() {
             }) / mats as f64;
             let gemm = time(reps, || {
                 for w in &wx {
-                    linear(&x, &Matrix::X8(X8Rows::new(w, zk, ci).unwrap()), None, &mut z);
+                    linear(
+                        &x,
+                        &Matrix::X8(X8Rows::new(w, zk, ci).unwrap()),
+                        None,
+                        &mut z,
+                    );
                 }
                 std::hint::black_box(&z);
             }) / mats as f64;
-            line += &format!("  [{label}] f16 x W {:.3} ms, int8x8 GEMM order {:.3} ms ({:.2}x)", rows * 1e3, gemm * 1e3, gemm / rows);
+            line += &format!(
+                "  [{label}] f16 x W {:.3} ms, int8x8 GEMM order {:.3} ms ({:.2}x)",
+                rows * 1e3,
+                gemm * 1e3,
+                gemm / rows
+            );
         }
         println!("{line}");
     }
@@ -215,43 +284,117 @@ fn main() {
     let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
     let mut out = vec![0.0f32; n * c];
     let mut scores = vec![0.0f32; n];
-    let mask = TiledCausalMask { t_q: t, t_k: t, q_pos0: 0 };
+    let mask = TiledCausalMask {
+        t_q: t,
+        t_k: t,
+        q_pos0: 0,
+    };
     let mut line = format!("attention {n}x{n} C={c} heads={nh}:");
     for isa in &isas {
         // SAFETY: as above.
         unsafe { simd::set_isa(*isa) };
-        let s = time(reps, || attention(&q, &k[..], &v[..], c, nh, &mask, &mut scores, &mut out));
-        let alone = time(reps, || attention(&q, &k[..], &v[..], c, nh, &Ungrouped(mask), &mut scores, &mut out));
-        line += &format!("  [{isa:?}] {:.2} ms (queries alone {:.2} ms: {:.2}x)", s * 1e3, alone * 1e3, s / alone);
+        let s = time(reps, || {
+            attention(&q, &k[..], &v[..], c, nh, &mask, &mut scores, &mut out)
+        });
+        let alone = time(reps, || {
+            attention(
+                &q,
+                &k[..],
+                &v[..],
+                c,
+                nh,
+                &Ungrouped(mask),
+                &mut scores,
+                &mut out,
+            )
+        });
+        line += &format!(
+            "  [{isa:?}] {:.2} ms (queries alone {:.2} ms: {:.2}x)",
+            s * 1e3,
+            alone * 1e3,
+            s / alone
+        );
     }
     println!("{line}");
     // Attention of one S-step append: the 10 new rows of one position against
     // a full f16 cache (290 keys, read in place), as in every streaming step.
-    let to_f16 = |v: &[f32]| v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect::<Vec<u16>>();
+    let to_f16 = |v: &[f32]| {
+        v.iter()
+            .map(|&x| half::f16::from_f32(x).to_bits())
+            .collect::<Vec<u16>>()
+    };
     let (k16, v16) = (to_f16(&k), to_f16(&v));
-    let mask = TiledCausalMask { t_q: 1, t_k: t, q_pos0: t - 1 };
+    let mask = TiledCausalMask {
+        t_q: 1,
+        t_k: t,
+        q_pos0: t - 1,
+    };
     let mut line = format!("attention S append {streams}x{n} f16 K/V C={c} heads={nh}:");
     for isa in &isas {
         // SAFETY: as above.
         unsafe { simd::set_isa(*isa) };
-        let (kr, vr) = (KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16)));
-        let s = time(reps * 20, || attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]));
-        let alone = time(reps * 20, || attention(&q[..streams * c], kr, vr, c, nh, &Ungrouped(mask), &mut scores, &mut out[..streams * c]));
-        line += &format!("  [{isa:?}] {:.3} ms (queries alone {:.3} ms: {:.2}x)", s * 1e3, alone * 1e3, s / alone);
+        let (kr, vr) = (
+            KvRows::one(RowData::F16(&k16)),
+            KvRows::one(RowData::F16(&v16)),
+        );
+        let s = time(reps * 20, || {
+            attention(
+                &q[..streams * c],
+                kr,
+                vr,
+                c,
+                nh,
+                &mask,
+                &mut scores,
+                &mut out[..streams * c],
+            )
+        });
+        let alone = time(reps * 20, || {
+            attention(
+                &q[..streams * c],
+                kr,
+                vr,
+                c,
+                nh,
+                &Ungrouped(mask),
+                &mut scores,
+                &mut out[..streams * c],
+            )
+        });
+        line += &format!(
+            "  [{isa:?}] {:.3} ms (queries alone {:.3} ms: {:.2}x)",
+            s * 1e3,
+            alone * 1e3,
+            s / alone
+        );
     }
     println!("{line}");
     // The appends of 16 sessions x 12 layers in one `step_many`, each over its
     // own cache (192 caches, 171 MB: read cold from memory), against as many
     // appends over one cache (hot): how much of the memory time is hidden.
-    let caches: Vec<(Vec<u16>, Vec<u16>)> = (0..16 * 12).map(|_| (to_f16(&r.vec(n * c)), to_f16(&r.vec(n * c)))).collect();
-    let mut line = format!("attention S append x{} caches (16 sessions x 12 layers):", caches.len());
+    let caches: Vec<(Vec<u16>, Vec<u16>)> = (0..16 * 12)
+        .map(|_| (to_f16(&r.vec(n * c)), to_f16(&r.vec(n * c))))
+        .collect();
+    let mut line = format!(
+        "attention S append x{} caches (16 sessions x 12 layers):",
+        caches.len()
+    );
     for isa in &isas {
         // SAFETY: as above.
         unsafe { simd::set_isa(*isa) };
         let cold = time(reps, || {
             for (kc, vc) in &caches {
                 let (kr, vr) = (KvRows::one(RowData::F16(kc)), KvRows::one(RowData::F16(vc)));
-                attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]);
+                attention(
+                    &q[..streams * c],
+                    kr,
+                    vr,
+                    c,
+                    nh,
+                    &mask,
+                    &mut scores,
+                    &mut out[..streams * c],
+                );
             }
         });
         // As `step_many` attends them: the next session's keys and values
@@ -259,14 +402,38 @@ fn main() {
         let ahead = time(reps, || {
             for (i, (kc, vc)) in caches.iter().enumerate() {
                 let (kr, vr) = (KvRows::one(RowData::F16(kc)), KvRows::one(RowData::F16(vc)));
-                let next = caches.get(i + 1).map_or([&[][..], &[][..]], |(kn, vn)| [bytemuck::cast_slice(kn), bytemuck::cast_slice(vn)]);
-                attention_ahead(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c], next);
+                let next = caches.get(i + 1).map_or([&[][..], &[][..]], |(kn, vn)| {
+                    [bytemuck::cast_slice(kn), bytemuck::cast_slice(vn)]
+                });
+                attention_ahead(
+                    &q[..streams * c],
+                    kr,
+                    vr,
+                    c,
+                    nh,
+                    &mask,
+                    &mut scores,
+                    &mut out[..streams * c],
+                    next,
+                );
             }
         });
-        let (kr, vr) = (KvRows::one(RowData::F16(&caches[0].0)), KvRows::one(RowData::F16(&caches[0].1)));
+        let (kr, vr) = (
+            KvRows::one(RowData::F16(&caches[0].0)),
+            KvRows::one(RowData::F16(&caches[0].1)),
+        );
         let hot = time(reps, || {
             for _ in 0..caches.len() {
-                attention(&q[..streams * c], kr, vr, c, nh, &mask, &mut scores, &mut out[..streams * c]);
+                attention(
+                    &q[..streams * c],
+                    kr,
+                    vr,
+                    c,
+                    nh,
+                    &mask,
+                    &mut scores,
+                    &mut out[..streams * c],
+                );
             }
         });
         // The same caches head-major (a session's GPT cache): each head's
@@ -276,13 +443,34 @@ fn main() {
         }
         let cold_hm = time(reps, || {
             for (kc, vc) in &caches {
-                attention(&q[..streams * c], hm(kc, n, c / nh), hm(vc, n, c / nh), c, nh, &mask, &mut scores, &mut out[..streams * c]);
+                attention(
+                    &q[..streams * c],
+                    hm(kc, n, c / nh),
+                    hm(vc, n, c / nh),
+                    c,
+                    nh,
+                    &mask,
+                    &mut scores,
+                    &mut out[..streams * c],
+                );
             }
         });
         let ahead_hm = time(reps, || {
             for (i, (kc, vc)) in caches.iter().enumerate() {
-                let next = caches.get(i + 1).map_or([&[][..], &[][..]], |(kn, vn)| [bytemuck::cast_slice(kn), bytemuck::cast_slice(vn)]);
-                attention_ahead(&q[..streams * c], hm(kc, n, c / nh), hm(vc, n, c / nh), c, nh, &mask, &mut scores, &mut out[..streams * c], next);
+                let next = caches.get(i + 1).map_or([&[][..], &[][..]], |(kn, vn)| {
+                    [bytemuck::cast_slice(kn), bytemuck::cast_slice(vn)]
+                });
+                attention_ahead(
+                    &q[..streams * c],
+                    hm(kc, n, c / nh),
+                    hm(vc, n, c / nh),
+                    c,
+                    nh,
+                    &mask,
+                    &mut scores,
+                    &mut out[..streams * c],
+                    next,
+                );
             }
         });
         line += &format!(
@@ -302,11 +490,16 @@ fn main() {
     drop(caches);
     // The softmax exponentials and the MLP's GELU against libm in the same run
     // (the R step's 290-key scores; one MLP hidden of 290 rows).
-    let libm_exp = |s: &mut [f32], max: f32| s.iter_mut().fold(0.0f32, |a, v| {
-        *v = libm::expf(*v - max);
-        a + *v
-    });
-    let libm_gelu = |x: &mut [f32]| x.iter_mut().for_each(|v| *v = 0.5 * *v * (1.0 + libm::erff(*v * std::f32::consts::FRAC_1_SQRT_2)));
+    let libm_exp = |s: &mut [f32], max: f32| {
+        s.iter_mut().fold(0.0f32, |a, v| {
+            *v = libm::expf(*v - max);
+            a + *v
+        })
+    };
+    let libm_gelu = |x: &mut [f32]| {
+        x.iter_mut()
+            .for_each(|v| *v = 0.5 * *v * (1.0 + libm::erff(*v * std::f32::consts::FRAC_1_SQRT_2)))
+    };
     let x0: Vec<f32> = r.vec(290 * 4 * c).iter().map(|v| v * 4.0).collect();
     let mut x = x0.clone();
     let mut line = format!("exp (softmax, rows of 290) / GELU ({} values):", x0.len());
@@ -321,7 +514,11 @@ fn main() {
         libm_gelu(&mut x);
         std::hint::black_box(&x);
     });
-    line += &format!("  [libm] exp {:.2} ms, GELU {:.2} ms", t_libm_exp * 1e3, t_libm_gelu * 1e3);
+    line += &format!(
+        "  [libm] exp {:.2} ms, GELU {:.2} ms",
+        t_libm_exp * 1e3,
+        t_libm_gelu * 1e3
+    );
     for isa in &isas {
         // SAFETY: as above.
         unsafe { simd::set_isa(*isa) };
@@ -336,7 +533,13 @@ fn main() {
             simd::gelu_inplace(&mut x);
             std::hint::black_box(&x);
         });
-        line += &format!("  [{isa:?}] exp {:.2} ms ({:.1}x libm), GELU {:.2} ms ({:.1}x libm)", te * 1e3, t_libm_exp / te, tg * 1e3, t_libm_gelu / tg);
+        line += &format!(
+            "  [{isa:?}] exp {:.2} ms ({:.1}x libm), GELU {:.2} ms ({:.1}x libm)",
+            te * 1e3,
+            t_libm_exp / te,
+            tg * 1e3,
+            t_libm_gelu / tg
+        );
     }
     println!("{line}");
 }

@@ -47,12 +47,22 @@ fn rest_pose() -> [[f32; 3]; JOINTS] {
     ];
     p[..25].copy_from_slice(&body);
     // Fingers hang down from the wrist: index, middle, pinky, ring, thumb; 3 joints each.
-    let bases: [[f32; 3]; 5] = [[0.01, -0.09, 0.03], [0.0, -0.095, 0.01], [0.0, -0.08, -0.03], [0.0, -0.09, -0.01], [0.01, -0.03, 0.045]];
+    let bases: [[f32; 3]; 5] = [
+        [0.01, -0.09, 0.03],
+        [0.0, -0.095, 0.01],
+        [0.0, -0.08, -0.03],
+        [0.0, -0.09, -0.01],
+        [0.01, -0.03, 0.045],
+    ];
     for (side, wrist, first) in [(1.0f32, 20usize, 25usize), (-1.0, 21, 40)] {
         for (f, b) in bases.iter().enumerate() {
             for k in 0..3 {
                 let j = first + 3 * f + k;
-                let step = if f == 4 { [0.0, -0.022, 0.018] } else { [0.0, -0.03, 0.0] };
+                let step = if f == 4 {
+                    [0.0, -0.022, 0.018]
+                } else {
+                    [0.0, -0.03, 0.0]
+                };
                 p[j] = [
                     p[wrist][0] + side * b[0],
                     p[wrist][1] + b[1] + step[1] * k as f32,
@@ -186,16 +196,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let th = TAU * t / lap;
         let r = 1.1;
         let heading = (-th.sin()).atan2(-th.cos()); // along d/dt of (r cos th, -r sin th)
-        pose(&rest, [r * th.cos(), -r * th.sin()], heading, TAU * t, &mut leader[f * ROW..(f + 1) * ROW]);
+        pose(
+            &rest,
+            [r * th.cos(), -r * th.sin()],
+            heading,
+            TAU * t,
+            &mut leader[f * ROW..(f + 1) * ROW],
+        );
         // Follower: the other way round a 0.5 m circle, with a full spin on every fourth beat.
         let thf = -TAU * t / lap * 1.3 + PI / 2.0;
         let rf = 0.5;
         let spin_period = 4.0 * BEAT_PERIOD as f32 / FPS;
-        let spin = TAU * ((t / spin_period).floor() + smoothstep((t % spin_period) / (0.6 * spin_period)));
+        let spin =
+            TAU * ((t / spin_period).floor() + smoothstep((t % spin_period) / (0.6 * spin_period)));
         let headf = thf + spin; // thf decreases: the path tangent is (sin thf, cos thf)
-        pose(&rest, [rf * thf.cos(), -rf * thf.sin()], headf, TAU * t * 1.1 + 1.0, &mut follower[f * ROW..(f + 1) * ROW]);
+        pose(
+            &rest,
+            [rf * thf.cos(), -rf * thf.sin()],
+            headf,
+            TAU * t * 1.1 + 1.0,
+            &mut follower[f * ROW..(f + 1) * ROW],
+        );
     }
-    let beats: Vec<f32> = (0..frames).map(|f| if f % BEAT_PERIOD == 0 { 1.0 } else { 0.0 }).collect();
+    let beats: Vec<f32> = (0..frames)
+        .map(|f| if f % BEAT_PERIOD == 0 { 1.0 } else { 0.0 })
+        .collect();
     let rows = frames / 4;
     let tokens: Vec<u32> = (0..rows * TOKEN_STREAMS)
         .map(|i| {

@@ -20,7 +20,11 @@ pub fn token_agreement(a: &[u32], b: &[u32], n: usize) -> TokenAgreement {
     let (all, per) = agreement_of(a, b, n, 5);
     let mut per_stream = [0.0; 5];
     per_stream.copy_from_slice(&per);
-    TokenAgreement { all, per_stream, rows: n }
+    TokenAgreement {
+        all,
+        per_stream,
+        rows: n,
+    }
 }
 
 /// Any number of streams: `a`, `b` (rows, `w`), the first `n` rows of
@@ -33,7 +37,10 @@ pub fn agreement_of(a: &[u32], b: &[u32], n: usize, w: usize) -> (f64, Vec<f64>)
         }
     }
     let d = n.max(1) as f64;
-    (per.iter().sum::<usize>() as f64 / (w.max(1) as f64 * d), per.iter().map(|&c| c as f64 / d).collect())
+    (
+        per.iter().sum::<usize>() as f64 / (w.max(1) as f64 * d),
+        per.iter().map(|&c| c as f64 / d).collect(),
+    )
 }
 
 /// [`free_run`] for `w` streams per row: rows 1..=n (row 0, the seed, is
@@ -71,7 +78,11 @@ pub fn joint_error_mm_of(a: &[f32], b: &[f32], joints: usize) -> (f64, f64, usiz
     let n = (a.len() / row).min(b.len() / row);
     let (mut sum, mut max) = (0.0f64, 0.0f64);
     for i in 0..n * joints {
-        let d: f64 = (0..3).map(|c| (a[i * 3 + c] as f64 - b[i * 3 + c] as f64).powi(2)).sum::<f64>().sqrt() * 1000.0;
+        let d: f64 = (0..3)
+            .map(|c| (a[i * 3 + c] as f64 - b[i * 3 + c] as f64).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            * 1000.0;
         sum += d;
         max = max.max(d);
     }

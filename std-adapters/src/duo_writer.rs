@@ -46,7 +46,10 @@ pub fn quantise_q8_block32(values: &[f32]) -> Vec<u8> {
         let df = d.to_f32();
         let inv = if df > 0.0 { 1.0 / df } else { 0.0 };
         out.extend_from_slice(&d.to_le_bytes());
-        out.extend(b.iter().map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8));
+        out.extend(
+            b.iter()
+                .map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8),
+        );
     }
     out
 }
@@ -148,7 +151,12 @@ pub struct HeaderV2 {
 #[derive(Debug)]
 pub enum WriteError {
     /// `values.len()` differs from the product of `shape`.
-    ValueCount { name: String, shape: Vec<u32>, expected: u64, found: usize },
+    ValueCount {
+        name: String,
+        shape: Vec<u32>,
+        expected: u64,
+        found: usize,
+    },
     /// `StoreAs::Q8Block32` / `Q4Block32` on a tensor whose last axis is not a multiple of 32.
     BlockShape { name: String, shape: Vec<u32> },
     /// Two tensors with the same name.
@@ -158,14 +166,25 @@ pub enum WriteError {
     /// The written bytes did not pass the decoder (a config/schema mismatch:
     /// the detail names the tensor and the expected vs found shape).
     Rejected(ModelFileError),
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
 }
 
 impl fmt::Display for WriteError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            WriteError::ValueCount { name, shape, expected, found } => {
-                write!(f, "tensor '{name}': shape {shape:?} needs {expected} values, got {found}")
+            WriteError::ValueCount {
+                name,
+                shape,
+                expected,
+                found,
+            } => {
+                write!(
+                    f,
+                    "tensor '{name}': shape {shape:?} needs {expected} values, got {found}"
+                )
             }
             WriteError::BlockShape { name, shape } => {
                 write!(f, "tensor '{name}': shape {shape:?} cannot be stored in blocks of 32 (Q8Block32/Q4Block32: last axis not a multiple of 32)")
@@ -200,7 +219,11 @@ pub fn assemble_raw(header_bytes: &[u8], data: &[u8]) -> Result<Vec<u8>, WriteEr
 }
 
 /// Prefix of `version` + `header_bytes` + zero padding + `data`.
-pub fn assemble_raw_version(version: u32, header_bytes: &[u8], data: &[u8]) -> Result<Vec<u8>, WriteError> {
+pub fn assemble_raw_version(
+    version: u32,
+    header_bytes: &[u8],
+    data: &[u8],
+) -> Result<Vec<u8>, WriteError> {
     let header_end = (PREFIX_LEN + header_bytes.len()) as u64;
     let data_start = align_up(header_end).unwrap_or(header_end) as usize;
     let mut out = Vec::with_capacity(data_start + data.len());
@@ -224,17 +247,31 @@ pub fn write_duo(config: &ModelConfig, tensors: &[Tensor]) -> Result<Vec<u8>, Wr
 /// [`write_duo`] for any family: Duolando models as version 1 (bytes
 /// unchanged since before families), every other family as version 2.
 pub fn write_model(config: &FamilyConfig, tensors: &[Tensor]) -> Result<Vec<u8>, WriteError> {
-    write_model_version(config, tensors, if config.family() == Family::Duolando { VERSION_DUOLANDO } else { VERSION })
+    write_model_version(
+        config,
+        tensors,
+        if config.family() == Family::Duolando {
+            VERSION_DUOLANDO
+        } else {
+            VERSION
+        },
+    )
 }
 
 /// [`write_model`] in a given format version (2 for any family, 1 only for
 /// Duolando); tests write Duolando models as version 2 with it.
-pub fn write_model_version(config: &FamilyConfig, tensors: &[Tensor], version: u32) -> Result<Vec<u8>, WriteError> {
+pub fn write_model_version(
+    config: &FamilyConfig,
+    tensors: &[Tensor],
+    version: u32,
+) -> Result<Vec<u8>, WriteError> {
     let mut order: Vec<&Tensor> = tensors.iter().collect();
     order.sort_by(|a, b| a.name.as_bytes().cmp(b.name.as_bytes()));
     for pair in order.windows(2) {
         if pair[0].name == pair[1].name {
-            return Err(WriteError::Duplicate { name: pair[0].name.clone() });
+            return Err(WriteError::Duplicate {
+                name: pair[0].name.clone(),
+            });
         }
     }
     let mut entries = Vec::with_capacity(order.len());
@@ -256,13 +293,23 @@ pub fn write_model_version(config: &FamilyConfig, tensors: &[Tensor], version: u
                 DType::F32
             }
             StoreAs::F16 => {
-                data.extend(t.values.iter().flat_map(|&v| half::f16::from_f32(v).to_le_bytes()));
+                data.extend(
+                    t.values
+                        .iter()
+                        .flat_map(|&v| half::f16::from_f32(v).to_le_bytes()),
+                );
                 DType::F16
             }
-            StoreAs::Q8Block32 | StoreAs::Q8Block32x8 | StoreAs::Q4Block32 | StoreAs::Q4Block32x8 => {
+            StoreAs::Q8Block32
+            | StoreAs::Q8Block32x8
+            | StoreAs::Q4Block32
+            | StoreAs::Q4Block32x8 => {
                 let row = duolando_core::tensor::block_row(&t.shape);
                 if row == 0 || row % 32 != 0 {
-                    return Err(WriteError::BlockShape { name: t.name.clone(), shape: t.shape.clone() });
+                    return Err(WriteError::BlockShape {
+                        name: t.name.clone(),
+                        shape: t.shape.clone(),
+                    });
                 }
                 match t.store_as {
                     StoreAs::Q8Block32 => {
@@ -286,27 +333,57 @@ pub fn write_model_version(config: &FamilyConfig, tensors: &[Tensor], version: u
         };
         let nbytes = data.len() as u64 - offset;
         data.resize(data.len().next_multiple_of(ALIGN), 0);
-        entries.push(HeaderEntry { name: t.name.clone(), dtype: dtype as u8, shape: t.shape.clone(), offset, nbytes });
+        entries.push(HeaderEntry {
+            name: t.name.clone(),
+            dtype: dtype as u8,
+            shape: t.shape.clone(),
+            offset,
+            nbytes,
+        });
     }
     let bytes = match (version, config) {
-        (VERSION_DUOLANDO, FamilyConfig::Duolando(c)) => assemble(&Header { config: *c, tensors: entries }, &data)?,
-        _ => assemble_v2(&HeaderV2 { config: *config, tensors: entries }, &data)?,
+        (VERSION_DUOLANDO, FamilyConfig::Duolando(c)) => assemble(
+            &Header {
+                config: *c,
+                tensors: entries,
+            },
+            &data,
+        )?,
+        _ => assemble_v2(
+            &HeaderV2 {
+                config: *config,
+                tensors: entries,
+            },
+            &data,
+        )?,
     };
-    ModelFile::from_aligned(AlignedBytes::copy_from(&bytes), "<written model>").map_err(WriteError::Rejected)?;
+    ModelFile::from_aligned(AlignedBytes::copy_from(&bytes), "<written model>")
+        .map_err(WriteError::Rejected)?;
     Ok(bytes)
 }
 
 /// [`write_duo`], then writes the bytes to `path` (via a temporary file in
 /// the same directory, renamed into place, so a failed write leaves no
 /// half-written model behind).
-pub fn write_duo_to_path(config: &ModelConfig, tensors: &[Tensor], path: &Path) -> Result<(), WriteError> {
+pub fn write_duo_to_path(
+    config: &ModelConfig,
+    tensors: &[Tensor],
+    path: &Path,
+) -> Result<(), WriteError> {
     write_model_to_path(&FamilyConfig::Duolando(*config), tensors, path)
 }
 
 /// [`write_model`], then writes the bytes to `path` as [`write_duo_to_path`] does.
-pub fn write_model_to_path(config: &FamilyConfig, tensors: &[Tensor], path: &Path) -> Result<(), WriteError> {
+pub fn write_model_to_path(
+    config: &FamilyConfig,
+    tensors: &[Tensor],
+    path: &Path,
+) -> Result<(), WriteError> {
     let bytes = write_model(config, tensors)?;
-    let io = |source| WriteError::Io { path: path.display().to_string(), source };
+    let io = |source| WriteError::Io {
+        path: path.display().to_string(),
+        source,
+    };
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".partial");
     std::fs::write(&tmp, &bytes).map_err(io)?;

@@ -21,7 +21,7 @@ pub mod kernel_bench;
 pub mod live;
 pub mod music;
 pub mod npy;
-pub mod streaming;
 pub mod skeleton;
+pub mod streaming;
 pub mod synth;
 pub mod viewer;

@@ -58,7 +58,8 @@ pub enum ServeError {
 /// The page served at `/`: `viewer/live.html` with its stylesheets and
 /// script inlined (no other request is needed).
 pub fn render_live_page() -> String {
-    let mut out = String::with_capacity(LIVE_HTML.len() + LIVE_JS.len() + VIEWER_CSS.len() + LIVE_CSS.len());
+    let mut out =
+        String::with_capacity(LIVE_HTML.len() + LIVE_JS.len() + VIEWER_CSS.len() + LIVE_CSS.len());
     let mut rest = LIVE_HTML;
     while let Some(start) = rest.find("{{") {
         out.push_str(&rest[..start]);
@@ -131,12 +132,17 @@ impl LiveServer {
     /// Listens on 127.0.0.1:`port` (0: a free port chosen by the system)
     /// and starts serving in background threads.
     pub fn bind(port: u16) -> Result<LiveServer, ServeError> {
-        let listener = TcpListener::bind((Ipv4Addr::LOCALHOST, port)).map_err(|source| match source.kind() {
-            io::ErrorKind::AddrInUse => ServeError::PortInUse { port },
-            io::ErrorKind::PermissionDenied => ServeError::PermissionDenied { port },
-            _ => ServeError::Bind { port, source },
-        })?;
-        let addr = listener.local_addr().map_err(|source| ServeError::Bind { port, source })?;
+        let listener =
+            TcpListener::bind((Ipv4Addr::LOCALHOST, port)).map_err(|source| {
+                match source.kind() {
+                    io::ErrorKind::AddrInUse => ServeError::PortInUse { port },
+                    io::ErrorKind::PermissionDenied => ServeError::PermissionDenied { port },
+                    _ => ServeError::Bind { port, source },
+                }
+            })?;
+        let addr = listener
+            .local_addr()
+            .map_err(|source| ServeError::Bind { port, source })?;
         let shared = Arc::new(Shared::default());
         let page: Arc<str> = render_live_page().into();
         let sh = Arc::clone(&shared);
@@ -167,7 +173,10 @@ impl LiveServer {
         if st.ended {
             return id;
         }
-        let block = format!("id: {id}\nevent: {event}\ndata: {}\n\n", data.replace(['\r', '\n'], " "));
+        let block = format!(
+            "id: {id}\nevent: {event}\ndata: {}\n\n",
+            data.replace(['\r', '\n'], " ")
+        );
         st.events.push(block.into());
         drop(st);
         self.shared.changed.notify_all();
@@ -192,7 +201,12 @@ impl LiveServer {
                 },
                 None => KEEPALIVE,
             };
-            st = self.shared.changed.wait_timeout(st, wait).unwrap_or_else(|p| p.into_inner()).0;
+            st = self
+                .shared
+                .changed
+                .wait_timeout(st, wait)
+                .unwrap_or_else(|p| p.into_inner())
+                .0;
         }
         true
     }
@@ -208,12 +222,26 @@ impl LiveServer {
         self.shared.changed.notify_all();
         loop {
             if st.delivered > 0 && st.open_streams == 0 {
-                return Finished { delivered: st.delivered, timed_out: false };
+                return Finished {
+                    delivered: st.delivered,
+                    timed_out: false,
+                };
             }
-            let Some(wait) = deadline.checked_duration_since(Instant::now()).filter(|w| !w.is_zero()) else {
-                return Finished { delivered: st.delivered, timed_out: true };
+            let Some(wait) = deadline
+                .checked_duration_since(Instant::now())
+                .filter(|w| !w.is_zero())
+            else {
+                return Finished {
+                    delivered: st.delivered,
+                    timed_out: true,
+                };
             };
-            st = self.shared.changed.wait_timeout(st, wait).unwrap_or_else(|p| p.into_inner()).0;
+            st = self
+                .shared
+                .changed
+                .wait_timeout(st, wait)
+                .unwrap_or_else(|p| p.into_inner())
+                .0;
         }
     }
 }
@@ -233,17 +261,25 @@ fn accept_loop(listener: TcpListener, addr: SocketAddr, shared: Arc<Shared>, pag
             if st.connections >= MAX_CONNECTIONS {
                 drop(st);
                 let _ = stream.set_write_timeout(Some(WRITE_TIMEOUT));
-                let _ = respond(&stream, "503 Service Unavailable", "text/plain; charset=utf-8", b"too many connections\n", false);
+                let _ = respond(
+                    &stream,
+                    "503 Service Unavailable",
+                    "text/plain; charset=utf-8",
+                    b"too many connections\n",
+                    false,
+                );
                 continue;
             }
             st.connections += 1;
         }
         let (sh, pg) = (Arc::clone(&shared), Arc::clone(&page));
-        let spawned = std::thread::Builder::new().name("live-conn".into()).spawn(move || {
-            let _ = serve(stream, addr, &sh, &pg);
-            sh.lock().connections -= 1;
-            sh.changed.notify_all();
-        });
+        let spawned = std::thread::Builder::new()
+            .name("live-conn".into())
+            .spawn(move || {
+                let _ = serve(stream, addr, &sh, &pg);
+                sh.lock().connections -= 1;
+                sh.changed.notify_all();
+            });
         if spawned.is_err() {
             shared.lock().connections -= 1;
         }
@@ -294,14 +330,21 @@ fn parse_head(head: &[u8]) -> Result<Request, HeadError> {
     let text = std::str::from_utf8(head).map_err(|_| HeadError::Malformed)?;
     let mut lines = text.split("\r\n");
     let mut parts = lines.next().ok_or(HeadError::Malformed)?.split(' ');
-    let (Some(method), Some(target), Some(version), None) = (parts.next(), parts.next(), parts.next(), parts.next()) else {
+    let (Some(method), Some(target), Some(version), None) =
+        (parts.next(), parts.next(), parts.next(), parts.next())
+    else {
         return Err(HeadError::Malformed);
     };
     if method.is_empty() || !version.starts_with("HTTP/1.") || !target.starts_with('/') {
         return Err(HeadError::Malformed);
     }
     let path = target.split(['?', '#']).next().unwrap_or("/").to_string();
-    let mut req = Request { method: method.to_string(), path, host: None, last_event_id: None };
+    let mut req = Request {
+        method: method.to_string(),
+        path,
+        host: None,
+        last_event_id: None,
+    };
     for line in lines.filter(|l| !l.is_empty()) {
         let (name, value) = line.split_once(':').ok_or(HeadError::Malformed)?;
         let value = value.trim();
@@ -315,7 +358,13 @@ fn parse_head(head: &[u8]) -> Result<Request, HeadError> {
 }
 
 /// Writes a whole response with `Content-Length` and `Connection: close`.
-fn respond(mut stream: &TcpStream, status: &str, content_type: &str, body: &[u8], head_only: bool) -> io::Result<()> {
+fn respond(
+    mut stream: &TcpStream,
+    status: &str,
+    content_type: &str,
+    body: &[u8],
+    head_only: bool,
+) -> io::Result<()> {
     let head = format!(
         "HTTP/1.1 {status}\r\nContent-Type: {content_type}\r\nContent-Length: {}\r\nCache-Control: no-store\r\n\
          X-Content-Type-Options: nosniff\r\nConnection: close\r\n\r\n",
@@ -336,13 +385,38 @@ fn serve(mut stream: TcpStream, addr: SocketAddr, shared: &Shared, page: &str) -
     let req = match read_head(&mut stream).and_then(|h| parse_head(&h)) {
         Ok(r) => r,
         Err(HeadError::Incomplete) => return Ok(()),
-        Err(HeadError::TooLarge) => return respond(&stream, "431 Request Header Fields Too Large", text, b"request head too large\n", false),
-        Err(HeadError::Malformed) => return respond(&stream, "400 Bad Request", text, b"malformed request\n", false),
+        Err(HeadError::TooLarge) => {
+            return respond(
+                &stream,
+                "431 Request Header Fields Too Large",
+                text,
+                b"request head too large\n",
+                false,
+            )
+        }
+        Err(HeadError::Malformed) => {
+            return respond(
+                &stream,
+                "400 Bad Request",
+                text,
+                b"malformed request\n",
+                false,
+            )
+        }
     };
     let port = addr.port();
-    let host_ok = req.host.as_deref().is_some_and(|h| h == format!("127.0.0.1:{port}") || h == format!("localhost:{port}"));
+    let host_ok = req
+        .host
+        .as_deref()
+        .is_some_and(|h| h == format!("127.0.0.1:{port}") || h == format!("localhost:{port}"));
     if !host_ok {
-        return respond(&stream, "403 Forbidden", text, b"this server answers only requests for its own address (127.0.0.1 or localhost)\n", false);
+        return respond(
+            &stream,
+            "403 Forbidden",
+            text,
+            b"this server answers only requests for its own address (127.0.0.1 or localhost)\n",
+            false,
+        );
     }
     let head_only = req.method == "HEAD";
     if req.method != "GET" && !head_only {
@@ -357,18 +431,39 @@ fn serve(mut stream: TcpStream, addr: SocketAddr, shared: &Shared, page: &str) -
         return s.flush();
     }
     match req.path.as_str() {
-        "/" | "/index.html" => respond(&stream, "200 OK", "text/html; charset=utf-8", page.as_bytes(), head_only),
+        "/" | "/index.html" => respond(
+            &stream,
+            "200 OK",
+            "text/html; charset=utf-8",
+            page.as_bytes(),
+            head_only,
+        ),
         "/events" => {
-            let from = req.last_event_id.as_deref().and_then(|v| v.parse::<usize>().ok()).map_or(0, |id| id.saturating_add(1));
+            let from = req
+                .last_event_id
+                .as_deref()
+                .and_then(|v| v.parse::<usize>().ok())
+                .map_or(0, |id| id.saturating_add(1));
             stream_events(stream, shared, from, head_only)
         }
-        _ => respond(&stream, "404 Not Found", text, b"not found: the page is at / and the event stream at /events\n", head_only),
+        _ => respond(
+            &stream,
+            "404 Not Found",
+            text,
+            b"not found: the page is at / and the event stream at /events\n",
+            head_only,
+        ),
     }
 }
 
 /// Sends events `from..` as they come; returns when the last was sent after
 /// the end, or when the client is gone.
-fn stream_events(stream: TcpStream, shared: &Shared, from: usize, head_only: bool) -> io::Result<()> {
+fn stream_events(
+    stream: TcpStream,
+    shared: &Shared,
+    from: usize,
+    head_only: bool,
+) -> io::Result<()> {
     let mut w = BufWriter::new(stream);
     w.write_all(
         b"HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-store\r\n\
@@ -400,7 +495,11 @@ fn pump(w: &mut BufWriter<TcpStream>, shared: &Shared, mut next: usize) -> io::R
             let mut waited = Duration::ZERO;
             while next >= st.events.len() && !st.ended && waited < KEEPALIVE {
                 let t = Instant::now();
-                st = shared.changed.wait_timeout(st, KEEPALIVE - waited).unwrap_or_else(|p| p.into_inner()).0;
+                st = shared
+                    .changed
+                    .wait_timeout(st, KEEPALIVE - waited)
+                    .unwrap_or_else(|p| p.into_inner())
+                    .0;
                 waited += t.elapsed();
             }
             let batch: Vec<Arc<str>> = st.events.get(next..).map(<[_]>::to_vec).unwrap_or_default();
@@ -426,13 +525,32 @@ mod tests {
 
     #[test]
     fn parses_request_heads() {
-        let r = parse_head(b"GET /events?x=1 HTTP/1.1\r\nHost: 127.0.0.1:80\r\nLast-Event-ID: 7\r\n").unwrap();
+        let r =
+            parse_head(b"GET /events?x=1 HTTP/1.1\r\nHost: 127.0.0.1:80\r\nLast-Event-ID: 7\r\n")
+                .unwrap();
         assert_eq!(
             r,
-            Request { method: "GET".into(), path: "/events".into(), host: Some("127.0.0.1:80".into()), last_event_id: Some("7".into()) }
+            Request {
+                method: "GET".into(),
+                path: "/events".into(),
+                host: Some("127.0.0.1:80".into()),
+                last_event_id: Some("7".into())
+            }
         );
-        for bad in [&b"GET\r\n"[..], b"GET / HTTP/1.1 x\r\n", b"GET nope HTTP/1.1\r\n", b"GET / SPDY\r\n", b"GET / HTTP/1.1\r\nno colon\r\n", b"\xff / HTTP/1.1\r\n"] {
-            assert_eq!(parse_head(bad), Err(HeadError::Malformed), "{}", String::from_utf8_lossy(bad));
+        for bad in [
+            &b"GET\r\n"[..],
+            b"GET / HTTP/1.1 x\r\n",
+            b"GET nope HTTP/1.1\r\n",
+            b"GET / SPDY\r\n",
+            b"GET / HTTP/1.1\r\nno colon\r\n",
+            b"\xff / HTTP/1.1\r\n",
+        ] {
+            assert_eq!(
+                parse_head(bad),
+                Err(HeadError::Malformed),
+                "{}",
+                String::from_utf8_lossy(bad)
+            );
         }
     }
 
@@ -440,8 +558,14 @@ mod tests {
     fn head_reading_is_bounded() {
         let big = vec![b'a'; MAX_REQUEST_HEAD * 2];
         assert_eq!(read_head(&mut &big[..]), Err(HeadError::TooLarge));
-        assert_eq!(read_head(&mut &b"GET / HTTP/1.1\r\n"[..]), Err(HeadError::Incomplete));
-        assert_eq!(read_head(&mut &b"GET / HTTP/1.1\r\n\r\nbody"[..]).unwrap(), b"GET / HTTP/1.1\r\n");
+        assert_eq!(
+            read_head(&mut &b"GET / HTTP/1.1\r\n"[..]),
+            Err(HeadError::Incomplete)
+        );
+        assert_eq!(
+            read_head(&mut &b"GET / HTTP/1.1\r\n\r\nbody"[..]).unwrap(),
+            b"GET / HTTP/1.1\r\n"
+        );
     }
 
     #[test]

@@ -50,7 +50,10 @@ fn shape_2d(path: &Path, shape: &[u64], cols: Option<usize>, what: &str) -> Resu
 pub fn read_f32_2d(path: &Path, cols: Option<usize>, what: &str) -> Result<Array2<f32>> {
     let npy = open(path)?;
     if npy.order() != npyz::Order::C {
-        bail!("{}: Fortran-ordered arrays are not supported; save with np.ascontiguousarray", path.display());
+        bail!(
+            "{}: Fortran-ordered arrays are not supported; save with np.ascontiguousarray",
+            path.display()
+        );
     }
     let (rows, c) = shape_2d(path, npy.shape(), cols, what)?;
     let data: Vec<f32> = match npy.dtype() {
@@ -63,12 +66,24 @@ pub fn read_f32_2d(path: &Path, cols: Option<usize>, what: &str) -> Result<Array
             .into_iter()
             .map(|v| v as f32)
             .collect(),
-        other => bail!("{}: expected float32 {what}, found dtype {}", path.display(), other.descr()),
+        other => bail!(
+            "{}: expected float32 {what}, found dtype {}",
+            path.display(),
+            other.descr()
+        ),
     };
     if data.len() != rows * c {
-        bail!("{}: {} values do not fill shape ({rows}, {c})", path.display(), data.len());
+        bail!(
+            "{}: {} values do not fill shape ({rows}, {c})",
+            path.display(),
+            data.len()
+        );
     }
-    Ok(Array2 { data, rows, cols: c })
+    Ok(Array2 {
+        data,
+        rows,
+        cols: c,
+    })
 }
 
 /// Reads an integer array (any int/uint width) of shape (rows, cols) or (n,)
@@ -91,14 +106,29 @@ pub fn read_i64_2d(path: &Path, cols: Option<usize>, what: &str) -> Result<Array
             4 => npy.into_vec::<u32>()?.into_iter().map(i64::from).collect(),
             2 => npy.into_vec::<u16>()?.into_iter().map(i64::from).collect(),
             1 => npy.into_vec::<u8>()?.into_iter().map(i64::from).collect(),
-            _ => bail!("{}: unsigned 64-bit {what} are not supported", path.display()),
+            _ => bail!(
+                "{}: unsigned 64-bit {what} are not supported",
+                path.display()
+            ),
         },
-        other => bail!("{}: expected integer {what}, found dtype {}", path.display(), other.descr()),
+        other => bail!(
+            "{}: expected integer {what}, found dtype {}",
+            path.display(),
+            other.descr()
+        ),
     };
     if data.len() != rows * c {
-        bail!("{}: {} values do not fill shape ({rows}, {c})", path.display(), data.len());
+        bail!(
+            "{}: {} values do not fill shape ({rows}, {c})",
+            path.display(),
+            data.len()
+        );
     }
-    Ok(Array2 { data, rows, cols: c })
+    Ok(Array2 {
+        data,
+        rows,
+        cols: c,
+    })
 }
 
 /// Writes a little-endian float32 array with the given shape.
@@ -118,7 +148,12 @@ fn write_any<T: npyz::Serialize + npyz::AutoSerialize + Copy>(
 ) -> Result<()> {
     let n: usize = shape.iter().product();
     if n != data.len() {
-        bail!("internal: {} values do not fill shape {:?} for {}", data.len(), shape, path.display());
+        bail!(
+            "internal: {} values do not fill shape {:?} for {}",
+            data.len(),
+            shape,
+            path.display()
+        );
     }
     let file = File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let shape64: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
@@ -130,7 +165,8 @@ fn write_any<T: npyz::Serialize + npyz::AutoSerialize + Copy>(
         .with_context(|| format!("cannot write {}", path.display()))?;
     w.extend(data.iter().copied())
         .with_context(|| format!("cannot write {}", path.display()))?;
-    w.finish().with_context(|| format!("cannot write {}", path.display()))?;
+    w.finish()
+        .with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
 }
 
@@ -148,7 +184,9 @@ mod tests {
         let a = read_f32_2d(&p, Some(3), "rows").unwrap();
         assert_eq!((a.rows, a.cols), (4, 3));
         assert_eq!(a.data, v);
-        let err = read_f32_2d(&p, Some(165), "leader pos3d").unwrap_err().to_string();
+        let err = read_f32_2d(&p, Some(165), "leader pos3d")
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("165 columns"), "{err}");
         let q = dir.join("t.npy");
         write_i64(&q, &[1, 2, 3, 4, 5, 6], &[2, 3]).unwrap();

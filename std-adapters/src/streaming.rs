@@ -5,9 +5,9 @@
 //! the S golden tests.
 
 use duolando_core::duolando::config::{POSE_DIM, ROT_DIM};
-use duolando_core::error::Error;
 use duolando_core::duolando::model::Model;
 use duolando_core::duolando::session::{FollowerFrame, Session, SessionConfig};
+use duolando_core::error::Error;
 
 /// Everything a streaming run produced, with readiness.
 #[derive(Clone, Debug, Default)]
@@ -91,7 +91,11 @@ pub fn run_streaming_with(
         s.force_history(f)?;
     }
     s.set_music_track(music)?;
-    let mut run = StreamRun { latency_frames: s.latency_frames(), arena_bytes: bytes, ..Default::default() };
+    let mut run = StreamRun {
+        latency_frames: s.latency_frames(),
+        arena_bytes: bytes,
+        ..Default::default()
+    };
     run.tokens.extend_from_slice(&seed);
     let mut frame = FollowerFrame::default();
     let mut seen_codes = 0;
@@ -107,7 +111,8 @@ pub fn run_streaming_with(
         let (n_codes, code) = s.leader_codes();
         if n_codes > seen_codes {
             seen_codes = n_codes;
-            run.leader_codes.extend_from_slice(&code.unwrap_or_default());
+            run.leader_codes
+                .extend_from_slice(&code.unwrap_or_default());
         }
         if s.steps() > run.step_ready.len() + 1 {
             // More than one step after one push cannot happen with a preloaded track.

@@ -22,7 +22,10 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn duolando(args: &[String]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_duolando")).args(args).output().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .args(args)
+        .output()
+        .unwrap()
 }
 
 fn s(p: &Path) -> String {
@@ -30,7 +33,10 @@ fn s(p: &Path) -> String {
 }
 
 fn expected(model: &str) -> Value {
-    serde_json::from_slice(&std::fs::read(fixtures().join(format!("streaming_compare/{model}.json"))).unwrap()).unwrap()
+    serde_json::from_slice(
+        &std::fs::read(fixtures().join(format!("streaming_compare/{model}.json"))).unwrap(),
+    )
+    .unwrap()
 }
 
 /// Runs `compare` for one setting of the study and checks every figure.
@@ -53,7 +59,13 @@ fn check(model: &str, setting: &str) {
     } else {
         let t = read_i64_2d(&inputs.join("seed_tokens.npy"), Some(5), "seed").unwrap();
         args.push("--seed-tokens".into());
-        args.push(t.data.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(","));
+        args.push(
+            t.data
+                .iter()
+                .map(|v| v.to_string())
+                .collect::<Vec<_>>()
+                .join(","),
+        );
     }
     for k in ["lookahead", "enc_future", "dec_future", "shift"] {
         args.push(format!("--{}", k.replace('_', "-")));
@@ -64,7 +76,12 @@ fn check(model: &str, setting: &str) {
     let o = duolando(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let got: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
-    for key in ["latency_frames", "one_step_steps", "free_run_steps", "joint_err_frames"] {
+    for key in [
+        "latency_frames",
+        "one_step_steps",
+        "free_run_steps",
+        "joint_err_frames",
+    ] {
         assert_eq!(got[key], want[key], "{model} {setting}: {key}");
     }
     // Token counts are exact; the study stored them as float32 ratios.
@@ -76,7 +93,10 @@ fn check(model: &str, setting: &str) {
     }
     for key in ["mean_joint_err_mm", "max_joint_err_mm"] {
         let (g, w) = (got[key].as_f64().unwrap(), want[key].as_f64().unwrap());
-        assert!((g - w).abs() < 0.05, "{model} {setting}: {key} {g} vs {w} mm");
+        assert!(
+            (g - w).abs() < 0.05,
+            "{model} {setting}: {key} {g} vs {w} mm"
+        );
     }
 }
 
@@ -118,7 +138,11 @@ fn generate_streaming_writes_the_s_golden() {
         "--music".into(),
         s(&roll.join("music.npy")),
         "--seed-tokens".into(),
-        seed.data.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(","),
+        seed.data
+            .iter()
+            .map(|v| v.to_string())
+            .collect::<Vec<_>>()
+            .join(","),
         "--lookahead".into(),
         "6".into(),
         "--enc-future".into(),
@@ -135,11 +159,21 @@ fn generate_streaming_writes_the_s_golden() {
     let o = duolando(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let tokens = read_i64_2d(&out.join("tokens.npy"), Some(5), "tokens").unwrap();
-    assert_eq!(tokens.data, read_i64_2d(&g.join("tokens.npy"), Some(5), "tokens").unwrap().data);
+    assert_eq!(
+        tokens.data,
+        read_i64_2d(&g.join("tokens.npy"), Some(5), "tokens")
+            .unwrap()
+            .data
+    );
     let pos = read_f32_2d(&out.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
     let want = read_f32_2d(&g.join("follower_pos3d.npy"), Some(165), "pos").unwrap();
     assert_eq!(pos.rows, want.rows);
-    let err = pos.data.iter().zip(&want.data).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    let err = pos
+        .data
+        .iter()
+        .zip(&want.data)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
     assert!(err <= 1e-4, "max |pos err| {err}");
 }
 
@@ -163,7 +197,10 @@ fn compare_rejects_a_budget_outside_the_model() {
     let o = duolando(&args);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("--lookahead 99") && err.contains("largest allowed: 5"), "{err}");
+    assert!(
+        err.contains("--lookahead 99") && err.contains("largest allowed: 5"),
+        "{err}"
+    );
 }
 
 /// Bailando models in exact mode: a model against itself agrees fully
@@ -181,11 +218,41 @@ fn compare_bailando_models() {
     let roll = fx.join("bailando_rollout_btiny_aist_slide");
     let f16 = dir.join("f16.duo");
     let b = fx.join("bailando_btiny");
-    let o = duolando(&["convert", "--config", &s(&b.join("actor_critic.yaml")), "--gpt", &s(&b.join("gpt.safetensors")), "--vqvae", &s(&b.join("vqvae.safetensors")), "--dtype", "f16", "-o", &s(&f16)].map(String::from));
+    let o = duolando(
+        &[
+            "convert",
+            "--config",
+            &s(&b.join("actor_critic.yaml")),
+            "--gpt",
+            &s(&b.join("gpt.safetensors")),
+            "--vqvae",
+            &s(&b.join("vqvae.safetensors")),
+            "--dtype",
+            "f16",
+            "-o",
+            &s(&f16),
+        ]
+        .map(String::from),
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let run = |against: &Path, name: &str| -> Value {
         let json = dir.join(name);
-        let o = duolando(&["compare", "--model", &s(&m), "--against", &s(against), "--music", &s(&roll.join("music.npy")), "--dance", &s(&roll.join("dance.npy")), "--json", &s(&json)].map(String::from));
+        let o = duolando(
+            &[
+                "compare",
+                "--model",
+                &s(&m),
+                "--against",
+                &s(against),
+                "--music",
+                &s(&roll.join("music.npy")),
+                "--dance",
+                &s(&roll.join("dance.npy")),
+                "--json",
+                &s(&json),
+            ]
+            .map(String::from),
+        );
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap()
     };
@@ -200,23 +267,59 @@ fn compare_bailando_models() {
     assert!(err > 0.0 && err < 5.0, "f16 max joint error {err} mm");
     let sr = |extra: &[&str], name: &str| -> Value {
         let json = dir.join(name);
-        let mut a = vec!["compare".to_string(), "--model".into(), s(&m), "--music".into(), s(&roll.join("music.npy")), "--dance".into(), s(&roll.join("dance.npy")), "--json".into(), s(&json)];
+        let mut a = vec![
+            "compare".to_string(),
+            "--model".into(),
+            s(&m),
+            "--music".into(),
+            s(&roll.join("music.npy")),
+            "--dance".into(),
+            s(&roll.join("dance.npy")),
+            "--json".into(),
+            s(&json),
+        ];
         a.extend(extra.iter().map(|x| x.to_string()));
         let o = duolando(&a);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        assert!(String::from_utf8_lossy(&o.stdout).contains("streaming"), "{}", String::from_utf8_lossy(&o.stdout));
+        assert!(
+            String::from_utf8_lossy(&o.stdout).contains("streaming"),
+            "{}",
+            String::from_utf8_lossy(&o.stdout)
+        );
         serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap()
     };
     let exact = sr(&["--preset", "exact"], "s_exact.json");
-    assert_eq!((exact["one_step_agreement"].as_f64(), exact["free_run_agreement"].as_f64(), exact["max_joint_err_mm"].as_f64()), (Some(1.0), Some(1.0), Some(0.0)), "{exact}");
+    assert_eq!(
+        (
+            exact["one_step_agreement"].as_f64(),
+            exact["free_run_agreement"].as_f64(),
+            exact["max_joint_err_mm"].as_f64()
+        ),
+        (Some(1.0), Some(1.0), Some(0.0)),
+        "{exact}"
+    );
     let d0 = sr(&["--preset", "exact", "--dec-future", "0"], "s_d0.json");
     assert_eq!(d0["free_run_agreement"], 1.0, "{d0}");
     assert!(d0["max_joint_err_mm"].as_f64().unwrap() > 0.0, "{d0}");
     assert_eq!(d0["latency_frames"], 0);
     let jump = sr(&["--preset", "reference"], "s_ref.json");
     assert!(jump["one_step_agreement"].as_f64().unwrap() < 1.0, "{jump}");
-    for (extra, want) in [(vec!["--preset", "live-music"], "Duolando preset"), (vec!["--against", "x.duo", "--leader", "l.npy"], "solo dancer")] {
-        let mut a = vec!["compare".to_string(), "--model".into(), s(&m), "--music".into(), s(&roll.join("music.npy")), "--dance".into(), s(&roll.join("dance.npy"))];
+    for (extra, want) in [
+        (vec!["--preset", "live-music"], "Duolando preset"),
+        (
+            vec!["--against", "x.duo", "--leader", "l.npy"],
+            "solo dancer",
+        ),
+    ] {
+        let mut a = vec![
+            "compare".to_string(),
+            "--model".into(),
+            s(&m),
+            "--music".into(),
+            s(&roll.join("music.npy")),
+            "--dance".into(),
+            s(&roll.join("dance.npy")),
+        ];
         a.extend(extra.iter().map(|x| x.to_string()));
         let o = duolando(&a);
         let e = String::from_utf8_lossy(&o.stderr);

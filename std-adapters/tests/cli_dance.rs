@@ -32,7 +32,11 @@ fn p(path: &Path) -> &str {
 }
 
 fn dance(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_duolando")).arg("dance").args(args).output().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .arg("dance")
+        .args(args)
+        .output()
+        .unwrap()
 }
 
 fn stderr(o: &Output) -> String {
@@ -42,7 +46,16 @@ fn stderr(o: &Output) -> String {
 /// Runs dance on the tiny model; `leader`/`music` override the rollout inputs.
 fn dance_tiny(out: &Path, leader: &Path, music: &Path, extra: &[&str]) -> Output {
     let m = model();
-    let mut a = vec!["--model", p(&m), "--leader", p(leader), "--music", p(music), "--out", p(out)];
+    let mut a = vec![
+        "--model",
+        p(&m),
+        "--leader",
+        p(leader),
+        "--music",
+        p(music),
+        "--out",
+        p(out),
+    ];
     a.extend_from_slice(extra);
     dance(&a)
 }
@@ -52,7 +65,11 @@ fn assert_fails(o: &Output, file: &Path, expect: &str) {
     let e = stderr(o);
     assert!(!o.status.success(), "expected failure, got success: {e}");
     assert_eq!(o.status.code(), Some(1), "{e}");
-    assert!(e.contains(p(file)), "error does not name {}: {e}", file.display());
+    assert!(
+        e.contains(p(file)),
+        "error does not name {}: {e}",
+        file.display()
+    );
     assert!(e.contains(expect), "error lacks '{expect}': {e}");
     assert!(!e.contains("panicked"), "{e}");
 }
@@ -61,8 +78,16 @@ fn assert_fails(o: &Output, file: &Path, expect: &str) {
 fn glb_json(path: &Path) -> serde_json::Value {
     let b = std::fs::read(path).unwrap();
     assert_eq!(&b[0..4], b"glTF");
-    assert_eq!(u32::from_le_bytes(b[4..8].try_into().unwrap()), 2, "glTF version");
-    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()) as usize, b.len(), "glb length field");
+    assert_eq!(
+        u32::from_le_bytes(b[4..8].try_into().unwrap()),
+        2,
+        "glTF version"
+    );
+    assert_eq!(
+        u32::from_le_bytes(b[8..12].try_into().unwrap()) as usize,
+        b.len(),
+        "glb length field"
+    );
     let json_len = u32::from_le_bytes(b[12..16].try_into().unwrap()) as usize;
     assert_eq!(&b[16..20], b"JSON");
     serde_json::from_slice(&b[20..20 + json_len]).unwrap()
@@ -73,7 +98,12 @@ fn dance_writes_every_file_and_matches_the_golden_tokens() {
     let out = tmp("all");
     let r = roll();
     let start = r.join("follower_start.npy");
-    let o = dance_tiny(&out, &r.join("leader_pos3d.npy"), &r.join("music.npy"), &["--follower-start", p(&start)]);
+    let o = dance_tiny(
+        &out,
+        &r.join("leader_pos3d.npy"),
+        &r.join("music.npy"),
+        &["--follower-start", p(&start)],
+    );
     let e = stderr(&o);
     assert!(o.status.success(), "{e}");
     assert!(e.contains("[5/5]") && e.contains("index.html"), "{e}");
@@ -95,13 +125,26 @@ fn dance_writes_every_file_and_matches_the_golden_tokens() {
     }
     let fpos = read_f32_2d(&out.join("follower_pos3d.npy"), Some(165), "f").unwrap();
     let gpos = read_f32_2d(&r.join("follower_pos3d.npy"), Some(165), "g").unwrap();
-    let err = fpos.data.iter().zip(&gpos.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let err = fpos
+        .data
+        .iter()
+        .zip(&gpos.data)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
     assert!(err <= 1e-4, "follower_pos3d vs golden: {err}");
 
     // glb: both dancers, 55 joints each, one animation.
     let g = glb_json(&out.join("follower.glb"));
-    let names: Vec<&str> = g["nodes"].as_array().unwrap().iter().filter_map(|n| n["name"].as_str()).collect();
-    assert!(names.contains(&"leader") && names.contains(&"follower"), "{names:?}");
+    let names: Vec<&str> = g["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|n| n["name"].as_str())
+        .collect();
+    assert!(
+        names.contains(&"leader") && names.contains(&"follower"),
+        "{names:?}"
+    );
     assert!(names.contains(&"follower_pelvis") && names.contains(&"leader_right_wrist"));
     assert_eq!(g["animations"].as_array().unwrap().len(), 1);
 
@@ -117,15 +160,34 @@ fn dance_writes_every_file_and_matches_the_golden_tokens() {
     // The viewer page embeds the data: frames, tokens and the title.
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     assert!(html.contains("id=\"duolando-data\""), "no data block");
-    assert!(html.contains("leader_pos3d.npy + music.npy"), "title missing");
-    let data = html.split("id=\"duolando-data\">").nth(1).unwrap().split("</script>").next().unwrap();
+    assert!(
+        html.contains("leader_pos3d.npy + music.npy"),
+        "title missing"
+    );
+    let data = html
+        .split("id=\"duolando-data\">")
+        .nth(1)
+        .unwrap()
+        .split("</script>")
+        .next()
+        .unwrap();
     let v: serde_json::Value = serde_json::from_str(data).unwrap();
     let token_text = v.to_string();
-    assert!(token_text.contains(&golden.data[5..10].iter().map(|t| t.to_string()).collect::<Vec<_>>().join(",")));
-    assert!(!html.contains("<audio") || !html.contains("src=\"music"), "no audio was given");
+    assert!(token_text.contains(
+        &golden.data[5..10]
+            .iter()
+            .map(|t| t.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    ));
+    assert!(
+        !html.contains("<audio") || !html.contains("src=\"music"),
+        "no audio was given"
+    );
 
     // summary.json
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(s["follower_frames"], frames);
     assert_eq!(s["token_rows"], tokens.rows);
     assert_eq!(s["fps"], 30);
@@ -144,20 +206,40 @@ fn interpenetration_is_reported() {
     let out = tmp("contact");
     let r = roll();
     let leader = r.join("leader_pos3d.npy");
-    let o = dance_tiny(&out, &leader, &r.join("music.npy"), &["--true-follower", p(&leader)]);
+    let o = dance_tiny(
+        &out,
+        &leader,
+        &r.join("music.npy"),
+        &["--true-follower", p(&leader)],
+    );
     let e = stderr(&o);
     assert!(o.status.success(), "{e}");
-    assert!(e.contains("pelvis distance") && e.contains("true follower"), "{e}");
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert!(
+        e.contains("pelvis distance") && e.contains("true follower"),
+        "{e}"
+    );
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
     let f = &s["interpenetration"]["follower"];
     let num = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"));
     assert_eq!(f["frames"], 484);
     let d = &f["pelvis_distance_m"];
-    assert!(num(&d["min"]) <= num(&d["p5"]) && num(&d["p5"]) <= num(&d["mean"]), "{d}");
+    assert!(
+        num(&d["min"]) <= num(&d["p5"]) && num(&d["p5"]) <= num(&d["mean"]),
+        "{d}"
+    );
     for g in ["trunk_capsules", "body_capsules", "all_capsules"] {
         let c = &f[g];
-        assert!((0.0..=1.0).contains(&num(&c["frames_overlapping"])) && num(&c["frames_over_2cm"]) <= num(&c["frames_overlapping"]), "{c}");
-        assert!(num(&c["depth_mean_m"]) <= num(&c["depth_p95_m"]) + 1e-6 && num(&c["depth_p95_m"]) <= num(&c["depth_max_m"]), "{c}");
+        assert!(
+            (0.0..=1.0).contains(&num(&c["frames_overlapping"]))
+                && num(&c["frames_over_2cm"]) <= num(&c["frames_overlapping"]),
+            "{c}"
+        );
+        assert!(
+            num(&c["depth_mean_m"]) <= num(&c["depth_p95_m"]) + 1e-6
+                && num(&c["depth_p95_m"]) <= num(&c["depth_max_m"]),
+            "{c}"
+        );
     }
     // More capsules can only overlap more.
     assert!(num(&f["trunk_capsules"]["depth_max_m"]) <= num(&f["body_capsules"]["depth_max_m"]));
@@ -165,7 +247,14 @@ fn interpenetration_is_reported() {
     let t = &s["interpenetration"]["true_follower"];
     assert!(t["file"].as_str().unwrap().ends_with("leader_pos3d.npy"));
     let m = &t["measure"];
-    assert_eq!((num(&m["pelvis_distance_m"]["min"]), num(&m["pelvis_distance_m"]["mean"])), (0.0, 0.0), "{m}");
+    assert_eq!(
+        (
+            num(&m["pelvis_distance_m"]["min"]),
+            num(&m["pelvis_distance_m"]["mean"])
+        ),
+        (0.0, 0.0),
+        "{m}"
+    );
     assert_eq!(num(&m["frames_pelvis_under_0_25_m"]), 1.0);
     assert_eq!(num(&m["trunk_capsules"]["frames_overlapping"]), 1.0);
     assert!(num(&m["trunk_capsules"]["depth_p95_m"]) > 0.1, "{m}");
@@ -173,19 +262,45 @@ fn interpenetration_is_reported() {
     // A true follower shorter than the duet is refused, naming the file.
     let short = out.join("short.npy");
     write_f32(&short, &vec![0.0; 100 * 165], &[100, 165]).unwrap();
-    assert_fails(&dance_tiny(&out.join("x"), &leader, &r.join("music.npy"), &["--true-follower", p(&short)]), &short, "at least");
+    assert_fails(
+        &dance_tiny(
+            &out.join("x"),
+            &leader,
+            &r.join("music.npy"),
+            &["--true-follower", p(&short)],
+        ),
+        &short,
+        "at least",
+    );
     let nan = out.join("nan.npy");
     let mut v = vec![0.0f32; 600 * 165];
     v[3 * 165 + 1] = f32::NAN;
     write_f32(&nan, &v, &[600, 165]).unwrap();
-    assert_fails(&dance_tiny(&out.join("x"), &leader, &r.join("music.npy"), &["--true-follower", p(&nan)]), &nan, "[3, 1]");
-    assert!(!out.join("x").join("follower.glb").exists(), "a refused true follower writes nothing");
+    assert_fails(
+        &dance_tiny(
+            &out.join("x"),
+            &leader,
+            &r.join("music.npy"),
+            &["--true-follower", p(&nan)],
+        ),
+        &nan,
+        "[3, 1]",
+    );
+    assert!(
+        !out.join("x").join("follower.glb").exists(),
+        "a refused true follower writes nothing"
+    );
 }
 
 /// A 21 s mono WAV: clicks at 120 BPM over a quiet tone.
 fn write_wav(path: &Path) {
     let sr = 22050u32;
-    let spec = hound::WavSpec { channels: 1, sample_rate: sr, bits_per_sample: 16, sample_format: hound::SampleFormat::Int };
+    let spec = hound::WavSpec {
+        channels: 1,
+        sample_rate: sr,
+        bits_per_sample: 16,
+        sample_format: hound::SampleFormat::Int,
+    };
     let mut w = hound::WavWriter::create(path, spec).unwrap();
     for i in 0..sr * 21 {
         let t = i as f32 / sr as f32;
@@ -201,15 +316,27 @@ fn dance_with_audio_music_and_the_default_seed() {
     let out = tmp("audio");
     let wav = out.join("song.wav");
     write_wav(&wav);
-    let o = dance_tiny(&out.join("out"), &roll().join("leader_pos3d.npy"), &wav, &[]);
+    let o = dance_tiny(
+        &out.join("out"),
+        &roll().join("leader_pos3d.npy"),
+        &wav,
+        &[],
+    );
     let e = stderr(&o);
     assert!(o.status.success(), "{e}");
-    assert!(e.contains("face to face"), "the default seed is printed: {e}");
+    assert!(
+        e.contains("face to face"),
+        "the default seed is printed: {e}"
+    );
     let dir = out.join("out");
-    assert!(dir.join("music.wav").is_file(), "audio copied for the viewer");
+    assert!(
+        dir.join("music.wav").is_file(),
+        "audio copied for the viewer"
+    );
     let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
     assert!(html.contains("music.wav"), "the page plays the audio");
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
     assert!(s["music"]["tempo_bpm"].as_f64().unwrap() > 0.0);
     assert_eq!(s["music"]["audio"], "music.wav");
     assert!(s["seed"].as_str().unwrap().contains("face to face"));
@@ -220,33 +347,59 @@ fn dance_with_a_bvh_leader() {
     let dir = tmp("bvh");
     let take = duolando::synth::demo_take(3, 10.0);
     let leader = dir.join("leader_in.bvh");
-    bvh::write(&leader, &Motion::from_track(&take.leader), 30.0, bvh::Units::Centimetres).unwrap();
+    bvh::write(
+        &leader,
+        &Motion::from_track(&take.leader),
+        30.0,
+        bvh::Units::Centimetres,
+    )
+    .unwrap();
     let music = dir.join("music.npy");
     write_f32(&music, &take.music, &[take.frames, 54]).unwrap();
     let o = dance_tiny(&dir.join("out"), &leader, &music, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("out/summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out/summary.json")).unwrap()).unwrap();
     assert_eq!(s["leader"]["source"], "bvh, SMPL-X, centimetres");
     assert_eq!(s["leader"]["frames"], take.frames);
     // The leader read back from BVH is the take's leader (cm text round-off).
     let got = read_f32_2d(&dir.join("out/leader_pos3d.npy"), Some(165), "leader").unwrap();
-    let err = got.data.iter().zip(&take.leader.positions).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let err = got
+        .data
+        .iter()
+        .zip(&take.leader.positions)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
     assert!(err < 1e-3, "BVH leader vs take: {err} m");
 
     // The same frames labelled 60 fps: resampled to 30 fps, frame k is the
     // take's frame 2k.
     let fast = dir.join("leader_60fps.bvh");
-    let text = std::fs::read_to_string(&leader).unwrap().replace("Frame Time: 0.0333333", "Frame Time: 0.0166667");
+    let text = std::fs::read_to_string(&leader)
+        .unwrap()
+        .replace("Frame Time: 0.0333333", "Frame Time: 0.0166667");
     std::fs::write(&fast, text).unwrap();
     let o = dance_tiny(&dir.join("out2"), &fast, &music, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("out2/summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out2/summary.json")).unwrap()).unwrap();
     assert_eq!(s["leader"]["frames"], (take.frames - 1) / 2 + 1);
-    assert!(s["leader"]["source"].as_str().unwrap().contains("60.00 fps resampled to 30"), "{}", s["leader"]["source"]);
+    assert!(
+        s["leader"]["source"]
+            .as_str()
+            .unwrap()
+            .contains("60.00 fps resampled to 30"),
+        "{}",
+        s["leader"]["source"]
+    );
     let got = read_f32_2d(&dir.join("out2/leader_pos3d.npy"), Some(165), "leader").unwrap();
     for k in 0..got.rows {
         let want = &take.leader.positions[2 * k * 165..(2 * k + 1) * 165];
-        let err = got.data[k * 165..(k + 1) * 165].iter().zip(want).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+        let err = got.data[k * 165..(k + 1) * 165]
+            .iter()
+            .zip(want)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0f32, f32::max);
         assert!(err < 1e-3, "60 fps frame {} vs take: {err} m", 2 * k);
     }
 
@@ -255,17 +408,42 @@ fn dance_with_a_bvh_leader() {
     let mixamo = dir.join("leader_mixamo.bvh");
     let mut text = std::fs::read_to_string(&leader).unwrap();
     for (smplx, mixamo) in [
-        ("left_hip", "LeftUpLeg"), ("right_hip", "RightUpLeg"), ("spine1", "Spine"), ("left_knee", "LeftLeg"),
-        ("right_knee", "RightLeg"), ("spine2", "Spine1"), ("left_ankle", "LeftFoot"), ("right_ankle", "RightFoot"),
-        ("spine3", "Spine2"), ("left_foot", "LeftToeBase"), ("right_foot", "RightToeBase"), ("neck", "Neck"),
-        ("left_collar", "LeftShoulder"), ("right_collar", "RightShoulder"), ("head", "Head"),
-        ("left_shoulder", "LeftArm"), ("right_shoulder", "RightArm"), ("left_elbow", "LeftForeArm"),
-        ("right_elbow", "RightForeArm"), ("left_wrist", "LeftHand"), ("right_wrist", "RightHand"), ("pelvis", "Hips"),
+        ("left_hip", "LeftUpLeg"),
+        ("right_hip", "RightUpLeg"),
+        ("spine1", "Spine"),
+        ("left_knee", "LeftLeg"),
+        ("right_knee", "RightLeg"),
+        ("spine2", "Spine1"),
+        ("left_ankle", "LeftFoot"),
+        ("right_ankle", "RightFoot"),
+        ("spine3", "Spine2"),
+        ("left_foot", "LeftToeBase"),
+        ("right_foot", "RightToeBase"),
+        ("neck", "Neck"),
+        ("left_collar", "LeftShoulder"),
+        ("right_collar", "RightShoulder"),
+        ("head", "Head"),
+        ("left_shoulder", "LeftArm"),
+        ("right_shoulder", "RightArm"),
+        ("left_elbow", "LeftForeArm"),
+        ("right_elbow", "RightForeArm"),
+        ("left_wrist", "LeftHand"),
+        ("right_wrist", "RightHand"),
+        ("pelvis", "Hips"),
     ] {
-        text = text.replace(&format!("JOINT {smplx}\n"), &format!("JOINT mixamorig:{mixamo}\n"));
-        text = text.replace(&format!("ROOT {smplx}\n"), &format!("ROOT mixamorig:{mixamo}\n"));
+        text = text.replace(
+            &format!("JOINT {smplx}\n"),
+            &format!("JOINT mixamorig:{mixamo}\n"),
+        );
+        text = text.replace(
+            &format!("ROOT {smplx}\n"),
+            &format!("ROOT mixamorig:{mixamo}\n"),
+        );
     }
-    assert!(text.contains("mixamorig:LeftForeArm") && text.contains("ROOT mixamorig:Hips"), "renamed");
+    assert!(
+        text.contains("mixamorig:LeftForeArm") && text.contains("ROOT mixamorig:Hips"),
+        "renamed"
+    );
     std::fs::write(&mixamo, text).unwrap();
     let o = dance_tiny(&dir.join("out3"), &mixamo, &music, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -273,14 +451,20 @@ fn dance_with_a_bvh_leader() {
     for t in 0..got.rows {
         for j in 0..55 {
             let src = match j {
-                22..=24 => 15,  // jaw, eyes: at the head
-                25..=39 => 20,  // left fingers: at the wrist
-                40..=54 => 21,  // right fingers
+                22..=24 => 15, // jaw, eyes: at the head
+                25..=39 => 20, // left fingers: at the wrist
+                40..=54 => 21, // right fingers
                 _ => j,
             };
             for c in 0..3 {
-                let (a, b) = (got.data[t * 165 + j * 3 + c], take.leader.positions[t * 165 + src * 3 + c]);
-                assert!((a - b).abs() < 1e-3, "Mixamo frame {t} joint {j}: {a} vs {b}");
+                let (a, b) = (
+                    got.data[t * 165 + j * 3 + c],
+                    take.leader.positions[t * 165 + src * 3 + c],
+                );
+                assert!(
+                    (a - b).abs() < 1e-3,
+                    "Mixamo frame {t} joint {j}: {a} vs {b}"
+                );
             }
         }
     }
@@ -295,13 +479,22 @@ fn music_shorter_than_the_leader_cuts_the_leader() {
     write_f32(&short, &music.data[..300 * 54], &[300, 54]).unwrap();
     let o = dance_tiny(&dir.join("out"), &r.join("leader_pos3d.npy"), &short, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stderr(&o).contains("the leader is cut to the music"), "{}", stderr(&o));
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("out/summary.json")).unwrap()).unwrap();
+    assert!(
+        stderr(&o).contains("the leader is cut to the music"),
+        "{}",
+        stderr(&o)
+    );
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out/summary.json")).unwrap()).unwrap();
     assert_eq!(s["leader"]["frames"], 300);
     assert!(s["follower_frames"].as_u64().unwrap() <= 300);
     let leader = read_f32_2d(&dir.join("out/leader_pos3d.npy"), Some(165), "leader").unwrap();
     let full = read_f32_2d(&r.join("leader_pos3d.npy"), Some(165), "leader").unwrap();
-    assert_eq!(leader.data[..], full.data[..leader.data.len()], "the leader's first frames, unchanged");
+    assert_eq!(
+        leader.data[..],
+        full.data[..leader.data.len()],
+        "the leader's first frames, unchanged"
+    );
 }
 
 #[test]
@@ -327,7 +520,11 @@ fn bad_inputs_fail_naming_the_file() {
     // Leader too short for the model.
     let tiny_clip = dir.join("leader_short.npy");
     write_f32(&tiny_clip, &vec![0.0; 40 * 165], &[40, 165]).unwrap();
-    assert_fails(&dance_tiny(&out, &tiny_clip, &music, &[]), &tiny_clip, "at least");
+    assert_fails(
+        &dance_tiny(&out, &tiny_clip, &music, &[]),
+        &tiny_clip,
+        "at least",
+    );
     // Non-finite leader value.
     let nan = dir.join("leader_nan.npy");
     let mut v = read_f32_2d(&leader, Some(165), "l").unwrap().data;
@@ -336,7 +533,11 @@ fn bad_inputs_fail_naming_the_file() {
     assert_fails(&dance_tiny(&out, &nan, &music, &[]), &nan, "[7, 2]");
     // Missing file.
     let missing = dir.join("nope.npy");
-    assert_fails(&dance_tiny(&out, &leader, &missing, &[]), &missing, "cannot open");
+    assert_fails(
+        &dance_tiny(&out, &leader, &missing, &[]),
+        &missing,
+        "cannot open",
+    );
     // Unknown leader format.
     let txt = dir.join("leader.txt");
     std::fs::write(&txt, "hello").unwrap();
@@ -358,14 +559,31 @@ fn bad_inputs_fail_naming_the_file() {
     .unwrap();
     assert_fails(&dance_tiny(&out, &other, &music, &[]), &other, "SMPL-X");
     // Model mismatch: a seed token outside the tiny model's vocabulary (64).
-    assert_fails(&dance_tiny(&out, &leader, &music, &["--seed-tokens", "1,2,3,4,64"]), &model(), "vocabulary 64");
+    assert_fails(
+        &dance_tiny(&out, &leader, &music, &["--seed-tokens", "1,2,3,4,64"]),
+        &model(),
+        "vocabulary 64",
+    );
     // Not a model.
-    let m = dance(&["--model", p(&music), "--leader", p(&leader), "--music", p(&music), "--out", p(&out)]);
+    let m = dance(&[
+        "--model",
+        p(&music),
+        "--leader",
+        p(&leader),
+        "--music",
+        p(&music),
+        "--out",
+        p(&out),
+    ]);
     assert_fails(&m, &music, "not a .duo file");
     // Follower start of the wrong length.
     let one = dir.join("start_1.npy");
     write_f32(&one, &[0.0; 165], &[1, 165]).unwrap();
-    assert_fails(&dance_tiny(&out, &leader, &music, &["--follower-start", p(&one)]), &one, "follower start");
+    assert_fails(
+        &dance_tiny(&out, &leader, &music, &["--follower-start", p(&one)]),
+        &one,
+        "follower start",
+    );
     // Nothing was written by the failures.
     assert!(!out.join("index.html").exists());
 }
@@ -385,7 +603,11 @@ fn base64_decode(s: &str) -> Vec<u8> {
     let mut out = Vec::with_capacity(s.len() / 4 * 3);
     for q in s.as_bytes().chunks(4) {
         let pad = q.iter().filter(|&&c| c == b'=').count();
-        let n = q.iter().filter(|&&c| c != b'=').fold(0u32, |a, &c| (a << 6) | val(c)) << (6 * pad);
+        let n = q
+            .iter()
+            .filter(|&&c| c != b'=')
+            .fold(0u32, |a, &c| (a << 6) | val(c))
+            << (6 * pad);
         out.extend_from_slice(&n.to_be_bytes()[1..4 - pad]);
     }
     out
@@ -393,10 +615,19 @@ fn base64_decode(s: &str) -> Vec<u8> {
 
 /// The follower positions the viewer page `index.html` shows, (T, 165).
 fn viewer_follower(html: &str) -> Vec<f32> {
-    let data = html.split("id=\"duolando-data\">").nth(1).unwrap().split("</script>").next().unwrap();
+    let data = html
+        .split("id=\"duolando-data\">")
+        .nth(1)
+        .unwrap()
+        .split("</script>")
+        .next()
+        .unwrap();
     let v: serde_json::Value = serde_json::from_str(data).unwrap();
     let bytes = base64_decode(v["follower"]["f32"].as_str().unwrap());
-    bytes.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect()
+    bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect()
 }
 
 /// World positions (T, 165), metres, of a BVH as `dance` writes it (cm).
@@ -426,7 +657,9 @@ const EXPORT_BODY_P95_TOL_M: f32 = 0.12;
 const EXPORT_ALL_MEAN_TOL_M: f32 = 0.06;
 
 fn within_export_tolerance(e: &GroupErrors) -> bool {
-    e.body.mean <= EXPORT_BODY_MEAN_TOL_M && e.body.p95 <= EXPORT_BODY_P95_TOL_M && e.all.mean <= EXPORT_ALL_MEAN_TOL_M
+    e.body.mean <= EXPORT_BODY_MEAN_TOL_M
+        && e.body.p95 <= EXPORT_BODY_P95_TOL_M
+        && e.all.mean <= EXPORT_ALL_MEAN_TOL_M
 }
 
 #[test]
@@ -440,44 +673,84 @@ fn demo_export_matches_the_viewer_positions() {
     let o = dance(&["--out", p(&out)]);
     let e = stderr(&o);
     assert!(o.status.success(), "{e}");
-    assert!(!e.contains("untrained"), "the trained demo is not blamed as untrained: {e}");
+    assert!(
+        !e.contains("untrained"),
+        "the trained demo is not blamed as untrained: {e}"
+    );
     let shown = viewer_follower(&std::fs::read_to_string(out.join("index.html")).unwrap());
     let pos = read_f32_2d(&out.join("follower_pos3d.npy"), Some(165), "follower_pos3d").unwrap();
     assert_eq!(shown, pos.data, "the viewer shows follower_pos3d.npy");
 
     let from_bvh = GroupErrors::between(&bvh_positions(&out.join("follower.bvh")), &shown);
-    let (doc, bin) = glb::parse(&std::fs::read(out.join("follower.glb")).unwrap(), "follower.glb").unwrap();
+    let (doc, bin) = glb::parse(
+        &std::fs::read(out.join("follower.glb")).unwrap(),
+        "follower.glb",
+    )
+    .unwrap();
     let glb_pos = glb::dancer_positions(&doc, &bin, "follower", "follower.glb").unwrap();
     assert_eq!(glb_pos.len(), shown.len());
     let from_glb = GroupErrors::between(&glb_pos, &shown);
     // The old behaviour: decoder rotations (projected) on the measured rig.
     let raw = read_f32_2d(&out.join("follower_rotmat_raw.npy"), Some(495), "raw").unwrap();
-    let decoder = GroupErrors::between(&Motion::from_decoded(&shown, Some(&raw.data), "decoder").unwrap().positions, &shown);
+    let decoder = GroupErrors::between(
+        &Motion::from_decoded(&shown, Some(&raw.data), "decoder")
+            .unwrap()
+            .positions,
+        &shown,
+    );
     println!("export vs viewer: bvh {from_bvh:?}\nglb {from_glb:?}\ndecoder rotations {decoder:?}");
-    assert!(within_export_tolerance(&from_bvh), "follower.bvh: {from_bvh:?}");
-    assert!(within_export_tolerance(&from_glb), "follower.glb: {from_glb:?}");
-    assert!(!within_export_tolerance(&decoder), "the tolerance must reject the decoder rotations: {decoder:?}");
+    assert!(
+        within_export_tolerance(&from_bvh),
+        "follower.bvh: {from_bvh:?}"
+    );
+    assert!(
+        within_export_tolerance(&from_glb),
+        "follower.glb: {from_glb:?}"
+    );
+    assert!(
+        !within_export_tolerance(&decoder),
+        "the tolerance must reject the decoder rotations: {decoder:?}"
+    );
 
     // summary.json reports the same error (BVH text round-off aside).
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(s["follower_rotations"], "fitted");
-    for (group, got) in [("body", from_glb.body), ("hands", from_glb.hands), ("all", from_glb.all)] {
+    for (group, got) in [
+        ("body", from_glb.body),
+        ("hands", from_glb.hands),
+        ("all", from_glb.all),
+    ] {
         let r = &s["export_error_m"]["follower"][group];
         for (k, v) in [("mean", got.mean), ("p95", got.p95), ("max", got.max)] {
             let want = r[k].as_f64().unwrap() as f32;
-            assert!((want - v).abs() < 1e-3, "summary {group}.{k} {want} vs glb {v}");
+            assert!(
+                (want - v).abs() < 1e-3,
+                "summary {group}.{k} {want} vs glb {v}"
+            );
         }
     }
     // The rig is rigid: every bone keeps one length over the clip.
-    let rig = bvh::parse(&std::fs::read_to_string(out.join("follower.bvh")).unwrap(), "f").unwrap();
+    let rig = bvh::parse(
+        &std::fs::read_to_string(out.join("follower.bvh")).unwrap(),
+        "f",
+    )
+    .unwrap();
     let bp = bvh_positions(&out.join("follower.bvh"));
     for j in 1..55 {
         let par = duolando::skeleton::parent(j).unwrap();
-        let k = rig.joints.iter().position(|q| q.name == duolando::skeleton::JOINT_NAMES[j]).unwrap();
+        let k = rig
+            .joints
+            .iter()
+            .position(|q| q.name == duolando::skeleton::JOINT_NAMES[j])
+            .unwrap();
         let o = rig.joints[k].offset;
         let len = (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt() / 100.0;
         for t in (0..rig.frames).step_by(37) {
-            let d: f32 = (0..3).map(|c| (bp[t * 165 + 3 * j + c] - bp[t * 165 + 3 * par + c]).powi(2)).sum::<f32>().sqrt();
+            let d: f32 = (0..3)
+                .map(|c| (bp[t * 165 + 3 * j + c] - bp[t * 165 + 3 * par + c]).powi(2))
+                .sum::<f32>()
+                .sqrt();
             assert!((d - len).abs() < 1e-4, "bone {j} frame {t}: {d} vs {len}");
         }
     }
@@ -486,12 +759,20 @@ fn demo_export_matches_the_viewer_positions() {
     let dec = tmp("demo-decoder");
     let o = dance(&["--out", p(&dec), "--follower-rotations", "decoder"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dec.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dec.join("summary.json")).unwrap()).unwrap();
     assert_eq!(s["follower_rotations"], "decoder");
     let got = GroupErrors::between(&bvh_positions(&dec.join("follower.bvh")), &shown);
-    assert!((got.body.p95 - decoder.body.p95).abs() < 1e-3, "{got:?} vs {decoder:?}");
+    assert!(
+        (got.body.p95 - decoder.body.p95).abs() < 1e-3,
+        "{got:?} vs {decoder:?}"
+    );
     let o = dance(&["--out", p(&dec), "--follower-rotations", "magic"]);
-    assert!(!o.status.success() && stderr(&o).contains("fitted"), "{}", stderr(&o));
+    assert!(
+        !o.status.success() && stderr(&o).contains("fitted"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]
@@ -509,10 +790,17 @@ fn without_demo_assets_the_error_says_how_to_pass_inputs() {
         .unwrap();
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "{e}");
-    assert!(e.contains("assets/demo.duo") && e.contains("missing") && e.contains("--model"), "{e}");
+    assert!(
+        e.contains("assets/demo.duo") && e.contains("missing") && e.contains("--model"),
+        "{e}"
+    );
     // Only one of --leader/--music is a usage error.
     let o = dance(&["--leader", "a.npy", "--out", "x"]);
-    assert!(!o.status.success() && stderr(&o).contains("--music"), "{}", stderr(&o));
+    assert!(
+        !o.status.success() && stderr(&o).contains("--music"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 /// A solo dance (music, no leader) on a Bailando model: R's positions in
@@ -527,20 +815,41 @@ fn solo_dance_to_music_alone() {
     let r = fixtures().join("bailando_rollout_btiny_demo_odd");
     let bmodel = fixtures().join("bailando_btiny/model.duo");
     let dir = out.join("npy");
-    let o = dance(&["--model", p(&bmodel), "--music", p(&r.join("music.npy")), "--seed-tokens", "15,14", "--out", p(&dir)]);
+    let o = dance(&[
+        "--model",
+        p(&bmodel),
+        "--music",
+        p(&r.join("music.npy")),
+        "--seed-tokens",
+        "15,14",
+        "--out",
+        p(&dir),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let got = read_f32_2d(&dir.join("dancer_smpl24.npy"), Some(72), "solo").unwrap();
     let want = read_f32_2d(&r.join("pos3d.npy"), Some(72), "golden").unwrap();
     assert_eq!(got.rows, want.rows);
-    let err = got.data.iter().zip(&want.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let err = got
+        .data
+        .iter()
+        .zip(&want.data)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
     assert!(err <= 1e-5, "max abs err {err}");
     let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
-    assert!(html.contains("\"leader\":null") && html.contains("\"fps\":60"), "one dancer at 60 fps");
+    assert!(
+        html.contains("\"leader\":null") && html.contains("\"fps\":60"),
+        "one dancer at 60 fps"
+    );
     let shown = viewer_follower(&html);
     assert_eq!(shown.len(), got.rows * 165);
     for f in 0..got.rows {
         for c in 0..66 {
-            assert_eq!(shown[f * 165 + c], got.data[f * 72 + c], "frame {f} channel {c}: joints 0-21 are the model's");
+            assert_eq!(
+                shown[f * 165 + c],
+                got.data[f * 72 + c],
+                "frame {f} channel {c}: joints 0-21 are the model's"
+            );
         }
     }
     let bvh_text = std::fs::read_to_string(dir.join("dancer.bvh")).unwrap();
@@ -550,25 +859,86 @@ fn solo_dance_to_music_alone() {
     // weights stretch bones freely; summary.json reports it).
     let bvh = bvh_positions(&dir.join("dancer.bvh"));
     let rig = read_f32_2d(&dir.join("dancer_pos3d.npy"), Some(165), "rig").unwrap();
-    let rig_err = bvh.iter().zip(&rig.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-    assert!(rig_err < 1e-3, "dancer.bvh is {rig_err} m from dancer_pos3d.npy");
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
-    assert_eq!((s["family"].as_str(), s["frames"].as_u64()), (Some("bailando"), Some(got.rows as u64)));
+    let rig_err = bvh
+        .iter()
+        .zip(&rig.data)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
+    assert!(
+        rig_err < 1e-3,
+        "dancer.bvh is {rig_err} m from dancer_pos3d.npy"
+    );
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(
+        (s["family"].as_str(), s["frames"].as_u64()),
+        (Some("bailando"), Some(got.rows as u64))
+    );
     assert!(s["export_error_m"]["all"]["max"].as_f64().unwrap() > 0.0);
     // From audio.
     let wav = out.join("song.wav");
     write_wav(&wav);
-    let o = dance(&["--model", p(&bmodel), "--music", p(&wav), "--seed-tokens", "1,2", "--out", p(&out.join("wav"))]);
+    let o = dance(&[
+        "--model",
+        p(&bmodel),
+        "--music",
+        p(&wav),
+        "--seed-tokens",
+        "1,2",
+        "--out",
+        p(&out.join("wav")),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("wav/summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("wav/summary.json")).unwrap()).unwrap();
     // 21 s at 7.5 rows/s.
-    assert!((150..=160).contains(&s["music"]["rows"].as_u64().unwrap()), "{s}");
+    assert!(
+        (150..=160).contains(&s["music"]["rows"].as_u64().unwrap()),
+        "{s}"
+    );
     assert_eq!(s["music"]["audio"], "music.wav");
     // Refusals.
-    let o = dance(&["--model", p(&bmodel), "--music", p(&r.join("music.npy")), "--follower-start", p(&r.join("music.npy")), "--out", p(&out.join("x"))]);
-    assert!(!o.status.success() && stderr(&o).contains("--follower-start is for a duet"), "{}", stderr(&o));
-    let o = dance(&["--model", p(&model()), "--music", p(&r.join("music.npy")), "--out", p(&out.join("y"))]);
-    assert!(!o.status.success() && stderr(&o).contains("Duolando"), "{}", stderr(&o));
-    let o = dance(&["--model", p(&bmodel), "--music", p(&r.join("music.npy")), "--seed-tokens", "1,2,3,4,5", "--out", p(&out.join("z"))]);
-    assert!(!o.status.success() && stderr(&o).contains("two tokens"), "{}", stderr(&o));
+    let o = dance(&[
+        "--model",
+        p(&bmodel),
+        "--music",
+        p(&r.join("music.npy")),
+        "--follower-start",
+        p(&r.join("music.npy")),
+        "--out",
+        p(&out.join("x")),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("--follower-start is for a duet"),
+        "{}",
+        stderr(&o)
+    );
+    let o = dance(&[
+        "--model",
+        p(&model()),
+        "--music",
+        p(&r.join("music.npy")),
+        "--out",
+        p(&out.join("y")),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("Duolando"),
+        "{}",
+        stderr(&o)
+    );
+    let o = dance(&[
+        "--model",
+        p(&bmodel),
+        "--music",
+        p(&r.join("music.npy")),
+        "--seed-tokens",
+        "1,2,3,4,5",
+        "--out",
+        p(&out.join("z")),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("two tokens"),
+        "{}",
+        stderr(&o)
+    );
 }

@@ -31,7 +31,12 @@ fn recipe(g: &Value) -> Recipe {
         seed: r["seed"].as_u64().unwrap(),
         n_real: r["n_real"].as_u64().unwrap() as usize,
         n_gen: r["n_gen"].as_u64().unwrap() as usize,
-        base_pose_mm: r["base_pose_mm"].as_array().unwrap().iter().map(|v| v.as_i64().unwrap()).collect(),
+        base_pose_mm: r["base_pose_mm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_i64().unwrap())
+            .collect(),
     }
 }
 
@@ -43,7 +48,10 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn duolando(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_duolando")).args(args).output().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .args(args)
+        .output()
+        .unwrap()
 }
 
 fn s(p: &Path) -> &str {
@@ -57,14 +65,22 @@ fn build(dir: &Path) -> Value {
     let want = g["checksums"].as_object().unwrap();
     assert_eq!(sums.len(), want.len());
     for (file, sum) in sums {
-        assert_eq!(sum, want[&file].as_u64().unwrap(), "{file}: the recipe set differs from the script's");
+        assert_eq!(
+            sum,
+            want[&file].as_u64().unwrap(),
+            "{file}: the recipe set differs from the script's"
+        );
     }
     g
 }
 
 fn run_json(args: &[&str], json: &Path) -> Value {
     let out = duolando(args);
-    assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "eval failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     serde_json::from_slice(&std::fs::read(json).unwrap()).unwrap()
 }
 
@@ -89,10 +105,17 @@ fn compare(got: &Value, want: &Value) {
         ("fsr", 0.0),
         ("fsr_00", 0.0),
     ] {
-        let (g, w) = (got[key].as_f64().unwrap_or_else(|| panic!("{key} missing")), want[key].as_f64().unwrap());
+        let (g, w) = (
+            got[key].as_f64().unwrap_or_else(|| panic!("{key} missing")),
+            want[key].as_f64().unwrap(),
+        );
         let r = rel(g, w);
         report.push(format!("{key} {g:.9} vs {w:.9} rel {r:.1e}"));
-        assert!(r <= tol, "{key}: {g} vs authors' {w} (relative {r:e} > {tol:e})\n{}", report.join("\n"));
+        assert!(
+            r <= tol,
+            "{key}: {g} vs authors' {w} (relative {r:e} > {tol:e})\n{}",
+            report.join("\n")
+        );
     }
     eprintln!("{}", report.join("\n"));
 }
@@ -105,7 +128,19 @@ fn eval_matches_the_authors_figures_and_saved_stats_give_the_same() {
     let (gen, real, music) = (dir.join("gen"), dir.join("real"), dir.join("music"));
     let (json, stats) = (dir.join("figures.json"), dir.join("real_stats.json"));
     let got = run_json(
-        &["eval", "--gen", s(&gen), "--real", s(&real), "--music", s(&music), "--save-real", s(&stats), "--json", s(&json)],
+        &[
+            "eval",
+            "--gen",
+            s(&gen),
+            "--real",
+            s(&real),
+            "--music",
+            s(&music),
+            "--save-real",
+            s(&stats),
+            "--json",
+            s(&json),
+        ],
         &json,
     );
     assert_eq!(got["clips_gen"], 24);
@@ -113,8 +148,32 @@ fn eval_matches_the_authors_figures_and_saved_stats_give_the_same() {
     compare(&got, want);
     // The saved real-set features reproduce every figure.
     let json2 = dir.join("figures2.json");
-    let again = run_json(&["eval", "--gen", s(&gen), "--real-stats", s(&stats), "--music", s(&music), "--json", s(&json2)], &json2);
-    for key in ["fid_k", "fid_g", "fid_cd", "div_k", "div_g", "div_cd", "div_k_real", "bas", "bed", "fsr"] {
+    let again = run_json(
+        &[
+            "eval",
+            "--gen",
+            s(&gen),
+            "--real-stats",
+            s(&stats),
+            "--music",
+            s(&music),
+            "--json",
+            s(&json2),
+        ],
+        &json2,
+    );
+    for key in [
+        "fid_k",
+        "fid_g",
+        "fid_cd",
+        "div_k",
+        "div_g",
+        "div_cd",
+        "div_k_real",
+        "bas",
+        "bed",
+        "fsr",
+    ] {
         assert_eq!(again[key], got[key], "{key} from --real-stats");
     }
     let _ = std::fs::remove_dir_all(&dir);
@@ -126,9 +185,16 @@ fn without_real_or_music_the_missing_metrics_are_named() {
     build(&dir);
     let json = dir.join("figures.json");
     let out = duolando(&["eval", "--gen", s(&dir.join("gen")), "--json", s(&json)]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("not computed: FID and Div need --real"), "{err}");
+    assert!(
+        err.contains("not computed: FID and Div need --real"),
+        "{err}"
+    );
     assert!(err.contains("not computed: BAS needs --music"), "{err}");
     let got: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     assert!(got.get("fid_k").is_none());
@@ -145,13 +211,20 @@ fn bad_inputs_fail_with_named_errors() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot read the motion folder"));
     // Empty folder.
     let out = duolando(&["eval", "--gen", s(&dir)]);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("no <name>_00.npy"), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("no <name>_00.npy"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     // A two-frame clip: too short for the kinetic features.
     duolando::npy::write_f32(&dir.join("A_01_01_00.npy"), &[0.0; 330], &[2, 165]).unwrap();
     let out = duolando(&["eval", "--gen", s(&dir)]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1));
-    assert!(err.contains("kinetic features needs at least 3 frames, the clip has 2"), "{err}");
+    assert!(
+        err.contains("kinetic features needs at least 3 frames, the clip has 2"),
+        "{err}"
+    );
     // Wrong width.
     std::fs::remove_file(dir.join("A_01_01_00.npy")).unwrap();
     duolando::npy::write_f32(&dir.join("A_01_01_00.npy"), &[0.0; 40], &[4, 10]).unwrap();
@@ -160,7 +233,13 @@ fn bad_inputs_fail_with_named_errors() {
     assert!(err.contains("165 columns"), "{err}");
     // A statistics file that is not one.
     std::fs::write(dir.join("stats.json"), "{}").unwrap();
-    let out = duolando(&["eval", "--gen", s(&dir), "--real-stats", s(&dir.join("stats.json"))]);
+    let out = duolando(&[
+        "eval",
+        "--gen",
+        s(&dir),
+        "--real-stats",
+        s(&dir.join("stats.json")),
+    ]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a real-set statistics file"));
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -184,25 +263,62 @@ fn bvh_clips_give_the_features_of_their_npy() {
         let take = duolando::synth::demo_take(seed, 6.0);
         for (role, track) in [("00", &take.follower), ("01", &take.leader)] {
             let name = format!("Take_{seed:02}_00_{role}");
-            duolando::npy::write_f32(&npy_dir.join(format!("{name}.npy")), &track.positions, &[take.frames, 165]).unwrap();
-            bvh::write(&bvh_dir.join(format!("{name}.bvh")), &Motion::from_track(track), 30.0, bvh::Units::Centimetres)
-                .unwrap();
+            duolando::npy::write_f32(
+                &npy_dir.join(format!("{name}.npy")),
+                &track.positions,
+                &[take.frames, 165],
+            )
+            .unwrap();
+            bvh::write(
+                &bvh_dir.join(format!("{name}.bvh")),
+                &Motion::from_track(track),
+                30.0,
+                bvh::Units::Centimetres,
+            )
+            .unwrap();
         }
     }
     let stats = |real: &Path, out: &str| -> Value {
         let file = dir.join(out);
         let json = dir.join(format!("{out}.figures.json"));
-        run_json(&["eval", "--gen", s(&npy_dir), "--real", s(real), "--save-real", s(&file), "--json", s(&json)], &json);
+        run_json(
+            &[
+                "eval",
+                "--gen",
+                s(&npy_dir),
+                "--real",
+                s(real),
+                "--save-real",
+                s(&file),
+                "--json",
+                s(&json),
+            ],
+            &json,
+        );
         serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap()
     };
     let (a, b) = (stats(&npy_dir, "npy.json"), stats(&bvh_dir, "bvh.json"));
     assert_eq!(a["clips"], b["clips"]);
     assert_eq!(a["duets"], b["duets"]);
-    let rows = |v: &Value| -> Vec<f64> { v.as_array().unwrap().iter().flat_map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap())).collect() };
+    let rows = |v: &Value| -> Vec<f64> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+            .collect()
+    };
     let (ka, kb) = (rows(&a["kinetic"]), rows(&b["kinetic"]));
-    let kin = ka.iter().zip(&kb).map(|(x, y)| (x - y).abs() / x.abs().max(1e-3)).fold(0.0, f64::max);
+    let kin = ka
+        .iter()
+        .zip(&kb)
+        .map(|(x, y)| (x - y).abs() / x.abs().max(1e-3))
+        .fold(0.0, f64::max);
     let (ga, gb) = (rows(&a["geometric"]), rows(&b["geometric"]));
-    let geo = ga.iter().zip(&gb).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    let geo = ga
+        .iter()
+        .zip(&gb)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
     eprintln!("npy vs BVH: kinetic max rel {kin:.2e}, geometric max abs {geo:.3}");
     assert!(kin <= KINETIC_REL, "kinetic features npy vs BVH: {kin}");
     assert!(geo <= GEOMETRIC_ABS, "geometric features npy vs BVH: {geo}");

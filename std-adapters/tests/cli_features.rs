@@ -20,8 +20,14 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn run(args: &[&str]) -> (Option<i32>, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_duolando")).args(args).output().unwrap();
-    (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned())
+    let o = Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
 }
 
 fn library(set: FeatureSet) -> duolando::music::Features {
@@ -33,9 +39,18 @@ fn library(set: FeatureSet) -> duolando::music::Features {
 fn for_bailando_writes_the_438_features_of_the_file() {
     let d = tmp("bailando");
     let out = d.join("music.npy");
-    let (code, err) = run(&["features", "--for", "bailando", flac().to_str().unwrap(), out.to_str().unwrap()]);
+    let (code, err) = run(&[
+        "features",
+        "--for",
+        "bailando",
+        flac().to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, Some(0), "{err}");
-    assert!(err.contains("(16, 438) bailando features at 7.5 fps"), "{err}");
+    assert!(
+        err.contains("(16, 438) bailando features at 7.5 fps"),
+        "{err}"
+    );
     let a = duolando::npy::read_f32_2d(&out, Some(bailando::FEATURE_DIM), "music").unwrap();
     let want = library(FeatureSet::Bailando);
     assert_eq!((a.rows, a.cols), (want.frames, 438));
@@ -49,7 +64,12 @@ fn for_bailando_writes_the_438_features_of_the_file() {
 fn default_is_duolando_and_o_still_works() {
     let d = tmp("duolando");
     let out = d.join("music.npy");
-    let (code, err) = run(&["features", flac().to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let (code, err) = run(&[
+        "features",
+        flac().to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, Some(0), "{err}");
     let a = duolando::npy::read_f32_2d(&out, Some(FEATURE_DIM), "music").unwrap();
     assert_eq!(a.rows, 1 + 2 * SAMPLE_RATE as usize / 512);

@@ -9,7 +9,11 @@ fn tiny() -> PathBuf {
 }
 
 fn inspect(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_duolando")).arg("inspect").args(args).output().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .arg("inspect")
+        .args(args)
+        .output()
+        .unwrap()
 }
 
 #[test]
@@ -39,35 +43,78 @@ fn inspect_json_parses_and_agrees_with_the_file() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["config"]["gpt"]["n_embd"], 32);
-    assert_eq!(v["config"]["gpt"]["vocab"], serde_json::json!([64, 64, 64, 64, 64]));
+    assert_eq!(
+        v["config"]["gpt"]["vocab"],
+        serde_json::json!([64, 64, 64, 64, 64])
+    );
     assert_eq!(v["file_bytes"], std::fs::metadata(&m).unwrap().len());
     let tensors = v["tensors"].as_u64().unwrap();
     assert!(tensors > 0);
-    let per: u64 = v["dtypes"].as_object().unwrap().values().map(|d| d["tensors"].as_u64().unwrap()).sum();
+    let per: u64 = v["dtypes"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|d| d["tensors"].as_u64().unwrap())
+        .sum();
     assert_eq!(per, tensors);
-    let params: u64 = v["dtypes"].as_object().unwrap().values().map(|d| d["params"].as_u64().unwrap()).sum();
+    let params: u64 = v["dtypes"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|d| d["params"].as_u64().unwrap())
+        .sum();
     assert_eq!(params, v["params"].as_u64().unwrap());
     // 600 frames: the rollout_tiny_long golden has K = 120 steps, 484 frames.
     let r = &v["r_mode"]["requested"];
-    assert_eq!((r["steps"].as_u64(), r["output_frames"].as_u64()), (Some(120), Some(484)));
+    assert_eq!(
+        (r["steps"].as_u64(), r["output_frames"].as_u64()),
+        (Some(120), Some(484))
+    );
     assert!(v["r_mode"]["one_minute"]["scratch_bytes"].as_u64().unwrap() > 0);
     assert_eq!(v["r_mode"]["one_minute"]["input_frames"], 1800);
     // The tiny fixture has the published geometry: e_max = d_max = 22 (docs/STREAMING.md §1).
-    assert_eq!((v["streaming"]["enc_future_max"].as_u64(), v["streaming"]["dec_future_max"].as_u64()), (Some(22), Some(22)));
+    assert_eq!(
+        (
+            v["streaming"]["enc_future_max"].as_u64(),
+            v["streaming"]["dec_future_max"].as_u64()
+        ),
+        (Some(22), Some(22))
+    );
     let b = &v["streaming"]["budgets"];
     // Preset::ALL: reference, interactive, live-music, minimum.
-    let names: Vec<&str> = b.as_array().unwrap().iter().map(|x| x["budget"].as_str().unwrap()).collect();
+    let names: Vec<&str> = b
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x["budget"].as_str().unwrap())
+        .collect();
     assert_eq!(names, ["reference", "interactive", "live-music", "minimum"]);
     assert_eq!(b[0]["latency_frames"], 291);
     assert_eq!(b[1]["latency_frames"], 31);
-    assert_eq!((b[2]["latency_frames"].as_u64(), b[2]["live_latency_frames"].as_u64(), b[2]["music_lookahead"].as_u64()), (Some(31), Some(31), Some(0)));
-    assert_eq!((b[3]["latency_frames"].as_u64(), b[3]["live_latency_frames"].as_u64()), (Some(0), Some(3)));
+    assert_eq!(
+        (
+            b[2]["latency_frames"].as_u64(),
+            b[2]["live_latency_frames"].as_u64(),
+            b[2]["music_lookahead"].as_u64()
+        ),
+        (Some(31), Some(31), Some(0))
+    );
+    assert_eq!(
+        (
+            b[3]["latency_frames"].as_u64(),
+            b[3]["live_latency_frames"].as_u64()
+        ),
+        (Some(0), Some(3))
+    );
     // The arena figure is Model::session_bytes of that budget.
     let file = duolando::model_file::ModelFile::open(&m).unwrap();
     let duo = file.duo().unwrap();
     let model = duolando_core::duolando::model::Model::from_duo(&duo).unwrap();
     let sc = duolando_core::duolando::session::SessionConfig::reference(&model.cfg);
-    assert_eq!(b[0]["arena_bytes"].as_u64(), Some(model.session_bytes(&sc).unwrap() as u64));
+    assert_eq!(
+        b[0]["arena_bytes"].as_u64(),
+        Some(model.session_bytes(&sc).unwrap() as u64)
+    );
 }
 
 #[test]
@@ -80,7 +127,10 @@ fn inspect_names_a_bad_file() {
         let o = inspect(&[path.to_str().unwrap()]);
         let e = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{e}");
-        assert!(e.contains(path.to_str().unwrap()) && !e.contains("panicked"), "{e}");
+        assert!(
+            e.contains(path.to_str().unwrap()) && !e.contains("panicked"),
+            "{e}"
+        );
     }
 }
 
@@ -109,7 +159,10 @@ fn inspect_and_generate_refuse_a_non_finite_weight_by_name() {
                 .args(["generate", "--model", bad.to_str().unwrap()])
                 .args(["--leader", roll.join("leader_pos3d.npy").to_str().unwrap()])
                 .args(["--music", roll.join("music.npy").to_str().unwrap()])
-                .args(["--follower-start", roll.join("follower_start.npy").to_str().unwrap()])
+                .args([
+                    "--follower-start",
+                    roll.join("follower_start.npy").to_str().unwrap(),
+                ])
                 .args(["--out", gen_out.to_str().unwrap()])
                 .output()
                 .unwrap(),
@@ -117,10 +170,21 @@ fn inspect_and_generate_refuse_a_non_finite_weight_by_name() {
         for o in runs {
             let e = String::from_utf8_lossy(&o.stderr);
             assert_eq!(o.status.code(), Some(1), "{e}");
-            assert!(e.contains(bad.to_str().unwrap()) && e.contains("weight element") && e.contains(&format!("is {word}")), "{e}");
-            assert!(e.contains('`') && !e.contains("panicked"), "the tensor is named: {e}");
+            assert!(
+                e.contains(bad.to_str().unwrap())
+                    && e.contains("weight element")
+                    && e.contains(&format!("is {word}")),
+                "{e}"
+            );
+            assert!(
+                e.contains('`') && !e.contains("panicked"),
+                "the tensor is named: {e}"
+            );
         }
-        assert!(!gen_out.join("follower_pos3d.npy").exists(), "nothing generated");
+        assert!(
+            !gen_out.join("follower_pos3d.npy").exists(),
+            "nothing generated"
+        );
     }
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -129,7 +193,8 @@ fn inspect_and_generate_refuse_a_non_finite_weight_by_name() {
 /// and JSON.
 #[test]
 fn inspect_prints_a_bailando_model() {
-    let m = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/bailando_btiny/model.duo");
+    let m =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/bailando_btiny/model.duo");
     let o = inspect(&[m.to_str().unwrap()]);
     let s = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

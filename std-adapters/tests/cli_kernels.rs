@@ -37,7 +37,10 @@ fn run(args: &[String], isa: Option<&str>) -> Output {
 fn kernels(o: &Output) -> String {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{e}");
-    let lines: Vec<&str> = e.lines().filter_map(|l| l.strip_prefix("kernels: ")).collect();
+    let lines: Vec<&str> = e
+        .lines()
+        .filter_map(|l| l.strip_prefix("kernels: "))
+        .collect();
     assert_eq!(lines.len(), 1, "one kernels line expected:\n{e}");
     lines[0].trim().to_string()
 }
@@ -84,7 +87,15 @@ fn commands(out: &Path) -> Vec<(&'static str, Vec<String>)> {
     let mut live = s(&["live", "--model"]);
     live.push(p(&model));
     live.extend(io("live")[..4].iter().cloned());
-    live.extend(s(&["--seed-tokens", "1,2,3,4,5", "--no-pace", "--port", "0", "--linger", "0"]));
+    live.extend(s(&[
+        "--seed-tokens",
+        "1,2,3,4,5",
+        "--no-pace",
+        "--port",
+        "0",
+        "--linger",
+        "0",
+    ]));
     let mut inspect = s(&["inspect"]);
     inspect.push(p(&model));
     vec![
@@ -103,10 +114,14 @@ fn every_command_runs_the_detected_kernels_unasked() {
     let out = tmp("all");
     for (name, args) in commands(&out) {
         let got = kernels(&run(&args, None));
-        assert_eq!(got, want, "`duolando {name}` ran {got}, this CPU's best is {want}");
+        assert_eq!(
+            got, want,
+            "`duolando {name}` ran {got}, this CPU's best is {want}"
+        );
     }
     // dance also records them in summary.json.
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("dance/summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("dance/summary.json")).unwrap()).unwrap();
     assert_eq!(s["kernels"], want.as_str());
 }
 

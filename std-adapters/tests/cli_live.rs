@@ -107,13 +107,25 @@ impl Live {
             Err(_) => {
                 let _ = child.kill();
                 let _ = child.wait();
-                panic!("no URL on stdout; stderr: {}", erx.recv_timeout(Duration::from_secs(5)).unwrap_or_default());
+                panic!(
+                    "no URL on stdout; stderr: {}",
+                    erx.recv_timeout(Duration::from_secs(5)).unwrap_or_default()
+                );
             }
         };
-        let rest = line.strip_prefix("http://127.0.0.1:").unwrap_or_else(|| panic!("stdout line is not a 127.0.0.1 URL: {line:?}"));
-        let port: u16 = rest.strip_suffix('/').and_then(|p| p.parse().ok()).unwrap_or_else(|| panic!("no port in {line:?}"));
+        let rest = line
+            .strip_prefix("http://127.0.0.1:")
+            .unwrap_or_else(|| panic!("stdout line is not a 127.0.0.1 URL: {line:?}"));
+        let port: u16 = rest
+            .strip_suffix('/')
+            .and_then(|p| p.parse().ok())
+            .unwrap_or_else(|| panic!("no port in {line:?}"));
         assert_ne!(port, 0);
-        Live { child, port, stderr: erx }
+        Live {
+            child,
+            port,
+            stderr: erx,
+        }
     }
 
     /// Waits for the process to exit by itself; returns (success, stderr).
@@ -121,10 +133,16 @@ impl Live {
         let t = Instant::now();
         loop {
             if let Some(status) = self.child.try_wait().unwrap() {
-                let err = self.stderr.recv_timeout(Duration::from_secs(10)).unwrap_or_default();
+                let err = self
+                    .stderr
+                    .recv_timeout(Duration::from_secs(10))
+                    .unwrap_or_default();
                 return (status.success(), err);
             }
-            assert!(t.elapsed() < within, "duolando live still running after {within:?}");
+            assert!(
+                t.elapsed() < within,
+                "duolando live still running after {within:?}"
+            );
             std::thread::sleep(Duration::from_millis(20));
         }
     }
@@ -144,10 +162,17 @@ fn http(port: u16, request_line: &str, headers: &[&str]) -> (u16, String, Vec<u8
     s.write_all(req.as_bytes()).unwrap();
     let mut buf = Vec::new();
     s.read_to_end(&mut buf).unwrap();
-    let split = buf.windows(4).position(|w| w == b"\r\n\r\n").expect("no end of response head");
+    let split = buf
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("no end of response head");
     let head = String::from_utf8(buf[..split].to_vec()).unwrap();
     let body = buf[split + 4..].to_vec();
-    let code = head.split(' ').nth(1).and_then(|c| c.parse().ok()).unwrap_or_else(|| panic!("bad status line: {head}"));
+    let code = head
+        .split(' ')
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or_else(|| panic!("bad status line: {head}"));
     (code, head, body)
 }
 
@@ -186,9 +211,13 @@ fn parse_sse(body: &[u8]) -> Vec<Event> {
                 kind = Some(v.to_string());
             } else if let Some(v) = line.strip_prefix("data: ") {
                 assert!(data.is_none(), "one data line per event: {block}");
-                data = Some(serde_json::from_str(v).unwrap_or_else(|e| panic!("bad JSON ({e}): {v}")));
+                data =
+                    Some(serde_json::from_str(v).unwrap_or_else(|e| panic!("bad JSON ({e}): {v}")));
             } else {
-                assert!(line.starts_with(':') || line.starts_with("retry: "), "unexpected line {line:?}");
+                assert!(
+                    line.starts_with(':') || line.starts_with("retry: "),
+                    "unexpected line {line:?}"
+                );
             }
         }
         if let (Some(id), Some(kind), Some(data)) = (id, kind, data) {
@@ -200,11 +229,15 @@ fn parse_sse(body: &[u8]) -> Vec<Event> {
 
 /// A JSON array of 165 finite numbers, as f32.
 fn pose(v: &Value, what: &str) -> Vec<f32> {
-    let a = v.as_array().unwrap_or_else(|| panic!("{what} is not an array: {v}"));
+    let a = v
+        .as_array()
+        .unwrap_or_else(|| panic!("{what} is not an array: {v}"));
     assert_eq!(a.len(), ROW, "{what}: {} values, expected {ROW}", a.len());
     a.iter()
         .map(|x| {
-            let f = x.as_f64().unwrap_or_else(|| panic!("{what}: {x} is not a number"));
+            let f = x
+                .as_f64()
+                .unwrap_or_else(|| panic!("{what}: {x} is not a number"));
             assert!(f.is_finite(), "{what}: {f}");
             f as f32
         })
@@ -212,11 +245,15 @@ fn pose(v: &Value, what: &str) -> Vec<f32> {
 }
 
 fn uint(v: &Value, key: &str) -> usize {
-    v[key].as_u64().unwrap_or_else(|| panic!("{key} missing or not an integer in {v}")) as usize
+    v[key]
+        .as_u64()
+        .unwrap_or_else(|| panic!("{key} missing or not an integer in {v}")) as usize
 }
 
 /// The same session driven in this process: (run, latency frames).
-fn reference_run(cfg_of: impl Fn(&duolando_core::duolando::config::ModelConfig) -> SessionConfig) -> duolando::streaming::StreamRun {
+fn reference_run(
+    cfg_of: impl Fn(&duolando_core::duolando::config::ModelConfig) -> SessionConfig,
+) -> duolando::streaming::StreamRun {
     let file = ModelFile::open(tiny()).unwrap();
     let duo = file.duo().unwrap();
     let model = Model::from_duo(&duo).unwrap();
@@ -225,21 +262,52 @@ fn reference_run(cfg_of: impl Fn(&duolando_core::duolando::config::ModelConfig) 
     let start = read_f32_2d(&roll().join("follower_start.npy"), Some(ROW), "start").unwrap();
     let seed = seed_tokens(&model, Seed::FollowerFrames(&start.data), &leader.data).unwrap();
     let sc = cfg_of(&model.cfg);
-    run_streaming_with(&model, &leader.data, &music.data, &sc, seed, None, true, &mut |_, _| {}).unwrap()
+    run_streaming_with(
+        &model,
+        &leader.data,
+        &music.data,
+        &sc,
+        seed,
+        None,
+        true,
+        &mut |_, _| {},
+    )
+    .unwrap()
 }
 
 #[test]
 fn live_streams_the_sessions_frames_in_order() {
-    let mut live = Live::start(&tiny_args(&["--lookahead", "4", "--enc-future", "2", "--dec-future", "2", "--linger", "120"]));
+    let mut live = Live::start(&tiny_args(&[
+        "--lookahead",
+        "4",
+        "--enc-future",
+        "2",
+        "--dec-future",
+        "2",
+        "--linger",
+        "120",
+    ]));
     let port = live.port;
 
     // The page.
     let (code, head, body) = get(port, "/", &[]);
     assert_eq!(code, 200, "{head}");
-    assert_eq!(header(&head, "content-type"), Some("text/html; charset=utf-8"));
-    assert_eq!(header(&head, "content-length").and_then(|v| v.parse().ok()), Some(body.len()));
+    assert_eq!(
+        header(&head, "content-type"),
+        Some("text/html; charset=utf-8")
+    );
+    assert_eq!(
+        header(&head, "content-length").and_then(|v| v.parse().ok()),
+        Some(body.len())
+    );
     let page = String::from_utf8(body).unwrap();
-    for needle in ["<canvas id=\"view\"", "new EventSource(\"events\")", "id=\"live-latency-frames\"", "id=\"live-step-ms\"", "--follower: #ff7a1a"] {
+    for needle in [
+        "<canvas id=\"view\"",
+        "new EventSource(\"events\")",
+        "id=\"live-latency-frames\"",
+        "id=\"live-step-ms\"",
+        "--follower: #ff7a1a",
+    ] {
         assert!(page.contains(needle), "the page lacks {needle}");
     }
     assert!(!page.contains("{{"), "unfilled placeholder");
@@ -255,14 +323,25 @@ fn live_streams_the_sessions_frames_in_order() {
     let run = reference_run(|c| SessionConfig::with(c, 4, 2, 2, SessionConfig::reference(c).shift));
     let leader = read_f32_2d(&roll().join("leader_pos3d.npy"), Some(ROW), "leader").unwrap();
     let t = leader.rows;
-    let drained = run.frame_ready.iter().filter(|&&f| f == run.frames_in).count();
+    let drained = run
+        .frame_ready
+        .iter()
+        .filter(|&&f| f == run.frames_in)
+        .count();
     assert!(drained > 0, "the drain gives frames");
-    assert_eq!(events.len(), t + 2 + drained, "hello, one frame event per leader frame, one drain event per drained frame, end");
+    assert_eq!(
+        events.len(),
+        t + 2 + drained,
+        "hello, one frame event per leader frame, one drain event per drained frame, end"
+    );
 
     let hello = &events[0];
     assert_eq!(hello.kind, "hello");
     assert_eq!(uint(&hello.data, "frames"), t);
-    assert_eq!(uint(&hello.data, "latency_frames"), run.latency_frames as usize);
+    assert_eq!(
+        uint(&hello.data, "latency_frames"),
+        run.latency_frames as usize
+    );
     assert_eq!(run.latency_frames, 31);
     assert_eq!(uint(&hello.data, "joints"), 55);
     assert_eq!(hello.data["parents"].as_array().map(Vec::len), Some(55));
@@ -278,9 +357,17 @@ fn live_streams_the_sessions_frames_in_order() {
         if d["refused"].as_bool().unwrap() {
             refused.push(i);
         }
-        assert_eq!(pose(&d["leader"], "leader"), leader.data[i * ROW..(i + 1) * ROW], "leader frame {i} as read");
+        assert_eq!(
+            pose(&d["leader"], "leader"),
+            leader.data[i * ROW..(i + 1) * ROW],
+            "leader frame {i} as read"
+        );
         for f in d["follower"].as_array().unwrap() {
-            assert_eq!(uint(f, "index"), follower.len(), "follower frames in order, none skipped");
+            assert_eq!(
+                uint(f, "index"),
+                follower.len(),
+                "follower frames in order, none skipped"
+            );
             follower.push((i, pose(&f["pos"], "follower")));
         }
         assert_eq!(uint(d, "follower_frames"), follower.len());
@@ -289,14 +376,30 @@ fn live_streams_the_sessions_frames_in_order() {
         match follower.last() {
             Some(_) => {
                 // The newest follower frame's latency, in frames and measured ms.
-                assert_eq!(uint(d, "latency_frames"), i - (follower.len() - 1), "latency at leader frame {i}");
-                assert!(d["latency_ms"].as_f64().is_some_and(|v| v.is_finite() && v >= 0.0), "{d}");
+                assert_eq!(
+                    uint(d, "latency_frames"),
+                    i - (follower.len() - 1),
+                    "latency at leader frame {i}"
+                );
+                assert!(
+                    d["latency_ms"]
+                        .as_f64()
+                        .is_some_and(|v| v.is_finite() && v >= 0.0),
+                    "{d}"
+                );
             }
             None => assert!(d["latency_frames"].is_null() && d["latency_ms"].is_null()),
         }
-        assert!(d["tick_ms"].as_f64().is_some_and(|v| v.is_finite() && v >= 0.0));
+        assert!(d["tick_ms"]
+            .as_f64()
+            .is_some_and(|v| v.is_finite() && v >= 0.0));
         if steps > 0 {
-            assert!(d["step_ms"].as_f64().is_some_and(|v| v.is_finite() && v >= 0.0), "{d}");
+            assert!(
+                d["step_ms"]
+                    .as_f64()
+                    .is_some_and(|v| v.is_finite() && v >= 0.0),
+                "{d}"
+            );
         }
     }
 
@@ -307,7 +410,11 @@ fn live_streams_the_sessions_frames_in_order() {
         assert_eq!(uint(&e.data, "d"), d);
         let fs = e.data["follower"].as_array().unwrap();
         assert_eq!(fs.len(), 1, "one drained frame per tick");
-        assert_eq!(uint(&fs[0], "index"), follower.len(), "drained frames in order");
+        assert_eq!(
+            uint(&fs[0], "index"),
+            follower.len(),
+            "drained frames in order"
+        );
         follower.push((run.frames_in, pose(&fs[0]["pos"], "follower")));
         assert_eq!(uint(&e.data, "follower_frames"), follower.len());
     }
@@ -315,24 +422,51 @@ fn live_streams_the_sessions_frames_in_order() {
     // The session took the leader frames run_streaming could push (it stops
     // at the first backlog: music past the end of the track), then refused
     // every later one.
-    assert_eq!(refused, (run.frames_in..t).collect::<Vec<_>>(), "refused leader frames");
+    assert_eq!(
+        refused,
+        (run.frames_in..t).collect::<Vec<_>>(),
+        "refused leader frames"
+    );
     // Exactly the session's frames, at the same leader frames.
     assert_eq!(follower.len(), run.frames_out(), "follower frame count");
-    assert!(follower.len() > t / 2, "{} follower frames for {t} leader frames", follower.len());
-    assert_eq!(uint(&events[t + drained].data, "steps"), run.steps(), "steps, the drain's included");
+    assert!(
+        follower.len() > t / 2,
+        "{} follower frames for {t} leader frames",
+        follower.len()
+    );
+    assert_eq!(
+        uint(&events[t + drained].data, "steps"),
+        run.steps(),
+        "steps, the drain's included"
+    );
     assert!(steps <= run.steps());
     let mut worst = 0.0f32;
     for (j, (at, pos)) in follower.iter().enumerate() {
-        assert_eq!(*at, run.frame_ready[j], "follower frame {j} came with leader frame {at}, the session had it after {}", run.frame_ready[j]);
+        assert_eq!(
+            *at, run.frame_ready[j],
+            "follower frame {j} came with leader frame {at}, the session had it after {}",
+            run.frame_ready[j]
+        );
         for (a, b) in pos.iter().zip(&run.pos[j * ROW..(j + 1) * ROW]) {
             worst = worst.max((a - b).abs());
         }
     }
-    assert_eq!(worst, 0.0, "follower positions differ from the session's by up to {worst}");
+    assert_eq!(
+        worst, 0.0,
+        "follower positions differ from the session's by up to {worst}"
+    );
     // The follower trails by at most the session's latency, and by all of it
     // at the last frame of each token (frames come out a token, 4 frames, at a time).
-    let lat: Vec<usize> = follower[..ticked].iter().enumerate().map(|(j, (at, _))| at - j).collect();
-    assert!(lat.iter().all(|&l| l <= 31) && lat.iter().max() == Some(&31), "latencies: {:?}", &lat[..lat.len().min(40)]);
+    let lat: Vec<usize> = follower[..ticked]
+        .iter()
+        .enumerate()
+        .map(|(j, (at, _))| at - j)
+        .collect();
+    assert!(
+        lat.iter().all(|&l| l <= 31) && lat.iter().max() == Some(&31),
+        "latencies: {:?}",
+        &lat[..lat.len().min(40)]
+    );
 
     let end = &events[t + 1 + drained];
     assert_eq!(end.kind, "end");
@@ -340,31 +474,51 @@ fn live_streams_the_sessions_frames_in_order() {
     assert_eq!(uint(&end.data, "follower_frames"), follower.len());
     assert_eq!(uint(&end.data, "frames_accepted"), run.frames_in);
     assert_eq!(uint(&end.data, "drained_frames"), drained);
-    assert_eq!(uint(&end.data, "follower_frames_pending"), run.frames_in.saturating_sub(follower.len()));
+    assert_eq!(
+        uint(&end.data, "follower_frames_pending"),
+        run.frames_in.saturating_sub(follower.len())
+    );
     assert_eq!(uint(&end.data, "steps"), run.steps());
-    assert_eq!(uint(&end.data["step_ms"], "count"), steps, "step times of the ticks that stepped");
+    assert_eq!(
+        uint(&end.data["step_ms"], "count"),
+        steps,
+        "step times of the ticks that stepped"
+    );
 
     // Its one stream got everything: it exits by itself, long before --linger 120.
     let (ok, err) = live.wait_exit(Duration::from_secs(60));
     assert!(ok, "{err}");
-    assert!(err.contains("every open page received the whole stream"), "{err}");
+    assert!(
+        err.contains("every open page received the whole stream"),
+        "{err}"
+    );
     assert!(!err.contains("panicked"), "{err}");
 }
 
 #[test]
 fn live_serves_only_its_routes_and_resumes_after_an_event_id() {
-    let mut live = Live::start(&tiny_args(&["--preset", "minimum", "--frames", "40", "--linger", "120"]));
+    let mut live = Live::start(&tiny_args(&[
+        "--preset", "minimum", "--frames", "40", "--linger", "120",
+    ]));
     let port = live.port;
     assert_eq!(get(port, "/nope", &[]).0, 404);
     assert_eq!(get(port, "/index.html?x=1", &[]).0, 200);
     let (code, head, _) = http(port, "GET / HTTP/1.1", &["Host: evil.example:80"]);
     assert_eq!(code, 403, "a foreign Host is refused: {head}");
     assert_eq!(http(port, "GET / HTTP/1.1", &[]).0, 403, "no Host");
-    let (code, head, _) = http(port, "POST /events HTTP/1.1", &[&format!("Host: localhost:{port}")]);
+    let (code, head, _) = http(
+        port,
+        "POST /events HTTP/1.1",
+        &[&format!("Host: localhost:{port}")],
+    );
     assert_eq!(code, 405);
     assert_eq!(header(&head, "allow"), Some("GET, HEAD"));
     assert_eq!(http(port, "NONSENSE", &[]).0, 400);
-    let (code, _, body) = http(port, "HEAD / HTTP/1.1", &[&format!("Host: 127.0.0.1:{port}")]);
+    let (code, _, body) = http(
+        port,
+        "HEAD / HTTP/1.1",
+        &[&format!("Host: 127.0.0.1:{port}")],
+    );
     assert_eq!((code, body.len()), (200, 0));
 
     // A page reconnecting after event 10 gets 11.. only (40 frames: ids 0..=41).
@@ -372,7 +526,10 @@ fn live_serves_only_its_routes_and_resumes_after_an_event_id() {
     assert_eq!(code, 200);
     let ev = parse_sse(&body);
     assert_eq!(ev.first().map(|e| e.id), Some(11));
-    assert_eq!(ev.iter().map(|e| e.id).collect::<Vec<_>>(), (11..=41).collect::<Vec<_>>());
+    assert_eq!(
+        ev.iter().map(|e| e.id).collect::<Vec<_>>(),
+        (11..=41).collect::<Vec<_>>()
+    );
     assert_eq!(uint(&ev[0].data, "i"), 10);
     assert_eq!(ev.last().map(|e| e.kind.as_str()), Some("end"));
     // Latency 0: the follower frame of each leader frame comes with it.
@@ -389,13 +546,28 @@ fn live_without_flags_streams_the_bundled_demo() {
         eprintln!("skipped: no bundled demo model at {}", demo.display());
         return;
     }
-    let mut live = Live::start(&["--no-pace".to_string(), "--port".to_string(), "0".to_string(), "--linger".to_string(), "120".to_string()]);
+    let mut live = Live::start(&[
+        "--no-pace".to_string(),
+        "--port".to_string(),
+        "0".to_string(),
+        "--linger".to_string(),
+        "120".to_string(),
+    ]);
     let (code, _, body) = get(live.port, "/events", &[]);
     assert_eq!(code, 200);
     let ev = parse_sse(&body);
     let hello = &ev[0].data;
-    assert!(hello["model"].as_str().unwrap().ends_with("demo.duo"), "{hello}");
-    assert!(hello["leader"].as_str().unwrap().ends_with("demo_leader_pos3d.npy"), "{hello}");
+    assert!(
+        hello["model"].as_str().unwrap().ends_with("demo.duo"),
+        "{hello}"
+    );
+    assert!(
+        hello["leader"]
+            .as_str()
+            .unwrap()
+            .ends_with("demo_leader_pos3d.npy"),
+        "{hello}"
+    );
     let frames = uint(hello, "frames");
     assert_eq!(frames, 748);
     let end = &ev.last().unwrap().data;
@@ -406,16 +578,27 @@ fn live_without_flags_streams_the_bundled_demo() {
     // Drained, the follower has R's frame count: 4 (K + 1), K = (T4 - 4) / 4 - 29.
     let k = (frames / 4 * 4 - 4) / 4 - 29;
     assert_eq!(uint(end, "follower_frames"), 4 * (k + 1), "{end}");
-    assert!(drained > 0 && drained <= latency, "the drain gives at most what the latency held back: {end}");
+    assert!(
+        drained > 0 && drained <= latency,
+        "the drain gives at most what the latency held back: {end}"
+    );
     let (ok, err) = live.wait_exit(Duration::from_secs(60));
     assert!(ok, "{err}");
 }
 
 fn live_fails(args: &[String]) -> String {
-    let o = Command::new(env!("CARGO_BIN_EXE_duolando")).arg("live").args(args).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .arg("live")
+        .args(args)
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert_eq!(o.status.code(), Some(1), "expected a failure: {err}");
-    assert!(o.stdout.is_empty(), "no URL printed on failure: {}", String::from_utf8_lossy(&o.stdout));
+    assert!(
+        o.stdout.is_empty(),
+        "no URL printed on failure: {}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     assert!(!err.contains("panicked"), "{err}");
     err
 }
@@ -430,7 +613,10 @@ fn live_bad_inputs_and_a_busy_port_are_named_errors() {
     let i = a.iter().position(|s| s == "--port").unwrap();
     a.remove(i); // ... and its flag, keeping ours
     let err = live_fails(&a);
-    assert!(err.contains(&format!("127.0.0.1:{port}")) && err.contains("already in use"), "{err}");
+    assert!(
+        err.contains(&format!("127.0.0.1:{port}")) && err.contains("already in use"),
+        "{err}"
+    );
     drop(held);
 
     let dir = std::env::temp_dir().join(format!("duo-live-bad-{}", std::process::id()));
@@ -460,7 +646,10 @@ fn live_bad_inputs_and_a_busy_port_are_named_errors() {
     let mi = a.iter().position(|s| s == "--music").unwrap();
     a[mi + 1] = p(&short).to_string();
     let err = live_fails(&a);
-    assert!(err.contains(p(&short)) && err.contains("must cover"), "{err}");
+    assert!(
+        err.contains(p(&short)) && err.contains("must cover"),
+        "{err}"
+    );
     // A clip no longer than the latency (reference: 291 frames).
     let err = live_fails(&tiny_args(&["--frames", "200"]));
     assert!(err.contains("no follower frame would come out"), "{err}");
@@ -476,7 +665,9 @@ fn live_bad_inputs_and_a_busy_port_are_named_errors() {
 fn live_paces_one_leader_frame_per_tick() {
     // Paced (no --no-pace): frame i is pushed no earlier than i / 30 s after
     // the clock starts, which --wait holds until this stream opens.
-    let mut a = tiny_args(&["--preset", "minimum", "--frames", "45", "--linger", "120", "--wait"]);
+    let mut a = tiny_args(&[
+        "--preset", "minimum", "--frames", "45", "--linger", "120", "--wait",
+    ]);
     a.retain(|s| s != "--no-pace");
     let mut live = Live::start(&a);
     let t0 = Instant::now();
@@ -490,10 +681,17 @@ fn live_paces_one_leader_frame_per_tick() {
     let mut prev = -1.0;
     for (i, e) in ev[1..46].iter().enumerate() {
         let t = e.data["t_ms"].as_f64().unwrap();
-        assert!(t >= i as f64 * slot_ms - 1.0 && t > prev, "frame {i} pushed at {t} ms, its slot starts at {:.1} ms", i as f64 * slot_ms);
+        assert!(
+            t >= i as f64 * slot_ms - 1.0 && t > prev,
+            "frame {i} pushed at {t} ms, its slot starts at {:.1} ms",
+            i as f64 * slot_ms
+        );
         prev = t;
     }
-    assert!(wall >= Duration::from_millis(44 * 1000 / 30), "45 paced frames streamed in {wall:?}");
+    assert!(
+        wall >= Duration::from_millis(44 * 1000 / 30),
+        "45 paced frames streamed in {wall:?}"
+    );
     let (ok, err) = live.wait_exit(Duration::from_secs(60));
     assert!(ok, "{err}");
 }

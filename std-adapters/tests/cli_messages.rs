@@ -18,8 +18,14 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn run(args: &[&str]) -> (Option<i32>, String) {
-    let o: Output = Command::new(env!("CARGO_BIN_EXE_duolando")).args(args).output().unwrap();
-    (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned())
+    let o: Output = Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
 }
 
 /// `duolando convert` of the tiny fixture with `config` and `gpt` in place
@@ -77,8 +83,14 @@ fn a_file_that_is_not_safetensors_says_why() {
     let (code, e) = convert(&t.join("follower_gpt.yaml"), &fake, &dir);
     assert_eq!(code, Some(1), "{e}");
     let n = u64::from_le_bytes(bytes[..8].try_into().unwrap());
-    assert!(e.contains(&format!("header of {n} bytes")) && e.contains("108 bytes"), "{e}");
-    assert!(e.contains("pt_to_safetensors.py"), "says how to make one: {e}");
+    assert!(
+        e.contains(&format!("header of {n} bytes")) && e.contains("108 bytes"),
+        "{e}"
+    );
+    assert!(
+        e.contains("pt_to_safetensors.py"),
+        "says how to make one: {e}"
+    );
 }
 
 #[test]
@@ -88,5 +100,8 @@ fn not_a_model_prints_its_magic_in_hex() {
     std::fs::write(&f, b"hello, world, this is not a model at all").unwrap();
     let (code, e) = run(&["inspect", f.to_str().unwrap()]);
     assert_eq!(code, Some(1), "{e}");
-    assert!(e.contains("not a .duo file") && e.contains("0x68656c6c6f2c2077"), "{e}");
+    assert!(
+        e.contains("not a .duo file") && e.contains("0x68656c6c6f2c2077"),
+        "{e}"
+    );
 }

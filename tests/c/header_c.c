@@ -7,5 +7,8 @@ int main(void) {
   duo_session_config c;
   (void)f;
   (void)c;
-  return (int)sizeof(duo_leader_frame) == 660 ? 0 : 1;
+  return (int)sizeof(duo_leader_frame) == 660 && sizeof(duo_transflower_info) == 48 &&
+                 sizeof(duo_transflower_config) == 24
+             ? 0
+             : 1;
 }

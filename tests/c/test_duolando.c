@@ -818,6 +818,84 @@ static void test_solo(void) {
   free(want);
 }
 
+/* ---- a Transflower model ---------------------------------------------- */
+
+/* The Transflower paper fixture: info; an "exact" session fed the audio
+ * row by row, replaying the recorded base samples, gives the authors'
+ * frames (output.npy) within the paper case's tolerance (4 x the
+ * reference's own float32-vs-float64 difference: 9.7e-6 relative,
+ * docs/TRANSFLOWER.md); a seeded session repeats itself after reset; the
+ * other families' calls are refused by name; the model may be freed first. */
+static void test_transflower(void) {
+  char path[1200];
+  size_t n_motion = 0, n_audio = 0, n_noise = 0, n_want = 0, got = 0, i, j;
+  float *motion, *audio, *noise, *want, f[64], first[64];
+  duo_model *m = NULL;
+  duo_model_info mi;
+  duo_transflower_info info;
+  duo_transflower_config c;
+  duo_session *s = NULL;
+  uint64_t index = 0;
+  float worst = 0.0f, scale = 1.0f;
+  char msg[512];
+  sprintf(path, "%s/tests/fixtures/transflower_paper/in_expmap_scaled_20.npy", root_dir);
+  motion = read_npy_f32(path, &n_motion);
+  sprintf(path, "%s/tests/fixtures/transflower_paper/in_audio_feats_scaled_20.npy", root_dir);
+  audio = read_npy_f32(path, &n_audio);
+  sprintf(path, "%s/tests/fixtures/transflower_paper/noise.npy", root_dir);
+  noise = read_npy_f32(path, &n_noise);
+  sprintf(path, "%s/tests/fixtures/transflower_paper/output.npy", root_dir);
+  want = read_npy_f32(path, &n_want);
+  CHECK(motion && audio && noise && want);
+  if (!motion || !audio || !noise || !want) return;
+  sprintf(path, "%s/tests/fixtures/transflower_paper/model.duo", root_dir);
+  EXPECT(duo_model_open_file(path, &m), DUO_OK);
+  EXPECT(duo_model_get_info(m, &mi), DUO_OK);
+  CHECK(mi.family == DUO_FAMILY_TRANSFLOWER && mi.joints == 0 && mi.fps == 20);
+  EXPECT(duo_transflower_get_info(m, &info), DUO_OK);
+  CHECK(info.channels <= 64 && info.audio_features == mi.music_features && info.labels == 0);
+  EXPECT(duo_transflower_config_preset(m, "exact", &c), DUO_OK);
+  CHECK(c.refresh == 1);
+  EXPECT(duo_transflower_session_new(m, &c, motion, (size_t)info.seed_rows * info.channels, NULL, 0, &s), DUO_OK);
+  duo_model_free(m); /* the session keeps the weights alive */
+  EXPECT(duo_session_push_leader(s, &leader[0]), DUO_INVALID_ARGUMENT);
+  duo_last_error_message(msg, sizeof msg);
+  CHECK(strstr(msg, "Transflower") != NULL);
+  EXPECT(duo_session_pull_positions(s, f, 72, &index), DUO_INVALID_ARGUMENT);
+  for (i = 0; i + info.audio_features <= n_audio; i += info.audio_features) {
+    EXPECT(duo_session_push_music(s, audio + i, info.audio_features), DUO_OK);
+    while ((got + 1) * info.noise_floats <= n_noise &&
+           duo_transflower_pull_frame_with_noise(s, noise + got * info.noise_floats, info.noise_floats, f, info.channels, &index) == DUO_OK) {
+      CHECK(index == got);
+      for (j = 0; j < info.channels && (got + 1) * info.channels <= n_want; j++) {
+        float d = fabsf(f[j] - want[got * info.channels + j]);
+        if (!(d <= worst)) worst = d;
+        if (fabsf(want[got * info.channels + j]) > scale) scale = fabsf(want[got * info.channels + j]);
+      }
+      got++;
+    }
+  }
+  CHECK(got * info.channels == n_want);
+  if (!(worst / scale <= 9.7e-6f)) fprintf(stderr, "transflower: rel err %g over %zu frames\n", (double)(worst / scale), got);
+  CHECK(worst / scale <= 9.7e-6f);
+  /* Seeded: the same seed, the same first frame. */
+  for (j = 0; j < 2; j++) {
+    EXPECT(duo_transflower_session_reset(s, 11), DUO_OK);
+    EXPECT(duo_transflower_pull_frame(s, f, info.channels, &index), DUO_NOT_READY);
+    EXPECT(duo_session_push_music(s, audio, (size_t)info.audio_window * info.audio_features), DUO_OK);
+    EXPECT(duo_transflower_pull_frame(s, f, info.channels, &index), DUO_OK);
+    CHECK(index == 0);
+    if (j == 0) memcpy(first, f, sizeof f);
+  }
+  CHECK(memcmp(first, f, info.channels * sizeof(float)) == 0);
+  EXPECT(duo_transflower_pull_frame(s, f, info.channels + 1, &index), DUO_INVALID_ARGUMENT);
+  duo_session_free(s);
+  free(motion);
+  free(audio);
+  free(noise);
+  free(want);
+}
+
 int main(int argc, char **argv) {
   duo_model *m = NULL;
   if (argc < 2 || strlen(argv[1]) > 1000) {
@@ -842,6 +920,7 @@ int main(int argc, char **argv) {
   test_threads(m);
   test_model_freed_first();
   test_solo();
+  test_transflower();
   duo_model_free(m);
   free(reference);
   free(leader);

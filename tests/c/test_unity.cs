@@ -158,6 +158,7 @@ static class TestUnity
             }
         }
         TestSolo(root);
+        TestTransflower(root);
         TestPositionsOfAFollower(root, leader, track, frames);
         Check(pulled > frames / 2, "frames pulled: " + pulled);
         Check(rejected > 0, "NaN frames rejected");
@@ -201,6 +202,72 @@ static class TestUnity
             if (!(d <= worst)) worst = d;   // NaN counts as worst
         }
         return worst;
+    }
+
+    // The Transflower paper fixture through TransflowerSession: the recorded noise replayed
+    // gives the authors' frames (output.npy) within the case's 9.7e-6 relative tolerance
+    // (docs/TRANSFLOWER.md); a seed repeats its dance after Reset; the wrong family throws.
+    static void TestTransflower(string root)
+    {
+        string dir = Path.Combine(root, "tests/fixtures/transflower_paper");
+        float[] motion = ReadNpyF32(Path.Combine(dir, "in_expmap_scaled_20.npy"));
+        float[] audio = ReadNpyF32(Path.Combine(dir, "in_audio_feats_scaled_20.npy"));
+        float[] noise = ReadNpyF32(Path.Combine(dir, "noise.npy"));
+        float[] want = ReadNpyF32(Path.Combine(dir, "output.npy"));
+        Check(Marshal.SizeOf(typeof(TransflowerInfo)) == 48 && Marshal.SizeOf(typeof(TransflowerConfig)) == 24, "Transflower struct sizes");
+        using (Model duet = Model.OpenFile(Path.Combine(root, "tests/fixtures/tiny/model.duo")))
+            ThrowsArgument(() => new TransflowerSession(duet, new TransflowerConfig(), motion, null), "TransflowerSession on a Duolando model");
+        using (Model model = Model.OpenFile(Path.Combine(dir, "model.duo")))
+        {
+            Check(model.Family == ModelFamily.Transflower, "family Transflower");
+            Throws(() => TransflowerSession.Preset(model, "interactive"), DuoResult.InvalidArgument, "realtime", "an unknown Transflower preset");
+            TransflowerConfig exact = TransflowerSession.Preset(model, "exact");
+            Check(exact.Refresh == 1, "exact: refresh 1");
+            using (TransflowerSession s = new TransflowerSession(model, exact, Slice(motion, 0, 12 * 11), null))
+            {
+                int c = (int)s.Info.Channels, d = (int)s.Info.AudioFeatures, nz = (int)s.Info.NoiseFloats;
+                float[] frame = new float[c];
+                float[] z = new float[nz];
+                int got = 0;
+                double worst = 0, scale = 1;
+                ulong index;
+                for (int r = 0; r * d < audio.Length; r++)
+                {
+                    s.PushAudio(Slice(audio, r * d, d));
+                    while ((got + 1) * nz <= noise.Length)
+                    {
+                        Array.Copy(noise, got * nz, z, 0, nz);
+                        if (!s.TryPullFrame(frame, out index, z)) break;
+                        Check(index == (ulong)got, "frame index");
+                        for (int j = 0; j < c; j++)
+                        {
+                            worst = Math.Max(worst, Math.Abs(frame[j] - want[got * c + j]));
+                            scale = Math.Max(scale, Math.Abs(want[got * c + j]));
+                        }
+                        got++;
+                    }
+                }
+                Check(got * c == want.Length, "every frame of the golden");
+                Check(worst / scale <= 9.7e-6, "Transflower frames vs the authors': rel " + (worst / scale));
+                float[] first = null;
+                for (int k = 0; k < 2; k++)
+                {
+                    s.Reset(3);
+                    Check(!s.TryPullFrame(frame, out index), "no audio: not ready");
+                    s.PushAudio(Slice(audio, 0, (int)s.Info.AudioWindow * d));
+                    Check(s.TryPullFrame(frame, out index) && index == 0, "a seeded frame");
+                    if (first == null) first = (float[])frame.Clone();
+                }
+                Check(first != null && System.Linq.Enumerable.SequenceEqual(first, frame), "the same seed, the same frame");
+            }
+        }
+    }
+
+    static float[] Slice(float[] a, int from, int n)
+    {
+        float[] r = new float[n];
+        Array.Copy(a, from, r, 0, n);
+        return r;
     }
 
     // The Bailando fixture through SoloSession: the authors' positions within 1e-5 m.

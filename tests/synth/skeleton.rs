@@ -2,9 +2,13 @@
 
 use duolando::skeleton::fk::forward_kinematics;
 use duolando::skeleton::ik::{self, Chain};
-use duolando::skeleton::math::{self, axis_angle, det, mat_mul, max_abs_diff, norm, sub, transpose, Mat3, IDENTITY};
+use duolando::skeleton::math::{
+    self, axis_angle, det, mat_mul, max_abs_diff, norm, sub, transpose, Mat3, IDENTITY,
+};
 use duolando::skeleton::retarget::{measure_skeleton, retarget};
-use duolando::skeleton::rotation::{euler_zxy_from_mat, mat_from_euler_zxy, mat_from_quat, nearest_rotation, quat_from_mat};
+use duolando::skeleton::rotation::{
+    euler_zxy_from_mat, mat_from_euler_zxy, mat_from_quat, nearest_rotation, quat_from_mat,
+};
 use duolando::skeleton::{children, parent, Skeleton, JOINTS, JOINT_NAMES, PARENTS};
 use duolando::synth::rng::Rng;
 
@@ -47,7 +51,11 @@ fn tree_is_the_smplx_tree() {
         let len = s.bone_length(j);
         assert!(len > 0.015 && len < 0.45, "{} bone {len}", JOINT_NAMES[j]);
         let m = duolando::skeleton::rest::mirror_of(j);
-        assert!((p[m][0] + p[j][0]).abs() < 1e-6 && (p[m][1] - p[j][1]).abs() < 1e-6, "{} not mirrored", JOINT_NAMES[j]);
+        assert!(
+            (p[m][0] + p[j][0]).abs() < 1e-6 && (p[m][1] - p[j][1]).abs() < 1e-6,
+            "{} not mirrored",
+            JOINT_NAMES[j]
+        );
     }
 }
 
@@ -76,7 +84,11 @@ fn retarget_reproduces_fk_positions() {
     let mut worst = 0.0f32;
     for _ in 0..50 {
         let local = random_pose(&mut rng, 1.5);
-        let root = [rng.range(-2.0, 2.0), rng.range(0.5, 1.0), rng.range(-2.0, 2.0)];
+        let root = [
+            rng.range(-2.0, 2.0),
+            rng.range(0.5, 1.0),
+            rng.range(-2.0, 2.0),
+        ];
         let pos = forward_kinematics(&s, root, &local).positions;
         let back = retarget(&s, &pos);
         let again = forward_kinematics(&s, root, &back).positions;
@@ -100,7 +112,9 @@ fn retarget_onto_a_measured_rig_fits_foreign_proportions() {
         other.offsets[j] = math::scale(other.offsets[j], 1.1);
     }
     let mut rng = Rng::new(3, 0);
-    let clip: Vec<_> = (0..20).map(|_| forward_kinematics(&other, [0.0, 0.9, 0.0], &random_pose(&mut rng, 1.0)).positions).collect();
+    let clip: Vec<_> = (0..20)
+        .map(|_| forward_kinematics(&other, [0.0, 0.9, 0.0], &random_pose(&mut rng, 1.0)).positions)
+        .collect();
     let rig = measure_skeleton(&Skeleton::adult(1.0), &clip);
     let mut worst = 0.0f32;
     for pos in &clip {
@@ -116,7 +130,12 @@ fn retarget_onto_a_measured_rig_fits_foreign_proportions() {
 #[test]
 fn two_bone_ik_reaches_reachable_targets() {
     let s = Skeleton::adult(1.0);
-    let leg = Chain { root: 1, mid: 4, end: 7, rest_pole: [0.0, 0.0, 1.0] };
+    let leg = Chain {
+        root: 1,
+        mid: 4,
+        end: 7,
+        rest_pole: [0.0, 0.0, 1.0],
+    };
     let mut rng = Rng::new(4, 0);
     let hip = [0.06, 0.85, 0.0];
     for _ in 0..200 {
@@ -127,7 +146,11 @@ fn two_bone_ik_reaches_reachable_targets() {
         assert!(!sol.clamped);
         let knee = math::add(hip, math::mat_vec(&sol.root_world, s.offsets[4]));
         let ankle = math::add(knee, math::mat_vec(&sol.mid_world, s.offsets[7]));
-        assert!(norm(sub(ankle, target)) < 1e-4, "ankle misses by {}", norm(sub(ankle, target)));
+        assert!(
+            norm(sub(ankle, target)) < 1e-4,
+            "ankle misses by {}",
+            norm(sub(ankle, target))
+        );
     }
     let far = ik::solve(&s, leg, hip, [0.0, -2.0, 0.0], [0.0, 0.0, 1.0]);
     assert!(far.clamped);
@@ -145,9 +168,15 @@ fn quaternion_round_trips() {
     }
     // Known value: 90 degrees about +y is (0, sin 45, 0, cos 45).
     let q = quat_from_mat(&math::rot_y(std::f32::consts::FRAC_PI_2));
-    assert!((q[1] - 0.70710677).abs() < 1e-6 && (q[3] - 0.70710677).abs() < 1e-6 && q[0].abs() < 1e-6);
+    assert!(
+        (q[1] - 0.70710677).abs() < 1e-6 && (q[3] - 0.70710677).abs() < 1e-6 && q[0].abs() < 1e-6
+    );
     // Half turns (w = 0) take the other branches.
-    for m in [math::rot_x(std::f32::consts::PI), math::rot_y(std::f32::consts::PI), math::rot_z(std::f32::consts::PI)] {
+    for m in [
+        math::rot_x(std::f32::consts::PI),
+        math::rot_y(std::f32::consts::PI),
+        math::rot_z(std::f32::consts::PI),
+    ] {
         assert!(max_abs_diff(&mat_from_quat(quat_from_mat(&m)), &m) < CLOSE_ROT);
     }
 }
@@ -160,7 +189,10 @@ fn euler_zxy_round_trips_including_gimbal_lock() {
         let e = euler_zxy_from_mat(&m);
         assert!(max_abs_diff(&mat_from_euler_zxy(e), &m) < 1e-4);
     }
-    let lock = mat_mul(&math::rot_z(0.4), &mat_mul(&math::rot_x(std::f32::consts::FRAC_PI_2), &math::rot_y(0.3)));
+    let lock = mat_mul(
+        &math::rot_z(0.4),
+        &mat_mul(&math::rot_x(std::f32::consts::FRAC_PI_2), &math::rot_y(0.3)),
+    );
     assert!(max_abs_diff(&mat_from_euler_zxy(euler_zxy_from_mat(&lock)), &lock) < 1e-4);
 }
 
@@ -173,25 +205,47 @@ fn nearest_rotation_properties() {
         assert!(max_abs_diff(&nearest_rotation(&r), &r) < CLOSE_ROT);
         // R S with S symmetric positive definite projects back to R.
         let q = random_rotation(&mut rng, std::f32::consts::PI);
-        let d = [[rng.range(0.3, 2.0), 0.0, 0.0], [0.0, rng.range(0.3, 2.0), 0.0], [0.0, 0.0, rng.range(0.3, 2.0)]];
+        let d = [
+            [rng.range(0.3, 2.0), 0.0, 0.0],
+            [0.0, rng.range(0.3, 2.0), 0.0],
+            [0.0, 0.0, rng.range(0.3, 2.0)],
+        ];
         let spd = mat_mul(&q, &mat_mul(&d, &transpose(&q)));
         assert!(max_abs_diff(&nearest_rotation(&mat_mul(&r, &spd)), &r) < 1e-4);
         // Arbitrary matrices: a proper rotation, no farther than any sampled rotation.
-        let m: Mat3 = [[rng.normal(), rng.normal(), rng.normal()], [rng.normal(), rng.normal(), rng.normal()], [rng.normal(), rng.normal(), rng.normal()]];
+        let m: Mat3 = [
+            [rng.normal(), rng.normal(), rng.normal()],
+            [rng.normal(), rng.normal(), rng.normal()],
+            [rng.normal(), rng.normal(), rng.normal()],
+        ];
         let p = nearest_rotation(&m);
         assert!(max_abs_diff(&mat_mul(&p, &transpose(&p)), &IDENTITY) < 1e-5);
         assert!((det(&p) - 1.0).abs() < 1e-5);
-        let frob = |a: &Mat3| math::flatten(a).iter().zip(math::flatten(&m).iter()).map(|(x, y)| (x - y) * (x - y)).sum::<f32>();
+        let frob = |a: &Mat3| {
+            math::flatten(a)
+                .iter()
+                .zip(math::flatten(&m).iter())
+                .map(|(x, y)| (x - y) * (x - y))
+                .sum::<f32>()
+        };
         let best = frob(&p);
         for _ in 0..20 {
             let other = mat_mul(&p, &random_rotation(&mut rng, 0.5));
-            assert!(frob(&other) >= best - 1e-4, "a neighbour is nearer: {} < {best}", frob(&other));
+            assert!(
+                frob(&other) >= best - 1e-4,
+                "a neighbour is nearer: {} < {best}",
+                frob(&other)
+            );
         }
         // Equivariance: nearest(Q M) = Q nearest(M).
         assert!(max_abs_diff(&nearest_rotation(&mat_mul(&q, &m)), &mat_mul(&q, &p)) < 1e-4);
     }
     // Degenerate inputs give a rotation, never NaN.
-    for m in [[[0.0; 3]; 3], [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]], [[f32::NAN; 3]; 3]] {
+    for m in [
+        [[0.0; 3]; 3],
+        [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
+        [[f32::NAN; 3]; 3],
+    ] {
         let p = nearest_rotation(&m);
         assert!((det(&p) - 1.0).abs() < 1e-5);
     }
@@ -207,7 +261,9 @@ fn retarget_residual_at_branching_joints_is_bounded_by_the_shape_change() {
     other.offsets[1][0] += widen;
     other.offsets[2][0] -= widen;
     let mut rng = Rng::new(8, 0);
-    let clip: Vec<_> = (0..20).map(|_| forward_kinematics(&other, [0.0, 0.9, 0.0], &random_pose(&mut rng, 1.0)).positions).collect();
+    let clip: Vec<_> = (0..20)
+        .map(|_| forward_kinematics(&other, [0.0, 0.9, 0.0], &random_pose(&mut rng, 1.0)).positions)
+        .collect();
     let rig = measure_skeleton(&Skeleton::adult(1.0), &clip);
     let mut worst = 0.0f32;
     for pos in &clip {

@@ -5,9 +5,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::duolando::config::Part;
 use crate::limits::*;
 use crate::nn::vq_config::VqConfig;
-use crate::duolando::config::Part;
 
 /// SMPL joints of a Bailando pose (positions, xyz per joint).
 pub const N_JOINTS: usize = 24;
@@ -74,10 +74,18 @@ impl BailandoConfig {
         for (i, part) in [Part::Up, Part::Down].into_iter().enumerate() {
             self.parts[i].validate(VqWhich::Part(part), channels[i], 0)?;
             range(ConfigField::Vocab(i as u8), g.vocab[i], 1, MAX_VOCAB)?;
-            equal(ConfigField::Vocab(i as u8), g.vocab[i], self.parts[i].l_bins)?;
+            equal(
+                ConfigField::Vocab(i as u8),
+                g.vocab[i],
+                self.parts[i].l_bins,
+            )?;
         }
         let hop = self.parts[0].hop().unwrap_or(0);
-        equal(ConfigField::Vq(VqWhich::Part(Part::Down), VqField::Hop), self.parts[1].hop().unwrap_or(0), hop)?;
+        equal(
+            ConfigField::Vq(VqWhich::Part(Part::Down), VqField::Hop),
+            self.parts[1].hop().unwrap_or(0),
+            hop,
+        )?;
         Ok(())
     }
 }
@@ -101,7 +109,18 @@ pub fn published() -> BailandoConfig {
         m_conv_den: 1,
     };
     BailandoConfig {
-        gpt: GptConfig { n_embd: 768, n_head: 12, n_layer_base: 6, n_layer_head: 6, block_size: 29, vocab: [512, 512], n_music: 438 },
-        parts: [vq((UP_JOINTS.len() * 3) as u32), vq((DOWN_JOINTS.len() * 3) as u32)],
+        gpt: GptConfig {
+            n_embd: 768,
+            n_head: 12,
+            n_layer_base: 6,
+            n_layer_head: 6,
+            block_size: 29,
+            vocab: [512, 512],
+            n_music: 438,
+        },
+        parts: [
+            vq((UP_JOINTS.len() * 3) as u32),
+            vq((DOWN_JOINTS.len() * 3) as u32),
+        ],
     }
 }

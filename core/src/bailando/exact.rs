@@ -61,7 +61,10 @@ struct SampleScratch<'s> {
     toks: &'s mut [u32],
 }
 
-fn sample_scratch<'s, A: Carve<'s>>(a: &mut A, cfg: &BailandoConfig) -> Result<SampleScratch<'s>, ArenaError> {
+fn sample_scratch<'s, A: Carve<'s>>(
+    a: &mut A,
+    cfg: &BailandoConfig,
+) -> Result<SampleScratch<'s>, ArenaError> {
     let mc = max_context(cfg);
     Ok(SampleScratch {
         gpt: GptScratch::carve(a, cfg, mc)?,
@@ -82,11 +85,23 @@ pub fn sample_scratch_bytes(cfg: &BailandoConfig) -> Option<usize> {
 /// columns are read (the authors cut wider arrays the same way), padded
 /// as `padding` says; `tokens` ((K + 1) * 2, K = [`steps`]) receives the
 /// seed then one (up, down) pair per step.
-pub fn sample(model: &Model<'_>, music: &[f32], width: usize, padding: MusicPadding, seed: [u32; 2], scratch: &mut [u8], tokens: &mut [u32]) -> Result<(), Error> {
+pub fn sample(
+    model: &Model<'_>,
+    music: &[f32],
+    width: usize,
+    padding: MusicPadding,
+    seed: [u32; 2],
+    scratch: &mut [u8],
+    tokens: &mut [u32],
+) -> Result<(), Error> {
     let cfg = &model.cfg;
     let nm = cfg.gpt.n_music as usize;
     if width < nm || music.is_empty() || !music.len().is_multiple_of(width) {
-        return Err(Error::Ragged { buffer: Buffer::Music, len: music.len(), row: width.max(nm) });
+        return Err(Error::Ragged {
+            buffer: Buffer::Music,
+            len: music.len(),
+            row: width.max(nm),
+        });
     }
     input::check(Buffer::Music, music)?;
     let rows = music.len() / width;
@@ -94,11 +109,20 @@ pub fn sample(model: &Model<'_>, music: &[f32], width: usize, padding: MusicPadd
     check_len(Buffer::Tokens, tokens.len(), (k_steps + 1) * 2)?;
     for (j, &v) in seed.iter().enumerate() {
         if v >= cfg.gpt.vocab[j] {
-            return Err(Error::Token { stream: j as u8, token: v, vocab: cfg.gpt.vocab[j] });
+            return Err(Error::Token {
+                stream: j as u8,
+                token: v,
+                vocab: cfg.gpt.vocab[j],
+            });
         }
     }
     let mut a = Arena::new(scratch);
-    let SampleScratch { gpt: mut gs, music: win_music, logits, toks: win_toks } = sample_scratch(&mut a, cfg)?;
+    let SampleScratch {
+        gpt: mut gs,
+        music: win_music,
+        logits,
+        toks: win_toks,
+    } = sample_scratch(&mut a, cfg)?;
     let bs1 = max_context(cfg);
     let vu = cfg.gpt.vocab[0] as usize;
     tokens[..2].copy_from_slice(&seed);
@@ -111,7 +135,13 @@ pub fn sample(model: &Model<'_>, music: &[f32], width: usize, padding: MusicPadd
             let r = (lo + 1 + p).min(rows - 1);
             win_music[p * nm..(p + 1) * nm].copy_from_slice(&music[r * width..r * width + nm]);
         }
-        window_logits(model, &win_toks[..2 * c], &win_music[..c * nm], &mut gs, logits)?;
+        window_logits(
+            model,
+            &win_toks[..2 * c],
+            &win_music[..c * nm],
+            &mut gs,
+            logits,
+        )?;
         tokens[2 * (k + 1)] = argmax(&logits[..vu]);
         tokens[2 * (k + 1) + 1] = argmax(&logits[vu..]);
     }
@@ -134,12 +164,24 @@ struct DanceScratch<'s> {
     codes: &'s mut [u32],
 }
 
-fn dance_scratch<'s, A: Carve<'s>>(a: &mut A, cfg: &BailandoConfig, frames: usize) -> Result<DanceScratch<'s>, ArenaError> {
+fn dance_scratch<'s, A: Carve<'s>>(
+    a: &mut A,
+    cfg: &BailandoConfig,
+    frames: usize,
+) -> Result<DanceScratch<'s>, ArenaError> {
     let t = padded_frames(frames);
-    let emb = cfg.parts.iter().map(|p| p.emb_width as usize).max().unwrap_or(0);
+    let emb = cfg
+        .parts
+        .iter()
+        .map(|p| p.emb_width as usize)
+        .max()
+        .unwrap_or(0);
     Ok(DanceScratch {
         conv: ConvScratch::carve(a, &cfg.vqs(), t)?,
-        part: a.f32(t.checked_mul(UP_JOINTS.len() * 3).ok_or(ArenaError::Overflow)?)?,
+        part: a.f32(
+            t.checked_mul(UP_JOINTS.len() * 3)
+                .ok_or(ArenaError::Overflow)?,
+        )?,
         feat: a.f32(t.checked_mul(emb).ok_or(ArenaError::Overflow)?)?,
         codes: a.u32(t)?,
     })
@@ -157,15 +199,28 @@ pub fn dance_scratch_bytes(cfg: &BailandoConfig, frames: usize) -> Option<usize>
 /// copies of its last row to [`padded_frames`], each half encoded over the
 /// whole sequence (the down half with its pelvis channels zeroed); the
 /// seed is each half's first code.
-pub fn seed_from_dance(model: &Model<'_>, dance: &[f32], scratch: &mut [u8]) -> Result<[u32; 2], Error> {
+pub fn seed_from_dance(
+    model: &Model<'_>,
+    dance: &[f32],
+    scratch: &mut [u8],
+) -> Result<[u32; 2], Error> {
     if dance.is_empty() || dance.len() % POSE_DIM != 0 {
-        return Err(Error::Ragged { buffer: Buffer::Pose, len: dance.len(), row: POSE_DIM });
+        return Err(Error::Ragged {
+            buffer: Buffer::Pose,
+            len: dance.len(),
+            row: POSE_DIM,
+        });
     }
     input::check(Buffer::Pose, dance)?;
     let frames = dance.len() / POSE_DIM;
     let t = padded_frames(frames);
     let mut a = Arena::new(scratch);
-    let DanceScratch { mut conv, part, feat, codes } = dance_scratch(&mut a, &model.cfg, frames)?;
+    let DanceScratch {
+        mut conv,
+        part,
+        feat,
+        codes,
+    } = dance_scratch(&mut a, &model.cfg, frames)?;
     let mut seed = [0u32; 2];
     for (h, joints) in [&UP_JOINTS[..], &DOWN_JOINTS[..]].into_iter().enumerate() {
         let w = joints.len() * 3;
@@ -183,7 +238,13 @@ pub fn seed_from_dance(model: &Model<'_>, dance: &[f32], scratch: &mut [u8]) -> 
         let vq = &model.parts[h];
         let n = t / vq.cfg.hop().unwrap_or(1).max(1) as usize;
         let emb = vq.cfg.emb_width as usize;
-        vq_encoder::encode(vq, &part[..t * w], &mut conv, &mut feat[..n * emb], &mut codes[..n])?;
+        vq_encoder::encode(
+            vq,
+            &part[..t * w],
+            &mut conv,
+            &mut feat[..n * emb],
+            &mut codes[..n],
+        )?;
         seed[h] = codes[0];
     }
     Ok(seed)
@@ -198,11 +259,20 @@ struct DecodeScratch<'s> {
     codes: &'s mut [u32],
 }
 
-fn decode_scratch<'s, A: Carve<'s>>(a: &mut A, cfg: &BailandoConfig, n_tokens: usize) -> Result<DecodeScratch<'s>, ArenaError> {
-    let n = n_tokens.checked_mul(cfg.hop()).ok_or(ArenaError::Overflow)?;
+fn decode_scratch<'s, A: Carve<'s>>(
+    a: &mut A,
+    cfg: &BailandoConfig,
+    n_tokens: usize,
+) -> Result<DecodeScratch<'s>, ArenaError> {
+    let n = n_tokens
+        .checked_mul(cfg.hop())
+        .ok_or(ArenaError::Overflow)?;
     Ok(DecodeScratch {
         conv: ConvScratch::carve(a, &cfg.vqs(), n)?,
-        out: a.f32(n.checked_mul(UP_JOINTS.len() * 3).ok_or(ArenaError::Overflow)?)?,
+        out: a.f32(
+            n.checked_mul(UP_JOINTS.len() * 3)
+                .ok_or(ArenaError::Overflow)?,
+        )?,
         codes: a.u32(n_tokens)?,
     })
 }
@@ -219,16 +289,29 @@ pub fn decode_scratch_bytes(cfg: &BailandoConfig, n_tokens: usize) -> Option<usi
 /// root velocity v (its own pelvis output is discarded); the root is
 /// `r[0] = 0, r[i] = r[i-1] + v[i-1]` (float32, in order), the pelvis is
 /// `r` and every other joint gets `r` added.
-pub fn decode(model: &Model<'_>, tokens: &[u32], scratch: &mut [u8], pos3d: &mut [f32]) -> Result<(), Error> {
+pub fn decode(
+    model: &Model<'_>,
+    tokens: &[u32],
+    scratch: &mut [u8],
+    pos3d: &mut [f32],
+) -> Result<(), Error> {
     let cfg = &model.cfg;
     if tokens.is_empty() || tokens.len() % 2 != 0 {
-        return Err(Error::Ragged { buffer: Buffer::Tokens, len: tokens.len(), row: 2 });
+        return Err(Error::Ragged {
+            buffer: Buffer::Tokens,
+            len: tokens.len(),
+            row: 2,
+        });
     }
     let n_tok = tokens.len() / 2;
     let n = n_tok * cfg.hop();
     check_len(Buffer::Output, pos3d.len(), n * POSE_DIM)?;
     let mut a = Arena::new(scratch);
-    let DecodeScratch { mut conv, out, codes } = decode_scratch(&mut a, cfg, n_tok)?;
+    let DecodeScratch {
+        mut conv,
+        out,
+        codes,
+    } = decode_scratch(&mut a, cfg, n_tok)?;
     for (h, joints) in [&UP_JOINTS[..], &DOWN_JOINTS[..]].into_iter().enumerate() {
         for (i, c) in codes.iter_mut().enumerate() {
             *c = tokens[2 * i + h];
@@ -244,7 +327,14 @@ pub fn decode(model: &Model<'_>, tokens: &[u32], scratch: &mut [u8], pos3d: &mut
         }
     }
     // The root velocity replaces the down half's pelvis (joint 0) output.
-    vq_decoder::decode(&model.parts[1], &model.root, codes, 1, &mut conv, &mut out[..n * 3])?;
+    vq_decoder::decode(
+        &model.parts[1],
+        &model.root,
+        codes,
+        1,
+        &mut conv,
+        &mut out[..n * 3],
+    )?;
     let mut r = [0.0f32; 3];
     for f in 0..n {
         if f > 0 {

@@ -25,7 +25,11 @@ pub struct GptScratch<'s> {
 }
 
 impl<'s> GptScratch<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &BailandoConfig, max_c: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &BailandoConfig,
+        max_c: usize,
+    ) -> Result<Self, ArenaError> {
         let c = cfg.gpt.n_embd as usize;
         let rows = max_c.checked_mul(N_STREAMS).ok_or(ArenaError::Overflow)?;
         Ok(GptScratch {
@@ -51,13 +55,23 @@ pub fn logits_len(cfg: &BailandoConfig) -> usize {
 /// The GPT at one window of `t` positions: `tokens` (t, 2) up/down,
 /// `music` (t, n_music) the rows in the same slots; `logits` = head_up then
 /// head_down at the last position.
-pub fn window_logits(model: &Model<'_>, tokens: &[u32], music: &[f32], s: &mut GptScratch<'_>, logits: &mut [f32]) -> Result<(), Error> {
+pub fn window_logits(
+    model: &Model<'_>,
+    tokens: &[u32],
+    music: &[f32],
+    s: &mut GptScratch<'_>,
+    logits: &mut [f32],
+) -> Result<(), Error> {
     let cfg = &model.cfg;
     let g = &cfg.gpt;
     let c = g.n_embd as usize;
     let nm = g.n_music as usize;
     if tokens.is_empty() || tokens.len() % 2 != 0 {
-        return Err(Error::Ragged { buffer: Buffer::Tokens, len: tokens.len(), row: 2 });
+        return Err(Error::Ragged {
+            buffer: Buffer::Tokens,
+            len: tokens.len(),
+            row: 2,
+        });
     }
     let t = tokens.len() / 2;
     let max = s.max_c.min(max_context(cfg));
@@ -68,13 +82,22 @@ pub fn window_logits(model: &Model<'_>, tokens: &[u32], music: &[f32], s: &mut G
     check_len(Buffer::Logits, logits.len(), logits_len(cfg))?;
     let x = &mut s.x[..N_STREAMS * t * c];
     for p in 0..t {
-        linear(&music[p * nm..(p + 1) * nm], &model.gpt.cond_emb.w, model.gpt.cond_emb.b, &mut x[p * c..(p + 1) * c]);
+        linear(
+            &music[p * nm..(p + 1) * nm],
+            &model.gpt.cond_emb.w,
+            model.gpt.cond_emb.b,
+            &mut x[p * c..(p + 1) * c],
+        );
     }
     for (j, table) in model.gpt.tok_emb.iter().enumerate() {
         for p in 0..t {
             let tok = tokens[2 * p + j];
             if tok as usize >= table.rows() {
-                return Err(Error::Token { stream: j as u8, token: tok, vocab: table.rows() as u32 });
+                return Err(Error::Token {
+                    stream: j as u8,
+                    token: tok,
+                    vocab: table.rows() as u32,
+                });
             }
             let row = (1 + j) * t + p;
             table.row_into(tok as usize, &mut x[row * c..(row + 1) * c]);
@@ -82,10 +105,25 @@ pub fn window_logits(model: &Model<'_>, tokens: &[u32], music: &[f32], s: &mut G
     }
     add_positions(model.gpt.pos_emb, g.block_size as usize, N_STREAMS, t, c, x);
     let rows = [2 * t - 1, 3 * t - 1];
-    forward_last(&model.gpt.base, &model.gpt.head, x, &rows, t, c, g.n_head as usize, &mut s.block, s.last);
+    forward_last(
+        &model.gpt.base,
+        &model.gpt.head,
+        x,
+        &rows,
+        t,
+        c,
+        g.n_head as usize,
+        &mut s.block,
+        s.last,
+    );
     let (up, down) = logits.split_at_mut(g.vocab[0] as usize);
     for (j, out) in [up, down].into_iter().enumerate() {
-        layernorm(&s.last[j * c..(j + 1) * c], model.gpt.ln_f.w, model.gpt.ln_f.b, s.ln);
+        layernorm(
+            &s.last[j * c..(j + 1) * c],
+            model.gpt.ln_f.w,
+            model.gpt.ln_f.b,
+            s.ln,
+        );
         linear(s.ln, &model.gpt.heads[j], None, out);
     }
     Ok(())

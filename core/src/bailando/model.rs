@@ -42,31 +42,51 @@ pub struct Model<'a> {
 
 impl<'a> Model<'a> {
     /// Validates `cfg` and binds every tensor the schema lists from `src`.
-    pub fn bind<S: TensorSource<'a>>(cfg: &BailandoConfig, src: &S) -> Result<Model<'a>, BindError> {
+    pub fn bind<S: TensorSource<'a>>(
+        cfg: &BailandoConfig,
+        src: &S,
+    ) -> Result<Model<'a>, BindError> {
         cfg.validate().map_err(BindError::Config)?;
         let b = Binder { src };
         let g = &cfg.gpt;
         let c = g.n_embd;
-        let blocks = |prefix: &str, n: u32| -> Result<Vec<BlockW<'a>, { MAX_GPT_LAYERS as usize }>, BindError> {
+        let blocks = |prefix: &str,
+                      n: u32|
+         -> Result<Vec<BlockW<'a>, { MAX_GPT_LAYERS as usize }>, BindError> {
             let mut v = Vec::new();
             for i in 0..n {
-                v.push(b.block(&name(format_args!("{prefix}.blocks.{i}"))?, c)?).map_err(|_| BindError::Capacity)?;
+                v.push(b.block(&name(format_args!("{prefix}.blocks.{i}"))?, c)?)
+                    .map_err(|_| BindError::Capacity)?;
             }
             Ok(v)
         };
         let gpt = GptW {
-            tok_emb: [b.matrix(schema::tok_emb_name(0)?, &[g.vocab[0], c])?, b.matrix(schema::tok_emb_name(1)?, &[g.vocab[1], c])?],
-            pos_emb: b.get(name(format_args!("gpt.gpt_base.pos_emb"))?, &[1, g.block_size * N_STREAMS as u32, c])?,
+            tok_emb: [
+                b.matrix(schema::tok_emb_name(0)?, &[g.vocab[0], c])?,
+                b.matrix(schema::tok_emb_name(1)?, &[g.vocab[1], c])?,
+            ],
+            pos_emb: b.get(
+                name(format_args!("gpt.gpt_base.pos_emb"))?,
+                &[1, g.block_size * N_STREAMS as u32, c],
+            )?,
             cond_emb: b.linear("gpt.gpt_base.cond_emb", c, g.n_music, true)?,
             base: blocks("gpt.gpt_base", g.n_layer_base)?,
             head: blocks("gpt.gpt_head", g.n_layer_head)?,
             ln_f: b.ln("gpt.gpt_head.ln_f", c)?,
-            heads: [b.matrix(schema::head_name(0)?, &[g.vocab[0], c])?, b.matrix(schema::head_name(1)?, &[g.vocab[1], c])?],
+            heads: [
+                b.matrix(schema::head_name(0)?, &[g.vocab[0], c])?,
+                b.matrix(schema::head_name(1)?, &[g.vocab[1], c])?,
+            ],
         };
         let up = b.vq(&schema::vq_prefix(0)?, &cfg.parts[0])?;
         let down = b.vq(&schema::vq_prefix(1)?, &cfg.parts[1])?;
         let root = b.decoder(&schema::vq_prefix(1)?, &cfg.parts[1], DecoderKind::Root)?;
-        Ok(Model { cfg: *cfg, gpt, parts: [up, down], root })
+        Ok(Model {
+            cfg: *cfg,
+            gpt,
+            parts: [up, down],
+            root,
+        })
     }
 
     /// Binds every weight of a parsed `.duo` file; a file of another
@@ -74,7 +94,10 @@ impl<'a> Model<'a> {
     pub fn from_duo(file: &crate::format::DuoFile<'a>) -> Result<Model<'a>, BindError> {
         match file.config() {
             crate::family::FamilyConfig::Bailando(cfg) => Model::bind(cfg, file),
-            other => Err(BindError::Family { expected: crate::family::Family::Bailando, found: other.family() }),
+            other => Err(BindError::Family {
+                expected: crate::family::Family::Bailando,
+                found: other.family(),
+            }),
         }
     }
 

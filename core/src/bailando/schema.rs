@@ -17,24 +17,37 @@ pub fn vq_prefix(part: usize) -> Result<TensorName, SchemaError> {
 
 /// Token embedding of a stream: `gpt.gpt_base.tok_emb_<up|down>.weight`.
 pub fn tok_emb_name(part: usize) -> Result<TensorName, SchemaError> {
-    name(format_args!("gpt.gpt_base.tok_emb_{}.weight", PART_NAMES[part.min(1)]))
+    name(format_args!(
+        "gpt.gpt_base.tok_emb_{}.weight",
+        PART_NAMES[part.min(1)]
+    ))
 }
 
 /// Output head of a stream: `gpt.gpt_head.head_<up|down>.weight`.
 pub fn head_name(part: usize) -> Result<TensorName, SchemaError> {
-    name(format_args!("gpt.gpt_head.head_{}.weight", PART_NAMES[part.min(1)]))
+    name(format_args!(
+        "gpt.gpt_head.head_{}.weight",
+        PART_NAMES[part.min(1)]
+    ))
 }
 
 /// Calls `f` once per tensor the config needs, in a fixed order (GPT
 /// base, GPT head, up VQ-VAE, down VQ-VAE with its root decoder).
-pub fn for_each_tensor<E: From<SchemaError>>(cfg: &BailandoConfig, f: &mut dyn FnMut(&TensorSpec) -> Result<(), E>) -> Result<(), E> {
+pub fn for_each_tensor<E: From<SchemaError>>(
+    cfg: &BailandoConfig,
+    f: &mut dyn FnMut(&TensorSpec) -> Result<(), E>,
+) -> Result<(), E> {
     let mut e = Emit { f };
     let g = &cfg.gpt;
     let c = g.n_embd;
     for p in 0..2 {
         e.t(tok_emb_name(p)?, &[g.vocab[p], c], Role::Embedding)?;
     }
-    e.t(name(format_args!("gpt.gpt_base.pos_emb"))?, &[1, g.block_size.saturating_mul(N_STREAMS as u32), c], Role::PosEmb)?;
+    e.t(
+        name(format_args!("gpt.gpt_base.pos_emb"))?,
+        &[1, g.block_size.saturating_mul(N_STREAMS as u32), c],
+        Role::PosEmb,
+    )?;
     e.wb("gpt.gpt_base.cond_emb", &[c, g.n_music], c, Role::Linear)?;
     for i in 0..g.n_layer_base {
         e.block(&name(format_args!("gpt.gpt_base.blocks.{i}"))?, c)?;

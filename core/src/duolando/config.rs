@@ -68,7 +68,13 @@ impl ModelConfig {
     /// Every VQ-VAE config: the four parts (up, down, lhand, rhand), then
     /// the translation.
     pub fn vqs(&self) -> [VqConfig; 5] {
-        [self.parts[0], self.parts[1], self.parts[2], self.parts[3], self.transl]
+        [
+            self.parts[0],
+            self.parts[1],
+            self.parts[2],
+            self.parts[3],
+            self.transl,
+        ]
     }
 }
 
@@ -97,12 +103,8 @@ impl Part {
         match self {
             Part::Down => &[0, 1, 2, 4, 5, 7, 8, 10, 11],
             Part::Up => &[3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24],
-            Part::LHand => &[
-                25, 26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36, 37, 38, 39,
-            ],
-            Part::RHand => &[
-                40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54,
-            ],
+            Part::LHand => &[25, 26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36, 37, 38, 39],
+            Part::RHand => &[40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54],
         }
     }
 }

@@ -6,11 +6,11 @@
 //! the mask is the `t x t` lower triangle tiled 10 x 10 (a token at
 //! position i sees every stream at positions <= i). No final LayerNorm.
 
+use crate::duolando::model::GptW;
+use crate::error::Error;
 use crate::nn::block::BlockScratch;
 use crate::nn::streams;
 pub use crate::nn::streams::add_positions;
-use crate::error::Error;
-use crate::duolando::model::GptW;
 
 /// First follower stream (F_up); follower streams are 5..10.
 pub const FIRST_FOLLOWER_STREAM: usize = 5;
@@ -20,7 +20,11 @@ pub const FOLLOWER_STREAMS: usize = 5;
 /// Checks the stream layout a session assumes (music, 4 leader, 5 follower).
 pub fn check_layout(streams: usize) -> Result<(), Error> {
     if streams != FIRST_FOLLOWER_STREAM + FOLLOWER_STREAMS {
-        return Err(Error::Length { buffer: crate::error::Buffer::Features, len: streams, expected: FIRST_FOLLOWER_STREAM + FOLLOWER_STREAMS });
+        return Err(Error::Length {
+            buffer: crate::error::Buffer::Features,
+            len: streams,
+            expected: FIRST_FOLLOWER_STREAM + FOLLOWER_STREAMS,
+        });
     }
     Ok(())
 }
@@ -37,14 +41,24 @@ pub const fn follower_table(j: usize) -> usize {
 
 /// Writes follower token embeddings into streams 5..9 of `x` (10t, C).
 /// `follower`: (t, 5) row-major tokens (up, down, lhand, rhand, transl).
-pub fn embed_followers(gpt: &GptW<'_>, follower: &[u32], t: usize, c: usize, x: &mut [f32]) -> Result<(), Error> {
+pub fn embed_followers(
+    gpt: &GptW<'_>,
+    follower: &[u32],
+    t: usize,
+    c: usize,
+    x: &mut [f32],
+) -> Result<(), Error> {
     for j in 0..FOLLOWER_STREAMS {
         let table = &gpt.tok_emb[follower_table(j)];
         let base = (FIRST_FOLLOWER_STREAM + j) * t;
         for p in 0..t {
             let tok = follower[p * FOLLOWER_STREAMS + j];
             if tok as usize >= table.rows() {
-                return Err(Error::Token { stream: j as u8, token: tok, vocab: table.rows() as u32 });
+                return Err(Error::Token {
+                    stream: j as u8,
+                    token: tok,
+                    vocab: table.rows() as u32,
+                });
             }
             table.row_into(tok as usize, &mut x[(base + p) * c..(base + p + 1) * c]);
         }
@@ -55,7 +69,15 @@ pub fn embed_followers(gpt: &GptW<'_>, follower: &[u32], t: usize, c: usize, x: 
 /// Runs the base and head blocks over `x` (10t, C). The last head block
 /// is evaluated only at the last position of the 5 follower streams:
 /// `last` (5, C) receives those rows (all a logits head reads).
-pub fn forward_last(gpt: &GptW<'_>, x: &mut [f32], t: usize, c: usize, n_head: usize, s: &mut BlockScratch<'_>, last: &mut [f32]) {
+pub fn forward_last(
+    gpt: &GptW<'_>,
+    x: &mut [f32],
+    t: usize,
+    c: usize,
+    n_head: usize,
+    s: &mut BlockScratch<'_>,
+    last: &mut [f32],
+) {
     let mut rows = [0usize; FOLLOWER_STREAMS];
     for (j, r) in rows.iter_mut().enumerate() {
         *r = (FIRST_FOLLOWER_STREAM + j) * t + t - 1;

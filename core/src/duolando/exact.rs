@@ -20,15 +20,15 @@
 
 use crate::arena::{Arena, ArenaError, Carve, Planner};
 use crate::duolando::config::{ModelConfig, Part, POSE_DIM, ROT_DIM};
-use crate::nn::conv_stack::ConvScratch;
-use crate::error::{check_at_least, check_len, Buffer, Error};
-use crate::input;
 use crate::duolando::gpt::{head_rows, logits_len, max_context, window_logits, GptScratch, Window};
 use crate::duolando::model::Model;
 use crate::duolando::motion::{denormalise, gather_part, normalise, scatter_part};
-use crate::nn::sampler::argmax;
 use crate::duolando::vq_decoder::{decode, Output};
 use crate::duolando::vq_encoder::encode;
+use crate::error::{check_at_least, check_len, Buffer, Error};
+use crate::input;
+use crate::nn::conv_stack::ConvScratch;
+use crate::nn::sampler::argmax;
 
 /// Follower tokens per row: up, down, lhand, rhand, transl.
 pub const TOKEN_COLUMNS: usize = 5;
@@ -130,7 +130,13 @@ struct Persistent<'s> {
 
 impl<'s> Persistent<'s> {
     fn carve<A: Carve<'s>>(a: &mut A, sh: &OutputShape) -> Result<Self, ArenaError> {
-        Ok(Persistent { leader: a.u32(sh.leader_tokens.checked_mul(4).ok_or(ArenaError::Overflow)?)? })
+        Ok(Persistent {
+            leader: a.u32(
+                sh.leader_tokens
+                    .checked_mul(4)
+                    .ok_or(ArenaError::Overflow)?,
+            )?,
+        })
     }
 }
 
@@ -148,7 +154,11 @@ struct EncodePhase<'s> {
 }
 
 impl<'s> EncodePhase<'s> {
-    fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, sh: &OutputShape) -> Result<Self, ArenaError> {
+    fn carve<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &ModelConfig,
+        sh: &OutputShape,
+    ) -> Result<Self, ArenaError> {
         let (pos, _, emb) = widths(cfg);
         let ov = ArenaError::Overflow;
         let t = sh.frames_in;
@@ -171,7 +181,10 @@ struct StepPhase<'s> {
 
 impl<'s> StepPhase<'s> {
     fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig) -> Result<Self, ArenaError> {
-        Ok(StepPhase { gpt: GptScratch::carve(a, cfg, max_context(cfg))?, logits: a.f32(logits_len(cfg))? })
+        Ok(StepPhase {
+            gpt: GptScratch::carve(a, cfg, max_context(cfg))?,
+            logits: a.f32(logits_len(cfg))?,
+        })
     }
 }
 
@@ -187,7 +200,11 @@ struct DecodePhase<'s> {
 }
 
 impl<'s> DecodePhase<'s> {
-    fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, sh: &OutputShape) -> Result<Self, ArenaError> {
+    fn carve<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &ModelConfig,
+        sh: &OutputShape,
+    ) -> Result<Self, ArenaError> {
         let (pos, rot, _) = widths(cfg);
         let ov = ArenaError::Overflow;
         let f = sh.frames_out;
@@ -207,7 +224,10 @@ fn plan(cfg: &ModelConfig, sh: &OutputShape) -> Result<(usize, [usize; 3]), Aren
     EncodePhase::carve(&mut phases[0], cfg, sh)?;
     StepPhase::carve(&mut phases[1], cfg)?;
     DecodePhase::carve(&mut phases[2], cfg, sh)?;
-    Ok((p.bytes(), [phases[0].bytes(), phases[1].bytes(), phases[2].bytes()]))
+    Ok((
+        p.bytes(),
+        [phases[0].bytes(), phases[1].bytes(), phases[2].bytes()],
+    ))
 }
 
 /// Scratch bytes [`generate`] needs for `t_frames` input frames, for a
@@ -222,10 +242,13 @@ pub fn scratch_bytes(cfg: &ModelConfig, t_frames: usize) -> Option<usize> {
     total.total_for_any_base()
 }
 
-
 fn rows(buffer: Buffer, x: &[f32], row: usize) -> Result<usize, Error> {
     if row == 0 || x.len() % row != 0 {
-        return Err(Error::Ragged { buffer, len: x.len(), row });
+        return Err(Error::Ragged {
+            buffer,
+            len: x.len(),
+            row,
+        });
     }
     Ok(x.len() / row)
 }
@@ -243,19 +266,39 @@ pub fn generate(
     let cfg = &model.cfg;
     let hop = cfg.hop();
     let t = rows(Buffer::LeaderPos3d, inp.leader_pos3d, POSE_DIM)?;
-    let sh = output_shape(cfg, t).ok_or(Error::TooShort { buffer: Buffer::LeaderPos3d, frames: t, min: hop })?;
+    let sh = output_shape(cfg, t).ok_or(Error::TooShort {
+        buffer: Buffer::LeaderPos3d,
+        frames: t,
+        min: hop,
+    })?;
     let n_music = cfg.gpt.music.n_in as usize;
     let music_frames = rows(Buffer::Music, inp.music, n_music)?;
     if music_frames < sh.frames_in {
-        return Err(Error::TooShort { buffer: Buffer::Music, frames: music_frames, min: sh.frames_in });
+        return Err(Error::TooShort {
+            buffer: Buffer::Music,
+            frames: music_frames,
+            min: sh.frames_in,
+        });
     }
     let leader = &inp.leader_pos3d[..sh.frames_in * POSE_DIM];
     let music = &inp.music[..sh.frames_in * n_music];
     input::check(Buffer::LeaderPos3d, leader)?;
     input::check(Buffer::Music, music)?;
-    check_len(Buffer::Tokens, out.tokens.len(), sh.token_rows * TOKEN_COLUMNS)?;
-    check_len(Buffer::FollowerPos3d, out.follower_pos3d.len(), sh.frames_out * POSE_DIM)?;
-    check_len(Buffer::FollowerRotmat, out.follower_rotmat.len(), sh.frames_out * ROT_DIM)?;
+    check_len(
+        Buffer::Tokens,
+        out.tokens.len(),
+        sh.token_rows * TOKEN_COLUMNS,
+    )?;
+    check_len(
+        Buffer::FollowerPos3d,
+        out.follower_pos3d.len(),
+        sh.frames_out * POSE_DIM,
+    )?;
+    check_len(
+        Buffer::FollowerRotmat,
+        out.follower_rotmat.len(),
+        sh.frames_out * ROT_DIM,
+    )?;
     if let Some(l) = out.leader_tokens.as_deref() {
         check_len(Buffer::LeaderTokens, l.len(), sh.leader_tokens * 4)?;
     }
@@ -264,7 +307,11 @@ pub fn generate(
             let vocab = cfg.gpt.vocab;
             for (j, &v) in tok.iter().enumerate() {
                 if v >= vocab[j] {
-                    return Err(Error::Token { stream: j as u8, token: v, vocab: vocab[j] });
+                    return Err(Error::Token {
+                        stream: j as u8,
+                        token: v,
+                        vocab: vocab[j],
+                    });
                 }
             }
             0
@@ -272,10 +319,18 @@ pub fn generate(
         Seed::FollowerFrames(f) => {
             let n = rows(Buffer::SeedFrames, f, POSE_DIM)? / hop * hop;
             if n < hop {
-                return Err(Error::TooShort { buffer: Buffer::SeedFrames, frames: n, min: hop });
+                return Err(Error::TooShort {
+                    buffer: Buffer::SeedFrames,
+                    frames: n,
+                    min: hop,
+                });
             }
             if n > sh.frames_in {
-                return Err(Error::Length { buffer: Buffer::SeedFrames, len: n, expected: sh.frames_in });
+                return Err(Error::Length {
+                    buffer: Buffer::SeedFrames,
+                    len: n,
+                    expected: sh.frames_in,
+                });
             }
             input::check(Buffer::SeedFrames, &f[..n * POSE_DIM])?;
             n
@@ -293,12 +348,31 @@ pub fn generate(
         let mut a = Arena::new(&mut *rest);
         let mut ph = EncodePhase::carve(&mut a, cfg, &sh)?;
         peak = peak.max(base_used + a.used());
-        encode_leader(model, leader, &sh, ph.norm, ph.part, ph.feat, ph.codes, &mut ph.conv, pers.leader)?;
+        encode_leader(
+            model,
+            leader,
+            &sh,
+            ph.norm,
+            ph.part,
+            ph.feat,
+            ph.codes,
+            &mut ph.conv,
+            pers.leader,
+        )?;
         let seed = match inp.seed {
             Seed::Tokens(tok) => tok,
             Seed::FollowerFrames(f) => {
                 let f = &f[..seed_frames * POSE_DIM];
-                encode_seed(model, f, leader, ph.norm, ph.part, ph.feat, ph.codes, &mut ph.conv)?
+                encode_seed(
+                    model,
+                    f,
+                    leader,
+                    ph.norm,
+                    ph.part,
+                    ph.feat,
+                    ph.codes,
+                    &mut ph.conv,
+                )?
             }
         };
         out.tokens[..TOKEN_COLUMNS].copy_from_slice(&seed);
@@ -326,7 +400,10 @@ pub fn generate(
         peak = peak.max(base_used + a.used());
         decode_follower(model, leader, &sh, &mut ph, out)?;
     }
-    Ok(ExactSummary { shape: sh, scratch_used: peak })
+    Ok(ExactSummary {
+        shape: sh,
+        scratch_used: peak,
+    })
 }
 
 /// Buffers of [`seed_tokens`] for `frames` seed frames.
@@ -343,7 +420,11 @@ struct SeedPhase<'s> {
 }
 
 impl<'s> SeedPhase<'s> {
-    fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, frames: usize) -> Result<Self, ArenaError> {
+    fn carve<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &ModelConfig,
+        frames: usize,
+    ) -> Result<Self, ArenaError> {
         let (pos, _, emb) = widths(cfg);
         let ov = ArenaError::Overflow;
         let n = frames / cfg.hop().max(1);
@@ -370,22 +451,44 @@ pub fn seed_scratch_bytes(cfg: &ModelConfig, frames: usize) -> Option<usize> {
 /// `20 * (follower root - leader root)` over every given frame.
 /// `follower`, `leader`: (F, 165) raw world joints over the same frames,
 /// `F` a positive multiple of hop (extra frames are ignored).
-pub fn seed_tokens(model: &Model<'_>, follower: &[f32], leader: &[f32], scratch: &mut [u8]) -> Result<[u32; 5], Error> {
+pub fn seed_tokens(
+    model: &Model<'_>,
+    follower: &[f32],
+    leader: &[f32],
+    scratch: &mut [u8],
+) -> Result<[u32; 5], Error> {
     let hop = model.cfg.hop();
     let f = rows(Buffer::SeedFrames, follower, POSE_DIM)? / hop * hop;
     if f < hop {
-        return Err(Error::TooShort { buffer: Buffer::SeedFrames, frames: f, min: hop });
+        return Err(Error::TooShort {
+            buffer: Buffer::SeedFrames,
+            frames: f,
+            min: hop,
+        });
     }
     let l = rows(Buffer::LeaderPos3d, leader, POSE_DIM)?;
     if l < f {
-        return Err(Error::TooShort { buffer: Buffer::LeaderPos3d, frames: l, min: f });
+        return Err(Error::TooShort {
+            buffer: Buffer::LeaderPos3d,
+            frames: l,
+            min: f,
+        });
     }
     let (follower, leader) = (&follower[..f * POSE_DIM], &leader[..f * POSE_DIM]);
     input::check(Buffer::SeedFrames, follower)?;
     input::check(Buffer::LeaderPos3d, leader)?;
     let mut a = Arena::new(scratch);
     let mut ph = SeedPhase::carve(&mut a, &model.cfg, f)?;
-    encode_seed(model, follower, leader, ph.norm, ph.part, ph.feat, ph.codes, &mut ph.conv)
+    encode_seed(
+        model,
+        follower,
+        leader,
+        ph.norm,
+        ph.part,
+        ph.feat,
+        ph.codes,
+        &mut ph.conv,
+    )
 }
 
 /// Step 2 of the module doc: leader codes per part into `leader` (4, n_tok).
@@ -402,7 +505,10 @@ fn encode_leader(
     out: &mut [u32],
 ) -> Result<(), Error> {
     let (t, n) = (sh.frames_in, sh.leader_tokens);
-    for (raw, o) in leader.chunks_exact(POSE_DIM).zip(norm.chunks_exact_mut(POSE_DIM)) {
+    for (raw, o) in leader
+        .chunks_exact(POSE_DIM)
+        .zip(norm.chunks_exact_mut(POSE_DIM))
+    {
         normalise(raw, o);
     }
     for (p, part_id) in Part::ALL.iter().enumerate() {
@@ -410,7 +516,13 @@ fn encode_leader(
         let w = vq.cfg.in_channels as usize;
         let emb = vq.cfg.emb_width as usize;
         gather_part(*part_id, &norm[..t * POSE_DIM], &mut part[..t * w]);
-        encode(vq, &part[..t * w], conv, &mut feat[..n * emb], &mut codes[..n])?;
+        encode(
+            vq,
+            &part[..t * w],
+            conv,
+            &mut feat[..n * emb],
+            &mut codes[..n],
+        )?;
         out[p * n..(p + 1) * n].copy_from_slice(&codes[..n]);
     }
     Ok(())
@@ -431,14 +543,23 @@ fn encode_seed(
     let hop = model.cfg.hop();
     let frames = f.len() / POSE_DIM;
     let mut seed = [0u32; 5];
-    for (raw, o) in f[..hop * POSE_DIM].chunks_exact(POSE_DIM).zip(norm.chunks_exact_mut(POSE_DIM)) {
+    for (raw, o) in f[..hop * POSE_DIM]
+        .chunks_exact(POSE_DIM)
+        .zip(norm.chunks_exact_mut(POSE_DIM))
+    {
         normalise(raw, o);
     }
     for (p, part_id) in Part::ALL.iter().enumerate() {
         let vq = &model.parts[p];
         let (w, emb) = (vq.cfg.in_channels as usize, vq.cfg.emb_width as usize);
         gather_part(*part_id, &norm[..hop * POSE_DIM], &mut part[..hop * w]);
-        encode(vq, &part[..hop * w], conv, &mut feat[..emb], &mut codes[..1])?;
+        encode(
+            vq,
+            &part[..hop * w],
+            conv,
+            &mut feat[..emb],
+            &mut codes[..1],
+        )?;
         seed[p] = codes[0];
     }
     // Relative translation 20 * (root_f - root_l) over every given frame.
@@ -466,7 +587,10 @@ fn run_steps(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(), Error> {
     let cfg = &model.cfg;
-    let (ds, lf) = (cfg.gpt.music.downsample_rate as usize, cfg.gpt.look_forward as usize);
+    let (ds, lf) = (
+        cfg.gpt.music.downsample_rate as usize,
+        cfg.gpt.look_forward as usize,
+    );
     let mmr = cfg.music_motion_rate as usize;
     let n_music = cfg.gpt.music.n_in as usize;
     let m = max_context(cfg);
@@ -516,14 +640,35 @@ fn decode_follower(
         let vq = &model.parts[p];
         column(&mut ph.codes[..rows], p, out.tokens);
         let w = vq.cfg.in_channels as usize;
-        decode(vq, Output::Position, &ph.codes[..rows], p as u8, &mut ph.conv, &mut ph.out[..f * w])?;
+        decode(
+            vq,
+            Output::Position,
+            &ph.codes[..rows],
+            p as u8,
+            &mut ph.conv,
+            &mut ph.out[..f * w],
+        )?;
         scatter_part(*part, 3, &ph.out[..f * w], out.follower_pos3d);
         let r = vq.cfg.rot_channels as usize;
-        decode(vq, Output::Rotation, &ph.codes[..rows], p as u8, &mut ph.conv, &mut ph.out[..f * r])?;
+        decode(
+            vq,
+            Output::Rotation,
+            &ph.codes[..rows],
+            p as u8,
+            &mut ph.conv,
+            &mut ph.out[..f * r],
+        )?;
         scatter_part(*part, 9, &ph.out[..f * r], out.follower_rotmat);
     }
     column(&mut ph.codes[..rows], 4, out.tokens);
-    decode(&model.transl, Output::Position, &ph.codes[..rows], 4, &mut ph.conv, &mut ph.transl[..f * 3])?;
+    decode(
+        &model.transl,
+        Output::Position,
+        &ph.codes[..rows],
+        4,
+        &mut ph.conv,
+        &mut ph.transl[..f * 3],
+    )?;
     let root0 = [leader[0], leader[1], leader[2]];
     for i in 0..f {
         let pose = &mut out.follower_pos3d[i * POSE_DIM..(i + 1) * POSE_DIM];

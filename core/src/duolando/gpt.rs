@@ -3,13 +3,15 @@
 //! window position of each follower stream.
 
 use crate::arena::{ArenaError, Carve};
-use crate::nn::block::BlockScratch;
 use crate::duolando::config::ModelConfig;
-use crate::duolando::coordinated_attention::{add_positions, embed_followers, forward_last, FOLLOWER_STREAMS};
-use crate::error::{check_len, Buffer, Error};
-use crate::kernels::linear;
+use crate::duolando::coordinated_attention::{
+    add_positions, embed_followers, forward_last, FOLLOWER_STREAMS,
+};
 use crate::duolando::lat::{lat_forward, LatInput, LatScratch};
 use crate::duolando::model::Model;
+use crate::error::{check_len, Buffer, Error};
+use crate::kernels::linear;
+use crate::nn::block::BlockScratch;
 
 /// One GPT window: `c` follower tokens per stream and the conditioning
 /// that covers them plus the look-ahead.
@@ -37,12 +39,20 @@ pub struct GptScratch<'s> {
 }
 
 impl<'s> GptScratch<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, max_c: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &ModelConfig,
+        max_c: usize,
+    ) -> Result<Self, ArenaError> {
         let g = &cfg.gpt;
         let c = g.n_embd as usize;
         let lf = g.look_forward as usize;
         let ov = ArenaError::Overflow;
-        let lat_rows = max_c.checked_add(lf).ok_or(ov)?.checked_mul(g.music.downsample_rate.max(1) as usize).ok_or(ov)?;
+        let lat_rows = max_c
+            .checked_add(lf)
+            .ok_or(ov)?
+            .checked_mul(g.music.downsample_rate.max(1) as usize)
+            .ok_or(ov)?;
         let streams = g.n_streams as usize;
         let x_rows = max_c.checked_mul(streams).ok_or(ov)?;
         Ok(GptScratch {
@@ -72,7 +82,13 @@ pub fn scratch_bytes(cfg: &ModelConfig, max_c: usize) -> Option<usize> {
 /// vocab_down, vocab_transl: the original heads' quirk).
 pub fn head_rows(cfg: &ModelConfig) -> [usize; 5] {
     let v = cfg.gpt.vocab;
-    [v[0] as usize, v[1] as usize, v[0] as usize, v[1] as usize, v[4] as usize]
+    [
+        v[0] as usize,
+        v[1] as usize,
+        v[0] as usize,
+        v[1] as usize,
+        v[4] as usize,
+    ]
 }
 
 /// Floats of the concatenated logits of the 5 heads.
@@ -83,7 +99,12 @@ pub fn logits_len(cfg: &ModelConfig) -> usize {
 /// The GPT at one window: `logits` (sum of [`head_rows`]) = the 5 heads
 /// (up, down, lhand, rhand, transl) at the last window position,
 /// concatenated in that order.
-pub fn window_logits(model: &Model<'_>, win: &Window<'_>, s: &mut GptScratch<'_>, logits: &mut [f32]) -> Result<(), Error> {
+pub fn window_logits(
+    model: &Model<'_>,
+    win: &Window<'_>,
+    s: &mut GptScratch<'_>,
+    logits: &mut [f32],
+) -> Result<(), Error> {
     let cfg = &model.cfg;
     let g = &cfg.gpt;
     let c = g.n_embd as usize;
@@ -94,34 +115,72 @@ pub fn window_logits(model: &Model<'_>, win: &Window<'_>, s: &mut GptScratch<'_>
         return Err(Error::Context { c: t, max });
     }
     let ds = g.music.downsample_rate as usize;
-    check_len(Buffer::Music, win.music.len(), (t + lf) * ds * g.music.n_in as usize)?;
+    check_len(
+        Buffer::Music,
+        win.music.len(),
+        (t + lf) * ds * g.music.n_in as usize,
+    )?;
     for l in win.leader {
         check_len(Buffer::LeaderTokens, l.len(), t + lf)?;
     }
-    check_len(Buffer::FollowerTokens, win.follower.len(), t * FOLLOWER_STREAMS)?;
+    check_len(
+        Buffer::FollowerTokens,
+        win.follower.len(),
+        t * FOLLOWER_STREAMS,
+    )?;
     check_len(Buffer::Logits, logits.len(), logits_len(cfg))?;
     let streams = g.n_streams as usize;
     let x = &mut s.x[..streams * t * c];
     // Stream 0: music LAT; streams 1..5: leader LATs over their token embeddings.
-    lat_forward(&model.gpt.music, c, lf, LatInput::Features(win.music), &mut s.lat, &mut s.block, &mut x[..t * c])?;
+    lat_forward(
+        &model.gpt.music,
+        c,
+        lf,
+        LatInput::Features(win.music),
+        &mut s.lat,
+        &mut s.block,
+        &mut x[..t * c],
+    )?;
     for p in 0..4 {
-        let input = LatInput::Tokens { tokens: win.leader[p], table: &model.gpt.tok_emb[p], stream: p as u8 };
+        let input = LatInput::Tokens {
+            tokens: win.leader[p],
+            table: &model.gpt.tok_emb[p],
+            stream: p as u8,
+        };
         let out = &mut x[(1 + p) * t * c..(2 + p) * t * c];
-        lat_forward(&model.gpt.leaders[p], c, lf, input, &mut s.lat, &mut s.block, out)?;
+        lat_forward(
+            &model.gpt.leaders[p],
+            c,
+            lf,
+            input,
+            &mut s.lat,
+            &mut s.block,
+            out,
+        )?;
     }
     embed_followers(&model.gpt, win.follower, t, c, x)?;
     add_positions(model.gpt.pos_emb, g.block_size as usize, streams, t, c, x);
     forward_last(&model.gpt, x, t, c, g.n_head as usize, &mut s.block, s.last);
     let mut off = 0;
     for (j, rows) in head_rows(cfg).iter().enumerate() {
-        linear(&s.last[j * c..(j + 1) * c], &model.gpt.heads[j], None, &mut logits[off..off + rows]);
+        linear(
+            &s.last[j * c..(j + 1) * c],
+            &model.gpt.heads[j],
+            None,
+            &mut logits[off..off + rows],
+        );
         off += rows;
     }
     Ok(())
 }
 
 /// [`window_logits`] with byte scratch (>= [`scratch_bytes`]`(cfg, win.c)`).
-pub fn step_logits(model: &Model<'_>, win: &Window<'_>, scratch: &mut [u8], logits: &mut [f32]) -> Result<(), Error> {
+pub fn step_logits(
+    model: &Model<'_>,
+    win: &Window<'_>,
+    scratch: &mut [u8],
+    logits: &mut [f32],
+) -> Result<(), Error> {
     let mut a = crate::arena::Arena::new(scratch);
     let mut s = GptScratch::carve(&mut a, &model.cfg, win.c)?;
     window_logits(model, win, &mut s, logits)

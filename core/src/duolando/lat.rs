@@ -11,10 +11,10 @@
 
 use crate::arena::{Arena, ArenaError, Carve, Planner};
 use crate::duolando::config::{ModelConfig, Part};
-use crate::nn::block::{block_forward, BlockScratch};
+use crate::duolando::model::{LatW, Model};
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::{linear, BandMask, Matrix};
-use crate::duolando::model::{LatW, Model};
+use crate::nn::block::{block_forward, BlockScratch};
 
 /// What a LAT reads.
 #[derive(Clone, Copy)]
@@ -22,7 +22,11 @@ pub enum LatInput<'x> {
     /// Feature rows (n, n_in): music frames.
     Features(&'x [f32]),
     /// Token ids (n), looked up in `table` (vocab, C): leader tokens.
-    Tokens { tokens: &'x [u32], table: &'x Matrix<'x>, stream: u8 },
+    Tokens {
+        tokens: &'x [u32],
+        table: &'x Matrix<'x>,
+        stream: u8,
+    },
 }
 
 /// Working memory of a LAT over at most `rows` input rows.
@@ -36,7 +40,10 @@ pub struct LatScratch<'s> {
 impl<'s> LatScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, c: usize) -> Result<Self, ArenaError> {
         let rc = rows.checked_mul(c).ok_or(ArenaError::Overflow)?;
-        Ok(LatScratch { x: a.f32(rc)?, emb: a.f32(rc)? })
+        Ok(LatScratch {
+            x: a.f32(rc)?,
+            emb: a.f32(rc)?,
+        })
     }
 }
 
@@ -47,7 +54,9 @@ pub fn lat_out_rows(n_in_rows: usize, ds: usize, look_forward: usize) -> Option<
     if ds == 0 || n_in_rows % ds != 0 {
         return None;
     }
-    (n_in_rows / ds).checked_sub(look_forward).filter(|&c| c > 0)
+    (n_in_rows / ds)
+        .checked_sub(look_forward)
+        .filter(|&c| c > 0)
 }
 
 /// Runs a LAT: `out` (n/ds - look_forward, C). `block` and `s` must hold
@@ -66,7 +75,11 @@ pub fn lat_forward(
     let n = match input {
         LatInput::Features(f) => {
             if n_in == 0 || f.len() % n_in != 0 {
-                return Err(Error::Ragged { buffer: Buffer::Music, len: f.len(), row: n_in });
+                return Err(Error::Ragged {
+                    buffer: Buffer::Music,
+                    len: f.len(),
+                    row: n_in,
+                });
             }
             f.len() / n_in
         }
@@ -79,27 +92,47 @@ pub fn lat_forward(
     })?;
     let cap = (s.x.len() / c.max(1)).min(block.rows);
     if n > cap {
-        return Err(Error::Length { buffer: Buffer::Features, len: n, expected: cap });
+        return Err(Error::Length {
+            buffer: Buffer::Features,
+            len: n,
+            expected: cap,
+        });
     }
     check_len(Buffer::Output, out.len(), rows * c)?;
     let x = &mut s.x[..n * c];
     match input {
         LatInput::Features(f) => linear(f, &w.cond_emb.w, w.cond_emb.b, x),
-        LatInput::Tokens { tokens, table, stream } => {
+        LatInput::Tokens {
+            tokens,
+            table,
+            stream,
+        } => {
             if n_in != c || table.cols() != c {
-                return Err(Error::Length { buffer: Buffer::Features, len: table.cols(), expected: n_in });
+                return Err(Error::Length {
+                    buffer: Buffer::Features,
+                    len: table.cols(),
+                    expected: n_in,
+                });
             }
             let emb = &mut s.emb[..n * c];
             for (i, &t) in tokens.iter().enumerate() {
                 if t as usize >= table.rows() {
-                    return Err(Error::Token { stream, token: t, vocab: table.rows() as u32 });
+                    return Err(Error::Token {
+                        stream,
+                        token: t,
+                        vocab: table.rows() as u32,
+                    });
                 }
                 table.row_into(t as usize, &mut emb[i * c..(i + 1) * c]);
             }
             linear(emb, &w.cond_emb.w, w.cond_emb.b, x);
         }
     }
-    let mask = BandMask { radius: look_forward * ds, q_pos0: 0, k_pos0: 0 };
+    let mask = BandMask {
+        radius: look_forward * ds,
+        q_pos0: 0,
+        k_pos0: 0,
+    };
     for b in &w.blocks {
         block_forward(b, x, c, w.cfg.n_head as usize, &mask, block);
     }
@@ -109,16 +142,28 @@ pub fn lat_forward(
 }
 
 /// Input rows a LAT reads for context `c`: `(c + look_forward) * ds`.
-pub fn input_rows(cfg: &ModelConfig, lat: &crate::duolando::config::LatConfig, c: usize) -> Option<usize> {
-    c.checked_add(cfg.gpt.look_forward as usize)?.checked_mul(lat.downsample_rate as usize)
+pub fn input_rows(
+    cfg: &ModelConfig,
+    lat: &crate::duolando::config::LatConfig,
+    c: usize,
+) -> Option<usize> {
+    c.checked_add(cfg.gpt.look_forward as usize)?
+        .checked_mul(lat.downsample_rate as usize)
 }
 
-fn carve_standalone<'s, A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, c: usize) -> Result<(LatScratch<'s>, BlockScratch<'s>), ArenaError> {
+fn carve_standalone<'s, A: Carve<'s>>(
+    a: &mut A,
+    cfg: &ModelConfig,
+    c: usize,
+) -> Result<(LatScratch<'s>, BlockScratch<'s>), ArenaError> {
     let rows = input_rows(cfg, &cfg.gpt.music, c)
         .ok_or(ArenaError::Overflow)?
         .max(input_rows(cfg, &cfg.gpt.leader, c).ok_or(ArenaError::Overflow)?);
     let e = cfg.gpt.n_embd as usize;
-    Ok((LatScratch::carve(a, rows, e)?, BlockScratch::carve(a, rows, e)?))
+    Ok((
+        LatScratch::carve(a, rows, e)?,
+        BlockScratch::carve(a, rows, e)?,
+    ))
 }
 
 /// Scratch bytes of [`music_lat`] / [`leader_lat`] for context `c` (any base address).
@@ -130,24 +175,47 @@ pub fn scratch_bytes(cfg: &ModelConfig, c: usize) -> Option<usize> {
 
 /// The music LAT alone: `music` ((c + lf) * ds, n_music) -> `out` (c, C).
 /// Returns c. `scratch` >= [`scratch_bytes`]`(cfg, c)`.
-pub fn music_lat(model: &Model<'_>, music: &[f32], scratch: &mut [u8], out: &mut [f32]) -> Result<usize, Error> {
+pub fn music_lat(
+    model: &Model<'_>,
+    music: &[f32],
+    scratch: &mut [u8],
+    out: &mut [f32],
+) -> Result<usize, Error> {
     let cfg = &model.cfg;
     let (e, lf) = (cfg.gpt.n_embd as usize, cfg.gpt.look_forward as usize);
     let c = out.len() / e.max(1);
     let mut a = Arena::new(scratch);
     let (mut s, mut b) = carve_standalone(&mut a, cfg, c)?;
-    lat_forward(&model.gpt.music, e, lf, LatInput::Features(music), &mut s, &mut b, out)
+    lat_forward(
+        &model.gpt.music,
+        e,
+        lf,
+        LatInput::Features(music),
+        &mut s,
+        &mut b,
+        out,
+    )
 }
 
 /// A leader LAT alone, including its `tok_emb_<part>` lookup: `tokens`
 /// (c + lf) -> `out` (c, C). Returns c.
-pub fn leader_lat(model: &Model<'_>, part: Part, tokens: &[u32], scratch: &mut [u8], out: &mut [f32]) -> Result<usize, Error> {
+pub fn leader_lat(
+    model: &Model<'_>,
+    part: Part,
+    tokens: &[u32],
+    scratch: &mut [u8],
+    out: &mut [f32],
+) -> Result<usize, Error> {
     let cfg = &model.cfg;
     let (e, lf) = (cfg.gpt.n_embd as usize, cfg.gpt.look_forward as usize);
     let c = out.len() / e.max(1);
     let mut a = Arena::new(scratch);
     let (mut s, mut b) = carve_standalone(&mut a, cfg, c)?;
     let p = part as usize;
-    let input = LatInput::Tokens { tokens, table: &model.gpt.tok_emb[p], stream: p as u8 };
+    let input = LatInput::Tokens {
+        tokens,
+        table: &model.gpt.tok_emb[p],
+        stream: p as u8,
+    };
     lat_forward(&model.gpt.leaders[p], e, lf, input, &mut s, &mut b, out)
 }

@@ -75,7 +75,12 @@ impl<'a> Model<'a> {
             b.vq(&schema::vq_prefix(Some(Part::RHand))?, &cfg.parts[3])?,
         ];
         let transl = b.vq(&schema::vq_prefix(None)?, &cfg.transl)?;
-        Ok(Model { cfg: *cfg, gpt, parts, transl })
+        Ok(Model {
+            cfg: *cfg,
+            gpt,
+            parts,
+            transl,
+        })
     }
 
     pub fn config(&self) -> &ModelConfig {
@@ -88,7 +93,6 @@ const _: () = {
     assert_sync::<Model<'static>>();
 };
 
-
 impl<'a> Model<'a> {
     /// Binds every weight of a parsed `.duo` file (its config was validated
     /// by the decoder and is validated again here).
@@ -96,7 +100,10 @@ impl<'a> Model<'a> {
     pub fn from_duo(file: &crate::format::DuoFile<'a>) -> Result<Model<'a>, BindError> {
         match file.config() {
             crate::family::FamilyConfig::Duolando(cfg) => Model::bind(cfg, file),
-            other => Err(BindError::Family { expected: crate::family::Family::Duolando, found: other.family() }),
+            other => Err(BindError::Family {
+                expected: crate::family::Family::Duolando,
+                found: other.family(),
+            }),
         }
     }
 }
@@ -111,7 +118,12 @@ impl<'a> Model<'a> {
     }
 }
 
-fn lat<'a, S: TensorSource<'a>>(b: &Binder<'_, S>, which: Option<Part>, lat: &LatConfig, c: u32) -> Result<LatW<'a>, BindError> {
+fn lat<'a, S: TensorSource<'a>>(
+    b: &Binder<'_, S>,
+    which: Option<Part>,
+    lat: &LatConfig,
+    c: u32,
+) -> Result<LatW<'a>, BindError> {
     let p = schema::lat_prefix(which)?;
     let mut blocks = Vec::new();
     for i in 0..lat.n_layer {
@@ -122,11 +134,19 @@ fn lat<'a, S: TensorSource<'a>>(b: &Binder<'_, S>, which: Option<Part>, lat: &La
         cfg: *lat,
         cond_emb: b.linear(&name(format_args!("{p}.cond_emb"))?, c, lat.n_in, true)?,
         blocks,
-        downsample: b.linear(&name(format_args!("{p}.downsample"))?, c, c * lat.downsample_rate, true)?,
+        downsample: b.linear(
+            &name(format_args!("{p}.downsample"))?,
+            c,
+            c * lat.downsample_rate,
+            true,
+        )?,
     })
 }
 
-fn gpt<'a, S: TensorSource<'a>>(b: &Binder<'_, S>, cfg: &ModelConfig) -> Result<GptW<'a>, BindError> {
+fn gpt<'a, S: TensorSource<'a>>(
+    b: &Binder<'_, S>,
+    cfg: &ModelConfig,
+) -> Result<GptW<'a>, BindError> {
     let g = &cfg.gpt;
     let c = g.n_embd;
     let music = lat(b, None, &g.music, c)?;
@@ -140,7 +160,10 @@ fn gpt<'a, S: TensorSource<'a>>(b: &Binder<'_, S>, cfg: &ModelConfig) -> Result<
     for (s, t) in tok.iter_mut().enumerate() {
         *t = Some(b.matrix(schema::tok_emb_name(s)?, &[g.vocab[s], c])?);
     }
-    let pos_emb = b.get(name(format_args!("gpt.gpt_base.pos_emb"))?, &[1, g.block_size * g.n_streams, c])?;
+    let pos_emb = b.get(
+        name(format_args!("gpt.gpt_base.pos_emb"))?,
+        &[1, g.block_size * g.n_streams, c],
+    )?;
     let mut base = Vec::new();
     for i in 0..g.n_layer_base {
         let b = b.block(&name(format_args!("gpt.gpt_base.blocks.{i}"))?, c)?;
@@ -164,5 +187,13 @@ fn gpt<'a, S: TensorSource<'a>>(b: &Binder<'_, S>, cfg: &ModelConfig) -> Result<
         }
         Ok(out)
     };
-    Ok(GptW { music, leaders, tok_emb: unwrap5(tok)?, pos_emb, base, head, heads: unwrap5(heads)? })
+    Ok(GptW {
+        music,
+        leaders,
+        tok_emb: unwrap5(tok)?,
+        pos_emb,
+        base,
+        head,
+        heads: unwrap5(heads)?,
+    })
 }

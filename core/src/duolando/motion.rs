@@ -81,7 +81,8 @@ pub fn scatter_part(part: Part, per_joint: usize, x: &[f32], out: &mut [f32]) {
     for (xr, o) in x.chunks_exact(w).zip(out.chunks_exact_mut(full)) {
         for (i, &j) in joints.iter().enumerate() {
             let j = j as usize;
-            o[per_joint * j..per_joint * (j + 1)].copy_from_slice(&xr[per_joint * i..per_joint * (i + 1)]);
+            o[per_joint * j..per_joint * (j + 1)]
+                .copy_from_slice(&xr[per_joint * i..per_joint * (i + 1)]);
         }
     }
 }

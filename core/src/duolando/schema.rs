@@ -30,12 +30,18 @@ pub fn lat_prefix(which: Option<Part>) -> Result<TensorName, SchemaError> {
 
 /// Token embedding table of a stream (0..4 = up, down, lhand, rhand, 4 = transl).
 pub fn tok_emb_name(stream: usize) -> Result<TensorName, SchemaError> {
-    name(format_args!("gpt.tok_emb_{}.weight", STREAM_NAMES[stream.min(4)]))
+    name(format_args!(
+        "gpt.tok_emb_{}.weight",
+        STREAM_NAMES[stream.min(4)]
+    ))
 }
 
 /// Output head of a follower stream (0..4 = up, down, lhand, rhand, transl).
 pub fn head_name(stream: usize) -> Result<TensorName, SchemaError> {
-    name(format_args!("gpt.gpt_head.head_{}.weight", STREAM_NAMES[stream.min(4)]))
+    name(format_args!(
+        "gpt.gpt_head.head_{}.weight",
+        STREAM_NAMES[stream.min(4)]
+    ))
 }
 
 /// Stream names in token order.
@@ -67,7 +73,11 @@ pub fn for_each_tensor<E: From<SchemaError>>(
     for s in 0..5 {
         e.t(tok_emb_name(s)?, &[g.vocab[s], c], Role::Embedding)?;
     }
-    e.t(name(format_args!("gpt.gpt_base.pos_emb"))?, &[1, g.block_size.saturating_mul(g.n_streams), c], Role::PosEmb)?;
+    e.t(
+        name(format_args!("gpt.gpt_base.pos_emb"))?,
+        &[1, g.block_size.saturating_mul(g.n_streams), c],
+        Role::PosEmb,
+    )?;
     for i in 0..g.n_layer_base {
         e.block(&name(format_args!("gpt.gpt_base.blocks.{i}"))?, c)?;
     }
@@ -95,10 +105,25 @@ pub fn tensor_count(cfg: &ModelConfig) -> usize {
     n
 }
 
-fn lat<E: From<SchemaError>>(e: &mut Emit<'_, E>, prefix: &str, lat: &LatConfig, c: u32) -> Result<(), E> {
-    e.wb(&name(format_args!("{prefix}.cond_emb"))?, &[c, lat.n_in], c, Role::Linear)?;
+fn lat<E: From<SchemaError>>(
+    e: &mut Emit<'_, E>,
+    prefix: &str,
+    lat: &LatConfig,
+    c: u32,
+) -> Result<(), E> {
+    e.wb(
+        &name(format_args!("{prefix}.cond_emb"))?,
+        &[c, lat.n_in],
+        c,
+        Role::Linear,
+    )?;
     for i in 0..lat.n_layer {
         e.block(&name(format_args!("{prefix}.blocks.{i}"))?, c)?;
     }
-    e.wb(&name(format_args!("{prefix}.downsample"))?, &[c, c * lat.downsample_rate], c, Role::Linear)
+    e.wb(
+        &name(format_args!("{prefix}.downsample"))?,
+        &[c, c * lat.downsample_rate],
+        c,
+        Role::Linear,
+    )
 }

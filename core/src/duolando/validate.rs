@@ -12,7 +12,12 @@ impl LatConfig {
         range(f(LatField::NLayer), self.n_layer, 1, MAX_LAT_LAYERS)?;
         range(f(LatField::NHead), self.n_head, 1, MAX_HEADS)?;
         divisible(ConfigField::NEmbd, n_embd, self.n_head)?;
-        range(f(LatField::DownsampleRate), self.downsample_rate, 1, MAX_DOWNSAMPLE)?;
+        range(
+            f(LatField::DownsampleRate),
+            self.downsample_rate,
+            1,
+            MAX_DOWNSAMPLE,
+        )?;
         Ok(())
     }
 }
@@ -22,13 +27,28 @@ impl GptConfig {
         range(ConfigField::NEmbd, self.n_embd, 1, MAX_EMBD)?;
         range(ConfigField::NHead, self.n_head, 1, MAX_HEADS)?;
         divisible(ConfigField::NEmbd, self.n_embd, self.n_head)?;
-        range(ConfigField::NLayerBase, self.n_layer_base, 1, MAX_GPT_LAYERS)?;
-        range(ConfigField::NLayerHead, self.n_layer_head, 1, MAX_GPT_LAYERS)?;
+        range(
+            ConfigField::NLayerBase,
+            self.n_layer_base,
+            1,
+            MAX_GPT_LAYERS,
+        )?;
+        range(
+            ConfigField::NLayerHead,
+            self.n_layer_head,
+            1,
+            MAX_GPT_LAYERS,
+        )?;
         // The follower context is block_size - 1 tokens: at least one.
         range(ConfigField::BlockSize, self.block_size, 2, MAX_BLOCK_SIZE)?;
         // The original drops the last `look_forward` LAT rows with
         // `x[:, :-look_forward]`, which is empty for 0: at least one.
-        range(ConfigField::LookForward, self.look_forward, 1, MAX_LOOK_FORWARD)?;
+        range(
+            ConfigField::LookForward,
+            self.look_forward,
+            1,
+            MAX_LOOK_FORWARD,
+        )?;
         for (i, &v) in self.vocab.iter().enumerate() {
             range(ConfigField::Vocab(i as u8), v, 1, MAX_VOCAB)?;
         }
@@ -46,16 +66,30 @@ impl GptConfig {
             });
         }
         if self.n_streams != DUOLANDO_STREAMS {
-            return Err(ConfigError::Unsupported { field: ConfigField::NStreams, value: self.n_streams });
+            return Err(ConfigError::Unsupported {
+                field: ConfigField::NStreams,
+                value: self.n_streams,
+            });
         }
         if self.final_ln {
-            return Err(ConfigError::Unsupported { field: ConfigField::FinalLn, value: 1 });
+            return Err(ConfigError::Unsupported {
+                field: ConfigField::FinalLn,
+                value: 1,
+            });
         }
         self.music.validate(LatWhich::Music, self.n_embd)?;
         self.leader.validate(LatWhich::Leader, self.n_embd)?;
         // Leader LATs read token embeddings, one row per token.
-        equal(ConfigField::Lat(LatWhich::Leader, LatField::NIn), self.leader.n_in, self.n_embd)?;
-        equal(ConfigField::Lat(LatWhich::Leader, LatField::DownsampleRate), self.leader.downsample_rate, 1)?;
+        equal(
+            ConfigField::Lat(LatWhich::Leader, LatField::NIn),
+            self.leader.n_in,
+            self.n_embd,
+        )?;
+        equal(
+            ConfigField::Lat(LatWhich::Leader, LatField::DownsampleRate),
+            self.leader.downsample_rate,
+            1,
+        )?;
         Ok(())
     }
 }
@@ -69,7 +103,11 @@ impl ModelConfig {
         for (i, part) in Part::ALL.iter().enumerate() {
             let joints = part.joints().len() as u32;
             self.parts[i].validate(VqWhich::Part(*part), 3 * joints, 9 * joints)?;
-            equal(ConfigField::Vocab(i as u8), self.gpt.vocab[i], self.parts[i].l_bins)?;
+            equal(
+                ConfigField::Vocab(i as u8),
+                self.gpt.vocab[i],
+                self.parts[i].l_bins,
+            )?;
         }
         self.transl.validate(VqWhich::Transl, 3, 0)?;
         equal(ConfigField::Vocab(4), self.gpt.vocab[4], self.transl.l_bins)?;
@@ -80,13 +118,22 @@ impl ModelConfig {
             let h = self.parts[i].hop().unwrap_or(0);
             equal(ConfigField::Vq(VqWhich::Part(*part), VqField::Hop), h, hop)?;
         }
-        equal(ConfigField::Vq(VqWhich::Transl, VqField::Hop), self.transl.hop().unwrap_or(0), hop)?;
+        equal(
+            ConfigField::Vq(VqWhich::Transl, VqField::Hop),
+            self.transl.hop().unwrap_or(0),
+            hop,
+        )?;
         equal(
             ConfigField::Lat(LatWhich::Music, LatField::DownsampleRate),
             self.gpt.music.downsample_rate,
             hop,
         )?;
-        range(ConfigField::MusicMotionRate, self.music_motion_rate, 1, MAX_MUSIC_MOTION_RATE)?;
+        range(
+            ConfigField::MusicMotionRate,
+            self.music_motion_rate,
+            1,
+            MAX_MUSIC_MOTION_RATE,
+        )?;
         Ok(())
     }
 

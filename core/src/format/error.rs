@@ -116,7 +116,11 @@ pub enum FormatError {
     /// not fit the dtype's block layout.
     SizeOverflow { index: u32 },
     /// Stored byte length differs from `dtype.bytes_for(shape)`.
-    ByteLenMismatch { index: u32, expected: u64, found: u64 },
+    ByteLenMismatch {
+        index: u32,
+        expected: u64,
+        found: u64,
+    },
     /// A data offset that is not a multiple of 64.
     UnalignedOffset { index: u32, offset: u64 },
     /// A payload starting before the end of the previous one (table order).
@@ -139,12 +143,20 @@ pub enum FormatError {
     /// A tensor the schema does not know (table `index`).
     UnknownTensor { index: u32 },
     /// A tensor whose shape differs from the schema's for this config.
-    ShapeMismatch { index: u32, expected: Shape, found: Shape },
+    ShapeMismatch {
+        index: u32,
+        expected: Shape,
+        found: Shape,
+    },
     /// A quantization scale that is NaN or infinite.
     NonFiniteScale { index: u32, block: u64 },
     /// An `F32` / `F16` weight that is NaN or infinite: element `element`
     /// (row-major) of tensor `index`.
-    NonFiniteWeight { index: u32, element: u64, kind: NonFiniteKind },
+    NonFiniteWeight {
+        index: u32,
+        element: u64,
+        kind: NonFiniteKind,
+    },
     /// A schema name outgrew its buffer (impossible for a validated config).
     Schema(SchemaError),
     /// `DuoFile::tensor(name)`: no tensor with that name.

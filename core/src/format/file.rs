@@ -3,12 +3,12 @@
 use super::prefix::Prefix;
 use super::table::{decode_entry, Cursor, TensorEntry};
 use super::{align_up, schema_check, FormatError, HeaderField, MAX_TENSORS, PREFIX_LEN};
-use crate::duolando::config::ModelConfig;
 use crate::bailando::config::BailandoConfig;
+use crate::duolando::config::ModelConfig;
 use crate::family::{Family, FamilyConfig, FamilyConfigError};
-use crate::transflower::config::TransflowerConfig;
 use crate::kernels::simd::{PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES};
 use crate::tensor::{block_row, DType, TensorRef};
+use crate::transflower::config::TransflowerConfig;
 
 /// A `.duo` buffer that passed every rule of docs/FORMAT.md.
 ///
@@ -59,7 +59,9 @@ impl<'a> DuoFile<'a> {
         let header = bytes.get(PREFIX_LEN..header_end).unwrap_or(&[]);
         let padding = bytes.get(header_end..data_start).unwrap_or(&[]);
         if let Some(i) = padding.iter().position(|&b| b != 0) {
-            return Err(FormatError::NonZeroPadding { offset: (header_end + i) as u64 });
+            return Err(FormatError::NonZeroPadding {
+                offset: (header_end + i) as u64,
+            });
         }
         let data = bytes.get(data_start..).unwrap_or(&[]);
         let data_len = data.len() as u64;
@@ -70,9 +72,15 @@ impl<'a> DuoFile<'a> {
         } else {
             let tag: u32 = cur.take(HeaderField::Family)?;
             match Family::from_tag(tag) {
-                Some(Family::Duolando) => FamilyConfig::Duolando(cur.take::<ModelConfig>(HeaderField::Config)?),
-                Some(Family::Bailando) => FamilyConfig::Bailando(cur.take::<BailandoConfig>(HeaderField::Config)?),
-                Some(Family::Transflower) => FamilyConfig::Transflower(cur.take::<TransflowerConfig>(HeaderField::Config)?),
+                Some(Family::Duolando) => {
+                    FamilyConfig::Duolando(cur.take::<ModelConfig>(HeaderField::Config)?)
+                }
+                Some(Family::Bailando) => {
+                    FamilyConfig::Bailando(cur.take::<BailandoConfig>(HeaderField::Config)?)
+                }
+                Some(Family::Transflower) => {
+                    FamilyConfig::Transflower(cur.take::<TransflowerConfig>(HeaderField::Config)?)
+                }
                 None => return Err(FormatError::UnknownFamily { tag }),
             }
         };
@@ -82,7 +90,10 @@ impl<'a> DuoFile<'a> {
         })?;
         let count: u64 = cur.take(HeaderField::TensorCount)?;
         if count > MAX_TENSORS as u64 {
-            return Err(FormatError::TooManyTensors { count, max: MAX_TENSORS });
+            return Err(FormatError::TooManyTensors {
+                count,
+                max: MAX_TENSORS,
+            });
         }
         let count = count as u32;
         let table = cur.rest;
@@ -101,33 +112,63 @@ impl<'a> DuoFile<'a> {
             if let Some(p) = prev {
                 match e.name.as_bytes().cmp(p.name.as_bytes()) {
                     core::cmp::Ordering::Equal => {
-                        return Err(FormatError::DuplicateTensor { index, previous: index - 1 })
+                        return Err(FormatError::DuplicateTensor {
+                            index,
+                            previous: index - 1,
+                        })
                     }
                     core::cmp::Ordering::Less => return Err(FormatError::UnsortedTable { index }),
                     core::cmp::Ordering::Greater => {}
                 }
             }
             if e.offset % super::ALIGN as u64 != 0 {
-                return Err(FormatError::UnalignedOffset { index, offset: e.offset });
+                return Err(FormatError::UnalignedOffset {
+                    index,
+                    offset: e.offset,
+                });
             }
             if index > 0 && e.offset < prev_end {
-                return Err(FormatError::Overlap { index, previous: index - 1 });
+                return Err(FormatError::Overlap {
+                    index,
+                    previous: index - 1,
+                });
             }
-            let end = e.offset.checked_add(e.nbytes).ok_or(FormatError::SizeOverflow { index })?;
+            let end = e
+                .offset
+                .checked_add(e.nbytes)
+                .ok_or(FormatError::SizeOverflow { index })?;
             if end > data_len {
-                return Err(FormatError::DataOutOfRange { index, end, data_len });
+                return Err(FormatError::DataOutOfRange {
+                    index,
+                    end,
+                    data_len,
+                });
             }
             match e.dtype {
-                DType::Q8Block32 | DType::Q4Block32 => check_block_scales(payload(data, &e), e.dtype.block_bytes(), index)?,
-                DType::Q8Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, PACK_BLOCK_VALUES, index)?,
-                DType::Q4Block32x8 => check_group_scales(payload(data, &e), block_row(e.dims()) / 32, PACK_BLOCK_NIBBLES, index)?,
+                DType::Q8Block32 | DType::Q4Block32 => {
+                    check_block_scales(payload(data, &e), e.dtype.block_bytes(), index)?
+                }
+                DType::Q8Block32x8 => check_group_scales(
+                    payload(data, &e),
+                    block_row(e.dims()) / 32,
+                    PACK_BLOCK_VALUES,
+                    index,
+                )?,
+                DType::Q4Block32x8 => check_group_scales(
+                    payload(data, &e),
+                    block_row(e.dims()) / 32,
+                    PACK_BLOCK_NIBBLES,
+                    index,
+                )?,
                 DType::F32 | DType::F16 => {}
             }
             prev_end = end;
             prev = Some(e);
         }
         if !cur.rest.is_empty() {
-            return Err(FormatError::TrailingHeaderBytes { count: cur.rest.len() });
+            return Err(FormatError::TrailingHeaderBytes {
+                count: cur.rest.len(),
+            });
         }
         // The data section ends at the last payload padded to 64 bytes; zero
         // bytes may follow (asset pipelines pad files), nothing else.
@@ -136,7 +177,9 @@ impl<'a> DuoFile<'a> {
             // expected_len < data_len, a usize.
             let tail = data.get(expected_len as usize..).unwrap_or(&[]);
             if let Some(i) = tail.iter().position(|&b| b != 0) {
-                return Err(FormatError::TrailingData { offset: prefix.data_start + expected_len + i as u64 });
+                return Err(FormatError::TrailingData {
+                    offset: prefix.data_start + expected_len + i as u64,
+                });
             }
         }
         if data_len < expected_len {
@@ -147,7 +190,15 @@ impl<'a> DuoFile<'a> {
             });
         }
 
-        let file = DuoFile { prefix, config, table, count, data, marks, stride };
+        let file = DuoFile {
+            prefix,
+            config,
+            table,
+            count,
+            data,
+            marks,
+            stride,
+        };
         schema_check::check(&file)?;
         Ok(file)
     }
@@ -173,7 +224,11 @@ impl<'a> DuoFile<'a> {
 
     /// Every table entry, in table (= name, = data) order.
     pub fn tensors(&self) -> Tensors<'a> {
-        Tensors { cur: Cursor::new(self.table), index: 0, count: self.count }
+        Tensors {
+            cur: Cursor::new(self.table),
+            index: 0,
+            count: self.count,
+        }
     }
 
     /// The entry and payload of the tensor called `name` (a binary search
@@ -216,12 +271,21 @@ impl<'a> DuoFile<'a> {
     /// The entries from mark `m` on.
     fn from_mark(&self, m: usize) -> Tensors<'a> {
         let off = self.marks[m] as usize;
-        Tensors { cur: Cursor::new(self.table.get(off..).unwrap_or(&[])), index: m as u32 * self.stride, count: self.count }
+        Tensors {
+            cur: Cursor::new(self.table.get(off..).unwrap_or(&[])),
+            index: m as u32 * self.stride,
+            count: self.count,
+        }
     }
 
     /// The payload view of a validated entry of this file.
     pub fn view(&self, e: &TensorEntry<'a>) -> TensorRef<'a> {
-        TensorRef { dtype: e.dtype, rank: e.rank, shape: e.shape, data: payload(self.data, e) }
+        TensorRef {
+            dtype: e.dtype,
+            rank: e.rank,
+            shape: e.shape,
+            data: payload(self.data, e),
+        }
     }
 
     /// Rule 15: every `F32` / `F16` element finite (the first one that is
@@ -229,8 +293,14 @@ impl<'a> DuoFile<'a> {
     /// pass over those payloads (docs/FORMAT.md §4 "Non-finite values").
     pub fn check_weights(&self) -> Result<(), FormatError> {
         for (index, e) in self.tensors().enumerate() {
-            if let Some((element, kind)) = super::weights::first_non_finite(e.dtype, payload(self.data, &e)) {
-                return Err(FormatError::NonFiniteWeight { index: index as u32, element, kind });
+            if let Some((element, kind)) =
+                super::weights::first_non_finite(e.dtype, payload(self.data, &e))
+            {
+                return Err(FormatError::NonFiniteWeight {
+                    index: index as u32,
+                    element,
+                    kind,
+                });
             }
         }
         Ok(())
@@ -251,7 +321,11 @@ impl<'a> DuoFile<'a> {
 /// (an empty slice if it somehow was not: never a panic).
 fn payload<'a>(data: &'a [u8], e: &TensorEntry<'_>) -> &'a [u8] {
     let start = usize::try_from(e.offset).ok();
-    let end = start.and_then(|s| usize::try_from(e.nbytes).ok().and_then(|n| s.checked_add(n)));
+    let end = start.and_then(|s| {
+        usize::try_from(e.nbytes)
+            .ok()
+            .and_then(|n| s.checked_add(n))
+    });
     match (start, end) {
         (Some(s), Some(t)) => data.get(s..t).unwrap_or(&[]),
         _ => &[],
@@ -264,7 +338,10 @@ fn check_block_scales(bytes: &[u8], block_bytes: usize, index: u32) -> Result<()
     for (block, chunk) in bytes.chunks_exact(block_bytes.max(2)).enumerate() {
         let scale = half::f16::from_le_bytes([chunk[0], chunk[1]]);
         if !scale.is_finite() {
-            return Err(FormatError::NonFiniteScale { index, block: block as u64 });
+            return Err(FormatError::NonFiniteScale {
+                index,
+                block: block as u64,
+            });
         }
     }
     Ok(())
@@ -274,7 +351,12 @@ fn check_block_scales(bytes: &[u8], block_bytes: usize, index: u32) -> Result<()
 /// `nb * per_block` value bytes (256 / 128) then `nb * 8` f16 scales, which
 /// must be finite (the padding rows' too). Blocks are numbered group-major,
 /// then block, then row (`(t * nb + b) * 8 + n`).
-fn check_group_scales(bytes: &[u8], nb: usize, per_block: usize, index: u32) -> Result<(), FormatError> {
+fn check_group_scales(
+    bytes: &[u8],
+    nb: usize,
+    per_block: usize,
+    index: u32,
+) -> Result<(), FormatError> {
     let (values, group) = (nb * per_block, nb * (per_block + PACK_BLOCK_SCALES));
     if group == 0 {
         return Ok(());
@@ -282,7 +364,10 @@ fn check_group_scales(bytes: &[u8], nb: usize, per_block: usize, index: u32) -> 
     for (t, g) in bytes.chunks_exact(group).enumerate() {
         for (k, c) in g[values..].chunks_exact(2).enumerate() {
             if !half::f16::from_le_bytes([c[0], c[1]]).is_finite() {
-                return Err(FormatError::NonFiniteScale { index, block: (t * nb * 8 + k) as u64 });
+                return Err(FormatError::NonFiniteScale {
+                    index,
+                    block: (t * nb * 8 + k) as u64,
+                });
             }
         }
     }

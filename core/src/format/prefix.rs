@@ -1,6 +1,8 @@
 //! The fixed 24-byte little-endian prefix and the layout it implies.
 
-use super::{align_up, FormatError, ALIGN, MAGIC, MAX_HEADER_LEN, PREFIX_LEN, VERSION, VERSION_DUOLANDO};
+use super::{
+    align_up, FormatError, ALIGN, MAGIC, MAX_HEADER_LEN, PREFIX_LEN, VERSION, VERSION_DUOLANDO,
+};
 
 /// The decoded prefix plus the derived section boundaries (all checked).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -47,7 +49,10 @@ impl Prefix {
         }
         let version = u32_at(bytes, 8);
         if !(VERSION_DUOLANDO..=VERSION).contains(&version) {
-            return Err(FormatError::UnsupportedVersion { found: version, supported: VERSION });
+            return Err(FormatError::UnsupportedVersion {
+                found: version,
+                supported: VERSION,
+            });
         }
         let flags = u32_at(bytes, 12);
         if flags != 0 {
@@ -55,14 +60,22 @@ impl Prefix {
         }
         let header_len = u64_at(bytes, 16);
         if header_len > MAX_HEADER_LEN {
-            return Err(FormatError::HeaderTooLarge { header_len, max: MAX_HEADER_LEN });
+            return Err(FormatError::HeaderTooLarge {
+                header_len,
+                max: MAX_HEADER_LEN,
+            });
         }
         // header_len <= 2^22, so neither sum can overflow; checked anyway.
         let header_end = (PREFIX_LEN as u64).checked_add(header_len);
         let data_start = header_end.and_then(align_up);
         let file_len = bytes.len() as u64;
         match (header_end, data_start) {
-            (Some(_), Some(ds)) if ds <= file_len => Ok(Prefix { version, flags, header_len, data_start: ds }),
+            (Some(_), Some(ds)) if ds <= file_len => Ok(Prefix {
+                version,
+                flags,
+                header_len,
+                data_start: ds,
+            }),
             _ => Err(FormatError::HeaderPastEnd {
                 header_end: header_end.unwrap_or(u64::MAX),
                 file_len,

@@ -16,24 +16,32 @@ impl From<SchemaError> for FormatError {
 /// weight's GEMM-order shape); nothing else present.
 pub(super) fn check(file: &DuoFile<'_>) -> Result<(), FormatError> {
     let mut schema_index: u32 = 0;
-    file.config().for_each_tensor::<FormatError>(&mut |spec: &TensorSpec| {
-        let (index, e) = file.find(spec.name.as_str()).ok_or(FormatError::MissingTensor { schema_index })?;
-        if !spec.accepts(e.dims()) {
-            return Err(FormatError::ShapeMismatch {
-                index,
-                expected: Shape { rank: spec.rank, dims: spec.shape },
-                found: e.shape(),
-            });
-        }
-        schema_index += 1;
-        Ok(())
-    })?;
+    file.config()
+        .for_each_tensor::<FormatError>(&mut |spec: &TensorSpec| {
+            let (index, e) = file
+                .find(spec.name.as_str())
+                .ok_or(FormatError::MissingTensor { schema_index })?;
+            if !spec.accepts(e.dims()) {
+                return Err(FormatError::ShapeMismatch {
+                    index,
+                    expected: Shape {
+                        rank: spec.rank,
+                        dims: spec.shape,
+                    },
+                    found: e.shape(),
+                });
+            }
+            schema_index += 1;
+            Ok(())
+        })?;
     // Table names are unique (rule 11.8) and each schema name matched one,
     // so a longer table holds at least one tensor the schema lacks.
     if file.len() > schema_index as usize {
         for (index, e) in file.tensors().enumerate() {
             if !in_schema(file, e.name) {
-                return Err(FormatError::UnknownTensor { index: index as u32 });
+                return Err(FormatError::UnknownTensor {
+                    index: index as u32,
+                });
             }
         }
     }
@@ -52,13 +60,15 @@ fn in_schema(file: &DuoFile<'_>, name: &str) -> bool {
             Stop::Schema
         }
     }
-    let r = file.config().for_each_tensor::<Stop>(&mut |spec: &TensorSpec| {
-        if spec.name.as_str() == name {
-            Err(Stop::Found)
-        } else {
-            Ok(())
-        }
-    });
+    let r = file
+        .config()
+        .for_each_tensor::<Stop>(&mut |spec: &TensorSpec| {
+            if spec.name.as_str() == name {
+                Err(Stop::Found)
+            } else {
+                Ok(())
+            }
+        });
     matches!(r, Err(Stop::Found))
 }
 

@@ -28,7 +28,10 @@ impl TensorEntry<'_> {
         &self.shape[..(self.rank as usize).min(MAX_RANK)]
     }
     pub fn shape(&self) -> Shape {
-        Shape { rank: self.rank, dims: self.shape }
+        Shape {
+            rank: self.rank,
+            dims: self.shape,
+        }
     }
 }
 
@@ -40,13 +43,19 @@ pub(crate) struct Cursor<'a> {
 
 impl<'a> Cursor<'a> {
     pub(crate) fn new(header: &'a [u8]) -> Self {
-        Cursor { rest: header, header_len: header.len() }
+        Cursor {
+            rest: header,
+            header_len: header.len(),
+        }
     }
     pub(crate) fn offset(&self) -> usize {
         self.header_len - self.rest.len()
     }
     /// Decodes one postcard value; on failure names the field and offset.
-    pub(crate) fn take<T: serde::Deserialize<'a>>(&mut self, field: HeaderField) -> Result<T, FormatError> {
+    pub(crate) fn take<T: serde::Deserialize<'a>>(
+        &mut self,
+        field: HeaderField,
+    ) -> Result<T, FormatError> {
         let offset = self.offset();
         match postcard::take_from_bytes::<T>(self.rest) {
             Ok((v, rest)) => {
@@ -61,13 +70,20 @@ impl<'a> Cursor<'a> {
 /// Decodes and checks entry `index` in isolation: name length, dtype code,
 /// rank, dims, element count and byte length. Ordering, offsets and the
 /// schema are checked by the caller, which sees the neighbours.
-pub(crate) fn decode_entry<'a>(cur: &mut Cursor<'a>, index: u32) -> Result<TensorEntry<'a>, FormatError> {
+pub(crate) fn decode_entry<'a>(
+    cur: &mut Cursor<'a>,
+    index: u32,
+) -> Result<TensorEntry<'a>, FormatError> {
     let name: &'a str = cur.take(HeaderField::Name)?;
     if name.is_empty() {
         return Err(FormatError::EmptyName { index });
     }
     if name.len() > MAX_NAME_LEN {
-        return Err(FormatError::NameTooLong { index, len: name.len(), max: MAX_NAME_LEN });
+        return Err(FormatError::NameTooLong {
+            index,
+            len: name.len(),
+            max: MAX_NAME_LEN,
+        });
     }
     let code: u8 = cur.take(HeaderField::Dtype)?;
     let dtype = DType::from_code(code).ok_or(FormatError::UnknownDtype { index, code })?;
@@ -83,17 +99,32 @@ pub(crate) fn decode_entry<'a>(cur: &mut Cursor<'a>, index: u32) -> Result<Tenso
             return Err(FormatError::DimOutOfRange { index, axis, dim });
         }
         shape[axis as usize] = dim;
-        numel = numel.checked_mul(dim as u64).ok_or(FormatError::SizeOverflow { index })?;
+        numel = numel
+            .checked_mul(dim as u64)
+            .ok_or(FormatError::SizeOverflow { index })?;
     }
     let offset: u64 = cur.take(HeaderField::Offset)?;
     let nbytes: u64 = cur.take(HeaderField::ByteLen)?;
     let numel = usize::try_from(numel).map_err(|_| FormatError::SizeOverflow { index })?;
     let row = crate::tensor::block_row(&shape[..rank as usize]);
-    let expected = dtype.bytes_for(numel, row).ok_or(FormatError::SizeOverflow { index })? as u64;
+    let expected = dtype
+        .bytes_for(numel, row)
+        .ok_or(FormatError::SizeOverflow { index })? as u64;
     if expected != nbytes {
-        return Err(FormatError::ByteLenMismatch { index, expected, found: nbytes });
+        return Err(FormatError::ByteLenMismatch {
+            index,
+            expected,
+            found: nbytes,
+        });
     }
-    Ok(TensorEntry { name, dtype, rank: rank as u8, shape, offset, nbytes })
+    Ok(TensorEntry {
+        name,
+        dtype,
+        rank: rank as u8,
+        shape,
+        offset,
+        nbytes,
+    })
 }
 
 /// The name of entry `index` of a possibly invalid `.duo` buffer, decoded
@@ -105,7 +136,8 @@ pub fn entry_name(bytes: &[u8], index: u32) -> Option<&str> {
     let header_len = usize::try_from(u64::from_le_bytes(len)).ok()?;
     let header = bytes.get(super::PREFIX_LEN..super::PREFIX_LEN.checked_add(header_len)?)?;
     let mut cur = Cursor::new(header);
-    cur.take::<crate::duolando::config::ModelConfig>(HeaderField::Config).ok()?;
+    cur.take::<crate::duolando::config::ModelConfig>(HeaderField::Config)
+        .ok()?;
     let count: u64 = cur.take(HeaderField::TensorCount).ok()?;
     if index as u64 >= count {
         return None;

@@ -17,8 +17,6 @@ use crate::tensor::DType;
 /// Bytes folded per branch (a multiple of 4).
 const BLOCK: usize = 1024;
 
-
-
 /// What a non-finite weight holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum NonFiniteKind {
@@ -122,7 +120,9 @@ impl Bits for u16 {
 
 #[inline(always)]
 fn fold<T: Bits>(words: &[T]) -> T {
-    words.iter().fold(T::zero(), |acc, &w| acc.or(w.le().flag()))
+    words
+        .iter()
+        .fold(T::zero(), |acc, &w| acc.or(w.le().flag()))
 }
 
 /// The first NaN or infinite element of `bytes` (whole elements of `T`).
@@ -247,7 +247,11 @@ mod tests {
                     c.copy_from_slice(&(0x3c00u16 + (i % 7) as u16).to_le_bytes());
                 }
                 b[2 * at..2 * at + 2].copy_from_slice(&bits.to_le_bytes());
-                assert_eq!(both::<u16>(&b), want.map(|k| (at as u64, k)), "f16 {bits:#06x} at {at}");
+                assert_eq!(
+                    both::<u16>(&b),
+                    want.map(|k| (at as u64, k)),
+                    "f16 {bits:#06x} at {at}"
+                );
             }
         }
     }
@@ -255,7 +259,10 @@ mod tests {
     #[test]
     fn quantised_payloads_are_not_float_scanned() {
         let b = [0xffu8; 64];
-        assert_eq!(first_non_finite(DType::F32, &b), Some((0, NonFiniteKind::Nan)));
+        assert_eq!(
+            first_non_finite(DType::F32, &b),
+            Some((0, NonFiniteKind::Nan))
+        );
         assert_eq!(first_non_finite(DType::Q8Block32, &b), None);
         assert_eq!(first_non_finite(DType::F32, &[]), None);
     }

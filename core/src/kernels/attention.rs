@@ -69,6 +69,24 @@ impl Mask for BandMask {
     }
 }
 
+/// No mask: every query sees every key (torch's `TransformerEncoderLayer`
+/// without `src_mask`); all queries are one group ([`Mask::period`] 1).
+#[derive(Clone, Copy, Debug)]
+pub struct AllKeys;
+
+impl Mask for AllKeys {
+    #[inline]
+    fn allowed(&self, _: usize, _: usize) -> bool {
+        true
+    }
+    fn period(&self) -> Option<usize> {
+        Some(1)
+    }
+    fn key_runs(&self, _: usize, nk: usize, runs: &mut [(usize, usize)]) -> Option<usize> {
+        Some(one_run(0, nk, runs))
+    }
+}
+
 /// The coordinated-attention mask: streams laid out one after another,
 /// `t_q` query rows and `t_k` key rows per stream; a query at in-stream
 /// position `q_pos0 + qi % t_q` sees every key (any stream) whose
@@ -96,7 +114,11 @@ impl Mask for TiledCausalMask {
         if self.t_q == 0 || self.t_k == 0 {
             return None;
         }
-        let seen = self.q_pos0.checked_add(qi % self.t_q)?.saturating_add(1).min(self.t_k);
+        let seen = self
+            .q_pos0
+            .checked_add(qi % self.t_q)?
+            .saturating_add(1)
+            .min(self.t_k);
         if seen == self.t_k {
             return Some(one_run(0, nk, runs));
         }
@@ -201,13 +223,31 @@ pub fn attention_ahead<'a, M: Mask>(
     if nk > SPLIT_MAX_KEYS {
         return attend_queries(q, &k, &v, c, n_head, mask, 0, nk, scores, out, ahead);
     }
-    split_cols_aligned(out, nq * c, c, nq.saturating_mul(nk).saturating_mul(c), |mut cols| {
-        let (lo, hi) = (cols.lo(), cols.hi());
-        let mut scores = [0.0f32; SPLIT_SCORES];
-        // The first share of the queries prefetches `ahead` (once).
-        let ahead = if lo == 0 { ahead } else { [&[][..], &[][..]] };
-        attend_queries(q, &k, &v, c, n_head, mask, lo / c, nk, &mut scores, cols.seg(0, lo, hi), ahead);
-    });
+    split_cols_aligned(
+        out,
+        nq * c,
+        c,
+        nq.saturating_mul(nk).saturating_mul(c),
+        |mut cols| {
+            let (lo, hi) = (cols.lo(), cols.hi());
+            let mut scores = [0.0f32; SPLIT_SCORES];
+            // The first share of the queries prefetches `ahead` (once).
+            let ahead = if lo == 0 { ahead } else { [&[][..], &[][..]] };
+            attend_queries(
+                q,
+                &k,
+                &v,
+                c,
+                n_head,
+                mask,
+                lo / c,
+                nk,
+                &mut scores,
+                cols.seg(0, lo, hi),
+                ahead,
+            );
+        },
+    );
 }
 
 /// Queries `q0 .. q0 + out.len() / c` of [`attention`] (`out`: their rows).
@@ -219,7 +259,19 @@ pub fn attention_ahead<'a, M: Mask>(
 /// member. Each query's numbers are those of attending it alone. The
 /// first group prefetches `ahead` ([`attention_ahead`]).
 #[allow(clippy::too_many_arguments)]
-fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_head: usize, mask: &M, q0: usize, nk: usize, scores: &mut [f32], out: &mut [f32], mut ahead: [&[u8]; 2]) {
+fn attend_queries<M: Mask>(
+    q: &[f32],
+    k: &KvRows<'_>,
+    v: &KvRows<'_>,
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    q0: usize,
+    nk: usize,
+    scores: &mut [f32],
+    out: &mut [f32],
+    mut ahead: [&[u8]; 2],
+) {
     let nq = out.len() / c;
     let g_max = simd::QUERY_GROUP.min(scores.len() / nk.max(1)).max(1);
     let p = match mask.period() {
@@ -236,7 +288,23 @@ fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, 
             let n = key_runs(mask, q0 + li, nk, &mut next);
             let same = n == nr && n <= MAX_RUNS && next[..n] == runs[..n];
             if g > 0 && (g == size || !same) {
-                attend_group(q, k, v, c, n_head, mask, q0 + first, p, g, &runs, nr, nk, scores, &mut out[first * c..], ahead);
+                attend_group(
+                    q,
+                    k,
+                    v,
+                    c,
+                    n_head,
+                    mask,
+                    q0 + first,
+                    p,
+                    g,
+                    &runs,
+                    nr,
+                    nk,
+                    scores,
+                    &mut out[first * c..],
+                    ahead,
+                );
                 ahead = [&[], &[]];
                 g = 0;
             }
@@ -248,7 +316,23 @@ fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, 
             g += 1;
         }
         if g > 0 {
-            attend_group(q, k, v, c, n_head, mask, q0 + first, p, g, &runs, nr, nk, scores, &mut out[first * c..], ahead);
+            attend_group(
+                q,
+                k,
+                v,
+                c,
+                n_head,
+                mask,
+                q0 + first,
+                p,
+                g,
+                &runs,
+                nr,
+                nk,
+                scores,
+                &mut out[first * c..],
+                ahead,
+            );
             ahead = [&[], &[]];
         }
     }
@@ -257,7 +341,12 @@ fn attend_queries<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, 
 /// The runs of keys `0..nk` query `qi` may see, as `(start, end)` pairs in
 /// `runs`; returns their number (more than [`MAX_RUNS`]: only the first
 /// `MAX_RUNS` are written, and the caller goes key by key).
-fn key_runs<M: Mask>(mask: &M, qi: usize, nk: usize, runs: &mut [(usize, usize); MAX_RUNS]) -> usize {
+fn key_runs<M: Mask>(
+    mask: &M,
+    qi: usize,
+    nk: usize,
+    runs: &mut [(usize, usize); MAX_RUNS],
+) -> usize {
     if let Some(n) = mask.key_runs(qi, nk, runs) {
         return n;
     }
@@ -287,13 +376,41 @@ fn key_runs<M: Mask>(mask: &M, qi: usize, nk: usize, runs: &mut [(usize, usize);
 /// values in one [`KvRows::axpy_rows_group`] call per run; each call
 /// prefetches its share of `ahead` ([`attention_ahead`]).
 #[allow(clippy::too_many_arguments)]
-fn attend_group<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_head: usize, mask: &M, qi0: usize, p: usize, g: usize, runs: &[(usize, usize); MAX_RUNS], nr: usize, nk: usize, scores: &mut [f32], out: &mut [f32], ahead: [&[u8]; 2]) {
+fn attend_group<M: Mask>(
+    q: &[f32],
+    k: &KvRows<'_>,
+    v: &KvRows<'_>,
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    qi0: usize,
+    p: usize,
+    g: usize,
+    runs: &[(usize, usize); MAX_RUNS],
+    nr: usize,
+    nk: usize,
+    scores: &mut [f32],
+    out: &mut [f32],
+    ahead: [&[u8]; 2],
+) {
     let hd = c / n_head;
     let scale = 1.0 / libm::sqrtf(hd as f32);
     let rs = p * c;
     if nr > MAX_RUNS {
         for m in 0..g {
-            attention_query_keywise(q, k, v, c, n_head, mask, qi0 + m * p, nk, scale, scores, &mut out[m * rs..m * rs + c]);
+            attention_query_keywise(
+                q,
+                k,
+                v,
+                c,
+                n_head,
+                mask,
+                qi0 + m * p,
+                nk,
+                scale,
+                scores,
+                &mut out[m * rs..m * rs + c],
+            );
         }
         return;
     }
@@ -305,7 +422,19 @@ fn attend_group<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_
         // Call (h, run r)'s share of `ahead`.
         let share = |bytes, r| share(bytes, h * nr + r, n_head * nr);
         for (r, &(a, b)) in runs.iter().enumerate() {
-            k.dot_rows_group(qh, hd, rs, g, a, b, c, h * hd, &mut scores[a..], nk, share(ahead[0], r));
+            k.dot_rows_group(
+                qh,
+                hd,
+                rs,
+                g,
+                a,
+                b,
+                c,
+                h * hd,
+                &mut scores[a..],
+                nk,
+                share(ahead[0], r),
+            );
         }
         for (row, sum) in scores.chunks_exact_mut(nk).zip(&mut sums) {
             let mut max = f32::NEG_INFINITY;
@@ -328,7 +457,19 @@ fn attend_group<M: Mask>(q: &[f32], k: &KvRows<'_>, v: &KvRows<'_>, c: usize, n_
             oh[m * rs..m * rs + hd].fill(0.0);
         }
         for (r, &(a, b)) in runs.iter().enumerate() {
-            v.axpy_rows_group(&scores[a..], nk, a, b, c, h * hd, oh, rs, hd, g, share(ahead[1], r));
+            v.axpy_rows_group(
+                &scores[a..],
+                nk,
+                a,
+                b,
+                c,
+                h * hd,
+                oh,
+                rs,
+                hd,
+                g,
+                share(ahead[1], r),
+            );
         }
         for (m, &sum) in sums[..g].iter().enumerate() {
             if sum == 0.0 {

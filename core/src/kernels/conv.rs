@@ -72,7 +72,10 @@ impl ConvGeom {
     /// Output length of a `Conv1d` with symmetric padding `pad` over `t_in`
     /// rows (PyTorch's formula); None if negative or on overflow.
     pub fn out_len(&self, t_in: usize) -> Option<usize> {
-        let span = self.dilation.checked_mul(self.kernel.checked_sub(1)?)?.checked_add(1)?;
+        let span = self
+            .dilation
+            .checked_mul(self.kernel.checked_sub(1)?)?
+            .checked_add(1)?;
         let padded = t_in.checked_add(2 * self.pad)?;
         if padded < span || self.stride == 0 {
             return None;
@@ -103,9 +106,21 @@ pub struct ConvSeg {
 /// (c_out, c_in, k), `b` (c_out), `y` (t_out, c_out) with `t_out =
 /// y.len() / c_out`. `col`: >= [`conv1d_col_len`] floats (unused when the
 /// conv is pointwise). Callers check lengths.
-pub fn conv1d(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeom, y: &mut [f32], col: &mut [f32]) {
+pub fn conv1d(
+    x: &[f32],
+    c_in: usize,
+    w: &Matrix<'_>,
+    b: &[f32],
+    g: ConvGeom,
+    y: &mut [f32],
+    col: &mut [f32],
+) {
     let rows = |len: usize, c: usize| len.checked_div(c).unwrap_or(0);
-    let seg = ConvSeg { t_in: rows(x.len(), c_in), t_out: rows(y.len(), w.rows()), pad: g.pad };
+    let seg = ConvSeg {
+        t_in: rows(x.len(), c_in),
+        t_out: rows(y.len(), w.rows()),
+        pad: g.pad,
+    };
     conv1d_segs(x, c_in, w, b, g, &[seg], y, col);
 }
 
@@ -114,7 +129,16 @@ pub fn conv1d(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeom, y:
 /// `y` their output rows. im2col tiles of [`CONV_TILE`] rows run across
 /// segment ends, so a tile reads the weights once for every segment in it.
 #[allow(clippy::too_many_arguments)]
-pub fn conv1d_segs(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeom, segs: &[ConvSeg], y: &mut [f32], col: &mut [f32]) {
+pub fn conv1d_segs(
+    x: &[f32],
+    c_in: usize,
+    w: &Matrix<'_>,
+    b: &[f32],
+    g: ConvGeom,
+    segs: &[ConvSeg],
+    y: &mut [f32],
+    col: &mut [f32],
+) {
     let c_out = w.rows();
     if c_out == 0 || c_in == 0 {
         return;
@@ -122,7 +146,8 @@ pub fn conv1d_segs(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeo
     // Pointwise, and the output rows are the input rows (a lone segment
     // may have spare input rows at its end): one GEMM, no im2col.
     let pointwise = g.kernel == 1 && g.stride == 1 && segs.iter().all(|s| s.pad == 0);
-    let in_place = segs.iter().all(|s| s.t_in == s.t_out) || matches!(segs, [s] if s.t_in >= s.t_out);
+    let in_place =
+        segs.iter().all(|s| s.t_in == s.t_out) || matches!(segs, [s] if s.t_in >= s.t_out);
     if pointwise && in_place {
         let n: usize = segs.iter().map(|s| s.t_out).sum();
         linear(&x[..n * c_in], w, Some(b), &mut y[..n * c_out]);
@@ -165,7 +190,12 @@ pub fn conv1d_segs(x: &[f32], c_in: usize, w: &Matrix<'_>, b: &[f32], g: ConvGeo
             t += 1;
         }
         if rows > 0 {
-            linear(&col[..rows * ck], w, Some(b), &mut y[y0 * c_out..(y0 + rows) * c_out]);
+            linear(
+                &col[..rows * ck],
+                w,
+                Some(b),
+                &mut y[y0 * c_out..(y0 + rows) * c_out],
+            );
             y0 += rows;
         }
     }
@@ -181,9 +211,22 @@ pub fn convt_z_len(c_out: usize, kernel: usize) -> usize {
 /// `t = i*stride - pad + j` receives `x[i] . W[:, o, j]`; rows outside
 /// `[0, t_out)` are dropped. `z`: >= [`convt_z_len`] floats.
 #[allow(clippy::too_many_arguments)]
-pub fn conv_transpose1d(x: &[f32], w: &ConvTWeight<'_>, b: &[f32], kernel: usize, stride: usize, pad: usize, y: &mut [f32], z: &mut [f32]) {
+pub fn conv_transpose1d(
+    x: &[f32],
+    w: &ConvTWeight<'_>,
+    b: &[f32],
+    kernel: usize,
+    stride: usize,
+    pad: usize,
+    y: &mut [f32],
+    z: &mut [f32],
+) {
     let rows = |len: usize, c: usize| len.checked_div(c).unwrap_or(0);
-    let seg = ConvSeg { t_in: rows(x.len(), w.c_in()), t_out: rows(y.len(), b.len()), pad };
+    let seg = ConvSeg {
+        t_in: rows(x.len(), w.c_in()),
+        t_out: rows(y.len(), b.len()),
+        pad,
+    };
     conv_transpose1d_segs(x, w, b, kernel, stride, &[seg], y, z);
 }
 
@@ -191,7 +234,16 @@ pub fn conv_transpose1d(x: &[f32], w: &ConvTWeight<'_>, b: &[f32], kernel: usize
 /// another in `x`, outputs in `y`, each with its own `pad`): `z = x . W`
 /// tiles of [`CONV_TILE`] input rows run across segment ends.
 #[allow(clippy::too_many_arguments)]
-pub fn conv_transpose1d_segs(x: &[f32], w: &ConvTWeight<'_>, b: &[f32], kernel: usize, stride: usize, segs: &[ConvSeg], y: &mut [f32], z: &mut [f32]) {
+pub fn conv_transpose1d_segs(
+    x: &[f32],
+    w: &ConvTWeight<'_>,
+    b: &[f32],
+    kernel: usize,
+    stride: usize,
+    segs: &[ConvSeg],
+    y: &mut [f32],
+    z: &mut [f32],
+) {
     let c_in = w.c_in();
     let c_out = b.len();
     if c_in == 0 || c_out == 0 || kernel == 0 || w.z_cols() != c_out * kernel {

@@ -49,12 +49,18 @@ struct HeadMajor {
 impl<'a> KvRows<'a> {
     /// One run.
     pub fn one(d: RowData<'a>) -> Self {
-        KvRows { parts: [d, RowData::F32(&[])], heads: None }
+        KvRows {
+            parts: [d, RowData::F32(&[])],
+            heads: None,
+        }
     }
 
     /// `first`'s rows, then `second`'s (each a whole number of rows).
     pub fn two(first: RowData<'a>, second: RowData<'a>) -> Self {
-        KvRows { parts: [first, second], heads: None }
+        KvRows {
+            parts: [first, second],
+            heads: None,
+        }
     }
 
     /// One head-major run: head `h`'s `hd` lanes of row `j` at `(h cap +
@@ -65,14 +71,26 @@ impl<'a> KvRows<'a> {
     /// whose rows `d` holds in full are the heads there are: [`Self::rows`]
     /// is 0 for a width `c` with more. None if `hd == 0` or `rows > cap`.
     pub fn head_major(d: RowData<'a>, rows: usize, cap: usize, hd: usize) -> Option<Self> {
-        (hd > 0 && rows <= cap).then_some(KvRows { parts: [d, RowData::F32(&[])], heads: Some(HeadMajor { rows, cap, hd }) })
+        (hd > 0 && rows <= cap).then_some(KvRows {
+            parts: [d, RowData::F32(&[])],
+            heads: Some(HeadMajor { rows, cap, hd }),
+        })
     }
 
     /// [`Self::head_major`]'s rows, then the row-major rows of `tail`
     /// (whole rows of the width; the GPT cache's newest rows, read only by
     /// the call that makes them). None as for `head_major`.
-    pub fn head_major_then(d: RowData<'a>, rows: usize, cap: usize, hd: usize, tail: RowData<'a>) -> Option<Self> {
-        Self::head_major(d, rows, cap, hd).map(|k| KvRows { parts: [k.parts[0], tail], ..k })
+    pub fn head_major_then(
+        d: RowData<'a>,
+        rows: usize,
+        cap: usize,
+        hd: usize,
+        tail: RowData<'a>,
+    ) -> Option<Self> {
+        Self::head_major(d, rows, cap, hd).map(|k| KvRows {
+            parts: [k.parts[0], tail],
+            ..k
+        })
     }
 
     /// Whole rows of width `c` held (a part's partial last row is not one;
@@ -86,8 +104,14 @@ impl<'a> KvRows<'a> {
             None => self.parts[0].len() / c + self.parts[1].len() / c,
             Some(hm) => {
                 let heads = c / hm.hd;
-                let whole = c % hm.hd == 0 && heads > 0 && (heads - 1) * hm.cap * hm.hd + hm.rows * hm.hd <= self.parts[0].len();
-                if whole { hm.rows + self.parts[1].len() / c } else { 0 }
+                let whole = c % hm.hd == 0
+                    && heads > 0
+                    && (heads - 1) * hm.cap * hm.hd + hm.rows * hm.hd <= self.parts[0].len();
+                if whole {
+                    hm.rows + self.parts[1].len() / c
+                } else {
+                    0
+                }
             }
         }
     }
@@ -116,12 +140,28 @@ impl<'a> KvRows<'a> {
     fn pieces(&self, a: usize, b: usize, c: usize) -> [(&RowData<'a>, usize, usize, usize); 2] {
         let n0 = self.split(c);
         let mid = b.min(n0).max(a);
-        [(&self.parts[0], a, mid, 0), (&self.parts[1], mid - n0.min(mid), b.saturating_sub(n0), mid - a)]
+        [
+            (&self.parts[0], a, mid, 0),
+            (
+                &self.parts[1],
+                mid - n0.min(mid),
+                b.saturating_sub(n0),
+                mid - a,
+            ),
+        ]
     }
 
     /// `out[j - a] = qh . row j [h_off .. h_off + qh.len()]` for keys
     /// `a..b` (`b <= rows(c)`, `h_off + qh.len() <= c`; `out`: b - a).
-    pub(crate) fn dot_rows(&self, qh: &[f32], a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32]) {
+    pub(crate) fn dot_rows(
+        &self,
+        qh: &[f32],
+        a: usize,
+        b: usize,
+        c: usize,
+        h_off: usize,
+        out: &mut [f32],
+    ) {
         for (run, (part, lo, hi, at)) in self.pieces(a, b, c).into_iter().enumerate() {
             let out = &mut out[at..at + (hi - lo)];
             let (s, stride) = self.at(run, lo, c, h_off);
@@ -142,11 +182,22 @@ impl<'a> KvRows<'a> {
     /// `y += sum_j coef[j - a] * row j [h_off .. h_off + y.len()]` for rows
     /// `a..b` in order (`coef`: b - a): per lane the `axpy` of each row in
     /// turn, bit for bit, in one kernel call per run.
-    pub(crate) fn axpy_rows(&self, coef: &[f32], a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32]) {
+    pub(crate) fn axpy_rows(
+        &self,
+        coef: &[f32],
+        a: usize,
+        b: usize,
+        c: usize,
+        h_off: usize,
+        y: &mut [f32],
+    ) {
         let n = y.len();
         for (run, (part, lo, hi, at)) in self.pieces(a, b, c).into_iter().enumerate() {
             let (s, stride) = self.at(run, lo, c, h_off);
-            let (coef, e) = (&coef[at..at + (hi - lo)], s + (hi - lo).saturating_sub(1) * stride + n);
+            let (coef, e) = (
+                &coef[at..at + (hi - lo)],
+                s + (hi - lo).saturating_sub(1) * stride + n,
+            );
             match part {
                 _ if hi == lo => {}
                 RowData::F32(d) => f32::axpy_rows(coef, &d[s..e], stride, y),
@@ -162,14 +213,49 @@ impl<'a> KvRows<'a> {
     /// `side`: bytes prefetched into L2 over the pass (the first non-empty
     /// run's call; [`simd::dot_rows_group`](super::simd::dot_rows_group)).
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn dot_rows_group(&self, q: &[f32], hd: usize, q_stride: usize, g: usize, a: usize, b: usize, c: usize, h_off: usize, out: &mut [f32], out_stride: usize, mut side: &[u8]) {
+    pub(crate) fn dot_rows_group(
+        &self,
+        q: &[f32],
+        hd: usize,
+        q_stride: usize,
+        g: usize,
+        a: usize,
+        b: usize,
+        c: usize,
+        h_off: usize,
+        out: &mut [f32],
+        out_stride: usize,
+        mut side: &[u8],
+    ) {
         for (run, (part, lo, hi, at)) in self.pieces(a, b, c).into_iter().enumerate() {
             let out = &mut out[at..];
             let (s, stride) = self.at(run, lo, c, h_off);
             match part {
                 _ if hi == lo => continue,
-                RowData::F32(d) => f32::dot_rows_group(q, hd, q_stride, g, &d[s..], stride, hi - lo, out, out_stride, side),
-                RowData::F16(d) => u16::dot_rows_group(q, hd, q_stride, g, &d[s..], stride, hi - lo, out, out_stride, side),
+                RowData::F32(d) => f32::dot_rows_group(
+                    q,
+                    hd,
+                    q_stride,
+                    g,
+                    &d[s..],
+                    stride,
+                    hi - lo,
+                    out,
+                    out_stride,
+                    side,
+                ),
+                RowData::F16(d) => u16::dot_rows_group(
+                    q,
+                    hd,
+                    q_stride,
+                    g,
+                    &d[s..],
+                    stride,
+                    hi - lo,
+                    out,
+                    out_stride,
+                    side,
+                ),
             }
             side = &[];
         }
@@ -180,14 +266,49 @@ impl<'a> KvRows<'a> {
     /// ..][..n]`; bit for bit the per-query call.
     /// `side` as in [`KvRows::dot_rows_group`].
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn axpy_rows_group(&self, coef: &[f32], coef_stride: usize, a: usize, b: usize, c: usize, h_off: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, mut side: &[u8]) {
+    pub(crate) fn axpy_rows_group(
+        &self,
+        coef: &[f32],
+        coef_stride: usize,
+        a: usize,
+        b: usize,
+        c: usize,
+        h_off: usize,
+        y: &mut [f32],
+        y_stride: usize,
+        n: usize,
+        g: usize,
+        mut side: &[u8],
+    ) {
         for (run, (part, lo, hi, at)) in self.pieces(a, b, c).into_iter().enumerate() {
             let (s, stride) = self.at(run, lo, c, h_off);
             let (coef, e) = (&coef[at..], s + (hi - lo).saturating_sub(1) * stride + n);
             match part {
                 _ if hi == lo => continue,
-                RowData::F32(d) => f32::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], stride, y, y_stride, n, g, side),
-                RowData::F16(d) => u16::axpy_rows_group(coef, coef_stride, hi - lo, &d[s..e], stride, y, y_stride, n, g, side),
+                RowData::F32(d) => f32::axpy_rows_group(
+                    coef,
+                    coef_stride,
+                    hi - lo,
+                    &d[s..e],
+                    stride,
+                    y,
+                    y_stride,
+                    n,
+                    g,
+                    side,
+                ),
+                RowData::F16(d) => u16::axpy_rows_group(
+                    coef,
+                    coef_stride,
+                    hi - lo,
+                    &d[s..e],
+                    stride,
+                    y,
+                    y_stride,
+                    n,
+                    g,
+                    side,
+                ),
             }
             side = &[];
         }

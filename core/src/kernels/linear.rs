@@ -2,9 +2,11 @@
 //! (the transposed-convolution GEMM). Written once against [`RowMatrix`].
 
 use super::parallel::{split_cols, Cols};
-use crate::arena::{ArenaError, Carve};
 use super::simd::{self, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
-use super::weights::{ExpandsToQ8, Matrix, PreparedAct, Q4Rows, Q8Rows, RowMatrix, X8Rows, Q8X8_ROWS};
+use super::weights::{
+    ExpandsToQ8, Matrix, PreparedAct, Q4Rows, Q8Rows, RowMatrix, X8Rows, Q8X8_ROWS,
+};
+use crate::arena::{ArenaError, Carve};
 
 /// Weight bytes kept hot per pass over the activations (~L2-sized blocks:
 /// 64 f32 rows at width 768, more rows for narrower weight types).
@@ -27,7 +29,13 @@ pub fn linear(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32]) {
 /// rather than once per stack panel, and no stack panel is zeroed. The
 /// values are the same bit for bit (rows are computed independently); an
 /// empty `room` is [`linear`].
-pub fn linear_with(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], room: &mut Q8Room<'_>) {
+pub fn linear_with(
+    x: &[f32],
+    w: &Matrix<'_>,
+    b: Option<&[f32]>,
+    y: &mut [f32],
+    room: &mut Q8Room<'_>,
+) {
     linear_epilogue(x, w, Epilogue::bias(b), y, room)
 }
 
@@ -35,8 +43,23 @@ pub fn linear_with(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], 
 /// `y`, bit for bit, with GELU applied to each output segment as the GEMM
 /// writes it (while it is in L1, and on every thread of a split GEMM)
 /// instead of in a second pass over `y`.
-pub fn linear_gelu_with(x: &[f32], w: &Matrix<'_>, b: Option<&[f32]>, y: &mut [f32], room: &mut Q8Room<'_>) {
-    linear_epilogue(x, w, Epilogue { bias: b, gelu: true }, y, room)
+pub fn linear_gelu_with(
+    x: &[f32],
+    w: &Matrix<'_>,
+    b: Option<&[f32]>,
+    y: &mut [f32],
+    room: &mut Q8Room<'_>,
+) {
+    linear_epilogue(
+        x,
+        w,
+        Epilogue {
+            bias: b,
+            gelu: true,
+        },
+        y,
+        room,
+    )
 }
 
 /// What a GEMM does to its output values after the products (the usual
@@ -61,7 +84,13 @@ impl<'b> Epilogue<'b> {
 }
 
 /// [`linear_with`] with epilogue `e`.
-fn linear_epilogue(x: &[f32], w: &Matrix<'_>, e: Epilogue<'_>, y: &mut [f32], room: &mut Q8Room<'_>) {
+fn linear_epilogue(
+    x: &[f32],
+    w: &Matrix<'_>,
+    e: Epilogue<'_>,
+    y: &mut [f32],
+    room: &mut Q8Room<'_>,
+) {
     let (n_in, n_out) = (w.cols(), w.rows());
     if n_in == 0 || n_out == 0 {
         return;
@@ -80,7 +109,12 @@ fn linear_epilogue(x: &[f32], w: &Matrix<'_>, e: Epilogue<'_>, y: &mut [f32], ro
         }
     }
     let block = (BLOCK_BYTES / (w.weight_bytes() / n_out).max(1)).clamp(16, 1024);
-    split_cols(y, n_out, w.weight_bytes().saturating_mul(n), |cols| crate::with_rows!(w, m => linear_impl(x, m, e, cols, block)))
+    split_cols(
+        y,
+        n_out,
+        w.weight_bytes().saturating_mul(n),
+        |cols| crate::with_rows!(w, m => linear_impl(x, m, e, cols, block)),
+    )
 }
 
 /// Whether [`linear`] runs `w` on the int8 panel path ([`linear_q8`]).
@@ -101,16 +135,35 @@ fn takes_q8_panel(w: &Matrix<'_>) -> bool {
 /// [`linear`] calls, bit for bit. Where all `N` are stored in the same
 /// int8 layout, of the same width, for the same rows, and take the int8
 /// panel path, the activation rows are quantised once for all of them.
-pub fn linear_each<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N]) {
+pub fn linear_each<const N: usize>(
+    x: &[f32],
+    ws: [&Matrix<'_>; N],
+    bs: [Option<&[f32]>; N],
+    ys: [&mut [f32]; N],
+) {
     linear_each_with(x, ws, bs, ys, &mut Q8Room::default())
 }
 
 /// [`linear_each`] with caller memory for the int8 panel (see [`linear_with`]).
-pub fn linear_each_with<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Option<&[f32]>; N], ys: [&mut [f32]; N], room: &mut Q8Room<'_>) {
+pub fn linear_each_with<const N: usize>(
+    x: &[f32],
+    ws: [&Matrix<'_>; N],
+    bs: [Option<&[f32]>; N],
+    ys: [&mut [f32]; N],
+    room: &mut Q8Room<'_>,
+) {
     let n_in = ws.first().map_or(0, |w| w.cols());
-    let rows = |k: usize, y: &[f32]| if n_in == 0 || ws[k].rows() == 0 { 0 } else { (x.len() / n_in).min(y.len() / ws[k].rows()) };
+    let rows = |k: usize, y: &[f32]| {
+        if n_in == 0 || ws[k].rows() == 0 {
+            0
+        } else {
+            (x.len() / n_in).min(y.len() / ws[k].rows())
+        }
+    };
     let n = ys.first().map_or(0, |y| rows(0, y));
-    let shared = n > 0 && ws.iter().all(|w| w.cols() == n_in && takes_q8_panel(w)) && ys.iter().enumerate().all(|(k, y)| rows(k, y) == n);
+    let shared = n > 0
+        && ws.iter().all(|w| w.cols() == n_in && takes_q8_panel(w))
+        && ys.iter().enumerate().all(|(k, y)| rows(k, y) == n);
     if shared {
         let x = &x[..n * n_in];
         if let Some(m) = same_layout(ws, |w| if let Matrix::X8(q) = w { Some(q) } else { None }) {
@@ -130,10 +183,15 @@ pub fn linear_each_with<const N: usize>(x: &[f32], ws: [&Matrix<'_>; N], bs: [Op
 
 /// The `N` matrices as one stored layout (`pick` takes a matrix's rows of
 /// it), if every one is stored so; None for `N = 0`.
-fn same_layout<'a, 'm, T, const N: usize>(ws: [&'a Matrix<'m>; N], pick: impl Fn(&'a Matrix<'m>) -> Option<&'a T>) -> Option<[&'a T; N]> {
+fn same_layout<'a, 'm, T, const N: usize>(
+    ws: [&'a Matrix<'m>; N],
+    pick: impl Fn(&'a Matrix<'m>) -> Option<&'a T>,
+) -> Option<[&'a T; N]> {
     let m = ws.map(pick);
     let first = m.first().copied().flatten()?;
-    m.iter().all(Option::is_some).then(|| m.map(|q| q.unwrap_or(first)))
+    m.iter()
+        .all(Option::is_some)
+        .then(|| m.map(|q| q.unwrap_or(first)))
 }
 
 /// Int8 activation values quantised at once by `linear` over a [`Q8Rows`]
@@ -171,7 +229,11 @@ const PACK_MIN_ROWS: usize = 4;
 /// step's GEMMs of one session: up to 10 rows of the widest input). Its
 /// zeroed stack room is 44 KiB where the full panel's is 264 KiB, zeroed
 /// on every call (which showed in the streaming step's profile).
-const Q8_PANEL_SMALL: usize = if Q8_PANEL < 32 * 1024 { Q8_PANEL } else { 32 * 1024 };
+const Q8_PANEL_SMALL: usize = if Q8_PANEL < 32 * 1024 {
+    Q8_PANEL
+} else {
+    32 * 1024
+};
 
 /// Room for `Q` quantised activation values (`B = Q / 32` block scales,
 /// `C = 2 B` VNNI corrections).
@@ -196,12 +258,20 @@ impl<'a> Q8Room<'a> {
     /// call that should be quantised at once).
     pub fn carve<A: Carve<'a>>(a: &mut A, values: usize) -> Result<Self, ArenaError> {
         let blocks = values.div_ceil(Q8_BLOCK);
-        Ok(Q8Room { q: a.i8(values)?, d: a.f32(blocks)?, c: a.i32(blocks.checked_mul(2).ok_or(ArenaError::Overflow)?)? })
+        Ok(Q8Room {
+            q: a.i8(values)?,
+            d: a.f32(blocks)?,
+            c: a.i32(blocks.checked_mul(2).ok_or(ArenaError::Overflow)?)?,
+        })
     }
 
     /// The same memory, borrowed for a shorter time.
     pub fn reborrow(&mut self) -> Q8Room<'_> {
-        Q8Room { q: self.q, d: self.d, c: self.c }
+        Q8Room {
+            q: self.q,
+            d: self.d,
+            c: self.c,
+        }
     }
 
     /// Rows of width `n_in` it holds.
@@ -251,16 +321,29 @@ trait Q8Source: RowMatrix {
     const PREPACKED: bool;
     fn new_buf() -> Self::Buf;
     /// Rows `rows` (N <= `simd::PACK_ROWS`) as stored Q8Block32 rows.
-    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut Self::Buf) -> [&'s [u8]; N];
+    fn q8_rows<'s, const N: usize>(
+        &'s self,
+        rows: [usize; N],
+        buf: &'s mut Self::Buf,
+    ) -> [&'s [u8]; N];
     /// Rows `t0 .. t0 + 8` (`t0` a multiple of 8; rows past the matrix
     /// repeat its last row or are padding: their results are dropped) as
     /// a packed tile of `nb` blocks (`nb <= PACK_BLOCKS` unless PREPACKED).
     /// `pack` and `buf` are made on first use (a source stored packed
     /// needs neither: zeroing their ~60 KiB per call showed in the
     /// streaming step's profile).
-    fn packed_tile<'s>(&'s self, t0: usize, nb: usize, pack: &'s mut Option<simd::Q8Pack8>, buf: &'s mut Option<Self::Buf>) -> simd::PackedQ8<'s> {
+    fn packed_tile<'s>(
+        &'s self,
+        t0: usize,
+        nb: usize,
+        pack: &'s mut Option<simd::Q8Pack8>,
+        buf: &'s mut Option<Self::Buf>,
+    ) -> simd::PackedQ8<'s> {
         let last = self.rows() - 1;
-        let rows = self.q8_rows(core::array::from_fn(|j| (t0 + j).min(last)), buf.get_or_insert_with(Self::new_buf));
+        let rows = self.q8_rows(
+            core::array::from_fn(|j| (t0 + j).min(last)),
+            buf.get_or_insert_with(Self::new_buf),
+        );
         let pack = pack.get_or_insert_with(simd::Q8Pack8::new);
         simd::q8_pack8(rows, nb, pack);
         pack.view()
@@ -291,7 +374,11 @@ type ExpandBuf = [[u8; Q4_ROW_BYTES]; simd::PACK_ROWS];
 /// Rows `rows` of a layout read through its Q8 expansion, expanded into
 /// `buf` (the first `Q4_FAST_COLS` columns; callers keep rows that short).
 #[inline]
-fn expanded_rows<'s, W: ExpandsToQ8, const N: usize>(w: &W, rows: [usize; N], buf: &'s mut ExpandBuf) -> [&'s [u8]; N] {
+fn expanded_rows<'s, W: ExpandsToQ8, const N: usize>(
+    w: &W,
+    rows: [usize; N],
+    buf: &'s mut ExpandBuf,
+) -> [&'s [u8]; N] {
     let nb = (w.dims().1 / Q8_BLOCK).min(Q4_FAST_COLS / Q8_BLOCK);
     for (dst, &r) in buf.iter_mut().zip(&rows) {
         w.expand_blocks(r, 0, nb, dst);
@@ -308,7 +395,11 @@ impl Q8Source for Q4Rows<'_> {
         [[0; Q4_ROW_BYTES]; simd::PACK_ROWS]
     }
     #[inline]
-    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut ExpandBuf) -> [&'s [u8]; N] {
+    fn q8_rows<'s, const N: usize>(
+        &'s self,
+        rows: [usize; N],
+        buf: &'s mut ExpandBuf,
+    ) -> [&'s [u8]; N] {
         expanded_rows(self, rows, buf)
     }
     #[inline]
@@ -325,11 +416,21 @@ impl Q8Source for X8Rows<'_> {
         [[0; Q4_ROW_BYTES]; simd::PACK_ROWS]
     }
     #[inline]
-    fn q8_rows<'s, const N: usize>(&'s self, rows: [usize; N], buf: &'s mut ExpandBuf) -> [&'s [u8]; N] {
+    fn q8_rows<'s, const N: usize>(
+        &'s self,
+        rows: [usize; N],
+        buf: &'s mut ExpandBuf,
+    ) -> [&'s [u8]; N] {
         expanded_rows(self, rows, buf)
     }
     #[inline]
-    fn packed_tile<'s>(&'s self, t0: usize, _nb: usize, _: &'s mut Option<simd::Q8Pack8>, _: &'s mut Option<Self::Buf>) -> simd::PackedQ8<'s> {
+    fn packed_tile<'s>(
+        &'s self,
+        t0: usize,
+        _nb: usize,
+        _: &'s mut Option<simd::Q8Pack8>,
+        _: &'s mut Option<Self::Buf>,
+    ) -> simd::PackedQ8<'s> {
         self.group(t0 / Q8X8_ROWS)
     }
     #[inline]
@@ -346,11 +447,23 @@ impl Q8Source for X8Rows<'_> {
 /// `N` matrices of the same width over the same `n = x.len() / in` rows
 /// (each `y` holds `n` rows; [`linear_each`] checks it) share the
 /// quantised panel; each takes its own kernels, as if called alone.
-fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], es: [Epilogue<'_>; N], ys: [&mut [f32]; N], room: &mut Q8Room<'_>) {
+fn linear_q8<W: Q8Source + Sync, const N: usize>(
+    x: &[f32],
+    ws: [&W; N],
+    es: [Epilogue<'_>; N],
+    ys: [&mut [f32]; N],
+    room: &mut Q8Room<'_>,
+) {
     let n_in = ws.first().map_or(0, |w| w.cols());
     let values = x.len().checked_div(n_in).map_or(0, |rows| rows * n_in);
     if values <= Q8_PANEL_SMALL {
-        linear_q8_in::<W, N, Q8_PANEL_SMALL, { Q8_PANEL_SMALL / Q8_BLOCK }, { 2 * Q8_PANEL_SMALL / Q8_BLOCK }>(x, ws, es, ys)
+        linear_q8_in::<
+            W,
+            N,
+            Q8_PANEL_SMALL,
+            { Q8_PANEL_SMALL / Q8_BLOCK },
+            { 2 * Q8_PANEL_SMALL / Q8_BLOCK },
+        >(x, ws, es, ys)
     } else if room.rows(n_in) * n_in >= values || room.rows(n_in) > Q8_PANEL / n_in {
         linear_q8_on(x, ws, es, ys, room.q, room.d, room.c)
     } else {
@@ -360,16 +473,41 @@ fn linear_q8<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], es: [Ep
 
 /// [`linear_q8`] with a stack panel of `Q` values (`B = Q / 32`, `C = 2 B`).
 #[inline(never)]
-fn linear_q8_in<W: Q8Source + Sync, const N: usize, const Q: usize, const B: usize, const C: usize>(x: &[f32], ws: [&W; N], es: [Epilogue<'_>; N], ys: [&mut [f32]; N]) {
-    let mut room = PanelRoom::<Q, B, C> { q: [0; Q], d: [0.0; B], c: [0; C] };
+fn linear_q8_in<
+    W: Q8Source + Sync,
+    const N: usize,
+    const Q: usize,
+    const B: usize,
+    const C: usize,
+>(
+    x: &[f32],
+    ws: [&W; N],
+    es: [Epilogue<'_>; N],
+    ys: [&mut [f32]; N],
+) {
+    let mut room = PanelRoom::<Q, B, C> {
+        q: [0; Q],
+        d: [0.0; B],
+        c: [0; C],
+    };
     linear_q8_on(x, ws, es, ys, &mut room.q, &mut room.d, &mut room.c)
 }
 
 /// [`linear_q8`] on panel memory `q` (values), `d` (block scales), `c`
 /// (corrections): the rows in panels of as many rows as it holds.
 #[inline(never)]
-fn linear_q8_on<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], es: [Epilogue<'_>; N], mut ys: [&mut [f32]; N], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
-    let Some(n_in) = ws.first().map(|w| w.cols()).filter(|&c| c > 0) else { return };
+fn linear_q8_on<W: Q8Source + Sync, const N: usize>(
+    x: &[f32],
+    ws: [&W; N],
+    es: [Epilogue<'_>; N],
+    mut ys: [&mut [f32]; N],
+    q: &mut [i8],
+    d: &mut [f32],
+    c: &mut [i32],
+) {
+    let Some(n_in) = ws.first().map(|w| w.cols()).filter(|&c| c > 0) else {
+        return;
+    };
     let n = x.len() / n_in;
     let nb = n_in / Q8_BLOCK;
     let per_panel = panel_rows(q, d, c, n_in);
@@ -391,8 +529,16 @@ fn linear_q8_on<W: Q8Source + Sync, const N: usize>(x: &[f32], ws: [&W; N], es: 
         // Packing 8 weight rows per call pays off from a few activation
         // rows on (measured: at 1 row the unpacked VNNI tile is faster);
         // stored packed tiles are faster from one row on.
-        let packed = simd::packed_q8_fast() && (W::PREPACKED || (simd::q8_packing_pays() && p1 - p0 >= PACK_MIN_ROWS && nb <= simd::PACK_BLOCKS));
-        let p = &Q8Panel { q: &*q, d: &*d, c: &*c };
+        let packed = simd::packed_q8_fast()
+            && (W::PREPACKED
+                || (simd::q8_packing_pays()
+                    && p1 - p0 >= PACK_MIN_ROWS
+                    && nb <= simd::PACK_BLOCKS));
+        let p = &Q8Panel {
+            q: &*q,
+            d: &*d,
+            c: &*c,
+        };
         for ((w, e), y) in ws.iter().zip(es).zip(ys.iter_mut()) {
             let n_out = w.rows();
             let work = (n_out * nb * Q8_BLOCK_BYTES).saturating_mul(p1 - p0);
@@ -494,7 +640,15 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
         let r1 = (r0 + XW_ROWS).min(rows);
         for i0 in (0..n).step_by(simd::QUERY_GROUP) {
             let g = simd::QUERY_GROUP.min(n - i0);
-            w.axpy_rows_group(r0, r1, &x[i0 * rows + r0..], rows, &mut z[i0 * cols..], cols, g);
+            w.axpy_rows_group(
+                r0,
+                r1,
+                &x[i0 * rows + r0..],
+                rows,
+                &mut z[i0 * cols..],
+                cols,
+                g,
+            );
         }
     }
 }
@@ -503,7 +657,14 @@ fn linear_xw_impl<W: RowMatrix>(x: &[f32], w: &W, z: &mut [f32]) {
 /// at most `PACK_BLOCKS` blocks (every matrix of the model; 1.5 KiB zeroed
 /// per call) or the widest the panel takes (96 KiB). Off AVX512-VNNI every
 /// int8 GEMM of a streaming step runs here.
-fn q8_panel_tiles_for<W: Q8Source>(w: &W, e: Epilogue<'_>, y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
+fn q8_panel_tiles_for<W: Q8Source>(
+    w: &W,
+    e: Epilogue<'_>,
+    y: Cols<'_>,
+    p: &Q8Panel<'_>,
+    n_rows: usize,
+    n_in: usize,
+) {
     if n_in / Q8_BLOCK <= simd::PACK_BLOCKS {
         q8_panel_tiles::<W, { simd::PACK_BLOCKS }>(w, e, y, p, n_rows, n_in)
     } else {
@@ -516,7 +677,14 @@ fn q8_panel_tiles_for<W: Q8Source>(w: &W, e: Epilogue<'_>, y: Cols<'_>, p: &Q8Pa
 /// with [`simd::gemm_q8`].
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_tiles<W: Q8Source, const WB: usize>(w: &W, e: Epilogue<'_>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
+fn q8_panel_tiles<W: Q8Source, const WB: usize>(
+    w: &W,
+    e: Epilogue<'_>,
+    mut y: Cols<'_>,
+    p: &Q8Panel<'_>,
+    n_rows: usize,
+    n_in: usize,
+) {
     let nb = n_in / Q8_BLOCK;
     let mut ws = [[0.0f32; WB]; TN];
     let mut buf = W::new_buf();
@@ -548,11 +716,23 @@ fn q8_panel_tiles<W: Q8Source, const WB: usize>(w: &W, e: Epilogue<'_>, mut y: C
                     t.into_iter().enumerate().for_each(|(m, r)| put(m, r));
                 }
                 3 => {
-                    let t = simd::gemm_q8::<3>(wr, wd, [q(0), q(1), q(2)], [d(0), d(1), d(2)], [c(0), c(1), c(2)]);
+                    let t = simd::gemm_q8::<3>(
+                        wr,
+                        wd,
+                        [q(0), q(1), q(2)],
+                        [d(0), d(1), d(2)],
+                        [c(0), c(1), c(2)],
+                    );
                     t.into_iter().enumerate().for_each(|(m, r)| put(m, r));
                 }
                 _ => {
-                    let t = simd::gemm_q8::<4>(wr, wd, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
+                    let t = simd::gemm_q8::<4>(
+                        wr,
+                        wd,
+                        core::array::from_fn(q),
+                        core::array::from_fn(d),
+                        core::array::from_fn(c),
+                    );
                     t.into_iter().enumerate().for_each(|(m, r)| put(m, r));
                 }
             }
@@ -571,7 +751,14 @@ fn q8_panel_tiles<W: Q8Source, const WB: usize>(w: &W, e: Epilogue<'_>, mut y: C
 /// bit; the rows after them stay on VNNI.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn q8_panel_packed<W: Q8Source>(w: &W, e: Epilogue<'_>, mut y: Cols<'_>, p: &Q8Panel<'_>, n_rows: usize, n_in: usize) {
+fn q8_panel_packed<W: Q8Source>(
+    w: &W,
+    e: Epilogue<'_>,
+    mut y: Cols<'_>,
+    p: &Q8Panel<'_>,
+    n_rows: usize,
+    n_in: usize,
+) {
     const R: usize = simd::PACK_ROWS;
     let nb = n_in / Q8_BLOCK;
     let (mut pack, mut buf) = (None, None);
@@ -584,22 +771,35 @@ fn q8_panel_packed<W: Q8Source>(w: &W, e: Epilogue<'_>, mut y: Cols<'_>, p: &Q8P
         let tile = w.packed_tile(t0, nb, &mut pack, &mut buf);
         // The weights two tiles ahead stream into L2 while this one is
         // multiplied, the prefetches spread over the kernel's blocks.
-        let ahead = if n_rows < AMX_MIN_ROWS && t0 + PREFETCH_TILES * R < y.hi() { w.stored_rows(t0 + PREFETCH_TILES * R, (t0 + (PREFETCH_TILES + 1) * R).min(y.hi())) } else { &[] };
+        let ahead = if n_rows < AMX_MIN_ROWS && t0 + PREFETCH_TILES * R < y.hi() {
+            w.stored_rows(
+                t0 + PREFETCH_TILES * R,
+                (t0 + (PREFETCH_TILES + 1) * R).min(y.hi()),
+            )
+        } else {
+            &[]
+        };
         let prepared = amx_planned > 0 && amx.as_mut().is_some_and(|a| a.prepare(0, tile));
         let Some(a) = amx.as_mut().filter(|_| prepared) else {
-            vnni_rows(tile, p, 0, n_rows, n_in, ahead, |i, t| put_row(&mut y, e, i, t0, nt, t));
+            vnni_rows(tile, p, 0, n_rows, n_in, ahead, |i, t| {
+                put_row(&mut y, e, i, t0, nt, t)
+            });
             t0 += nt;
             continue;
         };
         // This tile's rows after the AMX rows, then the second tile's (or
         // this one again as a second operand whose results are dropped).
-        vnni_rows(tile, p, amx_planned, n_rows, n_in, &[], |i, t| put_row(&mut y, e, i, t0, nt, t));
+        vnni_rows(tile, p, amx_planned, n_rows, n_in, &[], |i, t| {
+            put_row(&mut y, e, i, t0, nt, t)
+        });
         let t1 = t0 + R;
         let nt1 = if t1 < y.hi() { R.min(y.hi() - t1) } else { 0 };
         if nt1 > 0 {
             let tile1 = w.packed_tile(t1, nb, &mut pack, &mut buf);
             a.prepare(1, tile1);
-            vnni_rows(tile1, p, amx_planned, n_rows, n_in, &[], |i, t| put_row(&mut y, e, i, t1, nt1, t));
+            vnni_rows(tile1, p, amx_planned, n_rows, n_in, &[], |i, t| {
+                put_row(&mut y, e, i, t1, nt1, t)
+            });
         } else {
             a.prepare(1, tile);
         }
@@ -613,7 +813,9 @@ fn q8_panel_packed<W: Q8Source>(w: &W, e: Epilogue<'_>, mut y: Cols<'_>, p: &Q8P
             for (tt, ntt) in [(t0, nt), (t1, nt1)] {
                 if ntt > 0 {
                     let tile = w.packed_tile(tt, nb, &mut pack, &mut buf);
-                    vnni_rows(tile, p, done, amx_planned, n_in, &[], |i, t| put_row(&mut y, e, i, tt, ntt, t));
+                    vnni_rows(tile, p, done, amx_planned, n_in, &[], |i, t| {
+                        put_row(&mut y, e, i, tt, ntt, t)
+                    });
                 }
             }
         }
@@ -654,7 +856,15 @@ const PACKED_CALL_ROWS: usize = 12;
 /// rows (`put(row, values)`), prefetching `ahead` (each call its share:
 /// [`simd::part_bytes`]).
 #[inline]
-fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_in: usize, ahead: &[u8], mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS])) {
+fn vnni_rows(
+    tile: simd::PackedQ8<'_>,
+    p: &Q8Panel<'_>,
+    r0: usize,
+    r1: usize,
+    n_in: usize,
+    ahead: &[u8],
+    mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS]),
+) {
     let nb = n_in / Q8_BLOCK;
     let rows = r1.saturating_sub(r0);
     let calls = rows.div_ceil(PACKED_CALL_ROWS);
@@ -670,7 +880,13 @@ fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_
         let c = |m: usize| &p.c[2 * pr(m) * nb..2 * (pr(m) + 1) * nb];
         macro_rules! run {
             ($m:literal) => {{
-                let t = simd::gemm_q8_packed_ahead::<$m>(tile, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c), share);
+                let t = simd::gemm_q8_packed_ahead::<$m>(
+                    tile,
+                    core::array::from_fn(q),
+                    core::array::from_fn(d),
+                    core::array::from_fn(c),
+                    share,
+                );
                 for (m, r) in t.iter().enumerate() {
                     put(i0 + m, r);
                 }
@@ -699,8 +915,27 @@ fn vnni_rows(tile: simd::PackedQ8<'_>, p: &Q8Panel<'_>, r0: usize, r1: usize, n_
 /// those rows through the epilogue `e` itself, prefetching `ahead`;
 /// returns the rows done.
 #[allow(clippy::too_many_arguments)]
-fn amx_pair(a: &simd::AmxWeights, p: &Q8Panel<'_>, rows: usize, n_in: usize, ahead: &[u8], y: &mut Cols<'_>, e: Epilogue<'_>, t0: usize, cols: usize) -> usize {
+fn amx_pair(
+    a: &simd::AmxWeights,
+    p: &Q8Panel<'_>,
+    rows: usize,
+    n_in: usize,
+    ahead: &[u8],
+    y: &mut Cols<'_>,
+    e: Epilogue<'_>,
+    t0: usize,
+    cols: usize,
+) -> usize {
     let nb = n_in / Q8_BLOCK;
     let bias = e.bias.map(|b| &b[t0..t0 + cols]);
-    simd::gemm_q8_packed_amx(a, &p.q[..rows * n_in], n_in, &p.d[..rows * nb], y.window(0, rows, t0, t0 + cols), bias, e.gelu, ahead)
+    simd::gemm_q8_packed_amx(
+        a,
+        &p.q[..rows * n_in],
+        n_in,
+        &p.d[..rows * nb],
+        y.window(0, rows, t0, t0 + cols),
+        bias,
+        e.gelu,
+        ahead,
+    )
 }

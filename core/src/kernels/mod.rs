@@ -22,8 +22,16 @@ pub mod weights;
 
 pub use activation::{gelu_inplace, relu_inplace, relu_into};
 pub use attention::{attention, attention_ahead, BandMask, Mask, TiledCausalMask, Ungrouped};
+pub use conv::{
+    conv1d, conv1d_col_len, conv1d_segs, conv_transpose1d, conv_transpose1d_segs, convt_z_len,
+    ConvGeom, ConvSeg, ConvTWeight, CONV_TILE,
+};
 pub use kv_rows::{KvRows, RowData};
-pub use conv::{conv1d, conv1d_col_len, conv1d_segs, conv_transpose1d, conv_transpose1d_segs, convt_z_len, ConvGeom, ConvSeg, ConvTWeight, CONV_TILE};
-pub use linear::{linear, linear_each, linear_each_with, linear_gelu_with, linear_with, linear_xw, Q8Room};
+pub use linear::{
+    linear, linear_each, linear_each_with, linear_gelu_with, linear_with, linear_xw, Q8Room,
+};
 pub use norm::{layernorm, LN_EPS};
-pub use weights::{dot, expand_q4, DenseElem, DenseRows, F16Rows, F32Rows, Matrix, ExpandsToQ8, Q4Rows, Q8Rows, X8Rows, RowMatrix, Q4_BLOCK_BYTES, Q8X8_ROWS};
+pub use weights::{
+    dot, expand_q4, DenseElem, DenseRows, ExpandsToQ8, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows,
+    RowMatrix, X8Rows, Q4_BLOCK_BYTES, Q8X8_ROWS,
+};

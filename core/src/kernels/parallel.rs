@@ -43,7 +43,9 @@ static WORKERS: AtomicPtr<Installed> = AtomicPtr::new(core::ptr::null_mut());
 /// Installs `w` for every later kernel call of this process (None: run
 /// everything on the caller's thread, the default).
 pub fn set_workers(w: Option<&'static Installed>) {
-    let p = w.map_or(core::ptr::null_mut(), |w| w as *const Installed as *mut Installed);
+    let p = w.map_or(core::ptr::null_mut(), |w| {
+        w as *const Installed as *mut Installed
+    });
     WORKERS.store(p, Ordering::Release);
 }
 
@@ -91,7 +93,14 @@ pub struct Cols<'y> {
 impl<'y> Cols<'y> {
     /// All columns `0..stride` of `y` (no split).
     pub fn whole(y: &'y mut [f32], stride: usize) -> Self {
-        Cols { ptr: y.as_mut_ptr(), len: y.len(), stride, lo: 0, hi: stride, _y: PhantomData }
+        Cols {
+            ptr: y.as_mut_ptr(),
+            len: y.len(),
+            stride,
+            lo: 0,
+            hi: stride,
+            _y: PhantomData,
+        }
     }
     /// First column of the range.
     pub fn lo(&self) -> usize {
@@ -104,7 +113,10 @@ impl<'y> Cols<'y> {
     /// `y[i][a..b]`. Panics unless `lo <= a <= b <= hi` and the row lies in `y`.
     #[inline]
     pub fn seg(&mut self, i: usize, a: usize, b: usize) -> &mut [f32] {
-        assert!(self.lo <= a && a <= b && b <= self.hi, "column range outside the task's share");
+        assert!(
+            self.lo <= a && a <= b && b <= self.hi,
+            "column range outside the task's share"
+        );
         let start = i * self.stride + a;
         assert!(start + (b - a) <= self.len, "row outside the output");
         // SAFETY: in bounds of the `y` this view was made from (checked
@@ -117,14 +129,36 @@ impl<'y> Cols<'y> {
     /// call writes in place. Panics unless `lo <= a <= b <= hi` and the
     /// rows lie in `y`.
     pub fn window(&mut self, i0: usize, rows: usize, a: usize, b: usize) -> Window<'_> {
-        assert!(self.lo <= a && a <= b && b <= self.hi, "column range outside the task's share");
+        assert!(
+            self.lo <= a && a <= b && b <= self.hi,
+            "column range outside the task's share"
+        );
         // One past the window's last float (nothing for no rows).
-        let end = if rows == 0 { Some(0) } else { i0.checked_add(rows - 1).and_then(|l| l.checked_mul(self.stride)).and_then(|o| o.checked_add(b)) };
-        assert!(end.is_some_and(|e| e <= self.len), "rows outside the output");
+        let end = if rows == 0 {
+            Some(0)
+        } else {
+            i0.checked_add(rows - 1)
+                .and_then(|l| l.checked_mul(self.stride))
+                .and_then(|o| o.checked_add(b))
+        };
+        assert!(
+            end.is_some_and(|e| e <= self.len),
+            "rows outside the output"
+        );
         // SAFETY: i0 * stride + a <= len (checked above when rows > 0; an
         // empty window keeps the base pointer and is never written).
-        let ptr = if rows == 0 { self.ptr } else { unsafe { self.ptr.add(i0 * self.stride + a) } };
-        Window { ptr, stride: self.stride, rows, cols: b - a, _w: PhantomData }
+        let ptr = if rows == 0 {
+            self.ptr
+        } else {
+            unsafe { self.ptr.add(i0 * self.stride + a) }
+        };
+        Window {
+            ptr,
+            stride: self.stride,
+            rows,
+            cols: b - a,
+            _w: PhantomData,
+        }
     }
 }
 
@@ -162,8 +196,19 @@ impl<'w> Window<'w> {
         let k = k.min(self.rows);
         // SAFETY: row k starts inside the window's rows when k < rows; at
         // k == rows the rest is empty and keeps the base pointer.
-        let rest = if k < self.rows { unsafe { self.ptr.add(k * self.stride) } } else { self.ptr };
-        (Window { rows: k, ..self }, Window { ptr: rest, rows: self.rows - k, ..self })
+        let rest = if k < self.rows {
+            unsafe { self.ptr.add(k * self.stride) }
+        } else {
+            self.ptr
+        };
+        (
+            Window { rows: k, ..self },
+            Window {
+                ptr: rest,
+                rows: self.rows - k,
+                ..self
+            },
+        )
     }
 }
 
@@ -205,11 +250,23 @@ where
         _ => return f(Cols::whole(y, n_out)),
     };
     let per = n_out.div_ceil(align).div_ceil(tasks) * align;
-    let out = &SharedOut { ptr: y.as_mut_ptr(), len: y.len(), stride: n_out, _y: PhantomData };
+    let out = &SharedOut {
+        ptr: y.as_mut_ptr(),
+        len: y.len(),
+        stride: n_out,
+        _y: PhantomData,
+    };
     pool.run(tasks, &|t| {
         let (lo, hi) = ((t * per).min(n_out), ((t + 1) * per).min(n_out));
         if lo < hi {
-            f(Cols { ptr: out.ptr, len: out.len, stride: out.stride, lo, hi, _y: PhantomData });
+            f(Cols {
+                ptr: out.ptr,
+                len: out.len,
+                stride: out.stride,
+                lo,
+                hi,
+                _y: PhantomData,
+            });
         }
     });
 }

@@ -41,7 +41,10 @@ pub struct Q8Act {
 
 impl PreparedAct for Q8Act {
     fn new() -> Self {
-        Q8Act { q: [[0; ACT_CHUNK]; TM], d: [[0.0; ACT_CHUNK / Q8_BLOCK]; TM] }
+        Q8Act {
+            q: [[0; ACT_CHUNK]; TM],
+            d: [[0.0; ACT_CHUNK / Q8_BLOCK]; TM],
+        }
     }
 }
 
@@ -77,11 +80,24 @@ pub trait RowMatrix {
     /// each row's lanes loaded once for the `g` outputs,
     /// [`DenseElem::axpy_rows_group`]).
     #[allow(clippy::too_many_arguments)]
-    fn axpy_rows_group(&self, r0: usize, r1: usize, coef: &[f32], coef_stride: usize, y: &mut [f32], y_stride: usize, g: usize) {
+    fn axpy_rows_group(
+        &self,
+        r0: usize,
+        r1: usize,
+        coef: &[f32],
+        coef_stride: usize,
+        y: &mut [f32],
+        y_stride: usize,
+        g: usize,
+    ) {
         let n = self.cols();
         for m in 0..g {
             for r in r0..r1 {
-                self.axpy(r, coef[m * coef_stride + r - r0], &mut y[m * y_stride..m * y_stride + n]);
+                self.axpy(
+                    r,
+                    coef[m * coef_stride + r - r0],
+                    &mut y[m * y_stride..m * y_stride + n],
+                );
             }
         }
     }
@@ -131,12 +147,34 @@ pub trait DenseElem: Copy + 'static {
     /// scores `out_stride` apart ([`simd::dot_rows_group`]; bit for bit the
     /// per-query call; `side` prefetched into L2 meanwhile).
     #[allow(clippy::too_many_arguments)]
-    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[Self], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]);
+    fn dot_rows_group(
+        q: &[f32],
+        hd: usize,
+        q_stride: usize,
+        g: usize,
+        rows: &[Self],
+        stride: usize,
+        n: usize,
+        out: &mut [f32],
+        out_stride: usize,
+        side: &[u8],
+    );
     /// [`Self::axpy_rows`] for `g` queries: coefficients `coef_stride`
     /// apart, outputs of `n` lanes `y_stride` apart
     /// ([`simd::axpy_rows_group_f32`]; bit for bit the per-query call).
     #[allow(clippy::too_many_arguments)]
-    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[Self], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]);
+    fn axpy_rows_group(
+        coef: &[f32],
+        coef_stride: usize,
+        nk: usize,
+        rows: &[Self],
+        stride: usize,
+        y: &mut [f32],
+        y_stride: usize,
+        n: usize,
+        g: usize,
+        side: &[u8],
+    );
 }
 
 impl DenseElem for f32 {
@@ -165,11 +203,33 @@ impl DenseElem for f32 {
         simd::axpy_rows_f32(coef, rows, stride, y)
     }
     #[inline]
-    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
+    fn dot_rows_group(
+        q: &[f32],
+        hd: usize,
+        q_stride: usize,
+        g: usize,
+        rows: &[f32],
+        stride: usize,
+        n: usize,
+        out: &mut [f32],
+        out_stride: usize,
+        side: &[u8],
+    ) {
         simd::dot_rows_group(q, hd, q_stride, g, rows, stride, n, out, out_stride, side)
     }
     #[inline]
-    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
+    fn axpy_rows_group(
+        coef: &[f32],
+        coef_stride: usize,
+        nk: usize,
+        rows: &[f32],
+        stride: usize,
+        y: &mut [f32],
+        y_stride: usize,
+        n: usize,
+        g: usize,
+        side: &[u8],
+    ) {
         simd::axpy_rows_group_f32(coef, coef_stride, nk, rows, stride, y, y_stride, n, g, side)
     }
 }
@@ -201,11 +261,33 @@ impl DenseElem for u16 {
         simd::axpy_rows_f16(coef, rows, stride, y)
     }
     #[inline]
-    fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, rows: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
+    fn dot_rows_group(
+        q: &[f32],
+        hd: usize,
+        q_stride: usize,
+        g: usize,
+        rows: &[u16],
+        stride: usize,
+        n: usize,
+        out: &mut [f32],
+        out_stride: usize,
+        side: &[u8],
+    ) {
         simd::dot_rows_group_f16(q, hd, q_stride, g, rows, stride, n, out, out_stride, side)
     }
     #[inline]
-    fn axpy_rows_group(coef: &[f32], coef_stride: usize, nk: usize, rows: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
+    fn axpy_rows_group(
+        coef: &[f32],
+        coef_stride: usize,
+        nk: usize,
+        rows: &[u16],
+        stride: usize,
+        y: &mut [f32],
+        y_stride: usize,
+        n: usize,
+        g: usize,
+        side: &[u8],
+    ) {
         simd::axpy_rows_group_f16(coef, coef_stride, nk, rows, stride, y, y_stride, n, g, side)
     }
 }
@@ -213,7 +295,7 @@ impl DenseElem for u16 {
 /// Row-major dense weights borrowed from the model bytes.
 #[derive(Clone, Copy, Debug)]
 pub struct DenseRows<'a, E> {
-    data: &'a [E],  // (rows, cols)
+    data: &'a [E], // (rows, cols)
     rows: usize,
     cols: usize,
 }
@@ -259,9 +341,29 @@ impl<E: DenseElem> RowMatrix for DenseRows<'_, E> {
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
         E::axpy(a, self.row(r), y)
     }
-    fn axpy_rows_group(&self, r0: usize, r1: usize, coef: &[f32], coef_stride: usize, y: &mut [f32], y_stride: usize, g: usize) {
+    fn axpy_rows_group(
+        &self,
+        r0: usize,
+        r1: usize,
+        coef: &[f32],
+        coef_stride: usize,
+        y: &mut [f32],
+        y_stride: usize,
+        g: usize,
+    ) {
         let c = self.cols;
-        E::axpy_rows_group(coef, coef_stride, r1.saturating_sub(r0), &self.data[r0 * c..r1 * c], c, y, y_stride, c, g, &[])
+        E::axpy_rows_group(
+            coef,
+            coef_stride,
+            r1.saturating_sub(r0),
+            &self.data[r0 * c..r1 * c],
+            c,
+            y,
+            y_stride,
+            c,
+            g,
+            &[],
+        )
     }
     fn row_into(&self, r: usize, out: &mut [f32]) {
         for (o, &w) in out.iter_mut().zip(self.row(r)) {
@@ -307,7 +409,12 @@ pub struct Q8Rows<'a> {
 impl<'a> Q8Rows<'a> {
     /// None unless `cols % 32 == 0` and `data.len() == rows * cols / 32 * 34`.
     pub fn new(data: &'a [u8], rows: usize, cols: usize) -> Option<Self> {
-        if cols % Q8_BLOCK != 0 || rows.checked_mul(cols / Q8_BLOCK)?.checked_mul(Q8_BLOCK_BYTES)? != data.len() {
+        if cols % Q8_BLOCK != 0
+            || rows
+                .checked_mul(cols / Q8_BLOCK)?
+                .checked_mul(Q8_BLOCK_BYTES)?
+                != data.len()
+        {
             return None;
         }
         Some(Q8Rows { data, rows, cols })
@@ -326,7 +433,11 @@ impl<'a> Q8Rows<'a> {
     /// `f(column block start, scale, 32 quantised values)` for each block of row `r`.
     fn for_blocks(&self, r: usize, mut f: impl FnMut(usize, f32, &[u8])) {
         for (b, blk) in self.row(r).chunks_exact(Q8_BLOCK_BYTES).enumerate() {
-            f(b * Q8_BLOCK, f16_to_f32(u16::from_le_bytes([blk[0], blk[1]])), &blk[2..]);
+            f(
+                b * Q8_BLOCK,
+                f16_to_f32(u16::from_le_bytes([blk[0], blk[1]])),
+                &blk[2..],
+            );
         }
     }
 }
@@ -357,10 +468,16 @@ impl RowMatrix for Q8Rows<'_> {
     fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], act: &Q8Act) -> Tile {
         let b0 = c0 / Q8_BLOCK * Q8_BLOCK_BYTES;
         let nb = x[0].len() / Q8_BLOCK;
-        tile_q8_act(o.map(|r| &self.row(r)[b0..b0 + nb * Q8_BLOCK_BYTES]), nb, act)
+        tile_q8_act(
+            o.map(|r| &self.row(r)[b0..b0 + nb * Q8_BLOCK_BYTES]),
+            nb,
+            act,
+        )
     }
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
-        self.for_blocks(r, |c, d, q| q8_block_axpy(a * d, q, &mut y[c..c + Q8_BLOCK]));
+        self.for_blocks(r, |c, d, q| {
+            q8_block_axpy(a * d, q, &mut y[c..c + Q8_BLOCK])
+        });
     }
     fn row_into(&self, r: usize, out: &mut [f32]) {
         self.for_blocks(r, |c, d, q| q8_block_into(d, q, &mut out[c..c + Q8_BLOCK]));
@@ -410,7 +527,12 @@ impl<'a> X8Rows<'a> {
     }
     fn with(data: &'a [u8], rows: usize, cols: usize, q4: bool) -> Option<Self> {
         let groups = rows.div_ceil(Q8X8_ROWS);
-        let m = X8Rows { data, rows, cols, q4 };
+        let m = X8Rows {
+            data,
+            rows,
+            cols,
+            q4,
+        };
         if cols % Q8_BLOCK != 0 || groups.checked_mul(m.group_bytes())? != data.len() {
             return None;
         }
@@ -429,7 +551,11 @@ impl<'a> X8Rows<'a> {
         let gb = self.group_bytes();
         let nb = self.cols / Q8_BLOCK;
         let g = &self.data[t * gb..(t + 1) * gb];
-        let tile = if self.q4 { simd::PackedQ8::from_q4_group(g, nb) } else { simd::PackedQ8::from_group(g, nb) };
+        let tile = if self.q4 {
+            simd::PackedQ8::from_q4_group(g, nb)
+        } else {
+            simd::PackedQ8::from_group(g, nb)
+        };
         tile.unwrap_or_else(|| unreachable!("group length checked by new"))
     }
     /// Stored bytes of the groups holding rows `r0..r1` (clamped; contiguous).
@@ -468,7 +594,10 @@ pub const Q4_BLOCK_BYTES: usize = 18;
 /// both layouts, so every Q8 kernel computes the Q4 product.
 #[inline]
 pub fn expand_q4(src: &[u8], dst: &mut [u8]) {
-    for (s, d) in src.chunks_exact(Q4_BLOCK_BYTES).zip(dst.chunks_exact_mut(Q8_BLOCK_BYTES)) {
+    for (s, d) in src
+        .chunks_exact(Q4_BLOCK_BYTES)
+        .zip(dst.chunks_exact_mut(Q8_BLOCK_BYTES))
+    {
         d[0] = s[0];
         d[1] = s[1];
         let (lo, hi) = d[2..].split_at_mut(16);
@@ -496,7 +625,12 @@ const CHUNK_BLOCKS: usize = ACT_CHUNK / Q8_BLOCK;
 impl<'a> Q4Rows<'a> {
     /// None unless `cols % 32 == 0` and `data.len() == rows * cols / 32 * 18`.
     pub fn new(data: &'a [u8], rows: usize, cols: usize) -> Option<Self> {
-        if cols % Q8_BLOCK != 0 || rows.checked_mul(cols / Q8_BLOCK)?.checked_mul(Q4_BLOCK_BYTES)? != data.len() {
+        if cols % Q8_BLOCK != 0
+            || rows
+                .checked_mul(cols / Q8_BLOCK)?
+                .checked_mul(Q4_BLOCK_BYTES)?
+                != data.len()
+        {
             return None;
         }
         Some(Q4Rows { data, rows, cols })
@@ -520,7 +654,10 @@ impl ExpandsToQ8 for Q4Rows<'_> {
     }
     #[inline]
     fn expand_blocks(&self, r: usize, b0: usize, nb: usize, dst: &mut [u8]) {
-        expand_q4(&self.row(r)[b0 * Q4_BLOCK_BYTES..(b0 + nb) * Q4_BLOCK_BYTES], dst);
+        expand_q4(
+            &self.row(r)[b0 * Q4_BLOCK_BYTES..(b0 + nb) * Q4_BLOCK_BYTES],
+            dst,
+        );
     }
 }
 
@@ -542,7 +679,11 @@ fn expanded_blocks<W: ExpandsToQ8>(w: &W, r: usize, mut f: impl FnMut(usize, f32
     let mut q8 = [0u8; Q8_BLOCK_BYTES];
     for b in 0..w.dims().1 / Q8_BLOCK {
         w.expand_blocks(r, b, 1, &mut q8);
-        f(b * Q8_BLOCK, f16_to_f32(u16::from_le_bytes([q8[0], q8[1]])), &q8[2..]);
+        f(
+            b * Q8_BLOCK,
+            f16_to_f32(u16::from_le_bytes([q8[0], q8[1]])),
+            &q8[2..],
+        );
     }
 }
 
@@ -564,7 +705,11 @@ impl<W: ExpandsToQ8> RowMatrix for W {
         let nb = x.len() / Q8_BLOCK;
         let mut buf = [0u8; CHUNK_BLOCKS * Q8_BLOCK_BYTES];
         self.expand_blocks(r, c0 / Q8_BLOCK, nb, &mut buf);
-        simd::dot_q8(&buf[..nb * Q8_BLOCK_BYTES], &act.q[0][..nb * Q8_BLOCK], &act.d[0][..nb])
+        simd::dot_q8(
+            &buf[..nb * Q8_BLOCK_BYTES],
+            &act.q[0][..nb * Q8_BLOCK],
+            &act.d[0][..nb],
+        )
     }
     #[inline]
     fn dot_tile(&self, o: [usize; TN], c0: usize, x: [&[f32]; TM], act: &Q8Act) -> Tile {
@@ -576,10 +721,14 @@ impl<W: ExpandsToQ8> RowMatrix for W {
         tile_q8_act(bufs.each_ref().map(|b| &b[..nb * Q8_BLOCK_BYTES]), nb, act)
     }
     fn axpy(&self, r: usize, a: f32, y: &mut [f32]) {
-        expanded_blocks(self, r, |c, d, q| q8_block_axpy(a * d, q, &mut y[c..c + Q8_BLOCK]));
+        expanded_blocks(self, r, |c, d, q| {
+            q8_block_axpy(a * d, q, &mut y[c..c + Q8_BLOCK])
+        });
     }
     fn row_into(&self, r: usize, out: &mut [f32]) {
-        expanded_blocks(self, r, |c, d, q| q8_block_into(d, q, &mut out[c..c + Q8_BLOCK]));
+        expanded_blocks(self, r, |c, d, q| {
+            q8_block_into(d, q, &mut out[c..c + Q8_BLOCK])
+        });
     }
 }
 

@@ -4,7 +4,10 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
-use crate::kernels::{attention, attention_ahead, layernorm, linear_each, linear_each_with, linear_gelu_with, linear_with, KvRows, Mask, Q8Room};
+use crate::kernels::{
+    attention, attention_ahead, layernorm, linear_each, linear_each_with, linear_gelu_with,
+    linear_with, KvRows, Mask, Q8Room,
+};
 use crate::nn::weights::{BlockW, Linear};
 
 /// Working memory of one block over at most `rows` rows of width `c`.
@@ -54,7 +57,10 @@ impl<'s> BlockScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, c: usize) -> Result<Self, ArenaError> {
         let mut s = Self::carve_keys(a, rows, rows, c)?;
         s.att = a.f32(rows.checked_mul(c).ok_or(ArenaError::Overflow)?)?;
-        let values = rows.checked_mul(c).and_then(|v| v.checked_mul(4)).ok_or(ArenaError::Overflow)?;
+        let values = rows
+            .checked_mul(c)
+            .and_then(|v| v.checked_mul(4))
+            .ok_or(ArenaError::Overflow)?;
         s.panel = Q8Room::carve(a, values)?;
         Ok(s)
     }
@@ -62,7 +68,12 @@ impl<'s> BlockScratch<'s> {
     /// see at most `keys` keys (a chunk of rows attending a longer cache):
     /// a streaming session's, without `att` (the attention output goes
     /// over `ln`).
-    pub fn carve_keys<A: Carve<'s>>(a: &mut A, rows: usize, keys: usize, c: usize) -> Result<Self, ArenaError> {
+    pub fn carve_keys<A: Carve<'s>>(
+        a: &mut A,
+        rows: usize,
+        keys: usize,
+        c: usize,
+    ) -> Result<Self, ArenaError> {
         let rc = rows.checked_mul(c).ok_or(ArenaError::Overflow)?;
         Ok(BlockScratch {
             ln: a.f32(rc)?,
@@ -84,7 +95,15 @@ impl<'s> BlockScratch<'s> {
         let rc = self.ln.len();
         let (q, rest) = self.work.split_at_mut(rc);
         let (k, rest) = rest.split_at_mut(rc);
-        QkvParts { ln: self.ln, q, k, v: &mut rest[..rc], att: self.att, scores: self.scores, panel: self.panel.reborrow() }
+        QkvParts {
+            ln: self.ln,
+            q,
+            k,
+            v: &mut rest[..rc],
+            att: self.att,
+            scores: self.scores,
+            panel: self.panel.reborrow(),
+        }
     }
 
     /// The MLP-phase buffers: LayerNorm output (then the MLP output), hidden rows (rows, 4C), int8 panel.
@@ -105,13 +124,32 @@ fn add(x: &mut [f32], y: &[f32]) {
 
 /// One block over all rows of `x` (n, C) in place; `n <= s.rows` (callers
 /// size the scratch). `mask` relates query row i to key row j of `x`.
-pub fn block_forward<M: Mask>(w: &BlockW<'_>, x: &mut [f32], c: usize, n_head: usize, mask: &M, s: &mut BlockScratch<'_>) {
+pub fn block_forward<M: Mask>(
+    w: &BlockW<'_>,
+    x: &mut [f32],
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    s: &mut BlockScratch<'_>,
+) {
     let nc = x.len();
     let n = nc / c;
     let mut p = s.qkv();
-    let (ln, q, k, v, att) = (&mut p.ln[..nc], &mut p.q[..nc], &mut p.k[..nc], &mut p.v[..nc], &mut p.att[..nc]);
+    let (ln, q, k, v, att) = (
+        &mut p.ln[..nc],
+        &mut p.q[..nc],
+        &mut p.k[..nc],
+        &mut p.v[..nc],
+        &mut p.att[..nc],
+    );
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    linear_each_with(ln, [&w.query.w, &w.key.w, &w.value.w], [w.query.b, w.key.b, w.value.b], [q, k, v], &mut p.panel);
+    linear_each_with(
+        ln,
+        [&w.query.w, &w.key.w, &w.value.w],
+        [w.query.b, w.key.b, w.value.b],
+        [q, k, v],
+        &mut p.panel,
+    );
     attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att);
     lin(att, &w.proj, ln, &mut p.panel);
     add(x, ln);
@@ -150,9 +188,21 @@ pub fn block_forward_rows<M: Mask>(
     let r = rows.len();
     let rc = r * c;
     let mut p = s.qkv();
-    let (ln, q, k, v, att) = (&mut p.ln[..nc], &mut p.q[..rc], &mut p.k[..nc], &mut p.v[..nc], &mut p.att[..nc]);
+    let (ln, q, k, v, att) = (
+        &mut p.ln[..nc],
+        &mut p.q[..rc],
+        &mut p.k[..nc],
+        &mut p.v[..nc],
+        &mut p.att[..nc],
+    );
     layernorm(x, w.ln1.w, w.ln1.b, ln);
-    linear_each_with(ln, [&w.key.w, &w.value.w], [w.key.b, w.value.b], [k, v], &mut p.panel);
+    linear_each_with(
+        ln,
+        [&w.key.w, &w.value.w],
+        [w.key.b, w.value.b],
+        [k, v],
+        &mut p.panel,
+    );
     // Gather the selected rows of ln1(x) and of x.
     for (i, &row) in rows.iter().enumerate() {
         let (a, b) = (row * c, (row + 1) * c);
@@ -192,15 +242,32 @@ pub fn block_kv(w: &BlockW<'_>, x: &[f32], ln: &mut [f32], k: &mut [f32], v: &mu
 /// independently: `linear_rows_do_not_depend_on_the_batch`). While group
 /// `g` attends, group `g + 1`'s keys and values (their first run) are
 /// prefetched (`attention_ahead`; no number depends on it).
-pub fn block_attend_groups<'k, M, F>(w: &BlockW<'_>, x: &mut [f32], bounds: &[usize], c: usize, n_head: usize, keys: F, s: &mut BlockScratch<'_>) -> Result<(), Error>
+pub fn block_attend_groups<'k, M, F>(
+    w: &BlockW<'_>,
+    x: &mut [f32],
+    bounds: &[usize],
+    c: usize,
+    n_head: usize,
+    keys: F,
+    s: &mut BlockScratch<'_>,
+) -> Result<(), Error>
 where
     M: Mask,
     F: Fn(usize) -> Result<(KvRows<'k>, KvRows<'k>, M), Error>,
 {
     let nc = x.len();
     let groups = bounds.len().saturating_sub(1);
-    if c == 0 || !nc.is_multiple_of(c) || bounds.first() != Some(&0) || bounds.last() != Some(&(nc / c)) || nc > s.ln.len() {
-        return Err(Error::Length { buffer: Buffer::Features, len: nc, expected: bounds.last().copied().unwrap_or(0) * c });
+    if c == 0
+        || !nc.is_multiple_of(c)
+        || bounds.first() != Some(&0)
+        || bounds.last() != Some(&(nc / c))
+        || nc > s.ln.len()
+    {
+        return Err(Error::Length {
+            buffer: Buffer::Features,
+            len: nc,
+            expected: bounds.last().copied().unwrap_or(0) * c,
+        });
     }
     let mut p = s.qkv();
     let (ln, q, scores) = (&mut p.ln[..nc], &mut p.q[..nc], p.scores);
@@ -212,16 +279,38 @@ where
     for g in 0..groups {
         let (a, b) = (bounds[g], bounds[g + 1]);
         if b < a {
-            return Err(Error::Length { buffer: Buffer::Features, len: a, expected: b });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: a,
+                expected: b,
+            });
         }
         let (k, v, mask) = keys(g)?;
         let nk = k.rows(c);
         if nk > scores.len() {
-            return Err(Error::Length { buffer: Buffer::Features, len: nk, expected: scores.len() });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: nk,
+                expected: scores.len(),
+            });
         }
         // The next group's keys and values stream in while this one computes.
-        let ahead = if g + 1 < groups { keys(g + 1).map(|(k, v, _)| [k.lead_bytes(), v.lead_bytes()])? } else { [&[][..], &[][..]] };
-        attention_ahead(&q[a * c..b * c], k, v, c, n_head, &mask, &mut scores[..nk], &mut att[a * c..b * c], ahead);
+        let ahead = if g + 1 < groups {
+            keys(g + 1).map(|(k, v, _)| [k.lead_bytes(), v.lead_bytes()])?
+        } else {
+            [&[][..], &[][..]]
+        };
+        attention_ahead(
+            &q[a * c..b * c],
+            k,
+            v,
+            c,
+            n_head,
+            &mask,
+            &mut scores[..nk],
+            &mut att[a * c..b * c],
+            ahead,
+        );
     }
     lin(att, &w.proj, q, &mut p.panel);
     add(x, q);

@@ -33,7 +33,12 @@ fn dims(vqs: &[VqConfig]) -> (usize, usize, usize, usize) {
     let mut bins = 0u32;
     for vq in vqs {
         let inner = vq.res_inner().unwrap_or(0);
-        ch = ch.max(vq.width).max(inner).max(vq.emb_width).max(vq.in_channels).max(vq.rot_channels);
+        ch = ch
+            .max(vq.width)
+            .max(inner)
+            .max(vq.emb_width)
+            .max(vq.in_channels)
+            .max(vq.rot_channels);
         k = k.max(2 * vq.stride_t);
         s = s.max(vq.stride_t);
         bins = bins.max(vq.l_bins);
@@ -43,7 +48,11 @@ fn dims(vqs: &[VqConfig]) -> (usize, usize, usize, usize) {
 
 impl<'s> ConvScratch<'s> {
     /// Scratch for every VQ-VAE in `vqs` (a model's whole set).
-    pub fn carve<A: Carve<'s>>(a: &mut A, vqs: &[VqConfig], rows: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        vqs: &[VqConfig],
+        rows: usize,
+    ) -> Result<Self, ArenaError> {
         let (ch, k, s, bins) = dims(vqs);
         let n = rows.checked_mul(ch).ok_or(ArenaError::Overflow)?;
         Ok(ConvScratch {
@@ -67,7 +76,14 @@ pub fn conv(w: &ConvW<'_>, x: &[f32], y: &mut [f32], col: &mut [f32]) {
 
 /// `Resnet1D` in place over `x` (len, width): per block
 /// `x += conv_1x1(relu(conv_dil(relu(x))))`. `r`, `h`: >= len * width / inner.
-pub fn resnet(blocks: &ResnetW<'_>, x: &mut [f32], len: usize, r: &mut [f32], h: &mut [f32], col: &mut [f32]) {
+pub fn resnet(
+    blocks: &ResnetW<'_>,
+    x: &mut [f32],
+    len: usize,
+    r: &mut [f32],
+    h: &mut [f32],
+    col: &mut [f32],
+) {
     for blk in blocks {
         let (w, inner) = (blk.conv_dil.c_in, blk.conv_dil.c_out);
         let (x, r, h) = (&mut x[..len * w], &mut r[..len * w], &mut h[..len * inner]);

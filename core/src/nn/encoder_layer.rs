@@ -15,8 +15,10 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::kernels::simd;
-use crate::kernels::{layernorm, linear, relu_inplace};
+use crate::kernels::{layernorm, linear, relu_inplace, RowData};
+use crate::kernels::{F32Rows, Matrix};
 use crate::nn::bind::{BindError, Binder, TensorSource};
+use crate::nn::kv_store::{KvBuf, KvType};
 use crate::nn::names::{name, Emit, Role, SchemaError};
 use crate::nn::weights::{LayerNormW, Linear};
 
@@ -36,11 +38,19 @@ pub struct EncoderLayerW<'a> {
 }
 
 /// Binds the layer under `prefix` (e.g. `...transformer_encoder.layers.0`).
-pub fn bind_encoder_layer<'a, S: TensorSource<'a>>(b: &Binder<'_, S>, prefix: &str, d: u32, f: u32) -> Result<EncoderLayerW<'a>, BindError> {
+pub fn bind_encoder_layer<'a, S: TensorSource<'a>>(
+    b: &Binder<'_, S>,
+    prefix: &str,
+    d: u32,
+    f: u32,
+) -> Result<EncoderLayerW<'a>, BindError> {
     let p = |s: &str| name(format_args!("{prefix}.{s}"));
     let d3 = d.checked_mul(3).ok_or(BindError::Capacity)?;
     Ok(EncoderLayerW {
-        in_proj: Linear { w: b.matrix(p("self_attn.in_proj_weight")?, &[d3, d])?, b: Some(b.get(p("self_attn.in_proj_bias")?, &[d3])?) },
+        in_proj: Linear {
+            w: b.matrix(p("self_attn.in_proj_weight")?, &[d3, d])?,
+            b: Some(b.get(p("self_attn.in_proj_bias")?, &[d3])?),
+        },
         out_proj: b.linear(&p("self_attn.out_proj")?, d, d, true)?,
         linear1: b.linear(&p("linear1")?, f, d, true)?,
         linear2: b.linear(&p("linear2")?, d, f, true)?,
@@ -50,7 +60,12 @@ pub fn bind_encoder_layer<'a, S: TensorSource<'a>>(b: &Binder<'_, S>, prefix: &s
 }
 
 /// Lists the layer's tensors (the order of torch's `state_dict`).
-pub fn emit_encoder_layer<E: From<SchemaError>>(e: &mut Emit<'_, E>, prefix: &str, d: u32, f: u32) -> Result<(), E> {
+pub fn emit_encoder_layer<E: From<SchemaError>>(
+    e: &mut Emit<'_, E>,
+    prefix: &str,
+    d: u32,
+    f: u32,
+) -> Result<(), E> {
     let p = |s: &str| name(format_args!("{prefix}.{s}"));
     e.t(p("self_attn.in_proj_weight")?, &[3 * d, d], Role::Linear)?;
     e.t(p("self_attn.in_proj_bias")?, &[3 * d], Role::Vector)?;
@@ -68,6 +83,11 @@ pub struct EncoderLayerScratch<'s> {
     qkv: &'s mut [f32],
     /// (rows, d): attention output, then the FFN output.
     att: &'s mut [f32],
+    /// (rows, d): the queries, head-major (head h: (rows, d / n_head)),
+    /// then each head's attention output in the same place.
+    q: &'s mut [f32],
+    /// (rows, rows): one head's attention probabilities.
+    probs: &'s mut [f32],
     /// (rows, d): out_proj output + residual, then FFN output + residual.
     sum: &'s mut [f32],
     /// (rows, f): FFN hidden rows.
@@ -77,11 +97,18 @@ pub struct EncoderLayerScratch<'s> {
 }
 
 impl<'s> EncoderLayerScratch<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, d: usize, f: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        rows: usize,
+        d: usize,
+        f: usize,
+    ) -> Result<Self, ArenaError> {
         let rd = rows.checked_mul(d).ok_or(ArenaError::Overflow)?;
         Ok(EncoderLayerScratch {
             qkv: a.f32(rd.checked_mul(3).ok_or(ArenaError::Overflow)?)?,
             att: a.f32(rd)?,
+            q: a.f32(rd)?,
+            probs: a.f32(rows.checked_mul(rows).ok_or(ArenaError::Overflow)?)?,
             sum: a.f32(rd)?,
             hid: a.f32(rows.checked_mul(f).ok_or(ArenaError::Overflow)?)?,
             scores: a.f32(rows)?,
@@ -91,6 +118,13 @@ impl<'s> EncoderLayerScratch<'s> {
     /// Rows this scratch was carved for.
     pub fn rows(&self) -> usize {
         self.scores.len()
+    }
+
+    /// After [`encoder_layer`] over `n` rows of width `d`: each row's
+    /// q | k | v (n, 3d) of that layer (what a cache of its keys and values
+    /// keeps: [`encoder_layer_rows`]).
+    pub fn qkv(&self, n: usize, d: usize) -> &[f32] {
+        &self.qkv[..(3 * n * d).min(self.qkv.len())]
     }
 }
 
@@ -104,7 +138,15 @@ impl<'s> EncoderLayerScratch<'s> {
 /// `keep` serves a last layer of which only the first rows are read (the
 /// cross-modal net's conditioning rows). The caller sizes the scratch
 /// (`n <= rows`) and checks `bias.len() == n * n`.
-pub fn encoder_layer(w: &EncoderLayerW<'_>, x: &mut [f32], d: usize, n_head: usize, bias: Option<&[f32]>, keep: usize, s: &mut EncoderLayerScratch<'_>) {
+pub fn encoder_layer(
+    w: &EncoderLayerW<'_>,
+    x: &mut [f32],
+    d: usize,
+    n_head: usize,
+    bias: Option<&[f32]>,
+    keep: usize,
+    s: &mut EncoderLayerScratch<'_>,
+) {
     if d == 0 || n_head == 0 {
         return;
     }
@@ -116,26 +158,241 @@ pub fn encoder_layer(w: &EncoderLayerW<'_>, x: &mut [f32], d: usize, n_head: usi
     let qkv = &mut s.qkv[..3 * nd];
     linear(x, &w.in_proj.w, w.in_proj.b, qkv);
     // (keep, d) attention output of the kept query rows.
-    let att = &mut s.att[..kd];
-    self_attention(qkv, n, d, n_head, bias, keep, &mut s.scores[..n], att);
-    // x = norm1(x + out_proj(att)) over the kept rows.
+    match bias {
+        Some(_) => self_attention(
+            qkv,
+            n,
+            d,
+            n_head,
+            bias,
+            keep,
+            &mut s.scores[..n],
+            &mut s.att[..kd],
+        ),
+        None if f >= d && s.probs.len() >= keep * n => attention_gemm(n, d, n_head, keep, s),
+        None => self_attention(
+            qkv,
+            n,
+            d,
+            n_head,
+            None,
+            keep,
+            &mut s.scores[..n],
+            &mut s.att[..kd],
+        ),
+    }
+    after_attention(w, &mut x[..kd], d, f, s);
+}
+
+/// The rest of the layer over the rows `x` (m, d) whose attention output
+/// is in `s.att[..m d]`: `x = norm1(x + out_proj(att))`, then
+/// `x = norm2(x + linear2(relu(linear1(x))))`.
+fn after_attention(
+    w: &EncoderLayerW<'_>,
+    x: &mut [f32],
+    d: usize,
+    f: usize,
+    s: &mut EncoderLayerScratch<'_>,
+) {
+    let kd = x.len();
+    let m = kd / d;
     let sum = &mut s.sum[..kd];
-    linear(att, &w.out_proj.w, w.out_proj.b, sum);
-    add(sum, &x[..kd]);
-    layernorm(sum, w.norm1.w, w.norm1.b, &mut x[..kd]);
-    // x = norm2(x + linear2(relu(linear1(x)))).
-    let hid = &mut s.hid[..keep * f];
-    linear(&x[..kd], &w.linear1.w, w.linear1.b, hid);
+    linear(&s.att[..kd], &w.out_proj.w, w.out_proj.b, sum);
+    add(sum, x);
+    layernorm(sum, w.norm1.w, w.norm1.b, x);
+    let hid = &mut s.hid[..m * f];
+    linear(x, &w.linear1.w, w.linear1.b, hid);
     relu_inplace(hid);
     let ff = &mut s.att[..kd];
     linear(hid, &w.linear2.w, w.linear2.b, ff);
-    add(ff, &x[..kd]);
-    layernorm(ff, w.norm2.w, w.norm2.b, &mut x[..kd]);
+    add(ff, x);
+    layernorm(ff, w.norm2.w, w.norm2.b, x);
+}
+
+/// Where a layer's keys and values of `n` rows are kept between calls of
+/// [`encoder_layer_rows`]: `k`, `v` (n, d) each in a [`KvBuf`]'s storage
+/// (f32, or f16 rounded once when stored), a row per slot.
+pub struct LayerKv<'s> {
+    pub k: KvBuf<'s>,
+    pub v: KvBuf<'s>,
+}
+
+impl<'s> LayerKv<'s> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        kv: KvType,
+        n: usize,
+        d: usize,
+    ) -> Result<Self, ArenaError> {
+        let nd = n.checked_mul(d).ok_or(ArenaError::Overflow)?;
+        Ok(LayerKv {
+            k: KvBuf::carve(a, kv, nd)?,
+            v: KvBuf::carve(a, kv, nd)?,
+        })
+    }
+
+    /// Stores the keys and values of `qkv` (n, 3d), row `j` into slot `j`
+    /// (what [`EncoderLayerScratch::qkv`] holds after a whole layer).
+    pub fn store_all(&mut self, qkv: &[f32], d: usize) {
+        for (j, row) in qkv.chunks_exact(3 * d).enumerate() {
+            // In range: the caller carved n >= the rows of `qkv`.
+            let _ = self.k.store(j * d, &row[d..2 * d]);
+            let _ = self.v.store(j * d, &row[2 * d..]);
+        }
+    }
+}
+
+/// The score bias of [`encoder_layer_rows`]: `bias` (L, L) by window
+/// position, `pos[j]` the current position of the row in slot `j`.
+#[derive(Clone, Copy, Debug)]
+pub struct SlotBias<'x> {
+    pub bias: &'x [f32],
+    pub pos: &'x [u32],
+}
+
+/// One layer over only some rows of a sequence whose other rows' keys and
+/// values are kept in `kv` from earlier calls: `x` (m, d) holds the rows
+/// to compute (in place), `slots[r]` the slot of row r. Their keys and
+/// values are stored into their slots first (replacing what was there);
+/// then each row attends to every slot of `kv` (n rows, no mask; with
+/// `bias`, query r's score of slot j gets `bias[pos[slots[r]] L + pos[j]]`),
+/// and the rest of the layer is [`encoder_layer`]'s. With every slot's keys
+/// and values from the same layer inputs, a row's numbers are those of
+/// the whole layer up to the order of the softmax sums; with keys and values
+/// kept from earlier inputs (stale rows), it is an approximation
+/// (Transflower's stale-rows S mode). Scratch: `m` and `n` rows.
+#[allow(clippy::too_many_arguments)]
+pub fn encoder_layer_rows(
+    w: &EncoderLayerW<'_>,
+    x: &mut [f32],
+    d: usize,
+    n_head: usize,
+    kv: &mut LayerKv<'_>,
+    slots: &[u32],
+    bias: Option<SlotBias<'_>>,
+    s: &mut EncoderLayerScratch<'_>,
+) {
+    if d == 0 || n_head == 0 || !d.is_multiple_of(n_head) {
+        return;
+    }
+    let m = (x.len() / d).min(slots.len());
+    let n = kv.k.len() / d;
+    let f = w.linear1.w.rows();
+    let qkv = &mut s.qkv[..3 * m * d];
+    linear(&x[..m * d], &w.in_proj.w, w.in_proj.b, qkv);
+    for (r, &slot) in slots[..m].iter().enumerate() {
+        let row = &qkv[r * 3 * d..(r + 1) * 3 * d];
+        // A slot outside the cache leaves it unchanged (callers pass slots < n).
+        let at = slot as usize * d;
+        let _ = kv.k.store(at, &row[d..2 * d]);
+        let _ = kv.v.store(at, &row[2 * d..]);
+    }
+    let hd = d / n_head;
+    let scale = 1.0 / libm::sqrtf(hd as f32);
+    let scores = &mut s.scores[..n];
+    let (Ok(kd), Ok(vd)) = (kv.k.view(0, n * d), kv.v.view(0, n * d)) else {
+        return;
+    };
+    for r in 0..m {
+        for h in 0..n_head {
+            let q = &qkv[r * 3 * d + h * hd..][..hd];
+            match kd {
+                RowData::F32(k) => simd::dot_rows(q, &k[h * hd..], d, scores),
+                RowData::F16(k) => simd::dot_rows_f16(q, &k[h * hd..], d, scores),
+            }
+            let max = match bias {
+                None => simd::scale_max(scores, scale, f32::NEG_INFINITY),
+                Some(b) => {
+                    let l = b.pos.len();
+                    let qp = b.pos[slots[r] as usize] as usize;
+                    let row = &b.bias[qp * l..(qp + 1) * l];
+                    let mut max = f32::NEG_INFINITY;
+                    for (sc, &pj) in scores.iter_mut().zip(b.pos) {
+                        *sc = *sc * scale + row[pj as usize];
+                        max = max.max(*sc);
+                    }
+                    max
+                }
+            };
+            let sum = simd::exp_shifted_sum(scores, max);
+            let inv = if sum > 0.0 { 1.0 / sum } else { 0.0 };
+            for sc in scores.iter_mut() {
+                *sc *= inv;
+            }
+            let o = &mut s.att[r * d + h * hd..][..hd];
+            o.fill(0.0);
+            match vd {
+                RowData::F32(v) => simd::axpy_rows_f32(scores, &v[h * hd..], d, o),
+                RowData::F16(v) => simd::axpy_rows_f16(scores, &v[h * hd..], d, o),
+            }
+        }
+    }
+    after_attention(w, &mut x[..m * d], d, f, s);
 }
 
 fn add(y: &mut [f32], x: &[f32]) {
     for (a, b) in y.iter_mut().zip(x) {
         *a += b;
+    }
+}
+
+/// [`self_attention`] without a bias as GEMMs: per head, the scores
+/// (keep, n) = q_h k_h^T and the output (keep, hd) = p_h v_h through the
+/// f32 `linear` kernel (register tiles, threads), the softmax between as
+/// [`self_attention`] does it. Keys go head-major into `sum` (n, hd per
+/// head), values transposed into `hid` (hd, n per head), queries into `q`
+/// (keep, hd per head), where each head's output then lands; `att`
+/// (keep, d) gets them back row-major. `qkv` is left as it was
+/// ([`EncoderLayerScratch::qkv`]).
+fn attention_gemm(n: usize, d: usize, n_head: usize, keep: usize, s: &mut EncoderLayerScratch<'_>) {
+    let hd = d / n_head;
+    let scale = 1.0 / libm::sqrtf(hd as f32);
+    let qkv = &s.qkv[..3 * n * d];
+    let (q, k, vt) = (
+        &mut s.q[..keep * d],
+        &mut s.sum[..n * d],
+        &mut s.hid[..n * d],
+    );
+    for (j, row) in qkv.chunks_exact(3 * d).take(n).enumerate() {
+        for h in 0..n_head {
+            let (qh, kh, vh) = (
+                &row[h * hd..][..hd],
+                &row[d + h * hd..][..hd],
+                &row[2 * d + h * hd..][..hd],
+            );
+            if j < keep {
+                q[(h * keep + j) * hd..][..hd].copy_from_slice(qh);
+            }
+            k[(h * n + j) * hd..][..hd].copy_from_slice(kh);
+            for (t, &v) in vh.iter().enumerate() {
+                vt[(h * hd + t) * n + j] = v;
+            }
+        }
+    }
+    let probs = &mut s.probs[..keep * n];
+    for h in 0..n_head {
+        let (Some(kh), Some(vth)) = (
+            F32Rows::new(&k[h * n * hd..(h + 1) * n * hd], n, hd),
+            F32Rows::new(&vt[h * hd * n..(h + 1) * hd * n], hd, n),
+        ) else {
+            return;
+        };
+        let qh = &mut q[h * keep * hd..(h + 1) * keep * hd];
+        linear(qh, &Matrix::F32(kh), None, probs);
+        for p in probs.chunks_exact_mut(n) {
+            let max = simd::scale_max(p, scale, f32::NEG_INFINITY);
+            let sum = simd::exp_shifted_sum(p, max);
+            let inv = if sum > 0.0 { 1.0 / sum } else { 0.0 };
+            for v in p.iter_mut() {
+                *v *= inv;
+            }
+        }
+        linear(probs, &Matrix::F32(vth), None, qh);
+    }
+    for i in 0..keep {
+        for h in 0..n_head {
+            s.att[i * d + h * hd..][..hd].copy_from_slice(&q[(h * keep + i) * hd..][..hd]);
+        }
     }
 }
 
@@ -145,7 +402,16 @@ fn add(y: &mut [f32], x: &[f32]) {
 /// probability-weighted value rows (`simd::dot_rows`, `exp_shifted_sum`,
 /// `axpy_rows_f32`: the attention kernel's operations). `scores`: (n).
 #[allow(clippy::too_many_arguments)]
-fn self_attention(qkv: &[f32], n: usize, d: usize, n_head: usize, bias: Option<&[f32]>, keep: usize, scores: &mut [f32], out: &mut [f32]) {
+fn self_attention(
+    qkv: &[f32],
+    n: usize,
+    d: usize,
+    n_head: usize,
+    bias: Option<&[f32]>,
+    keep: usize,
+    scores: &mut [f32],
+    out: &mut [f32],
+) {
     let hd = d / n_head;
     let scale = 1.0 / libm::sqrtf(hd as f32);
     let stride = 3 * d;

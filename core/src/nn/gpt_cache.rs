@@ -23,12 +23,12 @@
 //! ([`KvRows::head_major_then`]), the same numbers as one stretch.
 
 use crate::arena::{ArenaError, Carve};
-use crate::nn::block::{block_attend_groups, block_kv, BlockScratch};
 use crate::error::{Buffer, Error};
 use crate::kernels::{KvRows, Mask};
-use crate::nn::weights::BlockW;
+use crate::nn::block::{block_attend_groups, block_kv, BlockScratch};
 use crate::nn::kv_store::KvBuf;
 pub use crate::nn::kv_store::KvType;
+use crate::nn::weights::BlockW;
 
 /// The most sessions a step batch holds.
 pub const MAX_BATCH: usize = 64;
@@ -88,11 +88,38 @@ pub struct GptCache<'s> {
 impl<'s> GptCache<'s> {
     /// Per layer (heads, streams * (m - 1), C / n_head) keys and values,
     /// and one window row's (the tail).
-    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, layers: usize, streams: usize, m: usize, c: usize, n_head: usize) -> Result<Self, ArenaError> {
-        let n = layers.checked_mul(streams).and_then(|v| v.checked_mul(m.saturating_sub(1))).and_then(|v| v.checked_mul(c)).ok_or(ArenaError::Overflow)?;
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        kv: KvType,
+        layers: usize,
+        streams: usize,
+        m: usize,
+        c: usize,
+        n_head: usize,
+    ) -> Result<Self, ArenaError> {
+        let n = layers
+            .checked_mul(streams)
+            .and_then(|v| v.checked_mul(m.saturating_sub(1)))
+            .and_then(|v| v.checked_mul(c))
+            .ok_or(ArenaError::Overflow)?;
         let t = streams.checked_mul(c).ok_or(ArenaError::Overflow)?;
-        let hd = c.checked_div(n_head).filter(|&hd| hd > 0 && hd * n_head == c).ok_or(ArenaError::Overflow)?;
-        Ok(GptCache { k: KvBuf::carve(a, kv, n)?, v: KvBuf::carve(a, kv, n)?, tail_k: KvBuf::carve(a, kv, t)?, tail_v: KvBuf::carve(a, kv, t)?, layers, streams, m, c, hd, rows: 0, lo: None })
+        let hd = c
+            .checked_div(n_head)
+            .filter(|&hd| hd > 0 && hd * n_head == c)
+            .ok_or(ArenaError::Overflow)?;
+        Ok(GptCache {
+            k: KvBuf::carve(a, kv, n)?,
+            v: KvBuf::carve(a, kv, n)?,
+            tail_k: KvBuf::carve(a, kv, t)?,
+            tail_v: KvBuf::carve(a, kv, t)?,
+            layers,
+            streams,
+            m,
+            c,
+            hd,
+            rows: 0,
+            lo: None,
+        })
     }
 
     /// Stream-rows cached per layer (all but the window's last row).
@@ -129,12 +156,20 @@ impl<'s> GptCache<'s> {
         let (c, hd, cap) = (self.c, self.hd, self.cap());
         let (rc, rt) = (r1.min(cap), r1.saturating_sub(cap));
         if rt > self.streams {
-            return Err(Error::Context { c: r1, max: cap + self.streams });
+            return Err(Error::Context {
+                c: r1,
+                max: cap + self.streams,
+            });
         }
         let base = l * cap * c;
         let end = base + (c - hd) * cap + rc * hd;
-        let rows = |d, tail| KvRows::head_major_then(d, rc, cap, hd, tail).ok_or(Error::Context { c: r1, max: cap });
-        Ok((rows(self.k.view(base, end)?, self.tail_k.view(0, rt * c)?)?, rows(self.v.view(base, end)?, self.tail_v.view(0, rt * c)?)?))
+        let rows = |d, tail| {
+            KvRows::head_major_then(d, rc, cap, hd, tail).ok_or(Error::Context { c: r1, max: cap })
+        };
+        Ok((
+            rows(self.k.view(base, end)?, self.tail_k.view(0, rt * c)?)?,
+            rows(self.v.view(base, end)?, self.tail_v.view(0, rt * c)?)?,
+        ))
     }
 
     /// Stores the new rows' K/V (`k`, `v`: (r1 - r0, C) f32) of layer `l`
@@ -143,7 +178,11 @@ impl<'s> GptCache<'s> {
     fn store(&mut self, l: usize, r0: usize, r1: usize, k: &[f32], v: &[f32]) -> Result<(), Error> {
         let (c, hd, cap) = (self.c, self.hd, self.cap());
         if k.len() != (r1 - r0) * c || v.len() != k.len() || r1 > cap + self.streams {
-            return Err(Error::Length { buffer: Buffer::Features, len: k.len(), expected: (r1 - r0) * c });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: k.len(),
+                expected: (r1 - r0) * c,
+            });
         }
         for (i, (kr, vr)) in k.chunks_exact(c).zip(v.chunks_exact(c)).enumerate() {
             let r = r0 + i;
@@ -174,19 +213,39 @@ impl<'s> GptCache<'s> {
     /// items without it skip the last layer's attention and MLP (only its
     /// K/V are kept). Other rows of `x` are scratch. An item's result is
     /// what an append of its own would give.
-    pub fn append_many<'w: 'b, 'b>(blocks: impl Iterator<Item = &'b BlockW<'w>> + Clone, n_head: usize, out_streams: usize, items: &mut [GptItem<'_, '_>], x: &mut [f32], s: &mut BlockScratch<'_>) -> Result<(), Error> {
-        let Some(first) = items.first() else { return Ok(()) };
+    pub fn append_many<'w: 'b, 'b>(
+        blocks: impl Iterator<Item = &'b BlockW<'w>> + Clone,
+        n_head: usize,
+        out_streams: usize,
+        items: &mut [GptItem<'_, '_>],
+        x: &mut [f32],
+        s: &mut BlockScratch<'_>,
+    ) -> Result<(), Error> {
+        let Some(first) = items.first() else {
+            return Ok(());
+        };
         let (st, c, layers) = (first.cache.streams, first.cache.c, first.cache.layers);
         if out_streams == 0 || out_streams > st {
-            return Err(Error::Length { buffer: Buffer::Features, len: out_streams, expected: st });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: out_streams,
+                expected: st,
+            });
         }
         if blocks.clone().count() != layers || items.len() > MAX_ITEMS {
-            return Err(Error::Context { c: items.len(), max: MAX_ITEMS });
+            return Err(Error::Context {
+                c: items.len(),
+                max: MAX_ITEMS,
+            });
         }
         // The caches are head-major for heads of `hd` lanes (carved with
         // `hd * heads == c`): other heads would read across them.
         if c.checked_div(n_head) != Some(first.cache.hd) {
-            return Err(Error::Length { buffer: Buffer::Features, len: n_head, expected: c / first.cache.hd });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: n_head,
+                expected: c / first.cache.hd,
+            });
         }
         // Row bounds of the items in `x`, and each item's first cached row.
         let mut bounds: Vec<usize, { MAX_ITEMS + 1 }> = Vec::new();
@@ -194,14 +253,27 @@ impl<'s> GptCache<'s> {
         let mut total = 0usize;
         for it in items.iter() {
             let ch = &it.cache;
-            if it.rows == 0 || ch.streams != st || ch.c != c || ch.hd != first.cache.hd || ch.layers != layers || ch.rows + it.rows > ch.m {
-                return Err(Error::Context { c: ch.rows + it.rows, max: ch.m });
+            if it.rows == 0
+                || ch.streams != st
+                || ch.c != c
+                || ch.hd != first.cache.hd
+                || ch.layers != layers
+                || ch.rows + it.rows > ch.m
+            {
+                return Err(Error::Context {
+                    c: ch.rows + it.rows,
+                    max: ch.m,
+                });
             }
             total += it.rows * st;
             bounds.push(total).map_err(|_| Error::State)?;
         }
         if x.len() != total * c || total * c > s.row_floats() {
-            return Err(Error::Length { buffer: Buffer::Features, len: x.len(), expected: total * c });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: x.len(),
+                expected: total * c,
+            });
         }
         let row0 = |it: &GptItem<'_, '_>| it.cache.rows * st;
         for (l, b) in blocks.enumerate() {
@@ -212,7 +284,8 @@ impl<'s> GptCache<'s> {
             for (i, it) in items.iter_mut().enumerate() {
                 let (a, z) = (bounds[i] * c, bounds[i + 1] * c);
                 let r0 = row0(it);
-                it.cache.store(l, r0, r0 + it.rows * st, &kn[a..z], &vn[a..z])?;
+                it.cache
+                    .store(l, r0, r0 + it.rows * st, &kn[a..z], &vn[a..z])?;
             }
             let items_ro: &[GptItem<'_, '_>] = items;
             if l + 1 < layers {
@@ -220,7 +293,14 @@ impl<'s> GptCache<'s> {
                     let it = &items_ro[g];
                     let r0 = row0(it);
                     let (k, v) = it.cache.visible(l, r0 + it.rows * st)?;
-                    Ok((k, v, RowCausal { streams: st, q_row0: r0 }))
+                    Ok((
+                        k,
+                        v,
+                        RowCausal {
+                            streams: st,
+                            q_row0: r0,
+                        },
+                    ))
                 };
                 block_attend_groups(b, x, &bounds, c, n_head, keys, s)?;
             } else {
@@ -243,7 +323,14 @@ impl<'s> GptCache<'s> {
                         let it = &items_ro[outs[g]];
                         let r1 = row0(it) + it.rows * st;
                         let (k, v) = it.cache.visible(l, r1)?;
-                        Ok((k, v, RowCausal { streams: st, q_row0: r1 - out_streams }))
+                        Ok((
+                            k,
+                            v,
+                            RowCausal {
+                                streams: st,
+                                q_row0: r1 - out_streams,
+                            },
+                        ))
                     };
                     let xs = &mut x[..outs.len() * out_streams * c];
                     block_attend_groups(b, xs, &ob, c, n_head, keys, s)?;
@@ -277,7 +364,12 @@ mod tests {
     fn row_causal_key_runs_equal_the_scan() {
         for streams in [1usize, 3, 10] {
             for q_row0 in [0usize, 1, 9, 10, 37] {
-                crate::tests::kernels::assert_key_runs_scan(&std::format!("row-causal streams={streams} q_row0={q_row0}"), &RowCausal { streams, q_row0 }, 2 * streams + 1, 6 * streams + 2);
+                crate::tests::kernels::assert_key_runs_scan(
+                    &std::format!("row-causal streams={streams} q_row0={q_row0}"),
+                    &RowCausal { streams, q_row0 },
+                    2 * streams + 1,
+                    6 * streams + 2,
+                );
             }
         }
     }
@@ -301,15 +393,37 @@ mod tests {
             let q: Vec<f32> = (0..nq * c).map(|_| next()).collect();
             let k: Vec<f32> = (0..nk * c).map(|_| next()).collect();
             let v: Vec<f32> = (0..nk * c).map(|_| next()).collect();
-            let k16: Vec<u16> = k.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
-            let v16: Vec<u16> = v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
-            let mask = RowCausal { streams: st, q_row0 };
+            let k16: Vec<u16> = k
+                .iter()
+                .map(|&x| half::f16::from_f32(x).to_bits())
+                .collect();
+            let v16: Vec<u16> = v
+                .iter()
+                .map(|&x| half::f16::from_f32(x).to_bits())
+                .collect();
+            let mask = RowCausal {
+                streams: st,
+                q_row0,
+            };
             let mut scores = std::vec![0f32; nk];
-            for (kr, vr) in [(KvRows::from(&k[..]), KvRows::from(&v[..])), (KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16)))] {
-                let (mut grouped, mut alone) = (std::vec![f32::NAN; nq * c], std::vec![f32::NAN; nq * c]);
+            for (kr, vr) in [
+                (KvRows::from(&k[..]), KvRows::from(&v[..])),
+                (
+                    KvRows::one(RowData::F16(&k16)),
+                    KvRows::one(RowData::F16(&v16)),
+                ),
+            ] {
+                let (mut grouped, mut alone) =
+                    (std::vec![f32::NAN; nq * c], std::vec![f32::NAN; nq * c]);
                 attention(&q, kr, vr, c, nh, &mask, &mut scores, &mut grouped);
                 attention(&q, kr, vr, c, nh, &Ungrouped(mask), &mut scores, &mut alone);
-                assert!(grouped.iter().zip(&alone).all(|(a, b)| a.to_bits() == b.to_bits()), "nq {nq} q_row0 {q_row0}: grouped queries differ from alone");
+                assert!(
+                    grouped
+                        .iter()
+                        .zip(&alone)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "nq {nq} q_row0 {q_row0}: grouped queries differ from alone"
+                );
             }
         }
     }

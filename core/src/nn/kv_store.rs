@@ -25,7 +25,11 @@ pub enum KvBuf<'s> {
 }
 
 fn out_of_range(at: usize, len: usize) -> Error {
-    Error::Length { buffer: Buffer::Output, len: at, expected: len }
+    Error::Length {
+        buffer: Buffer::Output,
+        len: at,
+        expected: len,
+    }
 }
 
 impl<'s> KvBuf<'s> {
@@ -48,12 +52,28 @@ impl<'s> KvBuf<'s> {
         self.len() == 0
     }
 
-    /// Stores `x` at elements `at .. at + x.len()` (f16: rounded to nearest).
+    /// Stores `x` at elements `at .. at + x.len()` (f16: rounded to nearest,
+    /// finite values beyond its range saturated to +-65504).
     pub fn store(&mut self, at: usize, x: &[f32]) -> Result<(), Error> {
-        let end = at.checked_add(x.len()).filter(|&e| e <= self.len()).ok_or(out_of_range(at, self.len()))?;
+        let end = at
+            .checked_add(x.len())
+            .filter(|&e| e <= self.len())
+            .ok_or(out_of_range(at, self.len()))?;
         match self {
             KvBuf::F32(d) => d[at..end].copy_from_slice(x),
-            KvBuf::F16(d) => crate::kernels::simd::narrow_f16(x, &mut d[at..end]),
+            KvBuf::F16(d) => {
+                let d = &mut d[at..end];
+                crate::kernels::simd::narrow_f16(x, d);
+                // A finite value beyond binary16's range is kept as the
+                // largest finite one of its sign, not infinity (an
+                // infinite key makes the softmax NaN): post-LN layers
+                // (Transflower) store keys of unnormalised rows.
+                for (h, &v) in d.iter_mut().zip(x) {
+                    if *h & 0x7fff == 0x7c00 && v.is_finite() {
+                        *h = (*h & 0x8000) | 0x7bff;
+                    }
+                }
+            }
         }
         Ok(())
     }
@@ -85,9 +105,19 @@ pub struct KvRing<'s> {
 }
 
 impl<'s> KvRing<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, cap: usize, width: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        kv: KvType,
+        cap: usize,
+        width: usize,
+    ) -> Result<Self, ArenaError> {
         let n = cap.checked_mul(width).ok_or(ArenaError::Overflow)?;
-        Ok(KvRing { data: KvBuf::carve(a, kv, n)?, cap, width, len: 0 })
+        Ok(KvRing {
+            data: KvBuf::carve(a, kv, n)?,
+            cap,
+            width,
+            len: 0,
+        })
     }
 
     pub fn clear(&mut self) {
@@ -111,7 +141,11 @@ impl<'s> KvRing<'s> {
     pub fn push(&mut self, row: &[f32]) -> Result<(), Error> {
         let w = self.width;
         if row.len() != w || self.cap == 0 {
-            return Err(Error::Length { buffer: Buffer::Output, len: row.len(), expected: w });
+            return Err(Error::Length {
+                buffer: Buffer::Output,
+                len: row.len(),
+                expected: w,
+            });
         }
         self.data.store((self.len % self.cap) * w, row)?;
         self.len += 1;
@@ -123,7 +157,11 @@ impl<'s> KvRing<'s> {
     pub fn rows(&self, lo: usize, hi: usize) -> Result<KvRows<'_>, Error> {
         let oldest = self.len.saturating_sub(self.cap);
         if lo > hi || lo < oldest || hi > self.len {
-            return Err(Error::Evicted { index: lo, oldest, len: self.len });
+            return Err(Error::Evicted {
+                index: lo,
+                oldest,
+                len: self.len,
+            });
         }
         let w = self.width;
         if lo == hi {
@@ -133,7 +171,29 @@ impl<'s> KvRing<'s> {
         if s + n <= self.cap {
             Ok(KvRows::one(self.data.view(s * w, (s + n) * w)?))
         } else {
-            Ok(KvRows::two(self.data.view(s * w, self.cap * w)?, self.data.view(0, (s + n - self.cap) * w)?))
+            Ok(KvRows::two(
+                self.data.view(s * w, self.cap * w)?,
+                self.data.view(0, (s + n - self.cap) * w)?,
+            ))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// f16 storage: values within range are rounded to nearest; finite
+    /// values beyond +-65504 are saturated (an infinite key would make the
+    /// softmax NaN); infinities and NaN stay what they are.
+    #[test]
+    fn f16_store_saturates_finite_overflow() {
+        let mut buf = [0u16; 6];
+        let mut kv = KvBuf::F16(&mut buf);
+        kv.store(0, &[1.0, -2.5, 1.0e6, -7.0e4, f32::INFINITY, 65504.0])
+            .unwrap();
+        let KvBuf::F16(d) = kv else { unreachable!() };
+        let back: [f32; 6] = core::array::from_fn(|i| crate::kernels::simd::f16_to_f32(d[i]));
+        assert_eq!(back, [1.0, -2.5, 65504.0, -65504.0, f32::INFINITY, 65504.0]);
     }
 }

@@ -6,8 +6,8 @@
 
 pub mod bind;
 pub mod block;
-pub mod encoder_layer;
 pub mod conv_stack;
+pub mod encoder_layer;
 pub mod gpt_cache;
 pub mod kv_store;
 pub mod names;

@@ -118,7 +118,10 @@ pub fn encoder_stage(vq: &str, i: u32) -> Result<TensorName, SchemaError> {
 
 /// Module prefix of decoder stage `i` (0 = input conv, 1..=down_t = Resnet1D `.0` + ConvTranspose `.1`).
 pub fn decoder_stage(vq: &str, kind: DecoderKind, i: u32) -> Result<TensorName, SchemaError> {
-    name(format_args!("{vq}.{}.0.level_blocks.0.model.{i}", kind.module()))
+    name(format_args!(
+        "{vq}.{}.0.level_blocks.0.model.{i}",
+        kind.module()
+    ))
 }
 
 /// Output conv of a decoder: `<vq>.<decoders|decoders_rot>.0.out`.
@@ -143,7 +146,11 @@ pub fn decoder_channels(vq: &VqConfig, kind: DecoderKind) -> u32 {
 /// Dilation of residual block `d` of a Resnet1D (`growth^d`; decoders
 /// use the reversed order, `vqvae_reverse_decoder_dilation: True`).
 pub fn dilation(vq: &VqConfig, d: u32, reversed: bool) -> u32 {
-    let e = if reversed { vq.depth - 1 - d.min(vq.depth - 1) } else { d };
+    let e = if reversed {
+        vq.depth - 1 - d.min(vq.depth - 1)
+    } else {
+        d
+    };
     vq.dilation_growth_rate.saturating_pow(e)
 }
 
@@ -157,7 +164,12 @@ impl<E: From<SchemaError>> Emit<'_, E> {
     pub fn t(&mut self, name: TensorName, dims: &[u32], role: Role) -> Result<(), E> {
         let mut shape = [1u32; 4];
         shape[..dims.len()].copy_from_slice(dims);
-        (self.f)(&TensorSpec { name, rank: dims.len() as u8, shape, role })
+        (self.f)(&TensorSpec {
+            name,
+            rank: dims.len() as u8,
+            shape,
+            role,
+        })
     }
     /// `<prefix>.weight` (`w`, read as `role`) and `<prefix>.bias` (`bias`).
     pub fn wb(&mut self, prefix: &str, w: &[u32], bias: u32, role: Role) -> Result<(), E> {
@@ -169,10 +181,25 @@ impl<E: From<SchemaError>> Emit<'_, E> {
         self.wb(&name(format_args!("{prefix}.ln1"))?, &[c], c, Role::Vector)?;
         self.wb(&name(format_args!("{prefix}.ln2"))?, &[c], c, Role::Vector)?;
         for p in ["key", "query", "value", "proj"] {
-            self.wb(&name(format_args!("{prefix}.attn.{p}"))?, &[c, c], c, Role::Linear)?;
+            self.wb(
+                &name(format_args!("{prefix}.attn.{p}"))?,
+                &[c, c],
+                c,
+                Role::Linear,
+            )?;
         }
-        self.wb(&name(format_args!("{prefix}.mlp.0"))?, &[4 * c, c], 4 * c, Role::Linear)?;
-        self.wb(&name(format_args!("{prefix}.mlp.2"))?, &[c, 4 * c], c, Role::Linear)
+        self.wb(
+            &name(format_args!("{prefix}.mlp.0"))?,
+            &[4 * c, c],
+            4 * c,
+            Role::Linear,
+        )?;
+        self.wb(
+            &name(format_args!("{prefix}.mlp.2"))?,
+            &[c, 4 * c],
+            c,
+            Role::Linear,
+        )
     }
     /// A Resnet1D whose convs are read as `conv` (encoder or decoder).
     pub fn resnet(&mut self, stage: &str, vq: &VqConfig, conv: Role) -> Result<(), E> {
@@ -189,11 +216,25 @@ impl<E: From<SchemaError>> Emit<'_, E> {
         for i in 0..vq.down_t {
             let stage = encoder_stage(vq_name, i)?;
             let c_in = if i == 0 { vq.in_channels } else { w };
-            self.wb(&name(format_args!("{stage}.0"))?, &[w, c_in, k], w, Role::EncoderConv)?;
+            self.wb(
+                &name(format_args!("{stage}.0"))?,
+                &[w, c_in, k],
+                w,
+                Role::EncoderConv,
+            )?;
             self.resnet(&name(format_args!("{stage}.1"))?, vq, Role::EncoderConv)?;
         }
-        self.wb(&encoder_stage(vq_name, vq.down_t)?, &[vq.emb_width, w, 3], vq.emb_width, Role::EncoderConv)?;
-        self.t(codebook_name(vq_name)?, &[vq.l_bins, vq.emb_width], Role::Codebook)?;
+        self.wb(
+            &encoder_stage(vq_name, vq.down_t)?,
+            &[vq.emb_width, w, 3],
+            vq.emb_width,
+            Role::EncoderConv,
+        )?;
+        self.t(
+            codebook_name(vq_name)?,
+            &[vq.l_bins, vq.emb_width],
+            Role::Codebook,
+        )?;
         for kind in [DecoderKind::Position, DecoderKind::Rotation] {
             if decoder_channels(vq, kind) > 0 {
                 self.decoder(vq_name, vq, kind)?;
@@ -205,13 +246,28 @@ impl<E: From<SchemaError>> Emit<'_, E> {
     pub fn decoder(&mut self, vq_name: &str, vq: &VqConfig, kind: DecoderKind) -> Result<(), E> {
         let (w, k) = (vq.width, 2 * vq.stride_t);
         let c_out = decoder_channels(vq, kind);
-        self.wb(&decoder_stage(vq_name, kind, 0)?, &[w, vq.emb_width, 3], w, Role::Conv)?;
+        self.wb(
+            &decoder_stage(vq_name, kind, 0)?,
+            &[w, vq.emb_width, 3],
+            w,
+            Role::Conv,
+        )?;
         for i in 0..vq.down_t {
             let stage = decoder_stage(vq_name, kind, i + 1)?;
             self.resnet(&name(format_args!("{stage}.0"))?, vq, Role::Conv)?;
             let out = if i + 1 == vq.down_t { vq.emb_width } else { w };
-            self.wb(&name(format_args!("{stage}.1"))?, &[w, out, k], out, Role::ConvTranspose)?;
+            self.wb(
+                &name(format_args!("{stage}.1"))?,
+                &[w, out, k],
+                out,
+                Role::ConvTranspose,
+            )?;
         }
-        self.wb(&decoder_out(vq_name, kind)?, &[c_out, vq.emb_width, 3], c_out, Role::Conv)
+        self.wb(
+            &decoder_out(vq_name, kind)?,
+            &[c_out, vq.emb_width, 3],
+            c_out,
+            Role::Conv,
+        )
     }
 }

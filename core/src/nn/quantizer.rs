@@ -31,7 +31,13 @@ pub fn nearest(codebook: &Matrix<'_>, kk: &[f32], x: &[f32]) -> u32 {
 }
 
 /// Codes of `feat` (n, emb): `codes` (n). `row`: (emb) scratch; `kk`: (l_bins).
-pub fn quantise(codebook: &Matrix<'_>, feat: &[f32], codes: &mut [u32], row: &mut [f32], kk: &mut [f32]) -> Result<(), Error> {
+pub fn quantise(
+    codebook: &Matrix<'_>,
+    feat: &[f32],
+    codes: &mut [u32],
+    row: &mut [f32],
+    kk: &mut [f32],
+) -> Result<(), Error> {
     let emb = codebook.cols();
     check_len(Buffer::Features, feat.len(), codes.len() * emb)?;
     let kk = &mut kk[..codebook.rows()];
@@ -43,12 +49,21 @@ pub fn quantise(codebook: &Matrix<'_>, feat: &[f32], codes: &mut [u32], row: &mu
 }
 
 /// Codebook rows of `codes` into `out` (n, emb).
-pub fn dequantise(codebook: &Matrix<'_>, codes: &[u32], stream: u8, out: &mut [f32]) -> Result<(), Error> {
+pub fn dequantise(
+    codebook: &Matrix<'_>,
+    codes: &[u32],
+    stream: u8,
+    out: &mut [f32],
+) -> Result<(), Error> {
     let emb = codebook.cols();
     check_len(Buffer::Features, out.len(), codes.len() * emb)?;
     for (&c, o) in codes.iter().zip(out.chunks_exact_mut(emb)) {
         if c as usize >= codebook.rows() {
-            return Err(Error::Token { stream, token: c, vocab: codebook.rows() as u32 });
+            return Err(Error::Token {
+                stream,
+                token: c,
+                vocab: codebook.rows() as u32,
+            });
         }
         codebook.row_into(c as usize, o);
     }

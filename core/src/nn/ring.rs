@@ -20,7 +20,12 @@ pub struct RowRing<'s> {
 impl<'s> RowRing<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, cap: usize, width: usize) -> Result<Self, ArenaError> {
         let n = cap.checked_mul(width).ok_or(ArenaError::Overflow)?;
-        Ok(RowRing { data: a.f32(n)?, cap, width, len: 0 })
+        Ok(RowRing {
+            data: a.f32(n)?,
+            cap,
+            width,
+            len: 0,
+        })
     }
 
     pub fn clear(&mut self) {
@@ -49,7 +54,11 @@ impl<'s> RowRing<'s> {
     pub fn push(&mut self, row: &[f32]) -> Result<(), Error> {
         let w = self.width;
         if row.len() != w || self.cap == 0 {
-            return Err(Error::Length { buffer: Buffer::Output, len: row.len(), expected: w });
+            return Err(Error::Length {
+                buffer: Buffer::Output,
+                len: row.len(),
+                expected: w,
+            });
         }
         let s = self.len % self.cap;
         self.data[s * w..(s + 1) * w].copy_from_slice(row);
@@ -61,7 +70,11 @@ impl<'s> RowRing<'s> {
     pub fn row(&self, i: usize) -> Result<&[f32], Error> {
         let oldest = self.len.saturating_sub(self.cap);
         if i < oldest || i >= self.len {
-            return Err(Error::Evicted { index: i, oldest, len: self.len });
+            return Err(Error::Evicted {
+                index: i,
+                oldest,
+                len: self.len,
+            });
         }
         let s = i % self.cap;
         Ok(&self.data[s * self.width..(s + 1) * self.width])
@@ -78,7 +91,11 @@ pub struct TokenRing<'s> {
 
 impl<'s> TokenRing<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, cap: usize, width: usize) -> Result<Self, ArenaError> {
-        Ok(TokenRing { data: a.u32(cap.checked_mul(width).ok_or(ArenaError::Overflow)?)?, width, len: 0 })
+        Ok(TokenRing {
+            data: a.u32(cap.checked_mul(width).ok_or(ArenaError::Overflow)?)?,
+            width,
+            len: 0,
+        })
     }
     pub fn clear(&mut self) {
         self.len = 0;
@@ -99,7 +116,11 @@ impl<'s> TokenRing<'s> {
     pub fn push(&mut self, row: &[u32]) -> Result<(), Error> {
         let (cap, w) = (self.cap(), self.width);
         if cap == 0 || row.len() != w {
-            return Err(Error::Length { buffer: Buffer::Tokens, len: row.len(), expected: w });
+            return Err(Error::Length {
+                buffer: Buffer::Tokens,
+                len: row.len(),
+                expected: w,
+            });
         }
         let s = self.len % cap;
         self.data[s * w..(s + 1) * w].copy_from_slice(row);
@@ -110,7 +131,11 @@ impl<'s> TokenRing<'s> {
         let (cap, w) = (self.cap(), self.width);
         let oldest = self.len.saturating_sub(cap);
         if i < oldest || i >= self.len {
-            return Err(Error::Evicted { index: i, oldest, len: self.len });
+            return Err(Error::Evicted {
+                index: i,
+                oldest,
+                len: self.len,
+            });
         }
         let s = i % cap;
         Ok(&self.data[s * w..(s + 1) * w])

@@ -42,12 +42,15 @@ use heapless::Vec;
 
 use crate::arena::{ArenaError, Carve};
 use crate::duolando::config::ModelConfig;
-use crate::nn::vq_config::VqConfig;
 use crate::error::{Buffer, Error};
-use crate::kernels::{conv1d, conv1d_col_len, conv1d_segs, conv_transpose1d_segs, convt_z_len, relu_inplace, ConvGeom, ConvSeg, Matrix};
+use crate::kernels::{
+    conv1d, conv1d_col_len, conv1d_segs, conv_transpose1d_segs, convt_z_len, relu_inplace,
+    ConvGeom, ConvSeg, Matrix,
+};
 use crate::limits::{MAX_DEPTH, MAX_DILATION, MAX_DOWNSAMPLE, MAX_DOWN_T, MAX_STRIDE, MAX_WIDTH};
-use crate::nn::weights::{ConvTW, ConvW, DecoderW, EncoderW, ResBlockW};
 use crate::nn::names::dilation;
+use crate::nn::vq_config::VqConfig;
+use crate::nn::weights::{ConvTW, ConvW, DecoderW, EncoderW, ResBlockW};
 
 /// Most stacks one [`StreamStack::push_many`] / [`StreamStack::output_many`]
 /// computes together (the sessions of a batch).
@@ -104,7 +107,15 @@ pub struct Unit {
     pub c_out: usize,
 }
 
-const EMPTY_UNIT: Unit = Unit { kind: UnitKind::Conv, kernel: 1, stride: 1, pad: 0, dilation: 1, c_in: 0, c_out: 0 };
+const EMPTY_UNIT: Unit = Unit {
+    kind: UnitKind::Conv,
+    kernel: 1,
+    stride: 1,
+    pad: 0,
+    dilation: 1,
+    c_in: 0,
+    c_out: 0,
+};
 
 /// `floor(a / b)` for `b > 0`.
 fn div_floor(a: isize, b: isize) -> isize {
@@ -117,19 +128,56 @@ fn div_ceil(a: isize, b: isize) -> isize {
 }
 
 impl Unit {
-    fn conv(kernel: usize, stride: usize, pad: usize, dilation: usize, c_in: usize, c_out: usize) -> Unit {
-        Unit { kind: UnitKind::Conv, kernel, stride, pad, dilation, c_in, c_out }
+    fn conv(
+        kernel: usize,
+        stride: usize,
+        pad: usize,
+        dilation: usize,
+        c_in: usize,
+        c_out: usize,
+    ) -> Unit {
+        Unit {
+            kind: UnitKind::Conv,
+            kernel,
+            stride,
+            pad,
+            dilation,
+            c_in,
+            c_out,
+        }
     }
     fn res(dil: usize, width: usize) -> Unit {
-        Unit { kind: UnitKind::Res, kernel: 3, stride: 1, pad: dil, dilation: dil, c_in: width, c_out: width }
+        Unit {
+            kind: UnitKind::Res,
+            kernel: 3,
+            stride: 1,
+            pad: dil,
+            dilation: dil,
+            c_in: width,
+            c_out: width,
+        }
     }
     fn convt(stride: usize, c_in: usize, c_out: usize) -> Unit {
-        Unit { kind: UnitKind::ConvT, kernel: 2 * stride, stride, pad: stride / 2, dilation: 1, c_in, c_out }
+        Unit {
+            kind: UnitKind::ConvT,
+            kernel: 2 * stride,
+            stride,
+            pad: stride / 2,
+            dilation: 1,
+            c_in,
+            c_out,
+        }
     }
 
     /// Output columns of the unit over `n_in` input columns (PyTorch's formulas).
     pub fn out_len(&self, n_in: usize) -> usize {
-        let (n, k, s, p, d) = (n_in as isize, self.kernel as isize, self.stride as isize, self.pad as isize, self.dilation as isize);
+        let (n, k, s, p, d) = (
+            n_in as isize,
+            self.kernel as isize,
+            self.stride as isize,
+            self.pad as isize,
+            self.dilation as isize,
+        );
         let len = match self.kind {
             UnitKind::ConvT if n == 0 => 0,
             UnitKind::ConvT => (n - 1) * s - 2 * p + k,
@@ -140,7 +188,12 @@ impl Unit {
 
     /// Smallest input index output `t` reads (may be negative: zero padding).
     pub fn first_in(&self, t: usize) -> isize {
-        let (t, k, s, p) = (t as isize, self.kernel as isize, self.stride as isize, self.pad as isize);
+        let (t, k, s, p) = (
+            t as isize,
+            self.kernel as isize,
+            self.stride as isize,
+            self.pad as isize,
+        );
         match self.kind {
             UnitKind::ConvT => div_ceil(t + p - (k - 1), s),
             _ => t * s - p,
@@ -149,7 +202,13 @@ impl Unit {
 
     /// Largest input index output `t` reads (may be past the end: zero padding).
     pub fn last_in(&self, t: usize) -> isize {
-        let (t, k, s, p, d) = (t as isize, self.kernel as isize, self.stride as isize, self.pad as isize, self.dilation as isize);
+        let (t, k, s, p, d) = (
+            t as isize,
+            self.kernel as isize,
+            self.stride as isize,
+            self.pad as isize,
+            self.dilation as isize,
+        );
         match self.kind {
             UnitKind::ConvT => div_floor(t + p, s),
             _ => t * s - p + d * (k - 1),
@@ -168,7 +227,12 @@ impl Unit {
     /// input columns gathered from `g0` (`ConvGeom::pad` / the transposed
     /// conv's `pad`); never negative for the stacks' geometries.
     fn local_pad(&self, a: usize, g0: usize) -> Option<usize> {
-        let (a, g0, s, p) = (a as isize, g0 as isize, self.stride as isize, self.pad as isize);
+        let (a, g0, s, p) = (
+            a as isize,
+            g0 as isize,
+            self.stride as isize,
+            self.pad as isize,
+        );
         let pad = match self.kind {
             UnitKind::ConvT => a + p - g0 * s,
             _ => g0 - (a * s - p),
@@ -195,10 +259,22 @@ impl Geometry {
     /// None for a config outside the engine's limits (unvalidated).
     pub fn new(cfg: &VqConfig, kind: StackKind) -> Option<Geometry> {
         let hop = cfg.hop()? as usize;
-        let (s, w, emb) = (cfg.stride_t as usize, cfg.width as usize, cfg.emb_width as usize);
+        let (s, w, emb) = (
+            cfg.stride_t as usize,
+            cfg.width as usize,
+            cfg.emb_width as usize,
+        );
         // The engine's limits (crate::limits), so no index arithmetic can overflow.
-        let chans = [cfg.width, cfg.emb_width, cfg.in_channels, cfg.rot_channels, cfg.res_inner()?];
-        let max_dil = cfg.dilation_growth_rate.checked_pow(cfg.depth.saturating_sub(1))?;
+        let chans = [
+            cfg.width,
+            cfg.emb_width,
+            cfg.in_channels,
+            cfg.rot_channels,
+            cfg.res_inner()?,
+        ];
+        let max_dil = cfg
+            .dilation_growth_rate
+            .checked_pow(cfg.depth.saturating_sub(1))?;
         if !(1..=MAX_DEPTH).contains(&cfg.depth)
             || !(1..=MAX_DOWN_T).contains(&cfg.down_t)
             || !(2..=MAX_STRIDE).contains(&cfg.stride_t)
@@ -241,7 +317,14 @@ impl Geometry {
             StackKind::Encoder => (hop, 1),
             StackKind::Decoder => (1, hop),
         };
-        Some(Geometry { kind, units: arr, n_units: units.len(), in_per_push, out_per_push, inner: cfg.res_inner()? as usize })
+        Some(Geometry {
+            kind,
+            units: arr,
+            n_units: units.len(),
+            in_per_push,
+            out_per_push,
+            inner: cfg.res_inner()? as usize,
+        })
     }
 
     pub fn units(&self) -> &[Unit] {
@@ -300,7 +383,11 @@ struct Counts {
 }
 
 impl Counts {
-    const ZERO: Counts = Counts { n_in0: 0, n_out: [0; MAX_UNITS], set: [0; MAX_UNITS] };
+    const ZERO: Counts = Counts {
+        n_in0: 0,
+        n_out: [0; MAX_UNITS],
+        set: [0; MAX_UNITS],
+    };
 
     /// Input columns of unit `u`.
     fn n_in(&self, u: usize) -> usize {
@@ -355,7 +442,10 @@ impl Counts {
             let below_lo = unit.first_in(lo).max(self.set[u - 1] as isize);
             let below_hi = (unit.last_in(hi - 1) + 1).min(self.n_out[u - 1] as isize);
             if below_lo < below_hi {
-                need[u - 1] = Span { lo: below_lo as usize, hi: below_hi as usize };
+                need[u - 1] = Span {
+                    lo: below_lo as usize,
+                    hi: below_hi as usize,
+                };
             }
         }
         need
@@ -411,7 +501,14 @@ impl ScratchNeed {
     /// The needs of two stacks computed together: per-column buffers add
     /// up, the kernel tiles are shared.
     fn plus(self, o: ScratchNeed) -> ScratchNeed {
-        ScratchNeed { g: self.g + o.g, h: self.h + o.h, r: self.r + o.r, t: self.t + o.t, col: self.col.max(o.col), z: self.z.max(o.z) }
+        ScratchNeed {
+            g: self.g + o.g,
+            h: self.h + o.h,
+            r: self.r + o.r,
+            t: self.t + o.t,
+            col: self.col.max(o.col),
+            z: self.z.max(o.z),
+        }
     }
 
     /// The largest need of any stack of `cfg` (every VQ-VAE, both kinds,
@@ -436,7 +533,12 @@ impl ScratchNeed {
 
     /// Every buffer of `self` at least that of `o`.
     pub fn holds(&self, o: &ScratchNeed) -> bool {
-        self.g >= o.g && self.h >= o.h && self.r >= o.r && self.t >= o.t && self.col >= o.col && self.z >= o.z
+        self.g >= o.g
+            && self.h >= o.h
+            && self.r >= o.r
+            && self.t >= o.t
+            && self.col >= o.col
+            && self.z >= o.z
     }
 
     /// True if `s` holds at least these floats in every buffer.
@@ -454,7 +556,9 @@ impl ScratchNeed {
 /// (`e_max` / `d_max` of docs/STREAMING.md §1): the tiny fixture and the
 /// published model 22 for both stacks, `tiny2` 8. 0 for an invalid config.
 pub fn future_max(cfg: &VqConfig, kind: StackKind) -> usize {
-    Geometry::new(cfg, kind).map(|g| future_max_of(&g)).unwrap_or(0)
+    Geometry::new(cfg, kind)
+        .map(|g| future_max_of(&g))
+        .unwrap_or(0)
 }
 
 fn future_max_of(g: &Geometry) -> usize {
@@ -495,7 +599,15 @@ impl StackPlan {
 
     fn simulate_for(g: Geometry, lag_lo: usize, lag_hi: usize, pushes: usize) -> StackPlan {
         let z = [0; MAX_UNITS];
-        let mut p = StackPlan { geometry: g, lag: lag_hi, ring: z, tail: z, out_ring: 0, batch: z, gather: z };
+        let mut p = StackPlan {
+            geometry: g,
+            lag: lag_hi,
+            ring: z,
+            tail: z,
+            out_ring: 0,
+            batch: z,
+            gather: z,
+        };
         let g = &p.geometry.clone();
         let m = g.out_per_push;
         let mut c = Counts::ZERO;
@@ -621,13 +733,24 @@ impl<'s> StreamScratch<'s> {
 impl<'s> StreamScratch<'s> {
     /// Scratch for one stack of any VQ-VAE of `cfg` at a time.
     pub fn for_model<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig) -> Result<Self, ArenaError> {
-        StreamScratch::carve(a, ScratchNeed::for_model(cfg).ok_or(ArenaError::Overflow)?, 1)
+        StreamScratch::carve(
+            a,
+            ScratchNeed::for_model(cfg).ok_or(ArenaError::Overflow)?,
+            1,
+        )
     }
 }
 
 impl Default for StreamScratch<'_> {
     fn default() -> Self {
-        StreamScratch { g: &mut [], h: &mut [], r: &mut [], ta: &mut [], tb: &mut [], tile: &mut [] }
+        StreamScratch {
+            g: &mut [],
+            h: &mut [],
+            r: &mut [],
+            ta: &mut [],
+            tb: &mut [],
+            tile: &mut [],
+        }
     }
 }
 
@@ -653,18 +776,31 @@ fn evicted(index: usize, oldest: usize, len: usize) -> Error {
 
 impl<'s> ColRing<'s> {
     fn carve<A: Carve<'s>>(a: &mut A, cap: usize, ch: usize) -> Result<Self, ArenaError> {
-        Ok(ColRing { data: a.f32(cap.checked_mul(ch).ok_or(ArenaError::Overflow)?)?, cap, ch, n: 0 })
+        Ok(ColRing {
+            data: a.f32(cap.checked_mul(ch).ok_or(ArenaError::Overflow)?)?,
+            cap,
+            ch,
+            n: 0,
+        })
     }
 
     /// Appends one column of at most `ch` floats (the oldest falls out).
     fn push(&mut self, col: &[f32]) -> Result<(), Error> {
         if col.len() > self.ch {
-            return Err(Error::Length { buffer: Buffer::Features, len: col.len(), expected: self.ch });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: col.len(),
+                expected: self.ch,
+            });
         }
         if self.cap > 0 {
             let s = (self.n % self.cap) * self.ch;
             let len = self.data.len();
-            let slot = self.data.get_mut(s..s + col.len()).ok_or(Error::Length { buffer: Buffer::Features, len, expected: s + col.len() })?;
+            let slot = self.data.get_mut(s..s + col.len()).ok_or(Error::Length {
+                buffer: Buffer::Features,
+                len,
+                expected: s + col.len(),
+            })?;
             slot.copy_from_slice(col);
         }
         self.n += 1;
@@ -678,7 +814,9 @@ impl<'s> ColRing<'s> {
             return Err(evicted(i, oldest, self.n));
         }
         let s = (i % self.cap) * self.ch;
-        self.data.get(s..s + self.ch).ok_or(evicted(i, oldest, self.n))
+        self.data
+            .get(s..s + self.ch)
+            .ok_or(evicted(i, oldest, self.n))
     }
 }
 
@@ -706,7 +844,11 @@ impl UnitW<'_, '_> {
 
 /// A conv's shapes match its geometry and channels.
 fn conv_fits(c: &ConvW<'_>, g: ConvGeom, c_in: usize, c_out: usize) -> bool {
-    c.geom == g && c.c_in == c_in && c.c_out == c_out && mat_fits(&c.w, c_out, c_in * g.kernel) && c.b.len() == c_out
+    c.geom == g
+        && c.c_in == c_in
+        && c.c_out == c_out
+        && mat_fits(&c.w, c_out, c_in * g.kernel)
+        && c.b.len() == c_out
 }
 
 fn mat_fits(m: &Matrix<'_>, rows: usize, cols: usize) -> bool {
@@ -717,13 +859,32 @@ impl<'r, 'a> UnitW<'r, 'a> {
     /// True if these weights implement `u` (channels of the last decoder
     /// unit: at most `u.c_out`).
     fn fits(&self, u: &Unit, inner: usize, last: bool) -> bool {
-        let c_out_ok = |c: usize| if last { c <= u.c_out && c > 0 } else { c == u.c_out };
-        let geom = ConvGeom { kernel: u.kernel, stride: u.stride, pad: u.pad, dilation: u.dilation };
+        let c_out_ok = |c: usize| {
+            if last {
+                c <= u.c_out && c > 0
+            } else {
+                c == u.c_out
+            }
+        };
+        let geom = ConvGeom {
+            kernel: u.kernel,
+            stride: u.stride,
+            pad: u.pad,
+            dilation: u.dilation,
+        };
         match (self, u.kind) {
-            (UnitW::Conv(c), UnitKind::Conv) => c_out_ok(c.c_out) && conv_fits(c, geom, u.c_in, c.c_out),
+            (UnitW::Conv(c), UnitKind::Conv) => {
+                c_out_ok(c.c_out) && conv_fits(c, geom, u.c_in, c.c_out)
+            }
             (UnitW::Res(r), UnitKind::Res) => {
-                let g1 = ConvGeom { kernel: 1, stride: 1, pad: 0, dilation: 1 };
-                conv_fits(&r.conv_dil, geom, u.c_in, inner) && conv_fits(&r.conv_1x1, g1, inner, u.c_out)
+                let g1 = ConvGeom {
+                    kernel: 1,
+                    stride: 1,
+                    pad: 0,
+                    dilation: 1,
+                };
+                conv_fits(&r.conv_dil, geom, u.c_in, inner)
+                    && conv_fits(&r.conv_1x1, g1, inner, u.c_out)
             }
             (UnitW::ConvT(t), UnitKind::ConvT) => {
                 c_out_ok(t.c_out)
@@ -744,35 +905,75 @@ impl<'r, 'a> UnitW<'r, 'a> {
     /// likewise in `y`. `h`, `r`: residual scratch; `tile`: the kernel tile
     /// (im2col for a conv, the transposed conv's otherwise).
     #[allow(clippy::too_many_arguments)]
-    fn run(&self, u: &Unit, jobs: &[Job], x: &mut [f32], y: &mut [f32], h: &mut [f32], r: &mut [f32], tile: &mut [f32]) -> Result<(), Error> {
+    fn run(
+        &self,
+        u: &Unit,
+        jobs: &[Job],
+        x: &mut [f32],
+        y: &mut [f32],
+        h: &mut [f32],
+        r: &mut [f32],
+        tile: &mut [f32],
+    ) -> Result<(), Error> {
         let mut segs: Vec<ConvSeg, MAX_STACKS> = Vec::new();
         for j in jobs {
-            let pad = u.local_pad(j.a, j.g0).ok_or(Error::Length { buffer: Buffer::Features, len: j.g0, expected: j.a })?;
-            segs.push(ConvSeg { t_in: j.n_in, t_out: j.n_out, pad }).map_err(|_| Error::State)?;
+            let pad = u.local_pad(j.a, j.g0).ok_or(Error::Length {
+                buffer: Buffer::Features,
+                len: j.g0,
+                expected: j.a,
+            })?;
+            segs.push(ConvSeg {
+                t_in: j.n_in,
+                t_out: j.n_out,
+                pad,
+            })
+            .map_err(|_| Error::State)?;
         }
-        let (n_in, n_out) = (jobs.iter().map(|j| j.n_in).sum::<usize>(), jobs.iter().map(|j| j.n_out).sum::<usize>());
+        let (n_in, n_out) = (
+            jobs.iter().map(|j| j.n_in).sum::<usize>(),
+            jobs.iter().map(|j| j.n_out).sum::<usize>(),
+        );
         let oc = self.c_out();
         if x.len() != n_in * u.c_in || y.len() != n_out * oc {
-            return Err(Error::Length { buffer: Buffer::Features, len: y.len(), expected: n_out * oc });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: y.len(),
+                expected: n_out * oc,
+            });
         }
-        let geom = ConvGeom { kernel: u.kernel, stride: u.stride, pad: 0, dilation: u.dilation };
+        let geom = ConvGeom {
+            kernel: u.kernel,
+            stride: u.stride,
+            pad: 0,
+            dilation: u.dilation,
+        };
         let need = match self {
             UnitW::ConvT(t) => convt_z_len(t.c_out, t.kernel),
             _ => conv1d_col_len(u.c_in, u.kernel),
         };
         if need > tile.len() {
-            return Err(Error::Length { buffer: Buffer::Features, len: tile.len(), expected: need });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: tile.len(),
+                expected: need,
+            });
         }
         match self {
             UnitW::Conv(c) => conv1d_segs(x, c.c_in, &c.w, c.b, geom, &segs, y, tile),
-            UnitW::ConvT(t) => conv_transpose1d_segs(x, &t.w, t.b, t.kernel, t.stride, &segs, y, tile),
+            UnitW::ConvT(t) => {
+                conv_transpose1d_segs(x, &t.w, t.b, t.kernel, t.stride, &segs, y, tile)
+            }
             UnitW::Res(b) => {
                 let (w, inner) = (b.conv_dil.c_in, b.conv_dil.c_out);
                 // Identity: output a + t of a job is its gathered row a + t - g0.
                 let (mut xo, mut yo) = (0, 0);
                 for j in jobs {
                     let id = (xo + j.a.saturating_sub(j.g0)) * w;
-                    let src = x.get(id..id + j.n_out * w).ok_or(Error::Length { buffer: Buffer::Features, len: x.len(), expected: id + j.n_out * w })?;
+                    let src = x.get(id..id + j.n_out * w).ok_or(Error::Length {
+                        buffer: Buffer::Features,
+                        len: x.len(),
+                        expected: id + j.n_out * w,
+                    })?;
                     y[yo * w..(yo + j.n_out) * w].copy_from_slice(src);
                     xo += j.n_in;
                     yo += j.n_out;
@@ -782,7 +983,12 @@ impl<'r, 'a> UnitW<'r, 'a> {
                 conv1d_segs(x, w, &b.conv_dil.w, b.conv_dil.b, geom, &segs, h, tile);
                 relu_inplace(h);
                 let r = first(r, n_out * w)?;
-                let g1 = ConvGeom { kernel: 1, stride: 1, pad: 0, dilation: 1 };
+                let g1 = ConvGeom {
+                    kernel: 1,
+                    stride: 1,
+                    pad: 0,
+                    dilation: 1,
+                };
                 conv1d(h, inner, &b.conv_1x1.w, b.conv_1x1.b, g1, r, tile);
                 for (o, v) in y.iter_mut().zip(r.iter()) {
                     *o += v;
@@ -807,7 +1013,11 @@ struct Job {
 /// The first `n` floats of `b`, or a length error.
 fn first(b: &mut [f32], n: usize) -> Result<&mut [f32], Error> {
     let len = b.len();
-    b.get_mut(..n).ok_or(Error::Length { buffer: Buffer::Features, len, expected: n })
+    b.get_mut(..n).ok_or(Error::Length {
+        buffer: Buffer::Features,
+        len,
+        expected: n,
+    })
 }
 
 // ---------------------------------------------------------------------------
@@ -838,7 +1048,12 @@ impl<'s> StreamStack<'s> {
     /// frames `[hop q, hop q + hop)` after push `q + lag + 1`). Any lag
     /// works; requests with a smaller lag also work (the shared scratch
     /// covers `0..=future_max`), older ones than `lag` may error.
-    pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &VqConfig, kind: StackKind, lag: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &VqConfig,
+        kind: StackKind,
+        lag: usize,
+    ) -> Result<Self, ArenaError> {
         let plan = StackPlan::new(cfg, kind, lag).ok_or(ArenaError::Overflow)?;
         let mut rings = Vec::new();
         for (u, unit) in plan.geometry.units().iter().enumerate() {
@@ -848,7 +1063,16 @@ impl<'s> StreamStack<'s> {
         let last = plan.geometry.units()[plan.geometry.n_units - 1];
         let out = ColRing::carve(a, plan.out_ring, last.c_out)?;
         let need = plan.scratch_need();
-        Ok(StreamStack { plan, rings, out, counts: Counts::ZERO, pushed: 0, out_ch: 0, need, broken: false })
+        Ok(StreamStack {
+            plan,
+            rings,
+            out,
+            counts: Counts::ZERO,
+            pushed: 0,
+            out_ch: 0,
+            need,
+            broken: false,
+        })
     }
 
     /// Back to zero columns pushed (no allocation).
@@ -904,7 +1128,11 @@ impl<'s> StreamStack<'s> {
     /// The weights of every unit, checked against the geometry.
     fn bind<'r, 'a>(&self, w: StackW<'r, 'a>) -> Result<Vec<UnitW<'r, 'a>, MAX_UNITS>, Error> {
         let mut v: Vec<UnitW<'r, 'a>, MAX_UNITS> = Vec::new();
-        let bad = Error::Length { buffer: self.out_buffer(), len: 0, expected: 0 };
+        let bad = Error::Length {
+            buffer: self.out_buffer(),
+            len: 0,
+            expected: 0,
+        };
         match (w, self.plan.geometry.kind) {
             (StackW::Encoder(e), StackKind::Encoder) => {
                 for (conv, res) in e.stages.iter() {
@@ -929,11 +1157,19 @@ impl<'s> StreamStack<'s> {
         }
         let g = &self.plan.geometry;
         if v.len() != g.n_units {
-            return Err(Error::Length { buffer: self.out_buffer(), len: v.len(), expected: g.n_units });
+            return Err(Error::Length {
+                buffer: self.out_buffer(),
+                len: v.len(),
+                expected: g.n_units,
+            });
         }
         for (u, (uw, unit)) in v.iter().zip(g.units()).enumerate() {
             if !uw.fits(unit, g.inner, u + 1 == g.n_units) {
-                return Err(Error::Length { buffer: self.out_buffer(), len: uw.c_out(), expected: unit.c_out });
+                return Err(Error::Length {
+                    buffer: self.out_buffer(),
+                    len: uw.c_out(),
+                    expected: unit.c_out,
+                });
             }
         }
         Ok(v)
@@ -944,7 +1180,12 @@ impl<'s> StreamStack<'s> {
     /// On an error before any state changed the stack is unchanged; an
     /// error half-way (impossible with the planned sizes) leaves it broken
     /// until [`StreamStack::reset`].
-    pub fn push(&mut self, w: StackW<'_, '_>, cols: &[f32], s: &mut StreamScratch<'_>) -> Result<(), Error> {
+    pub fn push(
+        &mut self,
+        w: StackW<'_, '_>,
+        cols: &[f32],
+        s: &mut StreamScratch<'_>,
+    ) -> Result<(), Error> {
         Self::push_many(&mut [self], w, &[cols], s)
     }
 
@@ -954,16 +1195,31 @@ impl<'s> StreamStack<'s> {
     /// kernel tile instead of one per stack. Each stack ends bit for bit as
     /// after its own push (row-independent kernels). `s` must hold the
     /// stacks' needs together ([`StreamScratch::carve`] for `n` stacks).
-    pub fn push_many(stacks: &mut [&mut StreamStack<'s>], w: StackW<'_, '_>, cols: &[&[f32]], s: &mut StreamScratch<'_>) -> Result<(), Error> {
+    pub fn push_many(
+        stacks: &mut [&mut StreamStack<'s>],
+        w: StackW<'_, '_>,
+        cols: &[&[f32]],
+        s: &mut StreamScratch<'_>,
+    ) -> Result<(), Error> {
         let units = Self::check_many(stacks.iter().map(|st| &**st), w, s)?;
-        let Some(first) = stacks.first() else { return Ok(()) };
+        let Some(first) = stacks.first() else {
+            return Ok(());
+        };
         if cols.len() != stacks.len() {
-            return Err(Error::Length { buffer: first.in_buffer(), len: cols.len(), expected: stacks.len() });
+            return Err(Error::Length {
+                buffer: first.in_buffer(),
+                len: cols.len(),
+                expected: stacks.len(),
+            });
         }
         let g = &first.plan.geometry;
         let expected = g.in_per_push * g.units[0].c_in;
         if let Some(c) = cols.iter().find(|c| c.len() != expected) {
-            return Err(Error::Length { buffer: first.in_buffer(), len: c.len(), expected });
+            return Err(Error::Length {
+                buffer: first.in_buffer(),
+                len: c.len(),
+                expected,
+            });
         }
         let oc = units[g.n_units - 1].c_out();
         for st in stacks.iter_mut() {
@@ -982,11 +1238,17 @@ impl<'s> StreamStack<'s> {
     /// at most [`MAX_STACKS`] stacks, none broken, one geometry, weights
     /// that fit it (and the output channels of earlier pushes), scratch for
     /// all of them together. Returns the bound weights.
-    fn check_many<'r, 'a, 'x>(stacks: impl Iterator<Item = &'x StreamStack<'s>> + Clone, w: StackW<'r, 'a>, s: &StreamScratch<'_>) -> Result<Vec<UnitW<'r, 'a>, MAX_UNITS>, Error>
+    fn check_many<'r, 'a, 'x>(
+        stacks: impl Iterator<Item = &'x StreamStack<'s>> + Clone,
+        w: StackW<'r, 'a>,
+        s: &StreamScratch<'_>,
+    ) -> Result<Vec<UnitW<'r, 'a>, MAX_UNITS>, Error>
     where
         's: 'x,
     {
-        let Some(first) = stacks.clone().next() else { return Ok(Vec::new()) };
+        let Some(first) = stacks.clone().next() else {
+            return Ok(Vec::new());
+        };
         let units = first.bind(w)?;
         let oc = units[first.plan.geometry.n_units - 1].c_out();
         let mut need = ScratchNeed::default();
@@ -995,12 +1257,20 @@ impl<'s> StreamStack<'s> {
                 return Err(Error::State);
             }
             if st.out_ch != 0 && oc != st.out_ch {
-                return Err(Error::Length { buffer: st.out_buffer(), len: oc, expected: st.out_ch });
+                return Err(Error::Length {
+                    buffer: st.out_buffer(),
+                    len: oc,
+                    expected: st.out_ch,
+                });
             }
             need = need.plus(st.need);
         }
         if !need.fits(s) {
-            return Err(Error::Length { buffer: Buffer::Features, len: s.g.len(), expected: need.g });
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: s.g.len(),
+                expected: need.g,
+            });
         }
         Ok(units)
     }
@@ -1008,7 +1278,12 @@ impl<'s> StreamStack<'s> {
     /// The push proper: new input columns into ring 0 of every stack, then
     /// unit after unit every stack's newly settled outputs (one computation
     /// for all stacks) into the next ring.
-    fn settle(stacks: &mut [&mut StreamStack<'s>], units: &[UnitW<'_, '_>], cols: &[&[f32]], s: &mut StreamScratch<'_>) -> Result<(), Error> {
+    fn settle(
+        stacks: &mut [&mut StreamStack<'s>],
+        units: &[UnitW<'_, '_>],
+        cols: &[&[f32]],
+        s: &mut StreamScratch<'_>,
+    ) -> Result<(), Error> {
         let g = stacks[0].plan.geometry.clone();
         let mut counts: Vec<Counts, MAX_STACKS> = Vec::new();
         let mut new: Vec<[Span; MAX_UNITS], MAX_STACKS> = Vec::new();
@@ -1040,7 +1315,16 @@ impl<'s> StreamStack<'s> {
                 for (c, xc) in (g0..g1).zip(x.chunks_exact_mut(unit.c_in)) {
                     xc.copy_from_slice(ring.col(c)?);
                 }
-                jobs.push((i, Job { a: lo, g0, n_in: g1 - g0, n_out: hi - lo })).map_err(|_| Error::State)?;
+                jobs.push((
+                    i,
+                    Job {
+                        a: lo,
+                        g0,
+                        n_in: g1 - g0,
+                        n_out: hi - lo,
+                    },
+                ))
+                .map_err(|_| Error::State)?;
                 xo += g1 - g0;
                 yo += hi - lo;
             }
@@ -1054,7 +1338,11 @@ impl<'s> StreamStack<'s> {
             let mut rows = y.chunks_exact(oc);
             for &(i, j) in jobs.iter() {
                 let st = &mut *stacks[i];
-                let next = if u == last { &mut st.out } else { &mut st.rings[u + 1] };
+                let next = if u == last {
+                    &mut st.out
+                } else {
+                    &mut st.rings[u + 1]
+                };
                 for c in rows.by_ref().take(j.n_out) {
                     next.push(c)?;
                 }
@@ -1072,7 +1360,14 @@ impl<'s> StreamStack<'s> {
     /// output ring (bit-identical to the full conv); unsettled ones are
     /// computed now from the tail cone. Errors if `t + n` exceeds the
     /// prefix's output, or a column is older than the output ring holds.
-    pub fn output(&self, w: StackW<'_, '_>, t: usize, n: usize, s: &mut StreamScratch<'_>, out: &mut [f32]) -> Result<(), Error> {
+    pub fn output(
+        &self,
+        w: StackW<'_, '_>,
+        t: usize,
+        n: usize,
+        s: &mut StreamScratch<'_>,
+        out: &mut [f32],
+    ) -> Result<(), Error> {
         Self::output_many(&[self], w, &[t], n, s, &mut [out])
     }
 
@@ -1080,26 +1375,52 @@ impl<'s> StreamStack<'s> {
     /// `stacks[i]` into `outs[i]` for several stacks of one geometry, the
     /// tails of all of them computed together (one read of each unit's
     /// weights); bit for bit what each stack's own call gives.
-    pub fn output_many(stacks: &[&StreamStack<'s>], w: StackW<'_, '_>, ts: &[usize], n: usize, s: &mut StreamScratch<'_>, outs: &mut [&mut [f32]]) -> Result<(), Error> {
+    pub fn output_many(
+        stacks: &[&StreamStack<'s>],
+        w: StackW<'_, '_>,
+        ts: &[usize],
+        n: usize,
+        s: &mut StreamScratch<'_>,
+        outs: &mut [&mut [f32]],
+    ) -> Result<(), Error> {
         let units = Self::check_many(stacks.iter().copied(), w, s)?;
-        let Some(first) = stacks.first() else { return Ok(()) };
+        let Some(first) = stacks.first() else {
+            return Ok(());
+        };
         if ts.len() != stacks.len() || outs.len() != stacks.len() {
-            return Err(Error::Length { buffer: first.out_buffer(), len: ts.len().min(outs.len()), expected: stacks.len() });
+            return Err(Error::Length {
+                buffer: first.out_buffer(),
+                len: ts.len().min(outs.len()),
+                expected: stacks.len(),
+            });
         }
         let oc = units[first.plan.geometry.n_units - 1].c_out();
-        let expected = n.checked_mul(oc).ok_or(Error::Length { buffer: first.out_buffer(), len: n, expected: usize::MAX })?;
+        let expected = n.checked_mul(oc).ok_or(Error::Length {
+            buffer: first.out_buffer(),
+            len: n,
+            expected: usize::MAX,
+        })?;
         // Per stack: the unsettled columns [a, end) still to compute, if any.
         let mut want: Vec<Option<(usize, usize)>, MAX_STACKS> = Vec::new();
         for ((st, &t), out) in stacks.iter().zip(ts).zip(outs.iter()) {
             if out.len() != expected {
-                return Err(Error::Length { buffer: st.out_buffer(), len: out.len(), expected });
+                return Err(Error::Length {
+                    buffer: st.out_buffer(),
+                    len: out.len(),
+                    expected,
+                });
             }
             let end = t.saturating_add(n);
             if end > st.len() {
-                return Err(Error::Length { buffer: st.out_buffer(), len: end, expected: st.len() });
+                return Err(Error::Length {
+                    buffer: st.out_buffer(),
+                    len: end,
+                    expected: st.len(),
+                });
             }
             let set = st.settled();
-            want.push((end > set).then(|| (t.max(set), end))).map_err(|_| Error::State)?;
+            want.push((end > set).then(|| (t.max(set), end)))
+                .map_err(|_| Error::State)?;
         }
         for ((st, &t), out) in stacks.iter().zip(ts).zip(outs.iter_mut()) {
             let set = st.settled();
@@ -1111,7 +1432,9 @@ impl<'s> StreamStack<'s> {
             let (tail, at) = Self::tails(stacks, &units, &want, s)?;
             for (i, out) in outs.iter_mut().enumerate() {
                 if let Some((a, end)) = want[i] {
-                    let src = tail.get(at[i] * oc..(at[i] + end - a) * oc).ok_or(Error::State)?;
+                    let src = tail
+                        .get(at[i] * oc..(at[i] + end - a) * oc)
+                        .ok_or(Error::State)?;
                     out[(a - ts[i]) * oc..].copy_from_slice(src);
                 }
             }
@@ -1124,7 +1447,12 @@ impl<'s> StreamStack<'s> {
     /// together; returns them in a scratch buffer: stack `i`'s `(b - a,
     /// c_out)` rows from row `at[i]`.
     #[allow(clippy::type_complexity)]
-    fn tails<'x>(stacks: &[&StreamStack<'s>], units: &[UnitW<'_, '_>], want: &[Option<(usize, usize)>], s: &'x mut StreamScratch<'_>) -> Result<(&'x [f32], [usize; MAX_STACKS]), Error> {
+    fn tails<'x>(
+        stacks: &[&StreamStack<'s>],
+        units: &[UnitW<'_, '_>],
+        want: &[Option<(usize, usize)>],
+        s: &'x mut StreamScratch<'_>,
+    ) -> Result<(&'x [f32], [usize; MAX_STACKS]), Error> {
         let g = &stacks[0].plan.geometry;
         let mut need: Vec<[Span; MAX_UNITS], MAX_STACKS> = Vec::new();
         for (st, w) in stacks.iter().zip(want) {
@@ -1134,7 +1462,9 @@ impl<'s> StreamStack<'s> {
             };
             need.push(cone).map_err(|_| Error::State)?;
         }
-        let u0 = (0..g.n_units).find(|&u| need.iter().any(|nd| !nd[u].is_empty())).unwrap_or(g.n_units - 1);
+        let u0 = (0..g.n_units)
+            .find(|&u| need.iter().any(|nd| !nd[u].is_empty()))
+            .unwrap_or(g.n_units - 1);
         // prev: tails of the unit below (stack i's from row prev_at[i]); cur: this unit's.
         let (mut prev, mut cur): (&mut [f32], &mut [f32]) = (&mut s.ta[..], &mut s.tb[..]);
         let (mut prev_at, mut cur_at) = ([0usize; MAX_STACKS], [0usize; MAX_STACKS]);
@@ -1156,20 +1486,40 @@ impl<'s> StreamStack<'s> {
                         xc.copy_from_slice(ring.col(col)?);
                     } else {
                         // Unsettled input: tail of unit u-1, which covers [set_in, g1).
-                        let below = if u > 0 { need[i][u - 1] } else { Span::default() };
+                        let below = if u > 0 {
+                            need[i][u - 1]
+                        } else {
+                            Span::default()
+                        };
                         let k = col.checked_sub(below.lo).filter(|_| col < below.hi);
-                        let src = k.and_then(|k| prev.get((prev_at[i] + k) * unit.c_in..(prev_at[i] + k + 1) * unit.c_in));
+                        let src = k.and_then(|k| {
+                            prev.get((prev_at[i] + k) * unit.c_in..(prev_at[i] + k + 1) * unit.c_in)
+                        });
                         xc.copy_from_slice(src.ok_or(evicted(col, set_in, c.n_in(u)))?);
                     }
                 }
-                jobs.push(Job { a: lo, g0, n_in: g1 - g0, n_out: hi - lo }).map_err(|_| Error::State)?;
+                jobs.push(Job {
+                    a: lo,
+                    g0,
+                    n_in: g1 - g0,
+                    n_out: hi - lo,
+                })
+                .map_err(|_| Error::State)?;
                 cur_at[i] = yo;
                 xo += g1 - g0;
                 yo += hi - lo;
             }
             let oc = units[u].c_out();
             let y = first(cur, yo * oc)?;
-            units[u].run(&unit, &jobs, first(s.g, xo * unit.c_in)?, y, s.h, s.r, s.tile)?;
+            units[u].run(
+                &unit,
+                &jobs,
+                first(s.g, xo * unit.c_in)?,
+                y,
+                s.h,
+                s.r,
+                s.tile,
+            )?;
             core::mem::swap(&mut prev, &mut cur);
             core::mem::swap(&mut prev_at, &mut cur_at);
         }
@@ -1180,7 +1530,11 @@ impl<'s> StreamStack<'s> {
 /// Columns `[at, at + n)` of `c` floats each of `b`, or a length error.
 fn cols_at(b: &mut [f32], at: usize, n: usize, c: usize) -> Result<&mut [f32], Error> {
     let len = b.len();
-    b.get_mut(at * c..(at + n) * c).ok_or(Error::Length { buffer: Buffer::Features, len, expected: (at + n) * c })
+    b.get_mut(at * c..(at + n) * c).ok_or(Error::Length {
+        buffer: Buffer::Features,
+        len,
+        expected: (at + n) * c,
+    })
 }
 
 #[cfg(test)]
@@ -1194,8 +1548,17 @@ mod tests {
         [
             p,
             VqConfig { depth: 2, ..p },
-            VqConfig { stride_t: 4, down_t: 1, ..p },
-            VqConfig { down_t: 3, depth: 4, dilation_growth_rate: 2, ..p },
+            VqConfig {
+                stride_t: 4,
+                down_t: 1,
+                ..p
+            },
+            VqConfig {
+                down_t: 3,
+                depth: 4,
+                dilation_growth_rate: 2,
+                ..p
+            },
         ]
     }
 
@@ -1252,8 +1615,14 @@ mod tests {
         let bad = [
             VqConfig { depth: 0, ..p },
             VqConfig { stride_t: 3, ..p },
-            VqConfig { width: u32::MAX, ..p },
-            VqConfig { dilation_growth_rate: u32::MAX, ..p },
+            VqConfig {
+                width: u32::MAX,
+                ..p
+            },
+            VqConfig {
+                dilation_growth_rate: u32::MAX,
+                ..p
+            },
             VqConfig { down_t: 40, ..p },
             VqConfig { m_conv_den: 0, ..p },
         ];
@@ -1272,12 +1641,25 @@ mod tests {
     /// Index arithmetic of the units against brute force over the kernel taps.
     #[test]
     fn unit_reads_match_brute_force() {
-        let units = [Unit::conv(4, 2, 1, 1, 1, 1), Unit::conv(8, 4, 2, 1, 1, 1), Unit::res(9, 1), Unit::convt(2, 1, 1), Unit::convt(4, 1, 1)];
+        let units = [
+            Unit::conv(4, 2, 1, 1, 1, 1),
+            Unit::conv(8, 4, 2, 1, 1, 1),
+            Unit::res(9, 1),
+            Unit::convt(2, 1, 1),
+            Unit::convt(4, 1, 1),
+        ];
         for u in units {
             for t in 0..40usize {
                 let reads: std::vec::Vec<isize> = match u.kind {
-                    UnitKind::ConvT => (-10..60).filter(|&i| (0..u.kernel as isize).any(|j| i * u.stride as isize - u.pad as isize + j == t as isize)).collect(),
-                    _ => (0..u.kernel).map(|j| (t * u.stride + j * u.dilation) as isize - u.pad as isize).collect(),
+                    UnitKind::ConvT => (-10..60)
+                        .filter(|&i| {
+                            (0..u.kernel as isize)
+                                .any(|j| i * u.stride as isize - u.pad as isize + j == t as isize)
+                        })
+                        .collect(),
+                    _ => (0..u.kernel)
+                        .map(|j| (t * u.stride + j * u.dilation) as isize - u.pad as isize)
+                        .collect(),
                 };
                 assert_eq!(u.first_in(t), *reads.iter().min().unwrap(), "{u:?} t {t}");
                 assert_eq!(u.last_in(t), *reads.iter().max().unwrap(), "{u:?} t {t}");

@@ -11,7 +11,14 @@ use crate::nn::weights::BlockW;
 
 /// Adds the learned position embedding: stream `s`, position `p` gets row
 /// `s * block_size + p` of `pos_emb`.
-pub fn add_positions(pos_emb: &[f32], block_size: usize, streams: usize, t: usize, c: usize, x: &mut [f32]) {
+pub fn add_positions(
+    pos_emb: &[f32],
+    block_size: usize,
+    streams: usize,
+    t: usize,
+    c: usize,
+    x: &mut [f32],
+) {
     for s in 0..streams {
         for p in 0..t {
             let row = &pos_emb[(s * block_size + p) * c..(s * block_size + p + 1) * c];
@@ -29,8 +36,22 @@ pub fn add_positions(pos_emb: &[f32], block_size: usize, streams: usize, t: usiz
 /// (rows.len(), C) receives them. With no blocks at all, `out` gets the
 /// rows of `x` as they are.
 #[allow(clippy::too_many_arguments)]
-pub fn forward_last(base: &[BlockW<'_>], head: &[BlockW<'_>], x: &mut [f32], rows: &[usize], t: usize, c: usize, n_head: usize, s: &mut BlockScratch<'_>, out: &mut [f32]) {
-    let mask = TiledCausalMask { t_q: t, t_k: t, q_pos0: 0 };
+pub fn forward_last(
+    base: &[BlockW<'_>],
+    head: &[BlockW<'_>],
+    x: &mut [f32],
+    rows: &[usize],
+    t: usize,
+    c: usize,
+    n_head: usize,
+    s: &mut BlockScratch<'_>,
+    out: &mut [f32],
+) {
+    let mask = TiledCausalMask {
+        t_q: t,
+        t_k: t,
+        q_pos0: 0,
+    };
     let all: &[&[BlockW<'_>]] = &[base, head];
     let n = base.len() + head.len();
     let mut blocks = all.iter().flat_map(|b| b.iter());
@@ -41,7 +62,11 @@ pub fn forward_last(base: &[BlockW<'_>], head: &[BlockW<'_>], x: &mut [f32], row
     }
     match blocks.next() {
         Some(b) => {
-            let q_mask = TiledCausalMask { t_q: 1, t_k: t, q_pos0: t - 1 };
+            let q_mask = TiledCausalMask {
+                t_q: 1,
+                t_k: t,
+                q_pos0: t - 1,
+            };
             block_forward_rows(b, x, rows, c, n_head, &q_mask, s, out);
         }
         None => {

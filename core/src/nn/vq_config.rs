@@ -49,6 +49,8 @@ impl VqConfig {
         if self.m_conv_den == 0 {
             return None;
         }
-        self.width.checked_mul(self.m_conv_num).map(|v| v / self.m_conv_den)
+        self.width
+            .checked_mul(self.m_conv_num)
+            .map(|v| v / self.m_conv_den)
     }
 }

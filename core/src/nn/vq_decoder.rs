@@ -13,12 +13,23 @@ use crate::nn::weights::{DecoderW, VqW};
 /// positions, rotations or root velocity) into `out` (N * hop, dec's
 /// output channels). `N * hop` must be at most `s.rows`. `stream` names
 /// the codes in errors.
-pub fn decode(vq: &VqW<'_>, dec: &DecoderW<'_>, codes: &[u32], stream: u8, s: &mut ConvScratch<'_>, out: &mut [f32]) -> Result<(), Error> {
+pub fn decode(
+    vq: &VqW<'_>,
+    dec: &DecoderW<'_>,
+    codes: &[u32],
+    stream: u8,
+    s: &mut ConvScratch<'_>,
+    out: &mut [f32],
+) -> Result<(), Error> {
     let hop = vq.cfg.hop().unwrap_or(0) as usize;
     let n = codes.len();
     let frames = n * hop;
     if n == 0 || frames > s.rows {
-        return Err(Error::Length { buffer: Buffer::Codes, len: n, expected: s.rows / hop.max(1) });
+        return Err(Error::Length {
+            buffer: Buffer::Codes,
+            len: n,
+            expected: s.rows / hop.max(1),
+        });
     }
     check_len(Buffer::Output, out.len(), frames * dec.out.c_out)?;
     let emb = vq.cfg.emb_width as usize;
@@ -30,7 +41,16 @@ pub fn decode(vq: &VqW<'_>, dec: &DecoderW<'_>, codes: &[u32], stream: u8, s: &m
     for (res, up) in &dec.stages {
         resnet(res, src, len, s.r, s.h, s.col);
         let out_len = len * up.stride;
-        conv_transpose1d(&src[..len * up.c_in], &up.w, up.b, up.kernel, up.stride, up.pad, &mut dst[..out_len * up.c_out], s.z);
+        conv_transpose1d(
+            &src[..len * up.c_in],
+            &up.w,
+            up.b,
+            up.kernel,
+            up.stride,
+            up.pad,
+            &mut dst[..out_len * up.c_out],
+            s.z,
+        );
         core::mem::swap(&mut src, &mut dst);
         len = out_len;
     }

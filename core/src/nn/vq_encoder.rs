@@ -11,18 +11,35 @@ use crate::nn::weights::VqW;
 /// Pre-quantisation features of `x` (T, in_channels) into `feat`
 /// (T / hop, emb_width). `T` must be a positive multiple of the hop and at
 /// most `s.rows`. Returns the number of tokens.
-pub fn encode_features(vq: &VqW<'_>, x: &[f32], s: &mut ConvScratch<'_>, feat: &mut [f32]) -> Result<usize, Error> {
+pub fn encode_features(
+    vq: &VqW<'_>,
+    x: &[f32],
+    s: &mut ConvScratch<'_>,
+    feat: &mut [f32],
+) -> Result<usize, Error> {
     let c_in = vq.cfg.in_channels as usize;
     let hop = vq.cfg.hop().unwrap_or(0) as usize;
     if c_in == 0 || x.len() % c_in != 0 {
-        return Err(Error::Ragged { buffer: Buffer::Pose, len: x.len(), row: c_in });
+        return Err(Error::Ragged {
+            buffer: Buffer::Pose,
+            len: x.len(),
+            row: c_in,
+        });
     }
     let t = x.len() / c_in;
     if hop == 0 || t == 0 || t % hop != 0 {
-        return Err(Error::TooShort { buffer: Buffer::Pose, frames: t, min: hop });
+        return Err(Error::TooShort {
+            buffer: Buffer::Pose,
+            frames: t,
+            min: hop,
+        });
     }
     if t > s.rows {
-        return Err(Error::Length { buffer: Buffer::Pose, len: t, expected: s.rows });
+        return Err(Error::Length {
+            buffer: Buffer::Pose,
+            len: t,
+            expected: s.rows,
+        });
     }
     let n_tok = t / hop;
     let emb = vq.cfg.emb_width as usize;
@@ -48,7 +65,13 @@ pub fn encode_features(vq: &VqW<'_>, x: &[f32], s: &mut ConvScratch<'_>, feat: &
 
 /// Features and codes of `x` (T, in_channels): `feat` (T/hop, emb),
 /// `codes` (T/hop).
-pub fn encode(vq: &VqW<'_>, x: &[f32], s: &mut ConvScratch<'_>, feat: &mut [f32], codes: &mut [u32]) -> Result<(), Error> {
+pub fn encode(
+    vq: &VqW<'_>,
+    x: &[f32],
+    s: &mut ConvScratch<'_>,
+    feat: &mut [f32],
+    codes: &mut [u32],
+) -> Result<(), Error> {
     let n = encode_features(vq, x, s, feat)?;
     check_len(Buffer::Codes, codes.len(), n)?;
     let emb = vq.cfg.emb_width as usize;

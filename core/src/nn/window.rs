@@ -120,7 +120,15 @@ mod tests {
 
     #[test]
     fn live_windows_cover_every_step_that_reads_a_row() {
-        for (m, s) in [(29, 22), (29, 15), (29, 8), (29, 27), (7, 5), (7, 7), (29, 1)] {
+        for (m, s) in [
+            (29, 22),
+            (29, 15),
+            (29, 8),
+            (29, 27),
+            (7, 5),
+            (7, 7),
+            (29, 1),
+        ] {
             let pool = window_pool(m, s);
             for k in 0..200 {
                 let mut live: [usize; 64] = [usize::MAX; 64];
@@ -134,7 +142,10 @@ mod tests {
                 for k2 in k..k + 2 * m {
                     let lo = window_start(k2, m, s);
                     if lo <= k {
-                        assert!(live[..n].contains(&lo), "m {m} s {s} k {k}: window {lo} of step {k2} missing");
+                        assert!(
+                            live[..n].contains(&lo),
+                            "m {m} s {s} k {k}: window {lo} of step {k2} missing"
+                        );
                     }
                 }
                 assert!(live[..n].contains(&window_start(k, m, s)));
@@ -152,7 +163,18 @@ mod tests {
                 .max()
                 .unwrap()
         };
-        assert_eq!([steady(22), steady(15), steady(8), steady(27)], [4, 2, 2, 10]);
-        assert_eq!([window_pool(29, 22), window_pool(29, 15), window_pool(29, 8), window_pool(29, 27)], [5, 3, 3, 11]);
+        assert_eq!(
+            [steady(22), steady(15), steady(8), steady(27)],
+            [4, 2, 2, 10]
+        );
+        assert_eq!(
+            [
+                window_pool(29, 22),
+                window_pool(29, 15),
+                window_pool(29, 8),
+                window_pool(29, 27)
+            ],
+            [5, 3, 3, 11]
+        );
     }
 }

@@ -1,6 +1,8 @@
 use crate::arena::{Arena, ArenaError, Carve, Planner, Split, ALIGN};
 
-fn carve<'a, C: Carve<'a>>(c: &mut C) -> Result<(&'a mut [f32], &'a mut [u32], &'a mut [f32]), ArenaError> {
+fn carve<'a, C: Carve<'a>>(
+    c: &mut C,
+) -> Result<(&'a mut [f32], &'a mut [u32], &'a mut [f32]), ArenaError> {
     Ok((c.f32(3)?, c.u32(17)?, c.f32(100)?))
 }
 
@@ -53,22 +55,49 @@ fn split_pool_fits_its_plan_and_does_not_zero() {
     let n = Split::floats_for(&p);
     assert_eq!(n, (64 + 448 + 64) / 4);
     let mut pool = vec![7.0f32; n];
-    assert_eq!(pieces(&mut Split::new(&mut pool)).unwrap(), 7.0f32.to_bits() as usize);
-    assert!(matches!(pieces(&mut Split::new(&mut pool[..n - 1])), Err(ArenaError::OutOfMemory { .. })));
+    assert_eq!(
+        pieces(&mut Split::new(&mut pool)).unwrap(),
+        7.0f32.to_bits() as usize
+    );
+    assert!(matches!(
+        pieces(&mut Split::new(&mut pool[..n - 1])),
+        Err(ArenaError::OutOfMemory { .. })
+    ));
     // Integer pieces: the pool's floats viewed as integers, rounded as a
     // plan counts them (an int8 panel: values, scales, corrections).
     let ints = |c: &mut Split<'_>| -> Result<(usize, usize, usize, usize), ArenaError> {
         let (q, d, k, h) = (c.i8(33)?, c.f32(2)?, c.i32(4)?, c.u16(31)?);
         assert_eq!((q.len(), d.len(), k.len(), h.len()), (33, 2, 4, 31));
         assert_eq!(d.as_ptr() as usize - q.as_ptr() as usize, 64);
-        Ok((q[0] as u8 as usize, k[0] as u32 as usize, h[0] as usize, h.as_ptr() as usize - k.as_ptr() as usize))
+        Ok((
+            q[0] as u8 as usize,
+            k[0] as u32 as usize,
+            h[0] as usize,
+            h.as_ptr() as usize - k.as_ptr() as usize,
+        ))
     };
     let mut p = Planner::new();
-    let _ = (p.i8(33).unwrap(), p.f32(2).unwrap(), p.i32(4).unwrap(), p.u16(31).unwrap());
+    let _ = (
+        p.i8(33).unwrap(),
+        p.f32(2).unwrap(),
+        p.i32(4).unwrap(),
+        p.u16(31).unwrap(),
+    );
     let n = Split::floats_for(&p);
     assert_eq!(n, 4 * 64 / 4);
     let mut pool = vec![7.0f32; n];
     let bits = 7.0f32.to_bits();
-    assert_eq!(ints(&mut Split::new(&mut pool)).unwrap(), ((bits & 0xff) as usize, bits as usize, (bits & 0xffff) as usize, 64));
-    assert!(matches!(ints(&mut Split::new(&mut pool[..n - 1])), Err(ArenaError::OutOfMemory { .. })));
+    assert_eq!(
+        ints(&mut Split::new(&mut pool)).unwrap(),
+        (
+            (bits & 0xff) as usize,
+            bits as usize,
+            (bits & 0xffff) as usize,
+            64
+        )
+    );
+    assert!(matches!(
+        ints(&mut Split::new(&mut pool[..n - 1])),
+        Err(ArenaError::OutOfMemory { .. })
+    ));
 }

@@ -3,12 +3,14 @@
 use std::collections::HashMap;
 
 use crate::duolando::config::ModelConfig;
-use crate::error::{Buffer, Error};
-use crate::duolando::exact::{generate, output_shape, scratch_bytes, ExactInputs, ExactOutputs, Seed};
-use crate::nn::bind::{BindError, TensorSource};
+use crate::duolando::exact::{
+    generate, output_shape, scratch_bytes, ExactInputs, ExactOutputs, Seed,
+};
 use crate::duolando::model::Model;
 use crate::duolando::presets::{duolando_published, published_vq};
 use crate::duolando::schema::for_each_tensor;
+use crate::error::{Buffer, Error};
+use crate::nn::bind::{BindError, TensorSource};
 use crate::nn::names::SchemaError;
 use crate::tensor::{DType, TensorRef};
 
@@ -21,12 +23,28 @@ fn tiny() -> ModelConfig {
     c.gpt.block_size = 6;
     c.gpt.look_forward = 3;
     c.gpt.vocab = [8; 5];
-    c.gpt.music = crate::duolando::config::LatConfig { n_in: 5, n_layer: 1, n_head: 2, downsample_rate: 4 };
-    c.gpt.leader = crate::duolando::config::LatConfig { n_in: 16, n_layer: 1, n_head: 4, downsample_rate: 1 };
+    c.gpt.music = crate::duolando::config::LatConfig {
+        n_in: 5,
+        n_layer: 1,
+        n_head: 2,
+        downsample_rate: 4,
+    };
+    c.gpt.leader = crate::duolando::config::LatConfig {
+        n_in: 16,
+        n_layer: 1,
+        n_head: 4,
+        downsample_rate: 1,
+    };
     c.gpt.music.n_in = 5;
     for vq in c.parts.iter_mut().chain(core::iter::once(&mut c.transl)) {
         let base = published_vq(vq.in_channels, vq.rot_channels);
-        *vq = crate::duolando::config::VqConfig { width: 8, emb_width: 4, l_bins: 8, depth: 2, ..base };
+        *vq = crate::duolando::config::VqConfig {
+            width: 8,
+            emb_width: 4,
+            l_bins: 8,
+            depth: 2,
+            ..base
+        };
     }
     c
 }
@@ -53,7 +71,10 @@ impl Fake {
             Ok(())
         })
         .unwrap();
-        Fake { data, hits: Default::default() }
+        Fake {
+            data,
+            hits: Default::default(),
+        }
     }
 }
 
@@ -61,7 +82,12 @@ impl<'a> TensorSource<'a> for &'a Fake {
     fn tensor(&self, name: &str) -> Option<TensorRef<'a>> {
         let (v, shape, rank) = self.data.get(name)?;
         self.hits.borrow_mut().insert(name.to_string());
-        Some(TensorRef { dtype: DType::F32, rank: *rank, shape: *shape, data: bytemuck::cast_slice(v) })
+        Some(TensorRef {
+            dtype: DType::F32,
+            rank: *rank,
+            shape: *shape,
+            data: bytemuck::cast_slice(v),
+        })
     }
 }
 
@@ -79,18 +105,31 @@ fn binding_reads_exactly_the_schema() {
     broken.data.remove("gpt.gpt_head.head_rhand.weight");
     let b = &broken;
     match Model::bind(&cfg, &b) {
-        Err(BindError::Missing { name }) => assert_eq!(name.as_str(), "gpt.gpt_head.head_rhand.weight"),
+        Err(BindError::Missing { name }) => {
+            assert_eq!(name.as_str(), "gpt.gpt_head.head_rhand.weight")
+        }
         other => panic!("{other:?}"),
     }
     let mut broken = Fake::new(&cfg);
-    broken.data.get_mut("transl.decoders.0.out.weight").unwrap().1[0] = 4;
+    broken
+        .data
+        .get_mut("transl.decoders.0.out.weight")
+        .unwrap()
+        .1[0] = 4;
     let b = &broken;
-    assert!(matches!(Model::bind(&cfg, &b), Err(BindError::Shape { .. })));
+    assert!(matches!(
+        Model::bind(&cfg, &b),
+        Err(BindError::Shape { .. })
+    ));
 }
 
 fn inputs(t: usize, n_music: usize) -> (Vec<f32>, Vec<f32>) {
-    let leader = (0..t * 165).map(|i| ((i * 37 % 101) as f32 / 101.0 - 0.5) + (i / 165) as f32 * 0.01).collect();
-    let music = (0..t * n_music).map(|i| ((i * 13 % 29) as f32 / 29.0) - 0.5).collect();
+    let leader = (0..t * 165)
+        .map(|i| ((i * 37 % 101) as f32 / 101.0 - 0.5) + (i / 165) as f32 * 0.01)
+        .collect();
+    let music = (0..t * n_music)
+        .map(|i| ((i * 13 % 29) as f32 / 29.0) - 0.5)
+        .collect();
     (leader, music)
 }
 
@@ -102,7 +141,10 @@ fn exact_runs_within_plan_and_is_deterministic() {
     let model = Model::bind(&cfg, &src).unwrap();
     let t = 83; // truncated to 80; K = (80-4)/4 - 3 = 16
     let sh = output_shape(&cfg, t).unwrap();
-    assert_eq!((sh.frames_in, sh.steps, sh.token_rows, sh.frames_out), (80, 16, 17, 68));
+    assert_eq!(
+        (sh.frames_in, sh.steps, sh.token_rows, sh.frames_out),
+        (80, 16, 17, 68)
+    );
     let (leader, music) = inputs(t, 5);
     let need = scratch_bytes(&cfg, t).unwrap();
     let run = |scratch: &mut [u8], seed: Seed<'_>| {
@@ -110,8 +152,23 @@ fn exact_runs_within_plan_and_is_deterministic() {
         let mut pos = vec![0f32; sh.frames_out * 165];
         let mut rot = vec![0f32; sh.frames_out * 495];
         let mut calls = 0;
-        let mut out = ExactOutputs { tokens: &mut tokens, follower_pos3d: &mut pos, follower_rotmat: &mut rot, leader_tokens: None };
-        let r = generate(&model, &ExactInputs { leader_pos3d: &leader, music: &music, seed }, scratch, &mut out, &mut |_, _| calls += 1);
+        let mut out = ExactOutputs {
+            tokens: &mut tokens,
+            follower_pos3d: &mut pos,
+            follower_rotmat: &mut rot,
+            leader_tokens: None,
+        };
+        let r = generate(
+            &model,
+            &ExactInputs {
+                leader_pos3d: &leader,
+                music: &music,
+                seed,
+            },
+            scratch,
+            &mut out,
+            &mut |_, _| calls += 1,
+        );
         (r, tokens, pos, rot, calls)
     };
     let mut scratch = vec![0u8; need];
@@ -130,24 +187,100 @@ fn exact_runs_within_plan_and_is_deterministic() {
     assert!(r.is_ok());
     // Too little scratch is an error, not a panic.
     let mut small = vec![0u8; need / 2];
-    assert!(matches!(run(&mut small, Seed::Tokens([0; 5])).0, Err(Error::Arena(_))));
+    assert!(matches!(
+        run(&mut small, Seed::Tokens([0; 5])).0,
+        Err(Error::Arena(_))
+    ));
     // Bad inputs.
-    assert!(matches!(run(&mut scratch, Seed::Tokens([0, 0, 0, 0, 8])).0, Err(Error::Token { stream: 4, token: 8, vocab: 8 })));
-    assert!(matches!(run(&mut scratch, Seed::FollowerFrames(&leader[..3 * 165])).0, Err(Error::TooShort { buffer: Buffer::SeedFrames, .. })));
+    assert!(matches!(
+        run(&mut scratch, Seed::Tokens([0, 0, 0, 0, 8])).0,
+        Err(Error::Token {
+            stream: 4,
+            token: 8,
+            vocab: 8
+        })
+    ));
+    assert!(matches!(
+        run(&mut scratch, Seed::FollowerFrames(&leader[..3 * 165])).0,
+        Err(Error::TooShort {
+            buffer: Buffer::SeedFrames,
+            ..
+        })
+    ));
     let mut tokens = vec![0u32; 3];
     let mut pos = vec![0f32; 1];
     let mut rot = vec![0f32; 1];
-    let mut out = ExactOutputs { tokens: &mut tokens, follower_pos3d: &mut pos, follower_rotmat: &mut rot, leader_tokens: None };
-    let e = generate(&model, &ExactInputs { leader_pos3d: &leader, music: &music, seed: Seed::Tokens([0; 5]) }, &mut scratch, &mut out, &mut |_, _| {});
-    assert!(matches!(e, Err(Error::Length { buffer: Buffer::Tokens, .. })));
+    let mut out = ExactOutputs {
+        tokens: &mut tokens,
+        follower_pos3d: &mut pos,
+        follower_rotmat: &mut rot,
+        leader_tokens: None,
+    };
+    let e = generate(
+        &model,
+        &ExactInputs {
+            leader_pos3d: &leader,
+            music: &music,
+            seed: Seed::Tokens([0; 5]),
+        },
+        &mut scratch,
+        &mut out,
+        &mut |_, _| {},
+    );
+    assert!(matches!(
+        e,
+        Err(Error::Length {
+            buffer: Buffer::Tokens,
+            ..
+        })
+    ));
     let mut nan = leader.clone();
     nan[500] = f32::NAN;
-    let e = generate(&model, &ExactInputs { leader_pos3d: &nan, music: &music, seed: Seed::Tokens([0; 5]) }, &mut scratch, &mut out, &mut |_, _| {});
-    assert!(matches!(e, Err(Error::NonFinite { .. }) | Err(Error::Length { .. })));
-    let e = generate(&model, &ExactInputs { leader_pos3d: &leader[..2 * 165], music: &music, seed: Seed::Tokens([0; 5]) }, &mut scratch, &mut out, &mut |_, _| {});
+    let e = generate(
+        &model,
+        &ExactInputs {
+            leader_pos3d: &nan,
+            music: &music,
+            seed: Seed::Tokens([0; 5]),
+        },
+        &mut scratch,
+        &mut out,
+        &mut |_, _| {},
+    );
+    assert!(matches!(
+        e,
+        Err(Error::NonFinite { .. }) | Err(Error::Length { .. })
+    ));
+    let e = generate(
+        &model,
+        &ExactInputs {
+            leader_pos3d: &leader[..2 * 165],
+            music: &music,
+            seed: Seed::Tokens([0; 5]),
+        },
+        &mut scratch,
+        &mut out,
+        &mut |_, _| {},
+    );
     assert!(matches!(e, Err(Error::TooShort { .. })));
-    let e = generate(&model, &ExactInputs { leader_pos3d: &leader, music: &music[..10 * 5], seed: Seed::Tokens([0; 5]) }, &mut scratch, &mut out, &mut |_, _| {});
-    assert!(matches!(e, Err(Error::TooShort { buffer: Buffer::Music, .. })));
+    let e = generate(
+        &model,
+        &ExactInputs {
+            leader_pos3d: &leader,
+            music: &music[..10 * 5],
+            seed: Seed::Tokens([0; 5]),
+        },
+        &mut scratch,
+        &mut out,
+        &mut |_, _| {},
+    );
+    assert!(matches!(
+        e,
+        Err(Error::TooShort {
+            buffer: Buffer::Music,
+            ..
+        })
+    ));
 }
 
 #[test]
@@ -164,8 +297,24 @@ fn short_sequences_decode_the_seed_only() {
         let mut tokens = vec![0u32; 5];
         let mut pos = vec![0f32; 4 * 165];
         let mut rot = vec![0f32; 4 * 495];
-        let mut out = ExactOutputs { tokens: &mut tokens, follower_pos3d: &mut pos, follower_rotmat: &mut rot, leader_tokens: None };
-        generate(&model, &ExactInputs { leader_pos3d: &leader, music: &music, seed: Seed::Tokens([7; 5]) }, &mut scratch, &mut out, &mut |_, _| {}).unwrap();
+        let mut out = ExactOutputs {
+            tokens: &mut tokens,
+            follower_pos3d: &mut pos,
+            follower_rotmat: &mut rot,
+            leader_tokens: None,
+        };
+        generate(
+            &model,
+            &ExactInputs {
+                leader_pos3d: &leader,
+                music: &music,
+                seed: Seed::Tokens([7; 5]),
+            },
+            &mut scratch,
+            &mut out,
+            &mut |_, _| {},
+        )
+        .unwrap();
     }
     assert!(output_shape(&cfg, 3).is_none());
 }

@@ -8,7 +8,10 @@ const CLOSE: f64 = 1e-5;
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f32 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((self.0 >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
     }
     fn vec(&mut self, n: usize) -> Vec<f32> {
@@ -38,7 +41,10 @@ fn linear_matches_naive() {
         let mut want = vec![0.0f64; n * o];
         for a in 0..n {
             for c in 0..o {
-                want[a * o + c] = b[c] as f64 + (0..i).map(|k| x[a * i + k] as f64 * w[c * i + k] as f64).sum::<f64>();
+                want[a * o + c] = b[c] as f64
+                    + (0..i)
+                        .map(|k| x[a * i + k] as f64 * w[c * i + k] as f64)
+                        .sum::<f64>();
             }
         }
         assert_close(&y, &want, CLOSE);
@@ -49,7 +55,9 @@ fn linear_matches_naive() {
         let mut want = vec![0.0f64; n * i];
         for a in 0..n {
             for k in 0..i {
-                want[a * i + k] = (0..o).map(|c| xo[a * o + c] as f64 * w[c * i + k] as f64).sum();
+                want[a * i + k] = (0..o)
+                    .map(|c| xo[a * o + c] as f64 * w[c * i + k] as f64)
+                    .sum();
             }
         }
         assert_close(&z, &want, CLOSE);
@@ -64,7 +72,10 @@ fn layernorm_and_gelu() {
     layernorm(&x, &w, &b, &mut y);
     let mut want = vec![0.0f64; 30];
     for row in 0..3 {
-        let xr: Vec<f64> = x[row * 10..row * 10 + 10].iter().map(|&v| v as f64).collect();
+        let xr: Vec<f64> = x[row * 10..row * 10 + 10]
+            .iter()
+            .map(|&v| v as f64)
+            .collect();
         let m = xr.iter().sum::<f64>() / 10.0;
         let var = xr.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / 10.0;
         for i in 0..10 {
@@ -75,10 +86,28 @@ fn layernorm_and_gelu() {
     // GELU(1) = 0.8413447 * 1, GELU(-1) = -0.1586553, exact-erf values.
     let mut g = [1.0f32, -1.0, 0.0, 3.0];
     gelu_inplace(&mut g);
-    assert_close(&g, &[0.8413447460685429, -0.15865525393145707, 0.0, 2.995950070189245], 1e-6);
+    assert_close(
+        &g,
+        &[
+            0.8413447460685429,
+            -0.15865525393145707,
+            0.0,
+            2.995950070189245,
+        ],
+        1e-6,
+    );
 }
 
-fn naive_conv(x: &[f32], t_in: usize, ci: usize, w: &[f32], b: &[f32], co: usize, g: ConvGeom, t_out: usize) -> Vec<f64> {
+fn naive_conv(
+    x: &[f32],
+    t_in: usize,
+    ci: usize,
+    w: &[f32],
+    b: &[f32],
+    co: usize,
+    g: ConvGeom,
+    t_out: usize,
+) -> Vec<f64> {
     let mut y = vec![0.0f64; t_out * co];
     for t in 0..t_out {
         for o in 0..co {
@@ -101,11 +130,36 @@ fn naive_conv(x: &[f32], t_in: usize, ci: usize, w: &[f32], b: &[f32], co: usize
 fn conv1d_matches_naive() {
     let mut r = Lcg(3);
     let geoms = [
-        ConvGeom { kernel: 4, stride: 2, pad: 1, dilation: 1 },
-        ConvGeom { kernel: 3, stride: 1, pad: 1, dilation: 1 },
-        ConvGeom { kernel: 3, stride: 1, pad: 9, dilation: 9 },
-        ConvGeom { kernel: 1, stride: 1, pad: 0, dilation: 1 },
-        ConvGeom { kernel: 3, stride: 1, pad: 0, dilation: 2 },
+        ConvGeom {
+            kernel: 4,
+            stride: 2,
+            pad: 1,
+            dilation: 1,
+        },
+        ConvGeom {
+            kernel: 3,
+            stride: 1,
+            pad: 1,
+            dilation: 1,
+        },
+        ConvGeom {
+            kernel: 3,
+            stride: 1,
+            pad: 9,
+            dilation: 9,
+        },
+        ConvGeom {
+            kernel: 1,
+            stride: 1,
+            pad: 0,
+            dilation: 1,
+        },
+        ConvGeom {
+            kernel: 3,
+            stride: 1,
+            pad: 0,
+            dilation: 2,
+        },
     ];
     for g in geoms {
         for &(t_in, ci, co) in &[(4usize, 3usize, 5usize), (70, 7, 6), (64, 16, 16)] {
@@ -125,7 +179,11 @@ fn conv1d_matches_naive() {
 #[test]
 fn conv_transpose_matches_naive() {
     let mut r = Lcg(4);
-    for &(s, t_in, ci, co) in &[(2usize, 1usize, 3usize, 4usize), (2, 40, 8, 5), (4, 9, 3, 3)] {
+    for &(s, t_in, ci, co) in &[
+        (2usize, 1usize, 3usize, 4usize),
+        (2, 40, 8, 5),
+        (4, 9, 3, 3),
+    ] {
         let (k, p) = (2 * s, s / 2);
         let t_out = (t_in - 1) * s + k - 2 * p;
         assert_eq!(t_out, t_in * s);
@@ -133,8 +191,26 @@ fn conv_transpose_matches_naive() {
         let wt = gemm_order(&w, ci, co * k);
         let mut ys = [vec![0.0; t_out * co], vec![0.0; t_out * co]];
         let mut z = vec![0.0; convt_z_len(co, k)];
-        conv_transpose1d(&x, &ConvTWeight::Rows(mat(&w, ci, co * k)), &b, k, s, p, &mut ys[0], &mut z);
-        conv_transpose1d(&x, &ConvTWeight::Gemm(mat(&wt, co * k, ci)), &b, k, s, p, &mut ys[1], &mut z);
+        conv_transpose1d(
+            &x,
+            &ConvTWeight::Rows(mat(&w, ci, co * k)),
+            &b,
+            k,
+            s,
+            p,
+            &mut ys[0],
+            &mut z,
+        );
+        conv_transpose1d(
+            &x,
+            &ConvTWeight::Gemm(mat(&wt, co * k, ci)),
+            &b,
+            k,
+            s,
+            p,
+            &mut ys[1],
+            &mut z,
+        );
         let mut want = vec![0.0f64; t_out * co];
         for t in 0..t_out {
             for o in 0..co {
@@ -149,7 +225,8 @@ fn conv_transpose_matches_naive() {
                 }
                 for o in 0..co {
                     for c in 0..ci {
-                        want[t as usize * co + o] += x[i * ci + c] as f64 * w[(c * co + o) * k + j] as f64;
+                        want[t as usize * co + o] +=
+                            x[i * ci + c] as f64 * w[(c * co + o) * k + j] as f64;
                     }
                 }
             }
@@ -163,7 +240,9 @@ fn conv_transpose_matches_naive() {
 /// A ConvTranspose1d weight (c_in, c_out * k) in GEMM order (c_out * k,
 /// c_in): row `o * k + j` = `W[:, o, j]`.
 fn gemm_order(w: &[f32], c_in: usize, zk: usize) -> Vec<f32> {
-    (0..zk * c_in).map(|n| w[(n % c_in) * zk + n / c_in]).collect()
+    (0..zk * c_in)
+        .map(|n| w[(n % c_in) * zk + n / c_in])
+        .collect()
 }
 
 /// The segmented convolutions (several streams' columns in one GEMM per
@@ -184,19 +263,55 @@ fn segmented_convs_equal_one_call_per_segment() {
         &[(12, 12, 0), (12, 12, 0), (12, 12, 0)],
     ];
     let geoms = [
-        ConvGeom { kernel: 3, stride: 1, pad: 0, dilation: 3 },
-        ConvGeom { kernel: 4, stride: 2, pad: 0, dilation: 1 },
-        ConvGeom { kernel: 1, stride: 1, pad: 0, dilation: 1 },
+        ConvGeom {
+            kernel: 3,
+            stride: 1,
+            pad: 0,
+            dilation: 3,
+        },
+        ConvGeom {
+            kernel: 4,
+            stride: 2,
+            pad: 0,
+            dilation: 1,
+        },
+        ConvGeom {
+            kernel: 1,
+            stride: 1,
+            pad: 0,
+            dilation: 1,
+        },
     ];
     for g in geoms {
         let ck = ci * g.kernel;
         let (w, b) = (r.vec(co * ck), r.vec(co));
         let (h, q) = (f16_bits(&w), q8_bytes(&w));
-        let mats = [mat(&w, co, ck), Matrix::F16(F16Rows::new(&h, co, ck).unwrap()), Matrix::Q8(Q8Rows::new(&q, co, ck).unwrap())];
+        let mats = [
+            mat(&w, co, ck),
+            Matrix::F16(F16Rows::new(&h, co, ck).unwrap()),
+            Matrix::Q8(Q8Rows::new(&q, co, ck).unwrap()),
+        ];
         for m in &mats {
             for list in lists {
                 // (t_in, t_out, pad); a pointwise conv reads input row t for output row t.
-                let segs: Vec<ConvSeg> = list.iter().map(|&(ti, to, p)| if g.kernel == 1 { ConvSeg { t_in: ti, t_out: to.min(ti), pad: 0 } } else { ConvSeg { t_in: ti, t_out: to, pad: p } }).collect();
+                let segs: Vec<ConvSeg> = list
+                    .iter()
+                    .map(|&(ti, to, p)| {
+                        if g.kernel == 1 {
+                            ConvSeg {
+                                t_in: ti,
+                                t_out: to.min(ti),
+                                pad: 0,
+                            }
+                        } else {
+                            ConvSeg {
+                                t_in: ti,
+                                t_out: to,
+                                pad: p,
+                            }
+                        }
+                    })
+                    .collect();
                 let t_in: usize = segs.iter().map(|s| s.t_in).sum();
                 let t_out: usize = segs.iter().map(|s| s.t_out).sum();
                 let x = r.vec(t_in * ci);
@@ -206,8 +321,22 @@ fn segmented_convs_equal_one_call_per_segment() {
                 let (mut x0, mut y0) = (0, 0);
                 for s in &segs {
                     let mut alone = vec![f32::NAN; s.t_out * co];
-                    conv1d(&x[x0 * ci..(x0 + s.t_in) * ci], ci, m, &b, ConvGeom { pad: s.pad, ..g }, &mut alone, &mut col);
-                    assert!(alone.iter().zip(&y[y0 * co..(y0 + s.t_out) * co]).all(|(a, b)| a.to_bits() == b.to_bits()), "conv1d {g:?} {segs:?}: segment {s:?}");
+                    conv1d(
+                        &x[x0 * ci..(x0 + s.t_in) * ci],
+                        ci,
+                        m,
+                        &b,
+                        ConvGeom { pad: s.pad, ..g },
+                        &mut alone,
+                        &mut col,
+                    );
+                    assert!(
+                        alone
+                            .iter()
+                            .zip(&y[y0 * co..(y0 + s.t_out) * co])
+                            .all(|(a, b)| a.to_bits() == b.to_bits()),
+                        "conv1d {g:?} {segs:?}: segment {s:?}"
+                    );
                     x0 += s.t_in;
                     y0 += s.t_out;
                 }
@@ -228,7 +357,14 @@ fn segmented_convs_equal_one_call_per_segment() {
     ];
     for m in &mats {
         for list in lists {
-            let segs: Vec<ConvSeg> = list.iter().map(|&(ti, _, p)| ConvSeg { t_in: ti, t_out: (ti * st).saturating_sub(p), pad: p }).collect();
+            let segs: Vec<ConvSeg> = list
+                .iter()
+                .map(|&(ti, _, p)| ConvSeg {
+                    t_in: ti,
+                    t_out: (ti * st).saturating_sub(p),
+                    pad: p,
+                })
+                .collect();
             let t_in: usize = segs.iter().map(|s| s.t_in).sum();
             let t_out: usize = segs.iter().map(|s| s.t_out).sum();
             let x = r.vec(t_in * ci);
@@ -238,8 +374,23 @@ fn segmented_convs_equal_one_call_per_segment() {
             let (mut x0, mut y0) = (0, 0);
             for s in &segs {
                 let mut alone = vec![f32::NAN; s.t_out * co];
-                conv_transpose1d(&x[x0 * ci..(x0 + s.t_in) * ci], m, &b, k, st, s.pad, &mut alone, &mut z);
-                assert!(alone.iter().zip(&y[y0 * co..(y0 + s.t_out) * co]).all(|(a, b)| a.to_bits() == b.to_bits()), "conv_transpose1d {segs:?}: segment {s:?}");
+                conv_transpose1d(
+                    &x[x0 * ci..(x0 + s.t_in) * ci],
+                    m,
+                    &b,
+                    k,
+                    st,
+                    s.pad,
+                    &mut alone,
+                    &mut z,
+                );
+                assert!(
+                    alone
+                        .iter()
+                        .zip(&y[y0 * co..(y0 + s.t_out) * co])
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "conv_transpose1d {segs:?}: segment {s:?}"
+                );
                 x0 += s.t_in;
                 y0 += s.t_out;
             }
@@ -247,7 +398,14 @@ fn segmented_convs_equal_one_call_per_segment() {
     }
 }
 
-fn naive_attention(q: &[f32], k: &[f32], v: &[f32], c: usize, nh: usize, allowed: &dyn Fn(usize, usize) -> bool) -> Vec<f64> {
+fn naive_attention(
+    q: &[f32],
+    k: &[f32],
+    v: &[f32],
+    c: usize,
+    nh: usize,
+    allowed: &dyn Fn(usize, usize) -> bool,
+) -> Vec<f64> {
     let hd = c / nh;
     let (nq, nk) = (q.len() / c, k.len() / c);
     let mut out = vec![0.0f64; nq * c];
@@ -256,7 +414,10 @@ fn naive_attention(q: &[f32], k: &[f32], v: &[f32], c: usize, nh: usize, allowed
             let s: Vec<f64> = (0..nk)
                 .map(|j| {
                     if allowed(i, j) {
-                        (0..hd).map(|d| q[i * c + h * hd + d] as f64 * k[j * c + h * hd + d] as f64).sum::<f64>() / (hd as f64).sqrt()
+                        (0..hd)
+                            .map(|d| q[i * c + h * hd + d] as f64 * k[j * c + h * hd + d] as f64)
+                            .sum::<f64>()
+                            / (hd as f64).sqrt()
                     } else {
                         f64::NEG_INFINITY
                     }
@@ -266,7 +427,9 @@ fn naive_attention(q: &[f32], k: &[f32], v: &[f32], c: usize, nh: usize, allowed
             let e: Vec<f64> = s.iter().map(|v| (v - m).exp()).collect();
             let z: f64 = e.iter().sum();
             for d in 0..hd {
-                out[i * c + h * hd + d] = (0..nk).map(|j| e[j] / z * v[j * c + h * hd + d] as f64).sum();
+                out[i * c + h * hd + d] = (0..nk)
+                    .map(|j| e[j] / z * v[j * c + h * hd + d] as f64)
+                    .sum();
             }
         }
     }
@@ -282,24 +445,49 @@ fn attention_band_and_tiled_causal() {
     let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
     let mut out = vec![0.0; n * c];
     let mut scores = vec![0.0; n];
-    let band = BandMask { radius: 4, q_pos0: 0, k_pos0: 0 };
+    let band = BandMask {
+        radius: 4,
+        q_pos0: 0,
+        k_pos0: 0,
+    };
     attention(&q, &k[..], &v[..], c, nh, &band, &mut scores, &mut out);
-    assert_close(&out, &naive_attention(&q, &k[..], &v[..], c, nh, &|i, j| i.abs_diff(j) <= 4), CLOSE);
+    assert_close(
+        &out,
+        &naive_attention(&q, &k[..], &v[..], c, nh, &|i, j| i.abs_diff(j) <= 4),
+        CLOSE,
+    );
     // Tiled causal: 10 streams of t = 3.
     let t = 3;
     let n = 10 * t;
     let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
     let mut out = vec![0.0; n * c];
     let mut scores = vec![0.0; n];
-    let m = TiledCausalMask { t_q: t, t_k: t, q_pos0: 0 };
+    let m = TiledCausalMask {
+        t_q: t,
+        t_k: t,
+        q_pos0: 0,
+    };
     attention(&q, &k[..], &v[..], c, nh, &m, &mut scores, &mut out);
     let want = naive_attention(&q, &k[..], &v[..], c, nh, &|i, j| j % t <= i % t);
     assert_close(&out, &want, CLOSE);
     // Only the last position of stream 7 as a query (the logits shortcut).
     let qi = 7 * t + t - 1;
     let mut one = vec![0.0; c];
-    let last = TiledCausalMask { t_q: 1, t_k: t, q_pos0: t - 1 };
-    attention(&q[qi * c..(qi + 1) * c], &k[..], &v[..], c, nh, &last, &mut scores, &mut one);
+    let last = TiledCausalMask {
+        t_q: 1,
+        t_k: t,
+        q_pos0: t - 1,
+    };
+    attention(
+        &q[qi * c..(qi + 1) * c],
+        &k[..],
+        &v[..],
+        c,
+        nh,
+        &last,
+        &mut scores,
+        &mut one,
+    );
     assert_close(&one, &want[qi * c..(qi + 1) * c], CLOSE);
 }
 
@@ -325,10 +513,20 @@ impl Mask for FalsePeriod {
 fn grouped_queries_equal_each_query_alone() {
     let mut r = Lcg(71);
     for (c, nh) in [(32, 4), (128, 2), (96, 1)] {
-        for (streams, t_q, t_k, q_pos0) in [(10, 1, 4, 3), (10, 4, 4, 0), (5, 7, 9, 2), (3, 2, 5, 1), (1, 6, 6, 0)] {
+        for (streams, t_q, t_k, q_pos0) in [
+            (10, 1, 4, 3),
+            (10, 4, 4, 0),
+            (5, 7, 9, 2),
+            (3, 2, 5, 1),
+            (1, 6, 6, 0),
+        ] {
             let (nq, nk) = (streams * t_q, streams * t_k);
             let (q, k, v) = (r.vec(nq * c), r.vec(nk * c), r.vec(nk * c));
-            let f16 = |x: &[f32]| -> Vec<u16> { x.iter().map(|&a| half::f16::from_f32(a).to_bits()).collect() };
+            let f16 = |x: &[f32]| -> Vec<u16> {
+                x.iter()
+                    .map(|&a| half::f16::from_f32(a).to_bits())
+                    .collect()
+            };
             let (k16, v16) = (f16(&k), f16(&v));
             let split = (nk / 3) * c;
             let m = TiledCausalMask { t_q, t_k, q_pos0 };
@@ -336,15 +534,54 @@ fn grouped_queries_equal_each_query_alone() {
                 let mut scores = vec![0.0; rows * nk];
                 let (mut grouped, mut alone) = (vec![f32::NAN; nq * c], vec![f32::NAN; nq * c]);
                 attention(&q, &k[..], &v[..], c, nh, &m, &mut scores, &mut grouped);
-                attention(&q, &k[..], &v[..], c, nh, &Ungrouped(m), &mut scores, &mut alone);
-                assert!(grouped.iter().zip(&alone).all(|(a, b)| a.to_bits() == b.to_bits()), "f32 c={c} {streams}x{t_q} q_pos0={q_pos0} rows={rows}");
+                attention(
+                    &q,
+                    &k[..],
+                    &v[..],
+                    c,
+                    nh,
+                    &Ungrouped(m),
+                    &mut scores,
+                    &mut alone,
+                );
+                assert!(
+                    grouped
+                        .iter()
+                        .zip(&alone)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "f32 c={c} {streams}x{t_q} q_pos0={q_pos0} rows={rows}"
+                );
                 fn kv16(d: &[u16], split: usize) -> KvRows<'_> {
                     KvRows::two(RowData::F16(&d[..split]), RowData::F16(&d[split..]))
                 }
                 let (mut grouped16, mut alone16) = (vec![f32::NAN; nq * c], vec![f32::NAN; nq * c]);
-                attention(&q, kv16(&k16, split), kv16(&v16, split), c, nh, &m, &mut scores, &mut grouped16);
-                attention(&q, kv16(&k16, split), kv16(&v16, split), c, nh, &Ungrouped(m), &mut scores, &mut alone16);
-                assert!(grouped16.iter().zip(&alone16).all(|(a, b)| a.to_bits() == b.to_bits()), "f16 c={c} {streams}x{t_q} q_pos0={q_pos0} rows={rows}");
+                attention(
+                    &q,
+                    kv16(&k16, split),
+                    kv16(&v16, split),
+                    c,
+                    nh,
+                    &m,
+                    &mut scores,
+                    &mut grouped16,
+                );
+                attention(
+                    &q,
+                    kv16(&k16, split),
+                    kv16(&v16, split),
+                    c,
+                    nh,
+                    &Ungrouped(m),
+                    &mut scores,
+                    &mut alone16,
+                );
+                assert!(
+                    grouped16
+                        .iter()
+                        .zip(&alone16)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "f16 c={c} {streams}x{t_q} q_pos0={q_pos0} rows={rows}"
+                );
             }
             let want = naive_attention(&q, &k, &v, c, nh, &|i, j| j % t_k <= q_pos0 + i % t_q);
             let mut scores = vec![0.0; nk];
@@ -354,13 +591,36 @@ fn grouped_queries_equal_each_query_alone() {
         }
         let n = 24;
         let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
-        let band = BandMask { radius: 3, q_pos0: 0, k_pos0: 0 };
+        let band = BandMask {
+            radius: 3,
+            q_pos0: 0,
+            k_pos0: 0,
+        };
         let mut scores = vec![0.0; 4 * n];
         let (mut fooled, mut plain) = (vec![0.0; n * c], vec![0.0; n * c]);
-        attention(&q, &k[..], &v[..], c, nh, &FalsePeriod(band), &mut scores, &mut fooled);
+        attention(
+            &q,
+            &k[..],
+            &v[..],
+            c,
+            nh,
+            &FalsePeriod(band),
+            &mut scores,
+            &mut fooled,
+        );
         attention(&q, &k[..], &v[..], c, nh, &band, &mut scores, &mut plain);
-        assert!(fooled.iter().zip(&plain).all(|(a, b)| a.to_bits() == b.to_bits()), "false period c={c}");
-        assert_close(&fooled, &naive_attention(&q, &k, &v, c, nh, &|i, j| i.abs_diff(j) <= 3), CLOSE);
+        assert!(
+            fooled
+                .iter()
+                .zip(&plain)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "false period c={c}"
+        );
+        assert_close(
+            &fooled,
+            &naive_attention(&q, &k, &v, c, nh, &|i, j| i.abs_diff(j) <= 3),
+            CLOSE,
+        );
     }
 }
 
@@ -376,7 +636,10 @@ fn linear_xw_equals_one_axpy_per_row_and_input() {
     for rows in [1, 3, 8, 9, 17] {
         for cols in [1, 7, 8, 64, 65, 130] {
             let w = r.vec(rows * cols);
-            let w16: Vec<u16> = w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+            let w16: Vec<u16> = w
+                .iter()
+                .map(|&v| half::f16::from_f32(v).to_bits())
+                .collect();
             let f32m = F32Rows::new(&w, rows, cols).unwrap();
             let f16m = F16Rows::new(&w16, rows, cols).unwrap();
             for n in 0..=9 {
@@ -390,7 +653,10 @@ fn linear_xw_equals_one_axpy_per_row_and_input() {
                             one(k, x[i * rows + k], &mut want[i * cols..(i + 1) * cols]);
                         }
                     }
-                    assert!(z.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "{name} rows={rows} cols={cols} n={n}");
+                    assert!(
+                        z.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()),
+                        "{name} rows={rows} cols={cols} n={n}"
+                    );
                 };
                 check(&Matrix::F32(f32m), &|k, a, y| f32m.axpy(k, a, y), "f32");
                 check(&Matrix::F16(f16m), &|k, a, y| f16m.axpy(k, a, y), "f16");
@@ -426,7 +692,9 @@ pub(crate) fn assert_key_runs_scan<M: Mask>(what: &str, m: &M, nq: usize, nk_max
             let want = scanned_runs(m, qi, nk);
             for cap in [64usize, 2] {
                 let mut got = vec![(usize::MAX, usize::MAX); cap];
-                let n = m.key_runs(qi, nk, &mut got).unwrap_or_else(|| panic!("{what}: no closed form"));
+                let n = m
+                    .key_runs(qi, nk, &mut got)
+                    .unwrap_or_else(|| panic!("{what}: no closed form"));
                 assert_eq!(n, want.len(), "{what} qi={qi} nk={nk}: count");
                 let k = n.min(cap);
                 assert_eq!(got[..k], want[..k], "{what} qi={qi} nk={nk} cap={cap}");
@@ -439,19 +707,56 @@ pub(crate) fn assert_key_runs_scan<M: Mask>(what: &str, m: &M, nq: usize, nk_max
 fn mask_key_runs_equal_the_scan() {
     for radius in [0usize, 1, 3, 7, 116] {
         for (q0, k0) in [(0usize, 0usize), (5, 0), (0, 5), (20, 3), (3, 40)] {
-            assert_key_runs_scan(&format!("band r={radius} q0={q0} k0={k0}"), &BandMask { radius, q_pos0: q0, k_pos0: k0 }, 12, 60);
+            assert_key_runs_scan(
+                &format!("band r={radius} q0={q0} k0={k0}"),
+                &BandMask {
+                    radius,
+                    q_pos0: q0,
+                    k_pos0: k0,
+                },
+                12,
+                60,
+            );
         }
     }
     for (t_q, t_k) in [(1usize, 1usize), (1, 4), (3, 8), (5, 5), (29, 29), (4, 3)] {
         for q0 in [0usize, 1, 3, 7, 28, 40] {
-            let m = TiledCausalMask { t_q, t_k, q_pos0: q0 };
-            assert_key_runs_scan(&format!("tiled t_q={t_q} t_k={t_k} q0={q0}"), &m, 2 * t_q + 1, 3 * t_k + 2);
-            assert_key_runs_scan(&format!("ungrouped tiled t_q={t_q} t_k={t_k} q0={q0}"), &Ungrouped(m), t_q, 2 * t_k + 1);
+            let m = TiledCausalMask {
+                t_q,
+                t_k,
+                q_pos0: q0,
+            };
+            assert_key_runs_scan(
+                &format!("tiled t_q={t_q} t_k={t_k} q0={q0}"),
+                &m,
+                2 * t_q + 1,
+                3 * t_k + 2,
+            );
+            assert_key_runs_scan(
+                &format!("ungrouped tiled t_q={t_q} t_k={t_k} q0={q0}"),
+                &Ungrouped(m),
+                t_q,
+                2 * t_k + 1,
+            );
         }
     }
     // The R window: 10 streams of 29, 290 keys.
-    assert_key_runs_scan("R window", &TiledCausalMask { t_q: 29, t_k: 29, q_pos0: 0 }, 290, 290);
-    assert_key_runs_scan("LAT band", &crate::duolando::session::lat_stream::Visible, 3, 40);
+    assert_key_runs_scan(
+        "R window",
+        &TiledCausalMask {
+            t_q: 29,
+            t_k: 29,
+            q_pos0: 0,
+        },
+        290,
+        290,
+    );
+    assert_key_runs_scan(
+        "LAT band",
+        &crate::duolando::session::lat_stream::Visible,
+        3,
+        40,
+    );
 }
 
 /// A `Cols` window covers exactly its rows and columns: rows read and
@@ -478,7 +783,11 @@ fn cols_window_covers_its_block() {
     }
     for i in 0..rows {
         for j in 0..stride {
-            let want = if (2..6).contains(&j) && (1..4).contains(&i) { i as f32 } else { 0.0 };
+            let want = if (2..6).contains(&j) && (1..4).contains(&i) {
+                i as f32
+            } else {
+                0.0
+            };
             assert_eq!(y[i * stride + j], want, "[{i}][{j}]");
         }
     }

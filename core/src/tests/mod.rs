@@ -3,8 +3,8 @@
 //! accounting). Integration tests against ONNX/tract live in `tests/`.
 
 mod arena;
-pub(crate) mod kernels;
 mod engine;
+pub(crate) mod kernels;
 mod motion_sampler;
 mod rings;
 mod schema_config;

@@ -3,7 +3,9 @@ use crate::duolando::motion::{denormalise, gather_part, normalise, scatter_part}
 use crate::nn::sampler::{argmax, top_k, Rng};
 
 fn pose(seed: u32) -> Vec<f32> {
-    (0..POSE_DIM).map(|i| (((i as u32).wrapping_mul(2654435761u32) ^ seed) % 2000) as f32 / 1000.0 - 1.0).collect()
+    (0..POSE_DIM)
+        .map(|i| (((i as u32).wrapping_mul(2654435761u32) ^ seed) % 2000) as f32 / 1000.0 - 1.0)
+        .collect()
 }
 
 #[test]
@@ -36,7 +38,10 @@ fn parts_cover_every_joint_once_and_first_joint_is_zeroed() {
         let mut x = vec![0.0; 3 * j];
         gather_part(p, &raw, &mut x);
         assert_eq!(&x[..3], &[0.0, 0.0, 0.0]);
-        assert_eq!(&x[3..6], &raw[3 * p.joints()[1] as usize..3 * p.joints()[1] as usize + 3]);
+        assert_eq!(
+            &x[3..6],
+            &raw[3 * p.joints()[1] as usize..3 * p.joints()[1] as usize + 3]
+        );
         let first = p.joints()[0] as usize;
         x[..3].copy_from_slice(&raw[3 * first..3 * first + 3]);
         scatter_part(p, 3, &x, &mut full);

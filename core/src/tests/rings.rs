@@ -35,10 +35,19 @@ fn kv_ring_serves_every_held_run_in_order() {
                 }
             }
             if oldest > 0 {
-                assert!(matches!(ring.rows(oldest - 1, n), Err(Error::Evicted { .. })), "{kv:?} n={n}: evicted row served");
+                assert!(
+                    matches!(ring.rows(oldest - 1, n), Err(Error::Evicted { .. })),
+                    "{kv:?} n={n}: evicted row served"
+                );
             }
-            assert!(matches!(ring.rows(oldest, n + 1), Err(Error::Evicted { .. })), "{kv:?} n={n}: future row served");
-            assert!(ring.rows(n, n - 1).is_err(), "{kv:?} n={n}: reversed range served");
+            assert!(
+                matches!(ring.rows(oldest, n + 1), Err(Error::Evicted { .. })),
+                "{kv:?} n={n}: future row served"
+            );
+            assert!(
+                ring.rows(n, n - 1).is_err(),
+                "{kv:?} n={n}: reversed range served"
+            );
         }
         assert!(ring.push(&[0.0; 2]).is_err(), "wrong width accepted");
     }

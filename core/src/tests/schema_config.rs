@@ -1,7 +1,7 @@
 use crate::duolando::config::Part;
-use crate::limits::{ConfigError, ConfigField, LatField, LatWhich, VqField, VqWhich};
 use crate::duolando::presets::duolando_published;
 use crate::duolando::schema::{for_each_tensor, tensor_count};
+use crate::limits::{ConfigError, ConfigField, LatField, LatWhich, VqField, VqWhich};
 use crate::nn::names::{SchemaError, TensorSpec};
 
 fn specs(cfg: &crate::duolando::config::ModelConfig) -> std::vec::Vec<TensorSpec> {
@@ -15,7 +15,9 @@ fn specs(cfg: &crate::duolando::config::ModelConfig) -> std::vec::Vec<TensorSpec
 }
 
 fn find<'a>(v: &'a [TensorSpec], n: &str) -> &'a TensorSpec {
-    v.iter().find(|s| s.name.as_str() == n).unwrap_or_else(|| panic!("missing {n}"))
+    v.iter()
+        .find(|s| s.name.as_str() == n)
+        .unwrap_or_else(|| panic!("missing {n}"))
 }
 
 #[test]
@@ -44,17 +46,41 @@ fn published_schema_names_and_shapes() {
     assert_eq!(d("gpt.gpt_base.blocks.5.mlp.0.weight"), [3072, 768]);
     assert_eq!(d("gpt.gpt_head.blocks.5.mlp.2.bias"), [768]);
     assert_eq!(d("gpt.gpt_head.head_transl.weight"), [512, 768]);
-    assert_eq!(d("motion.vqvae_up.encoders.0.level_blocks.0.model.0.0.weight"), [512, 48, 4]);
-    assert_eq!(d("motion.vqvae_up.encoders.0.level_blocks.0.model.1.1.model.2.model.1.weight"), [512, 512, 3]);
-    assert_eq!(d("motion.vqvae_up.encoders.0.level_blocks.0.model.1.1.model.2.model.3.weight"), [512, 512, 1]);
-    assert_eq!(d("motion.vqvae_up.encoders.0.level_blocks.0.model.2.weight"), [512, 512, 3]);
+    assert_eq!(
+        d("motion.vqvae_up.encoders.0.level_blocks.0.model.0.0.weight"),
+        [512, 48, 4]
+    );
+    assert_eq!(
+        d("motion.vqvae_up.encoders.0.level_blocks.0.model.1.1.model.2.model.1.weight"),
+        [512, 512, 3]
+    );
+    assert_eq!(
+        d("motion.vqvae_up.encoders.0.level_blocks.0.model.1.1.model.2.model.3.weight"),
+        [512, 512, 1]
+    );
+    assert_eq!(
+        d("motion.vqvae_up.encoders.0.level_blocks.0.model.2.weight"),
+        [512, 512, 3]
+    );
     assert_eq!(d("motion.vqvae_up.bottleneck.level_blocks.0.k"), [512, 512]);
-    assert_eq!(d("motion.vqvae_down.decoders.0.level_blocks.0.model.0.weight"), [512, 512, 3]);
-    assert_eq!(d("motion.vqvae_down.decoders.0.level_blocks.0.model.2.1.weight"), [512, 512, 4]);
+    assert_eq!(
+        d("motion.vqvae_down.decoders.0.level_blocks.0.model.0.weight"),
+        [512, 512, 3]
+    );
+    assert_eq!(
+        d("motion.vqvae_down.decoders.0.level_blocks.0.model.2.1.weight"),
+        [512, 512, 4]
+    );
     assert_eq!(d("motion.vqvae_down.decoders.0.out.weight"), [27, 512, 3]);
-    assert_eq!(d("motion.vqvae_down.decoders_rot.0.out.weight"), [81, 512, 3]);
+    assert_eq!(
+        d("motion.vqvae_down.decoders_rot.0.out.weight"),
+        [81, 512, 3]
+    );
     assert_eq!(d("motion.vqvae_lhand.decoders_rot.0.out.bias"), [135]);
-    assert_eq!(d("transl.encoders.0.level_blocks.0.model.0.0.weight"), [512, 3, 4]);
+    assert_eq!(
+        d("transl.encoders.0.level_blocks.0.model.0.0.weight"),
+        [512, 3, 4]
+    );
     assert_eq!(d("transl.decoders.0.out.weight"), [3, 512, 3]);
     assert_eq!(d("transl.bottleneck.level_blocks.0.k"), [512, 512]);
     // Not stored: masks, LAT pos_emb, unused cond embeddings, root head, transl rot decoder.
@@ -69,7 +95,10 @@ fn published_schema_names_and_shapes() {
         assert!(!names.contains(&absent), "{absent}");
     }
     // Parameter count of the inference path (DESIGN.md: ~300M).
-    let params: u64 = v.iter().map(|s| s.dims().iter().map(|&x| x as u64).product::<u64>()).sum();
+    let params: u64 = v
+        .iter()
+        .map(|s| s.dims().iter().map(|&x| x as u64).product::<u64>())
+        .sum();
     assert!((250_000_000..350_000_000).contains(&params), "{params}");
     let gpt: u64 = v
         .iter()
@@ -82,7 +111,11 @@ fn published_schema_names_and_shapes() {
 #[test]
 fn schema_follows_depth_and_down_t() {
     let mut cfg = duolando_published();
-    for vq in cfg.parts.iter_mut().chain(core::iter::once(&mut cfg.transl)) {
+    for vq in cfg
+        .parts
+        .iter_mut()
+        .chain(core::iter::once(&mut cfg.transl))
+    {
         vq.depth = 2;
         vq.width = 64;
         vq.emb_width = 32;
@@ -91,15 +124,35 @@ fn schema_follows_depth_and_down_t() {
     assert_eq!(cfg.validate(), Ok(()));
     let v = specs(&cfg);
     let d = |s: &str| find(&v, s).dims().to_vec();
-    assert_eq!(d("motion.vqvae_up.encoders.0.level_blocks.0.model.1.1.model.1.model.1.weight"), [64, 64, 3]);
-    assert_eq!(d("motion.vqvae_up.encoders.0.level_blocks.0.model.2.weight"), [32, 64, 3]);
-    assert_eq!(d("motion.vqvae_up.decoders.0.level_blocks.0.model.2.1.weight"), [64, 32, 4]);
-    assert_eq!(d("motion.vqvae_up.decoders.0.level_blocks.0.model.1.1.weight"), [64, 64, 4]);
+    assert_eq!(
+        d("motion.vqvae_up.encoders.0.level_blocks.0.model.1.1.model.1.model.1.weight"),
+        [64, 64, 3]
+    );
+    assert_eq!(
+        d("motion.vqvae_up.encoders.0.level_blocks.0.model.2.weight"),
+        [32, 64, 3]
+    );
+    assert_eq!(
+        d("motion.vqvae_up.decoders.0.level_blocks.0.model.2.1.weight"),
+        [64, 32, 4]
+    );
+    assert_eq!(
+        d("motion.vqvae_up.decoders.0.level_blocks.0.model.1.1.weight"),
+        [64, 64, 4]
+    );
     assert!(!v.iter().any(|s| s.name.contains("model.2.model.1.weight")));
-    assert!(!v.iter().any(|s| s.name.starts_with("gpt.gpt_base.blocks.1.")));
+    assert!(!v
+        .iter()
+        .any(|s| s.name.starts_with("gpt.gpt_base.blocks.1.")));
     // A hop that differs between parts is rejected.
     cfg.parts[0].down_t = 3;
-    assert!(matches!(cfg.validate(), Err(ConfigError::Mismatch { field: ConfigField::Vq(_, VqField::Hop), .. })));
+    assert!(matches!(
+        cfg.validate(),
+        Err(ConfigError::Mismatch {
+            field: ConfigField::Vq(_, VqField::Hop),
+            ..
+        })
+    ));
 }
 
 #[test]
@@ -107,59 +160,137 @@ fn config_rejections() {
     let ok = duolando_published();
     let mut c = ok;
     c.gpt.n_head = 7;
-    assert_eq!(c.validate(), Err(ConfigError::NotDivisible { field: ConfigField::NEmbd, value: 768, divisor: 7 }));
+    assert_eq!(
+        c.validate(),
+        Err(ConfigError::NotDivisible {
+            field: ConfigField::NEmbd,
+            value: 768,
+            divisor: 7
+        })
+    );
     let mut c = ok;
     c.gpt.n_embd = 0;
-    assert_eq!(c.validate(), Err(ConfigError::Zero { field: ConfigField::NEmbd }));
+    assert_eq!(
+        c.validate(),
+        Err(ConfigError::Zero {
+            field: ConfigField::NEmbd
+        })
+    );
     let mut c = ok;
     c.gpt.n_embd = 1 << 20;
-    assert!(matches!(c.validate(), Err(ConfigError::TooLarge { field: ConfigField::NEmbd, .. })));
+    assert!(matches!(
+        c.validate(),
+        Err(ConfigError::TooLarge {
+            field: ConfigField::NEmbd,
+            ..
+        })
+    ));
     let mut c = ok;
     c.gpt.vocab[0] = 511;
     assert!(matches!(c.validate(), Err(ConfigError::Mismatch { .. })));
     let mut c = ok;
     c.gpt.vocab[4] = 100;
-    assert_eq!(c.validate(), Err(ConfigError::Mismatch { field: ConfigField::Vocab(4), value: 100, expected: 512 }));
+    assert_eq!(
+        c.validate(),
+        Err(ConfigError::Mismatch {
+            field: ConfigField::Vocab(4),
+            value: 100,
+            expected: 512
+        })
+    );
     let mut c = ok;
     c.parts[1].in_channels = 30;
     assert_eq!(
         c.validate(),
-        Err(ConfigError::Mismatch { field: ConfigField::Vq(VqWhich::Part(Part::Down), VqField::InChannels), value: 30, expected: 27 })
+        Err(ConfigError::Mismatch {
+            field: ConfigField::Vq(VqWhich::Part(Part::Down), VqField::InChannels),
+            value: 30,
+            expected: 27
+        })
     );
     let mut c = ok;
     c.transl.stride_t = 3;
     assert_eq!(
         c.validate(),
-        Err(ConfigError::Unsupported { field: ConfigField::Vq(VqWhich::Transl, VqField::StrideT), value: 3 })
+        Err(ConfigError::Unsupported {
+            field: ConfigField::Vq(VqWhich::Transl, VqField::StrideT),
+            value: 3
+        })
     );
     let mut c = ok;
     c.gpt.final_ln = true;
-    assert!(matches!(c.validate(), Err(ConfigError::Unsupported { field: ConfigField::FinalLn, .. })));
+    assert!(matches!(
+        c.validate(),
+        Err(ConfigError::Unsupported {
+            field: ConfigField::FinalLn,
+            ..
+        })
+    ));
     let mut c = ok;
     c.gpt.n_streams = 3;
-    assert!(matches!(c.validate(), Err(ConfigError::Unsupported { field: ConfigField::NStreams, .. })));
+    assert!(matches!(
+        c.validate(),
+        Err(ConfigError::Unsupported {
+            field: ConfigField::NStreams,
+            ..
+        })
+    ));
     let mut c = ok;
     c.gpt.leader.downsample_rate = 2;
-    assert!(matches!(c.validate(), Err(ConfigError::Mismatch { field: ConfigField::Lat(LatWhich::Leader, LatField::DownsampleRate), .. })));
+    assert!(matches!(
+        c.validate(),
+        Err(ConfigError::Mismatch {
+            field: ConfigField::Lat(LatWhich::Leader, LatField::DownsampleRate),
+            ..
+        })
+    ));
     let mut c = ok;
     c.gpt.music.downsample_rate = 8;
-    assert!(matches!(c.validate(), Err(ConfigError::Mismatch { field: ConfigField::Lat(LatWhich::Music, LatField::DownsampleRate), .. })));
+    assert!(matches!(
+        c.validate(),
+        Err(ConfigError::Mismatch {
+            field: ConfigField::Lat(LatWhich::Music, LatField::DownsampleRate),
+            ..
+        })
+    ));
     let mut c = ok;
     c.gpt.look_forward = 0;
-    assert!(matches!(c.validate(), Err(ConfigError::Zero { field: ConfigField::LookForward })));
+    assert!(matches!(
+        c.validate(),
+        Err(ConfigError::Zero {
+            field: ConfigField::LookForward
+        })
+    ));
     let mut c = ok;
     c.gpt.block_size = 1;
-    assert!(matches!(c.validate(), Err(ConfigError::TooSmall { field: ConfigField::BlockSize, .. })));
+    assert!(matches!(
+        c.validate(),
+        Err(ConfigError::TooSmall {
+            field: ConfigField::BlockSize,
+            ..
+        })
+    ));
     let mut c = ok;
     c.parts[2].dilation_growth_rate = 100;
     c.parts[2].depth = 8;
-    assert!(matches!(c.validate(), Err(ConfigError::TooLarge { field: ConfigField::Vq(_, VqField::MaxDilation), .. })));
+    assert!(matches!(
+        c.validate(),
+        Err(ConfigError::TooLarge {
+            field: ConfigField::Vq(_, VqField::MaxDilation),
+            ..
+        })
+    ));
     let mut c = ok;
     c.parts[2].m_conv_den = 0;
     assert!(matches!(c.validate(), Err(ConfigError::Zero { .. })));
     let mut c = ok;
     c.music_motion_rate = 0;
-    assert!(matches!(c.validate(), Err(ConfigError::Zero { field: ConfigField::MusicMotionRate })));
+    assert!(matches!(
+        c.validate(),
+        Err(ConfigError::Zero {
+            field: ConfigField::MusicMotionRate
+        })
+    ));
 }
 
 /// Blocked rows run over every axis but the first: a Conv1d (out, in, k)
@@ -172,18 +303,51 @@ fn block_rows_span_all_axes_but_the_first() {
     assert_eq!(block_row(&[768, 3072]), 3072);
     assert_eq!(block_row(&[96]), 96);
     assert_eq!(block_row(&[]), 0);
-    assert_eq!(block_row(&[2, u32::MAX, u32::MAX, u32::MAX]), 0, "overflow reads as no row");
-    assert_eq!(DType::Q8Block32.bytes_for(512 * 512 * 3, block_row(&[512, 512, 3])), Some(512 * 48 * 34));
-    assert_eq!(DType::Q4Block32.bytes_for(64 * 64 * 3, block_row(&[64, 64, 3])), Some(64 * 6 * 18));
+    assert_eq!(
+        block_row(&[2, u32::MAX, u32::MAX, u32::MAX]),
+        0,
+        "overflow reads as no row"
+    );
+    assert_eq!(
+        DType::Q8Block32.bytes_for(512 * 512 * 3, block_row(&[512, 512, 3])),
+        Some(512 * 48 * 34)
+    );
+    assert_eq!(
+        DType::Q4Block32.bytes_for(64 * 64 * 3, block_row(&[64, 64, 3])),
+        Some(64 * 6 * 18)
+    );
     // 16 * 3 = 48 values per row do not make whole blocks.
-    assert_eq!(DType::Q8Block32.bytes_for(16 * 16 * 3, block_row(&[16, 16, 3])), None);
+    assert_eq!(
+        DType::Q8Block32.bytes_for(16 * 16 * 3, block_row(&[16, 16, 3])),
+        None
+    );
     // Roles: the published model's first decoder conv is a Conv, the
     // first encoder conv an EncoderConv, a decoder upsampler a ConvTranspose.
     let v = specs(&duolando_published());
     use crate::nn::names::Role;
-    assert_eq!(find(&v, "motion.vqvae_up.decoders.0.out.weight").role, Role::Conv);
-    assert_eq!(find(&v, "motion.vqvae_up.encoders.0.level_blocks.0.model.0.0.weight").role, Role::EncoderConv);
-    assert_eq!(find(&v, "motion.vqvae_up.decoders.0.level_blocks.0.model.1.1.weight").role, Role::ConvTranspose);
+    assert_eq!(
+        find(&v, "motion.vqvae_up.decoders.0.out.weight").role,
+        Role::Conv
+    );
+    assert_eq!(
+        find(
+            &v,
+            "motion.vqvae_up.encoders.0.level_blocks.0.model.0.0.weight"
+        )
+        .role,
+        Role::EncoderConv
+    );
+    assert_eq!(
+        find(
+            &v,
+            "motion.vqvae_up.decoders.0.level_blocks.0.model.1.1.weight"
+        )
+        .role,
+        Role::ConvTranspose
+    );
     assert_eq!(find(&v, "gpt.gpt_base.pos_emb").role, Role::PosEmb);
-    assert_eq!(find(&v, "motion.vqvae_up.bottleneck.level_blocks.0.k").role, Role::Codebook);
+    assert_eq!(
+        find(&v, "motion.vqvae_up.bottleneck.level_blocks.0.k").role,
+        Role::Codebook
+    );
 }

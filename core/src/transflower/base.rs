@@ -40,7 +40,11 @@ pub struct Replay<'n> {
 
 impl BaseSample for Replay<'_> {
     fn check(&self, steps: usize, per_step: usize) -> Result<(), Error> {
-        check_len(Buffer::Features, self.noise.len(), steps.saturating_mul(per_step))?;
+        check_len(
+            Buffer::Features,
+            self.noise.len(),
+            steps.saturating_mul(per_step),
+        )?;
         crate::input::check(Buffer::Features, self.noise)
     }
     fn sample(&mut self, step: usize, z: &mut [f32]) {
@@ -77,7 +81,12 @@ pub struct Seeded {
 impl Seeded {
     /// The model's base distribution (`cfg.flow.base`) over its H positions.
     pub fn new(seed: u64, cfg: &TransflowerConfig) -> Seeded {
-        Seeded { rng: Rng(seed), dist: cfg.flow.base, h: cfg.output_length as usize, spare: None }
+        Seeded {
+            rng: Rng(seed),
+            dist: cfg.flow.base,
+            h: cfg.output_length as usize,
+            spare: None,
+        }
     }
 
     /// Uniform in [0, 1).

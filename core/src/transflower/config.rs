@@ -45,22 +45,30 @@ impl ModalityName {
     /// None if empty, too long or not `[A-Za-z0-9_]`.
     pub fn new(s: &str) -> Option<ModalityName> {
         let b = s.as_bytes();
-        if b.is_empty() || b.len() > MODALITY_NAME_CAP || !b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_') {
+        if b.is_empty()
+            || b.len() > MODALITY_NAME_CAP
+            || !b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
+        {
             return None;
         }
         let mut bytes = [0u8; MODALITY_NAME_CAP];
         bytes[..b.len()].copy_from_slice(b);
-        Some(ModalityName { len: b.len() as u8, bytes })
+        Some(ModalityName {
+            len: b.len() as u8,
+            bytes,
+        })
     }
     /// Whether the stored bytes are what [`ModalityName::new`] makes (a
     /// name decoded from a file may not be: length over the cap, bytes
     /// outside `[A-Za-z0-9_]`, or non-zero bytes past the length).
     pub fn is_valid(&self) -> bool {
-        (self.len as usize) <= MODALITY_NAME_CAP && ModalityName::new(self.as_str()).as_ref() == Some(self)
+        (self.len as usize) <= MODALITY_NAME_CAP
+            && ModalityName::new(self.as_str()).as_ref() == Some(self)
     }
     pub fn as_str(&self) -> &str {
         // Only ASCII is ever stored (`new`); a corrupt value reads as "".
-        core::str::from_utf8(&self.bytes[..(self.len as usize).min(MODALITY_NAME_CAP)]).unwrap_or("")
+        core::str::from_utf8(&self.bytes[..(self.len as usize).min(MODALITY_NAME_CAP)])
+            .unwrap_or("")
     }
 }
 
@@ -184,11 +192,15 @@ pub enum Unsupported {
     /// `residual: True` (3 published configs): a mean network adds to the sample.
     Residual,
     /// `scales` with more than one level (squeeze, halved split, doubled cond).
-    MultiLevelScales { levels: u32 },
+    MultiLevelScales {
+        levels: u32,
+    },
     /// `scales [[n, s]]` with a checkerboard part `s > 0`.
     CheckerboardScales,
     /// `num_mixture_components > 0`: mixture-of-logistics couplings.
-    MixtureCouplings { components: u32 },
+    MixtureCouplings {
+        components: u32,
+    },
     /// `use_transformer_nn: False`: convolutional coupling nets.
     ConvCouplingNets,
     UseXTransformers,
@@ -207,7 +219,9 @@ pub enum Unsupported {
     /// `input_time_offsets` other than 0.
     InputTimeOffsets,
     /// A discrete input that is not `single`, or a `single` continuous input.
-    WindowType { input: u8 },
+    WindowType {
+        input: u8,
+    },
     /// `douts` other than the output input's `dins`.
     OutputWidth,
     /// Per-input lists (`dins`, `input_lengths`, ...) of another length
@@ -218,20 +232,45 @@ pub enum Unsupported {
 /// Why a config was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ConfigError {
-    Zero { field: Field },
-    TooLarge { field: Field, value: u32, max: u32 },
-    TooSmall { field: Field, value: u32, min: u32 },
-    NotDivisible { field: Field, value: u32, divisor: u32 },
-    Mismatch { field: Field, value: u32, expected: u32 },
+    Zero {
+        field: Field,
+    },
+    TooLarge {
+        field: Field,
+        value: u32,
+        max: u32,
+    },
+    TooSmall {
+        field: Field,
+        value: u32,
+        min: u32,
+    },
+    NotDivisible {
+        field: Field,
+        value: u32,
+        divisor: u32,
+    },
+    Mismatch {
+        field: Field,
+        value: u32,
+        expected: u32,
+    },
     Unsupported(Unsupported),
     /// Input `input`'s modality name is empty, too long or not
     /// `[A-Za-z0-9_]` (only a corrupt `.duo` header can hold one).
-    BadName { input: u8 },
+    BadName {
+        input: u8,
+    },
     /// Inputs `input` and `previous` have the same modality name (their
     /// tensor names would collide).
-    DuplicateName { input: u8, previous: u8 },
+    DuplicateName {
+        input: u8,
+        previous: u8,
+    },
     /// Slot `input` at or past `n_inputs` is not empty (all zero).
-    UnusedInput { input: u8 },
+    UnusedInput {
+        input: u8,
+    },
 }
 
 fn range(field: Field, value: u32, min: u32, max: u32) -> Result<(), ConfigError> {
@@ -270,7 +309,11 @@ impl TransflowerConfig {
     }
     /// The longest input window (the step count is `rows of the last input - this + 1`).
     pub fn max_window(&self) -> usize {
-        self.inputs().iter().map(|i| i.length as usize).max().unwrap_or(0)
+        self.inputs()
+            .iter()
+            .map(|i| i.length as usize)
+            .max()
+            .unwrap_or(0)
     }
     /// Whether input `i`'s transformer has a `pos_emb` score bias.
     pub fn input_has_bias(&self, i: usize) -> bool {
@@ -311,15 +354,23 @@ impl TransflowerConfig {
     /// Checks every size against the engine's caps and the model's rules.
     pub fn validate(&self) -> Result<(), ConfigError> {
         range(Field::Inputs, self.n_inputs, 1, MAX_INPUTS as u32)?;
-        if let Some(k) = self.inputs[self.n_inputs as usize..].iter().position(|i| *i != InputConfig::default()) {
-            return Err(ConfigError::UnusedInput { input: (self.n_inputs as usize + k) as u8 });
+        if let Some(k) = self.inputs[self.n_inputs as usize..]
+            .iter()
+            .position(|i| *i != InputConfig::default())
+        {
+            return Err(ConfigError::UnusedInput {
+                input: (self.n_inputs as usize + k) as u8,
+            });
         }
         for (i, inp) in self.inputs().iter().enumerate() {
             if !inp.name.is_valid() {
                 return Err(ConfigError::BadName { input: i as u8 });
             }
             if let Some(p) = self.inputs()[..i].iter().position(|q| q.name == inp.name) {
-                return Err(ConfigError::DuplicateName { input: i as u8, previous: p as u8 });
+                return Err(ConfigError::DuplicateName {
+                    input: i as u8,
+                    previous: p as u8,
+                });
             }
             let i = i as u8;
             range(Field::InputDim(i), inp.dim, 1, MAX_EMBD)?;
@@ -330,10 +381,16 @@ impl TransflowerConfig {
             }
         }
         if self.output >= self.n_inputs {
-            return Err(ConfigError::TooLarge { field: Field::Output, value: self.output, max: self.n_inputs - 1 });
+            return Err(ConfigError::TooLarge {
+                field: Field::Output,
+                value: self.output,
+                max: self.n_inputs - 1,
+            });
         }
         if self.output_input().is_discrete() {
-            return Err(unsupported(Unsupported::WindowType { input: self.output as u8 }));
+            return Err(unsupported(Unsupported::WindowType {
+                input: self.output as u8,
+            }));
         }
         range(Field::Channels, self.channels() as u32, 2, MAX_EMBD)?;
         range(Field::OutputLength, self.output_length, 1, MAX_WINDOW)?;
@@ -341,7 +398,11 @@ impl TransflowerConfig {
         range(Field::Dhid, self.dhid, 1, MAX_EMBD)?;
         range(Field::Nhead, self.nhead, 1, MAX_HEADS)?;
         if !self.dhid.is_multiple_of(self.nhead) {
-            return Err(ConfigError::NotDivisible { field: Field::Dhid, value: self.dhid, divisor: self.nhead });
+            return Err(ConfigError::NotDivisible {
+                field: Field::Dhid,
+                value: self.dhid,
+                divisor: self.nhead,
+            });
         }
         range(Field::Nlayers, self.nlayers, 1, MAX_LAYERS)?;
         let f = &self.flow;
@@ -349,12 +410,20 @@ impl TransflowerConfig {
         range(Field::DhidFlow, f.dhid, 1, MAX_EMBD)?;
         range(Field::HeadsFlow, f.heads, 1, MAX_HEADS)?;
         if !f.dhid.is_multiple_of(f.heads) {
-            return Err(ConfigError::NotDivisible { field: Field::DhidFlow, value: f.dhid, divisor: f.heads });
+            return Err(ConfigError::NotDivisible {
+                field: Field::DhidFlow,
+                value: f.dhid,
+                divisor: f.heads,
+            });
         }
         range(Field::CouplingLayers, f.layers, 1, MAX_COUPLING_LAYERS)?;
         if f.concat_dims && self.cond_len != self.output_length {
             // `cat((x_id, cond), dim=1)` needs as many conditioning rows as frames.
-            return Err(ConfigError::Mismatch { field: Field::CondLen, value: self.cond_len, expected: self.output_length });
+            return Err(ConfigError::Mismatch {
+                field: Field::CondLen,
+                value: self.cond_len,
+                expected: self.output_length,
+            });
         }
         if let BaseDist::StudentT { df } = f.base {
             range(Field::StudentTDf, df, 1, u32::MAX)?;
@@ -373,13 +442,17 @@ impl TransflowerConfig {
             return u(Unsupported::Residual);
         }
         if h.scales.n != 1 {
-            return u(Unsupported::MultiLevelScales { levels: h.scales.n as u32 });
+            return u(Unsupported::MultiLevelScales {
+                levels: h.scales.n as u32,
+            });
         }
         if h.scales.items[0].1 != 0 {
             return u(Unsupported::CheckerboardScales);
         }
         if h.num_mixture_components > 0 {
-            return u(Unsupported::MixtureCouplings { components: h.num_mixture_components });
+            return u(Unsupported::MixtureCouplings {
+                components: h.num_mixture_components,
+            });
         }
         if !h.use_transformer_nn {
             return u(Unsupported::ConvCouplingNets);
@@ -389,7 +462,10 @@ impl TransflowerConfig {
             (h.use_rotary_pos_emb, Unsupported::UseRotaryPosEmb),
             (h.use_pos_emb_inputs, Unsupported::UsePosEmbInputs),
             (h.use_rel_pos_emb_output, Unsupported::UseRelPosEmbOutput),
-            (h.use_rel_pos_emb_coupling, Unsupported::UseRelPosEmbCoupling),
+            (
+                h.use_rel_pos_emb_coupling,
+                Unsupported::UseRelPosEmbCoupling,
+            ),
         ] {
             if on {
                 return u(what);
@@ -403,7 +479,9 @@ impl TransflowerConfig {
         };
         let base = match h.flow_dist {
             DistOption::Normal => BaseDist::Normal,
-            DistOption::StudentT => BaseDist::StudentT { df: h.flow_dist_param },
+            DistOption::StudentT => BaseDist::StudentT {
+                df: h.flow_dist_param,
+            },
             DistOption::Other => return u(Unsupported::FlowDist),
         };
         let n = h.input_modalities.n;
@@ -411,12 +489,21 @@ impl TransflowerConfig {
             return u(Unsupported::SeveralOutputs);
         }
         let out_name = h.output_modalities.items[0];
-        let output = h.input_modalities.as_slice().iter().position(|m| *m == out_name);
+        let output = h
+            .input_modalities
+            .as_slice()
+            .iter()
+            .position(|m| *m == out_name);
         let Some(output) = output else {
             return u(Unsupported::OutputNotAnInput);
         };
         let per_input = |len: usize, optional: bool| len == n || (optional && len == 0);
-        if !per_input(h.dins.n, false) || !per_input(h.input_lengths.n, false) || !per_input(h.input_types_discrete.n, true) || !per_input(h.input_fix_single.n, true) || !per_input(h.input_num_tokens.n, true) {
+        if !per_input(h.dins.n, false)
+            || !per_input(h.input_lengths.n, false)
+            || !per_input(h.input_types_discrete.n, true)
+            || !per_input(h.input_fix_single.n, true)
+            || !per_input(h.input_num_tokens.n, true)
+        {
             return u(Unsupported::ListLength);
         }
         let offs = h.input_time_offsets.as_slice();
@@ -430,11 +517,22 @@ impl TransflowerConfig {
             if discrete != single {
                 return u(Unsupported::WindowType { input: i as u8 });
             }
-            let tokens = if discrete { h.input_num_tokens.items[i] } else { 0 };
+            let tokens = if discrete {
+                h.input_num_tokens.items[i]
+            } else {
+                0
+            };
             if discrete && tokens == 0 {
-                return Err(ConfigError::Zero { field: Field::InputTokens(i as u8) });
+                return Err(ConfigError::Zero {
+                    field: Field::InputTokens(i as u8),
+                });
             }
-            *slot = InputConfig { name: h.input_modalities.items[i], dim: h.dins.items[i], length: h.input_lengths.items[i], tokens };
+            *slot = InputConfig {
+                name: h.input_modalities.items[i],
+                dim: h.dins.items[i],
+                length: h.input_lengths.items[i],
+                tokens,
+            };
         }
         if h.douts.items[0] != inputs[output].dim {
             return u(Unsupported::OutputWidth);
@@ -445,7 +543,12 @@ impl TransflowerConfig {
             inputs,
             output: output as u32,
             output_length,
-            output_time_offset: h.output_time_offsets.as_slice().first().copied().unwrap_or(0),
+            output_time_offset: h
+                .output_time_offsets
+                .as_slice()
+                .first()
+                .copied()
+                .unwrap_or(0),
             cond_len: h.conditioning_seq_lens.unwrap_or(output_length),
             dhid: h.dhid,
             nhead: h.nhead,

@@ -6,7 +6,7 @@
 
 use crate::transflower::model::Model;
 use crate::transflower::probe::{Net, Probe, Stage};
-use crate::transflower::transformer::{forward, stages, TransformerScratch};
+use crate::transflower::transformer::{forward_recorded, stages, TransformerScratch};
 
 /// One input's window at a step.
 #[derive(Clone, Copy, Debug)]
@@ -20,7 +20,29 @@ pub enum Window<'x> {
 /// `latent` (sum L_i, dhid) = every input transformer over its window,
 /// stacked. `emb`: (max discrete dim) scratch for an embedding row.
 /// Callers check the windows (lengths, labels in range).
-pub fn encode_inputs(model: &Model<'_>, windows: &[Window<'_>], s: &mut TransformerScratch<'_>, emb: &mut [f32], latent: &mut [f32], probe: &mut dyn FnMut(Probe, &[f32])) {
+pub fn encode_inputs(
+    model: &Model<'_>,
+    windows: &[Window<'_>],
+    s: &mut TransformerScratch<'_>,
+    emb: &mut [f32],
+    latent: &mut [f32],
+    probe: &mut dyn FnMut(Probe, &[f32]),
+) {
+    encode_inputs_recorded(model, windows, s, emb, latent, probe, &mut |_, _, _| {});
+}
+
+/// [`encode_inputs`] that also hands input `i`'s layer `l` q | k | v rows
+/// (L_i, 3 dhid) to `layer_qkv(i, l, qkv)`.
+#[allow(clippy::too_many_arguments)]
+pub fn encode_inputs_recorded(
+    model: &Model<'_>,
+    windows: &[Window<'_>],
+    s: &mut TransformerScratch<'_>,
+    emb: &mut [f32],
+    latent: &mut [f32],
+    probe: &mut dyn FnMut(Probe, &[f32]),
+    layer_qkv: &mut dyn FnMut(usize, usize, &[f32]),
+) {
     let d = model.cfg.dhid as usize;
     let mut row = 0usize;
     for (i, (net, win)) in model.inputs.iter().zip(windows).enumerate() {
@@ -30,7 +52,13 @@ pub fn encode_inputs(model: &Model<'_>, windows: &[Window<'_>], s: &mut Transfor
                 // `encoder` (Embedding): the label's row (1, dim).
                 let e = &mut emb[..net.din];
                 table.row_into(label as usize, e);
-                probe(Probe::Net { net: Net::Input(i as u8), stage: Stage::Encoder }, e);
+                probe(
+                    Probe::Net {
+                        net: Net::Input(i as u8),
+                        stage: Stage::Encoder,
+                    },
+                    e,
+                );
                 e
             }
             (Window::Rows(rows), _) => rows,
@@ -38,7 +66,15 @@ pub fn encode_inputs(model: &Model<'_>, windows: &[Window<'_>], s: &mut Transfor
             (Window::Label(_), None) => &[],
         };
         let out = &mut latent[row * d..(row + l) * d];
-        forward(net, input, l, s, out, &mut stages(probe, Net::Input(i as u8)));
+        forward_recorded(
+            net,
+            input,
+            l,
+            s,
+            out,
+            &mut stages(probe, Net::Input(i as u8)),
+            &mut |layer, qkv| layer_qkv(i, layer, qkv),
+        );
         row += l;
     }
 }

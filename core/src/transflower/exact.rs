@@ -72,38 +72,70 @@ pub fn steps(cfg: &TransflowerConfig, inputs: &[Input<'_>]) -> Result<usize, Err
         match (*inp, c.is_discrete()) {
             (Input::Label(v), true) => {
                 if v >= c.tokens {
-                    return Err(Error::Token { stream: i as u8, token: v, vocab: c.tokens });
+                    return Err(Error::Token {
+                        stream: i as u8,
+                        token: v,
+                        vocab: c.tokens,
+                    });
                 }
                 rows[i] = 1;
             }
             (Input::Rows(x), false) => {
                 let d = c.dim as usize;
                 if x.is_empty() || !x.len().is_multiple_of(d) {
-                    return Err(Error::Ragged { buffer, len: x.len(), row: d });
+                    return Err(Error::Ragged {
+                        buffer,
+                        len: x.len(),
+                        row: d,
+                    });
                 }
                 input::check(buffer, x)?;
                 rows[i] = x.len() / d;
             }
             // A label for a continuous input, or rows for a discrete one.
-            (Input::Label(_), false) => return Err(Error::Ragged { buffer, len: 1, row: c.dim as usize }),
-            (Input::Rows(x), true) => return Err(Error::Length { buffer, len: x.len(), expected: 1 }),
+            (Input::Label(_), false) => {
+                return Err(Error::Ragged {
+                    buffer,
+                    len: 1,
+                    row: c.dim as usize,
+                })
+            }
+            (Input::Rows(x), true) => {
+                return Err(Error::Length {
+                    buffer,
+                    len: x.len(),
+                    expected: 1,
+                })
+            }
         }
     }
     let m = cfg.output as usize;
     let lm = cfg.inputs[m].length as usize;
     if rows[m] < lm {
-        return Err(Error::TooShort { buffer: Buffer::SeedFrames, frames: rows[m], min: lm });
+        return Err(Error::TooShort {
+            buffer: Buffer::SeedFrames,
+            frames: rows[m],
+            min: lm,
+        });
     }
     let last = n_in - 1;
     let max_l = cfg.max_window();
     if rows[last] < max_l {
-        return Err(Error::TooShort { buffer: buffer_of(cfg, last), frames: rows[last], min: max_l });
+        return Err(Error::TooShort {
+            buffer: buffer_of(cfg, last),
+            frames: rows[last],
+            min: max_l,
+        });
     }
     let n = rows[last] - max_l + 1;
     for (i, c) in cfg.inputs().iter().enumerate() {
         let need = c.length as usize + n - 1;
         if i != m && !c.is_discrete() && rows[i] < need {
-            return Err(Error::TooShort { buffer: Features, frames: rows[i], min: need });
+            return Err(Error::TooShort {
+                buffer: Features,
+                frames: rows[i],
+                min: need,
+            });
         }
     }
     Ok(n)
@@ -114,16 +146,16 @@ use Buffer::Features;
 /// Working memory of one step ([`step`]).
 pub struct StepScratch<'s> {
     /// Shared by every transformer (inputs, cross-modal, couplings).
-    net: TransformerScratch<'s>,
+    pub(crate) net: TransformerScratch<'s>,
     /// (max discrete input dim): an embedding row.
-    emb: &'s mut [f32],
+    pub(crate) emb: &'s mut [f32],
     /// (sum L, D): the input encoders' outputs.
-    latent: &'s mut [f32],
+    pub(crate) latent: &'s mut [f32],
     /// (cond_len, D).
-    cond: &'s mut [f32],
+    pub(crate) cond: &'s mut [f32],
     /// (C, H): the base sample, then the flow's sample.
-    x: &'s mut [f32],
-    flow: FlowScratch<'s>,
+    pub(crate) x: &'s mut [f32],
+    pub(crate) flow: FlowScratch<'s>,
 }
 
 impl<'s> StepScratch<'s> {
@@ -131,7 +163,13 @@ impl<'s> StepScratch<'s> {
         let d = cfg.dhid as usize;
         let rows = cfg.latent_rows().max(cfg.coupling_rows());
         let width = d.max(cfg.flow.dhid as usize);
-        let emb = cfg.inputs().iter().filter(|i| i.is_discrete()).map(|i| i.dim as usize).max().unwrap_or(0);
+        let emb = cfg
+            .inputs()
+            .iter()
+            .filter(|i| i.is_discrete())
+            .map(|i| i.dim as usize)
+            .max()
+            .unwrap_or(0);
         Ok(StepScratch {
             net: TransformerScratch::carve(a, rows, width)?,
             emb: a.f32(emb)?,
@@ -156,9 +194,16 @@ impl<'s> Prepared<'s> {
         let cc = c.checked_mul(c).ok_or(ArenaError::Overflow)?;
         let col: &'s mut [u32] = a.u32(2 * c)?;
         Ok(Prepared {
-            inv_w: a.f32(cc.checked_mul(cfg.flow.steps as usize).ok_or(ArenaError::Overflow)?)?,
+            inv_w: a.f32(
+                cc.checked_mul(cfg.flow.steps as usize)
+                    .ok_or(ArenaError::Overflow)?,
+            )?,
             // f64 column: carved as u32 pairs (64-byte aligned; a planner's is empty).
-            inv: InverseScratch { li: a.f32(cc)?, ui: a.f32(cc)?, col: bytemuck::try_cast_slice_mut(col).unwrap_or(&mut []) },
+            inv: InverseScratch {
+                li: a.f32(cc)?,
+                ui: a.f32(cc)?,
+                col: bytemuck::try_cast_slice_mut(col).unwrap_or(&mut []),
+            },
         })
     }
 }
@@ -167,7 +212,12 @@ impl<'s> Prepared<'s> {
 pub fn prepare(model: &Model<'_>, p: &mut Prepared<'_>) {
     let c = model.cfg.channels();
     for (j, step) in model.flow.iter().enumerate() {
-        inverse_weight(&step.conv, c, &mut p.inv, &mut p.inv_w[j * c * c..(j + 1) * c * c]);
+        inverse_weight(
+            &step.conv,
+            c,
+            &mut p.inv,
+            &mut p.inv_w[j * c * c..(j + 1) * c * c],
+        );
     }
 }
 
@@ -175,7 +225,15 @@ pub fn prepare(model: &Model<'_>, p: &mut Prepared<'_>) {
 /// per input: rows (L_i, d_i) or a label) and the base sample `z` (C, H).
 /// Windows are the caller's to check ([`generate`] does).
 #[allow(clippy::too_many_arguments)]
-pub fn step(model: &Model<'_>, p: &Prepared<'_>, windows: &[Window<'_>], z: &[f32], s: &mut StepScratch<'_>, frames: &mut [f32], probe: &mut dyn FnMut(Probe, &[f32])) {
+pub fn step(
+    model: &Model<'_>,
+    p: &Prepared<'_>,
+    windows: &[Window<'_>],
+    z: &[f32],
+    s: &mut StepScratch<'_>,
+    frames: &mut [f32],
+    probe: &mut dyn FnMut(Probe, &[f32]),
+) {
     let cfg = &model.cfg;
     let (c, h) = (cfg.channels(), cfg.output_length as usize);
     encode_inputs(model, windows, &mut s.net, s.emb, s.latent, probe);
@@ -203,7 +261,10 @@ struct GenerateScratch<'s> {
     frames: &'s mut [f32],
 }
 
-fn generate_scratch<'s, A: Carve<'s>>(a: &mut A, cfg: &TransflowerConfig) -> Result<GenerateScratch<'s>, ArenaError> {
+fn generate_scratch<'s, A: Carve<'s>>(
+    a: &mut A,
+    cfg: &TransflowerConfig,
+) -> Result<GenerateScratch<'s>, ArenaError> {
     let ch = cfg.channels() * cfg.output_length as usize;
     Ok(GenerateScratch {
         prepared: Prepared::carve(a, cfg)?,
@@ -224,13 +285,26 @@ pub fn generate_scratch_bytes(cfg: &TransflowerConfig) -> Option<usize> {
 /// The authors' loop: `out` (N, C) receives the N = [`steps`] generated
 /// frames (the scaled features; frame t is song row `output_time_offset + t`).
 /// Returns N.
-pub fn generate<B: BaseSample>(model: &Model<'_>, inputs: &[Input<'_>], base: &mut B, scratch: &mut [u8], out: &mut [f32]) -> Result<usize, Error> {
+pub fn generate<B: BaseSample>(
+    model: &Model<'_>,
+    inputs: &[Input<'_>],
+    base: &mut B,
+    scratch: &mut [u8],
+    out: &mut [f32],
+) -> Result<usize, Error> {
     generate_probed(model, inputs, base, scratch, out, &mut probe::none)
 }
 
 /// [`generate`] with a probe that sees every stage of every step
 /// ([`crate::transflower::probe`]; step boundaries: each `FlowOut`).
-pub fn generate_probed<B: BaseSample>(model: &Model<'_>, inputs: &[Input<'_>], base: &mut B, scratch: &mut [u8], out: &mut [f32], probe: &mut dyn FnMut(Probe, &[f32])) -> Result<usize, Error> {
+pub fn generate_probed<B: BaseSample>(
+    model: &Model<'_>,
+    inputs: &[Input<'_>],
+    base: &mut B,
+    scratch: &mut [u8],
+    out: &mut [f32],
+    probe: &mut dyn FnMut(Probe, &[f32]),
+) -> Result<usize, Error> {
     let cfg = &model.cfg;
     let n = steps(cfg, inputs)?;
     let c = cfg.channels();
@@ -238,7 +312,13 @@ pub fn generate_probed<B: BaseSample>(model: &Model<'_>, inputs: &[Input<'_>], b
     check_len(Buffer::Output, out.len(), n * c)?;
     base.check(n, c * h)?;
     let mut a = Arena::new(scratch);
-    let GenerateScratch { mut prepared, step: mut s, window, z, frames } = generate_scratch(&mut a, cfg)?;
+    let GenerateScratch {
+        mut prepared,
+        step: mut s,
+        window,
+        z,
+        frames,
+    } = generate_scratch(&mut a, cfg)?;
     prepare(model, &mut prepared);
     let m = cfg.output as usize;
     let lm = cfg.inputs[m].length as usize;
@@ -256,7 +336,15 @@ pub fn generate_probed<B: BaseSample>(model: &Model<'_>, inputs: &[Input<'_>], b
             };
         }
         base.sample(t, z);
-        step(model, &prepared, &windows[..cfg.inputs().len()], z, &mut s, frames, probe);
+        step(
+            model,
+            &prepared,
+            &windows[..cfg.inputs().len()],
+            z,
+            &mut s,
+            frames,
+            probe,
+        );
         // Row 0 of the H sampled frames is kept and fed back.
         out[t * c..(t + 1) * c].copy_from_slice(&frames[..c]);
         window.copy_within(c.., 0);

@@ -181,7 +181,10 @@ impl Default for Hparams {
     /// The authors' argparse defaults (models/transflower_model.py; note
     /// `num_glow_coupling_blocks` 10 and `scales` `[[10,0]]` there).
     fn default() -> Self {
-        let zero = List { n: 1, items: [0; MAX_INPUTS] };
+        let zero = List {
+            n: 1,
+            items: [0; MAX_INPUTS],
+        };
         Hparams {
             is_transflower: false,
             input_modalities: List::default(),
@@ -202,7 +205,10 @@ impl Default for Hparams {
             dhid_flow: 512,
             num_heads_flow: 8,
             num_glow_coupling_blocks: 10,
-            scales: List { n: 1, items: [(10, 0); MAX_INPUTS] },
+            scales: List {
+                n: 1,
+                items: [(10, 0); MAX_INPUTS],
+            },
             glow_norm_layer: NormOption::None,
             flow_dist: DistOption::Normal,
             flow_dist_param: 50,
@@ -250,7 +256,10 @@ fn flag(v: &str) -> Option<bool> {
 
 /// A comma-separated list of at most [`MAX_INPUTS`] items.
 fn list<T: Copy + Default>(v: &str, item: impl Fn(&str) -> Option<T>) -> Option<List<T>> {
-    let mut l = List { n: 0, items: [T::default(); MAX_INPUTS] };
+    let mut l = List {
+        n: 0,
+        items: [T::default(); MAX_INPUTS],
+    };
     for s in v.split(',') {
         if l.n == MAX_INPUTS {
             return None;
@@ -264,7 +273,10 @@ fn list<T: Copy + Default>(v: &str, item: impl Fn(&str) -> Option<T>) -> Option<
 /// `[[n, s], [n, s]]` (the authors `literal_eval` it).
 fn scales(v: &str) -> Option<List<(u32, u32)>> {
     let inner = v.trim().strip_prefix('[')?.strip_suffix(']')?;
-    let mut l = List { n: 0, items: [(0, 0); MAX_INPUTS] };
+    let mut l = List {
+        n: 0,
+        items: [(0, 0); MAX_INPUTS],
+    };
     for part in inner.split(']') {
         let part = part.trim().trim_start_matches(',').trim();
         if part.is_empty() {
@@ -295,8 +307,12 @@ impl Hparams {
         let flags = |v: &str| flag(v).ok_or(bad);
         match k {
             Key::Model => self.is_transflower = v == "transflower",
-            Key::InputModalities => self.input_modalities = list(v, ModalityName::new).ok_or(bad)?,
-            Key::OutputModalities => self.output_modalities = list(v, ModalityName::new).ok_or(bad)?,
+            Key::InputModalities => {
+                self.input_modalities = list(v, ModalityName::new).ok_or(bad)?
+            }
+            Key::OutputModalities => {
+                self.output_modalities = list(v, ModalityName::new).ok_or(bad)?
+            }
             Key::Dins => self.dins = nums(v)?,
             Key::Douts => self.douts = nums(v)?,
             Key::InputLengths => self.input_lengths = nums(v)?,
@@ -313,7 +329,9 @@ impl Hparams {
                 .ok_or(bad)?
             }
             Key::InputFixLengthTypes if is_null(v) => self.input_fix_single = List::default(),
-            Key::InputFixLengthTypes => self.input_fix_single = list(v, |s| Some(s == "single")).ok_or(bad)?,
+            Key::InputFixLengthTypes => {
+                self.input_fix_single = list(v, |s| Some(s == "single")).ok_or(bad)?
+            }
             Key::InputNumTokens if is_null(v) => self.input_num_tokens = List::default(),
             Key::InputNumTokens => self.input_num_tokens = nums(v)?,
             Key::ConditioningSeqLens if is_null(v) => self.conditioning_seq_lens = None,

@@ -20,4 +20,5 @@ pub mod hparams;
 pub mod model;
 pub mod probe;
 pub mod schema;
+pub mod session;
 pub mod transformer;

@@ -14,7 +14,10 @@ use crate::nn::bind::{BindError, Binder, TensorSource};
 use crate::nn::encoder_layer::{bind_encoder_layer, EncoderLayerW};
 use crate::nn::names::{name, SchemaError, TensorName};
 use crate::nn::weights::Linear;
-use crate::transflower::config::{ConfigError, NormLayer, TransflowerConfig, INPUT_LAYERS, MAX_COUPLING_LAYERS, MAX_FLOW_STEPS, MAX_INPUTS, MAX_LAYERS};
+use crate::transflower::config::{
+    ConfigError, NormLayer, TransflowerConfig, INPUT_LAYERS, MAX_COUPLING_LAYERS, MAX_FLOW_STEPS,
+    MAX_INPUTS, MAX_LAYERS,
+};
 use crate::transflower::schema;
 
 /// The authors' `BasicTransformerModel` (models/transformer.py), up to `N`
@@ -51,9 +54,17 @@ pub type CouplingNetW<'a> = TransformerW<'a, { MAX_COUPLING_LAYERS as usize }>;
 pub enum NormW<'a> {
     None,
     /// The authors' `BatchNorm` in eval: `gamma`, `beta`, `running_mean`, `running_var`.
-    BatchNorm { gamma: &'a [f32], beta: &'a [f32], mean: &'a [f32], var: &'a [f32] },
+    BatchNorm {
+        gamma: &'a [f32],
+        beta: &'a [f32],
+        mean: &'a [f32],
+        var: &'a [f32],
+    },
     /// `ActNorm`: `mean`, `inv_std`.
-    ActNorm { mean: &'a [f32], inv_std: &'a [f32] },
+    ActNorm {
+        mean: &'a [f32],
+        inv_std: &'a [f32],
+    },
 }
 
 /// `InvertibleConv1x1` in LU form: W = p (L U), L = l * strict_lower + I,
@@ -108,7 +119,10 @@ pub enum ValueProblem {
 pub enum ModelError {
     Config(ConfigError),
     Bind(BindError),
-    Value { name: TensorName, problem: ValueProblem },
+    Value {
+        name: TensorName,
+        problem: ValueProblem,
+    },
 }
 
 impl From<BindError> for ModelError {
@@ -140,18 +154,35 @@ struct Bind<'b, 's, S> {
 
 impl<'a, S: TensorSource<'a>> Bind<'_, '_, S> {
     #[allow(clippy::too_many_arguments)]
-    fn transformer<const N: usize>(&self, p: &str, din: u32, d: u32, dout: u32, layers: u32, n_head: u32, pe: Option<u32>, bias: Option<u32>) -> Result<TransformerW<'a, N>, ModelError> {
+    fn transformer<const N: usize>(
+        &self,
+        p: &str,
+        din: u32,
+        d: u32,
+        dout: u32,
+        layers: u32,
+        n_head: u32,
+        pe: Option<u32>,
+        bias: Option<u32>,
+    ) -> Result<TransformerW<'a, N>, ModelError> {
         let b = self.b;
         let mut ls = Vec::new();
         for i in 0..layers {
-            let l = bind_encoder_layer(b, &name(format_args!("{p}.transformer_encoder.layers.{i}"))?, d, d)?;
+            let l = bind_encoder_layer(
+                b,
+                &name(format_args!("{p}.transformer_encoder.layers.{i}"))?,
+                d,
+                d,
+            )?;
             ls.push(l).map_err(|_| BindError::Capacity)?;
         }
         Ok(TransformerW {
             embedding: None,
             encoder1: b.linear(&name(format_args!("{p}.encoder1"))?, d, din, true)?,
             pe: match pe {
-                Some(rows) => Some(b.get(name(format_args!("{p}.pos_encoder.pe"))?, &[rows, 1, d])?),
+                Some(rows) => {
+                    Some(b.get(name(format_args!("{p}.pos_encoder.pe"))?, &[rows, 1, d])?)
+                }
                 None => None,
             },
             bias: match bias {
@@ -172,7 +203,10 @@ impl<'a, S: TensorSource<'a>> Bind<'_, '_, S> {
         let nm = name(format_args!("{m}.{n}"))?;
         let v = self.b.get(nm.clone(), dims)?;
         if v.iter().any(|x| !x.is_finite()) {
-            return Err(ModelError::Value { name: nm, problem: ValueProblem::NonFinite });
+            return Err(ModelError::Value {
+                name: nm,
+                problem: ValueProblem::NonFinite,
+            });
         }
         Ok(v)
     }
@@ -187,14 +221,19 @@ fn refuse(m: &str, n: &str, problem: ValueProblem) -> ModelError {
 
 /// Whether `p` (c, c) is a permutation matrix.
 fn is_permutation(p: &[f32], c: usize) -> bool {
-    let rows_ok = p.chunks_exact(c).all(|r| r.iter().all(|&v| v == 0.0 || v == 1.0) && r.iter().filter(|&&v| v == 1.0).count() == 1);
+    let rows_ok = p.chunks_exact(c).all(|r| {
+        r.iter().all(|&v| v == 0.0 || v == 1.0) && r.iter().filter(|&&v| v == 1.0).count() == 1
+    });
     let cols_ok = (0..c).all(|j| (0..c).filter(|&i| p[i * c + j] == 1.0).count() == 1);
     rows_ok && cols_ok
 }
 
 impl<'a> Model<'a> {
     /// Validates `cfg` and binds every tensor the schema lists from `src`.
-    pub fn bind<S: TensorSource<'a>>(cfg: &TransflowerConfig, src: &S) -> Result<Model<'a>, ModelError> {
+    pub fn bind<S: TensorSource<'a>>(
+        cfg: &TransflowerConfig,
+        src: &S,
+    ) -> Result<Model<'a>, ModelError> {
         cfg.validate().map_err(ModelError::Config)?;
         let binder = Binder { src };
         let b = Bind { b: &binder };
@@ -203,14 +242,27 @@ impl<'a> Model<'a> {
         for (i, inp) in cfg.inputs().iter().enumerate() {
             let p = schema::input_prefix(cfg, i)?;
             let bias = cfg.input_has_bias(i).then_some(inp.length);
-            let mut t: InputNetW<'a> = b.transformer(&p, inp.dim, d, d, INPUT_LAYERS, cfg.nhead, None, bias)?;
+            let mut t: InputNetW<'a> =
+                b.transformer(&p, inp.dim, d, d, INPUT_LAYERS, cfg.nhead, None, bias)?;
             if inp.is_discrete() {
-                t.embedding = Some(binder.matrix(name(format_args!("{p}.encoder.weight"))?, &[inp.tokens, inp.dim])?);
+                t.embedding = Some(binder.matrix(
+                    name(format_args!("{p}.encoder.weight"))?,
+                    &[inp.tokens, inp.dim],
+                )?);
             }
             inputs.push(t).map_err(|_| BindError::Capacity)?;
         }
         let pe = cfg.pos_emb_output.then_some(cfg.latent_rows() as u32);
-        let cross_modal = b.transformer(&schema::cross_modal_prefix(cfg)?, d, d, d, cfg.nlayers, cfg.nhead, pe, None)?;
+        let cross_modal = b.transformer(
+            &schema::cross_modal_prefix(cfg)?,
+            d,
+            d,
+            d,
+            cfg.nlayers,
+            cfg.nhead,
+            pe,
+            None,
+        )?;
         let c = cfg.channels() as u32;
         let cc = cfg.change_channels() as u32;
         let f = &cfg.flow;
@@ -221,14 +273,22 @@ impl<'a> Model<'a> {
             let norm = match (f.norm, norm_k) {
                 (NormLayer::BatchNorm, Some(k)) => {
                     let m = schema::flow_module(cfg, k)?;
-                    let (gamma, var) = (b.vector(&m, "gamma", &cv)?, b.vector(&m, "running_var", &cv)?);
+                    let (gamma, var) = (
+                        b.vector(&m, "gamma", &cv)?,
+                        b.vector(&m, "running_var", &cv)?,
+                    );
                     if gamma.contains(&0.0) {
                         return Err(refuse(&m, "gamma", ValueProblem::Zero));
                     }
                     if var.iter().any(|&v| v < 0.0) {
                         return Err(refuse(&m, "running_var", ValueProblem::NegativeVariance));
                     }
-                    NormW::BatchNorm { gamma, beta: b.vector(&m, "beta", &cv)?, mean: b.vector(&m, "running_mean", &cv)?, var }
+                    NormW::BatchNorm {
+                        gamma,
+                        beta: b.vector(&m, "beta", &cv)?,
+                        mean: b.vector(&m, "running_mean", &cv)?,
+                        var,
+                    }
                 }
                 (NormLayer::ActNorm, Some(k)) => {
                     let m = schema::flow_module(cfg, k)?;
@@ -236,12 +296,21 @@ impl<'a> Model<'a> {
                     if inv_std.contains(&0.0) {
                         return Err(refuse(&m, "inv_std", ValueProblem::Zero));
                     }
-                    NormW::ActNorm { mean: b.vector(&m, "mean", &cv)?, inv_std }
+                    NormW::ActNorm {
+                        mean: b.vector(&m, "mean", &cv)?,
+                        inv_std,
+                    }
                 }
                 _ => NormW::None,
             };
             let m = schema::flow_module(cfg, conv_k)?;
-            let conv = InvConvW { l: b.vector(&m, "l", &[c, c])?, u: b.vector(&m, "u", &[c, c])?, p: b.vector(&m, "p", &[c, c])?, log_s: b.vector(&m, "log_s", &[c])?, sign_s: b.vector(&m, "sign_s", &[c])? };
+            let conv = InvConvW {
+                l: b.vector(&m, "l", &[c, c])?,
+                u: b.vector(&m, "u", &[c, c])?,
+                p: b.vector(&m, "p", &[c, c])?,
+                log_s: b.vector(&m, "log_s", &[c])?,
+                sign_s: b.vector(&m, "sign_s", &[c])?,
+            };
             if !is_permutation(conv.p, c as usize) {
                 return Err(refuse(&m, "p", ValueProblem::NotPermutation));
             }
@@ -249,16 +318,47 @@ impl<'a> Model<'a> {
                 return Err(refuse(&m, "sign_s", ValueProblem::SignNotUnit));
             }
             let m = schema::flow_module(cfg, coupling_k)?;
-            let input_encoder = if f.concat_dims { None } else { Some(binder.linear(&name(format_args!("{m}.input_encoder"))?, d, c - cc, true)?) };
-            let (weight_g, weight_v) = (b.vector(&m, "nn.rescale.weight_g", &[cc, 1, 1])?, b.vector(&m, "nn.rescale.weight_v", &[cc, 1, 1])?);
+            let input_encoder = if f.concat_dims {
+                None
+            } else {
+                Some(binder.linear(&name(format_args!("{m}.input_encoder"))?, d, c - cc, true)?)
+            };
+            let (weight_g, weight_v) = (
+                b.vector(&m, "nn.rescale.weight_g", &[cc, 1, 1])?,
+                b.vector(&m, "nn.rescale.weight_v", &[cc, 1, 1])?,
+            );
             if weight_v.contains(&0.0) {
                 return Err(refuse(&m, "nn.rescale.weight_v", ValueProblem::Zero));
             }
             let pe = f.pos_emb.then_some(cfg.coupling_rows() as u32);
-            let net = b.transformer(&name(format_args!("{m}.nn.transformer"))?, cfg.coupling_in() as u32, f.dhid, 2 * cc, f.layers, f.heads, pe, None)?;
-            flow.push(FlowStepW { norm, conv, coupling: CouplingW { input_encoder, weight_g, weight_v, net } }).map_err(|_| BindError::Capacity)?;
+            let net = b.transformer(
+                &name(format_args!("{m}.nn.transformer"))?,
+                cfg.coupling_in() as u32,
+                f.dhid,
+                2 * cc,
+                f.layers,
+                f.heads,
+                pe,
+                None,
+            )?;
+            flow.push(FlowStepW {
+                norm,
+                conv,
+                coupling: CouplingW {
+                    input_encoder,
+                    weight_g,
+                    weight_v,
+                    net,
+                },
+            })
+            .map_err(|_| BindError::Capacity)?;
         }
-        Ok(Model { cfg: *cfg, inputs, cross_modal, flow })
+        Ok(Model {
+            cfg: *cfg,
+            inputs,
+            cross_modal,
+            flow,
+        })
     }
 
     /// Binds every weight of a parsed `.duo` file (family Transflower); a
@@ -266,7 +366,10 @@ impl<'a> Model<'a> {
     pub fn from_duo(file: &crate::format::DuoFile<'a>) -> Result<Model<'a>, ModelError> {
         match file.config() {
             crate::family::FamilyConfig::Transflower(cfg) => Model::bind(cfg, file),
-            other => Err(ModelError::Bind(BindError::Family { expected: crate::family::Family::Transflower, found: other.family() })),
+            other => Err(ModelError::Bind(BindError::Family {
+                expected: crate::family::Family::Transflower,
+                found: other.family(),
+            })),
         }
     }
 

@@ -31,7 +31,10 @@ pub enum Stage {
 /// One probed value.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Probe {
-    Net { net: Net, stage: Stage },
+    Net {
+        net: Net,
+        stage: Stage,
+    },
     /// `flows.channels.<k>`: x after module k in the reverse pass.
     FlowModule(u32),
     /// `flows.channels.<k>.nn.s` (after the weight-normed rescale of tanh) / `.nn.t`.

@@ -26,17 +26,26 @@ use crate::transflower::config::{NormLayer, TransflowerConfig, INPUT_LAYERS};
 
 /// `net_input_<mod>` of input `i`.
 pub fn input_prefix(cfg: &TransflowerConfig, i: usize) -> Result<TensorName, SchemaError> {
-    name(format_args!("net_input_{}", cfg.inputs[i.min(cfg.inputs.len() - 1)].name.as_str()))
+    name(format_args!(
+        "net_input_{}",
+        cfg.inputs[i.min(cfg.inputs.len() - 1)].name.as_str()
+    ))
 }
 
 /// `net_output_<out>`: the cross-modal transformer.
 pub fn cross_modal_prefix(cfg: &TransflowerConfig) -> Result<TensorName, SchemaError> {
-    name(format_args!("net_output_{}", cfg.output_input().name.as_str()))
+    name(format_args!(
+        "net_output_{}",
+        cfg.output_input().name.as_str()
+    ))
 }
 
 /// `net_output_glow_<out>.flows.channels.<k>`: flow module `k`.
 pub fn flow_module(cfg: &TransflowerConfig, k: u32) -> Result<TensorName, SchemaError> {
-    name(format_args!("net_output_glow_{}.flows.channels.{k}", cfg.output_input().name.as_str()))
+    name(format_args!(
+        "net_output_glow_{}.flows.channels.{k}",
+        cfg.output_input().name.as_str()
+    ))
 }
 
 /// Module indices of flow step `j`: (norm if any, 1x1 conv, coupling).
@@ -54,35 +63,79 @@ pub fn step_modules(cfg: &TransflowerConfig, j: u32) -> (Option<u32>, u32, u32) 
 /// `dout`, width `d`, `layers` layers, `pe` rows if any, `bias` rows of a
 /// `pos_emb` if any).
 #[allow(clippy::too_many_arguments)]
-fn transformer<E: From<SchemaError>>(e: &mut Emit<'_, E>, p: &str, din: u32, d: u32, dout: u32, layers: u32, pe: Option<u32>, bias: Option<u32>) -> Result<(), E> {
-    e.wb(&name(format_args!("{p}.encoder1"))?, &[d, din], d, Role::Linear)?;
+fn transformer<E: From<SchemaError>>(
+    e: &mut Emit<'_, E>,
+    p: &str,
+    din: u32,
+    d: u32,
+    dout: u32,
+    layers: u32,
+    pe: Option<u32>,
+    bias: Option<u32>,
+) -> Result<(), E> {
+    e.wb(
+        &name(format_args!("{p}.encoder1"))?,
+        &[d, din],
+        d,
+        Role::Linear,
+    )?;
     if let Some(rows) = pe {
-        e.t(name(format_args!("{p}.pos_encoder.pe"))?, &[rows, 1, d], Role::PosEmb)?;
+        e.t(
+            name(format_args!("{p}.pos_encoder.pe"))?,
+            &[rows, 1, d],
+            Role::PosEmb,
+        )?;
     }
     if let Some(l) = bias {
         e.t(name(format_args!("{p}.pos_emb"))?, &[l, l], Role::PosEmb)?;
     }
     for i in 0..layers {
-        emit_encoder_layer(e, &name(format_args!("{p}.transformer_encoder.layers.{i}"))?, d, d)?;
+        emit_encoder_layer(
+            e,
+            &name(format_args!("{p}.transformer_encoder.layers.{i}"))?,
+            d,
+            d,
+        )?;
     }
-    e.wb(&name(format_args!("{p}.decoder"))?, &[dout, d], dout, Role::Linear)
+    e.wb(
+        &name(format_args!("{p}.decoder"))?,
+        &[dout, d],
+        dout,
+        Role::Linear,
+    )
 }
 
 /// Calls `f` once per tensor the config needs: the input transformers in
 /// order, the cross-modal transformer, the flow modules in index order.
-pub fn for_each_tensor<E: From<SchemaError>>(cfg: &TransflowerConfig, f: &mut dyn FnMut(&TensorSpec) -> Result<(), E>) -> Result<(), E> {
+pub fn for_each_tensor<E: From<SchemaError>>(
+    cfg: &TransflowerConfig,
+    f: &mut dyn FnMut(&TensorSpec) -> Result<(), E>,
+) -> Result<(), E> {
     let mut e = Emit { f };
     let d = cfg.dhid;
     for (i, inp) in cfg.inputs().iter().enumerate() {
         let p = input_prefix(cfg, i)?;
         if inp.is_discrete() {
-            e.t(name(format_args!("{p}.encoder.weight"))?, &[inp.tokens, inp.dim], Role::Embedding)?;
+            e.t(
+                name(format_args!("{p}.encoder.weight"))?,
+                &[inp.tokens, inp.dim],
+                Role::Embedding,
+            )?;
         }
         let bias = cfg.input_has_bias(i).then_some(inp.length);
         transformer(&mut e, &p, inp.dim, d, d, INPUT_LAYERS, None, bias)?;
     }
     let pe = cfg.pos_emb_output.then_some(cfg.latent_rows() as u32);
-    transformer(&mut e, &cross_modal_prefix(cfg)?, d, d, d, cfg.nlayers, pe, None)?;
+    transformer(
+        &mut e,
+        &cross_modal_prefix(cfg)?,
+        d,
+        d,
+        d,
+        cfg.nlayers,
+        pe,
+        None,
+    )?;
     let c = cfg.channels() as u32;
     let cc = cfg.change_channels() as u32;
     let ci = c - cc;
@@ -109,13 +162,31 @@ pub fn for_each_tensor<E: From<SchemaError>>(cfg: &TransflowerConfig, f: &mut dy
         }
         let m = flow_module(cfg, coupling)?;
         if !f.concat_dims {
-            e.wb(&name(format_args!("{m}.input_encoder"))?, &[d, ci], d, Role::Linear)?;
+            e.wb(
+                &name(format_args!("{m}.input_encoder"))?,
+                &[d, ci],
+                d,
+                Role::Linear,
+            )?;
         }
         for n in ["weight_g", "weight_v"] {
-            e.t(name(format_args!("{m}.nn.rescale.{n}"))?, &[cc, 1, 1], Role::Vector)?;
+            e.t(
+                name(format_args!("{m}.nn.rescale.{n}"))?,
+                &[cc, 1, 1],
+                Role::Vector,
+            )?;
         }
         let pe = f.pos_emb.then_some(cfg.coupling_rows() as u32);
-        transformer(&mut e, &name(format_args!("{m}.nn.transformer"))?, cfg.coupling_in() as u32, f.dhid, 2 * cc, f.layers, pe, None)?;
+        transformer(
+            &mut e,
+            &name(format_args!("{m}.nn.transformer"))?,
+            cfg.coupling_in() as u32,
+            f.dhid,
+            2 * cc,
+            f.layers,
+            pe,
+            None,
+        )?;
     }
     Ok(())
 }

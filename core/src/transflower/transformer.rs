@@ -6,7 +6,9 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::kernels::linear;
-use crate::nn::encoder_layer::{encoder_layer, EncoderLayerScratch};
+use crate::nn::encoder_layer::{
+    encoder_layer, encoder_layer_rows, EncoderLayerScratch, LayerKv, SlotBias,
+};
 use crate::transflower::model::TransformerW;
 use crate::transflower::probe::{Probe, Stage};
 
@@ -19,7 +21,10 @@ pub struct TransformerScratch<'s> {
 
 impl<'s> TransformerScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, d: usize) -> Result<Self, ArenaError> {
-        Ok(TransformerScratch { x: a.f32(rows.checked_mul(d).ok_or(ArenaError::Overflow)?)?, layer: EncoderLayerScratch::carve(a, rows, d, d)? })
+        Ok(TransformerScratch {
+            x: a.f32(rows.checked_mul(d).ok_or(ArenaError::Overflow)?)?,
+            layer: EncoderLayerScratch::carve(a, rows, d, d)?,
+        })
     }
 }
 
@@ -30,7 +35,29 @@ impl<'s> TransformerScratch<'s> {
 /// (`Stage::Layer` of the last layer and `Stage::Decoder`: `keep` rows).
 /// Callers size the scratch and check `input.len() == L * din` with
 /// L matching `pe` / `pos_emb` rows (the config fixes both).
-pub fn forward<const N: usize>(w: &TransformerW<'_, N>, input: &[f32], keep: usize, s: &mut TransformerScratch<'_>, out: &mut [f32], probe: &mut dyn FnMut(Stage, &[f32])) {
+pub fn forward<const N: usize>(
+    w: &TransformerW<'_, N>,
+    input: &[f32],
+    keep: usize,
+    s: &mut TransformerScratch<'_>,
+    out: &mut [f32],
+    probe: &mut dyn FnMut(Stage, &[f32]),
+) {
+    forward_recorded(w, input, keep, s, out, probe, &mut |_, _| {});
+}
+
+/// [`forward`] that also hands each layer's q | k | v of every row (L, 3d)
+/// to `layer_qkv(layer, qkv)` (a stale-rows session keeps the keys and
+/// values: `transflower::session`). Same numbers.
+pub fn forward_recorded<const N: usize>(
+    w: &TransformerW<'_, N>,
+    input: &[f32],
+    keep: usize,
+    s: &mut TransformerScratch<'_>,
+    out: &mut [f32],
+    probe: &mut dyn FnMut(Stage, &[f32]),
+    layer_qkv: &mut dyn FnMut(usize, &[f32]),
+) {
     let d = w.d;
     let rows = input.len() / w.din.max(1);
     // (L, d) = encoder1(input).
@@ -48,6 +75,7 @@ pub fn forward<const N: usize>(w: &TransformerW<'_, N>, input: &[f32], keep: usi
     for (i, layer) in w.layers.iter().enumerate() {
         let k = if i + 1 == n { keep } else { rows };
         encoder_layer(layer, x, d, w.n_head, w.bias, k, &mut s.layer);
+        layer_qkv(i, s.layer.qkv(rows, d));
         probe(Stage::Layer(i as u32), &x[..k * d]);
     }
     let keep = if n == 0 { rows } else { keep.min(rows) };
@@ -57,6 +85,56 @@ pub fn forward<const N: usize>(w: &TransformerW<'_, N>, input: &[f32], keep: usi
 }
 
 /// Adapts a [`Probe`] callback to one net's [`Stage`]s.
-pub fn stages<'p>(probe: &'p mut dyn FnMut(Probe, &[f32]), net: crate::transflower::probe::Net) -> impl FnMut(Stage, &[f32]) + 'p {
+pub fn stages<'p>(
+    probe: &'p mut dyn FnMut(Probe, &[f32]),
+    net: crate::transflower::probe::Net,
+) -> impl FnMut(Stage, &[f32]) + 'p {
     move |stage, v| probe(Probe::Net { net, stage }, v)
+}
+
+/// The transformer over only the rows `input` (m, din) of a sequence whose
+/// other rows' keys and values are kept in `kv` (one [`LayerKv`] per layer,
+/// a row per slot; [`forward_recorded`] fills them): row r is at slot
+/// `slots[r]` and window position `pos[slots[r]]` (`pe` is added at that
+/// position, `pos_emb` biases the scores by positions). `out` (keep, dout)
+/// = the decoder of the first `keep` rows. The stale-rows S mode
+/// (`transflower::session`): rows not passed keep the keys and values of
+/// the inputs they had when last computed.
+#[allow(clippy::too_many_arguments)]
+pub fn forward_rows<const N: usize>(
+    w: &TransformerW<'_, N>,
+    input: &[f32],
+    slots: &[u32],
+    pos: &[u32],
+    keep: usize,
+    kv: &mut [LayerKv<'_>],
+    s: &mut TransformerScratch<'_>,
+    out: &mut [f32],
+) {
+    let d = w.d;
+    let m = slots.len();
+    let x = &mut s.x[..m * d];
+    linear(&input[..m * w.din], &w.encoder1.w, w.encoder1.b, x);
+    if let Some(pe) = w.pe {
+        for (r, &slot) in slots.iter().enumerate() {
+            let p = pos[slot as usize] as usize;
+            for (v, e) in x[r * d..(r + 1) * d]
+                .iter_mut()
+                .zip(&pe[p * d..(p + 1) * d])
+            {
+                *v += e;
+            }
+        }
+    }
+    let bias = w.bias.map(|bias| SlotBias { bias, pos });
+    for (layer, lkv) in w.layers.iter().zip(kv.iter_mut()) {
+        encoder_layer_rows(layer, x, d, w.n_head, lkv, slots, bias, &mut s.layer);
+    }
+    let keep = keep.min(m);
+    linear(
+        &x[..keep * d],
+        &w.decoder.w,
+        w.decoder.b,
+        &mut out[..keep * w.dout],
+    );
 }

@@ -39,10 +39,20 @@ struct Args {
 }
 
 fn args() -> Args {
-    let mut a = Args { steps: 1_000_000, max_seconds: u64::MAX, greedy: false, warmup_frames: 20_000, rss_tolerance_kb: 256 };
+    let mut a = Args {
+        steps: 1_000_000,
+        max_seconds: u64::MAX,
+        greedy: false,
+        warmup_frames: 20_000,
+        rss_tolerance_kb: 256,
+    };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
-        let mut num = || it.next().and_then(|v| v.parse::<u64>().ok()).unwrap_or_else(|| panic!("{k} needs a number"));
+        let mut num = || {
+            it.next()
+                .and_then(|v| v.parse::<u64>().ok())
+                .unwrap_or_else(|| panic!("{k} needs a number"))
+        };
         match k.as_str() {
             "--steps" => a.steps = num(),
             "--max-seconds" => a.max_seconds = num(),
@@ -61,7 +71,10 @@ fn main() {
     let clip = tiny2_clip();
     let mut cfg = SessionConfig::reference(&model.cfg);
     if !a.greedy {
-        cfg.sampling = Sampling::TopK { k: 8, rng_seed: 0x5eed };
+        cfg.sampling = Sampling::TopK {
+            k: 8,
+            rng_seed: 0x5eed,
+        };
     }
     let bytes = model.session_bytes(&cfg).expect("session_bytes");
     let mut arena = vec![0u8; bytes];
@@ -70,7 +83,11 @@ fn main() {
         "soak: tiny2, {cfg:?}\n  arena {bytes} B, latency {} frames, target {} steps, limit {} s",
         s.latency_frames(),
         a.steps,
-        if a.max_seconds == u64::MAX { "none".to_string() } else { a.max_seconds.to_string() }
+        if a.max_seconds == u64::MAX {
+            "none".to_string()
+        } else {
+            a.max_seconds.to_string()
+        }
     );
     let base = clip.leader_frame(0).to_vec();
     let mut leader = vec![0f32; base.len()];
@@ -97,7 +114,16 @@ fn main() {
             }
             next_index = f.index + 1;
         };
-        match tick(&mut s, None, clip, &leader, &mut music_t, frames_in as usize, &mut out, &mut sink) {
+        match tick(
+            &mut s,
+            None,
+            clip,
+            &leader,
+            &mut music_t,
+            frames_in as usize,
+            &mut out,
+            &mut sink,
+        ) {
             Ok(true) => {}
             Ok(false) => {
                 stuck = true;
@@ -149,10 +175,15 @@ fn main() {
     println!("soak result:");
     println!("  steps {} (follower tokens), leader frames in {frames_in}, follower frames out {next_index}, music frames in {music_t}", s.steps());
     println!("  wall {el:.1} s, {:.0} leader frames/s, {:.1} us per frame; tick p50 <= {} ns, p99 <= {} ns, max {} us", frames_in as f64 / el, el * 1e6 / frames_in.max(1) as f64, pct(0.5), pct(0.99), worst.as_micros());
-    println!("  non-finite frames {non_finite}, out-of-order indices {out_of_order}, stuck {stuck}");
+    println!(
+        "  non-finite frames {non_finite}, out-of-order indices {out_of_order}, stuck {stuck}"
+    );
     let growth = rss_max_after.saturating_sub(rss_warm);
     println!("  RSS after warm-up ({} frames) {rss_warm} kB, max after {rss_max_after} kB, end {rss_end} kB, growth {growth} kB (tolerance {} kB), peak (VmHWM) {hwm} kB", a.warmup_frames, a.rss_tolerance_kb);
-    let ok = non_finite == 0 && out_of_order == 0 && !stuck && (frames_in <= a.warmup_frames || growth <= a.rss_tolerance_kb);
+    let ok = non_finite == 0
+        && out_of_order == 0
+        && !stuck
+        && (frames_in <= a.warmup_frames || growth <= a.rss_tolerance_kb);
     println!("  {}", if ok { "PASS" } else { "FAIL" });
     if !ok {
         std::process::exit(1);

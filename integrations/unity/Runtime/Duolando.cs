@@ -142,6 +142,46 @@ namespace Duolando
         Duolando = 0,
         /// <summary>A solo dancer to music (24 SMPL joints, 60 fps): SoloSession.</summary>
         Bailando = 1,
+        /// <summary>A probabilistic solo dancer (motion features from audio features, 20 fps):
+        /// TransflowerSession.</summary>
+        Transflower = 2,
+    }
+
+    /// <summary>duo_transflower_info (48 bytes).</summary>
+    [StructLayout(LayoutKind.Sequential)]
+    public struct TransflowerInfo
+    {
+        /// <summary>Floats per frame (the model's scaled motion features).</summary>
+        public uint Channels;
+        /// <summary>Rows of the motion seed (SeedRows x Channels floats).</summary>
+        public uint SeedRows;
+        public uint Inputs;
+        /// <summary>Floats per audio row (PushAudio).</summary>
+        public uint AudioFeatures;
+        /// <summary>Audio rows a step reads.</summary>
+        public uint AudioWindow;
+        /// <summary>Style labels a session takes, and values of the first.</summary>
+        public uint Labels, LabelValues;
+        /// <summary>Floats of one base sample (TryPullFrame with noise).</summary>
+        public uint NoiseFloats;
+        public uint Fps;
+        /// <summary>Frame t is song row OutputTimeOffset + t.</summary>
+        public uint OutputTimeOffset;
+        /// <summary>Audio rows after a frame's own row its step reads (19: 0.95 s).</summary>
+        public int LookaheadRows;
+        public uint Reserved;
+    }
+
+    /// <summary>duo_transflower_config (24 bytes): start from TransflowerSession.Preset.</summary>
+    [StructLayout(LayoutKind.Sequential)]
+    public struct TransflowerConfig
+    {
+        /// <summary>Steps between recomputations of every row (1 = the offline model).</summary>
+        public uint Refresh;
+        public KvType Kv;
+        public uint InputBufferRows, PendingFrames;
+        /// <summary>The base samples' seed: another seed, another dance.</summary>
+        public ulong RngSeed;
     }
 
     /// <summary>duo_model_info (32 bytes).</summary>
@@ -252,6 +292,12 @@ namespace Duolando
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_pull_follower(SessionHandle session, ref FollowerFrame frame);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_session_reset(SessionHandle session, uint[] seed);
         [DllImport(Lib, CallingConvention = CC)] public static extern void duo_session_free(IntPtr session);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_get_info(ModelHandle model, out TransflowerInfo info);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_config_preset(ModelHandle model, byte[] nameUtf8Nul, out TransflowerConfig config);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_session_new(ModelHandle model, ref TransflowerConfig config, float[] seed, UIntPtr n, uint[] labels, UIntPtr nLabels, out SessionHandle session);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_pull_frame(SessionHandle session, float* frame, UIntPtr n, out ulong index);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_pull_frame_with_noise(SessionHandle session, float[] noise, UIntPtr nNoise, float* frame, UIntPtr n, out ulong index);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_session_reset(SessionHandle session, ulong rngSeed);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_step_batch_new(ModelHandle model, ref SessionConfig config, UIntPtr maxSessions, out StepBatchHandle batch);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_step_batch_push_leader(StepBatchHandle batch, IntPtr[] sessions, [In] LeaderFrame[] frames, UIntPtr n, out UIntPtr failedSession);
         [DllImport(Lib, CallingConvention = CC)] public static extern void duo_step_batch_free(IntPtr batch);
@@ -541,6 +587,71 @@ namespace Duolando
                 throw new ArgumentException("SoloSession needs a solo model (family Bailando); this is a " + model.Family + " model: use Session", "model");
             return model;
         }
+    }
+
+    /// <summary>A Transflower dancer: audio feature rows in (PushAudio, pushed
+    /// Info.LookaheadRows ahead), the model's motion features out (TryPullFrame, Channels
+    /// floats each, scaled), from a motion seed, style labels and a seed for its base
+    /// samples (another seed, another dance). Preset "exact" gives the offline model's frames;
+    /// "reference" and "realtime" are faster approximations. One thread at a time.</summary>
+    public sealed class TransflowerSession : IDisposable
+    {
+        readonly SessionHandle handle;
+        /// <summary>The model's sizes (duo_transflower_get_info).</summary>
+        public readonly TransflowerInfo Info;
+
+        /// <summary>A named configuration: "exact", "reference" or "realtime" (another throws).</summary>
+        public static TransflowerConfig Preset(Model model, string name)
+        {
+            if (model == null) throw new ArgumentNullException("model");
+            if (name == null) throw new ArgumentNullException("name");
+            TransflowerConfig c;
+            Native.Check(Native.duo_transflower_config_preset(model.Handle, Encoding.UTF8.GetBytes(name + "\0"), out c));
+            return c;
+        }
+
+        /// <summary>seedMotion: Info.SeedRows x Info.Channels floats; labels: Info.Labels values
+        /// (an empty array when the model takes none).</summary>
+        public TransflowerSession(Model model, TransflowerConfig config, float[] seedMotion, uint[] labels)
+        {
+            if (model == null) throw new ArgumentNullException("model");
+            if (model.Family != ModelFamily.Transflower)
+                throw new ArgumentException("TransflowerSession needs a Transflower model; this is a " + model.Family + " model", "model");
+            if (seedMotion == null) throw new ArgumentNullException("seedMotion");
+            if (labels == null) labels = new uint[0];
+            Native.Check(Native.duo_transflower_get_info(model.Handle, out Info));
+            Native.Check(Native.duo_transflower_session_new(model.Handle, ref config, seedMotion, new UIntPtr((ulong)seedMotion.LongLength),
+                labels.Length == 0 ? null : labels, new UIntPtr((ulong)labels.LongLength), out handle));
+        }
+
+        /// <summary>One or more whole audio rows (Info.AudioFeatures floats each).</summary>
+        public unsafe void PushAudio(float[] rows)
+        {
+            if (rows == null) throw new ArgumentNullException("rows");
+            fixed (float* p = rows)
+                Native.Check(Native.duo_session_push_music(handle, p, new UIntPtr((ulong)rows.LongLength)));
+        }
+
+        /// <summary>The next frame into `frame` (Info.Channels floats), running its step (the
+        /// costly call: off the main thread); false while its audio is not in yet.
+        /// `noise`: the step's base sample (Info.NoiseFloats), or null for the session's RNG.</summary>
+        public unsafe bool TryPullFrame(float[] frame, out ulong index, float[] noise = null)
+        {
+            if (frame == null) throw new ArgumentNullException("frame");
+            DuoResult r;
+            fixed (float* p = frame)
+                r = noise == null
+                    ? Native.duo_transflower_pull_frame(handle, p, new UIntPtr((ulong)frame.LongLength), out index)
+                    : Native.duo_transflower_pull_frame_with_noise(handle, noise, new UIntPtr((ulong)noise.LongLength), p, new UIntPtr((ulong)frame.LongLength), out index);
+            if (r == DuoResult.NotReady) return false;
+            Native.Check(r);
+            return true;
+        }
+
+        /// <summary>Back to the seed motion with no audio; the base samples reseeded.</summary>
+        public void Reset(ulong rngSeed) { Native.Check(Native.duo_transflower_session_reset(handle, rngSeed)); }
+
+        public void Dispose() { handle.Dispose(); }
     }
 
     /// <summary>Joint positions as TryPullPositions writes them (x, y, z per joint, SMPL-X axes).</summary>

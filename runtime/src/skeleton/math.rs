@@ -26,7 +26,11 @@ pub fn dot(a: Vec3, b: Vec3) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 pub fn norm(a: Vec3) -> f32 {
     dot(a, a).sqrt()
@@ -58,7 +62,11 @@ pub fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
     out
 }
 pub fn transpose(m: &Mat3) -> Mat3 {
-    [[m[0][0], m[1][0], m[2][0]], [m[0][1], m[1][1], m[2][1]], [m[0][2], m[1][2], m[2][2]]]
+    [
+        [m[0][0], m[1][0], m[2][0]],
+        [m[0][1], m[1][1], m[2][1]],
+        [m[0][2], m[1][2], m[2][2]],
+    ]
 }
 pub fn det(m: &Mat3) -> f32 {
     dot(m[0], cross(m[1], m[2]))
@@ -69,7 +77,9 @@ pub fn from_cols(a: Vec3, b: Vec3, c: Vec3) -> Mat3 {
 }
 /// Row-major flattening (9 floats), the dataset's `rotmat` layout.
 pub fn flatten(m: &Mat3) -> [f32; 9] {
-    [m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2]]
+    [
+        m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
+    ]
 }
 /// Inverse of [`flatten`].
 pub fn unflatten(v: &[f32]) -> Mat3 {
@@ -78,7 +88,10 @@ pub fn unflatten(v: &[f32]) -> Mat3 {
 /// Largest absolute entry difference.
 pub fn max_abs_diff(a: &Mat3, b: &Mat3) -> f32 {
     let (fa, fb) = (flatten(a), flatten(b));
-    fa.iter().zip(fb.iter()).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+    fa.iter()
+        .zip(fb.iter())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
 }
 
 /// Rotation about +x.
@@ -119,7 +132,11 @@ pub fn swing(from: Vec3, to: Vec3) -> Mat3 {
             return IDENTITY;
         }
         // Opposite vectors: half turn about any axis perpendicular to `from`.
-        let helper = if from[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+        let helper = if from[0].abs() < 0.9 {
+            [1.0, 0.0, 0.0]
+        } else {
+            [0.0, 1.0, 0.0]
+        };
         let perp = normalize_or(cross(from, helper), [0.0, 0.0, 1.0]);
         return axis_angle(perp, std::f32::consts::PI);
     }
@@ -133,7 +150,11 @@ pub fn basis(primary: Vec3, secondary: Vec3) -> Mat3 {
     let a = normalize_or(primary, [0.0, 1.0, 0.0]);
     let mut b = sub(secondary, scale(a, dot(secondary, a)));
     if norm(b) < 1e-6 {
-        let helper = if a[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 0.0, 1.0] };
+        let helper = if a[0].abs() < 0.9 {
+            [1.0, 0.0, 0.0]
+        } else {
+            [0.0, 0.0, 1.0]
+        };
         b = sub(helper, scale(a, dot(helper, a)));
     }
     let b = normalize_or(b, [0.0, 0.0, 1.0]);
@@ -144,5 +165,8 @@ pub fn basis(primary: Vec3, secondary: Vec3) -> Mat3 {
 /// the reference `rest_ref` as close as possible to `reference` (both
 /// references projected perpendicular to their directions).
 pub fn align(rest_dir: Vec3, rest_ref: Vec3, dir: Vec3, reference: Vec3) -> Mat3 {
-    mat_mul(&basis(dir, reference), &transpose(&basis(rest_dir, rest_ref)))
+    mat_mul(
+        &basis(dir, reference),
+        &transpose(&basis(rest_dir, rest_ref)),
+    )
 }

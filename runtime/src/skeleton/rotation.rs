@@ -13,20 +13,45 @@ pub fn quat_from_mat(m: &Mat3) -> Quat {
     let g = |r: usize, c: usize| m[r][c] as f64;
     let q = if tr > 0.0 {
         let s = (tr + 1.0).sqrt() * 2.0; // 4w
-        [(g(2, 1) - g(1, 2)) / s, (g(0, 2) - g(2, 0)) / s, (g(1, 0) - g(0, 1)) / s, 0.25 * s]
+        [
+            (g(2, 1) - g(1, 2)) / s,
+            (g(0, 2) - g(2, 0)) / s,
+            (g(1, 0) - g(0, 1)) / s,
+            0.25 * s,
+        ]
     } else if m00 > m11 && m00 > m22 {
         let s = (1.0 + m00 - m11 - m22).sqrt() * 2.0; // 4x
-        [0.25 * s, (g(0, 1) + g(1, 0)) / s, (g(0, 2) + g(2, 0)) / s, (g(2, 1) - g(1, 2)) / s]
+        [
+            0.25 * s,
+            (g(0, 1) + g(1, 0)) / s,
+            (g(0, 2) + g(2, 0)) / s,
+            (g(2, 1) - g(1, 2)) / s,
+        ]
     } else if m11 > m22 {
         let s = (1.0 + m11 - m00 - m22).sqrt() * 2.0; // 4y
-        [(g(0, 1) + g(1, 0)) / s, 0.25 * s, (g(1, 2) + g(2, 1)) / s, (g(0, 2) - g(2, 0)) / s]
+        [
+            (g(0, 1) + g(1, 0)) / s,
+            0.25 * s,
+            (g(1, 2) + g(2, 1)) / s,
+            (g(0, 2) - g(2, 0)) / s,
+        ]
     } else {
         let s = (1.0 + m22 - m00 - m11).sqrt() * 2.0; // 4z
-        [(g(0, 2) + g(2, 0)) / s, (g(1, 2) + g(2, 1)) / s, 0.25 * s, (g(1, 0) - g(0, 1)) / s]
+        [
+            (g(0, 2) + g(2, 0)) / s,
+            (g(1, 2) + g(2, 1)) / s,
+            0.25 * s,
+            (g(1, 0) - g(0, 1)) / s,
+        ]
     };
     let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
     let sign = if q[3] < 0.0 { -1.0 } else { 1.0 };
-    [(sign * q[0] / n) as f32, (sign * q[1] / n) as f32, (sign * q[2] / n) as f32, (sign * q[3] / n) as f32]
+    [
+        (sign * q[0] / n) as f32,
+        (sign * q[1] / n) as f32,
+        (sign * q[2] / n) as f32,
+        (sign * q[3] / n) as f32,
+    ]
 }
 
 /// The rotation matrix of a quaternion (normalized first).
@@ -37,9 +62,21 @@ pub fn mat_from_quat(q: Quat) -> Mat3 {
     }
     let [x, y, z, w] = [q[0] / n, q[1] / n, q[2] / n, q[3] / n];
     [
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - z * w),
+            2.0 * (x * z + y * w),
+        ],
+        [
+            2.0 * (x * y + z * w),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - x * w),
+        ],
+        [
+            2.0 * (x * z - y * w),
+            2.0 * (y * z + x * w),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
     ]
 }
 
@@ -108,14 +145,22 @@ fn norm64(a: [f64; 3]) -> f64 {
     (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
 }
 fn cross64(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 fn unit64(a: [f64; 3]) -> Option<[f64; 3]> {
     let n = norm64(a);
     (n > 1e-12).then(|| [a[0] / n, a[1] / n, a[2] / n])
 }
 fn any_perp(a: [f64; 3]) -> [f64; 3] {
-    let h = if a[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+    let h = if a[0].abs() < 0.9 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
     unit64(cross64(a, h)).unwrap_or([0.0, 0.0, 1.0])
 }
 
@@ -142,7 +187,11 @@ pub fn nearest_rotation(m: &Mat3) -> Mat3 {
     }
     let (vals, vecs) = sym_eigen(mtm);
     let mut order = [0usize, 1, 2];
-    order.sort_by(|&i, &j| vals[j].partial_cmp(&vals[i]).unwrap_or(std::cmp::Ordering::Equal));
+    order.sort_by(|&i, &j| {
+        vals[j]
+            .partial_cmp(&vals[i])
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
     let col = |i: usize| [vecs[0][i], vecs[1][i], vecs[2][i]];
     let v1 = col(order[0]);
     let v2 = unit64({
@@ -159,10 +208,13 @@ pub fn nearest_rotation(m: &Mat3) -> Mat3 {
             md[2][0] * v[0] + md[2][1] * v[1] + md[2][2] * v[2],
         ]
     };
-    let Some(u1) = unit64(mv(v1)) else { return IDENTITY };
+    let Some(u1) = unit64(mv(v1)) else {
+        return IDENTITY;
+    };
     let mv2 = mv(v2);
     let d = mv2[0] * u1[0] + mv2[1] * u1[1] + mv2[2] * u1[2];
-    let u2 = unit64([mv2[0] - d * u1[0], mv2[1] - d * u1[1], mv2[2] - d * u1[2]]).unwrap_or_else(|| any_perp(u1));
+    let u2 = unit64([mv2[0] - d * u1[0], mv2[1] - d * u1[1], mv2[2] - d * u1[2]])
+        .unwrap_or_else(|| any_perp(u1));
     let u3 = cross64(u1, u2);
     // R = U V^T = sum_i u_i v_i^T.
     let mut r = [[0.0f32; 3]; 3];

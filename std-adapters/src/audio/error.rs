@@ -8,10 +8,15 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum AudioError {
     #[error("{path}: cannot read file: {error}")]
-    Io { path: PathBuf, error: std::io::Error },
+    Io {
+        path: PathBuf,
+        error: std::io::Error,
+    },
     #[error("{path}: not a readable WAV file (expected RIFF/WAVE PCM or float): {reason}")]
     Wav { path: PathBuf, reason: String },
-    #[error("{path}: not a decodable audio file (expected WAV, MP3, OGG Vorbis or FLAC): {reason}")]
+    #[error(
+        "{path}: not a decodable audio file (expected WAV, MP3, OGG Vorbis or FLAC): {reason}"
+    )]
     Format { path: PathBuf, reason: String },
     #[error("{path}: no audio track (expected one decodable audio stream)")]
     NoTrack { path: PathBuf },

@@ -19,10 +19,15 @@ pub fn load_mono(path: impl AsRef<Path>, target_sr: u32) -> Result<Vec<f32>, Aud
     let d = decode(path)?;
     let mono = d.mono();
     if mono.is_empty() {
-        return Err(AudioError::Empty { path: path.to_path_buf() });
+        return Err(AudioError::Empty {
+            path: path.to_path_buf(),
+        });
     }
     if target_sr == 0 {
-        return Err(AudioError::BadRate { path: path.to_path_buf(), rate: 0 });
+        return Err(AudioError::BadRate {
+            path: path.to_path_buf(),
+            rate: 0,
+        });
     }
     Ok(resample::resample(&mono, d.sample_rate, target_sr))
 }

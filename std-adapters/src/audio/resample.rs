@@ -30,7 +30,11 @@ pub fn resample(x: &[f32], from: u32, to: u32) -> Vec<f32> {
     }
     let g = gcd(from as u64, to as u64);
     let (up, down) = (to as u64 / g, from as u64 / g);
-    let phases = if up as usize <= MAX_PHASES { up as usize } else { MAX_PHASES };
+    let phases = if up as usize <= MAX_PHASES {
+        up as usize
+    } else {
+        MAX_PHASES
+    };
     let ratio = to as f64 / from as f64;
     let scale = ratio.min(1.0); // cutoff relative to the input Nyquist
     let cutoff = ROLLOFF * scale;
@@ -44,9 +48,17 @@ pub fn resample(x: &[f32], from: u32, to: u32) -> Vec<f32> {
         for (j, w) in bank[p * width..(p + 1) * width].iter_mut().enumerate() {
             let d = (j as isize - half + 1) as f64 - frac; // input offset minus position
             let x = cutoff * d;
-            let sinc = if x == 0.0 { 1.0 } else { (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x) };
+            let sinc = if x == 0.0 {
+                1.0
+            } else {
+                (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x)
+            };
             let r = d / (half as f64);
-            let win = if r.abs() >= 1.0 { 0.0 } else { bessel_i0(BETA * (1.0 - r * r).sqrt()) / i0b };
+            let win = if r.abs() >= 1.0 {
+                0.0
+            } else {
+                bessel_i0(BETA * (1.0 - r * r).sqrt()) / i0b
+            };
             *w = (cutoff * sinc * win) as f32;
         }
     }
@@ -58,8 +70,16 @@ pub fn resample(x: &[f32], from: u32, to: u32) -> Vec<f32> {
         let num = t as u128 * down as u128;
         let base = (num / up as u128) as isize;
         let rem = (num % up as u128) as u64;
-        let p = if phases == up as usize { rem as usize } else { ((rem as f64 / up as f64) * phases as f64).round() as usize };
-        let (base, p) = if p == phases { (base + 1, 0) } else { (base, p) };
+        let p = if phases == up as usize {
+            rem as usize
+        } else {
+            ((rem as f64 / up as f64) * phases as f64).round() as usize
+        };
+        let (base, p) = if p == phases {
+            (base + 1, 0)
+        } else {
+            (base, p)
+        };
         let taps = &bank[p * width..(p + 1) * width];
         let first = base - half + 1;
         let acc = if first >= 0 && first + width as isize <= n {
@@ -86,18 +106,24 @@ mod tests {
     #[test]
     fn tone_survives_44100_to_15360() {
         let f = 1000.0;
-        let x: Vec<f32> = (0..44100).map(|i| (2.0 * std::f64::consts::PI * f * i as f64 / 44100.0).sin() as f32).collect();
+        let x: Vec<f32> = (0..44100)
+            .map(|i| (2.0 * std::f64::consts::PI * f * i as f64 / 44100.0).sin() as f32)
+            .collect();
         let y = resample(&x, 44100, 15360);
         assert_eq!(y.len(), 15360);
         let err = (200..15000)
-            .map(|i| (y[i] as f64 - (2.0 * std::f64::consts::PI * f * i as f64 / 15360.0).sin()).abs())
+            .map(|i| {
+                (y[i] as f64 - (2.0 * std::f64::consts::PI * f * i as f64 / 15360.0).sin()).abs()
+            })
             .fold(0.0, f64::max);
         assert!(err < 1e-3, "{err}");
     }
 
     #[test]
     fn removes_content_above_new_nyquist() {
-        let x: Vec<f32> = (0..48000).map(|i| (2.0 * std::f64::consts::PI * 12000.0 * i as f64 / 48000.0).sin() as f32).collect();
+        let x: Vec<f32> = (0..48000)
+            .map(|i| (2.0 * std::f64::consts::PI * 12000.0 * i as f64 / 48000.0).sin() as f32)
+            .collect();
         let y = resample(&x, 48000, 15360);
         let rms = (y[500..14000].iter().map(|v| v * v).sum::<f32>() / 13500.0).sqrt();
         assert!(rms < 1e-4, "{rms}");

@@ -47,6 +47,9 @@ macro_rules! say {
     };
 }
 
+#[path = "bench_transflower.rs"]
+mod transflower;
+
 /// Flags of `duolando bench`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -85,9 +88,10 @@ pub struct Args {
     /// (median of `--runs` calls per shape, at most 5 for 64 rows or more).
     #[arg(long)]
     pub kernels: bool,
-    /// Which family's published model: duolando (default) or bailando (its
+    /// Which family's published model: duolando (default), bailando (its
     /// R step, the actor GPT over a full 28-token window, and its S step per
-    /// preset, f16 K/V, with the session arena).
+    /// preset, f16 K/V, with the session arena) or transflower (the paper
+    /// config's R step and its S step per session preset, with the arena).
     #[arg(long, default_value = "duolando")]
     pub family: String,
     /// Session counts stepped together with `Session::step_many` (int8
@@ -608,8 +612,11 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>) -> anyho
     if args.family == "bailando" {
         bench_bailando(args)?;
         return Ok(j);
+    } else if args.family == "transflower" {
+        transflower::run(args)?;
+        return Ok(j);
     } else if args.family != "duolando" {
-        return Err(anyhow!("unknown family '{}' (duolando, bailando)", args.family));
+        return Err(anyhow!("unknown family '{}' (duolando, bailando, transflower)", args.family));
     }
     let mut results = Vec::new();
     for d in &args.dtypes {

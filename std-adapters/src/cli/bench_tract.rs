@@ -43,16 +43,32 @@ pub fn r_steps(path: &Path, warmup: usize, runs: usize) -> anyhow::Result<(Vec<D
         Ok(m) => (m, true),
         Err(_) => (typed, false),
     };
-    let plan = model.into_runnable().map_err(|e| anyhow!("tract cannot plan {}: {e:?}", path.display()))?;
-    eprintln!("tract: {} loaded and planned in {:.1} s ({})", path.display(), t0.elapsed().as_secs_f64(), if optimized { "optimized" } else { "decluttered: the optimizer refused it" });
+    let plan = model
+        .into_runnable()
+        .map_err(|e| anyhow!("tract cannot plan {}: {e:?}", path.display()))?;
+    eprintln!(
+        "tract: {} loaded and planned in {:.1} s ({})",
+        path.display(),
+        t0.elapsed().as_secs_f64(),
+        if optimized {
+            "optimized"
+        } else {
+            "decluttered: the optimizer refused it"
+        }
+    );
     let mut inputs: TVec<TValue> = TVec::new();
-    for name in ["f_up", "f_down", "f_lhand", "f_rhand", "f_transl", "music", "l_up", "l_down", "l_lhand", "l_rhand"] {
+    for name in [
+        "f_up", "f_down", "f_lhand", "f_rhand", "f_transl", "music", "l_up", "l_down", "l_lhand",
+        "l_rhand",
+    ] {
         let f = io.join(format!("{name}.npy"));
         let t = if name == "music" {
-            let a = read_f32_2d(&f, Some(54), name).with_context(|| format!("{} (written by the export script)", f.display()))?;
+            let a = read_f32_2d(&f, Some(54), name)
+                .with_context(|| format!("{} (written by the export script)", f.display()))?;
             Tensor::from_shape(&[1, a.rows, 54], &a.data)?
         } else {
-            let a = read_i64_2d(&f, None, name).with_context(|| format!("{} (written by the export script)", f.display()))?;
+            let a = read_i64_2d(&f, None, name)
+                .with_context(|| format!("{} (written by the export script)", f.display()))?;
             Tensor::from_shape(&[1, a.data.len()], &a.data)?
         };
         inputs.push(t.into());
@@ -63,18 +79,30 @@ pub fn r_steps(path: &Path, warmup: usize, runs: usize) -> anyhow::Result<(Vec<D
     let mut err = 0.0f32;
     for i in 0..warmup + runs {
         let t = Instant::now();
-        let out = plan.run(inputs.clone()).map_err(|e| anyhow!("tract run failed: {e:?}"))?;
+        let out = plan
+            .run(inputs.clone())
+            .map_err(|e| anyhow!("tract run failed: {e:?}"))?;
         let dt = t.elapsed();
         if i >= warmup {
             times.push(dt);
         }
         if i == 0 {
-            let got = out[0].as_slice::<f32>().map_err(|e| anyhow!("tract output: {e:?}"))?;
+            let got = out[0]
+                .as_slice::<f32>()
+                .map_err(|e| anyhow!("tract output: {e:?}"))?;
             if got.len() != want.data.len() {
-                return Err(anyhow!("tract gave {} logits, torch {}", got.len(), want.data.len()));
+                return Err(anyhow!(
+                    "tract gave {} logits, torch {}",
+                    got.len(),
+                    want.data.len()
+                ));
             }
             let scale = want.data.iter().fold(1.0f32, |m, v| m.max(v.abs()));
-            err = got.iter().zip(&want.data).fold(0.0f32, |m, (a, b)| m.max((a - b).abs())) / scale;
+            err = got
+                .iter()
+                .zip(&want.data)
+                .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()))
+                / scale;
         }
     }
     Ok((times, err))
@@ -82,5 +110,8 @@ pub fn r_steps(path: &Path, warmup: usize, runs: usize) -> anyhow::Result<(Vec<D
 
 #[cfg(not(feature = "tract"))]
 pub fn r_steps(path: &Path, _: usize, _: usize) -> anyhow::Result<(Vec<Duration>, f32)> {
-    Err(anyhow!("{} is present, but this binary was built without the `tract` feature: {HOW}", path.display()))
+    Err(anyhow!(
+        "{} is present, but this binary was built without the `tract` feature: {HOW}",
+        path.display()
+    ))
 }

@@ -6,9 +6,10 @@ use clap::ValueEnum;
 use duolando_core::duolando::config::ModelConfig;
 use duolando_core::duolando::session::{CacheSchedule, Sampling, SessionConfig};
 // One list of presets for every command and the C ABI (core/src/duolando/session/config.rs).
-pub use duolando_core::duolando::session::Preset;
 use duolando_core::bailando::config::BailandoConfig;
 use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as SoloConfig};
+pub use duolando_core::duolando::session::Preset;
+use duolando_core::transflower::session::{Preset as TfPreset, SessionConfig as TfConfig};
 
 /// `--preset` values: the names of every family's presets ([`Preset::ALL`],
 /// [`SoloPreset::ALL`]), checked by clap (listed in `--help`); each family
@@ -16,6 +17,11 @@ use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as So
 fn preset_parser() -> clap::builder::PossibleValuesParser {
     let mut names: Vec<&'static str> = Preset::ALL.map(Preset::name).to_vec();
     for p in SoloPreset::ALL {
+        if !names.contains(&p.name()) {
+            names.push(p.name());
+        }
+    }
+    for p in TfPreset::ALL {
         if !names.contains(&p.name()) {
             names.push(p.name());
         }
@@ -62,9 +68,15 @@ pub struct BudgetArgs {
     /// (twice its cache memory; one re-prefill at the first jump).
     #[arg(long, conflicts_with = "staggered")]
     pub spread: bool,
-    /// Element type of the session's keys and values (GPT cache, LAT rings).
-    #[arg(long, value_enum, default_value = "f32")]
-    pub kv: Kv,
+    /// Element type of the session's keys and values (GPT cache, LAT rings;
+    /// Transflower: the kept rows of the stale-rows mode). Default: the
+    /// preset's (f32, but f16 for Transflower's `realtime`).
+    #[arg(long, value_enum)]
+    pub kv: Option<Kv>,
+    /// Transflower: steps between recomputations of every row (1 = R;
+    /// more: the stale-rows approximation, faster).
+    #[arg(long)]
+    pub refresh: Option<u32>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -78,8 +90,11 @@ impl BudgetArgs {
     /// The session configuration for `cfg`, checked.
     pub fn config(&self, cfg: &ModelConfig) -> Result<SessionConfig> {
         let Some(preset) = Preset::from_name(&self.preset) else {
-            bail!("--preset {} is a Bailando preset; a Duolando model takes {} (R itself: --mode exact)", self.preset, Preset::ALL.map(Preset::name).join(", "));
+            bail!("--preset {} is another family's preset; a Duolando model takes {} (R itself: --mode exact)", self.preset, Preset::ALL.map(Preset::name).join(", "));
         };
+        if self.refresh.is_some() {
+            bail!("--refresh is a Transflower setting; a Duolando model's budget is --lookahead, --enc-future, --dec-future, --shift, --music-lookahead");
+        }
         let base = SessionConfig::preset(cfg, preset);
         let mut sc = SessionConfig {
             lookahead: self.lookahead.unwrap_or(base.lookahead),
@@ -96,15 +111,21 @@ impl BudgetArgs {
             (false, true) => CacheSchedule::Spread,
             (false, false) => CacheSchedule::Reprefill,
         };
-        sc.kv = match self.kv {
+        sc.kv = match self.kv.unwrap_or(Kv::F32) {
             Kv::F32 => duolando_core::duolando::session::KvType::F32,
             Kv::F16 => duolando_core::duolando::session::KvType::F16,
         };
         if let Some(k) = self.topk {
-            sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };
+            sc.sampling = Sampling::TopK {
+                k,
+                rng_seed: self.rng_seed,
+            };
         }
         if let Err((setting, value, max)) = sc.check(cfg) {
-            bail!("--{} {value} is outside its range for this model (largest allowed: {max})", flag(setting));
+            bail!(
+                "--{} {value} is outside its range for this model (largest allowed: {max})",
+                flag(setting)
+            );
         }
         Ok(sc)
     }
@@ -115,27 +136,49 @@ impl BudgetArgs {
     /// settings a solo model does not have are refused by name.
     pub fn solo_config(&self, cfg: &BailandoConfig) -> Result<SoloConfig> {
         let Some(preset) = SoloPreset::from_name(&self.preset) else {
-            bail!("--preset {} is a Duolando preset; a Bailando model takes {}", self.preset, SoloPreset::ALL.map(SoloPreset::name).join(", "));
+            bail!(
+                "--preset {} is another family's preset; a Bailando model takes {}",
+                self.preset,
+                SoloPreset::ALL.map(SoloPreset::name).join(", ")
+            );
         };
-        for (given, name) in [(self.lookahead.is_some(), "lookahead"), (self.enc_future.is_some(), "enc-future"), (self.music_lookahead.is_some(), "music-lookahead"), (self.staggered, "staggered")] {
+        if self.refresh.is_some() {
+            bail!("--refresh is a Transflower setting; a Bailando model's settings are --preset, --dec-future, --shift, --spread, --topk, --kv");
+        }
+        for (given, name) in [
+            (self.lookahead.is_some(), "lookahead"),
+            (self.enc_future.is_some(), "enc-future"),
+            (self.music_lookahead.is_some(), "music-lookahead"),
+            (self.staggered, "staggered"),
+        ] {
             if given {
                 bail!("--{name} is a Duolando setting: a Bailando model has no leader and reads no music ahead (its settings: --preset, --dec-future, --shift, --spread, --topk, --kv)");
             }
         }
         let base = SoloConfig::preset(cfg, preset);
-        let mut sc = SoloConfig { dec_future: self.dec_future.unwrap_or(base.dec_future), shift: self.shift.unwrap_or(base.shift), ..base };
+        let mut sc = SoloConfig {
+            dec_future: self.dec_future.unwrap_or(base.dec_future),
+            shift: self.shift.unwrap_or(base.shift),
+            ..base
+        };
         if self.spread {
             sc.schedule = duolando_core::nn::window::CacheSchedule::Spread;
         }
-        sc.kv = match self.kv {
+        sc.kv = match self.kv.unwrap_or(Kv::F32) {
             Kv::F32 => duolando_core::nn::kv_store::KvType::F32,
             Kv::F16 => duolando_core::nn::kv_store::KvType::F16,
         };
         if let Some(k) = self.topk {
-            sc.sampling = Sampling::TopK { k, rng_seed: self.rng_seed };
+            sc.sampling = Sampling::TopK {
+                k,
+                rng_seed: self.rng_seed,
+            };
         }
         if let Err((setting, value, max)) = sc.check(cfg) {
-            bail!("--{} {value} is outside its range for this model (largest allowed: {max})", flag(setting));
+            bail!(
+                "--{} {value} is outside its range for this model (largest allowed: {max})",
+                flag(setting)
+            );
         }
         Ok(sc)
     }
@@ -155,5 +198,52 @@ fn flag(s: duolando_core::duolando::session::Setting) -> &'static str {
         MusicBuffer => "music-buffer-frames",
         Windows => "staggered",
         Batch => "sessions",
+        Refresh => "refresh",
+    }
+}
+
+impl BudgetArgs {
+    /// The session configuration of a Transflower model, checked; the
+    /// settings it does not have are refused by name.
+    pub fn transflower_config(&self) -> Result<TfConfig> {
+        let Some(preset) = TfPreset::from_name(&self.preset) else {
+            bail!(
+                "--preset {} is another family's preset; a Transflower model takes {}",
+                self.preset,
+                TfPreset::ALL.map(TfPreset::name).join(", ")
+            );
+        };
+        for (given, name) in [
+            (self.lookahead.is_some(), "lookahead"),
+            (self.enc_future.is_some(), "enc-future"),
+            (self.dec_future.is_some(), "dec-future"),
+            (self.shift.is_some(), "shift"),
+            (self.music_lookahead.is_some(), "music-lookahead"),
+            (self.topk.is_some(), "topk"),
+            (self.rng_seed != 0, "rng-seed"),
+            (self.staggered, "staggered"),
+            (self.spread, "spread"),
+        ] {
+            if given {
+                bail!("--{name} is a Duolando / Bailando setting; a Transflower session's settings are --preset, --refresh, --kv (its base samples: --seed N or --noise FILE.npy)");
+            }
+        }
+        let mut sc = TfConfig::preset(preset);
+        if let Some(r) = self.refresh {
+            sc.refresh = r;
+        }
+        if let Some(kv) = self.kv {
+            sc.kv = match kv {
+                Kv::F32 => duolando_core::nn::kv_store::KvType::F32,
+                Kv::F16 => duolando_core::nn::kv_store::KvType::F16,
+            };
+        }
+        if let Err((setting, value, max)) = sc.check() {
+            bail!(
+                "--{} {value} is outside its range (largest allowed: {max})",
+                flag(setting)
+            );
+        }
+        Ok(sc)
     }
 }

@@ -22,7 +22,13 @@ use crate::engine_errors::describe;
 use crate::npy::{read_f32_2d, write_f32, write_i64};
 
 pub fn run_bailando(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
-    let model = Model::from_duo(duo).map_err(|e| anyhow::anyhow!("{}: {}", args.model.display(), crate::engine_errors::describe_bind(&e)))?;
+    let model = Model::from_duo(duo).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: {}",
+            args.model.display(),
+            crate::engine_errors::describe_bind(&e)
+        )
+    })?;
     if args.leader.is_some() || args.follower_start.is_some() {
         bail!("{} is a Bailando model (a solo dancer): it takes no leader; give --music and --dance or --seed-tokens up,down", args.model.display());
     }
@@ -30,14 +36,35 @@ pub fn run_bailando(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
         bail!("{} is a Bailando model: --music (Bailando features (R, >= 438) at 7.5 fps) is required", args.model.display());
     };
     let run = match args.mode {
-        Mode::Exact => bailando_exact(&model, music, args.dance.as_deref(), args.seed_tokens.as_deref(), &args.model)?,
+        Mode::Exact => bailando_exact(
+            &model,
+            music,
+            args.dance.as_deref(),
+            args.seed_tokens.as_deref(),
+            &args.model,
+        )?,
         Mode::Streaming => {
             let sc = args.budget.solo_config(&model.cfg)?;
-            bailando_streaming(&model, music, args.dance.as_deref(), args.seed_tokens.as_deref(), &args.model, &sc)?
+            bailando_streaming(
+                &model,
+                music,
+                args.dance.as_deref(),
+                args.seed_tokens.as_deref(),
+                &args.model,
+                &sc,
+            )?
         }
     };
-    let SoloRun { tokens, pos3d: pos, steps: k, frames, music_rows, path } = run;
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    let SoloRun {
+        tokens,
+        pos3d: pos,
+        steps: k,
+        frames,
+        music_rows,
+        path,
+    } = run;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
     let toks: Vec<i64> = tokens.iter().map(|&t| t as i64).collect();
     write_i64(&args.out.join("tokens.npy"), &toks, &[k + 1, 2])?;
     write_f32(&args.out.join("pos3d.npy"), &pos, &[frames, POSE_DIM])?;
@@ -59,9 +86,15 @@ pub fn parse_seed(s: &str, vocab: [u32; 2]) -> Result<[u32; 2]> {
     }
     let mut out = [0u32; 2];
     for (i, x) in v.iter().enumerate() {
-        let t: u32 = x.parse().with_context(|| format!("--seed-tokens {s:?}: {x:?} is not a token number"))?;
+        let t: u32 = x
+            .parse()
+            .with_context(|| format!("--seed-tokens {s:?}: {x:?} is not a token number"))?;
         if t >= vocab[i] {
-            bail!("--seed-tokens {s:?}: token {t} of the {} stream is outside its vocabulary 0..{}", ["up", "down"][i], vocab[i]);
+            bail!(
+                "--seed-tokens {s:?}: token {t} of the {} stream is outside its vocabulary 0..{}",
+                ["up", "down"][i],
+                vocab[i]
+            );
         }
         out[i] = t;
     }
@@ -84,44 +117,99 @@ pub struct SoloRun {
 /// R mode on `music_path` (R, >= n_music) with the AIST++ path (`dance`:
 /// a (T, 72) .npy) or the demo path (`seed_tokens` "up,down"); every
 /// input error names its file. `model_path` labels messages.
-pub fn bailando_exact(model: &Model<'_>, music_path: &Path, dance: Option<&Path>, seed_tokens: Option<&str>, model_path: &Path) -> Result<SoloRun> {
-    let SoloInputs { music, padding, seed, path } = solo_inputs(model, music_path, dance, seed_tokens, model_path)?;
-    let mut run = exact_rows(model, &music.data, music.cols, padding, seed).map_err(|e| anyhow::anyhow!("{}: {e:#}", music_path.display()))?;
+pub fn bailando_exact(
+    model: &Model<'_>,
+    music_path: &Path,
+    dance: Option<&Path>,
+    seed_tokens: Option<&str>,
+    model_path: &Path,
+) -> Result<SoloRun> {
+    let SoloInputs {
+        music,
+        padding,
+        seed,
+        path,
+    } = solo_inputs(model, music_path, dance, seed_tokens, model_path)?;
+    let mut run = exact_rows(model, &music.data, music.cols, padding, seed)
+        .map_err(|e| anyhow::anyhow!("{}: {e:#}", music_path.display()))?;
     run.path = path;
     Ok(run)
 }
 
 /// R mode on music rows in memory (`music` (R, cols), the first
 /// `n_music` columns read).
-pub fn exact_rows(model: &Model<'_>, music: &[f32], cols: usize, padding: MusicPadding, seed: [u32; 2]) -> Result<SoloRun> {
+pub fn exact_rows(
+    model: &Model<'_>,
+    music: &[f32],
+    cols: usize,
+    padding: MusicPadding,
+    seed: [u32; 2],
+) -> Result<SoloRun> {
     let cfg = model.cfg;
     let rows = music.len() / cols.max(1);
     let k = exact::steps(padding, rows);
     let mut tokens = vec![0u32; (k + 1) * 2];
     let mut scratch = vec![0u8; exact::sample_scratch_bytes(&cfg).context("config too large")?];
-    exact::sample(model, music, cols, padding, seed, &mut scratch, &mut tokens).map_err(|e| anyhow::anyhow!("{}", describe(&e)))?;
+    exact::sample(model, music, cols, padding, seed, &mut scratch, &mut tokens)
+        .map_err(|e| anyhow::anyhow!("{}", describe(&e)))?;
     let frames = (k + 1) * cfg.hop();
     let mut pos = vec![0f32; frames * POSE_DIM];
-    let mut scratch = vec![0u8; exact::decode_scratch_bytes(&cfg, k + 1).context("too many tokens")?];
-    exact::decode(model, &tokens, &mut scratch, &mut pos).map_err(|e| anyhow::anyhow!("decoding: {}", describe(&e)))?;
+    let mut scratch =
+        vec![0u8; exact::decode_scratch_bytes(&cfg, k + 1).context("too many tokens")?];
+    exact::decode(model, &tokens, &mut scratch, &mut pos)
+        .map_err(|e| anyhow::anyhow!("decoding: {}", describe(&e)))?;
     let path = match padding {
         MusicPadding::Aist => "AIST++ test path",
         MusicPadding::Demo => "demo path (seed given)",
     };
-    Ok(SoloRun { tokens, pos3d: pos, steps: k, frames, music_rows: rows, path })
+    Ok(SoloRun {
+        tokens,
+        pos3d: pos,
+        steps: k,
+        frames,
+        music_rows: rows,
+        path,
+    })
 }
 
 /// S mode on the same inputs as [`bailando_exact`]: a session is given the
 /// whole track (its first `n_music` columns), told the music ended (the
 /// same padding as R's path), and pulled to the end.
-pub fn bailando_streaming(model: &Model<'_>, music_path: &Path, dance: Option<&Path>, seed_tokens: Option<&str>, model_path: &Path, sc: &SessionConfig) -> Result<SoloRun> {
-    let SoloInputs { music, padding, seed, path } = solo_inputs(model, music_path, dance, seed_tokens, model_path)?;
+pub fn bailando_streaming(
+    model: &Model<'_>,
+    music_path: &Path,
+    dance: Option<&Path>,
+    seed_tokens: Option<&str>,
+    model_path: &Path,
+    sc: &SessionConfig,
+) -> Result<SoloRun> {
+    let SoloInputs {
+        music,
+        padding,
+        seed,
+        path,
+    } = solo_inputs(model, music_path, dance, seed_tokens, model_path)?;
     let nm = model.cfg.gpt.n_music as usize;
-    let sc = SessionConfig { music_buffer_rows: (music.rows as u32).max(1), ..*sc };
-    let mut arena = vec![0u8; model.session_bytes(&sc).map_err(|e| anyhow::anyhow!("session: {}", describe(&e)))?];
-    let mut s = Session::new(model, &mut arena, &sc, seed).map_err(|e| anyhow::anyhow!("session: {}", describe(&e)))?;
-    let rows: Vec<f32> = music.data.chunks_exact(music.cols).flat_map(|r| r[..nm].iter().copied()).collect();
-    let err = |e: duolando_core::error::Error| anyhow::anyhow!("{}: {}", music_path.display(), describe(&e));
+    let sc = SessionConfig {
+        music_buffer_rows: (music.rows as u32).max(1),
+        ..*sc
+    };
+    let mut arena = vec![
+        0u8;
+        model
+            .session_bytes(&sc)
+            .map_err(|e| anyhow::anyhow!("session: {}", describe(&e)))?
+    ];
+    let mut s = Session::new(model, &mut arena, &sc, seed)
+        .map_err(|e| anyhow::anyhow!("session: {}", describe(&e)))?;
+    let rows: Vec<f32> = music
+        .data
+        .chunks_exact(music.cols)
+        .flat_map(|r| r[..nm].iter().copied())
+        .collect();
+    let err = |e: duolando_core::error::Error| {
+        anyhow::anyhow!("{}: {}", music_path.display(), describe(&e))
+    };
     s.push_music(&rows).map_err(err)?;
     s.finish(padding).map_err(err)?;
     let mut tokens = seed.to_vec();
@@ -144,7 +232,14 @@ pub fn bailando_streaming(model: &Model<'_>, music_path: &Path, dance: Option<&P
         bail!("the session did not reach the end of the music (an engine bug)");
     }
     let k = tokens.len() / 2 - 1;
-    Ok(SoloRun { tokens, frames: pos.len() / POSE_DIM, pos3d: pos, steps: k, music_rows: music.rows, path })
+    Ok(SoloRun {
+        tokens,
+        frames: pos.len() / POSE_DIM,
+        pos3d: pos,
+        steps: k,
+        music_rows: music.rows,
+        path,
+    })
 }
 
 /// The inputs of a solo run, read and checked, every error naming its file.
@@ -155,10 +250,20 @@ struct SoloInputs {
     path: &'static str,
 }
 
-fn solo_inputs(model: &Model<'_>, music_path: &Path, dance: Option<&Path>, seed_tokens: Option<&str>, model_path: &Path) -> Result<SoloInputs> {
+fn solo_inputs(
+    model: &Model<'_>,
+    music_path: &Path,
+    dance: Option<&Path>,
+    seed_tokens: Option<&str>,
+    model_path: &Path,
+) -> Result<SoloInputs> {
     let cfg = model.cfg;
     let nm = cfg.gpt.n_music as usize;
-    let music = read_f32_2d(music_path, None, &format!("music features (R, >= {nm}) at 7.5 fps"))?;
+    let music = read_f32_2d(
+        music_path,
+        None,
+        &format!("music features (R, >= {nm}) at 7.5 fps"),
+    )?;
     if music.cols < nm {
         bail!("{}: {} columns per row, the model reads {nm} (Bailando's features: `duolando features --for bailando`)", music_path.display(), music.cols);
     }
@@ -178,5 +283,10 @@ fn solo_inputs(model: &Model<'_>, music_path: &Path, dance: Option<&Path>, seed_
         (None, Some(s)) => (MusicPadding::Demo, parse_seed(s, cfg.gpt.vocab)?, "demo path (seed given)"),
         _ => bail!("{} is a Bailando model: give --dance (the AIST++ test path) or --seed-tokens up,down (the demo path)", model_path.display()),
     };
-    Ok(SoloInputs { music, padding, seed, path })
+    Ok(SoloInputs {
+        music,
+        padding,
+        seed,
+        path,
+    })
 }

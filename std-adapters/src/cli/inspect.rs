@@ -234,7 +234,18 @@ fn transflower_report(duo: &duolando_core::format::DuoFile<'_>, cfg: &Transflowe
                 cfg.output_input().length
             ),
         },
-        "streaming": Value::Null,
+        "streaming": {
+            "lookahead_rows": duolando_core::transflower::session::lookahead_rows(cfg),
+            "presets": duolando_core::transflower::session::Preset::ALL.iter().map(|&p| {
+                let sc = duolando_core::transflower::session::SessionConfig::preset(p);
+                json!({
+                    "name": p.name(),
+                    "refresh": sc.refresh,
+                    "kv": format!("{:?}", sc.kv).to_lowercase(),
+                    "arena_bytes": duolando_core::transflower::session::session_bytes(cfg, &sc).ok(),
+                })
+            }).collect::<Vec<_>>(),
+        },
     }))
 }
 
@@ -288,7 +299,21 @@ fn transflower_text(r: &Value) -> String {
         ));
     }
     line(format!("  latency: {}", r["r_mode"]["latency"].as_str().unwrap_or("")));
-    line("streaming (S): not built yet for Transflower".into());
+    let st = &r["streaming"];
+    line(format!(
+        "streaming (S): frame t (song row offset + t) is made once the last input has row t + {} ({} rows after the frame's own row)",
+        r["derived"]["longest_window_rows"].as_u64().unwrap_or(0).saturating_sub(1),
+        st["lookahead_rows"]
+    ));
+    for p in st["presets"].as_array().into_iter().flatten() {
+        line(format!(
+            "  {:<10} refresh {:>3} ({} kept keys/values): arena {}",
+            p["name"].as_str().unwrap_or(""),
+            p["refresh"].as_u64().unwrap_or(0),
+            p["kv"].as_str().unwrap_or(""),
+            p["arena_bytes"].as_u64().map(mib).unwrap_or_else(|| "overflow".into())
+        ));
+    }
     s
 }
 

@@ -15,8 +15,8 @@
 
 use clap::{Parser, Subcommand};
 
-pub mod budget;
 pub mod bench_tract;
+pub mod budget;
 pub mod generate_solo;
 pub mod generate_transflower;
 
@@ -68,7 +68,11 @@ commands! {
 
 /// `duolando <command> [flags]`.
 #[derive(Parser, Debug)]
-#[command(name = "duolando", version, about = "Real-time Duolando dance accompaniment")]
+#[command(
+    name = "duolando",
+    version,
+    about = "Real-time Duolando dance accompaniment"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,

@@ -28,8 +28,17 @@ pub struct BailandoReport {
 
 /// Converts in memory: `cfg` (from [`super::parse_bailando_config`]), the
 /// GPT and VQ-VAE safetensors (each labelled by its path).
-pub fn convert_bailando(cfg: &BailandoConfig, gpt: (&Path, &[u8]), vqvae: (&Path, &[u8]), store_as: StoreAs, label: &Path) -> Result<(Vec<u8>, BailandoReport), ConvertError> {
-    let sources = [Source::parse(gpt.0, gpt.1)?, Source::parse(vqvae.0, vqvae.1)?];
+pub fn convert_bailando(
+    cfg: &BailandoConfig,
+    gpt: (&Path, &[u8]),
+    vqvae: (&Path, &[u8]),
+    store_as: StoreAs,
+    label: &Path,
+) -> Result<(Vec<u8>, BailandoReport), ConvertError> {
+    let sources = [
+        Source::parse(gpt.0, gpt.1)?,
+        Source::parse(vqvae.0, vqvae.1)?,
+    ];
     let prefixes = ["gpt.", "motion."];
     let mut used: [BTreeSet<String>; 2] = Default::default();
     let mut tensors = Vec::new();
@@ -38,7 +47,13 @@ pub fn convert_bailando(cfg: &BailandoConfig, gpt: (&Path, &[u8]), vqvae: (&Path
         tensors.push(take_tensor(spec, &sources, &prefixes, &mut used, store_as)?);
         Ok(())
     })?;
-    let mut out = BailandoReport { report: Report { written: tensors.len(), ..Report::default() }, critic_skipped: 0 };
+    let mut out = BailandoReport {
+        report: Report {
+            written: tensors.len(),
+            ..Report::default()
+        },
+        critic_skipped: 0,
+    };
     for (c, src) in sources.iter().enumerate() {
         let mut extra = Vec::new();
         for name in src.tensors.keys().filter(|n| !used[c].contains(*n)) {
@@ -54,10 +69,16 @@ pub fn convert_bailando(cfg: &BailandoConfig, gpt: (&Path, &[u8]), vqvae: (&Path
             }
         }
         if !extra.is_empty() {
-            return Err(ConvertError::Extra { path: src.path.clone(), tensors: extra });
+            return Err(ConvertError::Extra {
+                path: src.path.clone(),
+                tensors: extra,
+            });
         }
     }
-    let bytes = write_model(&family, &tensors).map_err(|source| ConvertError::Write { path: label.into(), source })?;
+    let bytes = write_model(&family, &tensors).map_err(|source| ConvertError::Write {
+        path: label.into(),
+        source,
+    })?;
     out.report.bytes = bytes.len();
     Ok((bytes, out))
 }

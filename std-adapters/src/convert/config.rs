@@ -17,7 +17,9 @@
 
 use std::path::{Path, PathBuf};
 
-use duolando_core::bailando::config::{BailandoConfig, GptConfig as BGptConfig, DOWN_JOINTS, UP_JOINTS};
+use duolando_core::bailando::config::{
+    BailandoConfig, GptConfig as BGptConfig, DOWN_JOINTS, UP_JOINTS,
+};
 use duolando_core::duolando::config::{GptConfig, LatConfig, ModelConfig};
 use duolando_core::nn::vq_config::VqConfig;
 
@@ -26,14 +28,23 @@ use super::yaml::Yaml;
 
 /// Reads and maps the follower-GPT YAML at `path`.
 pub fn load_config(path: &Path) -> Result<ModelConfig, ConvertError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ConvertError::Io { path: path.into(), source })?;
+    let text = std::fs::read_to_string(path).map_err(|source| ConvertError::Io {
+        path: path.into(),
+        source,
+    })?;
     parse_config(path, &text)
 }
 
 /// Maps YAML `text`; `path` only labels errors.
 pub fn parse_config(path: &Path, text: &str) -> Result<ModelConfig, ConvertError> {
-    let root = Yaml::parse(text).map_err(|source| ConvertError::Yaml { path: path.into(), source })?;
-    let cfg = Keys { path: path.to_path_buf() }.model(&root)?;
+    let root = Yaml::parse(text).map_err(|source| ConvertError::Yaml {
+        path: path.into(),
+        source,
+    })?;
+    let cfg = Keys {
+        path: path.to_path_buf(),
+    }
+    .model(&root)?;
     cfg.validate().map_err(|error| ConvertError::Config {
         path: path.into(),
         error,
@@ -48,7 +59,8 @@ pub fn is_bailando(text: &str) -> bool {
     match Yaml::parse(text) {
         Ok(root) => {
             let name = |k: &str| root.get(k).and_then(|s| s.get("name")).cloned();
-            name("structure") == Some(Yaml::Str("SepVQVAER".into())) || name("structure_generate") == Some(Yaml::Str("CrossCondGPT2AC".into()))
+            name("structure") == Some(Yaml::Str("SepVQVAER".into()))
+                || name("structure_generate") == Some(Yaml::Str("CrossCondGPT2AC".into()))
         }
         Err(_) => false,
     }
@@ -59,10 +71,19 @@ pub fn is_bailando(text: &str) -> bool {
 /// base/head; `critic_net` is training-only and not read); `path` only
 /// labels errors.
 pub fn parse_bailando_config(path: &Path, text: &str) -> Result<BailandoConfig, ConvertError> {
-    let root = Yaml::parse(text).map_err(|source| ConvertError::Yaml { path: path.into(), source })?;
-    let keys = Keys { path: path.to_path_buf() };
+    let root = Yaml::parse(text).map_err(|source| ConvertError::Yaml {
+        path: path.into(),
+        source,
+    })?;
+    let keys = Keys {
+        path: path.to_path_buf(),
+    };
     let cfg = keys.bailando(&root)?;
-    cfg.validate().map_err(|error| ConvertError::Config { path: path.into(), error, detail: format!("{error:?}") })?;
+    cfg.validate().map_err(|error| ConvertError::Config {
+        path: path.into(),
+        error,
+        detail: format!("{error:?}"),
+    })?;
     Ok(cfg)
 }
 
@@ -73,7 +94,11 @@ struct Keys {
 
 impl Keys {
     fn err(&self, key: &str, problem: impl Into<String>) -> ConvertError {
-        ConvertError::ConfigKey { path: self.path.clone(), key: key.to_string(), problem: problem.into() }
+        ConvertError::ConfigKey {
+            path: self.path.clone(),
+            key: key.to_string(),
+            problem: problem.into(),
+        }
     }
 
     fn node<'y>(&self, y: &'y Yaml, key: &str) -> Result<&'y Yaml, ConvertError> {
@@ -86,7 +111,8 @@ impl Keys {
 
     fn uint(&self, y: &Yaml, key: &str) -> Result<u32, ConvertError> {
         match self.node(y, key)? {
-            Yaml::Int(i) => u32::try_from(*i).map_err(|_| self.err(key, format!("{i} is not in 0..=4294967295"))),
+            Yaml::Int(i) => u32::try_from(*i)
+                .map_err(|_| self.err(key, format!("{i} is not in 0..=4294967295"))),
             other => Err(self.err(key, format!("expected an integer, found {}", other.kind()))),
         }
     }
@@ -104,10 +130,18 @@ impl Keys {
     fn single(&self, y: &Yaml, key: &str) -> Result<u32, ConvertError> {
         match self.node(y, key)? {
             Yaml::Seq(items) if items.len() == 1 => match &items[0] {
-                Yaml::Int(i) => u32::try_from(*i).map_err(|_| self.err(key, format!("{i} is out of range"))),
-                other => Err(self.err(key, format!("expected an integer item, found {}", other.kind()))),
+                Yaml::Int(i) => {
+                    u32::try_from(*i).map_err(|_| self.err(key, format!("{i} is out of range")))
+                }
+                other => Err(self.err(
+                    key,
+                    format!("expected an integer item, found {}", other.kind()),
+                )),
             },
-            Yaml::Seq(items) => Err(self.err(key, format!("expected one entry (levels = 1), found {}", items.len()))),
+            Yaml::Seq(items) => Err(self.err(
+                key,
+                format!("expected one entry (levels = 1), found {}", items.len()),
+            )),
             other => Err(self.err(key, format!("expected a list, found {}", other.kind()))),
         }
     }
@@ -116,7 +150,10 @@ impl Keys {
     fn same(&self, y: &Yaml, a: &str, b: &str) -> Result<u32, ConvertError> {
         let (va, vb) = (self.uint(y, a)?, self.uint(y, b)?);
         if va != vb {
-            return Err(self.err(b, format!("is {vb} but `{a}` is {va}; the engine has one value for both")));
+            return Err(self.err(
+                b,
+                format!("is {vb} but `{a}` is {va}; the engine has one value for both"),
+            ));
         }
         Ok(va)
     }
@@ -131,20 +168,41 @@ impl Keys {
 
     fn model(&self, root: &Yaml) -> Result<ModelConfig, ConvertError> {
         let parts = [
-            self.vq_keys(root, "structure.up_half", "pos_channel", Some("rot_channel"))?,
-            self.vq_keys(root, "structure.down_half", "pos_channel", Some("rot_channel"))?,
+            self.vq_keys(
+                root,
+                "structure.up_half",
+                "pos_channel",
+                Some("rot_channel"),
+            )?,
+            self.vq_keys(
+                root,
+                "structure.down_half",
+                "pos_channel",
+                Some("rot_channel"),
+            )?,
             self.vq_keys(root, "structure.lhand", "pos_channel", Some("rot_channel"))?,
             self.vq_keys(root, "structure.rhand", "pos_channel", Some("rot_channel"))?,
         ];
         let transl = self.vq_keys(root, "structure_transl_vqvae", "input_dim", None)?;
         let gpt = self.gpt(root)?;
         let music_motion_rate = self.uint(root, "music_motion_rate")?;
-        Ok(ModelConfig { gpt, parts, transl, music_motion_rate })
+        Ok(ModelConfig {
+            gpt,
+            parts,
+            transl,
+            music_motion_rate,
+        })
     }
 
     /// One VQ-VAE section at `sec` (a dotted path) whose channel counts
     /// are the keys `in_key` and `rot_key`.
-    fn vq_keys(&self, root: &Yaml, sec: &str, in_key: &str, rot_key: Option<&str>) -> Result<VqConfig, ConvertError> {
+    fn vq_keys(
+        &self,
+        root: &Yaml,
+        sec: &str,
+        in_key: &str,
+        rot_key: Option<&str>,
+    ) -> Result<VqConfig, ConvertError> {
         let k = |name: &str| format!("{sec}.{name}");
         let in_channels = self.uint(root, &k(in_key))?;
         let rot_channels = match rot_key {
@@ -155,11 +213,20 @@ impl Keys {
     }
 
     /// One VQ-VAE section at `sec` (a dotted path) with the given channels.
-    fn vq(&self, root: &Yaml, sec: &str, in_channels: u32, rot_channels: u32) -> Result<VqConfig, ConvertError> {
+    fn vq(
+        &self,
+        root: &Yaml,
+        sec: &str,
+        in_channels: u32,
+        rot_channels: u32,
+    ) -> Result<VqConfig, ConvertError> {
         let k = |name: &str| format!("{sec}.{name}");
         let levels = self.uint(root, &k("levels"))?;
         if levels != 1 {
-            return Err(self.err(&k("levels"), format!("only 1 level is supported (the published models), found {levels}")));
+            return Err(self.err(
+                &k("levels"),
+                format!("only 1 level is supported (the published models), found {levels}"),
+            ));
         }
         let mult = match self.node(root, &k("hvqvae_multipliers")) {
             Ok(_) => self.single(root, &k("hvqvae_multipliers"))?,
@@ -167,21 +234,36 @@ impl Keys {
         };
         if let Ok(v) = self.node(root, &k("dilation_cycle")) {
             if *v != Yaml::Null {
-                return Err(self.err(&k("dilation_cycle"), "must be absent or null (dilation cycles are not supported)"));
+                return Err(self.err(
+                    &k("dilation_cycle"),
+                    "must be absent or null (dilation cycles are not supported)",
+                ));
             }
         }
         if let Ok(v) = self.node(root, &k("vqvae_reverse_decoder_dilation")) {
             if *v != Yaml::Bool(true) {
-                return Err(self.err(&k("vqvae_reverse_decoder_dilation"), "must be true (the engine's decoders reverse the dilations)"));
+                return Err(self.err(
+                    &k("vqvae_reverse_decoder_dilation"),
+                    "must be true (the engine's decoders reverse the dilations)",
+                ));
             }
         }
         let width = self.uint(root, &k("width"))?;
         let depth = self.uint(root, &k("depth"))?;
         let scaled = |key: &str, v: u32| {
-            v.checked_mul(mult).ok_or_else(|| self.err(&k(key), format!("{v} x hvqvae_multipliers {mult} overflows")))
+            v.checked_mul(mult).ok_or_else(|| {
+                self.err(
+                    &k(key),
+                    format!("{v} x hvqvae_multipliers {mult} overflows"),
+                )
+            })
         };
-        let (m_conv_num, m_conv_den) = ratio(self.float(root, &k("m_conv"))?)
-            .ok_or_else(|| self.err(&k("m_conv"), "must be a positive ratio with denominator <= 64 (e.g. 1.0, 0.5, 0.75)"))?;
+        let (m_conv_num, m_conv_den) = ratio(self.float(root, &k("m_conv"))?).ok_or_else(|| {
+            self.err(
+                &k("m_conv"),
+                "must be a positive ratio with denominator <= 64 (e.g. 1.0, 0.5, 0.75)",
+            )
+        })?;
         Ok(VqConfig {
             in_channels,
             rot_channels,
@@ -201,11 +283,17 @@ impl Keys {
         let part = |sec: &str, joints: usize| -> Result<VqConfig, ConvertError> {
             let jc = self.uint(root, &format!("{sec}.joint_channel"))?;
             if jc != 3 {
-                return Err(self.err(&format!("{sec}.joint_channel"), format!("must be 3 (joint positions), found {jc}")));
+                return Err(self.err(
+                    &format!("{sec}.joint_channel"),
+                    format!("must be 3 (joint positions), found {jc}"),
+                ));
             }
             self.vq(root, sec, (joints * 3) as u32, 0)
         };
-        let parts = [part("structure.up_half", UP_JOINTS.len())?, part("structure.down_half", DOWN_JOINTS.len())?];
+        let parts = [
+            part("structure.up_half", UP_JOINTS.len())?,
+            part("structure.down_half", DOWN_JOINTS.len())?,
+        ];
         let g = |name: &str| format!("structure_generate.{name}");
         let n_embd = self.same(root, &g("base.n_embd"), &g("head.n_embd"))?;
         self.same(root, &g("base.n_embd"), &g("base.n_music_emb"))?;
@@ -252,7 +340,11 @@ impl Keys {
         let n_head = self.same(root, &g("base.n_head"), &g("head.n_head"))?;
         // GPTHead sizes head_up/head_lhand by head.vocab_size_up and
         // head_down/head_rhand by head.vocab_size_down (the original's quirk).
-        for (top, head) in [("vocab_size_up", "head.vocab_size_up"), ("vocab_size_down", "head.vocab_size_down"), ("vocab_size_transl", "head.vocab_size_transl")] {
+        for (top, head) in [
+            ("vocab_size_up", "head.vocab_size_up"),
+            ("vocab_size_down", "head.vocab_size_down"),
+            ("vocab_size_transl", "head.vocab_size_transl"),
+        ] {
             self.same_if_present(root, &g(top), &g(head))?;
         }
         let music = self.lat(root, "music_trans")?;

@@ -98,8 +98,14 @@ pub fn storage_for(requested: StoreAs, spec: &TensorSpec) -> StoreAs {
         return StoreAs::F32;
     }
     // A ConvTranspose1d weight is blocked along `in`, in GEMM order.
-    let row = spec.gemm_dims().map_or_else(|| block_row(spec.dims()), |[_, c_in]| c_in as usize);
-    let blockable = matches!(spec.role, Role::Linear | Role::Conv | Role::ConvTranspose | Role::Embedding) && row % 32 == 0 && row > 0;
+    let row = spec
+        .gemm_dims()
+        .map_or_else(|| block_row(spec.dims()), |[_, c_in]| c_in as usize);
+    let blockable = matches!(
+        spec.role,
+        Role::Linear | Role::Conv | Role::ConvTranspose | Role::Embedding
+    ) && row % 32 == 0
+        && row > 0;
     match requested {
         StoreAs::Q8Block32 | StoreAs::Q8Block32x8 if blockable => {
             if spec.role == Role::Embedding {
@@ -139,7 +145,11 @@ pub fn stored_dims(spec: &TensorSpec, stored: StoreAs) -> Vec<u32> {
 /// ConvTranspose1d weight `(in, out, k)` stored blocked becomes the GEMM
 /// order `(out * k, in)`, row `o * k + j` = `W[:, o, j]` (docs/FORMAT.md
 /// §6); everything else as it is.
-pub fn to_stored_order(spec: &TensorSpec, stored: StoreAs, values: Vec<f32>) -> (Vec<u32>, Vec<f32>) {
+pub fn to_stored_order(
+    spec: &TensorSpec,
+    stored: StoreAs,
+    values: Vec<f32>,
+) -> (Vec<u32>, Vec<f32>) {
     match (spec.dims(), spec.gemm_dims()) {
         (&[c_in, c_out, k], Some(gemm)) if gemm_order(spec, stored) => {
             let (c_in, zk) = (c_in as usize, c_out as usize * k as usize);
@@ -157,7 +167,11 @@ pub fn to_stored_order(spec: &TensorSpec, stored: StoreAs, values: Vec<f32>) -> 
 
 /// Pulls every schema tensor of `cfg` out of the sources (checked, upcast
 /// to f32, stored as [`storage_for`]`(store_as, ..)`) and verifies nothing unknown is left over.
-pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: StoreAs) -> Result<(Vec<Tensor>, Report), ConvertError> {
+pub fn collect_tensors(
+    cfg: &ModelConfig,
+    sources: &Sources<'_>,
+    store_as: StoreAs,
+) -> Result<(Vec<Tensor>, Report), ConvertError> {
     let parsed = [
         Source::parse(sources.gpt.0, sources.gpt.1)?,
         Source::parse(sources.vqvae.0, sources.vqvae.1)?,
@@ -170,7 +184,10 @@ pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: Store
         tensors.push(take_tensor(spec, &parsed, &prefixes, &mut used, store_as)?);
         Ok(())
     })?;
-    let mut report = Report { written: tensors.len(), ..Report::default() };
+    let mut report = Report {
+        written: tensors.len(),
+        ..Report::default()
+    };
     for (c, component) in Component::ALL.iter().enumerate() {
         let src = &parsed[c];
         let mut extra = Vec::new();
@@ -186,7 +203,10 @@ pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: Store
             }
         }
         if !extra.is_empty() {
-            return Err(ConvertError::Extra { path: src.path.clone(), tensors: extra });
+            return Err(ConvertError::Extra {
+                path: src.path.clone(),
+                tensors: extra,
+            });
         }
     }
     Ok((tensors, report))
@@ -196,7 +216,13 @@ pub fn collect_tensors(cfg: &ModelConfig, sources: &Sources<'_>, store_as: Store
 /// (`prefixes[i]` for `sources[i]`) its name carries: checked against the
 /// schema shape, upcast to f32, refused if not finite, stored as
 /// [`storage_for`]`(store_as, spec)`; its source name is added to `used[i]`.
-pub fn take_tensor(spec: &TensorSpec, sources: &[Source<'_>], prefixes: &[&str], used: &mut [BTreeSet<String>], store_as: StoreAs) -> Result<Tensor, ConvertError> {
+pub fn take_tensor(
+    spec: &TensorSpec,
+    sources: &[Source<'_>],
+    prefixes: &[&str],
+    used: &mut [BTreeSet<String>],
+    store_as: StoreAs,
+) -> Result<Tensor, ConvertError> {
     let duo_name = spec.name.as_str();
     let (c, rest) = prefixes
         .iter()
@@ -210,17 +236,31 @@ pub fn take_tensor(spec: &TensorSpec, sources: &[Source<'_>], prefixes: &[&str],
     let src = &sources[c];
     let values = src.f32_values(rest, duo_name, spec.dims())?;
     if let Some((index, &value)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(ConvertError::NonFinite { path: src.path.clone(), tensor: rest.to_string(), index, value });
+        return Err(ConvertError::NonFinite {
+            path: src.path.clone(),
+            tensor: rest.to_string(),
+            index,
+            value,
+        });
     }
     used[c].insert(rest.to_string());
     let stored = storage_for(store_as, spec);
     let (shape, values) = to_stored_order(spec, stored, values);
-    Ok(Tensor { name: duo_name.to_string(), shape, values, store_as: stored })
+    Ok(Tensor {
+        name: duo_name.to_string(),
+        shape,
+        values,
+        store_as: stored,
+    })
 }
 
 /// The whole conversion in memory: YAML text (labelled by `config.0`) +
 /// three safetensors -> `.duo` bytes.
-pub fn convert_bytes(config: (&Path, &str), sources: &Sources<'_>, store_as: StoreAs) -> Result<(Vec<u8>, Report), ConvertError> {
+pub fn convert_bytes(
+    config: (&Path, &str),
+    sources: &Sources<'_>,
+    store_as: StoreAs,
+) -> Result<(Vec<u8>, Report), ConvertError> {
     let cfg = parse_config(config.0, config.1)?;
     convert_with_config(&cfg, sources, store_as, Path::new("<memory>"))
 }
@@ -233,7 +273,10 @@ pub fn convert_with_config(
     label: &Path,
 ) -> Result<(Vec<u8>, Report), ConvertError> {
     let (tensors, mut report) = collect_tensors(cfg, sources, store_as)?;
-    let bytes = write_duo(cfg, &tensors).map_err(|source| ConvertError::Write { path: label.into(), source })?;
+    let bytes = write_duo(cfg, &tensors).map_err(|source| ConvertError::Write {
+        path: label.into(),
+        source,
+    })?;
     report.bytes = bytes.len();
     Ok((bytes, report))
 }
@@ -250,7 +293,11 @@ pub fn convert_files(
 ) -> Result<Report, ConvertError> {
     let cfg = load_config(config)?;
     let (m_gpt, m_vq, m_tr) = (map(gpt)?, map(vqvae)?, map(transl)?);
-    let sources = Sources { gpt: (gpt, &m_gpt), vqvae: (vqvae, &m_vq), transl: (transl, &m_tr) };
+    let sources = Sources {
+        gpt: (gpt, &m_gpt),
+        vqvae: (vqvae, &m_vq),
+        transl: (transl, &m_tr),
+    };
     let (bytes, report) = convert_with_config(&cfg, &sources, store_as, out)?;
     write_atomically(out, &bytes)?;
     Ok(report)
@@ -259,7 +306,10 @@ pub fn convert_files(
 /// Writes `bytes` to `out` via a temporary file renamed into place (a
 /// failed write leaves no half-written model).
 pub fn write_atomically(out: &Path, bytes: &[u8]) -> Result<(), ConvertError> {
-    let io = |source| ConvertError::Io { path: out.into(), source };
+    let io = |source| ConvertError::Io {
+        path: out.into(),
+        source,
+    };
     let mut tmp = out.as_os_str().to_owned();
     tmp.push(".partial");
     std::fs::write(&tmp, bytes).map_err(io)?;
@@ -268,7 +318,10 @@ pub fn write_atomically(out: &Path, bytes: &[u8]) -> Result<(), ConvertError> {
 
 /// Read-only map of a source file (an empty file maps to nothing).
 fn map(path: &Path) -> Result<Mapped, ConvertError> {
-    let io = |source| ConvertError::Io { path: path.into(), source };
+    let io = |source| ConvertError::Io {
+        path: path.into(),
+        source,
+    };
     let file = std::fs::File::open(path).map_err(io)?;
     if file.metadata().map_err(io)?.len() == 0 {
         return Ok(Mapped::Empty);

@@ -34,8 +34,20 @@ impl Component {
     }
 }
 
-const LATS: [&str; 5] = ["music_trans", "leader_up_trans", "leader_down_trans", "leader_lhand_trans", "leader_rhand_trans"];
-const GPT_BASE_UNUSED: [&str; 5] = ["cond_emb", "cond_up_emb", "cond_down_emb", "cond_lhand_emb", "cond_rhand_emb"];
+const LATS: [&str; 5] = [
+    "music_trans",
+    "leader_up_trans",
+    "leader_down_trans",
+    "leader_lhand_trans",
+    "leader_rhand_trans",
+];
+const GPT_BASE_UNUSED: [&str; 5] = [
+    "cond_emb",
+    "cond_up_emb",
+    "cond_down_emb",
+    "cond_lhand_emb",
+    "cond_rhand_emb",
+];
 
 /// What to do with a source tensor the schema does not ask for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -64,7 +76,9 @@ pub fn classify(component: Component, name: &str) -> Option<Skip> {
     match component {
         Component::Gpt => {
             if name.ends_with(".attn.mask") {
-                let lat = LATS.iter().position(|l| name.starts_with(&format!("{l}.blocks.")));
+                let lat = LATS
+                    .iter()
+                    .position(|l| name.starts_with(&format!("{l}.blocks.")));
                 return Some(Skip::Mask(match lat {
                     Some(0) => MaskKind::MusicBand,
                     Some(_) => MaskKind::LeaderBand,
@@ -74,24 +88,40 @@ pub fn classify(component: Component, name: &str) -> Option<Skip> {
             if LATS.iter().any(|l| name == format!("{l}.pos_emb")) {
                 return Some(Skip::Unused);
             }
-            if GPT_BASE_UNUSED.iter().any(|m| name == format!("gpt_base.{m}.weight") || name == format!("gpt_base.{m}.bias")) {
+            if GPT_BASE_UNUSED.iter().any(|m| {
+                name == format!("gpt_base.{m}.weight") || name == format!("gpt_base.{m}.bias")
+            }) {
                 return Some(Skip::Unused);
             }
             None
         }
-        Component::Motion => name.starts_with("vqvae_down.decoders_root.").then_some(Skip::Unused),
+        Component::Motion => name
+            .starts_with("vqvae_down.decoders_root.")
+            .then_some(Skip::Unused),
         Component::Transl => None,
     }
 }
 
 /// Checks a mask buffer's shape and every value against what the config implies.
-pub fn check_mask(src: &Source<'_>, name: &str, kind: MaskKind, cfg: &ModelConfig) -> Result<(), ConvertError> {
+pub fn check_mask(
+    src: &Source<'_>,
+    name: &str,
+    kind: MaskKind,
+    cfg: &ModelConfig,
+) -> Result<(), ConvertError> {
     let g = &cfg.gpt;
     let (len, band) = match kind {
         MaskKind::Causal => (g.block_size as u64, None),
         MaskKind::MusicBand | MaskKind::LeaderBand => {
-            let ds = if kind == MaskKind::MusicBand { g.music.downsample_rate } else { g.leader.downsample_rate };
-            ((g.block_size as u64 + g.look_forward as u64) * ds as u64, Some(g.look_forward as u64 * ds as u64))
+            let ds = if kind == MaskKind::MusicBand {
+                g.music.downsample_rate
+            } else {
+                g.leader.downsample_rate
+            };
+            (
+                (g.block_size as u64 + g.look_forward as u64) * ds as u64,
+                Some(g.look_forward as u64 * ds as u64),
+            )
         }
     };
     check_mask_values(src, name, len, band)
@@ -99,7 +129,12 @@ pub fn check_mask(src: &Source<'_>, name: &str, kind: MaskKind, cfg: &ModelConfi
 
 /// Checks a `(1, 1, len, len)` mask: ones where `|i - j| <= band`, or on
 /// and below the diagonal when `band` is None (causal).
-pub fn check_mask_values(src: &Source<'_>, name: &str, len: u64, band: Option<u64>) -> Result<(), ConvertError> {
+pub fn check_mask_values(
+    src: &Source<'_>,
+    name: &str,
+    len: u64,
+    band: Option<u64>,
+) -> Result<(), ConvertError> {
     let view = src.tensors.get(name).ok_or_else(|| ConvertError::Missing {
         path: src.path.clone(),
         tensor: name.to_string(),
@@ -108,7 +143,12 @@ pub fn check_mask_values(src: &Source<'_>, name: &str, len: u64, band: Option<u6
     })?;
     let expected = [1u32, 1, len as u32, len as u32];
     let found = view.shape();
-    if found.len() != 4 || found.iter().zip(expected).any(|(&f, e)| f as u64 != e as u64) {
+    if found.len() != 4
+        || found
+            .iter()
+            .zip(expected)
+            .any(|(&f, e)| f as u64 != e as u64)
+    {
         return Err(ConvertError::Shape {
             path: src.path.clone(),
             tensor: name.to_string(),

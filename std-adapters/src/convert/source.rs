@@ -24,11 +24,17 @@ impl<'a> Source<'a> {
     /// Parses `bytes` (the contents of `path`). Accepts names that all carry
     /// the `module.` prefix or that all lack it.
     pub fn parse(path: &Path, bytes: &'a [u8]) -> Result<Source<'a>, ConvertError> {
-        let st = SafeTensors::deserialize(bytes)
-            .map_err(|e| ConvertError::Safetensors { path: path.into(), detail: explain(bytes, &e) })?;
+        let st = SafeTensors::deserialize(bytes).map_err(|e| ConvertError::Safetensors {
+            path: path.into(),
+            detail: explain(bytes, &e),
+        })?;
         let all = st.tensors();
-        let with = all.iter().find(|(n, _)| n.starts_with(DATA_PARALLEL_PREFIX));
-        let without = all.iter().find(|(n, _)| !n.starts_with(DATA_PARALLEL_PREFIX));
+        let with = all
+            .iter()
+            .find(|(n, _)| n.starts_with(DATA_PARALLEL_PREFIX));
+        let without = all
+            .iter()
+            .find(|(n, _)| !n.starts_with(DATA_PARALLEL_PREFIX));
         if let (Some((w, _)), Some((wo, _))) = (with, without) {
             return Err(ConvertError::MixedPrefix {
                 path: path.into(),
@@ -38,21 +44,44 @@ impl<'a> Source<'a> {
         }
         let tensors = all
             .into_iter()
-            .map(|(n, v)| (n.strip_prefix(DATA_PARALLEL_PREFIX).map(str::to_string).unwrap_or(n), v))
+            .map(|(n, v)| {
+                (
+                    n.strip_prefix(DATA_PARALLEL_PREFIX)
+                        .map(str::to_string)
+                        .unwrap_or(n),
+                    v,
+                )
+            })
             .collect();
-        Ok(Source { path: path.into(), tensors })
+        Ok(Source {
+            path: path.into(),
+            tensors,
+        })
     }
 
     /// The tensor `name` as f32 values, after checking its shape is `expected`.
-    pub fn f32_values(&self, name: &str, duo_name: &str, expected: &[u32]) -> Result<Vec<f32>, ConvertError> {
-        let view = self.tensors.get(name).ok_or_else(|| ConvertError::Missing {
-            path: self.path.clone(),
-            tensor: name.to_string(),
-            duo_name: duo_name.to_string(),
-            expected: expected.to_vec(),
-        })?;
+    pub fn f32_values(
+        &self,
+        name: &str,
+        duo_name: &str,
+        expected: &[u32],
+    ) -> Result<Vec<f32>, ConvertError> {
+        let view = self
+            .tensors
+            .get(name)
+            .ok_or_else(|| ConvertError::Missing {
+                path: self.path.clone(),
+                tensor: name.to_string(),
+                duo_name: duo_name.to_string(),
+                expected: expected.to_vec(),
+            })?;
         let found = view.shape();
-        if found.len() != expected.len() || found.iter().zip(expected).any(|(&f, &e)| f as u64 != e as u64) {
+        if found.len() != expected.len()
+            || found
+                .iter()
+                .zip(expected)
+                .any(|(&f, &e)| f as u64 != e as u64)
+        {
             return Err(ConvertError::Shape {
                 path: self.path.clone(),
                 tensor: name.to_string(),
@@ -73,9 +102,18 @@ impl<'a> Source<'a> {
 pub fn upcast(view: &TensorView<'_>) -> Option<Vec<f32>> {
     let data = view.data();
     Some(match view.dtype() {
-        Dtype::F32 => data.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
-        Dtype::F16 => data.chunks_exact(2).map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32()).collect(),
-        Dtype::BF16 => data.chunks_exact(2).map(|c| half::bf16::from_le_bytes([c[0], c[1]]).to_f32()).collect(),
+        Dtype::F32 => data
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect(),
+        Dtype::F16 => data
+            .chunks_exact(2)
+            .map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32())
+            .collect(),
+        Dtype::BF16 => data
+            .chunks_exact(2)
+            .map(|c| half::bf16::from_le_bytes([c[0], c[1]]).to_f32())
+            .collect(),
         _ => return None,
     })
 }
@@ -85,7 +123,9 @@ fn explain(bytes: &[u8], e: &safetensors::SafeTensorError) -> String {
     use safetensors::SafeTensorError as E;
     let hint = "a safetensors file starts with an 8-byte little-endian header length and a JSON header; \
                 PyTorch checkpoints (.pt, .pth, .bin) must be turned into safetensors first: tools/pt_to_safetensors.py";
-    let header_len = bytes.get(..8).map(|b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])));
+    let header_len = bytes
+        .get(..8)
+        .map(|b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])));
     match (e, header_len) {
         (E::HeaderTooSmall, _) => format!("the file has {} bytes, fewer than the 8 of a header length; {hint}", bytes.len()),
         (E::HeaderTooLarge | E::InvalidHeaderLength, Some(n)) => format!(

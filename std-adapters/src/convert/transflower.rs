@@ -94,7 +94,10 @@ fn key_name(k: Key) -> &'static str {
 /// Maps the authors' `hparams.yaml` text onto the engine's config; `path`
 /// only labels errors. A value of the wrong kind names its key; an option
 /// the engine does not implement is refused by name.
-pub fn parse_transflower_config(path: &Path, text: &str) -> Result<TransflowerConfig, ConvertError> {
+pub fn parse_transflower_config(
+    path: &Path,
+    text: &str,
+) -> Result<TransflowerConfig, ConvertError> {
     let h = Hparams::parse(text).map_err(|HparamsError::Value { key }| ConvertError::ConfigKey {
         path: path.into(),
         key: key_name(key).to_string(),
@@ -108,7 +111,12 @@ pub fn parse_transflower_config(path: &Path, text: &str) -> Result<TransflowerCo
 
 /// Converts in memory: `cfg` (from [`parse_transflower_config`]) and the
 /// state dict as safetensors (labelled by its path).
-pub fn convert_transflower(cfg: &TransflowerConfig, weights: (&Path, &[u8]), store_as: StoreAs, label: &Path) -> Result<(Vec<u8>, TransflowerReport), ConvertError> {
+pub fn convert_transflower(
+    cfg: &TransflowerConfig,
+    weights: (&Path, &[u8]),
+    store_as: StoreAs,
+    label: &Path,
+) -> Result<(Vec<u8>, TransflowerReport), ConvertError> {
     let sources = [Source::parse(weights.0, weights.1)?];
     let mut used: [BTreeSet<String>; 1] = Default::default();
     let mut tensors = Vec::new();
@@ -117,7 +125,13 @@ pub fn convert_transflower(cfg: &TransflowerConfig, weights: (&Path, &[u8]), sto
         tensors.push(take_tensor(spec, &sources, &[""], &mut used, store_as)?);
         Ok(())
     })?;
-    let mut out = TransflowerReport { report: Report { written: tensors.len(), ..Report::default() }, ..TransflowerReport::default() };
+    let mut out = TransflowerReport {
+        report: Report {
+            written: tensors.len(),
+            ..Report::default()
+        },
+        ..TransflowerReport::default()
+    };
     let src = &sources[0];
     let mut extra = Vec::new();
     for name in src.tensors.keys().filter(|n| !used[0].contains(*n)) {
@@ -132,9 +146,15 @@ pub fn convert_transflower(cfg: &TransflowerConfig, weights: (&Path, &[u8]), sto
         out.report.skipped += 1;
     }
     if !extra.is_empty() {
-        return Err(ConvertError::Extra { path: src.path.clone(), tensors: extra });
+        return Err(ConvertError::Extra {
+            path: src.path.clone(),
+            tensors: extra,
+        });
     }
-    let bytes = write_model(&family, &tensors).map_err(|source| ConvertError::Write { path: label.into(), source })?;
+    let bytes = write_model(&family, &tensors).map_err(|source| ConvertError::Write {
+        path: label.into(),
+        source,
+    })?;
     out.report.bytes = bytes.len();
     Ok((bytes, out))
 }

@@ -70,7 +70,9 @@ impl<'de> Visitor<'de> for YamlVisitor {
         Ok(Yaml::Int(v))
     }
     fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Yaml, E> {
-        i64::try_from(v).map(Yaml::Int).map_err(|_| E::custom("integer out of range"))
+        i64::try_from(v)
+            .map(Yaml::Int)
+            .map_err(|_| E::custom("integer out of range"))
     }
     fn visit_f64<E>(self, v: f64) -> Result<Yaml, E> {
         Ok(Yaml::Float(v))
@@ -95,7 +97,12 @@ impl<'de> Visitor<'de> for YamlVisitor {
                 Yaml::Str(s) => s,
                 Yaml::Int(i) => i.to_string(),
                 Yaml::Bool(b) => b.to_string(),
-                other => return Err(serde::de::Error::custom(format!("unsupported mapping key: {}", other.kind()))),
+                other => {
+                    return Err(serde::de::Error::custom(format!(
+                        "unsupported mapping key: {}",
+                        other.kind()
+                    )))
+                }
             };
             match entries.iter_mut().find(|(k, _)| *k == key) {
                 Some(slot) => slot.1 = v,

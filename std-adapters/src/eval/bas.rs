@@ -36,12 +36,19 @@ fn reflect(i: isize, n: usize) -> usize {
 /// `scipy.ndimage.gaussian_filter1d(x, sigma)` with the defaults, in f64.
 pub fn gaussian_filter(x: &[f64], sigma: f64) -> Vec<f64> {
     let radius = (TRUNCATE * sigma + 0.5) as isize;
-    let mut w: Vec<f64> = (-radius..=radius).map(|k| (-0.5 / (sigma * sigma) * (k * k) as f64).exp()).collect();
+    let mut w: Vec<f64> = (-radius..=radius)
+        .map(|k| (-0.5 / (sigma * sigma) * (k * k) as f64).exp())
+        .collect();
     let s: f64 = w.iter().sum();
     w.iter_mut().for_each(|v| *v /= s);
     let n = x.len();
     (0..n as isize)
-        .map(|i| (-radius..=radius).zip(&w).map(|(k, wk)| wk * x[reflect(i + k, n)]).sum())
+        .map(|i| {
+            (-radius..=radius)
+                .zip(&w)
+                .map(|(k, wk)| wk * x[reflect(i + k, n)])
+                .sum()
+        })
         .collect()
 }
 
@@ -50,10 +57,16 @@ pub fn kinetic_velocity(pos: &[f32]) -> Result<Vec<f64>, EvalError> {
     let t_len = frames(pos)?;
     Ok((1..t_len)
         .map(|t| {
-            let (a, b) = (&pos[(t - 1) * POSE_DIM..t * POSE_DIM], &pos[t * POSE_DIM..(t + 1) * POSE_DIM]);
+            let (a, b) = (
+                &pos[(t - 1) * POSE_DIM..t * POSE_DIM],
+                &pos[t * POSE_DIM..(t + 1) * POSE_DIM],
+            );
             let sum: f64 = (0..JOINTS)
                 .map(|j| {
-                    let d: f64 = (0..3).map(|c| (b[j * 3 + c] - a[j * 3 + c]) as f64).map(|v| v * v).sum();
+                    let d: f64 = (0..3)
+                        .map(|c| (b[j * 3 + c] - a[j * 3 + c]) as f64)
+                        .map(|v| v * v)
+                        .sum();
                     d.sqrt()
                 })
                 .sum();
@@ -67,8 +80,13 @@ pub fn kinetic_velocity(pos: &[f32]) -> Result<Vec<f64>, EvalError> {
 pub fn motion_beats(pos: &[f32]) -> Result<Vec<usize>, EvalError> {
     let vel = kinetic_velocity(pos)?;
     // The authors' float32 files give a float32 filter output: compare in f32.
-    let s: Vec<f32> = gaussian_filter(&vel, SIGMA).into_iter().map(|v| v as f32).collect();
-    Ok((1..s.len().saturating_sub(1)).filter(|&i| s[i] < s[i - 1] && s[i] < s[i + 1]).collect())
+    let s: Vec<f32> = gaussian_filter(&vel, SIGMA)
+        .into_iter()
+        .map(|v| v as f32)
+        .collect();
+    Ok((1..s.len().saturating_sub(1))
+        .filter(|&i| s[i] < s[i - 1] && s[i] < s[i + 1])
+        .collect())
 }
 
 /// Beat frames of (T, 54) music features among the first `length` frames.
@@ -77,7 +95,9 @@ pub fn music_beats(music: &[f32], cols: usize, length: usize) -> Result<Vec<usiz
         return Err(EvalError::MusicColumns { cols });
     }
     let rows = music.len() / cols;
-    Ok((0..rows.min(length)).filter(|&t| music[t * cols + BEAT_COLUMN] != 0.0).collect())
+    Ok((0..rows.min(length))
+        .filter(|&t| music[t * cols + BEAT_COLUMN] != 0.0)
+        .collect())
 }
 
 /// The score of `reference` beats against `motion` beats (the authors' `BA`).
@@ -91,7 +111,11 @@ pub fn align(reference: &[usize], motion: &[usize], what: &'static str) -> Resul
     let total: f64 = reference
         .iter()
         .map(|&b| {
-            let d2 = motion.iter().map(|&m| (m as i64 - b as i64).pow(2)).min().unwrap_or(0);
+            let d2 = motion
+                .iter()
+                .map(|&m| (m as i64 - b as i64).pow(2))
+                .min()
+                .unwrap_or(0);
             (-(d2 as f64) / 2.0 / SCORE_VAR).exp()
         })
         .sum();
@@ -106,7 +130,11 @@ pub fn clip_score(pos: &[f32], music: &[f32], music_cols: usize) -> Result<f64, 
     }
     let n = t_len.min(music.len() / music_cols);
     if n < 2 {
-        return Err(EvalError::TooShort { what: "beat align score (motion and music)", frames: n, need: 2 });
+        return Err(EvalError::TooShort {
+            what: "beat align score (motion and music)",
+            frames: n,
+            need: 2,
+        });
     }
     let beats = motion_beats(&pos[..n * POSE_DIM])?;
     let mb = music_beats(music, music_cols, n - 1)?;
@@ -138,12 +166,21 @@ mod tests {
         assert_eq!(align(&[10, 20], &[10, 20], "t").unwrap(), 1.0);
         let s = align(&[10], &[13], "t").unwrap();
         assert!((s - (-0.5f64).exp()).abs() < 1e-15);
-        assert_eq!(align(&[], &[1], "t"), Err(EvalError::NoReferenceBeats { what: "t" }));
-        assert_eq!(align(&[1], &[], "t"), Err(EvalError::NoMotionBeats { what: "t" }));
+        assert_eq!(
+            align(&[], &[1], "t"),
+            Err(EvalError::NoReferenceBeats { what: "t" })
+        );
+        assert_eq!(
+            align(&[1], &[], "t"),
+            Err(EvalError::NoMotionBeats { what: "t" })
+        );
     }
 
     #[test]
     fn music_must_be_54_wide() {
-        assert_eq!(music_beats(&[0.0; 10], 5, 2), Err(EvalError::MusicColumns { cols: 5 }));
+        assert_eq!(
+            music_beats(&[0.0; 10], 5, 2),
+            Err(EvalError::MusicColumns { cols: 5 })
+        );
     }
 }

@@ -20,6 +20,11 @@ mod tests {
     #[test]
     fn still_leader_has_no_beats() {
         let still = vec![0.5f32; 40 * 165];
-        assert_eq!(duet_score(&still, &still), Err(EvalError::NoReferenceBeats { what: "beat echo degree" }));
+        assert_eq!(
+            duet_score(&still, &still),
+            Err(EvalError::NoReferenceBeats {
+                what: "beat echo degree"
+            })
+        );
     }
 }

@@ -15,14 +15,21 @@ pub const DIM: usize = 100;
 pub fn features(follower: &[f32], leader: &[f32]) -> Result<Vec<f32>, EvalError> {
     let t_len = frames(follower)?.min(frames(leader)?);
     if t_len == 0 {
-        return Err(EvalError::TooShort { what: "cross-distance features", frames: 0, need: 1 });
+        return Err(EvalError::TooShort {
+            what: "cross-distance features",
+            frames: 0,
+            need: 1,
+        });
     }
     let mut acc = vec![0.0f64; DIM];
     for t in 0..t_len {
         let (f, l) = (&follower[t * POSE_DIM..], &leader[t * POSE_DIM..]);
         for (a, &ja) in POINTS.iter().enumerate() {
             for (b, &jb) in POINTS.iter().enumerate() {
-                let d2: f64 = (0..3).map(|c| (f[ja * 3 + c] - l[jb * 3 + c]) as f64).map(|v| v * v).sum();
+                let d2: f64 = (0..3)
+                    .map(|c| (f[ja * 3 + c] - l[jb * 3 + c]) as f64)
+                    .map(|v| v * v)
+                    .sum();
                 acc[a * 10 + b] += d2.sqrt();
             }
         }
@@ -45,6 +52,13 @@ mod tests {
         }
         let c = features(&f, &l).unwrap();
         assert!(c.iter().all(|&v| v == 1.5));
-        assert_eq!(features(&[], &l), Err(EvalError::TooShort { what: "cross-distance features", frames: 0, need: 1 }));
+        assert_eq!(
+            features(&[], &l),
+            Err(EvalError::TooShort {
+                what: "cross-distance features",
+                frames: 0,
+                need: 1
+            })
+        );
     }
 }

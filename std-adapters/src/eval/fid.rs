@@ -32,7 +32,12 @@ impl Features {
         Features { rows }
     }
     pub fn from_f32(rows: &[Vec<f32>]) -> Self {
-        Features { rows: rows.iter().map(|r| r.iter().map(|&v| v as f64).collect()).collect() }
+        Features {
+            rows: rows
+                .iter()
+                .map(|r| r.iter().map(|&v| v as f64).collect())
+                .collect(),
+        }
     }
     fn width(&self) -> usize {
         self.rows.first().map_or(0, |r| r.len())
@@ -49,14 +54,24 @@ pub struct Scores {
 
 fn check(set: &Features, name: &'static str, width: usize) -> Result<(), EvalError> {
     if set.rows.len() < 2 {
-        return Err(EvalError::TooFewClips { what: "FID and Div", set: name, found: set.rows.len(), need: 2 });
+        return Err(EvalError::TooFewClips {
+            what: "FID and Div",
+            set: name,
+            found: set.rows.len(),
+            need: 2,
+        });
     }
     for r in &set.rows {
         if r.len() != width {
-            return Err(EvalError::Width { a: width, b: r.len() });
+            return Err(EvalError::Width {
+                a: width,
+                b: r.len(),
+            });
         }
         if r.iter().any(|v| !v.is_finite()) {
-            return Err(EvalError::NonFinite { what: "feature vectors" });
+            return Err(EvalError::NonFinite {
+                what: "feature vectors",
+            });
         }
     }
     Ok(())
@@ -89,7 +104,13 @@ pub fn normalize(real: &Features, gen: &Features) -> (Features, Features) {
         rows: set
             .rows
             .iter()
-            .map(|r| r.iter().zip(&mean).zip(&std).map(|((v, m), s)| (v - m) / (s + STD_EPS)).collect())
+            .map(|r| {
+                r.iter()
+                    .zip(&mean)
+                    .zip(&std)
+                    .map(|((v, m), s)| (v - m) / (s + STD_EPS))
+                    .collect()
+            })
             .collect(),
     };
     (f(real), f(gen))
@@ -129,7 +150,11 @@ pub fn jacobi_eigen(a: &[f64], d: usize) -> (Vec<f64>, Vec<f64>) {
     }
     let total: f64 = a.iter().map(|x| x * x).sum::<f64>().sqrt();
     for _sweep in 0..100 {
-        let off: f64 = (0..d).flat_map(|i| (0..d).filter(move |&j| j != i).map(move |j| (i, j))).map(|(i, j)| a[i * d + j] * a[i * d + j]).sum::<f64>().sqrt();
+        let off: f64 = (0..d)
+            .flat_map(|i| (0..d).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| a[i * d + j] * a[i * d + j])
+            .sum::<f64>()
+            .sqrt();
         if off <= 1e-15 * total || off == 0.0 {
             break;
         }
@@ -225,7 +250,12 @@ pub fn diversity(set: &Features) -> f64 {
     let mut total = 0.0;
     for i in 0..n {
         for j in i + 1..n {
-            total += set.rows[i].iter().zip(&set.rows[j]).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+            total += set.rows[i]
+                .iter()
+                .zip(&set.rows[j])
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>()
+                .sqrt();
         }
     }
     total / ((n * n - n) as f64 / 2.0)
@@ -237,7 +267,11 @@ pub fn scores(real: &Features, gen: &Features) -> Result<Scores, EvalError> {
     check(real, "real", d)?;
     check(gen, "generated", d)?;
     let (r, g) = normalize(real, gen);
-    Ok(Scores { fid: frechet(&g, &r), div_gen: diversity(&g), div_real: diversity(&r) })
+    Ok(Scores {
+        fid: frechet(&g, &r),
+        div_gen: diversity(&g),
+        div_real: diversity(&r),
+    })
 }
 
 #[cfg(test)]
@@ -259,7 +293,9 @@ mod tests {
 
     #[test]
     fn identical_sets_have_zero_fid() {
-        let rows: Vec<Vec<f64>> = (0..9).map(|i| vec![i as f64, (i * i) as f64 * 0.1, (i % 3) as f64]).collect();
+        let rows: Vec<Vec<f64>> = (0..9)
+            .map(|i| vec![i as f64, (i * i) as f64 * 0.1, (i % 3) as f64])
+            .collect();
         let f = Features::new(rows);
         let s = scores(&f, &f).unwrap();
         assert!(s.fid.abs() < 1e-9, "{}", s.fid);
@@ -270,7 +306,13 @@ mod tests {
     fn too_few_clips_and_width_mismatch_are_named() {
         let one = Features::new(vec![vec![1.0, 2.0]]);
         let two = Features::new(vec![vec![1.0, 2.0], vec![3.0, 4.0]]);
-        assert!(matches!(scores(&two, &one), Err(EvalError::TooFewClips { set: "generated", .. })));
+        assert!(matches!(
+            scores(&two, &one),
+            Err(EvalError::TooFewClips {
+                set: "generated",
+                ..
+            })
+        ));
         let wide = Features::new(vec![vec![1.0, 2.0, 3.0], vec![3.0, 4.0, 5.0]]);
         assert_eq!(scores(&two, &wide), Err(EvalError::Width { a: 2, b: 3 }));
     }

@@ -35,7 +35,10 @@ pub fn clip_counts(pos: &[f32]) -> Result<(usize, usize), EvalError> {
         let pv = (((p1[0] - p0[0]) as f64).powi(2) + ((p1[1] - p0[1]) as f64).powi(2)).sqrt();
         let leg = |a: usize| {
             let (a0, a1) = (joint(i, a), joint(i + 1, a));
-            let d: f64 = (0..3).map(|c| ((a1[c] - p1[c]) - (a0[c] - p0[c])) as f64).map(|v| v * v).sum();
+            let d: f64 = (0..3)
+                .map(|c| ((a1[c] - p1[c]) - (a0[c] - p0[c])) as f64)
+                .map(|v| v * v)
+                .sum();
             d.sqrt()
         };
         if pv > PELVIS_THRESHOLD && leg(LANKLE) < LEG_THRESHOLD && leg(RANKLE) < LEG_THRESHOLD {

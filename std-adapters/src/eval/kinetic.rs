@@ -35,7 +35,11 @@ pub fn features(pos: &[f32]) -> Result<Vec<f32>, EvalError> {
 pub fn features_smpl24(p: &[[V3; 24]]) -> Result<Vec<f32>, EvalError> {
     let t_len = p.len();
     if t_len < MIN_FRAMES {
-        return Err(EvalError::TooShort { what: "kinetic features", frames: t_len, need: MIN_FRAMES });
+        return Err(EvalError::TooShort {
+            what: "kinetic features",
+            frames: t_len,
+            need: MIN_FRAMES,
+        });
     }
     let n = t_len as isize;
     let mut out = Vec::with_capacity(DIM);
@@ -68,7 +72,8 @@ pub fn features_smpl24(p: &[[V3; 24]]) -> Result<Vec<f32>, EvalError> {
                 if k - 1 < 0 || k + 1 >= n {
                     continue;
                 }
-                let (prev, cur, next) = (p[k as usize - 1][j], p[k as usize][j], p[k as usize + 1][j]);
+                let (prev, cur, next) =
+                    (p[k as usize - 1][j], p[k as usize][j], p[k as usize + 1][j]);
                 for c in 0..3 {
                     let v2 = (next[c] - cur[c]) / FRAME_TIME;
                     let v1 = cur[c] - prev[c] / FRAME_TIME;
@@ -116,8 +121,15 @@ mod tests {
     fn short_and_ragged_clips_are_named_errors() {
         assert_eq!(
             features(&still(2)).unwrap_err(),
-            EvalError::TooShort { what: "kinetic features", frames: 2, need: 3 }
+            EvalError::TooShort {
+                what: "kinetic features",
+                frames: 2,
+                need: 3
+            }
         );
-        assert_eq!(features(&[0.0; 7]).unwrap_err(), EvalError::Ragged { values: 7 });
+        assert_eq!(
+            features(&[0.0; 7]).unwrap_err(),
+            EvalError::Ragged { values: 7 }
+        );
     }
 }

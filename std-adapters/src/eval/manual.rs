@@ -86,8 +86,8 @@ enum Test {
     Fast(P, f64, U),
 }
 
-use P::J;
 use Test::*;
+use P::J;
 use U::*;
 
 /// The 32 tests, in the extractor's order.
@@ -100,7 +100,14 @@ const TESTS: [Test; DIM] = [
     Along(J(BELLY), J(CHEST), J(CHEST), J(LWRIST), 1.8, Humerus),
     Angle(J(RELBOW), J(RSHOULDER), J(RELBOW), J(RWRIST), 0.0, 110.0),
     Angle(J(LELBOW), J(LSHOULDER), J(LELBOW), J(LWRIST), 0.0, 110.0),
-    NormalPlane(J(LSHOULDER), J(RSHOULDER), J(LWRIST), J(RWRIST), 2.5, Shoulders),
+    NormalPlane(
+        J(LSHOULDER),
+        J(RSHOULDER),
+        J(LWRIST),
+        J(RWRIST),
+        2.5,
+        Shoulders,
+    ),
     Along(J(LWRIST), J(RWRIST), J(RWRIST), J(LWRIST), 1.4, Humerus),
     Along(J(RWRIST), J(ROOT), J(LWRIST), J(ROOT), 1.4, Humerus),
     Along(J(LWRIST), J(ROOT), J(RWRIST), J(ROOT), 1.4, Humerus),
@@ -155,7 +162,11 @@ fn at(frame: &[V3; 24], p: P) -> V3 {
         P::Zero => [0.0, 0.0, 0.0],
         P::YUp => [0.0, 1.0, 0.0],
         P::YDown => [0.0, -1.0, 0.0],
-        P::Floor => [0.0, frame.iter().map(|q| q[1]).fold(f64::INFINITY, f64::min), 0.0],
+        P::Floor => [
+            0.0,
+            frame.iter().map(|q| q[1]).fold(f64::INFINITY, f64::min),
+            0.0,
+        ],
     }
 }
 
@@ -203,7 +214,11 @@ pub fn features(pos: &[f32]) -> Result<Vec<f32>, EvalError> {
 /// Geometric features of 24-joint positions (already rooted as the authors do).
 pub fn features_smpl24(p: &[[V3; 24]]) -> Result<Vec<f32>, EvalError> {
     if p.len() < MIN_FRAMES {
-        return Err(EvalError::TooShort { what: "geometric features", frames: p.len(), need: MIN_FRAMES });
+        return Err(EvalError::TooShort {
+            what: "geometric features",
+            frames: p.len(),
+            need: MIN_FRAMES,
+        });
     }
     let units = Units::rest();
     let mut counts = [0u32; DIM];
@@ -234,7 +249,14 @@ mod tests {
     #[test]
     fn one_frame_is_a_named_error() {
         let err = features(&[0.0; 165]).unwrap_err();
-        assert_eq!(err, EvalError::TooShort { what: "geometric features", frames: 1, need: 2 });
+        assert_eq!(
+            err,
+            EvalError::TooShort {
+                what: "geometric features",
+                frames: 1,
+                need: 2
+            }
+        );
     }
 
     #[test]

@@ -32,9 +32,18 @@ pub enum EvalError {
     #[error("motion has {values} values, not a whole number of {POSE_DIM}-float rows (55 SMPL-X joints x 3)")]
     Ragged { values: usize },
     #[error("{what} needs at least {need} frames, the clip has {frames}")]
-    TooShort { what: &'static str, frames: usize, need: usize },
+    TooShort {
+        what: &'static str,
+        frames: usize,
+        need: usize,
+    },
     #[error("{what} needs at least {need} clips in the {set} set, found {found}")]
-    TooFewClips { what: &'static str, set: &'static str, found: usize, need: usize },
+    TooFewClips {
+        what: &'static str,
+        set: &'static str,
+        found: usize,
+        need: usize,
+    },
     #[error("feature sets differ in width: {a} vs {b}")]
     Width { a: usize, b: usize },
     #[error("{what}: no beats in the reference beat list (the authors' code divides by zero)")]
@@ -68,7 +77,11 @@ pub(crate) fn norm(a: V3) -> f64 {
     dot(a, a).sqrt()
 }
 pub(crate) fn cross(a: V3, b: V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// The 24-joint SMPL skeleton the solo features read, made from SMPL-X as

@@ -61,9 +61,19 @@ fn load(path: &Path) -> Result<Vec<f32>> {
     if path.extension().and_then(|e| e.to_str()) == Some("bvh") {
         return Ok(load_leader(path)?.pos3d);
     }
-    let a = read_f32_2d(path, Some(super::POSE_DIM), "SMPL-X joint positions (T, 165), metres, y up, 30 fps")?;
+    let a = read_f32_2d(
+        path,
+        Some(super::POSE_DIM),
+        "SMPL-X joint positions (T, 165), metres, y up, 30 fps",
+    )?;
     if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
-        bail!("{}: value [{}, {}] is not finite ({})", path.display(), i / a.cols, i % a.cols, a.data[i]);
+        bail!(
+            "{}: value [{}, {}] is not finite ({})",
+            path.display(),
+            i / a.cols,
+            i % a.cols,
+            a.data[i]
+        );
     }
     Ok(a.data)
 }
@@ -88,11 +98,21 @@ pub fn compute(dir: &Path, music: Option<&Path>, scores: bool) -> Result<(SetFea
         .filter(|p| p.is_file() && is_motion(p))
         .collect();
     entries.sort();
-    let mut set = SetFeatures { format: STATS_FORMAT.into(), ..Default::default() };
+    let mut set = SetFeatures {
+        format: STATS_FORMAT.into(),
+        ..Default::default()
+    };
     let mut extra = SetExtras::default();
     for path in &entries {
-        let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
-        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or_default();
+        let stem = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or_default()
+            .to_string();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or_default();
         let pos = load(path)?;
         let shown = path.display().to_string();
         if scores && ext == "npy" {
@@ -102,28 +122,41 @@ pub fn compute(dir: &Path, music: Option<&Path>, scores: bool) -> Result<(SetFea
                 extra.fs_00.push(counts);
             }
         }
-        let Some(name) = stem.strip_suffix("_00") else { continue };
+        let Some(name) = stem.strip_suffix("_00") else {
+            continue;
+        };
         set.clips.push(name.to_string());
-        set.kinetic.push(kinetic::features(&pos).with_context(|| format!("{shown}: kinetic features"))?);
-        set.geometric.push(manual::features(&pos).with_context(|| format!("{shown}: geometric features"))?);
+        set.kinetic
+            .push(kinetic::features(&pos).with_context(|| format!("{shown}: kinetic features"))?);
+        set.geometric
+            .push(manual::features(&pos).with_context(|| format!("{shown}: geometric features"))?);
         let leader_path = path.with_file_name(format!("{name}_01.{ext}"));
         if leader_path.is_file() {
             let leader = load(&leader_path)?;
             set.duets.push(name.to_string());
-            set.cd.push(cd::features(&pos, &leader).with_context(|| format!("{shown}: cross-distance features"))?);
+            set.cd.push(
+                cd::features(&pos, &leader)
+                    .with_context(|| format!("{shown}: cross-distance features"))?,
+            );
             if scores {
                 match bed::duet_score(&pos, &leader) {
                     Ok(v) => extra.bed.push(v),
                     Err(e) => {
-                        extra.bed_error.get_or_insert(format!("{shown} with {}: {e}", leader_path.display()));
+                        extra
+                            .bed_error
+                            .get_or_insert(format!("{shown} with {}: {e}", leader_path.display()));
                     }
                 }
             }
         }
         if let (true, Some(mdir)) = (scores, music) {
             let mpath = music_path(mdir, name)?;
-            let m = read_f32_2d(&mpath, Some(bas::MUSIC_DIM), "music features (T, 54), beat in column 53")
-                .with_context(|| format!("music of {shown}"))?;
+            let m = read_f32_2d(
+                &mpath,
+                Some(bas::MUSIC_DIM),
+                "music features (T, 54), beat in column 53",
+            )
+            .with_context(|| format!("music of {shown}"))?;
             match bas::clip_score(&pos, &m.data, m.cols) {
                 Ok(v) => extra.bas.push(v),
                 Err(e) => {
@@ -133,7 +166,10 @@ pub fn compute(dir: &Path, music: Option<&Path>, scores: bool) -> Result<(SetFea
         }
     }
     if set.clips.is_empty() {
-        bail!("{}: no <name>_00.npy or <name>_00.bvh motion files", dir.display());
+        bail!(
+            "{}: no <name>_00.npy or <name>_00.bvh motion files",
+            dir.display()
+        );
     }
     Ok((set, extra))
 }
@@ -147,10 +183,18 @@ pub fn save(set: &SetFeatures, path: &Path) -> Result<()> {
 /// Reads a real-set statistics file written by [`save`].
 pub fn load_stats(path: &Path) -> Result<SetFeatures> {
     let text = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let set: SetFeatures = serde_json::from_slice(&text)
-        .with_context(|| format!("{}: not a real-set statistics file (JSON written by `duolando eval --save-real`)", path.display()))?;
+    let set: SetFeatures = serde_json::from_slice(&text).with_context(|| {
+        format!(
+            "{}: not a real-set statistics file (JSON written by `duolando eval --save-real`)",
+            path.display()
+        )
+    })?;
     if set.format != STATS_FORMAT {
-        bail!("{}: format '{}', expected '{STATS_FORMAT}'", path.display(), set.format);
+        bail!(
+            "{}: format '{}', expected '{STATS_FORMAT}'",
+            path.display(),
+            set.format
+        );
     }
     let bad = |rows: &[Vec<f32>], d: usize| rows.iter().any(|r| r.len() != d);
     if set.kinetic.len() != set.clips.len()
@@ -202,10 +246,16 @@ mod tests {
         assert_eq!(load_stats(&path).unwrap().kinetic, set.kinetic);
         set.geometric[0].pop();
         save(&set, &path).unwrap();
-        assert!(load_stats(&path).unwrap_err().to_string().contains("inconsistent statistics"));
+        assert!(load_stats(&path)
+            .unwrap_err()
+            .to_string()
+            .contains("inconsistent statistics"));
         set.format = "other".into();
         save(&set, &path).unwrap();
-        assert!(load_stats(&path).unwrap_err().to_string().contains("expected 'duolando-eval-features/1'"));
+        assert!(load_stats(&path)
+            .unwrap_err()
+            .to_string()
+            .contains("expected 'duolando-eval-features/1'"));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -75,7 +75,9 @@ impl Recipe {
                 sway * 0.5 * (TWO_PI * fr * time + 2.0).sin(),
             ];
             for (ch, &(f1, p1, a1)) in chans.iter().enumerate() {
-                let v = self.base_pose_mm[ch] as f64 / 1000.0 + root[ch % 3] + a1 * (TWO_PI * f1 * time + p1).sin();
+                let v = self.base_pose_mm[ch] as f64 / 1000.0
+                    + root[ch % 3]
+                    + a1 * (TWO_PI * f1 * time + p1).sin();
                 out[t * 165 + ch] = v as f32;
             }
         }
@@ -112,9 +114,21 @@ impl Recipe {
                 let f = self.motion(set, k, 0);
                 let l = self.motion(set, k, 1);
                 let m = self.music(set, k, f.len() / 165);
-                crate::npy::write_f32(&dir.join(sub).join(format!("{nm}_00.npy")), &f, &[f.len() / 165, 165])?;
-                crate::npy::write_f32(&dir.join(sub).join(format!("{nm}_01.npy")), &l, &[l.len() / 165, 165])?;
-                crate::npy::write_f32(&dir.join("music").join(format!("{nm}.npy")), &m, &[m.len() / 54, 54])?;
+                crate::npy::write_f32(
+                    &dir.join(sub).join(format!("{nm}_00.npy")),
+                    &f,
+                    &[f.len() / 165, 165],
+                )?;
+                crate::npy::write_f32(
+                    &dir.join(sub).join(format!("{nm}_01.npy")),
+                    &l,
+                    &[l.len() / 165, 165],
+                )?;
+                crate::npy::write_f32(
+                    &dir.join("music").join(format!("{nm}.npy")),
+                    &m,
+                    &[m.len() / 54, 54],
+                )?;
                 sums.push((format!("{sub}/{nm}_00.npy"), checksum(&f)));
                 sums.push((format!("{sub}/{nm}_01.npy"), checksum(&l)));
                 sums.push((format!("music/{nm}.npy"), checksum(&m)));

@@ -14,7 +14,9 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 
 use super::Motion;
-use crate::skeleton::math::{add, mat_mul, mat_vec, rot_x, rot_y, rot_z, scale, unflatten, Mat3, Vec3, IDENTITY};
+use crate::skeleton::math::{
+    add, mat_mul, mat_vec, rot_x, rot_y, rot_z, scale, unflatten, Mat3, Vec3, IDENTITY,
+};
 use crate::skeleton::rotation::euler_zxy_from_mat;
 use crate::skeleton::{children, JOINTS, JOINT_NAMES, ROT_DIM};
 
@@ -50,12 +52,24 @@ pub fn depth_first_order() -> Vec<usize> {
 
 fn hierarchy(m: &Motion, k: f32, j: usize, depth: usize, s: &mut String) {
     let pad = "  ".repeat(depth);
-    let o = if j == 0 { [0.0; 3] } else { scale(m.skeleton.offsets[j], k) };
-    let _ = writeln!(s, "{pad}{} {}", if j == 0 { "ROOT" } else { "JOINT" }, JOINT_NAMES[j]);
+    let o = if j == 0 {
+        [0.0; 3]
+    } else {
+        scale(m.skeleton.offsets[j], k)
+    };
+    let _ = writeln!(
+        s,
+        "{pad}{} {}",
+        if j == 0 { "ROOT" } else { "JOINT" },
+        JOINT_NAMES[j]
+    );
     let _ = writeln!(s, "{pad}{{");
     let _ = writeln!(s, "{pad}  OFFSET {:.6} {:.6} {:.6}", o[0], o[1], o[2]);
     if j == 0 {
-        let _ = writeln!(s, "{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation");
+        let _ = writeln!(
+            s,
+            "{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"
+        );
     } else {
         let _ = writeln!(s, "{pad}  CHANNELS 3 Zrotation Xrotation Yrotation");
     }
@@ -66,7 +80,11 @@ fn hierarchy(m: &Motion, k: f32, j: usize, depth: usize, s: &mut String) {
     }
     if !any {
         let e = scale(o, 0.5);
-        let _ = writeln!(s, "{pad}  End Site\n{pad}  {{\n{pad}    OFFSET {:.6} {:.6} {:.6}\n{pad}  }}", e[0], e[1], e[2]);
+        let _ = writeln!(
+            s,
+            "{pad}  End Site\n{pad}  {{\n{pad}    OFFSET {:.6} {:.6} {:.6}\n{pad}  }}",
+            e[0], e[1], e[2]
+        );
     }
     let _ = writeln!(s, "{pad}}}");
 }
@@ -76,7 +94,12 @@ pub fn to_string(m: &Motion, fps: f32, units: Units) -> String {
     let k = units.per_metre();
     let mut s = String::from("HIERARCHY\n");
     hierarchy(m, k, 0, 0, &mut s);
-    let _ = write!(s, "MOTION\nFrames: {}\nFrame Time: {:.7}\n", m.frames, 1.0 / fps);
+    let _ = write!(
+        s,
+        "MOTION\nFrames: {}\nFrame Time: {:.7}\n",
+        m.frames,
+        1.0 / fps
+    );
     let order = depth_first_order();
     let mut prev = vec![[0.0f32; 3]; JOINTS];
     for t in 0..m.frames {
@@ -101,7 +124,8 @@ pub fn to_string(m: &Motion, fps: f32, units: Units) -> String {
 
 /// Writes a motion as BVH.
 pub fn write(path: &Path, m: &Motion, fps: f32, units: Units) -> Result<()> {
-    std::fs::write(path, to_string(m, fps, units)).with_context(|| format!("cannot write {}", path.display()))
+    std::fs::write(path, to_string(m, fps, units))
+        .with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// One channel of a BVH joint.
@@ -137,7 +161,9 @@ pub struct BvhClip {
 pub fn parse(text: &str, what: &str) -> Result<BvhClip> {
     let mut tok = text.split_whitespace().peekable();
     let mut next = |expect: &str| -> Result<String> {
-        tok.next().map(str::to_string).with_context(|| format!("{what}: unexpected end of file, expected {expect}"))
+        tok.next()
+            .map(str::to_string)
+            .with_context(|| format!("{what}: unexpected end of file, expected {expect}"))
     };
     if next("HIERARCHY")? != "HIERARCHY" {
         bail!("{what}: expected HIERARCHY at the start");
@@ -154,7 +180,9 @@ pub fn parse(text: &str, what: &str) -> Result<BvhClip> {
                 pending = Some((String::new(), true));
             }
             "{" => {
-                let (name, end) = pending.take().with_context(|| format!("{what}: '{{' without a joint"))?;
+                let (name, end) = pending
+                    .take()
+                    .with_context(|| format!("{what}: '{{' without a joint"))?;
                 if end {
                     stack.push(None);
                 } else {
@@ -162,28 +190,43 @@ pub fn parse(text: &str, what: &str) -> Result<BvhClip> {
                     if parent.is_none() && !joints.is_empty() {
                         bail!("{what}: more than one ROOT");
                     }
-                    joints.push(BvhJoint { name, parent, offset: [0.0; 3], channels: Vec::new() });
+                    joints.push(BvhJoint {
+                        name,
+                        parent,
+                        offset: [0.0; 3],
+                        channels: Vec::new(),
+                    });
                     stack.push(Some(joints.len() - 1));
                 }
             }
             "}" => {
-                stack.pop().with_context(|| format!("{what}: unbalanced '}}'"))?;
+                stack
+                    .pop()
+                    .with_context(|| format!("{what}: unbalanced '}}'"))?;
             }
             "OFFSET" => {
                 let mut o = [0.0f32; 3];
                 for v in o.iter_mut() {
-                    *v = next("an OFFSET value")?.parse().with_context(|| format!("{what}: bad OFFSET value"))?;
+                    *v = next("an OFFSET value")?
+                        .parse()
+                        .with_context(|| format!("{what}: bad OFFSET value"))?;
                 }
                 if let Some(Some(j)) = stack.last() {
                     joints[*j].offset = o;
                 }
             }
             "CHANNELS" => {
-                let n: usize = next("a channel count")?.parse().with_context(|| format!("{what}: bad CHANNELS count"))?;
+                let n: usize = next("a channel count")?
+                    .parse()
+                    .with_context(|| format!("{what}: bad CHANNELS count"))?;
                 if n > 6 {
                     bail!("{what}: at most 6 channels per joint, got {n}");
                 }
-                let j = stack.last().copied().flatten().with_context(|| format!("{what}: CHANNELS outside a joint"))?;
+                let j = stack
+                    .last()
+                    .copied()
+                    .flatten()
+                    .with_context(|| format!("{what}: CHANNELS outside a joint"))?;
                 for _ in 0..n {
                     let c = match next("a channel name")?.as_str() {
                         "Xposition" => Channel::Xposition,
@@ -207,21 +250,38 @@ pub fn parse(text: &str, what: &str) -> Result<BvhClip> {
     if next("Frames:")? != "Frames:" {
         bail!("{what}: expected 'Frames:' after MOTION");
     }
-    let frames: usize = next("a frame count")?.parse().with_context(|| format!("{what}: bad frame count"))?;
+    let frames: usize = next("a frame count")?
+        .parse()
+        .with_context(|| format!("{what}: bad frame count"))?;
     if next("Frame")? != "Frame" || next("Time:")? != "Time:" {
         bail!("{what}: expected 'Frame Time:'");
     }
-    let frame_time: f32 = next("a frame time")?.parse().with_context(|| format!("{what}: bad frame time"))?;
+    let frame_time: f32 = next("a frame time")?
+        .parse()
+        .with_context(|| format!("{what}: bad frame time"))?;
     let width: usize = joints.iter().map(|j| j.channels.len()).sum();
-    let want = frames.checked_mul(width).with_context(|| format!("{what}: frame count too large"))?;
+    let want = frames
+        .checked_mul(width)
+        .with_context(|| format!("{what}: frame count too large"))?;
     let mut values = Vec::with_capacity(want.min(1 << 26));
     for tkn in tok {
-        values.push(tkn.parse::<f32>().with_context(|| format!("{what}: bad motion value {tkn}"))?);
+        values.push(
+            tkn.parse::<f32>()
+                .with_context(|| format!("{what}: bad motion value {tkn}"))?,
+        );
     }
     if values.len() != want {
-        bail!("{what}: expected {frames} frames x {width} channels = {want} values, found {}", values.len());
+        bail!(
+            "{what}: expected {frames} frames x {width} channels = {want} values, found {}",
+            values.len()
+        );
     }
-    Ok(BvhClip { joints, frame_time, frames, values })
+    Ok(BvhClip {
+        joints,
+        frame_time,
+        frames,
+        values,
+    })
 }
 
 impl BvhClip {

@@ -40,12 +40,21 @@ fn colour(name: &str) -> [f32; 4] {
     };
     let lin = |c: u8| {
         let c = c as f32 / 255.0;
-        if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
     };
     [lin(srgb[0]), lin(srgb[1]), lin(srgb[2]), 1.0]
 }
 
-fn push_view(views: &mut Vec<Value>, bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>) -> usize {
+fn push_view(
+    views: &mut Vec<Value>,
+    bin: &mut Vec<u8>,
+    bytes: &[u8],
+    target: Option<u32>,
+) -> usize {
     while bin.len() % 4 != 0 {
         bin.push(0);
     }
@@ -90,10 +99,15 @@ fn push_f32s(bin: &mut Vec<u8>, vals: impl IntoIterator<Item = f32>) {
 /// Builds the .glb bytes for `dancers` (name, motion); all must have the
 /// same number of frames.
 pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
-    let Some((_, first)) = dancers.first() else { bail!("glb export: no dancers given") };
+    let Some((_, first)) = dancers.first() else {
+        bail!("glb export: no dancers given")
+    };
     let frames = first.frames;
     if let Some((n, m)) = dancers.iter().find(|(_, m)| m.frames != frames) {
-        bail!("glb export: dancer {n} has {} frames, expected {frames} like the first", m.frames);
+        bail!(
+            "glb export: dancer {n} has {} frames, expected {frames} like the first",
+            m.frames
+        );
     }
     if fps.is_nan() || fps <= 0.0 {
         bail!("glb export: fps must be positive, got {fps}");
@@ -112,8 +126,10 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
     let times: Vec<f32> = (0..frames).map(|t| t as f32 / fps).collect();
     views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": 4 * frames}));
     push_f32s(&mut bin, times.iter().copied());
-    accessors.push(json!({"bufferView": 0, "componentType": FLOAT, "count": frames, "type": "SCALAR",
-        "min": [times[0]], "max": [times[frames - 1]]}));
+    accessors.push(
+        json!({"bufferView": 0, "componentType": FLOAT, "count": frames, "type": "SCALAR",
+        "min": [times[0]], "max": [times[frames - 1]]}),
+    );
 
     let mut scene_nodes = Vec::new();
     for (d, (name, m)) in dancers.iter().enumerate() {
@@ -127,7 +143,11 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
             if !kids.is_empty() {
                 node["children"] = json!(kids);
             }
-            let tr = if j == 0 { [m.roots[0], m.roots[1], m.roots[2]] } else { m.skeleton.offsets[j] };
+            let tr = if j == 0 {
+                [m.roots[0], m.roots[1], m.roots[2]]
+            } else {
+                m.skeleton.offsets[j]
+            };
             node["translation"] = json!(tr);
             node["rotation"] = json!(quats[j * frames]);
             nodes.push(node);
@@ -137,17 +157,23 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
         views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": 12 * frames}));
         push_f32s(&mut bin, m.roots.iter().copied());
         let acc = accessors.len();
-        accessors.push(json!({"bufferView": view, "componentType": FLOAT, "count": frames, "type": "VEC3"}));
+        accessors.push(
+            json!({"bufferView": view, "componentType": FLOAT, "count": frames, "type": "VEC3"}),
+        );
         samplers.push(json!({"input": 0, "output": acc, "interpolation": "LINEAR"}));
         channels.push(json!({"sampler": samplers.len() - 1, "target": {"node": base + 1, "path": "translation"}}));
         // Rotations (55, T, 4) in one view, one accessor per joint.
         let view = views.len();
-        views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": 16 * frames * JOINTS}));
+        views.push(
+            json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": 16 * frames * JOINTS}),
+        );
         push_f32s(&mut bin, quats.iter().flatten().copied());
         for j in 0..JOINTS {
             let acc = accessors.len();
-            accessors.push(json!({"bufferView": view, "byteOffset": 16 * frames * j, "componentType": FLOAT,
-                "count": frames, "type": "VEC4"}));
+            accessors.push(
+                json!({"bufferView": view, "byteOffset": 16 * frames * j, "componentType": FLOAT,
+                "count": frames, "type": "VEC4"}),
+            );
             samplers.push(json!({"input": 0, "output": acc, "interpolation": "LINEAR"}));
             channels.push(json!({"sampler": samplers.len() - 1, "target": {"node": base + 1 + j, "path": "rotation"}}));
         }
@@ -161,14 +187,27 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
                 hi[k] = hi[k].max(p[k]);
             }
         }
-        let v = push_view(&mut views, &mut bin, &f32_bytes(mesh.positions.iter().flatten()), Some(ARRAY_BUFFER));
+        let v = push_view(
+            &mut views,
+            &mut bin,
+            &f32_bytes(mesh.positions.iter().flatten()),
+            Some(ARRAY_BUFFER),
+        );
         let pos_acc = accessors.len();
         accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": n, "type": "VEC3", "min": lo, "max": hi}));
-        let v = push_view(&mut views, &mut bin, &f32_bytes(mesh.normals.iter().flatten()), Some(ARRAY_BUFFER));
-        accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": n, "type": "VEC3"}));
+        let v = push_view(
+            &mut views,
+            &mut bin,
+            &f32_bytes(mesh.normals.iter().flatten()),
+            Some(ARRAY_BUFFER),
+        );
+        accessors
+            .push(json!({"bufferView": v, "componentType": FLOAT, "count": n, "type": "VEC3"}));
         let joints: Vec<u8> = mesh.joints.iter().flat_map(|&j| [j, 0, 0, 0]).collect();
         let v = push_view(&mut views, &mut bin, &joints, Some(ARRAY_BUFFER));
-        accessors.push(json!({"bufferView": v, "componentType": UNSIGNED_BYTE, "count": n, "type": "VEC4"}));
+        accessors.push(
+            json!({"bufferView": v, "componentType": UNSIGNED_BYTE, "count": n, "type": "VEC4"}),
+        );
         let weights: Vec<u8> = (0..n).flat_map(|_| [255u8, 0, 0, 0]).collect();
         let v = push_view(&mut views, &mut bin, &weights, Some(ARRAY_BUFFER));
         accessors.push(json!({"bufferView": v, "componentType": UNSIGNED_BYTE, "normalized": true, "count": n, "type": "VEC4"}));
@@ -177,12 +216,24 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
         let idx_acc = accessors.len();
         accessors.push(json!({"bufferView": v, "componentType": UNSIGNED_SHORT, "count": mesh.indices.len(), "type": "SCALAR"}));
         let rest = m.skeleton.rest_positions();
-        let ibm: Vec<f32> = rest.iter().flat_map(|p| [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -p[0], -p[1], -p[2], 1.0]).collect();
+        let ibm: Vec<f32> = rest
+            .iter()
+            .flat_map(|p| {
+                [
+                    1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -p[0], -p[1],
+                    -p[2], 1.0,
+                ]
+            })
+            .collect();
         let v = push_view(&mut views, &mut bin, &f32_bytes(ibm.iter()), None);
         let ibm_acc = accessors.len();
-        accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": JOINTS, "type": "MAT4"}));
-        materials.push(json!({"name": format!("{name}_material"), "pbrMetallicRoughness": {
-            "baseColorFactor": colour(name), "metallicFactor": 0.0, "roughnessFactor": 0.7}}));
+        accessors.push(
+            json!({"bufferView": v, "componentType": FLOAT, "count": JOINTS, "type": "MAT4"}),
+        );
+        materials.push(
+            json!({"name": format!("{name}_material"), "pbrMetallicRoughness": {
+            "baseColorFactor": colour(name), "metallicFactor": 0.0, "roughnessFactor": 0.7}}),
+        );
         meshes.push(json!({"name": format!("{name}_mannequin"), "primitives": [{
             "attributes": {"POSITION": pos_acc, "NORMAL": pos_acc + 1, "JOINTS_0": pos_acc + 2, "WEIGHTS_0": pos_acc + 3},
             "indices": idx_acc, "material": materials.len() - 1, "mode": 4}]}));
@@ -229,40 +280,61 @@ pub fn to_bytes(dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<u8>> {
 
 /// Writes `dancers` to a .glb file.
 pub fn write(path: &Path, dancers: &[(&str, &Motion)], fps: f32) -> Result<()> {
-    let bytes = to_bytes(dancers, fps).with_context(|| format!("cannot export {}", path.display()))?;
+    let bytes =
+        to_bytes(dancers, fps).with_context(|| format!("cannot export {}", path.display()))?;
     std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// The two chunks of a .glb file, checked: (JSON document, BIN payload).
 pub fn parse(bytes: &[u8], what: &str) -> Result<(Value, Vec<u8>)> {
     let word = |o: usize| -> Result<u32> {
-        let b = bytes.get(o..o + 4).with_context(|| format!("{what}: truncated glb at byte {o}"))?;
+        let b = bytes
+            .get(o..o + 4)
+            .with_context(|| format!("{what}: truncated glb at byte {o}"))?;
         Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
     };
     if word(0)? != GLB_MAGIC || word(4)? != 2 {
         bail!("{what}: not a glTF 2.0 binary (bad magic or version)");
     }
     if word(8)? as usize != bytes.len() {
-        bail!("{what}: header length {} but the file has {} bytes", word(8)?, bytes.len());
+        bail!(
+            "{what}: header length {} but the file has {} bytes",
+            word(8)?,
+            bytes.len()
+        );
     }
     let json_len = word(12)? as usize;
     if word(16)? != CHUNK_JSON || json_len % 4 != 0 {
         bail!("{what}: first chunk must be JSON with a length multiple of 4");
     }
-    let json_end = 20usize.checked_add(json_len).filter(|&e| e <= bytes.len()).with_context(|| format!("{what}: JSON chunk overruns the file"))?;
-    let doc: Value = serde_json::from_slice(&bytes[20..json_end]).with_context(|| format!("{what}: JSON chunk is not valid JSON"))?;
+    let json_end = 20usize
+        .checked_add(json_len)
+        .filter(|&e| e <= bytes.len())
+        .with_context(|| format!("{what}: JSON chunk overruns the file"))?;
+    let doc: Value = serde_json::from_slice(&bytes[20..json_end])
+        .with_context(|| format!("{what}: JSON chunk is not valid JSON"))?;
     let bin_len = word(json_end)? as usize;
     if word(json_end + 4)? != CHUNK_BIN || bin_len % 4 != 0 {
         bail!("{what}: second chunk must be BIN with a length multiple of 4");
     }
-    let bin_end = (json_end + 8).checked_add(bin_len).filter(|&e| e == bytes.len()).with_context(|| format!("{what}: BIN chunk length does not match the file"))?;
+    let bin_end = (json_end + 8)
+        .checked_add(bin_len)
+        .filter(|&e| e == bytes.len())
+        .with_context(|| format!("{what}: BIN chunk length does not match the file"))?;
     Ok((doc, bytes[json_end + 8..bin_end].to_vec()))
 }
 
 /// The float data of accessor `i` (FLOAT components, tightly packed):
 /// (values, count, components). Every index and range is checked.
-fn read_accessor(doc: &Value, bin: &[u8], i: usize, what: &str) -> Result<(Vec<f32>, usize, usize)> {
-    let a = doc["accessors"].get(i).with_context(|| format!("{what}: no accessor {i}"))?;
+fn read_accessor(
+    doc: &Value,
+    bin: &[u8],
+    i: usize,
+    what: &str,
+) -> Result<(Vec<f32>, usize, usize)> {
+    let a = doc["accessors"]
+        .get(i)
+        .with_context(|| format!("{what}: no accessor {i}"))?;
     let comps = match a["type"].as_str() {
         Some("SCALAR") => 1,
         Some("VEC3") => 3,
@@ -272,18 +344,31 @@ fn read_accessor(doc: &Value, bin: &[u8], i: usize, what: &str) -> Result<(Vec<f
     if a["componentType"].as_u64() != Some(FLOAT as u64) {
         bail!("{what}: accessor {i} is not FLOAT");
     }
-    let count = a["count"].as_u64().with_context(|| format!("{what}: accessor {i} has no count"))? as usize;
-    let vi = a["bufferView"].as_u64().with_context(|| format!("{what}: accessor {i} has no bufferView"))? as usize;
-    let v = doc["bufferViews"].get(vi).with_context(|| format!("{what}: no bufferView {vi}"))?;
-    let start = (v["byteOffset"].as_u64().unwrap_or(0) as usize).checked_add(a["byteOffset"].as_u64().unwrap_or(0) as usize);
+    let count = a["count"]
+        .as_u64()
+        .with_context(|| format!("{what}: accessor {i} has no count"))? as usize;
+    let vi = a["bufferView"]
+        .as_u64()
+        .with_context(|| format!("{what}: accessor {i} has no bufferView"))? as usize;
+    let v = doc["bufferViews"]
+        .get(vi)
+        .with_context(|| format!("{what}: no bufferView {vi}"))?;
+    let start = (v["byteOffset"].as_u64().unwrap_or(0) as usize)
+        .checked_add(a["byteOffset"].as_u64().unwrap_or(0) as usize);
     let len = count.checked_mul(4 * comps);
     let end = start.zip(len).and_then(|(s, l)| s.checked_add(l));
-    let (Some(start), Some(end)) = (start, end) else { bail!("{what}: accessor {i} range overflows") };
-    let view_end = (v["byteOffset"].as_u64().unwrap_or(0) as usize).saturating_add(v["byteLength"].as_u64().unwrap_or(0) as usize);
+    let (Some(start), Some(end)) = (start, end) else {
+        bail!("{what}: accessor {i} range overflows")
+    };
+    let view_end = (v["byteOffset"].as_u64().unwrap_or(0) as usize)
+        .saturating_add(v["byteLength"].as_u64().unwrap_or(0) as usize);
     if end > view_end || end > bin.len() {
         bail!("{what}: accessor {i} reads past its bufferView or the BIN chunk");
     }
-    let vals = bin[start..end].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    let vals = bin[start..end]
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
     Ok((vals, count, comps))
 }
 
@@ -295,27 +380,51 @@ fn read_accessor(doc: &Value, bin: &[u8], i: usize, what: &str) -> Result<(Vec<f
 pub fn dancer_positions(doc: &Value, bin: &[u8], name: &str, what: &str) -> Result<Vec<f32>> {
     use crate::skeleton::math::{add, mat_mul, mat_vec};
     use crate::skeleton::{mat_from_quat, parent, POS_DIM};
-    let nodes = doc["nodes"].as_array().with_context(|| format!("{what}: no nodes"))?;
+    let nodes = doc["nodes"]
+        .as_array()
+        .with_context(|| format!("{what}: no nodes"))?;
     let mut index = [0usize; JOINTS];
     let mut rest = [[0.0f32; 3]; JOINTS];
     for j in 0..JOINTS {
         let node_name = format!("{name}_{}", JOINT_NAMES[j]);
-        index[j] = nodes.iter().position(|n| n["name"].as_str() == Some(&node_name)).with_context(|| format!("{what}: no node {node_name}"))?;
-        let t = nodes[index[j]]["translation"].as_array().filter(|t| t.len() == 3).with_context(|| format!("{what}: node {node_name} has no translation"))?;
+        index[j] = nodes
+            .iter()
+            .position(|n| n["name"].as_str() == Some(&node_name))
+            .with_context(|| format!("{what}: no node {node_name}"))?;
+        let t = nodes[index[j]]["translation"]
+            .as_array()
+            .filter(|t| t.len() == 3)
+            .with_context(|| format!("{what}: node {node_name} has no translation"))?;
         for k in 0..3 {
-            rest[j][k] = t[k].as_f64().with_context(|| format!("{what}: node {node_name}: bad translation"))? as f32;
+            rest[j][k] = t[k]
+                .as_f64()
+                .with_context(|| format!("{what}: node {node_name}: bad translation"))?
+                as f32;
         }
     }
-    let anim = doc["animations"].get(0).with_context(|| format!("{what}: no animation"))?;
-    let channels = anim["channels"].as_array().with_context(|| format!("{what}: animation without channels"))?;
+    let anim = doc["animations"]
+        .get(0)
+        .with_context(|| format!("{what}: no animation"))?;
+    let channels = anim["channels"]
+        .as_array()
+        .with_context(|| format!("{what}: animation without channels"))?;
     let mut rot: Vec<Option<Vec<f32>>> = vec![None; JOINTS];
     let mut root: Option<Vec<f32>> = None;
     let mut frames: Option<usize> = None;
     for ch in channels {
-        let Some(node) = ch["target"]["node"].as_u64() else { continue };
-        let Some(j) = index.iter().position(|&n| n as u64 == node) else { continue };
-        let s = ch["sampler"].as_u64().and_then(|s| anim["samplers"].get(s as usize)).with_context(|| format!("{what}: channel without a sampler"))?;
-        let out = s["output"].as_u64().with_context(|| format!("{what}: sampler without output"))? as usize;
+        let Some(node) = ch["target"]["node"].as_u64() else {
+            continue;
+        };
+        let Some(j) = index.iter().position(|&n| n as u64 == node) else {
+            continue;
+        };
+        let s = ch["sampler"]
+            .as_u64()
+            .and_then(|s| anim["samplers"].get(s as usize))
+            .with_context(|| format!("{what}: channel without a sampler"))?;
+        let out = s["output"]
+            .as_u64()
+            .with_context(|| format!("{what}: sampler without output"))? as usize;
         let (data, count, comps) = read_accessor(doc, bin, out, what)?;
         if *frames.get_or_insert(count) != count {
             bail!("{what}: {name}: channels with different keyframe counts");
@@ -323,7 +432,10 @@ pub fn dancer_positions(doc: &Value, bin: &[u8], name: &str, what: &str) -> Resu
         match (ch["target"]["path"].as_str(), comps) {
             (Some("rotation"), 4) => rot[j] = Some(data),
             (Some("translation"), 3) if j == 0 => root = Some(data),
-            (p, c) => bail!("{what}: unexpected channel {p:?} with {c} components on {name}_{}", JOINT_NAMES[j]),
+            (p, c) => bail!(
+                "{what}: unexpected channel {p:?} with {c} components on {name}_{}",
+                JOINT_NAMES[j]
+            ),
         }
     }
     let frames = frames.with_context(|| format!("{what}: {name} is not animated"))?;

@@ -39,7 +39,11 @@ pub fn mesh(skel: &Skeleton) -> Mesh {
 
 fn capsule(m: &mut Mesh, a: Vec3, b: Vec3, r: f32, joint: u8) {
     let u = normalize_or(sub(b, a), [0.0, 1.0, 0.0]);
-    let helper = if u[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 0.0, 1.0] };
+    let helper = if u[0].abs() < 0.9 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 0.0, 1.0]
+    };
     let v = normalize_or(cross(helper, u), [0.0, 0.0, 1.0]);
     let w = cross(u, v); // v x w = u
     let base = m.positions.len() as u16;
@@ -50,14 +54,20 @@ fn capsule(m: &mut Mesh, a: Vec3, b: Vec3, r: f32, joint: u8) {
         m.joints.push(joint);
     };
     push(b, u, m); // top pole: vertex base
-    // 2 * RINGS rings of SIDES vertices: the top hemisphere around b (from
-    // near the pole down to the equator), then the bottom one around a
-    // (from the equator down to near the pole).
+                   // 2 * RINGS rings of SIDES vertices: the top hemisphere around b (from
+                   // near the pole down to the equator), then the bottom one around a
+                   // (from the equator down to near the pole).
     for ring in 0..2 * RINGS {
         let (centre, phi) = if ring < RINGS {
-            (b, (ring + 1) as f32 / RINGS as f32 * std::f32::consts::FRAC_PI_2)
+            (
+                b,
+                (ring + 1) as f32 / RINGS as f32 * std::f32::consts::FRAC_PI_2,
+            )
         } else {
-            (a, std::f32::consts::FRAC_PI_2 * (1.0 + (ring - RINGS) as f32 / RINGS as f32))
+            (
+                a,
+                std::f32::consts::FRAC_PI_2 * (1.0 + (ring - RINGS) as f32 / RINGS as f32),
+            )
         };
         for s in 0..SIDES {
             let theta = s as f32 / SIDES as f32 * std::f32::consts::TAU;
@@ -70,13 +80,20 @@ fn capsule(m: &mut Mesh, a: Vec3, b: Vec3, r: f32, joint: u8) {
     let ring_at = |ring: usize, s: usize| base + 1 + (ring * SIDES + s % SIDES) as u16;
     let bottom = base + 1 + (2 * RINGS * SIDES) as u16;
     for s in 0..SIDES {
-        m.indices.extend_from_slice(&[base, ring_at(0, s), ring_at(0, s + 1)]);
+        m.indices
+            .extend_from_slice(&[base, ring_at(0, s), ring_at(0, s + 1)]);
         for ring in 0..2 * RINGS - 1 {
-            let (uk, uk1, lk, lk1) = (ring_at(ring, s), ring_at(ring, s + 1), ring_at(ring + 1, s), ring_at(ring + 1, s + 1));
+            let (uk, uk1, lk, lk1) = (
+                ring_at(ring, s),
+                ring_at(ring, s + 1),
+                ring_at(ring + 1, s),
+                ring_at(ring + 1, s + 1),
+            );
             m.indices.extend_from_slice(&[uk, lk, lk1, uk, lk1, uk1]);
         }
         let last = 2 * RINGS - 1;
-        m.indices.extend_from_slice(&[bottom, ring_at(last, s + 1), ring_at(last, s)]);
+        m.indices
+            .extend_from_slice(&[bottom, ring_at(last, s + 1), ring_at(last, s)]);
     }
 }
 
@@ -102,12 +119,17 @@ mod tests {
             let [p0, p1, p2] = [0, 1, 2].map(|k| m.positions[t[k] as usize]);
             let g = cross(sub(p1, p0), sub(p2, p0));
             assert!(norm(g) > 1e-10, "degenerate triangle {t:?}");
-            let n = add(add(m.normals[t[0] as usize], m.normals[t[1] as usize]), m.normals[t[2] as usize]);
+            let n = add(
+                add(m.normals[t[0] as usize], m.normals[t[1] as usize]),
+                m.normals[t[2] as usize],
+            );
             assert!(dot(g, n) > 0.0, "triangle {t:?} faces inwards");
         }
         // Each capsule's vertices belong to its bind joint.
         for (i, c) in CAPSULES.iter().enumerate() {
-            assert!(m.joints[i * per..(i + 1) * per].iter().all(|&j| j as usize == c.bind));
+            assert!(m.joints[i * per..(i + 1) * per]
+                .iter()
+                .all(|&j| j as usize == c.bind));
         }
         // Standing height of the adult rig: about 1.75 m from sole to crown.
         let ys = m.positions.iter().map(|p| p[1]);

@@ -68,7 +68,10 @@ pub fn as_frames(positions: &[f32]) -> Vec<[Vec3; JOINTS]> {
 }
 
 fn max_distance(a: &[f32], b: &[f32]) -> f32 {
-    a.chunks_exact(3).zip(b.chunks_exact(3)).map(|(p, q)| norm(sub([p[0], p[1], p[2]], [q[0], q[1], q[2]]))).fold(0.0, f32::max)
+    a.chunks_exact(3)
+        .zip(b.chunks_exact(3))
+        .map(|(p, q)| norm(sub([p[0], p[1], p[2]], [q[0], q[1], q[2]])))
+        .fold(0.0, f32::max)
 }
 
 /// Joint groups of the SMPL-X layout for error reports: `body` = joints
@@ -94,7 +97,12 @@ impl ErrorStats {
             .chunks_exact(POS_DIM)
             .zip(b.chunks_exact(POS_DIM))
             .flat_map(|(fa, fb)| {
-                joints.clone().map(move |j| norm(sub([fa[3 * j], fa[3 * j + 1], fa[3 * j + 2]], [fb[3 * j], fb[3 * j + 1], fb[3 * j + 2]])))
+                joints.clone().map(move |j| {
+                    norm(sub(
+                        [fa[3 * j], fa[3 * j + 1], fa[3 * j + 2]],
+                        [fb[3 * j], fb[3 * j + 1], fb[3 * j + 2]],
+                    ))
+                })
             })
             .collect();
         ErrorStats::of(&mut d)
@@ -109,7 +117,11 @@ impl ErrorStats {
         let n = values.len();
         let mean = (values.iter().map(|&v| v as f64).sum::<f64>() / n as f64) as f32;
         let rank = ((0.95 * n as f64).ceil() as usize).clamp(1, n);
-        ErrorStats { mean, p95: values[rank - 1], max: values[n - 1] }
+        ErrorStats {
+            mean,
+            p95: values[rank - 1],
+            max: values[n - 1],
+        }
     }
 }
 
@@ -152,15 +164,31 @@ impl Motion {
         }
         let fk = positions_of_clip(&skeleton, &roots, &rotmats);
         let fit_error_m = max_distance(&fk, positions);
-        Ok(Motion { skeleton, frames, roots, rotmats, positions: fk, fit_error_m })
+        Ok(Motion {
+            skeleton,
+            frames,
+            roots,
+            rotmats,
+            positions: fk,
+            fit_error_m,
+        })
     }
 
     /// From root translations (T, 3) and local rotation matrices (T, 495)
     /// on `skeleton`; every 3x3 is projected to the nearest rotation.
-    pub fn from_rotations(roots: &[f32], rotmats: &[f32], skeleton: Skeleton, what: &str) -> Result<Motion> {
+    pub fn from_rotations(
+        roots: &[f32],
+        rotmats: &[f32],
+        skeleton: Skeleton,
+        what: &str,
+    ) -> Result<Motion> {
         let frames = frames_of(rotmats.len(), ROT_DIM, what)?;
         if roots.len() != frames * 3 {
-            bail!("{what}: {frames} frames of rotations but {} root values (expected (T, 3) = {})", roots.len(), frames * 3);
+            bail!(
+                "{what}: {frames} frames of rotations but {} root values (expected (T, 3) = {})",
+                roots.len(),
+                frames * 3
+            );
         }
         check_finite(roots, what)?;
         check_finite(rotmats, what)?;
@@ -169,7 +197,14 @@ impl Motion {
             proper.extend_from_slice(&flatten(&nearest_rotation(&unflatten(m))));
         }
         let positions = positions_of_clip(&skeleton, roots, &proper);
-        Ok(Motion { skeleton, frames, roots: roots.to_vec(), rotmats: proper, positions, fit_error_m: 0.0 })
+        Ok(Motion {
+            skeleton,
+            frames,
+            roots: roots.to_vec(),
+            rotmats: proper,
+            positions,
+            fit_error_m: 0.0,
+        })
     }
 
     /// From the model's decoded outputs: positions (T, 165) and, optionally,
@@ -179,14 +214,19 @@ impl Motion {
     /// far that FK lands from the decoded positions. Without, see
     /// [`Motion::from_positions`].
     pub fn from_decoded(positions: &[f32], rotmats: Option<&[f32]>, what: &str) -> Result<Motion> {
-        let Some(rotmats) = rotmats else { return Motion::from_positions(positions, what) };
+        let Some(rotmats) = rotmats else {
+            return Motion::from_positions(positions, what);
+        };
         let frames = frames_of(positions.len(), POS_DIM, what)?;
         check_finite(positions, what)?;
         if rotmats.len() != frames * ROT_DIM {
             bail!("{what}: {frames} frames of positions but {} rotation values (expected (T, 495) = {})", rotmats.len(), frames * ROT_DIM);
         }
         let skeleton = measure_skeleton(&Skeleton::default(), &as_frames(positions));
-        let roots: Vec<f32> = positions.chunks_exact(POS_DIM).flat_map(|r| [r[0], r[1], r[2]]).collect();
+        let roots: Vec<f32> = positions
+            .chunks_exact(POS_DIM)
+            .flat_map(|r| [r[0], r[1], r[2]])
+            .collect();
         let mut m = Motion::from_rotations(&roots, rotmats, skeleton, what)?;
         m.fit_error_m = max_distance(&m.positions, positions);
         Ok(m)
@@ -220,8 +260,14 @@ pub fn write_all(dir: &Path, leader: Option<&Motion>, follower: &Motion) -> Resu
 
 /// [`write_all`] for any named dancers at any frame rate: `glb` holds them
 /// all, each gets `<name>.bvh`, `<name>_pos3d.npy`, `<name>_rotmat.npy`.
-pub fn write_dancers(dir: &Path, glb: &str, dancers: &[(&str, &Motion)], fps: f32) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+pub fn write_dancers(
+    dir: &Path,
+    glb: &str,
+    dancers: &[(&str, &Motion)],
+    fps: f32,
+) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
     let mut out = Vec::new();
     let glb_path = dir.join(glb);
     glb::write(&glb_path, dancers, fps)?;

@@ -61,7 +61,12 @@ pub fn assemble(p: &Parts, tempogram: &[f32]) -> Features {
             data[b * FEATURE_DIM + BEAT_COL] = 1.0;
         }
     }
-    Features { frames: t, dim: FEATURE_DIM, data, tempo_bpm: p.tempo_bpm }
+    Features {
+        frames: t,
+        dim: FEATURE_DIM,
+        data,
+        tempo_bpm: p.tempo_bpm,
+    }
 }
 
 #[cfg(test)]
@@ -90,7 +95,9 @@ mod tests {
         let f = features(&y).unwrap();
         assert_eq!((f.frames, f.dim, f.data.len()), (31, 438, 31 * 438));
         assert!(f.data.iter().all(|v| v.is_finite()));
-        let nonzero_rows = (0..f.frames).filter(|&t| f.row(t)[TEMPOGRAM_COLS].iter().any(|&v| v != 0.0)).count();
+        let nonzero_rows = (0..f.frames)
+            .filter(|&t| f.row(t)[TEMPOGRAM_COLS].iter().any(|&v| v != 0.0))
+            .count();
         assert!(nonzero_rows > 0);
         for t in 0..f.frames {
             let r = &f.row(t)[TEMPOGRAM_COLS];

@@ -19,7 +19,9 @@ pub fn beat_track(onset: &[f32], frame_rate: f64, bpm: f64) -> Vec<usize> {
     let period = period.max(1);
     let local = local_score(onset, period as usize);
     let (backlink, cum) = dynamic_programme(&local, period);
-    let Some(last) = last_beat(&cum) else { return Vec::new() };
+    let Some(last) = last_beat(&cum) else {
+        return Vec::new();
+    };
     let mut beats = vec![last];
     while backlink[*beats.last().expect("non-empty")] >= 0 {
         let b = backlink[*beats.last().expect("non-empty")] as usize;
@@ -34,11 +36,25 @@ pub fn beat_track(onset: &[f32], frame_rate: f64, bpm: f64) -> Vec<usize> {
 pub fn local_score(onset: &[f32], period: usize) -> Vec<f64> {
     let n = onset.len();
     let mean = onset.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
-    let var = if n > 1 { onset.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64 } else { 0.0 };
+    let var = if n > 1 {
+        onset
+            .iter()
+            .map(|&v| (v as f64 - mean).powi(2))
+            .sum::<f64>()
+            / (n - 1) as f64
+    } else {
+        0.0
+    };
     let std = var.sqrt() as f32;
-    let norm: Vec<f32> = if std > 0.0 { onset.iter().map(|&v| v / std).collect() } else { onset.to_vec() };
+    let norm: Vec<f32> = if std > 0.0 {
+        onset.iter().map(|&v| v / std).collect()
+    } else {
+        onset.to_vec()
+    };
     let p = period as i64;
-    let window: Vec<f64> = (-p..=p).map(|k| (-0.5 * (k as f64 * 32.0 / p as f64).powi(2)).exp()).collect();
+    let window: Vec<f64> = (-p..=p)
+        .map(|k| (-0.5 * (k as f64 * 32.0 / p as f64).powi(2)).exp())
+        .collect();
     (0..n as i64)
         .map(|i| {
             let mut s = 0.0;
@@ -59,7 +75,10 @@ pub fn dynamic_programme(local: &[f64], period: i64) -> (Vec<i64>, Vec<f64>) {
     let n = local.len();
     let hi = -(round_half_even(period as f64 / 2.0) as i64);
     let offsets: Vec<i64> = (-2 * period..=hi).collect();
-    let txwt: Vec<f64> = offsets.iter().map(|&d| -100.0 * ((-d as f64) / period as f64).ln().powi(2)).collect();
+    let txwt: Vec<f64> = offsets
+        .iter()
+        .map(|&d| -100.0 * ((-d as f64) / period as f64).ln().powi(2))
+        .collect();
     let max_local = local.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let mut backlink = vec![0i64; n];
     let mut cum = vec![0.0f64; n];
@@ -100,9 +119,15 @@ pub fn last_beat(cum: &[f64]) -> Option<usize> {
     }
     maxima.sort_by(f64::total_cmp);
     let m = maxima.len();
-    let med = if m % 2 == 1 { maxima[m / 2] } else { (maxima[m / 2 - 1] + maxima[m / 2]) / 2.0 };
+    let med = if m % 2 == 1 {
+        maxima[m / 2]
+    } else {
+        (maxima[m / 2 - 1] + maxima[m / 2]) / 2.0
+    };
     // `cum * maxes * 2 > med`: frames that are not maxima count as 0.
-    (0..n).rev().find(|&i| (if is_max(i) { cum[i] * 2.0 } else { 0.0 }) > med)
+    (0..n)
+        .rev()
+        .find(|&i| (if is_max(i) { cum[i] * 2.0 } else { 0.0 }) > med)
 }
 
 /// 0.8.1 trimming: smooth the beats' local scores with Hann(5) = [0,.5,1,.5,0],

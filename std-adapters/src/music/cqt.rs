@@ -56,7 +56,9 @@ impl CqtBank {
     /// (fraction of a 1/36-octave bin), for hop 512.
     pub fn new(sr: f64, tuning: f64, n_octaves: usize) -> Result<Self, super::MusicError> {
         if n_octaves == 0 || n_octaves > 10 {
-            return Err(super::MusicError::Unsupported("CQT octave count must be 1..=10 (hop 512 halves per octave)"));
+            return Err(super::MusicError::Unsupported(
+                "CQT octave count must be 1..=10 (hop 512 halves per octave)",
+            ));
         }
         let bpo = BINS_PER_OCTAVE as f64;
         let n_bins = BINS_PER_OCTAVE * n_octaves;
@@ -68,15 +70,21 @@ impl CqtBank {
         let cutoff = fmax_t * (1.0 + 0.5 * HANN_BANDWIDTH / q);
         let nyquist = sr / 2.0;
         if cutoff >= BW_FASTEST * nyquist {
-            return Err(super::MusicError::Unsupported("top CQT octave needs kaiser_best resampling (sample rate too low)"));
+            return Err(super::MusicError::Unsupported(
+                "top CQT octave needs kaiser_best resampling (sample rate too low)",
+            ));
         }
         let early = (((BW_FASTEST * nyquist / cutoff).log2().ceil() as i64) - 2).max(0);
         let twos = 9i64; // hop 512 = 2^9
         if early.min((twos - n_octaves as i64 + 1).max(0)) > 0 {
-            return Err(super::MusicError::Unsupported("CQT early downsampling (sample rate too high for this port)"));
+            return Err(super::MusicError::Unsupported(
+                "CQT early downsampling (sample rate too high for this port)",
+            ));
         }
         // filters of the top octave, at the input rate
-        let lengths: Vec<f64> = (0..BINS_PER_OCTAVE).map(|k| q * sr / (fmin_t * 2f64.powf(k as f64 / bpo))).collect();
+        let lengths: Vec<f64> = (0..BINS_PER_OCTAVE)
+            .map(|k| q * sr / (fmin_t * 2f64.powf(k as f64 / bpo)))
+            .collect();
         let max_len = lengths.iter().copied().fold(0.0, f64::max);
         let n_fft = 2f64.powf(max_len.log2().ceil()) as usize;
         let mut fft = FftPlanner::<f64>::new().plan_fft_forward(n_fft);
@@ -85,13 +93,26 @@ impl CqtBank {
             let f = fmin_t * 2f64.powf(k as f64 / bpo);
             rows.push(Self::filter_row(l, f, sr, n_fft, &mut fft));
         }
-        let inv_sqrt_len = (0..n_bins).map(|k| (1.0 / (q * sr / freq(k)).sqrt()) as f32).collect();
-        Ok(Self { n_fft, n_octaves, rows, inv_sqrt_len })
+        let inv_sqrt_len = (0..n_bins)
+            .map(|k| (1.0 / (q * sr / freq(k)).sqrt()) as f32)
+            .collect();
+        Ok(Self {
+            n_fft,
+            n_octaves,
+            rows,
+            inv_sqrt_len,
+        })
     }
 
     /// One filter: windowed exponential, L1-normalised, centred in `n_fft`,
     /// scaled by `length / n_fft`, FFT'd, kept to `n_fft/2+1` bins and sparsified.
-    fn filter_row(l: f64, f: f64, sr: f64, n_fft: usize, fft: &mut std::sync::Arc<dyn rustfft::Fft<f64>>) -> SparseRow {
+    fn filter_row(
+        l: f64,
+        f: f64,
+        sr: f64,
+        n_fft: usize,
+        fft: &mut std::sync::Arc<dyn rustfft::Fft<f64>>,
+    ) -> SparseRow {
         let a = (-l / 2.0).floor() as i64;
         let b = (l / 2.0).floor() as i64;
         let count = (b - a) as usize;
@@ -164,7 +185,10 @@ impl CqtBank {
             let t = spec.len() / nb;
             let gain = (2f64.powi(i as i32)).sqrt();
             let mut r = vec![C32::new(0.0, 0.0); t * BINS_PER_OCTAVE];
-            for (frame, o) in spec.chunks_exact(nb).zip(r.chunks_exact_mut(BINS_PER_OCTAVE)) {
+            for (frame, o) in spec
+                .chunks_exact(nb)
+                .zip(r.chunks_exact_mut(BINS_PER_OCTAVE))
+            {
                 for (row, o) in self.rows.iter().zip(o.iter_mut()) {
                     let mut acc = Complex::new(0.0f64, 0.0f64);
                     for (&j, w) in row.idx.iter().zip(&row.w) {

@@ -128,7 +128,10 @@ impl Extractor {
     /// Checks length and finiteness.
     pub fn validate(y: &[f32]) -> Result<(), MusicError> {
         if y.len() < MIN_SAMPLES {
-            return Err(MusicError::TooShort { got: y.len(), needed: MIN_SAMPLES });
+            return Err(MusicError::TooShort {
+                got: y.len(),
+                needed: MIN_SAMPLES,
+            });
         }
         if let Some((index, &value)) = y.iter().enumerate().find(|(_, v)| !v.is_finite()) {
             return Err(MusicError::NonFinite { index, value });
@@ -163,14 +166,23 @@ impl Extractor {
     /// As [`Extractor::parts`], with the dB reference of the MFCC spectrogram
     /// chosen by `reference(max mel power of y)` (offline: that max itself;
     /// streaming: a running max).
-    pub fn parts_with_reference(&self, y: &[f32], reference: impl FnMut(f32) -> f32) -> Result<Parts, MusicError> {
+    pub fn parts_with_reference(
+        &self,
+        y: &[f32],
+        reference: impl FnMut(f32) -> f32,
+    ) -> Result<Parts, MusicError> {
         self.parts_with_levels(y, reference, |max_db| max_db)
     }
 
     /// As [`Extractor::parts_with_reference`], with the level the onset
     /// spectrogram's 80 dB floor hangs from chosen by `onset_top(max dB of
     /// y's onset mel spectrogram)` (offline: that max; streaming: a running max).
-    pub fn parts_with_levels(&self, y: &[f32], mut reference: impl FnMut(f32) -> f32, onset_top: impl FnOnce(f32) -> f32) -> Result<Parts, MusicError> {
+    pub fn parts_with_levels(
+        &self,
+        y: &[f32],
+        mut reference: impl FnMut(f32) -> f32,
+        onset_top: impl FnOnce(f32) -> f32,
+    ) -> Result<Parts, MusicError> {
         Self::validate(y)?;
         let nb = self.stft.n_bins();
         let mut d: Vec<C32> = Vec::new(); // (T, 1025)
@@ -216,9 +228,23 @@ impl Extractor {
         let mut onset = Vec::new(); // (T,)
         onset_strength_with_top(&power, nb, &self.onset_mel, onset_top, &mut onset);
         let frame_rate = self.set.frame_rate();
-        let tempo_bpm = if onset.iter().any(|&v| v != 0.0) { tempo(&onset, frame_rate) } else { 0.0 };
+        let tempo_bpm = if onset.iter().any(|&v| v != 0.0) {
+            tempo(&onset, frame_rate)
+        } else {
+            0.0
+        };
         let beats = beat_track(&onset, frame_rate, tempo_bpm);
-        Ok(Parts { mfcc, delta, chroma, onset, beats, tempo_bpm, tuning, harmonic, percussive })
+        Ok(Parts {
+            mfcc,
+            delta,
+            chroma,
+            onset,
+            beats,
+            tempo_bpm,
+            tuning,
+            harmonic,
+            percussive,
+        })
     }
 }
 
@@ -239,5 +265,10 @@ pub fn assemble(p: &Parts) -> Features {
             data[b * FEATURE_DIM + 53] = 1.0;
         }
     }
-    Features { frames: t, dim: FEATURE_DIM, data, tempo_bpm: p.tempo_bpm }
+    Features {
+        frames: t,
+        dim: FEATURE_DIM,
+        data,
+        tempo_bpm: p.tempo_bpm,
+    }
 }

@@ -24,7 +24,13 @@ pub fn soft_masks(h: f32, p: f32) -> (f32, f32) {
 
 /// Splits the STFT `d` (T, n_bins) of a signal of `len` samples into harmonic
 /// and percussive signals (each `len` samples).
-pub fn hpss(stft: &Stft, d: &[C32], len: usize, harmonic: &mut Vec<f32>, percussive: &mut Vec<f32>) {
+pub fn hpss(
+    stft: &Stft,
+    d: &[C32],
+    len: usize,
+    harmonic: &mut Vec<f32>,
+    percussive: &mut Vec<f32>,
+) {
     let nb = stft.n_bins();
     let t = d.len() / nb;
     let mag: Vec<f32> = d.iter().map(|c| c.norm()).collect(); // (T, n_bins)

@@ -17,7 +17,11 @@ impl RunningMedian {
     /// Width `w`, odd.
     pub fn new(w: usize) -> Self {
         assert!(w % 2 == 1, "median width must be odd");
-        Self { w, ext: Vec::new(), sorted: Vec::with_capacity(w) }
+        Self {
+            w,
+            ext: Vec::new(),
+            sorted: Vec::with_capacity(w),
+        }
     }
 
     /// `out[i] = median(x[i-h ..= i+h])`, `h = w/2`, reflected at both ends.
@@ -26,7 +30,8 @@ impl RunningMedian {
         let n = x.len();
         let h = (self.w / 2) as isize;
         self.ext.clear();
-        self.ext.extend((0..(n + self.w - 1) as isize).map(|j| x[scipy_reflect(j - h, n)]));
+        self.ext
+            .extend((0..(n + self.w - 1) as isize).map(|j| x[scipy_reflect(j - h, n)]));
         self.sorted.clear();
         self.sorted.extend_from_slice(&self.ext[..self.w]);
         self.sorted.sort_unstable_by(f32::total_cmp);
@@ -68,14 +73,18 @@ mod tests {
 
     #[test]
     fn matches_brute_force() {
-        let x: Vec<f32> = (0..200).map(|i| ((i * 37 % 101) as f32) * 0.5 - ((i % 7) as f32)).collect();
+        let x: Vec<f32> = (0..200)
+            .map(|i| ((i * 37 % 101) as f32) * 0.5 - ((i % 7) as f32))
+            .collect();
         for &w in &[1usize, 3, 31] {
             let mut rm = RunningMedian::new(w);
             let mut out = vec![0.0; x.len()];
             rm.filter(&x, &mut out);
             let h = (w / 2) as isize;
             for i in 0..x.len() {
-                let mut win: Vec<f32> = (-h..=h).map(|d| x[scipy_reflect(i as isize + d, x.len())]).collect();
+                let mut win: Vec<f32> = (-h..=h)
+                    .map(|d| x[scipy_reflect(i as isize + d, x.len())])
+                    .collect();
                 win.sort_by(f32::total_cmp);
                 assert_eq!(out[i], win[w / 2], "w={w} i={i}");
             }

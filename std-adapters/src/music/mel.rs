@@ -43,7 +43,13 @@ impl MelBank {
         // numpy linspace: start + i * step, last point exactly `hi`.
         let step = (hi - lo) / (n_pts - 1) as f64;
         let mel_f: Vec<f64> = (0..n_pts)
-            .map(|i| if i == n_pts - 1 { mel_to_hz(hi) } else { mel_to_hz(lo + i as f64 * step) })
+            .map(|i| {
+                if i == n_pts - 1 {
+                    mel_to_hz(hi)
+                } else {
+                    mel_to_hz(lo + i as f64 * step)
+                }
+            })
             .collect();
         let mut start = Vec::with_capacity(n_mels);
         let mut weights = Vec::with_capacity(n_mels);
@@ -61,7 +67,11 @@ impl MelBank {
             let first = row.iter().position(|&w| w != 0.0).unwrap_or(0);
             let last = row.iter().rposition(|&w| w != 0.0).map_or(0, |p| p + 1);
             start.push(first);
-            weights.push(if last > first { row[first..last].to_vec() } else { Vec::new() });
+            weights.push(if last > first {
+                row[first..last].to_vec()
+            } else {
+                Vec::new()
+            });
         }
         Self { start, weights }
     }

@@ -40,9 +40,14 @@ impl Dct {
     pub fn new(n_in: usize, n_out: usize) -> Self {
         let mut basis = Vec::with_capacity(n_in * n_out);
         for k in 0..n_out {
-            let scale = if k == 0 { (1.0 / n_in as f64).sqrt() } else { (2.0 / n_in as f64).sqrt() };
+            let scale = if k == 0 {
+                (1.0 / n_in as f64).sqrt()
+            } else {
+                (2.0 / n_in as f64).sqrt()
+            };
             for n in 0..n_in {
-                let c = (std::f64::consts::PI * k as f64 * (2 * n + 1) as f64 / (2 * n_in) as f64).cos();
+                let c = (std::f64::consts::PI * k as f64 * (2 * n + 1) as f64 / (2 * n_in) as f64)
+                    .cos();
                 basis.push((scale * c) as f32);
             }
         }
@@ -52,7 +57,11 @@ impl Dct {
     /// `out` (n_out,) from `x` (n_in,), accumulated in f64.
     pub fn apply(&self, x: &[f32], out: &mut [f32]) {
         for (o, row) in out.iter_mut().zip(self.basis.chunks_exact(self.n_in)) {
-            *o = row.iter().zip(x).map(|(&b, &v)| b as f64 * v as f64).sum::<f64>() as f32;
+            *o = row
+                .iter()
+                .zip(x)
+                .map(|(&b, &v)| b as f64 * v as f64)
+                .sum::<f64>() as f32;
         }
     }
 }

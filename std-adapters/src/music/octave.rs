@@ -37,7 +37,11 @@ pub fn bessel_i0(x: f64) -> f64 {
 pub fn half_window(j: usize, num_zeros: usize, precision: usize, rolloff: f64, beta: f64) -> f64 {
     let n = (num_zeros * precision) as f64;
     let x = rolloff * num_zeros as f64 * j as f64 / n;
-    let sinc = if x == 0.0 { 1.0 } else { (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x) };
+    let sinc = if x == 0.0 {
+        1.0
+    } else {
+        (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x)
+    };
     let r = j as f64 / n;
     let taper = bessel_i0(beta * (1.0 - r * r).max(0.0).sqrt()) / bessel_i0(beta);
     rolloff * sinc * taper
@@ -60,7 +64,9 @@ impl Halver {
         let step = PRECISION / 2; // index_step = int(0.5 * num_table)
         let nwin = NUM_ZEROS * PRECISION + 1;
         let k = nwin / step; // left wing: i < nwin / step
-        let taps = (0..k).map(|i| 0.5 * half_window(i * step, NUM_ZEROS, PRECISION, ROLLOFF, BETA)).collect();
+        let taps = (0..k)
+            .map(|i| 0.5 * half_window(i * step, NUM_ZEROS, PRECISION, ROLLOFF, BETA))
+            .collect();
         Self { taps }
     }
 
@@ -114,7 +120,9 @@ mod tests {
         h.halve(&x, &mut y);
         assert_eq!(y.len(), 2000);
         // interior: y[t] ~ sqrt(2) * x[2t]
-        let err = (200..1800).map(|t| (y[t] - std::f32::consts::SQRT_2 * x[2 * t]).abs()).fold(0.0, f32::max);
+        let err = (200..1800)
+            .map(|t| (y[t] - std::f32::consts::SQRT_2 * x[2 * t]).abs())
+            .fold(0.0, f32::max);
         assert!(err < 1e-3, "{err}");
     }
 }

@@ -44,10 +44,19 @@ pub fn onset_strength(power: &[f32], n_bins: usize, bank: &MelBank, out: &mut Ve
 
 /// As [`onset_strength`], with the 80 dB floor hung from `top(max dB)`
 /// (offline: the max itself; streaming: a running max).
-pub fn onset_strength_with_top(power: &[f32], n_bins: usize, bank: &MelBank, top: impl FnOnce(f32) -> f32, out: &mut Vec<f32>) {
+pub fn onset_strength_with_top(
+    power: &[f32],
+    n_bins: usize,
+    bank: &MelBank,
+    top: impl FnOnce(f32) -> f32,
+    out: &mut Vec<f32>,
+) {
     let t = power.len() / n_bins;
     let mut mel = vec![0.0f32; t * ONSET_MELS]; // (T, 128)
-    for (p, m) in power.chunks_exact(n_bins).zip(mel.chunks_exact_mut(ONSET_MELS)) {
+    for (p, m) in power
+        .chunks_exact(n_bins)
+        .zip(mel.chunks_exact_mut(ONSET_MELS))
+    {
         bank.apply(p, m);
     }
     power_to_db_with_top(&mut mel, 1.0, top);

@@ -39,7 +39,13 @@ impl Stft {
     fn with_window(window: Vec<f64>, hop: usize) -> Self {
         let n_fft = window.len();
         let mut planner = RealFftPlanner::<f64>::new();
-        Self { n_fft, hop, window, fwd: planner.plan_fft_forward(n_fft), inv: planner.plan_fft_inverse(n_fft) }
+        Self {
+            n_fft,
+            hop,
+            window,
+            fwd: planner.plan_fft_forward(n_fft),
+            inv: planner.plan_fft_inverse(n_fft),
+        }
     }
 
     /// `n_fft/2 + 1`.
@@ -69,7 +75,9 @@ impl Stft {
             for ((f, &x), &w) in frame.iter_mut().zip(seg).zip(&self.window) {
                 *f = x as f64 * w;
             }
-            self.fwd.process_with_scratch(&mut frame, &mut spec, &mut scratch).expect("fft sizes fixed at plan time");
+            self.fwd
+                .process_with_scratch(&mut frame, &mut spec, &mut scratch)
+                .expect("fft sizes fixed at plan time");
             for (o, s) in row.iter_mut().zip(&spec) {
                 *o = C32::new(s.re as f32, s.im as f32);
             }
@@ -94,7 +102,9 @@ impl Stft {
             }
             buf[0].im = 0.0;
             buf[n_bins - 1].im = 0.0;
-            self.inv.process_with_scratch(&mut buf, &mut frame, &mut scratch).expect("fft sizes fixed at plan time");
+            self.inv
+                .process_with_scratch(&mut buf, &mut frame, &mut scratch)
+                .expect("fft sizes fixed at plan time");
             let o = i * self.hop;
             for (j, (&x, &w)) in frame.iter().zip(&self.window).enumerate() {
                 acc[o + j] += x * norm * w;
@@ -116,7 +126,9 @@ impl Stft {
 
 /// Periodic Hann window of length `n`.
 pub fn periodic_hann(n: usize) -> Vec<f64> {
-    (0..n).map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / n as f64).cos()).collect()
+    (0..n)
+        .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / n as f64).cos())
+        .collect()
 }
 
 #[cfg(test)]
@@ -126,13 +138,19 @@ mod tests {
     #[test]
     fn round_trip_is_identity() {
         let stft = Stft::hann(2048, 512);
-        let y: Vec<f32> = (0..10_000).map(|i| ((i as f32) * 0.013).sin() + 0.1 * ((i * 7 % 13) as f32 - 6.0)).collect();
+        let y: Vec<f32> = (0..10_000)
+            .map(|i| ((i as f32) * 0.013).sin() + 0.1 * ((i * 7 % 13) as f32 - 6.0))
+            .collect();
         let mut spec = Vec::new();
         stft.forward(&y, &mut spec);
         assert_eq!(spec.len(), stft.n_frames(y.len()) * 1025);
         let mut back = Vec::new();
         stft.inverse(&spec, y.len(), &mut back);
-        let err = y.iter().zip(&back).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        let err = y
+            .iter()
+            .zip(&back)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
         assert!(err < 1e-5, "round trip error {err}");
     }
 }

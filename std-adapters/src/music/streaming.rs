@@ -49,7 +49,11 @@ pub struct StreamingConfig {
 impl Default for StreamingConfig {
     /// Duolando's: 3.2 s of context, 0.53 s blocks, 0.8 s of look-ahead.
     fn default() -> Self {
-        Self { context: 96, block: 16, lookahead: 24 }
+        Self {
+            context: 96,
+            block: 16,
+            lookahead: 24,
+        }
     }
 }
 
@@ -57,7 +61,11 @@ impl StreamingConfig {
     /// Bailando's default at 7.5 frames/s: 8.5 s of context (the tempo
     /// estimate wants 8 s), 0.53 s blocks, 0.8 s of look-ahead.
     pub fn bailando() -> Self {
-        Self { context: 64, block: 4, lookahead: 6 }
+        Self {
+            context: 64,
+            block: 4,
+            lookahead: 6,
+        }
     }
 }
 
@@ -79,7 +87,14 @@ struct TempogramState {
 impl TempogramState {
     fn new() -> Self {
         let w = TEMPOGRAM_WIN;
-        Self { ac: LocalAutocorr::new(w), hist: Vec::new(), base: 0, first: None, seg: vec![0.0; w], col: vec![0.0; w] }
+        Self {
+            ac: LocalAutocorr::new(w),
+            hist: Vec::new(),
+            base: 0,
+            first: None,
+            seg: vec![0.0; w],
+            col: vec![0.0; w],
+        }
     }
 
     /// Appends the tempogram row of frame `t` to `out`. `window` holds the
@@ -91,8 +106,19 @@ impl TempogramState {
         let newest = t0 + window.len() - 1;
         // offline: frames t - half ..= t + half - 1; live: shifted back until all are
         // known (early on into the left padding: the window then holds all known frames)
-        let centre = if at_end { t as i64 } else { (t as i64).min(newest as i64 + 1 - half as i64) };
-        let first = self.first.or(if t0 == 0 { window.first().copied() } else { None }).unwrap_or(0.0);
+        let centre = if at_end {
+            t as i64
+        } else {
+            (t as i64).min(newest as i64 + 1 - half as i64)
+        };
+        let first = self
+            .first
+            .or(if t0 == 0 {
+                window.first().copied()
+            } else {
+                None
+            })
+            .unwrap_or(0.0);
         let last = window[window.len() - 1];
         let (hist, base) = (&self.hist, self.base);
         let value_at = |f: i64| -> f32 {
@@ -105,7 +131,11 @@ impl TempogramState {
                     first * (j as f32 / half as f32)
                 }
             } else if (f as usize) < t0 {
-                (f as usize).checked_sub(base).and_then(|i| hist.get(i)).copied().unwrap_or(0.0)
+                (f as usize)
+                    .checked_sub(base)
+                    .and_then(|i| hist.get(i))
+                    .copied()
+                    .unwrap_or(0.0)
             } else if (f as usize) <= newest {
                 window[f as usize - t0]
             } else {
@@ -180,7 +210,18 @@ impl Streaming {
 
     pub fn for_set(set: FeatureSet, cfg: StreamingConfig) -> Self {
         let tempogram = (set == FeatureSet::Bailando).then(TempogramState::new);
-        Self { ex: Extractor::for_set(set), tempogram, finished: false, cfg, audio: Vec::new(), base: 0, total: 0, emitted: 0, db_ref: 0.0, onset_top: (set == FeatureSet::Bailando).then_some(f32::NEG_INFINITY) }
+        Self {
+            ex: Extractor::for_set(set),
+            tempogram,
+            finished: false,
+            cfg,
+            audio: Vec::new(),
+            base: 0,
+            total: 0,
+            emitted: 0,
+            db_ref: 0.0,
+            onset_top: (set == FeatureSet::Bailando).then_some(f32::NEG_INFINITY),
+        }
     }
 
     /// Which features the rows are.
@@ -202,7 +243,10 @@ impl Streaming {
     /// row that became ready to `out` ((n, dim) appended). Returns the number of rows.
     pub fn push(&mut self, samples: &[f32], out: &mut Vec<f32>) -> Result<usize, MusicError> {
         if let Some((i, &v)) = samples.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(MusicError::NonFinite { index: self.total + i, value: v });
+            return Err(MusicError::NonFinite {
+                index: self.total + i,
+                value: v,
+            });
         }
         self.audio.extend_from_slice(samples);
         self.total += samples.len();
@@ -262,10 +306,12 @@ impl Streaming {
         let f = assemble(&parts);
         let rows = (end - t0).min(f.frames.saturating_sub(t0 - w0));
         match self.tempogram.as_mut() {
-            None => out.extend_from_slice(&f.data[(t0 - w0) * FEATURE_DIM..(t0 - w0 + rows) * FEATURE_DIM]),
+            None => out.extend_from_slice(
+                &f.data[(t0 - w0) * FEATURE_DIM..(t0 - w0 + rows) * FEATURE_DIM],
+            ),
             Some(tg) => {
                 let onset = &parts.onset[t0 - w0..]; // frames t0.., newest last
-                // `finish` windows reach the last sample
+                                                     // `finish` windows reach the last sample
                 let at_end = self.finished && s1 == self.total;
                 for t in t0..t0 + rows {
                     out.extend_from_slice(f.row(t - w0));

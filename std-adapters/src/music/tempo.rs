@@ -53,7 +53,14 @@ impl LocalAutocorr {
         let fwd = planner.plan_fft_forward(nfft);
         let inv = planner.plan_fft_inverse(nfft);
         let (buf, spec) = (fwd.make_input_vec(), fwd.make_output_vec());
-        Self { win, window: periodic_hann(win), fwd, inv, buf, spec }
+        Self {
+            win,
+            window: periodic_hann(win),
+            fwd,
+            inv,
+            buf,
+            spec,
+        }
     }
 
     /// Window length in frames.
@@ -68,11 +75,15 @@ impl LocalAutocorr {
         for ((b, &x), &w) in self.buf.iter_mut().zip(&seg[..win]).zip(&self.window) {
             *b = x as f64 * w;
         }
-        self.fwd.process(&mut self.buf, &mut self.spec).expect("fixed fft size");
+        self.fwd
+            .process(&mut self.buf, &mut self.spec)
+            .expect("fixed fft size");
         for c in self.spec.iter_mut() {
             *c = Complex::new(c.norm_sqr(), 0.0);
         }
-        self.inv.process(&mut self.spec, &mut self.buf).expect("fixed fft size");
+        self.inv
+            .process(&mut self.spec, &mut self.buf)
+            .expect("fixed fft size");
         let ac = &self.buf[..win];
         let m = ac.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
         // the inverse FFT is unnormalised; normalising by the max removes that scale too

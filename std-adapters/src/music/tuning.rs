@@ -11,8 +11,13 @@ pub fn estimate_tuning(mag: &[f32], n_fft: usize, sr: f64, bins_per_octave: usiz
     let bin_hz = sr / n_fft as f64;
     let fmax = 4000.0f64.min(sr / 2.0);
     // bins with 150 <= f < fmax; the first and last bins are never peaks (edge pads)
-    let k_lo = (1..nb - 1).find(|&k| k as f64 * bin_hz >= 150.0).unwrap_or(nb - 1);
-    let k_hi = (1..nb - 1).take_while(|&k| (k as f64 * bin_hz) < fmax).last().map_or(0, |k| k + 1);
+    let k_lo = (1..nb - 1)
+        .find(|&k| k as f64 * bin_hz >= 150.0)
+        .unwrap_or(nb - 1);
+    let k_hi = (1..nb - 1)
+        .take_while(|&k| (k as f64 * bin_hz) < fmax)
+        .last()
+        .map_or(0, |k| k + 1);
     let mut pitches = Vec::new();
     let mut mags = Vec::new();
     for s in mag.chunks_exact(nb) {
@@ -42,7 +47,12 @@ pub fn estimate_tuning(mag: &[f32], n_fft: usize, sr: f64, bins_per_octave: usiz
         return 0.0;
     }
     let threshold = median_f32(&mut mags.clone());
-    let freqs: Vec<f32> = pitches.iter().zip(&mags).filter(|(_, &m)| m >= threshold).map(|(&p, _)| p).collect();
+    let freqs: Vec<f32> = pitches
+        .iter()
+        .zip(&mags)
+        .filter(|(_, &m)| m >= threshold)
+        .map(|(&p, _)| p)
+        .collect();
     pitch_tuning(&freqs, bins_per_octave)
 }
 
@@ -62,7 +72,13 @@ pub fn median_f32(v: &mut [f32]) -> f32 {
 /// librosa `pitch_tuning(frequencies, resolution=0.01, bins_per_octave)`.
 pub fn pitch_tuning(freqs: &[f32], bins_per_octave: usize) -> f64 {
     const N_BINS: usize = 100;
-    let edge = |j: usize| if j == N_BINS { 0.5 } else { j as f64 * (1.0 / N_BINS as f64) - 0.5 };
+    let edge = |j: usize| {
+        if j == N_BINS {
+            0.5
+        } else {
+            j as f64 * (1.0 / N_BINS as f64) - 0.5
+        }
+    };
     let mut counts = [0usize; N_BINS];
     let mut any = false;
     for &f in freqs.iter().filter(|&&f| f > 0.0) {
@@ -88,6 +104,9 @@ pub fn pitch_tuning(freqs: &[f32], bins_per_octave: usize) -> f64 {
     if !any {
         return 0.0;
     }
-    let best = counts.iter().enumerate().fold(0, |b, (j, &c)| if c > counts[b] { j } else { b });
+    let best = counts
+        .iter()
+        .enumerate()
+        .fold(0, |b, (j, &c)| if c > counts[b] { j } else { b });
     edge(best)
 }

@@ -45,7 +45,13 @@ pub struct Capsule {
 }
 
 const fn bone(parent: usize, child: usize, radius: f32, part: Part) -> Capsule {
-    Capsule { a: End::Joint(parent), b: End::Joint(child), radius, bind: parent, part }
+    Capsule {
+        a: End::Joint(parent),
+        b: End::Joint(child),
+        radius,
+        bind: parent,
+        part,
+    }
 }
 
 /// The mannequin: 47 capsules (trunk, head, legs, arms, palms and finger
@@ -53,22 +59,32 @@ const fn bone(parent: usize, child: usize, radius: f32, part: Part) -> Capsule {
 pub const CAPSULES: [Capsule; 47] = {
     use Part::{Arm, Leg, Trunk};
     [
-        bone(0, 1, 0.085, Trunk),  // pelvis -> left hip
-        bone(0, 2, 0.085, Trunk),  // pelvis -> right hip
-        bone(0, 3, 0.11, Trunk),   // pelvis -> spine1
-        bone(3, 6, 0.11, Trunk),   // spine1 -> spine2
-        bone(6, 9, 0.12, Trunk),   // spine2 -> spine3
-        bone(9, 12, 0.06, Trunk),  // spine3 -> neck
-        bone(9, 13, 0.06, Trunk),  // spine3 -> left collar
-        bone(9, 14, 0.06, Trunk),  // spine3 -> right collar
+        bone(0, 1, 0.085, Trunk),   // pelvis -> left hip
+        bone(0, 2, 0.085, Trunk),   // pelvis -> right hip
+        bone(0, 3, 0.11, Trunk),    // pelvis -> spine1
+        bone(3, 6, 0.11, Trunk),    // spine1 -> spine2
+        bone(6, 9, 0.12, Trunk),    // spine2 -> spine3
+        bone(9, 12, 0.06, Trunk),   // spine3 -> neck
+        bone(9, 13, 0.06, Trunk),   // spine3 -> left collar
+        bone(9, 14, 0.06, Trunk),   // spine3 -> right collar
         bone(13, 16, 0.055, Trunk), // collar -> shoulder
         bone(14, 17, 0.055, Trunk),
         bone(12, 15, 0.05, Trunk), // neck -> head
         // The skull: the neck -> head bone continued by its own length.
-        Capsule { a: End::Joint(15), b: End::Beyond { from: 12, to: 15, k: 1.0 }, radius: 0.095, bind: 12, part: Trunk },
-        bone(1, 4, 0.075, Leg),  // thighs
+        Capsule {
+            a: End::Joint(15),
+            b: End::Beyond {
+                from: 12,
+                to: 15,
+                k: 1.0,
+            },
+            radius: 0.095,
+            bind: 12,
+            part: Trunk,
+        },
+        bone(1, 4, 0.075, Leg), // thighs
         bone(2, 5, 0.075, Leg),
-        bone(4, 7, 0.055, Leg),  // shins
+        bone(4, 7, 0.055, Leg), // shins
         bone(5, 8, 0.055, Leg),
         bone(7, 10, 0.045, Leg), // feet
         bone(8, 11, 0.045, Leg),
@@ -150,7 +166,11 @@ pub fn segment_distance(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> f32 {
         } else {
             let b = dot(d1, d2);
             let denom = a * e - b * b;
-            let mut s0 = if denom > EPS { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let mut s0 = if denom > EPS {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             let mut t0 = (b * s0 + f) / e;
             if t0 < 0.0 {
                 t0 = 0.0;
@@ -173,8 +193,17 @@ pub fn segment_distance(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> f32 {
 /// pair of capsules of `parts`, one from each dancer. `a` and `b` are
 /// (T, 165) world positions (the shorter length is used); `scale_a` and
 /// `scale_b` scale the radii (see [`radius_scale`]).
-pub fn overlap_depths(a: &[f32], b: &[f32], scale_a: f32, scale_b: f32, parts: &[Part]) -> Vec<f32> {
-    let caps: Vec<&Capsule> = CAPSULES.iter().filter(|c| parts.contains(&c.part)).collect();
+pub fn overlap_depths(
+    a: &[f32],
+    b: &[f32],
+    scale_a: f32,
+    scale_b: f32,
+    parts: &[Part],
+) -> Vec<f32> {
+    let caps: Vec<&Capsule> = CAPSULES
+        .iter()
+        .filter(|c| parts.contains(&c.part))
+        .collect();
     let frame = |row: &[f32]| -> [Vec3; JOINTS] {
         let mut p = [[0.0f32; 3]; JOINTS];
         for (j, q) in p.iter_mut().enumerate() {
@@ -186,8 +215,14 @@ pub fn overlap_depths(a: &[f32], b: &[f32], scale_a: f32, scale_b: f32, parts: &
         .zip(b.chunks_exact(POS_DIM))
         .map(|(ra, rb)| {
             let (pa, pb) = (frame(ra), frame(rb));
-            let sa: Vec<(Vec3, Vec3, f32)> = caps.iter().map(|c| (end_point(c.a, &pa), end_point(c.b, &pa), c.radius * scale_a)).collect();
-            let sb: Vec<(Vec3, Vec3, f32)> = caps.iter().map(|c| (end_point(c.a, &pb), end_point(c.b, &pb), c.radius * scale_b)).collect();
+            let sa: Vec<(Vec3, Vec3, f32)> = caps
+                .iter()
+                .map(|c| (end_point(c.a, &pa), end_point(c.b, &pa), c.radius * scale_a))
+                .collect();
+            let sb: Vec<(Vec3, Vec3, f32)> = caps
+                .iter()
+                .map(|c| (end_point(c.a, &pb), end_point(c.b, &pb), c.radius * scale_b))
+                .collect();
             let mut deepest = 0.0f32;
             for &(p1, q1, r1) in &sa {
                 for &(p2, q2, r2) in &sb {
@@ -259,15 +294,24 @@ fn overlap_stats(mut d: Vec<f32>) -> OverlapStats {
     let visible = d.iter().filter(|&&v| v > VISIBLE_DEPTH_M).count() as f32 / n;
     let mean = (d.iter().map(|&v| v as f64).sum::<f64>() / d.len() as f64) as f32;
     d.sort_unstable_by(f32::total_cmp);
-    OverlapStats { frames_overlapping: over, frames_over_2cm: visible, depth_mean_m: mean, depth_p95_m: nearest_rank(&d, 0.95), depth_max_m: d[d.len() - 1] }
+    OverlapStats {
+        frames_overlapping: over,
+        frames_over_2cm: visible,
+        depth_mean_m: mean,
+        depth_p95_m: nearest_rank(&d, 0.95),
+        depth_max_m: d[d.len() - 1],
+    }
 }
 
 /// Interpenetration of dancers `a` and `b` ((T, 165) world positions each;
 /// the shorter length is used) whose capsule radii scale by `scale_a`,
 /// `scale_b` (see [`radius_scale`]).
 pub fn interpenetration(a: &[f32], b: &[f32], scale_a: f32, scale_b: f32) -> Interpenetration {
-    let mut pelvis: Vec<f32> =
-        a.chunks_exact(POS_DIM).zip(b.chunks_exact(POS_DIM)).map(|(fa, fb)| norm(sub([fa[0], fa[1], fa[2]], [fb[0], fb[1], fb[2]]))).collect();
+    let mut pelvis: Vec<f32> = a
+        .chunks_exact(POS_DIM)
+        .zip(b.chunks_exact(POS_DIM))
+        .map(|(fa, fb)| norm(sub([fa[0], fa[1], fa[2]], [fb[0], fb[1], fb[2]])))
+        .collect();
     let frames = pelvis.len();
     if frames == 0 {
         return Interpenetration::default();
@@ -277,11 +321,27 @@ pub fn interpenetration(a: &[f32], b: &[f32], scale_a: f32, scale_b: f32) -> Int
     pelvis.sort_unstable_by(f32::total_cmp);
     Interpenetration {
         frames,
-        pelvis_distance_m: DistanceStats { min: pelvis[0], p5: nearest_rank(&pelvis, 0.05), mean },
+        pelvis_distance_m: DistanceStats {
+            min: pelvis[0],
+            p5: nearest_rank(&pelvis, 0.05),
+            mean,
+        },
         frames_pelvis_under_0_25_m: close,
         trunk_capsules: overlap_stats(overlap_depths(a, b, scale_a, scale_b, &[Part::Trunk])),
-        body_capsules: overlap_stats(overlap_depths(a, b, scale_a, scale_b, &[Part::Trunk, Part::Leg])),
-        all_capsules: overlap_stats(overlap_depths(a, b, scale_a, scale_b, &[Part::Trunk, Part::Leg, Part::Arm])),
+        body_capsules: overlap_stats(overlap_depths(
+            a,
+            b,
+            scale_a,
+            scale_b,
+            &[Part::Trunk, Part::Leg],
+        )),
+        all_capsules: overlap_stats(overlap_depths(
+            a,
+            b,
+            scale_a,
+            scale_b,
+            &[Part::Trunk, Part::Leg, Part::Arm],
+        )),
     }
 }
 
@@ -292,15 +352,39 @@ mod tests {
     #[test]
     fn segment_distance_cases() {
         // Parallel, 1 apart.
-        assert!((segment_distance([0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]) - 1.0).abs() < 1e-6);
+        assert!(
+            (segment_distance([0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]) - 1.0)
+                .abs()
+                < 1e-6
+        );
         // Crossing at right angles, 0.5 apart in z.
-        assert!((segment_distance([-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.5], [0.0, 1.0, 0.5]) - 0.5).abs() < 1e-6);
+        assert!(
+            (segment_distance(
+                [-1.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, -1.0, 0.5],
+                [0.0, 1.0, 0.5]
+            ) - 0.5)
+                .abs()
+                < 1e-6
+        );
         // End to end along a line.
-        assert!((segment_distance([0.0; 3], [1.0, 0.0, 0.0], [3.0, 0.0, 0.0], [4.0, 0.0, 0.0]) - 2.0).abs() < 1e-6);
+        assert!(
+            (segment_distance([0.0; 3], [1.0, 0.0, 0.0], [3.0, 0.0, 0.0], [4.0, 0.0, 0.0]) - 2.0)
+                .abs()
+                < 1e-6
+        );
         // Points.
-        assert!((segment_distance([0.0; 3], [0.0; 3], [0.0, 3.0, 4.0], [0.0, 3.0, 4.0]) - 5.0).abs() < 1e-6);
+        assert!(
+            (segment_distance([0.0; 3], [0.0; 3], [0.0, 3.0, 4.0], [0.0, 3.0, 4.0]) - 5.0).abs()
+                < 1e-6
+        );
         // Point against a segment.
-        assert!((segment_distance([0.5, 2.0, 0.0], [0.5, 2.0, 0.0], [0.0; 3], [1.0, 0.0, 0.0]) - 2.0).abs() < 1e-6);
+        assert!(
+            (segment_distance([0.5, 2.0, 0.0], [0.5, 2.0, 0.0], [0.0; 3], [1.0, 0.0, 0.0]) - 2.0)
+                .abs()
+                < 1e-6
+        );
     }
 
     #[test]
@@ -308,8 +392,14 @@ mod tests {
         for c in CAPSULES {
             for e in [c.a, c.b] {
                 match e {
-                    End::Joint(j) => assert!(j == c.bind || super::super::parent(j) == Some(c.bind), "{c:?}"),
-                    End::Beyond { from, to, .. } => assert!(from == c.bind && super::super::parent(to) == Some(from), "{c:?}"),
+                    End::Joint(j) => assert!(
+                        j == c.bind || super::super::parent(j) == Some(c.bind),
+                        "{c:?}"
+                    ),
+                    End::Beyond { from, to, .. } => assert!(
+                        from == c.bind && super::super::parent(to) == Some(from),
+                        "{c:?}"
+                    ),
                 }
             }
             assert!(c.radius > 0.0);
@@ -319,23 +409,51 @@ mod tests {
     #[test]
     fn overlap_of_two_bodies() {
         let rest = Skeleton::default().rest_positions();
-        let row = |dz: f32| -> Vec<f32> { rest.iter().flat_map(|p| [p[0], p[1], p[2] + dz]).collect() };
+        let row =
+            |dz: f32| -> Vec<f32> { rest.iter().flat_map(|p| [p[0], p[1], p[2] + dz]).collect() };
         // The same body twice: the deepest pair is the chest (2 x 0.12).
         let same = overlap_depths(&row(0.0), &row(0.0), 1.0, 1.0, &[Part::Trunk]);
         assert!((same[0] - 0.24).abs() < 1e-5, "{same:?}");
         // 2 m apart: none.
-        assert_eq!(overlap_depths(&row(0.0), &row(2.0), 1.0, 1.0, &[Part::Trunk, Part::Leg, Part::Arm]), vec![0.0]);
+        assert_eq!(
+            overlap_depths(
+                &row(0.0),
+                &row(2.0),
+                1.0,
+                1.0,
+                &[Part::Trunk, Part::Leg, Part::Arm]
+            ),
+            vec![0.0]
+        );
         // 0.2 m apart in z: the chest capsules (0.24) overlap by ~0.04 (the spine3 tilt aside).
         let near = overlap_depths(&row(0.0), &row(0.2), 1.0, 1.0, &[Part::Trunk])[0];
         assert!(near > 0.03 && near < 0.06, "{near}");
         // Over a clip: one frame 0.2 m apart, three 2 m apart.
         let a: Vec<f32> = (0..4).flat_map(|_| row(0.0)).collect();
-        let b: Vec<f32> = [0.2, 2.0, 2.0, 2.0].iter().flat_map(|&dz| row(dz)).collect();
+        let b: Vec<f32> = [0.2, 2.0, 2.0, 2.0]
+            .iter()
+            .flat_map(|&dz| row(dz))
+            .collect();
         let r = interpenetration(&a, &b, 1.0, 1.0);
         assert_eq!(r.frames, 4);
-        assert!((r.pelvis_distance_m.min - 0.2).abs() < 1e-6 && (r.frames_pelvis_under_0_25_m - 0.25).abs() < 1e-6, "{r:?}");
-        assert!((r.trunk_capsules.frames_overlapping - 0.25).abs() < 1e-6 && (r.trunk_capsules.depth_max_m - near).abs() < 1e-6, "{r:?}");
-        assert!(r.body_capsules.depth_max_m >= near && r.all_capsules.depth_max_m >= r.body_capsules.depth_max_m, "{r:?}");
-        assert!((r.trunk_capsules.depth_mean_m - near / 4.0).abs() < 1e-6, "{r:?}");
+        assert!(
+            (r.pelvis_distance_m.min - 0.2).abs() < 1e-6
+                && (r.frames_pelvis_under_0_25_m - 0.25).abs() < 1e-6,
+            "{r:?}"
+        );
+        assert!(
+            (r.trunk_capsules.frames_overlapping - 0.25).abs() < 1e-6
+                && (r.trunk_capsules.depth_max_m - near).abs() < 1e-6,
+            "{r:?}"
+        );
+        assert!(
+            r.body_capsules.depth_max_m >= near
+                && r.all_capsules.depth_max_m >= r.body_capsules.depth_max_m,
+            "{r:?}"
+        );
+        assert!(
+            (r.trunk_capsules.depth_mean_m - near / 4.0).abs() < 1e-6,
+            "{r:?}"
+        );
     }
 }

@@ -27,7 +27,13 @@ pub struct ChainSolution {
 /// Solves the chain so that the end joint lands on `target` (when
 /// reachable), bending the middle joint towards `pole` (a world
 /// direction). `root_pos` is the world position of the chain's root joint.
-pub fn solve(skel: &Skeleton, chain: Chain, root_pos: Vec3, target: Vec3, pole: Vec3) -> ChainSolution {
+pub fn solve(
+    skel: &Skeleton,
+    chain: Chain,
+    root_pos: Vec3,
+    target: Vec3,
+    pole: Vec3,
+) -> ChainSolution {
     let l1 = norm(skel.offsets[chain.mid]);
     let l2 = norm(skel.offsets[chain.end]);
     let to_target = sub(target, root_pos);
@@ -42,9 +48,23 @@ pub fn solve(skel: &Skeleton, chain: Chain, root_pos: Vec3, target: Vec3, pole: 
     let sin_a = (1.0 - cos_a * cos_a).max(0.0).sqrt();
     let mid_pos = add(root_pos, scale(add(scale(u, cos_a), scale(v, sin_a)), l1));
     let end_pos = add(root_pos, scale(u, dist));
-    let root_world = align(skel.offsets[chain.mid], chain.rest_pole, sub(mid_pos, root_pos), pole);
-    let mid_world = align(skel.offsets[chain.end], chain.rest_pole, sub(end_pos, mid_pos), pole);
-    ChainSolution { root_world, mid_world, clamped }
+    let root_world = align(
+        skel.offsets[chain.mid],
+        chain.rest_pole,
+        sub(mid_pos, root_pos),
+        pole,
+    );
+    let mid_world = align(
+        skel.offsets[chain.end],
+        chain.rest_pole,
+        sub(end_pos, mid_pos),
+        pole,
+    );
+    ChainSolution {
+        root_world,
+        mid_world,
+        clamped,
+    }
 }
 
 /// Largest distance a chain can reach (just under full extension).

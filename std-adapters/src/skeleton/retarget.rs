@@ -15,7 +15,10 @@
 //!   children (least squares in the plane perpendicular to the bone).
 //! - leaves (feet, eyes, finger tips): local rotation identity.
 
-use super::math::{cross, dot, mat_mul, mat_vec, norm, normalize_or, scale, sub, axis_angle, swing, Mat3, Vec3, IDENTITY};
+use super::math::{
+    axis_angle, cross, dot, mat_mul, mat_vec, norm, normalize_or, scale, sub, swing, Mat3, Vec3,
+    IDENTITY,
+};
 use super::{children, parent, Skeleton, JOINTS};
 
 /// The child whose direction is matched exactly at a branching joint.
@@ -69,7 +72,14 @@ pub fn retarget(skel: &Skeleton, positions: &[Vec3; JOINTS]) -> [Mat3; JOINTS] {
 
 /// The twist angle about `axis` that best aligns `g offset[k]` with the
 /// observed `positions[k] - origin` for the secondary children `ks`.
-fn best_twist(g: &Mat3, skel: &Skeleton, axis: Vec3, ks: &[usize], positions: &[Vec3; JOINTS], origin: Vec3) -> f32 {
+fn best_twist(
+    g: &Mat3,
+    skel: &Skeleton,
+    axis: Vec3,
+    ks: &[usize],
+    positions: &[Vec3; JOINTS],
+    origin: Vec3,
+) -> f32 {
     let (mut s, mut c) = (0.0f32, 0.0f32);
     for &k in ks {
         let u = mat_vec(g, skel.offsets[k]);
@@ -108,7 +118,11 @@ pub fn measure_skeleton(template: &Skeleton, clip: &[[Vec3; JOINTS]]) -> Skeleto
         lengths.extend(clip.iter().map(|f| norm(sub(f[j], f[p]))));
         lengths.sort_unstable_by(f32::total_cmp);
         let n = lengths.len();
-        let median = if n % 2 == 1 { lengths[n / 2] } else { 0.5 * (lengths[n / 2 - 1] + lengths[n / 2]) };
+        let median = if n % 2 == 1 {
+            lengths[n / 2]
+        } else {
+            0.5 * (lengths[n / 2 - 1] + lengths[n / 2])
+        };
         let len = norm(template.offsets[j]);
         if median.is_finite() && median > 1e-5 && len > 1e-9 {
             out.offsets[j] = scale(template.offsets[j], median / len);
@@ -140,10 +154,19 @@ mod tests {
             })
             .collect();
         let m = measure_skeleton(&Skeleton::default(), &clip);
-        assert!((m.bone_length(21) - rig.bone_length(21)).abs() < 1e-6, "{} vs {}", m.bone_length(21), rig.bone_length(21));
+        assert!(
+            (m.bone_length(21) - rig.bone_length(21)).abs() < 1e-6,
+            "{} vs {}",
+            m.bone_length(21),
+            rig.bone_length(21)
+        );
         assert!((m.bone_length(19) - rig.bone_length(19)).abs() < 1e-6);
         // An even count takes the middle two's mean: 2 at rest, 2 stretched.
         let m = measure_skeleton(&Skeleton::default(), &clip[..4]);
-        assert!((m.bone_length(21) - 1.5 * rig.bone_length(21)).abs() < 1e-5, "{}", m.bone_length(21));
+        assert!(
+            (m.bone_length(21) - 1.5 * rig.bone_length(21)).abs() < 1e-5,
+            "{}",
+            m.bone_length(21)
+        );
     }
 }

@@ -46,13 +46,27 @@ pub fn to_smplx(pos24: &[f32]) -> Vec<f32> {
                 math::sub(w, e),
             );
             for j in FINGERS[side].clone() {
-                put(o, j, math::add(w, math::mat_vec(&r, math::sub(rest[j], rest[wrists[side]]))));
+                put(
+                    o,
+                    j,
+                    math::add(w, math::mat_vec(&r, math::sub(rest[j], rest[wrists[side]]))),
+                );
             }
         }
         let (neck, head) = (at(p, joint::NECK), at(p, joint::HEAD));
-        let r = math::swing(math::sub(rest[joint::HEAD], rest[joint::NECK]), math::sub(head, neck));
+        let r = math::swing(
+            math::sub(rest[joint::HEAD], rest[joint::NECK]),
+            math::sub(head, neck),
+        );
         for j in FACE {
-            put(o, j, math::add(head, math::mat_vec(&r, math::sub(rest[j], rest[joint::HEAD]))));
+            put(
+                o,
+                j,
+                math::add(
+                    head,
+                    math::mat_vec(&r, math::sub(rest[j], rest[joint::HEAD])),
+                ),
+            );
         }
     }
     out
@@ -82,10 +96,16 @@ mod tests {
         // The left hand bent 90 degrees at the wrist.
         let w = rest[joint::L_WRIST];
         let mut bent = p24.clone();
-        let down = math::add(w, [0.0, -math::norm(math::sub(rest[joint::L_MIDDLE1], w)), 0.0]);
+        let down = math::add(
+            w,
+            [0.0, -math::norm(math::sub(rest[joint::L_MIDDLE1], w)), 0.0],
+        );
         bent[66..69].copy_from_slice(&down);
         let x = to_smplx(&bent);
-        assert!(math::norm(math::sub(at(&x, joint::L_MIDDLE1), down)) < 1e-5, "the middle finger points where SMPL's hand is");
+        assert!(
+            math::norm(math::sub(at(&x, joint::L_MIDDLE1), down)) < 1e-5,
+            "the middle finger points where SMPL's hand is"
+        );
         for j in 25..40 {
             let want = math::norm(math::sub(rest[j], w));
             let got = math::norm(math::sub(at(&x, j), w));

@@ -62,9 +62,15 @@ impl Couple {
         let half = mat_vec(&rot_y(self.heading), [0.0, 0.0, 0.5 * self.distance]);
         let c = [self.center[0], 0.0, self.center[1]];
         if follower {
-            Body { pos: add(c, half), heading: self.heading + std::f32::consts::PI + self.spin }
+            Body {
+                pos: add(c, half),
+                heading: self.heading + std::f32::consts::PI + self.spin,
+            }
         } else {
-            Body { pos: [c[0] - half[0], 0.0, c[2] - half[2]], heading: self.heading }
+            Body {
+                pos: [c[0] - half[0], 0.0, c[2] - half[2]],
+                heading: self.heading,
+            }
         }
     }
 }
@@ -96,13 +102,23 @@ impl Plan {
     /// range unless `bpm` is given). `choreo` draws the figure sequence;
     /// `take` draws the follower's hidden responses, so two takes of one
     /// choreography share the leader's figures but not her answers.
-    pub fn new(genre: Genre, bpm: Option<f32>, seconds: f32, choreo: &mut Rng, take: &mut Rng) -> Plan {
+    pub fn new(
+        genre: Genre,
+        bpm: Option<f32>,
+        seconds: f32,
+        choreo: &mut Rng,
+        take: &mut Rng,
+    ) -> Plan {
         let (lo, hi) = genre.bpm_range();
-        let bpm = bpm.unwrap_or_else(|| choreo.range(lo, hi)).clamp(72.0, 163.0);
+        let bpm = bpm
+            .unwrap_or_else(|| choreo.range(lo, hi))
+            .clamp(72.0, 163.0);
         let period = 60.0 / bpm;
         let first_beat = choreo.range(0.05, period);
         let n_beats = ((seconds - first_beat) / period).ceil().max(1.0) as usize + 1;
-        let beats: Vec<f32> = (0..n_beats).map(|k| first_beat + k as f32 * period).collect();
+        let beats: Vec<f32> = (0..n_beats)
+            .map(|k| first_beat + k as f32 * period)
+            .collect();
         let bar = genre.beats_per_bar();
         let table = genre.figures();
         let mut figures = Vec::new();
@@ -125,25 +141,68 @@ impl Plan {
             let t0 = first_beat + beat * period;
             let distance = choreo.range(0.34, 0.52);
             let response = Response {
-                spin: if figure.hold == Hold::Underarm { [0i8, 1, -1][take.below(3)] } else { 0 },
-                arm_style: if figure.hold == Hold::Open { take.below(3) as u8 } else { 0 },
+                spin: if figure.hold == Hold::Underarm {
+                    [0i8, 1, -1][take.below(3)]
+                } else {
+                    0
+                },
+                arm_style: if figure.hold == Hold::Open {
+                    take.below(3) as u8
+                } else {
+                    0
+                },
                 swap_accent: take.chance(0.5),
             };
             let mut b = beat;
             for s in figure.steps {
-                steps.push(TimedStep { t0: first_beat + b * period, dur: s.beats * period, step: *s, figure: figures.len() });
+                steps.push(TimedStep {
+                    t0: first_beat + b * period,
+                    dur: s.beats * period,
+                    step: *s,
+                    figure: figures.len(),
+                });
                 b += s.beats;
             }
-            figures.push(PlacedFigure { figure, t0, t1: first_beat + b * period, distance, response });
+            figures.push(PlacedFigure {
+                figure,
+                t0,
+                t1: first_beat + b * period,
+                distance,
+                response,
+            });
             // Next figure on the next bar line (pauses fill the bar).
             beat = ((b / bar as f32).ceil() * bar as f32).max(b);
         }
-        let keys = Self::keyframes(&steps, &figures, choreo.range(0.0, TAU), choreo.range(0.38, 0.48));
-        Plan { genre, bpm, period, beats, beats_per_bar: bar, figures, steps, keys }
+        let keys = Self::keyframes(
+            &steps,
+            &figures,
+            choreo.range(0.0, TAU),
+            choreo.range(0.38, 0.48),
+        );
+        Plan {
+            genre,
+            bpm,
+            period,
+            beats,
+            beats_per_bar: bar,
+            figures,
+            steps,
+            keys,
+        }
     }
 
-    fn keyframes(steps: &[TimedStep], figures: &[PlacedFigure], heading: f32, distance: f32) -> Vec<Couple> {
-        let mut cur = Couple { center: [0.0, 0.0], heading, distance, spin: 0.0 };
+    fn keyframes(
+        steps: &[TimedStep],
+        figures: &[PlacedFigure],
+        heading: f32,
+        distance: f32,
+    ) -> Vec<Couple> {
+        let mut cur = Couple {
+            center: [0.0, 0.0],
+            heading,
+            distance,
+            spin: 0.0,
+        };
         let mut keys = vec![cur];
         for (i, ts) in steps.iter().enumerate() {
             let s = ts.step;
@@ -152,12 +211,22 @@ impl Plan {
                 cur.center = [cur.center[0] + d[0], cur.center[1] + d[2]];
                 cur.heading += s.turn;
                 let fig = &figures[ts.figure];
-                let first_weight_step = steps[..i].iter().rev().take_while(|p| p.figure == ts.figure).all(|p| p.step.kind != StepKind::Step);
+                let first_weight_step = steps[..i]
+                    .iter()
+                    .rev()
+                    .take_while(|p| p.figure == ts.figure)
+                    .all(|p| p.step.kind != StepKind::Step);
                 if first_weight_step {
                     cur.distance = fig.distance;
                 }
                 if fig.response.spin != 0 {
-                    let n = fig.figure.steps.iter().filter(|p| p.kind == StepKind::Step).count().max(1);
+                    let n = fig
+                        .figure
+                        .steps
+                        .iter()
+                        .filter(|p| p.kind == StepKind::Step)
+                        .count()
+                        .max(1);
                     cur.spin += fig.response.spin as f32 * TAU / n as f32;
                 }
             }
@@ -175,7 +244,9 @@ impl Plan {
 
     /// The couple frame at time `t` (smooth within steps, still between).
     pub fn couple_at(&self, t: f32) -> Couple {
-        let Some(i) = self.step_at(t) else { return self.keys[0] };
+        let Some(i) = self.step_at(t) else {
+            return self.keys[0];
+        };
         let ts = &self.steps[i];
         let (a, b) = (self.keys[i], self.keys[i + 1]);
         let s = ease((t - ts.t0) / ts.dur);

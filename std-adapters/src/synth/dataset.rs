@@ -63,7 +63,13 @@ pub fn plan_takes(minutes: f32, seed: u64) -> Vec<TakeEntry> {
         let choreo_seed = rng.next_u64();
         let takes = if rng.chance(0.5) { 2 } else { 1 };
         for take in 1..=takes {
-            let spec = TakeSpec { genre, seconds, bpm: None, choreo_seed, take_seed: rng.next_u64() };
+            let spec = TakeSpec {
+                genre,
+                seconds,
+                bpm: None,
+                choreo_seed,
+                take_seed: rng.next_u64(),
+            };
             out.push(TakeEntry {
                 stem: format!("{}_{:02}_{:02}", genre.name(), index, take),
                 split: if index % 5 == 0 { "test" } else { "train" },
@@ -100,7 +106,10 @@ pub fn write_take(dir: &Path, entry: &TakeEntry, take: &Take) -> Result<Vec<Path
         write_f32(&r, &track.rotmat_with_root(), &[t, 3 + ROT_DIM])?;
         files.push(r);
     }
-    let m = dir.join("music/feature").join(entry.split).join(format!("{}.npy", entry.stem));
+    let m = dir
+        .join("music/feature")
+        .join(entry.split)
+        .join(format!("{}.npy", entry.stem));
     write_f32(&m, &take.music, &[t, MUSIC_DIM])?;
     files.push(m);
     Ok(files)
@@ -116,7 +125,12 @@ fn hold_name(h: Hold) -> &'static str {
 
 /// Generates `minutes` of duets from `seed` into `dir`. `progress` is
 /// called after each take with (done, total).
-pub fn write_dataset(dir: &Path, minutes: f32, seed: u64, mut progress: impl FnMut(usize, usize)) -> Result<DatasetSummary> {
+pub fn write_dataset(
+    dir: &Path,
+    minutes: f32,
+    seed: u64,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<DatasetSummary> {
     mkdirs(dir)?;
     let entries = plan_takes(minutes, seed);
     let mut files = Vec::new();
@@ -151,12 +165,19 @@ pub fn write_dataset(dir: &Path, minutes: f32, seed: u64, mut progress: impl FnM
         "takes": meta,
     });
     let json_path = dir.join("takes.json");
-    fs::write(&json_path, serde_json::to_string_pretty(&index)?).with_context(|| format!("cannot write {}", json_path.display()))?;
+    fs::write(&json_path, serde_json::to_string_pretty(&index)?)
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
     files.push(json_path);
     let readme = dir.join("README.md");
-    fs::write(&readme, readme_text(seed, minutes, entries.len(), frames)).with_context(|| format!("cannot write {}", readme.display()))?;
+    fs::write(&readme, readme_text(seed, minutes, entries.len(), frames))
+        .with_context(|| format!("cannot write {}", readme.display()))?;
     files.push(readme);
-    Ok(DatasetSummary { takes: entries.len(), frames, seconds: frames as f32 / FPS, files })
+    Ok(DatasetSummary {
+        takes: entries.len(),
+        frames,
+        seconds: frames as f32 / FPS,
+        files,
+    })
 }
 
 fn readme_text(seed: u64, minutes: f32, takes: usize, frames: usize) -> String {

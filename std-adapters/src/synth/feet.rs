@@ -43,12 +43,18 @@ fn home(plan: &Plan, follower: bool, foot: usize, t: f32, scale: f32) -> FootPla
     let off = mat_vec(&rot_y(body.heading), [side * HALF_STANCE * scale, 0.0, 0.0]);
     let mut ankle = add(body.pos, off);
     ankle[1] = ANKLE_HEIGHT * scale;
-    FootPlace { ankle, yaw: body.heading + side * TOE_OUT }
+    FootPlace {
+        ankle,
+        yaw: body.heading + side * TOE_OUT,
+    }
 }
 
 /// Plans both feet of a dancer (`scale` is the rig scale).
 pub fn plan_feet(plan: &Plan, follower: bool, scale: f32) -> [FootTrack; 2] {
-    let mut tracks = [0, 1].map(|f| FootTrack { initial: home(plan, follower, f, 0.0, scale), swings: Vec::new() });
+    let mut tracks = [0, 1].map(|f| FootTrack {
+        initial: home(plan, follower, f, 0.0, scale),
+        swings: Vec::new(),
+    });
     let swing_frac = plan.genre.style().swing;
     for ts in &plan.steps {
         let foot = dancer_foot(ts.step.foot, follower);
@@ -67,19 +73,37 @@ pub fn plan_feet(plan: &Plan, follower: bool, scale: f32) -> [FootTrack; 2] {
             StepKind::Step => {
                 let land = ts.t0 + (swing_frac * ts.dur).max(0.1f32.min(ts.dur));
                 let to = home(plan, follower, foot, ts.t0 + ts.dur, scale);
-                Swing { lift, land, from, to, apex: None }
+                Swing {
+                    lift,
+                    land,
+                    from,
+                    to,
+                    apex: None,
+                }
             }
             StepKind::Tap => {
                 let heading = plan.couple_at(ts.t0).heading;
                 let d = mat_vec(&rot_y(heading), [ts.step.side, 0.0, ts.step.fwd]);
                 let apex = add(from.ankle, [d[0] * scale, 0.01, d[2] * scale]);
-                Swing { lift, land: ts.t0 + 0.9 * ts.dur, from, to: from, apex: Some(apex) }
+                Swing {
+                    lift,
+                    land: ts.t0 + 0.9 * ts.dur,
+                    from,
+                    to: from,
+                    apex: Some(apex),
+                }
             }
             StepKind::Kick => {
                 let body = plan.couple_at(ts.t0).body(follower);
                 let side = if foot == 0 { 1.0 } else { -1.0 };
                 let d = mat_vec(&rot_y(body.heading), [side * 0.25, 0.2, 0.12]);
-                Swing { lift, land: ts.t0 + 0.9 * ts.dur, from, to: from, apex: Some(add(from.ankle, scale3(d, scale))) }
+                Swing {
+                    lift,
+                    land: ts.t0 + 0.9 * ts.dur,
+                    from,
+                    to: from,
+                    apex: Some(add(from.ankle, scale3(d, scale))),
+                }
             }
         };
         track.swings.push(swing);
@@ -95,7 +119,9 @@ impl FootTrack {
     /// The foot's place at `t` and whether it is in contact (planted).
     pub fn at(&self, t: f32) -> (FootPlace, bool, f32) {
         let n = self.swings.partition_point(|s| s.lift <= t);
-        let Some(i) = n.checked_sub(1) else { return (self.initial, true, 0.0) };
+        let Some(i) = n.checked_sub(1) else {
+            return (self.initial, true, 0.0);
+        };
         let s = &self.swings[i];
         if t >= s.land {
             return (s.to, true, 0.0);

@@ -73,77 +73,423 @@ const R: Foot = Foot::Right;
 const D: f32 = PI / 180.0;
 
 const fn st(beats: f32, foot: Foot, side: f32, fwd: f32, turn_deg: f32) -> Step {
-    Step { beats, foot, side, fwd, turn: turn_deg * D, kind: StepKind::Step }
+    Step {
+        beats,
+        foot,
+        side,
+        fwd,
+        turn: turn_deg * D,
+        kind: StepKind::Step,
+    }
 }
 const fn tap(beats: f32, foot: Foot, side: f32, fwd: f32) -> Step {
-    Step { beats, foot, side, fwd, turn: 0.0, kind: StepKind::Tap }
+    Step {
+        beats,
+        foot,
+        side,
+        fwd,
+        turn: 0.0,
+        kind: StepKind::Tap,
+    }
 }
 const fn kick(beats: f32, foot: Foot) -> Step {
-    Step { beats, foot, side: 0.0, fwd: 0.3, turn: 0.0, kind: StepKind::Kick }
+    Step {
+        beats,
+        foot,
+        side: 0.0,
+        fwd: 0.3,
+        turn: 0.0,
+        kind: StepKind::Kick,
+    }
 }
 const fn fig(name: &'static str, hold: Hold, steps: &'static [Step]) -> Figure {
     Figure { name, hold, steps }
 }
 
 const WALTZ: &[Figure] = &[
-    fig("box_forward", Hold::Closed, &[st(1.0, L, 0.0, 0.28, 0.0), st(1.0, R, -0.22, 0.0, 0.0), st(1.0, L, 0.0, 0.0, 0.0)]),
-    fig("box_back", Hold::Closed, &[st(1.0, R, 0.0, -0.28, 0.0), st(1.0, L, 0.22, 0.0, 0.0), st(1.0, R, 0.0, 0.0, 0.0)]),
-    fig("natural_turn", Hold::Closed, &[st(1.0, R, 0.0, 0.28, -45.0), st(1.0, L, 0.2, 0.0, -45.0), st(1.0, R, 0.0, 0.0, -10.0)]),
-    fig("reverse_turn", Hold::Closed, &[st(1.0, L, 0.0, 0.28, 45.0), st(1.0, R, -0.2, 0.0, 45.0), st(1.0, L, 0.0, 0.0, 10.0)]),
-    fig("hesitation", Hold::Closed, &[st(1.0, L, 0.0, 0.25, 0.0), tap(2.0, R, 0.0, 0.15)]),
-    fig("promenade", Hold::Open, &[st(1.0, L, 0.24, 0.0, 0.0), st(1.0, R, 0.2, 0.0, 0.0), st(1.0, L, 0.0, 0.0, 0.0)]),
-    fig("underarm_turn", Hold::Underarm, &[st(1.0, L, 0.0, 0.18, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(1.0, L, 0.0, 0.0, 0.0), st(1.0, R, 0.0, -0.18, 0.0), st(1.0, L, 0.0, 0.0, 0.0), st(1.0, R, 0.0, 0.0, 0.0)]),
+    fig(
+        "box_forward",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.0, 0.28, 0.0),
+            st(1.0, R, -0.22, 0.0, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "box_back",
+        Hold::Closed,
+        &[
+            st(1.0, R, 0.0, -0.28, 0.0),
+            st(1.0, L, 0.22, 0.0, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "natural_turn",
+        Hold::Closed,
+        &[
+            st(1.0, R, 0.0, 0.28, -45.0),
+            st(1.0, L, 0.2, 0.0, -45.0),
+            st(1.0, R, 0.0, 0.0, -10.0),
+        ],
+    ),
+    fig(
+        "reverse_turn",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.0, 0.28, 45.0),
+            st(1.0, R, -0.2, 0.0, 45.0),
+            st(1.0, L, 0.0, 0.0, 10.0),
+        ],
+    ),
+    fig(
+        "hesitation",
+        Hold::Closed,
+        &[st(1.0, L, 0.0, 0.25, 0.0), tap(2.0, R, 0.0, 0.15)],
+    ),
+    fig(
+        "promenade",
+        Hold::Open,
+        &[
+            st(1.0, L, 0.24, 0.0, 0.0),
+            st(1.0, R, 0.2, 0.0, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "underarm_turn",
+        Hold::Underarm,
+        &[
+            st(1.0, L, 0.0, 0.18, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            st(1.0, R, 0.0, -0.18, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+        ],
+    ),
 ];
 
 const TANGO: &[Figure] = &[
-    fig("walks", Hold::Closed, &[st(2.0, L, 0.0, 0.34, 0.0), st(2.0, R, 0.0, 0.34, 0.0)]),
-    fig("progressive_link", Hold::Closed, &[st(1.0, L, 0.0, 0.3, 0.0), st(1.0, R, -0.08, 0.1, 0.0), st(2.0, L, 0.0, 0.0, 25.0)]),
-    fig("rock_turn", Hold::Closed, &[st(1.0, R, 0.0, 0.25, -30.0), st(1.0, L, 0.0, -0.18, -30.0), st(2.0, R, 0.0, 0.0, -30.0)]),
-    fig("corte", Hold::Closed, &[st(2.0, R, 0.0, -0.3, 0.0), st(2.0, L, 0.0, 0.3, 0.0)]),
-    fig("open_promenade", Hold::Open, &[st(2.0, L, 0.3, 0.0, 0.0), st(1.0, R, 0.25, 0.0, 0.0), st(1.0, L, 0.0, 0.0, 0.0)]),
-    fig("tap_and_close", Hold::Closed, &[tap(2.0, L, 0.25, 0.0), st(2.0, L, 0.0, 0.0, 0.0)]),
+    fig(
+        "walks",
+        Hold::Closed,
+        &[st(2.0, L, 0.0, 0.34, 0.0), st(2.0, R, 0.0, 0.34, 0.0)],
+    ),
+    fig(
+        "progressive_link",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.0, 0.3, 0.0),
+            st(1.0, R, -0.08, 0.1, 0.0),
+            st(2.0, L, 0.0, 0.0, 25.0),
+        ],
+    ),
+    fig(
+        "rock_turn",
+        Hold::Closed,
+        &[
+            st(1.0, R, 0.0, 0.25, -30.0),
+            st(1.0, L, 0.0, -0.18, -30.0),
+            st(2.0, R, 0.0, 0.0, -30.0),
+        ],
+    ),
+    fig(
+        "corte",
+        Hold::Closed,
+        &[st(2.0, R, 0.0, -0.3, 0.0), st(2.0, L, 0.0, 0.3, 0.0)],
+    ),
+    fig(
+        "open_promenade",
+        Hold::Open,
+        &[
+            st(2.0, L, 0.3, 0.0, 0.0),
+            st(1.0, R, 0.25, 0.0, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "tap_and_close",
+        Hold::Closed,
+        &[tap(2.0, L, 0.25, 0.0), st(2.0, L, 0.0, 0.0, 0.0)],
+    ),
 ];
 
 const FOXTROT: &[Figure] = &[
-    fig("feather", Hold::Closed, &[st(2.0, R, 0.0, 0.35, 0.0), st(1.0, L, 0.0, 0.3, 0.0), st(1.0, R, 0.0, 0.3, 0.0)]),
-    fig("three_step", Hold::Closed, &[st(2.0, L, 0.0, 0.33, 0.0), st(1.0, R, 0.0, 0.3, 0.0), st(1.0, L, 0.0, 0.3, 0.0)]),
-    fig("reverse_turn", Hold::Closed, &[st(2.0, L, 0.0, 0.3, 40.0), st(1.0, R, -0.2, 0.0, 40.0), st(1.0, L, 0.0, -0.2, 20.0)]),
-    fig("natural_weave", Hold::Open, &[st(2.0, R, 0.0, 0.3, -30.0), st(1.0, L, 0.2, 0.0, -30.0), st(1.0, R, 0.0, -0.25, 0.0)]),
-    fig("underarm_turn", Hold::Underarm, &[st(2.0, L, 0.0, 0.2, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(1.0, L, 0.0, 0.0, 0.0), st(2.0, R, 0.0, -0.2, 0.0), st(1.0, L, 0.0, 0.0, 0.0), st(1.0, R, 0.0, 0.0, 0.0)]),
+    fig(
+        "feather",
+        Hold::Closed,
+        &[
+            st(2.0, R, 0.0, 0.35, 0.0),
+            st(1.0, L, 0.0, 0.3, 0.0),
+            st(1.0, R, 0.0, 0.3, 0.0),
+        ],
+    ),
+    fig(
+        "three_step",
+        Hold::Closed,
+        &[
+            st(2.0, L, 0.0, 0.33, 0.0),
+            st(1.0, R, 0.0, 0.3, 0.0),
+            st(1.0, L, 0.0, 0.3, 0.0),
+        ],
+    ),
+    fig(
+        "reverse_turn",
+        Hold::Closed,
+        &[
+            st(2.0, L, 0.0, 0.3, 40.0),
+            st(1.0, R, -0.2, 0.0, 40.0),
+            st(1.0, L, 0.0, -0.2, 20.0),
+        ],
+    ),
+    fig(
+        "natural_weave",
+        Hold::Open,
+        &[
+            st(2.0, R, 0.0, 0.3, -30.0),
+            st(1.0, L, 0.2, 0.0, -30.0),
+            st(1.0, R, 0.0, -0.25, 0.0),
+        ],
+    ),
+    fig(
+        "underarm_turn",
+        Hold::Underarm,
+        &[
+            st(2.0, L, 0.0, 0.2, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            st(2.0, R, 0.0, -0.2, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+        ],
+    ),
 ];
 
 const QUICKSTEP: &[Figure] = &[
-    fig("quarter_turn", Hold::Closed, &[st(2.0, R, 0.0, 0.32, -45.0), st(1.0, L, 0.2, 0.0, -45.0), st(1.0, R, 0.08, 0.0, 0.0), st(2.0, L, 0.16, 0.0, 0.0), st(2.0, R, 0.0, -0.25, 0.0)]),
-    fig("chasse", Hold::Closed, &[st(1.0, L, 0.2, 0.0, 0.0), st(1.0, R, 0.08, 0.0, 0.0), st(2.0, L, 0.2, 0.0, 0.0)]),
-    fig("lock_step", Hold::Closed, &[st(2.0, L, 0.0, 0.3, 0.0), st(1.0, R, 0.05, 0.2, 0.0), st(1.0, L, 0.0, 0.2, 0.0), st(2.0, R, 0.0, 0.3, 0.0), st(2.0, L, 0.0, 0.0, 0.0)]),
-    fig("hop_kicks", Hold::Open, &[kick(1.0, L), st(1.0, L, 0.0, 0.0, 0.0), kick(1.0, R), st(1.0, R, 0.0, 0.0, 0.0)]),
+    fig(
+        "quarter_turn",
+        Hold::Closed,
+        &[
+            st(2.0, R, 0.0, 0.32, -45.0),
+            st(1.0, L, 0.2, 0.0, -45.0),
+            st(1.0, R, 0.08, 0.0, 0.0),
+            st(2.0, L, 0.16, 0.0, 0.0),
+            st(2.0, R, 0.0, -0.25, 0.0),
+        ],
+    ),
+    fig(
+        "chasse",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.2, 0.0, 0.0),
+            st(1.0, R, 0.08, 0.0, 0.0),
+            st(2.0, L, 0.2, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "lock_step",
+        Hold::Closed,
+        &[
+            st(2.0, L, 0.0, 0.3, 0.0),
+            st(1.0, R, 0.05, 0.2, 0.0),
+            st(1.0, L, 0.0, 0.2, 0.0),
+            st(2.0, R, 0.0, 0.3, 0.0),
+            st(2.0, L, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "hop_kicks",
+        Hold::Open,
+        &[
+            kick(1.0, L),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            kick(1.0, R),
+            st(1.0, R, 0.0, 0.0, 0.0),
+        ],
+    ),
 ];
 
 const RUMBA: &[Figure] = &[
-    fig("basic", Hold::Closed, &[st(1.0, L, 0.0, 0.18, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(2.0, L, 0.14, -0.1, 0.0), st(1.0, R, 0.0, -0.18, 0.0), st(1.0, L, 0.0, 0.0, 0.0), st(2.0, R, -0.14, 0.1, 0.0)]),
-    fig("new_york", Hold::Open, &[st(1.0, L, 0.2, 0.0, 20.0), st(1.0, R, 0.0, 0.0, -20.0), st(2.0, L, -0.2, 0.0, 0.0)]),
-    fig("alemana", Hold::Underarm, &[st(1.0, L, 0.0, 0.15, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(2.0, L, 0.0, 0.0, 0.0), st(1.0, R, 0.0, -0.15, 0.0), st(1.0, L, 0.0, 0.0, 0.0), st(2.0, R, 0.0, 0.0, 0.0)]),
-    fig("side_steps", Hold::Closed, &[st(1.0, L, 0.2, 0.0, 0.0), st(1.0, R, 0.1, 0.0, 0.0), st(2.0, L, 0.2, 0.0, 0.0)]),
+    fig(
+        "basic",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.0, 0.18, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(2.0, L, 0.14, -0.1, 0.0),
+            st(1.0, R, 0.0, -0.18, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            st(2.0, R, -0.14, 0.1, 0.0),
+        ],
+    ),
+    fig(
+        "new_york",
+        Hold::Open,
+        &[
+            st(1.0, L, 0.2, 0.0, 20.0),
+            st(1.0, R, 0.0, 0.0, -20.0),
+            st(2.0, L, -0.2, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "alemana",
+        Hold::Underarm,
+        &[
+            st(1.0, L, 0.0, 0.15, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(2.0, L, 0.0, 0.0, 0.0),
+            st(1.0, R, 0.0, -0.15, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            st(2.0, R, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "side_steps",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.2, 0.0, 0.0),
+            st(1.0, R, 0.1, 0.0, 0.0),
+            st(2.0, L, 0.2, 0.0, 0.0),
+        ],
+    ),
 ];
 
 const CHACHA: &[Figure] = &[
-    fig("basic", Hold::Closed, &[st(1.0, L, 0.0, 0.2, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(0.5, L, 0.12, -0.1, 0.0), st(0.5, R, 0.06, 0.0, 0.0), st(1.0, L, 0.12, 0.0, 0.0), st(1.0, R, 0.0, -0.2, 0.0), st(1.0, L, 0.0, 0.0, 0.0), st(0.5, R, -0.12, 0.1, 0.0), st(0.5, L, -0.06, 0.0, 0.0), st(1.0, R, -0.12, 0.0, 0.0)]),
-    fig("hand_to_hand", Hold::Open, &[st(1.0, L, 0.0, -0.2, 30.0), st(1.0, R, 0.0, 0.0, -30.0), st(0.5, L, 0.12, 0.0, 0.0), st(0.5, R, 0.06, 0.0, 0.0), st(1.0, L, 0.12, 0.0, 0.0)]),
-    fig("spot_turn", Hold::Underarm, &[st(1.0, L, 0.0, 0.15, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(0.5, L, 0.0, -0.15, 0.0), st(0.5, R, 0.0, 0.0, 0.0), st(1.0, L, 0.0, 0.0, 0.0)]),
+    fig(
+        "basic",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.0, 0.2, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(0.5, L, 0.12, -0.1, 0.0),
+            st(0.5, R, 0.06, 0.0, 0.0),
+            st(1.0, L, 0.12, 0.0, 0.0),
+            st(1.0, R, 0.0, -0.2, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            st(0.5, R, -0.12, 0.1, 0.0),
+            st(0.5, L, -0.06, 0.0, 0.0),
+            st(1.0, R, -0.12, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "hand_to_hand",
+        Hold::Open,
+        &[
+            st(1.0, L, 0.0, -0.2, 30.0),
+            st(1.0, R, 0.0, 0.0, -30.0),
+            st(0.5, L, 0.12, 0.0, 0.0),
+            st(0.5, R, 0.06, 0.0, 0.0),
+            st(1.0, L, 0.12, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "spot_turn",
+        Hold::Underarm,
+        &[
+            st(1.0, L, 0.0, 0.15, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(0.5, L, 0.0, -0.15, 0.0),
+            st(0.5, R, 0.0, 0.0, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+        ],
+    ),
 ];
 
 const SAMBA: &[Figure] = &[
-    fig("basic_bounce", Hold::Closed, &[st(1.0, L, 0.0, 0.2, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(1.0, R, 0.0, -0.2, 0.0), st(1.0, L, 0.0, 0.0, 0.0)]),
-    fig("whisks", Hold::Closed, &[st(1.0, L, 0.18, 0.0, 0.0), tap(1.0, R, 0.0, -0.12), st(1.0, R, -0.18, 0.0, 0.0), tap(1.0, L, 0.0, -0.12)]),
-    fig("botafogo", Hold::Open, &[st(1.0, L, 0.15, 0.15, 25.0), st(1.0, R, 0.0, 0.0, 0.0), st(1.0, R, -0.15, 0.15, -25.0), st(1.0, L, 0.0, 0.0, 0.0)]),
-    fig("samba_roll", Hold::Underarm, &[st(1.0, L, 0.0, 0.12, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(1.0, L, 0.0, -0.12, 0.0), st(1.0, R, 0.0, 0.0, 0.0)]),
+    fig(
+        "basic_bounce",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.0, 0.2, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(1.0, R, 0.0, -0.2, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "whisks",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.18, 0.0, 0.0),
+            tap(1.0, R, 0.0, -0.12),
+            st(1.0, R, -0.18, 0.0, 0.0),
+            tap(1.0, L, 0.0, -0.12),
+        ],
+    ),
+    fig(
+        "botafogo",
+        Hold::Open,
+        &[
+            st(1.0, L, 0.15, 0.15, 25.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(1.0, R, -0.15, 0.15, -25.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "samba_roll",
+        Hold::Underarm,
+        &[
+            st(1.0, L, 0.0, 0.12, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(1.0, L, 0.0, -0.12, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+        ],
+    ),
 ];
 
 const JIVE: &[Figure] = &[
-    fig("fallaway_rock", Hold::Closed, &[st(1.0, L, 0.0, -0.2, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(0.5, L, 0.12, 0.0, 0.0), st(0.5, R, 0.05, 0.0, 0.0), st(1.0, L, 0.12, 0.0, 0.0), st(0.5, R, -0.12, 0.0, 0.0), st(0.5, L, -0.05, 0.0, 0.0), st(1.0, R, -0.12, 0.0, 0.0)]),
-    fig("kicks", Hold::Open, &[kick(1.0, L), st(1.0, L, 0.0, 0.0, 0.0), kick(1.0, R), st(1.0, R, 0.0, 0.0, 0.0)]),
-    fig("change_of_places", Hold::Underarm, &[st(1.0, L, 0.0, -0.15, 0.0), st(1.0, R, 0.0, 0.0, 0.0), st(0.5, L, 0.0, 0.0, 45.0), st(0.5, R, 0.0, 0.0, 45.0), st(1.0, L, 0.0, 0.0, 0.0), st(0.5, R, 0.0, 0.0, 45.0), st(0.5, L, 0.0, 0.0, 45.0), st(1.0, R, 0.0, 0.0, 0.0)]),
-    fig("link", Hold::Closed, &[st(1.0, L, 0.0, -0.2, 0.0), st(1.0, R, 0.0, 0.2, 0.0), st(0.5, L, 0.0, 0.0, 0.0), st(0.5, R, 0.0, 0.0, 0.0), st(1.0, L, 0.0, 0.0, 0.0)]),
+    fig(
+        "fallaway_rock",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.0, -0.2, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(0.5, L, 0.12, 0.0, 0.0),
+            st(0.5, R, 0.05, 0.0, 0.0),
+            st(1.0, L, 0.12, 0.0, 0.0),
+            st(0.5, R, -0.12, 0.0, 0.0),
+            st(0.5, L, -0.05, 0.0, 0.0),
+            st(1.0, R, -0.12, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "kicks",
+        Hold::Open,
+        &[
+            kick(1.0, L),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            kick(1.0, R),
+            st(1.0, R, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "change_of_places",
+        Hold::Underarm,
+        &[
+            st(1.0, L, 0.0, -0.15, 0.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+            st(0.5, L, 0.0, 0.0, 45.0),
+            st(0.5, R, 0.0, 0.0, 45.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+            st(0.5, R, 0.0, 0.0, 45.0),
+            st(0.5, L, 0.0, 0.0, 45.0),
+            st(1.0, R, 0.0, 0.0, 0.0),
+        ],
+    ),
+    fig(
+        "link",
+        Hold::Closed,
+        &[
+            st(1.0, L, 0.0, -0.2, 0.0),
+            st(1.0, R, 0.0, 0.2, 0.0),
+            st(0.5, L, 0.0, 0.0, 0.0),
+            st(0.5, R, 0.0, 0.0, 0.0),
+            st(1.0, L, 0.0, 0.0, 0.0),
+        ],
+    ),
 ];
 
 /// Per-genre movement style.
@@ -177,8 +523,14 @@ pub enum Genre {
 impl Genre {
     /// Every genre.
     pub const ALL: [Genre; 8] = [
-        Genre::Waltz, Genre::Tango, Genre::Foxtrot, Genre::Quickstep,
-        Genre::Rumba, Genre::ChaCha, Genre::Samba, Genre::Jive,
+        Genre::Waltz,
+        Genre::Tango,
+        Genre::Foxtrot,
+        Genre::Quickstep,
+        Genre::Rumba,
+        Genre::ChaCha,
+        Genre::Samba,
+        Genre::Jive,
     ];
 
     /// The name used in take file names.
@@ -234,7 +586,13 @@ impl Genre {
 
     /// Movement style.
     pub fn style(self) -> Style {
-        let s = |rise, bounce, hip_roll, crouch, swing| Style { rise, bounce, hip_roll, crouch, swing };
+        let s = |rise, bounce, hip_roll, crouch, swing| Style {
+            rise,
+            bounce,
+            hip_roll,
+            crouch,
+            swing,
+        };
         match self {
             Genre::Waltz => s(0.05, 0.0, 0.02, 0.03, 0.6),
             Genre::Tango => s(0.0, 0.0, 0.02, 0.06, 0.45),

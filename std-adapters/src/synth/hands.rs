@@ -81,7 +81,10 @@ pub fn upper_body(hold: Hold, resp: Response, f: &Frame) -> UpperBody {
                     [ll, at(pl, hl, sl, [-0.57, 0.5 + 0.12 * wave, 0.1])],
                     [free_follower(resp.arm_style), fr],
                 ],
-                curl: [[0.9, 0.1], [0.1 + 0.3 * (resp.arm_style == 2) as u8 as f32, 0.9]],
+                curl: [
+                    [0.9, 0.1],
+                    [0.1 + 0.3 * (resp.arm_style == 2) as u8 as f32, 0.9],
+                ],
                 collar: [[0.0, 0.05], [0.05, 0.0]],
                 head_yaw: [0.3, -0.3],
                 head_pitch: [0.0, 0.0],

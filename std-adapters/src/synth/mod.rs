@@ -23,5 +23,11 @@ pub use take::{generate as generate_take, DancerTrack, FigureLog, Take, TakeSpec
 /// picked from `seed`.
 pub fn demo_take(seed: u64, seconds: f32) -> Take {
     let genre = Genre::ALL[(seed % Genre::ALL.len() as u64) as usize];
-    generate_take(&TakeSpec { genre, seconds, bpm: None, choreo_seed: seed, take_seed: seed ^ 0x5eed })
+    generate_take(&TakeSpec {
+        genre,
+        seconds,
+        bpm: None,
+        choreo_seed: seed,
+        take_seed: seed ^ 0x5eed,
+    })
 }

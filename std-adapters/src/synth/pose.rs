@@ -5,7 +5,10 @@
 use super::feet::FootPlace;
 use crate::skeleton::fk::{forward_kinematics, Pose};
 use crate::skeleton::ik::{self, Chain};
-use crate::skeleton::math::{add, mat_mul, mat_vec, norm, normalize_or, rot_x, rot_y, rot_z, sub, transpose, Mat3, Vec3, IDENTITY};
+use crate::skeleton::math::{
+    add, mat_mul, mat_vec, norm, normalize_or, rot_x, rot_y, rot_z, sub, transpose, Mat3, Vec3,
+    IDENTITY,
+};
 use crate::skeleton::{joint, Skeleton, JOINTS};
 
 /// Everything that defines one frame of a dancer.
@@ -33,12 +36,32 @@ pub struct Targets {
 }
 
 const LEGS: [Chain; 2] = [
-    Chain { root: joint::L_HIP, mid: joint::L_KNEE, end: joint::L_ANKLE, rest_pole: [0.0, 0.0, 1.0] },
-    Chain { root: joint::R_HIP, mid: joint::R_KNEE, end: joint::R_ANKLE, rest_pole: [0.0, 0.0, 1.0] },
+    Chain {
+        root: joint::L_HIP,
+        mid: joint::L_KNEE,
+        end: joint::L_ANKLE,
+        rest_pole: [0.0, 0.0, 1.0],
+    },
+    Chain {
+        root: joint::R_HIP,
+        mid: joint::R_KNEE,
+        end: joint::R_ANKLE,
+        rest_pole: [0.0, 0.0, 1.0],
+    },
 ];
 const ARMS: [Chain; 2] = [
-    Chain { root: joint::L_SHOULDER, mid: joint::L_ELBOW, end: joint::L_WRIST, rest_pole: [0.0, 0.0, -1.0] },
-    Chain { root: joint::R_SHOULDER, mid: joint::R_ELBOW, end: joint::R_WRIST, rest_pole: [0.0, 0.0, -1.0] },
+    Chain {
+        root: joint::L_SHOULDER,
+        mid: joint::L_ELBOW,
+        end: joint::L_WRIST,
+        rest_pole: [0.0, 0.0, -1.0],
+    },
+    Chain {
+        root: joint::R_SHOULDER,
+        mid: joint::R_ELBOW,
+        end: joint::R_WRIST,
+        rest_pole: [0.0, 0.0, -1.0],
+    },
 ];
 /// Fraction of full leg reach allowed before the pelvis is lowered.
 const LEG_SLACK: f32 = 0.985;
@@ -66,7 +89,11 @@ fn reachable_pelvis(skel: &Skeleton, t: &Targets, g0: &Mat3) -> Vec3 {
 /// Local rotations of every finger joint for a curl `c` (left hand `side`
 /// = 0 bends about -z, right hand about +z; thumbs fold across the palm).
 fn finger_local(j: usize, c: f32) -> Mat3 {
-    let (left, k) = if (25..40).contains(&j) { (true, j - 25) } else { (false, j - 40) };
+    let (left, k) = if (25..40).contains(&j) {
+        (true, j - 25)
+    } else {
+        (false, j - 40)
+    };
     let s = if left { -1.0 } else { 1.0 };
     let thumb = k >= 12;
     match (thumb, k % 3) {
@@ -109,11 +136,19 @@ pub fn solve(skel: &Skeleton, t: &Targets) -> ([Mat3; JOINTS], Pose) {
     let body = rot_y(t.heading);
     for (i, arm) in ARMS.iter().enumerate() {
         let side = if i == 0 { 1.0 } else { -1.0 };
-        let collar = if i == 0 { joint::L_COLLAR } else { joint::R_COLLAR };
+        let collar = if i == 0 {
+            joint::L_COLLAR
+        } else {
+            joint::R_COLLAR
+        };
         let shoulder = trunk.positions[arm.root];
         let reach_dir = sub(t.hands[i], shoulder);
         // Elbow points down, back and out; more out when the hand is high.
-        let up = if norm(reach_dir) > 1e-6 { reach_dir[1] / norm(reach_dir) } else { 0.0 };
+        let up = if norm(reach_dir) > 1e-6 {
+            reach_dir[1] / norm(reach_dir)
+        } else {
+            0.0
+        };
         let pole = mat_vec(&body, [side * (0.3 + 0.7 * up.max(0.0)), -1.0, -0.4]);
         let sol = ik::solve(skel, *arm, shoulder, t.hands[i], pole);
         local[arm.root] = mat_mul(&transpose(&trunk.world[collar]), &sol.root_world);

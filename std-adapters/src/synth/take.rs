@@ -1,7 +1,7 @@
 //! Generates one take: plan -> per-frame targets -> IK -> FK, for both
 //! dancers, plus the music feature track.
 
-use super::choreography::{ease, Plan, PlacedFigure, Response};
+use super::choreography::{ease, PlacedFigure, Plan, Response};
 use super::feet::{plan_feet, FootPlace, FootTrack};
 use super::genre::{Genre, Hold};
 use super::hands::{blend, upper_body, Frame, UpperBody};
@@ -18,9 +18,9 @@ pub const FPS: f32 = 30.0;
 #[derive(Clone, Debug)]
 pub struct DancerTrack {
     pub skeleton: Skeleton,
-    pub roots: Vec<f32>,     // (T, 3) pelvis world position
-    pub rotmats: Vec<f32>,   // (T, 495) local rotations, row-major 3x3 per joint
-    pub positions: Vec<f32>, // (T, 165) world joint positions (FK of the above)
+    pub roots: Vec<f32>,          // (T, 3) pelvis world position
+    pub rotmats: Vec<f32>,        // (T, 495) local rotations, row-major 3x3 per joint
+    pub positions: Vec<f32>,      // (T, 165) world joint positions (FK of the above)
     pub contacts: Vec<[bool; 2]>, // (T, 2) left/right foot planted
 }
 
@@ -78,7 +78,14 @@ pub struct TakeSpec {
 fn hold_targets(fig: Option<&PlacedFigure>) -> (Hold, Response) {
     match fig {
         Some(f) => (f.figure.hold, f.response),
-        None => (Hold::Closed, Response { spin: 0, arm_style: 0, swap_accent: false }),
+        None => (
+            Hold::Closed,
+            Response {
+                spin: 0,
+                arm_style: 0,
+                swap_accent: false,
+            },
+        ),
     }
 }
 
@@ -89,10 +96,19 @@ const HOLD_BLEND: f32 = 0.4;
 pub fn generate(spec: &TakeSpec) -> Take {
     let mut choreo = Rng::new(spec.choreo_seed, 1);
     let mut take_rng = Rng::new(spec.take_seed, 2);
-    let plan = Plan::new(spec.genre, spec.bpm, spec.seconds, &mut choreo, &mut take_rng);
+    let plan = Plan::new(
+        spec.genre,
+        spec.bpm,
+        spec.seconds,
+        &mut choreo,
+        &mut take_rng,
+    );
     let scales = [choreo.range(0.98, 1.06), choreo.range(0.9, 0.97)];
     let skels = scales.map(Skeleton::adult);
-    let feet: [[FootTrack; 2]; 2] = [plan_feet(&plan, false, scales[0]), plan_feet(&plan, true, scales[1])];
+    let feet: [[FootTrack; 2]; 2] = [
+        plan_feet(&plan, false, scales[0]),
+        plan_feet(&plan, true, scales[1]),
+    ];
     let frames = (spec.seconds * FPS).round() as usize;
     let style = spec.genre.style();
     let first_beat = plan.beats.first().copied().unwrap_or(0.0);
@@ -110,7 +126,8 @@ pub fn generate(spec: &TakeSpec) -> Take {
         let bar = beat / plan.beats_per_bar as f32;
         let mut pelvis = [[0.0f32; 3]; 2];
         let mut heading = [0.0f32; 2];
-        let mut placed: [[(FootPlace, bool, f32); 2]; 2] = [[(feet[0][0].initial, true, 0.0); 2]; 2];
+        let mut placed: [[(FootPlace, bool, f32); 2]; 2] =
+            [[(feet[0][0].initial, true, 0.0); 2]; 2];
         for d in 0..2 {
             let body = couple.body(d == 1);
             let s = scales[d];
@@ -131,7 +148,13 @@ pub fn generate(spec: &TakeSpec) -> Take {
             pelvis[d] = p;
             heading[d] = body.heading;
         }
-        let frame = Frame { couple, pelvis, heading, scale: scales, beat };
+        let frame = Frame {
+            couple,
+            pelvis,
+            heading,
+            scale: scales,
+            beat,
+        };
         let upper = current_upper(&plan, time, &frame);
         let roll = style.hip_roll * (std::f32::consts::PI * beat).sin();
         for d in 0..2 {
@@ -173,7 +196,17 @@ pub fn generate(spec: &TakeSpec) -> Take {
         })
         .collect();
     let [leader, follower] = tracks;
-    Take { genre: spec.genre, bpm: plan.bpm, frames, beats: plan.beats.clone(), beats_per_bar: plan.beats_per_bar, leader, follower, music, figures }
+    Take {
+        genre: spec.genre,
+        bpm: plan.bpm,
+        frames,
+        beats: plan.beats.clone(),
+        beats_per_bar: plan.beats_per_bar,
+        leader,
+        follower,
+        music,
+        figures,
+    }
 }
 
 /// Upper-body targets at `time`, blending from the previous hold over

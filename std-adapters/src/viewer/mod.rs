@@ -90,7 +90,12 @@ pub enum ViewerDataError {
     #[error("{which}_pos3d has {len} floats, not a multiple of {ROW} (expected (T, {ROW}))")]
     RaggedMotion { which: &'static str, len: usize },
     #[error("{which}_pos3d[{frame}, {channel}] is not finite ({value})")]
-    NonFiniteMotion { which: &'static str, frame: usize, channel: usize, value: f32 },
+    NonFiniteMotion {
+        which: &'static str,
+        frame: usize,
+        channel: usize,
+        value: f32,
+    },
     #[error("beats has {len} values but the leader has {frames} frames (expected (T,))")]
     BeatsLength { len: usize, frames: usize },
     #[error("beats[{frame}] is not finite ({value})")]
@@ -125,10 +130,18 @@ fn check_motion(which: &'static str, m: &[f32]) -> Result<usize, ViewerDataError
         return Err(ViewerDataError::EmptyMotion { which });
     }
     if m.len() % ROW != 0 {
-        return Err(ViewerDataError::RaggedMotion { which, len: m.len() });
+        return Err(ViewerDataError::RaggedMotion {
+            which,
+            len: m.len(),
+        });
     }
     if let Some(i) = m.iter().position(|v| !v.is_finite()) {
-        return Err(ViewerDataError::NonFiniteMotion { which, frame: i / ROW, channel: i % ROW, value: m[i] });
+        return Err(ViewerDataError::NonFiniteMotion {
+            which,
+            frame: i / ROW,
+            channel: i % ROW,
+            value: m[i],
+        });
     }
     Ok(m.len() / ROW)
 }
@@ -136,7 +149,12 @@ fn check_motion(which: &'static str, m: &[f32]) -> Result<usize, ViewerDataError
 /// Checks an audio name: one non-empty path component, no separators, no `.`/`..`,
 /// no control characters.
 fn check_audio_name(name: &str) -> Result<(), ViewerDataError> {
-    let bad = |why| Err(ViewerDataError::BadAudioName { name: name.to_owned(), why });
+    let bad = |why| {
+        Err(ViewerDataError::BadAudioName {
+            name: name.to_owned(),
+            why,
+        })
+    };
     if name.is_empty() {
         return bad("empty");
     }
@@ -161,26 +179,46 @@ impl ViewerData<'_> {
         if !(self.fps.is_finite() && self.fps > 0.0 && self.fps <= MAX_FPS) {
             return Err(ViewerDataError::BadFps(self.fps));
         }
-        let leader_frames = self.leader_pos3d.map(|l| check_motion("leader", l)).transpose()?.unwrap_or(0);
+        let leader_frames = self
+            .leader_pos3d
+            .map(|l| check_motion("leader", l))
+            .transpose()?
+            .unwrap_or(0);
         let follower_frames = check_motion("follower", self.follower_pos3d)?;
         if let Some(b) = self.beats {
-            let frames = if self.leader_pos3d.is_some() { leader_frames } else { follower_frames };
+            let frames = if self.leader_pos3d.is_some() {
+                leader_frames
+            } else {
+                follower_frames
+            };
             if b.len() != frames {
-                return Err(ViewerDataError::BeatsLength { len: b.len(), frames });
+                return Err(ViewerDataError::BeatsLength {
+                    len: b.len(),
+                    frames,
+                });
             }
             if let Some(i) = b.iter().position(|v| !v.is_finite()) {
-                return Err(ViewerDataError::NonFiniteBeat { frame: i, value: b[i] });
+                return Err(ViewerDataError::NonFiniteBeat {
+                    frame: i,
+                    value: b[i],
+                });
             }
         }
         let token_rows = match self.tokens {
-            Some(t) if t.len() % TOKEN_STREAMS != 0 => return Err(ViewerDataError::RaggedTokens { len: t.len() }),
+            Some(t) if t.len() % TOKEN_STREAMS != 0 => {
+                return Err(ViewerDataError::RaggedTokens { len: t.len() })
+            }
             Some(t) => t.len() / TOKEN_STREAMS,
             None => 0,
         };
         if let Some(a) = self.audio_file {
             check_audio_name(a)?;
         }
-        Ok(ViewerDims { leader_frames, follower_frames, token_rows })
+        Ok(ViewerDims {
+            leader_frames,
+            follower_frames,
+            token_rows,
+        })
     }
 }
 
@@ -194,10 +232,15 @@ pub fn write_index_html(dir: &Path, data: &ViewerData) -> io::Result<PathBuf> {
             return Err(ViewerDataError::MissingAudio { path }.into());
         }
     }
-    std::fs::create_dir_all(dir)
-        .map_err(|e| io::Error::new(e.kind(), format!("creating viewer directory {}: {e}", dir.display())))?;
+    std::fs::create_dir_all(dir).map_err(|e| {
+        io::Error::new(
+            e.kind(),
+            format!("creating viewer directory {}: {e}", dir.display()),
+        )
+    })?;
     let path = dir.join("index.html");
-    std::fs::write(&path, html).map_err(|e| io::Error::new(e.kind(), format!("writing {}: {e}", path.display())))?;
+    std::fs::write(&path, html)
+        .map_err(|e| io::Error::new(e.kind(), format!("writing {}: {e}", path.display())))?;
     Ok(path)
 }
 
@@ -212,7 +255,9 @@ pub fn render_index_html(data: &ViewerData) -> Result<String, ViewerDataError> {
         ),
         None => String::new(),
     };
-    let mut out = String::with_capacity(TEMPLATE_HTML.len() + VIEWER_JS.len() + VIEWER_CSS.len() + json.len() + 256);
+    let mut out = String::with_capacity(
+        TEMPLATE_HTML.len() + VIEWER_JS.len() + VIEWER_CSS.len() + json.len() + 256,
+    );
     fill_template(TEMPLATE_HTML, &mut out, |name, out| match name {
         "TITLE" => {
             out.push_str(&escape_html(data.title));
@@ -242,13 +287,21 @@ pub fn render_index_html(data: &ViewerData) -> Result<String, ViewerDataError> {
 
 /// One pass over `template`: each `{{NAME}}` is replaced by `fill`, so substituted text
 /// is never scanned again. Unknown names are copied through unchanged.
-fn fill_template(template: &str, out: &mut String, mut fill: impl FnMut(&str, &mut String) -> bool) {
+fn fill_template(
+    template: &str,
+    out: &mut String,
+    mut fill: impl FnMut(&str, &mut String) -> bool,
+) {
     let mut rest = template;
     while let Some(start) = rest.find("{{") {
         out.push_str(&rest[..start]);
         let after = &rest[start + 2..];
         match after.find("}}") {
-            Some(end) if after[..end].bytes().all(|b| b.is_ascii_uppercase() || b == b'_') => {
+            Some(end)
+                if after[..end]
+                    .bytes()
+                    .all(|b| b.is_ascii_uppercase() || b == b'_') =>
+            {
                 let name = &after[..end];
                 if !fill(name, out) {
                     out.push_str(&rest[start..start + 2 + end + 2]);
@@ -276,7 +329,12 @@ fn data_json(d: &ViewerData, dims: &ViewerDims) -> String {
     );
     match d.leader_pos3d {
         Some(l) => {
-            let _ = write!(s, "\"leader\":{{\"frames\":{},\"f32\":\"{}\"}},", dims.leader_frames, base64_f32(l));
+            let _ = write!(
+                s,
+                "\"leader\":{{\"frames\":{},\"f32\":\"{}\"}},",
+                dims.leader_frames,
+                base64_f32(l)
+            );
         }
         None => s.push_str("\"leader\":null,"),
     }
@@ -288,7 +346,12 @@ fn data_json(d: &ViewerData, dims: &ViewerDims) -> String {
     );
     match d.beats {
         Some(b) => {
-            let _ = write!(s, "\"beats\":{{\"frames\":{},\"f32\":\"{}\"}},", b.len(), base64_f32(b));
+            let _ = write!(
+                s,
+                "\"beats\":{{\"frames\":{},\"f32\":\"{}\"}},",
+                b.len(),
+                base64_f32(b)
+            );
         }
         None => s.push_str("\"beats\":null,"),
     }
@@ -376,12 +439,24 @@ fn base64(bytes: &[u8]) -> String {
     const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
     for chunk in bytes.chunks(3) {
-        let b = [chunk[0], *chunk.get(1).unwrap_or(&0), *chunk.get(2).unwrap_or(&0)];
+        let b = [
+            chunk[0],
+            *chunk.get(1).unwrap_or(&0),
+            *chunk.get(2).unwrap_or(&0),
+        ];
         let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
         out.push(A[(n >> 18) as usize & 63] as char);
         out.push(A[(n >> 12) as usize & 63] as char);
-        out.push(if chunk.len() > 1 { A[(n >> 6) as usize & 63] as char } else { '=' });
-        out.push(if chunk.len() > 2 { A[n as usize & 63] as char } else { '=' });
+        out.push(if chunk.len() > 1 {
+            A[(n >> 6) as usize & 63] as char
+        } else {
+            '='
+        });
+        out.push(if chunk.len() > 2 {
+            A[n as usize & 63] as char
+        } else {
+            '='
+        });
     }
     out
 }
@@ -395,12 +470,28 @@ mod tests {
     }
 
     fn data<'a>(l: &'a [f32], f: &'a [f32]) -> ViewerData<'a> {
-        ViewerData { title: "t", fps: 30.0, leader_pos3d: Some(l), follower_pos3d: f, beats: None, tokens: None, audio_file: None }
+        ViewerData {
+            title: "t",
+            fps: 30.0,
+            leader_pos3d: Some(l),
+            follower_pos3d: f,
+            beats: None,
+            tokens: None,
+            audio_file: None,
+        }
     }
 
     #[test]
     fn base64_matches_rfc4648_vectors() {
-        let cases = [("", ""), ("f", "Zg=="), ("fo", "Zm8="), ("foo", "Zm9v"), ("foob", "Zm9vYg=="), ("fooba", "Zm9vYmE="), ("foobar", "Zm9vYmFy")];
+        let cases = [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ];
         for (plain, enc) in cases {
             assert_eq!(base64(plain.as_bytes()), enc, "{plain:?}");
         }
@@ -414,39 +505,96 @@ mod tests {
         let f = motion(6);
         assert_eq!(
             data(&l, &f).validate(),
-            Ok(ViewerDims { leader_frames: 8, follower_frames: 6, token_rows: 0 })
+            Ok(ViewerDims {
+                leader_frames: 8,
+                follower_frames: 6,
+                token_rows: 0
+            })
         );
-        assert_eq!(data(&[], &f).validate(), Err(ViewerDataError::EmptyMotion { which: "leader" }));
-        assert_eq!(data(&l, &l[..ROW + 1]).validate(), Err(ViewerDataError::RaggedMotion { which: "follower", len: ROW + 1 }));
+        assert_eq!(
+            data(&[], &f).validate(),
+            Err(ViewerDataError::EmptyMotion { which: "leader" })
+        );
+        assert_eq!(
+            data(&l, &l[..ROW + 1]).validate(),
+            Err(ViewerDataError::RaggedMotion {
+                which: "follower",
+                len: ROW + 1
+            })
+        );
         let mut bad = l.clone();
         bad[2 * ROW + 4] = f32::NAN;
         assert!(matches!(
             data(&bad, &f).validate(),
-            Err(ViewerDataError::NonFiniteMotion { which: "leader", frame: 2, channel: 4, .. })
+            Err(ViewerDataError::NonFiniteMotion {
+                which: "leader",
+                frame: 2,
+                channel: 4,
+                ..
+            })
         ));
         for fps in [0.0, -30.0, f32::NAN, f32::INFINITY, 5000.0] {
-            assert!(matches!(ViewerData { fps, ..data(&l, &f) }.validate(), Err(ViewerDataError::BadFps(_))), "{fps}");
+            assert!(
+                matches!(
+                    ViewerData {
+                        fps,
+                        ..data(&l, &f)
+                    }
+                    .validate(),
+                    Err(ViewerDataError::BadFps(_))
+                ),
+                "{fps}"
+            );
         }
         let beats = vec![0.0; 7];
         assert_eq!(
-            ViewerData { beats: Some(&beats), ..data(&l, &f) }.validate(),
+            ViewerData {
+                beats: Some(&beats),
+                ..data(&l, &f)
+            }
+            .validate(),
             Err(ViewerDataError::BeatsLength { len: 7, frames: 8 })
         );
         let beats = [0.0, 1.0, 0.0, f32::INFINITY, 0.0, 0.0, 0.0, 0.0];
         assert!(matches!(
-            ViewerData { beats: Some(&beats), ..data(&l, &f) }.validate(),
+            ViewerData {
+                beats: Some(&beats),
+                ..data(&l, &f)
+            }
+            .validate(),
             Err(ViewerDataError::NonFiniteBeat { frame: 3, .. })
         ));
         let tokens = [1u32; 7];
         assert_eq!(
-            ViewerData { tokens: Some(&tokens), ..data(&l, &f) }.validate(),
+            ViewerData {
+                tokens: Some(&tokens),
+                ..data(&l, &f)
+            }
+            .validate(),
             Err(ViewerDataError::RaggedTokens { len: 7 })
         );
         let tokens = [1u32; 10];
-        assert_eq!(ViewerData { tokens: Some(&tokens), ..data(&l, &f) }.validate().map(|d| d.token_rows), Ok(2));
-        for name in ["", ".", "..", "../x.wav", "a/b.wav", "a\\b.wav", "a\nb.wav", "C:x.wav"] {
+        assert_eq!(
+            ViewerData {
+                tokens: Some(&tokens),
+                ..data(&l, &f)
+            }
+            .validate()
+            .map(|d| d.token_rows),
+            Ok(2)
+        );
+        for name in [
+            "", ".", "..", "../x.wav", "a/b.wav", "a\\b.wav", "a\nb.wav", "C:x.wav",
+        ] {
             assert!(
-                matches!(ViewerData { audio_file: Some(name), ..data(&l, &f) }.validate(), Err(ViewerDataError::BadAudioName { .. })),
+                matches!(
+                    ViewerData {
+                        audio_file: Some(name),
+                        ..data(&l, &f)
+                    }
+                    .validate(),
+                    Err(ViewerDataError::BadAudioName { .. })
+                ),
                 "{name:?}"
             );
         }
@@ -456,13 +604,23 @@ mod tests {
     fn title_cannot_break_out_of_the_page() {
         let l = motion(2);
         let title = "</script><script>alert(1)</script><!-- & \u{2028} \"q\" {{DATA}}";
-        let html = render_index_html(&ViewerData { title, ..data(&l, &l) }).unwrap();
+        let html = render_index_html(&ViewerData {
+            title,
+            ..data(&l, &l)
+        })
+        .unwrap();
         // The only script elements are the page's own: one data block and one program.
         assert_eq!(html.matches("<script").count(), 2, "{}", &html[..400]);
         assert_eq!(html.matches("</script>").count(), 2);
         assert!(!html.contains("alert(1)</"));
-        assert!(html.contains("&lt;/script&gt;&lt;script&gt;alert(1)"), "title shown as text");
-        assert!(html.contains("\\u003c/script\\u003e\\u003cscript\\u003ealert(1)"), "title escaped in JSON");
+        assert!(
+            html.contains("&lt;/script&gt;&lt;script&gt;alert(1)"),
+            "title shown as text"
+        );
+        assert!(
+            html.contains("\\u003c/script\\u003e\\u003cscript\\u003ealert(1)"),
+            "title escaped in JSON"
+        );
         // The placeholder inside the title is not expanded a second time.
         assert_eq!(html.matches("\"leader\":").count(), 1);
         for name in ["{{TITLE}}", "{{STYLE}}", "{{SCRIPT}}", "{{AUDIO}}"] {
@@ -474,11 +632,15 @@ mod tests {
     fn audio_name_is_url_encoded_and_must_exist() {
         let dir = std::env::temp_dir().join(format!("duolando-viewer-test-{}", std::process::id()));
         let l = motion(2);
-        let d = ViewerData { audio_file: Some("my song #1.wav"), ..data(&l, &l) };
+        let d = ViewerData {
+            audio_file: Some("my song #1.wav"),
+            ..data(&l, &l)
+        };
         let err = write_index_html(&dir, &d).unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::InvalidInput);
         assert!(matches!(
-            err.get_ref().and_then(|e| e.downcast_ref::<ViewerDataError>()),
+            err.get_ref()
+                .and_then(|e| e.downcast_ref::<ViewerDataError>()),
             Some(ViewerDataError::MissingAudio { .. })
         ));
         std::fs::create_dir_all(&dir).unwrap();
@@ -492,7 +654,10 @@ mod tests {
     #[test]
     fn json_strings_are_escaped() {
         assert_eq!(json_string("a\"b\\c\nd\u{1}"), r#""a\"b\\c\nd\u0001""#);
-        assert_eq!(json_string("</script>&\u{2028}é"), r#""\u003c/script\u003e\u0026\u2028é""#);
+        assert_eq!(
+            json_string("</script>&\u{2028}é"),
+            r#""\u003c/script\u003e\u0026\u2028é""#
+        );
     }
 
     #[test]
@@ -501,16 +666,35 @@ mod tests {
         let f: Vec<f32> = motion(2).iter().map(|v| -v).collect();
         let beats = [1.0, 0.0, 0.0];
         let tokens = [5u32, 6, 7, 8, 511];
-        let d = ViewerData { beats: Some(&beats), tokens: Some(&tokens), ..data(&l, &f) };
+        let d = ViewerData {
+            beats: Some(&beats),
+            tokens: Some(&tokens),
+            ..data(&l, &f)
+        };
         let html = render_index_html(&d).unwrap();
         let start = html.find("id=\"duolando-data\">").unwrap() + "id=\"duolando-data\">".len();
         let end = start + html[start..].find("</script>").unwrap();
         let block = &html[start..end];
-        assert!(block.starts_with("{\"version\":1,") && block.ends_with("\"audio\":false}"), "{block}");
-        assert!(block.contains(&format!("\"leader\":{{\"frames\":3,\"f32\":\"{}\"}}", base64_f32(&l))));
-        assert!(block.contains(&format!("\"follower\":{{\"frames\":2,\"f32\":\"{}\"}}", base64_f32(&f))));
-        assert!(block.contains(&format!("\"beats\":{{\"frames\":3,\"f32\":\"{}\"}}", base64_f32(&beats))));
-        assert!(block.contains("\"rows\":1,") && block.contains("\"ids\":[5, 6, 7, 8, 511]"), "{block}");
+        assert!(
+            block.starts_with("{\"version\":1,") && block.ends_with("\"audio\":false}"),
+            "{block}"
+        );
+        assert!(block.contains(&format!(
+            "\"leader\":{{\"frames\":3,\"f32\":\"{}\"}}",
+            base64_f32(&l)
+        )));
+        assert!(block.contains(&format!(
+            "\"follower\":{{\"frames\":2,\"f32\":\"{}\"}}",
+            base64_f32(&f)
+        )));
+        assert!(block.contains(&format!(
+            "\"beats\":{{\"frames\":3,\"f32\":\"{}\"}}",
+            base64_f32(&beats)
+        )));
+        assert!(
+            block.contains("\"rows\":1,") && block.contains("\"ids\":[5, 6, 7, 8, 511]"),
+            "{block}"
+        );
         assert!(block.contains("\"parents\":[-1, 0, 0, 0, 1,") && block.contains("52, 53]"));
     }
 }

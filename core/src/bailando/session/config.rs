@@ -65,7 +65,12 @@ pub enum Preset {
 }
 
 impl Preset {
-    pub const ALL: [Preset; 4] = [Preset::Exact, Preset::Reference, Preset::Interactive, Preset::Minimum];
+    pub const ALL: [Preset; 4] = [
+        Preset::Exact,
+        Preset::Reference,
+        Preset::Interactive,
+        Preset::Minimum,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -89,14 +94,26 @@ pub fn window_rows(cfg: &BailandoConfig) -> usize {
 /// Decoder future at which S's frames equal R's (max over the up, down
 /// and root decoders; the root decoder has the down half's geometry).
 pub fn dec_future_max(cfg: &BailandoConfig) -> u32 {
-    cfg.parts.iter().map(|vq| future_max(vq, StackKind::Decoder)).max().unwrap_or(0) as u32
+    cfg.parts
+        .iter()
+        .map(|vq| future_max(vq, StackKind::Decoder))
+        .max()
+        .unwrap_or(0) as u32
 }
 
 impl SessionConfig {
     /// A budget: decoder future `dec_future`, window shift `shift`, greedy,
     /// f32 K/V, 64 pending frames, 64 music rows ahead.
     pub fn with(dec_future: u32, shift: u32) -> Self {
-        SessionConfig { dec_future, shift, sampling: Sampling::Greedy, pending_frames: 64, music_buffer_rows: 64, kv: KvType::F32, schedule: CacheSchedule::Reprefill }
+        SessionConfig {
+            dec_future,
+            shift,
+            sampling: Sampling::Greedy,
+            pending_frames: 64,
+            music_buffer_rows: 64,
+            kv: KvType::F32,
+            schedule: CacheSchedule::Reprefill,
+        }
     }
 
     pub fn preset(cfg: &BailandoConfig, preset: Preset) -> Self {
@@ -113,7 +130,13 @@ impl SessionConfig {
 
     /// `(setting, value, max)` of the first setting outside its range.
     pub fn check(&self, cfg: &BailandoConfig) -> Result<(), (Setting, u32, u32)> {
-        let range = |s: Setting, v: u32, lo: u32, hi: u32| if v < lo || v > hi { Err((s, v, hi)) } else { Ok(()) };
+        let range = |s: Setting, v: u32, lo: u32, hi: u32| {
+            if v < lo || v > hi {
+                Err((s, v, hi))
+            } else {
+                Ok(())
+            }
+        };
         range(Setting::DecFuture, self.dec_future, 0, dec_future_max(cfg))?;
         range(Setting::Shift, self.shift, 1, window_rows(cfg) as u32)?;
         if let Sampling::TopK { k, .. } = self.sampling {
@@ -153,9 +176,21 @@ mod tests {
         }
         assert_eq!(SessionConfig::preset(&cfg, Preset::Reference).shift, 21);
         assert_eq!(SessionConfig::preset(&cfg, Preset::Exact).shift, 28);
-        assert_eq!(SessionConfig::preset(&cfg, Preset::Minimum).latency_frames(8), 0);
-        assert_eq!(SessionConfig::with(dmax + 1, 5).check(&cfg), Err((Setting::DecFuture, dmax + 1, dmax)));
-        assert_eq!(SessionConfig::with(0, 29).check(&cfg), Err((Setting::Shift, 29, 28)));
-        assert_eq!(SessionConfig::with(0, 0).check(&cfg), Err((Setting::Shift, 0, 28)));
+        assert_eq!(
+            SessionConfig::preset(&cfg, Preset::Minimum).latency_frames(8),
+            0
+        );
+        assert_eq!(
+            SessionConfig::with(dmax + 1, 5).check(&cfg),
+            Err((Setting::DecFuture, dmax + 1, dmax))
+        );
+        assert_eq!(
+            SessionConfig::with(0, 29).check(&cfg),
+            Err((Setting::Shift, 29, 28))
+        );
+        assert_eq!(
+            SessionConfig::with(0, 0).check(&cfg),
+            Err((Setting::Shift, 0, 28))
+        );
     }
 }

@@ -38,24 +38,40 @@ pub fn session_bytes_for(model: &BailandoConfig, cfg: &SessionConfig) -> Result<
     let mut p = Planner::new();
     State::carve(&mut p, model, cfg)?;
     StepScratch::carve(&mut p, model, 1)?;
-    p.total_for_any_base().ok_or(Error::Arena(ArenaError::Overflow))
+    p.total_for_any_base()
+        .ok_or(Error::Arena(ArenaError::Overflow))
 }
 
 /// Arena bytes of a session stepped only through a [`StepBatch`] (its
 /// state alone).
-pub fn batched_session_bytes_for(model: &BailandoConfig, cfg: &SessionConfig) -> Result<usize, Error> {
+pub fn batched_session_bytes_for(
+    model: &BailandoConfig,
+    cfg: &SessionConfig,
+) -> Result<usize, Error> {
     check_config(model, cfg)?;
     let mut p = Planner::new();
     State::carve(&mut p, model, cfg)?;
-    p.total_for_any_base().ok_or(Error::Arena(ArenaError::Overflow))
+    p.total_for_any_base()
+        .ok_or(Error::Arena(ArenaError::Overflow))
 }
 
 fn check_config(model: &BailandoConfig, cfg: &SessionConfig) -> Result<(), Error> {
-    model.validate().map_err(|e| Error::Bind(crate::nn::bind::BindError::Config(e)))?;
-    cfg.check(model).map_err(|(setting, value, max)| Error::Setting { setting, value, max })?;
+    model
+        .validate()
+        .map_err(|e| Error::Bind(crate::nn::bind::BindError::Config(e)))?;
+    cfg.check(model)
+        .map_err(|(setting, value, max)| Error::Setting {
+            setting,
+            value,
+            max,
+        })?;
     if let Sampling::TopK { k, .. } = cfg.sampling {
         if k as usize > MAX_TOP_K {
-            return Err(Error::Setting { setting: crate::error::Setting::TopK, value: k, max: MAX_TOP_K as u32 });
+            return Err(Error::Setting {
+                setting: crate::error::Setting::TopK,
+                value: k,
+                max: MAX_TOP_K as u32,
+            });
         }
     }
     Ok(())
@@ -84,13 +100,16 @@ impl<'a> StepBatch<'a> {
         check_batch(n)?;
         let mut p = Planner::new();
         StepScratch::carve(&mut p, model, n)?;
-        p.total_for_any_base().ok_or(Error::Arena(ArenaError::Overflow))
+        p.total_for_any_base()
+            .ok_or(Error::Arena(ArenaError::Overflow))
     }
 
     pub fn new(model: &BailandoConfig, n: usize, arena: &'a mut [u8]) -> Result<Self, Error> {
         check_batch(n)?;
         let mut a = Arena::new(arena);
-        Ok(StepBatch { scratch: StepScratch::carve(&mut a, model, n)? })
+        Ok(StepBatch {
+            scratch: StepScratch::carve(&mut a, model, n)?,
+        })
     }
 
     /// Steps every ready session once (see [`step_many`]).
@@ -102,7 +121,11 @@ impl<'a> StepBatch<'a> {
 fn check_batch(n: usize) -> Result<(), Error> {
     let max = crate::nn::gpt_cache::MAX_BATCH;
     if n == 0 || n > max {
-        return Err(Error::Setting { setting: crate::error::Setting::Batch, value: n.min(u32::MAX as usize) as u32, max: max as u32 });
+        return Err(Error::Setting {
+            setting: crate::error::Setting::Batch,
+            value: n.min(u32::MAX as usize) as u32,
+            max: max as u32,
+        });
     }
     Ok(())
 }
@@ -146,23 +169,59 @@ pub struct Session<'a> {
 impl<'a> Session<'a> {
     /// A session with its own step memory; `seed` is token 0 (up, down):
     /// the authors' demo uses (423, 12) for their model.
-    pub fn new(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 2]) -> Result<Self, Error> {
+    pub fn new(
+        model: &'a Model<'a>,
+        arena: &'a mut [u8],
+        cfg: &SessionConfig,
+        seed: [u32; 2],
+    ) -> Result<Self, Error> {
         Self::carve(model, arena, cfg, seed, true)
     }
 
     /// A session without step memory: stepped only by [`step_many`] /
     /// [`StepBatch::step`] ([`Session::pull`] gives the frames decoded).
-    pub fn new_batched(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 2]) -> Result<Self, Error> {
+    pub fn new_batched(
+        model: &'a Model<'a>,
+        arena: &'a mut [u8],
+        cfg: &SessionConfig,
+        seed: [u32; 2],
+    ) -> Result<Self, Error> {
         Self::carve(model, arena, cfg, seed, false)
     }
 
-    fn carve(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 2], own: bool) -> Result<Self, Error> {
+    fn carve(
+        model: &'a Model<'a>,
+        arena: &'a mut [u8],
+        cfg: &SessionConfig,
+        seed: [u32; 2],
+        own: bool,
+    ) -> Result<Self, Error> {
         check_config(&model.cfg, cfg)?;
         check_seed(model, seed)?;
         let mut a = Arena::new(arena);
         let st = State::carve(&mut a, &model.cfg, cfg)?;
-        let own = if own { Some(StepScratch::carve(&mut a, &model.cfg, 1)?) } else { None };
-        let mut s = Session { model, cfg: *cfg, st, own, seed, rng: Rng(0), steps: 0, rows: 0, end: None, dec_fed: 0, decoded: 0, pulled: 0, root: [0.0; 3], prefilled: 0, spread_rows: 0 };
+        let own = if own {
+            Some(StepScratch::carve(&mut a, &model.cfg, 1)?)
+        } else {
+            None
+        };
+        let mut s = Session {
+            model,
+            cfg: *cfg,
+            st,
+            own,
+            seed,
+            rng: Rng(0),
+            steps: 0,
+            rows: 0,
+            end: None,
+            dec_fed: 0,
+            decoded: 0,
+            pulled: 0,
+            root: [0.0; 3],
+            prefilled: 0,
+            spread_rows: 0,
+        };
         s.restart(seed)?;
         Ok(s)
     }
@@ -175,7 +234,17 @@ impl<'a> Session<'a> {
             Sampling::TopK { rng_seed, .. } => rng_seed,
             Sampling::Greedy => 0,
         });
-        (self.steps, self.rows, self.end, self.dec_fed, self.decoded, self.pulled, self.root, self.prefilled, self.spread_rows) = (0, 0, None, 0, 0, 0, [0.0; 3], 0, 0);
+        (
+            self.steps,
+            self.rows,
+            self.end,
+            self.dec_fed,
+            self.decoded,
+            self.pulled,
+            self.root,
+            self.prefilled,
+            self.spread_rows,
+        ) = (0, 0, None, 0, 0, 0, [0.0; 3], 0, 0);
         Ok(())
     }
 
@@ -227,7 +296,11 @@ impl<'a> Session<'a> {
         }
         let nm = self.model.cfg.gpt.n_music as usize;
         if rows.is_empty() || rows.len() % nm != 0 {
-            return Err(Error::Ragged { buffer: Buffer::Music, len: rows.len(), row: nm });
+            return Err(Error::Ragged {
+                buffer: Buffer::Music,
+                len: rows.len(),
+                row: nm,
+            });
         }
         input::check(Buffer::Music, rows)?;
         let n = rows.len() / nm;
@@ -235,7 +308,11 @@ impl<'a> Session<'a> {
         let waiting = self.rows.saturating_sub(self.steps + 1);
         let cap = self.cfg.music_buffer_rows as usize;
         if (self.rows + n).saturating_sub(self.steps + 1) > cap {
-            return Err(Error::Backlog { buffer: Buffer::Music, held: waiting, capacity: cap });
+            return Err(Error::Backlog {
+                buffer: Buffer::Music,
+                held: waiting,
+                capacity: cap,
+            });
         }
         for r in rows.chunks_exact(nm) {
             self.st.music.push(r)?;
@@ -258,13 +335,18 @@ impl<'a> Session<'a> {
 
     /// True once the music has ended and every frame has been pulled.
     pub fn done(&self) -> bool {
-        self.end.is_some_and(|e| self.steps + 1 == e && self.pulled == e * self.model.cfg.hop())
+        self.end
+            .is_some_and(|e| self.steps + 1 == e && self.pulled == e * self.model.cfg.hop())
     }
 
     /// Music row `i` as the GPT reads it (past the end: the padding's
     /// copies of the last row).
     pub(crate) fn music_row(&self, i: usize) -> Result<&[f32], Error> {
-        let i = if self.end.is_some() { i.min(self.rows.saturating_sub(1)) } else { i };
+        let i = if self.end.is_some() {
+            i.min(self.rows.saturating_sub(1))
+        } else {
+            i
+        };
         self.st.music.row(i)
     }
 
@@ -292,7 +374,10 @@ impl<'a> Session<'a> {
         self.own = Some(sc);
         match r {
             Ok(0) => Ok(None),
-            Ok(_) => Ok(Some(StepReport { k: self.steps - 1, token: self.token(self.steps)? })),
+            Ok(_) => Ok(Some(StepReport {
+                k: self.steps - 1,
+                token: self.token(self.steps)?,
+            })),
             Err((_, e)) => Err(e),
         }
     }
@@ -318,7 +403,11 @@ impl<'a> Session<'a> {
 fn check_seed(model: &Model<'_>, seed: [u32; 2]) -> Result<(), Error> {
     for (j, &v) in seed.iter().enumerate() {
         if v >= model.cfg.gpt.vocab[j] {
-            return Err(Error::Token { stream: j as u8, token: v, vocab: model.cfg.gpt.vocab[j] });
+            return Err(Error::Token {
+                stream: j as u8,
+                token: v,
+                vocab: model.cfg.gpt.vocab[j],
+            });
         }
     }
     Ok(())

@@ -46,18 +46,39 @@ pub struct State<'s> {
 }
 
 impl<'s> State<'s> {
-    pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &BailandoConfig, sc: &SessionConfig) -> Result<Self, Error> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &BailandoConfig,
+        sc: &SessionConfig,
+    ) -> Result<Self, Error> {
         let g = &cfg.gpt;
         let m = window_rows(cfg);
         let c = g.n_embd as usize;
         let hop = cfg.hop();
         let d = sc.dec_future as usize;
         let layers = (g.n_layer_base + g.n_layer_head) as usize;
-        let music = RowRing::carve(a, m.checked_add(sc.music_buffer_rows as usize).ok_or(ov())?, g.n_music as usize)?;
+        let music = RowRing::carve(
+            a,
+            m.checked_add(sc.music_buffer_rows as usize).ok_or(ov())?,
+            g.n_music as usize,
+        )?;
         let toks = TokenRing::carve(a, m + 1, 2)?;
         let mut gpt = heapless::Vec::new();
-        for _ in 0..if sc.schedule == CacheSchedule::Spread { 2 } else { 1 } {
-            gpt.push(GptCache::carve(a, sc.kv, layers, N_STREAMS, m, c, g.n_head as usize)?).map_err(|_| ov())?;
+        for _ in 0..if sc.schedule == CacheSchedule::Spread {
+            2
+        } else {
+            1
+        } {
+            gpt.push(GptCache::carve(
+                a,
+                sc.kv,
+                layers,
+                N_STREAMS,
+                m,
+                c,
+                g.n_head as usize,
+            )?)
+            .map_err(|_| ov())?;
         }
         let up = StreamStack::carve(a, &cfg.parts[0], StackKind::Decoder, d)?;
         let down = StreamStack::carve(a, &cfg.parts[1], StackKind::Decoder, d)?;
@@ -69,7 +90,13 @@ impl<'s> State<'s> {
             dec: [up, down, root],
             dec_out: a.f32(hop.checked_mul(UP_JOINTS.len() * 3).ok_or(ov())?)?,
             frames: a.f32(hop.checked_mul(POSE_DIM).ok_or(ov())?)?,
-            pending: RowRing::carve(a, hop.checked_mul((d + 1).max(2)).and_then(|f| f.checked_add(sc.pending_frames as usize)).ok_or(ov())?, POSE_DIM)?,
+            pending: RowRing::carve(
+                a,
+                hop.checked_mul((d + 1).max(2))
+                    .and_then(|f| f.checked_add(sc.pending_frames as usize))
+                    .ok_or(ov())?,
+                POSE_DIM,
+            )?,
         })
     }
 
@@ -113,8 +140,16 @@ impl<'s> StepScratch<'s> {
         let g = &cfg.gpt;
         let c = g.n_embd as usize;
         let m = window_rows(cfg);
-        let rows = n.checked_mul(1 + PREFILL_CHUNK).and_then(|r| r.checked_mul(N_STREAMS)).ok_or(ov())?;
-        let emb = cfg.parts.iter().map(|p| p.emb_width as usize).max().unwrap_or(0);
+        let rows = n
+            .checked_mul(1 + PREFILL_CHUNK)
+            .and_then(|r| r.checked_mul(N_STREAMS))
+            .ok_or(ov())?;
+        let emb = cfg
+            .parts
+            .iter()
+            .map(|p| p.emb_width as usize)
+            .max()
+            .unwrap_or(0);
         let need = ScratchNeed::for_vqs(&cfg.vqs()).ok_or(ov())?;
         Ok(StepScratch {
             n,

@@ -32,15 +32,30 @@ fn at(i: usize) -> impl Fn(Error) -> BatchError {
 /// The (3, C) input rows of token row `j` at window slot `p`: the music
 /// row through `cond_emb`, the two token embeddings, each plus its
 /// stream's position row `s * block_size + p`.
-fn embed_row(model: &Model<'_>, tok: &[u32], music: &[f32], p: usize, x: &mut [f32]) -> Result<(), Error> {
+fn embed_row(
+    model: &Model<'_>,
+    tok: &[u32],
+    music: &[f32],
+    p: usize,
+    x: &mut [f32],
+) -> Result<(), Error> {
     let g = &model.cfg.gpt;
     let c = g.n_embd as usize;
     let bs = g.block_size as usize;
-    linear(music, &model.gpt.cond_emb.w, model.gpt.cond_emb.b, &mut x[..c]);
+    linear(
+        music,
+        &model.gpt.cond_emb.w,
+        model.gpt.cond_emb.b,
+        &mut x[..c],
+    );
     for (j, table) in model.gpt.tok_emb.iter().enumerate() {
         let t = tok[j];
         if t as usize >= table.rows() {
-            return Err(Error::Token { stream: j as u8, token: t, vocab: table.rows() as u32 });
+            return Err(Error::Token {
+                stream: j as u8,
+                token: t,
+                vocab: table.rows() as u32,
+            });
         }
         table.row_into(t as usize, &mut x[(1 + j) * c..(2 + j) * c]);
     }
@@ -55,7 +70,13 @@ fn embed_row(model: &Model<'_>, tok: &[u32], music: &[f32], p: usize, x: &mut [f
 
 /// Rows `j` of `x` (n, 3C) for the session's tokens `from..to` at their
 /// slots of the window starting at `lo`.
-fn embed_rows(s: &Session<'_>, lo: usize, from: usize, to: usize, x: &mut [f32]) -> Result<(), Error> {
+fn embed_rows(
+    s: &Session<'_>,
+    lo: usize,
+    from: usize,
+    to: usize,
+    x: &mut [f32],
+) -> Result<(), Error> {
     let w = N_STREAMS * s.model.cfg.gpt.n_embd as usize;
     for (i, j) in (from..to).enumerate() {
         let tok = s.st.toks.row(j)?;
@@ -68,14 +89,19 @@ fn embed_rows(s: &Session<'_>, lo: usize, from: usize, to: usize, x: &mut [f32])
 /// Steps every ready session of `ss` once (at most `sc.n` of them; the
 /// rest wait for the next call) and decodes the frames that became final.
 /// Returns how many sessions stepped.
-pub fn step_many(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<usize, BatchError> {
+pub fn step_many(
+    ss: &mut [&mut Session<'_>],
+    sc: &mut StepScratch<'_>,
+) -> Result<usize, BatchError> {
     let mut ready: Vec<usize, MAX_BATCH> = Vec::new();
     for (i, s) in ss.iter().enumerate() {
         if ready.len() < sc.n.min(MAX_BATCH) && s.can_step() {
             ready.push(i).map_err(|_| (i, Error::State))?;
         }
     }
-    let Some(&first) = ready.first() else { return Ok(0) };
+    let Some(&first) = ready.first() else {
+        return Ok(0);
+    };
     let model = ss[first].model;
     for &i in ready.iter().skip(1) {
         if !core::ptr::eq(ss[i].model, model) {
@@ -102,7 +128,11 @@ pub fn step_many(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Resul
             Some(c) => c,
             None => {
                 // The cache of an older window (or an empty one) starts this one.
-                let c = s.st.gpt.iter().position(|g| g.window_start().is_none_or(|x| x < lo)).ok_or((i, Error::State))?;
+                let c =
+                    s.st.gpt
+                        .iter()
+                        .position(|g| g.window_start().is_none_or(|x| x < lo))
+                        .ok_or((i, Error::State))?;
                 s.st.gpt[c].restart(lo);
                 c
             }
@@ -116,8 +146,20 @@ pub fn step_many(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Resul
         while from < k {
             let to = (from + PREFILL_CHUNK).min(k);
             embed_rows(s, lo, from, to, &mut sc.x[..(to - from) * w]).map_err(at(i))?;
-            let mut items = [GptItem { cache: &mut s.st.gpt[cur], rows: to - from, need_output: false }];
-            GptCache::append_many(blocks(), nh, 2, &mut items, &mut sc.x[..(to - from) * w], &mut sc.block).map_err(at(i))?;
+            let mut items = [GptItem {
+                cache: &mut s.st.gpt[cur],
+                rows: to - from,
+                need_output: false,
+            }];
+            GptCache::append_many(
+                blocks(),
+                nh,
+                2,
+                &mut items,
+                &mut sc.x[..(to - from) * w],
+                &mut sc.block,
+            )
+            .map_err(at(i))?;
             s.prefilled += to - from;
             from = to;
         }
@@ -130,7 +172,9 @@ pub fn step_many(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Resul
             // Rows lo2..k2 are wanted before step k2; rows <= k exist.
             let have = lo2 + s.st.gpt[nx].rows();
             let quota = k2.saturating_sub(have).div_ceil(k2 - k);
-            let q = quota.min((k + 1).min(k2).saturating_sub(have)).min(PREFILL_CHUNK);
+            let q = quota
+                .min((k + 1).min(k2).saturating_sub(have))
+                .min(PREFILL_CHUNK);
             s.spread_rows += q;
             (q > 0).then_some((nx, have, q, lo2))
         } else {
@@ -149,7 +193,8 @@ pub fn step_many(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Resul
         embed_rows(s, lo, k, k + 1, &mut sc.x[rows * w..(rows + 1) * w]).map_err(at(i))?;
         rows += 1;
         if let Some((_, from, q, lo2)) = next {
-            embed_rows(s, lo2, from, from + q, &mut sc.x[rows * w..(rows + q) * w]).map_err(at(i))?;
+            embed_rows(s, lo2, from, from + q, &mut sc.x[rows * w..(rows + q) * w])
+                .map_err(at(i))?;
             rows += q;
         }
     }
@@ -163,13 +208,37 @@ pub fn step_many(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Resul
             let (cur, next) = plan[p];
             p += 1;
             let (a, b) = s.st.gpt.split_at_mut(1);
-            let (c, n) = if cur == 0 { (&mut a[0], b.first_mut()) } else { (&mut b[0], a.first_mut()) };
-            items.push(GptItem { cache: c, rows: 1, need_output: true }).map_err(|_| (i, Error::State))?;
+            let (c, n) = if cur == 0 {
+                (&mut a[0], b.first_mut())
+            } else {
+                (&mut b[0], a.first_mut())
+            };
+            items
+                .push(GptItem {
+                    cache: c,
+                    rows: 1,
+                    need_output: true,
+                })
+                .map_err(|_| (i, Error::State))?;
             if let (Some((_, _, q, _)), Some(n)) = (next, n) {
-                items.push(GptItem { cache: n, rows: q, need_output: false }).map_err(|_| (i, Error::State))?;
+                items
+                    .push(GptItem {
+                        cache: n,
+                        rows: q,
+                        need_output: false,
+                    })
+                    .map_err(|_| (i, Error::State))?;
             }
         }
-        GptCache::append_many(blocks(), nh, 2, &mut items, &mut sc.x[..rows * w], &mut sc.block).map_err(at(first))?;
+        GptCache::append_many(
+            blocks(),
+            nh,
+            2,
+            &mut items,
+            &mut sc.x[..rows * w],
+            &mut sc.block,
+        )
+        .map_err(at(first))?;
     }
     let n = ready.len();
 
@@ -181,7 +250,11 @@ pub fn step_many(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Resul
         for h in 0..2 {
             let row = &sc.x[(2 * j + h) * c..(2 * j + h + 1) * c];
             layernorm(row, model.gpt.ln_f.w, model.gpt.ln_f.b, sc.ln);
-            let logits = if h == 0 { &mut sc.logits[..vu] } else { &mut sc.logits[vu..] };
+            let logits = if h == 0 {
+                &mut sc.logits[..vu]
+            } else {
+                &mut sc.logits[vu..]
+            };
             linear(sc.ln, &model.gpt.heads[h], None, logits);
             tok[h] = match s.cfg.sampling {
                 Sampling::Greedy => argmax(logits),
@@ -235,7 +308,13 @@ fn frames_of(s: &mut Session<'_>, sc: &mut StepScratch<'_>) -> Result<(), Error>
     for (h, joints) in [&UP_JOINTS[..], &DOWN_JOINTS[..]].into_iter().enumerate() {
         let w = joints.len() * 3;
         let out = &mut st.dec_out[..hop * w];
-        st.dec[h].output(StackW::Decoder(&model.parts[h].pos), t, hop, &mut sc.conv, out)?;
+        st.dec[h].output(
+            StackW::Decoder(&model.parts[h].pos),
+            t,
+            hop,
+            &mut sc.conv,
+            out,
+        )?;
         for f in 0..hop {
             for (i, &j) in joints.iter().enumerate() {
                 let j = j as usize;

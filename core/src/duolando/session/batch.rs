@@ -17,19 +17,24 @@
 use heapless::Vec;
 
 use crate::arena::{ArenaError, Carve, Planner, Split};
-use crate::nn::block::BlockScratch;
 use crate::duolando::config::ModelConfig;
-use crate::duolando::coordinated_attention::{follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS};
-use crate::error::Error;
+use crate::duolando::coordinated_attention::{
+    follower_table, FIRST_FOLLOWER_STREAM, FOLLOWER_STREAMS,
+};
 use crate::duolando::gpt::{head_rows, logits_len};
-use crate::kernels::{linear, Q8Room};
 use crate::duolando::model::Model;
-use crate::nn::sampler::{argmax, top_k_by_id};
-use crate::duolando::session::config::{for_each_live_window, next_window, CacheSchedule, window_context, Sampling, Setting, MAX_WINDOWS};
-use crate::nn::gpt_cache::{GptCache, GptItem};
+use crate::duolando::session::config::{
+    for_each_live_window, next_window, window_context, CacheSchedule, Sampling, Setting,
+    MAX_WINDOWS,
+};
 use crate::duolando::session::lat_stream::{max_keys, LatInputs, LatStepScratch, LatStream};
 use crate::duolando::session::state::State;
 use crate::duolando::session::{vq_stream, Session, SessionConfig};
+use crate::error::Error;
+use crate::kernels::{linear, Q8Room};
+use crate::nn::block::BlockScratch;
+use crate::nn::gpt_cache::{GptCache, GptItem};
+use crate::nn::sampler::{argmax, top_k_by_id};
 use crate::nn::stream_conv::{ScratchNeed, StreamScratch};
 
 /// Most sessions stepped together (and most LAT pushes / GPT windows in
@@ -79,13 +84,21 @@ impl StepDims {
     /// The sizes for `n` sessions of `cfg` under session config `sc`.
     pub fn new(cfg: &ModelConfig, sc: &SessionConfig, n: usize) -> Result<StepDims, ArenaError> {
         let g = &cfg.gpt;
-        let m = (g.block_size as usize).checked_sub(1).ok_or(ArenaError::Overflow)?;
+        let m = (g.block_size as usize)
+            .checked_sub(1)
+            .ok_or(ArenaError::Overflow)?;
         let streams = g.n_streams as usize;
-        let (lds, mds) = (g.leader.downsample_rate as usize, g.music.downsample_rate as usize);
+        let (lds, mds) = (
+            g.leader.downsample_rate as usize,
+            g.music.downsample_rate as usize,
+        );
         let past = sc.lat_past as usize;
-        let keys = max_keys(past * mds, sc.music_lookahead as usize * mds).max(max_keys(past * lds, sc.lookahead as usize * lds));
+        let keys = max_keys(past * mds, sc.music_lookahead as usize * mds)
+            .max(max_keys(past * lds, sc.lookahead as usize * lds));
         let window = streams.checked_mul(m).ok_or(ArenaError::Overflow)?;
-        let chunk = streams.checked_mul(REPREFILL_CHUNK.min(m.max(1))).ok_or(ArenaError::Overflow)?;
+        let chunk = streams
+            .checked_mul(REPREFILL_CHUNK.min(m.max(1)))
+            .ok_or(ArenaError::Overflow)?;
         Ok(StepDims {
             n,
             rows: chunk.max(n.checked_mul(streams).ok_or(ArenaError::Overflow)?),
@@ -142,7 +155,18 @@ pub struct StepScratch<'s> {
 
 impl<'s> StepScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, dims: StepDims) -> Result<Self, ArenaError> {
-        let StepDims { n, rows, keys: _, c, lat_in, lat_width: _, music_burst: _, ds_max: _, logits, conv: _ } = dims;
+        let StepDims {
+            n,
+            rows,
+            keys: _,
+            c,
+            lat_in,
+            lat_width: _,
+            music_burst: _,
+            ds_max: _,
+            logits,
+            conv: _,
+        } = dims;
         let mul = |x: usize, y: usize| x.checked_mul(y).ok_or(ArenaError::Overflow);
         Ok(StepScratch {
             dims,
@@ -166,25 +190,36 @@ fn pool_floats(d: &StepDims) -> Result<usize, ArenaError> {
     carve_lat(&mut lat, d)?;
     let mut conv = Planner::new();
     StreamScratch::carve(&mut conv, d.conv, d.n)?;
-    Ok(Split::floats_for(&blk).max(Split::floats_for(&lat)).max(Split::floats_for(&conv)))
+    Ok(Split::floats_for(&blk)
+        .max(Split::floats_for(&lat))
+        .max(Split::floats_for(&conv)))
 }
 
 /// The LAT phase's scratch of dims `d`: the LAT scratch for `d.n` pushes
 /// of up to `music_burst` positions each, and a block scratch for those
 /// rows (their queries see at most `d.keys` keys), with an int8 panel for
 /// them in a batch's scratch (as [`carve_block`]).
-fn carve_lat<'x, A: Carve<'x>>(a: &mut A, d: &StepDims) -> Result<(LatStepScratch<'x>, BlockScratch<'x>), ArenaError> {
+fn carve_lat<'x, A: Carve<'x>>(
+    a: &mut A,
+    d: &StepDims,
+) -> Result<(LatStepScratch<'x>, BlockScratch<'x>), ArenaError> {
     let rows = d.n.checked_mul(d.music_burst).ok_or(ArenaError::Overflow)?;
     let lat = LatStepScratch::carve(a, d.c, d.ds_max, d.n, rows, d.lat_width)?;
     let mut s = BlockScratch::carve_keys(a, lat.rows, d.keys, d.c)?;
     if d.n > 1 {
-        s.panel = Q8Room::carve(a, lat.rows.checked_mul(4 * d.c).ok_or(ArenaError::Overflow)?)?;
+        s.panel = Q8Room::carve(
+            a,
+            lat.rows.checked_mul(4 * d.c).ok_or(ArenaError::Overflow)?,
+        )?;
     }
     Ok((lat, s))
 }
 
 /// The LAT phase's scratch over the pool of a [`StepScratch`] with dims `d`.
-pub fn lat_scratch<'x>(pool: &'x mut [f32], d: &StepDims) -> Result<(LatStepScratch<'x>, BlockScratch<'x>), Error> {
+pub fn lat_scratch<'x>(
+    pool: &'x mut [f32],
+    d: &StepDims,
+) -> Result<(LatStepScratch<'x>, BlockScratch<'x>), Error> {
     Ok(carve_lat(&mut Split::new(pool), d)?)
 }
 
@@ -229,13 +264,21 @@ impl<'s> StepBatch<'s> {
         let dims = batch_dims(cfg, sc, n)?;
         let mut p = crate::arena::Planner::new();
         StepScratch::carve(&mut p, dims)?;
-        p.total_for_any_base().ok_or(Error::Arena(ArenaError::Overflow))
+        p.total_for_any_base()
+            .ok_or(Error::Arena(ArenaError::Overflow))
     }
 
-    pub fn new(cfg: &ModelConfig, sc: &SessionConfig, n: usize, arena: &'s mut [u8]) -> Result<Self, Error> {
+    pub fn new(
+        cfg: &ModelConfig,
+        sc: &SessionConfig,
+        n: usize,
+        arena: &'s mut [u8],
+    ) -> Result<Self, Error> {
         let dims = batch_dims(cfg, sc, n)?;
         let mut a = crate::arena::Arena::new(arena);
-        Ok(StepBatch { sc: StepScratch::carve(&mut a, dims)? })
+        Ok(StepBatch {
+            sc: StepScratch::carve(&mut a, dims)?,
+        })
     }
 
     /// Sessions it can step at once.
@@ -246,7 +289,11 @@ impl<'s> StepBatch<'s> {
 
 fn batch_dims(cfg: &ModelConfig, sc: &SessionConfig, n: usize) -> Result<StepDims, Error> {
     if n == 0 || n > MAX_BATCH {
-        return Err(Error::Setting { setting: Setting::Batch, value: n.min(u32::MAX as usize) as u32, max: MAX_BATCH as u32 });
+        return Err(Error::Setting {
+            setting: Setting::Batch,
+            value: n.min(u32::MAX as usize) as u32,
+            max: MAX_BATCH as u32,
+        });
     }
     super::check_config(cfg, sc)?;
     Ok(StepDims::new(cfg, sc, n)?)
@@ -262,13 +309,19 @@ pub(super) fn at(i: usize) -> impl Fn(Error) -> BatchError {
 /// The sessions `ss` (one model, each fitting `sc`) have accepted their
 /// inputs: runs the encoders on the tokens completed (their codes wait in
 /// `State::codes`), then the LAT pushes and every step whose inputs exist.
-pub(super) fn advance(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+pub(super) fn advance(
+    ss: &mut [&mut Session<'_>],
+    sc: &mut StepScratch<'_>,
+) -> Result<(), BatchError> {
     vq_stream::encode(ss, sc)?;
     run_steps(ss, sc)
 }
 
 /// The states of sessions `chunk` (increasing indices into `ss`), in order.
-pub(super) fn states<'x, 'a>(ss: &'x mut [&mut Session<'a>], chunk: &[usize]) -> Result<Vec<&'x mut State<'a>, MAX_BATCH>, BatchError> {
+pub(super) fn states<'x, 'a>(
+    ss: &'x mut [&mut Session<'a>],
+    chunk: &[usize],
+) -> Result<Vec<&'x mut State<'a>, MAX_BATCH>, BatchError> {
     let mut v = Vec::new();
     let mut ci = 0;
     for (i, s) in ss.iter_mut().enumerate() {
@@ -284,7 +337,12 @@ pub(super) fn states<'x, 'a>(ss: &'x mut [&mut Session<'a>], chunk: &[usize]) ->
 }
 
 /// Splits `0..ss.len()` filtered by `want` into chunks of at most `n`.
-pub(super) fn for_chunks(ss: &mut [&mut Session<'_>], n: usize, want: impl Fn(&Session<'_>) -> bool, mut f: impl FnMut(&mut [&mut Session<'_>], &[usize]) -> Result<(), BatchError>) -> Result<(), BatchError> {
+pub(super) fn for_chunks(
+    ss: &mut [&mut Session<'_>],
+    n: usize,
+    want: impl Fn(&Session<'_>) -> bool,
+    mut f: impl FnMut(&mut [&mut Session<'_>], &[usize]) -> Result<(), BatchError>,
+) -> Result<(), BatchError> {
     let mut chunk: Vec<usize, MAX_BATCH> = Vec::new();
     let cap = n.clamp(1, MAX_BATCH);
     for i in 0..ss.len() {
@@ -335,7 +393,15 @@ fn leader_lats(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<
             }
             // Leader part p is embedded with the follower table of the same part.
             let inputs = LatInputs::Tokens(&ids[..chunk.len()], &model.gpt.tok_emb[p]);
-            lat_push(ss, chunk, &ones[..chunk.len()], sc, Lat::Leader(p), &model.gpt.leaders[p], inputs)?;
+            lat_push(
+                ss,
+                chunk,
+                &ones[..chunk.len()],
+                sc,
+                Lat::Leader(p),
+                &model.gpt.leaders[p],
+                inputs,
+            )?;
         }
         Ok(())
     })
@@ -352,7 +418,15 @@ enum Lat {
 /// One LAT push of `counts[j]` positions per session `chunk[j]` (`inputs`:
 /// one session's positions after another); produced rows go to the LAT's
 /// condition stream.
-fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: &mut StepScratch<'_>, which: Lat, w: &crate::duolando::model::LatW<'_>, inputs: LatInputs<'_, '_>) -> Result<(), BatchError> {
+fn lat_push(
+    ss: &mut [&mut Session<'_>],
+    chunk: &[usize],
+    counts: &[usize],
+    sc: &mut StepScratch<'_>,
+    which: Lat,
+    w: &crate::duolando::model::LatW<'_>,
+    inputs: LatInputs<'_, '_>,
+) -> Result<(), BatchError> {
     let cond = match which {
         Lat::Music => 0,
         Lat::Leader(p) => 1 + p,
@@ -372,11 +446,23 @@ fn lat_push(ss: &mut [&mut Session<'_>], chunk: &[usize], counts: &[usize], sc: 
             produced.push(false).map_err(|_| (first, Error::State))?;
         }
         let (mut lat, mut blk) = lat_scratch(sc.pool, &sc.dims).map_err(at(first))?;
-        LatStream::push_many(w, &mut lats, counts, inputs, &mut lat, &mut blk, &mut sc.lat_out[..n * c], &mut produced).map_err(at(first))?;
+        LatStream::push_many(
+            w,
+            &mut lats,
+            counts,
+            inputs,
+            &mut lat,
+            &mut blk,
+            &mut sc.lat_out[..n * c],
+            &mut produced,
+        )
+        .map_err(at(first))?;
     }
     for (j, &i) in chunk.iter().enumerate() {
         if produced[j] {
-            ss[i].st.cond[cond].push(&sc.lat_out[j * c..(j + 1) * c]).map_err(at(i))?;
+            ss[i].st.cond[cond]
+                .push(&sc.lat_out[j * c..(j + 1) * c])
+                .map_err(at(i))?;
         }
     }
     Ok(())
@@ -410,7 +496,10 @@ fn music_frames_wanted(s: &Session<'_>) -> usize {
 /// [`run_steps`], and for drained sessions ([`Session::finish`]) the
 /// leader codes that the end of the leader makes computable, as many as
 /// the steps left need and the code ring holds, until nothing changes.
-pub(super) fn pump(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+pub(super) fn pump(
+    ss: &mut [&mut Session<'_>],
+    sc: &mut StepScratch<'_>,
+) -> Result<(), BatchError> {
     loop {
         let mut more = false;
         for (i, s) in ss.iter_mut().enumerate() {
@@ -429,7 +518,10 @@ pub(super) fn pump(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Res
 }
 
 /// Runs every step whose inputs exist, in every session.
-pub(super) fn run_steps(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+pub(super) fn run_steps(
+    ss: &mut [&mut Session<'_>],
+    sc: &mut StepScratch<'_>,
+) -> Result<(), BatchError> {
     loop {
         // Leader codes into the leader LATs up to step k's row.
         while ss.iter().any(|s| leader_wanted(s)) {
@@ -451,16 +543,29 @@ pub(super) fn run_steps(ss: &mut [&mut Session<'_>], sc: &mut StepScratch<'_>) -
                     for f in 0..counts[j] {
                         let frame = s.st.music_lat.pushed() + mmr + f;
                         let x = match s.track {
-                            Some(t) => t.get(frame * n_music..(frame + 1) * n_music).ok_or((i, Error::State))?,
+                            Some(t) => t
+                                .get(frame * n_music..(frame + 1) * n_music)
+                                .ok_or((i, Error::State))?,
                             None => s.st.music.row(frame).map_err(at(i))?,
                         };
-                        sc.lat_in.get_mut(row * n_music..(row + 1) * n_music).ok_or((i, Error::State))?.copy_from_slice(x);
+                        sc.lat_in
+                            .get_mut(row * n_music..(row + 1) * n_music)
+                            .ok_or((i, Error::State))?
+                            .copy_from_slice(x);
                         row += 1;
                     }
                 }
                 // The rows stay in `lat_in` (taken out of `sc` for the call).
                 let x = core::mem::take(&mut sc.lat_in);
-                let r = lat_push(ss, chunk, &counts[..chunk.len()], sc, Lat::Music, &model.gpt.music, LatInputs::Rows(&x[..row * n_music]));
+                let r = lat_push(
+                    ss,
+                    chunk,
+                    &counts[..chunk.len()],
+                    sc,
+                    Lat::Music,
+                    &model.gpt.music,
+                    LatInputs::Rows(&x[..row * n_music]),
+                );
                 sc.lat_in = x;
                 r
             })?;
@@ -509,20 +614,40 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
         let mut over = false;
         for_each_live_window(k, m, shift, |w| over |= live.push(w).is_err());
         if over {
-            return Err(Error::Setting { setting: Setting::Windows, value: live.len() as u32 + 1, max: MAX_WINDOWS as u32 });
+            return Err(Error::Setting {
+                setting: Setting::Windows,
+                value: live.len() as u32 + 1,
+                max: MAX_WINDOWS as u32,
+            });
         }
         for &w in live.iter().rev() {
             let slot = match st.gpt.iter().position(|c| c.window_start() == Some(w)) {
                 Some(i) => i,
                 None => {
                     // A free cache: one whose window is not live any more.
-                    let i = st.gpt.iter().position(|c| c.window_start().is_none_or(|x| !live.contains(&x))).ok_or(Error::Evicted { index: w, oldest: k, len: st.gpt.len() })?;
+                    let i = st
+                        .gpt
+                        .iter()
+                        .position(|c| c.window_start().is_none_or(|x| !live.contains(&x)))
+                        .ok_or(Error::Evicted {
+                            index: w,
+                            oldest: k,
+                            len: st.gpt.len(),
+                        })?;
                     st.gpt[i].restart(w);
                     i
                 }
             };
             let first = w + st.gpt[slot].rows();
-            s.appends.push(Append { slot, lo: w, first, last: k, need_output: w == lo }).map_err(|_| Error::State)?;
+            s.appends
+                .push(Append {
+                    slot,
+                    lo: w,
+                    first,
+                    last: k,
+                    need_output: w == lo,
+                })
+                .map_err(|_| Error::State)?;
         }
     } else if s.cfg.schedule == CacheSchedule::Spread && st.gpt.len() >= 2 {
         // The cache of this window (filled ahead), or a restart in the
@@ -530,12 +655,24 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
         let slot = match st.gpt.iter().position(|c| c.window_start() == Some(lo)) {
             Some(i) => i,
             None => {
-                let i = st.gpt.iter().position(|c| c.window_start().is_none_or(|x| x < lo)).ok_or(Error::State)?;
+                let i = st
+                    .gpt
+                    .iter()
+                    .position(|c| c.window_start().is_none_or(|x| x < lo))
+                    .ok_or(Error::State)?;
                 st.gpt[i].restart(lo);
                 i
             }
         };
-        s.appends.push(Append { slot, lo, first: lo + st.gpt[slot].rows(), last: k, need_output: true }).map_err(|_| Error::State)?;
+        s.appends
+            .push(Append {
+                slot,
+                lo,
+                first: lo + st.gpt[slot].rows(),
+                last: k,
+                need_output: true,
+            })
+            .map_err(|_| Error::State)?;
         // The next window (start `nlo`, first used at step `k2`) in the other
         // cache: rows `nlo..k2` must be there by the end of step `k2 - 1`;
         // this step appends its share of the rows still missing.
@@ -550,18 +687,40 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
             let share = missing.div_ceil(k2 - k);
             if share > 0 && fill <= k {
                 let last = (fill + share - 1).min(k);
-                s.appends.push(Append { slot: other, lo: nlo, first: fill, last, need_output: false }).map_err(|_| Error::State)?;
+                s.appends
+                    .push(Append {
+                        slot: other,
+                        lo: nlo,
+                        first: fill,
+                        last,
+                        need_output: false,
+                    })
+                    .map_err(|_| Error::State)?;
             }
         }
     } else {
-        let first = if st.gpt[0].window_start() == Some(lo) { k } else {
+        let first = if st.gpt[0].window_start() == Some(lo) {
+            k
+        } else {
             st.gpt[0].restart(lo);
             lo
         };
-        s.appends.push(Append { slot: 0, lo, first, last: k, need_output: true }).map_err(|_| Error::State)?;
+        s.appends
+            .push(Append {
+                slot: 0,
+                lo,
+                first,
+                last: k,
+                need_output: true,
+            })
+            .map_err(|_| Error::State)?;
     }
     if !s.appends.iter().any(|a| a.need_output) {
-        return Err(Error::Evicted { index: lo, oldest: k, len: 0 });
+        return Err(Error::Evicted {
+            index: lo,
+            oldest: k,
+            len: 0,
+        });
     }
     Ok(())
 }
@@ -569,7 +728,14 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
 /// Builds the inputs of token rows `first..=k` of the window starting at
 /// `lo` (position rows added) into `x` ((k + 1 - first) * 10, C),
 /// position-major.
-fn window_rows(model: &Model<'_>, st: &State<'_>, lo: usize, first: usize, k: usize, x: &mut [f32]) -> Result<(), Error> {
+fn window_rows(
+    model: &Model<'_>,
+    st: &State<'_>,
+    lo: usize,
+    first: usize,
+    k: usize,
+    x: &mut [f32],
+) -> Result<(), Error> {
     let g = &model.cfg.gpt;
     let (e, bs) = (g.n_embd as usize, g.block_size as usize);
     let streams = g.n_streams as usize;
@@ -596,7 +762,11 @@ fn window_rows(model: &Model<'_>, st: &State<'_>, lo: usize, first: usize, k: us
 /// Step `k` of each session in `ready` (at most `sc.dims.n`): the GPT
 /// appends (batched), the heads (batched), then per session the sampler,
 /// the history and the decoders.
-fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'_>) -> Result<(), BatchError> {
+fn gpt_step(
+    ss: &mut [&mut Session<'_>],
+    ready: &[usize],
+    sc: &mut StepScratch<'_>,
+) -> Result<(), BatchError> {
     let nr = ready.len();
     for &i in ready {
         plan(ss[i]).map_err(at(i))?;
@@ -652,9 +822,23 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
                         break;
                     }
                     if rows > sc.dims.rows {
-                        return Err((i, Error::Context { c: rows, max: sc.dims.rows }));
+                        return Err((
+                            i,
+                            Error::Context {
+                                c: rows,
+                                max: sc.dims.rows,
+                            },
+                        ));
                     }
-                    window_rows(model, &s.st, a.lo, f, l, &mut sc.x[total * c..(total + rows) * c]).map_err(at(i))?;
+                    window_rows(
+                        model,
+                        &s.st,
+                        a.lo,
+                        f,
+                        l,
+                        &mut sc.x[total * c..(total + rows) * c],
+                    )
+                    .map_err(at(i))?;
                     total += rows;
                     call.push((q, a, f, l)).map_err(|_| (i, Error::State))?;
                     used[a.slot] = true;
@@ -674,15 +858,33 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
                 let mut ci = 0;
                 for (i, s) in ss.iter_mut().enumerate() {
                     // The session's caches, each handed out at most once.
-                    let mut caches: Vec<Option<&mut GptCache<'_>>, MAX_WINDOWS> = s.st.gpt.iter_mut().map(Some).collect();
+                    let mut caches: Vec<Option<&mut GptCache<'_>>, MAX_WINDOWS> =
+                        s.st.gpt.iter_mut().map(Some).collect();
                     while ci < call.len() && ready[call[ci].0] == i {
                         let (_, a, f, l) = call[ci];
-                        let cache = caches.get_mut(a.slot).and_then(Option::take).ok_or((i, Error::State))?;
-                        items.push(GptItem { cache, rows: l + 1 - f, need_output: a.need_output && l == a.last }).map_err(|_| (i, Error::State))?;
+                        let cache = caches
+                            .get_mut(a.slot)
+                            .and_then(Option::take)
+                            .ok_or((i, Error::State))?;
+                        items
+                            .push(GptItem {
+                                cache,
+                                rows: l + 1 - f,
+                                need_output: a.need_output && l == a.last,
+                            })
+                            .map_err(|_| (i, Error::State))?;
                         ci += 1;
                     }
                 }
-                GptCache::append_many(model.gpt.base.iter().chain(model.gpt.head.iter()), g.n_head as usize, FOLLOWER_STREAMS, &mut items, &mut sc.x[..total * c], &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?).map_err(at(first))?;
+                GptCache::append_many(
+                    model.gpt.base.iter().chain(model.gpt.head.iter()),
+                    g.n_head as usize,
+                    FOLLOWER_STREAMS,
+                    &mut items,
+                    &mut sc.x[..total * c],
+                    &mut block_scratch(sc.pool, &sc.dims).map_err(at(first))?,
+                )
+                .map_err(at(first))?;
             }
             // Advance the cursors; the follower rows of the output items, to the heads' inputs.
             let mut j = 0;
@@ -693,7 +895,8 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
                 if a.need_output && l == a.last {
                     for h in 0..FOLLOWER_STREAMS {
                         let src = (j * FOLLOWER_STREAMS + h) * c;
-                        sc.heads_in[(h * nr + qi) * c..(h * nr + qi + 1) * c].copy_from_slice(&sc.x[src..src + c]);
+                        sc.heads_in[(h * nr + qi) * c..(h * nr + qi + 1) * c]
+                            .copy_from_slice(&sc.x[src..src + c]);
                     }
                     j += 1;
                 }
@@ -707,7 +910,12 @@ fn gpt_step(ss: &mut [&mut Session<'_>], ready: &[usize], sc: &mut StepScratch<'
     let hr = head_rows(&model.cfg);
     let mut off = 0;
     for (h, &rows) in hr.iter().enumerate() {
-        linear(&sc.heads_in[h * nr * c..(h + 1) * nr * c], &model.gpt.heads[h], None, &mut sc.logits[off..off + nr * rows]);
+        linear(
+            &sc.heads_in[h * nr * c..(h + 1) * nr * c],
+            &model.gpt.heads[h],
+            None,
+            &mut sc.logits[off..off + nr * rows],
+        );
         off += nr * rows;
     }
     let mut tokens = [[0u32; 5]; MAX_BATCH];

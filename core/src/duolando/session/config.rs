@@ -46,7 +46,9 @@ pub use crate::nn::window::CacheSchedule;
 pub const MAX_WINDOWS: usize = 16;
 
 pub use crate::error::Setting;
-pub use crate::nn::window::{for_each_live_window, next_window, window_context, window_pool, window_start};
+pub use crate::nn::window::{
+    for_each_live_window, next_window, window_context, window_pool, window_start,
+};
 
 /// Largest `pending_frames` / `music_buffer_frames` (keeps every size far
 /// from overflow; about 18 minutes at 30 fps).
@@ -54,13 +56,22 @@ pub const MAX_BUFFER_FRAMES: u32 = 1 << 15;
 
 /// Encoder future context at which S's leader codes equal R's (max over parts).
 pub fn enc_future_max(cfg: &ModelConfig) -> u32 {
-    cfg.parts.iter().map(|p| future_max(p, StackKind::Encoder) as u32).max().unwrap_or(0)
+    cfg.parts
+        .iter()
+        .map(|p| future_max(p, StackKind::Encoder) as u32)
+        .max()
+        .unwrap_or(0)
 }
 
 /// Decoder future context at which S's frames equal R's (max over the 4
 /// parts and the translation).
 pub fn dec_future_max(cfg: &ModelConfig) -> u32 {
-    cfg.parts.iter().chain(core::iter::once(&cfg.transl)).map(|p| future_max(p, StackKind::Decoder) as u32).max().unwrap_or(0)
+    cfg.parts
+        .iter()
+        .chain(core::iter::once(&cfg.transl))
+        .map(|p| future_max(p, StackKind::Decoder) as u32)
+        .max()
+        .unwrap_or(0)
 }
 
 impl SessionConfig {
@@ -83,7 +94,13 @@ impl SessionConfig {
     }
 
     /// A budget with defaults for everything else.
-    pub fn with(cfg: &ModelConfig, lookahead: u32, enc_future: u32, dec_future: u32, shift: u32) -> Self {
+    pub fn with(
+        cfg: &ModelConfig,
+        lookahead: u32,
+        enc_future: u32,
+        dec_future: u32,
+        shift: u32,
+    ) -> Self {
         let lf = cfg.gpt.look_forward;
         SessionConfig {
             lookahead,
@@ -104,7 +121,13 @@ impl SessionConfig {
     pub fn check(&self, cfg: &ModelConfig) -> Result<(), (Setting, u32, u32)> {
         let lf = cfg.gpt.look_forward;
         let m = cfg.gpt.block_size.saturating_sub(1);
-        let range = |s: Setting, v: u32, lo: u32, hi: u32| if v < lo || v > hi { Err((s, v, hi)) } else { Ok(()) };
+        let range = |s: Setting, v: u32, lo: u32, hi: u32| {
+            if v < lo || v > hi {
+                Err((s, v, hi))
+            } else {
+                Ok(())
+            }
+        };
         range(Setting::Lookahead, self.lookahead, 0, lf)?;
         range(Setting::EncFuture, self.enc_future, 0, enc_future_max(cfg))?;
         range(Setting::DecFuture, self.dec_future, 0, dec_future_max(cfg))?;
@@ -114,10 +137,20 @@ impl SessionConfig {
         if let Sampling::TopK { k, .. } = self.sampling {
             range(Setting::TopK, k, 1, crate::nn::sampler::MAX_TOP_K as u32)?;
         }
-        range(Setting::PendingFrames, self.pending_frames, 0, MAX_BUFFER_FRAMES)?;
+        range(
+            Setting::PendingFrames,
+            self.pending_frames,
+            0,
+            MAX_BUFFER_FRAMES,
+        )?;
         // The music LAT reads 4 frames per step ahead of what it has consumed.
         let min_music = 4 * cfg.music_motion_rate;
-        range(Setting::MusicBuffer, self.music_buffer_frames, min_music, MAX_BUFFER_FRAMES)?;
+        range(
+            Setting::MusicBuffer,
+            self.music_buffer_frames,
+            min_music,
+            MAX_BUFFER_FRAMES,
+        )?;
         if self.schedule == CacheSchedule::Staggered {
             let pool = window_pool(m as usize, self.shift as usize) as u32;
             range(Setting::Windows, pool, 1, MAX_WINDOWS as u32)?;
@@ -142,7 +175,8 @@ impl SessionConfig {
     /// with `a + e = 0` this, not the leader, sets the delay
     /// (docs/STREAMING.md §2).
     pub fn live_latency_frames(&self, hop: u32) -> u32 {
-        self.latency_frames(hop).max((hop * (self.dec_future + 1)).saturating_sub(1))
+        self.latency_frames(hop)
+            .max((hop * (self.dec_future + 1)).saturating_sub(1))
     }
 
     /// The named budget `preset` for `cfg` ([`Preset::ALL`] lists them).
@@ -151,8 +185,17 @@ impl SessionConfig {
         let lf = cfg.gpt.look_forward;
         match preset {
             Preset::Reference => r,
-            Preset::Interactive => Self::with(cfg, 4.min(lf), 2.min(enc_future_max(cfg)), 2.min(dec_future_max(cfg)), r.shift),
-            Preset::LiveMusic => SessionConfig { music_lookahead: 0, ..Self::preset(cfg, Preset::Interactive) },
+            Preset::Interactive => Self::with(
+                cfg,
+                4.min(lf),
+                2.min(enc_future_max(cfg)),
+                2.min(dec_future_max(cfg)),
+                r.shift,
+            ),
+            Preset::LiveMusic => SessionConfig {
+                music_lookahead: 0,
+                ..Self::preset(cfg, Preset::Interactive)
+            },
             Preset::Minimum => Self::minimum(cfg),
         }
     }
@@ -179,7 +222,12 @@ pub enum Preset {
 
 impl Preset {
     /// Every preset, in the order front ends list them.
-    pub const ALL: [Preset; 4] = [Preset::Reference, Preset::Interactive, Preset::LiveMusic, Preset::Minimum];
+    pub const ALL: [Preset; 4] = [
+        Preset::Reference,
+        Preset::Interactive,
+        Preset::LiveMusic,
+        Preset::Minimum,
+    ];
 
     /// The preset's name on the command line and in the C ABI.
     pub fn name(self) -> &'static str {
@@ -211,15 +259,25 @@ mod tests {
         assert_eq!(Preset::from_name("fastest"), None);
         let lat = |p: Preset| {
             let c = SessionConfig::preset(&cfg, p);
-            (c.latency_frames(4), c.live_latency_frames(4), c.music_lookahead)
+            (
+                c.latency_frames(4),
+                c.live_latency_frames(4),
+                c.music_lookahead,
+            )
         };
         assert_eq!(lat(Preset::Reference), (291, 291, 29));
         assert_eq!(lat(Preset::Interactive), (31, 31, 29));
         assert_eq!(lat(Preset::LiveMusic), (31, 31, 0));
         // a + e = 0: step k waits for music frame 4(k + 2 + a_m) - 1, 4 (d + 1) - 1 after the leader's.
         assert_eq!(lat(Preset::Minimum), (0, 3, 29));
-        assert_eq!(SessionConfig::with(&cfg, 0, 0, 5, 22).live_latency_frames(4), 23);
-        assert_eq!(SessionConfig::with(&cfg, 1, 0, 5, 22).live_latency_frames(4), 23);
+        assert_eq!(
+            SessionConfig::with(&cfg, 0, 0, 5, 22).live_latency_frames(4),
+            23
+        );
+        assert_eq!(
+            SessionConfig::with(&cfg, 1, 0, 5, 22).live_latency_frames(4),
+            23
+        );
     }
 }
 
@@ -235,10 +293,31 @@ mod published {
         let cfg = crate::duolando::presets::duolando_published();
         let r = SessionConfig::reference(&cfg);
         let f32kv = session_bytes_for(&cfg, &r).unwrap();
-        let f16kv = session_bytes_for(&cfg, &SessionConfig { kv: KvType::F16, ..r }).unwrap();
-        let stag = session_bytes_for(&cfg, &SessionConfig { schedule: CacheSchedule::Staggered, ..r }).unwrap();
+        let f16kv = session_bytes_for(
+            &cfg,
+            &SessionConfig {
+                kv: KvType::F16,
+                ..r
+            },
+        )
+        .unwrap();
+        let stag = session_bytes_for(
+            &cfg,
+            &SessionConfig {
+                schedule: CacheSchedule::Staggered,
+                ..r
+            },
+        )
+        .unwrap();
         let min = session_bytes_for(&cfg, &SessionConfig::minimum(&cfg)).unwrap();
-        let batched = crate::duolando::session::batched_session_bytes_for(&cfg, &SessionConfig { kv: KvType::F16, ..r }).unwrap();
+        let batched = crate::duolando::session::batched_session_bytes_for(
+            &cfg,
+            &SessionConfig {
+                kv: KvType::F16,
+                ..r
+            },
+        )
+        .unwrap();
         assert!(batched + 1_000_000 < f16kv, "{batched} vs {f16kv}");
         // One f32 cache is 12 layers x 2 x (10 x 29 x 768) floats = 21.4 MB (§4).
         let cache = 12 * 2 * 10 * 29 * 768 * 4;

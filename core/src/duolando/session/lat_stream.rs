@@ -21,14 +21,14 @@
 use heapless::Vec;
 
 use crate::arena::{ArenaError, Carve};
-use crate::nn::block::{block_attend_groups, block_kv, BlockScratch};
+use crate::duolando::model::LatW;
+use crate::duolando::session::MAX_BATCH;
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::{linear, Mask, Matrix};
 use crate::limits::MAX_LAT_LAYERS;
-use crate::duolando::model::LatW;
+use crate::nn::block::{block_attend_groups, block_kv, BlockScratch};
 use crate::nn::kv_store::{KvRing, KvType};
 use crate::nn::ring::{RowRing, TokenRing};
-use crate::duolando::session::MAX_BATCH;
 
 /// Most positions one [`LatStream::push_many`] call carries over all its
 /// LATs (a batch of [`MAX_BATCH`] sessions, 4 music frames each).
@@ -76,7 +76,14 @@ pub struct LatStepScratch<'s> {
 impl<'s> LatStepScratch<'s> {
     /// Room for `n` pushes of `rows` positions in all: rows of inputs at
     /// most `in_width` wide, or one token a push (a C-wide embedding row).
-    pub fn carve<A: Carve<'s>>(a: &mut A, c: usize, ds_max: usize, n: usize, rows: usize, in_width: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        c: usize,
+        ds_max: usize,
+        n: usize,
+        rows: usize,
+        in_width: usize,
+    ) -> Result<Self, ArenaError> {
         let rows = rows.max(n);
         let mul = |x: usize, y: usize| x.checked_mul(y).ok_or(ArenaError::Overflow);
         let rc = mul(rows, c)?;
@@ -173,21 +180,35 @@ impl<'s> LatStream<'s> {
     /// LAT's inputs are (rows held as rows where narrower than C, else as
     /// residual rows; tokens held as ids).
     #[allow(clippy::too_many_arguments)]
-    pub fn carve<A: Carve<'s>>(a: &mut A, kv: KvType, w_layers: usize, ds: usize, c: usize, input: LatIn, past: usize, fut: usize, burst: usize) -> Result<Self, ArenaError> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        kv: KvType,
+        w_layers: usize,
+        ds: usize,
+        c: usize,
+        input: LatIn,
+        past: usize,
+        fut: usize,
+        burst: usize,
+    ) -> Result<Self, ArenaError> {
         let burst = burst.clamp(1, ds.max(1));
         let mut k = Vec::new();
         let mut v = Vec::new();
         for l in 0..w_layers {
             let cap = past + burst + if l == 0 { fut } else { 0 };
-            k.push(KvRing::carve(a, kv, cap, c)?).map_err(|_| ArenaError::Overflow)?;
-            v.push(KvRing::carve(a, kv, cap, c)?).map_err(|_| ArenaError::Overflow)?;
+            k.push(KvRing::carve(a, kv, cap, c)?)
+                .map_err(|_| ArenaError::Overflow)?;
+            v.push(KvRing::carve(a, kv, cap, c)?)
+                .map_err(|_| ArenaError::Overflow)?;
         }
         Ok(LatStream {
             k,
             v,
             h0: match input {
                 LatIn::Tokens => Held::Tokens(TokenRing::carve(a, fut + burst, 1)?),
-                LatIn::Rows(n_in) if n_in < c => Held::Inputs(RowRing::carve(a, fut + burst, n_in)?),
+                LatIn::Rows(n_in) if n_in < c => {
+                    Held::Inputs(RowRing::carve(a, fut + burst, n_in)?)
+                }
                 LatIn::Rows(_) => Held::Residuals(RowRing::carve(a, fut + burst, c)?),
             },
             last: a.f32(ds.checked_mul(c).ok_or(ArenaError::Overflow)?)?,
@@ -245,9 +266,20 @@ impl<'s> LatStream<'s> {
     /// for all positions; each LAT's result is what pushing its positions
     /// one at a time would give.
     #[allow(clippy::too_many_arguments)]
-    pub fn push_many(w: &LatW<'_>, lats: &mut [&mut LatStream<'_>], counts: &[usize], inputs: LatInputs<'_, '_>, s: &mut LatStepScratch<'_>, blk: &mut BlockScratch<'_>, out: &mut [f32], produced: &mut [bool]) -> Result<(), Error> {
+    pub fn push_many(
+        w: &LatW<'_>,
+        lats: &mut [&mut LatStream<'_>],
+        counts: &[usize],
+        inputs: LatInputs<'_, '_>,
+        s: &mut LatStepScratch<'_>,
+        blk: &mut BlockScratch<'_>,
+        out: &mut [f32],
+        produced: &mut [bool],
+    ) -> Result<(), Error> {
         let n = lats.len();
-        let Some(first) = lats.first() else { return Ok(()) };
+        let Some(first) = lats.first() else {
+            return Ok(());
+        };
         let (c, ds) = (first.c, first.ds);
         let n_head = w.cfg.n_head as usize;
         let n_in = w.cond_emb.w.cols();
@@ -259,21 +291,46 @@ impl<'s> LatStream<'s> {
                 check_len(Buffer::Tokens, ids.len(), total)?;
                 check_len(Buffer::Features, table.cols(), n_in)?;
                 if let Some(&id) = ids.iter().find(|&&id| id as usize >= table.rows()) {
-                    return Err(Error::Token { stream: 0, token: id, vocab: table.rows().min(u32::MAX as usize) as u32 });
+                    return Err(Error::Token {
+                        stream: 0,
+                        token: id,
+                        vocab: table.rows().min(u32::MAX as usize) as u32,
+                    });
                 }
             }
         }
         check_len(Buffer::Output, out.len(), n * c)?;
         check_len(Buffer::Output, produced.len(), n)?;
-        if n > s.n || n > MAX_BATCH || total > s.rows || total > MAX_LAT_ROWS || total.saturating_mul(2 * n_in) > s.xin.len() {
-            return Err(Error::Length { buffer: Buffer::Features, len: total, expected: s.rows.min(MAX_LAT_ROWS) });
+        if n > s.n
+            || n > MAX_BATCH
+            || total > s.rows
+            || total > MAX_LAT_ROWS
+            || total.saturating_mul(2 * n_in) > s.xin.len()
+        {
+            return Err(Error::Length {
+                buffer: Buffer::Features,
+                len: total,
+                expected: s.rows.min(MAX_LAT_ROWS),
+            });
         }
         for (lat, &cnt) in lats.iter().zip(counts) {
-            if w.blocks.len() != lat.k.len() || w.blocks.is_empty() || lat.c != c || w.cond_emb.w.rows() != c {
-                return Err(Error::Length { buffer: Buffer::Features, len: w.blocks.len(), expected: lat.k.len() });
+            if w.blocks.len() != lat.k.len()
+                || w.blocks.is_empty()
+                || lat.c != c
+                || w.cond_emb.w.rows() != c
+            {
+                return Err(Error::Length {
+                    buffer: Buffer::Features,
+                    len: w.blocks.len(),
+                    expected: lat.k.len(),
+                });
             }
             if cnt > lat.burst {
-                return Err(Error::Length { buffer: Buffer::Features, len: cnt, expected: lat.burst });
+                return Err(Error::Length {
+                    buffer: Buffer::Features,
+                    len: cnt,
+                    expected: lat.burst,
+                });
             }
             // What a LAT holds must be what it is given: rows of its width, or tokens.
             let fits = match (&lat.h0, inputs) {
@@ -282,7 +339,11 @@ impl<'s> LatStream<'s> {
                 _ => false,
             };
             if !fits {
-                return Err(Error::Length { buffer: Buffer::Features, len: n_in, expected: c });
+                return Err(Error::Length {
+                    buffer: Buffer::Features,
+                    len: n_in,
+                    expected: c,
+                });
             }
         }
         produced.fill(false);
@@ -293,7 +354,9 @@ impl<'s> LatStream<'s> {
         for (i, (lat, &cnt)) in lats.iter_mut().zip(counts).enumerate() {
             for _ in 0..cnt {
                 match (&mut lat.h0, inputs) {
-                    (Held::Inputs(h0), LatInputs::Rows(x)) => h0.push(&x[row * n_in..(row + 1) * n_in])?,
+                    (Held::Inputs(h0), LatInputs::Rows(x)) => {
+                        h0.push(&x[row * n_in..(row + 1) * n_in])?
+                    }
                     (Held::Tokens(h0), LatInputs::Tokens(ids, _)) => h0.push(&ids[row..row + 1])?,
                     // Residual rows are held once computed, below.
                     _ => {}
@@ -317,7 +380,9 @@ impl<'s> LatStream<'s> {
             let x = &mut xin[(total + again) * n_in..(total + again + 1) * n_in];
             match (&lats[i].h0, inputs) {
                 (Held::Inputs(h0), _) => x.copy_from_slice(h0.row(p)?),
-                (Held::Tokens(h0), LatInputs::Tokens(_, table)) => table.row_into(h0.row(p)?[0] as usize, x),
+                (Held::Tokens(h0), LatInputs::Tokens(_, table)) => {
+                    table.row_into(h0.row(p)?[0] as usize, x)
+                }
                 _ => continue,
             }
             again += 1;
@@ -325,8 +390,19 @@ impl<'s> LatStream<'s> {
         // One `cond_emb` for both: (total + again, C) layer-1 residual rows
         // (row by row what each alone gives), then the new positions'
         // keys and values.
-        linear(&xin[..(total + again) * n_in], &w.cond_emb.w, w.cond_emb.b, &mut s.h[..tc + again * c]);
-        block_kv(&w.blocks[0], &s.h[..tc], &mut s.ln[..tc], &mut s.k[..tc], &mut s.v[..tc]);
+        linear(
+            &xin[..(total + again) * n_in],
+            &w.cond_emb.w,
+            w.cond_emb.b,
+            &mut s.h[..tc + again * c],
+        );
+        block_kv(
+            &w.blocks[0],
+            &s.h[..tc],
+            &mut s.ln[..tc],
+            &mut s.k[..tc],
+            &mut s.v[..tc],
+        );
         let mut row = 0;
         for (lat, &cnt) in lats.iter_mut().zip(counts) {
             for _ in 0..cnt {
@@ -362,7 +438,13 @@ impl<'s> LatStream<'s> {
         }
         for (l, b) in w.blocks.iter().enumerate() {
             if l > 0 {
-                block_kv(b, &s.h[..rc], &mut s.ln[..rc], &mut s.k[..rc], &mut s.v[..rc]);
+                block_kv(
+                    b,
+                    &s.h[..rc],
+                    &mut s.ln[..rc],
+                    &mut s.k[..rc],
+                    &mut s.v[..rc],
+                );
                 for (g, &(i, _)) in ready.iter().enumerate() {
                     lats[i].k[l].push(&s.k[g * c..(g + 1) * c])?;
                     lats[i].v[l].push(&s.v[g * c..(g + 1) * c])?;
@@ -384,7 +466,11 @@ impl<'s> LatStream<'s> {
         for (g, &(i, p)) in ready.iter().enumerate() {
             let lat = &mut lats[i];
             if lat.ds != ds {
-                return Err(Error::Length { buffer: Buffer::Features, len: lat.ds, expected: ds });
+                return Err(Error::Length {
+                    buffer: Buffer::Features,
+                    len: lat.ds,
+                    expected: ds,
+                });
             }
             let slot = p % ds;
             lat.last[slot * c..(slot + 1) * c].copy_from_slice(&s.h[g * c..(g + 1) * c]);

@@ -24,16 +24,19 @@ pub mod lat_stream;
 mod state;
 mod vq_stream;
 
-pub use batch::{BatchError, StepBatch, StepDims, StepScratch, MAX_BATCH, REPREFILL_CHUNK};
 pub use crate::nn::kv_store::KvType;
-pub use config::{dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool, window_start, CacheSchedule, Preset, Sampling, SessionConfig, Setting, MAX_WINDOWS};
+pub use batch::{BatchError, StepBatch, StepDims, StepScratch, MAX_BATCH, REPREFILL_CHUNK};
+pub use config::{
+    dec_future_max, enc_future_max, for_each_live_window, window_context, window_pool,
+    window_start, CacheSchedule, Preset, Sampling, SessionConfig, Setting, MAX_WINDOWS,
+};
 
 use crate::arena::{Arena, Planner};
 use crate::duolando::config::{ModelConfig, POSE_DIM, ROT_DIM};
-use crate::error::{check_len, Buffer, Error};
-use crate::input;
 use crate::duolando::model::Model;
 use crate::duolando::motion::{denormalise, normalise};
+use crate::error::{check_len, Buffer, Error};
+use crate::input;
 use crate::nn::sampler::Rng;
 use batch::Append;
 use state::State;
@@ -58,7 +61,12 @@ pub struct FollowerFrame {
 
 impl Default for FollowerFrame {
     fn default() -> Self {
-        FollowerFrame { index: 0, positions: [0.0; POSE_DIM], rotations: [0.0; ROT_DIM], root: [0.0; 3] }
+        FollowerFrame {
+            index: 0,
+            positions: [0.0; POSE_DIM],
+            rotations: [0.0; ROT_DIM],
+            root: [0.0; 3],
+        }
     }
 }
 
@@ -100,7 +108,8 @@ pub fn batched_session_bytes_for(model: &ModelConfig, cfg: &SessionConfig) -> Re
     check_config(model, cfg)?;
     let mut p = Planner::new();
     State::carve(&mut p, model, cfg)?;
-    p.total_for_any_base().ok_or(Error::Arena(crate::arena::ArenaError::Overflow))
+    p.total_for_any_base()
+        .ok_or(Error::Arena(crate::arena::ArenaError::Overflow))
 }
 
 /// [`Model::session_bytes`] from the model's config alone (no weights):
@@ -110,12 +119,20 @@ pub fn session_bytes_for(model: &ModelConfig, cfg: &SessionConfig) -> Result<usi
     let mut p = Planner::new();
     State::carve(&mut p, model, cfg)?;
     StepScratch::carve(&mut p, StepDims::new(model, cfg, 1)?)?;
-    p.total_for_any_base().ok_or(Error::Arena(crate::arena::ArenaError::Overflow))
+    p.total_for_any_base()
+        .ok_or(Error::Arena(crate::arena::ArenaError::Overflow))
 }
 
 pub(crate) fn check_config(model: &ModelConfig, cfg: &SessionConfig) -> Result<(), Error> {
-    model.validate().map_err(|e| Error::Bind(crate::nn::bind::BindError::Config(e)))?;
-    cfg.check(model).map_err(|(setting, value, max)| Error::Setting { setting, value, max })?;
+    model
+        .validate()
+        .map_err(|e| Error::Bind(crate::nn::bind::BindError::Config(e)))?;
+    cfg.check(model)
+        .map_err(|(setting, value, max)| Error::Setting {
+            setting,
+            value,
+            max,
+        })?;
     crate::duolando::coordinated_attention::check_layout(model.gpt.n_streams as usize)
 }
 
@@ -123,12 +140,15 @@ fn check_seed(model: &Model<'_>, seed: &[u32; 5]) -> Result<(), Error> {
     let vocab = model.cfg.gpt.vocab;
     for (j, &v) in seed.iter().enumerate() {
         if v >= vocab[j] {
-            return Err(Error::Token { stream: j as u8, token: v, vocab: vocab[j] });
+            return Err(Error::Token {
+                stream: j as u8,
+                token: v,
+                vocab: vocab[j],
+            });
         }
     }
     Ok(())
 }
-
 
 /// A streaming session over one [`Model`]. All state lives in the arena
 /// given to [`Session::new`]; nothing allocates afterwards.
@@ -173,7 +193,12 @@ impl<'a> Session<'a> {
     /// A session of `model` in `arena` (>= [`Model::session_bytes`]),
     /// seeded with follower tokens `seed` (up, down, lhand, rhand, transl;
     /// from frames: [`crate::duolando::exact::seed_tokens`]).
-    pub fn new(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 5]) -> Result<Self, Error> {
+    pub fn new(
+        model: &'a Model<'a>,
+        arena: &'a mut [u8],
+        cfg: &SessionConfig,
+        seed: [u32; 5],
+    ) -> Result<Self, Error> {
         let mut s = Self::carve(model, arena, cfg, seed, true)?;
         s.restart()?;
         Ok(s)
@@ -189,7 +214,13 @@ impl<'a> Session<'a> {
     /// [`Session::push_leader_frame`]) runs inside [`Session::with_batch`]:
     /// called alone, they answer [`Error::State`] and change nothing. The
     /// numbers are those of [`Session::new`]'s session, bit for bit.
-    pub fn new_batched(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 5], batch: &mut StepBatch<'a>) -> Result<Self, Error> {
+    pub fn new_batched(
+        model: &'a Model<'a>,
+        arena: &'a mut [u8],
+        cfg: &SessionConfig,
+        seed: [u32; 5],
+        batch: &mut StepBatch<'a>,
+    ) -> Result<Self, Error> {
         let mut s = Self::carve(model, arena, cfg, seed, false)?;
         s.with_batch(batch, |s| s.restart())??;
         Ok(s)
@@ -197,13 +228,26 @@ impl<'a> Session<'a> {
 
     /// The state, and the session's own step scratch where `own_scratch`
     /// (else none: its dims only, for [`StepBatch`] checks).
-    fn carve(model: &'a Model<'a>, arena: &'a mut [u8], cfg: &SessionConfig, seed: [u32; 5], own_scratch: bool) -> Result<Self, Error> {
+    fn carve(
+        model: &'a Model<'a>,
+        arena: &'a mut [u8],
+        cfg: &SessionConfig,
+        seed: [u32; 5],
+        own_scratch: bool,
+    ) -> Result<Self, Error> {
         check_config(&model.cfg, cfg)?;
         check_seed(model, &seed)?;
         let mut a = Arena::new(arena);
         let st = State::carve(&mut a, &model.cfg, cfg)?;
         let dims = StepDims::new(&model.cfg, cfg, 1)?;
-        let sc = if own_scratch { StepScratch::carve(&mut a, dims)? } else { StepScratch { dims, ..StepScratch::default() } };
+        let sc = if own_scratch {
+            StepScratch::carve(&mut a, dims)?
+        } else {
+            StepScratch {
+                dims,
+                ..StepScratch::default()
+            }
+        };
         let mut s = Session {
             model,
             cfg: *cfg,
@@ -238,7 +282,11 @@ impl<'a> Session<'a> {
     /// track, resets or steps alone. [`Error::State`] (and `f` not run)
     /// if `batch` is smaller than the session needs (made for another
     /// config).
-    pub fn with_batch<R>(&mut self, batch: &mut StepBatch<'a>, f: impl FnOnce(&mut Self) -> R) -> Result<R, Error> {
+    pub fn with_batch<R>(
+        &mut self,
+        batch: &mut StepBatch<'a>,
+        f: impl FnOnce(&mut Self) -> R,
+    ) -> Result<R, Error> {
         if !batch.sc.dims.holds(&self.sc.dims) {
             return Err(Error::State);
         }
@@ -345,18 +393,28 @@ impl<'a> Session<'a> {
     /// `n - 1`. Only before the first leader frame.
     pub fn force_history(&mut self, tokens: &'a [u32]) -> Result<(), Error> {
         if self.ended {
-            return Err(Error::Ended { frames: self.frames });
+            return Err(Error::Ended {
+                frames: self.frames,
+            });
         }
         if self.frames > 0 || self.k > 0 {
             return Err(Error::State);
         }
         if tokens.len() < 5 || tokens.len() % 5 != 0 {
-            return Err(Error::Ragged { buffer: Buffer::Tokens, len: tokens.len(), row: 5 });
+            return Err(Error::Ragged {
+                buffer: Buffer::Tokens,
+                len: tokens.len(),
+                row: 5,
+            });
         }
         let vocab = self.model.cfg.gpt.vocab;
         for (i, &t) in tokens.iter().enumerate() {
             if t >= vocab[i % 5] {
-                return Err(Error::Token { stream: (i % 5) as u8, token: t, vocab: vocab[i % 5] });
+                return Err(Error::Token {
+                    stream: (i % 5) as u8,
+                    token: t,
+                    vocab: vocab[i % 5],
+                });
             }
         }
         if tokens[..5] != self.seed {
@@ -376,7 +434,11 @@ impl<'a> Session<'a> {
             return Err(Error::State);
         }
         if n_music == 0 || track.len() % n_music != 0 {
-            return Err(Error::Ragged { buffer: Buffer::Music, len: track.len(), row: n_music });
+            return Err(Error::Ragged {
+                buffer: Buffer::Music,
+                len: track.len(),
+                row: n_music,
+            });
         }
         input::check(Buffer::Music, track)?;
         self.track = Some(track);
@@ -393,12 +455,20 @@ impl<'a> Session<'a> {
         if self.track.is_some() {
             return Err(Error::State);
         }
-        check_len(Buffer::Music, features.len(), self.model.cfg.gpt.music.n_in as usize)?;
+        check_len(
+            Buffer::Music,
+            features.len(),
+            self.model.cfg.gpt.music.n_in as usize,
+        )?;
         input::check(Buffer::Music, features)?;
         let held = self.music_held();
         let cap = self.st.music.capacity();
         if held >= cap {
-            return Err(Error::Backlog { buffer: Buffer::Music, held, capacity: cap });
+            return Err(Error::Backlog {
+                buffer: Buffer::Music,
+                held,
+                capacity: cap,
+            });
         }
         self.st.music.push(features)?;
         self.music_frames += 1;
@@ -446,13 +516,26 @@ impl<'a> Session<'a> {
     /// (non-finite, out of range, wrong length, backlog) gives `Err((i, e))`
     /// for the first such session, and no session changes. A failure
     /// inside a step (an engine bug) names a session of the failing group.
-    pub fn step_many(sessions: &mut [&mut Session<'a>], frames: &[&[f32]], batch: &mut StepBatch<'_>) -> Result<(), BatchError> {
+    pub fn step_many(
+        sessions: &mut [&mut Session<'a>],
+        frames: &[&[f32]],
+        batch: &mut StepBatch<'_>,
+    ) -> Result<(), BatchError> {
         let n = sessions.len();
         if n > batch.capacity() {
-            return Err((0, Error::Setting { setting: Setting::Batch, value: n.min(u32::MAX as usize) as u32, max: batch.capacity() as u32 }));
+            return Err((
+                0,
+                Error::Setting {
+                    setting: Setting::Batch,
+                    value: n.min(u32::MAX as usize) as u32,
+                    max: batch.capacity() as u32,
+                },
+            ));
         }
         check_len(Buffer::LeaderPos3d, frames.len(), n).map_err(|e| (0, e))?;
-        let Some(first) = sessions.first() else { return Ok(()) };
+        let Some(first) = sessions.first() else {
+            return Ok(());
+        };
         let model = first.model;
         for (i, s) in sessions.iter().enumerate() {
             // The session's own scratch was carved for its needs (`StepDims::new(cfg, s.cfg, 1)`).
@@ -469,7 +552,10 @@ impl<'a> Session<'a> {
 
     /// Runs `f` over this session alone with its step scratch ([`Error::State`]
     /// where it has none: [`Session::new_batched`] outside [`Session::with_batch`]).
-    fn with_own_scratch(&mut self, f: impl FnOnce(&mut [&mut Session<'a>], &mut StepScratch<'a>) -> Result<(), BatchError>) -> Result<(), Error> {
+    fn with_own_scratch(
+        &mut self,
+        f: impl FnOnce(&mut [&mut Session<'a>], &mut StepScratch<'a>) -> Result<(), BatchError>,
+    ) -> Result<(), Error> {
         self.check_step_memory()?;
         let mut sc = core::mem::take(&mut self.sc);
         let r = f(&mut [&mut *self], &mut sc);
@@ -480,20 +566,33 @@ impl<'a> Session<'a> {
     /// Every refusal of [`Session::push_leader_frame`], changing nothing.
     fn check_leader_frame(&self, pos3d: &[f32]) -> Result<(), Error> {
         if self.ended {
-            return Err(Error::Ended { frames: self.frames });
+            return Err(Error::Ended {
+                frames: self.frames,
+            });
         }
         check_len(Buffer::LeaderPos3d, pos3d.len(), POSE_DIM)?;
         input::check(Buffer::LeaderPos3d, pos3d)?;
         let held = self.frames - self.emitted;
         let cap = self.latency_frames() as usize + 1 + self.cfg.pending_frames as usize;
         if held >= cap {
-            return Err(Error::Backlog { buffer: Buffer::FollowerPos3d, held, capacity: cap });
+            return Err(Error::Backlog {
+                buffer: Buffer::FollowerPos3d,
+                held,
+                capacity: cap,
+            });
         }
         // Leader rows there would be with every code in the LATs (codes
         // minus the look-ahead), beyond step k's.
-        let waiting = self.codes.saturating_sub(self.cfg.lookahead as usize).saturating_sub(self.k);
+        let waiting = self
+            .codes
+            .saturating_sub(self.cfg.lookahead as usize)
+            .saturating_sub(self.k);
         if waiting >= self.st.cond_slack {
-            return Err(Error::Backlog { buffer: Buffer::Music, held: waiting, capacity: self.st.cond_slack });
+            return Err(Error::Backlog {
+                buffer: Buffer::Music,
+                held: waiting,
+                capacity: self.st.cond_slack,
+            });
         }
         Ok(())
     }
@@ -508,7 +607,10 @@ impl<'a> Session<'a> {
         self.st.roots.push(&pos3d[..3])?;
         let hop = self.model.cfg.hop();
         let slot = self.frames % hop;
-        normalise(pos3d, &mut self.st.block[slot * POSE_DIM..(slot + 1) * POSE_DIM]);
+        normalise(
+            pos3d,
+            &mut self.st.block[slot * POSE_DIM..(slot + 1) * POSE_DIM],
+        );
         self.frames += 1;
         Ok(())
     }
@@ -529,7 +631,14 @@ impl<'a> Session<'a> {
             None => pred,
         };
         self.st.toks.push(&token)?;
-        self.last_step = Some(StepReport { k, context: c, window_lo: k + 1 - c, rows_computed: self.rows_computed, pred, token });
+        self.last_step = Some(StepReport {
+            k,
+            context: c,
+            window_lo: k + 1 - c,
+            rows_computed: self.rows_computed,
+            pred,
+            token,
+        });
         self.rows_computed = 0;
         self.k += 1;
         Ok(token)
@@ -566,7 +675,8 @@ impl<'a> Session<'a> {
             *v += self.root0[j % 3];
         }
         out.index = f as u64;
-        out.rotations.copy_from_slice(&row[POSE_DIM..POSE_DIM + ROT_DIM]);
+        out.rotations
+            .copy_from_slice(&row[POSE_DIM..POSE_DIM + ROT_DIM]);
         out.root = [pos[0], pos[1], pos[2]];
         out.positions = pos;
         self.emitted += 1;
@@ -609,7 +719,8 @@ impl<'a> Session<'a> {
         if self.ended {
             return Ok(());
         }
-        let r_steps = crate::duolando::exact::output_shape(&self.model.cfg, self.frames).map_or(0, |sh| sh.steps);
+        let r_steps = crate::duolando::exact::output_shape(&self.model.cfg, self.frames)
+            .map_or(0, |sh| sh.steps);
         self.ended = true;
         self.step_limit = self.k.max(r_steps);
         self.with_own_scratch(batch::pump)
@@ -647,7 +758,8 @@ impl<'a> Session<'a> {
     /// frames it completes fit the frame ring: the rest run as frames are
     /// pulled.
     pub(crate) fn step_possible(&self) -> bool {
-        let room = !self.ended || self.decoded - self.emitted + self.model.cfg.hop() <= self.st.pending.capacity();
+        let room = !self.ended
+            || self.decoded - self.emitted + self.model.cfg.hop() <= self.st.pending.capacity();
         self.steps_left() && room
     }
 

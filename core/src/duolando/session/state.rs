@@ -4,16 +4,16 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::duolando::config::{ModelConfig, POSE_DIM, ROT_DIM};
-use crate::error::Error;
 use crate::duolando::model::Model;
-use crate::nn::quantizer::codebook_norms;
-use crate::duolando::session::config::{SessionConfig, MAX_WINDOWS};
-use heapless::Vec;
-use crate::nn::gpt_cache::GptCache;
 use crate::duolando::session::batch::music_burst;
+use crate::duolando::session::config::{SessionConfig, MAX_WINDOWS};
 use crate::duolando::session::lat_stream::{LatIn, LatStream};
+use crate::error::Error;
+use crate::nn::gpt_cache::GptCache;
+use crate::nn::quantizer::codebook_norms;
 use crate::nn::ring::{RowRing, TokenRing};
 use crate::nn::stream_conv::{StackKind, StreamStack};
+use heapless::Vec;
 
 /// Floats of one decoded follower frame waiting to be pulled:
 /// normalised pose (165) | rotation matrices (495) | translation (3).
@@ -85,7 +85,11 @@ fn ov() -> ArenaError {
 impl<'s> State<'s> {
     /// Every buffer for a model of config `cfg` (bound models have a
     /// rotation decoder exactly where `rot_channels > 0`).
-    pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &ModelConfig, sc: &SessionConfig) -> Result<Self, Error> {
+    pub fn carve<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &ModelConfig,
+        sc: &SessionConfig,
+    ) -> Result<Self, Error> {
         let g = &cfg.gpt;
         let hop = cfg.hop();
         let c = g.n_embd as usize;
@@ -102,10 +106,32 @@ impl<'s> State<'s> {
         let [e0, e1, e2, e3] = enc;
         let enc = [e0?, e1?, e2?, e3?];
         let lat_layers = |l: &crate::duolando::config::LatConfig| l.n_layer as usize;
-        let leader_lat = [0, 1, 2, 3].map(|_| LatStream::carve(a, sc.kv, lat_layers(&g.leader), lds, c, LatIn::Tokens, past * lds, la * lds, 1));
+        let leader_lat = [0, 1, 2, 3].map(|_| {
+            LatStream::carve(
+                a,
+                sc.kv,
+                lat_layers(&g.leader),
+                lds,
+                c,
+                LatIn::Tokens,
+                past * lds,
+                la * lds,
+                1,
+            )
+        });
         let [l0, l1, l2, l3] = leader_lat;
         let leader_lat = [l0?, l1?, l2?, l3?];
-        let music_lat = LatStream::carve(a, sc.kv, lat_layers(&g.music), mds, c, LatIn::Rows(g.music.n_in as usize), past * mds, am * mds, music_burst(cfg))?;
+        let music_lat = LatStream::carve(
+            a,
+            sc.kv,
+            lat_layers(&g.music),
+            mds,
+            c,
+            LatIn::Rows(g.music.n_in as usize),
+            past * mds,
+            am * mds,
+            music_burst(cfg),
+        )?;
         let cond_slack = am + 10;
         let codes_cap = cond_slack.checked_add(1).ok_or(ov())?;
         // Every condition row of step k is made once step k may use it (rows
@@ -130,7 +156,15 @@ impl<'s> State<'s> {
         let n_caches = sc.schedule.caches(m, sc.shift as usize);
         let mut gpt = Vec::new();
         for _ in 0..n_caches.min(MAX_WINDOWS) {
-            let cache = GptCache::carve(a, sc.kv, g.n_layer_base as usize + g.n_layer_head as usize, streams, m, c, g.n_head as usize)?;
+            let cache = GptCache::carve(
+                a,
+                sc.kv,
+                g.n_layer_base as usize + g.n_layer_head as usize,
+                streams,
+                m,
+                c,
+                g.n_head as usize,
+            )?;
             gpt.push(cache).map_err(|_| ov())?;
         }
         // The backlog refusal admits `latency + 1 + pending_frames` unpulled
@@ -147,7 +181,9 @@ impl<'s> State<'s> {
         // decoded frames wait (the +1: latency 0 is not hop(a+e+d) - 1);
         // with music pushed live the refusal comes `extra` frames later
         // (the live latency), and as many more may wait.
-        let pending_cap = (sc.pending_frames as usize).checked_add(hop + 1 + extra).ok_or(ov())?;
+        let pending_cap = (sc.pending_frames as usize)
+            .checked_add(hop + 1 + extra)
+            .ok_or(ov())?;
         Ok(State {
             block: a.f32(hop.checked_mul(POSE_DIM).ok_or(ov())?)?,
             part_in: a.f32(hop.checked_mul(pos).ok_or(ov())?)?,
@@ -177,13 +213,22 @@ impl<'s> State<'s> {
         for p in 0..4 {
             let cb = &model.parts[p].codebook;
             let (emb, bins) = (model.parts[p].cfg.emb_width as usize, cb.rows());
-            codebook_norms(cb, &mut self.feat[..emb], &mut self.kk[p * self.kk_stride..p * self.kk_stride + bins]);
+            codebook_norms(
+                cb,
+                &mut self.feat[..emb],
+                &mut self.kk[p * self.kk_stride..p * self.kk_stride + bins],
+            );
         }
     }
 
     /// Back to an empty session (no allocation).
     pub fn reset(&mut self) {
-        for s in self.enc.iter_mut().chain(self.dec_pos.iter_mut()).chain(self.dec_rot.iter_mut().flatten()) {
+        for s in self
+            .enc
+            .iter_mut()
+            .chain(self.dec_pos.iter_mut())
+            .chain(self.dec_rot.iter_mut().flatten())
+        {
             s.reset();
         }
         for l in self.leader_lat.iter_mut() {

@@ -33,7 +33,10 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use crate::kernels::parallel::Window;
 
 use super::x86::gelu16;
-use super::{Isa, PackedQ8, PACK_BLOCKS, PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES, PACK_ROWS, Q8_BLOCK};
+use super::{
+    Isa, PackedQ8, PACK_BLOCKS, PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES,
+    PACK_ROWS, Q8_BLOCK,
+};
 
 /// Activation rows per tile multiply: groups of 12, and of [`ROWS_SMALL`]
 /// where 12s leave 8-11 rows ([`groups`]). Measured (2026-12-03, the Xeon
@@ -102,7 +105,11 @@ pub struct AmxWeights {
 
 impl AmxWeights {
     pub fn new() -> Self {
-        AmxWeights { b: [0; PACK_BLOCKS * B_BLOCK], s: [[[0.0; 16]; PAIRS]; 2], nb: [0; 2] }
+        AmxWeights {
+            b: [0; PACK_BLOCKS * B_BLOCK],
+            s: [[[0.0; 16]; PAIRS]; 2],
+            nb: [0; 2],
+        }
     }
 
     /// Lays out `w` as tile `half` (0: weight rows 0-7 of the result, 1:
@@ -131,7 +138,11 @@ impl AmxWeights {
         }
         self.nb[half] = 0;
         let nb = w.blocks();
-        let per = if w.q4 { PACK_BLOCK_NIBBLES } else { PACK_BLOCK_VALUES };
+        let per = if w.q4 {
+            PACK_BLOCK_NIBBLES
+        } else {
+            PACK_BLOCK_VALUES
+        };
         if nb > PACK_BLOCKS || w.v.len() < nb * per || w.s.len() < nb * PACK_BLOCK_SCALES {
             return false;
         }
@@ -154,7 +165,13 @@ impl Default for AmxWeights {
 /// avx512f, avx512bw and f16c; `w.v` holds `nb` blocks, `w.s` their scales,
 /// `out` `nb * B_BLOCK` bytes, `nb <= PACK_BLOCKS`.
 #[target_feature(enable = "avx512f,avx512bw,f16c")]
-unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], scales: &mut [[[f32; 16]; PAIRS]; 2]) {
+unsafe fn prepare_b(
+    w: PackedQ8<'_>,
+    nb: usize,
+    half: usize,
+    out: &mut [u8],
+    scales: &mut [[[f32; 16]; PAIRS]; 2],
+) {
     let low = _mm512_set1_epi8(0x0f);
     let eight = _mm512_set1_epi8(8);
     // Low half: the even dwords (h = 0) of a stored line, high half: the odd ones.
@@ -163,7 +180,9 @@ unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], sca
         let lines: [__m512i; 4] = if w.q4 {
             let vb = &w.v[PACK_BLOCK_NIBBLES * b..PACK_BLOCK_NIBBLES * (b + 1)];
             // SAFETY: vb holds 2 x 64 bytes.
-            let h: [__m512i; 2] = core::array::from_fn(|k| unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * k) as *const _) });
+            let h: [__m512i; 2] = core::array::from_fn(|k| unsafe {
+                _mm512_loadu_si512(vb.as_ptr().add(64 * k) as *const _)
+            });
             [
                 _mm512_sub_epi8(_mm512_and_si512(h[0], low), eight),
                 _mm512_sub_epi8(_mm512_and_si512(h[1], low), eight),
@@ -173,14 +192,22 @@ unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], sca
         } else {
             let vb = &w.v[PACK_BLOCK_VALUES * b..PACK_BLOCK_VALUES * (b + 1)];
             // SAFETY: vb holds 4 x 64 bytes.
-            core::array::from_fn(|g| unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _) })
+            core::array::from_fn(|g| unsafe {
+                _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _)
+            })
         };
         for (g, line) in lines.iter().enumerate() {
             let v = _mm512_permutexvar_epi32(split, *line);
             // SAFETY: ob holds 8 x 64 bytes; 128g + 64 + 32 half + 32 <= 512.
             unsafe {
-                _mm256_storeu_si256(ob.as_mut_ptr().add(128 * g + 32 * half) as *mut _, _mm512_castsi512_si256(v));
-                _mm256_storeu_si256(ob.as_mut_ptr().add(128 * g + 64 + 32 * half) as *mut _, _mm512_extracti64x4_epi64::<1>(v));
+                _mm256_storeu_si256(
+                    ob.as_mut_ptr().add(128 * g + 32 * half) as *mut _,
+                    _mm512_castsi512_si256(v),
+                );
+                _mm256_storeu_si256(
+                    ob.as_mut_ptr().add(128 * g + 64 + 32 * half) as *mut _,
+                    _mm512_extracti64x4_epi64::<1>(v),
+                );
             }
         }
     }
@@ -188,7 +215,14 @@ unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], sca
         let mut f = [0f32; 8];
         if b < nb {
             // SAFETY: block b's 8 f16 scales (16 bytes) lie in w.s; f holds 8 floats.
-            unsafe { _mm256_storeu_ps(f.as_mut_ptr(), _mm256_cvtph_ps(_mm_loadu_si128(w.s[PACK_BLOCK_SCALES * b..].as_ptr() as *const __m128i))) };
+            unsafe {
+                _mm256_storeu_ps(
+                    f.as_mut_ptr(),
+                    _mm256_cvtph_ps(_mm_loadu_si128(
+                        w.s[PACK_BLOCK_SCALES * b..].as_ptr() as *const __m128i
+                    )),
+                )
+            };
         }
         f
     };
@@ -217,7 +251,16 @@ unsafe fn prepare_b(w: PackedQ8<'_>, nb: usize, half: usize, out: &mut [u8], sca
 /// call, so their memory reads overlap the tile multiplies; no result
 /// depends on it.
 #[allow(clippy::too_many_arguments)]
-pub fn gemm_q8_packed_amx(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: Window<'_>, bias: Option<&[f32]>, gelu: bool, ahead: &[u8]) -> usize {
+pub fn gemm_q8_packed_amx(
+    w: &AmxWeights,
+    xq: &[i8],
+    stride: usize,
+    xd: &[f32],
+    out: Window<'_>,
+    bias: Option<&[f32]>,
+    gelu: bool,
+    ahead: &[u8],
+) -> usize {
     if !enabled() {
         return 0;
     }
@@ -231,8 +274,18 @@ pub fn gemm_q8_packed_amx(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], 
 pub fn amx_rows(nb: usize, xq_len: usize, stride: usize, xd_len: usize, rows: usize) -> usize {
     let (a, b) = groups(rows);
     let rows = a * ROWS + b * ROWS_SMALL;
-    let need_q = if rows == 0 { 0 } else { (rows - 1) * stride + nb * Q8_BLOCK };
-    if rows == 0 || nb == 0 || nb > PACK_BLOCKS || stride < nb * Q8_BLOCK || xq_len < need_q || xd_len < rows * nb {
+    let need_q = if rows == 0 {
+        0
+    } else {
+        (rows - 1) * stride + nb * Q8_BLOCK
+    };
+    if rows == 0
+        || nb == 0
+        || nb > PACK_BLOCKS
+        || stride < nb * Q8_BLOCK
+        || xq_len < need_q
+        || xd_len < rows * nb
+    {
         return 0;
     }
     rows
@@ -245,10 +298,20 @@ pub fn amx_rows(nb: usize, xq_len: usize, stride: usize, xd_len: usize, rows: us
 /// f16c, and the OS must have granted this process the tile data state
 /// ([`request_linux_permission`]).
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, xq: &[i8], stride: usize, xd: &[f32], out: Window<'_>, bias: Option<&[f32]>, gelu: bool, ahead: &[u8]) -> usize {
+pub unsafe fn gemm_q8_packed_amx_raw(
+    w: &AmxWeights,
+    xq: &[i8],
+    stride: usize,
+    xd: &[f32],
+    out: Window<'_>,
+    bias: Option<&[f32]>,
+    gelu: bool,
+    ahead: &[u8],
+) -> usize {
     let nb = w.nb[0];
     let rows = amx_rows(nb, xq.len(), stride, xd.len(), out.rows());
-    if rows == 0 || w.nb[1] != nb || out.cols() > COLS || bias.is_some_and(|b| b.len() < out.cols()) {
+    if rows == 0 || w.nb[1] != nb || out.cols() > COLS || bias.is_some_and(|b| b.len() < out.cols())
+    {
         return 0;
     }
     let e = Tail { bias, gelu };
@@ -260,8 +323,28 @@ pub unsafe fn gemm_q8_packed_amx_raw(w: &AmxWeights, xq: &[i8], stride: usize, x
     // SAFETY: as above; the small groups' rows start `big` rows further in
     // `xq` and `xd` (inside the checked extents). `ahead` goes to the first call.
     unsafe {
-        tiles_q8::<ROWS>(&w.b[..nb * B_BLOCK], &w.s, nb, xq, stride, xd, o_big, e, ahead);
-        tiles_q8::<ROWS_SMALL>(&w.b[..nb * B_BLOCK], &w.s, nb, &xq[big * stride..], stride, &xd[big * nb..], o_small.split_rows(rows - big).0, e, if big > 0 { &[] } else { ahead });
+        tiles_q8::<ROWS>(
+            &w.b[..nb * B_BLOCK],
+            &w.s,
+            nb,
+            xq,
+            stride,
+            xd,
+            o_big,
+            e,
+            ahead,
+        );
+        tiles_q8::<ROWS_SMALL>(
+            &w.b[..nb * B_BLOCK],
+            &w.s,
+            nb,
+            &xq[big * stride..],
+            stride,
+            &xd[big * nb..],
+            o_small.split_rows(rows - big).0,
+            e,
+            if big > 0 { &[] } else { ahead },
+        );
     }
     rows
 }
@@ -318,7 +401,16 @@ struct TileConfig([u8; 64]);
 const fn config(r: u8) -> TileConfig {
     let mut c = [0u8; 64];
     c[0] = 1; // palette 1
-    let tiles: [(usize, u8, u16); 8] = [(0, r, 64), (1, r, 32), (2, 8, 64), (3, r, 64), (4, 8, 64), (5, r, 32), (6, r, 64), (7, r, 64)];
+    let tiles: [(usize, u8, u16); 8] = [
+        (0, r, 64),
+        (1, r, 32),
+        (2, 8, 64),
+        (3, r, 64),
+        (4, 8, 64),
+        (5, r, 32),
+        (6, r, 64),
+        (7, r, 64),
+    ];
     let mut i = 0;
     while i < tiles.len() {
         let (t, rows, colsb) = tiles[i];
@@ -349,16 +441,24 @@ unsafe fn multiply<const EVEN: bool>(a: *const i8, stride: usize, b: *const u8, 
     unsafe {
         let (a1, b1) = (a.add(32), b.add(B_BLOCK));
         match (EVEN, two) {
-            (true, true) => asm!("tilezero tmm0", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm0, tmm1, tmm2",
+            (true, true) => {
+                asm!("tilezero tmm0", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm0, tmm1, tmm2",
                 "tilezero tmm3", "tileloadd tmm5, [{a1} + {sa}]", "tileloadd tmm4, [{b1} + {sb}]", "tdpbssd tmm3, tmm5, tmm4",
-                a = in(reg) a, a1 = in(reg) a1, sa = in(reg) stride, b = in(reg) b, b1 = in(reg) b1, sb = in(reg) 64usize, options(nostack, readonly)),
-            (true, false) => asm!("tilezero tmm0", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm0, tmm1, tmm2",
-                a = in(reg) a, sa = in(reg) stride, b = in(reg) b, sb = in(reg) 64usize, options(nostack, readonly)),
-            (false, true) => asm!("tilezero tmm6", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm6, tmm1, tmm2",
+                a = in(reg) a, a1 = in(reg) a1, sa = in(reg) stride, b = in(reg) b, b1 = in(reg) b1, sb = in(reg) 64usize, options(nostack, readonly))
+            }
+            (true, false) => {
+                asm!("tilezero tmm0", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm0, tmm1, tmm2",
+                a = in(reg) a, sa = in(reg) stride, b = in(reg) b, sb = in(reg) 64usize, options(nostack, readonly))
+            }
+            (false, true) => {
+                asm!("tilezero tmm6", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm6, tmm1, tmm2",
                 "tilezero tmm7", "tileloadd tmm5, [{a1} + {sa}]", "tileloadd tmm4, [{b1} + {sb}]", "tdpbssd tmm7, tmm5, tmm4",
-                a = in(reg) a, a1 = in(reg) a1, sa = in(reg) stride, b = in(reg) b, b1 = in(reg) b1, sb = in(reg) 64usize, options(nostack, readonly)),
-            (false, false) => asm!("tilezero tmm6", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm6, tmm1, tmm2",
-                a = in(reg) a, sa = in(reg) stride, b = in(reg) b, sb = in(reg) 64usize, options(nostack, readonly)),
+                a = in(reg) a, a1 = in(reg) a1, sa = in(reg) stride, b = in(reg) b, b1 = in(reg) b1, sb = in(reg) 64usize, options(nostack, readonly))
+            }
+            (false, false) => {
+                asm!("tilezero tmm6", "tileloadd tmm1, [{a} + {sa}]", "tileloadd tmm2, [{b} + {sb}]", "tdpbssd tmm6, tmm1, tmm2",
+                a = in(reg) a, sa = in(reg) stride, b = in(reg) b, sb = in(reg) 64usize, options(nostack, readonly))
+            }
         }
     }
 }
@@ -374,10 +474,18 @@ unsafe fn store<const EVEN: bool>(c: &mut CPair, two: bool) {
     // SAFETY: the caller's; 8 rows x 64 bytes fill each half of `c`.
     unsafe {
         match (EVEN, two) {
-            (true, true) => asm!("tilestored [{c0} + {s}], tmm0", "tilestored [{c1} + {s}], tmm3", c0 = in(reg) c0, c1 = in(reg) c1, s = in(reg) 64usize, options(nostack)),
-            (true, false) => asm!("tilestored [{c0} + {s}], tmm0", c0 = in(reg) c0, s = in(reg) 64usize, options(nostack)),
-            (false, true) => asm!("tilestored [{c0} + {s}], tmm6", "tilestored [{c1} + {s}], tmm7", c0 = in(reg) c0, c1 = in(reg) c1, s = in(reg) 64usize, options(nostack)),
-            (false, false) => asm!("tilestored [{c0} + {s}], tmm6", c0 = in(reg) c0, s = in(reg) 64usize, options(nostack)),
+            (true, true) => {
+                asm!("tilestored [{c0} + {s}], tmm0", "tilestored [{c1} + {s}], tmm3", c0 = in(reg) c0, c1 = in(reg) c1, s = in(reg) 64usize, options(nostack))
+            }
+            (true, false) => {
+                asm!("tilestored [{c0} + {s}], tmm0", c0 = in(reg) c0, s = in(reg) 64usize, options(nostack))
+            }
+            (false, true) => {
+                asm!("tilestored [{c0} + {s}], tmm6", "tilestored [{c1} + {s}], tmm7", c0 = in(reg) c0, c1 = in(reg) c1, s = in(reg) 64usize, options(nostack))
+            }
+            (false, false) => {
+                asm!("tilestored [{c0} + {s}], tmm6", c0 = in(reg) c0, s = in(reg) 64usize, options(nostack))
+            }
         }
     }
 }
@@ -394,7 +502,17 @@ unsafe fn store<const EVEN: bool>(c: &mut CPair, two: bool) {
 /// features, and the extents it checked.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,f16c")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: usize, xq: &[i8], stride: usize, xd: &[f32], mut out: Window<'_>, e: Tail<'_>, ahead: &[u8]) {
+unsafe fn tiles_q8<const R: usize>(
+    wb: &[u8],
+    sc: &[[[f32; 16]; PAIRS]; 2],
+    nb: usize,
+    xq: &[i8],
+    stride: usize,
+    xd: &[f32],
+    mut out: Window<'_>,
+    e: Tail<'_>,
+    ahead: &[u8],
+) {
     // Row m of a pair's C tile h: lane 8t + n = weight row 8t + n's sums of block 2p + h, which
     // the VNNI kernel keeps in lane 2n (h = 0) or 2n + 1 (h = 1) of tile t's accumulator: the same
     // FMAs lane for lane in acc[h], whose lanes the VNNI kernel adds at the end, even + odd.
@@ -407,7 +525,9 @@ unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: 
     // The window's columns (at most COLS) and their bias, as lanes.
     let cols = lanes(out.cols());
     // SAFETY: the masked lanes < out.cols() <= bias.len() (checked by the caller).
-    let bias = e.bias.map_or(_mm512_setzero_ps(), |b| unsafe { _mm512_maskz_loadu_ps(cols, b.as_ptr()) });
+    let bias = e.bias.map_or(_mm512_setzero_ps(), |b| unsafe {
+        _mm512_maskz_loadu_ps(cols, b.as_ptr())
+    });
     let mut c = [CPair([[0; 16 * ROWS]; 2]), CPair([[0; 16 * ROWS]; 2])];
     let cfg = if R == ROWS { &CONFIG } else { &CONFIG_SMALL };
     // SAFETY: both are valid palette-1 configurations (R is one of their row counts).
@@ -425,7 +545,10 @@ unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: 
             // tiles of its parity (multiplied in the previous step).
             unsafe {
                 if p + 1 < np {
-                    let (ap, bp) = (a[64 * (p + 1)..].as_ptr(), wb[2 * B_BLOCK * (p + 1)..].as_ptr());
+                    let (ap, bp) = (
+                        a[64 * (p + 1)..].as_ptr(),
+                        wb[2 * B_BLOCK * (p + 1)..].as_ptr(),
+                    );
                     if p % 2 == 0 {
                         multiply::<false>(ap, stride, bp, two(p + 1))
                     } else {
@@ -453,7 +576,11 @@ unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: 
                     // SAFETY: row m of the stored tile: 16 i32 at 16m (aligned).
                     let sums = unsafe { _mm512_load_si512(cph[16 * m..].as_ptr() as *const _) };
                     let xdv = _mm512_set1_ps(d[m * nb + 2 * p + h]);
-                    acc[h][m] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv, xdv), acc[h][m]);
+                    acc[h][m] = _mm512_fmadd_ps(
+                        _mm512_cvtepi32_ps(sums),
+                        _mm512_mul_ps(sv, xdv),
+                        acc[h][m],
+                    );
                 }
             }
         }
@@ -463,7 +590,9 @@ unsafe fn tiles_q8<const R: usize>(wb: &[u8], sc: &[[[f32; 16]; PAIRS]; 2], nb: 
             let y = _mm512_add_ps(bias, _mm512_add_ps(*even, *odd));
             let o = out.row(t * R + m);
             // SAFETY: the masked lanes < out.cols() = o.len().
-            unsafe { _mm512_mask_storeu_ps(o.as_mut_ptr(), cols, if e.gelu { gelu16(y) } else { y }) };
+            unsafe {
+                _mm512_mask_storeu_ps(o.as_mut_ptr(), cols, if e.gelu { gelu16(y) } else { y })
+            };
         }
     }
     // SAFETY: tiles configured above; releasing returns them to the init state.

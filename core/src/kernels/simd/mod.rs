@@ -19,14 +19,14 @@
 
 use core::sync::atomic::{AtomicU8, Ordering};
 
+#[cfg(target_arch = "x86_64")]
+pub mod amx;
 pub mod peak;
 pub mod scalar;
 #[cfg(test)]
 mod tests;
 #[cfg(target_arch = "x86_64")]
 pub mod x86;
-#[cfg(target_arch = "x86_64")]
-pub mod amx;
 #[cfg(target_arch = "x86_64")]
 pub use amx::{amx_rows, gemm_q8_packed_amx, AmxWeights, COLS as AMX_COLS, ROWS as AMX_ROWS};
 #[cfg(not(target_arch = "x86_64"))]
@@ -96,7 +96,11 @@ pub const COMPILE_TIME_ISA: Isa = if cfg!(all(
     target_feature = "f16c"
 )) {
     Isa::Avx2
-} else if cfg!(all(target_arch = "aarch64", target_feature = "neon", target_feature = "dotprod")) {
+} else if cfg!(all(
+    target_arch = "aarch64",
+    target_feature = "neon",
+    target_feature = "dotprod"
+)) {
     Isa::NeonDot
 } else if cfg!(all(target_arch = "aarch64", target_feature = "neon")) {
     Isa::Neon
@@ -244,7 +248,10 @@ pub(crate) fn even_passes(m: usize, most: usize, f: &mut impl FnMut(usize, usize
 /// shared evenly ([`even_passes`]); `$body` gives rows `$m0 .. $m0 + $k`
 /// with `$k` a `const usize` (1..=4) and `$a` the bytes to prefetch (all
 /// of `$ahead` in the first pass, none after).
-#[cfg_attr(not(any(target_arch = "x86_64", target_arch = "aarch64")), allow(unused_macros))]
+#[cfg_attr(
+    not(any(target_arch = "x86_64", target_arch = "aarch64")),
+    allow(unused_macros)
+)]
 macro_rules! passes_of_four {
     ($m:expr, $ahead:expr, |$k:ident, $m0:ident, $a:ident| $body:expr) => {{
         let mut out = [[0.0f32; $crate::kernels::simd::PACK_ROWS]; $m];
@@ -272,7 +279,10 @@ macro_rules! passes_of_four {
         out
     }};
 }
-#[cfg_attr(not(any(target_arch = "x86_64", target_arch = "aarch64")), allow(unused_imports))]
+#[cfg_attr(
+    not(any(target_arch = "x86_64", target_arch = "aarch64")),
+    allow(unused_imports)
+)]
 pub(crate) use passes_of_four;
 
 /// Prefetches (into L2) part `i` of `parts` of `ahead`'s 64-byte lines: a
@@ -296,7 +306,10 @@ pub(crate) fn part_bytes(len: usize, i: usize, parts: usize) -> (usize, usize) {
         return (0, 0);
     }
     let lines = len.div_ceil(64);
-    let (l0, l1) = ((i * lines / parts).min(lines), ((i + 1) * lines / parts).min(lines));
+    let (l0, l1) = (
+        (i * lines / parts).min(lines),
+        ((i + 1) * lines / parts).min(lines),
+    );
     ((l0 * 64).min(len), (l1 * 64).min(len))
 }
 
@@ -446,7 +459,11 @@ pub fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
 /// must be a multiple of 32 (a trailing partial block is ignored); `q` >=
 /// x.len(), `d` >= x.len() / 32.
 pub fn quantise_q8(x: &[f32], q: &mut [i8], d: &mut [f32]) {
-    for ((xb, qb), db) in x.chunks_exact(Q8_BLOCK).zip(q.chunks_exact_mut(Q8_BLOCK)).zip(d.iter_mut()) {
+    for ((xb, qb), db) in x
+        .chunks_exact(Q8_BLOCK)
+        .zip(q.chunks_exact_mut(Q8_BLOCK))
+        .zip(d.iter_mut())
+    {
         let amax = xb.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         let (scale, inv) = q8_scale(amax);
         *db = scale;
@@ -524,7 +541,13 @@ pub fn q8_scales(row: &[u8], out: &mut [f32]) {
 /// `xc` from [`quantise_q8_corr`]. `M` is 1..=4 (small-batch and
 /// matrix-vector products waste no lanes on padding rows).
 #[inline]
-pub fn gemm_q8<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; TN]; M] {
+pub fn gemm_q8<const M: usize>(
+    w: [&[u8]; TN],
+    wd: [&[f32]; TN],
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; TN]; M] {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: ISA holds Avx512Vnni only via COMPILE_TIME_ISA or `set_isa`,
@@ -760,13 +783,27 @@ impl<'a> PackedQ8<'a> {
     /// The blocks a packed kernel computes: the group's, cut to what every
     /// activation row, scale row and correction row (2 per block) holds.
     #[inline]
-    pub(crate) fn blocks_for<const M: usize, const C: usize>(&self, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; C]) -> usize {
-        let pv = if self.q4 { PACK_BLOCK_NIBBLES } else { PACK_BLOCK_VALUES };
+    pub(crate) fn blocks_for<const M: usize, const C: usize>(
+        &self,
+        xq: [&[i8]; M],
+        xd: [&[f32]; M],
+        xc: [&[i32]; C],
+    ) -> usize {
+        let pv = if self.q4 {
+            PACK_BLOCK_NIBBLES
+        } else {
+            PACK_BLOCK_VALUES
+        };
         xq.iter()
             .map(|r| r.len() / Q8_BLOCK)
             .chain(xd.iter().map(|r| r.len()))
             .chain(xc.iter().map(|r| r.len() / 2))
-            .fold(self.nb.min(self.v.len() / pv).min(self.s.len() / PACK_BLOCK_SCALES), usize::min)
+            .fold(
+                self.nb
+                    .min(self.v.len() / pv)
+                    .min(self.s.len() / PACK_BLOCK_SCALES),
+                usize::min,
+            )
     }
     /// Row `n`'s value `i` (0..32) of block `b` (`n < 8`, `b < nb`), as the
     /// signed integer the scale multiplies.
@@ -784,7 +821,10 @@ impl<'a> PackedQ8<'a> {
     /// Row `n`'s f16 scale bits of block `b`.
     #[inline]
     pub fn scale_bits(&self, b: usize, n: usize) -> u16 {
-        u16::from_le_bytes([self.s[PACK_BLOCK_SCALES * b + 2 * n], self.s[PACK_BLOCK_SCALES * b + 2 * n + 1]])
+        u16::from_le_bytes([
+            self.s[PACK_BLOCK_SCALES * b + 2 * n],
+            self.s[PACK_BLOCK_SCALES * b + 2 * n + 1],
+        ])
     }
     /// Row `n`'s block `b` as a stored Q8Block32 block (`dst`: at least 34
     /// bytes: the f16 scale, then the 32 values): [`Self::scale_bits`] and
@@ -823,12 +863,21 @@ pub struct Q8Pack8 {
 
 impl Q8Pack8 {
     pub fn new() -> Self {
-        Q8Pack8 { v: [0; PACK_BLOCKS * PACK_BLOCK_VALUES], s: [0; PACK_BLOCKS * PACK_BLOCK_SCALES], nb: 0 }
+        Q8Pack8 {
+            v: [0; PACK_BLOCKS * PACK_BLOCK_VALUES],
+            s: [0; PACK_BLOCKS * PACK_BLOCK_SCALES],
+            nb: 0,
+        }
     }
     /// The packed tile of the last [`q8_pack8`].
     pub fn view(&self) -> PackedQ8<'_> {
         let nb = self.nb.min(PACK_BLOCKS);
-        PackedQ8 { v: &self.v[..nb * PACK_BLOCK_VALUES], s: &self.s[..nb * PACK_BLOCK_SCALES], nb, q4: false }
+        PackedQ8 {
+            v: &self.v[..nb * PACK_BLOCK_VALUES],
+            s: &self.s[..nb * PACK_BLOCK_SCALES],
+            nb,
+            q4: false,
+        }
     }
 }
 
@@ -844,7 +893,10 @@ impl Default for Q8Pack8 {
 /// callers expand them to rows for [`gemm_q8`] otherwise.
 #[inline]
 pub fn packed_q8_fast() -> bool {
-    matches!(isa(), Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni | Isa::NeonDot)
+    matches!(
+        isa(),
+        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni | Isa::NeonDot
+    )
 }
 
 /// Whether packing 8 stored rows per tile ([`q8_pack8`]) for
@@ -874,7 +926,12 @@ pub fn q8_pack8(rows: [&[u8]; PACK_ROWS], nb: usize, pack: &mut Q8Pack8) {
 /// over the packed rows (see [`gemm_q8`]; `xc` from [`quantise_q8_corr`]).
 /// `M` is 1..=12 (`linear` hands it at most 12 rows per call).
 #[inline]
-pub fn gemm_q8_packed<const M: usize>(w: PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; PACK_ROWS]; M] {
+pub fn gemm_q8_packed<const M: usize>(
+    w: PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; PACK_ROWS]; M] {
     gemm_q8_packed_ahead(w, xq, xd, xc, &[])
 }
 
@@ -882,7 +939,13 @@ pub fn gemm_q8_packed<const M: usize>(w: PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f3
 /// tile) into L2, spread over its blocks (the SIMD variants; a hint, no
 /// numeric effect).
 #[inline]
-pub fn gemm_q8_packed_ahead<const M: usize>(w: PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; PACK_ROWS]; M] {
+pub fn gemm_q8_packed_ahead<const M: usize>(
+    w: PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+    ahead: &[u8],
+) -> [[f32; PACK_ROWS]; M] {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: ISA holds Avx512Vnni only via COMPILE_TIME_ISA or `set_isa`,
@@ -962,14 +1025,29 @@ pub const QUERY_GROUP: usize = 5;
 /// for heads of at most 64 lanes.
 #[inline]
 #[allow(clippy::too_many_arguments)]
-pub fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
+pub fn dot_rows_group(
+    q: &[f32],
+    hd: usize,
+    q_stride: usize,
+    g: usize,
+    k: &[f32],
+    stride: usize,
+    n: usize,
+    out: &mut [f32],
+    out_stride: usize,
+    side: &[u8],
+) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx512* imply avx512f).
-        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_group(q, hd, q_stride, g, k, stride, n, out, out_stride, side) },
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::dot_rows_512_group(q, hd, q_stride, g, k, stride, n, out, out_stride, side)
+        },
         _ => {
             let _ = side;
-            per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| dot_rows(qm, k, stride, o))
+            per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| {
+                dot_rows(qm, k, stride, o)
+            })
         }
     }
 }
@@ -978,23 +1056,50 @@ pub fn dot_rows_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32]
 /// [`dot_rows_f16`] per query.
 #[inline]
 #[allow(clippy::too_many_arguments)]
-pub fn dot_rows_group_f16(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
+pub fn dot_rows_group_f16(
+    q: &[f32],
+    hd: usize,
+    q_stride: usize,
+    g: usize,
+    k: &[u16],
+    stride: usize,
+    n: usize,
+    out: &mut [f32],
+    out_stride: usize,
+    side: &[u8],
+) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx512* imply avx512f/bw/vl and f16c).
-        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_group_f16(q, hd, q_stride, g, k, stride, n, out, out_stride, side) },
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::dot_rows_512_group_f16(q, hd, q_stride, g, k, stride, n, out, out_stride, side)
+        },
         _ => {
             let _ = side;
-            per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| dot_rows_f16(qm, k, stride, o))
+            per_query(q, hd, q_stride, g, n, out, out_stride, |qm, o| {
+                dot_rows_f16(qm, k, stride, o)
+            })
         }
     }
 }
 
 /// `f(query m, its n scores)` for each query of a [`dot_rows_group`] call.
 #[allow(clippy::too_many_arguments)]
-fn per_query(q: &[f32], hd: usize, q_stride: usize, g: usize, n: usize, out: &mut [f32], out_stride: usize, mut f: impl FnMut(&[f32], &mut [f32])) {
+fn per_query(
+    q: &[f32],
+    hd: usize,
+    q_stride: usize,
+    g: usize,
+    n: usize,
+    out: &mut [f32],
+    out_stride: usize,
+    mut f: impl FnMut(&[f32], &mut [f32]),
+) {
     for m in 0..g {
-        f(&q[m * q_stride..m * q_stride + hd], &mut out[m * out_stride..m * out_stride + n]);
+        f(
+            &q[m * q_stride..m * q_stride + hd],
+            &mut out[m * out_stride..m * out_stride + n],
+        );
     }
 }
 
@@ -1006,14 +1111,29 @@ fn per_query(q: &[f32], hd: usize, q_stride: usize, g: usize, n: usize, out: &mu
 /// [`dot_rows_group`].
 #[inline]
 #[allow(clippy::too_many_arguments)]
-pub fn axpy_rows_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
+pub fn axpy_rows_group_f32(
+    coef: &[f32],
+    coef_stride: usize,
+    nk: usize,
+    x: &[f32],
+    stride: usize,
+    y: &mut [f32],
+    y_stride: usize,
+    n: usize,
+    g: usize,
+    side: &[u8],
+) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_group_f32(coef, coef_stride, nk, x, stride, y, y_stride, n, g, side) },
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::axpy_rows_512_group_f32(coef, coef_stride, nk, x, stride, y, y_stride, n, g, side)
+        },
         _ => {
             let _ = side;
-            per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| axpy_rows_f32(c, x, stride, ym))
+            per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| {
+                axpy_rows_f32(c, x, stride, ym)
+            })
         }
     }
 }
@@ -1022,14 +1142,29 @@ pub fn axpy_rows_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32
 /// [`axpy_rows_f16`] per query.
 #[inline]
 #[allow(clippy::too_many_arguments)]
-pub fn axpy_rows_group_f16(coef: &[f32], coef_stride: usize, nk: usize, w: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
+pub fn axpy_rows_group_f16(
+    coef: &[f32],
+    coef_stride: usize,
+    nk: usize,
+    w: &[u16],
+    stride: usize,
+    y: &mut [f32],
+    y_stride: usize,
+    n: usize,
+    g: usize,
+    side: &[u8],
+) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
-        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_group_f16(coef, coef_stride, nk, w, stride, y, y_stride, n, g, side) },
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::axpy_rows_512_group_f16(coef, coef_stride, nk, w, stride, y, y_stride, n, g, side)
+        },
         _ => {
             let _ = side;
-            per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| axpy_rows_f16(c, w, stride, ym))
+            per_query_axpy(coef, coef_stride, nk, y, y_stride, n, g, |c, ym| {
+                axpy_rows_f16(c, w, stride, ym)
+            })
         }
     }
 }
@@ -1037,9 +1172,21 @@ pub fn axpy_rows_group_f16(coef: &[f32], coef_stride: usize, nk: usize, w: &[u16
 /// `f(query m's coefficients, its output row)` for each query of an
 /// [`axpy_rows_group_f32`] call.
 #[allow(clippy::too_many_arguments)]
-fn per_query_axpy(coef: &[f32], coef_stride: usize, nk: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, mut f: impl FnMut(&[f32], &mut [f32])) {
+fn per_query_axpy(
+    coef: &[f32],
+    coef_stride: usize,
+    nk: usize,
+    y: &mut [f32],
+    y_stride: usize,
+    n: usize,
+    g: usize,
+    mut f: impl FnMut(&[f32], &mut [f32]),
+) {
     for m in 0..g {
-        f(&coef[m * coef_stride..m * coef_stride + nk], &mut y[m * y_stride..m * y_stride + n]);
+        f(
+            &coef[m * coef_stride..m * coef_stride + nk],
+            &mut y[m * y_stride..m * y_stride + n],
+        );
     }
 }
 
@@ -1098,7 +1245,16 @@ mod no_amx {
     }
     /// Always 0 rows.
     #[allow(clippy::too_many_arguments)]
-    pub fn gemm_q8_packed_amx(_: &AmxWeights, _: &[i8], _: usize, _: &[f32], _: crate::kernels::parallel::Window<'_>, _: Option<&[f32]>, _: bool, _: &[u8]) -> usize {
+    pub fn gemm_q8_packed_amx(
+        _: &AmxWeights,
+        _: &[i8],
+        _: usize,
+        _: &[f32],
+        _: crate::kernels::parallel::Window<'_>,
+        _: Option<&[f32]>,
+        _: bool,
+        _: &[u8],
+    ) -> usize {
         0
     }
 }

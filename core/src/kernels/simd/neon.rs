@@ -23,8 +23,11 @@ unsafe fn f16x4_to_f32(h: uint16x4_t) -> float32x4_t {
     let h32 = vmovl_u16(h);
     let sign = vshlq_n_u32::<16>(vandq_u32(h32, vdupq_n_u32(0x8000)));
     let mag = vandq_u32(h32, vdupq_n_u32(0x7fff));
-    let scaled = vmulq_f32(vreinterpretq_f32_u32(vshlq_n_u32::<13>(mag)), vdupq_n_f32(f32::from_bits(0x7780_0000))); // 2^112
-    // exponent all ones (Inf/NaN): force the f32 exponent to all ones.
+    let scaled = vmulq_f32(
+        vreinterpretq_f32_u32(vshlq_n_u32::<13>(mag)),
+        vdupq_n_f32(f32::from_bits(0x7780_0000)),
+    ); // 2^112
+       // exponent all ones (Inf/NaN): force the f32 exponent to all ones.
     let is_special = vcgeq_u32(mag, vdupq_n_u32(0x7c00));
     let special = vorrq_u32(vshlq_n_u32::<13>(mag), vdupq_n_u32(0x7f80_0000));
     let bits = vbslq_u32(is_special, special, vreinterpretq_u32_f32(scaled));
@@ -43,7 +46,12 @@ pub unsafe fn dot_f32(a: &[f32], b: &[f32]) -> f32 {
     for (x, y) in a16.chunks_exact(16).zip(b16.chunks_exact(16)) {
         for (l, accl) in acc.iter_mut().enumerate() {
             // SAFETY: x and y hold 16 floats; lanes l*4..l*4+4 are in bounds.
-            let (xv, yv) = unsafe { (vld1q_f32(x.as_ptr().add(l * 4)), vld1q_f32(y.as_ptr().add(l * 4))) };
+            let (xv, yv) = unsafe {
+                (
+                    vld1q_f32(x.as_ptr().add(l * 4)),
+                    vld1q_f32(y.as_ptr().add(l * 4)),
+                )
+            };
             *accl = vfmaq_f32(*accl, xv, yv);
         }
     }
@@ -73,7 +81,13 @@ pub unsafe fn dot_f16(w: &[u16], x: &[f32]) -> f32 {
     let (x8, xr) = x.split_at(n - n % 8);
     for (wc, xc) in w8.chunks_exact(8).zip(x8.chunks_exact(8)) {
         // SAFETY: wc holds 8 u16, xc 8 floats.
-        let (wv, x0, x1) = unsafe { (vld1q_u16(wc.as_ptr()), vld1q_f32(xc.as_ptr()), vld1q_f32(xc.as_ptr().add(4))) };
+        let (wv, x0, x1) = unsafe {
+            (
+                vld1q_u16(wc.as_ptr()),
+                vld1q_f32(xc.as_ptr()),
+                vld1q_f32(xc.as_ptr().add(4)),
+            )
+        };
         acc[0] = vfmaq_f32(acc[0], f16x4_to_f32(vget_low_u16(wv)), x0);
         acc[1] = vfmaq_f32(acc[1], f16x4_to_f32(vget_high_u16(wv)), x1);
     }
@@ -88,9 +102,16 @@ pub unsafe fn dot_f16(w: &[u16], x: &[f32]) -> f32 {
 /// NEON must be available.
 #[target_feature(enable = "neon")]
 pub unsafe fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
-    let nb = (w.len() / Q8_BLOCK_BYTES).min(xq.len() / Q8_BLOCK).min(xd.len());
+    let nb = (w.len() / Q8_BLOCK_BYTES)
+        .min(xq.len() / Q8_BLOCK)
+        .min(xd.len());
     let mut acc = vdupq_n_f32(0.0);
-    for ((blk, xs), &dx) in w.chunks_exact(Q8_BLOCK_BYTES).zip(xq.chunks_exact(Q8_BLOCK)).zip(xd).take(nb) {
+    for ((blk, xs), &dx) in w
+        .chunks_exact(Q8_BLOCK_BYTES)
+        .zip(xq.chunks_exact(Q8_BLOCK))
+        .zip(xd)
+        .take(nb)
+    {
         let d = super::f16_to_f32(u16::from_le_bytes([blk[0], blk[1]])) * dx;
         let q = &blk[2..];
         // SAFETY: q and xs hold exactly 32 bytes each (two 16-byte loads).
@@ -124,7 +145,9 @@ pub unsafe fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
 pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
     let k = common(&w, &x);
     // SAFETY: NEON is available (this fn's contract).
-    pairwise_rows(distinct_rows(&x), |m, n| unsafe { dot_f32(&w[n][..k], &x[m][..k]) })
+    pairwise_rows(distinct_rows(&x), |m, n| unsafe {
+        dot_f32(&w[n][..k], &x[m][..k])
+    })
 }
 
 /// Pairwise NEON tile with binary16 weights (see [`tile_f32`]).
@@ -135,7 +158,9 @@ pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
 pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
     let k = common(&w, &x);
     // SAFETY: NEON is available (this fn's contract).
-    pairwise_rows(distinct_rows(&x), |m, n| unsafe { dot_f16(&w[n][..k], &x[m][..k]) })
+    pairwise_rows(distinct_rows(&x), |m, n| unsafe {
+        dot_f16(&w[n][..k], &x[m][..k])
+    })
 }
 
 /// Pairwise NEON int8 tile (see [`tile_f32`]).
@@ -146,7 +171,13 @@ pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
 pub unsafe fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
     let nb = common_blocks(&w, &xq, &xd);
     // SAFETY: NEON is available (this fn's contract).
-    pairwise(|m, n| unsafe { dot_q8(&w[n][..nb * Q8_BLOCK_BYTES], &xq[m][..nb * Q8_BLOCK], &xd[m][..nb]) })
+    pairwise(|m, n| unsafe {
+        dot_q8(
+            &w[n][..nb * Q8_BLOCK_BYTES],
+            &xq[m][..nb * Q8_BLOCK],
+            &xd[m][..nb],
+        )
+    })
 }
 
 /// See [`super::quantise_q8_corr`]: `vrndaq_f32` is `roundf` exactly (ties
@@ -157,10 +188,14 @@ pub unsafe fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile
 /// NEON must be available.
 #[target_feature(enable = "neon")]
 pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
-    let blocks = x.chunks_exact(Q8_BLOCK).zip(q.chunks_exact_mut(Q8_BLOCK)).zip(d.iter_mut().zip(c.chunks_exact_mut(2)));
+    let blocks = x
+        .chunks_exact(Q8_BLOCK)
+        .zip(q.chunks_exact_mut(Q8_BLOCK))
+        .zip(d.iter_mut().zip(c.chunks_exact_mut(2)));
     for ((xb, qb), (db, cb)) in blocks {
         // SAFETY: xb holds exactly 32 floats.
-        let v: [float32x4_t; 8] = core::array::from_fn(|i| unsafe { vld1q_f32(xb.as_ptr().add(4 * i)) });
+        let v: [float32x4_t; 8] =
+            core::array::from_fn(|i| unsafe { vld1q_f32(xb.as_ptr().add(4 * i)) });
         let mut m = vdupq_n_f32(0.0);
         for vi in &v {
             m = vmaxnmq_f32(m, vabsq_f32(*vi));
@@ -194,7 +229,9 @@ unsafe fn sdot(acc: int32x4_t, a: int8x16_t, b: int8x16_t) -> int32x4_t {
     let mut r = acc;
     // SAFETY: a register-only instruction of the dotprod extension (this
     // fn's target feature; the caller vouched for the CPU).
-    unsafe { core::arch::asm!("sdot {0:v}.4s, {1:v}.16b, {2:v}.16b", inout(vreg) r, in(vreg) a, in(vreg) b, options(pure, nomem, nostack)) };
+    unsafe {
+        core::arch::asm!("sdot {0:v}.4s, {1:v}.16b, {2:v}.16b", inout(vreg) r, in(vreg) a, in(vreg) b, options(pure, nomem, nostack))
+    };
     r
 }
 
@@ -207,7 +244,12 @@ unsafe fn sdot(acc: int32x4_t, a: int8x16_t, b: int8x16_t) -> int32x4_t {
 unsafe fn wblock(row: &[u8], b: usize) -> [int8x16_t; 2] {
     let q = &row[b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
     // SAFETY: q holds exactly 32 bytes.
-    unsafe { [vld1q_s8(q.as_ptr() as *const i8), vld1q_s8(q.as_ptr().add(16) as *const i8)] }
+    unsafe {
+        [
+            vld1q_s8(q.as_ptr() as *const i8),
+            vld1q_s8(q.as_ptr().add(16) as *const i8),
+        ]
+    }
 }
 
 /// The 32 quantised activations of block `b`.
@@ -229,7 +271,13 @@ unsafe fn xblock(xq: &[i8], b: usize) -> [int8x16_t; 2] {
 /// # Safety
 /// NEON must be available.
 #[target_feature(enable = "neon")]
-pub unsafe fn gemm_q8<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; TN]; M] {
+pub unsafe fn gemm_q8<const M: usize>(
+    w: [&[u8]; TN],
+    wd: [&[f32]; TN],
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; TN]; M] {
     let nb = super::scalar::gemm_blocks(&w, &wd, &xq, &xd, &xc);
     let mut acc = [[vdupq_n_f32(0.0); TN]; M];
     for b in 0..nb {
@@ -256,7 +304,13 @@ pub unsafe fn gemm_q8<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i
 /// # Safety
 /// NEON and the dotprod extension must be available.
 #[target_feature(enable = "neon,dotprod")]
-pub unsafe fn gemm_q8_dot<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; TN]; M] {
+pub unsafe fn gemm_q8_dot<const M: usize>(
+    w: [&[u8]; TN],
+    wd: [&[f32]; TN],
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; TN]; M] {
     let nb = super::scalar::gemm_blocks(&w, &wd, &xq, &xd, &xc);
     let mut acc = [[vdupq_n_f32(0.0); TN]; M];
     for b in 0..nb {
@@ -290,7 +344,12 @@ pub unsafe fn gemm_q8_dot<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: 
 /// # Safety
 /// NEON and the dotprod extension must be available.
 #[target_feature(enable = "neon,dotprod")]
-pub unsafe fn gemm_q8_packed_dot<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], _xc: [&[i32]; M]) -> [[f32; 8]; M] {
+pub unsafe fn gemm_q8_packed_dot<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    _xc: [&[i32]; M],
+) -> [[f32; 8]; M] {
     // SAFETY: the caller's features are this function's.
     unsafe { gemm_q8_packed_dot_ahead(w, xq, xd, _xc, &[]) }
 }
@@ -301,12 +360,24 @@ pub unsafe fn gemm_q8_packed_dot<const M: usize>(w: super::PackedQ8<'_>, xq: [&[
 /// # Safety
 /// As [`gemm_q8_packed_dot`].
 #[target_feature(enable = "neon,dotprod")]
-pub unsafe fn gemm_q8_packed_dot_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], _xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
+pub unsafe fn gemm_q8_packed_dot_ahead<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    _xc: [&[i32]; M],
+    ahead: &[u8],
+) -> [[f32; 8]; M] {
     super::passes_of_four!(M, ahead, |K, m0, a| {
         let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
         let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
         // SAFETY: the caller's features are these functions'.
-        unsafe { if w.q4 { packed_dot::<K, true>(w, q, d, a) } else { packed_dot::<K, false>(w, q, d, a) } }
+        unsafe {
+            if w.q4 {
+                packed_dot::<K, true>(w, q, d, a)
+            } else {
+                packed_dot::<K, false>(w, q, d, a)
+            }
+        }
     })
 }
 
@@ -317,7 +388,12 @@ pub unsafe fn gemm_q8_packed_dot_ahead<const M: usize>(w: super::PackedQ8<'_>, x
 /// As [`gemm_q8_packed_dot`].
 #[inline]
 #[target_feature(enable = "neon,dotprod")]
-unsafe fn packed_dot<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K], ahead: &[u8]) -> [[f32; 8]; K] {
+unsafe fn packed_dot<const K: usize, const Q4: bool>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; K],
+    xd: [&[f32]; K],
+    ahead: &[u8],
+) -> [[f32; 8]; K] {
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
     let nb = w.blocks_for(xq, xd, []);
@@ -332,7 +408,12 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq:
         // SAFETY: sb holds 8 f16 (16 bytes).
         let s16 = unsafe { vld1q_u16(sb.as_ptr() as *const u16) };
         // SAFETY: this function's features include f16x4_to_f32's.
-        let sv = unsafe { [f16x4_to_f32(vget_low_u16(s16)), f16x4_to_f32(vget_high_u16(s16))] };
+        let sv = unsafe {
+            [
+                f16x4_to_f32(vget_low_u16(s16)),
+                f16x4_to_f32(vget_high_u16(s16)),
+            ]
+        };
         // [row m][quarter j]: lanes (2r, 2r + 1) = halves of row 2j + r's block dot.
         let mut dp = [[vdupq_n_s32(0); 4]; K];
         for g in 0..4 {
@@ -340,7 +421,11 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq:
                 if Q4 {
                     // SAFETY: vb holds 2 x 64 bytes; 64 (g % 2) + 16 j + 16 <= 128.
                     let v = unsafe { vld1q_u8(vb.as_ptr().add(64 * (g % 2) + 16 * j)) };
-                    let nib = if g < 2 { vandq_u8(v, low) } else { vshrq_n_u8::<4>(v) };
+                    let nib = if g < 2 {
+                        vandq_u8(v, low)
+                    } else {
+                        vshrq_n_u8::<4>(v)
+                    };
                     vsubq_s8(vreinterpretq_s8_u8(nib), eight)
                 } else {
                     // SAFETY: vb holds 4 x 64 bytes; 64 g + 16 j + 16 <= 256.
@@ -350,7 +435,9 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq:
             for (m, dm) in dp.iter_mut().enumerate() {
                 let xs = &xq[m][b * Q8_BLOCK + 8 * g..b * Q8_BLOCK + 8 * g + 8];
                 // SAFETY: xs holds 8 bytes.
-                let xg = vreinterpretq_s8_u64(vdupq_n_u64(unsafe { (xs.as_ptr() as *const u64).read_unaligned() }));
+                let xg = vreinterpretq_s8_u64(vdupq_n_u64(unsafe {
+                    (xs.as_ptr() as *const u64).read_unaligned()
+                }));
                 for (d, wj) in dm.iter_mut().zip(&wg) {
                     // SAFETY: this function's features are sdot's.
                     *d = unsafe { sdot(*d, *wj, xg) };
@@ -389,7 +476,12 @@ pub unsafe fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
     let (y4, y1) = y.split_at_mut(n4);
     for (xc, yc) in x4.chunks_exact(4).zip(y4.chunks_exact_mut(4)) {
         // SAFETY: 4 floats each.
-        unsafe { vst1q_f32(yc.as_mut_ptr(), vfmaq_n_f32(vld1q_f32(yc.as_ptr()), vld1q_f32(xc.as_ptr()), a)) };
+        unsafe {
+            vst1q_f32(
+                yc.as_mut_ptr(),
+                vfmaq_n_f32(vld1q_f32(yc.as_ptr()), vld1q_f32(xc.as_ptr()), a),
+            )
+        };
     }
     for (yi, xi) in y1.iter_mut().zip(x1) {
         *yi += a * xi;
@@ -429,7 +521,12 @@ pub unsafe fn dot_rows_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32])
         for (x, y) in q16.chunks_exact(16).zip(k16.chunks_exact(16)) {
             for (l, accl) in acc.iter_mut().enumerate() {
                 // SAFETY: x holds 16 floats, y 16 u16; lanes l*4..l*4+4 are in bounds.
-                let (xv, yv) = unsafe { (vld1q_f32(x.as_ptr().add(l * 4)), f16x4_to_f32(vld1_u16(y.as_ptr().add(l * 4)))) };
+                let (xv, yv) = unsafe {
+                    (
+                        vld1q_f32(x.as_ptr().add(l * 4)),
+                        f16x4_to_f32(vld1_u16(y.as_ptr().add(l * 4))),
+                    )
+                };
                 *accl = vfmaq_f32(*accl, xv, yv);
             }
         }
@@ -461,7 +558,16 @@ pub unsafe fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
     let (y4, y1) = y.split_at_mut(n4);
     for (wc, yc) in w4.chunks_exact(4).zip(y4.chunks_exact_mut(4)) {
         // SAFETY: 4 u16 and 4 floats.
-        unsafe { vst1q_f32(yc.as_mut_ptr(), vfmaq_n_f32(vld1q_f32(yc.as_ptr()), f16x4_to_f32(vld1_u16(wc.as_ptr())), a)) };
+        unsafe {
+            vst1q_f32(
+                yc.as_mut_ptr(),
+                vfmaq_n_f32(
+                    vld1q_f32(yc.as_ptr()),
+                    f16x4_to_f32(vld1_u16(wc.as_ptr())),
+                    a,
+                ),
+            )
+        };
     }
     for (yi, wi) in y1.iter_mut().zip(w1) {
         *yi += a * super::f16_to_f32(*wi);
@@ -501,7 +607,14 @@ pub unsafe fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32
 /// NEON must be available; `load(row, e)` must be sound for `e + 4 <= row.len()`.
 #[inline]
 #[target_feature(enable = "neon")]
-unsafe fn axpy_rows_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: &mut [f32], load: impl Fn(&[E], usize) -> float32x4_t, widen: impl Fn(E) -> f32) {
+unsafe fn axpy_rows_by<E: Copy>(
+    coef: &[f32],
+    rows: &[E],
+    stride: usize,
+    y: &mut [f32],
+    load: impl Fn(&[E], usize) -> float32x4_t,
+    widen: impl Fn(E) -> f32,
+) {
     let n = y.len();
     let nk = super::scalar::whole_rows(coef.len(), rows.len(), stride, n);
     let n4 = n - n % 4;
@@ -509,7 +622,8 @@ unsafe fn axpy_rows_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: &mut
     let mut e = 0;
     while e + 64 <= n4 {
         // SAFETY: lanes e .. e + 64 of y (<= n).
-        let mut acc: [float32x4_t; 16] = core::array::from_fn(|t| unsafe { vld1q_f32(y.as_ptr().add(e + 4 * t)) });
+        let mut acc: [float32x4_t; 16] =
+            core::array::from_fn(|t| unsafe { vld1q_f32(y.as_ptr().add(e + 4 * t)) });
         for (j, &a) in coef.iter().enumerate().take(nk) {
             let r = row(j);
             for (t, acc) in acc.iter_mut().enumerate() {
@@ -552,7 +666,10 @@ unsafe fn exp4(x: float32x4_t) -> float32x4_t {
     // fminnm would drop a NaN; fmin keeps it, like the twin.
     let x = vminq_f32(x, vdupq_n_f32(HI));
     let below = vcltq_f32(x, vdupq_n_f32(LO));
-    let fx = vrndmq_f32(vaddq_f32(vmulq_f32(x, vdupq_n_f32(LOG2E)), vdupq_n_f32(0.5)));
+    let fx = vrndmq_f32(vaddq_f32(
+        vmulq_f32(x, vdupq_n_f32(LOG2E)),
+        vdupq_n_f32(0.5),
+    ));
     let r = vsubq_f32(x, vmulq_f32(fx, vdupq_n_f32(C1)));
     let r = vsubq_f32(r, vmulq_f32(fx, vdupq_n_f32(C2)));
     let z = vmulq_f32(r, r);
@@ -660,8 +777,14 @@ pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [
     for i in (0..body).step_by(4) {
         // SAFETY: i + 4 <= body <= n, the length of all four slices.
         unsafe {
-            let t = vmulq_f32(vmulq_f32(vsubq_f32(vld1q_f32(x.as_ptr().add(i)), m), iv), vld1q_f32(w.as_ptr().add(i)));
-            vst1q_f32(y.as_mut_ptr().add(i), vaddq_f32(t, vld1q_f32(b.as_ptr().add(i))));
+            let t = vmulq_f32(
+                vmulq_f32(vsubq_f32(vld1q_f32(x.as_ptr().add(i)), m), iv),
+                vld1q_f32(w.as_ptr().add(i)),
+            );
+            vst1q_f32(
+                y.as_mut_ptr().add(i),
+                vaddq_f32(t, vld1q_f32(b.as_ptr().add(i))),
+            );
         }
     }
     ln_affine(x, w, b, mean, inv, y, body);
@@ -693,7 +816,10 @@ pub unsafe fn gelu_inplace(x: &mut [f32]) {
             let e = exp4(vnegq_f32(vmulq_f32(a, a)));
             let e = vsubq_f32(one, vmulq_f32(vmulq_f32(y, t), e));
             let erf = vbslq_f32(neg, vnegq_f32(e), e);
-            vst1q_f32(c.as_mut_ptr(), vmulq_f32(vmulq_f32(vdupq_n_f32(0.5), xv), vaddq_f32(one, erf)));
+            vst1q_f32(
+                c.as_mut_ptr(),
+                vmulq_f32(vmulq_f32(vdupq_n_f32(0.5), xv), vaddq_f32(one, erf)),
+            );
         }
     }
     for v in tail {

@@ -2,7 +2,9 @@
 //! definition each SIMD variant is tested against, and the path taken on
 //! targets without a SIMD variant.
 
-use super::{distinct_rows, f16_to_f32, pairwise, pairwise_rows, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
+use super::{
+    distinct_rows, f16_to_f32, pairwise, pairwise_rows, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN,
+};
 
 /// `a . b` over `min(len)` with 8 independent accumulators (the summation
 /// order SIMD variants approximate; they differ by rounding only).
@@ -50,7 +52,9 @@ pub fn dot_f16(w: &[u16], x: &[f32]) -> f32 {
 /// scaled and summed in f32, block by block.
 #[inline]
 pub fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
-    let nb = (w.len() / Q8_BLOCK_BYTES).min(xq.len() / Q8_BLOCK).min(xd.len());
+    let nb = (w.len() / Q8_BLOCK_BYTES)
+        .min(xq.len() / Q8_BLOCK)
+        .min(xd.len());
     let mut sum = 0.0f32;
     for b in 0..nb {
         let blk = &w[b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
@@ -92,15 +96,30 @@ pub fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
 /// The fewest int8 blocks of any row of a tile.
 #[inline]
 pub(crate) fn common_blocks(w: &[&[u8]; TN], xq: &[&[i8]; TM], xd: &[&[f32]; TM]) -> usize {
-    let nbw = w.iter().map(|r| r.len() / Q8_BLOCK_BYTES).min().unwrap_or(0);
-    xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).min().unwrap_or(0).min(nbw)
+    let nbw = w
+        .iter()
+        .map(|r| r.len() / Q8_BLOCK_BYTES)
+        .min()
+        .unwrap_or(0);
+    xq.iter()
+        .map(|r| r.len() / Q8_BLOCK)
+        .chain(xd.iter().map(|r| r.len()))
+        .min()
+        .unwrap_or(0)
+        .min(nbw)
 }
 
 /// Tile twin of [`dot_q8`] (over the fewest blocks of any row).
 #[inline]
 pub fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
     let nb = common_blocks(&w, &xq, &xd);
-    pairwise(|m, n| dot_q8(&w[n][..nb * Q8_BLOCK_BYTES], &xq[m][..nb * Q8_BLOCK], &xd[m][..nb]))
+    pairwise(|m, n| {
+        dot_q8(
+            &w[n][..nb * Q8_BLOCK_BYTES],
+            &xq[m][..nb * Q8_BLOCK],
+            &xd[m][..nb],
+        )
+    })
 }
 
 /// Twin of [`super::quantise_q8_corr`]: [`super::quantise_q8`] plus the
@@ -108,9 +127,18 @@ pub fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
 /// sum(q[32b + i])` over the `i` with `(i % 8) / 4 == j`.
 pub fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
     super::quantise_q8(x, q, d);
-    for (cb, qb) in c.chunks_exact_mut(2).zip(q.chunks_exact(Q8_BLOCK)).take(x.len() / Q8_BLOCK) {
+    for (cb, qb) in c
+        .chunks_exact_mut(2)
+        .zip(q.chunks_exact(Q8_BLOCK))
+        .take(x.len() / Q8_BLOCK)
+    {
         for (j, cj) in cb.iter_mut().enumerate() {
-            *cj = -128 * qb.iter().enumerate().filter(|(i, _)| (i % 8) / 4 == j).map(|(_, &v)| v as i32).sum::<i32>();
+            *cj = -128
+                * qb.iter()
+                    .enumerate()
+                    .filter(|(i, _)| (i % 8) / 4 == j)
+                    .map(|(_, &v)| v as i32)
+                    .sum::<i32>();
         }
     }
 }
@@ -124,15 +152,38 @@ pub fn q8_scales(row: &[u8], out: &mut [f32]) {
 
 /// The fewest blocks of any argument of [`gemm_q8`].
 #[inline]
-pub(crate) fn gemm_blocks<const M: usize>(w: &[&[u8]; TN], wd: &[&[f32]; TN], xq: &[&[i8]; M], xd: &[&[f32]; M], xc: &[&[i32]; M]) -> usize {
-    let a = w.iter().map(|r| r.len() / Q8_BLOCK_BYTES).chain(wd.iter().map(|r| r.len())).min().unwrap_or(0);
-    let b = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).chain(xc.iter().map(|r| r.len() / 2)).min().unwrap_or(0);
+pub(crate) fn gemm_blocks<const M: usize>(
+    w: &[&[u8]; TN],
+    wd: &[&[f32]; TN],
+    xq: &[&[i8]; M],
+    xd: &[&[f32]; M],
+    xc: &[&[i32]; M],
+) -> usize {
+    let a = w
+        .iter()
+        .map(|r| r.len() / Q8_BLOCK_BYTES)
+        .chain(wd.iter().map(|r| r.len()))
+        .min()
+        .unwrap_or(0);
+    let b = xq
+        .iter()
+        .map(|r| r.len() / Q8_BLOCK)
+        .chain(xd.iter().map(|r| r.len()))
+        .chain(xc.iter().map(|r| r.len() / 2))
+        .min()
+        .unwrap_or(0);
     a.min(b)
 }
 
 /// Twin of [`super::gemm_q8`]: per pair, block by block, the exact i32 block
 /// dot scaled by `wd * xd` and summed in f32 (as [`dot_q8`]; `xc` unused).
-pub fn gemm_q8<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; TN]; M] {
+pub fn gemm_q8<const M: usize>(
+    w: [&[u8]; TN],
+    wd: [&[f32]; TN],
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; TN]; M] {
     let nb = gemm_blocks(&w, &wd, &xq, &xd, &xc);
     let mut out = [[0.0f32; TN]; M];
     for (m, row) in out.iter_mut().enumerate() {
@@ -141,7 +192,11 @@ pub fn gemm_q8<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M],
             for b in 0..nb {
                 let wq = &w[n][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
                 let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
-                let isum: i32 = wq.iter().zip(xs).map(|(&a, &c)| (a as i8 as i32) * c as i32).sum();
+                let isum: i32 = wq
+                    .iter()
+                    .zip(xs)
+                    .map(|(&a, &c)| (a as i8 as i32) * c as i32)
+                    .sum();
                 sum += (wd[n][b] * xd[m][b]) * isum as f32;
             }
             *o = sum;
@@ -180,14 +235,25 @@ pub fn dot_rows_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32]) {
 
 /// Twin of [`super::gemm_q8_packed`] (block by block, exact i32 block sums,
 /// as [`gemm_q8`]).
-pub fn gemm_q8_packed<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], _xc: [&[i32]; M]) -> [[f32; 8]; M] {
-    let nb = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).fold(w.blocks(), usize::min);
+pub fn gemm_q8_packed<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    _xc: [&[i32]; M],
+) -> [[f32; 8]; M] {
+    let nb = xq
+        .iter()
+        .map(|r| r.len() / Q8_BLOCK)
+        .chain(xd.iter().map(|r| r.len()))
+        .fold(w.blocks(), usize::min);
     let mut out = [[0.0f32; 8]; M];
     for (m, row) in out.iter_mut().enumerate() {
         for (n, o) in row.iter_mut().enumerate() {
             let mut sum = 0.0f32;
             for b in 0..nb {
-                let isum: i32 = (0..Q8_BLOCK).map(|i| w.value(b, n, i) as i32 * xq[m][b * Q8_BLOCK + i] as i32).sum();
+                let isum: i32 = (0..Q8_BLOCK)
+                    .map(|i| w.value(b, n, i) as i32 * xq[m][b * Q8_BLOCK + i] as i32)
+                    .sum();
                 sum += (f16_to_f32(w.scale_bits(b, n)) * xd[m][b]) * isum as f32;
             }
             *o = sum;
@@ -203,7 +269,8 @@ pub fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [u8], s: &mut [u8]) {
         for (n, row) in rows.iter().enumerate() {
             let blk = &row[b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
             for g in 0..4 {
-                v[PV * b + 64 * g + 8 * n..PV * b + 64 * g + 8 * n + 8].copy_from_slice(&blk[2 + 8 * g..2 + 8 * g + 8]);
+                v[PV * b + 64 * g + 8 * n..PV * b + 64 * g + 8 * n + 8]
+                    .copy_from_slice(&blk[2 + 8 * g..2 + 8 * g + 8]);
             }
             s[PS * b + 2 * n..PS * b + 2 * n + 2].copy_from_slice(&blk[..2]);
         }
@@ -217,14 +284,22 @@ pub(crate) fn whole_rows(coef: usize, len: usize, stride: usize, n: usize) -> us
     if len < n {
         return 0;
     }
-    coef.min(if stride == 0 { usize::MAX } else { (len - n) / stride + 1 })
+    coef.min(if stride == 0 {
+        usize::MAX
+    } else {
+        (len - n) / stride + 1
+    })
 }
 
 /// Twin of [`super::axpy_rows_f32`]: [`axpy_f32`] row after row.
 #[inline]
 pub fn axpy_rows_f32(coef: &[f32], x: &[f32], stride: usize, y: &mut [f32]) {
     let n = y.len();
-    for (j, &a) in coef.iter().enumerate().take(whole_rows(coef.len(), x.len(), stride, n)) {
+    for (j, &a) in coef
+        .iter()
+        .enumerate()
+        .take(whole_rows(coef.len(), x.len(), stride, n))
+    {
         axpy_f32(a, &x[j * stride..j * stride + n], y);
     }
 }
@@ -233,7 +308,11 @@ pub fn axpy_rows_f32(coef: &[f32], x: &[f32], stride: usize, y: &mut [f32]) {
 #[inline]
 pub fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
     let n = y.len();
-    for (j, &a) in coef.iter().enumerate().take(whole_rows(coef.len(), w.len(), stride, n)) {
+    for (j, &a) in coef
+        .iter()
+        .enumerate()
+        .take(whole_rows(coef.len(), w.len(), stride, n))
+    {
         axpy_f16(a, &w[j * stride..j * stride + n], y);
     }
 }
@@ -254,7 +333,14 @@ pub mod exp_c {
     pub const LOG2E: f32 = core::f32::consts::LOG2_E;
     pub const C1: f32 = 0.693_359_4;
     pub const C2: f32 = -2.121_944_4e-4;
-    pub const P: [f32; 6] = [1.987_569_1e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 0.166_666_65, 0.500_000_01];
+    pub const P: [f32; 6] = [
+        1.987_569_1e-4,
+        1.398_199_9e-3,
+        8.333_452e-3,
+        4.166_579_6e-2,
+        0.166_666_65,
+        0.500_000_01,
+    ];
 }
 
 /// `e^x` (max relative error ~2e-7 against libm; 0 below -87.3, inputs
@@ -339,7 +425,12 @@ pub fn ln_mean(lanes: [f32; 8], x: &[f32], body: usize) -> f32 {
 /// `(x - mean)^2` over `x[..body]` with the tail added in order.
 #[inline]
 pub fn ln_inv_std(lanes: [f32; 8], x: &[f32], body: usize, mean: f32, eps: f32) -> f32 {
-    let var = reduce8(lanes, x[body..].iter().fold(0.0, |t, &v| t + (v - mean) * (v - mean))) / x.len() as f32;
+    let var = reduce8(
+        lanes,
+        x[body..]
+            .iter()
+            .fold(0.0, |t, &v| t + (v - mean) * (v - mean)),
+    ) / x.len() as f32;
     1.0 / libm::sqrtf(var + eps)
 }
 
@@ -382,7 +473,13 @@ pub fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
 /// error 1.5e-7).
 pub mod erf_c {
     pub const P: f32 = 0.327_591_1;
-    pub const A: [f32; 5] = [1.061_405_4, -1.453_152, 1.421_413_8, -0.284_496_74, 0.254_829_6];
+    pub const A: [f32; 5] = [
+        1.061_405_4,
+        -1.453_152,
+        1.421_413_8,
+        -0.284_496_74,
+        0.254_829_6,
+    ];
 }
 
 /// Exact GELU (`nn.GELU()` default) `0.5 x (1 + erf(x / sqrt 2))`, erf by
@@ -416,7 +513,11 @@ pub fn gelu_inplace(x: &mut [f32]) {
 #[inline]
 pub fn bias_act(t: &[f32], b: Option<&[f32]>, gelu_too: bool, y: &mut [f32]) {
     match b {
-        Some(b) => y.iter_mut().zip(t).zip(b).for_each(|((yo, v), bj)| *yo = bj + v),
+        Some(b) => y
+            .iter_mut()
+            .zip(t)
+            .zip(b)
+            .for_each(|((yo, v), bj)| *yo = bj + v),
         None => y.iter_mut().zip(t).for_each(|(yo, v)| *yo = 0.0 + v),
     }
     if gelu_too {

@@ -4,7 +4,9 @@
 //! older dots and tiles). On aarch64 these run under qemu (`.ci/aarch64.sh`).
 
 use super::{scalar, Tile, Q8_BLOCK, Q8_BLOCK_BYTES, TM, TN};
-use crate::kernels::{expand_q4, linear, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows, RowMatrix, Q4_BLOCK_BYTES};
+use crate::kernels::{
+    expand_q4, linear, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows, RowMatrix, Q4_BLOCK_BYTES,
+};
 
 /// SIMD int8 GEMM vs scalar twin: the per-block i32 sums are exact; only
 /// the f32 sum across blocks and lanes is reordered: limit * sum_b
@@ -41,9 +43,16 @@ fn q8_bytes(w: &[f32]) -> Vec<u8> {
     for b in w.chunks_exact(Q8_BLOCK) {
         let amax = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         let d = half::f16::from_f32(amax / 127.0);
-        let inv = if d.to_f32() > 0.0 { 1.0 / d.to_f32() } else { 0.0 };
+        let inv = if d.to_f32() > 0.0 {
+            1.0 / d.to_f32()
+        } else {
+            0.0
+        };
         out.extend(d.to_le_bytes());
-        out.extend(b.iter().map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8));
+        out.extend(
+            b.iter()
+                .map(|&v| (v * inv).round().clamp(-127.0, 127.0) as i8 as u8),
+        );
     }
     out
 }
@@ -54,7 +63,11 @@ fn q4_bytes(w: &[f32]) -> Vec<u8> {
     for b in w.chunks_exact(Q8_BLOCK) {
         let amax = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         let d = half::f16::from_f32(amax / 7.0);
-        let inv = if d.to_f32() > 0.0 { 1.0 / d.to_f32() } else { 0.0 };
+        let inv = if d.to_f32() > 0.0 {
+            1.0 / d.to_f32()
+        } else {
+            0.0
+        };
         let q = |v: f32| ((v * inv).round().clamp(-8.0, 7.0) as i32 + 8) as u8;
         out.extend(d.to_le_bytes());
         out.extend((0..16).map(|j| q(b[j]) | (q(b[j + 16]) << 4)));
@@ -70,15 +83,18 @@ fn q4_group(rows: &[Vec<u8>], nb: usize) -> Vec<u8> {
         for b in 0..nb {
             let blk = &row[b * Q4_BLOCK_BYTES..(b + 1) * Q4_BLOCK_BYTES];
             for h in 0..2 {
-                group[128 * b + 64 * h + 8 * j..128 * b + 64 * h + 8 * j + 8].copy_from_slice(&blk[2 + 8 * h..2 + 8 * h + 8]);
+                group[128 * b + 64 * h + 8 * j..128 * b + 64 * h + 8 * j + 8]
+                    .copy_from_slice(&blk[2 + 8 * h..2 + 8 * h + 8]);
             }
-            group[128 * nb + 16 * b + 2 * j..128 * nb + 16 * b + 2 * j + 2].copy_from_slice(&blk[..2]);
+            group[128 * nb + 16 * b + 2 * j..128 * nb + 16 * b + 2 * j + 2]
+                .copy_from_slice(&blk[..2]);
         }
     }
     group
 }
 
-type Gemm<const M: usize> = fn([&[u8]; TN], [&[f32]; TN], [&[i8]; M], [&[f32]; M], [&[i32]; M]) -> [[f32; TN]; M];
+type Gemm<const M: usize> =
+    fn([&[u8]; TN], [&[f32]; TN], [&[i8]; M], [&[f32]; M], [&[i32]; M]) -> [[f32; TN]; M];
 
 /// One ISA's kernels as plain fns (the constructor checked the CPU).
 struct Variant {
@@ -103,7 +119,8 @@ fn variants() -> Vec<Variant> {
         use super::x86;
         use std::is_x86_feature_detected as has;
         let avx2 = has!("avx2") && has!("fma") && has!("f16c");
-        let avx512 = avx2 && has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl");
+        let avx512 =
+            avx2 && has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl");
         // SAFETY (every closure below): the features of the kernel it calls
         // were detected on this CPU just above.
         if avx2 {
@@ -198,7 +215,11 @@ fn quantiser_inputs(r: &mut Rng) -> Vec<f32> {
     let mut x = r.vec(32 * 40);
     // amax 127 -> scale 1, inv 1: exact ties.
     for (i, v) in x[..32].iter_mut().enumerate() {
-        *v = if i == 0 { 127.0 } else { (i as f32 - 16.0) + 0.5 };
+        *v = if i == 0 {
+            127.0
+        } else {
+            (i as f32 - 16.0) + 0.5
+        };
     }
     x[33] = -127.0;
     x[34] = 0.499_999_97;
@@ -226,11 +247,25 @@ fn quantiser_is_bit_identical_to_scalar_twin() {
     let (mut q1, mut d1) = (vec![0i8; x.len()], vec![0f32; nb]);
     super::quantise_q8(&x, &mut q1, &mut d1);
     assert_eq!(q0, q1);
-    assert!(q0[256..288].iter().all(|&v| v == 0) && d0[8] == 0.0, "a block whose 1 / scale overflows quantises to zero");
-    assert_eq!(d0.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), d1.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+    assert!(
+        q0[256..288].iter().all(|&v| v == 0) && d0[8] == 0.0,
+        "a block whose 1 / scale overflows quantises to zero"
+    );
+    assert_eq!(
+        d0.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        d1.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
     for (b, qb) in q0.chunks_exact(Q8_BLOCK).enumerate() {
-        assert_eq!(c0[2 * b] + c0[2 * b + 1], -128 * qb.iter().map(|&v| v as i32).sum::<i32>());
-        assert_eq!(c0[2 * b], -128 * (0..4).map(|g| qb[8 * g..8 * g + 4].iter().map(|&v| v as i32).sum::<i32>()).sum::<i32>());
+        assert_eq!(
+            c0[2 * b] + c0[2 * b + 1],
+            -128 * qb.iter().map(|&v| v as i32).sum::<i32>()
+        );
+        assert_eq!(
+            c0[2 * b],
+            -128 * (0..4)
+                .map(|g| qb[8 * g..8 * g + 4].iter().map(|&v| v as i32).sum::<i32>())
+                .sum::<i32>()
+        );
     }
     // Every block count up to the whole input (odd counts end on a lone block).
     for v in variants() {
@@ -262,7 +297,10 @@ fn q8_scales_match_scalar_twin() {
 
 fn check(name: &str, got: f32, want: f32, scale: f64, limit: f64) {
     let err = (got as f64 - want as f64).abs();
-    assert!(err <= limit * scale + 1e-30, "{name}: {got} vs {want}, err {err:e} > {limit:e} * {scale:e}");
+    assert!(
+        err <= limit * scale + 1e-30,
+        "{name}: {got} vs {want}, err {err:e} > {limit:e} * {scale:e}"
+    );
 }
 
 /// Every variant's `gemm_q8::<M>` (M = 1..=4) against the scalar twin, on
@@ -274,7 +312,9 @@ fn gemm_q8_matches_scalar_twin() {
     for v in variants() {
         for nb in (0..=12).chain([31, 48, 96]) {
             let n = nb * Q8_BLOCK;
-            let mut wb: Vec<Vec<u8>> = (0..TN).map(|j| q8_bytes(&r.vec(n + 32 * (j % 2)))).collect();
+            let mut wb: Vec<Vec<u8>> = (0..TN)
+                .map(|j| q8_bytes(&r.vec(n + 32 * (j % 2))))
+                .collect();
             if nb > 0 {
                 wb[1][2] = 0x80; // -128
             }
@@ -305,30 +345,64 @@ fn gemm_q8_matches_scalar_twin() {
                 (0..nb)
                     .map(|b| {
                         let blk = &w[j][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
-                        let s: i64 = blk.iter().zip(&qs[m][b * 32..(b + 1) * 32]).map(|(&a, &c)| ((a as i8 as i64) * c as i64).abs()).sum();
+                        let s: i64 = blk
+                            .iter()
+                            .zip(&qs[m][b * 32..(b + 1) * 32])
+                            .map(|(&a, &c)| ((a as i8 as i64) * c as i64).abs())
+                            .sum();
                         (wd[j][b] as f64 * ds[m][b] as f64).abs() * s as f64
                     })
                     .sum()
             };
-            let want4 = scalar::gemm_q8::<4>(w, wd, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c));
+            let want4 = scalar::gemm_q8::<4>(
+                w,
+                wd,
+                core::array::from_fn(q),
+                core::array::from_fn(d),
+                core::array::from_fn(c),
+            );
             let got: Vec<Vec<[f32; TN]>> = vec![
                 (v.g1)(w, wd, [q(0)], [d(0)], [c(0)]).to_vec(),
                 (v.g2)(w, wd, [q(0), q(1)], [d(0), d(1)], [c(0), c(1)]).to_vec(),
-                (v.g3)(w, wd, [q(0), q(1), q(2)], [d(0), d(1), d(2)], [c(0), c(1), c(2)]).to_vec(),
-                (v.g4)(w, wd, core::array::from_fn(q), core::array::from_fn(d), core::array::from_fn(c)).to_vec(),
+                (v.g3)(
+                    w,
+                    wd,
+                    [q(0), q(1), q(2)],
+                    [d(0), d(1), d(2)],
+                    [c(0), c(1), c(2)],
+                )
+                .to_vec(),
+                (v.g4)(
+                    w,
+                    wd,
+                    core::array::from_fn(q),
+                    core::array::from_fn(d),
+                    core::array::from_fn(c),
+                )
+                .to_vec(),
             ];
             for (mm, g) in got.iter().enumerate() {
                 for (m, row) in g.iter().enumerate() {
                     for j in 0..TN {
-                        check(&format!("{} gemm_q8::<{}> nb={nb} [{m}][{j}]", v.name, mm + 1), row[j], want4[m][j], scale(m, j), SIMD_VS_SCALAR_GEMM_Q8);
+                        check(
+                            &format!("{} gemm_q8::<{}> nb={nb} [{m}][{j}]", v.name, mm + 1),
+                            row[j],
+                            want4[m][j],
+                            scale(m, j),
+                            SIMD_VS_SCALAR_GEMM_Q8,
+                        );
                     }
                 }
             }
             // The twin is the pairwise blocked dot (`dot_q8`).
             for m in 0..4 {
                 for j in 0..TN {
-                    let want = scalar::dot_q8(&w[j][..nb * Q8_BLOCK_BYTES], &qs[m][..n], &ds[m][..nb]);
-                    assert_eq!(want4[m][j], want, "scalar gemm_q8 is the pairwise dot_q8 twin");
+                    let want =
+                        scalar::dot_q8(&w[j][..nb * Q8_BLOCK_BYTES], &qs[m][..n], &ds[m][..nb]);
+                    assert_eq!(
+                        want4[m][j], want,
+                        "scalar gemm_q8 is the pairwise dot_q8 twin"
+                    );
                 }
             }
         }
@@ -340,15 +414,28 @@ fn gemm_q8_matches_scalar_twin() {
                 *b = if i % 2 == 0 { 0x80 } else { 0x7f };
             }
         }
-        let q: Vec<i8> = (0..64).map(|i| if i % 2 == 0 { -127 } else { 127 }).collect();
+        let q: Vec<i8> = (0..64)
+            .map(|i| if i % 2 == 0 { -127 } else { 127 })
+            .collect();
         let mut c = vec![0i32; 4];
         let (mut qq, mut dd) = (vec![0i8; 64], vec![0f32; 2]);
         let xf: Vec<f32> = q.iter().map(|&v| v as f32).collect();
         scalar::quantise_q8_corr(&xf, &mut qq, &mut dd, &mut c);
         assert_eq!((qq.clone(), dd.clone()), (q.clone(), vec![1.0, 1.0]));
         let wd = [1.0f32; 2];
-        let t = (v.g1)([&w, &w, &w, &w], [&wd, &wd, &wd, &wd], [&q], [&[1.0, 1.0]], [&c]);
-        assert_eq!(t[0][0], 2.0 * (16.0 * 128.0 * 127.0 + 16.0 * 127.0 * 127.0), "{}: extreme int8 values", v.name);
+        let t = (v.g1)(
+            [&w, &w, &w, &w],
+            [&wd, &wd, &wd, &wd],
+            [&q],
+            [&[1.0, 1.0]],
+            [&c],
+        );
+        assert_eq!(
+            t[0][0],
+            2.0 * (16.0 * 128.0 * 127.0 + 16.0 * 127.0 * 127.0),
+            "{}: extreme int8 values",
+            v.name
+        );
     }
 }
 
@@ -356,7 +443,9 @@ fn gemm_q8_matches_scalar_twin() {
 fn wide_tiles_match_scalar_twins() {
     let mut r = Rng(0xabcd);
     for v in variants() {
-        let (Some(tf32), Some(tf16)) = (v.tile_f32, v.tile_f16) else { continue };
+        let (Some(tf32), Some(tf16)) = (v.tile_f32, v.tile_f16) else {
+            continue;
+        };
         let mut ks: Vec<usize> = (0..=70).collect();
         ks.extend([255, 257, 767, 768, 1031, 3072]);
         for k in ks {
@@ -364,16 +453,43 @@ fn wide_tiles_match_scalar_twins() {
             let xs: Vec<Vec<f32>> = (0..TM).map(|m| r.vec(k + m)).collect();
             let w: [&[f32]; TN] = core::array::from_fn(|j| &ws[j][..]);
             let x: [&[f32]; TM] = core::array::from_fn(|m| &xs[m][..]);
-            let hs: Vec<Vec<u16>> = ws.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
+            let hs: Vec<Vec<u16>> = ws
+                .iter()
+                .map(|w| {
+                    w.iter()
+                        .map(|&v| half::f16::from_f32(v).to_bits())
+                        .collect()
+                })
+                .collect();
             let hw: [&[u16]; TN] = core::array::from_fn(|j| &hs[j][..]);
             let (g32, w32) = (tf32(w, x), scalar::tile_f32(w, x));
             let (g16, w16) = (tf16(hw, x), scalar::tile_f16(hw, x));
             for m in 0..TM {
                 for j in 0..TN {
-                    let s: f64 = w[j][..k].iter().zip(&x[m][..k]).map(|(a, b)| (*a as f64 * *b as f64).abs()).sum();
-                    check(&format!("{} tile_f32 k={k}", v.name), g32[m][j], w32[m][j], s, SIMD_VS_SCALAR_TILE_512);
-                    let s: f64 = hw[j][..k].iter().zip(&x[m][..k]).map(|(a, b)| (super::f16_to_f32(*a) as f64 * *b as f64).abs()).sum();
-                    check(&format!("{} tile_f16 k={k}", v.name), g16[m][j], w16[m][j], s, SIMD_VS_SCALAR_TILE_512);
+                    let s: f64 = w[j][..k]
+                        .iter()
+                        .zip(&x[m][..k])
+                        .map(|(a, b)| (*a as f64 * *b as f64).abs())
+                        .sum();
+                    check(
+                        &format!("{} tile_f32 k={k}", v.name),
+                        g32[m][j],
+                        w32[m][j],
+                        s,
+                        SIMD_VS_SCALAR_TILE_512,
+                    );
+                    let s: f64 = hw[j][..k]
+                        .iter()
+                        .zip(&x[m][..k])
+                        .map(|(a, b)| (super::f16_to_f32(*a) as f64 * *b as f64).abs())
+                        .sum();
+                    check(
+                        &format!("{} tile_f16 k={k}", v.name),
+                        g16[m][j],
+                        w16[m][j],
+                        s,
+                        SIMD_VS_SCALAR_TILE_512,
+                    );
                 }
             }
         }
@@ -392,7 +508,13 @@ fn axpy_matches_scalar_twin() {
             scalar::axpy_f32(a, &x, &mut want);
             for i in 0..n {
                 let s = y0[i].abs() as f64 + (a * x[i]).abs() as f64;
-                check(&format!("{} axpy n={n}", v.name), got[i], want[i], s, SIMD_VS_SCALAR_AXPY);
+                check(
+                    &format!("{} axpy n={n}", v.name),
+                    got[i],
+                    want[i],
+                    s,
+                    SIMD_VS_SCALAR_AXPY,
+                );
             }
         }
     }
@@ -405,7 +527,15 @@ fn axpy_matches_scalar_twin() {
 fn q8_linear_matches_row_dots() {
     let mut r = Rng(4243);
     let panel = crate::kernels::linear::Q8_PANEL;
-    let shapes = [(1, 32, 1), (2, 64, 3), (3, 96, 5), (5, 768, 7), (9, 1056, 13), (10, 3072, 6), (panel / 768 + 5, 768, 9)];
+    let shapes = [
+        (1, 32, 1),
+        (2, 64, 3),
+        (3, 96, 5),
+        (5, 768, 7),
+        (9, 1056, 13),
+        (10, 3072, 6),
+        (panel / 768 + 5, 768, 9),
+    ];
     for &(n, i, o) in &shapes {
         let (x, w, b) = (r.vec(n * i), r.vec(o * i), r.vec(o));
         let q8 = q8_bytes(&w);
@@ -418,8 +548,18 @@ fn q8_linear_matches_row_dots() {
             for c in 0..o {
                 m.row_into(c, &mut row);
                 let want = b[c] + m.dot(c, xa);
-                let s: f64 = row.iter().zip(xa).map(|(p, q)| (*p as f64 * *q as f64).abs()).sum();
-                check(&format!("q8 linear ({n},{i},{o}) [{a},{c}]"), y[a * o + c], want, 1.0 + s, Q8_LINEAR_VS_ROW_DOTS);
+                let s: f64 = row
+                    .iter()
+                    .zip(xa)
+                    .map(|(p, q)| (*p as f64 * *q as f64).abs())
+                    .sum();
+                check(
+                    &format!("q8 linear ({n},{i},{o}) [{a},{c}]"),
+                    y[a * o + c],
+                    want,
+                    1.0 + s,
+                    Q8_LINEAR_VS_ROW_DOTS,
+                );
             }
         }
         // Unused import guard: the trait's own row count.
@@ -466,8 +606,18 @@ fn dot_rows_match_scalar_twin() {
             }
             for (name, g) in runs {
                 for j in 0..n {
-                    let s: f64 = q.iter().zip(&k[j * stride..]).map(|(a, b)| (*a as f64 * *b as f64).abs()).sum();
-                    check(&format!("{name} dot_rows hd={hd} j={j}"), g[j], want[j], s, SIMD_VS_SCALAR_TILE_512);
+                    let s: f64 = q
+                        .iter()
+                        .zip(&k[j * stride..])
+                        .map(|(a, b)| (*a as f64 * *b as f64).abs())
+                        .sum();
+                    check(
+                        &format!("{name} dot_rows hd={hd} j={j}"),
+                        g[j],
+                        want[j],
+                        s,
+                        SIMD_VS_SCALAR_TILE_512,
+                    );
                 }
             }
         }
@@ -498,15 +648,22 @@ fn for_row_counts(f: &mut dyn FnMut(usize, usize)) {
 /// sum; the two sums added at the end. The kernels must equal it bit for
 /// bit, so an x8 file gives the same numbers on every such CPU.
 fn packed_paired_model(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]]) -> Vec<[f32; 8]> {
-    let nb = q.iter().map(|r| r.len() / Q8_BLOCK).chain(d.iter().map(|r| r.len())).fold(w.blocks(), usize::min);
+    let nb = q
+        .iter()
+        .map(|r| r.len() / Q8_BLOCK)
+        .chain(d.iter().map(|r| r.len()))
+        .fold(w.blocks(), usize::min);
     q.iter()
         .zip(d)
         .map(|(qm, dm)| {
             core::array::from_fn(|n| {
                 let mut acc = [0.0f32; 2];
                 for b in 0..nb {
-                    let isum: i32 = (0..Q8_BLOCK).map(|i| w.value(b, n, i) as i32 * qm[b * Q8_BLOCK + i] as i32).sum();
-                    acc[b % 2] = (isum as f32).mul_add(super::f16_to_f32(w.scale_bits(b, n)) * dm[b], acc[b % 2]);
+                    let isum: i32 = (0..Q8_BLOCK)
+                        .map(|i| w.value(b, n, i) as i32 * qm[b * Q8_BLOCK + i] as i32)
+                        .sum();
+                    acc[b % 2] = (isum as f32)
+                        .mul_add(super::f16_to_f32(w.scale_bits(b, n)) * dm[b], acc[b % 2]);
                 }
                 acc[0] + acc[1]
             })
@@ -520,7 +677,12 @@ fn packed_paired_model(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]]) -> Vec
 /// The CPU must support avx2, fma and f16c.
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
-unsafe fn packed_rows_avx2(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]], c: &[&[i32]]) -> Vec<[f32; 8]> {
+unsafe fn packed_rows_avx2(
+    w: super::PackedQ8<'_>,
+    q: &[&[i8]],
+    d: &[&[f32]],
+    c: &[&[i32]],
+) -> Vec<[f32; 8]> {
     macro_rules! call {
         ($($k:literal)*) => {
             match q.len() {
@@ -539,7 +701,12 @@ unsafe fn packed_rows_avx2(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]], c:
 /// The CPU must support neon and dotprod.
 #[cfg(target_arch = "aarch64")]
 #[allow(unsafe_code)]
-unsafe fn packed_rows_dot(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]], c: &[&[i32]]) -> Vec<[f32; 8]> {
+unsafe fn packed_rows_dot(
+    w: super::PackedQ8<'_>,
+    q: &[&[i8]],
+    d: &[&[f32]],
+    c: &[&[i32]],
+) -> Vec<[f32; 8]> {
     macro_rules! call {
         ($($k:literal)*) => {
             match q.len() {
@@ -587,7 +754,13 @@ fn packed_gemm_q8_matches_scalar_twin() {
             let w: [&[u8]; TN] = core::array::from_fn(|j| &wb[4 * half + j][..]);
             let wd: [&[f32]; TN] = core::array::from_fn(|j| &wds[4 * half + j][..]);
             for m0 in [0, 4] {
-                let t = scalar::gemm_q8::<4>(w, wd, core::array::from_fn(|i| q[m0 + i]), core::array::from_fn(|i| d[m0 + i]), core::array::from_fn(|i| c[m0 + i]));
+                let t = scalar::gemm_q8::<4>(
+                    w,
+                    wd,
+                    core::array::from_fn(|i| q[m0 + i]),
+                    core::array::from_fn(|i| d[m0 + i]),
+                    core::array::from_fn(|i| c[m0 + i]),
+                );
                 for i in 0..4 {
                     for j in 0..4 {
                         want[m0 + i][4 * half + j] = t[i][j];
@@ -595,42 +768,93 @@ fn packed_gemm_q8_matches_scalar_twin() {
                 }
             }
         }
-        let (mut pv, mut ps) = (vec![0u8; nb * super::PACK_BLOCK_VALUES], vec![0u8; nb * super::PACK_BLOCK_SCALES]);
+        let (mut pv, mut ps) = (
+            vec![0u8; nb * super::PACK_BLOCK_VALUES],
+            vec![0u8; nb * super::PACK_BLOCK_SCALES],
+        );
         scalar::q8_pack8(core::array::from_fn(|j| &wb[j][..]), nb, &mut pv, &mut ps);
         let view = pack.view();
-        assert_eq!((view.v, view.s), (&pv[..], &ps[..]), "dispatched packing vs scalar twin nb={nb}");
+        assert_eq!(
+            (view.v, view.s),
+            (&pv[..], &ps[..]),
+            "dispatched packing vs scalar twin nb={nb}"
+        );
         // The packed layout holds each row's stored values and scale bits.
         for j in 0..PACK_ROWS {
             for b in 0..nb {
                 let blk = &wb[j][b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
                 assert_eq!(view.scale_bits(b, j), u16::from_le_bytes([blk[0], blk[1]]));
-                assert!((0..Q8_BLOCK).all(|i| view.value(b, j, i) == blk[2 + i] as i8), "row {j} block {b}");
+                assert!(
+                    (0..Q8_BLOCK).all(|i| view.value(b, j, i) == blk[2 + i] as i8),
+                    "row {j} block {b}"
+                );
             }
         }
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512bw") && std::is_x86_feature_detected!("avx512dq") && std::is_x86_feature_detected!("avx512vl") {
-            let (mut xv, mut xs) = (vec![0u8; nb * super::PACK_BLOCK_VALUES], vec![0u8; nb * super::PACK_BLOCK_SCALES]);
+        if std::is_x86_feature_detected!("avx512f")
+            && std::is_x86_feature_detected!("avx512bw")
+            && std::is_x86_feature_detected!("avx512dq")
+            && std::is_x86_feature_detected!("avx512vl")
+        {
+            let (mut xv, mut xs) = (
+                vec![0u8; nb * super::PACK_BLOCK_VALUES],
+                vec![0u8; nb * super::PACK_BLOCK_SCALES],
+            );
             // SAFETY: avx512f/bw/dq/vl detected (avx2 implied on every such CPU).
-            unsafe { super::x86::q8_pack8(core::array::from_fn(|j| &wb[j][..]), nb, &mut xv, &mut xs) };
-            assert_eq!((&xv, &xs), (&pv, &ps), "avx512 packing vs scalar twin nb={nb}");
+            unsafe {
+                super::x86::q8_pack8(core::array::from_fn(|j| &wb[j][..]), nb, &mut xv, &mut xs)
+            };
+            assert_eq!(
+                (&xv, &xs),
+                (&pv, &ps),
+                "avx512 packing vs scalar twin nb={nb}"
+            );
         }
         // A stored group (values then scales, as a Q8Block32x8 file holds it) reads the same.
         let group: Vec<u8> = pv.iter().chain(&ps).copied().collect();
         let stored = super::PackedQ8::from_group(&group, nb).unwrap();
-        assert!(super::PackedQ8::from_group(&group[..group.len().saturating_sub(1)], nb).is_none() || nb == 0);
+        assert!(
+            super::PackedQ8::from_group(&group[..group.len().saturating_sub(1)], nb).is_none()
+                || nb == 0
+        );
         let twin = scalar::gemm_q8_packed::<8>(view, q, d, c);
-        assert_eq!(scalar::gemm_q8_packed::<8>(stored, q, d, c), twin, "stored group vs stack pack nb={nb}");
+        assert_eq!(
+            scalar::gemm_q8_packed::<8>(stored, q, d, c),
+            twin,
+            "stored group vs stack pack nb={nb}"
+        );
         assert_eq!(twin, want, "scalar packed twin nb={nb}");
-        let mut got: Vec<(&str, [[f32; 8]; 8])> = vec![("dispatched", super::gemm_q8_packed::<8>(view, q, d, c)), ("dispatched, stored group", super::gemm_q8_packed::<8>(stored, q, d, c))];
+        let mut got: Vec<(&str, [[f32; 8]; 8])> = vec![
+            ("dispatched", super::gemm_q8_packed::<8>(view, q, d, c)),
+            (
+                "dispatched, stored group",
+                super::gemm_q8_packed::<8>(stored, q, d, c),
+            ),
+        ];
         #[cfg(target_arch = "x86_64")]
         {
             use std::is_x86_feature_detected as has;
-            if has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") && has!("avx512vnni") && has!("avx2") && has!("fma") && has!("f16c") {
+            if has!("avx512f")
+                && has!("avx512bw")
+                && has!("avx512dq")
+                && has!("avx512vl")
+                && has!("avx512vnni")
+                && has!("avx2")
+                && has!("fma")
+                && has!("f16c")
+            {
                 // SAFETY: every feature of the kernel detected above.
                 let v8 = unsafe { super::x86::gemm_q8_packed_vnni::<8>(view, q, d, c) };
                 got.push(("avx512vnni", v8));
                 // SAFETY: as above.
-                let t3 = unsafe { super::x86::gemm_q8_packed_vnni::<3>(stored, [q[2], q[3], q[4]], [d[2], d[3], d[4]], [c[2], c[3], c[4]]) };
+                let t3 = unsafe {
+                    super::x86::gemm_q8_packed_vnni::<3>(
+                        stored,
+                        [q[2], q[3], q[4]],
+                        [d[2], d[3], d[4]],
+                        [c[2], c[3], c[4]],
+                    )
+                };
                 let mut g = v8;
                 g[2..5].copy_from_slice(&t3);
                 got.push(("avx512vnni M=3", g));
@@ -642,8 +866,15 @@ fn packed_gemm_q8_matches_scalar_twin() {
                 // Every row count gives each row the numbers it gets among 8.
                 for_row_counts(&mut |m0, k| {
                     // SAFETY: as above.
-                    let t = unsafe { packed_rows_avx2(stored, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k]) };
-                    assert_eq!(bits8(&t), bits8(&a8[m0..m0 + k]), "avx2 rows {m0}..{} nb={nb}", m0 + k);
+                    let t = unsafe {
+                        packed_rows_avx2(stored, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k])
+                    };
+                    assert_eq!(
+                        bits8(&t),
+                        bits8(&a8[m0..m0 + k]),
+                        "avx2 rows {m0}..{} nb={nb}",
+                        m0 + k
+                    );
                 });
             }
         }
@@ -654,15 +885,26 @@ fn packed_gemm_q8_matches_scalar_twin() {
             got.push(("neondot", a8));
             for_row_counts(&mut |m0, k| {
                 // SAFETY: as above.
-                let t = unsafe { packed_rows_dot(stored, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k]) };
-                assert_eq!(bits8(&t), bits8(&a8[m0..m0 + k]), "neondot rows {m0}..{} nb={nb}", m0 + k);
+                let t = unsafe {
+                    packed_rows_dot(stored, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k])
+                };
+                assert_eq!(
+                    bits8(&t),
+                    bits8(&a8[m0..m0 + k]),
+                    "neondot rows {m0}..{} nb={nb}",
+                    m0 + k
+                );
             });
         }
         // Every SIMD variant performs the paired f32 steps: the same bits on every such CPU.
         let model = bits8(&packed_paired_model(view, &q, &d));
         for (name, g) in &got {
             if !name.starts_with("dispatched") || super::packed_q8_fast() {
-                assert_eq!(bits8(g), model, "{name}: the paired f32 steps, bit for bit, nb={nb}");
+                assert_eq!(
+                    bits8(g),
+                    model,
+                    "{name}: the paired f32 steps, bit for bit, nb={nb}"
+                );
             }
         }
         for (name, g) in got {
@@ -671,11 +913,21 @@ fn packed_gemm_q8_matches_scalar_twin() {
                     let s: f64 = (0..nb)
                         .map(|b| {
                             let blk = &wb[j][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
-                            let a: i64 = blk.iter().zip(&qs[m][b * 32..(b + 1) * 32]).map(|(&w, &x)| ((w as i8 as i64) * x as i64).abs()).sum();
+                            let a: i64 = blk
+                                .iter()
+                                .zip(&qs[m][b * 32..(b + 1) * 32])
+                                .map(|(&w, &x)| ((w as i8 as i64) * x as i64).abs())
+                                .sum();
                             (wds[j][b] as f64 * ds[m][b] as f64).abs() * a as f64
                         })
                         .sum();
-                    check(&format!("{name} packed nb={nb} [{m}][{j}]"), g[m][j], want[m][j], s, SIMD_VS_SCALAR_GEMM_Q8);
+                    check(
+                        &format!("{name} packed nb={nb} [{m}][{j}]"),
+                        g[m][j],
+                        want[m][j],
+                        s,
+                        SIMD_VS_SCALAR_GEMM_Q8,
+                    );
                 }
             }
         }
@@ -685,7 +937,13 @@ fn packed_gemm_q8_matches_scalar_twin() {
 /// Dispatches a run of `q.len()` (1..=12) rows to the packed kernel that
 /// `linear` calls ([`super::gemm_q8_packed_ahead`], at most 12 rows per
 /// call), prefetching `ahead`.
-fn packed_rows_dispatched(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]], c: &[&[i32]], ahead: &[u8]) -> Vec<[f32; 8]> {
+fn packed_rows_dispatched(
+    w: super::PackedQ8<'_>,
+    q: &[&[i8]],
+    d: &[&[f32]],
+    c: &[&[i32]],
+    ahead: &[u8],
+) -> Vec<[f32; 8]> {
     macro_rules! call {
         ($($k:literal)*) => {
             match q.len() {
@@ -729,13 +987,26 @@ fn packed_kernel_runs_of_up_to_12_rows_give_each_row_its_numbers() {
             let want: Vec<[u32; 8]> = if super::packed_q8_fast() {
                 bits8(&packed_paired_model(w, &q, &d))
             } else {
-                (0..ROWS).flat_map(|m| bits8(&scalar::gemm_q8_packed::<1>(w, [q[m]], [d[m]], [c[m]]))).collect()
+                (0..ROWS)
+                    .flat_map(|m| bits8(&scalar::gemm_q8_packed::<1>(w, [q[m]], [d[m]], [c[m]])))
+                    .collect()
             };
             for k in 1..=ROWS {
                 for m0 in 0..=ROWS - k {
                     let a = if m0 % 2 == 0 { &ahead[..] } else { &[] };
-                    let t = packed_rows_dispatched(w, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k], a);
-                    assert_eq!(bits8(&t), want[m0..m0 + k], "{name} rows {m0}..{} nb={nb}", m0 + k);
+                    let t = packed_rows_dispatched(
+                        w,
+                        &q[m0..m0 + k],
+                        &d[m0..m0 + k],
+                        &c[m0..m0 + k],
+                        a,
+                    );
+                    assert_eq!(
+                        bits8(&t),
+                        want[m0..m0 + k],
+                        "{name} rows {m0}..{} nb={nb}",
+                        m0 + k
+                    );
                 }
             }
         }
@@ -747,7 +1018,11 @@ fn packed_kernel_runs_of_up_to_12_rows_give_each_row_its_numbers() {
 fn axpy_f16_matches_scalar_twin() {
     let mut r = Rng(29);
     for n in (0..=20).chain([63, 64, 65, 512, 1001]) {
-        let w: Vec<u16> = r.vec(n).iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+        let w: Vec<u16> = r
+            .vec(n)
+            .iter()
+            .map(|&v| half::f16::from_f32(v).to_bits())
+            .collect();
         let y0 = r.vec(n);
         let a = r.f();
         let mut want = y0.clone();
@@ -755,14 +1030,23 @@ fn axpy_f16_matches_scalar_twin() {
         let mut got = y0.clone();
         super::axpy_f16(a, &w, &mut got);
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") && std::is_x86_feature_detected!("f16c") {
+        if std::is_x86_feature_detected!("avx2")
+            && std::is_x86_feature_detected!("fma")
+            && std::is_x86_feature_detected!("f16c")
+        {
             got = y0.clone();
             // SAFETY: avx2, fma, f16c detected.
             unsafe { super::x86::axpy_f16(a, &w, &mut got) };
         }
         for i in 0..n {
             let s = y0[i].abs() as f64 + (a * super::f16_to_f32(w[i])).abs() as f64;
-            check(&format!("axpy_f16 n={n}"), got[i], want[i], s, SIMD_VS_SCALAR_AXPY);
+            check(
+                &format!("axpy_f16 n={n}"),
+                got[i],
+                want[i],
+                s,
+                SIMD_VS_SCALAR_AXPY,
+            );
         }
     }
 }
@@ -779,7 +1063,10 @@ fn linear_rows_do_not_depend_on_the_batch() {
         let w = r.vec(o * i);
         let q8 = q8_bytes(&w);
         let q4 = q4_bytes(&w);
-        let h: Vec<u16> = w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+        let h: Vec<u16> = w
+            .iter()
+            .map(|&v| half::f16::from_f32(v).to_bits())
+            .collect();
         let x8 = x8_bytes(&q8, o, i);
         // 12 rows: at 3072 inputs more than 10 rows take the full panel, fewer the small one.
         let rows = 12;
@@ -791,17 +1078,26 @@ fn linear_rows_do_not_depend_on_the_batch() {
             Matrix::F16(F16Rows::new(&h, o, i).unwrap()),
             Matrix::F32(F32Rows::new(&w, o, i).unwrap()),
         ] {
-        let mut alone = vec![0.0f32; rows * o];
-        for a in 0..rows {
-            linear(&x[a * i..(a + 1) * i], &m, None, &mut alone[a * o..(a + 1) * o]);
-        }
-        for n in 2..=rows {
-            let mut y = vec![0.0f32; n * o];
-            linear(&x[..n * i], &m, None, &mut y);
-            for (k, (a, b)) in y.iter().zip(&alone).enumerate() {
-                assert_eq!(a.to_bits(), b.to_bits(), "in {i} out {o}: {n} rows, element {k}: {a} vs {b} alone");
+            let mut alone = vec![0.0f32; rows * o];
+            for a in 0..rows {
+                linear(
+                    &x[a * i..(a + 1) * i],
+                    &m,
+                    None,
+                    &mut alone[a * o..(a + 1) * o],
+                );
             }
-        }
+            for n in 2..=rows {
+                let mut y = vec![0.0f32; n * o];
+                linear(&x[..n * i], &m, None, &mut y);
+                for (k, (a, b)) in y.iter().zip(&alone).enumerate() {
+                    assert_eq!(
+                        a.to_bits(),
+                        b.to_bits(),
+                        "in {i} out {o}: {n} rows, element {k}: {a} vs {b} alone"
+                    );
+                }
+            }
         }
     }
 }
@@ -826,9 +1122,20 @@ fn group_blocks_expand_to_their_values() {
     let mut r = Rng(23);
     let nb = 3;
     for q4 in [false, true] {
-        let per = if q4 { super::PACK_BLOCK_NIBBLES } else { super::PACK_BLOCK_VALUES };
-        let bytes: Vec<u8> = (0..nb * (per + super::PACK_BLOCK_SCALES)).map(|_| r.u() as u8).collect();
-        let g = if q4 { super::PackedQ8::from_q4_group(&bytes, nb) } else { super::PackedQ8::from_group(&bytes, nb) }.unwrap();
+        let per = if q4 {
+            super::PACK_BLOCK_NIBBLES
+        } else {
+            super::PACK_BLOCK_VALUES
+        };
+        let bytes: Vec<u8> = (0..nb * (per + super::PACK_BLOCK_SCALES))
+            .map(|_| r.u() as u8)
+            .collect();
+        let g = if q4 {
+            super::PackedQ8::from_q4_group(&bytes, nb)
+        } else {
+            super::PackedQ8::from_group(&bytes, nb)
+        }
+        .unwrap();
         for b in 0..nb {
             for n in 0..super::PACK_ROWS {
                 let mut got = [0u8; Q8_BLOCK_BYTES];
@@ -853,9 +1160,20 @@ fn linear_each_equals_one_linear_per_matrix() {
         let outs = [64usize, 24, 40];
         let w: Vec<Vec<f32>> = outs.iter().map(|&o| r.vec(o * i)).collect();
         let q8: Vec<Vec<u8>> = w.iter().map(|w| q8_bytes(w)).collect();
-        let x8: Vec<Vec<u8>> = q8.iter().zip(&outs).map(|(q, &o)| x8_bytes(q, o, i)).collect();
+        let x8: Vec<Vec<u8>> = q8
+            .iter()
+            .zip(&outs)
+            .map(|(q, &o)| x8_bytes(q, o, i))
+            .collect();
         let q4: Vec<Vec<u8>> = w.iter().map(|w| q4_bytes(w)).collect();
-        let h: Vec<Vec<u16>> = w.iter().map(|w| w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect()).collect();
+        let h: Vec<Vec<u16>> = w
+            .iter()
+            .map(|w| {
+                w.iter()
+                    .map(|&v| half::f16::from_f32(v).to_bits())
+                    .collect()
+            })
+            .collect();
         let b: Vec<Vec<f32>> = outs.iter().map(|&o| r.vec(o)).collect();
         let sets: Vec<[Matrix<'_>; 3]> = vec![
             core::array::from_fn(|k| Matrix::X8(X8Rows::new(&x8[k], outs[k], i).unwrap())),
@@ -863,7 +1181,11 @@ fn linear_each_equals_one_linear_per_matrix() {
             core::array::from_fn(|k| Matrix::Q4(Q4Rows::new(&q4[k], outs[k], i).unwrap())),
             core::array::from_fn(|k| Matrix::F16(F16Rows::new(&h[k], outs[k], i).unwrap())),
             // Mixed layouts: one call per matrix.
-            [Matrix::X8(X8Rows::new(&x8[0], outs[0], i).unwrap()), Matrix::Q8(Q8Rows::new(&q8[1], outs[1], i).unwrap()), Matrix::F32(F32Rows::new(&w[2], outs[2], i).unwrap())],
+            [
+                Matrix::X8(X8Rows::new(&x8[0], outs[0], i).unwrap()),
+                Matrix::Q8(Q8Rows::new(&q8[1], outs[1], i).unwrap()),
+                Matrix::F32(F32Rows::new(&w[2], outs[2], i).unwrap()),
+            ],
         ];
         // Up to 12 rows: at 3072 inputs more than 10 rows take the full panel.
         for n in [1usize, 4, 9, 11, 12] {
@@ -877,13 +1199,28 @@ fn linear_each_equals_one_linear_per_matrix() {
                     })
                     .collect();
                 // One spare row of output room: only n rows are written.
-                let mut got: Vec<Vec<f32>> = outs.iter().map(|&o| vec![7.0f32; (n + 1) * o]).collect();
-                let [g0, g1, g2] = &mut got[..] else { unreachable!() };
-                linear_each(&x, [&m[0], &m[1], &m[2]], [Some(&b[0][..]), Some(&b[1][..]), Some(&b[2][..])], [&mut g0[..], &mut g1[..], &mut g2[..]]);
+                let mut got: Vec<Vec<f32>> =
+                    outs.iter().map(|&o| vec![7.0f32; (n + 1) * o]).collect();
+                let [g0, g1, g2] = &mut got[..] else {
+                    unreachable!()
+                };
+                linear_each(
+                    &x,
+                    [&m[0], &m[1], &m[2]],
+                    [Some(&b[0][..]), Some(&b[1][..]), Some(&b[2][..])],
+                    [&mut g0[..], &mut g1[..], &mut g2[..]],
+                );
                 for k in 0..3 {
                     let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
-                    assert_eq!(bits(&got[k][..n * outs[k]]), bits(&want[k]), "in {i}, {n} rows, matrix {k}");
-                    assert!(got[k][n * outs[k]..].iter().all(|&v| v == 7.0), "in {i}, {n} rows, matrix {k}: spare row written");
+                    assert_eq!(
+                        bits(&got[k][..n * outs[k]]),
+                        bits(&want[k]),
+                        "in {i}, {n} rows, matrix {k}"
+                    );
+                    assert!(
+                        got[k][n * outs[k]..].iter().all(|&v| v == 7.0),
+                        "in {i}, {n} rows, matrix {k}: spare row written"
+                    );
                 }
             }
         }
@@ -924,12 +1261,23 @@ fn q4_block_layout() {
 fn q4_matches_its_q8_expansion_bit_for_bit() {
     let mut r = Rng(4747);
     let wide = crate::kernels::linear::Q4_FAST_COLS + 32;
-    for &(n, i, o) in &[(1usize, 32usize, 3usize), (3, 96, 5), (5, 768, 7), (9, 1056, 13), (2, 3072, 6), (12, 768, 9), (3, wide, 5)] {
+    for &(n, i, o) in &[
+        (1usize, 32usize, 3usize),
+        (3, 96, 5),
+        (5, 768, 7),
+        (9, 1056, 13),
+        (2, 3072, 6),
+        (12, 768, 9),
+        (3, wide, 5),
+    ] {
         let (x, w) = (r.vec(n * i), r.vec(o * i));
         let q4 = q4_bytes(&w);
         let mut q8 = vec![0u8; o * i / Q8_BLOCK * Q8_BLOCK_BYTES];
         expand_q4(&q4, &mut q8);
-        let (m4, m8) = (Q4Rows::new(&q4, o, i).unwrap(), Q8Rows::new(&q8, o, i).unwrap());
+        let (m4, m8) = (
+            Q4Rows::new(&q4, o, i).unwrap(),
+            Q8Rows::new(&q8, o, i).unwrap(),
+        );
         let (mut r4, mut r8) = (vec![0.0f32; i], vec![0.0f32; i]);
         for c in 0..o {
             m4.row_into(c, &mut r4);
@@ -938,12 +1286,20 @@ fn q4_matches_its_q8_expansion_bit_for_bit() {
             // Within a quarter step of the f32 weights (round to nearest on the f16 scale's grid).
             for (k, (&a, &b)) in r4.iter().zip(&w[c * i..(c + 1) * i]).enumerate() {
                 let blk = &w[c * i + k / 32 * 32..c * i + k / 32 * 32 + 32];
-                let d = half::f16::from_f32(blk.iter().fold(0.0f32, |m, v| m.max(v.abs())) / 7.0).to_f32();
-                assert!((a - b).abs() <= 0.5 * d * 1.001 + 1e-7, "({i},{o}) [{c},{k}]: {a} vs {b}, step {d}");
+                let d = half::f16::from_f32(blk.iter().fold(0.0f32, |m, v| m.max(v.abs())) / 7.0)
+                    .to_f32();
+                assert!(
+                    (a - b).abs() <= 0.5 * d * 1.001 + 1e-7,
+                    "({i},{o}) [{c},{k}]: {a} vs {b}, step {d}"
+                );
             }
             for a in 0..n {
                 let xa = &x[a * i..(a + 1) * i];
-                assert_eq!(m4.dot(c, xa).to_bits(), m8.dot(c, xa).to_bits(), "dot ({n},{i},{o}) [{a},{c}]");
+                assert_eq!(
+                    m4.dot(c, xa).to_bits(),
+                    m8.dot(c, xa).to_bits(),
+                    "dot ({n},{i},{o}) [{a},{c}]"
+                );
             }
         }
         let m = Matrix::Q4(m4);
@@ -953,15 +1309,29 @@ fn q4_matches_its_q8_expansion_bit_for_bit() {
             let mut y8 = vec![f32::NAN; n * o];
             linear(&x, &Matrix::Q8(m8), None, &mut y8);
             let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&y), bits(&y8), "linear ({n},{i},{o}): Q4 vs its Q8 expansion");
+            assert_eq!(
+                bits(&y),
+                bits(&y8),
+                "linear ({n},{i},{o}): Q4 vs its Q8 expansion"
+            );
         }
         // ... and against its own row dots (the chunked path).
         for a in 0..n {
             let xa = &x[a * i..(a + 1) * i];
             for c in 0..o {
                 m.row_into(c, &mut r4);
-                let s: f64 = r4.iter().zip(xa).map(|(p, q)| (*p as f64 * *q as f64).abs()).sum();
-                check(&format!("q4 linear ({n},{i},{o}) [{a},{c}]"), y[a * o + c], m.dot(c, xa), 1.0 + s, Q8_LINEAR_VS_ROW_DOTS);
+                let s: f64 = r4
+                    .iter()
+                    .zip(xa)
+                    .map(|(p, q)| (*p as f64 * *q as f64).abs())
+                    .sum();
+                check(
+                    &format!("q4 linear ({n},{i},{o}) [{a},{c}]"),
+                    y[a * o + c],
+                    m.dot(c, xa),
+                    1.0 + s,
+                    Q8_LINEAR_VS_ROW_DOTS,
+                );
             }
         }
     }
@@ -971,7 +1341,23 @@ fn q4_matches_its_q8_expansion_bit_for_bit() {
 /// zero region, and pseudo-random scores.
 fn exp_inputs() -> std::vec::Vec<f32> {
     let mut v: std::vec::Vec<f32> = (-4000..=4000).map(|i| i as f32 * 0.0231).collect();
-    v.extend([0.0, -0.0, 1e-30, -1e-30, 88.29, 88.3, 88.31, 200.0, -87.29, -87.3, -87.31, -200.0, f32::NEG_INFINITY, f32::INFINITY, f32::MIN_POSITIVE]);
+    v.extend([
+        0.0,
+        -0.0,
+        1e-30,
+        -1e-30,
+        88.29,
+        88.3,
+        88.31,
+        200.0,
+        -87.29,
+        -87.3,
+        -87.31,
+        -200.0,
+        f32::NEG_INFINITY,
+        f32::INFINITY,
+        f32::MIN_POSITIVE,
+    ]);
     let mut r = Rng(99);
     v.extend((0..997).map(|_| r.f() * 30.0));
     v
@@ -1051,7 +1437,10 @@ fn gelu_matches_scalar_twin_and_libm() {
     for &x in &xs {
         let want = 0.5 * x as f64 * (1.0 + libm::erff(x * core::f32::consts::FRAC_1_SQRT_2) as f64);
         let got = scalar::gelu(x) as f64;
-        assert!((got - want).abs() <= 1e-7 * (1.0 + x.abs() as f64), "gelu({x}) = {got}, libm {want}");
+        assert!(
+            (got - want).abs() <= 1e-7 * (1.0 + x.abs() as f64),
+            "gelu({x}) = {got}, libm {want}"
+        );
     }
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
@@ -1097,17 +1486,31 @@ fn bias_act_matches_scalar_twin() {
     for n in (0..=20).chain([31, 32, 33, 48, 64, 65, xs.len()]) {
         let t = &xs[..n];
         let b = r.vec(n + 3);
-        for (bias, gelu) in [(None, false), (Some(&b[..n]), false), (Some(&b[..n]), true), (None, true)] {
+        for (bias, gelu) in [
+            (None, false),
+            (Some(&b[..n]), false),
+            (Some(&b[..n]), true),
+            (None, true),
+        ] {
             let mut want = vec![0.0f32; n];
             scalar::bias_act(t, bias, gelu, &mut want);
             for (j, w) in want.iter().enumerate() {
                 let s = bias.map_or(0.0, |b| b[j]) + t[j];
-                assert_eq!(w.to_bits(), if gelu { scalar::gelu(s) } else { s }.to_bits(), "twin n={n} j={j}");
+                assert_eq!(
+                    w.to_bits(),
+                    if gelu { scalar::gelu(s) } else { s }.to_bits(),
+                    "twin n={n} j={j}"
+                );
             }
             // One more output slot than values: it must stay as it was.
             let mut got = vec![-3.0f32; n + 1];
             super::bias_act(t, bias, gelu, &mut got);
-            assert_eq!(got[..n].iter().map(|v| v.to_bits()).collect::<Vec<_>>(), want.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), "dispatch n={n} bias={} gelu={gelu}", bias.is_some());
+            assert_eq!(
+                got[..n].iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                want.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                "dispatch n={n} bias={} gelu={gelu}",
+                bias.is_some()
+            );
             assert_eq!(got[n], -3.0);
             #[cfg(target_arch = "x86_64")]
             if std::is_x86_feature_detected!("avx512f") {
@@ -1115,7 +1518,12 @@ fn bias_act_matches_scalar_twin() {
                 // SAFETY: avx512f detected.
                 unsafe { super::x86::bias_act_512(t, bias, gelu, &mut got) };
                 for j in 0..n {
-                    assert_eq!(got[j].to_bits(), want[j].to_bits(), "avx512 n={n} j={j} bias={} gelu={gelu}", bias.is_some());
+                    assert_eq!(
+                        got[j].to_bits(),
+                        want[j].to_bits(),
+                        "avx512 n={n} j={j} bias={} gelu={gelu}",
+                        bias.is_some()
+                    );
                 }
                 assert_eq!(got[n], -3.0, "avx512 wrote past the values");
             }
@@ -1133,11 +1541,18 @@ fn widen_f16_matches_scalar_twin() {
     scalar::widen_f16(&all, &mut want);
     for (h, w) in all.iter().zip(&want) {
         let exact = half::f16::from_bits(*h).to_f32();
-        assert!(w.to_bits() == exact.to_bits() || (w.is_nan() && exact.is_nan()), "{h:#06x}");
+        assert!(
+            w.to_bits() == exact.to_bits() || (w.is_nan() && exact.is_nan()),
+            "{h:#06x}"
+        );
     }
     let same = |a: &[f32], b: &[f32], what: &str| {
         for (i, (x, y)) in a.iter().zip(b).enumerate() {
-            assert!(x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()), "{what} {:#06x}", all[i]);
+            assert!(
+                x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()),
+                "{what} {:#06x}",
+                all[i]
+            );
         }
     };
     #[cfg(target_arch = "x86_64")]
@@ -1185,7 +1600,8 @@ unsafe impl crate::kernels::parallel::Workers for ReversePool {
 }
 
 static REVERSE: ReversePool = ReversePool;
-static REVERSE_INSTALLED: crate::kernels::parallel::Installed = crate::kernels::parallel::Installed(&REVERSE);
+static REVERSE_INSTALLED: crate::kernels::parallel::Installed =
+    crate::kernels::parallel::Installed(&REVERSE);
 /// Held by every test that installs or removes the (process-wide) pool, so
 /// one test's `set_workers(None)` never lands inside another's split call.
 static POOL_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
@@ -1208,10 +1624,20 @@ fn split_gemm_matches_one_thread_bit_for_bit() {
     // installs one.
     let mut r = Rng(2024);
     let wide = crate::kernels::linear::Q4_FAST_COLS + 64;
-    for &(n, i, o) in &[(1usize, 768usize, 203usize), (5, 768, 203), (9, 256, 520), (3, 3072, 67), (50, 768, 96), (2, wide, 40)] {
+    for &(n, i, o) in &[
+        (1usize, 768usize, 203usize),
+        (5, 768, 203),
+        (9, 256, 520),
+        (3, 3072, 67),
+        (50, 768, 96),
+        (2, wide, 40),
+    ] {
         let w = r.vec(o * i);
         let (q8, q4) = (q8_bytes(&w), q4_bytes(&w));
-        let h: Vec<u16> = w.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+        let h: Vec<u16> = w
+            .iter()
+            .map(|&v| half::f16::from_f32(v).to_bits())
+            .collect();
         let (x, b) = (r.vec(n * i), r.vec(o));
         for m in [
             Matrix::Q8(Q8Rows::new(&q8, o, i).unwrap()),
@@ -1227,9 +1653,17 @@ fn split_gemm_matches_one_thread_bit_for_bit() {
             let mut split = vec![f32::NAN; n * o];
             linear(&x, &m, Some(&b), &mut split);
             set_workers(None);
-            assert!(reverse_jobs() > jobs, "({n},{i},{o}) {:?}: not split", m.rows());
+            assert!(
+                reverse_jobs() > jobs,
+                "({n},{i},{o}) {:?}: not split",
+                m.rows()
+            );
             for (k, (a, s)) in one.iter().zip(&split).enumerate() {
-                assert_eq!(a.to_bits(), s.to_bits(), "({n},{i},{o}) element {k}: one thread {a}, split {s}");
+                assert_eq!(
+                    a.to_bits(),
+                    s.to_bits(),
+                    "({n},{i},{o}) element {k}: one thread {a}, split {s}"
+                );
             }
         }
     }
@@ -1259,7 +1693,11 @@ fn layernorm_matches_scalar_twin_and_f64() {
                 let var = x.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n as f64;
                 for i in 0..n {
                     let e = (x[i] as f64 - mean) / (var + 1e-5).sqrt() * w[i] as f64 + b[i] as f64;
-                    assert!((want[i] as f64 - e).abs() <= 1e-5 * (1.0 + e.abs()), "n={n} offset {offset} [{i}]: {} vs f64 {e}", want[i]);
+                    assert!(
+                        (want[i] as f64 - e).abs() <= 1e-5 * (1.0 + e.abs()),
+                        "n={n} offset {offset} [{i}]: {} vs f64 {e}",
+                        want[i]
+                    );
                 }
             }
             let mut got = std::vec![f32::NAN; n];
@@ -1267,13 +1705,29 @@ fn layernorm_matches_scalar_twin_and_f64() {
             if std::is_x86_feature_detected!("avx2") {
                 // SAFETY: avx2 detected.
                 unsafe { super::x86::layernorm_row(&x, &w, &b, 1e-5, &mut got) };
-                assert_eq!(got.iter().map(|v| v.to_bits()).collect::<std::vec::Vec<_>>(), want.iter().map(|v| v.to_bits()).collect::<std::vec::Vec<_>>(), "avx2 n={n}");
+                assert_eq!(
+                    got.iter()
+                        .map(|v| v.to_bits())
+                        .collect::<std::vec::Vec<_>>(),
+                    want.iter()
+                        .map(|v| v.to_bits())
+                        .collect::<std::vec::Vec<_>>(),
+                    "avx2 n={n}"
+                );
             }
             #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
             {
                 // SAFETY: NEON is enabled for this build.
                 unsafe { super::neon::layernorm_row(&x, &w, &b, 1e-5, &mut got) };
-                assert_eq!(got.iter().map(|v| v.to_bits()).collect::<std::vec::Vec<_>>(), want.iter().map(|v| v.to_bits()).collect::<std::vec::Vec<_>>(), "neon n={n}");
+                assert_eq!(
+                    got.iter()
+                        .map(|v| v.to_bits())
+                        .collect::<std::vec::Vec<_>>(),
+                    want.iter()
+                        .map(|v| v.to_bits())
+                        .collect::<std::vec::Vec<_>>(),
+                    "neon n={n}"
+                );
             }
             let _ = &mut got;
         }
@@ -1308,10 +1762,21 @@ fn split_cols_ranges_cover_every_column_once() {
         assert_eq!(ranges[0].0, 0);
         assert_eq!(ranges.last().unwrap().1, n_out);
         for w in ranges.windows(2) {
-            assert_eq!(w[0].1, w[1].0, "{n_out}: ranges {ranges:?} leave a gap or overlap");
+            assert_eq!(
+                w[0].1, w[1].0,
+                "{n_out}: ranges {ranges:?} leave a gap or overlap"
+            );
         }
-        assert!(ranges.iter().all(|&(lo, hi)| lo % SPLIT_ALIGN == 0 && lo < hi), "{n_out}: {ranges:?}");
-        assert!(y.iter().all(|&v| v == 1.0), "{n_out}: some column written other than once: {y:?}");
+        assert!(
+            ranges
+                .iter()
+                .all(|&(lo, hi)| lo % SPLIT_ALIGN == 0 && lo < hi),
+            "{n_out}: {ranges:?}"
+        );
+        assert!(
+            y.iter().all(|&v| v == 1.0),
+            "{n_out}: some column written other than once: {y:?}"
+        );
     }
 }
 
@@ -1330,7 +1795,14 @@ fn split_attention_matches_one_thread_bit_for_bit() {
             kj % 2 == 0
         }
     }
-    fn run(m: &dyn Fn(&[f32], &[f32], &[f32], &mut [f32], &mut [f32]), nq: usize, nk: usize, c: usize, r: &mut Rng, split_expected: bool) {
+    fn run(
+        m: &dyn Fn(&[f32], &[f32], &[f32], &mut [f32], &mut [f32]),
+        nq: usize,
+        nk: usize,
+        c: usize,
+        r: &mut Rng,
+        split_expected: bool,
+    ) {
         let (q, k, v) = (r.vec(nq * c), r.vec(nk * c), r.vec(nk * c));
         let mut scores = std::vec![0.0f32; nk];
         set_workers(None);
@@ -1341,20 +1813,64 @@ fn split_attention_matches_one_thread_bit_for_bit() {
         let mut split = std::vec![f32::NAN; nq * c];
         m(&q, &k, &v, &mut scores, &mut split);
         set_workers(None);
-        assert_eq!(reverse_jobs() > jobs, split_expected, "({nq},{nk},{c}): split or not");
+        assert_eq!(
+            reverse_jobs() > jobs,
+            split_expected,
+            "({nq},{nk},{c}): split or not"
+        );
         for (i, (a, b)) in one.iter().zip(&split).enumerate() {
-            assert_eq!(a.to_bits(), b.to_bits(), "({nq},{nk},{c}) element {i}: {a} vs {b}");
+            assert_eq!(
+                a.to_bits(),
+                b.to_bits(),
+                "({nq},{nk},{c}) element {i}: {a} vs {b}"
+            );
         }
     }
     let mut r = Rng(31);
     let (c, nh) = (64usize, 4usize);
-    let band = BandMask { radius: 9, q_pos0: 3, k_pos0: 0 };
-    run(&|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o), 40, 60, c, &mut r, true);
-    let tiled = TiledCausalMask { t_q: 6, t_k: 30, q_pos0: 20 };
-    run(&|q, k, v, s, o| attention(q, k, v, c, nh, &tiled, s, o), 30, 150, c, &mut r, true);
-    run(&|q, k, v, s, o| attention(q, k, v, c, nh, &Comb, s, o), 12, 200, c, &mut r, true);
+    let band = BandMask {
+        radius: 9,
+        q_pos0: 3,
+        k_pos0: 0,
+    };
+    run(
+        &|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o),
+        40,
+        60,
+        c,
+        &mut r,
+        true,
+    );
+    let tiled = TiledCausalMask {
+        t_q: 6,
+        t_k: 30,
+        q_pos0: 20,
+    };
+    run(
+        &|q, k, v, s, o| attention(q, k, v, c, nh, &tiled, s, o),
+        30,
+        150,
+        c,
+        &mut r,
+        true,
+    );
+    run(
+        &|q, k, v, s, o| attention(q, k, v, c, nh, &Comb, s, o),
+        12,
+        200,
+        c,
+        &mut r,
+        true,
+    );
     let wide = crate::kernels::attention::SPLIT_MAX_KEYS + 8;
-    run(&|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o), 9, wide, c, &mut r, false);
+    run(
+        &|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o),
+        9,
+        wide,
+        c,
+        &mut r,
+        false,
+    );
 }
 
 /// The f16 K/V readers (`dot_rows_f16`, `axpy_f16`) of every variant this
@@ -1368,14 +1884,30 @@ fn f16_row_readers_equal_f32_kernels_on_widened_rows() {
     ///
     /// # Safety
     /// Both kernels need the variant's CPU features (pushed only where detected).
-    type DotRows = (&'static str, unsafe fn(&[f32], &[u16], usize, &mut [f32]), unsafe fn(&[f32], &[f32], usize, &mut [f32]));
+    type DotRows = (
+        &'static str,
+        unsafe fn(&[f32], &[u16], usize, &mut [f32]),
+        unsafe fn(&[f32], &[f32], usize, &mut [f32]),
+    );
     /// (variant, f16 axpy, f32 axpy of the same variant).
     ///
     /// # Safety
     /// As for `DotRows`.
-    type Axpy = (&'static str, unsafe fn(f32, &[u16], &mut [f32]), unsafe fn(f32, &[f32], &mut [f32]));
-    let mut dots: Vec<DotRows> = vec![("scalar", |q, k, s, o| scalar::dot_rows_f16(q, k, s, o), |q, k, s, o| scalar::dot_rows(q, k, s, o))];
-    let mut axpys: Vec<Axpy> = vec![("scalar", |a, w, y| scalar::axpy_f16(a, w, y), |a, x, y| scalar::axpy_f32(a, x, y))];
+    type Axpy = (
+        &'static str,
+        unsafe fn(f32, &[u16], &mut [f32]),
+        unsafe fn(f32, &[f32], &mut [f32]),
+    );
+    let mut dots: Vec<DotRows> = vec![(
+        "scalar",
+        |q, k, s, o| scalar::dot_rows_f16(q, k, s, o),
+        |q, k, s, o| scalar::dot_rows(q, k, s, o),
+    )];
+    let mut axpys: Vec<Axpy> = vec![(
+        "scalar",
+        |a, w, y| scalar::axpy_f16(a, w, y),
+        |a, x, y| scalar::axpy_f32(a, x, y),
+    )];
     #[cfg(target_arch = "x86_64")]
     {
         use std::is_x86_feature_detected as has;
@@ -1383,8 +1915,18 @@ fn f16_row_readers_equal_f32_kernels_on_widened_rows() {
             dots.push(("avx2", super::x86::dot_rows_f16, super::x86::dot_rows));
             axpys.push(("avx2", super::x86::axpy_f16, super::x86::axpy_f32));
         }
-        if has!("avx512f") && has!("avx512bw") && has!("avx512vl") && has!("avx2") && has!("fma") && has!("f16c") {
-            dots.push(("avx512", super::x86::dot_rows_512_f16, super::x86::dot_rows_512));
+        if has!("avx512f")
+            && has!("avx512bw")
+            && has!("avx512vl")
+            && has!("avx2")
+            && has!("fma")
+            && has!("f16c")
+        {
+            dots.push((
+                "avx512",
+                super::x86::dot_rows_512_f16,
+                super::x86::dot_rows_512,
+            ));
         }
     }
     #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
@@ -1393,7 +1935,11 @@ fn f16_row_readers_equal_f32_kernels_on_widened_rows() {
         axpys.push(("neon", super::neon::axpy_f16, super::neon::axpy_f32));
     }
     let mut r = Rng(41);
-    let h = |v: &[f32]| -> Vec<u16> { v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect() };
+    let h = |v: &[f32]| -> Vec<u16> {
+        v.iter()
+            .map(|&x| half::f16::from_f32(x).to_bits())
+            .collect()
+    };
     let widen = |v: &[u16]| -> Vec<f32> { v.iter().map(|&b| super::f16_to_f32(b)).collect() };
     for hd in [1, 3, 4, 7, 15, 16, 17, 33, 48, 63, 64, 65, 96] {
         let stride = hd + 3;
@@ -1410,9 +1956,25 @@ fn f16_row_readers_equal_f32_kernels_on_widened_rows() {
                 // SAFETY: as above.
                 unsafe { f32k(&q, &kw, stride, &mut b) };
                 for j in 0..n {
-                    assert_eq!(a[j].to_bits(), b[j].to_bits(), "{name} dot_rows_f16 hd={hd} j={j}: {} vs {}", a[j], b[j]);
-                    let s: f64 = q.iter().zip(&kw[j * stride..]).map(|(x, y)| (*x as f64 * *y as f64).abs()).sum();
-                    check(&format!("{name} dot_rows_f16 vs twin hd={hd} j={j}"), a[j], twin[j], s, SIMD_VS_SCALAR_TILE_512);
+                    assert_eq!(
+                        a[j].to_bits(),
+                        b[j].to_bits(),
+                        "{name} dot_rows_f16 hd={hd} j={j}: {} vs {}",
+                        a[j],
+                        b[j]
+                    );
+                    let s: f64 = q
+                        .iter()
+                        .zip(&kw[j * stride..])
+                        .map(|(x, y)| (*x as f64 * *y as f64).abs())
+                        .sum();
+                    check(
+                        &format!("{name} dot_rows_f16 vs twin hd={hd} j={j}"),
+                        a[j],
+                        twin[j],
+                        s,
+                        SIMD_VS_SCALAR_TILE_512,
+                    );
                 }
             }
         }
@@ -1428,7 +1990,11 @@ fn f16_row_readers_equal_f32_kernels_on_widened_rows() {
             // SAFETY: as above.
             unsafe { f32k(a, &ww, &mut want) };
             for i in 0..n {
-                assert_eq!(g[i].to_bits(), want[i].to_bits(), "{name} axpy_f16 n={n} i={i}");
+                assert_eq!(
+                    g[i].to_bits(),
+                    want[i].to_bits(),
+                    "{name} axpy_f16 n={n} i={i}"
+                );
             }
         }
     }
@@ -1442,7 +2008,9 @@ fn f16_row_readers_equal_f32_kernels_on_widened_rows() {
 /// `attention_ahead` with bytes to prefetch meanwhile.
 #[test]
 fn attention_over_split_and_f16_rows_equals_contiguous() {
-    use crate::kernels::{attention, attention_ahead, BandMask, KvRows, Mask, RowData, TiledCausalMask};
+    use crate::kernels::{
+        attention, attention_ahead, BandMask, KvRows, Mask, RowData, TiledCausalMask,
+    };
     struct Comb;
     impl Mask for Comb {
         fn allowed(&self, _: usize, kj: usize) -> bool {
@@ -1451,13 +2019,33 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
     }
     let mut r = Rng(43);
     let (c, nh) = (96usize, 3usize);
-    let round = |v: Vec<f32>| -> Vec<f32> { v.into_iter().map(|x| half::f16::from_f32(x).to_f32()).collect() };
-    let check_mask = |m: &dyn Fn(&[f32], KvRows<'_>, KvRows<'_>, &mut [f32], &mut [f32]), nq: usize, nk: usize, r: &mut Rng| {
+    let round = |v: Vec<f32>| -> Vec<f32> {
+        v.into_iter()
+            .map(|x| half::f16::from_f32(x).to_f32())
+            .collect()
+    };
+    let check_mask = |m: &dyn Fn(&[f32], KvRows<'_>, KvRows<'_>, &mut [f32], &mut [f32]),
+                      nq: usize,
+                      nk: usize,
+                      r: &mut Rng| {
         let (q, k, v) = (r.vec(nq * c), round(r.vec(nk * c)), round(r.vec(nk * c)));
-        let (k16, v16): (Vec<u16>, Vec<u16>) = (k.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect(), v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect());
+        let (k16, v16): (Vec<u16>, Vec<u16>) = (
+            k.iter()
+                .map(|&x| half::f16::from_f32(x).to_bits())
+                .collect(),
+            v.iter()
+                .map(|&x| half::f16::from_f32(x).to_bits())
+                .collect(),
+        );
         let mut scores = vec![0f32; nk];
         let mut want = vec![f32::NAN; nq * c];
-        m(&q, KvRows::from(&k[..]), KvRows::from(&v[..]), &mut scores, &mut want);
+        m(
+            &q,
+            KvRows::from(&k[..]),
+            KvRows::from(&v[..]),
+            &mut scores,
+            &mut want,
+        );
         // Head-major copies (a session's GPT cache): 3 rows of room beyond
         // the visible ones, NaN, so a misread row shows; the run ends at the
         // last head's last visible row.
@@ -1473,12 +2061,27 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
             d
         };
         let (kh, vh) = (head_major(&k), head_major(&v));
-        let bits16 = |d: &[f32]| -> Vec<u16> { d.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect() };
+        let bits16 = |d: &[f32]| -> Vec<u16> {
+            d.iter()
+                .map(|&x| half::f16::from_f32(x).to_bits())
+                .collect()
+        };
         let (kh16, vh16) = (bits16(&kh), bits16(&vh));
         let hm = |d| KvRows::head_major(d, nk, cap, hd).unwrap();
-        assert_eq!(hm(RowData::F32(&kh)).rows(c + hd), 0, "a width of more heads than held has no rows");
-        assert_eq!(hm(RowData::F32(&kh[..kh.len() - 1])).rows(c), 0, "a short run has no rows");
-        assert!(KvRows::head_major(RowData::F32(&kh), cap + 1, cap, hd).is_none() && KvRows::head_major(RowData::F32(&kh), nk, cap, 0).is_none());
+        assert_eq!(
+            hm(RowData::F32(&kh)).rows(c + hd),
+            0,
+            "a width of more heads than held has no rows"
+        );
+        assert_eq!(
+            hm(RowData::F32(&kh[..kh.len() - 1])).rows(c),
+            0,
+            "a short run has no rows"
+        );
+        assert!(
+            KvRows::head_major(RowData::F32(&kh), cap + 1, cap, hd).is_none()
+                && KvRows::head_major(RowData::F32(&kh), nk, cap, 0).is_none()
+        );
         // Head-major copies of the first `split` rows alone (NaN beyond), per split.
         let splits = [0, 1, nk / 3, nk / 2, nk - 1, nk];
         let head_major_first = |src: &[f32], split: usize| -> Vec<f32> {
@@ -1504,41 +2107,116 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
             let cut = split * c;
             let hmt = |d, tail| KvRows::head_major_then(d, split, cap, hd, tail).unwrap();
             let cases = [
-                ("f32 two runs", KvRows::two(RowData::F32(&k[..cut]), RowData::F32(&k[cut..])), KvRows::two(RowData::F32(&v[..cut]), RowData::F32(&v[cut..]))),
-                ("f16 two runs", KvRows::two(RowData::F16(&k16[..cut]), RowData::F16(&k16[cut..])), KvRows::two(RowData::F16(&v16[..cut]), RowData::F16(&v16[cut..]))),
-                ("f16 one run", KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16))),
-                ("f32 head-major", hm(RowData::F32(&kh)), hm(RowData::F32(&vh))),
-                ("f16 head-major", hm(RowData::F16(&kh16)), hm(RowData::F16(&vh16))),
+                (
+                    "f32 two runs",
+                    KvRows::two(RowData::F32(&k[..cut]), RowData::F32(&k[cut..])),
+                    KvRows::two(RowData::F32(&v[..cut]), RowData::F32(&v[cut..])),
+                ),
+                (
+                    "f16 two runs",
+                    KvRows::two(RowData::F16(&k16[..cut]), RowData::F16(&k16[cut..])),
+                    KvRows::two(RowData::F16(&v16[..cut]), RowData::F16(&v16[cut..])),
+                ),
+                (
+                    "f16 one run",
+                    KvRows::one(RowData::F16(&k16)),
+                    KvRows::one(RowData::F16(&v16)),
+                ),
+                (
+                    "f32 head-major",
+                    hm(RowData::F32(&kh)),
+                    hm(RowData::F32(&vh)),
+                ),
+                (
+                    "f16 head-major",
+                    hm(RowData::F16(&kh16)),
+                    hm(RowData::F16(&vh16)),
+                ),
                 // The first `split` rows head-major, the rest row-major after them (a GPT cache and its newest rows).
-                ("f16 head-major then f16 rows", hmt(RowData::F16(&hk16[split]), RowData::F16(&k16[cut..])), hmt(RowData::F16(&hv16[split]), RowData::F16(&v16[cut..]))),
-                ("f16 head-major then f32 rows", hmt(RowData::F16(&hk16[split]), RowData::F32(&k[cut..])), hmt(RowData::F16(&hv16[split]), RowData::F32(&v[cut..]))),
-                ("f32 head-major then f32 rows", hmt(RowData::F32(&hk[split]), RowData::F32(&k[cut..])), hmt(RowData::F32(&hv[split]), RowData::F32(&v[cut..]))),
+                (
+                    "f16 head-major then f16 rows",
+                    hmt(RowData::F16(&hk16[split]), RowData::F16(&k16[cut..])),
+                    hmt(RowData::F16(&hv16[split]), RowData::F16(&v16[cut..])),
+                ),
+                (
+                    "f16 head-major then f32 rows",
+                    hmt(RowData::F16(&hk16[split]), RowData::F32(&k[cut..])),
+                    hmt(RowData::F16(&hv16[split]), RowData::F32(&v[cut..])),
+                ),
+                (
+                    "f32 head-major then f32 rows",
+                    hmt(RowData::F32(&hk[split]), RowData::F32(&k[cut..])),
+                    hmt(RowData::F32(&hv[split]), RowData::F32(&v[cut..])),
+                ),
             ];
             for (name, kr, vr) in cases {
                 assert_eq!(kr.rows(c), nk);
                 let mut got = vec![f32::NAN; nq * c];
                 m(&q, kr, vr, &mut scores, &mut got);
                 for (i, (a, b)) in got.iter().zip(&want).enumerate() {
-                    assert_eq!(a.to_bits(), b.to_bits(), "{name} split {split} ({nq}x{nk}) element {i}: {a} vs {b}");
+                    assert_eq!(
+                        a.to_bits(),
+                        b.to_bits(),
+                        "{name} split {split} ({nq}x{nk}) element {i}: {a} vs {b}"
+                    );
                 }
             }
         }
     };
-    let band = BandMask { radius: 7, q_pos0: 5, k_pos0: 0 };
-    check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o), 12, 25, &mut r);
-    let tiled = TiledCausalMask { t_q: 3, t_k: 8, q_pos0: 4 };
-    check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &tiled, s, o), 9, 40, &mut r);
-    check_mask(&|q, k, v, s, o| attention(q, k, v, c, nh, &Comb, s, o), 2, 150, &mut r);
+    let band = BandMask {
+        radius: 7,
+        q_pos0: 5,
+        k_pos0: 0,
+    };
+    check_mask(
+        &|q, k, v, s, o| attention(q, k, v, c, nh, &band, s, o),
+        12,
+        25,
+        &mut r,
+    );
+    let tiled = TiledCausalMask {
+        t_q: 3,
+        t_k: 8,
+        q_pos0: 4,
+    };
+    check_mask(
+        &|q, k, v, s, o| attention(q, k, v, c, nh, &tiled, s, o),
+        9,
+        40,
+        &mut r,
+    );
+    check_mask(
+        &|q, k, v, s, o| attention(q, k, v, c, nh, &Comb, s, o),
+        2,
+        150,
+        &mut r,
+    );
     // The same with other rows prefetched meanwhile (`attention_ahead`: the
     // next session's keys and values in a batch): no number changes.
     let (ka, va) = (vec![3u8; 5000], vec![5u8; 70]);
     let (nq, nk) = (10usize, 40usize);
     let (q, k, v) = (r.vec(nq * c), r.vec(nk * c), r.vec(nk * c));
-    let k16: Vec<u16> = k.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
-    let v16: Vec<u16> = v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
-    let append = TiledCausalMask { t_q: 1, t_k: 4, q_pos0: 3 };
+    let k16: Vec<u16> = k
+        .iter()
+        .map(|&x| half::f16::from_f32(x).to_bits())
+        .collect();
+    let v16: Vec<u16> = v
+        .iter()
+        .map(|&x| half::f16::from_f32(x).to_bits())
+        .collect();
+    let append = TiledCausalMask {
+        t_q: 1,
+        t_k: 4,
+        q_pos0: 3,
+    };
     let mut scores = vec![0f32; nk];
-    for (kr, vr) in [(KvRows::from(&k[..]), KvRows::from(&v[..])), (KvRows::one(RowData::F16(&k16)), KvRows::one(RowData::F16(&v16)))] {
+    for (kr, vr) in [
+        (KvRows::from(&k[..]), KvRows::from(&v[..])),
+        (
+            KvRows::one(RowData::F16(&k16)),
+            KvRows::one(RowData::F16(&v16)),
+        ),
+    ] {
         /// One attention call given what it prefetches (keys, values).
         type Attend<'x> = &'x dyn Fn(&[u8], &[u8], &mut [f32], &mut [f32]);
         let masks: [Attend<'_>; 3] = [
@@ -1552,7 +2230,12 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
             for (a, b) in [(&ka[..], &va[..]), (&[][..], &ka[..]), (&va[..], &[][..])] {
                 let mut got = vec![f32::NAN; nq * c];
                 m(a, b, &mut scores, &mut got);
-                assert!(got.iter().zip(&want).all(|(x, y)| x.to_bits() == y.to_bits()), "attention_ahead changed a number");
+                assert!(
+                    got.iter()
+                        .zip(&want)
+                        .all(|(x, y)| x.to_bits() == y.to_bits()),
+                    "attention_ahead changed a number"
+                );
             }
         }
     }
@@ -1568,18 +2251,36 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
 /// int8 GEMM limit of the block sums' magnitude (`rows`: the weight rows
 /// as Q8Block32 rows; `qs`, `ds`: the quantised activation rows).
 #[allow(dead_code)]
-fn check_packed_rows(name: &str, got: [[f32; 8]; 8], twin: [[f32; 8]; 8], rows: &[Vec<u8>], qs: &[Vec<i8>], ds: &[Vec<f32>], nb: usize) {
+fn check_packed_rows(
+    name: &str,
+    got: [[f32; 8]; 8],
+    twin: [[f32; 8]; 8],
+    rows: &[Vec<u8>],
+    qs: &[Vec<i8>],
+    ds: &[Vec<f32>],
+    nb: usize,
+) {
     for m in 0..8 {
         for j in 0..8 {
             let s: f64 = (0..nb)
                 .map(|b| {
                     let blk = &rows[j][b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
                     let ws = super::f16_to_f32(u16::from_le_bytes([blk[0], blk[1]])) as f64;
-                    let a: i64 = blk[2..].iter().zip(&qs[m][b * 32..(b + 1) * 32]).map(|(&w, &x)| ((w as i8 as i64) * x as i64).abs()).sum();
+                    let a: i64 = blk[2..]
+                        .iter()
+                        .zip(&qs[m][b * 32..(b + 1) * 32])
+                        .map(|(&w, &x)| ((w as i8 as i64) * x as i64).abs())
+                        .sum();
                     (ws * ds[m][b] as f64).abs() * a as f64
                 })
                 .sum();
-            check(&format!("{name} nb={nb} [{m}][{j}]"), got[m][j], twin[m][j], s, SIMD_VS_SCALAR_GEMM_Q8);
+            check(
+                &format!("{name} nb={nb} [{m}][{j}]"),
+                got[m][j],
+                twin[m][j],
+                s,
+                SIMD_VS_SCALAR_GEMM_Q8,
+            );
         }
     }
 }
@@ -1607,7 +2308,10 @@ fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
             for b in 0..nb {
                 let blk = &q8[b * Q8_BLOCK_BYTES..(b + 1) * Q8_BLOCK_BYTES];
                 assert_eq!(g.scale_bits(b, j), u16::from_le_bytes([blk[0], blk[1]]));
-                assert!((0..Q8_BLOCK).all(|i| g.value(b, j, i) == blk[2 + i] as i8), "nb={nb} row {j} block {b}");
+                assert!(
+                    (0..Q8_BLOCK).all(|i| g.value(b, j, i) == blk[2 + i] as i8),
+                    "nb={nb} row {j} block {b}"
+                );
             }
         }
         let mut qs = vec![vec![0i8; n]; 8];
@@ -1624,34 +2328,99 @@ fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
         if nb <= super::PACK_BLOCKS {
             let mut pack = Q8Pack8::new();
             super::q8_pack8(core::array::from_fn(|j| &rows8[j][..]), nb, &mut pack);
-            assert_eq!(bits(twin), bits(scalar::gemm_q8_packed::<8>(pack.view(), q, d, c)), "scalar twin nb={nb}");
-            assert_eq!(bits(super::gemm_q8_packed::<8>(g, q, d, c)), bits(super::gemm_q8_packed::<8>(pack.view(), q, d, c)), "dispatched nb={nb}");
+            assert_eq!(
+                bits(twin),
+                bits(scalar::gemm_q8_packed::<8>(pack.view(), q, d, c)),
+                "scalar twin nb={nb}"
+            );
+            assert_eq!(
+                bits(super::gemm_q8_packed::<8>(g, q, d, c)),
+                bits(super::gemm_q8_packed::<8>(pack.view(), q, d, c)),
+                "dispatched nb={nb}"
+            );
             #[cfg(target_arch = "x86_64")]
             {
                 use std::is_x86_feature_detected as has;
-                if has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") && has!("avx512vnni") && has!("avx2") && has!("fma") && has!("f16c") {
+                if has!("avx512f")
+                    && has!("avx512bw")
+                    && has!("avx512dq")
+                    && has!("avx512vl")
+                    && has!("avx512vnni")
+                    && has!("avx2")
+                    && has!("fma")
+                    && has!("f16c")
+                {
                     // SAFETY: every feature of the kernel detected above.
-                    let (a, b) = unsafe { (super::x86::gemm_q8_packed_vnni::<8>(g, q, d, c), super::x86::gemm_q8_packed_vnni::<8>(pack.view(), q, d, c)) };
-                    assert_eq!(bits(a), bits(b), "avx512vnni q4 group vs packed expansion nb={nb}");
+                    let (a, b) = unsafe {
+                        (
+                            super::x86::gemm_q8_packed_vnni::<8>(g, q, d, c),
+                            super::x86::gemm_q8_packed_vnni::<8>(pack.view(), q, d, c),
+                        )
+                    };
+                    assert_eq!(
+                        bits(a),
+                        bits(b),
+                        "avx512vnni q4 group vs packed expansion nb={nb}"
+                    );
                     // SAFETY: as above.
-                    let a3 = unsafe { super::x86::gemm_q8_packed_vnni::<3>(g, [q[1], q[2], q[7]], [d[1], d[2], d[7]], [c[1], c[2], c[7]]) };
-                    assert_eq!(a3.map(|row| row.map(f32::to_bits)), [1, 2, 7].map(|m| bits(a)[m]), "M = 3 rows equal their rows of M = 8");
+                    let a3 = unsafe {
+                        super::x86::gemm_q8_packed_vnni::<3>(
+                            g,
+                            [q[1], q[2], q[7]],
+                            [d[1], d[2], d[7]],
+                            [c[1], c[2], c[7]],
+                        )
+                    };
+                    assert_eq!(
+                        a3.map(|row| row.map(f32::to_bits)),
+                        [1, 2, 7].map(|m| bits(a)[m]),
+                        "M = 3 rows equal their rows of M = 8"
+                    );
                 }
                 if has!("avx2") && has!("fma") && has!("f16c") {
                     // SAFETY: every feature of the kernel detected above.
-                    let (a, b) = unsafe { (super::x86::gemm_q8_packed_avx2::<8>(g, q, d, c), super::x86::gemm_q8_packed_avx2::<8>(pack.view(), q, d, c)) };
-                    assert_eq!(bits(a), bits(b), "avx2 q4 group vs packed expansion nb={nb}");
+                    let (a, b) = unsafe {
+                        (
+                            super::x86::gemm_q8_packed_avx2::<8>(g, q, d, c),
+                            super::x86::gemm_q8_packed_avx2::<8>(pack.view(), q, d, c),
+                        )
+                    };
+                    assert_eq!(
+                        bits(a),
+                        bits(b),
+                        "avx2 q4 group vs packed expansion nb={nb}"
+                    );
                     check_packed_rows("avx2 q4", a, twin, &rows8, &qs, &ds, nb);
                     // SAFETY: as above.
-                    let a3 = unsafe { super::x86::gemm_q8_packed_avx2::<3>(g, [q[1], q[2], q[7]], [d[1], d[2], d[7]], [c[1], c[2], c[7]]) };
-                    assert_eq!(a3.map(|row| row.map(f32::to_bits)), [1, 2, 7].map(|m| bits(a)[m]), "avx2 M = 3 rows equal their rows of M = 8");
+                    let a3 = unsafe {
+                        super::x86::gemm_q8_packed_avx2::<3>(
+                            g,
+                            [q[1], q[2], q[7]],
+                            [d[1], d[2], d[7]],
+                            [c[1], c[2], c[7]],
+                        )
+                    };
+                    assert_eq!(
+                        a3.map(|row| row.map(f32::to_bits)),
+                        [1, 2, 7].map(|m| bits(a)[m]),
+                        "avx2 M = 3 rows equal their rows of M = 8"
+                    );
                 }
             }
             #[cfg(target_arch = "aarch64")]
             if std::arch::is_aarch64_feature_detected!("dotprod") {
                 // SAFETY: neon (baseline) and dotprod detected.
-                let (a, b) = unsafe { (super::neon::gemm_q8_packed_dot::<8>(g, q, d, c), super::neon::gemm_q8_packed_dot::<8>(pack.view(), q, d, c)) };
-                assert_eq!(bits(a), bits(b), "neondot q4 group vs packed expansion nb={nb}");
+                let (a, b) = unsafe {
+                    (
+                        super::neon::gemm_q8_packed_dot::<8>(g, q, d, c),
+                        super::neon::gemm_q8_packed_dot::<8>(pack.view(), q, d, c),
+                    )
+                };
+                assert_eq!(
+                    bits(a),
+                    bits(b),
+                    "neondot q4 group vs packed expansion nb={nb}"
+                );
                 check_packed_rows("neondot q4", a, twin, &rows8, &qs, &ds, nb);
             }
         }
@@ -1670,16 +2439,40 @@ fn axpy_rows_equal_axpy_row_after_row() {
     ///
     /// # Safety
     /// Both kernels need the variant's CPU features (pushed only where detected).
-    type Rows32 = (&'static str, unsafe fn(&[f32], &[f32], usize, &mut [f32]), unsafe fn(f32, &[f32], &mut [f32]));
+    type Rows32 = (
+        &'static str,
+        unsafe fn(&[f32], &[f32], usize, &mut [f32]),
+        unsafe fn(f32, &[f32], &mut [f32]),
+    );
     /// As `Rows32`, binary16 rows.
     ///
     /// # Safety
     /// As for `Rows32`.
-    type Rows16 = (&'static str, unsafe fn(&[f32], &[u16], usize, &mut [f32]), unsafe fn(f32, &[u16], &mut [f32]));
-    let mut v32: Vec<Rows32> = vec![("scalar", |c, x, s, y| scalar::axpy_rows_f32(c, x, s, y), |a, x, y| scalar::axpy_f32(a, x, y))];
-    let mut v16: Vec<Rows16> = vec![("scalar", |c, x, s, y| scalar::axpy_rows_f16(c, x, s, y), |a, x, y| scalar::axpy_f16(a, x, y))];
-    v32.push(("dispatched", |c, x, s, y| super::axpy_rows_f32(c, x, s, y), |a, x, y| super::axpy_f32(a, x, y)));
-    v16.push(("dispatched", |c, x, s, y| super::axpy_rows_f16(c, x, s, y), |a, x, y| super::axpy_f16(a, x, y)));
+    type Rows16 = (
+        &'static str,
+        unsafe fn(&[f32], &[u16], usize, &mut [f32]),
+        unsafe fn(f32, &[u16], &mut [f32]),
+    );
+    let mut v32: Vec<Rows32> = vec![(
+        "scalar",
+        |c, x, s, y| scalar::axpy_rows_f32(c, x, s, y),
+        |a, x, y| scalar::axpy_f32(a, x, y),
+    )];
+    let mut v16: Vec<Rows16> = vec![(
+        "scalar",
+        |c, x, s, y| scalar::axpy_rows_f16(c, x, s, y),
+        |a, x, y| scalar::axpy_f16(a, x, y),
+    )];
+    v32.push((
+        "dispatched",
+        |c, x, s, y| super::axpy_rows_f32(c, x, s, y),
+        |a, x, y| super::axpy_f32(a, x, y),
+    ));
+    v16.push((
+        "dispatched",
+        |c, x, s, y| super::axpy_rows_f16(c, x, s, y),
+        |a, x, y| super::axpy_f16(a, x, y),
+    ));
     #[cfg(target_arch = "x86_64")]
     {
         use std::is_x86_feature_detected as has;
@@ -1687,8 +2480,16 @@ fn axpy_rows_equal_axpy_row_after_row() {
             v32.push(("avx2", super::x86::axpy_rows_f32, super::x86::axpy_f32));
             v16.push(("avx2", super::x86::axpy_rows_f16, super::x86::axpy_f16));
             if has!("avx512f") {
-                v32.push(("avx512", super::x86::axpy_rows_512_f32, super::x86::axpy_f32));
-                v16.push(("avx512", super::x86::axpy_rows_512_f16, super::x86::axpy_f16));
+                v32.push((
+                    "avx512",
+                    super::x86::axpy_rows_512_f32,
+                    super::x86::axpy_f32,
+                ));
+                v16.push((
+                    "avx512",
+                    super::x86::axpy_rows_512_f16,
+                    super::x86::axpy_f16,
+                ));
             }
         }
     }
@@ -1702,7 +2503,10 @@ fn axpy_rows_equal_axpy_row_after_row() {
         for nk in [0, 1, 2, 5, 31, 300] {
             let stride = n + 5;
             let x = r.vec(nk * stride + 2);
-            let x16: Vec<u16> = x.iter().map(|&v| half::f16::from_f32(v).to_bits()).collect();
+            let x16: Vec<u16> = x
+                .iter()
+                .map(|&v| half::f16::from_f32(v).to_bits())
+                .collect();
             // Exactly nk whole rows; one more coefficient than rows: it is left out.
             let len = if nk == 0 { 0 } else { (nk - 1) * stride + n };
             let coef: Vec<f32> = (0..nk + 1).map(|_| r.f() * 0.1).collect();
@@ -1718,9 +2522,24 @@ fn axpy_rows_equal_axpy_row_after_row() {
                     unsafe { axpy(coef[j], &x[j * stride..j * stride + n], &mut want) };
                 }
                 for i in 0..n {
-                    assert_eq!(got[i].to_bits(), want[i].to_bits(), "{name} axpy_rows_f32 n={n} nk={nk} lane {i}: {} vs {}", got[i], want[i]);
-                    let s = y0[i].abs() as f64 + (0..nk).map(|j| (coef[j] * x[j * stride + i]).abs() as f64).sum::<f64>();
-                    check(&format!("{name} axpy_rows_f32 vs twin n={n} nk={nk}"), got[i], twin[i], s, SIMD_VS_SCALAR_AXPY * nk.max(1) as f64);
+                    assert_eq!(
+                        got[i].to_bits(),
+                        want[i].to_bits(),
+                        "{name} axpy_rows_f32 n={n} nk={nk} lane {i}: {} vs {}",
+                        got[i],
+                        want[i]
+                    );
+                    let s = y0[i].abs() as f64
+                        + (0..nk)
+                            .map(|j| (coef[j] * x[j * stride + i]).abs() as f64)
+                            .sum::<f64>();
+                    check(
+                        &format!("{name} axpy_rows_f32 vs twin n={n} nk={nk}"),
+                        got[i],
+                        twin[i],
+                        s,
+                        SIMD_VS_SCALAR_AXPY * nk.max(1) as f64,
+                    );
                 }
             }
             let mut twin = y0.clone();
@@ -1734,9 +2553,24 @@ fn axpy_rows_equal_axpy_row_after_row() {
                     unsafe { axpy(coef[j], &x16[j * stride..j * stride + n], &mut want) };
                 }
                 for i in 0..n {
-                    assert_eq!(got[i].to_bits(), want[i].to_bits(), "{name} axpy_rows_f16 n={n} nk={nk} lane {i}");
-                    let s = y0[i].abs() as f64 + (0..nk).map(|j| (coef[j] * super::f16_to_f32(x16[j * stride + i])).abs() as f64).sum::<f64>();
-                    check(&format!("{name} axpy_rows_f16 vs twin n={n} nk={nk}"), got[i], twin[i], s, SIMD_VS_SCALAR_AXPY * nk.max(1) as f64);
+                    assert_eq!(
+                        got[i].to_bits(),
+                        want[i].to_bits(),
+                        "{name} axpy_rows_f16 n={n} nk={nk} lane {i}"
+                    );
+                    let s = y0[i].abs() as f64
+                        + (0..nk)
+                            .map(|j| {
+                                (coef[j] * super::f16_to_f32(x16[j * stride + i])).abs() as f64
+                            })
+                            .sum::<f64>();
+                    check(
+                        &format!("{name} axpy_rows_f16 vs twin n={n} nk={nk}"),
+                        got[i],
+                        twin[i],
+                        s,
+                        SIMD_VS_SCALAR_AXPY * nk.max(1) as f64,
+                    );
                 }
             }
         }
@@ -1759,7 +2593,14 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     use super::{PackedQ8, Q8Pack8, PACK_BLOCKS, PACK_ROWS};
     use crate::kernels::parallel::Cols;
     use std::is_x86_feature_detected as has;
-    let vnni = has!("avx512f") && has!("avx512bw") && has!("avx512dq") && has!("avx512vl") && has!("avx512vnni") && has!("avx2") && has!("fma") && has!("f16c");
+    let vnni = has!("avx512f")
+        && has!("avx512bw")
+        && has!("avx512dq")
+        && has!("avx512vl")
+        && has!("avx512vnni")
+        && has!("avx2")
+        && has!("fma")
+        && has!("f16c");
     // SAFETY (whole test): the AMX calls run only where the CPU reports
     // amx-tile and amx-int8 and Linux granted the tile permission, plus
     // every VNNI feature detected above; the VNNI kernel only where `vnni`.
@@ -1773,14 +2614,41 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
         let n = nb * Q8_BLOCK;
         for q4 in [false, true] {
             // Two tiles as the kernels read them: q8 rows packed on the stack, or stored 4-bit groups.
-            let rows: [Vec<Vec<u8>>; 2] = core::array::from_fn(|_| (0..PACK_ROWS).map(|_| if q4 { q4_bytes(&r.vec(n)) } else { q8_bytes(&r.vec(n)) }).collect());
+            let rows: [Vec<Vec<u8>>; 2] = core::array::from_fn(|_| {
+                (0..PACK_ROWS)
+                    .map(|_| {
+                        if q4 {
+                            q4_bytes(&r.vec(n))
+                        } else {
+                            q8_bytes(&r.vec(n))
+                        }
+                    })
+                    .collect()
+            });
             let mut packs = [Q8Pack8::new(), Q8Pack8::new()];
-            let groups: [Vec<u8>; 2] = core::array::from_fn(|t| if q4 { q4_group(&rows[t], nb) } else { Vec::new() });
+            let groups: [Vec<u8>; 2] = core::array::from_fn(|t| {
+                if q4 {
+                    q4_group(&rows[t], nb)
+                } else {
+                    Vec::new()
+                }
+            });
             for (t, pack) in packs.iter_mut().enumerate().filter(|_| !q4) {
-                scalar::q8_pack8(core::array::from_fn(|j| &rows[t][j][..]), nb, &mut pack.v, &mut pack.s);
+                scalar::q8_pack8(
+                    core::array::from_fn(|j| &rows[t][j][..]),
+                    nb,
+                    &mut pack.v,
+                    &mut pack.s,
+                );
                 pack.nb = nb;
             }
-            let tile: [PackedQ8<'_>; 2] = core::array::from_fn(|t| if q4 { PackedQ8::from_q4_group(&groups[t], nb).unwrap() } else { packs[t].view() });
+            let tile: [PackedQ8<'_>; 2] = core::array::from_fn(|t| {
+                if q4 {
+                    PackedQ8::from_q4_group(&groups[t], nb).unwrap()
+                } else {
+                    packs[t].view()
+                }
+            });
             let mut w = AmxWeights::new();
             for (t, tl) in tile.iter().enumerate() {
                 assert!(unsafe { w.prepare_raw(t, *tl) }, "nb={nb}");
@@ -1794,48 +2662,134 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
                 if m == 17 {
                     x[n - 1] = 1e4;
                 }
-                scalar::quantise_q8_corr(&x, &mut qs[m * n..(m + 1) * n], &mut ds[m * nb..(m + 1) * nb], &mut cs[m * 2 * nb..(m + 1) * 2 * nb]);
+                scalar::quantise_q8_corr(
+                    &x,
+                    &mut qs[m * n..(m + 1) * n],
+                    &mut ds[m * nb..(m + 1) * nb],
+                    &mut cs[m * 2 * nb..(m + 1) * 2 * nb],
+                );
             }
-            let row = |m: usize| (&qs[m * n..(m + 1) * n], &ds[m * nb..(m + 1) * nb], &cs[m * 2 * nb..(m + 1) * 2 * nb]);
+            let row = |m: usize| {
+                (
+                    &qs[m * n..(m + 1) * n],
+                    &ds[m * nb..(m + 1) * nb],
+                    &cs[m * 2 * nb..(m + 1) * 2 * nb],
+                )
+            };
             // The epilogues: none, a bias, a bias and GELU, GELU alone; over
             // 16 columns, and over 11 (the second tile partly outside the matrix).
             let bias = r.vec(amx::COLS);
-            let epilogues: [(Option<&[f32]>, bool, usize); 4] = [(None, false, 16), (Some(&bias), false, 11), (Some(&bias), true, 16), (None, true, 11)];
+            let epilogues: [(Option<&[f32]>, bool, usize); 4] = [
+                (None, false, 16),
+                (Some(&bias), false, 11),
+                (Some(&bias), true, 16),
+                (None, true, 11),
+            ];
             // The window sits at columns 2.. of rows 20 wide; the rest must stay untouched.
             const W: usize = 20;
             const SENTINEL: f32 = -7.5;
             // (rows given, rows done: whole groups of 12 and 8).
-            for (want_rows, want_done) in [(7usize, 0usize), (8, 8), (12, 12), (15, 12), (16, 16), (20, 20), (28, 28), (40, 40), (63, 60), (64, 64)] {
-                assert_eq!(amx::amx_rows(nb, qs.len(), n, ds.len(), want_rows), want_done);
+            for (want_rows, want_done) in [
+                (7usize, 0usize),
+                (8, 8),
+                (12, 12),
+                (15, 12),
+                (16, 16),
+                (20, 20),
+                (28, 28),
+                (40, 40),
+                (63, 60),
+                (64, 64),
+            ] {
+                assert_eq!(
+                    amx::amx_rows(nb, qs.len(), n, ds.len(), want_rows),
+                    want_done
+                );
                 for &(b, gelu, cols) in &epilogues {
                     let mut buf = vec![SENTINEL; want_rows * W];
-                    let done = unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, Cols::whole(&mut buf, W).window(0, want_rows, 2, 2 + cols), b, gelu, rows[0][0].as_slice()) };
+                    let done = unsafe {
+                        amx::gemm_q8_packed_amx_raw(
+                            &w,
+                            &qs,
+                            n,
+                            &ds,
+                            Cols::whole(&mut buf, W).window(0, want_rows, 2, 2 + cols),
+                            b,
+                            gelu,
+                            rows[0][0].as_slice(),
+                        )
+                    };
                     assert_eq!(done, want_done, "whole groups of 12 and 8 rows only");
                     for (k, v) in buf.iter().enumerate() {
                         let (m, j) = (k / W, k % W);
                         if m >= done || j < 2 || j >= 2 + cols {
-                            assert_eq!(v.to_bits(), SENTINEL.to_bits(), "written outside the window: row {m} column {j}");
+                            assert_eq!(
+                                v.to_bits(),
+                                SENTINEL.to_bits(),
+                                "written outside the window: row {m} column {j}"
+                            );
                         }
                     }
                     for m0 in (0..done).step_by(8) {
                         for (t, tl) in tile.iter().enumerate() {
-                            let v = unsafe { super::x86::gemm_q8_packed_vnni::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2)) };
-                            let s = scalar::gemm_q8_packed::<8>(*tl, core::array::from_fn(|m| row(m0 + m).0), core::array::from_fn(|m| row(m0 + m).1), core::array::from_fn(|m| row(m0 + m).2));
+                            let v = unsafe {
+                                super::x86::gemm_q8_packed_vnni::<8>(
+                                    *tl,
+                                    core::array::from_fn(|m| row(m0 + m).0),
+                                    core::array::from_fn(|m| row(m0 + m).1),
+                                    core::array::from_fn(|m| row(m0 + m).2),
+                                )
+                            };
+                            let s = scalar::gemm_q8_packed::<8>(
+                                *tl,
+                                core::array::from_fn(|m| row(m0 + m).0),
+                                core::array::from_fn(|m| row(m0 + m).1),
+                                core::array::from_fn(|m| row(m0 + m).2),
+                            );
                             for m in 0..8.min(done - m0) {
                                 for j in (0..8).filter(|j| 8 * t + j < cols) {
                                     let c = 8 * t + j;
                                     let got = buf[(m0 + m) * W + 2 + c];
                                     let mut want = [0f32];
-                                    scalar::bias_act(&[v[m][j]], b.map(|b| &b[c..c + 1]), gelu, &mut want);
-                                    assert_eq!(got.to_bits(), want[0].to_bits(), "q4={q4} nb={nb} bias={} gelu={gelu} tile {t} row {}", b.is_some(), m0 + m);
+                                    scalar::bias_act(
+                                        &[v[m][j]],
+                                        b.map(|b| &b[c..c + 1]),
+                                        gelu,
+                                        &mut want,
+                                    );
+                                    assert_eq!(
+                                        got.to_bits(),
+                                        want[0].to_bits(),
+                                        "q4={q4} nb={nb} bias={} gelu={gelu} tile {t} row {}",
+                                        b.is_some(),
+                                        m0 + m
+                                    );
                                     if b.is_none() && !gelu {
                                         let mag: f64 = (0..nb)
                                             .map(|bk| {
-                                                let a: i64 = (0..Q8_BLOCK).map(|i| (tl.value(bk, j, i) as i64 * row(m0 + m).0[bk * 32 + i] as i64).abs()).sum();
-                                                (super::f16_to_f32(tl.scale_bits(bk, j)) as f64 * row(m0 + m).1[bk] as f64).abs() * a as f64
+                                                let a: i64 = (0..Q8_BLOCK)
+                                                    .map(|i| {
+                                                        (tl.value(bk, j, i) as i64
+                                                            * row(m0 + m).0[bk * 32 + i] as i64)
+                                                            .abs()
+                                                    })
+                                                    .sum();
+                                                (super::f16_to_f32(tl.scale_bits(bk, j)) as f64
+                                                    * row(m0 + m).1[bk] as f64)
+                                                    .abs()
+                                                    * a as f64
                                             })
                                             .sum();
-                                        check(&format!("amx q4={q4} nb={nb} tile {t} [{}][{j}]", m0 + m), got, s[m][j], mag, SIMD_VS_SCALAR_GEMM_Q8);
+                                        check(
+                                            &format!(
+                                                "amx q4={q4} nb={nb} tile {t} [{}][{j}]",
+                                                m0 + m
+                                            ),
+                                            got,
+                                            s[m][j],
+                                            mag,
+                                            SIMD_VS_SCALAR_GEMM_Q8,
+                                        );
                                     }
                                 }
                             }
@@ -1846,20 +2800,109 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
             // Short operands, a window wider than two tiles or a short bias are refused, not read past.
             let mut buf = vec![0f32; 8 * 32];
             let mut out = Cols::whole(&mut buf, 32);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs[..7 * n + n - 1], n, &ds, out.window(0, 8, 0, 16), None, false, &[]) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds[..8 * nb - 1], out.window(0, 8, 0, 16), None, false, &[]) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, out.window(0, 7, 0, 16), None, false, &[]) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, out.window(0, 8, 0, 17), None, false, &[]) }, 0);
-            assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, n, &ds, out.window(0, 8, 0, 16), Some(&bias[..15]), false, &[]) }, 0);
+            assert_eq!(
+                unsafe {
+                    amx::gemm_q8_packed_amx_raw(
+                        &w,
+                        &qs[..7 * n + n - 1],
+                        n,
+                        &ds,
+                        out.window(0, 8, 0, 16),
+                        None,
+                        false,
+                        &[],
+                    )
+                },
+                0
+            );
+            assert_eq!(
+                unsafe {
+                    amx::gemm_q8_packed_amx_raw(
+                        &w,
+                        &qs,
+                        n,
+                        &ds[..8 * nb - 1],
+                        out.window(0, 8, 0, 16),
+                        None,
+                        false,
+                        &[],
+                    )
+                },
+                0
+            );
+            assert_eq!(
+                unsafe {
+                    amx::gemm_q8_packed_amx_raw(
+                        &w,
+                        &qs,
+                        n,
+                        &ds,
+                        out.window(0, 7, 0, 16),
+                        None,
+                        false,
+                        &[],
+                    )
+                },
+                0
+            );
+            assert_eq!(
+                unsafe {
+                    amx::gemm_q8_packed_amx_raw(
+                        &w,
+                        &qs,
+                        n,
+                        &ds,
+                        out.window(0, 8, 0, 17),
+                        None,
+                        false,
+                        &[],
+                    )
+                },
+                0
+            );
+            assert_eq!(
+                unsafe {
+                    amx::gemm_q8_packed_amx_raw(
+                        &w,
+                        &qs,
+                        n,
+                        &ds,
+                        out.window(0, 8, 0, 16),
+                        Some(&bias[..15]),
+                        false,
+                        &[],
+                    )
+                },
+                0
+            );
             assert!(buf.iter().all(|v| *v == 0.0), "a refused call wrote");
             let mut out = Cols::whole(&mut buf, 32);
             // A second tile of other blocks: refused.
             if nb > 1 {
                 let zeros = vec![0u8; (nb - 1) * (256 + 16)];
-                let narrow = if q4 { PackedQ8::from_q4_group(&zeros, nb - 1) } else { PackedQ8::from_group(&zeros, nb - 1) }.unwrap();
+                let narrow = if q4 {
+                    PackedQ8::from_q4_group(&zeros, nb - 1)
+                } else {
+                    PackedQ8::from_group(&zeros, nb - 1)
+                }
+                .unwrap();
                 let mut w2 = AmxWeights::new();
                 assert!(unsafe { w2.prepare_raw(0, tile[0]) && w2.prepare_raw(1, narrow) });
-                assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w2, &qs, n, &ds, out.window(0, 8, 0, 16), None, false, &[]) }, 0);
+                assert_eq!(
+                    unsafe {
+                        amx::gemm_q8_packed_amx_raw(
+                            &w2,
+                            &qs,
+                            n,
+                            &ds,
+                            out.window(0, 8, 0, 16),
+                            None,
+                            false,
+                            &[],
+                        )
+                    },
+                    0
+                );
             }
         }
     }
@@ -1871,7 +2914,21 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     let qs = vec![0i8; 8 * (PACK_BLOCKS + 1) * 32];
     let ds = vec![0f32; 8 * (PACK_BLOCKS + 1)];
     let mut buf = vec![0f32; 8 * 16];
-    assert_eq!(unsafe { amx::gemm_q8_packed_amx_raw(&w, &qs, (PACK_BLOCKS + 1) * 32, &ds, Cols::whole(&mut buf, 16).window(0, 8, 0, 16), None, false, &[]) }, 0);
+    assert_eq!(
+        unsafe {
+            amx::gemm_q8_packed_amx_raw(
+                &w,
+                &qs,
+                (PACK_BLOCKS + 1) * 32,
+                &ds,
+                Cols::whole(&mut buf, 16).window(0, 8, 0, 16),
+                None,
+                false,
+                &[],
+            )
+        },
+        0
+    );
 }
 
 /// The query-group kernels (`dot_rows_group*`, `axpy_rows_group*`) of
@@ -1890,27 +2947,85 @@ fn query_groups_equal_the_per_query_kernels() {
     ///
     /// # Safety
     /// Both kernels need the variant's CPU features (pushed only where detected).
-    type Dots<E> = (&'static str, unsafe fn(&[f32], usize, usize, usize, &[E], usize, usize, &mut [f32], usize, &[u8]), unsafe fn(&[f32], &[E], usize, &mut [f32]));
+    type Dots<E> = (
+        &'static str,
+        unsafe fn(&[f32], usize, usize, usize, &[E], usize, usize, &mut [f32], usize, &[u8]),
+        unsafe fn(&[f32], &[E], usize, &mut [f32]),
+    );
     /// As `Dots`, for the weighted value rows.
     ///
     /// # Safety
     /// As for `Dots`.
-    type Axpys<E> = (&'static str, unsafe fn(&[f32], usize, usize, &[E], usize, &mut [f32], usize, usize, usize, &[u8]), unsafe fn(&[f32], &[E], usize, &mut [f32]));
-    let mut d32: Vec<Dots<f32>> = vec![("dispatched", |q, hd, qs, g, k, s, n, o, os, side| super::dot_rows_group(q, hd, qs, g, k, s, n, o, os, side), |q, k, s, o| super::dot_rows(q, k, s, o))];
-    let mut d16: Vec<Dots<u16>> = vec![("dispatched", |q, hd, qs, g, k, s, n, o, os, side| super::dot_rows_group_f16(q, hd, qs, g, k, s, n, o, os, side), |q, k, s, o| super::dot_rows_f16(q, k, s, o))];
-    let mut a32: Vec<Axpys<f32>> = vec![("dispatched", |c, cs, nk, x, s, y, ys, n, g, side| super::axpy_rows_group_f32(c, cs, nk, x, s, y, ys, n, g, side), |c, x, s, y| super::axpy_rows_f32(c, x, s, y))];
-    let mut a16: Vec<Axpys<u16>> = vec![("dispatched", |c, cs, nk, x, s, y, ys, n, g, side| super::axpy_rows_group_f16(c, cs, nk, x, s, y, ys, n, g, side), |c, x, s, y| super::axpy_rows_f16(c, x, s, y))];
+    type Axpys<E> = (
+        &'static str,
+        unsafe fn(&[f32], usize, usize, &[E], usize, &mut [f32], usize, usize, usize, &[u8]),
+        unsafe fn(&[f32], &[E], usize, &mut [f32]),
+    );
+    let mut d32: Vec<Dots<f32>> = vec![(
+        "dispatched",
+        |q, hd, qs, g, k, s, n, o, os, side| {
+            super::dot_rows_group(q, hd, qs, g, k, s, n, o, os, side)
+        },
+        |q, k, s, o| super::dot_rows(q, k, s, o),
+    )];
+    let mut d16: Vec<Dots<u16>> = vec![(
+        "dispatched",
+        |q, hd, qs, g, k, s, n, o, os, side| {
+            super::dot_rows_group_f16(q, hd, qs, g, k, s, n, o, os, side)
+        },
+        |q, k, s, o| super::dot_rows_f16(q, k, s, o),
+    )];
+    let mut a32: Vec<Axpys<f32>> = vec![(
+        "dispatched",
+        |c, cs, nk, x, s, y, ys, n, g, side| {
+            super::axpy_rows_group_f32(c, cs, nk, x, s, y, ys, n, g, side)
+        },
+        |c, x, s, y| super::axpy_rows_f32(c, x, s, y),
+    )];
+    let mut a16: Vec<Axpys<u16>> = vec![(
+        "dispatched",
+        |c, cs, nk, x, s, y, ys, n, g, side| {
+            super::axpy_rows_group_f16(c, cs, nk, x, s, y, ys, n, g, side)
+        },
+        |c, x, s, y| super::axpy_rows_f16(c, x, s, y),
+    )];
     #[cfg(target_arch = "x86_64")]
     {
         use std::is_x86_feature_detected as has;
-        if has!("avx512f") && has!("avx512bw") && has!("avx512vl") && has!("avx2") && has!("fma") && has!("f16c") {
-            d32.push(("avx512", super::x86::dot_rows_512_group, super::x86::dot_rows_512));
-            d16.push(("avx512", super::x86::dot_rows_512_group_f16, super::x86::dot_rows_512_f16));
-            a32.push(("avx512", super::x86::axpy_rows_512_group_f32, super::x86::axpy_rows_512_f32));
-            a16.push(("avx512", super::x86::axpy_rows_512_group_f16, super::x86::axpy_rows_512_f16));
+        if has!("avx512f")
+            && has!("avx512bw")
+            && has!("avx512vl")
+            && has!("avx2")
+            && has!("fma")
+            && has!("f16c")
+        {
+            d32.push((
+                "avx512",
+                super::x86::dot_rows_512_group,
+                super::x86::dot_rows_512,
+            ));
+            d16.push((
+                "avx512",
+                super::x86::dot_rows_512_group_f16,
+                super::x86::dot_rows_512_f16,
+            ));
+            a32.push((
+                "avx512",
+                super::x86::axpy_rows_512_group_f32,
+                super::x86::axpy_rows_512_f32,
+            ));
+            a16.push((
+                "avx512",
+                super::x86::axpy_rows_512_group_f16,
+                super::x86::axpy_rows_512_f16,
+            ));
         }
     }
-    let to16 = |v: &[f32]| -> Vec<u16> { v.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect() };
+    let to16 = |v: &[f32]| -> Vec<u16> {
+        v.iter()
+            .map(|&x| half::f16::from_f32(x).to_bits())
+            .collect()
+    };
     let mut r = Rng(97);
     // Bytes the kernels prefetch meanwhile (no result may depend on them;
     // empty, shorter and longer than a line per key).
@@ -1928,40 +3043,80 @@ fn query_groups_equal_the_per_query_kernels() {
                     let qm = &q[m * q_stride..m * q_stride + hd];
                     let kj: Vec<f32> = (0..hd).map(|i| k(j * stride + i)).collect();
                     let want: f64 = qm.iter().zip(&kj).map(|(&a, &b)| a as f64 * b as f64).sum();
-                    let s: f64 = qm.iter().zip(&kj).map(|(&a, &b)| (a as f64 * b as f64).abs()).sum();
-                    check(&format!("{name} g={g} hd={hd} n={n} m={m} j={j} vs twin"), got, want as f32, s, SIMD_VS_SCALAR_TILE_512);
+                    let s: f64 = qm
+                        .iter()
+                        .zip(&kj)
+                        .map(|(&a, &b)| (a as f64 * b as f64).abs())
+                        .sum();
+                    check(
+                        &format!("{name} g={g} hd={hd} n={n} m={m} j={j} vs twin"),
+                        got,
+                        want as f32,
+                        s,
+                        SIMD_VS_SCALAR_TILE_512,
+                    );
                 };
                 for &(name, group, one) in &d32 {
                     let mut got = vec![f32::NAN; len];
                     // SAFETY: each variant was pushed only where its CPU features were detected.
-                    unsafe { group(&q, hd, q_stride, g, &k, stride, n, &mut got, out_stride, side) };
+                    unsafe {
+                        group(
+                            &q, hd, q_stride, g, &k, stride, n, &mut got, out_stride, side,
+                        )
+                    };
                     for m in 0..g {
                         let mut want = vec![0.0; n];
                         // SAFETY: as above.
                         unsafe { one(&q[m * q_stride..m * q_stride + hd], &k, stride, &mut want) };
                         for j in 0..n {
-                            assert_eq!(got[m * out_stride + j].to_bits(), want[j].to_bits(), "{name} dot_rows_group g={g} hd={hd} n={n} m={m} j={j}");
+                            assert_eq!(
+                                got[m * out_stride + j].to_bits(),
+                                want[j].to_bits(),
+                                "{name} dot_rows_group g={g} hd={hd} n={n} m={m} j={j}"
+                            );
                             twin(m, j, got[m * out_stride + j], name, &|i| k[i]);
                         }
                         if m + 1 < g {
-                            assert!(got[m * out_stride + n..(m + 1) * out_stride].iter().all(|v| v.is_nan()), "{name} wrote between rows");
+                            assert!(
+                                got[m * out_stride + n..(m + 1) * out_stride]
+                                    .iter()
+                                    .all(|v| v.is_nan()),
+                                "{name} wrote between rows"
+                            );
                         }
                     }
                 }
                 for &(name, group, one) in &d16 {
                     let mut got = vec![f32::NAN; len];
                     // SAFETY: as above.
-                    unsafe { group(&q, hd, q_stride, g, &k16, stride, n, &mut got, out_stride, side) };
+                    unsafe {
+                        group(
+                            &q, hd, q_stride, g, &k16, stride, n, &mut got, out_stride, side,
+                        )
+                    };
                     for m in 0..g {
                         let mut want = vec![0.0; n];
                         // SAFETY: as above.
-                        unsafe { one(&q[m * q_stride..m * q_stride + hd], &k16, stride, &mut want) };
+                        unsafe {
+                            one(&q[m * q_stride..m * q_stride + hd], &k16, stride, &mut want)
+                        };
                         for j in 0..n {
-                            assert_eq!(got[m * out_stride + j].to_bits(), want[j].to_bits(), "{name} dot_rows_group_f16 g={g} hd={hd} n={n} m={m} j={j}");
-                            twin(m, j, got[m * out_stride + j], name, &|i| super::f16_to_f32(k16[i]));
+                            assert_eq!(
+                                got[m * out_stride + j].to_bits(),
+                                want[j].to_bits(),
+                                "{name} dot_rows_group_f16 g={g} hd={hd} n={n} m={m} j={j}"
+                            );
+                            twin(m, j, got[m * out_stride + j], name, &|i| {
+                                super::f16_to_f32(k16[i])
+                            });
                         }
                         if m + 1 < g {
-                            assert!(got[m * out_stride + n..(m + 1) * out_stride].iter().all(|v| v.is_nan()), "{name} f16 wrote between rows");
+                            assert!(
+                                got[m * out_stride + n..(m + 1) * out_stride]
+                                    .iter()
+                                    .all(|v| v.is_nan()),
+                                "{name} f16 wrote between rows"
+                            );
                         }
                     }
                 }
@@ -1972,40 +3127,104 @@ fn query_groups_equal_the_per_query_kernels() {
                 let (stride, coef_stride, y_stride) = (n + 5, nk + 3, n + 7);
                 let x = r.vec(nk * stride);
                 let x16 = to16(&x);
-                let coef: Vec<f32> = (0..(g - 1) * coef_stride + nk).map(|_| r.f() * 0.1).collect();
-                let y0: Vec<f32> = (0..(g - 1) * y_stride + n).map(|i| if i % y_stride < n { r.f() } else { f32::NAN }).collect();
+                let coef: Vec<f32> = (0..(g - 1) * coef_stride + nk)
+                    .map(|_| r.f() * 0.1)
+                    .collect();
+                let y0: Vec<f32> = (0..(g - 1) * y_stride + n)
+                    .map(|i| if i % y_stride < n { r.f() } else { f32::NAN })
+                    .collect();
                 let rows_len = if nk == 0 { 0 } else { (nk - 1) * stride + n };
-                let check_rows = |name: &str, got: &[f32], per: &dyn Fn(&[f32], &mut [f32]), row: &dyn Fn(usize) -> f32| {
+                let check_rows = |name: &str,
+                                  got: &[f32],
+                                  per: &dyn Fn(&[f32], &mut [f32]),
+                                  row: &dyn Fn(usize) -> f32| {
                     for m in 0..g {
                         let cm = &coef[m * coef_stride..m * coef_stride + nk];
                         let mut want = y0[m * y_stride..m * y_stride + n].to_vec();
                         per(cm, &mut want);
                         for i in 0..n {
                             let gv = got[m * y_stride + i];
-                            assert_eq!(gv.to_bits(), want[i].to_bits(), "{name} axpy_rows_group g={g} n={n} nk={nk} m={m} lane {i}");
+                            assert_eq!(
+                                gv.to_bits(),
+                                want[i].to_bits(),
+                                "{name} axpy_rows_group g={g} n={n} nk={nk} m={m} lane {i}"
+                            );
                             let y = y0[m * y_stride + i] as f64;
-                            let t: f64 = y + (0..nk).map(|j| cm[j] as f64 * row(j * stride + i) as f64).sum::<f64>();
-                            let s: f64 = y.abs() + (0..nk).map(|j| (cm[j] as f64 * row(j * stride + i) as f64).abs()).sum::<f64>();
-                            check(&format!("{name} axpy_rows_group g={g} n={n} nk={nk} vs twin"), gv, t as f32, s, SIMD_VS_SCALAR_AXPY * nk.max(1) as f64);
+                            let t: f64 = y
+                                + (0..nk)
+                                    .map(|j| cm[j] as f64 * row(j * stride + i) as f64)
+                                    .sum::<f64>();
+                            let s: f64 = y.abs()
+                                + (0..nk)
+                                    .map(|j| (cm[j] as f64 * row(j * stride + i) as f64).abs())
+                                    .sum::<f64>();
+                            check(
+                                &format!("{name} axpy_rows_group g={g} n={n} nk={nk} vs twin"),
+                                gv,
+                                t as f32,
+                                s,
+                                SIMD_VS_SCALAR_AXPY * nk.max(1) as f64,
+                            );
                         }
                         if m + 1 < g {
-                            assert!(got[m * y_stride + n..(m + 1) * y_stride].iter().all(|v| v.is_nan()), "{name} axpy wrote between rows");
+                            assert!(
+                                got[m * y_stride + n..(m + 1) * y_stride]
+                                    .iter()
+                                    .all(|v| v.is_nan()),
+                                "{name} axpy wrote between rows"
+                            );
                         }
                     }
                 };
                 for &(name, group, one) in &a32 {
                     let mut got = y0.clone();
                     // SAFETY: as above.
-                    unsafe { group(&coef, coef_stride, nk, &x[..rows_len], stride, &mut got, y_stride, n, g, side) };
+                    unsafe {
+                        group(
+                            &coef,
+                            coef_stride,
+                            nk,
+                            &x[..rows_len],
+                            stride,
+                            &mut got,
+                            y_stride,
+                            n,
+                            g,
+                            side,
+                        )
+                    };
                     // SAFETY: as above.
-                    check_rows(name, &got, &|c, y| unsafe { one(c, &x[..rows_len], stride, y) }, &|i| x[i]);
+                    check_rows(
+                        name,
+                        &got,
+                        &|c, y| unsafe { one(c, &x[..rows_len], stride, y) },
+                        &|i| x[i],
+                    );
                 }
                 for &(name, group, one) in &a16 {
                     let mut got = y0.clone();
                     // SAFETY: as above.
-                    unsafe { group(&coef, coef_stride, nk, &x16[..rows_len], stride, &mut got, y_stride, n, g, side) };
+                    unsafe {
+                        group(
+                            &coef,
+                            coef_stride,
+                            nk,
+                            &x16[..rows_len],
+                            stride,
+                            &mut got,
+                            y_stride,
+                            n,
+                            g,
+                            side,
+                        )
+                    };
                     // SAFETY: as above.
-                    check_rows(name, &got, &|c, y| unsafe { one(c, &x16[..rows_len], stride, y) }, &|i| super::f16_to_f32(x16[i]));
+                    check_rows(
+                        name,
+                        &got,
+                        &|c, y| unsafe { one(c, &x16[..rows_len], stride, y) },
+                        &|i| super::f16_to_f32(x16[i]),
+                    );
                 }
             }
         }
@@ -2019,13 +3238,28 @@ fn query_groups_equal_the_per_query_kernels() {
 /// the scalar twin.
 #[test]
 fn softmax_shift_by_a_signed_zero_is_the_same() {
-    let base = [0.0f32, -0.0, -1.5, -0.25, 0.0, -3.0, -0.0, -7.0, -0.5, 0.0, -2.0, -0.0, -1.0, -4.0, 0.0, -0.125, -0.0];
+    let base = [
+        0.0f32, -0.0, -1.5, -0.25, 0.0, -3.0, -0.0, -7.0, -0.5, 0.0, -2.0, -0.0, -1.0, -4.0, 0.0,
+        -0.125, -0.0,
+    ];
     let run = |f: &dyn Fn(&mut [f32], f32) -> f32, max: f32| {
         let mut s = base.to_vec();
         let sum = f(&mut s, max);
-        (sum.to_bits(), s.iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+        (
+            sum.to_bits(),
+            s.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        )
     };
-    for (name, f) in [("dispatched", &(|s: &mut [f32], m: f32| super::exp_shifted_sum(s, m)) as &dyn Fn(&mut [f32], f32) -> f32), ("scalar", &|s: &mut [f32], m: f32| scalar::exp_shifted_sum(s, m))] {
+    for (name, f) in [
+        (
+            "dispatched",
+            &(|s: &mut [f32], m: f32| super::exp_shifted_sum(s, m))
+                as &dyn Fn(&mut [f32], f32) -> f32,
+        ),
+        ("scalar", &|s: &mut [f32], m: f32| {
+            scalar::exp_shifted_sum(s, m)
+        }),
+    ] {
         let (plus, minus) = (run(f, 0.0), run(f, -0.0));
         assert_eq!(plus, minus, "{name}");
         assert_eq!(plus.1[0], 1.0f32.to_bits(), "{name}");
@@ -2060,14 +3294,25 @@ fn scale_max_equals_the_twin() {
             }
             let mut twin = s0.clone();
             let want = scalar::scale_max(&mut twin, 0.125, start);
-            let naive = s0.iter().filter(|x| !x.is_nan()).fold(start, |m, &x| if x * 0.125 > m { x * 0.125 } else { m });
+            let naive = s0.iter().filter(|x| !x.is_nan()).fold(start, |m, &x| {
+                if x * 0.125 > m {
+                    x * 0.125
+                } else {
+                    m
+                }
+            });
             assert_eq!(want, naive, "twin n={n}");
             for &(name, f) in &v {
                 let mut got = s0.clone();
                 // SAFETY: pushed only where its CPU features were detected.
                 let m = unsafe { f(&mut got, 0.125, start) };
                 assert_eq!(m, want, "{name} n={n} start={start}");
-                assert!(got.iter().zip(&twin).all(|(a, b)| a.to_bits() == b.to_bits()), "{name} scaled n={n}");
+                assert!(
+                    got.iter()
+                        .zip(&twin)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{name} scaled n={n}"
+                );
             }
         }
     }
@@ -2089,10 +3334,25 @@ fn narrow_f16_matches_scalar_twin() {
         if v.is_finite() && next.is_finite() && (h & 0x7fff) < 0x7bff {
             let mid = (v as f64 + next as f64) / 2.0;
             let m = mid as f32;
-            xs.extend([m, f32::from_bits(m.to_bits().wrapping_add(1)), f32::from_bits(m.to_bits().wrapping_sub(1))]);
+            xs.extend([
+                m,
+                f32::from_bits(m.to_bits().wrapping_add(1)),
+                f32::from_bits(m.to_bits().wrapping_sub(1)),
+            ]);
         }
     }
-    xs.extend([f32::INFINITY, f32::NEG_INFINITY, 65520.0, 65519.99, 1e9, -1e9, f32::MIN_POSITIVE, 1e-30, -0.0, f32::NAN]);
+    xs.extend([
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        65520.0,
+        65519.99,
+        1e9,
+        -1e9,
+        f32::MIN_POSITIVE,
+        1e-30,
+        -0.0,
+        f32::NAN,
+    ]);
     let mut r = 0x9e3779b97f4a7c15u64;
     for _ in 0..300_000 {
         r ^= r << 13;
@@ -2115,7 +3375,11 @@ fn narrow_f16_matches_scalar_twin() {
             let mut got = vec![0u16; n];
             f(&xs[..n], &mut got);
             for (i, (&g, &w)) in got.iter().zip(&want).enumerate() {
-                assert!(g == w || (nan(g) && nan(w)), "{name} n={n}: {} -> {g:#06x}, twin {w:#06x}", xs[i]);
+                assert!(
+                    g == w || (nan(g) && nan(w)),
+                    "{name} n={n}: {} -> {g:#06x}, twin {w:#06x}",
+                    xs[i]
+                );
             }
         }
     }
@@ -2130,12 +3394,21 @@ fn prefetch_parts_cover_the_bytes_once() {
             let mut at = 0;
             for i in 0..parts {
                 let (b0, b1) = super::part_bytes(len, i, parts);
-                assert_eq!(b0, at, "len {len} parts {parts} part {i} starts where the last ended");
-                assert!(b1 >= b0 && (b1 % 64 == 0 || b1 == len), "len {len} parts {parts} part {i}: {b0}..{b1}");
+                assert_eq!(
+                    b0, at,
+                    "len {len} parts {parts} part {i} starts where the last ended"
+                );
+                assert!(
+                    b1 >= b0 && (b1 % 64 == 0 || b1 == len),
+                    "len {len} parts {parts} part {i}: {b0}..{b1}"
+                );
                 at = b1;
             }
             assert_eq!(at, len, "len {len} parts {parts}: covered");
-            assert_eq!(super::part_bytes(len, parts, parts).0, super::part_bytes(len, parts, parts).1);
+            assert_eq!(
+                super::part_bytes(len, parts, parts).0,
+                super::part_bytes(len, parts, parts).1
+            );
         }
         assert_eq!(super::part_bytes(len, 0, 0), (0, 0));
     }

@@ -39,7 +39,12 @@ pub unsafe fn dot_f32(a: &[f32], b: &[f32]) -> f32 {
     for (x, y) in a32.chunks_exact(32).zip(b32.chunks_exact(32)) {
         for (l, accl) in acc.iter_mut().enumerate() {
             // SAFETY: x and y hold 32 floats; lanes l*8..l*8+8 are in bounds.
-            let (xv, yv) = unsafe { (_mm256_loadu_ps(x.as_ptr().add(l * 8)), _mm256_loadu_ps(y.as_ptr().add(l * 8))) };
+            let (xv, yv) = unsafe {
+                (
+                    _mm256_loadu_ps(x.as_ptr().add(l * 8)),
+                    _mm256_loadu_ps(y.as_ptr().add(l * 8)),
+                )
+            };
             *accl = _mm256_fmadd_ps(xv, yv, *accl);
         }
     }
@@ -83,7 +88,12 @@ pub unsafe fn dot_f16(w: &[u16], x: &[f32]) -> f32 {
     let (x8, x1) = xr.split_at(w8.len());
     for (wc, xc) in w8.chunks_exact(8).zip(x8.chunks_exact(8)) {
         // SAFETY: 8 u16 and 8 floats.
-        let (wv, xv) = unsafe { (_mm256_cvtph_ps(_mm_loadu_si128(wc.as_ptr() as *const __m128i)), _mm256_loadu_ps(xc.as_ptr())) };
+        let (wv, xv) = unsafe {
+            (
+                _mm256_cvtph_ps(_mm_loadu_si128(wc.as_ptr() as *const __m128i)),
+                _mm256_loadu_ps(xc.as_ptr()),
+            )
+        };
         acc[0] = _mm256_fmadd_ps(wv, xv, acc[0]);
     }
     let s = _mm256_add_ps(_mm256_add_ps(acc[0], acc[1]), _mm256_add_ps(acc[2], acc[3]));
@@ -98,14 +108,24 @@ pub unsafe fn dot_f16(w: &[u16], x: &[f32]) -> f32 {
 /// The CPU must support avx2, fma and f16c.
 #[target_feature(enable = "avx2,fma,f16c")]
 pub unsafe fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
-    let nb = (w.len() / Q8_BLOCK_BYTES).min(xq.len() / Q8_BLOCK).min(xd.len());
+    let nb = (w.len() / Q8_BLOCK_BYTES)
+        .min(xq.len() / Q8_BLOCK)
+        .min(xd.len());
     let ones = _mm256_set1_epi16(1);
     let mut acc = _mm256_setzero_ps();
-    for ((blk, xs), &dx) in w.chunks_exact(Q8_BLOCK_BYTES).zip(xq.chunks_exact(Q8_BLOCK)).zip(xd).take(nb) {
+    for ((blk, xs), &dx) in w
+        .chunks_exact(Q8_BLOCK_BYTES)
+        .zip(xq.chunks_exact(Q8_BLOCK))
+        .zip(xd)
+        .take(nb)
+    {
         let d = super::f16_to_f32(u16::from_le_bytes([blk[0], blk[1]])) * dx;
         // SAFETY: blk[2..] and xs hold exactly 32 bytes each.
         let (wv, xv) = unsafe {
-            (_mm256_loadu_si256(blk[2..].as_ptr() as *const __m256i), _mm256_loadu_si256(xs.as_ptr() as *const __m256i))
+            (
+                _mm256_loadu_si256(blk[2..].as_ptr() as *const __m256i),
+                _mm256_loadu_si256(xs.as_ptr() as *const __m256i),
+            )
         };
         // |w| (unsigned) times sign(w)*x (signed): maddubs gives pairwise
         // i16 sums, at most 2*128*127 = 32512 in magnitude (no saturation,
@@ -150,7 +170,9 @@ pub unsafe fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
 pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
     // SAFETY: 8 u16 (one 128-bit load) of lanes c..c + 8 of a row holding
     // at least k >= c + 8 values.
-    let load = |r: &[u16], c: usize| unsafe { _mm256_cvtph_ps(_mm_loadu_si128(r.as_ptr().add(c) as *const __m128i)) };
+    let load = |r: &[u16], c: usize| unsafe {
+        _mm256_cvtph_ps(_mm_loadu_si128(r.as_ptr().add(c) as *const __m128i))
+    };
     // SAFETY: the caller's features are tile_256's.
     unsafe { tile_256(w, x, load, |v: &u16| super::f16_to_f32(*v)) }
 }
@@ -163,7 +185,12 @@ pub unsafe fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
 /// below the shortest row's length.
 #[inline]
 #[target_feature(enable = "avx2,fma,f16c")]
-unsafe fn tile_256<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize) -> __m256, val: impl Fn(&E) -> f32) -> Tile {
+unsafe fn tile_256<E>(
+    w: [&[E]; TN],
+    x: [&[f32]; TM],
+    load: impl Fn(&[E], usize) -> __m256,
+    val: impl Fn(&E) -> f32,
+) -> Tile {
     let k = tile_len(&w, &x);
     // SAFETY: the caller's features are rows_256's; d <= TM.
     unsafe {
@@ -190,7 +217,13 @@ unsafe fn tile_256<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize)
 /// As [`tile_256`]; `M <= TM`.
 #[inline]
 #[target_feature(enable = "avx2,fma,f16c")]
-unsafe fn seq_rows_256<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize, load: &impl Fn(&[E], usize) -> __m256, val: &impl Fn(&E) -> f32) -> [[f32; TN]; M] {
+unsafe fn seq_rows_256<E, const M: usize>(
+    w: &[&[E]; TN],
+    x: &[&[f32]; TM],
+    k: usize,
+    load: &impl Fn(&[E], usize) -> __m256,
+    val: &impl Fn(&E) -> f32,
+) -> [[f32; TN]; M] {
     let k8 = k - k % 8;
     let mut out = [[0.0f32; TN]; M];
     for (n, wn) in w.iter().enumerate() {
@@ -223,7 +256,13 @@ unsafe fn seq_rows_256<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: u
 /// As [`tile_256`]; `M <= TM`.
 #[inline]
 #[target_feature(enable = "avx2,fma,f16c")]
-unsafe fn rows_256<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize, load: &impl Fn(&[E], usize) -> __m256, val: &impl Fn(&E) -> f32) -> [[f32; TN]; M] {
+unsafe fn rows_256<E, const M: usize>(
+    w: &[&[E]; TN],
+    x: &[&[f32]; TM],
+    k: usize,
+    load: &impl Fn(&[E], usize) -> __m256,
+    val: &impl Fn(&E) -> f32,
+) -> [[f32; TN]; M] {
     let k8 = k - k % 8;
     let mut out = [[0.0f32; TN]; M];
     for n0 in (0..TN).step_by(2) {
@@ -260,7 +299,9 @@ unsafe fn rows_256<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize
 #[inline]
 #[target_feature(enable = "avx2,f16c")]
 unsafe fn f16_scale(blk: &[u8]) -> f32 {
-    _mm_cvtss_f32(_mm_cvtph_ps(_mm_cvtsi32_si128(u16::from_le_bytes([blk[0], blk[1]]) as i32)))
+    _mm_cvtss_f32(_mm_cvtph_ps(_mm_cvtsi32_si128(
+        u16::from_le_bytes([blk[0], blk[1]]) as i32,
+    )))
 }
 
 /// Blocked int8 tile (see [`dot_q8`]): per block of 32, each weight row is
@@ -271,19 +312,34 @@ unsafe fn f16_scale(blk: &[u8]) -> f32 {
 /// The CPU must support avx2, fma and f16c.
 #[target_feature(enable = "avx2,fma,f16c")]
 pub unsafe fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
-    let nbw = w.iter().map(|r| r.len() / Q8_BLOCK_BYTES).min().unwrap_or(0);
-    let nbx = xq.iter().map(|r| r.len() / Q8_BLOCK).chain(xd.iter().map(|r| r.len())).min().unwrap_or(0);
+    let nbw = w
+        .iter()
+        .map(|r| r.len() / Q8_BLOCK_BYTES)
+        .min()
+        .unwrap_or(0);
+    let nbx = xq
+        .iter()
+        .map(|r| r.len() / Q8_BLOCK)
+        .chain(xd.iter().map(|r| r.len()))
+        .min()
+        .unwrap_or(0);
     let nb = nbw.min(nbx);
     let ones = _mm256_set1_epi16(1);
     let mut out = [[0.0f32; TN]; TM];
     for n0 in (0..TN).step_by(2) {
         let mut acc = [[_mm256_setzero_ps(); 2]; TM];
-        let blocks = w[n0].chunks_exact(Q8_BLOCK_BYTES).zip(w[n0 + 1].chunks_exact(Q8_BLOCK_BYTES)).take(nb);
+        let blocks = w[n0]
+            .chunks_exact(Q8_BLOCK_BYTES)
+            .zip(w[n0 + 1].chunks_exact(Q8_BLOCK_BYTES))
+            .take(nb);
         for (b, (ba, bb)) in blocks.enumerate() {
             let (da, db) = (f16_scale(ba), f16_scale(bb));
             // SAFETY: ba[2..] and bb[2..] hold exactly 32 bytes each.
             let (wa, wb) = unsafe {
-                (_mm256_loadu_si256(ba[2..].as_ptr() as *const __m256i), _mm256_loadu_si256(bb[2..].as_ptr() as *const __m256i))
+                (
+                    _mm256_loadu_si256(ba[2..].as_ptr() as *const __m256i),
+                    _mm256_loadu_si256(bb[2..].as_ptr() as *const __m256i),
+                )
             };
             // |w| (unsigned) x sign(w)*x (signed), as in `dot_q8`: no i16
             // saturation since the quantiser keeps x in [-127, 127].
@@ -293,8 +349,10 @@ pub unsafe fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile
                 let dx = xd[m][b];
                 // SAFETY: xs holds exactly 32 bytes.
                 let xv = unsafe { _mm256_loadu_si256(xs.as_ptr() as *const __m256i) };
-                let pa = _mm256_madd_epi16(_mm256_maddubs_epi16(ua, _mm256_sign_epi8(xv, wa)), ones);
-                let pb = _mm256_madd_epi16(_mm256_maddubs_epi16(ub, _mm256_sign_epi8(xv, wb)), ones);
+                let pa =
+                    _mm256_madd_epi16(_mm256_maddubs_epi16(ua, _mm256_sign_epi8(xv, wa)), ones);
+                let pb =
+                    _mm256_madd_epi16(_mm256_maddubs_epi16(ub, _mm256_sign_epi8(xv, wb)), ones);
                 am[0] = _mm256_fmadd_ps(_mm256_set1_ps(da * dx), _mm256_cvtepi32_ps(pa), am[0]);
                 am[1] = _mm256_fmadd_ps(_mm256_set1_ps(db * dx), _mm256_cvtepi32_ps(pb), am[1]);
             }
@@ -333,7 +391,9 @@ pub unsafe fn tile_f32_512(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
     // SAFETY: the tile reads lanes c..c + 16 of rows holding at least k >= c + 16 floats.
     let load = |r: &[f32], c: usize| unsafe { _mm512_loadu_ps(r.as_ptr().add(c)) };
     // SAFETY: a masked load of lanes c..k, inside every row.
-    let tail = |r: &[f32], c: usize, mk: __mmask16| unsafe { _mm512_maskz_loadu_ps(mk, r.as_ptr().add(c)) };
+    let tail = |r: &[f32], c: usize, mk: __mmask16| unsafe {
+        _mm512_maskz_loadu_ps(mk, r.as_ptr().add(c))
+    };
     // SAFETY: the caller's features are tile_512's.
     unsafe { tile_512(w, x, load, tail) }
 }
@@ -345,9 +405,16 @@ pub unsafe fn tile_f32_512(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
 pub unsafe fn tile_f16_512(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
     // SAFETY: 16 u16 (one 256-bit load) of lanes c..c + 16 of a row holding at least k >= c + 16 values.
-    let load = |r: &[u16], c: usize| unsafe { _mm512_cvtph_ps(_mm256_loadu_si256(r.as_ptr().add(c) as *const __m256i)) };
+    let load = |r: &[u16], c: usize| unsafe {
+        _mm512_cvtph_ps(_mm256_loadu_si256(r.as_ptr().add(c) as *const __m256i))
+    };
     // SAFETY: a masked load of lanes c..k, inside every row.
-    let tail = |r: &[u16], c: usize, mk: __mmask16| unsafe { _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(mk, r.as_ptr().add(c) as *const i16)) };
+    let tail = |r: &[u16], c: usize, mk: __mmask16| unsafe {
+        _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(
+            mk,
+            r.as_ptr().add(c) as *const i16,
+        ))
+    };
     // SAFETY: as in tile_f32_512.
     unsafe { tile_512(w, x, load, tail) }
 }
@@ -360,7 +427,12 @@ pub unsafe fn tile_f16_512(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
 /// shortest row's length.
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
-unsafe fn tile_512<E>(w: [&[E]; TN], x: [&[f32]; TM], load: impl Fn(&[E], usize) -> __m512, tail: impl Fn(&[E], usize, __mmask16) -> __m512) -> Tile {
+unsafe fn tile_512<E>(
+    w: [&[E]; TN],
+    x: [&[f32]; TM],
+    load: impl Fn(&[E], usize) -> __m512,
+    tail: impl Fn(&[E], usize, __mmask16) -> __m512,
+) -> Tile {
     let k = tile_len(&w, &x);
     // SAFETY: the caller's features are rows_512's; d <= TM.
     unsafe {
@@ -415,7 +487,13 @@ fn one_stream(d: usize, k: usize) -> bool {
 /// As [`tile_512`]; `M <= TM`.
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
-unsafe fn seq_rows_512<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize, load: &impl Fn(&[E], usize) -> __m512, tail: &impl Fn(&[E], usize, __mmask16) -> __m512) -> [[f32; TN]; M] {
+unsafe fn seq_rows_512<E, const M: usize>(
+    w: &[&[E]; TN],
+    x: &[&[f32]; TM],
+    k: usize,
+    load: &impl Fn(&[E], usize) -> __m512,
+    tail: &impl Fn(&[E], usize, __mmask16) -> __m512,
+) -> [[f32; TN]; M] {
     let k16 = k - k % 16;
     let mut out = [[0.0f32; TN]; M];
     for (n, wn) in w.iter().enumerate() {
@@ -441,7 +519,15 @@ unsafe fn seq_rows_512<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: u
         }
         // The M sums at once (each `_mm512_reduce_add_ps`, bit for bit).
         // SAFETY: avx512f (this fn's features).
-        let sums = unsafe { sums4(core::array::from_fn(|m| if m < M { acc[m] } else { _mm512_setzero_ps() })) };
+        let sums = unsafe {
+            sums4(core::array::from_fn(|m| {
+                if m < M {
+                    acc[m]
+                } else {
+                    _mm512_setzero_ps()
+                }
+            }))
+        };
         for (o, v) in out.iter_mut().zip(sums) {
             o[n] = v;
         }
@@ -455,7 +541,13 @@ unsafe fn seq_rows_512<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: u
 /// As [`tile_512`]; `M <= TM`.
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
-unsafe fn rows_512<E, const M: usize>(w: &[&[E]; TN], x: &[&[f32]; TM], k: usize, load: &impl Fn(&[E], usize) -> __m512, tail: &impl Fn(&[E], usize, __mmask16) -> __m512) -> [[f32; TN]; M] {
+unsafe fn rows_512<E, const M: usize>(
+    w: &[&[E]; TN],
+    x: &[&[f32]; TM],
+    k: usize,
+    load: &impl Fn(&[E], usize) -> __m512,
+    tail: &impl Fn(&[E], usize, __mmask16) -> __m512,
+) -> [[f32; TN]; M] {
     let k16 = k - k % 16;
     let mut acc = [[_mm512_setzero_ps(); TN]; M];
     let mut c = 0;
@@ -524,10 +616,14 @@ unsafe fn hmax(v: __m256) -> f32 {
 pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
     let absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
     let fix = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
-    let blocks = x.chunks_exact(Q8_BLOCK).zip(q.chunks_exact_mut(Q8_BLOCK)).zip(d.iter_mut().zip(c.chunks_exact_mut(2)));
+    let blocks = x
+        .chunks_exact(Q8_BLOCK)
+        .zip(q.chunks_exact_mut(Q8_BLOCK))
+        .zip(d.iter_mut().zip(c.chunks_exact_mut(2)));
     for ((xb, qb), (db, cb)) in blocks {
         // SAFETY: xb holds exactly 32 floats.
-        let v: [__m256; 4] = core::array::from_fn(|i| unsafe { _mm256_loadu_ps(xb.as_ptr().add(8 * i)) });
+        let v: [__m256; 4] =
+            core::array::from_fn(|i| unsafe { _mm256_loadu_ps(xb.as_ptr().add(8 * i)) });
         // max(|v|, acc) keeps acc when v is NaN: f32::max's NaN rule, as the twin.
         let mut m = _mm256_setzero_ps();
         for vi in &v {
@@ -547,7 +643,10 @@ pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [
         cb[0] = -128 * h4(lo) as i32;
         cb[1] = -128 * h4(hi) as i32;
         let i: [__m256i; 4] = r.map(|ri| _mm256_cvtps_epi32(ri));
-        let p = _mm256_packs_epi16(_mm256_packs_epi32(i[0], i[1]), _mm256_packs_epi32(i[2], i[3]));
+        let p = _mm256_packs_epi16(
+            _mm256_packs_epi32(i[0], i[1]),
+            _mm256_packs_epi32(i[2], i[3]),
+        );
         let p = _mm256_permutevar8x32_epi32(p, fix);
         // SAFETY: qb holds exactly 32 bytes.
         unsafe { _mm256_storeu_si256(qb.as_mut_ptr() as *mut __m256i, p) };
@@ -569,7 +668,10 @@ pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [
 /// The CPU must support avx512f, avx2 and fma.
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
-    let nb = (x.len() / Q8_BLOCK).min(q.len() / Q8_BLOCK).min(d.len()).min(c.len() / 2);
+    let nb = (x.len() / Q8_BLOCK)
+        .min(q.len() / Q8_BLOCK)
+        .min(d.len())
+        .min(c.len() / 2);
     let whole = nb - nb % 16;
     let zero = _mm512_setzero_ps();
     for b0 in (0..whole).step_by(16) {
@@ -579,15 +681,27 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
         // order of maxima gives the same bits.
         let lane_max: [__m512; 16] = core::array::from_fn(|b| {
             // SAFETY: blocks b0 + b < nb: 32 floats each in `x`.
-            let (v0, v1) = unsafe { (_mm512_loadu_ps(x.as_ptr().add(32 * (b0 + b))), _mm512_loadu_ps(x.as_ptr().add(32 * (b0 + b) + 16))) };
+            let (v0, v1) = unsafe {
+                (
+                    _mm512_loadu_ps(x.as_ptr().add(32 * (b0 + b))),
+                    _mm512_loadu_ps(x.as_ptr().add(32 * (b0 + b) + 16)),
+                )
+            };
             _mm512_max_ps(_mm512_abs_ps(v1), _mm512_max_ps(_mm512_abs_ps(v0), zero))
         });
         let amax = fold16_ps(lane_max, |a, b| _mm512_max_ps(a, b))[0];
         // q8_scale: scale = amax / 127; inv = 1 / scale where scale > 0; both 0 where inv overflows.
         let scale = _mm512_div_ps(amax, _mm512_set1_ps(127.0));
-        let inv = _mm512_maskz_div_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(scale, zero), _mm512_set1_ps(1.0), scale);
+        let inv = _mm512_maskz_div_ps(
+            _mm512_cmp_ps_mask::<_CMP_GT_OQ>(scale, zero),
+            _mm512_set1_ps(1.0),
+            scale,
+        );
         let keep = _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(inv, _mm512_set1_ps(f32::INFINITY));
-        let (scale, inv) = (_mm512_maskz_mov_ps(keep, scale), _mm512_maskz_mov_ps(keep, inv));
+        let (scale, inv) = (
+            _mm512_maskz_mov_ps(keep, scale),
+            _mm512_maskz_mov_ps(keep, inv),
+        );
         // SAFETY: d holds blocks b0 .. b0 + 16.
         unsafe { _mm512_storeu_ps(d.as_mut_ptr().add(b0), scale) };
         let mut invs = [0f32; 16];
@@ -599,10 +713,17 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
             // SAFETY: block b0 + b: 32 floats of `x`, 32 bytes of `q`.
             unsafe {
                 let r0 = round_away_512(_mm512_mul_ps(_mm512_loadu_ps(x.as_ptr().add(at)), ib));
-                let r1 = round_away_512(_mm512_mul_ps(_mm512_loadu_ps(x.as_ptr().add(at + 16)), ib));
+                let r1 =
+                    round_away_512(_mm512_mul_ps(_mm512_loadu_ps(x.as_ptr().add(at + 16)), ib));
                 let (i0, i1) = (_mm512_cvtps_epi32(r0), _mm512_cvtps_epi32(r1));
-                _mm_storeu_si128(q.as_mut_ptr().add(at) as *mut __m128i, _mm512_cvtsepi32_epi8(i0));
-                _mm_storeu_si128(q.as_mut_ptr().add(at + 16) as *mut __m128i, _mm512_cvtsepi32_epi8(i1));
+                _mm_storeu_si128(
+                    q.as_mut_ptr().add(at) as *mut __m128i,
+                    _mm512_cvtsepi32_epi8(i0),
+                );
+                _mm_storeu_si128(
+                    q.as_mut_ptr().add(at + 16) as *mut __m128i,
+                    _mm512_cvtsepi32_epi8(i1),
+                );
                 // Value i is lane i % 16 of i0 / i1; its parity (i % 8) / 4 that of its lane.
                 _mm512_add_epi32(i0, i1)
             }
@@ -614,12 +735,25 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
         let k = _mm512_set1_epi32(-128);
         // SAFETY: c holds the 32 corrections of blocks b0 .. b0 + 16.
         unsafe {
-            _mm512_storeu_si512(c.as_mut_ptr().add(2 * b0) as *mut _, _mm512_mullo_epi32(lo, k));
-            _mm512_storeu_si512(c.as_mut_ptr().add(2 * b0 + 16) as *mut _, _mm512_mullo_epi32(hi, k));
+            _mm512_storeu_si512(
+                c.as_mut_ptr().add(2 * b0) as *mut _,
+                _mm512_mullo_epi32(lo, k),
+            );
+            _mm512_storeu_si512(
+                c.as_mut_ptr().add(2 * b0 + 16) as *mut _,
+                _mm512_mullo_epi32(hi, k),
+            );
         }
     }
     // SAFETY: this fn's contract covers the AVX2 kernel's.
-    unsafe { quantise_q8_corr(&x[32 * whole..32 * nb], &mut q[32 * whole..32 * nb], &mut d[whole..nb], &mut c[2 * whole..2 * nb]) };
+    unsafe {
+        quantise_q8_corr(
+            &x[32 * whole..32 * nb],
+            &mut q[32 * whole..32 * nb],
+            &mut d[whole..nb],
+            &mut c[2 * whole..2 * nb],
+        )
+    };
 }
 
 /// Lane pairs of the quantiser's transposing trees: per level, the two
@@ -657,8 +791,19 @@ const FOLD: [([i32; 16], [i32; 16]); 4] = {
 #[target_feature(enable = "avx512f")]
 fn fold16_ps(v: [__m512; 16], op: impl Fn(__m512, __m512) -> __m512) -> [__m512; 1] {
     // SAFETY: FOLD's rows are 16 i32 each.
-    let idx = |l: usize, h: usize| unsafe { _mm512_loadu_si512(if h == 0 { FOLD[l].0.as_ptr() } else { FOLD[l].1.as_ptr() } as *const _) };
-    let level = |l: usize, a: __m512, b: __m512| op(_mm512_permutex2var_ps(a, idx(l, 0), b), _mm512_permutex2var_ps(a, idx(l, 1), b));
+    let idx = |l: usize, h: usize| unsafe {
+        _mm512_loadu_si512(if h == 0 {
+            FOLD[l].0.as_ptr()
+        } else {
+            FOLD[l].1.as_ptr()
+        } as *const _)
+    };
+    let level = |l: usize, a: __m512, b: __m512| {
+        op(
+            _mm512_permutex2var_ps(a, idx(l, 0), b),
+            _mm512_permutex2var_ps(a, idx(l, 1), b),
+        )
+    };
     let v: [__m512; 8] = core::array::from_fn(|i| level(0, v[2 * i], v[2 * i + 1]));
     let v: [__m512; 4] = core::array::from_fn(|i| level(1, v[2 * i], v[2 * i + 1]));
     let v: [__m512; 2] = core::array::from_fn(|i| level(2, v[2 * i], v[2 * i + 1]));
@@ -672,8 +817,19 @@ fn fold16_ps(v: [__m512; 16], op: impl Fn(__m512, __m512) -> __m512) -> [__m512;
 #[target_feature(enable = "avx512f")]
 fn fold16_epi32(v: [__m512i; 16]) -> [__m512i; 2] {
     // SAFETY: FOLD's rows are 16 i32 each.
-    let idx = |l: usize, h: usize| unsafe { _mm512_loadu_si512(if h == 0 { FOLD[l].0.as_ptr() } else { FOLD[l].1.as_ptr() } as *const _) };
-    let level = |l: usize, a: __m512i, b: __m512i| _mm512_add_epi32(_mm512_permutex2var_epi32(a, idx(l, 0), b), _mm512_permutex2var_epi32(a, idx(l, 1), b));
+    let idx = |l: usize, h: usize| unsafe {
+        _mm512_loadu_si512(if h == 0 {
+            FOLD[l].0.as_ptr()
+        } else {
+            FOLD[l].1.as_ptr()
+        } as *const _)
+    };
+    let level = |l: usize, a: __m512i, b: __m512i| {
+        _mm512_add_epi32(
+            _mm512_permutex2var_epi32(a, idx(l, 0), b),
+            _mm512_permutex2var_epi32(a, idx(l, 1), b),
+        )
+    };
     let v: [__m512i; 8] = core::array::from_fn(|i| level(0, v[2 * i], v[2 * i + 1]));
     let v: [__m512i; 4] = core::array::from_fn(|i| level(1, v[2 * i], v[2 * i + 1]));
     core::array::from_fn(|i| level(2, v[2 * i], v[2 * i + 1]))
@@ -684,10 +840,14 @@ fn fold16_epi32(v: [__m512i; 16]) -> [__m512i; 2] {
 #[target_feature(enable = "avx512f")]
 fn round_away_512(t: __m512) -> __m512 {
     let r = _mm512_roundscale_ps::<{ _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC }>(t);
-    let half = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(_mm512_abs_ps(_mm512_sub_ps(t, r)), _mm512_set1_ps(0.5));
+    let half =
+        _mm512_cmp_ps_mask::<_CMP_GE_OQ>(_mm512_abs_ps(_mm512_sub_ps(t, r)), _mm512_set1_ps(0.5));
     // copysign(1, t)
     let sign = _mm512_and_si512(_mm512_castps_si512(t), _mm512_set1_epi32(i32::MIN));
-    let one = _mm512_castsi512_ps(_mm512_or_si512(_mm512_castps_si512(_mm512_set1_ps(1.0)), sign));
+    let one = _mm512_castsi512_ps(_mm512_or_si512(
+        _mm512_castps_si512(_mm512_set1_ps(1.0)),
+        sign,
+    ));
     let r = _mm512_mask_add_ps(r, half, r, one);
     _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_ORD_Q>(t, t), r)
 }
@@ -705,7 +865,12 @@ pub unsafe fn q8_scales(row: &[u8], out: &mut [f32]) {
         }
         let mut f = [0f32; 8];
         // SAFETY: h holds 8 u16 (128 bits), f 8 floats.
-        unsafe { _mm256_storeu_ps(f.as_mut_ptr(), _mm256_cvtph_ps(_mm_loadu_si128(h.as_ptr() as *const __m128i))) };
+        unsafe {
+            _mm256_storeu_ps(
+                f.as_mut_ptr(),
+                _mm256_cvtph_ps(_mm_loadu_si128(h.as_ptr() as *const __m128i)),
+            )
+        };
         let n = o.len().min(blks.len() / Q8_BLOCK_BYTES);
         o[..n].copy_from_slice(&f[..n]);
     }
@@ -721,7 +886,12 @@ pub unsafe fn q8_scales(row: &[u8], out: &mut [f32]) {
 unsafe fn two_blocks(row: &[u8], b: usize) -> __m512i {
     let blk = &row[b * Q8_BLOCK_BYTES..(b + 2) * Q8_BLOCK_BYTES];
     // SAFETY: blk holds 68 bytes: 2..34 and 36..68 are in bounds.
-    let (lo, hi) = unsafe { (_mm256_loadu_si256(blk.as_ptr().add(2) as *const __m256i), _mm256_loadu_si256(blk.as_ptr().add(36) as *const __m256i)) };
+    let (lo, hi) = unsafe {
+        (
+            _mm256_loadu_si256(blk.as_ptr().add(2) as *const __m256i),
+            _mm256_loadu_si256(blk.as_ptr().add(36) as *const __m256i),
+        )
+    };
     _mm512_inserti64x4::<1>(_mm512_castsi256_si512(lo), hi)
 }
 
@@ -735,7 +905,10 @@ unsafe fn pair_scales(s: &[f32], b: usize) -> __m512 {
     let p = &s[b..b + 2];
     // SAFETY: p holds 2 floats (8 bytes, one unaligned 64-bit load).
     let v = unsafe { _mm_castpd_ps(_mm_load_sd(p.as_ptr() as *const f64)) };
-    _mm512_permutexvar_ps(_mm512_setr_epi32(0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1), _mm512_castps128_ps512(v))
+    _mm512_permutexvar_ps(
+        _mm512_setr_epi32(0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1),
+        _mm512_castps128_ps512(v),
+    )
 }
 
 /// See [`super::gemm_q8`]: two blocks per 64-byte step; weights made
@@ -762,21 +935,28 @@ pub unsafe fn gemm_q8_vnni<const M: usize>(
     let mut b = 0;
     while b + 2 <= nb {
         // SAFETY (both): every row holds at least nb >= b + 2 blocks.
-        let wv: [__m512i; TN] = core::array::from_fn(|n| _mm512_xor_si512(unsafe { two_blocks(w[n], b) }, flip));
+        let wv: [__m512i; TN] =
+            core::array::from_fn(|n| _mm512_xor_si512(unsafe { two_blocks(w[n], b) }, flip));
         // SAFETY: this function's target features include pair_scales' avx512f.
         let dw: [__m512; TN] = core::array::from_fn(|n| unsafe { pair_scales(wd[n], b) });
         for m in 0..M {
             let xs = &xq[m][b * Q8_BLOCK..(b + 2) * Q8_BLOCK];
             let cs = &xc[m][2 * b..2 * b + 4];
             // SAFETY: xs holds 64 bytes; cs 4 i32 (one 128-bit load).
-            let (xv, cv) = unsafe { (_mm512_loadu_si512(xs.as_ptr() as *const _), _mm_loadu_si128(cs.as_ptr() as *const __m128i)) };
+            let (xv, cv) = unsafe {
+                (
+                    _mm512_loadu_si512(xs.as_ptr() as *const _),
+                    _mm_loadu_si128(cs.as_ptr() as *const __m128i),
+                )
+            };
             // Lanes 0, 1 <- block b's parity corrections, lanes 8, 9 <- block b + 1's.
             let init = _mm512_maskz_permutexvar_epi32(0x0303, corr_idx, _mm512_castsi128_si512(cv));
             // SAFETY: xd[m] holds at least b + 2 scales.
             let dx = unsafe { pair_scales(xd[m], b) };
             for n in 0..TN {
                 let dp = _mm512_dpbusd_epi32(init, wv[n], xv);
-                acc[m][n] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(dp), _mm512_mul_ps(dw[n], dx), acc[m][n]);
+                acc[m][n] =
+                    _mm512_fmadd_ps(_mm512_cvtepi32_ps(dp), _mm512_mul_ps(dw[n], dx), acc[m][n]);
             }
         }
         b += 2;
@@ -788,7 +968,10 @@ pub unsafe fn gemm_q8_vnni<const M: usize>(
         let wv: [__m256i; TN] = core::array::from_fn(|n| {
             let q = &w[n][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES];
             // SAFETY: q holds exactly 32 bytes.
-            _mm256_xor_si256(unsafe { _mm256_loadu_si256(q.as_ptr() as *const __m256i) }, flip)
+            _mm256_xor_si256(
+                unsafe { _mm256_loadu_si256(q.as_ptr() as *const __m256i) },
+                flip,
+            )
         });
         for m in 0..M {
             let xs = &xq[m][b * Q8_BLOCK..(b + 1) * Q8_BLOCK];
@@ -834,11 +1017,17 @@ pub unsafe fn gemm_q8_512<const M: usize>(
         for m in 0..M {
             let xs = &xq[m][b * Q8_BLOCK..(b + 2) * Q8_BLOCK];
             // SAFETY: xs holds 64 bytes; xd[m] at least b + 2 scales.
-            let (xv, dx) = unsafe { (_mm512_loadu_si512(xs.as_ptr() as *const _), pair_scales(xd[m], b)) };
+            let (xv, dx) = unsafe {
+                (
+                    _mm512_loadu_si512(xs.as_ptr() as *const _),
+                    pair_scales(xd[m], b),
+                )
+            };
             for n in 0..TN {
                 let sx = _mm512_mask_sub_epi8(xv, neg[n], zero, xv);
                 let p = _mm512_madd_epi16(_mm512_maddubs_epi16(aw[n], sx), ones);
-                acc[m][n] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(p), _mm512_mul_ps(dw[n], dx), acc[m][n]);
+                acc[m][n] =
+                    _mm512_fmadd_ps(_mm512_cvtepi32_ps(p), _mm512_mul_ps(dw[n], dx), acc[m][n]);
             }
         }
         b += 2;
@@ -880,15 +1069,30 @@ pub unsafe fn gemm_q8_avx2<const M: usize>(
 /// The CPU must support avx2, fma, f16c (slices are bounds-checked).
 #[inline]
 #[target_feature(enable = "avx2,fma,f16c")]
-unsafe fn gemm_q8_avx2_from<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq: [&[i8]; M], xd: [&[f32]; M], b0: usize, nb: usize) -> [[f32; TN]; M] {
+unsafe fn gemm_q8_avx2_from<const M: usize>(
+    w: [&[u8]; TN],
+    wd: [&[f32]; TN],
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    b0: usize,
+    nb: usize,
+) -> [[f32; TN]; M] {
     let ones = _mm256_set1_epi16(1);
     let mut out = [[0.0f32; TN]; M];
     for n0 in (0..TN).step_by(2) {
         let mut acc = [[_mm256_setzero_ps(); 2]; M];
         for b in b0..nb {
-            let (qa, qb) = (&w[n0][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES], &w[n0 + 1][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES]);
+            let (qa, qb) = (
+                &w[n0][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES],
+                &w[n0 + 1][b * Q8_BLOCK_BYTES + 2..(b + 1) * Q8_BLOCK_BYTES],
+            );
             // SAFETY: qa and qb hold exactly 32 bytes each.
-            let (wa, wb) = unsafe { (_mm256_loadu_si256(qa.as_ptr() as *const __m256i), _mm256_loadu_si256(qb.as_ptr() as *const __m256i)) };
+            let (wa, wb) = unsafe {
+                (
+                    _mm256_loadu_si256(qa.as_ptr() as *const __m256i),
+                    _mm256_loadu_si256(qb.as_ptr() as *const __m256i),
+                )
+            };
             let (ua, ub) = (_mm256_sign_epi8(wa, wa), _mm256_sign_epi8(wb, wb));
             let (dwa, dwb) = (_mm256_set1_ps(wd[n0][b]), _mm256_set1_ps(wd[n0 + 1][b]));
             for (m, am) in acc.iter_mut().enumerate() {
@@ -896,8 +1100,10 @@ unsafe fn gemm_q8_avx2_from<const M: usize>(w: [&[u8]; TN], wd: [&[f32]; TN], xq
                 // SAFETY: xs holds exactly 32 bytes.
                 let xv = unsafe { _mm256_loadu_si256(xs.as_ptr() as *const __m256i) };
                 let dx = _mm256_set1_ps(xd[m][b]);
-                let pa = _mm256_madd_epi16(_mm256_maddubs_epi16(ua, _mm256_sign_epi8(xv, wa)), ones);
-                let pb = _mm256_madd_epi16(_mm256_maddubs_epi16(ub, _mm256_sign_epi8(xv, wb)), ones);
+                let pa =
+                    _mm256_madd_epi16(_mm256_maddubs_epi16(ua, _mm256_sign_epi8(xv, wa)), ones);
+                let pb =
+                    _mm256_madd_epi16(_mm256_maddubs_epi16(ub, _mm256_sign_epi8(xv, wb)), ones);
                 am[0] = _mm256_fmadd_ps(_mm256_cvtepi32_ps(pa), _mm256_mul_ps(dwa, dx), am[0]);
                 am[1] = _mm256_fmadd_ps(_mm256_cvtepi32_ps(pb), _mm256_mul_ps(dwb, dx), am[1]);
             }
@@ -924,7 +1130,16 @@ pub unsafe fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
     let (y8, y1) = y.split_at_mut(n8);
     for (xc, yc) in x8.chunks_exact(8).zip(y8.chunks_exact_mut(8)) {
         // SAFETY: 8 floats each.
-        unsafe { _mm256_storeu_ps(yc.as_mut_ptr(), _mm256_fmadd_ps(av, _mm256_loadu_ps(xc.as_ptr()), _mm256_loadu_ps(yc.as_ptr()))) };
+        unsafe {
+            _mm256_storeu_ps(
+                yc.as_mut_ptr(),
+                _mm256_fmadd_ps(
+                    av,
+                    _mm256_loadu_ps(xc.as_ptr()),
+                    _mm256_loadu_ps(yc.as_ptr()),
+                ),
+            )
+        };
     }
     for (yi, xi) in y1.iter_mut().zip(x1) {
         *yi += a * xi;
@@ -970,7 +1185,9 @@ pub unsafe fn dot_rows_512(q: &[f32], k: &[f32], stride: usize, out: &mut [f32])
         return dot_rows(q, k, stride, out);
     }
     // SAFETY: masked loads read only lanes < hd of key row j (in bounds: `k` holds the rows).
-    let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_maskz_loadu_ps(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i)) };
+    let load = |j: usize, i: usize, m: __mmask16| unsafe {
+        _mm512_maskz_loadu_ps(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i))
+    };
     // SAFETY: this fn's contract.
     unsafe { dot_rows_512_by(q, load, out) }
 }
@@ -989,7 +1206,12 @@ pub unsafe fn dot_rows_512_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f
         return unsafe { dot_rows_f16(q, k, stride, out) };
     }
     // SAFETY: masked 16-bit loads read only lanes < hd of key row j.
-    let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i) as *const i16)) };
+    let load = |j: usize, i: usize, m: __mmask16| unsafe {
+        _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(
+            m,
+            k[j * stride..j * stride + hd].as_ptr().add(16 * i) as *const i16,
+        ))
+    };
     // SAFETY: this fn's contract.
     unsafe { dot_rows_512_by(q, load, out) }
 }
@@ -1004,12 +1226,30 @@ pub unsafe fn dot_rows_512_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f
 /// `j < out.len()`, `i < ceil(q.len() / 16)`.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn dot_rows_512_by(q: &[f32], load: impl Fn(usize, usize, __mmask16) -> __m512, out: &mut [f32]) {
+unsafe fn dot_rows_512_by(
+    q: &[f32],
+    load: impl Fn(usize, usize, __mmask16) -> __m512,
+    out: &mut [f32],
+) {
     let hd = q.len().min(64);
     let nv = hd.div_ceil(16);
-    let mask: [__mmask16; 4] = core::array::from_fn(|i| if 16 * (i + 1) <= hd { 0xffff } else if 16 * i < hd { lanes16(hd - 16 * i) } else { 0 });
+    let mask: [__mmask16; 4] = core::array::from_fn(|i| {
+        if 16 * (i + 1) <= hd {
+            0xffff
+        } else if 16 * i < hd {
+            lanes16(hd - 16 * i)
+        } else {
+            0
+        }
+    });
     // SAFETY: masked loads read only lanes < hd of q.
-    let qv: [__m512; 4] = core::array::from_fn(|i| if i < nv { unsafe { _mm512_maskz_loadu_ps(mask[i], q.as_ptr().add(16 * i)) } } else { _mm512_setzero_ps() });
+    let qv: [__m512; 4] = core::array::from_fn(|i| {
+        if i < nv {
+            unsafe { _mm512_maskz_loadu_ps(mask[i], q.as_ptr().add(16 * i)) }
+        } else {
+            _mm512_setzero_ps()
+        }
+    });
     let n = out.len();
     let mut j = 0;
     while j + 2 <= n {
@@ -1070,16 +1310,36 @@ fn prefetch_span<T>(s: &[T]) {
 /// The CPU must support avx512f, avx2 and fma.
 #[target_feature(enable = "avx512f,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn dot_rows_512_group(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[f32], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
+pub unsafe fn dot_rows_512_group(
+    q: &[f32],
+    hd: usize,
+    q_stride: usize,
+    g: usize,
+    k: &[f32],
+    stride: usize,
+    n: usize,
+    out: &mut [f32],
+    out_stride: usize,
+    side: &[u8],
+) {
     if hd == 0 || hd > 64 {
         for m in 0..g {
             // SAFETY: this fn's contract.
-            unsafe { dot_rows_512(&q[m * q_stride..m * q_stride + hd], k, stride, &mut out[m * out_stride..m * out_stride + n]) };
+            unsafe {
+                dot_rows_512(
+                    &q[m * q_stride..m * q_stride + hd],
+                    k,
+                    stride,
+                    &mut out[m * out_stride..m * out_stride + n],
+                )
+            };
         }
         return;
     }
     // SAFETY: masked loads read only lanes < hd of key row j (the slice is bounds-checked).
-    let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_maskz_loadu_ps(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i)) };
+    let load = |j: usize, i: usize, m: __mmask16| unsafe {
+        _mm512_maskz_loadu_ps(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i))
+    };
     let ahead = |j: usize| prefetch_span(&k[j * stride..j * stride + hd]);
     // SAFETY: this fn's contract.
     unsafe { dot_rows_512_group_by(q, hd, q_stride, g, load, ahead, n, out, out_stride, side) }
@@ -1093,16 +1353,39 @@ pub unsafe fn dot_rows_512_group(q: &[f32], hd: usize, q_stride: usize, g: usize
 /// The CPU must support avx512f, avx512bw, avx512vl, avx2, fma and f16c.
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,f16c")]
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn dot_rows_512_group_f16(q: &[f32], hd: usize, q_stride: usize, g: usize, k: &[u16], stride: usize, n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
+pub unsafe fn dot_rows_512_group_f16(
+    q: &[f32],
+    hd: usize,
+    q_stride: usize,
+    g: usize,
+    k: &[u16],
+    stride: usize,
+    n: usize,
+    out: &mut [f32],
+    out_stride: usize,
+    side: &[u8],
+) {
     if hd == 0 || hd > 64 {
         for m in 0..g {
             // SAFETY: this fn's contract.
-            unsafe { dot_rows_512_f16(&q[m * q_stride..m * q_stride + hd], k, stride, &mut out[m * out_stride..m * out_stride + n]) };
+            unsafe {
+                dot_rows_512_f16(
+                    &q[m * q_stride..m * q_stride + hd],
+                    k,
+                    stride,
+                    &mut out[m * out_stride..m * out_stride + n],
+                )
+            };
         }
         return;
     }
     // SAFETY: masked 16-bit loads read only lanes < hd of key row j (bounds-checked slice).
-    let load = |j: usize, i: usize, m: __mmask16| unsafe { _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(m, k[j * stride..j * stride + hd].as_ptr().add(16 * i) as *const i16)) };
+    let load = |j: usize, i: usize, m: __mmask16| unsafe {
+        _mm512_cvtph_ps(_mm256_maskz_loadu_epi16(
+            m,
+            k[j * stride..j * stride + hd].as_ptr().add(16 * i) as *const i16,
+        ))
+    };
     let ahead = |j: usize| prefetch_span(&k[j * stride..j * stride + hd]);
     // SAFETY: this fn's contract.
     unsafe { dot_rows_512_group_by(q, hd, q_stride, g, load, ahead, n, out, out_stride, side) }
@@ -1161,12 +1444,38 @@ unsafe fn dot_rows_512_group_by(
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load: impl Fn(usize, usize, __mmask16) -> __m512, ahead: impl Fn(usize), n: usize, out: &mut [f32], out_stride: usize, side: &[u8]) {
+unsafe fn dot_block<const G: usize>(
+    q: &[f32],
+    hd: usize,
+    q_stride: usize,
+    load: impl Fn(usize, usize, __mmask16) -> __m512,
+    ahead: impl Fn(usize),
+    n: usize,
+    out: &mut [f32],
+    out_stride: usize,
+    side: &[u8],
+) {
     let nv = hd.div_ceil(16);
-    let mask: [__mmask16; 4] = core::array::from_fn(|i| if 16 * (i + 1) <= hd { 0xffff } else if 16 * i < hd { lanes16(hd - 16 * i) } else { 0 });
+    let mask: [__mmask16; 4] = core::array::from_fn(|i| {
+        if 16 * (i + 1) <= hd {
+            0xffff
+        } else if 16 * i < hd {
+            lanes16(hd - 16 * i)
+        } else {
+            0
+        }
+    });
     let q = &q[..(G - 1) * q_stride + hd];
     // SAFETY: masked loads read only lanes < hd of query m (within `q`).
-    let qv: [[__m512; 4]; G] = core::array::from_fn(|m| core::array::from_fn(|i| if i < nv { unsafe { _mm512_maskz_loadu_ps(mask[i], q.as_ptr().add(m * q_stride + 16 * i)) } } else { _mm512_setzero_ps() }));
+    let qv: [[__m512; 4]; G] = core::array::from_fn(|m| {
+        core::array::from_fn(|i| {
+            if i < nv {
+                unsafe { _mm512_maskz_loadu_ps(mask[i], q.as_ptr().add(m * q_stride + 16 * i)) }
+            } else {
+                _mm512_setzero_ps()
+            }
+        })
+    });
     let out = &mut out[..(G - 1) * out_stride + n];
     for j in 0..n {
         if j + KEY_PREFETCH < n {
@@ -1184,7 +1493,18 @@ unsafe fn dot_block<const G: usize>(q: &[f32], hd: usize, q_stride: usize, load:
         let mut lanes = [0f32; 32];
         for (h, half) in lanes.chunks_exact_mut(16).enumerate().take(G.div_ceil(4)) {
             // SAFETY: avx512f (this fn's features); `half` holds 16 floats.
-            unsafe { _mm512_storeu_ps(half.as_mut_ptr(), reduce4(core::array::from_fn(|m| if 4 * h + m < G { acc[4 * h + m] } else { _mm512_setzero_ps() }))) };
+            unsafe {
+                _mm512_storeu_ps(
+                    half.as_mut_ptr(),
+                    reduce4(core::array::from_fn(|m| {
+                        if 4 * h + m < G {
+                            acc[4 * h + m]
+                        } else {
+                            _mm512_setzero_ps()
+                        }
+                    })),
+                )
+            };
         }
         for m in 0..G {
             out[m * out_stride + j] = lanes[16 * (m / 4) + 4 * (m % 4)];
@@ -1230,10 +1550,19 @@ unsafe fn sums4(a: [__m512; 4]) -> [f32; 4] {
 #[target_feature(enable = "avx512f")]
 unsafe fn reduce4(a: [__m512; 4]) -> __m512 {
     // 128-bit lanes: the 256-bit half sums of a[0] (lanes 0, 1) and a[1] (2, 3); of a[2], a[3].
-    let b0 = _mm512_add_ps(_mm512_shuffle_f32x4::<0x44>(a[0], a[1]), _mm512_shuffle_f32x4::<0xEE>(a[0], a[1]));
-    let b1 = _mm512_add_ps(_mm512_shuffle_f32x4::<0x44>(a[2], a[3]), _mm512_shuffle_f32x4::<0xEE>(a[2], a[3]));
+    let b0 = _mm512_add_ps(
+        _mm512_shuffle_f32x4::<0x44>(a[0], a[1]),
+        _mm512_shuffle_f32x4::<0xEE>(a[0], a[1]),
+    );
+    let b1 = _mm512_add_ps(
+        _mm512_shuffle_f32x4::<0x44>(a[2], a[3]),
+        _mm512_shuffle_f32x4::<0xEE>(a[2], a[3]),
+    );
     // 128-bit lane m: the 128-bit half sum of a[m].
-    let c = _mm512_add_ps(_mm512_shuffle_f32x4::<0x88>(b0, b1), _mm512_shuffle_f32x4::<0xDD>(b0, b1));
+    let c = _mm512_add_ps(
+        _mm512_shuffle_f32x4::<0x88>(b0, b1),
+        _mm512_shuffle_f32x4::<0xDD>(b0, b1),
+    );
     // Lanes (i, i + 2), then (0, 1), within each 128-bit lane.
     let d = _mm512_add_ps(c, _mm512_permute_ps::<0x4E>(c));
     _mm512_add_ps(d, _mm512_movehdup_ps(d))
@@ -1258,7 +1587,12 @@ unsafe fn reduce4(a: [__m512; 4]) -> __m512 {
 /// # Safety
 /// The CPU must support avx512f/bw/dq/vl/vnni, avx2, fma and f16c.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
-pub unsafe fn gemm_q8_packed_vnni<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; 8]; M] {
+pub unsafe fn gemm_q8_packed_vnni<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; 8]; M] {
     // SAFETY: the caller's features are this function's.
     unsafe { gemm_q8_packed_vnni_ahead(w, xq, xd, xc, &[]) }
 }
@@ -1269,7 +1603,13 @@ pub unsafe fn gemm_q8_packed_vnni<const M: usize>(w: super::PackedQ8<'_>, xq: [&
 /// # Safety
 /// As [`gemm_q8_packed_vnni`].
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
-pub unsafe fn gemm_q8_packed_vnni_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
+pub unsafe fn gemm_q8_packed_vnni_ahead<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+    ahead: &[u8],
+) -> [[f32; 8]; M] {
     if w.q4 {
         // SAFETY: the caller's features are this function's.
         unsafe { packed_vnni::<M, true>(w, xq, xd, xc, ahead) }
@@ -1285,7 +1625,13 @@ pub unsafe fn gemm_q8_packed_vnni_ahead<const M: usize>(w: super::PackedQ8<'_>, 
 /// As [`gemm_q8_packed_vnni`].
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
-unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
+unsafe fn packed_vnni<const M: usize, const Q4: bool>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+    ahead: &[u8],
+) -> [[f32; 8]; M] {
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
     debug_assert_eq!(w.q4, Q4);
@@ -1299,7 +1645,9 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
         let sb = &w.s[PS * b..PS * (b + 1)];
         let wv: [__m512i; 4] = if Q4 {
             // SAFETY: vb holds 2 x 64 bytes.
-            let h: [__m512i; 2] = core::array::from_fn(|k| unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * k) as *const _) });
+            let h: [__m512i; 2] = core::array::from_fn(|k| unsafe {
+                _mm512_loadu_si512(vb.as_ptr().add(64 * k) as *const _)
+            });
             [
                 _mm512_and_si512(h[0], low),
                 _mm512_and_si512(h[1], low),
@@ -1308,10 +1656,18 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
             ]
         } else {
             // SAFETY: vb holds 4 x 64 bytes.
-            core::array::from_fn(|g| _mm512_xor_si512(unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _) }, flip))
+            core::array::from_fn(|g| {
+                _mm512_xor_si512(
+                    unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _) },
+                    flip,
+                )
+            })
         };
         // SAFETY: sb holds 8 f16 (128 bits).
-        (wv, _mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) }))
+        (
+            wv,
+            _mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) }),
+        )
     };
     // Row m's dot with block b's groups: lanes (2n, 2n + 1) = row n's halves.
     let dot = |m: usize, b: usize, wv: &[__m512i; 4]| -> __m512i {
@@ -1324,7 +1680,9 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
         }
         for (g, wg) in wv.iter().enumerate() {
             // SAFETY: 8g + 8 <= 32.
-            let xg = unsafe { _mm512_set1_epi64((xs.as_ptr().add(8 * g) as *const i64).read_unaligned()) };
+            let xg = unsafe {
+                _mm512_set1_epi64((xs.as_ptr().add(8 * g) as *const i64).read_unaligned())
+            };
             dp = _mm512_dpbusd_epi32(dp, *wg, xg);
         }
         dp
@@ -1337,13 +1695,19 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
         let (w0, s0) = block(b);
         let (w1, s1) = block(b + 1);
         // Lane 2n: s_n,b; lane 2n + 1: s_n,b+1.
-        let sv = _mm512_permutex2var_ps(_mm512_castps256_ps512(s0), ilv, _mm512_castps256_ps512(s1));
+        let sv =
+            _mm512_permutex2var_ps(_mm512_castps256_ps512(s0), ilv, _mm512_castps256_ps512(s1));
         for (m, am) in acc.iter_mut().enumerate() {
             let (d0, d1) = (dot(m, b, &w0), dot(m, b + 1, &w1));
             // Lane 2n: block b's sum of row n; lane 2n + 1: block b + 1's.
-            let sums = _mm512_add_epi32(_mm512_mask_shuffle_epi32::<0xb1>(d0, 0xaaaa, d1), _mm512_mask_shuffle_epi32::<0xb1>(d1, 0x5555, d0));
+            let sums = _mm512_add_epi32(
+                _mm512_mask_shuffle_epi32::<0xb1>(d0, 0xaaaa, d1),
+                _mm512_mask_shuffle_epi32::<0xb1>(d1, 0x5555, d0),
+            );
             // SAFETY: xd[m] holds blocks b and b + 1 (b + 1 < nb).
-            let xdv = _mm512_castsi512_ps(_mm512_set1_epi64(unsafe { (xd[m].as_ptr().add(b) as *const i64).read_unaligned() }));
+            let xdv = _mm512_castsi512_ps(_mm512_set1_epi64(unsafe {
+                (xd[m].as_ptr().add(b) as *const i64).read_unaligned()
+            }));
             *am = _mm512_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv, xdv), *am);
         }
         b += 2;
@@ -1356,7 +1720,12 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
         for (m, am) in acc.iter_mut().enumerate() {
             let d0 = dot(m, b, &w0);
             let sums = _mm512_add_epi32(d0, _mm512_shuffle_epi32::<0xb1>(d0));
-            *am = _mm512_mask3_fmadd_ps(_mm512_cvtepi32_ps(sums), _mm512_mul_ps(sv, _mm512_set1_ps(xd[m][b])), *am, 0x5555);
+            *am = _mm512_mask3_fmadd_ps(
+                _mm512_cvtepi32_ps(sums),
+                _mm512_mul_ps(sv, _mm512_set1_ps(xd[m][b])),
+                *am,
+                0x5555,
+            );
         }
     }
     let mut out = [[0.0f32; 8]; M];
@@ -1395,7 +1764,12 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
 /// # Safety
 /// The CPU must support avx2, fma and f16c.
 #[target_feature(enable = "avx2,fma,f16c")]
-pub unsafe fn gemm_q8_packed_avx2<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M]) -> [[f32; 8]; M] {
+pub unsafe fn gemm_q8_packed_avx2<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; 8]; M] {
     // SAFETY: the caller's features are this function's.
     unsafe { gemm_q8_packed_avx2_ahead(w, xq, xd, xc, &[]) }
 }
@@ -1406,13 +1780,25 @@ pub unsafe fn gemm_q8_packed_avx2<const M: usize>(w: super::PackedQ8<'_>, xq: [&
 /// # Safety
 /// As [`gemm_q8_packed_avx2`].
 #[target_feature(enable = "avx2,fma,f16c")]
-pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(w: super::PackedQ8<'_>, xq: [&[i8]; M], xd: [&[f32]; M], xc: [&[i32]; M], ahead: &[u8]) -> [[f32; 8]; M] {
+pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+    ahead: &[u8],
+) -> [[f32; 8]; M] {
     super::passes_of_four!(M, ahead, |K, m0, a| {
         let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
         let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
         let c: [&[i32]; K] = core::array::from_fn(|m| xc[m0 + m]);
         // SAFETY: the caller's features are these functions'.
-        unsafe { if w.q4 { packed_avx2::<K, true>(w, q, d, c, a) } else { packed_avx2::<K, false>(w, q, d, c, a) } }
+        unsafe {
+            if w.q4 {
+                packed_avx2::<K, true>(w, q, d, c, a)
+            } else {
+                packed_avx2::<K, false>(w, q, d, c, a)
+            }
+        }
     })
 }
 
@@ -1423,7 +1809,13 @@ pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(w: super::PackedQ8<'_>, 
 /// As [`gemm_q8_packed_avx2`].
 #[inline]
 #[target_feature(enable = "avx2,fma,f16c")]
-unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq: [&[i8]; K], xd: [&[f32]; K], xc: [&[i32]; K], ahead: &[u8]) -> [[f32; 8]; K] {
+unsafe fn packed_avx2<const K: usize, const Q4: bool>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; K],
+    xd: [&[f32]; K],
+    xc: [&[i32]; K],
+    ahead: &[u8],
+) -> [[f32; 8]; K] {
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
     debug_assert_eq!(w.q4, Q4);
@@ -1439,13 +1831,18 @@ unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
         let vb = &w.v[pv * b..pv * (b + 1)];
         let sb = &w.s[PS * b..PS * (b + 1)];
         // SAFETY: sb holds 8 f16 (128 bits).
-        let sv = _mm256_permutevar8x32_ps(_mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) }), order);
+        let sv = _mm256_permutevar8x32_ps(
+            _mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) }),
+            order,
+        );
         // [row m][weight rows 0-3 / 4-7]: i32 lanes (2r, 2r + 1) = halves of row r's block dot.
         let mut dp: [[__m256i; 2]; K] = core::array::from_fn(|m| {
             if Q4 {
                 let cs = &xc[m][2 * b..2 * b + 2];
                 // SAFETY: cs holds 2 i32 (8 bytes).
-                let c = _mm256_srai_epi32::<4>(_mm256_set1_epi64x(unsafe { (cs.as_ptr() as *const i64).read_unaligned() }));
+                let c = _mm256_srai_epi32::<4>(_mm256_set1_epi64x(unsafe {
+                    (cs.as_ptr() as *const i64).read_unaligned()
+                }));
                 [c, c]
             } else {
                 [_mm256_setzero_si256(); 2]
@@ -1455,7 +1852,9 @@ unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
             let wg: [__m256i; 2] = core::array::from_fn(|h| {
                 if Q4 {
                     // SAFETY: vb holds 2 x 64 bytes; 64 (g % 2) + 32 h + 32 <= 128.
-                    let v = unsafe { _mm256_loadu_si256(vb.as_ptr().add(64 * (g % 2) + 32 * h) as *const __m256i) };
+                    let v = unsafe {
+                        _mm256_loadu_si256(vb.as_ptr().add(64 * (g % 2) + 32 * h) as *const __m256i)
+                    };
                     if g < 2 {
                         _mm256_and_si256(v, low)
                     } else {
@@ -1463,17 +1862,27 @@ unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
                     }
                 } else {
                     // SAFETY: vb holds 4 x 64 bytes; 64 g + 32 h + 32 <= 256.
-                    unsafe { _mm256_loadu_si256(vb.as_ptr().add(64 * g + 32 * h) as *const __m256i) }
+                    unsafe {
+                        _mm256_loadu_si256(vb.as_ptr().add(64 * g + 32 * h) as *const __m256i)
+                    }
                 }
             });
-            let uw = if Q4 { wg } else { wg.map(|v| _mm256_sign_epi8(v, v)) };
+            let uw = if Q4 {
+                wg
+            } else {
+                wg.map(|v| _mm256_sign_epi8(v, v))
+            };
             for (m, dm) in dp.iter_mut().enumerate() {
                 let xs = &xq[m][b * Q8_BLOCK + 8 * g..b * Q8_BLOCK + 8 * g + 8];
                 // SAFETY: xs holds 8 bytes.
-                let xg = _mm256_set1_epi64x(unsafe { (xs.as_ptr() as *const i64).read_unaligned() });
+                let xg =
+                    _mm256_set1_epi64x(unsafe { (xs.as_ptr() as *const i64).read_unaligned() });
                 for h in 0..2 {
                     let sx = if Q4 { xg } else { _mm256_sign_epi8(xg, wg[h]) };
-                    dm[h] = _mm256_add_epi32(dm[h], _mm256_madd_epi16(_mm256_maddubs_epi16(uw[h], sx), ones));
+                    dm[h] = _mm256_add_epi32(
+                        dm[h],
+                        _mm256_madd_epi16(_mm256_maddubs_epi16(uw[h], sx), ones),
+                    );
                 }
             }
         }
@@ -1481,13 +1890,22 @@ unsafe fn packed_avx2<const K: usize, const Q4: bool>(w: super::PackedQ8<'_>, xq
             // Lanes: the block sums of rows 0, 1, 4, 5 | 2, 3, 6, 7.
             let sums = _mm256_hadd_epi32(dp[m][0], dp[m][1]);
             let a = &mut am[b % 2];
-            *a = _mm256_fmadd_ps(_mm256_cvtepi32_ps(sums), _mm256_mul_ps(sv, _mm256_set1_ps(xd[m][b])), *a);
+            *a = _mm256_fmadd_ps(
+                _mm256_cvtepi32_ps(sums),
+                _mm256_mul_ps(sv, _mm256_set1_ps(xd[m][b])),
+                *a,
+            );
         }
     }
     let mut out = [[0.0f32; 8]; K];
     for (o, a) in out.iter_mut().zip(acc) {
         // SAFETY: o holds 8 floats.
-        unsafe { _mm256_storeu_ps(o.as_mut_ptr(), _mm256_permutevar8x32_ps(_mm256_add_ps(a[0], a[1]), order)) };
+        unsafe {
+            _mm256_storeu_ps(
+                o.as_mut_ptr(),
+                _mm256_permutevar8x32_ps(_mm256_add_ps(a[0], a[1]), order),
+            )
+        };
     }
     out
 }
@@ -1509,7 +1927,9 @@ pub unsafe fn q8_pack8(rows: [&[u8]; 8], nb: usize, v: &mut [u8], s: &mut [u8]) 
             // SAFETY: q holds exactly 32 bytes.
             unsafe { _mm256_loadu_si256(q.as_ptr() as *const __m256i) }
         });
-        let z: [__m512i; 4] = core::array::from_fn(|i| _mm512_inserti64x4::<1>(_mm512_castsi256_si512(r[2 * i]), r[2 * i + 1]));
+        let z: [__m512i; 4] = core::array::from_fn(|i| {
+            _mm512_inserti64x4::<1>(_mm512_castsi256_si512(r[2 * i]), r[2 * i + 1])
+        });
         let a = _mm512_permutex2var_epi64(z[0], ia, z[1]);
         let bq = _mm512_permutex2var_epi64(z[0], ib, z[1]);
         let c = _mm512_permutex2var_epi64(z[2], ia, z[3]);
@@ -1573,7 +1993,9 @@ pub unsafe fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32
 #[target_feature(enable = "avx2,fma,f16c")]
 unsafe fn axpy_rows_f16_from(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32], e0: usize) {
     // SAFETY: as in `axpy_rows_f32_from` (8 u16 = 128 bits at e).
-    let load = |row: &[u16], e: usize| unsafe { _mm256_cvtph_ps(_mm_loadu_si128(row.as_ptr().add(e) as *const __m128i)) };
+    let load = |row: &[u16], e: usize| unsafe {
+        _mm256_cvtph_ps(_mm_loadu_si128(row.as_ptr().add(e) as *const __m128i))
+    };
     // SAFETY: this fn's contract.
     unsafe { axpy_rows_by(coef, w, stride, y, e0, load, super::f16_to_f32) }
 }
@@ -1600,7 +2022,9 @@ pub unsafe fn axpy_rows_512_f32(coef: &[f32], x: &[f32], stride: usize, y: &mut 
 #[target_feature(enable = "avx512f,avx2,fma,f16c")]
 pub unsafe fn axpy_rows_512_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
     // SAFETY: as in `axpy_rows_512_f32` (16 u16 = 256 bits at e).
-    let load = |row: &[u16], e: usize| unsafe { _mm512_cvtph_ps(_mm256_loadu_si256(row.as_ptr().add(e) as *const __m256i)) };
+    let load = |row: &[u16], e: usize| unsafe {
+        _mm512_cvtph_ps(_mm256_loadu_si256(row.as_ptr().add(e) as *const __m256i))
+    };
     // SAFETY: this fn's contract.
     let done = unsafe { axpy_rows_512_by(coef, w, stride, y, load) };
     // SAFETY: as above.
@@ -1615,14 +2039,21 @@ pub unsafe fn axpy_rows_512_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut 
 /// The CPU must support avx512f; `load(row, e)` must be sound for `e + 16 <= row.len()`.
 #[inline]
 #[target_feature(enable = "avx512f")]
-unsafe fn axpy_rows_512_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: &mut [f32], load: impl Fn(&[E], usize) -> __m512) -> usize {
+unsafe fn axpy_rows_512_by<E: Copy>(
+    coef: &[f32],
+    rows: &[E],
+    stride: usize,
+    y: &mut [f32],
+    load: impl Fn(&[E], usize) -> __m512,
+) -> usize {
     let n = y.len();
     let nk = super::scalar::whole_rows(coef.len(), rows.len(), stride, n);
     let n8 = n - n % 8;
     let mut e = 0;
     while e + 64 <= n8 {
         // SAFETY: lanes e .. e + 64 of y (<= n).
-        let mut acc: [__m512; 4] = core::array::from_fn(|t| unsafe { _mm512_loadu_ps(y.as_ptr().add(e + 16 * t)) });
+        let mut acc: [__m512; 4] =
+            core::array::from_fn(|t| unsafe { _mm512_loadu_ps(y.as_ptr().add(e + 16 * t)) });
         for (j, &a) in coef.iter().enumerate().take(nk) {
             let (r, av) = (&rows[j * stride..j * stride + n], _mm512_set1_ps(a));
             for (t, acc) in acc.iter_mut().enumerate() {
@@ -1648,16 +2079,49 @@ unsafe fn axpy_rows_512_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: 
 /// The CPU must support avx512f, avx2 and fma.
 #[target_feature(enable = "avx512f,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn axpy_rows_512_group_f32(coef: &[f32], coef_stride: usize, nk: usize, x: &[f32], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
+pub unsafe fn axpy_rows_512_group_f32(
+    coef: &[f32],
+    coef_stride: usize,
+    nk: usize,
+    x: &[f32],
+    stride: usize,
+    y: &mut [f32],
+    y_stride: usize,
+    n: usize,
+    g: usize,
+    side: &[u8],
+) {
     // SAFETY: `row` holds n floats and `e + 16 <= n` (axpy_rows_512_group_by's contract).
     let load = |row: &[f32], e: usize| unsafe { _mm512_loadu_ps(row.as_ptr().add(e)) };
     // SAFETY: this fn's contract.
-    let done = unsafe { axpy_rows_512_group_by(coef, coef_stride, nk, x, stride, y, y_stride, n, g, load, side) };
+    let done = unsafe {
+        axpy_rows_512_group_by(
+            coef,
+            coef_stride,
+            nk,
+            x,
+            stride,
+            y,
+            y_stride,
+            n,
+            g,
+            load,
+            side,
+        )
+    };
     // Lanes past the 64-lane blocks (none for 64-lane heads) per query.
     for m in 0..if done < n { g } else { 0 } {
         let ym = &mut y[m * y_stride..m * y_stride + n];
         // SAFETY: as above; lanes from `done` on take the 256-bit body.
-        unsafe { axpy_rows_f32_from(&coef[m * coef_stride..m * coef_stride + nk], x, stride, ym, done) };
+        unsafe {
+            axpy_rows_f32_from(
+                &coef[m * coef_stride..m * coef_stride + nk],
+                x,
+                stride,
+                ym,
+                done,
+            )
+        };
     }
 }
 
@@ -1668,16 +2132,51 @@ pub unsafe fn axpy_rows_512_group_f32(coef: &[f32], coef_stride: usize, nk: usiz
 /// The CPU must support avx512f, avx2, fma and f16c.
 #[target_feature(enable = "avx512f,avx2,fma,f16c")]
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn axpy_rows_512_group_f16(coef: &[f32], coef_stride: usize, nk: usize, w: &[u16], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, side: &[u8]) {
+pub unsafe fn axpy_rows_512_group_f16(
+    coef: &[f32],
+    coef_stride: usize,
+    nk: usize,
+    w: &[u16],
+    stride: usize,
+    y: &mut [f32],
+    y_stride: usize,
+    n: usize,
+    g: usize,
+    side: &[u8],
+) {
     // SAFETY: as in `axpy_rows_512_group_f32` (16 u16 = 256 bits at e).
-    let load = |row: &[u16], e: usize| unsafe { _mm512_cvtph_ps(_mm256_loadu_si256(row.as_ptr().add(e) as *const __m256i)) };
+    let load = |row: &[u16], e: usize| unsafe {
+        _mm512_cvtph_ps(_mm256_loadu_si256(row.as_ptr().add(e) as *const __m256i))
+    };
     // SAFETY: this fn's contract.
-    let done = unsafe { axpy_rows_512_group_by(coef, coef_stride, nk, w, stride, y, y_stride, n, g, load, side) };
+    let done = unsafe {
+        axpy_rows_512_group_by(
+            coef,
+            coef_stride,
+            nk,
+            w,
+            stride,
+            y,
+            y_stride,
+            n,
+            g,
+            load,
+            side,
+        )
+    };
     // Lanes past the 64-lane blocks (none for 64-lane heads) per query.
     for m in 0..if done < n { g } else { 0 } {
         let ym = &mut y[m * y_stride..m * y_stride + n];
         // SAFETY: as above.
-        unsafe { axpy_rows_f16_from(&coef[m * coef_stride..m * coef_stride + nk], w, stride, ym, done) };
+        unsafe {
+            axpy_rows_f16_from(
+                &coef[m * coef_stride..m * coef_stride + nk],
+                w,
+                stride,
+                ym,
+                done,
+            )
+        };
     }
 }
 
@@ -1690,7 +2189,19 @@ pub unsafe fn axpy_rows_512_group_f16(coef: &[f32], coef_stride: usize, nk: usiz
 #[allow(clippy::too_many_arguments)]
 #[inline]
 #[target_feature(enable = "avx512f")]
-unsafe fn axpy_rows_512_group_by<E: Copy>(coef: &[f32], coef_stride: usize, nk: usize, rows: &[E], stride: usize, y: &mut [f32], y_stride: usize, n: usize, g: usize, load: impl Fn(&[E], usize) -> __m512 + Copy, side: &[u8]) -> usize {
+unsafe fn axpy_rows_512_group_by<E: Copy>(
+    coef: &[f32],
+    coef_stride: usize,
+    nk: usize,
+    rows: &[E],
+    stride: usize,
+    y: &mut [f32],
+    y_stride: usize,
+    n: usize,
+    g: usize,
+    load: impl Fn(&[E], usize) -> __m512 + Copy,
+    side: &[u8],
+) -> usize {
     if n == 0 {
         return 0;
     }
@@ -1706,11 +2217,71 @@ unsafe fn axpy_rows_512_group_by<E: Copy>(coef: &[f32], coef_stride: usize, nk: 
         // SAFETY: this fn's contract.
         unsafe {
             match gm {
-                5 => axpy_block::<5, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
-                4 => axpy_block::<4, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
-                3 => axpy_block::<3, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
-                2 => axpy_block::<2, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
-                _ => axpy_block::<1, E>(coef, coef_stride, nk, rows, stride, y, y_stride, n, done, load, side),
+                5 => axpy_block::<5, E>(
+                    coef,
+                    coef_stride,
+                    nk,
+                    rows,
+                    stride,
+                    y,
+                    y_stride,
+                    n,
+                    done,
+                    load,
+                    side,
+                ),
+                4 => axpy_block::<4, E>(
+                    coef,
+                    coef_stride,
+                    nk,
+                    rows,
+                    stride,
+                    y,
+                    y_stride,
+                    n,
+                    done,
+                    load,
+                    side,
+                ),
+                3 => axpy_block::<3, E>(
+                    coef,
+                    coef_stride,
+                    nk,
+                    rows,
+                    stride,
+                    y,
+                    y_stride,
+                    n,
+                    done,
+                    load,
+                    side,
+                ),
+                2 => axpy_block::<2, E>(
+                    coef,
+                    coef_stride,
+                    nk,
+                    rows,
+                    stride,
+                    y,
+                    y_stride,
+                    n,
+                    done,
+                    load,
+                    side,
+                ),
+                _ => axpy_block::<1, E>(
+                    coef,
+                    coef_stride,
+                    nk,
+                    rows,
+                    stride,
+                    y,
+                    y_stride,
+                    n,
+                    done,
+                    load,
+                    side,
+                ),
             }
         }
         m0 += gm;
@@ -1727,13 +2298,29 @@ unsafe fn axpy_rows_512_group_by<E: Copy>(coef: &[f32], coef_stride: usize, nk: 
 #[allow(clippy::too_many_arguments)]
 #[inline]
 #[target_feature(enable = "avx512f")]
-unsafe fn axpy_block<const G: usize, E: Copy>(coef: &[f32], coef_stride: usize, nk: usize, rows: &[E], stride: usize, y: &mut [f32], y_stride: usize, n: usize, done: usize, load: impl Fn(&[E], usize) -> __m512, side: &[u8]) {
+unsafe fn axpy_block<const G: usize, E: Copy>(
+    coef: &[f32],
+    coef_stride: usize,
+    nk: usize,
+    rows: &[E],
+    stride: usize,
+    y: &mut [f32],
+    y_stride: usize,
+    n: usize,
+    done: usize,
+    load: impl Fn(&[E], usize) -> __m512,
+    side: &[u8],
+) {
     let coef = &coef[..(G - 1) * coef_stride + nk];
     let y = &mut y[..(G - 1) * y_stride + n];
     let mut e = 0;
     while e + 64 <= done {
         // SAFETY: lanes e .. e + 64 <= n of row m of y.
-        let mut acc: [[__m512; 4]; G] = core::array::from_fn(|m| core::array::from_fn(|t| unsafe { _mm512_loadu_ps(y.as_ptr().add(m * y_stride + e + 16 * t)) }));
+        let mut acc: [[__m512; 4]; G] = core::array::from_fn(|m| {
+            core::array::from_fn(|t| unsafe {
+                _mm512_loadu_ps(y.as_ptr().add(m * y_stride + e + 16 * t))
+            })
+        });
         for j in 0..nk {
             if j + KEY_PREFETCH < nk {
                 let a = (j + KEY_PREFETCH) * stride + e;
@@ -1773,7 +2360,15 @@ unsafe fn axpy_block<const G: usize, E: Copy>(coef: &[f32], coef_stride: usize, 
 /// The CPU must support avx2 and fma; `load` must be sound for such `e`.
 #[inline]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn axpy_rows_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: &mut [f32], e0: usize, load: impl Fn(&[E], usize) -> __m256, widen: impl Fn(E) -> f32) {
+unsafe fn axpy_rows_by<E: Copy>(
+    coef: &[f32],
+    rows: &[E],
+    stride: usize,
+    y: &mut [f32],
+    e0: usize,
+    load: impl Fn(&[E], usize) -> __m256,
+    widen: impl Fn(E) -> f32,
+) {
     let n = y.len();
     let nk = super::scalar::whole_rows(coef.len(), rows.len(), stride, n);
     let n8 = n - n % 8;
@@ -1781,7 +2376,8 @@ unsafe fn axpy_rows_by<E: Copy>(coef: &[f32], rows: &[E], stride: usize, y: &mut
     let mut e = e0.min(n8);
     while e + 64 <= n8 {
         // SAFETY: lanes e .. e + 64 of y (<= n).
-        let mut acc: [__m256; 8] = core::array::from_fn(|t| unsafe { _mm256_loadu_ps(y.as_ptr().add(e + 8 * t)) });
+        let mut acc: [__m256; 8] =
+            core::array::from_fn(|t| unsafe { _mm256_loadu_ps(y.as_ptr().add(e + 8 * t)) });
         for (j, &a) in coef.iter().enumerate().take(nk) {
             let (r, av) = (row(j), _mm256_set1_ps(a));
             for (t, acc) in acc.iter_mut().enumerate() {
@@ -1828,7 +2424,10 @@ pub unsafe fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
         // SAFETY: 8 u16 (128 bits) and 8 floats.
         unsafe {
             let wv = _mm256_cvtph_ps(_mm_loadu_si128(wc.as_ptr() as *const __m128i));
-            _mm256_storeu_ps(yc.as_mut_ptr(), _mm256_fmadd_ps(av, wv, _mm256_loadu_ps(yc.as_ptr())));
+            _mm256_storeu_ps(
+                yc.as_mut_ptr(),
+                _mm256_fmadd_ps(av, wv, _mm256_loadu_ps(yc.as_ptr())),
+            );
         }
     }
     for (yi, wi) in y1.iter_mut().zip(w1) {
@@ -1848,7 +2447,10 @@ unsafe fn exp8(x: __m256) -> __m256 {
     // min(HI, x) keeps a NaN x (the second operand is returned on NaN).
     let x = _mm256_min_ps(_mm256_set1_ps(HI), x);
     let below = _mm256_cmp_ps::<_CMP_LT_OQ>(x, _mm256_set1_ps(LO));
-    let fx = _mm256_floor_ps(_mm256_add_ps(_mm256_mul_ps(x, _mm256_set1_ps(LOG2E)), _mm256_set1_ps(0.5)));
+    let fx = _mm256_floor_ps(_mm256_add_ps(
+        _mm256_mul_ps(x, _mm256_set1_ps(LOG2E)),
+        _mm256_set1_ps(0.5),
+    ));
     let r = _mm256_sub_ps(x, _mm256_mul_ps(fx, _mm256_set1_ps(C1)));
     let r = _mm256_sub_ps(r, _mm256_mul_ps(fx, _mm256_set1_ps(C2)));
     let z = _mm256_mul_ps(r, r);
@@ -1858,7 +2460,10 @@ unsafe fn exp8(x: __m256) -> __m256 {
     }
     let y = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(y, z), r), _mm256_set1_ps(1.0));
     let n = _mm256_cvtps_epi32(fx);
-    let pow2n = _mm256_castsi256_ps(_mm256_slli_epi32::<23>(_mm256_add_epi32(n, _mm256_set1_epi32(127))));
+    let pow2n = _mm256_castsi256_ps(_mm256_slli_epi32::<23>(_mm256_add_epi32(
+        n,
+        _mm256_set1_epi32(127),
+    )));
     _mm256_andnot_ps(below, _mm256_mul_ps(y, pow2n))
 }
 
@@ -1875,7 +2480,10 @@ unsafe fn exp16(x: __m512) -> __m512 {
     // min(HI, x) keeps a NaN x (the second operand is returned on NaN).
     let x = _mm512_min_ps(_mm512_set1_ps(HI), x);
     let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(x, _mm512_set1_ps(LO));
-    let fx = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(_mm512_add_ps(_mm512_mul_ps(x, _mm512_set1_ps(LOG2E)), _mm512_set1_ps(0.5)));
+    let fx = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(_mm512_add_ps(
+        _mm512_mul_ps(x, _mm512_set1_ps(LOG2E)),
+        _mm512_set1_ps(0.5),
+    ));
     let r = _mm512_sub_ps(x, _mm512_mul_ps(fx, _mm512_set1_ps(C1)));
     let r = _mm512_sub_ps(r, _mm512_mul_ps(fx, _mm512_set1_ps(C2)));
     let z = _mm512_mul_ps(r, r);
@@ -1885,7 +2493,10 @@ unsafe fn exp16(x: __m512) -> __m512 {
     }
     let y = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(y, z), r), _mm512_set1_ps(1.0));
     let n = _mm512_cvtps_epi32(fx);
-    let pow2n = _mm512_castsi512_ps(_mm512_slli_epi32::<23>(_mm512_add_epi32(n, _mm512_set1_epi32(127))));
+    let pow2n = _mm512_castsi512_ps(_mm512_slli_epi32::<23>(_mm512_add_epi32(
+        n,
+        _mm512_set1_epi32(127),
+    )));
     _mm512_maskz_mov_ps(!below, _mm512_mul_ps(y, pow2n))
 }
 
@@ -1908,7 +2519,10 @@ pub unsafe fn exp_shifted_sum_512(s: &mut [f32], max: f32) -> f32 {
             let e = exp16(_mm512_sub_ps(_mm512_loadu_ps(c.as_ptr()), m));
             _mm512_storeu_ps(c.as_mut_ptr(), e);
             acc = _mm256_add_ps(acc, _mm512_castps512_ps256(e));
-            acc = _mm256_add_ps(acc, _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(e))));
+            acc = _mm256_add_ps(
+                acc,
+                _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(e))),
+            );
         }
     }
     let mut t = 0.0f32;
@@ -1916,7 +2530,12 @@ pub unsafe fn exp_shifted_sum_512(s: &mut [f32], max: f32) -> f32 {
         let k = lanes16(rest.len());
         let mut e = [0f32; 16];
         // SAFETY: masked lanes < rest.len() of rest; e holds 16 floats.
-        unsafe { _mm512_storeu_ps(e.as_mut_ptr(), exp16(_mm512_sub_ps(_mm512_maskz_loadu_ps(k, rest.as_ptr()), m))) };
+        unsafe {
+            _mm512_storeu_ps(
+                e.as_mut_ptr(),
+                exp16(_mm512_sub_ps(_mm512_maskz_loadu_ps(k, rest.as_ptr()), m)),
+            )
+        };
         rest.copy_from_slice(&e[..rest.len()]);
         let whole = if rest.len() >= 8 { 8 } else { 0 };
         if whole == 8 {
@@ -1982,7 +2601,12 @@ pub unsafe fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
         let mut pad = [0f32; 8];
         pad[..tail.len()].copy_from_slice(tail);
         // SAFETY: pad holds 8 floats.
-        unsafe { _mm256_storeu_ps(pad.as_mut_ptr(), exp8(_mm256_sub_ps(_mm256_loadu_ps(pad.as_ptr()), m))) };
+        unsafe {
+            _mm256_storeu_ps(
+                pad.as_mut_ptr(),
+                exp8(_mm256_sub_ps(_mm256_loadu_ps(pad.as_ptr()), m)),
+            )
+        };
         for (v, &e) in tail.iter_mut().zip(&pad) {
             *v = e;
             t += e;
@@ -2028,8 +2652,14 @@ pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [
     for i in (0..body).step_by(8) {
         // SAFETY: i + 8 <= body <= n, the length of all four slices.
         unsafe {
-            let t = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(x.as_ptr().add(i)), m), iv), _mm256_loadu_ps(w.as_ptr().add(i)));
-            _mm256_storeu_ps(y.as_mut_ptr().add(i), _mm256_add_ps(t, _mm256_loadu_ps(b.as_ptr().add(i))));
+            let t = _mm256_mul_ps(
+                _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(x.as_ptr().add(i)), m), iv),
+                _mm256_loadu_ps(w.as_ptr().add(i)),
+            );
+            _mm256_storeu_ps(
+                y.as_mut_ptr().add(i),
+                _mm256_add_ps(t, _mm256_loadu_ps(b.as_ptr().add(i))),
+            );
         }
     }
     ln_affine(x, w, b, mean, inv, y, body);
@@ -2053,7 +2683,10 @@ pub unsafe fn gelu_inplace(x: &mut [f32]) {
             let u = _mm256_mul_ps(xv, _mm256_set1_ps(core::f32::consts::FRAC_1_SQRT_2));
             let neg = _mm256_cmp_ps::<_CMP_LT_OQ>(u, _mm256_setzero_ps());
             let a = _mm256_blendv_ps(u, _mm256_xor_ps(u, sign), neg);
-            let t = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_add_ps(_mm256_set1_ps(1.0), _mm256_mul_ps(_mm256_set1_ps(P), a)));
+            let t = _mm256_div_ps(
+                _mm256_set1_ps(1.0),
+                _mm256_add_ps(_mm256_set1_ps(1.0), _mm256_mul_ps(_mm256_set1_ps(P), a)),
+            );
             let mut y = _mm256_set1_ps(A[0]);
             for &cf in &A[1..] {
                 y = _mm256_add_ps(_mm256_mul_ps(y, t), _mm256_set1_ps(cf));
@@ -2061,7 +2694,10 @@ pub unsafe fn gelu_inplace(x: &mut [f32]) {
             let e = exp8(_mm256_xor_ps(_mm256_mul_ps(a, a), sign));
             let e = _mm256_sub_ps(_mm256_set1_ps(1.0), _mm256_mul_ps(_mm256_mul_ps(y, t), e));
             let erf = _mm256_blendv_ps(e, _mm256_xor_ps(e, sign), neg);
-            let g = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(0.5), xv), _mm256_add_ps(_mm256_set1_ps(1.0), erf));
+            let g = _mm256_mul_ps(
+                _mm256_mul_ps(_mm256_set1_ps(0.5), xv),
+                _mm256_add_ps(_mm256_set1_ps(1.0), erf),
+            );
             _mm256_storeu_ps(c.as_mut_ptr(), g);
         }
     }
@@ -2084,7 +2720,10 @@ pub unsafe fn gelu_inplace_512(x: &mut [f32]) {
     for c in &mut pairs {
         // SAFETY: c holds 32 floats.
         unsafe {
-            let (a, b) = (_mm512_loadu_ps(c.as_ptr()), _mm512_loadu_ps(c.as_ptr().add(16)));
+            let (a, b) = (
+                _mm512_loadu_ps(c.as_ptr()),
+                _mm512_loadu_ps(c.as_ptr().add(16)),
+            );
             let (ga, gb) = (gelu16(a), gelu16(b));
             _mm512_storeu_ps(c.as_mut_ptr(), ga);
             _mm512_storeu_ps(c.as_mut_ptr().add(16), gb);
@@ -2093,7 +2732,13 @@ pub unsafe fn gelu_inplace_512(x: &mut [f32]) {
     for c in pairs.into_remainder().chunks_mut(16) {
         let m = lanes16(c.len());
         // SAFETY: masked lanes < c.len() of c only.
-        unsafe { _mm512_mask_storeu_ps(c.as_mut_ptr(), m, gelu16(_mm512_maskz_loadu_ps(m, c.as_ptr()))) };
+        unsafe {
+            _mm512_mask_storeu_ps(
+                c.as_mut_ptr(),
+                m,
+                gelu16(_mm512_maskz_loadu_ps(m, c.as_ptr())),
+            )
+        };
     }
 }
 
@@ -2132,7 +2777,10 @@ pub(super) fn gelu16(xv: __m512) -> __m512 {
     let u = _mm512_mul_ps(xv, _mm512_set1_ps(core::f32::consts::FRAC_1_SQRT_2));
     let neg = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(u, _mm512_setzero_ps());
     let a = _mm512_mask_blend_ps(neg, u, flip(u));
-    let t = _mm512_div_ps(_mm512_set1_ps(1.0), _mm512_add_ps(_mm512_set1_ps(1.0), _mm512_mul_ps(_mm512_set1_ps(P), a)));
+    let t = _mm512_div_ps(
+        _mm512_set1_ps(1.0),
+        _mm512_add_ps(_mm512_set1_ps(1.0), _mm512_mul_ps(_mm512_set1_ps(P), a)),
+    );
     let mut y = _mm512_set1_ps(A[0]);
     for &cf in &A[1..] {
         y = _mm512_add_ps(_mm512_mul_ps(y, t), _mm512_set1_ps(cf));
@@ -2141,7 +2789,10 @@ pub(super) fn gelu16(xv: __m512) -> __m512 {
     let e = unsafe { exp16(flip(_mm512_mul_ps(a, a))) };
     let e = _mm512_sub_ps(_mm512_set1_ps(1.0), _mm512_mul_ps(_mm512_mul_ps(y, t), e));
     let erf = _mm512_mask_blend_ps(neg, e, flip(e));
-    _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(0.5), xv), _mm512_add_ps(_mm512_set1_ps(1.0), erf))
+    _mm512_mul_ps(
+        _mm512_mul_ps(_mm512_set1_ps(0.5), xv),
+        _mm512_add_ps(_mm512_set1_ps(1.0), erf),
+    )
 }
 
 /// See [`super::narrow_f16`]: `vcvtps2ph` (round to nearest even) on 8
@@ -2155,7 +2806,12 @@ pub unsafe fn narrow_f16(src: &[f32], dst: &mut [u16]) {
     let n8 = n - n % 8;
     for (s, d) in src[..n8].chunks_exact(8).zip(dst[..n8].chunks_exact_mut(8)) {
         // SAFETY: s and d hold 8 values each.
-        unsafe { _mm_storeu_si128(d.as_mut_ptr() as *mut __m128i, _mm256_cvtps_ph::<_MM_FROUND_TO_NEAREST_INT>(_mm256_loadu_ps(s.as_ptr()))) };
+        unsafe {
+            _mm_storeu_si128(
+                d.as_mut_ptr() as *mut __m128i,
+                _mm256_cvtps_ph::<_MM_FROUND_TO_NEAREST_INT>(_mm256_loadu_ps(s.as_ptr())),
+            )
+        };
     }
     super::scalar::narrow_f16(&src[n8..n], &mut dst[n8..n]);
 }
@@ -2173,7 +2829,12 @@ pub unsafe fn widen_f16(src: &[u16], dst: &mut [f32]) {
     let (d8, d1) = dst.split_at_mut(n8);
     for (s, d) in s8.chunks_exact(8).zip(d8.chunks_exact_mut(8)) {
         // SAFETY: s holds 8 u16 (128 bits), d 8 floats.
-        unsafe { _mm256_storeu_ps(d.as_mut_ptr(), _mm256_cvtph_ps(_mm_loadu_si128(s.as_ptr() as *const __m128i))) };
+        unsafe {
+            _mm256_storeu_ps(
+                d.as_mut_ptr(),
+                _mm256_cvtph_ps(_mm_loadu_si128(s.as_ptr() as *const __m128i)),
+            )
+        };
     }
     super::scalar::widen_f16(s1, d1);
 }

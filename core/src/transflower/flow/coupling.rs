@@ -39,8 +39,17 @@ impl<'s> CouplingScratch<'s> {
         let h = cfg.output_length as usize;
         let c = cfg.channels();
         let cc = cfg.change_channels();
-        let seq = cfg.coupling_rows().checked_mul(cfg.coupling_in()).ok_or(ArenaError::Overflow)?;
-        Ok(CouplingScratch { xt: a.f32(h * (c - cc))?, seq: a.f32(seq)?, y: a.f32(h * 2 * cc)?, a: a.f32(cc * h)?, t: a.f32(cc * h)? })
+        let seq = cfg
+            .coupling_rows()
+            .checked_mul(cfg.coupling_in())
+            .ok_or(ArenaError::Overflow)?;
+        Ok(CouplingScratch {
+            xt: a.f32(h * (c - cc))?,
+            seq: a.f32(seq)?,
+            y: a.f32(h * 2 * cc)?,
+            a: a.f32(cc * h)?,
+            t: a.f32(cc * h)?,
+        })
     }
 }
 
@@ -56,7 +65,16 @@ fn sigmoid(x: f32) -> f32 {
 /// Reverses coupling module `k` on `x` (C, H) in place given `cond`
 /// (cond_len, D).
 #[allow(clippy::too_many_arguments)]
-pub fn reverse(cfg: &TransflowerConfig, w: &CouplingW<'_>, k: u32, x: &mut [f32], cond: &[f32], net: &mut TransformerScratch<'_>, s: &mut CouplingScratch<'_>, probe: &mut dyn FnMut(Probe, &[f32])) {
+pub fn reverse(
+    cfg: &TransflowerConfig,
+    w: &CouplingW<'_>,
+    k: u32,
+    x: &mut [f32],
+    cond: &[f32],
+    net: &mut TransformerScratch<'_>,
+    s: &mut CouplingScratch<'_>,
+    probe: &mut dyn FnMut(Probe, &[f32]),
+) {
     let h = cfg.output_length as usize;
     let c = cfg.channels();
     let cc = cfg.change_channels();

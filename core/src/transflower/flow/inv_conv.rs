@@ -39,7 +39,9 @@ pub fn inverse_weight(conv: &InvConvW<'_>, c: usize, s: &mut InverseScratch<'_>,
                 1.0
             } else {
                 let row = &conv.l[i * c + j..i * c + i];
-                -row.iter().zip(&col[j..i]).fold(0.0f64, |acc, (&l, &x)| acc + l as f64 * x)
+                -row.iter()
+                    .zip(&col[j..i])
+                    .fold(0.0f64, |acc, (&l, &x)| acc + l as f64 * x)
             };
         }
         for i in 0..c {
@@ -56,7 +58,10 @@ pub fn inverse_weight(conv: &InvConvW<'_>, c: usize, s: &mut InverseScratch<'_>,
                 1.0 / diag(j)
             } else {
                 let row = &conv.u[i * c + i + 1..=i * c + j];
-                -row.iter().zip(&col[i + 1..=j]).fold(0.0f64, |acc, (&u, &x)| acc + u as f64 * x) / diag(i)
+                -row.iter()
+                    .zip(&col[i + 1..=j])
+                    .fold(0.0f64, |acc, (&u, &x)| acc + u as f64 * x)
+                    / diag(i)
             };
         }
         for i in 0..c {
@@ -65,7 +70,10 @@ pub fn inverse_weight(conv: &InvConvW<'_>, c: usize, s: &mut InverseScratch<'_>,
     }
     // L^-1 p^-1 = L^-1 p^T: column j is L^-1's column pi(j), where p[j, pi(j)] = 1.
     for j in 0..c {
-        let pj = conv.p[j * c..(j + 1) * c].iter().position(|&v| v == 1.0).unwrap_or(j);
+        let pj = conv.p[j * c..(j + 1) * c]
+            .iter()
+            .position(|&v| v == 1.0)
+            .unwrap_or(j);
         for i in 0..c {
             col[i] = li[i * c + pj] as f64;
         }

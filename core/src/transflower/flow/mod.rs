@@ -30,20 +30,40 @@ pub struct FlowScratch<'s> {
 
 impl<'s> FlowScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &TransflowerConfig) -> Result<Self, ArenaError> {
-        Ok(FlowScratch { coupling: CouplingScratch::carve(a, cfg)?, tmp: a.f32(cfg.channels() * cfg.output_length as usize)? })
+        Ok(FlowScratch {
+            coupling: CouplingScratch::carve(a, cfg)?,
+            tmp: a.f32(cfg.channels() * cfg.output_length as usize)?,
+        })
     }
 }
 
 /// `x` (C, H): the base sample in, the flow's sample out. `inv_w`
 /// (S, C, C): every step's reverse 1x1 weight ([`inv_conv::inverse_weight`]).
 /// `cond` (cond_len, D).
-pub fn reverse(model: &Model<'_>, inv_w: &[f32], x: &mut [f32], cond: &[f32], net: &mut TransformerScratch<'_>, s: &mut FlowScratch<'_>, probe: &mut dyn FnMut(Probe, &[f32])) {
+pub fn reverse(
+    model: &Model<'_>,
+    inv_w: &[f32],
+    x: &mut [f32],
+    cond: &[f32],
+    net: &mut TransformerScratch<'_>,
+    s: &mut FlowScratch<'_>,
+    probe: &mut dyn FnMut(Probe, &[f32]),
+) {
     let cfg = &model.cfg;
     let h = cfg.output_length as usize;
     let c = cfg.channels();
     for (j, step) in model.flow.iter().enumerate().rev() {
         let (norm_k, conv_k, coupling_k) = step_modules(cfg, j as u32);
-        coupling::reverse(cfg, &step.coupling, coupling_k, x, cond, net, &mut s.coupling, probe);
+        coupling::reverse(
+            cfg,
+            &step.coupling,
+            coupling_k,
+            x,
+            cond,
+            net,
+            &mut s.coupling,
+            probe,
+        );
         probe(Probe::FlowModule(coupling_k), x);
         inv_conv::apply(&inv_w[j * c * c..(j + 1) * c * c], x, h, s.tmp);
         probe(Probe::FlowModule(conv_k), x);

@@ -19,7 +19,12 @@ pub fn reverse(w: &NormW<'_>, x: &mut [f32], h: usize) {
     }
     match *w {
         NormW::None => {}
-        NormW::BatchNorm { gamma, beta, mean, var } => {
+        NormW::BatchNorm {
+            gamma,
+            beta,
+            mean,
+            var,
+        } => {
             for (c, row) in x.chunks_exact_mut(h).enumerate() {
                 let inv_std = 1.0 / (libm::sqrtf(var[c]) + BATCHNORM_EPS);
                 for v in row {
