@@ -25,6 +25,7 @@ const ALLOWED: &[&str] = &[
     "core/src/kernels/simd/x86.rs",
     "core/src/kernels/simd/amx.rs",
     "core/src/kernels/simd/neon.rs",
+    "core/src/kernels/simd/peak.rs",
     "core/src/kernels/simd/tests.rs",
     "core/src/tests/simd.rs",
     "runtime/src/simd.rs",

@@ -107,6 +107,91 @@ pub fn init() -> Isa {
     isa
 }
 
+/// Whether this CPU runs the int8 MAC peak probe `p`
+/// (`duolando_core::kernels::simd::peak`).
+pub fn probe_supported(p: simd::peak::Probe) -> bool {
+    use simd::peak::Probe;
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::is_x86_feature_detected as has;
+        match p {
+            Probe::Scalar => true,
+            Probe::Avx2 => has!("avx2"),
+            Probe::Avx512Bw => has!("avx512f") && has!("avx512bw"),
+            Probe::Avx512Vnni => has!("avx512f") && has!("avx512bw") && has!("avx512vnni"),
+            Probe::AvxVnni => has!("avx2") && has!("avxvnni"),
+            Probe::NeonDot | Probe::NeonI8mm => false,
+        }
+    }
+    #[cfg(target_arch = "aarch64")]
+    {
+        use std::arch::is_aarch64_feature_detected as has;
+        match p {
+            Probe::Scalar => true,
+            Probe::NeonDot => cfg!(target_feature = "neon") && has!("dotprod"),
+            Probe::NeonI8mm => cfg!(target_feature = "neon") && has!("i8mm"),
+            _ => false,
+        }
+    }
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    {
+        let _ = p;
+        false
+    }
+}
+
+/// Runs the peak probe `p` for `iters` iterations (its checksum; see
+/// `simd::peak::run`); `None` where this CPU or build cannot run it.
+pub fn run_probe(p: simd::peak::Probe, iters: u64, o: &simd::peak::Operands) -> Option<i64> {
+    if !probe_supported(p) {
+        return None;
+    }
+    // SAFETY: `probe_supported` checked this CPU's features for `p`.
+    #[allow(unsafe_code)]
+    unsafe {
+        simd::peak::run(p, iters, o)
+    }
+}
+
+/// Selects the ISA named `name` (as [`parse`] reads it; `avx512amx`: AVX512-VNNI
+/// with the AMX tiles, which must be usable) for the whole process, whatever
+/// `DUOLANDO_ISA` says; AMX stays off for every other name. Refuses, by
+/// name, an ISA this CPU lacks (`duolando bench --isa`).
+pub fn select(name: &str) -> Result<Isa, String> {
+    let isa = parse(name).ok_or_else(|| format!("unknown ISA '{name}' (scalar, avx2, avx512, avx512vnni, avx512amx, neon, neondot)"))?;
+    let all = supported();
+    let amx = name.eq_ignore_ascii_case("avx512amx");
+    if !all.contains(&isa) || (amx && !amx_usable()) {
+        let names: Vec<&str> = all.iter().map(|&i| name_plain(i)).collect();
+        return Err(format!("ISA '{name}': this CPU does not have it (it has: {}{})", names.join(", "), if amx_usable() { ", avx512amx" } else { "" }));
+    }
+    SELECTED.store(true, Ordering::Release);
+    // SAFETY: `supported` listed `isa`: this CPU has every feature its
+    // kernels are compiled for.
+    #[allow(unsafe_code)]
+    unsafe { simd::set_isa(isa) };
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: AMX only where `amx_usable` checked the CPU bits and got the
+    // tile permission, and the ISA is Avx512Vnni (parse maps avx512amx to it).
+    #[allow(unsafe_code)]
+    unsafe {
+        simd::amx::enable(amx)
+    };
+    Ok(isa)
+}
+
+/// The lower-case name of an ISA, AMX aside.
+fn name_plain(isa: Isa) -> &'static str {
+    match isa {
+        Isa::Scalar => "scalar",
+        Isa::Avx2 => "avx2",
+        Isa::Avx512 => "avx512",
+        Isa::Avx512Vnni => "avx512vnni",
+        Isa::Neon => "neon",
+        Isa::NeonDot => "neondot",
+    }
+}
+
 /// Selects the detected kernels ([`init`]) unless a selection was already
 /// made in this process; returns the ISA running now. Called by every
 /// constructor of [`crate::model_file::ModelFile`], so that no std caller

@@ -12,9 +12,16 @@
 //! The int8 activation quantiser at the R step's and the S step's shapes
 //! comes first.
 //!
+//! Then (issue #40) the int8 multiply-accumulate peak of each ISA (the
+//! register-only probes of `simd::peak`) and each int8 GEMM shape the
+//! engine runs (R step, re-prefill chunk, 16 sessions, S step, LAT push:
+//! `duolando::kernel_bench::SHAPES`) through `linear` with `Q8Block32x8`
+//! weights, its GMAC/s and fraction of that ISA's peak, under every ISA
+//! (as `duolando bench --kernels`).
+//!
 //! `cargo bench -p duolando --bench kernels` (`-- quick` for fewer repeats,
 //! `-- attention` for the attention lines alone, `-- quantiser` for the
-//! quantiser's).
+//! quantiser's, `-- peak` for the peak and GEMM-shape lines alone).
 
 use std::time::Instant;
 
@@ -73,6 +80,27 @@ fn quantiser_lines(isas: &[Isa], reps: usize, r: &mut Rng) {
     duolando::simd::init();
 }
 
+/// The int8 MAC peak per probe this CPU runs, then per ISA its probe and
+/// every GEMM shape of `kernel_bench::SHAPES` with its fraction of it.
+fn peak_lines(isas: &[Isa], reps: usize, quick: bool) {
+    let cpu = duolando::kernel_bench::cpu_name();
+    let mut line = format!("int8 MAC peaks on {cpu} (register-only probes, 1 thread):");
+    for p in duolando::kernel_bench::probes() {
+        line += &format!("  {} {:.1} GMAC/s", p.name(), duolando::kernel_bench::peak_gmacs(p).expect("probe equals its twin"));
+    }
+    println!("{line}");
+    let weights = duolando::kernel_bench::Weights::new(quick);
+    for &isa in isas {
+        // SAFETY: `supported` lists only ISAs this CPU has.
+        unsafe { simd::set_isa(isa) };
+        let rep = duolando::kernel_bench::run(&weights, reps).expect("kernel bench");
+        for l in rep.lines(&format!("[{} | {cpu}] ", duolando::simd::describe())) {
+            println!("{l}");
+        }
+    }
+    duolando::simd::init();
+}
+
 fn main() {
     let quick = std::env::args().any(|a| a == "quick");
     let reps = if quick { 3 } else { 7 };
@@ -88,10 +116,17 @@ fn main() {
     let mut r = Rng(0x1234_5678);
     // The int8 activation quantiser (every int8 GEMM's input rows, once per call), per ISA.
     let only_quantiser = std::env::args().any(|a| a == "quantiser");
-    if !only_attention {
+    let only_peak = std::env::args().any(|a| a == "peak");
+    if !only_attention && !only_peak {
         quantiser_lines(&isas, reps, &mut r);
     }
     if only_quantiser {
+        return;
+    }
+    if !only_attention {
+        peak_lines(&isas, reps, quick);
+    }
+    if only_peak {
         return;
     }
     // (out, in): the MLP's two matrices (the largest of the model).

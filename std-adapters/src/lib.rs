@@ -17,6 +17,7 @@ pub mod convert;
 pub mod duo_writer;
 pub mod eval;
 pub mod export;
+pub mod kernel_bench;
 pub mod live;
 pub mod music;
 pub mod npy;

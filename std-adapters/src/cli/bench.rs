@@ -36,6 +36,17 @@ use duolando_core::tensor::{block_row, DType, TensorRef, MAX_RANK};
 use crate::convert::{storage_for, stored_dims};
 use crate::duo_writer::{quantise_q4_block32, quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8, StoreAs};
 
+/// The `[isa | CPU] ` every printed line of the ISA being measured starts
+/// with (empty without `--isa`).
+static LABEL: std::sync::Mutex<String> = std::sync::Mutex::new(String::new());
+
+/// `println!` with the ISA label in front.
+macro_rules! say {
+    ($($t:tt)*) => {
+        println!("{}{}", LABEL.lock().map(|l| l.clone()).unwrap_or_default(), format!($($t)*))
+    };
+}
+
 #[path = "bench_transflower.rs"]
 mod transflower;
 
@@ -55,12 +66,28 @@ pub struct Args {
     /// Untimed warm-up R steps per weight type.
     #[arg(long, default_value_t = 1)]
     pub warmup: usize,
-    /// Weight types to measure (comma separated: f32,f16,int8,q4).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![String::from("int8"), String::from("f16"), String::from("f32")])]
+    /// Weight types to measure (comma separated: f32,f16,int8,q4; `--dtypes`
+    /// with no value skips the model benches, e.g. for `--kernels` alone).
+    #[arg(long, value_delimiter = ',', num_args = 0.., default_values_t = vec![String::from("int8"), String::from("f16"), String::from("f32")])]
     pub dtypes: Vec<String>,
     /// Use the scalar reference kernels instead of the detected SIMD ones.
     #[arg(long)]
     pub scalar: bool,
+    /// Run the whole bench once per ISA, in this order, in one invocation
+    /// (comma separated: scalar, avx2, avx512, avx512vnni, avx512amx =
+    /// AVX512-VNNI with the AMX tiles, neon, neondot); every line then starts
+    /// with `[isa | CPU model]` and every JSON key ends in `_<isa>`. An ISA
+    /// this CPU lacks is refused by name before anything runs. Default: the
+    /// detected ISA (capped by `DUOLANDO_ISA`).
+    #[arg(long, value_delimiter = ',')]
+    pub isa: Vec<String>,
+    /// Also measure the int8 multiply-accumulate peak of each ISA
+    /// (register-only probes) and each int8 GEMM shape the engine runs
+    /// (`linear`, `Q8Block32x8` weights: R step, re-prefill chunk, 16
+    /// sessions, S step, LAT push) with its fraction of the ISA's peak
+    /// (median of `--runs` calls per shape, at most 5 for 64 rows or more).
+    #[arg(long)]
+    pub kernels: bool,
     /// Which family's published model: duolando (default), bailando (its
     /// R step, the actor GPT over a full 28-token window, and its S step per
     /// preset, f16 K/V, with the session arena) or transflower (the paper
@@ -445,7 +472,7 @@ fn batched_steps(model: &Model<'_>, schedule: &str, n: usize, warmup: usize, ste
 fn print_batch(name: &str, what: &str, v: &[(usize, Stats)]) {
     let one = v.iter().find(|(n, _)| *n == 1).map(|(_, st)| st.median_ms);
     for (n, st) in v {
-        println!(
+        say!(
             "S step {name:>4} x{n:<2} {what} median {:8.2} ms  p99 {:8.2} ms  mean {:8.2} ms  = {:.2} ms per session{}",
             st.median_ms,
             st.p99_ms,
@@ -515,23 +542,79 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.scalar {
-        crate::simd::force_scalar();
+    let cpu = crate::kernel_bench::cpu_name();
+    anyhow::ensure!(!args.scalar || args.isa.is_empty(), "--scalar and --isa: give one (--isa scalar is --scalar)");
+    // Refuse every ISA this CPU lacks before anything runs.
+    for name in &args.isa {
+        crate::simd::select(name).map_err(|e| anyhow!("{e} [{cpu}]"))?;
+    }
+    let weights = args.kernels.then(|| crate::kernel_bench::Weights::new(false));
+    if args.kernels {
+        let mut line = format!("int8 MAC peaks on {cpu} (register-only probes, 1 thread):");
+        for p in crate::kernel_bench::probes() {
+            line += &format!("  {} {:.1} GMAC/s", p.name(), crate::kernel_bench::peak_gmacs(p)?);
+        }
+        println!("{line}");
+    }
+    let mut j = serde_json::Map::new();
+    j.insert("cpu".into(), cpu.clone().into());
+    if args.isa.is_empty() {
+        if args.scalar {
+            crate::simd::force_scalar();
+        } else {
+            crate::simd::init();
+        }
+        j.extend(run_one(&args, weights.as_ref())?);
     } else {
+        let mut names = Vec::new();
+        for name in &args.isa {
+            crate::simd::select(name).map_err(|e| anyhow!("{e}"))?;
+            let label = crate::simd::name(crate::simd::active());
+            names.push(serde_json::Value::from(label));
+            *LABEL.lock().map_err(|_| anyhow!("label lock"))? = format!("[{label} | {cpu}] ");
+            let one = run_one(&args, weights.as_ref());
+            *LABEL.lock().map_err(|_| anyhow!("label lock"))? = String::new();
+            for (k, v) in one? {
+                j.insert(format!("{k}_{label}"), v);
+            }
+        }
+        j.insert("isas".into(), names.into());
         crate::simd::init();
     }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&serde_json::Value::Object(j))?).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// The whole bench under the ISA selected now; its JSON entries.
+fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>) -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
+    let mut j = serde_json::Map::new();
     let isa = crate::simd::describe();
+    if let Some(w) = weights {
+        let rep = crate::kernel_bench::run(w, args.runs)?;
+        for l in rep.lines("") {
+            say!("{l}");
+        }
+        rep.json(&mut j, "");
+    }
+    if args.dtypes.is_empty() {
+        j.insert("isa".into(), isa.into());
+        return Ok(j);
+    }
     let memcpy = memcpy_gbps(1);
     let memcpy_t2 = memcpy_gbps(2);
     let read = read_gbps();
-    println!(
+    say!(
         "kernels: {isa}; threads: {:?}; memcpy bandwidth (256 MiB): {memcpy:.1} GB/s on 1 thread, {memcpy_t2:.1} GB/s on 2; read-only: {read:.1} GB/s on 1 thread",
         args.threads
     );
     if args.family == "bailando" {
-        return bench_bailando(&args);
+        bench_bailando(args)?;
+        return Ok(j);
     } else if args.family == "transflower" {
-        return transflower::run(&args);
+        transflower::run(args)?;
+        return Ok(j);
     } else if args.family != "duolando" {
         return Err(anyhow!("unknown family '{}' (duolando, bailando, transflower)", args.family));
     }
@@ -544,10 +627,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "q4" => ("q4", StoreAs::Q4Block32),
             other => return Err(anyhow!("unknown dtype '{other}' (f32, f16, int8, q4)")),
         };
-        let r = bench_dtype(name, store_as, &args)?;
+        let r = bench_dtype(name, store_as, args)?;
         for (t, st) in &r.r {
             let gbps = r.weight_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
-            println!(
+            say!(
                 "R step {:>4} t{t} (29-token window, LATs incl.): median {:8.1} ms  p99 {:8.1} ms  p99/median {:.2}  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy)",
                 r.name,
                 st.median_ms,
@@ -560,7 +643,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         for (t, st) in &r.s {
             let gbps = r.model_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
-            println!(
+            say!(
                 "S step {:>4} t{t} (reference budget, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy, {:.0}% of read)  arena {:.2} MB ({:.2} MB stepped only in a StepBatch)",
                 r.name,
                 st.median_ms,
@@ -576,7 +659,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
         for (sched, st, bytes) in &r.schedules {
-            println!(
+            say!(
                 "S step {:>4} t1 {sched:<9} caches, after start-up: median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  arena {:.1} MB",
                 r.name,
                 st.median_ms,
@@ -590,16 +673,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         print_batch(r.name, "spread sessions, one step_many, after start-up:", &r.batch_spread);
         results.push(r);
     }
-    println!("tN = one step with its large GEMMs split over N threads (duolando::workers); % of memcpy is against the 1-thread memcpy.");
+    say!("tN = one step with its large GEMMs split over N threads (duolando::workers); % of memcpy is against the 1-thread memcpy.");
     let tract = match super::bench_tract::onnx_path(args.tract_onnx.as_deref()) {
         None => {
-            println!("tract ratio: not measured (no full-size R-step ONNX; make it with: {})", super::bench_tract::HOW);
+            say!("tract ratio: not measured (no full-size R-step ONNX; make it with: {})", super::bench_tract::HOW);
             None
         }
         Some(path) => match super::bench_tract::r_steps(&path, args.warmup, args.runs) {
             Ok((times, err)) => {
                 let st = stats(times);
-                println!(
+                say!(
                     "R step tract t1 (same window, f32, {}): median {:8.1} ms  p99 {:8.1} ms  p99/median {:.2}  (logits vs torch: max rel diff {err:.1e})",
                     path.display(),
                     st.median_ms,
@@ -609,19 +692,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 for r in &results {
                     let at = |v: &[(usize, Stats)]| v.iter().find(|(t, _)| *t == 1).map(|(_, s)| s.median_ms);
                     if let (Some(rr), Some(ss)) = (at(&r.r), at(&r.s)) {
-                        println!("  {:>4}: tract R step / our R step = {:.2}x; tract R step / our S step = {:.1}x", r.name, st.median_ms / rr, st.median_ms / ss);
+                        say!("  {:>4}: tract R step / our R step = {:.2}x; tract R step / our S step = {:.1}x", r.name, st.median_ms / rr, st.median_ms / ss);
                     }
                 }
                 Some((st, err))
             }
             Err(e) => {
-                println!("tract ratio: not measured: {e:#}");
+                say!("tract ratio: not measured: {e:#}");
                 None
             }
         },
     };
-    if let Some(path) = &args.json {
-        let mut j = serde_json::Map::new();
+    {
         let null = serde_json::Value::Null;
         for k in [
             "s_step_ms_int8_t1",
@@ -694,10 +776,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 j.insert(format!("batch16_over_batch1_{}", r.name), (a / b).into());
             }
         }
-        std::fs::write(path, serde_json::to_string_pretty(&serde_json::Value::Object(j))?)
-            .with_context(|| format!("writing {}", path.display()))?;
     }
-    Ok(())
+    Ok(j)
 }
 
 /// Bailando's published model (`bailando::config::published`, seeded random
@@ -725,7 +805,7 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
                 .with_context(|| format!("{}: not the JSON of tools/bailando_ort_r_step.py", p.display()))?;
             let ms = v["median_ms"].as_f64().with_context(|| format!("{}: no median_ms", p.display()))?;
             let label = format!("onnxruntime {} f32, {} thread(s), {}", v["onnxruntime"].as_str().unwrap_or("?"), v["threads"], v["cpu"].as_str().unwrap_or("?"));
-            println!("Bailando R step in {label}: median {ms:.1} ms, p99 {:.1} ms ({})", v["p99_ms"].as_f64().unwrap_or(f64::NAN), p.display());
+            say!("Bailando R step in {label}: median {ms:.1} ms, p99 {:.1} ms ({})", v["p99_ms"].as_f64().unwrap_or(f64::NAN), p.display());
             Some((ms, label))
         }
     };
@@ -765,7 +845,7 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
             if let (Some((ms, _)), 1) = (&ort, t) {
                 vs_f32.push_str(&format!("; onnxruntime/this {:.2}x", ms / st.median_ms));
             }
-            println!(
+            say!(
                 "Bailando R step {d:>4} t{t} ({c}-token window): median {:8.1} ms  p99 {:8.1} ms  {:.2}x real time ({real_time_ms:.1} ms per token){vs_f32}",
                 st.median_ms,
                 st.p99_ms,
@@ -782,7 +862,7 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
             let n = (args.warmup + args.runs).max(c + 4 * period + args.warmup);
             let times = on_threads(1, || solo_s_steps(&model, &sc, n, args.warmup, &music[..nm]))?;
             let st = stats(times);
-            println!(
+            say!(
                 "Bailando S step {d:>4} t1 {:<11} {:<9} (dec_future {:>2}, shift {}, f16 K/V): median {:8.2} ms  p99 {:8.2} ms  p99/median {:.1}  mean {:8.2} ms  {:.0}x real time  arena {:.2} MB",
                 preset.name(),
                 if spread { "spread" } else { "reprefill" },
@@ -797,7 +877,7 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
             );
         }
     }
-    println!("Bailando: published config (actor_critic.yaml), seeded random weights; S step = one session step (GPT row or re-prefill at a window jump, heads, decoders), frames pulled; onnxruntime: --ort-json from tools/bailando_ort_r_step.py.");
+    say!("Bailando: published config (actor_critic.yaml), seeded random weights; S step = one session step (GPT row or re-prefill at a window jump, heads, decoders), frames pulled; onnxruntime: --ort-json from tools/bailando_ort_r_step.py.");
     Ok(())
 }
 

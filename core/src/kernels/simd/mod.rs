@@ -21,6 +21,7 @@ use core::sync::atomic::{AtomicU8, Ordering};
 
 #[cfg(target_arch = "x86_64")]
 pub mod amx;
+pub mod peak;
 pub mod scalar;
 #[cfg(test)]
 mod tests;
