@@ -24,4 +24,5 @@ pub mod npy;
 pub mod skeleton;
 pub mod streaming;
 pub mod synth;
+pub mod transflower_motion;
 pub mod viewer;

@@ -540,3 +540,276 @@ fn inspect_shows_the_config() {
         presets[2]["arena_bytes"].as_u64().unwrap() > presets[0]["arena_bytes"].as_u64().unwrap()
     );
 }
+
+fn motion_fixture(name: &str) -> PathBuf {
+    fixtures().join("transflower_motion").join(name)
+}
+
+/// Bone lengths of (N, J, 3) positions: |P_j - P_parent| per frame.
+fn bone_lengths(pos: &[f32], parents: &[Option<usize>], frame: usize) -> Vec<f32> {
+    let j = parents.len();
+    let at = |k: usize| &pos[(frame * j + k) * 3..(frame * j + k) * 3 + 3];
+    parents
+        .iter()
+        .enumerate()
+        .filter_map(|(k, q)| {
+            q.map(|q| {
+                (0..3)
+                    .map(|i| (at(k)[i] - at(q)[i]).powi(2))
+                    .sum::<f32>()
+                    .sqrt()
+            })
+        })
+        .collect()
+}
+
+/// `--scaler` on the slide case (the published 69 output features, 125
+/// frames): the motion outputs are written; positions.npy is the library's
+/// decode of output.npy on the built-in skeleton, its bones keep the
+/// table's lengths in every frame, the root height is the unscaled
+/// Hips_Yposition column; the exports hold every frame; S mode's exact
+/// preset writes the same positions.
+#[test]
+fn generate_with_scaler_writes_the_motion_on_a_skeleton() {
+    use duolando::transflower_motion::{
+        decode, layout::Layout, scaler::Scaler, skeleton::TfSkeleton,
+    };
+    let dir = tmp("motion");
+    let model = convert("slide", &dir);
+    let scaler = motion_fixture("hand_full/scaler.json");
+    let out = dir.join("out");
+    let (code, e) = generate(
+        &model,
+        &input_args("slide"),
+        &[
+            "--noise",
+            &p(&case("slide").join("noise.npy")),
+            "--scaler",
+            &p(&scaler),
+        ],
+        &out,
+    );
+    assert_eq!(code, Some(0), "{e}");
+    assert!(e.contains("motion on a skeleton"), "{e}");
+    let (shape, scaled) = npy(&out.join("output.npy"));
+    let n = shape[0] as usize;
+    assert_eq!(n, 125);
+    let skel = TfSkeleton::default();
+    let (pshape, pos) = npy(&out.join("positions.npy"));
+    assert_eq!(pshape, [125, 22, 3]);
+    let sc = Scaler::read(&scaler).unwrap();
+    let layout = Layout::new(&skel, 69).unwrap();
+    let unscaled = sc.unscale(&scaled);
+    let want: Vec<f32> = decode(&unscaled, &layout, &skel)
+        .positions
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    assert_eq!(pos, want, "positions.npy is the library's decode");
+    let table: Vec<f32> = skel
+        .offsets
+        .iter()
+        .skip(1)
+        .map(|o| (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt() as f32)
+        .collect();
+    for t in [0, 1, 64, 124] {
+        for (k, (a, b)) in bone_lengths(&pos, &skel.parents, t)
+            .iter()
+            .zip(&table)
+            .enumerate()
+        {
+            assert!((a - b).abs() < 2e-5, "frame {t} bone {k}: {a} vs table {b}");
+        }
+        assert!(
+            (pos[t * 66 + 1] as f64 - unscaled[t * 69 + 64]).abs() < 1e-5,
+            "root height of frame {t}"
+        );
+    }
+    let (ushape, u) = npy(&out.join("output_unscaled.npy"));
+    assert_eq!(ushape, [125, 1, 69]);
+    assert_eq!(u[64], unscaled[64] as f32);
+    let (s24, _) = npy(&out.join("dancer_smpl24.npy"));
+    assert_eq!(s24, [125, 72]);
+    let (pos3d, _) = npy(&out.join("dancer_pos3d.npy"));
+    assert_eq!(pos3d, [125, 165]);
+    let bvh = std::fs::read_to_string(out.join("dancer.bvh")).unwrap();
+    assert!(
+        bvh.contains("Frames: 125") && bvh.contains("Frame Time: 0.0500000"),
+        "{}",
+        &bvh[bvh.find("MOTION").unwrap()..][..60]
+    );
+    assert!(std::fs::metadata(out.join("dancer.glb")).unwrap().len() > 1000);
+    assert!(std::fs::read_to_string(out.join("index.html"))
+        .unwrap()
+        .contains("Transflower"));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("motion.json")).unwrap()).unwrap();
+    assert_eq!(summary["joints"].as_array().unwrap().len(), 22);
+    assert_eq!(summary["units"], "metres");
+    // The same run on the hand-made skeleton: its 23 joints.
+    let out2 = dir.join("out-hand");
+    let extra = [
+        "--noise",
+        &p(&case("slide").join("noise.npy")),
+        "--scaler",
+        &p(&scaler),
+        "--skeleton",
+        &p(&motion_fixture("hand.bvh")),
+    ];
+    let (code, e) = generate(&model, &input_args("slide"), &extra, &out2);
+    assert_eq!(code, Some(0), "{e}");
+    assert_eq!(npy(&out2.join("positions.npy")).0, [125, 23, 3]);
+    // S mode's exact preset (R bit for bit) writes the same motion.
+    let out3 = dir.join("out-streaming");
+    let noise = p(&case("slide").join("noise.npy"));
+    let extra = [
+        "--noise",
+        &noise,
+        "--mode",
+        "streaming",
+        "--preset",
+        "exact",
+        "--scaler",
+        &p(&scaler),
+    ];
+    let (code, e) = generate(&model, &input_args("slide"), &extra, &out3);
+    assert_eq!(code, Some(0), "{e}");
+    assert_eq!(
+        npy(&out3.join("positions.npy")).1,
+        pos,
+        "streaming exact positions = R's"
+    );
+}
+
+/// Bad scaler and skeleton files are refused by name before anything runs
+/// (no output.npy), and the flags are refused on the other families.
+#[test]
+fn bad_scalers_and_skeletons_are_refused_by_name() {
+    let dir = tmp("motion-bad");
+    let model = convert("slide", &dir);
+    let noise = p(&case("slide").join("noise.npy"));
+    let good = std::fs::read_to_string(motion_fixture("hand_full/scaler.json")).unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.join(name);
+        let mut args = vec!["--noise", noise.as_str()];
+        args.extend_from_slice(extra);
+        let (code, e) = generate(&model, &input_args("slide"), &args, &out);
+        assert_eq!(code, Some(1), "{name}: {e}");
+        assert!(
+            !out.join("output.npy").exists(),
+            "{name}: refused before anything is written"
+        );
+        e
+    };
+    let write = |name: &str, text: &str| {
+        let f = dir.join(name);
+        std::fs::write(&f, text).unwrap();
+        p(&f)
+    };
+    // Another feature set's width (the tool's 7-column self-test).
+    let e = run(
+        "width",
+        &["--scaler", &p(&motion_fixture("scaler_selftest.json"))],
+    );
+    assert!(
+        e.contains("scaler_selftest.json") && e.contains("7 columns") && e.contains("has 69"),
+        "{e}"
+    );
+    // NaN (JSON has none: the file is not a scaler file), zero scale, wrong width field.
+    let nan = good.replacen("\"mean\": [\n", "\"mean\": [\n NaN,\n", 1);
+    let e = run("nan", &["--scaler", &write("nan.json", &nan)]);
+    assert!(
+        e.contains("nan.json") && e.contains("not a scaler file"),
+        "{e}"
+    );
+    let v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    let mut zero = v.clone();
+    zero["scale"][5] = serde_json::json!(0.0);
+    let e = run(
+        "zero",
+        &["--scaler", &write("zero.json", &zero.to_string())],
+    );
+    assert!(
+        e.contains("zero.json") && e.contains("`scale`[5] = 0 is not > 0"),
+        "{e}"
+    );
+    let mut short = v.clone();
+    short["mean"].as_array_mut().unwrap().pop();
+    let e = run(
+        "short",
+        &["--scaler", &write("short.json", &short.to_string())],
+    );
+    assert!(e.contains("`mean` has 68 values, `width` says 69"), "{e}");
+    // Unreadable and missing files.
+    let e = run("missing", &["--scaler", &p(&dir.join("nope.json"))]);
+    assert!(
+        e.contains("cannot read the scaler") && e.contains("nope.json"),
+        "{e}"
+    );
+    let e = run(
+        "garbage",
+        &["--scaler", &write("garbage.json", "\u{1}\u{2} not json")],
+    );
+    assert!(
+        e.contains("garbage.json") && e.contains("not a scaler file"),
+        "{e}"
+    );
+    // A skeleton without --scaler; a BVH lacking the pipeline's joints; not a BVH.
+    let e = run(
+        "skel-alone",
+        &["--skeleton", &p(&motion_fixture("hand.bvh"))],
+    );
+    assert!(e.contains("give --scaler too"), "{e}");
+    let small = write("small.bvh", "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\nJOINT Spine\n{\nOFFSET 0 10 0\nCHANNELS 3 Zrotation Xrotation Yrotation\nEnd Site\n{\nOFFSET 0 10 0\n}\n}\n}\nMOTION\nFrames: 0\nFrame Time: 0.05\n");
+    let e = run(
+        "skel-small",
+        &[
+            "--scaler",
+            &p(&motion_fixture("hand_full/scaler.json")),
+            "--skeleton",
+            &small,
+        ],
+    );
+    assert!(
+        e.contains("small.bvh") && e.contains("lacks 19 of the 20 joints"),
+        "{e}"
+    );
+    let e = run(
+        "skel-bad",
+        &[
+            "--scaler",
+            &p(&motion_fixture("hand_full/scaler.json")),
+            "--skeleton",
+            &write("bad.bvh", "HIERARCHY\nROOT\n"),
+        ],
+    );
+    assert!(e.contains("bad.bvh"), "{e}");
+    // A model whose output fits no skeleton (the tiny paper case: 11 features).
+    let paper = convert("paper", &dir);
+    let mut w11 = v.clone();
+    w11["width"] = serde_json::json!(11);
+    w11["mean"] = serde_json::json!(vec![0.0; 11]);
+    w11["scale"] = serde_json::json!(vec![1.0; 11]);
+    let out = dir.join("w11");
+    let (code, e) = generate(
+        &paper,
+        &input_args("paper"),
+        &["--scaler", &write("w11.json", &w11.to_string())],
+        &out,
+    );
+    assert_eq!(code, Some(1));
+    assert!(
+        e.contains("11 features per frame do not fit") && e.contains("expmap_scaled_20"),
+        "{e}"
+    );
+    assert!(!out.join("output.npy").exists());
+    // Transflower's flags on a Duolando model.
+    let (code, e) = generate(
+        &fixtures().join("tiny/model.duo"),
+        &[],
+        &["--scaler", &p(&motion_fixture("hand_full/scaler.json"))],
+        &dir.join("duo"),
+    );
+    assert_eq!(code, Some(1));
+    assert!(e.contains("--scaler is for Transflower models"), "{e}");
+}

@@ -57,6 +57,19 @@ pub struct Args {
     /// deterministic, not the authors' torch streams).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Transflower: the motion features' scaler (JSON written by
+    /// tools/transflower_scalers.py from the authors' `*_scaler.pkl`). With
+    /// it the generated frames are also unscaled and placed on a skeleton:
+    /// `output_unscaled.npy`, `positions.npy` (N, J, 3), `dancer.glb`,
+    /// `dancer.bvh`, npy exports and `index.html` (docs/TRANSFLOWER.md
+    /// "Motion to a skeleton").
+    #[arg(long)]
+    pub scaler: Option<PathBuf>,
+    /// Transflower, with --scaler: the skeleton the features were made on,
+    /// a BVH file (its hierarchy; centimetres when taller than 5 units).
+    /// Default: the built-in table (the authors' mixamo.bvh body, metres).
+    #[arg(long)]
+    pub skeleton: Option<PathBuf>,
     /// Seed tokens: Duolando "up,down,lhand,rhand,transl"; Bailando
     /// "up,down", which selects the authors' music-only demo path (its
     /// music padding; the authors' demo seed is 423,12).
@@ -217,7 +230,14 @@ pub fn write_outputs(dir: &Path, g: &Generated) -> Result<()> {
 
 /// Refuses Transflower's flags on a model of another family, by name.
 fn refuse_transflower_flags(args: &Args, family: &str) -> Result<()> {
-    for (flag, on) in [("--input", !args.input.is_empty()), ("--noise", args.noise.is_some()), ("--seed", args.seed.is_some())] {
+    let flags = [
+        ("--input", !args.input.is_empty()),
+        ("--noise", args.noise.is_some()),
+        ("--seed", args.seed.is_some()),
+        ("--scaler", args.scaler.is_some()),
+        ("--skeleton", args.skeleton.is_some()),
+    ];
+    for (flag, on) in flags {
         if on {
             bail!("{flag} is for Transflower models; {} is a {family} model (it takes --music{})", args.model.display(), if family == "Duolando" { ", --leader and --seed-tokens or --follower-start" } else { " and --dance or --seed-tokens" });
         }

@@ -11,7 +11,10 @@
 //!
 //! Writes `output.npy`, (N, 1, C) float32: what generate.py
 //! `--no-use_scalers` saves (`<seq>.<mod>.generated.npy`): frame t is song
-//! row `output_time_offsets + t`, in the scaled feature space.
+//! row `output_time_offsets + t`, in the scaled feature space. With
+//! `--scaler` (and optionally `--skeleton`) the frames are also unscaled
+//! and placed on a skeleton, exported and shown
+//! (`generate_transflower_motion`).
 
 use std::path::{Path, PathBuf};
 
@@ -258,6 +261,11 @@ pub fn run_transflower(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
     }
     let cfg = model.cfg;
     let given = read_inputs(args, &cfg)?;
+    let motion = super::generate_transflower_motion::plan(
+        args,
+        cfg.channels(),
+        cfg.output_input().name.as_str(),
+    )?;
     let inputs: Vec<Input<'_>> = given
         .iter()
         .map(|g| match g {
@@ -328,6 +336,21 @@ pub fn run_transflower(args: &Args, duo: &DuoFile<'_>) -> Result<()> {
         args.out.join("output.npy").display(),
         started.elapsed().as_secs_f64()
     );
+    if let Some(plan) = &motion {
+        let title = format!(
+            "duolando: Transflower {}",
+            args.model
+                .file_name()
+                .map(|f| f.to_string_lossy())
+                .unwrap_or_default()
+        );
+        let files = super::generate_transflower_motion::write(plan, &args.out, &out, n, &title)?;
+        eprintln!(
+            "motion on a skeleton ({} frames at 20 fps): wrote {}",
+            n,
+            files.join(", ")
+        );
+    }
     Ok(())
 }
 

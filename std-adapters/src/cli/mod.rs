@@ -19,6 +19,7 @@ pub mod bench_tract;
 pub mod budget;
 pub mod generate_solo;
 pub mod generate_transflower;
+pub mod generate_transflower_motion;
 
 /// Declares the subcommand modules, the [`Command`] enum and its dispatcher
 /// from one list, so that a new subcommand cannot be half-registered.

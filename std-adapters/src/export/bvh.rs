@@ -145,6 +145,8 @@ pub struct BvhJoint {
     pub name: String,
     pub parent: Option<usize>,
     pub offset: Vec3,
+    /// The OFFSET as written, parsed to f64 (`offset` is it parsed to f32).
+    pub offset_f64: [f64; 3],
     pub channels: Vec<Channel>,
 }
 
@@ -194,6 +196,7 @@ pub fn parse(text: &str, what: &str) -> Result<BvhClip> {
                         name,
                         parent,
                         offset: [0.0; 3],
+                        offset_f64: [0.0; 3],
                         channels: Vec::new(),
                     });
                     stack.push(Some(joints.len() - 1));
@@ -206,13 +209,19 @@ pub fn parse(text: &str, what: &str) -> Result<BvhClip> {
             }
             "OFFSET" => {
                 let mut o = [0.0f32; 3];
-                for v in o.iter_mut() {
-                    *v = next("an OFFSET value")?
+                let mut o64 = [0.0f64; 3];
+                for (v, v64) in o.iter_mut().zip(o64.iter_mut()) {
+                    let text = next("an OFFSET value")?;
+                    *v = text
+                        .parse()
+                        .with_context(|| format!("{what}: bad OFFSET value"))?;
+                    *v64 = text
                         .parse()
                         .with_context(|| format!("{what}: bad OFFSET value"))?;
                 }
                 if let Some(Some(j)) = stack.last() {
                     joints[*j].offset = o;
+                    joints[*j].offset_f64 = o64;
                 }
             }
             "CHANNELS" => {

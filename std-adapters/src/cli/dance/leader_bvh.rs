@@ -64,7 +64,7 @@ fn mixamo(j: usize) -> (&'static str, Option<usize>) {
 
 /// Mixamo's names of SMPL-X joints 0..=21 (the body), in SMPL-X order: all
 /// required of a Mixamo rig.
-const MIXAMO_BODY: [&str; 22] = [
+pub const MIXAMO_BODY: [&str; 22] = [
     "Hips", "LeftUpLeg", "RightUpLeg", "Spine", "LeftLeg", "RightLeg", "Spine1", "LeftFoot", "RightFoot", "Spine2",
     "LeftToeBase", "RightToeBase", "Neck", "LeftShoulder", "RightShoulder", "Head", "LeftArm", "RightArm",
     "LeftForeArm", "RightForeArm", "LeftHand", "RightHand",
@@ -81,7 +81,7 @@ const RIGS: [Rig; 2] = [
 
 /// A joint name without a namespace prefix (`mixamorig:Hips` -> `Hips`,
 /// `mixamorig1:Hips` -> `Hips`), compared without case.
-fn bare(name: &str) -> &str {
+pub fn bare(name: &str) -> &str {
     name.rsplit(':').next().unwrap_or(name)
 }
 
