@@ -158,18 +158,26 @@ pub fn run_probe(p: simd::peak::Probe, iters: u64, o: &simd::peak::Operands) -> 
 /// `DUOLANDO_ISA` says; AMX stays off for every other name. Refuses, by
 /// name, an ISA this CPU lacks (`duolando bench --isa`).
 pub fn select(name: &str) -> Result<Isa, String> {
-    let isa = parse(name).ok_or_else(|| format!("unknown ISA '{name}' (scalar, avx2, avx512, avx512vnni, avx512amx, neon, neondot)"))?;
+    let isa = parse(name).ok_or_else(|| {
+        format!("unknown ISA '{name}' (scalar, avx2, avx512, avx512vnni, avx512amx, neon, neondot)")
+    })?;
     let all = supported();
     let amx = name.eq_ignore_ascii_case("avx512amx");
     if !all.contains(&isa) || (amx && !amx_usable()) {
         let names: Vec<&str> = all.iter().map(|&i| name_plain(i)).collect();
-        return Err(format!("ISA '{name}': this CPU does not have it (it has: {}{})", names.join(", "), if amx_usable() { ", avx512amx" } else { "" }));
+        return Err(format!(
+            "ISA '{name}': this CPU does not have it (it has: {}{})",
+            names.join(", "),
+            if amx_usable() { ", avx512amx" } else { "" }
+        ));
     }
     SELECTED.store(true, Ordering::Release);
     // SAFETY: `supported` listed `isa`: this CPU has every feature its
     // kernels are compiled for.
     #[allow(unsafe_code)]
-    unsafe { simd::set_isa(isa) };
+    unsafe {
+        simd::set_isa(isa)
+    };
     #[cfg(target_arch = "x86_64")]
     // SAFETY: AMX only where `amx_usable` checked the CPU bits and got the
     // tile permission, and the ISA is Avx512Vnni (parse maps avx512amx to it).

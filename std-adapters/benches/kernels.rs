@@ -86,7 +86,11 @@ fn peak_lines(isas: &[Isa], reps: usize, quick: bool) {
     let cpu = duolando::kernel_bench::cpu_name();
     let mut line = format!("int8 MAC peaks on {cpu} (register-only probes, 1 thread):");
     for p in duolando::kernel_bench::probes() {
-        line += &format!("  {} {:.1} GMAC/s", p.name(), duolando::kernel_bench::peak_gmacs(p).expect("probe equals its twin"));
+        line += &format!(
+            "  {} {:.1} GMAC/s",
+            p.name(),
+            duolando::kernel_bench::peak_gmacs(p).expect("probe equals its twin")
+        );
     }
     println!("{line}");
     let weights = duolando::kernel_bench::Weights::new(quick);

@@ -44,17 +44,83 @@ pub struct Shape {
 
 /// The shapes measured (largest R-step GEMM first).
 pub const SHAPES: [Shape; 11] = [
-    Shape { key: "r_fc", what: "R step MLP fc", rows: 290, out: 3072, inp: 768 },
-    Shape { key: "r_fc_out", what: "R step MLP fc_out", rows: 290, out: 768, inp: 3072 },
-    Shape { key: "r_proj", what: "R step q/k/v/proj", rows: 290, out: 768, inp: 768 },
-    Shape { key: "batch16_fc", what: "16 sessions step_many fc", rows: 160, out: 3072, inp: 768 },
-    Shape { key: "batch16_fc_out", what: "16 sessions step_many fc_out", rows: 160, out: 768, inp: 3072 },
-    Shape { key: "prefill_fc", what: "re-prefill chunk fc", rows: 80, out: 3072, inp: 768 },
-    Shape { key: "prefill_fc_out", what: "re-prefill chunk fc_out", rows: 80, out: 768, inp: 3072 },
-    Shape { key: "s_fc", what: "S step fc", rows: 10, out: 3072, inp: 768 },
-    Shape { key: "s_fc_out", what: "S step fc_out", rows: 10, out: 768, inp: 3072 },
-    Shape { key: "s_proj", what: "S step q/k/v/proj", rows: 10, out: 768, inp: 768 },
-    Shape { key: "lat_proj", what: "LAT push q/k/v/proj", rows: 1, out: 768, inp: 768 },
+    Shape {
+        key: "r_fc",
+        what: "R step MLP fc",
+        rows: 290,
+        out: 3072,
+        inp: 768,
+    },
+    Shape {
+        key: "r_fc_out",
+        what: "R step MLP fc_out",
+        rows: 290,
+        out: 768,
+        inp: 3072,
+    },
+    Shape {
+        key: "r_proj",
+        what: "R step q/k/v/proj",
+        rows: 290,
+        out: 768,
+        inp: 768,
+    },
+    Shape {
+        key: "batch16_fc",
+        what: "16 sessions step_many fc",
+        rows: 160,
+        out: 3072,
+        inp: 768,
+    },
+    Shape {
+        key: "batch16_fc_out",
+        what: "16 sessions step_many fc_out",
+        rows: 160,
+        out: 768,
+        inp: 3072,
+    },
+    Shape {
+        key: "prefill_fc",
+        what: "re-prefill chunk fc",
+        rows: 80,
+        out: 3072,
+        inp: 768,
+    },
+    Shape {
+        key: "prefill_fc_out",
+        what: "re-prefill chunk fc_out",
+        rows: 80,
+        out: 768,
+        inp: 3072,
+    },
+    Shape {
+        key: "s_fc",
+        what: "S step fc",
+        rows: 10,
+        out: 3072,
+        inp: 768,
+    },
+    Shape {
+        key: "s_fc_out",
+        what: "S step fc_out",
+        rows: 10,
+        out: 768,
+        inp: 3072,
+    },
+    Shape {
+        key: "s_proj",
+        what: "S step q/k/v/proj",
+        rows: 10,
+        out: 768,
+        inp: 768,
+    },
+    Shape {
+        key: "lat_proj",
+        what: "LAT push q/k/v/proj",
+        rows: 1,
+        out: 768,
+        inp: 768,
+    },
 ];
 
 /// The CPU's model name (`/proc/cpuinfo`'s `model name`; elsewhere, or
@@ -62,7 +128,12 @@ pub const SHAPES: [Shape; 11] = [
 pub fn cpu_name() -> String {
     std::fs::read_to_string("/proc/cpuinfo")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split_once(':')).map(|(_, v)| v.trim().to_string()))
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, v)| v.trim().to_string())
+        })
         .filter(|s| !s.is_empty())
         .unwrap_or_else(|| format!("unknown {} CPU", std::env::consts::ARCH))
 }
@@ -79,7 +150,10 @@ fn cpu_has(p: Probe) -> bool {
 /// The fixed operands the probes multiply (unsigned side below 128, as the
 /// kernels' sign trick keeps it, so no `vpmaddubsw` saturation).
 fn operands() -> Operands {
-    let mut o = Operands { a: [0; 64], b: [0; 64] };
+    let mut o = Operands {
+        a: [0; 64],
+        b: [0; 64],
+    };
     for i in 0..64 {
         o.a[i] = (i * 37 % 128) as u8;
         o.b[i] = (i as i32 * 53 % 255 - 127) as i8;
@@ -91,14 +165,23 @@ fn operands() -> Operands {
 /// about 20 ms each (after one to size them); an error if a run's
 /// checksum differs from the scalar twin's.
 pub fn peak_gmacs(p: Probe) -> anyhow::Result<f64> {
-    anyhow::ensure!(cpu_has(p), "this CPU ({}) cannot run the {} probe", cpu_name(), p.name());
+    anyhow::ensure!(
+        cpu_has(p),
+        "this CPU ({}) cannot run the {} probe",
+        cpu_name(),
+        p.name()
+    );
     let o = operands();
     let time = |iters: u64| -> anyhow::Result<f64> {
         let s = Instant::now();
         let got = crate::simd::run_probe(p, iters, std::hint::black_box(&o));
         let t = s.elapsed().as_secs_f64();
         let got = got.ok_or_else(|| anyhow::anyhow!("no {} probe in this build", p.name()))?;
-        anyhow::ensure!(got == peak::twin(p, iters, &o), "{} probe: checksum {got} differs from its twin's", p.name());
+        anyhow::ensure!(
+            got == peak::twin(p, iters, &o),
+            "{} probe: checksum {got} differs from its twin's",
+            p.name()
+        );
         Ok(t)
     };
     let mut iters = 1u64 << 16;
@@ -195,7 +278,12 @@ impl Weights {
     }
 
     fn get(&self, out: usize, inp: usize) -> &[Vec<u8>] {
-        &self.sets.iter().find(|(d, _)| *d == (out, inp)).expect("a set per shape").1
+        &self
+            .sets
+            .iter()
+            .find(|(d, _)| *d == (out, inp))
+            .expect("a set per shape")
+            .1
     }
 }
 
@@ -215,7 +303,8 @@ pub fn run(weights: &Weights, reps: usize) -> anyhow::Result<Report> {
         // The whole panel in caller memory, as R mode's blocks carve it.
         let mut room_bytes = vec![0u8; s.rows * s.inp * 2 + 4096];
         let mut arena = Arena::new(&mut room_bytes);
-        let mut room = Q8Room::carve(&mut arena, s.rows * s.inp).map_err(|e| anyhow::anyhow!("panel: {e:?}"))?;
+        let mut room = Q8Room::carve(&mut arena, s.rows * s.inp)
+            .map_err(|e| anyhow::anyhow!("panel: {e:?}"))?;
         let reps = if s.rows >= 64 { reps.min(5) } else { reps };
         let peak = peak_gmacs(probe)?;
         let t = median_secs(reps, || {
@@ -225,13 +314,28 @@ pub fn run(weights: &Weights, reps: usize) -> anyhow::Result<Report> {
             }
             std::hint::black_box(&y);
         }) / sets as f64;
-        anyhow::ensure!(y.iter().all(|v| v.is_finite()), "{}: non-finite output", s.what);
+        anyhow::ensure!(
+            y.iter().all(|v| v.is_finite()),
+            "{}: non-finite output",
+            s.what
+        );
         let gmacs = (s.rows * s.out * s.inp) as f64 / t / 1e9;
-        shapes.push(ShapeFigure { shape: s, ms: t * 1e3, gmacs, peak_gmacs: peak, of_peak: gmacs / peak });
+        shapes.push(ShapeFigure {
+            shape: s,
+            ms: t * 1e3,
+            gmacs,
+            peak_gmacs: peak,
+            of_peak: gmacs / peak,
+        });
     }
     let mut peaks: Vec<f64> = shapes.iter().map(|f| f.peak_gmacs).collect();
     peaks.sort_by(|a, b| a.total_cmp(b));
-    Ok(Report { isa, probe, peak_gmacs: peaks[peaks.len() / 2], shapes })
+    Ok(Report {
+        isa,
+        probe,
+        peak_gmacs: peaks[peaks.len() / 2],
+        shapes,
+    })
 }
 
 impl Report {

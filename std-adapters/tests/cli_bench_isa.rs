@@ -10,7 +10,12 @@ use std::process::{Command, Output};
 use duolando_core::kernels::simd::Isa;
 
 fn bench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_duolando")).arg("bench").args(args).env_remove("DUOLANDO_ISA").output().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .arg("bench")
+        .args(args)
+        .env_remove("DUOLANDO_ISA")
+        .output()
+        .unwrap()
 }
 
 fn name(isa: Isa) -> &'static str {
@@ -28,11 +33,28 @@ fn name(isa: Isa) -> &'static str {
 fn kernels_run_once_per_isa_labelled_with_isa_and_cpu() {
     let supported = duolando::simd::supported();
     // The best ISA and scalar (the two ends; both on every CPU).
-    let isas: Vec<&str> = if supported[0] == Isa::Scalar { vec!["scalar"] } else { vec![name(supported[0]), "scalar"] };
+    let isas: Vec<&str> = if supported[0] == Isa::Scalar {
+        vec!["scalar"]
+    } else {
+        vec![name(supported[0]), "scalar"]
+    };
     let json = std::env::temp_dir().join(format!("duo-bench-isa-{}.json", std::process::id()));
-    let o = bench(&["--kernels", "--dtypes", "--runs", "1", "--isa", &isas.join(","), "--json", json.to_str().unwrap()]);
+    let o = bench(&[
+        "--kernels",
+        "--dtypes",
+        "--runs",
+        "1",
+        "--isa",
+        &isas.join(","),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{out}\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let cpu = duolando::kernel_bench::cpu_name();
     let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     let _ = std::fs::remove_file(&json);
@@ -45,19 +67,37 @@ fn kernels_run_once_per_isa_labelled_with_isa_and_cpu() {
         // The peak line, then one line per shape.
         assert_eq!(lines.len(), 1 + shapes.len(), "{isa}:\n{out}");
         assert!(lines[0].contains("int8 MAC peak"), "{}", lines[0]);
-        let peak = j[format!("peak_gmacs_{isa}")].as_f64().unwrap_or_else(|| panic!("peak_gmacs_{isa} in {j}"));
+        let peak = j[format!("peak_gmacs_{isa}")]
+            .as_f64()
+            .unwrap_or_else(|| panic!("peak_gmacs_{isa} in {j}"));
         assert!(peak > 0.1, "{isa}: peak {peak}");
         for s in shapes {
             let g = j[format!("gemm_{}_gmacs_{isa}", s.key)].as_f64().unwrap();
             let f = j[format!("gemm_{}_of_peak_{isa}", s.key)].as_f64().unwrap();
-            let pk = j[format!("gemm_{}_peak_gmacs_{isa}", s.key)].as_f64().unwrap();
-            assert!(g > 0.0 && pk > 0.1 && (f - g / pk).abs() < 1e-9 * f.max(1.0), "{isa} {}: {g} GMAC/s, {f} of {pk}", s.key);
-            assert!(lines.iter().any(|l| l.contains(s.what)), "{isa}: no {} line", s.what);
+            let pk = j[format!("gemm_{}_peak_gmacs_{isa}", s.key)]
+                .as_f64()
+                .unwrap();
+            assert!(
+                g > 0.0 && pk > 0.1 && (f - g / pk).abs() < 1e-9 * f.max(1.0),
+                "{isa} {}: {g} GMAC/s, {f} of {pk}",
+                s.key
+            );
+            assert!(
+                lines.iter().any(|l| l.contains(s.what)),
+                "{isa}: no {} line",
+                s.what
+            );
         }
     }
     // No unlabelled figures but the probes' header (ISA-independent).
-    for l in out.lines().filter(|l| !isas.iter().any(|i| l.starts_with(&format!("[{i} | ")))) {
-        assert!(l.starts_with(&format!("int8 MAC peaks on {cpu}")), "unlabelled line: {l}");
+    for l in out
+        .lines()
+        .filter(|l| !isas.iter().any(|i| l.starts_with(&format!("[{i} | "))))
+    {
+        assert!(
+            l.starts_with(&format!("int8 MAC peaks on {cpu}")),
+            "unlabelled line: {l}"
+        );
     }
 }
 
@@ -69,13 +109,30 @@ fn an_isa_this_cpu_lacks_is_refused_by_name_before_anything_runs() {
         .filter(|n| !supported.contains(&duolando::simd::parse(n).unwrap()))
         .chain((!duolando::simd::amx_usable()).then_some("avx512amx"))
         .collect();
-    assert!(!missing.is_empty(), "no ISA family is missing on any CPU: x86 lacks NEON, aarch64 AVX");
+    assert!(
+        !missing.is_empty(),
+        "no ISA family is missing on any CPU: x86 lacks NEON, aarch64 AVX"
+    );
     for m in missing {
-        let o = bench(&["--kernels", "--dtypes", "--runs", "1", "--isa", &format!("scalar,{m}")]);
+        let o = bench(&[
+            "--kernels",
+            "--dtypes",
+            "--runs",
+            "1",
+            "--isa",
+            &format!("scalar,{m}"),
+        ]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success(), "{m} accepted");
-        assert!(err.contains(&format!("ISA '{m}': this CPU does not have it")), "{m}: {err}");
-        assert!(o.stdout.is_empty(), "{m}: ran before refusing: {}", String::from_utf8_lossy(&o.stdout));
+        assert!(
+            err.contains(&format!("ISA '{m}': this CPU does not have it")),
+            "{m}: {err}"
+        );
+        assert!(
+            o.stdout.is_empty(),
+            "{m}: ran before refusing: {}",
+            String::from_utf8_lossy(&o.stdout)
+        );
     }
     let o = bench(&["--dtypes", "--isa", "avx9"]);
     assert!(!o.status.success());

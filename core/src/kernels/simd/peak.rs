@@ -60,7 +60,15 @@ pub struct Operands {
 
 impl Probe {
     /// Every probe, best x86 first, then NEON, then scalar.
-    pub const ALL: [Probe; 7] = [Probe::Avx512Vnni, Probe::AvxVnni, Probe::Avx512Bw, Probe::Avx2, Probe::NeonI8mm, Probe::NeonDot, Probe::Scalar];
+    pub const ALL: [Probe; 7] = [
+        Probe::Avx512Vnni,
+        Probe::AvxVnni,
+        Probe::Avx512Bw,
+        Probe::Avx2,
+        Probe::NeonI8mm,
+        Probe::NeonDot,
+        Probe::Scalar,
+    ];
 
     /// A short name of the instruction sequence.
     pub fn name(self) -> &'static str {
@@ -132,13 +140,19 @@ fn increment(p: Probe, o: &Operands, chain: usize, lane: usize) -> i32 {
     match p {
         Probe::Scalar => a(chain) * b(0),
         Probe::Avx2 | Probe::Avx512Bw => {
-            let pair = |i: usize| (a(i) * b(i) + a(i + 1) * b(i + 1)).clamp(i16::MIN as i32, i16::MAX as i32);
+            let pair = |i: usize| {
+                (a(i) * b(i) + a(i + 1) * b(i + 1)).clamp(i16::MIN as i32, i16::MAX as i32)
+            };
             pair(4 * lane) + pair(4 * lane + 2)
         }
-        Probe::Avx512Vnni | Probe::AvxVnni => (0..4).map(|i| a(4 * lane + i) * b(4 * lane + i)).sum(),
+        Probe::Avx512Vnni | Probe::AvxVnni => {
+            (0..4).map(|i| a(4 * lane + i) * b(4 * lane + i)).sum()
+        }
         Probe::NeonDot => (0..4).map(|i| sa(4 * lane + i) * b(4 * lane + i)).sum(),
         // Lane 2i + j: row i of a (bytes 8i..8i+8) dot row j of b.
-        Probe::NeonI8mm => (0..8).map(|k| sa(8 * (lane / 2) + k) * b(8 * (lane % 2) + k)).sum(),
+        Probe::NeonI8mm => (0..8)
+            .map(|k| sa(8 * (lane / 2) + k) * b(8 * (lane % 2) + k))
+            .sum(),
     }
 }
 
@@ -251,14 +265,18 @@ mod x86 {
     #[target_feature(enable = "avx2")]
     fn sum256(v: &[__m256i]) -> i64 {
         // SAFETY: __m256i and [i32; 8] are the same plain bytes.
-    v.iter().map(|&x| lane_sum(&unsafe { core::mem::transmute::<__m256i, [i32; 8]>(x) })).sum()
+        v.iter()
+            .map(|&x| lane_sum(&unsafe { core::mem::transmute::<__m256i, [i32; 8]>(x) }))
+            .sum()
     }
 
     #[inline]
     #[target_feature(enable = "avx512f")]
     fn sum512(v: &[__m512i]) -> i64 {
         // SAFETY: __m512i and [i32; 16] are the same plain bytes.
-    v.iter().map(|&x| lane_sum(&unsafe { core::mem::transmute::<__m512i, [i32; 16]>(x) })).sum()
+        v.iter()
+            .map(|&x| lane_sum(&unsafe { core::mem::transmute::<__m512i, [i32; 16]>(x) }))
+            .sum()
     }
 
     /// # Safety
@@ -266,7 +284,12 @@ mod x86 {
     #[target_feature(enable = "avx2")]
     pub unsafe fn avx2(iters: u64, o: &Operands) -> i64 {
         // SAFETY: 32-byte reads of 64-byte arrays.
-        let (x, y) = unsafe { (_mm256_loadu_si256(o.a.as_ptr().cast()), _mm256_loadu_si256(o.b.as_ptr().cast())) };
+        let (x, y) = unsafe {
+            (
+                _mm256_loadu_si256(o.a.as_ptr().cast()),
+                _mm256_loadu_si256(o.b.as_ptr().cast()),
+            )
+        };
         let one = _mm256_set1_epi16(1);
         let mut c: [__m256i; 6] = core::array::from_fn(|k| _mm256_set1_epi32(k as i32));
         if iters > 0 {
@@ -299,7 +322,12 @@ mod x86 {
     #[target_feature(enable = "avx512f,avx512bw")]
     pub unsafe fn avx512bw(iters: u64, o: &Operands) -> i64 {
         // SAFETY: 64-byte reads of 64-byte arrays.
-        let (x, y) = unsafe { (core::ptr::read_unaligned(o.a.as_ptr().cast::<__m512i>()), core::ptr::read_unaligned(o.b.as_ptr().cast::<__m512i>())) };
+        let (x, y) = unsafe {
+            (
+                core::ptr::read_unaligned(o.a.as_ptr().cast::<__m512i>()),
+                core::ptr::read_unaligned(o.b.as_ptr().cast::<__m512i>()),
+            )
+        };
         let one = _mm512_set1_epi16(1);
         let mut c: [__m512i; 8] = core::array::from_fn(|k| _mm512_set1_epi32(k as i32));
         if iters > 0 {
@@ -334,7 +362,12 @@ mod x86 {
     #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
     pub unsafe fn avx512vnni(iters: u64, o: &Operands) -> i64 {
         // SAFETY: 64-byte reads of 64-byte arrays.
-        let (x, y) = unsafe { (core::ptr::read_unaligned(o.a.as_ptr().cast::<__m512i>()), core::ptr::read_unaligned(o.b.as_ptr().cast::<__m512i>())) };
+        let (x, y) = unsafe {
+            (
+                core::ptr::read_unaligned(o.a.as_ptr().cast::<__m512i>()),
+                core::ptr::read_unaligned(o.b.as_ptr().cast::<__m512i>()),
+            )
+        };
         let mut c: [__m512i; 12] = core::array::from_fn(|k| _mm512_set1_epi32(k as i32));
         if iters > 0 {
             // SAFETY: register-only AVX512-VNNI instructions (this fn's features).
@@ -364,7 +397,12 @@ mod x86 {
     #[target_feature(enable = "avx2,avxvnni")]
     pub unsafe fn avxvnni(iters: u64, o: &Operands) -> i64 {
         // SAFETY: 32-byte reads of 64-byte arrays.
-        let (x, y) = unsafe { (_mm256_loadu_si256(o.a.as_ptr().cast()), _mm256_loadu_si256(o.b.as_ptr().cast())) };
+        let (x, y) = unsafe {
+            (
+                _mm256_loadu_si256(o.a.as_ptr().cast()),
+                _mm256_loadu_si256(o.b.as_ptr().cast()),
+            )
+        };
         let mut c: [__m256i; 8] = core::array::from_fn(|k| _mm256_set1_epi32(k as i32));
         if iters > 0 {
             // SAFETY: register-only AVX-VNNI instructions (VEX-encoded,
@@ -479,11 +517,18 @@ mod tests {
             s ^= s << 17;
             s
         };
-        let mut o = Operands { a: [0; 64], b: [0; 64] };
+        let mut o = Operands {
+            a: [0; 64],
+            b: [0; 64],
+        };
         for i in 0..64 {
             // x86_signs_ok: a in 0..=127 (no i16 saturation in vpmaddubsw,
             // as the engine's sign trick guarantees); else any byte.
-            o.a[i] = if x86_signs_ok { (next() % 128) as u8 } else { next() as u8 };
+            o.a[i] = if x86_signs_ok {
+                (next() % 128) as u8
+            } else {
+                next() as u8
+            };
             o.b[i] = next() as i8;
         }
         o
@@ -542,7 +587,10 @@ mod tests {
     /// probe agreeing with it) fails here.
     #[test]
     fn twins_count_what_the_instructions_compute() {
-        let mut o = Operands { a: [0; 64], b: [0; 64] };
+        let mut o = Operands {
+            a: [0; 64],
+            b: [0; 64],
+        };
         o.a[0] = 255;
         o.a[1] = 255;
         o.b[0] = -128;
@@ -561,7 +609,10 @@ mod tests {
         // a, row 1 of b: bytes 8..16 of b, zero) nothing.
         assert_eq!(twin(Probe::NeonI8mm, 1, &o), 4 * 28 + 8 * 256);
         // The accumulators wrap as the instructions' do.
-        assert_eq!(twin(Probe::Avx512Vnni, 1 << 16, &o), 16 * 66 + 12 * ((1i32 << 16).wrapping_mul(-65280) as i64));
+        assert_eq!(
+            twin(Probe::Avx512Vnni, 1 << 16, &o),
+            16 * 66 + 12 * ((1i32 << 16).wrapping_mul(-65280) as i64)
+        );
         assert_eq!(Probe::Avx512Vnni.macs_per_iter(), 12 * 64);
         assert_eq!(Probe::Avx2.macs_per_iter(), 6 * 32);
     }
