@@ -100,10 +100,8 @@ int RunTransflowerComponentTests(const std::string& root) {
     TF_CHECK(!C.PushAudioRows(Slice(audio, 0, ac + 1)) && C.LastResult == DUO_INVALID_ARGUMENT);
     TF_CHECK(!C.PushInputRows(1, TArray<float>()) && C.LastResult == DUO_INVALID_ARGUMENT);
     TF_CHECK(!C.PushInputRows(2, Slice(audio, 0, ac)) && C.LastResult == DUO_INVALID_ARGUMENT);  // 2 inputs
-    // 0 floats through duo_session_push_music: the library answers DUO_OK on a Transflower
-    // session today (include/duolando.h documents DUO_INVALID_ARGUMENT for a count of 0);
-    // checked here only to change nothing (the golden below).
-    C.PushAudioRows(TArray<float>());
+    // 0 floats through duo_session_push_music: DUO_INVALID_ARGUMENT (the header's rule), nothing changed.
+    TF_CHECK(!C.PushAudioRows(TArray<float>()) && C.LastResult == DUO_INVALID_ARGUMENT);
     TArray<float> Bad = Slice(audio, 0, ac);
     Bad[2] = std::numeric_limits<float>::quiet_NaN();
     TF_CHECK(!C.PushAudioRows(Bad) && C.LastResult == DUO_NON_FINITE_INPUT);
