@@ -567,9 +567,10 @@ duo_result duo_transflower_get_info(const duo_model *model, duo_transflower_info
 duo_result duo_transflower_config_preset(const duo_model *model, const char *name,
                                          duo_transflower_config *out_config);
 
-/* The session's memory for `config` (one allocation in
- * duo_transflower_session_new). DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT
- * (a setting out of range: the message names it). Thread-safe. */
+/* Bytes duo_transflower_session_new_in needs for `config`, for memory at
+ * any address (duo_transflower_session_new allocates about as much, once).
+ * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (a setting out of range: the
+ * message names it). Thread-safe. */
 duo_result duo_transflower_session_bytes(const duo_model *model, const duo_transflower_config *config,
                                          size_t *out_bytes);
 
@@ -582,6 +583,16 @@ duo_result duo_transflower_session_new(const duo_model *model, const duo_transfl
                                        const float *seed_motion, size_t n_floats,
                                        const uint32_t *labels, size_t n_labels,
                                        duo_session **out_session);
+
+/* As duo_transflower_session_new, with the session placed entirely in
+ * caller memory (`memory`, len >= duo_transflower_session_bytes, any
+ * alignment; it must stay valid, unmoved and untouched until
+ * duo_session_free, after which it may be released): no allocation.
+ * Also DUO_BUFFER_TOO_SMALL (len short: the message gives the size). */
+duo_result duo_transflower_session_new_in(const duo_model *model, const duo_transflower_config *config,
+                                          const float *seed_motion, size_t n_floats,
+                                          const uint32_t *labels, size_t n_labels, void *memory,
+                                          size_t len, duo_session **out_session);
 
 /* Rows of sliding input `index` for models with more than one (the audio,
  * the last input, also takes duo_session_push_music). DUO_NULL_PARAMETER,

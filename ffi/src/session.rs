@@ -269,6 +269,17 @@ impl SessionInner {
         })
     }
 
+    /// A session in caller memory (its arena too), written into a
+    /// [`caller_slot`] and dropped in place.
+    pub(crate) fn in_caller(session: AnySession, model: Arc<ModelInner>) -> SessionInner {
+        SessionInner {
+            session,
+            model,
+            _arena: None,
+            in_caller_memory: true,
+        }
+    }
+
     /// The Duolando session, or a refusal naming the solo family for `what`.
     pub(crate) fn duolando(&mut self, what: &str) -> Result<&mut Session<'static>, Failure> {
         match &mut self.session {
@@ -505,7 +516,7 @@ pub unsafe extern "C" fn duo_session_config_preset(
 }
 
 /// Alignment slack and size of the handle placed at the start of caller memory.
-const HANDLE_BYTES: usize = handle_bytes::<SessionInner>();
+pub(crate) const HANDLE_BYTES: usize = handle_bytes::<SessionInner>();
 
 /// Bytes `duo_session_new_in` needs for `config` (any address).
 ///

@@ -15,10 +15,10 @@ use duolando_core::transflower::session::{
     lookahead_rows, session_bytes, Preset, Session, SessionConfig,
 };
 
-use crate::handle::{buffer, buffer_mut};
+use crate::handle::{buffer, buffer_mut, caller_slot};
 use crate::model::{share, AnyModel, DuoModel, ModelInner};
 use crate::result::{guard, DuoResult, Failure};
-use crate::session::{model_ref, session_mut, AnySession, DuoSession, SessionInner};
+use crate::session::{model_ref, session_mut, AnySession, DuoSession, SessionInner, HANDLE_BYTES};
 
 /// `duo_transflower_info`: the sizes a host needs (48 bytes).
 #[repr(C)]
@@ -253,7 +253,8 @@ pub unsafe extern "C" fn duo_transflower_config_preset(
     })
 }
 
-/// Bytes of a session of `config` (library memory: one allocation).
+/// Bytes `duo_transflower_session_new_in` needs for `config` (any
+/// address): the session's arena and its handle.
 ///
 /// # Safety
 /// Pointers NULL or valid.
@@ -273,7 +274,9 @@ pub unsafe extern "C" fn duo_transflower_session_bytes(
         if out_bytes.is_null() {
             return Err(Failure::null("out_bytes"));
         }
-        let n = session_bytes(&t.cfg, &c)?;
+        let n = session_bytes(&t.cfg, &c)?
+            .checked_add(HANDLE_BYTES)
+            .ok_or_else(|| Failure::invalid("session size overflows size_t"))?;
         // SAFETY: checked non-NULL.
         unsafe { *out_bytes = n };
         Ok(DuoResult::Ok)
@@ -329,6 +332,67 @@ pub unsafe extern "C" fn duo_transflower_session_new(
         let inner = SessionInner::owned(AnySession::Transflower(session), arc, arena);
         // SAFETY: checked non-NULL.
         unsafe { *out_session = Box::into_raw(inner) };
+        Ok(DuoResult::Ok)
+    })
+}
+
+/// As duo_transflower_session_new, placed entirely in caller memory
+/// (`memory`, `len` >= duo_transflower_session_bytes; any alignment): no
+/// allocation.
+///
+/// # Safety
+/// As duo_transflower_session_new; `memory` NULL or `len` writable bytes
+/// that stay valid, unmoved and otherwise untouched until
+/// `duo_session_free`.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn duo_transflower_session_new_in(
+    model: *const DuoModel,
+    config: *const DuoTransflowerConfig,
+    seed_motion: *const f32,
+    n_floats: usize,
+    labels: *const u32,
+    n_labels: usize,
+    memory: *mut u8,
+    len: usize,
+    out_session: *mut *mut DuoSession,
+) -> DuoResult {
+    guard("duo_transflower_session_new_in", || {
+        let m = model_ref(model)?;
+        let t = transflower(m, "duo_transflower_session_new_in")?;
+        // SAFETY: NULL or a valid struct (contract).
+        let cc = *unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
+        let c = cc.to_core()?;
+        // SAFETY: NULL or `n_floats` readable floats (contract).
+        let seed: &[f32] = unsafe { buffer(seed_motion, n_floats, "seed_motion") }?;
+        // SAFETY: NULL or `n_labels` readable u32 (contract).
+        let lab: &[u32] = unsafe { buffer(labels, n_labels, "labels") }?;
+        if out_session.is_null() {
+            return Err(Failure::null("out_session"));
+        }
+        // SAFETY: NULL or `len` writable bytes kept for the session (contract).
+        let memory = unsafe { buffer_mut(memory, len, "memory") }?;
+        let need = session_bytes(&t.cfg, &c)?.saturating_add(HANDLE_BYTES);
+        let (slot, arena) =
+            caller_slot::<SessionInner>(memory, need, "duo_transflower_session_bytes")?;
+        // SAFETY: `model` is a live handle (contract).
+        let arc: Arc<ModelInner> = unsafe { share(model) };
+        // SAFETY: the model lives in the Arc, which the SessionInner keeps
+        // (and drops after the session).
+        let tm: &'static duolando_core::transflower::model::Model<'static> =
+            match unsafe { &*Arc::as_ptr(&arc) }.any() {
+                AnyModel::Transflower(t) => t,
+                _ => return Err(Failure::invalid("not a Transflower model")),
+            };
+        let session = Session::new(tm, &c, seed, lab, cc.rng_seed, arena)?;
+        // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
+        unsafe {
+            slot.write(SessionInner::in_caller(
+                AnySession::Transflower(session),
+                arc,
+            ));
+            *out_session = slot;
+        }
         Ok(DuoResult::Ok)
     })
 }

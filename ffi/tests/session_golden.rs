@@ -979,6 +979,9 @@ fn every_buffer_follows_the_null_rule() {
     let transflower: &[(&str, &str)] = &[
         ("duo_transflower_session_new", "seed_motion"),
         ("duo_transflower_session_new", "labels"),
+        ("duo_transflower_session_new_in", "seed_motion"),
+        ("duo_transflower_session_new_in", "labels"),
+        ("duo_transflower_session_new_in", "memory"),
         ("duo_transflower_push_input", "rows"),
         ("duo_transflower_pull_frame", "out"),
         ("duo_transflower_pull_frame_with_noise", "noise"),

@@ -208,11 +208,66 @@ fn exact_preset_gives_r_frames() {
         seeded == r_frames(None, 5),
         "seeded session != R with Seeded::new(5)"
     );
-    // SAFETY: handles from the library, freed once.
+    // In caller memory (at an odd address): the same frames, no allocation
+    // of the session; a byte short is DUO_BUFFER_TOO_SMALL giving the size.
+    let mut bytes = 0usize;
+    // SAFETY: live model, valid config, writable size.
+    assert_eq!(
+        unsafe { duo_transflower_session_bytes(m, &cfg, &mut bytes) },
+        DuoResult::Ok
+    );
+    let mut mem = vec![0u8; bytes + 1];
+    let mut s2 = ptr::null_mut();
+    // SAFETY: live model, valid config, seed of the given length, `bytes - 1`
+    // writable bytes from offset 1.
+    let short = unsafe {
+        duo_transflower_session_new_in(
+            m,
+            &cfg,
+            seed.as_ptr(),
+            seed.len(),
+            ptr::null(),
+            0,
+            mem[1..].as_mut_ptr().cast(),
+            bytes - 1,
+            &mut s2,
+        )
+    };
+    assert_eq!(short, DuoResult::BufferTooSmall);
+    assert!(
+        last_error().contains(&bytes.to_string()),
+        "{}",
+        last_error()
+    );
+    assert!(s2.is_null());
+    // SAFETY: as above with `bytes` bytes, kept until the session is freed.
+    assert_eq!(
+        unsafe {
+            duo_transflower_session_new_in(
+                m,
+                &cfg,
+                seed.as_ptr(),
+                seed.len(),
+                ptr::null(),
+                0,
+                mem[1..].as_mut_ptr().cast(),
+                bytes,
+                &mut s2,
+            )
+        },
+        DuoResult::Ok,
+        "{}",
+        last_error()
+    );
+    let placed = run(s2, &info, &audio, Some(&noise));
+    assert!(placed == want, "a session in caller memory differs from R");
+    // SAFETY: handles from the library, freed once; `mem` outlives s2.
     unsafe {
+        duo_session_free(s2);
         duo_session_free(s);
         duo_model_free(m);
     }
+    drop(mem);
 }
 
 #[test]
@@ -512,6 +567,88 @@ fn buffers_follow_the_null_rule() {
             duo_transflower_session_new(m, &cfg, seed.as_ptr(), seed.len(), ptr::null(), 0, &mut s),
             DuoResult::Ok
         );
+        // memory (new_in): NULL with 0 = a pointer with 0 (too small).
+        let mut mem = vec![0u8; 64];
+        let mut s2 = ptr::null_mut();
+        let a = duo_transflower_session_new_in(
+            m,
+            &cfg,
+            seed.as_ptr(),
+            seed.len(),
+            ptr::null(),
+            0,
+            ptr::null_mut(),
+            0,
+            &mut s2,
+        );
+        let ma = last_error();
+        let b = duo_transflower_session_new_in(
+            m,
+            &cfg,
+            seed.as_ptr(),
+            seed.len(),
+            ptr::null(),
+            0,
+            mem.as_mut_ptr().cast(),
+            0,
+            &mut s2,
+        );
+        assert_eq!((a, ma), (b, last_error()), "memory");
+        assert_eq!(a, DuoResult::BufferTooSmall);
+        assert_eq!(
+            duo_transflower_session_new_in(
+                m,
+                &cfg,
+                seed.as_ptr(),
+                seed.len(),
+                ptr::null(),
+                0,
+                ptr::null_mut(),
+                64,
+                &mut s2,
+            ),
+            DuoResult::NullParameter
+        );
+        // seed_motion and labels through new_in: as through new.
+        let a = duo_transflower_session_new_in(
+            m,
+            &cfg,
+            ptr::null(),
+            0,
+            ptr::null(),
+            0,
+            mem.as_mut_ptr().cast(),
+            64,
+            &mut s2,
+        );
+        let ma = last_error();
+        let b = duo_transflower_session_new_in(
+            m,
+            &cfg,
+            one.as_ptr(),
+            0,
+            ptr::null(),
+            0,
+            mem.as_mut_ptr().cast(),
+            64,
+            &mut s2,
+        );
+        assert_eq!((a, ma), (b, last_error()), "seed_motion (new_in)");
+        assert_eq!(
+            duo_transflower_session_new_in(
+                m,
+                &cfg,
+                seed.as_ptr(),
+                seed.len(),
+                ptr::null(),
+                1,
+                mem.as_mut_ptr().cast(),
+                64,
+                &mut s2,
+            ),
+            DuoResult::NullParameter
+        );
+        assert!(s2.is_null(), "no session made");
         // rows
         let a = duo_transflower_push_input(s, 1, ptr::null(), 0);
         let ma = last_error();

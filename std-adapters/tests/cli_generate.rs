@@ -487,7 +487,7 @@ fn generate_bailando_matches_the_goldens_on_both_paths() {
                 "--preset",
                 "live-music",
             ],
-            "is another family's preset; a Bailando model takes",
+            "live-music is a Duolando preset; a Bailando model takes",
         ),
         (
             vec![

@@ -364,7 +364,7 @@ fn bad_inputs_are_refused_by_name() {
                 "--preset".into(),
                 "live-music".into(),
             ],
-            "--preset live-music is another family's preset; a Transflower model takes exact, reference, realtime",
+            "--preset live-music is a Duolando preset; a Transflower model takes exact, reference, realtime",
         ),
         (
             vec![

@@ -834,10 +834,12 @@ static void test_transflower(void) {
   duo_model_info mi;
   duo_transflower_info info;
   duo_transflower_config c;
-  duo_session *s = NULL;
+  duo_session *s = NULL, *placed = NULL;
   uint64_t index = 0;
   float worst = 0.0f, scale = 1.0f;
   char msg[512];
+  size_t bytes = 0;
+  unsigned char *mem = NULL;
   sprintf(path, "%s/tests/fixtures/transflower_paper/in_expmap_scaled_20.npy", root_dir);
   motion = read_npy_f32(path, &n_motion);
   sprintf(path, "%s/tests/fixtures/transflower_paper/in_audio_feats_scaled_20.npy", root_dir);
@@ -857,7 +859,21 @@ static void test_transflower(void) {
   EXPECT(duo_transflower_config_preset(m, "exact", &c), DUO_OK);
   CHECK(c.refresh == 1);
   EXPECT(duo_transflower_session_new(m, &c, motion, (size_t)info.seed_rows * info.channels, NULL, 0, &s), DUO_OK);
-  duo_model_free(m); /* the session keeps the weights alive */
+  /* A seeded session in caller memory (at an odd address); a byte short is refused. */
+  EXPECT(duo_transflower_session_bytes(m, &c, &bytes), DUO_OK);
+  mem = (unsigned char *)malloc(bytes + 1);
+  CHECK(mem != NULL);
+  if (!mem) return;
+  c.rng_seed = 11;
+  EXPECT(duo_transflower_session_new_in(m, &c, motion, (size_t)info.seed_rows * info.channels, NULL, 0, mem + 1,
+                                        bytes - 1, &placed),
+         DUO_BUFFER_TOO_SMALL);
+  CHECK(placed == NULL);
+  EXPECT(duo_transflower_session_new_in(m, &c, motion, (size_t)info.seed_rows * info.channels, NULL, 0, mem + 1, bytes,
+                                        &placed),
+         DUO_OK);
+  c.rng_seed = 0;
+  duo_model_free(m); /* the sessions keep the weights alive */
   EXPECT(duo_session_push_leader(s, &leader[0]), DUO_INVALID_ARGUMENT);
   duo_last_error_message(msg, sizeof msg);
   CHECK(strstr(msg, "Transflower") != NULL);
@@ -889,6 +905,12 @@ static void test_transflower(void) {
   }
   CHECK(memcmp(first, f, info.channels * sizeof(float)) == 0);
   EXPECT(duo_transflower_pull_frame(s, f, info.channels + 1, &index), DUO_INVALID_ARGUMENT);
+  /* The caller-memory session made with rng_seed 11: the same first frame. */
+  EXPECT(duo_session_push_music(placed, audio, (size_t)info.audio_window * info.audio_features), DUO_OK);
+  EXPECT(duo_transflower_pull_frame(placed, f, info.channels, &index), DUO_OK);
+  CHECK(index == 0 && memcmp(first, f, info.channels * sizeof(float)) == 0);
+  duo_session_free(placed);
+  free(mem);
   duo_session_free(s);
   free(motion);
   free(audio);

@@ -86,11 +86,36 @@ pub enum Kv {
     F16,
 }
 
+/// What a preset name refused by a model's family is: "is a Duolando
+/// preset", "is a Duolando and Bailando preset" (other families', named),
+/// or "is no preset".
+fn whose_preset(name: &str) -> String {
+    let families: Vec<&str> = [
+        ("Duolando", Preset::from_name(name).is_some()),
+        ("Bailando", SoloPreset::from_name(name).is_some()),
+        ("Transflower", TfPreset::from_name(name).is_some()),
+    ]
+    .iter()
+    .filter(|(_, has)| *has)
+    .map(|(f, _)| *f)
+    .collect();
+    if families.is_empty() {
+        "is no preset".into()
+    } else {
+        format!("is a {} preset", families.join(" and "))
+    }
+}
+
 impl BudgetArgs {
     /// The session configuration for `cfg`, checked.
     pub fn config(&self, cfg: &ModelConfig) -> Result<SessionConfig> {
         let Some(preset) = Preset::from_name(&self.preset) else {
-            bail!("--preset {} is another family's preset; a Duolando model takes {} (R itself: --mode exact)", self.preset, Preset::ALL.map(Preset::name).join(", "));
+            bail!(
+                "--preset {} {}; a Duolando model takes {} (R itself: --mode exact)",
+                self.preset,
+                whose_preset(&self.preset),
+                Preset::ALL.map(Preset::name).join(", ")
+            );
         };
         if self.refresh.is_some() {
             bail!("--refresh is a Transflower setting; a Duolando model's budget is --lookahead, --enc-future, --dec-future, --shift, --music-lookahead");
@@ -137,8 +162,9 @@ impl BudgetArgs {
     pub fn solo_config(&self, cfg: &BailandoConfig) -> Result<SoloConfig> {
         let Some(preset) = SoloPreset::from_name(&self.preset) else {
             bail!(
-                "--preset {} is another family's preset; a Bailando model takes {}",
+                "--preset {} {}; a Bailando model takes {}",
                 self.preset,
+                whose_preset(&self.preset),
                 SoloPreset::ALL.map(SoloPreset::name).join(", ")
             );
         };
@@ -208,8 +234,9 @@ impl BudgetArgs {
     pub fn transflower_config(&self) -> Result<TfConfig> {
         let Some(preset) = TfPreset::from_name(&self.preset) else {
             bail!(
-                "--preset {} is another family's preset; a Transflower model takes {}",
+                "--preset {} {}; a Transflower model takes {}",
                 self.preset,
+                whose_preset(&self.preset),
                 TfPreset::ALL.map(TfPreset::name).join(", ")
             );
         };
