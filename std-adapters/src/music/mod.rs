@@ -27,6 +27,7 @@ pub mod pad;
 pub mod stft;
 pub mod streaming;
 pub mod tempo;
+pub mod transflower;
 pub mod tuning;
 
 pub use error::MusicError;
