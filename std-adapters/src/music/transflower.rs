@@ -10,9 +10,11 @@
 //! - 0..80 `mel`: `power_to_db(melspectrogram(y, sr=96000, n_mels=80,
 //!   hop_length=4800), ref=np.max)` (n_fft 2048, centred, Slaney bank up
 //!   to 48 kHz, 80 dB floor), first frame dropped (`[1:]`). Reproduced.
-//! - 80 `envelope`: `onset_strength(y=y, hop_length=4800, n_mels=80)`:
-//!   note `sr` is NOT passed, so the mel bank is librosa's default
-//!   sr = 22050 (fmax 11025) laid over the 96 kHz spectrum's bins; dB with
+//! - 80 `envelope`: `extract_features_envelope(y, sr, hop)` =
+//!   `onset_strength(y=y, hop_length=4800, n_mels=100)` (the helper's
+//!   default `mel_dim=100`: process_audio.py passes no size), and `sr` is
+//!   NOT passed on, so the mel bank is librosa's default sr = 22050
+//!   (fmax 11025) laid over the 96 kHz spectrum's bins; dB with
 //!   ref 1, positive first difference, MEAN over the bands, one zero in
 //!   front (lag 1, `n_fft // (2 hop) = 0`), first frame dropped. Reproduced.
 //! - 81, 82 `madmombeats`: madmom's `RNNDownBeatProcessor` (an ensemble of
@@ -47,8 +49,10 @@ pub const FPS: f64 = 20.0;
 pub const HOP: usize = 4800;
 /// librosa's default FFT size (both the mel and the envelope spectrograms).
 pub const N_FFT: usize = 2048;
-/// Mel bands (`--mel_feature_size 80`; the envelope's bank too).
+/// Mel bands of the mel columns (`--mel_feature_size 80`).
 pub const N_MELS: usize = 80;
+/// Mel bands of the envelope's spectrogram (the helper's default `mel_dim`).
+pub const ENVELOPE_MELS: usize = 100;
 /// The rate the envelope's mel bank is built for (onset_strength's default sr).
 pub const ENVELOPE_SR: f64 = 22_050.0;
 /// Width of one row.
@@ -93,7 +97,7 @@ impl TfAudio {
         Self {
             stft: Stft::hann(N_FFT, HOP),
             mel: MelBank::new(sr, N_FFT, N_MELS, 0.0, sr / 2.0),
-            envelope_mel: MelBank::new(ENVELOPE_SR, N_FFT, N_MELS, 0.0, ENVELOPE_SR / 2.0),
+            envelope_mel: MelBank::new(ENVELOPE_SR, N_FFT, ENVELOPE_MELS, 0.0, ENVELOPE_SR / 2.0),
         }
     }
 
@@ -133,17 +137,15 @@ impl TfAudio {
         mel.drain(..N_MELS);
 
         // envelope: onset_strength (sr 22050 bank, ref 1, mean), then [1:]
-        let mut em = vec![0.0f32; t * N_MELS]; // (T, 80)
-        for (p, m) in power.chunks_exact(nb).zip(em.chunks_exact_mut(N_MELS)) {
+        let nm = ENVELOPE_MELS;
+        let mut em = vec![0.0f32; t * nm]; // (T, 100)
+        for (p, m) in power.chunks_exact(nb).zip(em.chunks_exact_mut(nm)) {
             self.envelope_mel.apply(p, m);
         }
         power_to_db_in_place(&mut em, 1.0);
         let mut envelope = Vec::with_capacity(t - 1); // frames 1..T
         for i in 1..t {
-            let (prev, cur) = (
-                &em[(i - 1) * N_MELS..i * N_MELS],
-                &em[i * N_MELS..(i + 1) * N_MELS],
-            );
+            let (prev, cur) = (&em[(i - 1) * nm..i * nm], &em[i * nm..(i + 1) * nm]);
             envelope.push(mean_positive_diff(cur, prev));
         }
         Ok(MelEnvelope {
