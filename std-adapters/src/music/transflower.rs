@@ -19,9 +19,11 @@
 //!   front (lag 1, `n_fft // (2 hop) = 0`), first frame dropped. Reproduced.
 //! - 81, 82 `madmombeats`: madmom's `RNNDownBeatProcessor` (an ensemble of
 //!   8 BLSTMs, called with `fps=20` so its 100-fps-trained networks see
-//!   20-fps spectral features). NOT reproduced: [`beat_substitute`] puts
-//!   the engine's own beat tracker there instead (1 at tracked beats,
-//!   1 at every 4th beat for the downbeat column, 0 elsewhere).
+//!   20-fps spectral features; its rows are NOT shifted by `[1:]`, so
+//!   madmom row k is at k/20 s while the mel/envelope row k is at
+//!   (k+1)/20 s). NOT reproduced: [`beat_substitute`] puts the engine's
+//!   own beat tracker there instead, at madmom's rough 20-fps levels and
+//!   with madmom's one-row offset.
 //! - 83, 84 `ddcpca`: 2 PCA components of a Beat Saber step-placement
 //!   network's hidden states (the checkpoint and the fitted PCA are not
 //!   available). NOT reproduced: 0, the PCA components' mean by
@@ -198,23 +200,34 @@ fn mean_positive_diff(cur: &[f32], prev: &[f32]) -> f32 {
     (s / cur.len() as f64) as f32
 }
 
+/// Substitute beat activation on a tracked beat and elsewhere: madmom's
+/// 20-fps levels read off the goldens (tests/fixtures/transflower_audio:
+/// on clicks madmom gives 0.07..0.26 over two rows, its median is 0.008 to
+/// 0.019), so that after the authors' scaler the substitute sits in
+/// madmom's range instead of tens of standard deviations out.
+pub const BEAT_ON: f32 = 0.1;
+pub const BEAT_OFF: f32 = 0.01;
+/// The same for the downbeat column (madmom: max 0.04..0.07, median 0.002..0.008).
+pub const DOWNBEAT_ON: f32 = 0.05;
+pub const DOWNBEAT_OFF: f32 = 0.005;
+
 /// The stand-in for madmom's beat and downbeat activations: librosa-style
 /// tempo and beat tracking (`beat.rs`, `tempo.rs`) on the 20-fps envelope;
-/// beat = 1 at tracked beats, downbeat = 1 at every 4th beat, the phase
-/// whose beats carry the most envelope; 0 elsewhere. Returns (beat,
-/// downbeat, tempo in BPM, 0 for a silent envelope).
+/// a beat tracked at envelope row r (time (r+1)/20 s) marks row r + 1
+/// (madmom's time base, see the module docs) with [`BEAT_ON`], every 4th
+/// beat (the phase whose beats carry the most envelope) also the downbeat
+/// column with [`DOWNBEAT_ON`]; the other rows hold [`BEAT_OFF`] and
+/// [`DOWNBEAT_OFF`]. Returns (beat, downbeat, tempo in BPM, 0 for a silent
+/// envelope).
 pub fn beat_substitute(envelope: &[f32]) -> (Vec<f32>, Vec<f32>, f64) {
     let n = envelope.len();
-    let mut beat = vec![0.0f32; n];
-    let mut downbeat = vec![0.0f32; n];
+    let mut beat = vec![BEAT_OFF; n];
+    let mut downbeat = vec![DOWNBEAT_OFF; n];
     if n < 2 || !envelope.iter().any(|&v| v != 0.0) {
         return (beat, downbeat, 0.0);
     }
     let bpm = tempo(envelope, FPS);
     let beats = beat_track(envelope, FPS, bpm);
-    for &b in &beats {
-        beat[b] = 1.0;
-    }
     let phase = (0..BEATS_PER_BAR.min(beats.len()))
         .max_by(|&a, &b| {
             let s = |p: usize| -> f64 {
@@ -227,8 +240,14 @@ pub fn beat_substitute(envelope: &[f32]) -> (Vec<f32>, Vec<f32>, f64) {
             s(a).total_cmp(&s(b)).then(b.cmp(&a)) // ties: the earliest phase
         })
         .unwrap_or(0);
-    for &b in beats.iter().skip(phase).step_by(BEATS_PER_BAR) {
-        downbeat[b] = 1.0;
+    for (k, &b) in beats.iter().enumerate() {
+        let Some(row) = beat.get_mut(b + 1) else {
+            continue;
+        };
+        *row = BEAT_ON;
+        if k >= phase && (k - phase) % BEATS_PER_BAR == 0 {
+            downbeat[b + 1] = DOWNBEAT_ON;
+        }
     }
     (beat, downbeat, bpm)
 }
@@ -292,13 +311,13 @@ mod tests {
         assert!(f.data.iter().all(|v| v.is_finite()));
         // beats at 120 BPM = every 10 frames; downbeats every 40
         let beats: Vec<usize> = (0..f.frames)
-            .filter(|&t| f.row(t)[BEAT_COL] == 1.0)
+            .filter(|&t| f.row(t)[BEAT_COL] == BEAT_ON)
             .collect();
         assert!(beats.len() >= 10, "{beats:?}");
         assert!(beats.windows(2).all(|w| w[1] - w[0] == 10), "{beats:?}");
         assert!((f.tempo_bpm - 120.0).abs() < 5.0, "{}", f.tempo_bpm);
         let downs: Vec<usize> = (0..f.frames)
-            .filter(|&t| f.row(t)[DOWNBEAT_COL] == 1.0)
+            .filter(|&t| f.row(t)[DOWNBEAT_COL] == DOWNBEAT_ON)
             .collect();
         assert!(downs.windows(2).all(|w| w[1] - w[0] == 40), "{downs:?}");
         assert!(downs.iter().all(|d| beats.contains(d)));
