@@ -180,3 +180,123 @@ fn a_44k_stereo_file_matches_through_the_whole_path() {
     );
     report_beats("stereo_44k", &f, &g);
 }
+
+// ---- `duolando features --for transflower [--scaler]` ----
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("duo-tfaudio-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn cli(args: &[&str]) -> (Option<i32>, String) {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_duolando"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+fn scaler_json(width: usize) -> String {
+    let mean: Vec<String> = (0..width)
+        .map(|c| format!("{}", c as f64 * 0.25 - 40.0))
+        .collect();
+    let scale: Vec<String> = (0..width)
+        .map(|c| format!("{}", 0.5 + c as f64 * 0.125))
+        .collect();
+    format!(
+        "{{\"format\": \"duolando-transflower-scaler\", \"version\": 1, \"width\": {width}, \"mean\": [{}], \"scale\": [{}]}}",
+        mean.join(", "),
+        scale.join(", ")
+    )
+}
+
+#[test]
+fn cli_writes_the_library_features_scaled_or_not() {
+    let d = tmp("cli");
+    let flac = fixtures().join("music/stereo_44k.flac");
+    let y = duolando::audio::load_mono(&flac, SAMPLE_RATE).unwrap();
+    let want = TfAudio::new().features(&y).unwrap();
+
+    let out = d.join("raw.npy");
+    let (code, err) = cli(&[
+        "features",
+        "--for",
+        "transflower",
+        flac.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains("(40, 85) transflower features at 20 fps (unscaled)"),
+        "{err}"
+    );
+    let a = read_f32_2d(&out, Some(FEATURE_DIM), "features").unwrap();
+    assert_eq!(a.rows, 40);
+    assert_eq!(a.data, want.data);
+
+    let sc = d.join("scaler.json");
+    std::fs::write(&sc, scaler_json(FEATURE_DIM)).unwrap();
+    let out = d.join("scaled.npy");
+    let (code, err) = cli(&[
+        "features",
+        "--family",
+        "transflower",
+        "--scaler",
+        sc.to_str().unwrap(),
+        flac.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("(scaled)"), "{err}");
+    let s = read_f32_2d(&out, Some(FEATURE_DIM), "features").unwrap();
+    for t in 0..s.rows {
+        for c in 0..FEATURE_DIM {
+            let (m, k) = (c as f64 * 0.25 - 40.0, 0.5 + c as f64 * 0.125);
+            let want_v = if PCA_COLS.contains(&c) {
+                0.0
+            } else {
+                ((want.row(t)[c] as f64 - m) / k) as f32
+            };
+            assert_eq!(s.data[t * FEATURE_DIM + c], want_v, "t {t} c {c}");
+        }
+    }
+    std::fs::remove_dir_all(d).ok();
+}
+
+#[test]
+fn cli_refuses_a_wrong_scaler() {
+    let d = tmp("refuse");
+    let flac = fixtures().join("music/stereo_44k.flac");
+    let sc = d.join("scaler67.json");
+    std::fs::write(&sc, scaler_json(67)).unwrap();
+    let out = d.join("x.npy");
+    let (code, err) = cli(&[
+        "features",
+        "--for",
+        "transflower",
+        "--scaler",
+        sc.to_str().unwrap(),
+        flac.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("67 columns") && err.contains("85"), "{err}");
+    assert!(!out.exists());
+    let (code, err) = cli(&[
+        "features",
+        "--scaler",
+        sc.to_str().unwrap(),
+        flac.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--for transflower"), "{err}");
+    assert!(!out.exists());
+    std::fs::remove_dir_all(d).ok();
+}
