@@ -300,3 +300,207 @@ fn cli_refuses_a_wrong_scaler() {
     assert!(!out.exists());
     std::fs::remove_dir_all(d).ok();
 }
+
+// ---- `duolando dance` on a Transflower model ----
+
+/// The paper fixture's config with the motion 67 wide (the built-in
+/// skeleton's width) and the audio 85 wide, seeded weights (valid flow
+/// values), as a `.duo` in `dir`.
+fn seeded_85_model(dir: &Path) -> PathBuf {
+    use duolando::duo_writer::{write_model, StoreAs, Tensor};
+    use duolando_core::family::FamilyConfig;
+    use duolando_core::nn::names::{SchemaError, TensorSpec};
+    use duolando_core::transflower::config::TransflowerConfig;
+    use duolando_core::transflower::hparams::Hparams;
+    let text = std::fs::read_to_string(fixtures().join("transflower_paper/hparams.yaml")).unwrap();
+    let mut h = Hparams::parse(&text).unwrap();
+    h.set("dins", "67,85").unwrap();
+    h.set("douts", "67").unwrap();
+    let cfg = TransflowerConfig::from_hparams(&h).unwrap();
+    let mut state = 0x2545f4914f6cdd1du64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+    };
+    let mut tensors: Vec<Tensor> = Vec::new();
+    FamilyConfig::Transflower(cfg)
+        .for_each_tensor::<SchemaError>(&mut |spec: &TensorSpec| {
+            let n: usize = spec.dims().iter().map(|&d| d as usize).product();
+            let name = spec.name.as_str();
+            let c = spec.dims()[0] as usize;
+            let values: Vec<f32> = if name.ends_with(".p") {
+                (0..n)
+                    .map(|i| if i / c == c - 1 - i % c { 1.0 } else { 0.0 })
+                    .collect()
+            } else if name.ends_with(".sign_s") {
+                (0..n)
+                    .map(|i| if i % 3 == 0 { -1.0 } else { 1.0 })
+                    .collect()
+            } else if [
+                "gamma",
+                "inv_std",
+                "weight_v",
+                "weight_g",
+                "running_var",
+                "norm1.weight",
+                "norm2.weight",
+            ]
+            .iter()
+            .any(|k| name.ends_with(k))
+            {
+                (0..n).map(|_| 1.0 + 0.1 * next()).collect()
+            } else {
+                (0..n).map(|_| 0.1 * next()).collect()
+            };
+            tensors.push(Tensor {
+                name: name.to_string(),
+                shape: spec.dims().to_vec(),
+                values,
+                store_as: StoreAs::F32,
+            });
+            Ok(())
+        })
+        .unwrap();
+    let bytes = write_model(&FamilyConfig::Transflower(cfg), &tensors).unwrap();
+    let p = dir.join("tf85.duo");
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+fn motion_scaler_json(width: usize) -> String {
+    // small scales: the seeded model's frames stay near the mean pose
+    let mean: Vec<String> = (0..width).map(|_| "0".to_string()).collect();
+    let scale: Vec<String> = (0..width).map(|_| "0.05".to_string()).collect();
+    format!(
+        "{{\"format\": \"duolando-transflower-scaler\", \"version\": 1, \"width\": {width}, \"mean\": [{}], \"scale\": [{}]}}",
+        mean.join(", "),
+        scale.join(", ")
+    )
+}
+
+#[test]
+fn dance_runs_features_then_generate() {
+    let d = tmp("dance");
+    let model = seeded_85_model(&d);
+    let flac = fixtures().join("music/stereo_44k.flac");
+    let (asc, msc) = (d.join("audio_scaler.json"), d.join("motion_scaler.json"));
+    std::fs::write(&asc, scaler_json(FEATURE_DIM)).unwrap();
+    std::fs::write(&msc, motion_scaler_json(67)).unwrap();
+    let out = d.join("out");
+    let (code, err) = cli(&[
+        "dance",
+        "--model",
+        model.to_str().unwrap(),
+        "--music",
+        flac.to_str().unwrap(),
+        "--audio-scaler",
+        asc.to_str().unwrap(),
+        "--scaler",
+        msc.to_str().unwrap(),
+        "--seed",
+        "7",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    for f in [
+        "audio_features.npy",
+        "motion_seed.npy",
+        "output.npy",
+        "dancer.glb",
+        "dancer.bvh",
+        "index.html",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing; {err}");
+    }
+    // the audio input is the features command's output, the seed the mean pose
+    let a = read_f32_2d(&out.join("audio_features.npy"), Some(FEATURE_DIM), "a").unwrap();
+    let fo = d.join("features.npy");
+    let (code, err) = cli(&[
+        "features",
+        "--for",
+        "transflower",
+        "--scaler",
+        asc.to_str().unwrap(),
+        flac.to_str().unwrap(),
+        fo.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(
+        a.data,
+        read_f32_2d(&fo, Some(FEATURE_DIM), "f").unwrap().data
+    );
+    let s = read_f32_2d(&out.join("motion_seed.npy"), Some(67), "s").unwrap();
+    assert_eq!(s.rows, 12);
+    assert!(s.data.iter().all(|&v| v == 0.0));
+    // and output.npy is generate's on those two files
+    let out2 = d.join("out2");
+    let (code, err) = cli(&[
+        "generate",
+        "--model",
+        model.to_str().unwrap(),
+        "--input",
+        &format!(
+            "audio_feats_scaled_20={}",
+            out.join("audio_features.npy").display()
+        ),
+        "--input",
+        &format!("expmap_scaled_20={}", out.join("motion_seed.npy").display()),
+        "--seed",
+        "7",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    let (x, y) = (
+        std::fs::read(out.join("output.npy")).unwrap(),
+        std::fs::read(out2.join("output.npy")).unwrap(),
+    );
+    assert_eq!(x, y, "dance and generate differ");
+    std::fs::remove_dir_all(d).ok();
+}
+
+#[test]
+fn dance_refuses_what_does_not_fit() {
+    let d = tmp("dance-refuse");
+    let flac = fixtures().join("music/stereo_44k.flac");
+    let out = d.join("out");
+    // the paper fixture's audio is 7 wide
+    let paper = fixtures().join("transflower_paper/model.duo");
+    let (code, err) = cli(&[
+        "dance",
+        "--model",
+        paper.to_str().unwrap(),
+        "--music",
+        flac.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("7 columns") && err.contains("85"), "{err}");
+    // a wrong audio scaler, a leader, on the 85-wide model
+    let model = seeded_85_model(&d);
+    let sc = d.join("s67.json");
+    std::fs::write(&sc, scaler_json(67)).unwrap();
+    let (code, err) = cli(&[
+        "dance",
+        "--model",
+        model.to_str().unwrap(),
+        "--music",
+        flac.to_str().unwrap(),
+        "--audio-scaler",
+        sc.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("67 columns"), "{err}");
+    assert!(!out.exists());
+    // Transflower flags on the (default) Duolando model
+    let (code, err) = cli(&["dance", "--seed", "1", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--seed is for a Transflower model"), "{err}");
+    std::fs::remove_dir_all(d).ok();
+}
