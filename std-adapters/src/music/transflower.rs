@@ -27,8 +27,8 @@
 //! - 83, 84 `ddcpca`: 2 PCA components of a Beat Saber step-placement
 //!   network's hidden states (the checkpoint and the fitted PCA are not
 //!   available). NOT reproduced: 0, the PCA components' mean by
-//!   construction; [`features_scaled`] puts the scaler's mean there so
-//!   they come out exactly 0 after scaling.
+//!   construction; [`TfAudio::features_scaled`] writes them as exactly 0
+//!   after scaling (they stand for the scaler's mean).
 //!
 //! Rows: `floor(len / 4800)` (the centred STFT's `1 + len / hop` frames
 //! less the dropped first one; the authors then truncate every part to the
@@ -168,7 +168,9 @@ impl TfAudio {
 
     /// As [`TfAudio::features`], then standardised by `mean`/`scale` (the
     /// authors' StandardScaler: `(x - mean) / scale`, in f64); the PCA
-    /// columns are set to the scaler's mean first, so they come out 0.
+    /// columns stand for the scaler's mean, so they are exactly 0.
+    ///
+    /// Panics unless `mean` and `scale` have [`FEATURE_DIM`] values.
     pub fn features_scaled(
         &self,
         y: &[f32],
@@ -179,12 +181,12 @@ impl TfAudio {
         assert_eq!(scale.len(), FEATURE_DIM, "scaler width");
         let me = self.mel_envelope(y)?;
         let (beat, downbeat, tempo_bpm) = beat_substitute(&me.envelope);
-        let pca = [mean[PCA_COLS.start] as f32, mean[PCA_COLS.start + 1] as f32];
-        let mut f = assemble(&me, &beat, &downbeat, pca, tempo_bpm);
+        let mut f = assemble(&me, &beat, &downbeat, [0.0, 0.0], tempo_bpm);
         for row in f.data.chunks_exact_mut(FEATURE_DIM) {
             for ((v, &m), &s) in row.iter_mut().zip(mean).zip(scale) {
                 *v = ((*v as f64 - m) / s) as f32;
             }
+            row[PCA_COLS].fill(0.0);
         }
         Ok(f)
     }
@@ -335,7 +337,8 @@ mod tests {
         let y = clicks(3.0, 100.0);
         let a = TfAudio::new();
         let raw = a.features(&y).unwrap();
-        let mean: Vec<f64> = (0..FEATURE_DIM).map(|c| c as f64 * 0.5 - 3.0).collect();
+        // means not representable in f32: the PCA columns must still be 0
+        let mean: Vec<f64> = (0..FEATURE_DIM).map(|c| c as f64 * 0.5 - 3.1).collect();
         let scale: Vec<f64> = (0..FEATURE_DIM).map(|c| 1.0 + c as f64 * 0.1).collect();
         let s = a.features_scaled(&y, &mean, &scale).unwrap();
         for t in 0..raw.frames {
