@@ -3,8 +3,9 @@
 # and C++17 (included twice), the C host test linked against the static and
 # the dynamic library and run under valgrind; the engine integrations
 # (issue #36 §6): the Unreal plugin's session runner under valgrind, its
-# module + component compiled against TEST STUB engine headers
-# (tests/unreal/stub) and run against the library, its .uplugin checked and
+# module + components (follower, Bailando solo, Transflower) compiled
+# against TEST STUB engine headers (tests/unreal/stub) and run against the
+# library, its .uplugin checked and
 # Build.cs rules compiled against a TEST STUB UnrealBuildTool and evaluated
 # per platform; the Unity wrapper compiled and run under Mono, the Unity
 # package layout checked, its runtime and sample compiled against a TEST
@@ -74,7 +75,9 @@ echo "--- Unreal plugin: module + component compiled against TEST STUB engine he
 # Not Unreal Engine: the stubs only let g++ check and run the plugin's own C++.
 UEFLAGS="-std=c++17 -Wall -Wextra -Werror -g -DDUOLANDO_API= -Itests/unreal/stub -Iinclude -I$UEMOD/Public -I$UEMOD/Private"
 g++ $UEFLAGS -fsyntax-only -DPLATFORM_WINDOWS=1 $UEMOD/Private/DuolandoModule.cpp   # the Windows DLL-loading branch
-g++ $UEFLAGS tests/unreal/test_component.cpp $UEMOD/Private/DuolandoFollowerComponent.cpp $UEMOD/Private/DuolandoSoloDancerComponent.cpp $UEMOD/Private/DuolandoModule.cpp \
+g++ $UEFLAGS tests/unreal/test_component.cpp tests/unreal/test_transflower_component.cpp \
+    $UEMOD/Private/DuolandoFollowerComponent.cpp $UEMOD/Private/DuolandoSoloDancerComponent.cpp \
+    $UEMOD/Private/DuolandoTransflowerComponent.cpp $UEMOD/Private/DuolandoModule.cpp \
     -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_component"
 "$OUT/test_component" "$ROOT"
 

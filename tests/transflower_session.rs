@@ -19,6 +19,7 @@
 
 use duolando_core::arena::Arena;
 use duolando_core::error::{Buffer, Error, Setting};
+use duolando_core::kernels::RowData;
 use duolando_core::nn::encoder_layer::{
     encoder_layer, encoder_layer_rows, EncoderLayerScratch, LayerKv, SlotBias,
 };
@@ -27,11 +28,12 @@ use duolando_core::transflower::encoders::Window;
 use duolando_core::transflower::exact::{
     generate, generate_scratch_bytes, prepare, step, steps, Prepared, Replay, Seeded, StepScratch,
 };
-use duolando_core::transflower::model::Model;
+use duolando_core::transflower::model::{Model, TransformerW};
 use duolando_core::transflower::probe;
 use duolando_core::transflower::session::{
     session_bytes, Preset, Session, SessionConfig, StepBatch,
 };
+use duolando_core::transflower::transformer::{forward, forward_chunked, TransformerScratch};
 
 #[path = "transflower_common.rs"]
 mod common;
@@ -317,7 +319,7 @@ fn rolling_schedule() {
             let n = got.len() / ch;
             let mut history = f.seed.clone();
             history.extend_from_slice(&got);
-            let (mut one_step, mut differ) = (0f32, 0);
+            let (mut one_step, mut differ, mut first) = (0f32, 0, 0f32);
             for t in 0..n {
                 let r = r_step(
                     &c,
@@ -329,10 +331,18 @@ fn rolling_schedule() {
                 );
                 let frame = &got[t * ch..(t + 1) * ch];
                 if t == 0 {
-                    assert!(
-                        frame == r.as_slice(),
-                        "{case} rolling {refresh}: the first step is not R's"
-                    );
+                    first = rel_err(frame, &r);
+                    if kv == KvType::F32 {
+                        assert!(
+                            first <= tol,
+                            "{case} rolling {refresh}: the first step is {first:e} from R's (tolerance {tol:e})"
+                        );
+                    } else {
+                        assert!(
+                            first <= F16_FIRST_STEP_TOL,
+                            "{case} rolling {refresh}: the first step with f16 keys and values is {first:e} from R's (tolerance {F16_FIRST_STEP_TOL:e})"
+                        );
+                    }
                 } else {
                     one_step = one_step.max(rel_err(frame, &r));
                     differ += usize::from(frame != r.as_slice());
@@ -346,7 +356,7 @@ fn rolling_schedule() {
             } else {
                 assert!(n < 2 || differ > 0, "{case} rolling {refresh}: no step differs from R's: the stale rows are not used");
             }
-            eprintln!("{case} rolling refresh {refresh} {kv:?}: {n} frames, one step vs R's step on the same window <= {one_step:.3e} ({differ} differ); whole run vs R {:.3e}", rel_err(&got, &want));
+            eprintln!("{case} rolling refresh {refresh} {kv:?}: {n} frames, first step vs R's {first:.3e}, one step vs R's step on the same window <= {one_step:.3e} ({differ} differ); whole run vs R {:.3e}", rel_err(&got, &want));
         }
     }
 }
@@ -423,10 +433,127 @@ fn cached_layer_equals_the_whole_layer() {
     }
 }
 
+/// A rolling session's first step runs each net over its rows in chunks
+/// (`forward_chunked`: every row's keys and values stored first, then each
+/// chunk's rows against them): in chunks of 1, 2 and 5 rows it gives one
+/// chunk's outputs and keys/values bit for bit, and the whole net's
+/// (`forward`) within REORDER_TOL-sized reorderings (f32 keys/values), on
+/// every net of every case (with and without a score bias).
+#[test]
+fn chunked_nets_equal_one_chunk_and_the_whole_net() {
+    for case in CASES {
+        let c = Case::load(case);
+        let model = c.model();
+        let mut nets: Vec<(String, usize, usize)> = Vec::new();
+        for (i, ic) in c.cfg.inputs().iter().enumerate() {
+            nets.push((format!("input {i}"), ic.length as usize, ic.length as usize));
+        }
+        let n = c.cfg.latent_rows();
+        nets.push(("cross-modal".into(), n, c.cfg.cond_len as usize));
+        for (k, (name, l, keep)) in nets.iter().enumerate() {
+            let label = format!("{case} {name}");
+            if k < c.cfg.inputs().len() {
+                check_chunked(&label, &model.inputs[k], *l, *keep, k as u64);
+            } else {
+                check_chunked(&label, &model.cross_modal, *l, *keep, k as u64);
+            }
+        }
+    }
+}
+
+/// `chunked_nets_equal_one_chunk_and_the_whole_net` on one net over `l`
+/// rows of which `keep` are decoded.
+fn check_chunked<const N: usize>(
+    name: &str,
+    w: &TransformerW<'_, N>,
+    l: usize,
+    keep: usize,
+    seed: u64,
+) {
+    let (one, one_kv) = chunked_run(w, l, keep, seed, Some(l));
+    assert!(one.iter().all(|v| v.is_finite()), "{name}: non-finite");
+    for chunk in [1, 2, 5] {
+        let (got, got_kv) = chunked_run(w, l, keep, seed, Some(chunk));
+        assert!(
+            got == one,
+            "{name}: chunks of {chunk} differ from one chunk"
+        );
+        assert!(
+            got_kv == one_kv,
+            "{name}: chunks of {chunk} keep other keys/values"
+        );
+    }
+    // The whole net's attention as GEMMs (another summation order): a
+    // REORDER_TOL per layer, compounded through the decoder (measured
+    // <= 6.7e-7 on these nets).
+    let (whole, _) = chunked_run(w, l, keep, seed, None);
+    let e = rel_err(&one, &whole);
+    eprintln!("{name}: chunked vs whole net {e:.2e}");
+    assert!(
+        e <= 4.0 * REORDER_TOL,
+        "{name}: chunked vs whole net {e:e} > {:e}",
+        4.0 * REORDER_TOL
+    );
+}
+
+/// The net over random rows: `forward_chunked` in chunks of `chunk` rows
+/// (its outputs and every layer's keys and values), or (None) `forward`.
+fn chunked_run<const N: usize>(
+    w: &TransformerW<'_, N>,
+    l: usize,
+    keep: usize,
+    seed: u64,
+    chunk: Option<usize>,
+) -> (Vec<f32>, Vec<Vec<f32>>) {
+    let (d, din) = (w.d, w.din);
+    let mut rng = 7 + seed;
+    let input: Vec<f32> = (0..l * din)
+        .map(|_| {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((rng >> 40) as f32 / (1u64 << 24) as f32) - 0.5
+        })
+        .collect();
+    let mut buf = vec![0u8; 32 << 20];
+    let mut a = Arena::new(&mut buf);
+    let mut out = vec![0f32; keep * w.dout];
+    let Some(chunk) = chunk else {
+        let mut s = TransformerScratch::carve(&mut a, l, d).unwrap();
+        forward(w, &input, keep, &mut s, &mut out, &mut |_, _| {});
+        return (out, Vec::new());
+    };
+    let mut s = TransformerScratch::carve_keys(&mut a, chunk, l, d).unwrap();
+    assert_eq!(s.rows(), chunk);
+    let mut kv: Vec<LayerKv> = (0..w.layers.len())
+        .map(|_| LayerKv::carve(&mut a, KvType::F32, l, d).unwrap())
+        .collect();
+    let ids: Vec<u32> = (0..l as u32).collect();
+    let mut x = vec![0f32; l * d];
+    forward_chunked(
+        w, &input, &ids, &ids, keep, &mut kv, &mut x, &mut s, &mut out,
+    );
+    let kept = kv
+        .iter()
+        .flat_map(|lkv| {
+            [&lkv.k, &lkv.v].map(|b| match b.view(0, l * d).unwrap() {
+                RowData::F32(r) => r.to_vec(),
+                RowData::F16(_) => unreachable!("f32 keys/values"),
+            })
+        })
+        .collect();
+    (out, kept)
+}
+
 /// A layer's outputs (LayerNorm: |v| ~ 1) computed with the attention's
 /// sums in another order: ~n ulps of the score and value sums at worst
 /// (n = 12 keys here, 6e-8 each: 7e-7); measured 1.4e-7.
 const REORDER_TOL: f32 = 1e-6;
+
+/// A rolling session's first step with f16 keys and values (read back
+/// rounded to 11 significant bits) vs R's step: f16's relative rounding
+/// (2^-11 = 4.9e-4) times 20 for its spread through 14 layers and the flow.
+const F16_FIRST_STEP_TOL: f32 = 1e-2;
 
 /// Sessions in one StepBatch (different presets, seeds) = each alone.
 #[test]

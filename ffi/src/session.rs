@@ -695,7 +695,12 @@ fn first_bad(x: &[f32], limit: f32) -> Option<(usize, f32)> {
 
 /// A core refusal, with the offending value in the message when core
 /// refused a value of `x` (non-finite or above `limit`).
-fn rejected_value(e: duolando_core::Error, x: &[f32], what: &str, limit: f32) -> Failure {
+pub(crate) fn rejected_value(
+    e: duolando_core::Error,
+    x: &[f32],
+    what: &str,
+    limit: f32,
+) -> Failure {
     match e {
         duolando_core::Error::NonFinite { index, .. }
         | duolando_core::Error::OutOfRange { index, .. }
@@ -797,7 +802,15 @@ pub unsafe extern "C" fn duo_session_push_music(
         match &mut s.session {
             AnySession::Duolando { session, .. } => session.push_music_frame(x),
             AnySession::Bailando(session) => session.push_music(x),
-            AnySession::Transflower(session) => crate::transflower::push_audio(session, x),
+            AnySession::Transflower(session) => {
+                if x.is_empty() {
+                    return Err(Failure::invalid(
+                        "n_features is 0: push one or more whole audio rows",
+                    ));
+                }
+                crate::transflower::push_audio(session, x)?;
+                return Ok(DuoResult::Ok);
+            }
         }
         .map_err(|e| rejected_value(e, x, "music frame", MAX_MUSIC_FEATURE))?;
         Ok(DuoResult::Ok)

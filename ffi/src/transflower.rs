@@ -157,9 +157,28 @@ fn session_of<'x>(
 
 /// `duo_session_push_music` on a Transflower session: whole rows of the
 /// last input (the audio features).
-pub(crate) fn push_audio(s: &mut Session<'static>, x: &[f32]) -> Result<(), duolando_core::Error> {
+pub(crate) fn push_audio(s: &mut Session<'static>, x: &[f32]) -> Result<(), Failure> {
     let last = s.config_model().inputs().len() - 1;
-    s.push(last, x)
+    s.push(last, x).map_err(|e| match e {
+        duolando_core::Error::NonFinite { .. } | duolando_core::Error::OutOfRange { .. } => {
+            crate::session::rejected_value(
+                e,
+                x,
+                "audio row",
+                duolando_core::input::MAX_MUSIC_FEATURE,
+            )
+        }
+        e => fail(e, s),
+    })
+}
+
+/// A core refusal of a Transflower session, described with the model's
+/// names (inputs, frames) rather than the duet's.
+fn fail(e: duolando_core::Error, s: &Session<'_>) -> Failure {
+    Failure::new(
+        crate::result::code_of(&e),
+        duolando_runtime::engine_errors::describe_transflower(&e, s.config_model()),
+    )
 }
 
 /// Sizes of a Transflower model.
@@ -343,7 +362,7 @@ pub unsafe extern "C" fn duo_transflower_push_input(
         }
         s.push(index as usize, x).map_err(|e| match e {
             duolando_core::Error::State => Failure::invalid(format!("input {index} is the motion (fed back) or a style label: only sliding feature inputs are pushed")),
-            e => e.into(),
+            e => fail(e, s),
         })?;
         Ok(DuoResult::Ok)
     })
@@ -366,9 +385,10 @@ fn pull(
     }
     if s.pending() == 0 {
         let made = match noise {
-            Some(z) => s.step_with(z)?,
-            None => s.step()?,
-        };
+            Some(z) => s.step_with(z),
+            None => s.step(),
+        }
+        .map_err(|e| fail(e, s))?;
         if !made {
             return Ok(None);
         }

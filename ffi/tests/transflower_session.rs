@@ -338,7 +338,12 @@ fn refusals_name_the_family_and_leave_the_session_unchanged() {
             duo_session_latency_frames(s, &mut lat),
             DuoResult::InvalidArgument
         );
-        // Bad audio: ragged, NaN, the motion input; refused whole.
+        // Bad audio: none, ragged, NaN, the motion input; refused whole.
+        assert_eq!(
+            duo_session_push_music(s, std::ptr::null(), 0),
+            DuoResult::InvalidArgument
+        );
+        assert!(last_error().contains("n_features is 0"), "{}", last_error());
         assert_eq!(
             duo_session_push_music(s, audio.as_ptr(), d + 1),
             DuoResult::InvalidArgument
@@ -401,11 +406,33 @@ fn refusals_name_the_family_and_leave_the_session_unchanged() {
             ),
             DuoResult::InvalidArgument
         );
+        assert!(
+            last_error().contains("noise") && !last_error().contains("encoder"),
+            "{}",
+            last_error()
+        );
         assert_eq!(
             duo_transflower_pull_frame(s, frame.as_mut_ptr(), c, &mut index),
             DuoResult::Ok
         );
         assert_eq!(index, 1);
+        // Audio past the feed's room: DUO_BACKLOG in the model's words.
+        let mut pushed = 0;
+        while pushed < 100_000 && duo_session_push_music(s, audio.as_ptr(), d) == DuoResult::Ok {
+            pushed += 1;
+        }
+        assert!(pushed < 100_000, "no backlog");
+        assert_eq!(
+            duo_session_push_music(s, audio.as_ptr(), d),
+            DuoResult::Backlog
+        );
+        let msg = last_error();
+        assert!(
+            msg.contains("input_buffer_rows")
+                && !msg.contains("follower")
+                && !msg.contains("leader"),
+            "{msg}"
+        );
         // A Duolando model: the Transflower calls refuse it.
         let duo = open(&case().join("../tiny/model.duo"));
         assert_eq!(

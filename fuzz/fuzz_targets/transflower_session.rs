@@ -81,6 +81,7 @@ fn run(data: &[u8]) -> AResult<()> {
     let sc = SessionConfig {
         refresh: u.int_in_range(1..=6)?,
         kv: if u.arbitrary()? { KvType::F16 } else { KvType::F32 },
+        rolling: u.arbitrary()?,
         input_buffer_rows: u.int_in_range(0..=8)?,
         pending_frames: u.int_in_range(1..=4)?,
     };

@@ -179,6 +179,13 @@ pub fn describe_transflower(
             "style label {token} of input `{}` is outside its {vocab} labels",
             cfg.inputs().get(stream as usize).map_or("?", |c| c.name.as_str())
         ),
+        Error::Backlog { buffer: Buffer::Output, held, capacity } => format!(
+            "the session is full ({held} of {capacity} frames made and not pulled): pull frames before the next step"
+        ),
+        Error::Backlog { buffer, held, capacity } => format!(
+            "the session is full ({} would hold {held} rows, at most {capacity}: the window plus input_buffer_rows): pull frames (each moves the window one row on) before pushing more",
+            transflower_buffer(buffer, cfg)
+        ),
         _ => describe(e),
     }
 }

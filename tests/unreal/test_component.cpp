@@ -11,13 +11,15 @@
 // track in, ticks at 60 fps publish every frame once, in order, never
 // before its time, in Unreal coordinates equal to the golden positions
 // (within 1e-3 cm = 1e-5 m); Restart starts again from frame 0; each
-// component refuses the other family's model.
+// component refuses the other family's model. UDuolandoTransflowerComponent:
+// test_transflower_component.cpp (its own checks, run from main here).
 // Usage: test_component <repo root>   (.ci/ffi.sh)
 #include "DuolandoFollowerComponent.h"
 #include "DuolandoSoloDancerComponent.h"
 #include "Misc/Paths.h"
 #include "Modules/ModuleManager.h"
 #include "duolando.h"
+#include "test_npy.h"
 
 #include <chrono>
 #include <cmath>
@@ -28,6 +30,7 @@
 #include <vector>
 
 IModuleInterface* StubCreateModule_Duolando();
+int RunTransflowerComponentTests(const std::string& root);  // test_transflower_component.cpp: its failures
 
 static int failures = 0;
 #define CHECK(c)                                                         \
@@ -37,30 +40,6 @@ static int failures = 0;
       ++failures;                                                        \
     }                                                                    \
   } while (0)
-
-// A 2-D little-endian float32 .npy (numpy format 1.0).
-static std::vector<float> ReadNpy(const std::string& path, size_t* rows, size_t* cols) {
-  std::vector<float> out;
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return out;
-  unsigned char head[10];
-  if (std::fread(head, 1, 10, f) != 10 || std::memcmp(head, "\x93NUMPY", 6) != 0 || head[6] != 1) {
-    std::fclose(f);
-    return out;
-  }
-  size_t hlen = head[8] | (head[9] << 8);
-  std::string h(hlen, '\0');
-  if (std::fread(&h[0], 1, hlen, f) != hlen || h.find("'<f4'") == std::string::npos) {
-    std::fclose(f);
-    return out;
-  }
-  size_t open = h.find('(', h.find("'shape'"));
-  std::sscanf(h.c_str() + open, "(%zu, %zu)", rows, cols);
-  out.resize(*rows * *cols);
-  if (std::fread(out.data(), 4, out.size(), f) != out.size()) out.clear();
-  std::fclose(f);
-  return out;
-}
 
 int main(int argc, char** argv) {
   if (argc < 2) return 2;
@@ -204,6 +183,7 @@ int main(int argc, char** argv) {
     CHECK(!Solo.IsRunning());
     Solo.EndPlay(EEndPlayReason::Quit);
   }
+  failures += RunTransflowerComponentTests(root);
   Module->ShutdownModule();
   delete Module;
   if (failures == 0) std::printf("test_component: all checks passed\n");

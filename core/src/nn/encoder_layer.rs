@@ -92,14 +92,29 @@ pub struct EncoderLayerScratch<'s> {
     sum: &'s mut [f32],
     /// (rows, f): FFN hidden rows.
     hid: &'s mut [f32],
-    /// (rows): one query's scores.
+    /// (keys): one query's scores.
     scores: &'s mut [f32],
+    /// Rows one call computes at a time.
+    rows: usize,
 }
 
 impl<'s> EncoderLayerScratch<'s> {
     pub fn carve<A: Carve<'s>>(
         a: &mut A,
         rows: usize,
+        d: usize,
+        f: usize,
+    ) -> Result<Self, ArenaError> {
+        Self::carve_keys(a, rows, rows, d, f)
+    }
+
+    /// Scratch for `rows` rows at a time (of a whole layer, or of
+    /// [`encoder_layer_rows`]) against at most `keys` kept rows
+    /// (`keys >= rows`).
+    pub fn carve_keys<A: Carve<'s>>(
+        a: &mut A,
+        rows: usize,
+        keys: usize,
         d: usize,
         f: usize,
     ) -> Result<Self, ArenaError> {
@@ -111,13 +126,14 @@ impl<'s> EncoderLayerScratch<'s> {
             probs: a.f32(rows.checked_mul(rows).ok_or(ArenaError::Overflow)?)?,
             sum: a.f32(rd)?,
             hid: a.f32(rows.checked_mul(f).ok_or(ArenaError::Overflow)?)?,
-            scores: a.f32(rows)?,
+            scores: a.f32(keys.max(rows))?,
+            rows,
         })
     }
 
     /// Rows this scratch was carved for.
     pub fn rows(&self) -> usize {
-        self.scores.len()
+        self.rows
     }
 
     /// After [`encoder_layer`] over `n` rows of width `d`: each row's
@@ -275,18 +291,10 @@ pub fn encoder_layer_rows(
     if d == 0 || n_head == 0 || !d.is_multiple_of(n_head) {
         return;
     }
-    let m = (x.len() / d).min(slots.len());
+    let m = store_rows_kv(w, x, d, kv, slots, s);
     let n = kv.k.len() / d;
     let f = w.linear1.w.rows();
-    let qkv = &mut s.qkv[..3 * m * d];
-    linear(&x[..m * d], &w.in_proj.w, w.in_proj.b, qkv);
-    for (r, &slot) in slots[..m].iter().enumerate() {
-        let row = &qkv[r * 3 * d..(r + 1) * 3 * d];
-        // A slot outside the cache leaves it unchanged (callers pass slots < n).
-        let at = slot as usize * d;
-        let _ = kv.k.store(at, &row[d..2 * d]);
-        let _ = kv.v.store(at, &row[2 * d..]);
-    }
+    let qkv = &s.qkv[..3 * m * d];
     let hd = d / n_head;
     let scale = 1.0 / libm::sqrtf(hd as f32);
     let scores = &mut s.scores[..n];
@@ -328,6 +336,34 @@ pub fn encoder_layer_rows(
         }
     }
     after_attention(w, &mut x[..m * d], d, f, s);
+}
+
+/// The first half of [`encoder_layer_rows`]: the q | k | v of the rows
+/// `x` (m, d) into the scratch's `qkv` (m, 3d), their keys and values into
+/// their slots of `kv` (m = the rows of `x` that have a slot). A whole
+/// sequence too long for the scratch goes through a layer in two passes
+/// (`transflower::transformer::forward_chunked`): this over every chunk,
+/// then [`encoder_layer_rows`] over every chunk (which stores the same
+/// keys and values again: `linear` computes each row on its own).
+pub fn store_rows_kv(
+    w: &EncoderLayerW<'_>,
+    x: &[f32],
+    d: usize,
+    kv: &mut LayerKv<'_>,
+    slots: &[u32],
+    s: &mut EncoderLayerScratch<'_>,
+) -> usize {
+    let m = (x.len() / d.max(1)).min(slots.len());
+    let qkv = &mut s.qkv[..3 * m * d];
+    linear(&x[..m * d], &w.in_proj.w, w.in_proj.b, qkv);
+    for (r, &slot) in slots[..m].iter().enumerate() {
+        let row = &qkv[r * 3 * d..(r + 1) * 3 * d];
+        // A slot outside the cache leaves it unchanged (callers pass slots < n).
+        let at = slot as usize * d;
+        let _ = kv.k.store(at, &row[d..2 * d]);
+        let _ = kv.v.store(at, &row[2 * d..]);
+    }
+    m
 }
 
 fn add(y: &mut [f32], x: &[f32]) {

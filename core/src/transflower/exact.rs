@@ -160,8 +160,22 @@ pub struct StepScratch<'s> {
 
 impl<'s> StepScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &TransflowerConfig) -> Result<Self, ArenaError> {
+        Self::carve_net(a, cfg, cfg.latent_rows(), true)
+    }
+
+    /// A step's scratch whose nets compute at most `rows` rows at a time
+    /// (at least a coupling's rows; against every latent row) and, with
+    /// `latent` false, no latent buffer (a rolling session keeps its own:
+    /// `transflower::session`).
+    pub fn carve_net<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &TransflowerConfig,
+        rows: usize,
+        latent: bool,
+    ) -> Result<Self, ArenaError> {
         let d = cfg.dhid as usize;
-        let rows = cfg.latent_rows().max(cfg.coupling_rows());
+        let keys = cfg.latent_rows().max(cfg.coupling_rows());
+        let rows = rows.max(cfg.coupling_rows()).min(keys);
         let width = d.max(cfg.flow.dhid as usize);
         let emb = cfg
             .inputs()
@@ -171,9 +185,9 @@ impl<'s> StepScratch<'s> {
             .max()
             .unwrap_or(0);
         Ok(StepScratch {
-            net: TransformerScratch::carve(a, rows, width)?,
+            net: TransformerScratch::carve_keys(a, rows, keys, width)?,
             emb: a.f32(emb)?,
-            latent: a.f32(cfg.latent_rows() * d)?,
+            latent: a.f32(if latent { cfg.latent_rows() * d } else { 0 })?,
             cond: a.f32(cfg.cond_len as usize * d)?,
             x: a.f32(cfg.channels() * cfg.output_length as usize)?,
             flow: FlowScratch::carve(a, cfg)?,

@@ -7,7 +7,7 @@
 use crate::arena::{ArenaError, Carve};
 use crate::kernels::linear;
 use crate::nn::encoder_layer::{
-    encoder_layer, encoder_layer_rows, EncoderLayerScratch, LayerKv, SlotBias,
+    encoder_layer, encoder_layer_rows, store_rows_kv, EncoderLayerScratch, LayerKv, SlotBias,
 };
 use crate::transflower::model::TransformerW;
 use crate::transflower::probe::{Probe, Stage};
@@ -21,10 +21,27 @@ pub struct TransformerScratch<'s> {
 
 impl<'s> TransformerScratch<'s> {
     pub fn carve<A: Carve<'s>>(a: &mut A, rows: usize, d: usize) -> Result<Self, ArenaError> {
+        Self::carve_keys(a, rows, rows, d)
+    }
+
+    /// Scratch for `rows` rows at a time against at most `keys` kept rows
+    /// ([`forward_rows`], [`forward_chunked`]; [`forward`] over at most
+    /// `rows` rows).
+    pub fn carve_keys<A: Carve<'s>>(
+        a: &mut A,
+        rows: usize,
+        keys: usize,
+        d: usize,
+    ) -> Result<Self, ArenaError> {
         Ok(TransformerScratch {
             x: a.f32(rows.checked_mul(d).ok_or(ArenaError::Overflow)?)?,
-            layer: EncoderLayerScratch::carve(a, rows, d, d)?,
+            layer: EncoderLayerScratch::carve_keys(a, rows, keys, d, d)?,
         })
+    }
+
+    /// Rows one call computes at a time.
+    pub fn rows(&self) -> usize {
+        self.layer.rows()
     }
 }
 
@@ -131,6 +148,71 @@ pub fn forward_rows<const N: usize>(
         encoder_layer_rows(layer, x, d, w.n_head, lkv, slots, bias, &mut s.layer);
     }
     let keep = keep.min(m);
+    linear(
+        &x[..keep * d],
+        &w.decoder.w,
+        w.decoder.b,
+        &mut out[..keep * w.dout],
+    );
+}
+
+/// The transformer over every row of `input` (L, din) in a scratch of
+/// fewer rows, keeping every layer's keys and values in `kv` (row j in
+/// slot j, at window position `pos[j]`; [`forward_recorded`]'s numbers up
+/// to the attention's summation order, and to `kv`'s storage: f16 keys and
+/// values are read back rounded). Per layer, every row's keys and values
+/// are stored first, chunk by chunk ([`store_rows_kv`]); then each chunk
+/// goes through [`encoder_layer_rows`] in place (a row's output needs its
+/// own input and the stored keys and values only). `x` (L, d): the hidden
+/// rows; `ids` (>= L): 0, 1, 2, ...; `out` (keep, dout) = the decoder of
+/// the first `keep` rows (the last layer computes only those). The first
+/// step of a rolling stale-rows session (`transflower::session`): its
+/// arena holds a chunk's scratch, not a whole step's.
+#[allow(clippy::too_many_arguments)]
+pub fn forward_chunked<const N: usize>(
+    w: &TransformerW<'_, N>,
+    input: &[f32],
+    ids: &[u32],
+    pos: &[u32],
+    keep: usize,
+    kv: &mut [LayerKv<'_>],
+    x: &mut [f32],
+    s: &mut TransformerScratch<'_>,
+    out: &mut [f32],
+) {
+    let d = w.d;
+    let rows = (input.len() / w.din.max(1)).min(ids.len());
+    let chunk = s.rows().max(1);
+    let x = &mut x[..rows * d];
+    linear(&input[..rows * w.din], &w.encoder1.w, w.encoder1.b, x);
+    if let Some(pe) = w.pe {
+        for (v, p) in x.iter_mut().zip(pe) {
+            *v += p;
+        }
+    }
+    let bias = w.bias.map(|bias| SlotBias { bias, pos });
+    let n = w.layers.len();
+    for (i, (layer, lkv)) in w.layers.iter().zip(kv.iter_mut()).enumerate() {
+        for a in (0..rows).step_by(chunk) {
+            let b = (a + chunk).min(rows);
+            store_rows_kv(layer, &x[a * d..b * d], d, lkv, &ids[a..b], &mut s.layer);
+        }
+        let k = if i + 1 == n { keep.min(rows) } else { rows };
+        for a in (0..k).step_by(chunk) {
+            let b = (a + chunk).min(k);
+            encoder_layer_rows(
+                layer,
+                &mut x[a * d..b * d],
+                d,
+                w.n_head,
+                lkv,
+                &ids[a..b],
+                bias,
+                &mut s.layer,
+            );
+        }
+    }
+    let keep = if n == 0 { rows } else { keep.min(rows) };
     linear(
         &x[..keep * d],
         &w.decoder.w,

@@ -18,6 +18,7 @@ using int32 = int32_t;
 using int64 = int64_t;
 using uint8 = uint8_t;
 using uint32 = uint32_t;
+using uint64 = uint64_t;
 using TCHAR = char;
 
 #define TEXT(s) s

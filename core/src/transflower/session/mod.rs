@@ -55,7 +55,7 @@ pub fn session_bytes(model: &TransflowerConfig, cfg: &SessionConfig) -> Result<u
     let mut p = Planner::new();
     State::carve(&mut p, model, cfg)?;
     Prepared::carve(&mut p, model)?;
-    Scratch::carve(&mut p, model, cfg.stale())?;
+    Scratch::carve(&mut p, model, Some(cfg))?;
     total(p)
 }
 
@@ -83,7 +83,7 @@ impl<'a> StepBatch<'a> {
     pub fn bytes(model: &TransflowerConfig) -> Result<usize, Error> {
         let mut p = Planner::new();
         Prepared::carve(&mut p, model)?;
-        Scratch::carve(&mut p, model, true)?;
+        Scratch::carve(&mut p, model, None)?;
         total(p)
     }
 
@@ -94,7 +94,7 @@ impl<'a> StepBatch<'a> {
         Ok(StepBatch {
             model: model as *const Model<'_> as *const u8,
             prepared,
-            scratch: Scratch::carve(&mut a, &model.cfg, true)?,
+            scratch: Scratch::carve(&mut a, &model.cfg, None)?,
         })
     }
 
@@ -201,7 +201,7 @@ impl<'a> Session<'a> {
         let own = if own {
             let mut p = Prepared::carve(&mut a, mc)?;
             prepare(model, &mut p);
-            Some((p, Scratch::carve(&mut a, mc, cfg.stale())?))
+            Some((p, Scratch::carve(&mut a, mc, Some(cfg))?))
         } else {
             None
         };

@@ -22,7 +22,39 @@ use crate::transflower::model::Model;
 use crate::transflower::probe;
 use crate::transflower::session::config::SessionConfig;
 use crate::transflower::session::state::{is_fed, need_rows, State};
-use crate::transflower::transformer::forward_rows;
+use crate::transflower::transformer::{forward_chunked, forward_rows};
+
+/// Rows a rolling session's nets compute at a time: a stale step's rows
+/// through one net, at least [`MIN_CHUNK`] (the first step's chunks), at
+/// most every latent row.
+pub fn chunk_rows(cfg: &TransflowerConfig, sc: &SessionConfig) -> usize {
+    let (mut most, mut cross) = (0, cfg.cond_len as usize);
+    for ic in cfg.inputs() {
+        let l = ic.length as usize;
+        if ic.is_discrete() {
+            cross += usize::from(sc.rolling);
+        } else {
+            let r = 1 + share(sc, l);
+            most = most.max(r);
+            cross += r;
+        }
+    }
+    most.max(cross).max(MIN_CHUNK).min(cfg.latent_rows())
+}
+
+/// The fewest rows a rolling session's first step computes at a time.
+pub const MIN_CHUNK: usize = 32;
+
+/// Rows of an input of window `l` a stale step recomputes besides its
+/// newest row: rolling, `ceil(l / refresh)` of them (round robin).
+fn share(sc: &SessionConfig, l: usize) -> usize {
+    if sc.rolling {
+        l.div_ceil(sc.refresh.max(1) as usize)
+            .min(l.saturating_sub(1))
+    } else {
+        0
+    }
+}
 
 /// Working memory of a step (shared by the sessions of a batch).
 pub struct Scratch<'s> {
@@ -38,14 +70,24 @@ pub struct Scratch<'s> {
 }
 
 impl<'s> Scratch<'s> {
+    /// The step memory of a session with config `sc`, or (None) of a
+    /// [`StepBatch`](super::StepBatch) that steps sessions of any config.
+    /// A rolling session's nets compute a chunk of rows at a time
+    /// ([`chunk_rows`]); the others' a whole step's rows.
     pub fn carve<A: Carve<'s>>(
         a: &mut A,
         cfg: &TransflowerConfig,
-        stale: bool,
+        sc: Option<&SessionConfig>,
     ) -> Result<Self, ArenaError> {
+        let stale = sc.is_none_or(|sc| sc.stale());
         let n = if stale { cfg.latent_rows() } else { 0 };
         Ok(Scratch {
-            step: StepScratch::carve(a, cfg)?,
+            step: match sc {
+                Some(sc) if sc.rolling => {
+                    StepScratch::carve_net(a, cfg, chunk_rows(cfg, sc), false)?
+                }
+                _ => StepScratch::carve(a, cfg)?,
+            },
             rows: a.f32(
                 n.checked_mul(cfg.dhid as usize)
                     .ok_or(ArenaError::Overflow)?,
@@ -123,6 +165,51 @@ pub(crate) fn step(
                     &mut |_, _| {},
                 );
             }
+            Some(x) if sc.rolling => {
+                // The first step: every row, a chunk at a time.
+                x.reset_slots(cfg);
+                let n = cfg.latent_rows();
+                for (j, id) in s.slots[..n].iter_mut().enumerate() {
+                    *id = j as u32;
+                }
+                let mut off = 0;
+                for (i, ic) in cfg.inputs().iter().enumerate() {
+                    let (l, net) = (ic.length as usize, &model.inputs[i]);
+                    let input: &[f32] = match (windows[i], net.embedding.as_ref()) {
+                        (Window::Rows(rows), _) => rows,
+                        (Window::Label(label), Some(table)) => {
+                            let e = &mut ss.emb[..net.din];
+                            table.row_into(label as usize, e);
+                            e
+                        }
+                        (Window::Label(_), None) => &[],
+                    };
+                    let layers = i * INPUT_LAYERS as usize..(i + 1) * INPUT_LAYERS as usize;
+                    forward_chunked(
+                        net,
+                        input,
+                        &s.slots[..l],
+                        &x.ipos[off..off + l],
+                        l,
+                        &mut x.input_kv[layers],
+                        &mut s.rows[..l * d],
+                        &mut ss.net,
+                        &mut x.latent[off * d..(off + l) * d],
+                    );
+                    off += l;
+                }
+                forward_chunked(
+                    &model.cross_modal,
+                    x.latent,
+                    &s.slots[..n],
+                    x.xpos,
+                    cfg.cond_len as usize,
+                    &mut x.cross_kv,
+                    s.rows,
+                    &mut ss.net,
+                    ss.cond,
+                );
+            }
             Some(x) => {
                 let kv = &mut x.input_kv;
                 encode_inputs_recorded(
@@ -158,13 +245,6 @@ pub(crate) fn step(
     } else if let Some(x) = st.stale.as_mut() {
         // Each sliding input's newest row (and, rolling, its next share of
         // rows) through its net, against the kept rows.
-        let share = |l: usize| {
-            if sc.rolling {
-                l.div_ceil(sc.refresh.max(1) as usize)
-            } else {
-                0
-            }
-        };
         let mut extra = 0;
         let mut off = 0;
         for (i, ic) in cfg.inputs().iter().enumerate() {
@@ -181,7 +261,7 @@ pub(crate) fn step(
             let mut mi = 0;
             s.slots[mi] = newest as u32;
             mi += 1;
-            for _ in 0..share(l).min(l - 1) {
+            for _ in 0..share(sc, l) {
                 let mut j = x.cursor[i] % l;
                 if j == newest {
                     j = (j + 1) % l;

@@ -1,6 +1,7 @@
 using UnrealBuildTool;
 
-// Runtime module: UDuolandoFollowerComponent, the session runner
+// Runtime module: UDuolandoFollowerComponent, UDuolandoSoloDancerComponent,
+// UDuolandoTransflowerComponent, the session runner
 // (Public/DuolandoRunner.h) and the module that loads the library.
 // The library itself is the External module DuolandoLibrary
 // (Source/ThirdParty/DuolandoLibrary: header, per-platform binaries,

@@ -20,7 +20,7 @@ void UDuolandoFollowerComponent::BeginPlay()
 	duo_model_info Info;
 	if (duo_model_get_info(Model, &Info) != DUO_OK || Info.family != DUO_FAMILY_DUOLANDO)
 	{
-		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s is a solo (Bailando) model: use UDuolandoSoloDancerComponent"), *ModelFile.FilePath);
+		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s is not a follower (Duolando) model: use UDuolandoSoloDancerComponent (Bailando) or UDuolandoTransflowerComponent (Transflower)"), *ModelFile.FilePath);
 		duo_model_free(Model);
 		Model = nullptr;
 		return;

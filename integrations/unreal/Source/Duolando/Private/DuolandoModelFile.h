@@ -19,20 +19,23 @@ inline FString DuolandoLastError()
 
 // Memory-mapped when the model is a plain file, else read through Unreal's
 // file system (pak, APK) and copied into native memory. Relative paths are
-// under the project's Content folder. Logs and returns nullptr on failure.
-inline duo_model* DuolandoOpenModel(const FString& File)
+// under the project's Content folder. Logs and returns nullptr on failure;
+// OutResult (optional): the library's last answer (DUO_OK on success).
+inline duo_model* DuolandoOpenModel(const FString& File, duo_result* OutResult = nullptr)
 {
+	duo_result Unused = DUO_OK;
+	duo_result& Result = OutResult ? *OutResult : Unused;
 	FString Path = File;
 	if (FPaths::IsRelative(Path))
 		Path = FPaths::Combine(FPaths::ProjectContentDir(), Path);
 	duo_model* Opened = nullptr;
-	if (duo_model_open_file(TCHAR_TO_UTF8(*Path), &Opened) == DUO_OK)
+	if ((Result = duo_model_open_file(TCHAR_TO_UTF8(*Path), &Opened)) == DUO_OK)
 		return Opened;
 	FString Reason = DuolandoLastError();
 	TArray<uint8> Bytes;
 	if (FFileHelper::LoadFileToArray(Bytes, *Path))
 	{
-		if (duo_model_open_copy(Bytes.GetData(), static_cast<size_t>(Bytes.Num()), &Opened) == DUO_OK)
+		if ((Result = duo_model_open_copy(Bytes.GetData(), static_cast<size_t>(Bytes.Num()), &Opened)) == DUO_OK)
 			return Opened;
 		Reason = DuolandoLastError();
 	}

@@ -21,7 +21,7 @@ void UDuolandoSoloDancerComponent::BeginPlay()
 	duo_model_info Info;
 	if (duo_model_get_info(Model, &Info) != DUO_OK || Info.family != DUO_FAMILY_BAILANDO)
 	{
-		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s is not a solo (Bailando) model: use UDuolandoFollowerComponent"), *ModelFile.FilePath);
+		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s is not a solo (Bailando) model: use UDuolandoFollowerComponent (Duolando) or UDuolandoTransflowerComponent (Transflower)"), *ModelFile.FilePath);
 		duo_model_free(Model);
 		Model = nullptr;
 		return;

@@ -1,0 +1,2 @@
+// TEST STUB — stands in for the file Unreal Header Tool generates.
+#pragma once
