@@ -83,9 +83,12 @@ fn usage_errors_exit_2() {
     let out = d.join("m.npy");
     let (o, f) = (out.to_str().unwrap(), flac());
     let f = f.to_str().unwrap();
-    let (code, err) = run(&["features", "--for", "transflower", f, o]);
+    let (code, err) = run(&["features", "--for", "edge", f, o]);
     assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("possible values: duolando, bailando"), "{err}");
+    assert!(
+        err.contains("possible values: duolando, bailando, transflower"),
+        "{err}"
+    );
     let (code, err) = run(&["features", f, o, "-o", o]);
     assert_eq!(code, Some(2), "{err}");
     let (code, err) = run(&["features", f]);

@@ -11,6 +11,7 @@
 pub mod inputs;
 pub mod leader_bvh;
 pub mod solo;
+pub mod transflower;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -73,6 +74,21 @@ pub struct Args {
     /// depend on it). Default: every core, at most 8.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub threads: Option<u32>,
+    /// Transflower: seed of the engine's base-sample RNG (default 0).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Transflower: the audio features' scaler (the authors'
+    /// `audio_feats_scaled_20_scaler.pkl` through tools/transflower_scalers.py, 85 columns).
+    #[arg(long)]
+    pub audio_scaler: Option<PathBuf>,
+    /// Transflower: the motion features' scaler; with it the dancer is placed
+    /// on a skeleton (glb, bvh, viewer), as `generate --scaler`.
+    #[arg(long)]
+    pub scaler: Option<PathBuf>,
+    /// Transflower: the motion seed, (T, C) float32 scaled features, T >= the
+    /// model's motion window. Default: zeros (the mean pose).
+    #[arg(long)]
+    pub motion_seed: Option<PathBuf>,
 }
 
 /// Where the exported follower's rotations come from (`--follower-rotations`).
@@ -182,6 +198,12 @@ fn distinct_tokens(g: &Generated) -> Vec<usize> {
 
 pub fn run(args: Args) -> Result<()> {
     let t_all = Instant::now();
+    if args.model.as_deref().is_some_and(transflower::is_transflower) {
+        let threads = args.threads.map_or_else(crate::workers::default_threads, |n| n as usize);
+        crate::workers::set_threads(threads).with_context(|| format!("starting {threads} threads"))?;
+        return transflower::run(&args);
+    }
+    transflower::refuse_flags(&args)?;
     if args.leader.is_none() && args.music.is_some() {
         // Music without a leader: a solo dancer.
         let (model_path, demo_model) = match &args.model {

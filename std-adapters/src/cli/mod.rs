@@ -51,7 +51,7 @@ commands! {
     Generate => generate,
     /// Write a procedural duet dataset in the original DD100 layout.
     Synth => synth,
-    /// Music features of an audio file (WAV/MP3/OGG/FLAC) as .npy: Duolando's (T, 54), or Bailando's (T, 438) with --for bailando.
+    /// Music features of an audio file (WAV/MP3/OGG/FLAC) as .npy: Duolando's (T, 54), Bailando's (T, 438) with --for bailando, Transflower's (T, 85) with --for transflower [--scaler].
     Features => features,
     /// Speed of the engine on a full-size model built from seeded random weights (f32/f16/int8).
     Bench => bench,

@@ -9,7 +9,8 @@
 //! part, beat one-hot 1 from `beat_track` on that envelope.
 //!
 //! The same building blocks make Bailando's 438-d features at 3840 Hz
-//! (7.5 frames/s): see [`bailando`] and [`FeatureSet`].
+//! (7.5 frames/s): see [`bailando`] and [`FeatureSet`]; Transflower's 85-d
+//! audio input at 96 kHz (20 frames/s) is [`transflower`].
 //! See docs/MUSIC.md for the facts, the measured deviations and the speed.
 
 pub mod bailando;
@@ -27,6 +28,7 @@ pub mod pad;
 pub mod stft;
 pub mod streaming;
 pub mod tempo;
+pub mod transflower;
 pub mod tuning;
 
 pub use error::MusicError;
