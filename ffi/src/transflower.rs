@@ -302,38 +302,94 @@ pub unsafe extern "C" fn duo_transflower_session_new(
     out_session: *mut *mut DuoSession,
 ) -> DuoResult {
     guard("duo_transflower_session_new", || {
-        let m = model_ref(model)?;
-        let t = transflower(m, "duo_transflower_session_new")?;
-        // SAFETY: NULL or a valid struct (contract).
-        let cc = *unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
-        let c = cc.to_core()?;
-        // SAFETY: NULL or `n_floats` readable floats (contract).
-        let seed: &[f32] = unsafe { buffer(seed_motion, n_floats, "seed_motion") }?;
-        // SAFETY: NULL or `n_labels` readable u32 (contract).
-        let lab: &[u32] = unsafe { buffer(labels, n_labels, "labels") }?;
-        if out_session.is_null() {
-            return Err(Failure::null("out_session"));
+        // SAFETY: the caller's pointers as documented above (contract).
+        unsafe {
+            make_session(
+                "duo_transflower_session_new",
+                model,
+                config,
+                (seed_motion, n_floats),
+                (labels, n_labels),
+                None,
+                out_session,
+            )
         }
-        let mut arena = vec![0u8; session_bytes(&t.cfg, &c)?].into_boxed_slice();
-        // SAFETY: the boxed bytes stay at one address until the
-        // SessionInner drops them, after the session.
-        let bytes: &'static mut [u8] =
-            unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
-        // SAFETY: `model` is a live handle (contract).
-        let arc: Arc<ModelInner> = unsafe { share(model) };
-        // SAFETY: the model lives in the Arc, which the SessionInner keeps
-        // (and drops after the session).
-        let tm: &'static duolando_core::transflower::model::Model<'static> =
-            match unsafe { &*Arc::as_ptr(&arc) }.any() {
-                AnyModel::Transflower(t) => t,
-                _ => return Err(Failure::invalid("not a Transflower model")),
-            };
-        let session = Session::new(tm, &c, seed, lab, cc.rng_seed, bytes)?;
-        let inner = SessionInner::owned(AnySession::Transflower(session), arc, arena);
-        // SAFETY: checked non-NULL.
-        unsafe { *out_session = Box::into_raw(inner) };
-        Ok(DuoResult::Ok)
     })
+}
+
+/// Where a new session lives: a library allocation, or a slot at the
+/// start of caller memory.
+enum Home {
+    Boxed(Box<[u8]>),
+    Caller(*mut SessionInner),
+}
+
+/// Both constructors: the checks in the header's order, the arena
+/// (allocated, or `memory` = (pointer, len) of caller memory: handle
+/// first), the session, `*out_session`.
+///
+/// # Safety
+/// As duo_transflower_session_new_in (`memory` None: as _new).
+unsafe fn make_session(
+    what: &str,
+    model: *const DuoModel,
+    config: *const DuoTransflowerConfig,
+    (seed_motion, n_floats): (*const f32, usize),
+    (labels, n_labels): (*const u32, usize),
+    memory: Option<(*mut u8, usize)>,
+    out_session: *mut *mut DuoSession,
+) -> Result<DuoResult, Failure> {
+    let m = model_ref(model)?;
+    let t = transflower(m, what)?;
+    // SAFETY: NULL or a valid struct (contract).
+    let cc = *unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
+    let c = cc.to_core()?;
+    // SAFETY: NULL or `n_floats` readable floats (contract).
+    let seed: &[f32] = unsafe { buffer(seed_motion, n_floats, "seed_motion") }?;
+    // SAFETY: NULL or `n_labels` readable u32 (contract).
+    let lab: &[u32] = unsafe { buffer(labels, n_labels, "labels") }?;
+    if out_session.is_null() {
+        return Err(Failure::null("out_session"));
+    }
+    let n = session_bytes(&t.cfg, &c)?;
+    let (arena, home): (&'static mut [u8], Home) = match memory {
+        None => {
+            let mut boxed = vec![0u8; n].into_boxed_slice();
+            // SAFETY: the boxed bytes stay at one address until the
+            // SessionInner drops them, after the session.
+            let bytes = unsafe { std::slice::from_raw_parts_mut(boxed.as_mut_ptr(), boxed.len()) };
+            (bytes, Home::Boxed(boxed))
+        }
+        Some((ptr, len)) => {
+            // SAFETY: NULL or `len` writable bytes kept for the session (contract).
+            let memory = unsafe { buffer_mut(ptr, len, "memory") }?;
+            let need = n.saturating_add(HANDLE_BYTES);
+            let (slot, arena) =
+                caller_slot::<SessionInner>(memory, need, "duo_transflower_session_bytes")?;
+            (arena, Home::Caller(slot))
+        }
+    };
+    // SAFETY: `model` is a live handle (contract).
+    let arc: Arc<ModelInner> = unsafe { share(model) };
+    // SAFETY: the model lives in the Arc, which the SessionInner keeps
+    // (and drops after the session).
+    let tm: &'static duolando_core::transflower::model::Model<'static> =
+        match unsafe { &*Arc::as_ptr(&arc) }.any() {
+            AnyModel::Transflower(t) => t,
+            _ => return Err(Failure::invalid("not a Transflower model")),
+        };
+    let session = AnySession::Transflower(Session::new(tm, &c, seed, lab, cc.rng_seed, arena)?);
+    let handle = match home {
+        Home::Boxed(boxed) => Box::into_raw(SessionInner::owned(session, arc, boxed)),
+        Home::Caller(slot) => {
+            // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
+            unsafe { slot.write(SessionInner::in_caller(session, arc)) };
+            slot
+        }
+    };
+    // SAFETY: checked non-NULL.
+    unsafe { *out_session = handle };
+    Ok(DuoResult::Ok)
 }
 
 /// As duo_transflower_session_new, placed entirely in caller memory
@@ -358,42 +414,18 @@ pub unsafe extern "C" fn duo_transflower_session_new_in(
     out_session: *mut *mut DuoSession,
 ) -> DuoResult {
     guard("duo_transflower_session_new_in", || {
-        let m = model_ref(model)?;
-        let t = transflower(m, "duo_transflower_session_new_in")?;
-        // SAFETY: NULL or a valid struct (contract).
-        let cc = *unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
-        let c = cc.to_core()?;
-        // SAFETY: NULL or `n_floats` readable floats (contract).
-        let seed: &[f32] = unsafe { buffer(seed_motion, n_floats, "seed_motion") }?;
-        // SAFETY: NULL or `n_labels` readable u32 (contract).
-        let lab: &[u32] = unsafe { buffer(labels, n_labels, "labels") }?;
-        if out_session.is_null() {
-            return Err(Failure::null("out_session"));
-        }
-        // SAFETY: NULL or `len` writable bytes kept for the session (contract).
-        let memory = unsafe { buffer_mut(memory, len, "memory") }?;
-        let need = session_bytes(&t.cfg, &c)?.saturating_add(HANDLE_BYTES);
-        let (slot, arena) =
-            caller_slot::<SessionInner>(memory, need, "duo_transflower_session_bytes")?;
-        // SAFETY: `model` is a live handle (contract).
-        let arc: Arc<ModelInner> = unsafe { share(model) };
-        // SAFETY: the model lives in the Arc, which the SessionInner keeps
-        // (and drops after the session).
-        let tm: &'static duolando_core::transflower::model::Model<'static> =
-            match unsafe { &*Arc::as_ptr(&arc) }.any() {
-                AnyModel::Transflower(t) => t,
-                _ => return Err(Failure::invalid("not a Transflower model")),
-            };
-        let session = Session::new(tm, &c, seed, lab, cc.rng_seed, arena)?;
-        // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
+        // SAFETY: the caller's pointers as documented above (contract).
         unsafe {
-            slot.write(SessionInner::in_caller(
-                AnySession::Transflower(session),
-                arc,
-            ));
-            *out_session = slot;
+            make_session(
+                "duo_transflower_session_new_in",
+                model,
+                config,
+                (seed_motion, n_floats),
+                (labels, n_labels),
+                Some((memory, len)),
+                out_session,
+            )
         }
-        Ok(DuoResult::Ok)
     })
 }
 
