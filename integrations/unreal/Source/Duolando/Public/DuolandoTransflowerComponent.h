@@ -12,7 +12,7 @@
 // game's job (docs/TRANSFLOWER.md "Motion to a skeleton").
 //
 // BLOCKING: TryPullFrame* runs the frame's model step on the calling thread
-// (published size, one thread: "realtime" mean 40.7 ms, p99 42.1 ms, the
+// (published size, one thread: "realtime" mean 39.6 ms, p99 41.5 ms, the
 // first step a whole R step, ~260 ms;
 // docs/TRANSFLOWER.md "Speed and memory at the published size", int8, a
 // shared 2-core machine). Unlike the follower and Bailando
