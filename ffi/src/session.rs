@@ -814,12 +814,8 @@ pub unsafe extern "C" fn duo_session_push_music(
             AnySession::Duolando { session, .. } => session.push_music_frame(x),
             AnySession::Bailando(session) => session.push_music(x),
             AnySession::Transflower(session) => {
-                if x.is_empty() {
-                    return Err(Failure::invalid(
-                        "n_features is 0: push one or more whole audio rows",
-                    ));
-                }
-                crate::transflower::push_audio(session, x)?;
+                let audio = session.config_model().inputs().len() - 1;
+                crate::transflower::push_rows(session, audio, x, "n_features")?;
                 return Ok(DuoResult::Ok);
             }
         }

@@ -155,18 +155,32 @@ fn session_of<'x>(
     }
 }
 
-/// `duo_session_push_music` on a Transflower session: whole rows of the
-/// last input (the audio features).
-pub(crate) fn push_audio(s: &mut Session<'static>, x: &[f32]) -> Result<(), Failure> {
-    let last = s.config_model().inputs().len() - 1;
-    s.push(last, x).map_err(|e| match e {
+/// Rows `x` for sliding input `index` (duo_transflower_push_input, and
+/// duo_session_push_music for the audio, the last input): none (`count`
+/// names the C count), an index past the inputs, the motion or a label,
+/// ragged rows, a bad value (named with its index) or a full feed are
+/// refused, the session unchanged.
+pub(crate) fn push_rows(
+    s: &mut Session<'static>,
+    index: usize,
+    x: &[f32],
+    count: &str,
+) -> Result<(), Failure> {
+    if x.is_empty() {
+        return Err(Failure::invalid(format!(
+            "{count} is 0: push one or more whole rows"
+        )));
+    }
+    let n_in = s.config_model().inputs().len();
+    if index >= n_in {
+        return Err(Failure::invalid(format!(
+            "index {index}: the model has {n_in} inputs"
+        )));
+    }
+    s.push(index, x).map_err(|e| match e {
+        duolando_core::Error::State => Failure::invalid(format!("input {index} is the motion (fed back) or a style label: only sliding feature inputs are pushed")),
         duolando_core::Error::NonFinite { .. } | duolando_core::Error::OutOfRange { .. } => {
-            crate::session::rejected_value(
-                e,
-                x,
-                "audio row",
-                duolando_core::input::MAX_MUSIC_FEATURE,
-            )
+            crate::session::rejected_value(e, x, "rows", duolando_core::input::MAX_MUSIC_FEATURE)
         }
         e => fail(e, s),
     })
@@ -445,21 +459,7 @@ pub unsafe extern "C" fn duo_transflower_push_input(
         let s = session_of(session_mut(session)?, "duo_transflower_push_input")?;
         // SAFETY: NULL or `n_floats` readable floats (contract).
         let x: &[f32] = unsafe { buffer(rows, n_floats, "rows") }?;
-        if x.is_empty() {
-            return Err(Failure::invalid(
-                "n_floats is 0: push one or more whole rows",
-            ));
-        }
-        let n_in = s.config_model().inputs().len();
-        if index as usize >= n_in {
-            return Err(Failure::invalid(format!(
-                "index {index}: the model has {n_in} inputs"
-            )));
-        }
-        s.push(index as usize, x).map_err(|e| match e {
-            duolando_core::Error::State => Failure::invalid(format!("input {index} is the motion (fed back) or a style label: only sliding feature inputs are pushed")),
-            e => fail(e, s),
-        })?;
+        push_rows(s, index as usize, x, "n_floats")?;
         Ok(DuoResult::Ok)
     })
 }

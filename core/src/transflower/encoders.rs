@@ -4,7 +4,7 @@
 //! published configs) into the latent sequence the cross-modal
 //! transformer reads.
 
-use crate::transflower::model::Model;
+use crate::transflower::model::{Model, TransformerW};
 use crate::transflower::probe::{Net, Probe, Stage};
 use crate::transflower::transformer::{forward_recorded, stages, TransformerScratch};
 
@@ -15,6 +15,26 @@ pub enum Window<'x> {
     Rows(&'x [f32]),
     /// A discrete input's label (`single`: one row for the whole sequence).
     Label(u32),
+}
+
+/// What input net `net` reads for window `win`: a continuous window's rows
+/// (L_i, d_i), or a label's embedding row (1, dim) looked up into `emb`
+/// (the net's `encoder`, an Embedding; a label for a continuous input is
+/// refused by the caller: empty here).
+pub fn input_rows<'x, const N: usize>(
+    net: &TransformerW<'_, N>,
+    win: Window<'x>,
+    emb: &'x mut [f32],
+) -> &'x [f32] {
+    match (win, net.embedding.as_ref()) {
+        (Window::Rows(rows), _) => rows,
+        (Window::Label(label), Some(table)) => {
+            let e = &mut emb[..net.din];
+            table.row_into(label as usize, e);
+            e
+        }
+        (Window::Label(_), None) => &[],
+    }
 }
 
 /// `latent` (sum L_i, dhid) = every input transformer over its window,
@@ -47,24 +67,16 @@ pub fn encode_inputs_recorded(
     let mut row = 0usize;
     for (i, (net, win)) in model.inputs.iter().zip(windows).enumerate() {
         let l = model.cfg.inputs[i].length as usize;
-        let input: &[f32] = match (*win, net.embedding.as_ref()) {
-            (Window::Label(label), Some(table)) => {
-                // `encoder` (Embedding): the label's row (1, dim).
-                let e = &mut emb[..net.din];
-                table.row_into(label as usize, e);
-                probe(
-                    Probe::Net {
-                        net: Net::Input(i as u8),
-                        stage: Stage::Encoder,
-                    },
-                    e,
-                );
-                e
-            }
-            (Window::Rows(rows), _) => rows,
-            // A label for a continuous input: refused by the caller.
-            (Window::Label(_), None) => &[],
-        };
+        let input = input_rows(net, *win, emb);
+        if let Window::Label(_) = win {
+            probe(
+                Probe::Net {
+                    net: Net::Input(i as u8),
+                    stage: Stage::Encoder,
+                },
+                input,
+            );
+        }
         let out = &mut latent[row * d..(row + l) * d];
         forward_recorded(
             net,

@@ -116,7 +116,7 @@ pub fn stages<'p>(
 /// position, `pos_emb` biases the scores by positions). `out` (keep, dout)
 /// = the decoder of the first `keep` rows. The stale-rows S mode
 /// (`transflower::session`): rows not passed keep the keys and values of
-/// the inputs they had when last computed.
+/// the inputs they had when last computed. `m` <= the scratch's rows.
 #[allow(clippy::too_many_arguments)]
 pub fn forward_rows<const N: usize>(
     w: &TransformerW<'_, N>,
@@ -128,31 +128,18 @@ pub fn forward_rows<const N: usize>(
     s: &mut TransformerScratch<'_>,
     out: &mut [f32],
 ) {
-    let d = w.d;
     let m = slots.len();
-    let x = &mut s.x[..m * d];
-    linear(&input[..m * w.din], &w.encoder1.w, w.encoder1.b, x);
-    if let Some(pe) = w.pe {
-        for (r, &slot) in slots.iter().enumerate() {
-            let p = pos[slot as usize] as usize;
-            for (v, e) in x[r * d..(r + 1) * d]
-                .iter_mut()
-                .zip(&pe[p * d..(p + 1) * d])
-            {
-                *v += e;
-            }
-        }
-    }
-    let bias = w.bias.map(|bias| SlotBias { bias, pos });
-    for (layer, lkv) in w.layers.iter().zip(kv.iter_mut()) {
-        encoder_layer_rows(layer, x, d, w.n_head, lkv, slots, bias, &mut s.layer);
-    }
-    let keep = keep.min(m);
-    linear(
-        &x[..keep * d],
-        &w.decoder.w,
-        w.decoder.b,
-        &mut out[..keep * w.dout],
+    let TransformerScratch { x, layer } = s;
+    kept_rows(
+        w,
+        input,
+        slots,
+        pos,
+        keep,
+        kv,
+        &mut x[..m * w.d],
+        layer,
+        out,
     );
 }
 
@@ -160,14 +147,11 @@ pub fn forward_rows<const N: usize>(
 /// fewer rows, keeping every layer's keys and values in `kv` (row j in
 /// slot j, at window position `pos[j]`; [`forward_recorded`]'s numbers up
 /// to the attention's summation order, and to `kv`'s storage: f16 keys and
-/// values are read back rounded). Per layer, every row's keys and values
-/// are stored first, chunk by chunk ([`store_rows_kv`]); then each chunk
-/// goes through [`encoder_layer_rows`] in place (a row's output needs its
-/// own input and the stored keys and values only). `x` (L, d): the hidden
-/// rows; `ids` (>= L): 0, 1, 2, ...; `out` (keep, dout) = the decoder of
-/// the first `keep` rows (the last layer computes only those). The first
-/// step of a rolling stale-rows session (`transflower::session`): its
-/// arena holds a chunk's scratch, not a whole step's.
+/// values are read back rounded). `x` (L, d): the hidden rows; `ids`
+/// (>= L): 0, 1, 2, ...; `out` (keep, dout) = the decoder of the first
+/// `keep` rows. The first step of a rolling stale-rows session
+/// (`transflower::session`): its arena holds a chunk's scratch, not a
+/// whole step's.
 #[allow(clippy::too_many_arguments)]
 pub fn forward_chunked<const N: usize>(
     w: &TransformerW<'_, N>,
@@ -180,24 +164,54 @@ pub fn forward_chunked<const N: usize>(
     s: &mut TransformerScratch<'_>,
     out: &mut [f32],
 ) {
-    let d = w.d;
     let rows = (input.len() / w.din.max(1)).min(ids.len());
+    kept_rows(w, input, &ids[..rows], pos, keep, kv, x, &mut s.layer, out);
+}
+
+/// [`forward_rows`] and [`forward_chunked`]: the rows `input` (m, din) at
+/// `slots` through every layer against the kept keys and values, `x`
+/// (m, d) their hidden rows, in chunks of the scratch's rows. Per layer,
+/// the rows a single [`encoder_layer_rows`] call computes store their own
+/// keys and values before attending; any other row's (rows past `keep` in
+/// the last layer, every row when the layer takes several chunks) are
+/// stored first ([`store_rows_kv`]), so every query sees this layer's keys
+/// and values of all `m` rows. A row's output needs only its own input
+/// and the stored keys and values: chunks change no number.
+#[allow(clippy::too_many_arguments)]
+fn kept_rows<const N: usize>(
+    w: &TransformerW<'_, N>,
+    input: &[f32],
+    slots: &[u32],
+    pos: &[u32],
+    keep: usize,
+    kv: &mut [LayerKv<'_>],
+    x: &mut [f32],
+    s: &mut EncoderLayerScratch<'_>,
+    out: &mut [f32],
+) {
+    let d = w.d;
+    let m = slots.len();
     let chunk = s.rows().max(1);
-    let x = &mut x[..rows * d];
-    linear(&input[..rows * w.din], &w.encoder1.w, w.encoder1.b, x);
+    let x = &mut x[..m * d];
+    linear(&input[..m * w.din], &w.encoder1.w, w.encoder1.b, x);
     if let Some(pe) = w.pe {
-        for (v, p) in x.iter_mut().zip(pe) {
-            *v += p;
+        for (row, &slot) in x.chunks_exact_mut(d.max(1)).zip(slots) {
+            let p = pos[slot as usize] as usize;
+            for (v, e) in row.iter_mut().zip(&pe[p * d..(p + 1) * d]) {
+                *v += e;
+            }
         }
     }
     let bias = w.bias.map(|bias| SlotBias { bias, pos });
     let n = w.layers.len();
     for (i, (layer, lkv)) in w.layers.iter().zip(kv.iter_mut()).enumerate() {
-        for a in (0..rows).step_by(chunk) {
-            let b = (a + chunk).min(rows);
-            store_rows_kv(layer, &x[a * d..b * d], d, lkv, &ids[a..b], &mut s.layer);
+        // Rows computed through this layer (the last: only those decoded).
+        let k = if i + 1 == n { keep.min(m) } else { m };
+        let stored_first = if k <= chunk { k } else { 0 };
+        for a in (stored_first..m).step_by(chunk) {
+            let b = (a + chunk).min(m);
+            store_rows_kv(layer, &x[a * d..b * d], d, lkv, &slots[a..b], s);
         }
-        let k = if i + 1 == n { keep.min(rows) } else { rows };
         for a in (0..k).step_by(chunk) {
             let b = (a + chunk).min(k);
             encoder_layer_rows(
@@ -206,13 +220,13 @@ pub fn forward_chunked<const N: usize>(
                 d,
                 w.n_head,
                 lkv,
-                &ids[a..b],
+                &slots[a..b],
                 bias,
-                &mut s.layer,
+                s,
             );
         }
     }
-    let keep = if n == 0 { rows } else { keep.min(rows) };
+    let keep = if n == 0 { m } else { keep.min(m) };
     linear(
         &x[..keep * d],
         &w.decoder.w,

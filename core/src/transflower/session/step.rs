@@ -15,7 +15,7 @@
 use crate::arena::{ArenaError, Carve};
 use crate::transflower::config::{TransflowerConfig, INPUT_LAYERS, MAX_INPUTS};
 use crate::transflower::cross_modal::condition_recorded;
-use crate::transflower::encoders::{encode_inputs_recorded, Window};
+use crate::transflower::encoders::{encode_inputs_recorded, input_rows, Window};
 use crate::transflower::exact::{Prepared, StepScratch};
 use crate::transflower::flow;
 use crate::transflower::model::Model;
@@ -175,15 +175,7 @@ pub(crate) fn step(
                 let mut off = 0;
                 for (i, ic) in cfg.inputs().iter().enumerate() {
                     let (l, net) = (ic.length as usize, &model.inputs[i]);
-                    let input: &[f32] = match (windows[i], net.embedding.as_ref()) {
-                        (Window::Rows(rows), _) => rows,
-                        (Window::Label(label), Some(table)) => {
-                            let e = &mut ss.emb[..net.din];
-                            table.row_into(label as usize, e);
-                            e
-                        }
-                        (Window::Label(_), None) => &[],
-                    };
+                    let input = input_rows(net, windows[i], ss.emb);
                     let layers = i * INPUT_LAYERS as usize..(i + 1) * INPUT_LAYERS as usize;
                     forward_chunked(
                         net,
