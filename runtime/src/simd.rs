@@ -7,7 +7,7 @@
 //! ([`ensure_init`]). [`init`] does the same explicitly (and again, after a
 //! change of `DUOLANDO_ISA`).
 //!
-//! `DUOLANDO_ISA=scalar|avx2|avx512|avx512vnni|avx512amx|neon|neondot` caps
+//! `DUOLANDO_ISA=scalar|avx2|avxvnni|avx512|avx512vnni|avx512amx|neon|neondot` caps
 //! the choice (an ISA this CPU lacks selects scalar), for comparisons.
 //!
 //! AMX-INT8 (Intel Sapphire Rapids and later) is not an ISA of its own
@@ -41,6 +41,9 @@ pub fn supported() -> Vec<Isa> {
         if avx512 {
             v.push(Isa::Avx512);
         }
+        if avx2 && has!("avxvnni") {
+            v.push(Isa::AvxVnni);
+        }
         if avx2 {
             v.push(Isa::Avx2);
         }
@@ -72,6 +75,7 @@ pub fn parse(name: &str) -> Option<Isa> {
     Some(match name.to_ascii_lowercase().as_str() {
         "scalar" => Isa::Scalar,
         "avx2" => Isa::Avx2,
+        "avxvnni" => Isa::AvxVnni,
         "avx512" => Isa::Avx512,
         "avx512vnni" | "avx512amx" => Isa::Avx512Vnni,
         "neon" => Isa::Neon,
@@ -159,7 +163,7 @@ pub fn run_probe(p: simd::peak::Probe, iters: u64, o: &simd::peak::Operands) -> 
 /// name, an ISA this CPU lacks (`duolando bench --isa`).
 pub fn select(name: &str) -> Result<Isa, String> {
     let isa = parse(name).ok_or_else(|| {
-        format!("unknown ISA '{name}' (scalar, avx2, avx512, avx512vnni, avx512amx, neon, neondot)")
+        format!("unknown ISA '{name}' (scalar, avx2, avxvnni, avx512, avx512vnni, avx512amx, neon, neondot)")
     })?;
     let all = supported();
     let amx = name.eq_ignore_ascii_case("avx512amx");
@@ -193,6 +197,7 @@ fn name_plain(isa: Isa) -> &'static str {
     match isa {
         Isa::Scalar => "scalar",
         Isa::Avx2 => "avx2",
+        Isa::AvxVnni => "avxvnni",
         Isa::Avx512 => "avx512",
         Isa::Avx512Vnni => "avx512vnni",
         Isa::Neon => "neon",
@@ -245,6 +250,7 @@ pub fn name(isa: Isa) -> &'static str {
     match isa {
         Isa::Scalar => "scalar",
         Isa::Avx2 => "avx2",
+        Isa::AvxVnni => "avxvnni",
         Isa::Avx512 => "avx512",
         Isa::Avx512Vnni if amx_active() => "avx512amx",
         Isa::Avx512Vnni => "avx512vnni",

@@ -22,6 +22,7 @@ fn name(isa: Isa) -> &'static str {
     match isa {
         Isa::Scalar => "scalar",
         Isa::Avx2 => "avx2",
+        Isa::AvxVnni => "avxvnni",
         Isa::Avx512 => "avx512",
         Isa::Avx512Vnni => "avx512vnni",
         Isa::Neon => "neon",
@@ -104,7 +105,7 @@ fn kernels_run_once_per_isa_labelled_with_isa_and_cpu() {
 #[test]
 fn an_isa_this_cpu_lacks_is_refused_by_name_before_anything_runs() {
     let supported = duolando::simd::supported();
-    let missing: Vec<&str> = ["neondot", "neon", "avx512vnni", "avx512", "avx2"]
+    let missing: Vec<&str> = ["neondot", "neon", "avx512vnni", "avx512", "avxvnni", "avx2"]
         .into_iter()
         .filter(|n| !supported.contains(&duolando::simd::parse(n).unwrap()))
         .chain((!duolando::simd::amx_usable()).then_some("avx512amx"))

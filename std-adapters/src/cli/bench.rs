@@ -74,7 +74,7 @@ pub struct Args {
     #[arg(long)]
     pub scalar: bool,
     /// Run the whole bench once per ISA, in this order, in one invocation
-    /// (comma separated: scalar, avx2, avx512, avx512vnni, avx512amx =
+    /// (comma separated: scalar, avx2, avxvnni, avx512, avx512vnni, avx512amx =
     /// AVX512-VNNI with the AMX tiles, neon, neondot); every line then starts
     /// with `[isa | CPU model]` and every JSON key ends in `_<isa>`. An ISA
     /// this CPU lacks is refused by name before anything runs. Default: the

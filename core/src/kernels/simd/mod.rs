@@ -55,13 +55,20 @@ pub enum Isa {
     Avx512Vnni = 4,
     /// aarch64 NEON + the dot-product extension (`sdot`).
     NeonDot = 5,
+    /// [`Isa::Avx2`] + AVX-VNNI (Intel Alder Lake and later desktops, AMD
+    /// Zen 5): the packed int8 GEMM with `{vex} vpdpbusd` on 32-byte
+    /// vectors; every other kernel is [`Isa::Avx2`]'s.
+    AvxVnni = 6,
 }
 
 impl Isa {
     /// True for the x86_64 variants (all imply AVX2 + FMA + F16C).
     #[inline]
     pub fn is_x86(self) -> bool {
-        matches!(self, Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni)
+        matches!(
+            self,
+            Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni
+        )
     }
 }
 
@@ -93,6 +100,14 @@ pub const COMPILE_TIME_ISA: Isa = if cfg!(all(
     target_arch = "x86_64",
     target_feature = "avx2",
     target_feature = "fma",
+    target_feature = "f16c",
+    target_feature = "avxvnni"
+)) {
+    Isa::AvxVnni
+} else if cfg!(all(
+    target_arch = "x86_64",
+    target_feature = "avx2",
+    target_feature = "fma",
     target_feature = "f16c"
 )) {
     Isa::Avx2
@@ -119,6 +134,7 @@ pub fn isa() -> Isa {
         3 => Isa::Avx512,
         4 => Isa::Avx512Vnni,
         5 => Isa::NeonDot,
+        6 => Isa::AvxVnni,
         _ => Isa::Scalar,
     }
 }
@@ -128,7 +144,8 @@ pub fn isa() -> Isa {
 /// # Safety
 /// The CPU running this process must support `isa` (for [`Isa::Avx2`]:
 /// avx2, fma and f16c; [`Isa::Avx512`]: those and avx512f, avx512bw,
-/// avx512dq, avx512vl; [`Isa::Avx512Vnni`]: those and avx512vnni; for
+/// avx512dq, avx512vl; [`Isa::Avx512Vnni`]: those and avx512vnni;
+/// [`Isa::AvxVnni`]: avx2, fma, f16c and avxvnni; for
 /// [`Isa::Neon`]: an aarch64 CPU, which always has it; [`Isa::NeonDot`]:
 /// the dotprod extension), and `isa` must be one this build has a variant for (an arm for a
 /// foreign architecture falls back to scalar). [`Isa::Scalar`] is always safe.
@@ -154,7 +171,9 @@ pub fn widen_f16(src: &[u16], dst: &mut [f32]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx2 implies f16c).
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::widen_f16(src, dst) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::widen_f16(src, dst)
+        },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::widen_f16(src, dst) },
@@ -171,7 +190,9 @@ pub fn narrow_f16(src: &[f32], dst: &mut [u16]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx2 implies f16c).
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::narrow_f16(src, dst) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::narrow_f16(src, dst)
+        },
         _ => scalar::narrow_f16(src, dst),
     }
 }
@@ -320,7 +341,7 @@ pub fn dot_f32(a: &[f32], b: &[f32]) -> f32 {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: ISA holds Avx2 only via COMPILE_TIME_ISA (features enabled
         // at build time) or `set_isa`, whose caller vouched for the CPU.
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_f32(a, b) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_f32(a, b) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::dot_f32(a, b) },
@@ -334,7 +355,7 @@ pub fn dot_f16(w: &[u16], x: &[f32]) -> f32 {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx2 implies f16c).
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_f16(w, x) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_f16(w, x) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::dot_f16(w, x) },
@@ -348,7 +369,9 @@ pub fn dot_q8(w: &[u8], xq: &[i8], xd: &[f32]) -> f32 {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_q8(w, xq, xd) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::dot_q8(w, xq, xd)
+        },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::dot_q8(w, xq, xd) },
@@ -413,7 +436,7 @@ pub fn tile_f32(w: [&[f32]; TN], x: [&[f32]; TM]) -> Tile {
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::tile_f32_512(w, x) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 => unsafe { x86::tile_f32(w, x) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::tile_f32(w, x) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::tile_f32(w, x) },
@@ -430,7 +453,7 @@ pub fn tile_f16(w: [&[u16]; TN], x: [&[f32]; TM]) -> Tile {
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::tile_f16_512(w, x) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx2 implies f16c).
-        Isa::Avx2 => unsafe { x86::tile_f16(w, x) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::tile_f16(w, x) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::tile_f16(w, x) },
@@ -445,7 +468,9 @@ pub fn tile_q8(w: [&[u8]; TN], xq: [&[i8]; TM], xd: [&[f32]; TM]) -> Tile {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::tile_q8(w, xq, xd) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::tile_q8(w, xq, xd)
+        },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::tile_q8(w, xq, xd) },
@@ -515,7 +540,7 @@ pub fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::quantise_q8_corr_512(x, q, d, c) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (every x86 variant implies avx2 + fma).
-        Isa::Avx2 => unsafe { x86::quantise_q8_corr(x, q, d, c) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::quantise_q8_corr(x, q, d, c) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::quantise_q8_corr(x, q, d, c) },
@@ -529,7 +554,9 @@ pub fn q8_scales(row: &[u8], out: &mut [f32]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::q8_scales(row, out) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::q8_scales(row, out)
+        },
         _ => scalar::q8_scales(row, out),
     }
 }
@@ -558,7 +585,7 @@ pub fn gemm_q8<const M: usize>(
         Isa::Avx512 => unsafe { x86::gemm_q8_512(w, wd, xq, xd, xc) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 => unsafe { x86::gemm_q8_avx2(w, wd, xq, xd, xc) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::gemm_q8_avx2(w, wd, xq, xd, xc) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: ISA holds NeonDot only via COMPILE_TIME_ISA (dotprod enabled
         // at build time) or `set_isa`, whose caller vouched for the CPU.
@@ -577,7 +604,9 @@ pub fn axpy_f32(a: f32, x: &[f32], y: &mut [f32]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_f32(a, x, y) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::axpy_f32(a, x, y)
+        },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_f32(a, x, y) },
@@ -597,7 +626,7 @@ pub fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::exp_shifted_sum_512(s, max) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 => unsafe { x86::exp_shifted_sum(s, max) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::exp_shifted_sum(s, max) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::exp_shifted_sum(s, max) },
@@ -630,7 +659,9 @@ pub fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [f32]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::layernorm_row(x, w, b, eps, y) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::layernorm_row(x, w, b, eps, y)
+        },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::layernorm_row(x, w, b, eps, y) },
@@ -649,7 +680,7 @@ pub fn gelu_inplace(x: &mut [f32]) {
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::gelu_inplace_512(x) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 => unsafe { x86::gelu_inplace(x) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::gelu_inplace(x) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::gelu_inplace(x) },
@@ -694,7 +725,7 @@ pub fn dot_rows(q: &[f32], k: &[f32], stride: usize, out: &mut [f32]) {
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512(q, k, stride, out) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 => unsafe { x86::dot_rows(q, k, stride, out) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::dot_rows(q, k, stride, out) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::dot_rows(q, k, stride, out) },
@@ -713,7 +744,7 @@ pub fn dot_rows_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f32]) {
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::dot_rows_512_f16(q, k, stride, out) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx2 implies f16c).
-        Isa::Avx2 => unsafe { x86::dot_rows_f16(q, k, stride, out) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::dot_rows_f16(q, k, stride, out) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::dot_rows_f16(q, k, stride, out) },
@@ -895,7 +926,7 @@ impl Default for Q8Pack8 {
 pub fn packed_q8_fast() -> bool {
     matches!(
         isa(),
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni | Isa::NeonDot
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni | Isa::NeonDot
     )
 }
 
@@ -955,6 +986,10 @@ pub fn gemm_q8_packed_ahead<const M: usize>(
         // SAFETY: ISA holds Avx2 or Avx512 only via COMPILE_TIME_ISA or
         // `set_isa`, whose caller vouched for avx2/fma/f16c (both imply them).
         Isa::Avx2 | Isa::Avx512 => unsafe { x86::gemm_q8_packed_avx2_ahead(w, xq, xd, xc, ahead) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: ISA holds AvxVnni only via COMPILE_TIME_ISA or `set_isa`,
+        // whose caller vouched for avx2/fma/f16c/avxvnni.
+        Isa::AvxVnni => unsafe { x86::gemm_q8_packed_avxvnni_ahead(w, xq, xd, xc, ahead) },
         #[cfg(target_arch = "aarch64")]
         // SAFETY: ISA holds NeonDot only via COMPILE_TIME_ISA or `set_isa`,
         // whose caller vouched for neon + dotprod.
@@ -979,7 +1014,7 @@ pub fn axpy_rows_f32(coef: &[f32], x: &[f32], stride: usize, y: &mut [f32]) {
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_f32(coef, x, stride, y) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32`.
-        Isa::Avx2 => unsafe { x86::axpy_rows_f32(coef, x, stride, y) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::axpy_rows_f32(coef, x, stride, y) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_rows_f32(coef, x, stride, y) },
@@ -997,7 +1032,7 @@ pub fn axpy_rows_f16(coef: &[f32], w: &[u16], stride: usize, y: &mut [f32]) {
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_rows_512_f16(coef, w, stride, y) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
-        Isa::Avx2 => unsafe { x86::axpy_rows_f16(coef, w, stride, y) },
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::axpy_rows_f16(coef, w, stride, y) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_rows_f16(coef, w, stride, y) },
@@ -1198,7 +1233,9 @@ pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (every x86 variant implies f16c).
-        Isa::Avx2 | Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::axpy_f16(a, w, y) },
+        Isa::Avx2 | Isa::AvxVnni | Isa::Avx512 | Isa::Avx512Vnni => unsafe {
+            x86::axpy_f16(a, w, y)
+        },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build (cfg above).
         Isa::Neon | Isa::NeonDot => unsafe { neon::axpy_f16(a, w, y) },

@@ -124,6 +124,7 @@ impl Probe {
         match isa {
             Isa::Scalar | Isa::Neon => Probe::Scalar,
             Isa::Avx2 => Probe::Avx2,
+            Isa::AvxVnni => Probe::AvxVnni,
             Isa::Avx512 => Probe::Avx512Bw,
             Isa::Avx512Vnni => Probe::Avx512Vnni,
             Isa::NeonDot => Probe::NeonDot,

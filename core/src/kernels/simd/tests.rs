@@ -671,10 +671,11 @@ fn packed_paired_model(w: super::PackedQ8<'_>, q: &[&[i8]], d: &[&[f32]]) -> Vec
         .collect()
 }
 
-/// Dispatches a run of `q.len()` (1..=8) rows to the AVX2 packed kernel.
+/// Dispatches a run of `q.len()` (1..=8) rows to the AVX2 packed kernel,
+/// or (`vnni`) the AVX-VNNI one.
 ///
 /// # Safety
-/// The CPU must support avx2, fma and f16c.
+/// The CPU must support avx2, fma and f16c, and avxvnni where `vnni`.
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 unsafe fn packed_rows_avx2(
@@ -682,12 +683,20 @@ unsafe fn packed_rows_avx2(
     q: &[&[i8]],
     d: &[&[f32]],
     c: &[&[i32]],
+    vnni: bool,
 ) -> Vec<[f32; 8]> {
     macro_rules! call {
         ($($k:literal)*) => {
             match q.len() {
                 // SAFETY: the caller's features.
-                $($k => unsafe { super::x86::gemm_q8_packed_avx2::<$k>(w, core::array::from_fn(|m| q[m]), core::array::from_fn(|m| d[m]), core::array::from_fn(|m| c[m])) }.to_vec(),)*
+                $($k => unsafe {
+                    let (q, d, c) = (core::array::from_fn(|m| q[m]), core::array::from_fn(|m| d[m]), core::array::from_fn(|m| c[m]));
+                    if vnni {
+                        super::x86::gemm_q8_packed_avxvnni::<$k>(w, q, d, c)
+                    } else {
+                        super::x86::gemm_q8_packed_avx2::<$k>(w, q, d, c)
+                    }
+                }.to_vec(),)*
                 _ => unreachable!(),
             }
         };
@@ -867,12 +876,41 @@ fn packed_gemm_q8_matches_scalar_twin() {
                 for_row_counts(&mut |m0, k| {
                     // SAFETY: as above.
                     let t = unsafe {
-                        packed_rows_avx2(stored, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k])
+                        packed_rows_avx2(
+                            stored,
+                            &q[m0..m0 + k],
+                            &d[m0..m0 + k],
+                            &c[m0..m0 + k],
+                            false,
+                        )
                     };
                     assert_eq!(
                         bits8(&t),
                         bits8(&a8[m0..m0 + k]),
                         "avx2 rows {m0}..{} nb={nb}",
+                        m0 + k
+                    );
+                });
+            }
+            if has!("avx2") && has!("fma") && has!("f16c") && has!("avxvnni") {
+                // SAFETY: every feature of the kernel detected above.
+                let a8 = unsafe { super::x86::gemm_q8_packed_avxvnni::<8>(view, q, d, c) };
+                got.push(("avxvnni", a8));
+                for_row_counts(&mut |m0, k| {
+                    // SAFETY: as above.
+                    let t = unsafe {
+                        packed_rows_avx2(
+                            stored,
+                            &q[m0..m0 + k],
+                            &d[m0..m0 + k],
+                            &c[m0..m0 + k],
+                            true,
+                        )
+                    };
+                    assert_eq!(
+                        bits8(&t),
+                        bits8(&a8[m0..m0 + k]),
+                        "avxvnni rows {m0}..{} nb={nb}",
                         m0 + k
                     );
                 });
@@ -2405,6 +2443,23 @@ fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
                         [1, 2, 7].map(|m| bits(a)[m]),
                         "avx2 M = 3 rows equal their rows of M = 8"
                     );
+                }
+                if has!("avx2") && has!("fma") && has!("f16c") && has!("avxvnni") {
+                    // SAFETY: every feature of the kernels detected above.
+                    let (a, b, v) = unsafe {
+                        (
+                            super::x86::gemm_q8_packed_avxvnni::<8>(g, q, d, c),
+                            super::x86::gemm_q8_packed_avxvnni::<8>(pack.view(), q, d, c),
+                            super::x86::gemm_q8_packed_avx2::<8>(g, q, d, c),
+                        )
+                    };
+                    assert_eq!(
+                        bits(a),
+                        bits(b),
+                        "avxvnni q4 group vs packed expansion nb={nb}"
+                    );
+                    assert_eq!(bits(a), bits(v), "avxvnni q4 = avx2 q4 bit for bit nb={nb}");
+                    check_packed_rows("avxvnni q4", a, twin, &rows8, &qs, &ds, nb);
                 }
             }
             #[cfg(target_arch = "aarch64")]

@@ -1791,25 +1791,76 @@ pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(
         let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
         let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
         let c: [&[i32]; K] = core::array::from_fn(|m| xc[m0 + m]);
-        // SAFETY: the caller's features are these functions'.
+        // SAFETY: the caller's features are the ones `packed_ymm` without
+        // VNNI uses (the closure inherits this function's features).
         unsafe {
             if w.q4 {
-                packed_avx2::<K, true>(w, q, d, c, a)
+                packed_ymm::<K, true, false>(w, q, d, c, a)
             } else {
-                packed_avx2::<K, false>(w, q, d, c, a)
+                packed_ymm::<K, false, false>(w, q, d, c, a)
             }
         }
     })
 }
 
-/// [`gemm_q8_packed_avx2`] for `K` (1..=4) activation rows and one value
-/// width (`Q4`: 4-bit halves).
+/// See [`super::gemm_q8_packed`] on 32-byte vectors with AVX-VNNI: the
+/// layout, passes and f32 steps of [`gemm_q8_packed_avx2`], the block dots
+/// by `{vex} vpdpbusd` (int8: the weights made unsigned `w + 128` by `^
+/// 0x80`, the sums started at the row's parity corrections `-128 sum(q)`;
+/// 4-bit: as [`gemm_q8_packed_avx2`]), so the same bits as every other
+/// packed kernel.
 ///
 /// # Safety
-/// As [`gemm_q8_packed_avx2`].
-#[inline]
-#[target_feature(enable = "avx2,fma,f16c")]
-unsafe fn packed_avx2<const K: usize, const Q4: bool>(
+/// The CPU must support avx2, fma, f16c and avxvnni.
+#[target_feature(enable = "avx2,fma,f16c,avxvnni")]
+pub unsafe fn gemm_q8_packed_avxvnni<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; 8]; M] {
+    // SAFETY: the caller's features are this function's.
+    unsafe { gemm_q8_packed_avxvnni_ahead(w, xq, xd, xc, &[]) }
+}
+
+/// [`gemm_q8_packed_avxvnni`] that also prefetches `ahead` into L2 (as
+/// [`gemm_q8_packed_avx2_ahead`]).
+///
+/// # Safety
+/// As [`gemm_q8_packed_avxvnni`].
+#[target_feature(enable = "avx2,fma,f16c,avxvnni")]
+pub unsafe fn gemm_q8_packed_avxvnni_ahead<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+    ahead: &[u8],
+) -> [[f32; 8]; M] {
+    super::passes_of_four!(M, ahead, |K, m0, a| {
+        let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
+        let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
+        let c: [&[i32]; K] = core::array::from_fn(|m| xc[m0 + m]);
+        // SAFETY: the caller's features are the ones `packed_ymm` with VNNI
+        // uses (the closure inherits this function's features).
+        unsafe {
+            if w.q4 {
+                packed_ymm::<K, true, true>(w, q, d, c, a)
+            } else {
+                packed_ymm::<K, false, true>(w, q, d, c, a)
+            }
+        }
+    })
+}
+
+/// The packed kernel on 32-byte vectors for `K` (1..=4) activation rows,
+/// one value width (`Q4`: 4-bit halves) and one multiply (`VNNI`:
+/// `vpdpbusd`; else `vpmaddubsw` + `vpmaddwd`). Always inlined into its
+/// callers, whose `#[target_feature]` sets the instructions it may use.
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c, and avxvnni where `VNNI`.
+#[inline(always)]
+unsafe fn packed_ymm<const K: usize, const Q4: bool, const VNNI: bool>(
     w: super::PackedQ8<'_>,
     xq: [&[i8]; K],
     xd: [&[f32]; K],
@@ -1820,94 +1871,103 @@ unsafe fn packed_avx2<const K: usize, const Q4: bool>(
     let pv = if Q4 { PN } else { PV };
     debug_assert_eq!(w.q4, Q4);
     let nb = w.blocks_for(xq, xd, xc);
-    let ones = _mm256_set1_epi16(1);
-    let low = _mm256_set1_epi8(0x0f);
-    // The lane order of `vphaddd` over the two halves, and back (its own inverse).
-    let order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
-    // [row m][even / odd blocks]: lanes in `order`.
-    let mut acc = [[_mm256_setzero_ps(); 2]; K];
-    for b in 0..nb {
-        super::prefetch_part(ahead, b, nb);
-        let vb = &w.v[pv * b..pv * (b + 1)];
-        let sb = &w.s[PS * b..PS * (b + 1)];
-        // SAFETY: sb holds 8 f16 (128 bits).
-        let sv = _mm256_permutevar8x32_ps(
-            _mm256_cvtph_ps(unsafe { _mm_loadu_si128(sb.as_ptr() as *const __m128i) }),
-            order,
-        );
-        // [row m][weight rows 0-3 / 4-7]: i32 lanes (2r, 2r + 1) = halves of row r's block dot.
-        let mut dp: [[__m256i; 2]; K] = core::array::from_fn(|m| {
-            if Q4 {
-                let cs = &xc[m][2 * b..2 * b + 2];
-                // SAFETY: cs holds 2 i32 (8 bytes).
-                let c = _mm256_srai_epi32::<4>(_mm256_set1_epi64x(unsafe {
-                    (cs.as_ptr() as *const i64).read_unaligned()
-                }));
-                [c, c]
-            } else {
-                [_mm256_setzero_si256(); 2]
-            }
-        });
-        for g in 0..4 {
-            let wg: [__m256i; 2] = core::array::from_fn(|h| {
-                if Q4 {
-                    // SAFETY: vb holds 2 x 64 bytes; 64 (g % 2) + 32 h + 32 <= 128.
-                    let v = unsafe {
-                        _mm256_loadu_si256(vb.as_ptr().add(64 * (g % 2) + 32 * h) as *const __m256i)
-                    };
-                    if g < 2 {
-                        _mm256_and_si256(v, low)
-                    } else {
-                        _mm256_and_si256(_mm256_srli_epi16::<4>(v), low)
-                    }
+    // SAFETY (every intrinsic below): the caller's features (avx2, fma,
+    // f16c; avxvnni for `_mm256_dpbusd_avx_epi32`, used only where VNNI).
+    unsafe {
+        let ones = _mm256_set1_epi16(1);
+        let low = _mm256_set1_epi8(0x0f);
+        let flip = _mm256_set1_epi8(-128);
+        // The lane order of `vphaddd` over the two halves, and back (its own inverse).
+        let order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
+        // [row m][even / odd blocks]: lanes in `order`.
+        let mut acc = [[_mm256_setzero_ps(); 2]; K];
+        for b in 0..nb {
+            super::prefetch_part(ahead, b, nb);
+            let vb = &w.v[pv * b..pv * (b + 1)];
+            let sb = &w.s[PS * b..PS * (b + 1)];
+            // sb holds 8 f16 (128 bits).
+            let sv = _mm256_permutevar8x32_ps(
+                _mm256_cvtph_ps(_mm_loadu_si128(sb.as_ptr() as *const __m128i)),
+                order,
+            );
+            // [row m][weight rows 0-3 / 4-7]: i32 lanes (2r, 2r + 1) = halves
+            // of row r's block dot, started at the parity corrections where
+            // the weights are offset (4-bit: `q + 8`; VNNI int8: `w + 128`).
+            let mut dp: [[__m256i; 2]; K] = core::array::from_fn(|m| {
+                if Q4 || VNNI {
+                    let cs = &xc[m][2 * b..2 * b + 2];
+                    // cs holds 2 i32 (8 bytes).
+                    let c = _mm256_set1_epi64x((cs.as_ptr() as *const i64).read_unaligned());
+                    let c = if Q4 { _mm256_srai_epi32::<4>(c) } else { c };
+                    [c, c]
                 } else {
-                    // SAFETY: vb holds 4 x 64 bytes; 64 g + 32 h + 32 <= 256.
-                    unsafe {
-                        _mm256_loadu_si256(vb.as_ptr().add(64 * g + 32 * h) as *const __m256i)
-                    }
+                    [_mm256_setzero_si256(); 2]
                 }
             });
-            let uw = if Q4 {
-                wg
-            } else {
-                wg.map(|v| _mm256_sign_epi8(v, v))
-            };
-            for (m, dm) in dp.iter_mut().enumerate() {
-                let xs = &xq[m][b * Q8_BLOCK + 8 * g..b * Q8_BLOCK + 8 * g + 8];
-                // SAFETY: xs holds 8 bytes.
-                let xg =
-                    _mm256_set1_epi64x(unsafe { (xs.as_ptr() as *const i64).read_unaligned() });
-                for h in 0..2 {
-                    let sx = if Q4 { xg } else { _mm256_sign_epi8(xg, wg[h]) };
-                    dm[h] = _mm256_add_epi32(
-                        dm[h],
-                        _mm256_madd_epi16(_mm256_maddubs_epi16(uw[h], sx), ones),
-                    );
+            for g in 0..4 {
+                let wg: [__m256i; 2] = core::array::from_fn(|h| {
+                    if Q4 {
+                        // vb holds 2 x 64 bytes; 64 (g % 2) + 32 h + 32 <= 128.
+                        let v = _mm256_loadu_si256(
+                            vb.as_ptr().add(64 * (g % 2) + 32 * h) as *const __m256i
+                        );
+                        if g < 2 {
+                            _mm256_and_si256(v, low)
+                        } else {
+                            _mm256_and_si256(_mm256_srli_epi16::<4>(v), low)
+                        }
+                    } else {
+                        // vb holds 4 x 64 bytes; 64 g + 32 h + 32 <= 256.
+                        _mm256_loadu_si256(vb.as_ptr().add(64 * g + 32 * h) as *const __m256i)
+                    }
+                });
+                // The unsigned operand: 4-bit as stored; int8 `w + 128`
+                // (VNNI) or `|w|` (the sign trick of [`gemm_q8_avx2`]).
+                let uw = if Q4 {
+                    wg
+                } else if VNNI {
+                    wg.map(|v| _mm256_xor_si256(v, flip))
+                } else {
+                    wg.map(|v| _mm256_sign_epi8(v, v))
+                };
+                for (m, dm) in dp.iter_mut().enumerate() {
+                    let xs = &xq[m][b * Q8_BLOCK + 8 * g..b * Q8_BLOCK + 8 * g + 8];
+                    // xs holds 8 bytes.
+                    let xg = _mm256_set1_epi64x((xs.as_ptr() as *const i64).read_unaligned());
+                    for h in 0..2 {
+                        dm[h] = if VNNI {
+                            _mm256_dpbusd_avx_epi32(dm[h], uw[h], xg)
+                        } else {
+                            let sx = if Q4 { xg } else { _mm256_sign_epi8(xg, wg[h]) };
+                            _mm256_add_epi32(
+                                dm[h],
+                                _mm256_madd_epi16(_mm256_maddubs_epi16(uw[h], sx), ones),
+                            )
+                        };
+                    }
                 }
             }
+            for (m, am) in acc.iter_mut().enumerate() {
+                // Lanes: the block sums of rows 0, 1, 4, 5 | 2, 3, 6, 7.
+                let sums = _mm256_hadd_epi32(dp[m][0], dp[m][1]);
+                let a = &mut am[b % 2];
+                *a = _mm256_fmadd_ps(
+                    _mm256_cvtepi32_ps(sums),
+                    _mm256_mul_ps(sv, _mm256_set1_ps(xd[m][b])),
+                    *a,
+                );
+            }
         }
-        for (m, am) in acc.iter_mut().enumerate() {
-            // Lanes: the block sums of rows 0, 1, 4, 5 | 2, 3, 6, 7.
-            let sums = _mm256_hadd_epi32(dp[m][0], dp[m][1]);
-            let a = &mut am[b % 2];
-            *a = _mm256_fmadd_ps(
-                _mm256_cvtepi32_ps(sums),
-                _mm256_mul_ps(sv, _mm256_set1_ps(xd[m][b])),
-                *a,
-            );
-        }
-    }
-    let mut out = [[0.0f32; 8]; K];
-    for (o, a) in out.iter_mut().zip(acc) {
-        // SAFETY: o holds 8 floats.
-        unsafe {
+        let mut out = [[0.0f32; 8]; K];
+        for (o, a) in out.iter_mut().zip(acc) {
+            // o holds 8 floats.
             _mm256_storeu_ps(
                 o.as_mut_ptr(),
                 _mm256_permutevar8x32_ps(_mm256_add_ps(a[0], a[1]), order),
-            )
-        };
+            );
+        }
+        out
     }
-    out
 }
 
 /// See [`super::q8_pack8`]: per block, the 8 rows' 32 bytes (as 4 qwords
