@@ -3087,7 +3087,7 @@ fn query_groups_equal_the_per_query_kernels() {
     let sides: [Vec<u8>; 3] = [Vec::new(), vec![7; 100], vec![9; 64 * 40 + 3]];
     for g in 1..=9 {
         let side = &sides[g % 3][..];
-        for hd in [1, 5, 16, 17, 48, 64, 65, 96] {
+        for hd in [1, 5, 16, 17, 40, 48, 64, 65, 80, 96] {
             for n in [0, 1, 2, 3, 29] {
                 let (q_stride, stride, out_stride) = (hd + 3, hd + 11, n + 2);
                 let q = r.vec((g - 1) * q_stride + hd);

@@ -1221,53 +1221,59 @@ pub unsafe fn dot_rows_512_f16(q: &[f32], k: &[u16], stride: usize, out: &mut [f
 /// `16 i .. 16 i + 16` of key row `j` as f32 (masked lanes zero);
 /// `q.len() <= 64`.
 ///
+/// Always inlined into its callers (no features of its own), so that their
+/// `load` (F16C and AVX512-BW for [`dot_rows_512_f16`]) is inlined too.
+///
 /// # Safety
-/// The CPU must support avx512f and fma; `load` must be sound for
-/// `j < out.len()`, `i < ceil(q.len() / 16)`.
-#[inline]
-#[target_feature(enable = "avx512f,avx2,fma")]
+/// The CPU must support avx512f and fma (and what `load` uses); `load`
+/// must be sound for `j < out.len()`, `i < ceil(q.len() / 16)`.
+#[inline(always)]
 unsafe fn dot_rows_512_by(
     q: &[f32],
     load: impl Fn(usize, usize, __mmask16) -> __m512,
     out: &mut [f32],
 ) {
-    let hd = q.len().min(64);
-    let nv = hd.div_ceil(16);
-    let mask: [__mmask16; 4] = core::array::from_fn(|i| {
-        if 16 * (i + 1) <= hd {
-            0xffff
-        } else if 16 * i < hd {
-            lanes16(hd - 16 * i)
-        } else {
-            0
+    // SAFETY (every intrinsic below): the caller's features (avx512f, fma);
+    // the loads read only lanes < hd as noted.
+    unsafe {
+        let hd = q.len().min(64);
+        let nv = hd.div_ceil(16);
+        let mask: [__mmask16; 4] = core::array::from_fn(|i| {
+            if 16 * (i + 1) <= hd {
+                0xffff
+            } else if 16 * i < hd {
+                lanes16(hd - 16 * i)
+            } else {
+                0
+            }
+        });
+        // Masked loads read only lanes < hd of q.
+        let qv: [__m512; 4] = core::array::from_fn(|i| {
+            if i < nv {
+                _mm512_maskz_loadu_ps(mask[i], q.as_ptr().add(16 * i))
+            } else {
+                _mm512_setzero_ps()
+            }
+        });
+        let n = out.len();
+        let mut j = 0;
+        while j + 2 <= n {
+            let (mut a, mut b) = (_mm512_setzero_ps(), _mm512_setzero_ps());
+            for i in 0..nv {
+                a = _mm512_fmadd_ps(qv[i], load(j, i, mask[i]), a);
+                b = _mm512_fmadd_ps(qv[i], load(j + 1, i, mask[i]), b);
+            }
+            out[j] = _mm512_reduce_add_ps(a);
+            out[j + 1] = _mm512_reduce_add_ps(b);
+            j += 2;
         }
-    });
-    // SAFETY: masked loads read only lanes < hd of q.
-    let qv: [__m512; 4] = core::array::from_fn(|i| {
-        if i < nv {
-            unsafe { _mm512_maskz_loadu_ps(mask[i], q.as_ptr().add(16 * i)) }
-        } else {
-            _mm512_setzero_ps()
+        if j < n {
+            let mut a = _mm512_setzero_ps();
+            for i in 0..nv {
+                a = _mm512_fmadd_ps(qv[i], load(j, i, mask[i]), a);
+            }
+            out[j] = _mm512_reduce_add_ps(a);
         }
-    });
-    let n = out.len();
-    let mut j = 0;
-    while j + 2 <= n {
-        let (mut a, mut b) = (_mm512_setzero_ps(), _mm512_setzero_ps());
-        for i in 0..nv {
-            a = _mm512_fmadd_ps(qv[i], load(j, i, mask[i]), a);
-            b = _mm512_fmadd_ps(qv[i], load(j + 1, i, mask[i]), b);
-        }
-        out[j] = _mm512_reduce_add_ps(a);
-        out[j + 1] = _mm512_reduce_add_ps(b);
-        j += 2;
-    }
-    if j < n {
-        let mut a = _mm512_setzero_ps();
-        for i in 0..nv {
-            a = _mm512_fmadd_ps(qv[i], load(j, i, mask[i]), a);
-        }
-        out[j] = _mm512_reduce_add_ps(a);
     }
 }
 
@@ -2416,10 +2422,16 @@ unsafe fn axpy_block<const G: usize, E: Copy>(
 /// tails. `load(row, e)` gives lanes
 /// `e .. e + 8` of a row (`e + 8 <= row.len()`), `widen` one lane.
 ///
+/// Always inlined into its callers (no features of its own), so that their
+/// `load` (an F16C conversion for [`axpy_rows_f16`]) is inlined too: with
+/// `#[target_feature(enable = "avx2,fma")]` here, the F16C closure could not
+/// be, and every 8-lane load was a call (8% of a Transflower `realtime`
+/// step on AVX2, 2026-12-05 profile).
+///
 /// # Safety
-/// The CPU must support avx2 and fma; `load` must be sound for such `e`.
-#[inline]
-#[target_feature(enable = "avx2,fma")]
+/// The CPU must support avx2 and fma (and what `load` uses); `load` must
+/// be sound for such `e`.
+#[inline(always)]
 unsafe fn axpy_rows_by<E: Copy>(
     coef: &[f32],
     rows: &[E],
@@ -2429,41 +2441,45 @@ unsafe fn axpy_rows_by<E: Copy>(
     load: impl Fn(&[E], usize) -> __m256,
     widen: impl Fn(E) -> f32,
 ) {
-    let n = y.len();
-    let nk = super::scalar::whole_rows(coef.len(), rows.len(), stride, n);
-    let n8 = n - n % 8;
-    let row = |j: usize| &rows[j * stride..j * stride + n];
-    let mut e = e0.min(n8);
-    while e + 64 <= n8 {
-        // SAFETY: lanes e .. e + 64 of y (<= n).
-        let mut acc: [__m256; 8] =
-            core::array::from_fn(|t| unsafe { _mm256_loadu_ps(y.as_ptr().add(e + 8 * t)) });
-        for (j, &a) in coef.iter().enumerate().take(nk) {
-            let (r, av) = (row(j), _mm256_set1_ps(a));
-            for (t, acc) in acc.iter_mut().enumerate() {
-                *acc = _mm256_fmadd_ps(av, load(r, e + 8 * t), *acc);
+    // SAFETY (every intrinsic below): the caller's features (avx2, fma);
+    // every load and store is in bounds as noted.
+    unsafe {
+        let n = y.len();
+        let nk = super::scalar::whole_rows(coef.len(), rows.len(), stride, n);
+        let n8 = n - n % 8;
+        let row = |j: usize| &rows[j * stride..j * stride + n];
+        let mut e = e0.min(n8);
+        while e + 64 <= n8 {
+            // In bounds: lanes e .. e + 64 of y (<= n).
+            let mut acc: [__m256; 8] =
+                core::array::from_fn(|t| _mm256_loadu_ps(y.as_ptr().add(e + 8 * t)));
+            for (j, &a) in coef.iter().enumerate().take(nk) {
+                let (r, av) = (row(j), _mm256_set1_ps(a));
+                for (t, acc) in acc.iter_mut().enumerate() {
+                    *acc = _mm256_fmadd_ps(av, load(r, e + 8 * t), *acc);
+                }
             }
+            for (t, acc) in acc.iter().enumerate() {
+                // In bounds: as above.
+                _mm256_storeu_ps(y.as_mut_ptr().add(e + 8 * t), *acc);
+            }
+            e += 64;
         }
-        for (t, acc) in acc.iter().enumerate() {
-            // SAFETY: as above.
-            unsafe { _mm256_storeu_ps(y.as_mut_ptr().add(e + 8 * t), *acc) };
+        while e + 8 <= n8 {
+            // In bounds: lanes e .. e + 8 of y.
+            let mut acc = _mm256_loadu_ps(y.as_ptr().add(e));
+            for (j, &a) in coef.iter().enumerate().take(nk) {
+                acc = _mm256_fmadd_ps(_mm256_set1_ps(a), load(row(j), e), acc);
+            }
+            // In bounds: as above.
+            _mm256_storeu_ps(y.as_mut_ptr().add(e), acc);
+            e += 8;
         }
-        e += 64;
-    }
-    while e + 8 <= n8 {
-        // SAFETY: lanes e .. e + 8 of y.
-        let mut acc = unsafe { _mm256_loadu_ps(y.as_ptr().add(e)) };
         for (j, &a) in coef.iter().enumerate().take(nk) {
-            acc = _mm256_fmadd_ps(_mm256_set1_ps(a), load(row(j), e), acc);
-        }
-        // SAFETY: as above.
-        unsafe { _mm256_storeu_ps(y.as_mut_ptr().add(e), acc) };
-        e += 8;
-    }
-    for (j, &a) in coef.iter().enumerate().take(nk) {
-        let r = row(j);
-        for (yi, &xi) in y[n8..].iter_mut().zip(&r[n8..]) {
-            *yi += a * widen(xi);
+            let r = row(j);
+            for (yi, &xi) in y[n8..].iter_mut().zip(&r[n8..]) {
+                *yi += a * widen(xi);
+            }
         }
     }
 }
