@@ -333,7 +333,9 @@ pub(crate) unsafe fn the_call<'x>(
         return Err(Failure::null("sessions"));
     }
     // SAFETY: `n` readable pointers (contract).
-    Ok(Some((b, unsafe { std::slice::from_raw_parts(sessions, n) })))
+    Ok(Some((b, unsafe {
+        std::slice::from_raw_parts(sessions, n)
+    })))
 }
 
 /// Step 2 of the header's order: each session by index, NULL, given
@@ -419,9 +421,11 @@ pub unsafe extern "C" fn duo_step_batch_push_leader(
     failed_session: *mut usize,
 ) -> DuoResult {
     // SAFETY: the caller's contract (see push_leader_many).
-    with_failed("duo_step_batch_push_leader", failed_session, |failed| unsafe {
-        push_leader_many(batch, sessions, frames, n, failed)
-    })
+    with_failed(
+        "duo_step_batch_push_leader",
+        failed_session,
+        |failed| unsafe { push_leader_many(batch, sessions, frames, n, failed) },
+    )
 }
 
 /// The body of [`duo_step_batch_push_leader`]; `failed` = the session a

@@ -209,7 +209,10 @@ unsafe fn step_many(
                 capacity,
             };
             let f = fail(e, s);
-            return Err(Failure::new(f.code, format!("sessions[{i}]: {}", f.message)));
+            return Err(Failure::new(
+                f.code,
+                format!("sessions[{i}]: {}", f.message),
+            ));
         }
     }
     // Model and backlog checked: core steps the ready ones.

@@ -202,7 +202,10 @@ fn transflower_batches_in_caller_memory_allocate_nothing() {
     unsafe {
         assert_eq!(duo_model_open_file(path.as_ptr(), &mut m), DuoResult::Ok);
         assert_eq!(duo_transflower_get_info(m, &mut info), DuoResult::Ok);
-        assert_eq!(duo_transflower_config_preset(m, name.as_ptr(), &mut c), DuoResult::Ok);
+        assert_eq!(
+            duo_transflower_config_preset(m, name.as_ptr(), &mut c),
+            DuoResult::Ok
+        );
         c.batched = 1;
         assert_eq!(duo_transflower_session_bytes(m, &c, &mut sb), DuoResult::Ok);
         assert_eq!(duo_transflower_step_batch_bytes(m, &mut bb), DuoResult::Ok);
@@ -223,7 +226,11 @@ fn transflower_batches_in_caller_memory_allocate_nothing() {
             duo_transflower_step_batch_new_in(m, bmem.as_mut_ptr(), bb, &mut batch),
             DuoResult::Ok
         );
-        for (k, (s, mem)) in sessions.iter_mut().zip(smem.chunks_exact_mut(sb)).enumerate() {
+        for (k, (s, mem)) in sessions
+            .iter_mut()
+            .zip(smem.chunks_exact_mut(sb))
+            .enumerate()
+        {
             c.rng_seed = k as u64;
             assert_eq!(
                 duo_transflower_session_new_in(

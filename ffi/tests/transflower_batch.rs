@@ -23,7 +23,9 @@ use duolando::transflower_batch::*;
 use duolando_std::npy::read_f32_2d;
 
 fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/fixtures")
+        .join(name)
 }
 
 fn last_error() -> String {
@@ -61,8 +63,7 @@ impl Case {
         } else {
             use duolando_std::convert::transflower::*;
             let h = dir.join("hparams.yaml");
-            let cfg =
-                parse_transflower_config(&h, &std::fs::read_to_string(&h).unwrap()).unwrap();
+            let cfg = parse_transflower_config(&h, &std::fs::read_to_string(&h).unwrap()).unwrap();
             let w = dir.join("model.safetensors");
             let (bytes, _) = convert_transflower(
                 &cfg,
@@ -277,7 +278,10 @@ fn sessions_stepped_in_a_batch_equal_sessions_alone() {
                 .map(|&rng_seed| DuoTransflowerConfig { rng_seed, ..base })
                 .collect();
             let alone: Vec<Vec<f32>> = cfgs.iter().map(|c| case.alone(c)).collect();
-            assert!(alone[0] != alone[1] && alone[1] != alone[2], "{name} {preset}: seeds");
+            assert!(
+                alone[0] != alone[1] && alone[1] != alone[2],
+                "{name} {preset}: seeds"
+            );
             for in_caller in [false, true] {
                 // Session 0: batched, caller memory at an odd address;
                 // 1: batched, library memory; 2: its own step memory.
@@ -342,7 +346,11 @@ fn sizes_memory_and_batched_sessions() {
         // Not a setting: batched 2.
         let mut n = 0;
         assert_eq!(
-            duo_transflower_session_bytes(case.m, &DuoTransflowerConfig { batched: 2, ..c }, &mut n),
+            duo_transflower_session_bytes(
+                case.m,
+                &DuoTransflowerConfig { batched: 2, ..c },
+                &mut n
+            ),
             DuoResult::InvalidArgument
         );
         assert!(last_error().contains("batched is 2"), "{}", last_error());
@@ -369,11 +377,19 @@ fn sizes_memory_and_batched_sessions() {
             duo_transflower_step_batch_new_in(case.m, mem[1..].as_mut_ptr(), bytes - 1, &mut b),
             DuoResult::BufferTooSmall
         );
-        assert!(last_error().contains(&bytes.to_string()), "{}", last_error());
+        assert!(
+            last_error().contains(&bytes.to_string()),
+            "{}",
+            last_error()
+        );
         let a = duo_transflower_step_batch_new_in(case.m, ptr::null_mut(), 0, &mut b);
         let ma = last_error();
         let z = duo_transflower_step_batch_new_in(case.m, mem.as_mut_ptr(), 0, &mut b);
-        assert_eq!((a, ma), (z, last_error()), "memory: NULL/0 as a pointer with 0");
+        assert_eq!(
+            (a, ma),
+            (z, last_error()),
+            "memory: NULL/0 as a pointer with 0"
+        );
         assert_eq!(a, DuoResult::BufferTooSmall);
         assert_eq!(
             duo_transflower_step_batch_new_in(case.m, ptr::null_mut(), bytes, &mut b),
@@ -418,7 +434,14 @@ fn sizes_memory_and_batched_sessions() {
             DuoResult::NotReady
         );
         assert_eq!(
-            duo_transflower_pull_frame_with_noise(s, z.as_ptr(), z.len(), f.as_mut_ptr(), ch, ptr::null_mut()),
+            duo_transflower_pull_frame_with_noise(
+                s,
+                z.as_ptr(),
+                z.len(),
+                f.as_mut_ptr(),
+                ch,
+                ptr::null_mut()
+            ),
             DuoResult::NotReady
         );
         // The batch in caller memory of exactly its size at an odd address;
@@ -429,7 +452,8 @@ fn sizes_memory_and_batched_sessions() {
         case.m = ptr::null_mut();
         let mut got = Vec::new();
         let mut stepped = 0;
-        while duo_step_batch_step(b, [s].as_ptr(), 1, &mut stepped, ptr::null_mut()) == DuoResult::Ok
+        while duo_step_batch_step(b, [s].as_ptr(), 1, &mut stepped, ptr::null_mut())
+            == DuoResult::Ok
             && stepped == 1
         {
             case.pull_all(s, &mut got);
@@ -476,21 +500,35 @@ fn step_refusals_come_in_the_stated_order() {
     // 1. The call.
     let mut failed = 5usize;
     // SAFETY: NULL batch with live sessions: refused before they are read.
-    let r = unsafe { duo_step_batch_step(ptr::null_mut(), s.as_ptr(), 2, ptr::null_mut(), &mut failed) };
+    let r = unsafe {
+        duo_step_batch_step(ptr::null_mut(), s.as_ptr(), 2, ptr::null_mut(), &mut failed)
+    };
     assert_eq!((r, failed), (DuoResult::NullParameter, none));
     let (r, f, stepped, _) = step(&[], 0);
-    assert_eq!((r, f, stepped), (DuoResult::Ok, none, 0), "n == 0 does nothing");
+    assert_eq!(
+        (r, f, stepped),
+        (DuoResult::Ok, none, 0),
+        "n == 0 does nothing"
+    );
     // SAFETY: n == 0 with NULL sessions: nothing read.
     let r = unsafe { duo_step_batch_step(b, ptr::null(), 0, ptr::null_mut(), ptr::null_mut()) };
     assert_eq!(r, DuoResult::Ok);
     let many = vec![s[0]; DUO_MAX + 1];
     let (r, f, stepped, msg) = step(&many, many.len());
-    assert_eq!((r, f, stepped), (DuoResult::InvalidArgument, none, 777), "{msg}");
+    assert_eq!(
+        (r, f, stepped),
+        (DuoResult::InvalidArgument, none, 777),
+        "{msg}"
+    );
     let (mut st, mut fl) = (0usize, 0usize);
     // SAFETY: NULL sessions with n > 0.
     let r = unsafe { duo_step_batch_step(b, ptr::null(), 2, &mut st, &mut fl) };
     assert_eq!((r, fl), (DuoResult::NullParameter, none));
-    assert!(last_error().contains("sessions is NULL"), "{}", last_error());
+    assert!(
+        last_error().contains("sessions is NULL"),
+        "{}",
+        last_error()
+    );
     // The other family's call and batch, even with n == 0.
     let lf = duolando::frames::DuoLeaderFrame::default();
     // SAFETY: a live batch, n == 0.
@@ -509,24 +547,41 @@ fn step_refusals_come_in_the_stated_order() {
         assert_eq!(duo_model_open_file(duo.as_ptr(), &mut dm), DuoResult::Ok);
         assert_eq!(duo_session_config_minimum(dm, &mut sc), DuoResult::Ok);
         assert_eq!(duo_step_batch_new(dm, &sc, 2, &mut db), DuoResult::Ok);
-        assert_eq!(duo_session_new(dm, &sc, [1u32, 2, 3, 4, 5].as_ptr(), &mut ds), DuoResult::Ok);
+        assert_eq!(
+            duo_session_new(dm, &sc, [1u32, 2, 3, 4, 5].as_ptr(), &mut ds),
+            DuoResult::Ok
+        );
         let r = duo_step_batch_step(db, [ds].as_ptr(), 1, &mut st, &mut fl);
         assert_eq!((r, fl), (DuoResult::InvalidArgument, none));
-        assert!(last_error().contains("duo_step_batch_push_leader"), "{}", last_error());
+        assert!(
+            last_error().contains("duo_step_batch_push_leader"),
+            "{}",
+            last_error()
+        );
         // A Transflower session handed to a Duolando batch.
         let r = duo_step_batch_push_leader(db, [ds, s[0]].as_ptr(), [lf, lf].as_ptr(), 2, &mut fl);
         assert_eq!((r, fl), (DuoResult::InvalidArgument, 1));
-        assert!(last_error().contains("sessions[1] is a session of a Transflower model"), "{}", last_error());
+        assert!(
+            last_error().contains("sessions[1] is a session of a Transflower model"),
+            "{}",
+            last_error()
+        );
     }
     // 2. The sessions: a Duolando session handed to this batch.
     let (r, f, _, msg) = step(&[s[0], ds], 2);
     assert_eq!((r, f), (DuoResult::InvalidArgument, 1), "{msg}");
-    assert!(msg.contains("sessions[1] is a session of a Duolando model"), "{msg}");
+    assert!(
+        msg.contains("sessions[1] is a session of a Duolando model"),
+        "{msg}"
+    );
     // Another model at 4 before the backlogged session 1.
     let five = [s[0], s[1], s[2], s[3], stranger];
     let (r, f, _, msg) = step(&five, 5);
     assert_eq!((r, f), (DuoResult::InvalidArgument, 4), "{msg}");
-    assert!(msg.contains("sessions[4] is a session of another model"), "{msg}");
+    assert!(
+        msg.contains("sessions[4] is a session of another model"),
+        "{msg}"
+    );
     // A repeated session at 3 before another model at 4.
     let (r, f, _, msg) = step(&[s[0], s[1], s[2], s[0], stranger], 5);
     assert_eq!((r, f), (DuoResult::InvalidArgument, 3), "{msg}");
@@ -534,11 +589,18 @@ fn step_refusals_come_in_the_stated_order() {
     // A NULL session at 2 before a repeat at 3 and another model at 4.
     let (r, f, _, _) = step(&[s[0], s[1], ptr::null_mut(), s[0], stranger], 5);
     assert_eq!((r, f), (DuoResult::NullParameter, 2));
-    assert!(last_error().contains("sessions[2] is NULL"), "{}", last_error());
+    assert!(
+        last_error().contains("sessions[2] is NULL"),
+        "{}",
+        last_error()
+    );
     // 4. Backlog: the first backlogged session, 1 (not 3).
     let (r, f, stepped, msg) = step(&s, 4);
     assert_eq!((r, f, stepped), (DuoResult::Backlog, 1, 777), "{msg}");
-    assert!(msg.contains("sessions[1]: the session is full (2 of 2 frames made and not pulled)"), "{msg}");
+    assert!(
+        msg.contains("sessions[1]: the session is full (2 of 2 frames made and not pulled)"),
+        "{msg}"
+    );
     // Nobody changed: 0 and 2 (and the stranger) make no frame before a
     // good call, then the frames of a fresh session alone.
     let mut fresh = Vec::new();
