@@ -12,16 +12,18 @@
  *                may be freed in any order.
  *   duo_session  one dancer (a follower, or a solo dancer on a Bailando
  *                model): streaming state in fixed memory.
- *   duo_step_batch  scratch for stepping several sessions of one model
- *                together (one weight read for all of them).
+ *   duo_step_batch  step memory several sessions of one model share
+ *                (Duolando: stepped together, one weight read for all of
+ *                them; Transflower: stepped one after another through it).
  *
  * Conventions (rustls-ffi style)
  *   - Fallible functions return duo_result. DUO_OK is success; on any
  *     other code (except DUO_NOT_READY, which is not a failure)
  *     duo_last_error_message() tells what went wrong on this thread.
  *   - Output parameters (out_*) are written only when DUO_OK is returned
- *     (failed_session of duo_step_batch_push_leader, not an out_ parameter,
- *     is written on every return).
+ *     (failed_session of duo_step_batch_push_leader and
+ *     duo_step_batch_step, not an out_ parameter, is written on every
+ *     return).
  *   - A NULL required pointer gives DUO_NULL_PARAMETER. Buffers (a pointer
  *     with an element count: bytes/len, memory/len, features/n_features,
  *     track/n_floats, the two pos3d/n_frames, sessions and frames/n)
@@ -527,7 +529,9 @@ void duo_session_free(duo_session *session);
  * recomputes every row only every k-th step and in between only the newest
  * and conditioning rows (faster, approximate: docs/TRANSFLOWER.md "S
  * mode"). duo_session_push_music and duo_session_free apply; the other
- * duo_session_* calls answer DUO_INVALID_ARGUMENT naming the family. */
+ * duo_session_* calls answer DUO_INVALID_ARGUMENT naming the family.
+ * Several sessions of one model may share one step's memory: a
+ * duo_step_batch ("Sessions stepped together" below). */
 
 /* Sizes of a Transflower model. 48 bytes. */
 typedef struct duo_transflower_info {
@@ -553,7 +557,12 @@ typedef struct duo_transflower_config {
   uint32_t pending_frames;    /* frames made and not pulled, 1..65536 */
   uint32_t rolling;           /* 1: a share of the rows recomputed every step (a flat cost);
                                  0: all of them every refresh-th step (a spike) */
-  uint32_t reserved;          /* 0 */
+  uint32_t batched;           /* 0: the session has its own step memory (its pulls step
+                                 it; a batch may step it too). 1: for step batches only:
+                                 its state alone (duo_transflower_session_bytes gives the
+                                 smaller size); only duo_step_batch_step makes its frames,
+                                 its pulls take them (DUO_NOT_READY until one is made).
+                                 Was `reserved` (0) before step batches. */
   uint64_t rng_seed;          /* the base samples' seed */
 } duo_transflower_config;
 
@@ -568,7 +577,8 @@ duo_result duo_transflower_config_preset(const duo_model *model, const char *nam
                                          duo_transflower_config *out_config);
 
 /* Bytes duo_transflower_session_new_in needs for `config`, for memory at
- * any address (duo_transflower_session_new allocates about as much, once).
+ * any address (duo_transflower_session_new allocates about as much, once);
+ * with config->batched = 1 the state alone, without a step's memory.
  * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (a setting out of range: the
  * message names it). Thread-safe. */
 duo_result duo_transflower_session_bytes(const duo_model *model, const duo_transflower_config *config,
@@ -604,7 +614,10 @@ duo_result duo_transflower_push_input(duo_session *session, uint32_t index, cons
 /* The next frame (n_floats = channels): DUO_OK (out and *out_index
  * written; out_index may be NULL) or DUO_NOT_READY (its audio is not in
  * yet; nothing written). Runs the frame's step (the costly call: off the
- * render thread) with the session's seeded base sample.
+ * render thread) with the session's seeded base sample, unless a frame was
+ * already made by duo_step_batch_step (then it takes that one). A batched
+ * session (config.batched = 1) never steps here: DUO_NOT_READY until its
+ * batch has made a frame.
  * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (n_floats, another family). */
 duo_result duo_transflower_pull_frame(duo_session *session, float *out, size_t n_floats,
                                       uint64_t *out_index);
@@ -625,18 +638,56 @@ duo_result duo_transflower_session_reset(duo_session *session, uint64_t rng_seed
 /* Sessions stepped together                                           */
 /* ------------------------------------------------------------------ */
 
-/* Scratch memory for stepping several sessions of one model in one call:
- * each weight matrix of the heavy part of a step is then read once for
- * all of them (16 sessions of the full model take 4.4-4.6x the time of
- * one, not 16x). Every session ends exactly as after its own
- * duo_session_push_leader, bit for bit. A batch holds no session state
- * and no model reference: it is sized for a configuration and a number of
- * sessions, and steps any sessions of one model whose configurations need
- * no more than that one. Thread rule: one thread at a time; the sessions
- * of a call must not be used by another thread during it. */
+/* Step memory several sessions of one model share. One handle for the
+ * families that have one; each family makes it with its own constructor,
+ * steps it with its own call, and frees it with duo_step_batch_free:
+ *   - Duolando (duo_step_batch_new; duo_step_batch_push_leader): scratch
+ *     for stepping sessions TOGETHER, each weight matrix of the heavy part
+ *     of a step read once for all of them (16 sessions of the full model
+ *     take 4.4-4.6x the time of one, not 16x). Every session ends exactly
+ *     as after its own duo_session_push_leader, bit for bit. Such a batch
+ *     holds no session state and no model reference: it is sized for a
+ *     configuration and a number of sessions, and steps any sessions of
+ *     one model whose configurations need no more than that one.
+ *   - Transflower (duo_transflower_step_batch_new; duo_step_batch_step):
+ *     one model's step scratch and flow weights, the sessions stepped ONE
+ *     AFTER ANOTHER through it, so that they need not each hold a step's
+ *     memory (a session made with duo_transflower_config.batched = 1 holds
+ *     its state alone). Every frame is the one the session makes stepped
+ *     alone (duo_transflower_pull_frame with its seeded RNG), bit for bit.
+ *     The size depends on the model only (not on the sessions' configs or
+ *     number). Holds a reference on its model, as a session does.
+ * A batch of one family refuses the other family's call and sessions
+ * (DUO_INVALID_ARGUMENT naming both families).
+ * Thread rule: one thread at a time; the sessions of a call must not be
+ * used by another thread during it.
+ *
+ * The refusals of duo_step_batch_push_leader and duo_step_batch_step, in
+ * this one order; the first refusal answers, before any session changes,
+ * *failed_session naming the session concerned:
+ *   1. the call (DUO_NO_SESSION): batch NULL (DUO_NULL_PARAMETER), or of
+ *      the other family (DUO_INVALID_ARGUMENT); n == 0 does nothing
+ *      (DUO_OK, sessions and frames may be NULL; *out_stepped = 0); n
+ *      above the batch's max_sessions (DUO_MAX_BATCH for a Transflower
+ *      batch) (DUO_INVALID_ARGUMENT); sessions NULL, then frames NULL
+ *      (DUO_NULL_PARAMETER);
+ *   2. each session, by index: NULL (DUO_NULL_PARAMETER); given twice, of
+ *      another family than the batch's, of another model than sessions[0]
+ *      (Duolando) or than the batch's (Transflower), or with a
+ *      configuration that needs more than the batch's (Duolando)
+ *      (DUO_INVALID_ARGUMENT);
+ *   3. each frame, by index (push_leader): NaN, infinity or |value| >
+ *      DUO_MAX_POSITION_M (DUO_NON_FINITE_INPUT);
+ *   4. each session, by index: it would refuse its step for backlog
+ *      (DUO_BACKLOG: push_leader as duo_session_push_leader; step: its
+ *      pending_frames frames are made and not pulled).
+ * So a session of another model at index 4 is reported before a bad frame
+ * at index 0, and a bad frame at index 3 before a backlogged session 1.
+ * failed_session (NULL or writable) is written on EVERY return: the index
+ * of the session a failure concerns, else DUO_NO_SESSION. */
 typedef struct duo_step_batch duo_step_batch;
 
-/* Most sessions one batch steps. */
+/* Most sessions one batch steps (per call). */
 #define DUO_MAX_BATCH 64
 /* failed_session of a call that succeeded or whose failure concerns no
  * single session. */
@@ -648,12 +699,13 @@ typedef struct duo_step_batch duo_step_batch;
 duo_result duo_step_batch_bytes(const duo_model *model, const duo_session_config *config,
                                 size_t max_sessions, size_t *out_bytes);
 
-/* Creates a batch in library memory (one allocation, here).
- * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT. Thread-safe. */
+/* Creates a Duolando batch in library memory (one allocation, here).
+ * DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (another family's model too).
+ * Thread-safe. */
 duo_result duo_step_batch_new(const duo_model *model, const duo_session_config *config,
                               size_t max_sessions, duo_step_batch **out_batch);
 
-/* Creates a batch entirely inside caller memory: `memory` (any
+/* Creates a Duolando batch entirely inside caller memory: `memory` (any
  * alignment), `len` >= duo_step_batch_bytes(). No allocation. The memory
  * must stay valid, unmoved and untouched until duo_step_batch_free.
  * DUO_BUFFER_TOO_SMALL (NULL/0 included), DUO_NULL_PARAMETER (memory NULL
@@ -662,32 +714,48 @@ duo_result duo_step_batch_new_in(const duo_model *model, const duo_session_confi
                                  size_t max_sessions, void *memory, size_t len,
                                  duo_step_batch **out_batch);
 
-/* Pushes frames[i] into sessions[i] for every i < n and runs the steps
- * that become possible, the sessions together (the costly call: run it
- * off the render thread). Pull each session's frames afterwards as usual.
- * Refused before any session changes. The checks run in this order and
- * the first refusal answers, *failed_session naming the session concerned:
- *   1. the call (DUO_NO_SESSION): batch NULL (DUO_NULL_PARAMETER); n == 0
- *      does nothing (DUO_OK, sessions and frames may be NULL); n above the
- *      batch's max_sessions (DUO_INVALID_ARGUMENT); sessions or frames
- *      NULL (DUO_NULL_PARAMETER);
- *   2. each session, by index: NULL (DUO_NULL_PARAMETER); given twice, of
- *      another model than sessions[0], or with a configuration that needs
- *      more than the batch's (DUO_INVALID_ARGUMENT);
- *   3. each frame, by index: NaN, infinity or |value| >
- *      DUO_MAX_POSITION_M (DUO_NON_FINITE_INPUT);
- *   4. each session, by index: it would refuse its frame for backlog
- *      (DUO_BACKLOG, as duo_session_push_leader).
- * So a session of another model at index 4 is reported before a bad frame
- * at index 0, and a bad frame at index 3 before a backlogged session 1.
- * failed_session (NULL or writable) is written on EVERY return: the index
- * of the session a failure concerns, else DUO_NO_SESSION. */
+/* Duolando batch: pushes frames[i] into sessions[i] for every i < n and
+ * runs the steps that become possible, the sessions together (the costly
+ * call: run it off the render thread). Pull each session's frames
+ * afterwards as usual. Refusals: the order above. */
 duo_result duo_step_batch_push_leader(duo_step_batch *batch, duo_session *const *sessions,
                                       const duo_leader_frame *frames, size_t n,
                                       size_t *failed_session);
 
-/* Frees a batch; its sessions are untouched. NULL is ignored. For a batch
- * made by duo_step_batch_new_in, release the memory afterwards. */
+/* Bytes duo_transflower_step_batch_new_in needs for `model` (any
+ * address): the model's step scratch and reverse flow weights, the same
+ * for any number of sessions of any configuration (docs/C_API.md gives
+ * the published size). DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (another
+ * family's model). Thread-safe. */
+duo_result duo_transflower_step_batch_bytes(const duo_model *model, size_t *out_bytes);
+
+/* Creates a Transflower batch in library memory (one allocation, here);
+ * it steps the sessions of `model` of every configuration, batched or
+ * not. DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (another family's model).
+ * Thread-safe (takes a reference on the model). */
+duo_result duo_transflower_step_batch_new(const duo_model *model, duo_step_batch **out_batch);
+
+/* As duo_transflower_step_batch_new, entirely inside caller memory
+ * (`memory`, any alignment, len >= duo_transflower_step_batch_bytes; it
+ * must stay valid, unmoved and untouched until duo_step_batch_free): no
+ * allocation. Also DUO_BUFFER_TOO_SMALL (NULL/0 included) and
+ * DUO_NULL_PARAMETER (memory NULL with len > 0). */
+duo_result duo_transflower_step_batch_new_in(const duo_model *model, void *memory, size_t len,
+                                             duo_step_batch **out_batch);
+
+/* Transflower batch: steps every session of sessions[0..n] whose audio is
+ * in once, one after another (the costly call: off the render thread),
+ * each with its own seeded RNG; a session without its audio is skipped.
+ * Each step makes one frame, kept for the session's pulls
+ * (duo_transflower_pull_frame takes it without stepping). On DUO_OK
+ * *out_stepped (may be NULL) = the sessions stepped (0 when none had its
+ * audio). Refusals: the order above. */
+duo_result duo_step_batch_step(duo_step_batch *batch, duo_session *const *sessions, size_t n,
+                               size_t *out_stepped, size_t *failed_session);
+
+/* Frees a batch of either family; its sessions are untouched (a
+ * Transflower batch drops its model reference). NULL is ignored. For a
+ * batch made in caller memory (_new_in), release the memory afterwards. */
 void duo_step_batch_free(duo_step_batch *batch);
 
 #ifdef __cplusplus

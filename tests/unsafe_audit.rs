@@ -42,6 +42,8 @@ const ALLOWED: &[&str] = &[
     "ffi/src/batch.rs",
     "ffi/src/handle.rs",
     "ffi/src/transflower.rs",
+    "ffi/src/transflower_batch.rs",
+    "ffi/tests/transflower_batch.rs",
     "ffi/tests/header.rs",
     "ffi/tests/session_golden.rs",
     "ffi/tests/no_alloc.rs",

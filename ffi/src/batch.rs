@@ -1,46 +1,86 @@
-//! `duo_step_batch`: several dancers on one model stepped together
-//! (`duolando_core::duolando::session::Session::step_many`): one leader frame per
-//! session per call, and each weight matrix of the LATs, the GPT and the
-//! heads read once for all of them. Every session ends exactly as after
-//! its own `duo_session_push_leader` (bit for bit); only the time differs
-//! (docs/PERFORMANCE.md: 16 sessions in 4.4-4.6x the time of one at full
-//! size).
+//! `duo_step_batch`: step memory several sessions of one model share. One
+//! handle for the two families that have one:
 //!
-//! A batch is scratch memory only (no session state, no model reference):
-//! it is sized for a session configuration and a number of sessions, and
-//! steps any sessions of one model whose configurations need no more than
-//! that one. Sessions keep their own handles (`duo_session_new` /
-//! `duo_session_new_in`) and every other call (music, pulls, reset) as
-//! before.
+//! - Duolando (`duo_step_batch_new`, here): several dancers stepped
+//!   together (`duolando_core::duolando::session::Session::step_many`):
+//!   one leader frame per session per call, and each weight matrix of the
+//!   LATs, the GPT and the heads read once for all of them. Every session
+//!   ends exactly as after its own `duo_session_push_leader` (bit for
+//!   bit); only the time differs (docs/PERFORMANCE.md: 16 sessions in
+//!   4.4-4.6x the time of one at full size). Scratch memory only (no
+//!   session state, no model reference), sized for a session configuration
+//!   and a number of sessions; it steps any sessions of one model whose
+//!   configurations need no more than that one.
+//! - Transflower (`duo_transflower_step_batch_new`, `duo_step_batch_step`:
+//!   [`crate::transflower_batch`]): the step scratch and the flow's reverse
+//!   weights of one model, its sessions stepped one after another through it.
+//!
+//! Sessions keep their own handles and every other call (input, pulls,
+//! reset) as before. This file: the handle, its placement (library or
+//! caller memory) and release, the checks every batch call makes in the
+//! header's one order, and the Duolando calls.
 //!
 //! Thread rule: a batch is used by one thread at a time, and the sessions
 //! of a call are not used by any other thread during it.
 
-use duolando_core::duolando::config::ModelConfig;
+use std::sync::Arc;
+
 use duolando_core::duolando::session::{Session, SessionConfig, StepBatch, StepDims, MAX_BATCH};
+use duolando_core::family::Family;
+use duolando_core::transflower::session::StepBatch as TfStepBatch;
 use duolando_core::Error;
 
 use crate::frames::DuoLeaderFrame;
 use crate::handle::{buffer_mut, caller_slot, drop_handle, handle_bytes};
-use crate::model::DuoModel;
+use crate::model::{DuoModel, ModelInner};
 use crate::result::{guard, DuoResult, Failure};
 use crate::session::{
-    config_ref, leader_pos3d, model_ref, DuoSession, DuoSessionConfig, SessionInner,
+    config_ref, leader_pos3d, model_ref, AnySession, DuoSession, DuoSessionConfig, SessionInner,
 };
 
 /// `DUO_NO_SESSION`: the `failed_session` of a call that succeeded, or whose
 /// failure concerns no single session.
 pub const NO_SESSION: usize = usize::MAX;
 
+/// The step memory of one family.
+pub(crate) enum Kind {
+    Duolando {
+        batch: StepBatch<'static>,
+        /// The step memory it holds (what a session's `dims` must fit in).
+        dims: StepDims,
+    },
+    Transflower {
+        batch: TfStepBatch<'static>,
+        /// The model the batch's reverse weights come from: kept alive (its
+        /// address is what a session's model is compared with).
+        model: Arc<ModelInner>,
+    },
+}
+
+impl Kind {
+    fn family(&self) -> Family {
+        match self {
+            Kind::Duolando { .. } => Family::Duolando,
+            Kind::Transflower { .. } => Family::Transflower,
+        }
+    }
+
+    /// Most sessions one call steps.
+    fn capacity(&self) -> usize {
+        match self {
+            Kind::Duolando { batch, .. } => batch.capacity(),
+            Kind::Transflower { .. } => MAX_BATCH,
+        }
+    }
+}
+
 /// What a `duo_step_batch *` points to.
 pub struct StepBatchInner {
     /// Carved from the arena below (or the caller's memory); declared first, dropped first.
-    batch: StepBatch<'static>,
-    /// The step memory it holds (what a session's `dims` must fit in).
-    dims: StepDims,
-    /// Library-allocated arena (`duo_step_batch_new`); None in caller memory.
+    pub(crate) kind: Kind,
+    /// Library-allocated arena (`_new`); None in caller memory.
     _arena: Option<Box<[u8]>>,
-    /// True when this struct lives in caller memory (`duo_step_batch_new_in`).
+    /// True when this struct lives in caller memory (`_new_in`).
     in_caller_memory: bool,
 }
 
@@ -48,9 +88,70 @@ pub struct StepBatchInner {
 pub type DuoStepBatch = StepBatchInner;
 
 /// Alignment slack and size of the handle placed at the start of caller memory.
-const HANDLE_BYTES: usize = handle_bytes::<StepBatchInner>();
+pub(crate) const HANDLE_BYTES: usize = handle_bytes::<StepBatchInner>();
 
-/// Arena bytes of a batch of `max_sessions` sessions of `config` on `model`.
+/// `n` arena bytes plus the handle's (what `_bytes` reports).
+pub(crate) fn with_handle(n: usize) -> Result<usize, Failure> {
+    n.checked_add(HANDLE_BYTES)
+        .ok_or_else(|| Failure::invalid("batch size overflows size_t"))
+}
+
+/// Every constructor's end: `out_batch` checked, an `n`-byte arena
+/// allocated here (`memory` None) or taken from caller memory (`memory` =
+/// pointer and length, handle first; `bytes_fn` names the size function),
+/// `make` carving the batch from it, the handle written to `*out_batch`.
+///
+/// # Safety
+/// `out_batch` NULL or writable; `memory` None, or NULL or `len` writable
+/// bytes that stay valid, unmoved and otherwise untouched until
+/// `duo_step_batch_free`.
+pub(crate) unsafe fn place(
+    n: usize,
+    memory: Option<(*mut u8, usize)>,
+    bytes_fn: &str,
+    out_batch: *mut *mut DuoStepBatch,
+    make: impl FnOnce(&'static mut [u8]) -> Result<Kind, Failure>,
+) -> Result<DuoResult, Failure> {
+    if out_batch.is_null() {
+        return Err(Failure::null("out_batch"));
+    }
+    let handle = match memory {
+        None => {
+            let mut arena = vec![0u8; n].into_boxed_slice();
+            // SAFETY: the boxed bytes stay at one address until the
+            // StepBatchInner drops them, after the batch.
+            let bytes: &'static mut [u8] =
+                unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
+            let kind = make(bytes)?;
+            Box::into_raw(Box::new(StepBatchInner {
+                kind,
+                _arena: Some(arena),
+                in_caller_memory: false,
+            }))
+        }
+        Some((ptr, len)) => {
+            // SAFETY: NULL or `len` writable bytes kept for the batch (contract).
+            let memory = unsafe { buffer_mut(ptr, len, "memory") }?;
+            let (slot, arena) =
+                caller_slot::<StepBatchInner>(memory, n.saturating_add(HANDLE_BYTES), bytes_fn)?;
+            let kind = make(arena)?;
+            // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
+            unsafe {
+                slot.write(StepBatchInner {
+                    kind,
+                    _arena: None,
+                    in_caller_memory: true,
+                })
+            };
+            slot
+        }
+    };
+    // SAFETY: checked non-NULL.
+    unsafe { *out_batch = handle };
+    Ok(DuoResult::Ok)
+}
+
+/// Arena bytes of a Duolando batch of `max_sessions` sessions of `config`.
 ///
 /// # Safety
 /// `model` NULL or live; `config` NULL or valid.
@@ -58,15 +159,39 @@ unsafe fn arena_bytes<'x>(
     model: *const DuoModel,
     config: *const DuoSessionConfig,
     max_sessions: usize,
-) -> Result<(usize, SessionConfig, &'x ModelConfig), Failure> {
+) -> Result<(usize, SessionConfig, &'x ModelInner), Failure> {
     let m = model_ref(model)?;
     let cfg = config_ref(m, config)?;
     if max_sessions == 0 || max_sessions > MAX_BATCH {
         return Err(Failure::invalid(format!("max_sessions is {max_sessions}; a batch steps 1 to {MAX_BATCH} sessions (DUO_MAX_BATCH)")));
     }
+    let n = StepBatch::bytes(m.duolando("a step batch")?.config(), &cfg, max_sessions)?;
+    Ok((n, cfg, m))
+}
+
+/// Both Duolando constructors (`memory` as [`place`]).
+///
+/// # Safety
+/// As `duo_step_batch_new_in` (`memory` None: as `duo_step_batch_new`).
+unsafe fn make_duolando(
+    model: *const DuoModel,
+    config: *const DuoSessionConfig,
+    max_sessions: usize,
+    memory: Option<(*mut u8, usize)>,
+    out_batch: *mut *mut DuoStepBatch,
+) -> Result<DuoResult, Failure> {
+    // SAFETY: the caller's contract.
+    let (n, cfg, m) = unsafe { arena_bytes(model, config, max_sessions) }?;
     let model_cfg = m.duolando("a step batch")?.config();
-    let n = StepBatch::bytes(model_cfg, &cfg, max_sessions)?;
-    Ok((n, cfg, model_cfg))
+    // SAFETY: the caller's contract.
+    unsafe {
+        place(n, memory, "duo_step_batch_bytes", out_batch, |arena| {
+            Ok(Kind::Duolando {
+                batch: StepBatch::new(model_cfg, &cfg, max_sessions, arena)?,
+                dims: StepDims::new(model_cfg, &cfg, max_sessions).map_err(Error::Arena)?,
+            })
+        })
+    }
 }
 
 /// Bytes `duo_step_batch_new_in` needs for `max_sessions` sessions of
@@ -87,9 +212,7 @@ pub unsafe extern "C" fn duo_step_batch_bytes(
         if out_bytes.is_null() {
             return Err(Failure::null("out_bytes"));
         }
-        let total = n
-            .checked_add(HANDLE_BYTES)
-            .ok_or_else(|| Failure::invalid("batch size overflows size_t"))?;
+        let total = with_handle(n)?;
         // SAFETY: checked non-NULL.
         unsafe { *out_bytes = total };
         Ok(DuoResult::Ok)
@@ -111,26 +234,7 @@ pub unsafe extern "C" fn duo_step_batch_new(
 ) -> DuoResult {
     guard("duo_step_batch_new", || {
         // SAFETY: the caller's contract.
-        let (n, cfg, model_cfg) = unsafe { arena_bytes(model, config, max_sessions) }?;
-        if out_batch.is_null() {
-            return Err(Failure::null("out_batch"));
-        }
-        let mut arena = vec![0u8; n].into_boxed_slice();
-        // SAFETY: the boxed bytes stay at one address until the
-        // StepBatchInner drops them, after the batch.
-        let bytes: &'static mut [u8] =
-            unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
-        let batch = StepBatch::new(model_cfg, &cfg, max_sessions, bytes)?;
-        let dims = StepDims::new(model_cfg, &cfg, max_sessions).map_err(Error::Arena)?;
-        let inner = Box::new(StepBatchInner {
-            batch,
-            dims,
-            _arena: Some(arena),
-            in_caller_memory: false,
-        });
-        // SAFETY: checked non-NULL.
-        unsafe { *out_batch = Box::into_raw(inner) };
-        Ok(DuoResult::Ok)
+        unsafe { make_duolando(model, config, max_sessions, None, out_batch) }
     })
 }
 
@@ -151,36 +255,13 @@ pub unsafe extern "C" fn duo_step_batch_new_in(
 ) -> DuoResult {
     guard("duo_step_batch_new_in", || {
         // SAFETY: the caller's contract.
-        let (n, cfg, model_cfg) = unsafe { arena_bytes(model, config, max_sessions) }?;
-        if out_batch.is_null() {
-            return Err(Failure::null("out_batch"));
-        }
-        // SAFETY: NULL or `len` writable bytes kept for the batch (contract).
-        let memory = unsafe { buffer_mut(memory, len, "memory") }?;
-        let (slot, arena) = caller_slot::<StepBatchInner>(
-            memory,
-            n.saturating_add(HANDLE_BYTES),
-            "duo_step_batch_bytes",
-        )?;
-        let batch = StepBatch::new(model_cfg, &cfg, max_sessions, arena)?;
-        let dims = StepDims::new(model_cfg, &cfg, max_sessions).map_err(Error::Arena)?;
-        // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
-        unsafe {
-            slot.write(StepBatchInner {
-                batch,
-                dims,
-                _arena: None,
-                in_caller_memory: true,
-            });
-            *out_batch = slot;
-        }
-        Ok(DuoResult::Ok)
+        unsafe { make_duolando(model, config, max_sessions, Some((memory, len)), out_batch) }
     })
 }
 
-/// Frees a batch. NULL is ignored. The sessions it stepped are untouched.
-/// For `duo_step_batch_new_in`, the caller's memory may be released
-/// afterwards.
+/// Frees a batch of either family. NULL is ignored. The sessions it
+/// stepped are untouched. For a batch in caller memory, the memory may be
+/// released afterwards.
 ///
 /// # Safety
 /// `batch` NULL or a live handle, freed once, not used afterwards.
@@ -193,27 +274,139 @@ pub unsafe extern "C" fn duo_step_batch_free(batch: *mut DuoStepBatch) {
     });
 }
 
+/// Runs a batch call's body with `failed` (`DUO_NO_SESSION` unless the
+/// body names a session) and writes it to `failed_session` (NULL or
+/// writable) on every return.
+pub(crate) fn with_failed(
+    what: &str,
+    failed_session: *mut usize,
+    body: impl FnOnce(&mut usize) -> Result<DuoResult, Failure>,
+) -> DuoResult {
+    let mut failed = NO_SESSION;
+    let r = guard(what, || body(&mut failed));
+    if !failed_session.is_null() {
+        // SAFETY: non-NULL and writable (the callers' contract).
+        unsafe { *failed_session = failed };
+    }
+    r
+}
+
+/// Step 1 of the header's order, the part every batch call shares: `batch`
+/// NULL, or of another family than `family` (the call's); `n == 0` (None:
+/// nothing to do); `n` above what the batch steps; `sessions` NULL.
+///
+/// # Safety
+/// `batch` NULL or live, used by this thread alone; `sessions` NULL or `n`
+/// readable pointers.
+pub(crate) unsafe fn the_call<'x>(
+    batch: *mut DuoStepBatch,
+    family: Family,
+    what: &str,
+    sessions: *const *mut DuoSession,
+    n: usize,
+) -> Result<Option<(&'x mut Kind, &'x [*mut DuoSession])>, Failure> {
+    // SAFETY: NULL or a live handle used by one thread at a time (contract).
+    let b = &mut unsafe { batch.as_mut() }
+        .ok_or_else(|| Failure::null("batch"))?
+        .kind;
+    if b.family() != family {
+        let made_by = match b.family() {
+            Family::Transflower => "duo_transflower_step_batch_new; step its sessions with duo_step_batch_step",
+            _ => "duo_step_batch_new; push its sessions' leader frames with duo_step_batch_push_leader",
+        };
+        return Err(Failure::invalid(format!(
+            "{what} steps {} sessions; this batch is a {} model's (made by {made_by})",
+            family.name(),
+            b.family().name()
+        )));
+    }
+    if n == 0 {
+        return Ok(None);
+    }
+    if n > b.capacity() {
+        return Err(Failure::invalid(format!(
+            "{n} sessions given to a batch made for at most {}",
+            b.capacity()
+        )));
+    }
+    if sessions.is_null() {
+        return Err(Failure::null("sessions"));
+    }
+    // SAFETY: `n` readable pointers (contract).
+    Ok(Some((b, unsafe {
+        std::slice::from_raw_parts(sessions, n)
+    })))
+}
+
+/// Step 2 of the header's order: each session by index, NULL, given
+/// twice, then `fits` (its family, model, step memory); `failed` follows
+/// the index.
+///
+/// # Safety
+/// Every pointer NULL or a live session not used by another thread.
+pub(crate) unsafe fn check_sessions(
+    ptrs: &[*mut DuoSession],
+    failed: &mut usize,
+    mut fits: impl FnMut(usize, &SessionInner) -> Result<(), Failure>,
+) -> Result<(), Failure> {
+    for (i, &p) in ptrs.iter().enumerate() {
+        *failed = i;
+        // SAFETY: NULL or a live session (contract); read only here.
+        let s = unsafe { p.as_ref() }.ok_or_else(|| Failure::null(&format!("sessions[{i}]")))?;
+        if let Some(j) = ptrs[..i].iter().position(|&q| std::ptr::eq(q, p)) {
+            return Err(Failure::invalid(format!(
+                "sessions[{i}] is sessions[{j}] again; a session takes one step per call"
+            )));
+        }
+        fits(i, s)?;
+    }
+    *failed = NO_SESSION;
+    Ok(())
+}
+
+/// Sessions[i] of another family than the batch's.
+pub(crate) fn family_refusal(i: usize, s: &SessionInner, batch: Family) -> Failure {
+    Failure::invalid(format!(
+        "sessions[{i}] is a session of a {} model; this batch steps {} sessions",
+        s.model.family().name(),
+        batch.name()
+    ))
+}
+
+/// The sessions, checked by [`check_sessions`], as `&mut` to the family's
+/// core session (`get`; None: another family, not expected after the
+/// checks). Nothing allocates: the list lives on the stack.
+///
+/// # Safety
+/// Every pointer a live session, pairwise distinct, not used by another
+/// thread during the call.
+pub(crate) unsafe fn sessions_mut<'x, T: 'x>(
+    ptrs: &[*mut DuoSession],
+    get: impl Fn(&'x mut AnySession) -> Option<&'x mut T>,
+) -> Result<heapless::Vec<&'x mut T, MAX_BATCH>, Failure> {
+    let mut refs = heapless::Vec::new();
+    for &p in ptrs {
+        // SAFETY: a live session (contract), distinct from the others: one
+        // `&mut` each.
+        let s = get(unsafe { &mut (*p).session })
+            .ok_or_else(|| Failure::invalid("a session changed family"))?;
+        refs.push(s)
+            .map_err(|_| Failure::invalid("more sessions than DUO_MAX_BATCH"))?;
+    }
+    Ok(refs)
+}
+
 /// Pushes `frames[i]` into `sessions[i]` for every `i < n` and runs the
 /// steps that become possible, the sessions' weight-heavy work together.
 /// Each session ends as after its own `duo_session_push_leader`.
 ///
-/// Refusals, in this order, the first one found answering (no session
-/// changes; `*failed_session` = the session concerned, else
-/// `DUO_NO_SESSION`):
-/// 1. the call: `batch` NULL (`DUO_NULL_PARAMETER`); `n == 0` does nothing
-///    (`DUO_OK`, whatever `sessions` and `frames` are); `n` above the
-///    batch's `max_sessions` (`DUO_INVALID_ARGUMENT`); `sessions` or
-///    `frames` NULL (`DUO_NULL_PARAMETER`) — all with `DUO_NO_SESSION`;
-/// 2. the sessions, by index: the first that is NULL (`DUO_NULL_PARAMETER`),
-///    given twice, of another model than `sessions[0]`, or needing more
-///    step memory than the batch holds (`DUO_INVALID_ARGUMENT`);
-/// 3. the frames, by index: the first with a non-finite or out-of-range
-///    value (`DUO_NON_FINITE_INPUT`);
-/// 4. the sessions, by index: the first that would refuse its frame for
-///    backlog (`DUO_BACKLOG`).
-///
-/// `failed_session` (NULL or writable) is written on every return: the index
-/// of the session a failure concerns, else `DUO_NO_SESSION`.
+/// Refusals in the header's order, the first one found answering (no
+/// session changes; `*failed_session` = the session concerned, else
+/// `DUO_NO_SESSION`): 1. the call ([`the_call`]; then `frames` NULL);
+/// 2. the sessions ([`check_sessions`]: another family, another model
+/// than `sessions[0]`, more step memory than the batch holds); 3. the
+/// frames, by index (`DUO_NON_FINITE_INPUT`); 4. the sessions, by index,
+/// that would refuse their frame for backlog (`DUO_BACKLOG`).
 ///
 /// # Safety
 /// `batch` NULL or live; `sessions` NULL or `n` readable pointers, each
@@ -227,16 +420,12 @@ pub unsafe extern "C" fn duo_step_batch_push_leader(
     n: usize,
     failed_session: *mut usize,
 ) -> DuoResult {
-    let mut failed = NO_SESSION;
     // SAFETY: the caller's contract (see push_leader_many).
-    let r = guard("duo_step_batch_push_leader", || unsafe {
-        push_leader_many(batch, sessions, frames, n, &mut failed)
-    });
-    if !failed_session.is_null() {
-        // SAFETY: non-NULL and writable (contract).
-        unsafe { *failed_session = failed };
-    }
-    r
+    with_failed(
+        "duo_step_batch_push_leader",
+        failed_session,
+        |failed| unsafe { push_leader_many(batch, sessions, frames, n, failed) },
+    )
 }
 
 /// The body of [`duo_step_batch_push_leader`]; `failed` = the session a
@@ -251,64 +440,42 @@ unsafe fn push_leader_many(
     n: usize,
     failed: &mut usize,
 ) -> Result<DuoResult, Failure> {
-    // SAFETY: NULL or a live handle used by one thread at a time (contract).
-    let b = unsafe { batch.as_mut() }.ok_or_else(|| Failure::null("batch"))?;
-    if n == 0 {
+    let what = "duo_step_batch_push_leader";
+    // SAFETY: the caller's contract.
+    let Some((kind, ptrs)) = (unsafe { the_call(batch, Family::Duolando, what, sessions, n) })?
+    else {
         return Ok(DuoResult::Ok);
-    }
-    if n > b.batch.capacity() {
-        return Err(Failure::invalid(format!(
-            "{n} sessions given to a batch made for at most {}",
-            b.batch.capacity()
-        )));
-    }
-    if sessions.is_null() {
-        return Err(Failure::null("sessions"));
-    }
+    };
+    let Kind::Duolando { batch, dims } = kind else {
+        return Err(Failure::invalid("not a Duolando batch"));
+    };
     if frames.is_null() {
         return Err(Failure::null("frames"));
     }
-    // SAFETY: `n` readable pointers and `n` readable frames (contract).
-    let (ptrs, frames) = unsafe {
-        (
-            std::slice::from_raw_parts(sessions, n),
-            std::slice::from_raw_parts(frames, n),
-        )
-    };
+    // SAFETY: `n` readable frames (contract).
+    let frames = unsafe { std::slice::from_raw_parts(frames, n) };
     // 2. The sessions themselves.
-    let mut first: Option<&SessionInner> = None;
-    for (i, &p) in ptrs.iter().enumerate() {
-        *failed = i;
-        // SAFETY: NULL or a live session (contract); read only here.
-        let s = unsafe { p.as_ref() }.ok_or_else(|| Failure::null(&format!("sessions[{i}]")))?;
-        if let Some(j) = ptrs[..i].iter().position(|&q| std::ptr::eq(q, p)) {
-            return Err(Failure::invalid(format!(
-                "sessions[{i}] is sessions[{j}] again; a session takes one frame per call"
-            )));
-        }
-        let s0 = *first.get_or_insert(s);
-        if !std::sync::Arc::ptr_eq(&s.model, &s0.model) {
-            return Err(Failure::invalid(format!(
-                "sessions[{i}] is a session of another model than sessions[0]"
-            )));
-        }
-        let dims = match &s.session {
-            crate::session::AnySession::Duolando { dims, .. } => dims,
-            crate::session::AnySession::Bailando(_) => {
-                return Err(crate::session::solo_refusal(&format!("sessions[{i}] in duo_step_batch_push_leader (solo sessions are stepped by their own pulls)")))
+    let mut first: Option<*const ModelInner> = None;
+    // SAFETY: the caller's contract.
+    unsafe {
+        check_sessions(ptrs, failed, |i, s| {
+            let AnySession::Duolando { dims: need, .. } = &s.session else {
+                return Err(family_refusal(i, s, Family::Duolando));
+            };
+            if *first.get_or_insert(Arc::as_ptr(&s.model)) != Arc::as_ptr(&s.model) {
+                return Err(Failure::invalid(format!(
+                    "sessions[{i}] is a session of another model than sessions[0]"
+                )));
             }
-            crate::session::AnySession::Transflower(_) => {
-                return Err(crate::model::transflower_refusal(&format!("sessions[{i}] in duo_step_batch_push_leader")))
+            if !dims.holds(need) {
+                return Err(Failure::invalid(format!(
+                    "sessions[{i}] needs more step memory than this batch holds: its configuration needs more than the batch's (duo_step_batch_new)"
+                )));
             }
-        };
-        if !b.dims.holds(dims) {
-            return Err(Failure::invalid(format!(
-                "sessions[{i}] needs more step memory than this batch holds: its configuration needs more than the batch's (duo_step_batch_new)"
-            )));
-        }
-    }
-    // 3. The frames' values. Nothing allocates: the frames are read in
-    // place, the lists live on the stack (n <= capacity <= MAX_BATCH).
+            Ok(())
+        })
+    }?;
+    // 3. The frames' values, read in place (n <= capacity <= MAX_BATCH).
     let mut rows: heapless::Vec<&[f32], MAX_BATCH> = heapless::Vec::new();
     for (i, f) in frames.iter().enumerate() {
         *failed = i;
@@ -316,27 +483,16 @@ unsafe fn push_leader_many(
             .map_err(|_| Failure::invalid("more frames than DUO_MAX_BATCH"))?;
     }
     *failed = NO_SESSION;
-    let mut refs: heapless::Vec<&mut Session<'static>, MAX_BATCH> = heapless::Vec::new();
-    for &p in ptrs {
-        // SAFETY: every pointer is a live session (contract), and they are
-        // pairwise distinct (checked above): one `&mut` each.
-        let session = match unsafe { &mut (*p).session } {
-            crate::session::AnySession::Duolando { session, .. } => session,
-            crate::session::AnySession::Bailando(_) => {
-                return Err(crate::session::solo_refusal("duo_step_batch_push_leader"))
-            }
-            crate::session::AnySession::Transflower(_) => {
-                return Err(crate::model::transflower_refusal(
-                    "duo_step_batch_push_leader",
-                ))
-            }
-        };
-        refs.push(session)
-            .map_err(|_| Failure::invalid("more sessions than DUO_MAX_BATCH"))?;
-    }
+    // SAFETY: checked live and pairwise distinct above (contract).
+    let mut refs = unsafe {
+        sessions_mut(ptrs, |s| match s {
+            AnySession::Duolando { session, .. } => Some(session),
+            _ => None,
+        })
+    }?;
     // 4. Backlog: `step_many` checks every session (model, step memory,
     // frame, backlog: the first three passed above) before it changes any.
-    Session::step_many(&mut refs, &rows, &mut b.batch).map_err(|(i, e)| {
+    Session::step_many(&mut refs, &rows, batch).map_err(|(i, e)| {
         *failed = i;
         match e {
             // Caught above; kept should core's checks ever be wider.

@@ -4,7 +4,7 @@
 //! Objects: [`model`] (`duo_model`, immutable, shared by threads and
 //! sessions) and `session` (`duo_session`, one dancer, one thread at a
 //! time); [`batch`] (`duo_step_batch`, sessions of one model stepped
-//! together); [`frames`] (blittable frame structs, coordinate conversions);
+//! together; Transflower's: [`transflower_batch`]); [`frames`] (blittable frame structs, coordinate conversions);
 //! [`result`] (result codes, the thread-local last error, the panic
 //! boundary). Every entry point catches panics: no unwinding crosses the C
 //! boundary. Outputs are written only on success.
@@ -19,6 +19,7 @@ pub mod model;
 pub mod result;
 pub mod session;
 pub mod transflower;
+pub mod transflower_batch;
 
 pub use batch::DuoStepBatch;
 pub use frames::{DuoFollowerFrame, DuoLeaderFrame, DuoQuat, DuoVec3};

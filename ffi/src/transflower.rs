@@ -12,7 +12,7 @@ use std::sync::Arc;
 use duolando_core::nn::kv_store::KvType;
 use duolando_core::transflower::config::FPS;
 use duolando_core::transflower::session::{
-    lookahead_rows, session_bytes, Preset, Session, SessionConfig,
+    batched_session_bytes, lookahead_rows, session_bytes, Preset, Session, SessionConfig,
 };
 
 use crate::handle::{buffer, buffer_mut, caller_slot};
@@ -66,8 +66,12 @@ pub struct DuoTransflowerConfig {
     /// 1: recompute a share of the rows every step (no cost spike); 0:
     /// all of them every `refresh`-th step.
     pub rolling: u32,
-    /// 0.
-    pub reserved: u32,
+    /// 1: a session for step batches only: its state alone, no step memory
+    /// (`batched_session_bytes`); its frames are made by
+    /// `duo_step_batch_step`, its pulls only take them. 0: its own step
+    /// memory (it steps on its pulls, and in batches too). Was `reserved`
+    /// (0) before step batches.
+    pub batched: u32,
     /// The base samples' seed.
     pub rng_seed: u64,
 }
@@ -85,12 +89,13 @@ impl DuoTransflowerConfig {
             input_buffer_rows: c.input_buffer_rows,
             pending_frames: c.pending_frames,
             rolling: c.rolling as u32,
-            reserved: 0,
+            batched: 0,
             rng_seed,
         }
     }
 
-    fn to_core(self) -> Result<SessionConfig, Failure> {
+    /// The core configuration, and whether the session is for batches only.
+    fn to_core(self) -> Result<(SessionConfig, bool), Failure> {
         let kv = match self.kv {
             0 => KvType::F32,
             1 => KvType::F16,
@@ -105,12 +110,11 @@ impl DuoTransflowerConfig {
             1 => true,
             v => return Err(Failure::invalid(format!("rolling is {v}; 0 or 1"))),
         };
-        if self.reserved != 0 {
-            return Err(Failure::invalid(format!(
-                "reserved is {}; 0",
-                self.reserved
-            )));
-        }
+        let batched = match self.batched {
+            0 => false,
+            1 => true,
+            v => return Err(Failure::invalid(format!("batched is {v}; 0 or 1"))),
+        };
         let c = SessionConfig {
             refresh: self.refresh,
             kv,
@@ -125,11 +129,11 @@ impl DuoTransflowerConfig {
                 max,
             })
         })?;
-        Ok(c)
+        Ok((c, batched))
     }
 }
 
-fn transflower<'x>(
+pub(crate) fn transflower<'x>(
     m: &'x ModelInner,
     what: &str,
 ) -> Result<&'x duolando_core::transflower::model::Model<'static>, Failure> {
@@ -188,7 +192,7 @@ pub(crate) fn push_rows(
 
 /// A core refusal of a Transflower session, described with the model's
 /// names (inputs, frames) rather than the duet's.
-fn fail(e: duolando_core::Error, s: &Session<'_>) -> Failure {
+pub(crate) fn fail(e: duolando_core::Error, s: &Session<'_>) -> Failure {
     Failure::new(
         crate::result::code_of(&e),
         duolando_runtime::engine_errors::describe_transflower(&e, s.config_model()),
@@ -288,7 +292,7 @@ pub unsafe extern "C" fn duo_transflower_session_bytes(
         if out_bytes.is_null() {
             return Err(Failure::null("out_bytes"));
         }
-        let n = session_bytes(&t.cfg, &c)?
+        let n = arena_bytes(&t.cfg, c)?
             .checked_add(HANDLE_BYTES)
             .ok_or_else(|| Failure::invalid("session size overflows size_t"))?;
         // SAFETY: checked non-NULL.
@@ -331,6 +335,18 @@ pub unsafe extern "C" fn duo_transflower_session_new(
     })
 }
 
+/// Arena bytes of a session (`batched`: its state alone).
+fn arena_bytes(
+    model: &duolando_core::transflower::config::TransflowerConfig,
+    (c, batched): (SessionConfig, bool),
+) -> Result<usize, duolando_core::Error> {
+    if batched {
+        batched_session_bytes(model, &c)
+    } else {
+        session_bytes(model, &c)
+    }
+}
+
 /// Where a new session lives: a library allocation, or a slot at the
 /// start of caller memory.
 enum Home {
@@ -357,7 +373,7 @@ unsafe fn make_session(
     let t = transflower(m, what)?;
     // SAFETY: NULL or a valid struct (contract).
     let cc = *unsafe { config.as_ref() }.ok_or_else(|| Failure::null("config"))?;
-    let c = cc.to_core()?;
+    let (c, batched) = cc.to_core()?;
     // SAFETY: NULL or `n_floats` readable floats (contract).
     let seed: &[f32] = unsafe { buffer(seed_motion, n_floats, "seed_motion") }?;
     // SAFETY: NULL or `n_labels` readable u32 (contract).
@@ -365,7 +381,7 @@ unsafe fn make_session(
     if out_session.is_null() {
         return Err(Failure::null("out_session"));
     }
-    let n = session_bytes(&t.cfg, &c)?;
+    let n = arena_bytes(&t.cfg, (c, batched))?;
     let (arena, home): (&'static mut [u8], Home) = match memory {
         None => {
             let mut boxed = vec![0u8; n].into_boxed_slice();
@@ -392,7 +408,12 @@ unsafe fn make_session(
             AnyModel::Transflower(t) => t,
             _ => return Err(Failure::invalid("not a Transflower model")),
         };
-    let session = AnySession::Transflower(Session::new(tm, &c, seed, lab, cc.rng_seed, arena)?);
+    let new = if batched {
+        Session::new_batched
+    } else {
+        Session::new
+    };
+    let session = AnySession::Transflower(new(tm, &c, seed, lab, cc.rng_seed, arena)?);
     let handle = match home {
         Home::Boxed(boxed) => Box::into_raw(SessionInner::owned(session, arc, boxed)),
         Home::Caller(slot) => {
@@ -480,6 +501,10 @@ fn pull(
         )));
     }
     if s.pending() == 0 {
+        if s.batched() {
+            // Its frames are made by duo_step_batch_step only.
+            return Ok(None);
+        }
         let made = match noise {
             Some(z) => s.step_with(z),
             None => s.step(),

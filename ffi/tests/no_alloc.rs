@@ -2,7 +2,8 @@
 //! allocator (this test binary only) checks it over whole runs of the tiny
 //! fixture: leader pushes, pulls and resets of a session alone, and pushes
 //! of sessions stepped together through a `duo_step_batch` (refused calls
-//! excepted: a failure writes its message).
+//! excepted: a failure writes its message); Transflower sessions and their
+//! step batch in caller memory, from creation on.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::Path;
@@ -175,4 +176,104 @@ fn pushes_pulls_and_batched_steps_allocate_nothing() {
     }
     unsafe { duo_step_batch_free(batch) };
     unsafe { duo_model_free(m) };
+}
+
+/// Transflower sessions for batches only and their batch, all in caller
+/// memory (`_new_in`): made, fed audio, stepped through the batch
+/// (`duo_step_batch_step`) and pulled without one heap allocation.
+#[test]
+fn transflower_batches_in_caller_memory_allocate_nothing() {
+    use duolando::transflower::*;
+    use duolando::transflower_batch::*;
+    // SAFETY: every C entry point below is called with pointers to live locals of the documented sizes; handles come from the library and are freed once; the memory outlives them.
+    let fx = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/transflower_paper");
+    let motion = read_f32_2d(&fx.join("in_expmap_scaled_20.npy"), None, "m")
+        .unwrap()
+        .data;
+    let audio = read_f32_2d(&fx.join("in_audio_feats_scaled_20.npy"), None, "a")
+        .unwrap()
+        .data;
+    let path = std::ffi::CString::new(fx.join("model.duo").to_str().unwrap()).unwrap();
+    let name = std::ffi::CString::new("realtime").unwrap();
+    let mut m = ptr::null_mut();
+    let mut info = DuoTransflowerInfo::default();
+    let mut c = DuoTransflowerConfig::default();
+    let (mut sb, mut bb) = (0usize, 0usize);
+    unsafe {
+        assert_eq!(duo_model_open_file(path.as_ptr(), &mut m), DuoResult::Ok);
+        assert_eq!(duo_transflower_get_info(m, &mut info), DuoResult::Ok);
+        assert_eq!(
+            duo_transflower_config_preset(m, name.as_ptr(), &mut c),
+            DuoResult::Ok
+        );
+        c.batched = 1;
+        assert_eq!(duo_transflower_session_bytes(m, &c, &mut sb), DuoResult::Ok);
+        assert_eq!(duo_transflower_step_batch_bytes(m, &mut bb), DuoResult::Ok);
+    }
+    const N: usize = 3;
+    let seed = &motion[..(info.seed_rows * info.channels) as usize];
+    let (d, ch) = (info.audio_features as usize, info.channels as usize);
+    let mut smem = vec![0u8; N * sb];
+    let mut bmem = vec![0u8; bb];
+    let mut frame = vec![0f32; ch];
+    let mut sessions = [ptr::null_mut(); N];
+    let mut batch = ptr::null_mut();
+    let mut pulled = 0usize;
+
+    let mark = allocations();
+    unsafe {
+        assert_eq!(
+            duo_transflower_step_batch_new_in(m, bmem.as_mut_ptr(), bb, &mut batch),
+            DuoResult::Ok
+        );
+        for (k, (s, mem)) in sessions
+            .iter_mut()
+            .zip(smem.chunks_exact_mut(sb))
+            .enumerate()
+        {
+            c.rng_seed = k as u64;
+            assert_eq!(
+                duo_transflower_session_new_in(
+                    m,
+                    &c,
+                    seed.as_ptr(),
+                    seed.len(),
+                    ptr::null(),
+                    0,
+                    mem.as_mut_ptr().cast(),
+                    sb,
+                    s
+                ),
+                DuoResult::Ok
+            );
+        }
+        for row in audio.chunks_exact(d) {
+            for &s in &sessions {
+                assert_eq!(duo_session_push_music(s, row.as_ptr(), d), DuoResult::Ok);
+            }
+            let mut stepped = 0usize;
+            assert_eq!(
+                duo_step_batch_step(batch, sessions.as_ptr(), N, &mut stepped, ptr::null_mut()),
+                DuoResult::Ok
+            );
+            for &s in &sessions {
+                while duo_transflower_pull_frame(s, frame.as_mut_ptr(), ch, ptr::null_mut())
+                    == DuoResult::Ok
+                {
+                    pulled += 1;
+                }
+            }
+        }
+    }
+    let during = allocations() - mark;
+    assert!(pulled >= N, "{pulled} frames");
+    assert_eq!(during, 0, "{during} allocations ({pulled} frames)");
+    unsafe {
+        for s in sessions {
+            duo_session_free(s);
+        }
+        duo_step_batch_free(batch);
+        duo_model_free(m);
+    }
+    drop((smem, bmem));
 }

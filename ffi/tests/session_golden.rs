@@ -975,8 +975,12 @@ fn every_buffer_follows_the_null_rule() {
         ("duo_step_batch_push_leader", "frames"),
     ];
     // Transflower's: checked in ffi/tests/transflower_session.rs
-    // (`buffers_follow_the_null_rule`, on a Transflower model).
+    // (`buffers_follow_the_null_rule`, on a Transflower model) and, for
+    // its step batches, ffi/tests/transflower_batch.rs
+    // (`sessions_follow_the_null_rule`, `sizes_memory_and_batched_sessions`).
     let transflower: &[(&str, &str)] = &[
+        ("duo_transflower_step_batch_new_in", "memory"),
+        ("duo_step_batch_step", "sessions"),
         ("duo_transflower_session_new", "seed_motion"),
         ("duo_transflower_session_new", "labels"),
         ("duo_transflower_session_new_in", "seed_motion"),

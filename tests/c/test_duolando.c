@@ -918,6 +918,174 @@ static void test_transflower(void) {
   free(want);
 }
 
+/* Transflower sessions through a duo_step_batch: two sessions for batches
+ * only (seeds 11 and 12, in caller memory) stepped through a batch in
+ * caller memory (at an odd address) give the frames each gives alone,
+ * byte for byte; the refusals of duo_step_batch_step in the header's order
+ * name their session; the model may be freed before its batch. `duo` is a
+ * Duolando model (its sessions and batches are refused). */
+static size_t tf_alone(duo_model *m, duo_transflower_config c, const float *motion, const float *audio,
+                       size_t rows, const duo_transflower_info *info, float *out, size_t cap) {
+  duo_session *s = NULL;
+  size_t got = 0, r;
+  uint64_t index = 0;
+  c.batched = 0;
+  EXPECT(duo_transflower_session_new(m, &c, motion, (size_t)info->seed_rows * info->channels, NULL, 0, &s), DUO_OK);
+  for (r = 0; r < rows; r++) {
+    EXPECT(duo_session_push_music(s, audio + r * info->audio_features, info->audio_features), DUO_OK);
+    while (got < cap && duo_transflower_pull_frame(s, out + got * info->channels, info->channels, &index) == DUO_OK) {
+      CHECK(index == got);
+      got++;
+    }
+  }
+  duo_session_free(s);
+  return got;
+}
+
+static void test_transflower_batch(duo_model *duo) {
+  char path[1200];
+  size_t n_motion = 0, n_audio = 0, rows, bytes = 0, sbytes = 0, full = 0, i, k;
+  size_t want_n[2] = {0, 0}, got[2] = {0, 0}, stepped = 0, failed = 0;
+  float *motion, *audio, want[2][64 * 32], out[2][64 * 32], f[64];
+  duo_model *m = NULL, *other = NULL;
+  duo_transflower_info info;
+  duo_transflower_config c;
+  duo_session *ss[2] = {NULL, NULL}, *stranger = NULL, *ds = NULL, *list[5], *many[DUO_MAX_BATCH + 1];
+  duo_step_batch *b = NULL, *db = NULL;
+  duo_session_config dc;
+  unsigned char *mem, *smem;
+  uint64_t index = 0;
+  sprintf(path, "%s/tests/fixtures/transflower_paper/in_expmap_scaled_20.npy", root_dir);
+  motion = read_npy_f32(path, &n_motion);
+  sprintf(path, "%s/tests/fixtures/transflower_paper/in_audio_feats_scaled_20.npy", root_dir);
+  audio = read_npy_f32(path, &n_audio);
+  CHECK(motion && audio);
+  if (!motion || !audio) return;
+  sprintf(path, "%s/tests/fixtures/transflower_paper/model.duo", root_dir);
+  EXPECT(duo_model_open_file(path, &m), DUO_OK);
+  EXPECT(duo_model_open_file(path, &other), DUO_OK);
+  EXPECT(duo_transflower_get_info(m, &info), DUO_OK);
+  CHECK(info.channels <= 64);
+  rows = n_audio / info.audio_features;
+  EXPECT(duo_transflower_config_preset(m, "exact", &c), DUO_OK);
+  c.pending_frames = 2;
+  for (k = 0; k < 2; k++) {
+    c.rng_seed = 11 + k;
+    want_n[k] = tf_alone(m, c, motion, audio, rows, &info, want[k], 32);
+  }
+  CHECK(want_n[0] > 2 && want_n[0] == want_n[1] && memcmp(want[0], want[1], info.channels * sizeof(float)) != 0);
+
+  /* Sizes: a batched session holds less; the batch in caller memory. */
+  EXPECT(duo_transflower_session_bytes(m, &c, &full), DUO_OK);
+  c.batched = 1;
+  EXPECT(duo_transflower_session_bytes(m, &c, &sbytes), DUO_OK);
+  CHECK(sbytes < full);
+  EXPECT(duo_transflower_step_batch_bytes(m, &bytes), DUO_OK);
+  mem = (unsigned char *)malloc(bytes + 3);
+  smem = (unsigned char *)malloc(2 * sbytes);
+  CHECK(mem && smem);
+  if (!mem || !smem) return;
+  EXPECT(duo_transflower_step_batch_new_in(m, mem + 3, bytes - 1, &b), DUO_BUFFER_TOO_SMALL);
+  EXPECT(duo_transflower_step_batch_new_in(m, NULL, 0, &b), DUO_BUFFER_TOO_SMALL);
+  EXPECT(duo_transflower_step_batch_new_in(m, NULL, bytes, &b), DUO_NULL_PARAMETER);
+  EXPECT(duo_transflower_step_batch_new(duo, &b), DUO_INVALID_ARGUMENT);
+  CHECK(b == NULL);
+  EXPECT(duo_transflower_step_batch_new_in(m, mem + 3, bytes, &b), DUO_OK);
+  for (k = 0; k < 2; k++) {
+    c.rng_seed = 11 + k;
+    EXPECT(duo_transflower_session_new_in(m, &c, motion, (size_t)info.seed_rows * info.channels, NULL, 0,
+                                          smem + k * sbytes, sbytes, &ss[k]),
+           DUO_OK);
+  }
+  EXPECT(duo_transflower_session_new(other, &c, motion, (size_t)info.seed_rows * info.channels, NULL, 0, &stranger),
+         DUO_OK);
+  EXPECT(duo_session_config_minimum(duo, &dc), DUO_OK);
+  EXPECT(duo_session_new(duo, &dc, seed, &ds), DUO_OK);
+  EXPECT(duo_step_batch_new(duo, &dc, 2, &db), DUO_OK);
+  duo_model_free(m); /* the batch and the sessions keep the weights alive */
+  duo_model_free(other);
+
+  /* Refusals, in the header's order; nothing changes. */
+  EXPECT(duo_step_batch_step(NULL, ss, 2, &stepped, &failed), DUO_NULL_PARAMETER);
+  CHECK(failed == DUO_NO_SESSION);
+  EXPECT(duo_step_batch_step(db, ss, 2, &stepped, &failed), DUO_INVALID_ARGUMENT);
+  CHECK(failed == DUO_NO_SESSION);
+  EXPECT(duo_step_batch_push_leader(b, NULL, NULL, 0, &failed), DUO_INVALID_ARGUMENT);
+  CHECK(failed == DUO_NO_SESSION);
+  stepped = 9;
+  EXPECT(duo_step_batch_step(b, NULL, 0, &stepped, &failed), DUO_OK);
+  CHECK(stepped == 0 && failed == DUO_NO_SESSION);
+  for (i = 0; i <= DUO_MAX_BATCH; i++) many[i] = ss[0];
+  EXPECT(duo_step_batch_step(b, many, DUO_MAX_BATCH + 1, &stepped, &failed), DUO_INVALID_ARGUMENT);
+  CHECK(failed == DUO_NO_SESSION);
+  EXPECT(duo_step_batch_step(b, NULL, 2, &stepped, &failed), DUO_NULL_PARAMETER);
+  CHECK(failed == DUO_NO_SESSION);
+  list[0] = ss[0]; list[1] = ss[1]; list[2] = NULL; list[3] = ss[0]; list[4] = stranger;
+  EXPECT(duo_step_batch_step(b, list, 5, &stepped, &failed), DUO_NULL_PARAMETER);
+  CHECK(failed == 2);
+  list[2] = ss[1];
+  EXPECT(duo_step_batch_step(b, list, 5, &stepped, &failed), DUO_INVALID_ARGUMENT); /* twice */
+  CHECK(failed == 2);
+  list[2] = ds;
+  EXPECT(duo_step_batch_step(b, list, 3, &stepped, &failed), DUO_INVALID_ARGUMENT); /* a Duolando session */
+  CHECK(failed == 2);
+  list[2] = stranger;
+  EXPECT(duo_step_batch_step(b, list, 3, &stepped, &failed), DUO_INVALID_ARGUMENT); /* another model */
+  CHECK(failed == 2);
+  list[0] = ds; list[1] = ss[0];
+  EXPECT(duo_step_batch_push_leader(db, list, leader, 2, &failed), DUO_INVALID_ARGUMENT);
+  CHECK(failed == 1);
+  /* Backlog: session 1 with its 2 pending frames made; another model at 2 first. */
+  EXPECT(duo_session_push_music(ss[1], audio, (size_t)(info.audio_window + 2) * info.audio_features), DUO_OK);
+  for (k = 0; k < 2; k++) {
+    EXPECT(duo_step_batch_step(b, &ss[1], 1, &stepped, &failed), DUO_OK);
+    CHECK(stepped == 1 && failed == DUO_NO_SESSION);
+  }
+  list[0] = ss[0]; list[1] = ss[1]; list[2] = stranger;
+  EXPECT(duo_step_batch_step(b, list, 3, &stepped, &failed), DUO_INVALID_ARGUMENT);
+  CHECK(failed == 2);
+  EXPECT(duo_step_batch_step(b, ss, 2, &stepped, &failed), DUO_BACKLOG);
+  CHECK(failed == 1);
+  /* A batched session's pull never steps. */
+  EXPECT(duo_session_push_music(ss[0], audio, (size_t)info.audio_window * info.audio_features), DUO_OK);
+  EXPECT(duo_transflower_pull_frame(ss[0], f, info.channels, &index), DUO_NOT_READY);
+
+  /* Both through the batch, the rest of the audio row by row: each as alone. */
+  for (k = 0; k < 2; k++)
+    while (got[k] < 32 && duo_transflower_pull_frame(ss[k], out[k] + got[k] * info.channels, info.channels, &index) == DUO_OK) {
+      CHECK(index == got[k]);
+      got[k]++;
+    }
+  CHECK(got[0] == 0 && got[1] == 2);
+  for (i = 0; i <= rows; i++) {
+    if (i < rows) {
+      if (i >= info.audio_window) EXPECT(duo_session_push_music(ss[0], audio + i * info.audio_features, info.audio_features), DUO_OK);
+      if (i >= info.audio_window + 2) EXPECT(duo_session_push_music(ss[1], audio + i * info.audio_features, info.audio_features), DUO_OK);
+    }
+    do {
+      EXPECT(duo_step_batch_step(b, ss, 2, &stepped, &failed), DUO_OK);
+      for (k = 0; k < 2; k++)
+        while (got[k] < 32 && duo_transflower_pull_frame(ss[k], out[k] + got[k] * info.channels, info.channels, &index) == DUO_OK) {
+          CHECK(index == got[k]);
+          got[k]++;
+        }
+    } while (stepped > 0);
+  }
+  for (k = 0; k < 2; k++) {
+    CHECK(got[k] == want_n[k]);
+    CHECK(memcmp(out[k], want[k], want_n[k] * info.channels * sizeof(float)) == 0);
+  }
+  duo_step_batch_free(b);
+  duo_step_batch_free(db);
+  free(mem);
+  for (k = 0; k < 2; k++) duo_session_free(ss[k]);
+  free(smem);
+  duo_session_free(stranger);
+  duo_session_free(ds);
+  free(motion);
+  free(audio);
+}
+
 int main(int argc, char **argv) {
   duo_model *m = NULL;
   if (argc < 2 || strlen(argv[1]) > 1000) {
@@ -943,6 +1111,7 @@ int main(int argc, char **argv) {
   test_model_freed_first();
   test_solo();
   test_transflower();
+  test_transflower_batch(m);
   duo_model_free(m);
   free(reference);
   free(leader);

@@ -182,7 +182,8 @@ namespace Duolando
         public uint InputBufferRows, PendingFrames;
         /// <summary>1: a share of the rows recomputed every step (flat cost); 0: all every Refresh-th step.</summary>
         public uint Rolling;
-        public uint Reserved;
+        /// <summary>1: a session for step batches only (duo_step_batch_step; not bound here); 0 here.</summary>
+        public uint Batched;
         /// <summary>The base samples' seed: another seed, another dance.</summary>
         public ulong RngSeed;
     }

@@ -265,6 +265,12 @@ impl<'a> Session<'a> {
         self.st.feeds[i].push(rows, buffer)
     }
 
+    /// Whether the session was made by [`Session::new_batched`] (it holds
+    /// no step memory: only a [`StepBatch`] steps it).
+    pub fn batched(&self) -> bool {
+        self.own.is_none()
+    }
+
     /// Whether the next step has its rows.
     pub fn ready(&self) -> bool {
         step::ready(&self.model.cfg, &self.st)
