@@ -8,8 +8,8 @@ layers, 12 cross-modal layers, 16 flow steps with 2-layer 512-wide coupling tran
 122,323,152 parameters) with seeded random weights (the authors' own initialisation under
 `np.random.seed` / `torch.manual_seed`: a flow that stays well conditioned, frames of order
 1-10; tiny.py's `init_weights` makes the 16 inverse couplings amplify to ~1e6), in eval mode,
-exported as ONE R step:
-the step `duolando bench --family transflower` times (`transflower::exact::step`):
+exported as ONE R step, the step `duolando bench --family transflower` times
+(`transflower::exact::step`):
 
     inputs   motion (120, 69)  the motion window (scaled expmap features)
              audio  (140, 85)  the audio window (scaled audio features)
@@ -40,9 +40,10 @@ intra-op threads) after warm-up; writes a JSON the bench reads: median/p99 ms (1
         --threads 1 --runs 3 --ort-json /tmp/transflower_ort.json
 
 Needs torch, onnx, onnxruntime, pyyaml, numpy, scipy (pip; tools/requirements.txt); none of
-them is a dependency of the engine or CI. ~2 min on one core, ~1.5 GB of memory, writes a
-~490 MB ONNX file (--onnx). `--hparams FILE` builds from the YAML file instead of the copy
-below (e.g. `git -C /work/.mirror/guillefix+transflower-lightning/repo show
+them is a dependency of the engine or CI. ~30 s on a quiet machine (export ~10 s, then
+2 x 33 steps), writes a ~490 MB ONNX file (--onnx). Figures: docs/TRANSFLOWER.md
+"onnxruntime baseline of the R step". `--hparams FILE` builds from the YAML file instead of
+the copy below (e.g. `git -C /work/.mirror/guillefix+transflower-lightning/repo show
 HEAD:training/hparams/dance_combined/transflower_expmap.yaml > /tmp/tf.yaml`).
 """
 import argparse
