@@ -108,6 +108,7 @@ def main():
     times.sort()
     p99 = times[min(len(times) - 1, int(round(0.99 * (len(times) - 1))))]
     out = {
+        "family": "bailando",
         "what": "Bailando R step (actor GPT over a 28-token window), onnxruntime f32",
         "onnxruntime": ort.__version__,
         "torch": torch.__version__,

@@ -50,6 +50,9 @@ macro_rules! say {
 #[path = "bench_transflower.rs"]
 mod transflower;
 
+#[path = "bench_ort.rs"]
+mod ort;
+
 /// Flags of `duolando bench`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -98,9 +101,11 @@ pub struct Args {
     /// only; comma separated; `--batch` with no value skips them).
     #[arg(long, value_delimiter = ',', num_args = 0.., default_values_t = vec![1usize, 4, 16])]
     pub batch: Vec<usize>,
-    /// Bailando (`--family bailando`): onnxruntime's time for the same R
-    /// step, measured right before by tools/bailando_ort_r_step.py (its JSON);
-    /// the bench prints each weight type's ratio to it.
+    /// Bailando and Transflower (`--family bailando|transflower`):
+    /// onnxruntime's time for the same R step, measured right before by
+    /// tools/<family>_ort_r_step.py (its JSON, checked before anything
+    /// runs); the bench prints it and each weight type's and thread
+    /// count's ratio onnxruntime / ours.
     #[arg(long)]
     pub ort_json: Option<std::path::PathBuf>,
     /// The full-size R step as ONNX (tools/reference/export_full_r_step.py),
@@ -548,6 +553,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for name in &args.isa {
         crate::simd::select(name).map_err(|e| anyhow!("{e} [{cpu}]"))?;
     }
+    // A missing or wrong onnxruntime JSON is refused before anything runs.
+    let ort = ort::from_args(args.ort_json.as_deref(), &args.family)?;
     let weights = args.kernels.then(|| crate::kernel_bench::Weights::new(false));
     if args.kernels {
         let mut line = format!("int8 MAC peaks on {cpu} (register-only probes, 1 thread):");
@@ -564,7 +571,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             crate::simd::init();
         }
-        j.extend(run_one(&args, weights.as_ref())?);
+        j.extend(run_one(&args, weights.as_ref(), ort.as_ref())?);
     } else {
         let mut names = Vec::new();
         for name in &args.isa {
@@ -572,7 +579,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let label = crate::simd::name(crate::simd::active());
             names.push(serde_json::Value::from(label));
             *LABEL.lock().map_err(|_| anyhow!("label lock"))? = format!("[{label} | {cpu}] ");
-            let one = run_one(&args, weights.as_ref());
+            let one = run_one(&args, weights.as_ref(), ort.as_ref());
             *LABEL.lock().map_err(|_| anyhow!("label lock"))? = String::new();
             for (k, v) in one? {
                 j.insert(format!("{k}_{label}"), v);
@@ -588,7 +595,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// The whole bench under the ISA selected now; its JSON entries.
-fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>) -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
+fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Option<&ort::OrtBaseline>) -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
     let mut j = serde_json::Map::new();
     let isa = crate::simd::describe();
     if let Some(w) = weights {
@@ -600,6 +607,11 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>) -> anyho
     }
     if args.dtypes.is_empty() {
         j.insert("isa".into(), isa.into());
+        // No model bench: onnxruntime's figure alone, no ratio.
+        if let Some(o) = ort {
+            o.print(&format!("{} R step", family_title(&args.family)));
+            o.json(&mut j, &[]);
+        }
         return Ok(j);
     }
     let memcpy = memcpy_gbps(1);
@@ -610,10 +622,12 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>) -> anyho
         args.threads
     );
     if args.family == "bailando" {
-        bench_bailando(args)?;
+        j.insert("isa".into(), isa.into());
+        bench_bailando(args, ort, &mut j)?;
         return Ok(j);
     } else if args.family == "transflower" {
-        transflower::run(args)?;
+        j.insert("isa".into(), isa.into());
+        transflower::run(args, ort, &mut j)?;
         return Ok(j);
     } else if args.family != "duolando" {
         return Err(anyhow!("unknown family '{}' (duolando, bailando, transflower)", args.family));
@@ -785,7 +799,7 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>) -> anyho
 /// `block_size - 1` = 28 tokens and their music rows, as `AC.eval` runs it
 /// once the window slides) per thread count, against real time (one token
 /// per 8 frames at 60 fps: 133.3 ms) and against f32 in the same run.
-fn bench_bailando(args: &Args) -> anyhow::Result<()> {
+fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, j: &mut serde_json::Map<String, serde_json::Value>) -> anyhow::Result<()> {
     use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as SoloConfig};
     use duolando_core::bailando::config::published;
     use duolando_core::bailando::gpt::{logits_len, max_context, window_logits, GptScratch};
@@ -798,17 +812,10 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
     let music: Vec<f32> = (0..c * nm).map(|_| rng.next()).collect();
     let mut f32_median = std::collections::BTreeMap::new();
     let real_time_ms = 1000.0 * cfg.hop() as f64 / duolando_core::bailando::config::FPS as f64;
-    let ort: Option<(f64, String)> = match &args.ort_json {
-        None => None,
-        Some(p) => {
-            let v: serde_json::Value = serde_json::from_slice(&std::fs::read(p).with_context(|| format!("reading {}", p.display()))?)
-                .with_context(|| format!("{}: not the JSON of tools/bailando_ort_r_step.py", p.display()))?;
-            let ms = v["median_ms"].as_f64().with_context(|| format!("{}: no median_ms", p.display()))?;
-            let label = format!("onnxruntime {} f32, {} thread(s), {}", v["onnxruntime"].as_str().unwrap_or("?"), v["threads"], v["cpu"].as_str().unwrap_or("?"));
-            say!("Bailando R step in {label}: median {ms:.1} ms, p99 {:.1} ms ({})", v["p99_ms"].as_f64().unwrap_or(f64::NAN), p.display());
-            Some((ms, label))
-        }
-    };
+    if let Some(o) = ort {
+        o.print("Bailando R step");
+    }
+    let mut ours = Vec::new();
     for d in &args.dtypes {
         let store_as = match d.as_str() {
             "f32" => StoreAs::F32,
@@ -842,9 +849,11 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
                 f32_median.insert(t, st.median_ms);
             }
             let mut vs_f32 = f32_median.get(&t).map(|f| format!("; f32/{d} {:.2}x", f / st.median_ms)).unwrap_or_default();
-            if let (Some((ms, _)), 1) = (&ort, t) {
-                vs_f32.push_str(&format!("; onnxruntime/this {:.2}x", ms / st.median_ms));
+            if let Some(o) = ort {
+                vs_f32.push_str(&o.ratio_note(t, st.median_ms));
             }
+            r_step_json(j, d, t, &st);
+            ours.push((d.clone(), t, st.median_ms));
             say!(
                 "Bailando R step {d:>4} t{t} ({c}-token window): median {:8.1} ms  p99 {:8.1} ms  {:.2}x real time ({real_time_ms:.1} ms per token){vs_f32}",
                 st.median_ms,
@@ -877,8 +886,25 @@ fn bench_bailando(args: &Args) -> anyhow::Result<()> {
             );
         }
     }
+    if let Some(o) = ort {
+        o.print_ratios("Bailando R step", &ours);
+        o.json(j, &ours);
+    }
     say!("Bailando: published config (actor_critic.yaml), seeded random weights; S step = one session step (GPT row or re-prefill at a window jump, heads, decoders), frames pulled; onnxruntime: --ort-json from tools/bailando_ort_r_step.py.");
     Ok(())
+}
+
+/// "Bailando" for "bailando".
+fn family_title(family: &str) -> String {
+    let mut c = family.chars();
+    c.next().map(|f| f.to_uppercase().chain(c).collect()).unwrap_or_default()
+}
+
+/// A family's R step in the JSON: `r_step_ms_<dtype>_t<N>`,
+/// `r_step_p99_ms_<dtype>_t<N>` (the duolando family's names).
+fn r_step_json(j: &mut serde_json::Map<String, serde_json::Value>, dtype: &str, threads: usize, st: &Stats) {
+    j.insert(format!("r_step_ms_{dtype}_t{threads}"), st.median_ms.into());
+    j.insert(format!("r_step_p99_ms_{dtype}_t{threads}"), st.p99_ms.into());
 }
 
 /// Times `n` steps of one Bailando session (after `warmup`), a music row

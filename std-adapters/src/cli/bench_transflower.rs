@@ -20,7 +20,9 @@ use duolando_core::transflower::model::Model;
 use duolando_core::transflower::probe;
 use duolando_core::transflower::session::{session_bytes, Preset, Session, SessionConfig};
 
-use super::{on_threads, stats, Args, RandomModel, Rng, StoreAs};
+use super::ort::OrtBaseline;
+use super::LABEL;
+use super::{on_threads, r_step_json, stats, Args, RandomModel, Rng, StoreAs};
 
 /// Multiply-accumulates of one R step at the published size (the authors'
 /// FlopCounter: 16.1 GMAC per frame).
@@ -91,7 +93,9 @@ fn flow_ready(rm: &mut RandomModel) {
     }
 }
 
-pub(super) fn run(args: &Args) -> anyhow::Result<()> {
+/// The bench; `ort`: onnxruntime's figures for the same R step
+/// (tools/transflower_ort_r_step.py), printed with the ratios.
+pub(super) fn run(args: &Args, ort: Option<&OrtBaseline>, j: &mut serde_json::Map<String, serde_json::Value>) -> anyhow::Result<()> {
     let cfg = published_paper()?;
     let c = cfg.channels();
     let h = cfg.output_length as usize;
@@ -104,6 +108,10 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let audio: Vec<f32> = (0..audio_rows * audio_d).map(|_| rng.next()).collect();
     let z: Vec<f32> = (0..c * h).map(|_| 0.5 * rng.next()).collect();
     let mut f32_median = std::collections::BTreeMap::new();
+    if let Some(o) = ort {
+        o.print("Transflower R step");
+    }
+    let mut ours = Vec::new();
     for d in &args.dtypes {
         let store_as = match d.as_str() {
             "f32" => StoreAs::F32,
@@ -143,8 +151,13 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             if d == "f32" {
                 f32_median.insert(t, st.median_ms);
             }
-            let vs_f32 = f32_median.get(&t).map(|f| format!("; f32/{d} {:.2}x", f / st.median_ms)).unwrap_or_default();
-            println!(
+            let mut vs_f32 = f32_median.get(&t).map(|f| format!("; f32/{d} {:.2}x", f / st.median_ms)).unwrap_or_default();
+            if let Some(o) = ort {
+                vs_f32.push_str(&o.ratio_note(t, st.median_ms));
+            }
+            r_step_json(j, d, t, &st);
+            ours.push((d.clone(), t, st.median_ms));
+            say!(
                 "Transflower R step {d:>4} t{t}: median {:8.1} ms  p99 {:8.1} ms  {:.1} GMAC/s  {:.2}x real time ({real_time_ms:.0} ms per frame){vs_f32}",
                 st.median_ms,
                 st.p99_ms,
@@ -182,7 +195,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
                 })
                 .with_context(|| format!("S step {}", preset.name()))?;
                 let st = stats(times);
-                println!(
+                say!(
                     "Transflower S step {d:>4} t{t} {:<8} (refresh {:>2}{}, {:?} K/V): median {:8.2} ms  p99 {:8.2} ms  mean {:8.2} ms  {:.2}x real time (mean)  arena {:.2} MB",
                     preset.name(),
                     sc.refresh,
@@ -197,6 +210,10 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             }
         }
     }
-    println!("Transflower: published paper config (transflower_expmap.yaml), seeded random weights (flow made invertible); R step = one generated frame of R mode; S step = one session step (audio row pushed, frame pulled); GMAC/s from the authors' 16.1 GMAC per frame.");
+    if let Some(o) = ort {
+        o.print_ratios("Transflower R step", &ours);
+        o.json(j, &ours);
+    }
+    say!("Transflower: published paper config (transflower_expmap.yaml), seeded random weights (flow made invertible); R step = one generated frame of R mode; S step = one session step (audio row pushed, frame pulled); GMAC/s from the authors' 16.1 GMAC per frame; onnxruntime: --ort-json from tools/transflower_ort_r_step.py (the authors' modules, the same step).");
     Ok(())
 }
