@@ -1797,13 +1797,12 @@ pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(
         let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
         let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
         let c: [&[i32]; K] = core::array::from_fn(|m| xc[m0 + m]);
-        // SAFETY: the caller's features are the ones `packed_ymm` without
-        // VNNI uses (the closure inherits this function's features).
+        // SAFETY: the caller's features are `packed_avx2`'s.
         unsafe {
             if w.q4 {
-                packed_ymm::<K, true, false>(w, q, d, c, a)
+                packed_avx2::<K, true>(w, q, d, c, a)
             } else {
-                packed_ymm::<K, false, false>(w, q, d, c, a)
+                packed_avx2::<K, false>(w, q, d, c, a)
             }
         }
     })
@@ -1846,16 +1845,51 @@ pub unsafe fn gemm_q8_packed_avxvnni_ahead<const M: usize>(
         let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
         let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
         let c: [&[i32]; K] = core::array::from_fn(|m| xc[m0 + m]);
-        // SAFETY: the caller's features are the ones `packed_ymm` with VNNI
-        // uses (the closure inherits this function's features).
+        // SAFETY: the caller's features are `packed_avxvnni`'s.
         unsafe {
             if w.q4 {
-                packed_ymm::<K, true, true>(w, q, d, c, a)
+                packed_avxvnni::<K, true>(w, q, d, c, a)
             } else {
-                packed_ymm::<K, false, true>(w, q, d, c, a)
+                packed_avxvnni::<K, false>(w, q, d, c, a)
             }
         }
     })
+}
+
+/// [`packed_ymm`] with `vpmaddubsw` + `vpmaddwd`: one function per `K` and
+/// value width, shared by every row count `M` of its callers (the body
+/// inlined into each `M` made the C library 0.5 MB larger).
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+#[inline]
+#[target_feature(enable = "avx2,fma,f16c")]
+unsafe fn packed_avx2<const K: usize, const Q4: bool>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; K],
+    xd: [&[f32]; K],
+    xc: [&[i32]; K],
+    ahead: &[u8],
+) -> [[f32; 8]; K] {
+    // SAFETY: this fn's features are packed_ymm's without VNNI.
+    unsafe { packed_ymm::<K, Q4, false>(w, xq, xd, xc, ahead) }
+}
+
+/// [`packed_ymm`] with `{vex} vpdpbusd` (as [`packed_avx2`]).
+///
+/// # Safety
+/// The CPU must support avx2, fma, f16c and avxvnni.
+#[inline]
+#[target_feature(enable = "avx2,fma,f16c,avxvnni")]
+unsafe fn packed_avxvnni<const K: usize, const Q4: bool>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; K],
+    xd: [&[f32]; K],
+    xc: [&[i32]; K],
+    ahead: &[u8],
+) -> [[f32; 8]; K] {
+    // SAFETY: this fn's features are packed_ymm's with VNNI.
+    unsafe { packed_ymm::<K, Q4, true>(w, xq, xd, xc, ahead) }
 }
 
 /// The packed kernel on 32-byte vectors for `K` (1..=4) activation rows,
