@@ -1748,6 +1748,26 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(
     out
 }
 
+/// The rows of a `*_ahead` 32-byte packed kernel in passes of at most 4
+/// ([`super::passes_of_four`]), each pass on `$kernel::<K, Q4>` (one of
+/// [`packed_avx2`] / [`packed_avxvnni`]: one function per `K` and value
+/// width). Expands to unsafe calls: the caller's features must be the
+/// kernel's.
+macro_rules! ymm_passes {
+    ($kernel:ident, $w:ident, $xq:ident, $xd:ident, $xc:ident, $ahead:ident) => {
+        super::passes_of_four!(M, $ahead, |K, m0, a| {
+            let q: [&[i8]; K] = core::array::from_fn(|m| $xq[m0 + m]);
+            let d: [&[f32]; K] = core::array::from_fn(|m| $xd[m0 + m]);
+            let c: [&[i32]; K] = core::array::from_fn(|m| $xc[m0 + m]);
+            if $w.q4 {
+                $kernel::<K, true>($w, q, d, c, a)
+            } else {
+                $kernel::<K, false>($w, q, d, c, a)
+            }
+        })
+    };
+}
+
 /// See [`super::gemm_q8_packed`] on 32-byte vectors (AVX2, and AVX-512
 /// without VNNI): the stored groups read in place, no expansion to rows.
 ///
@@ -1793,19 +1813,8 @@ pub unsafe fn gemm_q8_packed_avx2_ahead<const M: usize>(
     xc: [&[i32]; M],
     ahead: &[u8],
 ) -> [[f32; 8]; M] {
-    super::passes_of_four!(M, ahead, |K, m0, a| {
-        let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
-        let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
-        let c: [&[i32]; K] = core::array::from_fn(|m| xc[m0 + m]);
-        // SAFETY: the caller's features are `packed_avx2`'s.
-        unsafe {
-            if w.q4 {
-                packed_avx2::<K, true>(w, q, d, c, a)
-            } else {
-                packed_avx2::<K, false>(w, q, d, c, a)
-            }
-        }
-    })
+    // SAFETY: the caller's features are `packed_avx2`'s.
+    unsafe { ymm_passes!(packed_avx2, w, xq, xd, xc, ahead) }
 }
 
 /// See [`super::gemm_q8_packed`] on 32-byte vectors with AVX-VNNI: the
@@ -1841,19 +1850,8 @@ pub unsafe fn gemm_q8_packed_avxvnni_ahead<const M: usize>(
     xc: [&[i32]; M],
     ahead: &[u8],
 ) -> [[f32; 8]; M] {
-    super::passes_of_four!(M, ahead, |K, m0, a| {
-        let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
-        let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
-        let c: [&[i32]; K] = core::array::from_fn(|m| xc[m0 + m]);
-        // SAFETY: the caller's features are `packed_avxvnni`'s.
-        unsafe {
-            if w.q4 {
-                packed_avxvnni::<K, true>(w, q, d, c, a)
-            } else {
-                packed_avxvnni::<K, false>(w, q, d, c, a)
-            }
-        }
-    })
+    // SAFETY: the caller's features are `packed_avxvnni`'s.
+    unsafe { ymm_passes!(packed_avxvnni, w, xq, xd, xc, ahead) }
 }
 
 /// [`packed_ymm`] with `vpmaddubsw` + `vpmaddwd`: one function per `K` and
