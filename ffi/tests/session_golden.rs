@@ -6,8 +6,10 @@
 //! out-of-range frames leave the session unchanged (same output as a clean
 //! run), caller-memory sessions and sessions on other threads agree.
 
-use std::ffi::{c_char, CStr, CString};
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
+use std::ffi::c_char;
+use std::path::Path;
 use std::ptr;
 
 use duolando::batch::*;
@@ -21,18 +23,7 @@ use duolando_std::skeleton::rotation::{mat_from_quat, nearest_rotation};
 /// Tolerance of the S goldens on positions and rotations (metres / matrix entries).
 const MOTION_ABS: f32 = 1e-4;
 
-fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures")
-}
 
-fn last_error() -> String {
-    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
-    let mut buf = vec![0 as c_char; 512];
-    unsafe { duo_last_error_message(buf.as_mut_ptr(), buf.len()) };
-    unsafe { CStr::from_ptr(buf.as_ptr()) }
-        .to_string_lossy()
-        .into_owned()
-}
 
 struct Golden {
     leader: Vec<DuoLeaderFrame>,
@@ -46,7 +37,7 @@ struct Golden {
 
 fn golden() -> Golden {
     // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
-    let dir = fixtures().join("streaming_tiny_minimum");
+    let dir = fixture("streaming_tiny_minimum");
     // The goldens' meta.json may hold Python's bare `Infinity` (not JSON).
     let text = std::fs::read_to_string(dir.join("meta.json"))
         .unwrap()
@@ -94,16 +85,7 @@ unsafe impl Send for Model {}
 unsafe impl Sync for Model {}
 
 fn open() -> Model {
-    // SAFETY: every C entry point below is called with NULL (where the test checks NULL handling) or with pointers to live locals of the documented sizes; handles come from the library and are freed once.
-    let p = CString::new(fixtures().join("tiny/model.duo").to_str().unwrap()).unwrap();
-    let mut m = ptr::null_mut();
-    assert_eq!(
-        unsafe { duo_model_open_file(p.as_ptr(), &mut m) },
-        DuoResult::Ok,
-        "{}",
-        last_error()
-    );
-    Model(m)
+    Model(open_model(&fixture("tiny/model.duo")))
 }
 
 fn config(m: &Model, g: &Golden) -> DuoSessionConfig {

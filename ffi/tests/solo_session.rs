@@ -6,51 +6,25 @@
 //! from a track; every Duolando-only entry point is a named refusal that
 //! leaves the session unchanged.
 
-use std::ffi::{c_char, CStr, CString};
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
+use std::ffi::CString;
 use std::ptr;
 
 use duolando::batch::*;
 use duolando::frames::{DuoFollowerFrame, DuoLeaderFrame};
 use duolando::model::*;
-use duolando::result::{duo_last_error_message, DuoResult};
+use duolando::result::DuoResult;
 use duolando::session::*;
 use duolando_std::npy::{read_f32_2d, read_i64_2d};
 
 /// R's tolerance on positions (tests/bailando_exact.rs).
 const POS_TOL: f32 = 1e-5;
 
-fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures")
-}
 
-fn last_error() -> String {
-    let mut buf = vec![0 as c_char; 512];
-    // SAFETY: a writable buffer of the given length; the result is NUL-terminated.
-    unsafe { duo_last_error_message(buf.as_mut_ptr(), buf.len()) };
-    // SAFETY: as above.
-    unsafe { CStr::from_ptr(buf.as_ptr()) }
-        .to_string_lossy()
-        .into_owned()
-}
 
 fn open() -> *mut DuoModel {
-    let p = CString::new(
-        fixtures()
-            .join("bailando_btiny/model.duo")
-            .to_str()
-            .unwrap(),
-    )
-    .unwrap();
-    let mut m = ptr::null_mut();
-    // SAFETY: a NUL-terminated path and a live out-pointer.
-    assert_eq!(
-        unsafe { duo_model_open_file(p.as_ptr(), &mut m) },
-        DuoResult::Ok,
-        "{}",
-        last_error()
-    );
-    m
+    open_model(&fixture("bailando_btiny/model.duo"))
 }
 
 fn preset(m: *const DuoModel, name: &str) -> DuoSessionConfig {
@@ -116,7 +90,7 @@ fn dance(s: *mut DuoSession, music: &[f32], live: bool) -> Vec<f32> {
 
 #[test]
 fn a_solo_session_dances_the_golden() {
-    let dir = fixtures().join("bailando_rollout_btiny_demo_odd");
+    let dir = fixture("bailando_rollout_btiny_demo_odd");
     let music = read_f32_2d(&dir.join("music.npy"), Some(438), "music").unwrap();
     let tokens = read_i64_2d(&dir.join("tokens.npy"), Some(2), "tokens").unwrap();
     let want = read_f32_2d(&dir.join("pos3d.npy"), Some(72), "pos3d").unwrap();
@@ -193,7 +167,7 @@ fn a_solo_session_dances_the_golden() {
 #[test]
 fn duolando_only_calls_are_named_refusals() {
     let m = open();
-    let dir = fixtures().join("bailando_rollout_btiny_demo_odd");
+    let dir = fixture("bailando_rollout_btiny_demo_odd");
     let music = read_f32_2d(&dir.join("music.npy"), Some(438), "music").unwrap();
     let mut c = preset(m, "interactive");
     c.music_buffer_frames = music.rows as u32;
@@ -357,7 +331,7 @@ fn duolando_only_calls_are_named_refusals() {
 /// A step batch of the Duolando fixture (a solo session handed to it is
 /// refused by family).
 fn preset_duolando_free_batch(out: &mut *mut DuoStepBatch) -> Option<*mut DuoStepBatch> {
-    let p = CString::new(fixtures().join("tiny/model.duo").to_str().unwrap()).unwrap();
+    let p = CString::new(fixture("tiny/model.duo").to_str().unwrap()).unwrap();
     let mut m = ptr::null_mut();
     // SAFETY: a NUL-terminated path and live out-pointers; the model is freed after the batch is made (a batch holds no model reference).
     unsafe {

@@ -10,33 +10,21 @@
 //! short is refused); every refusal of the header's order, by index, the
 //! sessions unchanged; the buffer rule.
 
-use std::ffi::{c_char, CStr, CString};
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
+use std::ffi::CString;
+use std::path::Path;
 use std::ptr;
 
 use duolando::batch::*;
 use duolando::model::*;
-use duolando::result::{duo_last_error_message, DuoResult};
+use duolando::result::DuoResult;
 use duolando::session::*;
 use duolando::transflower::*;
 use duolando::transflower_batch::*;
 use duolando_std::npy::read_f32_2d;
 
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../tests/fixtures")
-        .join(name)
-}
 
-fn last_error() -> String {
-    let mut buf = vec![0 as c_char; 512];
-    // SAFETY: a writable buffer of the given length; the result is NUL-terminated.
-    unsafe { duo_last_error_message(buf.as_mut_ptr(), buf.len()) };
-    // SAFETY: as above.
-    unsafe { CStr::from_ptr(buf.as_ptr()) }
-        .to_string_lossy()
-        .into_owned()
-}
 
 /// A Transflower model with its seed motion and audio rows.
 struct Case {

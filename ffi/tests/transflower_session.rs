@@ -7,12 +7,14 @@
 //! Duolando / Bailando entry point on it is a named refusal; bad counts,
 //! NaN and another family's model are refused with the session unchanged.
 
-use std::ffi::{c_char, CStr, CString};
+mod common;
+use common::*;
+use std::ffi::CString;
 use std::path::{Path, PathBuf};
 use std::ptr;
 
 use duolando::model::*;
-use duolando::result::{duo_last_error_message, DuoResult};
+use duolando::result::DuoResult;
 use duolando::session::*;
 use duolando::transflower::*;
 use duolando_core::format::DuoFile;
@@ -23,31 +25,10 @@ use duolando_core::transflower::model::Model;
 use duolando_std::npy::read_f32_2d;
 
 fn case() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/transflower_paper")
+    fixture("transflower_paper")
 }
 
-fn last_error() -> String {
-    let mut buf = vec![0 as c_char; 512];
-    // SAFETY: a writable buffer of the given length; the result is NUL-terminated.
-    unsafe { duo_last_error_message(buf.as_mut_ptr(), buf.len()) };
-    // SAFETY: as above.
-    unsafe { CStr::from_ptr(buf.as_ptr()) }
-        .to_string_lossy()
-        .into_owned()
-}
 
-fn open(path: &Path) -> *mut DuoModel {
-    let p = CString::new(path.to_str().unwrap()).unwrap();
-    let mut m = ptr::null_mut();
-    // SAFETY: a NUL-terminated path and a live out-pointer.
-    assert_eq!(
-        unsafe { duo_model_open_file(p.as_ptr(), &mut m) },
-        DuoResult::Ok,
-        "{}",
-        last_error()
-    );
-    m
-}
 
 fn npy3(path: &Path) -> Vec<f32> {
     let bytes = std::fs::read(path).unwrap();
@@ -152,7 +133,7 @@ fn run(
 
 #[test]
 fn exact_preset_gives_r_frames() {
-    let m = open(&case().join("model.duo"));
+    let m = open_model(&case().join("model.duo"));
     let mut mi = DuoModelInfo::default();
     let mut info = DuoTransflowerInfo::default();
     // SAFETY: live model, writable structs.
@@ -278,7 +259,7 @@ fn exact_preset_gives_r_frames() {
 
 #[test]
 fn refusals_name_the_family_and_leave_the_session_unchanged() {
-    let m = open(&case().join("model.duo"));
+    let m = open_model(&case().join("model.duo"));
     let mut info = DuoTransflowerInfo::default();
     // SAFETY: live model, writable struct.
     unsafe { duo_transflower_get_info(m, &mut info) };
@@ -495,7 +476,7 @@ fn refusals_name_the_family_and_leave_the_session_unchanged() {
             "{msg}"
         );
         // A Duolando model: the Transflower calls refuse it.
-        let duo = open(&case().join("../tiny/model.duo"));
+        let duo = open_model(&case().join("../tiny/model.duo"));
         assert_eq!(
             duo_transflower_get_info(duo, &mut info),
             DuoResult::InvalidArgument
@@ -513,7 +494,7 @@ fn refusals_name_the_family_and_leave_the_session_unchanged() {
 /// `every_buffer_follows_the_null_rule`).
 #[test]
 fn buffers_follow_the_null_rule() {
-    let m = open(&case().join("model.duo"));
+    let m = open_model(&case().join("model.duo"));
     let mut info = DuoTransflowerInfo::default();
     let mut cfg = DuoTransflowerConfig::default();
     let name = CString::new("exact").unwrap();
