@@ -21,12 +21,8 @@ warm-up; writes a JSON the bench reads: median/p99 ms, onnxruntime version, thre
 Needs torch, onnx, onnxruntime, pyyaml (pip); none of them is a dependency of the engine or CI.
 """
 import argparse
-import json
 import os
-import platform
-import statistics
 import sys
-import time
 
 import numpy as np
 import torch
@@ -35,6 +31,7 @@ import yaml
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__))))
 from reference.bailando import authors  # noqa: E402
 from reference.config import Cfg  # noqa: E402
+from ort_timing import cpu_name, time_session, write_json  # noqa: E402
 
 
 class RStep(torch.nn.Module):
@@ -49,17 +46,6 @@ class RStep(torch.nn.Module):
     def forward(self, up, down, music):
         (lu, ld), _ = self.gpt((up, down), music)
         return lu[0, -1], ld[0, -1]
-
-
-def cpu_name():
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def main():
@@ -91,22 +77,9 @@ def main():
         torch.onnx.export(step, (up, down, music), args.onnx, input_names=["up", "down", "music"],
                           output_names=["logits_up", "logits_down"], opset_version=17, dynamo=False)
 
-    so = ort.SessionOptions()
-    so.intra_op_num_threads = 1
-    so.inter_op_num_threads = 1
-    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    sess = ort.InferenceSession(args.onnx, so, providers=["CPUExecutionProvider"])
     feed = {"up": up.numpy(), "down": down.numpy(), "music": music.numpy()}
-    got = sess.run(None, feed)
+    got, st = time_session(ort, args.onnx, 1, feed, args.warmup, args.runs)
     err = max(float(np.abs(got[i] - want[i].numpy()).max()) for i in range(2))
-    times = []
-    for i in range(args.warmup + args.runs):
-        t0 = time.perf_counter()
-        sess.run(None, feed)
-        if i >= args.warmup:
-            times.append((time.perf_counter() - t0) * 1e3)
-    times.sort()
-    p99 = times[min(len(times) - 1, int(round(0.99 * (len(times) - 1))))]
     out = {
         "family": "bailando",
         "what": "Bailando R step (actor GPT over a 28-token window), onnxruntime f32",
@@ -116,15 +89,13 @@ def main():
         "cpu": cpu_name(),
         "params": n_params,
         "window_tokens": c,
-        "median_ms": statistics.median(times),
-        "p99_ms": p99,
+        "median_ms": st["median_ms"],
+        "p99_ms": st["p99_ms"],
         "runs": args.runs,
         "max_abs_err_vs_torch": err,
         "logit_scale": max(float(want[i].abs().max()) for i in range(2)),
     }
-    with open(args.out, "w") as f:
-        json.dump(out, f, indent=1)
-    print(json.dumps(out, indent=1))
+    write_json(args.out, out)
 
 
 if __name__ == "__main__":

@@ -47,12 +47,8 @@ the copy below (e.g. `git -C /work/.mirror/guillefix+transflower-lightning/repo 
 HEAD:training/hparams/dance_combined/transflower_expmap.yaml > /tmp/tf.yaml`).
 """
 import argparse
-import json
 import os
-import platform
-import statistics
 import sys
-import time
 
 import numpy as np
 import torch
@@ -60,6 +56,7 @@ import yaml
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "reference"))
 from transflower import env, reference  # noqa: E402
+from ort_timing import cpu_name, time_session, write_json  # noqa: E402
 
 # training/hparams/dance_combined/transflower_expmap.yaml at the vendored commit (the keys that
 # reach the model; dhid_flow 512 and num_heads_flow 8 are the option defaults it leaves unset).
@@ -112,36 +109,6 @@ class RStep(torch.nn.Module):
         finally:
             del self.dist.sample
         return out[0, 0]
-
-
-def cpu_name():
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def time_session(ort, path, threads, feed, warmup, runs):
-    so = ort.SessionOptions()
-    so.intra_op_num_threads = threads
-    so.inter_op_num_threads = 1
-    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    sess = ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
-    got = sess.run(None, feed)[0]
-    times = []
-    for i in range(warmup + runs):
-        t0 = time.perf_counter()
-        sess.run(None, feed)
-        if i >= warmup:
-            times.append((time.perf_counter() - t0) * 1e3)
-    times.sort()
-    p99 = times[min(len(times) - 1, int(round(0.99 * (len(times) - 1))))]
-    return got, {"threads": threads, "median_ms": statistics.median(times), "p99_ms": p99,
-                 "min_ms": times[0], "runs": runs}
 
 
 def main():
@@ -207,7 +174,7 @@ def main():
     err = None
     for t in thread_counts:
         got, st = time_session(ort, args.onnx, t, feed, args.warmup, args.runs)
-        e = float(np.abs(got - want.numpy()).max())
+        e = float(np.abs(got[0] - want.numpy()).max())
         err = e if err is None else max(err, e)
         by_threads.append(st)
         print(f"onnxruntime f32 t{t}: median {st['median_ms']:.1f} ms  p99 {st['p99_ms']:.1f} ms  (max |ort - torch| {e:.2e})", file=sys.stderr)
@@ -232,9 +199,7 @@ def main():
         "frame_scale": float(want.abs().max()),
         "torch_equals_authors_loop": True,
     }
-    with open(args.out, "w") as f:
-        json.dump(out, f, indent=1)
-    print(json.dumps(out, indent=1))
+    write_json(args.out, out)
 
 
 if __name__ == "__main__":

@@ -5,18 +5,11 @@
 //! fraction of it. `--dtypes` with no value skips the (full-size) model
 //! benches, so these runs take seconds.
 
-use std::process::{Command, Output};
+
+mod common;
+use common::bench;
 
 use duolando_core::kernels::simd::Isa;
-
-fn bench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_duolando"))
-        .arg("bench")
-        .args(args)
-        .env_remove("DUOLANDO_ISA")
-        .output()
-        .unwrap()
-}
 
 fn name(isa: Isa) -> &'static str {
     match isa {

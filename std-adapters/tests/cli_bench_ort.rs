@@ -6,16 +6,9 @@
 //! take milliseconds.
 
 use std::path::PathBuf;
-use std::process::{Command, Output};
 
-fn bench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_duolando"))
-        .arg("bench")
-        .args(args)
-        .env_remove("DUOLANDO_ISA")
-        .output()
-        .unwrap()
-}
+mod common;
+use common::bench;
 
 fn tmp(name: &str, text: &str) -> PathBuf {
     let p = std::env::temp_dir().join(format!("duo-bench-ort-{}-{name}", std::process::id()));

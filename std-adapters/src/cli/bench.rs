@@ -810,12 +810,11 @@ fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, j: &mut serde_jso
     let mut rng = Rng(0xba11_a4d0);
     let tokens: Vec<u32> = (0..2 * c).map(|i| ((rng.next() + 1.0) * 255.0) as u32 % cfg.gpt.vocab[i % 2]).collect();
     let music: Vec<f32> = (0..c * nm).map(|_| rng.next()).collect();
-    let mut f32_median = std::collections::BTreeMap::new();
+    let mut medians = ort::RStepMedians::default();
     let real_time_ms = 1000.0 * cfg.hop() as f64 / duolando_core::bailando::config::FPS as f64;
     if let Some(o) = ort {
         o.print("Bailando R step");
     }
-    let mut ours = Vec::new();
     for d in &args.dtypes {
         let store_as = match d.as_str() {
             "f32" => StoreAs::F32,
@@ -845,15 +844,8 @@ fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, j: &mut serde_jso
                 Ok(v)
             })?;
             let st = stats(times);
-            if d == "f32" {
-                f32_median.insert(t, st.median_ms);
-            }
-            let mut vs_f32 = f32_median.get(&t).map(|f| format!("; f32/{d} {:.2}x", f / st.median_ms)).unwrap_or_default();
-            if let Some(o) = ort {
-                vs_f32.push_str(&o.ratio_note(t, st.median_ms));
-            }
+            let vs_f32 = medians.record(d, t, st.median_ms, ort);
             r_step_json(j, d, t, &st);
-            ours.push((d.clone(), t, st.median_ms));
             say!(
                 "Bailando R step {d:>4} t{t} ({c}-token window): median {:8.1} ms  p99 {:8.1} ms  {:.2}x real time ({real_time_ms:.1} ms per token){vs_f32}",
                 st.median_ms,
@@ -887,8 +879,8 @@ fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, j: &mut serde_jso
         }
     }
     if let Some(o) = ort {
-        o.print_ratios("Bailando R step", &ours);
-        o.json(j, &ours);
+        o.print_ratios("Bailando R step", &medians.ours);
+        o.json(j, &medians.ours);
     }
     say!("Bailando: published config (actor_critic.yaml), seeded random weights; S step = one session step (GPT row or re-prefill at a window jump, heads, decoders), frames pulled; onnxruntime: --ort-json from tools/bailando_ort_r_step.py.");
     Ok(())

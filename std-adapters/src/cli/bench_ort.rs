@@ -17,6 +17,32 @@ use serde_json::Value;
 
 use super::LABEL;
 
+/// The R-step medians of one family's bench, per weight type and thread
+/// count (`ours`: what [`OrtBaseline::print_ratios`] and
+/// [`OrtBaseline::json`] read), and each line's ratio notes.
+#[derive(Default)]
+pub struct RStepMedians {
+    f32_ms: std::collections::BTreeMap<usize, f64>,
+    pub ours: Vec<(String, usize, f64)>,
+}
+
+impl RStepMedians {
+    /// Records weight type `d` on `t` threads at `ms` (median) and returns
+    /// its line's note: `"; f32/int8 1.30x"` (where f32 ran before on `t`
+    /// threads) then onnxruntime's [`OrtBaseline::ratio_note`].
+    pub fn record(&mut self, d: &str, t: usize, ms: f64, ort: Option<&OrtBaseline>) -> String {
+        if d == "f32" {
+            self.f32_ms.insert(t, ms);
+        }
+        self.ours.push((d.to_string(), t, ms));
+        let mut note = self.f32_ms.get(&t).map(|f| format!("; f32/{d} {:.2}x", f / ms)).unwrap_or_default();
+        if let Some(o) = ort {
+            note.push_str(&o.ratio_note(t, ms));
+        }
+        note
+    }
+}
+
 /// onnxruntime's R-step figures of one family.
 #[derive(Debug)]
 pub struct OrtBaseline {

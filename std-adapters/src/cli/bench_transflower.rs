@@ -107,11 +107,10 @@ pub(super) fn run(args: &Args, ort: Option<&OrtBaseline>, j: &mut serde_json::Ma
     let audio_rows = cfg.inputs[1].length as usize + args.s_steps.max(64) + 64;
     let audio: Vec<f32> = (0..audio_rows * audio_d).map(|_| rng.next()).collect();
     let z: Vec<f32> = (0..c * h).map(|_| 0.5 * rng.next()).collect();
-    let mut f32_median = std::collections::BTreeMap::new();
+    let mut medians = super::ort::RStepMedians::default();
     if let Some(o) = ort {
         o.print("Transflower R step");
     }
-    let mut ours = Vec::new();
     for d in &args.dtypes {
         let store_as = match d.as_str() {
             "f32" => StoreAs::F32,
@@ -148,15 +147,8 @@ pub(super) fn run(args: &Args, ort: Option<&OrtBaseline>, j: &mut serde_json::Ma
                 Ok(v)
             })?;
             let st = stats(times);
-            if d == "f32" {
-                f32_median.insert(t, st.median_ms);
-            }
-            let mut vs_f32 = f32_median.get(&t).map(|f| format!("; f32/{d} {:.2}x", f / st.median_ms)).unwrap_or_default();
-            if let Some(o) = ort {
-                vs_f32.push_str(&o.ratio_note(t, st.median_ms));
-            }
+            let vs_f32 = medians.record(d, t, st.median_ms, ort);
             r_step_json(j, d, t, &st);
-            ours.push((d.clone(), t, st.median_ms));
             say!(
                 "Transflower R step {d:>4} t{t}: median {:8.1} ms  p99 {:8.1} ms  {:.1} GMAC/s  {:.2}x real time ({real_time_ms:.0} ms per frame){vs_f32}",
                 st.median_ms,
@@ -211,8 +203,8 @@ pub(super) fn run(args: &Args, ort: Option<&OrtBaseline>, j: &mut serde_json::Ma
         }
     }
     if let Some(o) = ort {
-        o.print_ratios("Transflower R step", &ours);
-        o.json(j, &ours);
+        o.print_ratios("Transflower R step", &medians.ours);
+        o.json(j, &medians.ours);
     }
     say!("Transflower: published paper config (transflower_expmap.yaml), seeded random weights (flow made invertible); R step = one generated frame of R mode; S step = one session step (audio row pushed, frame pulled); GMAC/s from the authors' 16.1 GMAC per frame; onnxruntime: --ort-json from tools/transflower_ort_r_step.py (the authors' modules, the same step).");
     Ok(())

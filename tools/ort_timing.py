@@ -1,0 +1,48 @@
+"""Timing helpers shared by the onnxruntime baselines of `duolando bench --ort-json`
+(tools/bailando_ort_r_step.py, tools/transflower_ort_r_step.py): the CPU's name, one
+onnxruntime session timed on N intra-op threads, and the JSON the bench reads."""
+import json
+import platform
+import statistics
+import time
+
+
+def cpu_name():
+    """The CPU model as /proc/cpuinfo names it (what the bench prints beside its own figures)."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def time_session(ort, path, threads, feed, warmup, runs):
+    """Runs the ONNX graph at `path` in onnxruntime (CPU, `threads` intra-op threads, one
+    inter-op thread, every graph optimisation) `warmup + runs` times on `feed`; returns its
+    outputs and {threads, median_ms, p99_ms, min_ms, runs} of the timed runs."""
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = threads
+    so.inter_op_num_threads = 1
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    sess = ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
+    got = sess.run(None, feed)
+    times = []
+    for i in range(warmup + runs):
+        t0 = time.perf_counter()
+        sess.run(None, feed)
+        if i >= warmup:
+            times.append((time.perf_counter() - t0) * 1e3)
+    times.sort()
+    p99 = times[min(len(times) - 1, int(round(0.99 * (len(times) - 1))))]
+    return got, {"threads": threads, "median_ms": statistics.median(times), "p99_ms": p99,
+                 "min_ms": times[0], "runs": runs}
+
+
+def write_json(path, out):
+    """Writes the bench's JSON to `path` and prints it."""
+    with open(path, "w") as f:
+        json.dump(out, f, indent=1)
+    print(json.dumps(out, indent=1))
