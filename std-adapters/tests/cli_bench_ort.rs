@@ -1,4 +1,4 @@
-//! `duolando bench --ort-json FILE` (issues #38, #39): onnxruntime's R-step
+//! `duolando bench --ort-json FILE` (issues #38, #39, #40): onnxruntime's R-step
 //! figure of the family (the JSON of tools/<family>_ort_r_step.py) is read
 //! and checked before anything runs (a missing, broken or other family's
 //! file is a named error), printed with its CPU, and written to the JSON
@@ -106,6 +106,57 @@ fn a_good_transflower_json_is_printed_and_written() {
 }
 
 #[test]
+fn a_duolando_json_is_read_for_duolando() {
+    // The keys tools/duolando_ort_r_step.py writes (made-up times).
+    let v = serde_json::json!({
+        "family": "duolando",
+        "what": "Duolando R step (follower GPT, 29-token window, LATs included, the 5 heads' last logits), published size, onnxruntime f32",
+        "onnxruntime": "1.32.0", "torch": "2.15.0", "threads": 1, "cpu": "Test CPU 9000",
+        "loadavg_1min_before": 0.5, "params": 300000000,
+        "median_ms": 377.0, "p99_ms": 390.5, "runs": 20,
+        "by_threads": [
+            {"threads": 1, "median_ms": 377.0, "p99_ms": 390.5, "min_ms": 370.0, "runs": 20},
+            {"threads": 2, "median_ms": 201.5, "p99_ms": 210.0, "min_ms": 199.0, "runs": 20}
+        ],
+        "max_abs_err_vs_torch": 2.0e-6, "logit_scale": 1.5
+    });
+    let input = tmp("duolando.json", &v.to_string());
+    let json = std::env::temp_dir().join(format!("duo-bench-ort-{}-duo-out.json", std::process::id()));
+    let o = bench(&[
+        "--dtypes",
+        "--ort-json",
+        input.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let lines: Vec<&str> = out
+        .lines()
+        .filter(|l| l.starts_with("Duolando R step onnxruntime 1.32.0 f32"))
+        .collect();
+    assert_eq!(lines.len(), 2, "{out}");
+    assert!(lines[0].contains(" t1 ") && lines[0].contains("median    377.0 ms"), "{}", lines[0]);
+    assert!(lines[1].contains(" t2 ") && lines[1].contains("median    201.5 ms"), "{}", lines[1]);
+    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let _ = std::fs::remove_file(&json);
+    let _ = std::fs::remove_file(&input);
+    assert_eq!(j["ort_family"], "duolando");
+    assert_eq!(j["ort_r_step_ms_t2"], 201.5);
+    // A Duolando file is not a Bailando one.
+    let input = tmp("duolando2.json", &v.to_string());
+    refused(
+        &["--family", "bailando", "--ort-json", input.to_str().unwrap()],
+        &["onnxruntime figures of duolando, this is --family bailando"],
+    );
+    let _ = std::fs::remove_file(&input);
+}
+
+#[test]
 fn an_older_bailando_json_is_read_for_bailando() {
     // tools/bailando_ort_r_step.py before `family`: named only in `what`, one thread.
     let v = serde_json::json!({
@@ -207,13 +258,9 @@ fn a_missing_or_wrong_json_is_a_named_error() {
         &["--family", "bailando", "--ort-json", good.to_str().unwrap()],
         &["onnxruntime figures of transflower, this is --family bailando"],
     );
-    // The duolando family's baseline is tract.
     refused(
         &["--ort-json", good.to_str().unwrap()],
-        &[
-            "--ort-json is for --family bailando or transflower",
-            "--tract-onnx",
-        ],
+        &["onnxruntime figures of transflower, this is --family duolando"],
     );
     for p in [broken, no_median, bad_list, good] {
         let _ = std::fs::remove_file(p);

@@ -28,15 +28,13 @@ PUBLISHED = dict(n_embd=768, n_head=12, base_layers=6, head_layers=6, lat_layers
                  look_forward=29, vocab=512)
 
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--out", default="/tmp/duolando_full")
-    ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args()
-    os.makedirs(args.out, exist_ok=True)
-    torch.manual_seed(args.seed)
-    g = torch.Generator().manual_seed(args.seed)
-    gpt = GPT2nt(Cfg(generate_structure(PUBLISHED)))
+def build(seed=0, structure=PUBLISHED):
+    """The R window step of a follower GPT of `structure` (default: the published size) with
+    seeded random weights, and its inputs: (step, inputs, names, logits (1, 5, vocab)).
+    tools/duolando_ort_r_step.py times the same step in onnxruntime."""
+    torch.manual_seed(seed)
+    g = torch.Generator().manual_seed(seed)
+    gpt = GPT2nt(Cfg(generate_structure(structure)))
     with torch.no_grad():
         for name, p in gpt.named_parameters():
             if name.endswith("weight") and p.dim() >= 2:
@@ -46,8 +44,7 @@ def main():
             else:
                 p.copy_(torch.randn(p.shape, generator=g) * 0.01)
     gpt.eval()
-    n_params = sum(p.numel() for p in gpt.parameters())
-    c, lf, v = PUBLISHED["block_size"] - 1, PUBLISHED["look_forward"], PUBLISHED["vocab"]
+    c, lf, v = structure["block_size"] - 1, structure["look_forward"], structure["vocab"]
     f = [torch.randint(0, v, (1, c), generator=g) for _ in range(5)]
     music = torch.randn(1, (c + lf) * 4, 54, generator=g)
     l = [torch.randint(0, v, (1, c + lf), generator=g) for _ in range(4)]
@@ -56,6 +53,18 @@ def main():
     step = GptStep(gpt)
     with torch.no_grad():
         logits = step(*inputs)
+    return step, inputs, names, logits
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", default="/tmp/duolando_full")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    step, inputs, names, logits = build(args.seed)
+    n_params = sum(p.numel() for p in step.parameters())
+    c = PUBLISHED["block_size"] - 1
     path = os.path.join(args.out, "full_r_step.onnx")
     kwargs = {"dynamo": False} if "dynamo" in torch.onnx.export.__code__.co_varnames else {}
     torch.onnx.export(step, tuple(inputs), path, input_names=names, output_names=["logits"],

@@ -17,7 +17,9 @@
 //!   layer runs each step), and the session arena bytes.
 //! - `Session::step_many` over 1, 4 and 16 sessions (int8, one thread);
 //! - tract running the full-size R step exported from tools/reference
-//!   (`--tract-onnx`, built with the `tract` feature), for the ratios.
+//!   (`--tract-onnx`, built with the `tract` feature), and onnxruntime's
+//!   time for the same step (`--ort-json` from tools/duolando_ort_r_step.py),
+//!   for the ratios.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -101,9 +103,8 @@ pub struct Args {
     /// only; comma separated; `--batch` with no value skips them).
     #[arg(long, value_delimiter = ',', num_args = 0.., default_values_t = vec![1usize, 4, 16])]
     pub batch: Vec<usize>,
-    /// Bailando and Transflower (`--family bailando|transflower`):
-    /// onnxruntime's time for the same R step, measured right before by
-    /// tools/<family>_ort_r_step.py (its JSON, checked before anything
+    /// onnxruntime's time for the family's R step, measured right before
+    /// by tools/<family>_ort_r_step.py (its JSON, checked before anything
     /// runs); the bench prints it and each weight type's and thread
     /// count's ratio onnxruntime / ours.
     #[arg(long)]
@@ -632,6 +633,10 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
     } else if args.family != "duolando" {
         return Err(anyhow!("unknown family '{}' (duolando, bailando, transflower)", args.family));
     }
+    if let Some(o) = ort {
+        o.print("R step");
+    }
+    let mut medians = ort::RStepMedians::default();
     let mut results = Vec::new();
     for d in &args.dtypes {
         let (name, store_as) = match d.as_str() {
@@ -644,8 +649,9 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
         let r = bench_dtype(name, store_as, args)?;
         for (t, st) in &r.r {
             let gbps = r.weight_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
+            let note = medians.record(r.name, *t, st.median_ms, ort);
             say!(
-                "R step {:>4} t{t} (29-token window, LATs incl.): median {:8.1} ms  p99 {:8.1} ms  p99/median {:.2}  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy)",
+                "R step {:>4} t{t} (29-token window, LATs incl.): median {:8.1} ms  p99 {:8.1} ms  p99/median {:.2}  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy){note}",
                 r.name,
                 st.median_ms,
                 st.p99_ms,
@@ -688,6 +694,10 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
         results.push(r);
     }
     say!("tN = one step with its large GEMMs split over N threads (duolando::workers); % of memcpy is against the 1-thread memcpy.");
+    if let Some(o) = ort {
+        o.print_ratios("R step", &medians.ours);
+        o.json(&mut j, &medians.ours);
+    }
     let tract = match super::bench_tract::onnx_path(args.tract_onnx.as_deref()) {
         None => {
             say!("tract ratio: not measured (no full-size R-step ONNX; make it with: {})", super::bench_tract::HOW);

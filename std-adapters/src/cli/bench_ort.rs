@@ -1,12 +1,12 @@
-//! `duolando bench --ort-json FILE` (Bailando, Transflower): onnxruntime's
+//! `duolando bench --ort-json FILE` (every family): onnxruntime's
 //! time for the family's R step, measured right before by
 //! `tools/<family>_ort_r_step.py` (its JSON), read once before anything
 //! runs and printed beside the engine's R step with the ratio
 //! onnxruntime / ours per weight type and thread count.
 //!
-//! The JSON (both scripts): `median_ms`, `p99_ms` and `threads` of the
+//! The JSON (every script): `median_ms`, `p99_ms` and `threads` of the
 //! headline run, `onnxruntime` (version), `cpu`; optional `family`
-//! (`bailando`, `transflower`; older Bailando files name it only in
+//! (`duolando`, `bailando`, `transflower`; older Bailando files name it only in
 //! `what`), `by_threads` (`[{threads, median_ms, p99_ms}]`: more thread
 //! counts), `max_abs_err_vs_torch`.
 
@@ -66,7 +66,7 @@ fn positive_ms(v: &Value, key: &str) -> Option<f64> {
 }
 
 impl OrtBaseline {
-    /// Reads and checks `path` for `family` (`bailando`, `transflower`).
+    /// Reads and checks `path` for `family` (`duolando`, `bailando`, `transflower`).
     pub fn read(path: &Path, family: &'static str) -> anyhow::Result<OrtBaseline> {
         let how = script(family);
         let bytes = std::fs::read(path).with_context(|| format!("--ort-json {}: cannot read it (make it with {how})", path.display()))?;
@@ -183,15 +183,41 @@ impl OrtBaseline {
     }
 }
 
-/// `--ort-json` read for the family asked (refused for duolando, whose
-/// baseline is tract).
+/// `--ort-json` read for the family asked.
 pub fn from_args(path: Option<&Path>, family: &str) -> anyhow::Result<Option<OrtBaseline>> {
     let Some(path) = path else { return Ok(None) };
     let family: &'static str = match family {
+        "duolando" => "duolando",
         "bailando" => "bailando",
         "transflower" => "transflower",
-        "duolando" => bail!("--ort-json is for --family bailando or transflower (the duolando family's baseline is tract: --tract-onnx)"),
         other => bail!("unknown family '{other}' (duolando, bailando, transflower)"),
     };
     OrtBaseline::read(path, family).map(Some)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn r_step_notes_give_f32_and_onnxruntime_ratios() {
+        let o = OrtBaseline {
+            path: PathBuf::from("ort.json"),
+            family: "duolando",
+            version: "1.32.0".into(),
+            cpu: "Test CPU".into(),
+            by_threads: vec![(1, 300.0, 310.0)],
+            max_abs_err: None,
+            load: None,
+        };
+        let mut m = RStepMedians::default();
+        // f32 first (its own ratio 1), then int8 at 150 ms: f32/int8 2x, onnxruntime/int8 2x.
+        assert_eq!(m.record("f32", 1, 300.0, Some(&o)), "; f32/f32 1.00x; onnxruntime/this 1.00x");
+        assert_eq!(m.record("int8", 1, 150.0, Some(&o)), "; f32/int8 2.00x; onnxruntime/this 2.00x");
+        // Two threads: no f32 and no onnxruntime figure there, no note.
+        assert_eq!(m.record("int8", 2, 100.0, Some(&o)), "");
+        assert_eq!(m.record("int8", 1, 75.0, None), "; f32/int8 4.00x");
+        assert_eq!(m.ours.len(), 4);
+        assert_eq!(m.ours[1], ("int8".to_string(), 1, 150.0));
+    }
 }
