@@ -39,6 +39,9 @@ def main():
     ap.add_argument("--threads", default="1,2", help="onnxruntime intra-op thread counts to time (the first is the headline)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--tiny", action="store_true", help="a small GPT: checks the plumbing, times mean nothing")
+    ap.add_argument("--reuse-onnx", action="store_true",
+                    help="time the --onnx file an earlier run with the same --seed and size exported (the export "
+                         "takes minutes); the output is still checked against torch")
     args = ap.parse_args()
 
     import onnxruntime as ort
@@ -47,9 +50,10 @@ def main():
     structure = TINY if args.tiny else PUBLISHED
     step, inputs, names, want = build(args.seed, structure)
     n_params = sum(p.numel() for p in step.parameters())
-    with torch.no_grad():
-        torch.onnx.export(step, tuple(inputs), args.onnx, input_names=names, output_names=["logits"],
-                          opset_version=17, do_constant_folding=True, dynamo=False)
+    if not (args.reuse_onnx and os.path.exists(args.onnx)):
+        with torch.no_grad():
+            torch.onnx.export(step, tuple(inputs), args.onnx, input_names=names, output_names=["logits"],
+                              opset_version=17, do_constant_folding=True, dynamo=False)
     feed = {n: x.numpy() for n, x in zip(names, inputs)}
     load = os.getloadavg()[0]
     by_threads, err = [], None
