@@ -64,6 +64,10 @@ def main():
         by_threads.append(st)
         print(f"onnxruntime f32 t{t}: median {st['median_ms']:.1f} ms  p99 {st['p99_ms']:.1f} ms  (max |ort - torch| {e:.2e})",
               file=sys.stderr)
+    scale = float(want.abs().max())
+    if err > 1e-3 * max(1.0, scale):
+        raise SystemExit(f"onnxruntime's logits differ from torch's by {err:.3g} (scale {scale:.3g}): "
+                         f"{args.onnx} is not this step (a --reuse-onnx file of another size or seed?)")
     head = by_threads[0]
     write_json(args.out, {
         "family": "duolando",
@@ -80,7 +84,7 @@ def main():
         "runs": args.runs,
         "by_threads": by_threads,
         "max_abs_err_vs_torch": err,
-        "logit_scale": float(want.abs().max()),
+        "logit_scale": scale,
     })
 
 
