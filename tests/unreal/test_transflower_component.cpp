@@ -207,8 +207,11 @@ int RunTransflowerComponentTests(const std::string& root) {
     TF_CHECK(Q.LastResult == DUO_BACKLOG && Pushed >= 400 + Q.AudioWindow() && Pushed < 2000);
     TF_CHECK(!Q.PushAudioRows(Slice(audio, 0, ac)) && Q.LastResult == DUO_BACKLOG);
     TF_CHECK(Q.TryPullFrame() && Q.FrameIndex == 0);  // made ahead
-    for (int i = 0; i < 3; ++i) TF_CHECK(PullWait(Q));  // frees room: rows are taken again
-    TF_CHECK(Q.PushAudioRows(Slice(audio, 0, ac)));
+    for (int i = 0; i < 3; ++i) TF_CHECK(PullWait(Q));  // frees room: the worker takes rows again
+    bool Taken = false;
+    for (int i = 0; i < 20000 && !(Taken = Q.PushAudioRows(Slice(audio, 0, ac))); ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    TF_CHECK(Taken && Q.LastResult == DUO_OK);
     Q.EndPlay(EEndPlayReason::Quit);   // with the queues full
 
     // The seed given at BeginPlay: the same frame as ResetSession with it; "realtime" runs too.

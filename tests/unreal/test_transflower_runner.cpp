@@ -189,7 +189,7 @@ void TestRunner(Fixture& fx, const std::string& root) {
     for (int spin = 0; spin < 20000 && accepted != before; ++spin) {  // until a pause changes nothing
       before = accepted;
       accepted += r.SubmitAudio(&audio80[accepted * fx.d], 80 - accepted);
-      std::this_thread::sleep_for(std::chrono::milliseconds(accepted == before ? 50 : 1));
+      std::this_thread::sleep_for(std::chrono::milliseconds(accepted == before ? 200 : 1));
       accepted += r.SubmitAudio(&audio80[accepted * fx.d], 80 - accepted);
     }
     // The session holds W + 6 rows past its last frame made: frame 0 made
@@ -253,14 +253,14 @@ void TestRunner(Fixture& fx, const std::string& root) {
     tiny.input_buffer_rows = 2;
     duolando::TransflowerRunner full(fx.model, tiny, fx.motion.data(), kSeedFloats, nullptr, 0, nullptr, 0, 2, 1);
     std::vector<float> a = Cycled(fx, W + 40);
-    size_t sent = 0;
-    for (int spin = 0; spin < 2000 && sent < W + 40; ++spin) {
+    size_t sent = 0, idle = 0;
+    while (sent < W + 40 && idle < 200) {  // until 200 ms pass with no row taken: queues full, a frame waiting
       size_t n = full.SubmitAudio(&a[sent * fx.d], W + 40 - sent);
       sent += n;
-      if (n == 0 && full.RowRoom() == 0) break;  // queues full, a frame waiting
+      idle = n ? 0 : idle + 1;
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
-    TR_CHECK(full.RowRoom() == 0);
+    TR_CHECK(sent < W + 40 && full.RowRoom() == 0);
   }
 }
 

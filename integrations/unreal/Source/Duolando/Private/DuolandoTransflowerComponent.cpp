@@ -9,9 +9,10 @@
 namespace
 {
 // Audio rows the component queues for the worker beyond the session's own
-// buffer (the preset's input_buffer_rows), and frames made ahead of
+// buffer (the preset's input_buffer_rows; 25.6 s at 20 rows a second: one
+// PushAudioRows takes at most that many), and frames made ahead of
 // TryPullFrame (1 s at 20 fps).
-const size_t QueueRows = 64;
+const size_t QueueRows = 512;
 const size_t FramesAhead = 20;
 }
 

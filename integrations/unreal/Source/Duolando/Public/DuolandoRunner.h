@@ -572,7 +572,7 @@ class TransflowerRunner : public RowRunner {
   }
   ~TransflowerRunner() override { Stop(); }
 
-  // The model's sizes (zeros when Status() is not DUO_OK before the info).
+  // The model's sizes (zeros for a model of another family).
   const duo_transflower_info& Info() const { return info_; }
 
   // Game thread: SubmitRows (audio rows).

@@ -93,8 +93,9 @@ public:
 
 	/** Queues one or more whole audio rows (AudioFeatures() floats each) for the worker. All
 	 *  or nothing: false (logged) on a wrong count, a non-finite value or one above
-	 *  DUO_MAX_MUSIC_FEATURE (DUO_NON_FINITE_INPUT), DUO_BACKLOG (the queue is full: take
-	 *  frames first; the dance waits for TryPullFrame) or no session. */
+	 *  DUO_MAX_MUSIC_FEATURE (DUO_NON_FINITE_INPUT), DUO_BACKLOG (the queue of 512 rows is
+	 *  full: take frames first, the dance waits for TryPullFrame; push longer audio in pieces)
+	 *  or no session. */
 	UFUNCTION(BlueprintCallable, Category = "Duolando")
 	bool PushAudioRows(const TArray<float>& Rows);
 
@@ -120,7 +121,7 @@ public:
 	UFUNCTION(BlueprintPure, Category = "Duolando")
 	int32 AudioWindow() const;
 	UFUNCTION(BlueprintPure, Category = "Duolando")
-	int32 NoiseFloats() const;   // floats of one base sample (TryPullFrameWithNoise)
+	int32 NoiseFloats() const;   // floats of one base sample (NoiseTrack holds whole ones)
 	UFUNCTION(BlueprintPure, Category = "Duolando")
 	int32 NumLabels() const;   // values Labels must hold
 	UFUNCTION(BlueprintPure, Category = "Duolando")
