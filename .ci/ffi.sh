@@ -2,10 +2,10 @@
 # The C ABI (issue #5): header vs exported symbols, header compiled as C99
 # and C++17 (included twice), the C host test linked against the static and
 # the dynamic library and run under valgrind; the engine integrations
-# (issue #36 §6): the Unreal plugin's session runner under valgrind, its
-# module + components (follower, Bailando solo, Transflower) compiled
-# against TEST STUB engine headers (tests/unreal/stub) and run against the
-# library, its .uplugin checked and
+# (issue #36 §6): the Unreal plugin's runners and Transflower step batch
+# under valgrind and ThreadSanitizer, its module + components (follower,
+# Bailando solo, Transflower) compiled against TEST STUB engine headers
+# (tests/unreal/stub) and run against the library, its .uplugin checked and
 # Build.cs rules compiled against a TEST STUB UnrealBuildTool and evaluated
 # per platform; the Unity wrapper compiled and run under Mono, the Unity
 # package layout checked, its runtime and sample compiled against a TEST
@@ -66,10 +66,15 @@ echo "--- valgrind: dynamic"
 
 UE=integrations/unreal
 UEMOD=$UE/Source/Duolando
-echo "--- Unreal plugin: the engine-independent session runner (C++17, threads) under valgrind"
+echo "--- Unreal plugin: the engine-independent runners and step batch (C++17, threads) under valgrind and ThreadSanitizer"
+RUNNER_TESTS="tests/c/test_runner.cpp tests/unreal/test_transflower_runner.cpp"
 g++ -std=c++17 -Wall -Wextra -Werror -pedantic -g -Iinclude -I$UEMOD/Public \
-    tests/c/test_runner.cpp -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_runner"
+    $RUNNER_TESTS -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_runner"
 "${VALGRIND[@]}" "$OUT/test_runner" "$ROOT"
+# Memcheck sees no races: the runners' own C++ again, instrumented (the library is not).
+g++ -std=c++17 -Wall -Wextra -Werror -pedantic -g -O1 -fsanitize=thread -Iinclude -I$UEMOD/Public \
+    $RUNNER_TESTS -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_runner_tsan"
+TSAN_OPTIONS=halt_on_error=1 "$OUT/test_runner_tsan" "$ROOT" > /dev/null
 
 echo "--- Unreal plugin: module + component compiled against TEST STUB engine headers (tests/unreal/stub) and run"
 # Not Unreal Engine: the stubs only let g++ check and run the plugin's own C++.

@@ -6,7 +6,8 @@
 // (one NaN row replaced) with a small output ring the game thread drains,
 // then Finish: the golden positions within 1e-5 m; the same with the rows
 // given as a track; each runner refuses the other family's model. Run
-// under valgrind by .ci/ffi.sh. usage: test_runner <repo root>
+// under valgrind by .ci/ffi.sh; with tests/unreal/test_transflower_runner.cpp
+// (TransflowerRunner, TransflowerStepBatch). usage: test_runner <repo root>
 #include "DuolandoRunner.h"
 
 #include <chrono>
@@ -124,6 +125,8 @@ static int TestSolo(const std::string& root) {
   return failures;
 }
 
+int RunTransflowerRunnerTests(const std::string& root);  // tests/unreal/test_transflower_runner.cpp
+
 int main(int argc, char** argv) {
   if (argc < 2) return 2;
   std::string root = argv[1];
@@ -170,5 +173,6 @@ int main(int argc, char** argv) {
   }
   int solo_failures = TestSolo(root);
   std::printf("test_runner: solo runner, %d failures\n", solo_failures);
-  return failures || solo_failures ? 1 : 0;
+  int transflower_failures = RunTransflowerRunnerTests(root);
+  return failures || solo_failures || transflower_failures ? 1 : 0;
 }

@@ -159,6 +159,7 @@ static class TestUnity
         }
         TestSolo(root);
         TestTransflower(root);
+        TestTransflowerBatch(root);
         TestPositionsOfAFollower(root, leader, track, frames);
         Check(pulled > frames / 2, "frames pulled: " + pulled);
         Check(rejected > 0, "NaN frames rejected");
@@ -260,6 +261,131 @@ static class TestUnity
                 }
                 Check(first != null && System.Linq.Enumerable.SequenceEqual(first, frame), "the same seed, the same frame");
             }
+        }
+    }
+
+    // `rows` rows of the fixture's audio (d floats each), cycled.
+    static float[] Cycled(float[] audio, int d, int rows)
+    {
+        float[] r = new float[rows * d];
+        for (int i = 0; i < rows; i++) Array.Copy(audio, (i % (audio.Length / d)) * d, r, i * d, d);
+        return r;
+    }
+
+    static unsafe bool SameBits(float[] a, float[] b)
+    {
+        if (a.Length != b.Length) return false;
+        fixed (float* pa = a, pb = b)
+            for (int i = 0; i < a.Length; i++)
+                if (((int*)pa)[i] != ((int*)pb)[i]) return false;
+        return true;
+    }
+
+    // Every ready frame of s appended to `all` (indices checked); returns how many were taken.
+    static int PullAllFrames(TransflowerSession s, System.Collections.Generic.List<float> all)
+    {
+        int c = (int)s.Info.Channels, n = 0;
+        float[] frame = new float[c];
+        ulong index;
+        while (s.TryPullFrame(frame, out index))
+        {
+            Check(index == (ulong)(all.Count / c), "frame index " + index);
+            all.AddRange(frame);
+            n++;
+        }
+        return n;
+    }
+
+    // Three Batched sessions (seeds 21, 22, 23) through one TransflowerStepBatch (in its own
+    // unmanaged memory) give each session's frames alone, bit for bit; a batched session's pull
+    // does not step; the refusals (another family's model, a session twice, another model's
+    // session, a null, more than MaxSessions, a backlogged session by index, a disposed batch).
+    static void TestTransflowerBatch(string root)
+    {
+        string dir = Path.Combine(root, "tests/fixtures/transflower_paper");
+        float[] motion = Slice(ReadNpyF32(Path.Combine(dir, "in_expmap_scaled_20.npy")), 0, 12 * 11);
+        float[] fixture = ReadNpyF32(Path.Combine(dir, "in_audio_feats_scaled_20.npy"));
+        using (Model duet = Model.OpenFile(Path.Combine(root, "tests/fixtures/tiny/model.duo")))
+            Throws(() => new TransflowerStepBatch(duet), DuoResult.InvalidArgument, "needs a Transflower model", "a step batch of a Duolando model");
+        using (Model model = Model.OpenFile(Path.Combine(dir, "model.duo")))
+        using (Model other = Model.OpenFile(Path.Combine(dir, "model.duo")))
+        {
+            TransflowerConfig c = TransflowerSession.Preset(model, "exact");
+            c.PendingFrames = 2;
+            TransflowerInfo info;
+            using (TransflowerSession probe = new TransflowerSession(model, c, motion, null)) info = probe.Info;
+            int d = (int)info.AudioFeatures, w = (int)info.AudioWindow, rows = 30;
+            float[] audio = Cycled(fixture, d, rows);
+            var alone = new System.Collections.Generic.List<float>[3];
+            for (int k = 0; k < 3; k++)
+            {
+                c.RngSeed = (ulong)(21 + k);
+                alone[k] = new System.Collections.Generic.List<float>();
+                using (TransflowerSession s = new TransflowerSession(model, c, motion, null))
+                    for (int r = 0; r < rows; r++)
+                    {
+                        s.PushAudio(Slice(audio, r * d, d));
+                        PullAllFrames(s, alone[k]);
+                    }
+                Check(alone[k].Count == (rows - w + 1) * (int)info.Channels, "frames alone: " + alone[k].Count);
+            }
+            Check(!SameBits(alone[0].ToArray(), alone[1].ToArray()), "two seeds, two dances");
+            Check(TransflowerStepBatch.Bytes(model) > 0, "batch bytes");
+            c.Batched = 1;
+            var ss = new TransflowerSession[3];
+            for (int k = 0; k < 3; k++)
+            {
+                c.RngSeed = (ulong)(21 + k);
+                ss[k] = new TransflowerSession(model, c, motion, null);
+            }
+            TransflowerSession stranger = new TransflowerSession(other, c, motion, null);
+            var got = new System.Collections.Generic.List<float>[3];
+            for (int k = 0; k < 3; k++) got[k] = new System.Collections.Generic.List<float>();
+            using (TransflowerStepBatch batch = new TransflowerStepBatch(model, true))
+            {
+                int stepped, failed;
+                Throws(() => batch.Step(new[] { ss[0], ss[1], ss[0] }, out stepped, out failed), DuoResult.InvalidArgument, "sessions[2] is sessions[0] again", "a session given twice");
+                Throws(() => batch.Step(new[] { ss[0], stranger }, out stepped, out failed), DuoResult.InvalidArgument, "sessions[1] is a session of another model", "a session of another model");
+                ThrowsArgument(() => batch.Step(new[] { ss[0], null }, out stepped, out failed), "a null session");
+                var many = new TransflowerSession[TransflowerStepBatch.MaxSessions + 1];
+                for (int i = 0; i < many.Length; i++) many[i] = ss[0];
+                ThrowsArgument(() => batch.Step(many, out stepped, out failed), "more than MaxSessions");
+                Check(batch.Step(ss, out stepped, out failed) == DuoResult.Ok && stepped == 0 && failed == -1, "no audio: none stepped");
+                for (int k = 0; k < 3; k++) ss[k].PushAudio(Slice(audio, 0, w * d));
+                float[] frame = new float[info.Channels];
+                ulong index;
+                Check(!ss[0].TryPullFrame(frame, out index), "a batched session's pull does not step");
+                // Backlog: session 2's two pending frames made and not pulled.
+                ss[2].PushAudio(Slice(audio, w * d, d));
+                for (int k = 0; k < 2; k++)
+                    Check(batch.Step(new[] { ss[2] }, out stepped, out failed) == DuoResult.Ok && stepped == 1, "session 2 stepped");
+                Check(batch.Step(ss, out stepped, out failed) == DuoResult.Backlog && failed == 2 && stepped == 0, "backlog names session 2: " + failed);
+                for (int r = w; r <= rows; r++)
+                {
+                    if (r < rows)
+                        for (int k = 0; k < 3; k++)
+                            if (k < 2 || r > w) ss[k].PushAudio(Slice(audio, r * d, d));
+                    do
+                    {
+                        for (int k = 0; k < 3; k++) PullAllFrames(ss[k], got[k]);
+                        Check(batch.Step(ss, out stepped, out failed) == DuoResult.Ok && failed == -1, "a batch step");
+                    } while (stepped > 0);
+                }
+                for (int k = 0; k < 3; k++) PullAllFrames(ss[k], got[k]);
+                for (int k = 0; k < 3; k++)
+                    Check(SameBits(got[k].ToArray(), alone[k].ToArray()), "batched session " + k + " equals the session alone, bit for bit (" + got[k].Count + " floats)");
+                batch.Dispose();
+                try { batch.Step(ss, out stepped, out failed); Check(false, "a disposed batch throws"); }
+                catch (ObjectDisposedException) { }
+            }
+            using (TransflowerStepBatch own = new TransflowerStepBatch(model))
+            {
+                int stepped, failed;
+                Check(own.Step(ss, out stepped, out failed) == DuoResult.Ok && stepped == 0, "a library-allocated batch: nothing left to step");
+            }
+            for (int k = 0; k < 3; k++) ss[k].Dispose();
+            stranger.Dispose();
+            Console.WriteLine("test_unity: 3 batched Transflower sessions through a TransflowerStepBatch, " + got[0].Count / (int)info.Channels + " frames each, as alone bit for bit");
         }
     }
 

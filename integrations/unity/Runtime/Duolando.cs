@@ -13,7 +13,10 @@
 //   music: SoloSession, music rows in, 24 joint positions out; its
 //   TryPullPositions runs the model: a worker thread too). The
 //   Duolando-only calls on a solo model (PushLeader, TryPull, SeedTokens,
-//   StepBatch) throw DuolandoException with the library's message.
+//   StepBatch) throw DuolandoException with the library's message. A third,
+//   Transflower (a probabilistic solo dancer: TransflowerSession, audio rows
+//   in, motion features out; TransflowerStepBatch steps several sessions
+//   through one step's memory).
 // - Expected outcomes (NonFiniteInput, Backlog, NotReady) are returned as
 //   DuoResult values; anything else throws DuolandoException with the
 //   library's message.
@@ -182,7 +185,8 @@ namespace Duolando
         public uint InputBufferRows, PendingFrames;
         /// <summary>1: a share of the rows recomputed every step (flat cost); 0: all every Refresh-th step.</summary>
         public uint Rolling;
-        /// <summary>1: a session for step batches only (duo_step_batch_step; not bound here); 0 here.</summary>
+        /// <summary>1: a session for step batches only (TransflowerStepBatch.Step makes its frames,
+        /// TryPullFrame takes them; it holds its state alone, no step memory); 0: its pulls step it.</summary>
         public uint Batched;
         /// <summary>The base samples' seed: another seed, another dance.</summary>
         public ulong RngSeed;
@@ -245,9 +249,17 @@ namespace Duolando
 
     public sealed class StepBatchHandle : SafeHandle
     {
+        /// <summary>Unmanaged memory the batch was placed in (_new_in), freed after it; or zero.</summary>
+        internal IntPtr Memory;
         public StepBatchHandle() : base(IntPtr.Zero, true) { }
         public override bool IsInvalid { get { return handle == IntPtr.Zero; } }
-        protected override bool ReleaseHandle() { Native.duo_step_batch_free(handle); return true; }
+        protected override bool ReleaseHandle()
+        {
+            Native.duo_step_batch_free(handle);
+            if (Memory != IntPtr.Zero) Marshal.FreeHGlobal(Memory);
+            Memory = IntPtr.Zero;
+            return true;
+        }
     }
 
     /// <summary>Unmanaged memory owned by a SafeHandle (music tracks and model copies the library borrows).</summary>
@@ -304,6 +316,10 @@ namespace Duolando
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_session_reset(SessionHandle session, ulong rngSeed);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_step_batch_new(ModelHandle model, ref SessionConfig config, UIntPtr maxSessions, out StepBatchHandle batch);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_step_batch_push_leader(StepBatchHandle batch, IntPtr[] sessions, [In] LeaderFrame[] frames, UIntPtr n, out UIntPtr failedSession);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_step_batch_bytes(ModelHandle model, out UIntPtr bytes);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_step_batch_new(ModelHandle model, out StepBatchHandle batch);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_transflower_step_batch_new_in(ModelHandle model, IntPtr memory, UIntPtr len, out StepBatchHandle batch);
+        [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_step_batch_step(StepBatchHandle batch, IntPtr[] sessions, UIntPtr n, out UIntPtr stepped, out UIntPtr failedSession);
         [DllImport(Lib, CallingConvention = CC)] public static extern void duo_step_batch_free(IntPtr batch);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_leader_frame_convert(ref LeaderFrame frame, uint coords);
         [DllImport(Lib, CallingConvention = CC)] public static extern DuoResult duo_follower_frame_convert(ref FollowerFrame frame, uint coords);
@@ -600,7 +616,7 @@ namespace Duolando
     /// "reference" and "realtime" are faster approximations. One thread at a time.</summary>
     public sealed class TransflowerSession : IDisposable
     {
-        readonly SessionHandle handle;
+        internal readonly SessionHandle handle;
         /// <summary>The model's sizes (duo_transflower_get_info).</summary>
         public readonly TransflowerInfo Info;
 
@@ -637,7 +653,9 @@ namespace Duolando
         }
 
         /// <summary>The next frame into `frame` (Info.Channels floats), running its step (the
-        /// costly call: off the main thread); false while its audio is not in yet.
+        /// costly call: off the main thread); false while its audio is not in yet. A frame a
+        /// TransflowerStepBatch made is taken without a step (a Batched session never steps here:
+        /// false until its batch has made one).
         /// `noise`: the step's base sample (Info.NoiseFloats), or null for the session's RNG.</summary>
         public unsafe bool TryPullFrame(float[] frame, out ulong index, float[] noise = null)
         {
@@ -740,6 +758,95 @@ namespace Duolando
             ulong fi = f.ToUInt64();
             failed = fi >= (ulong)n ? -1 : (int)fi;
             if (r != DuoResult.Ok && r != DuoResult.NonFiniteInput && r != DuoResult.Backlog) Native.Check(r);
+            return r;
+        }
+
+        public void Dispose() { handle.Dispose(); }
+    }
+
+    /// <summary>A Transflower step batch: one model's step memory (step scratch, the flow's
+    /// reverse weights) that several TransflowerSessions of that model share, stepped one after
+    /// another by Step: every frame is the one the session makes alone, bit for bit. Sessions made
+    /// with TransflowerConfig.Batched = 1 hold their state alone (only a batch makes their frames;
+    /// TryPullFrame takes them); Batched = 0 sessions may be stepped both ways. The batch keeps
+    /// its model alive. One thread at a time, and the sessions of a Step are not used elsewhere
+    /// during it; Step runs the model (off the main thread).</summary>
+    public sealed class TransflowerStepBatch : IDisposable
+    {
+        /// <summary>Most sessions one Step takes (DUO_MAX_BATCH).</summary>
+        public const int MaxSessions = 64;
+        readonly StepBatchHandle handle;
+        readonly IntPtr[] pointers = new IntPtr[MaxSessions];
+        readonly bool[] added = new bool[MaxSessions];
+
+        /// <summary>Bytes of a batch of `model` (the same for any sessions of any configuration).</summary>
+        public static long Bytes(Model model)
+        {
+            if (model == null) throw new ArgumentNullException("model");
+            UIntPtr n;
+            Native.Check(Native.duo_transflower_step_batch_bytes(model.Handle, out n));
+            return (long)n.ToUInt64();
+        }
+
+        /// <summary>A batch of `model` (a Transflower model; another throws). inPlace: placed in one
+        /// block of Bytes(model) unmanaged bytes allocated here and freed with the batch
+        /// (duo_transflower_step_batch_new_in); else the library allocates it.</summary>
+        public TransflowerStepBatch(Model model, bool inPlace = false)
+        {
+            if (model == null) throw new ArgumentNullException("model");
+            if (!inPlace)
+            {
+                Native.Check(Native.duo_transflower_step_batch_new(model.Handle, out handle));
+                return;
+            }
+            long bytes = Bytes(model);
+            IntPtr memory = Marshal.AllocHGlobal(new IntPtr(bytes));
+            DuoResult r = Native.duo_transflower_step_batch_new_in(model.Handle, memory, new UIntPtr((ulong)bytes), out handle);
+            if (r != DuoResult.Ok)
+            {
+                Marshal.FreeHGlobal(memory);
+                Native.Check(r);
+            }
+            handle.Memory = memory;
+        }
+
+        /// <summary>One step of every session of `sessions` whose audio is in (at most MaxSessions).
+        /// Ok: `stepped` = how many stepped (0 when none had its audio), `failed` = -1. Backlog:
+        /// sessions[failed] has its PendingFrames frames made and not pulled; nothing stepped.
+        /// Throws on anything else (a session of another model or given twice: DuolandoException
+        /// InvalidArgument, with the library's message naming it).</summary>
+        public DuoResult Step(TransflowerSession[] sessions, out int stepped, out int failed)
+        {
+            if (sessions == null) throw new ArgumentNullException("sessions");
+            int n = sessions.Length;
+            if (n > MaxSessions) throw new ArgumentException("more sessions than a batch steps at once (" + MaxSessions + ")", "sessions");
+            for (int i = 0; i < n; i++)
+                if (sessions[i] == null) throw new ArgumentNullException("sessions", "sessions[" + i + "] is null");
+            UIntPtr s = UIntPtr.Zero, f = UIntPtr.Zero;
+            DuoResult r;
+            try
+            {
+                for (int i = 0; i < n; i++)
+                {
+                    added[i] = false;
+                    sessions[i].handle.DangerousAddRef(ref added[i]);
+                    pointers[i] = sessions[i].handle.DangerousGetHandle();
+                }
+                r = Native.duo_step_batch_step(handle, pointers, new UIntPtr((ulong)n), out s, out f);
+            }
+            finally
+            {
+                for (int i = 0; i < n; i++)
+                {
+                    if (added[i]) sessions[i].handle.DangerousRelease();
+                    added[i] = false;
+                    pointers[i] = IntPtr.Zero;
+                }
+            }
+            ulong fi = f.ToUInt64();
+            failed = fi >= (ulong)n ? -1 : (int)fi;
+            stepped = r == DuoResult.Ok ? (int)s.ToUInt64() : 0;
+            if (r != DuoResult.Ok && r != DuoResult.Backlog) Native.Check(r);
             return r;
         }
 

@@ -45,6 +45,13 @@ class FString {
   bool IsEmpty() const { return s_.empty(); }
   bool operator==(const FString& o) const { return s_ == o.s_; }
   const std::string& Std() const { return s_; }  // stub only
+  template <typename... A>
+  static FString Printf(const TCHAR* Format, A... Args) {
+    int n = std::snprintf(nullptr, 0, Format, Args...);
+    std::string s(n > 0 ? static_cast<size_t>(n) : 0, '\0');
+    if (n > 0) std::snprintf(&s[0], s.size() + 1, Format, Args...);
+    return FString(std::move(s));
+  }
  private:
   std::string s_;
 };

@@ -2,17 +2,30 @@
 
 #include "DuolandoLog.h"
 #include "DuolandoModelFile.h"
+#include "DuolandoRunner.h"
+
+#include <cmath>
+
+namespace
+{
+// Audio rows the component queues for the worker beyond the session's own
+// buffer (the preset's input_buffer_rows; 25.6 s at 20 rows a second: one
+// PushAudioRows takes at most that many), and frames made ahead of
+// TryPullFrame (1 s at 20 fps).
+const size_t QueueRows = 512;
+const size_t FramesAhead = 20;
+}
 
 UDuolandoTransflowerComponent::UDuolandoTransflowerComponent()
 	: Info(std::make_unique<duo_transflower_info>())
 {
-	PrimaryComponentTick.bCanEverTick = false;   // the caller pulls frames; nothing to tick
+	PrimaryComponentTick.bCanEverTick = false;   // the caller takes frames; nothing to tick
 	*Info = duo_transflower_info{};
 }
 
 UDuolandoTransflowerComponent::~UDuolandoTransflowerComponent()
 {
-	duo_session_free(Session);   // both NULL after EndPlay
+	Runner.reset();   // joins the worker, frees the session (both NULL after EndPlay)
 	duo_model_free(Model);
 }
 
@@ -31,8 +44,14 @@ bool UDuolandoTransflowerComponent::Record(int32 Result, const TCHAR* Call)
 	LastResult = Result;
 	if (Result == DUO_OK)
 		return true;
-	if (Result != DUO_NOT_READY)   // not a failure: push more audio
-		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s: %s (%s)"), Call, UTF8_TO_TCHAR(duo_result_name(Result)), *DuolandoLastError());
+	UE_LOG(LogDuolando, Error, TEXT("Duolando: %s: %s (%s)"), Call, UTF8_TO_TCHAR(duo_result_name(Result)), *DuolandoLastError());
+	return false;
+}
+
+bool UDuolandoTransflowerComponent::Refuse(int32 Result, const FString& Why)
+{
+	LastResult = Result;
+	UE_LOG(LogDuolando, Error, TEXT("Duolando: %s (%s)"), *Why, UTF8_TO_TCHAR(duo_result_name(Result)));
 	return false;
 }
 
@@ -58,17 +77,11 @@ void UDuolandoTransflowerComponent::BeginPlay()
 	bool Ok = Record(duo_transflower_get_info(Model, &Sizes), TEXT("duo_transflower_get_info")) &&
 		Record(duo_transflower_config_preset(Model, TCHAR_TO_UTF8(*Preset), &Config), TEXT("duo_transflower_config_preset"));
 	if (Ok && SeedMotion.Num() != static_cast<int32>(Sizes.seed_rows * Sizes.channels))
-	{
-		LastResult = DUO_INVALID_ARGUMENT;
-		UE_LOG(LogDuolando, Error, TEXT("Duolando: SeedMotion has %d floats: the model needs %u rows x %u features"), SeedMotion.Num(), Sizes.seed_rows, Sizes.channels);
-		Ok = false;
-	}
+		Ok = Refuse(DUO_INVALID_ARGUMENT, FString::Printf(TEXT("SeedMotion has %d floats: the model needs %u rows x %u features"), SeedMotion.Num(), Sizes.seed_rows, Sizes.channels));
 	if (Ok && Labels.Num() != static_cast<int32>(Sizes.labels))
-	{
-		LastResult = DUO_INVALID_ARGUMENT;
-		UE_LOG(LogDuolando, Error, TEXT("Duolando: Labels has %d values: the model takes %u"), Labels.Num(), Sizes.labels);
-		Ok = false;
-	}
+		Ok = Refuse(DUO_INVALID_ARGUMENT, FString::Printf(TEXT("Labels has %d values: the model takes %u"), Labels.Num(), Sizes.labels));
+	if (Ok && NoiseTrack.Num() % static_cast<int32>(Sizes.noise_floats) != 0)
+		Ok = Refuse(DUO_INVALID_ARGUMENT, FString::Printf(TEXT("NoiseTrack has %d floats: whole samples of %u are needed"), NoiseTrack.Num(), Sizes.noise_floats));
 	if (Ok)
 	{
 		Config.rng_seed = static_cast<uint64_t>(RngSeed);
@@ -77,13 +90,15 @@ void UDuolandoTransflowerComponent::BeginPlay()
 		LabelValues.SetNum(Labels.Num());
 		for (int32 i = 0; i < Labels.Num(); ++i)
 			LabelValues[i] = static_cast<uint32>(Labels[i]);
-		// The seed motion and labels are copied into the session.
-		Ok = Record(duo_transflower_session_new(Model, &Config, SeedMotion.GetData(), static_cast<size_t>(SeedMotion.Num()),
-						LabelValues.Num() > 0 ? LabelValues.GetData() : nullptr, static_cast<size_t>(LabelValues.Num()), &Session),
-			TEXT("duo_transflower_session_new"));
+		// The seed motion, labels and noise track are copied: the properties may change afterwards.
+		Runner = std::make_unique<duolando::TransflowerRunner>(Model, Config, SeedMotion.GetData(), static_cast<size_t>(SeedMotion.Num()),
+			LabelValues.Num() > 0 ? LabelValues.GetData() : nullptr, static_cast<size_t>(LabelValues.Num()),
+			NoiseTrack.Num() > 0 ? NoiseTrack.GetData() : nullptr, static_cast<size_t>(NoiseTrack.Num()), QueueRows, FramesAhead);
+		Ok = Record(Runner->Status(), TEXT("duo_transflower_session_new"));
 	}
 	if (!Ok)
 	{
+		Runner.reset();
 		duo_model_free(Model);
 		Model = nullptr;
 		return;
@@ -95,17 +110,16 @@ void UDuolandoTransflowerComponent::BeginPlay()
 
 void UDuolandoTransflowerComponent::EndPlay(const EEndPlayReason::Type Reason)
 {
-	duo_session_free(Session);   // (order does not matter: sessions hold a model reference)
-	Session = nullptr;
-	duo_model_free(Model);
+	Runner.reset();   // joins the worker (at most the step in flight), frees the session
+	duo_model_free(Model);   // (order does not matter: sessions hold a model reference)
 	Model = nullptr;
 	*Info = duo_transflower_info{};
 	Super::EndPlay(Reason);
 }
 
 // A call without a session: answered as the library answers a NULL session, and logged.
-#define DUOLANDO_NEED_SESSION(Call)                                                            \
-	if (!Session)                                                                              \
+#define DUOLANDO_NEED_RUNNER(Call)                                                             \
+	if (!Runner)                                                                               \
 	{                                                                                          \
 		LastResult = DUO_NULL_PARAMETER;                                                       \
 		UE_LOG(LogDuolando, Error, TEXT("Duolando: %s: no session (BeginPlay failed)"), Call); \
@@ -114,15 +128,20 @@ void UDuolandoTransflowerComponent::EndPlay(const EEndPlayReason::Type Reason)
 
 bool UDuolandoTransflowerComponent::PushAudioRows(const TArray<float>& Rows)
 {
-	DUOLANDO_NEED_SESSION(TEXT("PushAudioRows"));
-	return Record(duo_session_push_music(Session, Rows.GetData(), static_cast<size_t>(Rows.Num())), TEXT("duo_session_push_music"));
-}
-
-bool UDuolandoTransflowerComponent::PushInputRows(int32 InputIndex, const TArray<float>& Rows)
-{
-	DUOLANDO_NEED_SESSION(TEXT("PushInputRows"));
-	return Record(duo_transflower_push_input(Session, static_cast<uint32_t>(InputIndex), Rows.GetData(), static_cast<size_t>(Rows.Num())),
-		TEXT("duo_transflower_push_input"));
+	DUOLANDO_NEED_RUNNER(TEXT("PushAudioRows"));
+	// Checked here, as the session would (its refusals come back from the worker too late to answer).
+	const int32 Features = AudioFeatures();
+	if (Rows.Num() == 0 || Rows.Num() % Features != 0)
+		return Refuse(DUO_INVALID_ARGUMENT, FString::Printf(TEXT("PushAudioRows: %d floats: whole rows of %d features are needed"), Rows.Num(), Features));
+	for (int32 i = 0; i < Rows.Num(); ++i)
+		if (!std::isfinite(Rows[i]) || std::fabs(Rows[i]) > DUO_MAX_MUSIC_FEATURE)
+			return Refuse(DUO_NON_FINITE_INPUT, FString::Printf(TEXT("PushAudioRows: row %d, feature %d is not finite or above DUO_MAX_MUSIC_FEATURE"), i / Features, i % Features));
+	const size_t N = static_cast<size_t>(Rows.Num() / Features);
+	if (Runner->RowRoom() < N)   // only the worker takes rows out: the room cannot shrink before SubmitAudio
+		return Refuse(DUO_BACKLOG, FString::Printf(TEXT("PushAudioRows: %d rows: the queue is full (take frames with TryPullFrame first)"), static_cast<int32>(N)));
+	Runner->SubmitAudio(Rows.GetData(), N);
+	LastResult = DUO_OK;
+	return true;
 }
 
 bool UDuolandoTransflowerComponent::Publish(uint64 Index)
@@ -135,31 +154,32 @@ bool UDuolandoTransflowerComponent::Publish(uint64 Index)
 
 bool UDuolandoTransflowerComponent::TryPullFrame()
 {
-	DUOLANDO_NEED_SESSION(TEXT("TryPullFrame"));
-	uint64_t Index = 0;   // Frame (Channels() floats) is written only on DUO_OK
-	if (!Record(duo_transflower_pull_frame(Session, Frame.GetData(), static_cast<size_t>(Frame.Num()), &Index), TEXT("duo_transflower_pull_frame")))
+	DUOLANDO_NEED_RUNNER(TEXT("TryPullFrame"));
+	uint64_t Index = 0;   // Frame (Channels() floats) is written only when a frame is taken
+	if (Runner->Take(Frame.GetData(), &Index, 1) == 1)
+	{
+		LastResult = DUO_OK;
+		return Publish(Index);
+	}
+	const duo_result Error = Runner->WorkerError();
+	if (Error == DUO_OK)
+	{
+		LastResult = DUO_NOT_READY;   // not a failure: push more audio, or its step still runs
 		return false;
-	return Publish(Index);
-}
-
-bool UDuolandoTransflowerComponent::TryPullFrameWithNoise(const TArray<float>& Noise)
-{
-	DUOLANDO_NEED_SESSION(TEXT("TryPullFrameWithNoise"));
-	uint64_t Index = 0;
-	if (!Record(duo_transflower_pull_frame_with_noise(Session, Noise.GetData(), static_cast<size_t>(Noise.Num()), Frame.GetData(),
-					static_cast<size_t>(Frame.Num()), &Index),
-			TEXT("duo_transflower_pull_frame_with_noise")))
-		return false;
-	return Publish(Index);
+	}
+	if (LastResult != Error)   // logged once
+		UE_LOG(LogDuolando, Error, TEXT("Duolando: the Transflower worker stopped: %s"), UTF8_TO_TCHAR(duo_result_name(Error)));
+	LastResult = Error;
+	return false;
 }
 
 bool UDuolandoTransflowerComponent::ResetSession(int64 Seed)
 {
-	DUOLANDO_NEED_SESSION(TEXT("ResetSession"));
-	if (!Record(duo_transflower_session_reset(Session, static_cast<uint64_t>(Seed)), TEXT("duo_transflower_session_reset")))
-		return false;
+	DUOLANDO_NEED_RUNNER(TEXT("ResetSession"));
+	Runner->Reset(static_cast<uint64_t>(Seed));
+	LastResult = DUO_OK;
 	FrameIndex = -1;
 	return true;
 }
 
-#undef DUOLANDO_NEED_SESSION
+#undef DUOLANDO_NEED_RUNNER

@@ -1,24 +1,24 @@
 // UDuolandoTransflowerComponent: one probabilistic solo dancer (a Transflower
-// model, .duo family 2) over the C ABI's duo_transflower_* session.
+// model, .duo family 2) over the C ABI's duo_transflower_* session, run by a
+// worker thread (duolando::TransflowerRunner, DuolandoRunner.h).
 //
-// The caller drives the session: PushAudioRows (whole rows of
-// AudioFeatures() floats, 20 per second), then TryPullFrame (the session's
-// seeded base sample) or TryPullFrameWithNoise (the caller's, e.g. recorded
-// noise to replay a dance) until it answers false; ResetSession(seed) goes
-// back to the seed motion with no audio. A pulled frame is the model's
-// motion features (Channels() floats, its scaled feature space: e.g. 69-d
-// exponential maps and root deltas in the paper config), not joints:
-// turning them into a pose (the authors' scaler and skeleton) is the
-// game's job (docs/TRANSFLOWER.md "Motion to a skeleton").
+// The caller feeds audio (PushAudioRows: whole rows of AudioFeatures()
+// floats, 20 per second) and takes frames (TryPullFrame) until it answers
+// false; ResetSession(seed) goes back to the seed motion with no audio.
+// The base samples come from the session's seeded RNG (RngSeed), or from
+// NoiseTrack while it lasts (recorded noise, e.g. to replay a dance). A
+// frame is the model's motion features (Channels() floats, its scaled
+// feature space: e.g. 69-d exponential maps and root deltas in the paper
+// config), not joints: turning them into a pose (the authors' scaler and
+// skeleton) is the game's job (docs/TRANSFLOWER.md "Motion to a skeleton").
 //
-// BLOCKING: TryPullFrame* runs the frame's model step on the calling thread
-// (published size, one thread: "realtime" mean 39.6 ms, p99 41.5 ms, the
-// first step a whole R step, ~260 ms;
-// docs/TRANSFLOWER.md "Speed and memory at the published size", int8, a
-// shared 2-core machine). Unlike the follower and Bailando
-// components there is no worker thread here: call the pulls from a worker
-// (e.g. an async task) holding the component exclusively, or accept the
-// hitch. One thread at a time per component (the session's rule).
+// THREADS: every function here is for the game thread and returns without
+// waiting for the model: the frames' steps (published size, one thread:
+// "realtime" mean 39.6 ms, p99 41.5 ms, the first step a whole R step,
+// ~260 ms; docs/TRANSFLOWER.md "Speed and memory at the published size")
+// run on the runner's worker, up to 20 frames (1 s) ahead of TryPullFrame,
+// and it alone touches the session. EndPlay (and destruction) joins the
+// worker: it waits for at most the step in flight.
 #pragma once
 
 #include "Components/ActorComponent.h"
@@ -29,8 +29,8 @@
 #include "DuolandoTransflowerComponent.generated.h"
 
 struct duo_model;
-struct duo_session;
 struct duo_transflower_info;
+namespace duolando { class TransflowerRunner; }
 
 // (The parameter is not named FrameIndex, as the component's property is: no shadowing.)
 DECLARE_DYNAMIC_MULTICAST_DELEGATE_OneParam(FDuolandoTransflowerFrameSignature, int64, PulledIndex);
@@ -42,7 +42,7 @@ class DUOLANDO_API UDuolandoTransflowerComponent : public UActorComponent
 
 public:
 	UDuolandoTransflowerComponent();
-	~UDuolandoTransflowerComponent();   // out of line: duo_transflower_info is incomplete here
+	~UDuolandoTransflowerComponent();   // out of line: duo_transflower_info and TransflowerRunner are incomplete here
 
 	/** The Transflower .duo model: absolute, or relative to the project's Content folder
 	 *  (memory-mapped when a plain file, else read into one native copy). */
@@ -68,6 +68,12 @@ public:
 	UPROPERTY(EditAnywhere, Category = "Duolando")
 	int64 RngSeed = 0;
 
+	/** Recorded base samples (whole samples of NoiseFloats() floats, channel-major): frame t
+	 *  takes sample t while they last, then the seeded RNG; again from the start after
+	 *  ResetSession. Empty: the RNG only. Copied at BeginPlay. */
+	UPROPERTY(EditAnywhere, Category = "Duolando")
+	TArray<float> NoiseTrack;
+
 	/** The newest pulled frame: Channels() floats (motion features). */
 	UPROPERTY(BlueprintReadOnly, Category = "Duolando")
 	TArray<float> Frame;
@@ -85,28 +91,22 @@ public:
 	UPROPERTY(BlueprintAssignable, Category = "Duolando")
 	FDuolandoTransflowerFrameSignature OnFrame;
 
-	/** One or more whole audio rows (AudioFeatures() floats each). False (logged) on a wrong
-	 *  count, a non-finite value, DUO_BACKLOG (pull frames first) or no session; the session
-	 *  is then unchanged. */
+	/** Queues one or more whole audio rows (AudioFeatures() floats each) for the worker. All
+	 *  or nothing: false (logged) on a wrong count, a non-finite value or one above
+	 *  DUO_MAX_MUSIC_FEATURE (DUO_NON_FINITE_INPUT), DUO_BACKLOG (the queue of 512 rows is
+	 *  full: take frames first, the dance waits for TryPullFrame; push longer audio in pieces)
+	 *  or no session. */
 	UFUNCTION(BlueprintCallable, Category = "Duolando")
 	bool PushAudioRows(const TArray<float>& Rows);
 
-	/** Rows of sliding input InputIndex for models with more than one (duo_transflower_push_input;
-	 *  none of the published configs has one). False (logged) on failure. */
-	UFUNCTION(BlueprintCallable, Category = "Duolando")
-	bool PushInputRows(int32 InputIndex, const TArray<float>& Rows);
-
-	/** The next frame with the session's seeded base sample into Frame (runs its step: see
-	 *  BLOCKING above). False when its audio is not in yet (not logged) or on failure (logged). */
+	/** The next frame into Frame, if the worker has made it. False when none is ready yet
+	 *  (LastResult DUO_NOT_READY, not logged: its audio is not in, or its step still runs) or
+	 *  after a failure of the worker (LastResult its result, logged once). */
 	UFUNCTION(BlueprintCallable, Category = "Duolando")
 	bool TryPullFrame();
 
-	/** As TryPullFrame with the caller's base sample: NoiseFloats() floats, channel-major
-	 *  (channels x frames per sample); the session's RNG is not drawn. */
-	UFUNCTION(BlueprintCallable, Category = "Duolando")
-	bool TryPullFrameWithNoise(const TArray<float>& Noise);
-
-	/** Back to frame 0: the seed motion, no audio, the base samples reseeded with Seed. */
+	/** Back to frame 0: the seed motion, no audio, the base samples reseeded with Seed (and
+	 *  NoiseTrack from its start). Does not wait: rows queued and frames not taken are dropped. */
 	UFUNCTION(BlueprintCallable, Category = "Duolando")
 	bool ResetSession(int64 Seed);
 
@@ -121,7 +121,7 @@ public:
 	UFUNCTION(BlueprintPure, Category = "Duolando")
 	int32 AudioWindow() const;
 	UFUNCTION(BlueprintPure, Category = "Duolando")
-	int32 NoiseFloats() const;   // floats of one base sample (TryPullFrameWithNoise)
+	int32 NoiseFloats() const;   // floats of one base sample (NoiseTrack holds whole ones)
 	UFUNCTION(BlueprintPure, Category = "Duolando")
 	int32 NumLabels() const;   // values Labels must hold
 	UFUNCTION(BlueprintPure, Category = "Duolando")
@@ -136,16 +136,17 @@ public:
 	virtual void EndPlay(const EEndPlayReason::Type Reason) override;
 
 	/** True between a successful BeginPlay and EndPlay. */
-	bool IsRunning() const { return Session != nullptr; }
+	bool IsRunning() const { return Runner != nullptr; }
 	/** Frames pulled since BeginPlay (OnFrame broadcasts; ResetSession does not clear it). */
 	int64 FramesPulled() const { return Pulled; }
 
 private:
-	bool Record(int32 Result, const TCHAR* Call);   // sets LastResult; logs a failure by name
+	bool Record(int32 Result, const TCHAR* Call);   // sets LastResult; logs a failure by name and the library's message
+	bool Refuse(int32 Result, const FString& Why);  // sets LastResult; logs Why; false
 	bool Publish(uint64 Index);                      // Frame written: index, count, OnFrame
 
 	duo_model* Model = nullptr;
-	duo_session* Session = nullptr;
+	std::unique_ptr<duolando::TransflowerRunner> Runner;   // the session and its worker
 	std::unique_ptr<duo_transflower_info> Info;   // the model's sizes (48 bytes); zeros without a session
 	int64 Pulled = 0;
 };
