@@ -873,6 +873,8 @@ fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, j: &mut serde_jso
             let n = (args.warmup + args.runs).max(c + 4 * period + args.warmup);
             let times = on_threads(1, || solo_s_steps(&model, &sc, n, args.warmup, &music[..nm]))?;
             let st = stats(times);
+            let setting = format!("{}{}", preset.name(), if spread { "_spread" } else { "" });
+            s_step_json(j, d, 1, &setting, &st, bytes);
             say!(
                 "Bailando S step {d:>4} t1 {:<11} {:<9} (dec_future {:>2}, shift {}, f16 K/V): median {:8.2} ms  p99 {:8.2} ms  p99/median {:.1}  mean {:8.2} ms  {:.0}x real time  arena {:.2} MB",
                 preset.name(),
@@ -907,6 +909,17 @@ fn family_title(family: &str) -> String {
 fn r_step_json(j: &mut serde_json::Map<String, serde_json::Value>, dtype: &str, threads: usize, st: &Stats) {
     j.insert(format!("r_step_ms_{dtype}_t{threads}"), st.median_ms.into());
     j.insert(format!("r_step_p99_ms_{dtype}_t{threads}"), st.p99_ms.into());
+}
+
+/// A family's S step under a named setting in the JSON:
+/// `s_step_{ms,p99_ms,mean_ms}_<dtype>_t<N>_<setting>` and
+/// `arena_bytes_<dtype>_<setting>` (the duolando family's key shapes with
+/// the setting appended: a preset, `_spread` where that schedule ran).
+fn s_step_json(j: &mut serde_json::Map<String, serde_json::Value>, dtype: &str, threads: usize, setting: &str, st: &Stats, arena: usize) {
+    j.insert(format!("s_step_ms_{dtype}_t{threads}_{setting}"), st.median_ms.into());
+    j.insert(format!("s_step_p99_ms_{dtype}_t{threads}_{setting}"), st.p99_ms.into());
+    j.insert(format!("s_step_mean_ms_{dtype}_t{threads}_{setting}"), st.mean_ms.into());
+    j.insert(format!("arena_bytes_{dtype}_{setting}"), arena.into());
 }
 
 /// Times `n` steps of one Bailando session (after `warmup`), a music row

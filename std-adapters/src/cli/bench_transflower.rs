@@ -22,7 +22,7 @@ use duolando_core::transflower::session::{session_bytes, Preset, Session, Sessio
 
 use super::ort::OrtBaseline;
 use super::LABEL;
-use super::{on_threads, r_step_json, stats, Args, RandomModel, Rng, StoreAs};
+use super::{on_threads, r_step_json, s_step_json, stats, Args, RandomModel, Rng, StoreAs};
 
 /// Multiply-accumulates of one R step at the published size (the authors'
 /// FlopCounter: 16.1 GMAC per frame).
@@ -187,6 +187,7 @@ pub(super) fn run(args: &Args, ort: Option<&OrtBaseline>, j: &mut serde_json::Ma
                 })
                 .with_context(|| format!("S step {}", preset.name()))?;
                 let st = stats(times);
+                s_step_json(j, d, t, preset.name(), &st, bytes);
                 say!(
                     "Transflower S step {d:>4} t{t} {:<8} (refresh {:>2}{}, {:?} K/V): median {:8.2} ms  p99 {:8.2} ms  mean {:8.2} ms  {:.2}x real time (mean)  arena {:.2} MB",
                     preset.name(),
