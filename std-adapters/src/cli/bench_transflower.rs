@@ -87,7 +87,7 @@ fn flow_ready(rm: &mut RandomModel) {
             v.fill(1.0);
         } else if name.ends_with(".gamma") || name.ends_with(".weight_v") || name.ends_with(".inv_std") || name.ends_with(".weight_g") {
             for x in v.iter_mut() {
-                *x = 1.0 + *x;
+                *x += 1.0;
             }
         }
     }
