@@ -397,8 +397,6 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(
     use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
     let pv = if Q4 { PN } else { PV };
     let nb = w.blocks_for(xq, xd, []);
-    let low = vdupq_n_u8(0x0f);
-    let eight = vdupq_n_s8(8);
     // [row m][even / odd blocks][rows 0-3 / 4-7].
     let mut acc = [[[vdupq_n_f32(0.0); 2]; 2]; K];
     for b in 0..nb {
@@ -417,21 +415,8 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(
         // [row m][quarter j]: lanes (2r, 2r + 1) = halves of row 2j + r's block dot.
         let mut dp = [[vdupq_n_s32(0); 4]; K];
         for g in 0..4 {
-            let wg: [int8x16_t; 4] = core::array::from_fn(|j| {
-                if Q4 {
-                    // SAFETY: vb holds 2 x 64 bytes; 64 (g % 2) + 16 j + 16 <= 128.
-                    let v = unsafe { vld1q_u8(vb.as_ptr().add(64 * (g % 2) + 16 * j)) };
-                    let nib = if g < 2 {
-                        vandq_u8(v, low)
-                    } else {
-                        vshrq_n_u8::<4>(v)
-                    };
-                    vsubq_s8(vreinterpretq_s8_u8(nib), eight)
-                } else {
-                    // SAFETY: vb holds 4 x 64 bytes; 64 g + 16 j + 16 <= 256.
-                    unsafe { vld1q_s8(vb.as_ptr().add(64 * g + 16 * j) as *const i8) }
-                }
-            });
+            // SAFETY: vb is block b's values (`pv` bytes); neon is this fn's.
+            let wg = unsafe { packed_group::<Q4>(vb, g) };
             for (m, dm) in dp.iter_mut().enumerate() {
                 let xs = &xq[m][b * Q8_BLOCK + 8 * g..b * Q8_BLOCK + 8 * g + 8];
                 // SAFETY: xs holds 8 bytes.
@@ -445,14 +430,65 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(
             }
         }
         for (m, am) in acc.iter_mut().enumerate() {
-            let sx = vdupq_n_f32(xd[m][b]);
-            let a = &mut am[b % 2];
-            for h in 0..2 {
-                let sums = vpaddq_s32(dp[m][2 * h], dp[m][2 * h + 1]);
-                a[h] = vfmaq_f32(a[h], vcvtq_f32_s32(sums), vmulq_f32(sv[h], sx));
-            }
+            let sums = [0, 1].map(|h| vpaddq_s32(dp[m][2 * h], dp[m][2 * h + 1]));
+            // SAFETY: neon is this fn's.
+            unsafe { block_fma(&mut am[b % 2], sums, &sv, xd[m][b]) };
         }
     }
+    // SAFETY: as above.
+    unsafe { packed_out(acc) }
+}
+
+/// The 64 bytes of 8-byte group `g` (0..4) of a packed block's values `vb`
+/// as 4 vectors, vector `j` = weight rows `2j` (bytes 0-7) and `2j + 1`
+/// (bytes 8-15), signed (4-bit: the stored nibble minus 8).
+///
+/// # Safety
+/// The CPU must support neon; `vb` holds one block (2 x 64 bytes 4-bit, 4
+/// x 64 int8).
+#[inline]
+#[target_feature(enable = "neon")]
+unsafe fn packed_group<const Q4: bool>(vb: &[u8], g: usize) -> [int8x16_t; 4] {
+    debug_assert!(vb.len() >= if Q4 { 128 } else { 256 });
+    core::array::from_fn(|j| {
+        if Q4 {
+            // SAFETY: vb holds 2 x 64 bytes; 64 (g % 2) + 16 j + 16 <= 128.
+            let v = unsafe { vld1q_u8(vb.as_ptr().add(64 * (g % 2) + 16 * j)) };
+            let nib = if g < 2 {
+                vandq_u8(v, vdupq_n_u8(0x0f))
+            } else {
+                vshrq_n_u8::<4>(v)
+            };
+            vsubq_s8(vreinterpretq_s8_u8(nib), vdupq_n_s8(8))
+        } else {
+            // SAFETY: vb holds 4 x 64 bytes; 64 g + 16 j + 16 <= 256.
+            unsafe { vld1q_s8(vb.as_ptr().add(64 * g + 16 * j) as *const i8) }
+        }
+    })
+}
+
+/// One block's f32 step of a packed kernel for one activation row: `a[h]
+/// += f32(sums[h]) * (s[h] * xd)` (weight rows 4h..4h + 4), the same
+/// operations as every other packed kernel's.
+///
+/// # Safety
+/// The CPU must support neon.
+#[inline]
+#[target_feature(enable = "neon")]
+unsafe fn block_fma(a: &mut [float32x4_t; 2], sums: [int32x4_t; 2], s: &[float32x4_t; 2], xd: f32) {
+    let sx = vdupq_n_f32(xd);
+    for h in 0..2 {
+        a[h] = vfmaq_f32(a[h], vcvtq_f32_s32(sums[h]), vmulq_f32(s[h], sx));
+    }
+}
+
+/// The rows' outputs: even-block plus odd-block accumulators (`acc[m][parity][h]`).
+///
+/// # Safety
+/// The CPU must support neon.
+#[inline]
+#[target_feature(enable = "neon")]
+unsafe fn packed_out<const K: usize>(acc: [[[float32x4_t; 2]; 2]; K]) -> [[f32; 8]; K] {
     let mut out = [[0.0f32; 8]; K];
     for (o, a) in out.iter_mut().zip(acc) {
         for h in 0..2 {
@@ -461,6 +497,140 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(
         }
     }
     out
+}
+
+/// See [`super::gemm_q8_packed`] with the i8mm extension: per 8-byte group,
+/// `smmla` multiplies two weight rows (one 16-byte vector of the packed
+/// group) by two activation rows (their 8 bytes side by side): 4 `smmla`
+/// for 2 activation rows x 8 weight rows, half the instructions of
+/// [`gemm_q8_packed_dot`]'s `sdot`. The exact i32 block sums are unzipped
+/// into [`gemm_q8_packed_dot`]'s lane order and take its f32 steps, so the
+/// same bits as every packed kernel. Activation rows go in passes of at
+/// most 4, as pairs (an odd last row paired with itself, its twin dropped).
+///
+/// # Safety
+/// The CPU must support neon, dotprod and i8mm.
+#[target_feature(enable = "neon,dotprod,i8mm")]
+pub unsafe fn gemm_q8_packed_i8mm<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    xc: [&[i32]; M],
+) -> [[f32; 8]; M] {
+    // SAFETY: the caller's features are this function's.
+    unsafe { gemm_q8_packed_i8mm_ahead(w, xq, xd, xc, &[]) }
+}
+
+/// [`gemm_q8_packed_i8mm`] that also prefetches `ahead` into L2 (as
+/// [`gemm_q8_packed_dot_ahead`]).
+///
+/// # Safety
+/// As [`gemm_q8_packed_i8mm`].
+#[target_feature(enable = "neon,dotprod,i8mm")]
+pub unsafe fn gemm_q8_packed_i8mm_ahead<const M: usize>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; M],
+    xd: [&[f32]; M],
+    _xc: [&[i32]; M],
+    ahead: &[u8],
+) -> [[f32; 8]; M] {
+    super::passes_of_four!(M, ahead, |K, m0, a| {
+        let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
+        let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
+        // SAFETY: the caller's features are these functions'.
+        unsafe {
+            if w.q4 {
+                packed_i8mm::<K, true>(w, q, d, a)
+            } else {
+                packed_i8mm::<K, false>(w, q, d, a)
+            }
+        }
+    })
+}
+
+/// `smmla`: `acc += a b^T` for `a`, `b` two rows of 8 i8 each (lanes:
+/// a0.b0, a0.b1, a1.b0, a1.b1), via asm: the intrinsic is not stable Rust yet.
+///
+/// # Safety
+/// The CPU must support neon and i8mm.
+#[inline]
+#[target_feature(enable = "neon,i8mm")]
+unsafe fn smmla(acc: int32x4_t, a: int8x16_t, b: int8x16_t) -> int32x4_t {
+    let mut r = acc;
+    // SAFETY: a register-only instruction of the i8mm extension (this fn's
+    // target feature; the caller vouched for the CPU).
+    unsafe {
+        core::arch::asm!("smmla {0:v}.4s, {1:v}.16b, {2:v}.16b", inout(vreg) r, in(vreg) a, in(vreg) b, options(pure, nomem, nostack))
+    };
+    r
+}
+
+/// [`gemm_q8_packed_i8mm`] for `K` (1..=4) activation rows and one value
+/// width (`Q4`: 4-bit halves).
+///
+/// # Safety
+/// As [`gemm_q8_packed_i8mm`].
+#[inline]
+#[target_feature(enable = "neon,dotprod,i8mm")]
+unsafe fn packed_i8mm<const K: usize, const Q4: bool>(
+    w: super::PackedQ8<'_>,
+    xq: [&[i8]; K],
+    xd: [&[f32]; K],
+    ahead: &[u8],
+) -> [[f32; 8]; K] {
+    use super::{PACK_BLOCK_NIBBLES as PN, PACK_BLOCK_SCALES as PS, PACK_BLOCK_VALUES as PV};
+    let pv = if Q4 { PN } else { PV };
+    let nb = w.blocks_for(xq, xd, []);
+    // Activation row pairs: (0, 1), (2, 3); an odd last row twice.
+    let pair = |p: usize| [2 * p, (2 * p + 1).min(K - 1)];
+    let mut acc = [[[vdupq_n_f32(0.0); 2]; 2]; K];
+    for b in 0..nb {
+        super::prefetch_part(ahead, b, nb);
+        let vb = &w.v[pv * b..pv * (b + 1)];
+        let sb = &w.s[PS * b..PS * (b + 1)];
+        // SAFETY: sb holds 8 f16 (16 bytes).
+        let s16 = unsafe { vld1q_u16(sb.as_ptr() as *const u16) };
+        // SAFETY: this function's features include f16x4_to_f32's.
+        let sv = unsafe {
+            [
+                f16x4_to_f32(vget_low_u16(s16)),
+                f16x4_to_f32(vget_high_u16(s16)),
+            ]
+        };
+        // [pair p][weight rows 2j, 2j + 1]: lanes (row 2j, act 0), (2j, act 1),
+        // (2j + 1, act 0), (2j + 1, act 1).
+        let mut dp = [[vdupq_n_s32(0); 4]; 2];
+        for g in 0..4 {
+            // SAFETY: vb is block b's values; neon is this fn's.
+            let wg = unsafe { packed_group::<Q4>(vb, g) };
+            for (p, dpp) in dp.iter_mut().enumerate().take(K.div_ceil(2)) {
+                let [m0, m1] = pair(p);
+                let x8 = |m: usize| {
+                    let xs = &xq[m][b * Q8_BLOCK + 8 * g..b * Q8_BLOCK + 8 * g + 8];
+                    // SAFETY: xs holds 8 bytes.
+                    unsafe { vld1_s8(xs.as_ptr()) }
+                };
+                let xg = vcombine_s8(x8(m0), x8(m1));
+                for (d, wj) in dpp.iter_mut().zip(&wg) {
+                    // SAFETY: this function's features are smmla's.
+                    *d = unsafe { smmla(*d, *wj, xg) };
+                }
+            }
+        }
+        for (p, dpp) in dp.iter().enumerate().take(K.div_ceil(2)) {
+            let [m0, m1] = pair(p);
+            // Weight rows 0-3 / 4-7 of activation row m0 (even lanes) and m1 (odd lanes).
+            let first = [0, 1].map(|h| vuzp1q_s32(dpp[2 * h], dpp[2 * h + 1]));
+            let second = [0, 1].map(|h| vuzp2q_s32(dpp[2 * h], dpp[2 * h + 1]));
+            // SAFETY (both): neon is this fn's.
+            unsafe { block_fma(&mut acc[m0][b % 2], first, &sv, xd[m0][b]) };
+            if m1 != m0 {
+                unsafe { block_fma(&mut acc[m1][b % 2], second, &sv, xd[m1][b]) };
+            }
+        }
+    }
+    // SAFETY: as above.
+    unsafe { packed_out(acc) }
 }
 
 /// `y += a * x` (fused multiply-add).

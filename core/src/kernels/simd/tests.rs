@@ -715,12 +715,20 @@ unsafe fn packed_rows_dot(
     q: &[&[i8]],
     d: &[&[f32]],
     c: &[&[i32]],
+    i8mm: bool,
 ) -> Vec<[f32; 8]> {
     macro_rules! call {
         ($($k:literal)*) => {
             match q.len() {
                 // SAFETY: the caller's features.
-                $($k => unsafe { super::neon::gemm_q8_packed_dot::<$k>(w, core::array::from_fn(|m| q[m]), core::array::from_fn(|m| d[m]), core::array::from_fn(|m| c[m])) }.to_vec(),)*
+                $($k => unsafe {
+                    let (q, d, c) = (core::array::from_fn(|m| q[m]), core::array::from_fn(|m| d[m]), core::array::from_fn(|m| c[m]));
+                    if i8mm {
+                        super::neon::gemm_q8_packed_i8mm::<$k>(w, q, d, c)
+                    } else {
+                        super::neon::gemm_q8_packed_dot::<$k>(w, q, d, c)
+                    }
+                }.to_vec(),)*
                 _ => unreachable!(),
             }
         };
@@ -898,20 +906,26 @@ fn packed_gemm_q8_matches_scalar_twin() {
                 });
             }
         }
+        // The NEON kernels (sdot, smmla): 8 rows in one call, then every row
+        // count gives each row the numbers it gets among 8.
         #[cfg(target_arch = "aarch64")]
-        if std::arch::is_aarch64_feature_detected!("dotprod") {
-            // SAFETY: neon (baseline) and dotprod detected.
-            let a8 = unsafe { super::neon::gemm_q8_packed_dot::<8>(view, q, d, c) };
-            got.push(("neondot", a8));
+        for (name, i8mm) in [("neondot", false), ("neoni8mm", true)] {
+            use std::arch::is_aarch64_feature_detected as has;
+            if !has!("dotprod") || (i8mm && !has!("i8mm")) {
+                continue;
+            }
+            // SAFETY: neon (baseline), dotprod and (where used) i8mm detected.
+            let a8 = unsafe { packed_rows_dot(view, &q, &d, &c, i8mm) };
+            got.push((name, a8.clone().try_into().unwrap()));
             for_row_counts(&mut |m0, k| {
                 // SAFETY: as above.
                 let t = unsafe {
-                    packed_rows_dot(stored, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k])
+                    packed_rows_dot(stored, &q[m0..m0 + k], &d[m0..m0 + k], &c[m0..m0 + k], i8mm)
                 };
                 assert_eq!(
                     bits8(&t),
                     bits8(&a8[m0..m0 + k]),
-                    "neondot rows {m0}..{} nb={nb}",
+                    "{name} rows {m0}..{} nb={nb}",
                     m0 + k
                 );
             });
@@ -2445,20 +2459,24 @@ fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
                 }
             }
             #[cfg(target_arch = "aarch64")]
-            if std::arch::is_aarch64_feature_detected!("dotprod") {
-                // SAFETY: neon (baseline) and dotprod detected.
-                let (a, b) = unsafe {
+            for (name, i8mm) in [("neondot q4", false), ("neoni8mm q4", true)] {
+                use std::arch::is_aarch64_feature_detected as has;
+                if !has!("dotprod") || (i8mm && !has!("i8mm")) {
+                    continue;
+                }
+                // SAFETY: neon (baseline), dotprod and (where used) i8mm detected.
+                let (a, b, dot) = unsafe {
                     (
+                        packed_rows_dot(g, &q, &d, &c, i8mm),
+                        packed_rows_dot(pack.view(), &q, &d, &c, i8mm),
                         super::neon::gemm_q8_packed_dot::<8>(g, q, d, c),
-                        super::neon::gemm_q8_packed_dot::<8>(pack.view(), q, d, c),
                     )
                 };
-                assert_eq!(
-                    bits(a),
-                    bits(b),
-                    "neondot q4 group vs packed expansion nb={nb}"
-                );
-                check_packed_rows("neondot q4", a, twin, &rows8, &qs, &ds, nb);
+                let a: [[f32; 8]; 8] = a.try_into().unwrap();
+                let b: [[f32; 8]; 8] = b.try_into().unwrap();
+                assert_eq!(bits(a), bits(b), "{name} group vs packed expansion nb={nb}");
+                assert_eq!(bits(a), bits(dot), "{name} = neondot q4 bit for bit nb={nb}");
+                check_packed_rows(name, a, twin, &rows8, &qs, &ds, nb);
             }
         }
     }
