@@ -7,7 +7,7 @@
 //! ([`ensure_init`]). [`init`] does the same explicitly (and again, after a
 //! change of `DUOLANDO_ISA`).
 //!
-//! `DUOLANDO_ISA=scalar|avx2|avxvnni|avx512|avx512vnni|avx512amx|neon|neondot` caps
+//! `DUOLANDO_ISA=scalar|avx2|avxvnni|avx512|avx512vnni|avx512amx|neon|neondot|neoni8mm` caps
 //! the choice (an ISA this CPU lacks selects scalar), for comparisons.
 //!
 //! AMX-INT8 (Intel Sapphire Rapids and later) is not an ISA of its own
@@ -15,7 +15,10 @@
 //! permission and, if granted, lets the packed int8 GEMM run whole tiles
 //! of 16 activation rows on the tile unit (the same values bit for bit:
 //! `duolando_core::kernels::simd::amx`). `DUOLANDO_ISA=avx512vnni` keeps
-//! it off; unset or `avx512amx` allows it.
+//! it off; unset or `avx512amx` allows it. The NEON i8mm extension is
+//! handled the same way on top of NeonDot (`smmla` for the packed int8
+//! GEMM: `duolando_core::kernels::simd::i8mm`): `DUOLANDO_ISA=neondot`
+//! keeps it off; unset or `neoni8mm` allows it.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Once;
@@ -79,7 +82,7 @@ pub fn parse(name: &str) -> Option<Isa> {
         "avx512" => Isa::Avx512,
         "avx512vnni" | "avx512amx" => Isa::Avx512Vnni,
         "neon" => Isa::Neon,
-        "neondot" => Isa::NeonDot,
+        "neondot" | "neoni8mm" => Isa::NeonDot,
         _ => return None,
     })
 }
@@ -106,6 +109,16 @@ pub fn init() -> Isa {
         #[allow(unsafe_code)]
         unsafe {
             simd::amx::enable(amx)
+        };
+    }
+    #[cfg(target_arch = "aarch64")]
+    {
+        let wanted =
+            std::env::var("DUOLANDO_ISA").map_or(true, |s| s.eq_ignore_ascii_case("neoni8mm"));
+        // SAFETY: `i8mm_usable` checked the CPU's i8mm bit; the ISA is NeonDot.
+        #[allow(unsafe_code)]
+        unsafe {
+            simd::i8mm::enable(isa == Isa::NeonDot && wanted && i8mm_usable())
         };
     }
     isa
@@ -163,16 +176,18 @@ pub fn run_probe(p: simd::peak::Probe, iters: u64, o: &simd::peak::Operands) -> 
 /// name, an ISA this CPU lacks (`duolando bench --isa`).
 pub fn select(name: &str) -> Result<Isa, String> {
     let isa = parse(name).ok_or_else(|| {
-        format!("unknown ISA '{name}' (scalar, avx2, avxvnni, avx512, avx512vnni, avx512amx, neon, neondot)")
+        format!("unknown ISA '{name}' (scalar, avx2, avxvnni, avx512, avx512vnni, avx512amx, neon, neondot, neoni8mm)")
     })?;
     let all = supported();
     let amx = name.eq_ignore_ascii_case("avx512amx");
-    if !all.contains(&isa) || (amx && !amx_usable()) {
+    let i8mm = name.eq_ignore_ascii_case("neoni8mm");
+    if !all.contains(&isa) || (amx && !amx_usable()) || (i8mm && !i8mm_usable()) {
         let names: Vec<&str> = all.iter().map(|&i| name_plain(i)).collect();
         return Err(format!(
-            "ISA '{name}': this CPU does not have it (it has: {}{})",
+            "ISA '{name}': this CPU does not have it (it has: {}{}{})",
             names.join(", "),
-            if amx_usable() { ", avx512amx" } else { "" }
+            if amx_usable() { ", avx512amx" } else { "" },
+            if i8mm_usable() { ", neoni8mm" } else { "" }
         ));
     }
     SELECTED.store(true, Ordering::Release);
@@ -188,6 +203,12 @@ pub fn select(name: &str) -> Result<Isa, String> {
     #[allow(unsafe_code)]
     unsafe {
         simd::amx::enable(amx)
+    };
+    // SAFETY: i8mm only where `i8mm_usable` checked the CPU bit, and the ISA
+    // is NeonDot (parse maps neoni8mm to it).
+    #[allow(unsafe_code)]
+    unsafe {
+        simd::i8mm::enable(i8mm)
     };
     Ok(isa)
 }
@@ -230,12 +251,13 @@ pub fn force_scalar() {
 }
 
 /// The kernels running now in words, as the CLI prints them: `Avx512Vnni`,
-/// `Avx512Vnni+AMX`, `Avx2`, `Neon`, `Scalar`, ...
+/// `Avx512Vnni+AMX`, `Avx2`, `NeonDot+I8MM`, `Neon`, `Scalar`, ...
 pub fn describe() -> String {
     format!(
-        "{:?}{}",
+        "{:?}{}{}",
         simd::isa(),
-        if amx_active() { "+AMX" } else { "" }
+        if amx_active() { "+AMX" } else { "" },
+        if i8mm_active() { "+I8MM" } else { "" }
     )
 }
 
@@ -245,7 +267,7 @@ pub fn active() -> Isa {
 }
 
 /// The lower-case name of an ISA, as [`parse`] reads it; `avx512amx` where
-/// the AMX tile kernel is on.
+/// the AMX tile kernel is on, `neoni8mm` where the i8mm kernel is.
 pub fn name(isa: Isa) -> &'static str {
     match isa {
         Isa::Scalar => "scalar",
@@ -255,8 +277,25 @@ pub fn name(isa: Isa) -> &'static str {
         Isa::Avx512Vnni if amx_active() => "avx512amx",
         Isa::Avx512Vnni => "avx512vnni",
         Isa::Neon => "neon",
+        Isa::NeonDot if i8mm_active() => "neoni8mm",
         Isa::NeonDot => "neondot",
     }
+}
+
+/// Whether the NEON i8mm packed kernel runs now (after [`init`]).
+pub fn i8mm_active() -> bool {
+    simd::i8mm::enabled()
+}
+
+/// Whether this CPU has NEON dotprod and i8mm (aarch64 only).
+pub fn i8mm_usable() -> bool {
+    #[cfg(target_arch = "aarch64")]
+    {
+        std::arch::is_aarch64_feature_detected!("dotprod")
+            && std::arch::is_aarch64_feature_detected!("i8mm")
+    }
+    #[cfg(not(target_arch = "aarch64"))]
+    false
 }
 
 /// Whether the AMX tile kernel runs now (after [`init`]).

@@ -102,6 +102,7 @@ fn an_isa_this_cpu_lacks_is_refused_by_name_before_anything_runs() {
         .into_iter()
         .filter(|n| !supported.contains(&duolando::simd::parse(n).unwrap()))
         .chain((!duolando::simd::amx_usable()).then_some("avx512amx"))
+        .chain((!duolando::simd::i8mm_usable()).then_some("neoni8mm"))
         .collect();
     assert!(
         !missing.is_empty(),

@@ -80,7 +80,8 @@ pub struct Args {
     pub scalar: bool,
     /// Run the whole bench once per ISA, in this order, in one invocation
     /// (comma separated: scalar, avx2, avxvnni, avx512, avx512vnni, avx512amx =
-    /// AVX512-VNNI with the AMX tiles, neon, neondot); every line then starts
+    /// AVX512-VNNI with the AMX tiles, neon, neondot, neoni8mm = NEON dotprod
+    /// with the i8mm packed GEMM); every line then starts
     /// with `[isa | CPU model]` and every JSON key ends in `_<isa>`. An ISA
     /// this CPU lacks is refused by name before anything runs. Default: the
     /// detected ISA (capped by `DUOLANDO_ISA`).

@@ -21,6 +21,7 @@ use core::sync::atomic::{AtomicU8, Ordering};
 
 #[cfg(target_arch = "x86_64")]
 pub mod amx;
+pub mod i8mm;
 pub mod peak;
 pub mod scalar;
 #[cfg(test)]
@@ -990,6 +991,9 @@ pub fn gemm_q8_packed_ahead<const M: usize>(
         // SAFETY: ISA holds AvxVnni only via COMPILE_TIME_ISA or `set_isa`,
         // whose caller vouched for avx2/fma/f16c/avxvnni.
         Isa::AvxVnni => unsafe { x86::gemm_q8_packed_avxvnni_ahead(w, xq, xd, xc, ahead) },
+        #[cfg(target_arch = "aarch64")]
+        // SAFETY: as below, and `i8mm::enable`'s caller vouched for i8mm.
+        Isa::NeonDot if i8mm::enabled() => unsafe { neon::gemm_q8_packed_i8mm_ahead(w, xq, xd, xc, ahead) },
         #[cfg(target_arch = "aarch64")]
         // SAFETY: ISA holds NeonDot only via COMPILE_TIME_ISA or `set_isa`,
         // whose caller vouched for neon + dotprod.
