@@ -54,8 +54,25 @@ def yaml_docs(s=DEMO, st=TRANSL):
     return {"follower_gpt.yaml": gpt, "motion_vqvae.yaml": motion, "transl_vqvae.yaml": transl}
 
 
-def build_models():
-    docs = yaml_docs()
+def demo_size(look_forward=None):
+    """The demo size, with another leader/music look-ahead (tokens) when given: the recipe's
+    latency knob (`train_gpt.py --look-forward`, docs/DEMO_MODEL.md "Latency chosen at
+    training time"). Only the GPT depends on it; the VQ-VAEs are the same for every value."""
+    return DEMO if look_forward is None else dict(DEMO, look_forward=int(look_forward))
+
+
+def checkpoint_look_forward(path):
+    """look_forward of a follower GPT checkpoint: stored by train_gpt.py, else read off the
+    music LAT's position table ((block_size + look_forward) * 4 rows; 29 for older files)."""
+    ck = torch.load(path, map_location="cpu", weights_only=False)
+    if "look_forward" in ck:
+        return int(ck["look_forward"])
+    rows = ck["model"]["music_trans.pos_emb"].shape[1]
+    return rows // RATE - DEMO["block_size"]
+
+
+def build_models(look_forward=None):
+    docs = yaml_docs(demo_size(look_forward))
     vq = SepVQVAEXM(Cfg(docs["motion_vqvae.yaml"]).structure)
     tr = VQVAE(Cfg(docs["transl_vqvae.yaml"]).structure)
     gpt = GPT2nt(Cfg(docs["follower_gpt.yaml"]).structure_generate)
@@ -173,12 +190,13 @@ def add_residual_dropout(module, p, types):
 
 # ---------------------------------------------------------------- checkpoints
 
-def save_checkpoint(model, path, epoch=1):
+def save_checkpoint(model, path, epoch=1, **extra):
     """Original checkpoint layout: {'model': state_dict, 'epoch': ...} (the original also
-    pickles its config object; we keep only plain data)."""
+    pickles its config object; we keep only plain data, plus `extra` keys such as the GPT's
+    look_forward)."""
     os.makedirs(os.path.dirname(path), exist_ok=True)
     torch.save({"model": {k: v.detach().clone() for k, v in model.state_dict().items()},
-                "epoch": epoch}, path)
+                "epoch": epoch, **extra}, path)
 
 
 def load_checkpoint(model, path):

@@ -24,7 +24,7 @@ import sys
 import numpy as np
 import torch
 
-from common import (Clock, RATE, build_models, load_checkpoint, load_split, setup_threads)
+from common import (Clock, RATE, build_models, checkpoint_look_forward, load_checkpoint, load_split, setup_threads)
 from train_gpt import batch_windows, encode_split, n_windows, window
 from reference.pipeline import generate_exact
 
@@ -205,7 +205,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     setup_threads()
     clock = Clock()
-    gpt, vq, tr = build_models()
+    gpt, vq, tr = build_models(None if args.recon_only else checkpoint_look_forward(f"{args.ckpt}/follower_gpt.pt"))
     for m, f in ((gpt, "follower_gpt.pt"), (vq, "motion_vqvae.pt"), (tr, "transl_vqvae.pt")):
         if args.recon_only and m is gpt:
             continue

@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import yaml
 
-from common import TOOLS, load_split, yaml_docs
+from common import TOOLS, checkpoint_look_forward, demo_size, load_split, yaml_docs
 
 sys.path.insert(0, TOOLS)
 import pt_to_safetensors  # noqa: E402
@@ -29,9 +29,15 @@ def main(argv=None):
     ap.add_argument("--data", required=True)
     ap.add_argument("--assets", required=True)
     ap.add_argument("--take", default=None, help="test take name for the demo clip (default: the longest)")
+    ap.add_argument("--look-forward", type=int, default=None,
+                    help="the GPT's look_forward for the YAML (default: the one stored in follower_gpt.pt)")
     args = ap.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
-    for name, doc in yaml_docs().items():
+    lf = args.look_forward
+    if lf is None:
+        lf = checkpoint_look_forward(os.path.join(args.ckpt, "follower_gpt.pt"))
+    print(f"follower GPT look_forward {lf}")
+    for name, doc in yaml_docs(demo_size(lf)).items():
         with open(os.path.join(args.out, name), "w") as f:
             yaml.safe_dump(doc, f, sort_keys=False)
     for pt, st in (("follower_gpt.pt", "gpt.safetensors"), ("motion_vqvae.pt", "vqvae.safetensors"),

@@ -8,7 +8,9 @@
 # MINUTES / SEED (synthetic data, default 60 / 1), DATA (synthetic data dir, default
 # /tmp/duo_synth_m$MINUTES_s$SEED; reused when it exists), WORK (scratch dir, default
 # /tmp/duo_train_m$MINUTES_s$SEED), VQ_STEPS / TR_STEPS / GPT_STEPS / GPT2_STEPS, EVAL=0 to skip
-# evaluation, DEMO_TAKE (test take of the demo clip; default Quickstep_20_01, empty = the longest),
+# evaluation, LOOK_FORWARD (the follower GPT's leader/music look-ahead in tokens, default 29 as the
+# original; the latency knob, docs/DEMO_MODEL.md "Latency chosen at training time"),
+# DEMO_TAKE (test take of the demo clip; default Quickstep_20_01, empty = the longest),
 # INSTALL=1 to replace assets/demo.duo and the demo clip, BIN (the duolando binary,
 # default $CARGO_TARGET_DIR or target, /release/duolando).
 # Single-threaded (torch.set_num_threads(1)) under nice; see docs/DEMO_MODEL.md for timings.
@@ -32,14 +34,15 @@ cd "$T"
 $NICE "$PY" train_vqvae.py  --data "$DATA" --out "$WORK/motion_vqvae.pt" --steps "${VQ_STEPS:-3000}" --batch 8 --lr 6e-4
 $NICE "$PY" train_transl.py --data "$DATA" --out "$WORK/transl_vqvae.pt" --steps "${TR_STEPS:-1500}"
 $NICE "$PY" train_gpt.py    --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
-                            --out "$WORK/follower_gpt.pt" --steps "${GPT_STEPS:-1800}" --batch 16
+                            --out "$WORK/follower_gpt.pt" --steps "${GPT_STEPS:-1800}" --batch 16 \
+                            --look-forward "${LOOK_FORWARD:-29}"
 # Optional second one-cycle run from the first (original `init_weight`). Off by default: with
 # 20 min of data, 600 more steps at lr 5e-4 overfit (held-out figures got worse; DEMO_MODEL.md).
 if [ "${GPT2_STEPS:-0}" != 0 ]; then
     mv "$WORK/follower_gpt.pt" "$WORK/follower_gpt_a.pt"
     $NICE "$PY" train_gpt.py --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
                              --init "$WORK/follower_gpt_a.pt" --out "$WORK/follower_gpt.pt" \
-                             --steps "$GPT2_STEPS" --batch 16 --lr 5e-4
+                             --steps "$GPT2_STEPS" --batch 16 --lr 5e-4 --look-forward "${LOOK_FORWARD:-29}"
 fi
 $NICE "$PY" export.py --ckpt "$WORK" --out "$WORK/export" --data "$DATA" --assets "$WORK/assets" \
     ${DEMO_TAKE:+--take "$DEMO_TAKE"}

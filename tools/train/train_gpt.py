@@ -2,7 +2,8 @@
 """Stage 2: the follower GPT, supervised (original gpt2t.py `MCTall.train`, models/gpt2nt_woln.py).
 
 Windows as in the original training (data.train.interval 240, move 4, music_dance_rate 1):
-a window starts at frame i = 4s; with bs = block_size (30) and lf = look_forward (29):
+a window starts at frame i = 4s; with bs = block_size (30) and lf = look_forward (29 as the
+original; `--look-forward N` trains another leader/music look-ahead, the recipe's latency knob):
   follower input tokens  [s, s+bs)        (up, down, lhand, rhand, transl)
   follower targets       [s+1, s+bs+1)    (teacher forcing)
   leader tokens          [s, s+bs+lf)     (look-ahead)
@@ -23,7 +24,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from common import (Clock, RATE, TRANSL_SCALE, build_models, load_checkpoint, load_split, normalised,
+from common import (Clock, DEMO, RATE, TRANSL_SCALE, build_models, load_checkpoint, load_split, normalised,
                     save_checkpoint, setup_threads)
 from reference.pipeline import encode_motion, encode_transl
 
@@ -100,10 +101,16 @@ def main(argv=None):
     ap.add_argument("--dropout", type=float, default=0.1)
     ap.add_argument("--seed", type=int, default=44)
     ap.add_argument("--init", default=None, help="continue from this GPT checkpoint (original init_weight)")
+    ap.add_argument("--look-forward", type=int, default=DEMO["look_forward"],
+                    help="leader and music look-ahead in tokens (4 frames each; default 29 as the original): "
+                         "the windows take leader tokens [s, s+bs+lf); R and S modes then need lf tokens "
+                         "of leader ahead (docs/DEMO_MODEL.md, latency)")
     args = ap.parse_args(argv)
+    if args.look_forward < 1:
+        ap.error("--look-forward must be >= 1")
     setup_threads()
     torch.manual_seed(args.seed)
-    gpt, vq, tr = build_models()
+    gpt, vq, tr = build_models(args.look_forward)
     load_checkpoint(vq, args.vqvae).eval()
     load_checkpoint(tr, args.transl).eval()
     clock = Clock()
@@ -121,7 +128,7 @@ def main(argv=None):
     opt = torch.optim.AdamW(gpt.parameters(), lr=args.lr, betas=(0.9, 0.95), weight_decay=0.01)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=args.lr, total_steps=args.steps, pct_start=0.05)
     n_params = sum(p.numel() for p in gpt.parameters())
-    print(f"[gpt] {n_params} parameters, {len(starts)} training windows", flush=True)
+    print(f"[gpt] {n_params} parameters, look_forward {lf}, {len(starts)} training windows", flush=True)
     run = None
     for step in range(1, args.steps + 1):
         pick = rng.integers(len(starts), size=args.batch)
@@ -141,7 +148,7 @@ def main(argv=None):
             print(f"[gpt] step {step}/{args.steps} loss {float(loss):.3f} "
                   f"train acc (ema) up/down/lh/rh/tr {' '.join(f'{a:.2f}' for a in run)} | {clock}", flush=True)
     gpt.eval()
-    save_checkpoint(gpt, args.out)
+    save_checkpoint(gpt, args.out, look_forward=lf)
     print(f"[gpt] saved {args.out} ({clock})")
     return 0
 
