@@ -622,9 +622,10 @@ unsafe fn packed_i8mm<const K: usize, const Q4: bool>(
             // Weight rows 0-3 / 4-7 of activation row m0 (even lanes) and m1 (odd lanes).
             let first = [0, 1].map(|h| vuzp1q_s32(dpp[2 * h], dpp[2 * h + 1]));
             let second = [0, 1].map(|h| vuzp2q_s32(dpp[2 * h], dpp[2 * h + 1]));
-            // SAFETY (both): neon is this fn's.
+            // SAFETY: neon is this fn's.
             unsafe { block_fma(&mut acc[m0][b % 2], first, &sv, xd[m0][b]) };
             if m1 != m0 {
+                // SAFETY: as above.
                 unsafe { block_fma(&mut acc[m1][b % 2], second, &sv, xd[m1][b]) };
             }
         }
