@@ -328,6 +328,24 @@ pub unsafe fn gemm_q8_dot<const M: usize>(
     acc.map(|am| am.map(|a| vaddvq_f32(a)))
 }
 
+/// The rows of a NEON `*_ahead` packed kernel in passes of at most 4
+/// ([`super::passes_of_four`]), each pass on `$kernel::<K, Q4>` (one of
+/// [`packed_dot`] / [`packed_i8mm`]). Expands to unsafe calls: the
+/// caller's features must be the kernel's.
+macro_rules! neon_passes {
+    ($kernel:ident, $w:ident, $xq:ident, $xd:ident, $ahead:ident) => {
+        super::passes_of_four!(M, $ahead, |K, m0, a| {
+            let q: [&[i8]; K] = core::array::from_fn(|m| $xq[m0 + m]);
+            let d: [&[f32]; K] = core::array::from_fn(|m| $xd[m0 + m]);
+            if $w.q4 {
+                $kernel::<K, true>($w, q, d, a)
+            } else {
+                $kernel::<K, false>($w, q, d, a)
+            }
+        })
+    };
+}
+
 /// See [`super::gemm_q8_packed`] with `sdot`: the stored groups read in
 /// place, no expansion to rows. Per block and 8-byte group `g`, the
 /// group's four 16-byte quarters (weight rows `2j, 2j + 1`) are `sdot`
@@ -367,18 +385,8 @@ pub unsafe fn gemm_q8_packed_dot_ahead<const M: usize>(
     _xc: [&[i32]; M],
     ahead: &[u8],
 ) -> [[f32; 8]; M] {
-    super::passes_of_four!(M, ahead, |K, m0, a| {
-        let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
-        let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
-        // SAFETY: the caller's features are these functions'.
-        unsafe {
-            if w.q4 {
-                packed_dot::<K, true>(w, q, d, a)
-            } else {
-                packed_dot::<K, false>(w, q, d, a)
-            }
-        }
-    })
+    // SAFETY: the caller's features are `packed_dot`'s.
+    unsafe { neon_passes!(packed_dot, w, xq, xd, ahead) }
 }
 
 /// [`gemm_q8_packed_dot`] for `K` (1..=4) activation rows and one value
@@ -534,18 +542,8 @@ pub unsafe fn gemm_q8_packed_i8mm_ahead<const M: usize>(
     _xc: [&[i32]; M],
     ahead: &[u8],
 ) -> [[f32; 8]; M] {
-    super::passes_of_four!(M, ahead, |K, m0, a| {
-        let q: [&[i8]; K] = core::array::from_fn(|m| xq[m0 + m]);
-        let d: [&[f32]; K] = core::array::from_fn(|m| xd[m0 + m]);
-        // SAFETY: the caller's features are these functions'.
-        unsafe {
-            if w.q4 {
-                packed_i8mm::<K, true>(w, q, d, a)
-            } else {
-                packed_i8mm::<K, false>(w, q, d, a)
-            }
-        }
-    })
+    // SAFETY: the caller's features are `packed_i8mm`'s.
+    unsafe { neon_passes!(packed_i8mm, w, xq, xd, ahead) }
 }
 
 /// `smmla`: `acc += a b^T` for `a`, `b` two rows of 8 i8 each (lanes:
