@@ -31,7 +31,7 @@ import yaml
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__))))
 from reference.bailando import authors  # noqa: E402
 from reference.config import Cfg  # noqa: E402
-from ort_timing import cpu_name, time_session, write_json  # noqa: E402
+from ort_timing import add_common_args, cpu_name, time_session, write_json  # noqa: E402
 
 
 class RStep(torch.nn.Module):
@@ -51,10 +51,7 @@ class RStep(torch.nn.Module):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--checkout", default=authors.DEFAULT_CHECKOUT, help="the authors' repository (models/, configs/)")
-    ap.add_argument("--onnx", default="/tmp/bailando_r_step.onnx", help="where the exported step goes (~350 MB)")
-    ap.add_argument("--out", required=True, help="JSON with the timing, for `bench --ort-json`")
-    ap.add_argument("--runs", type=int, default=20)
-    ap.add_argument("--warmup", type=int, default=3)
+    add_common_args(ap, "/tmp/bailando_r_step.onnx", "350 MB", runs=20, threads=False)
     args = ap.parse_args()
 
     import onnxruntime as ort

@@ -25,19 +25,14 @@ import torch
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 from tools.reference.export_full_r_step import PUBLISHED, build  # noqa: E402
-from tools.ort_timing import cpu_name, time_session, write_json  # noqa: E402
+from tools.ort_timing import add_common_args, cpu_name, time_session, write_json  # noqa: E402
 
 TINY = dict(PUBLISHED, n_embd=64, n_head=4, base_layers=1, head_layers=1, lat_layers=1)
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--onnx", default="/tmp/duolando_r_step_ort.onnx", help="where the exported step goes (~0.8 GB)")
-    ap.add_argument("--out", required=True, help="JSON with the timing, for `bench --ort-json`")
-    ap.add_argument("--runs", type=int, default=20)
-    ap.add_argument("--warmup", type=int, default=3)
-    ap.add_argument("--threads", default="1,2", help="onnxruntime intra-op thread counts to time (the first is the headline)")
-    ap.add_argument("--seed", type=int, default=0)
+    add_common_args(ap, "/tmp/duolando_r_step_ort.onnx", "0.8 GB", runs=20)
     ap.add_argument("--tiny", action="store_true", help="a small GPT: checks the plumbing, times mean nothing")
     ap.add_argument("--reuse-onnx", action="store_true",
                     help="time the --onnx file an earlier run with the same --seed and size exported (the export "

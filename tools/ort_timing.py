@@ -1,10 +1,23 @@
-"""Timing helpers shared by the onnxruntime baselines of `duolando bench --ort-json`
-(tools/bailando_ort_r_step.py, tools/transflower_ort_r_step.py): the CPU's name, one
-onnxruntime session timed on N intra-op threads, and the JSON the bench reads."""
+"""Helpers shared by the onnxruntime baselines of `duolando bench --ort-json`
+(tools/{duolando,bailando,transflower}_ort_r_step.py): their common arguments, the CPU's
+name, one onnxruntime session timed on N intra-op threads, and the JSON the bench reads."""
 import json
 import platform
 import statistics
 import time
+
+
+def add_common_args(ap, onnx, size, runs, threads=True):
+    """The arguments every baseline script takes: --onnx (default `onnx`, about `size` on
+    disk), --out, --runs (default `runs`), --warmup; with `threads`, also --threads and --seed."""
+    ap.add_argument("--onnx", default=onnx, help=f"where the exported step goes (~{size})")
+    ap.add_argument("--out", required=True, help="JSON with the timing, for `bench --ort-json`")
+    ap.add_argument("--runs", type=int, default=runs)
+    ap.add_argument("--warmup", type=int, default=3)
+    if threads:
+        ap.add_argument("--threads", default="1,2",
+                        help="onnxruntime intra-op thread counts to time (the first is the headline)")
+        ap.add_argument("--seed", type=int, default=0)
 
 
 def cpu_name():

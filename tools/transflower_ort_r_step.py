@@ -56,7 +56,7 @@ import yaml
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "reference"))
 from transflower import env, reference  # noqa: E402
-from ort_timing import cpu_name, time_session, write_json  # noqa: E402
+from ort_timing import add_common_args, cpu_name, time_session, write_json  # noqa: E402
 
 # training/hparams/dance_combined/transflower_expmap.yaml at the vendored commit (the keys that
 # reach the model; dhid_flow 512 and num_heads_flow 8 are the option defaults it leaves unset).
@@ -114,12 +114,7 @@ class RStep(torch.nn.Module):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hparams", help="a Transflower hparams YAML (default: the paper config above)")
-    ap.add_argument("--onnx", default="/tmp/transflower_r_step.onnx", help="where the exported step goes (~490 MB)")
-    ap.add_argument("--out", required=True, help="JSON with the timing, for `bench --ort-json`")
-    ap.add_argument("--runs", type=int, default=30)
-    ap.add_argument("--warmup", type=int, default=3)
-    ap.add_argument("--threads", default="1,2", help="onnxruntime intra-op thread counts to time (the first is the headline)")
-    ap.add_argument("--seed", type=int, default=0)
+    add_common_args(ap, "/tmp/transflower_r_step.onnx", "490 MB", runs=30)
     args = ap.parse_args()
 
     import onnx

@@ -65,6 +65,8 @@ fn kernels_run_once_per_isa_labelled_with_isa_and_cpu() {
             .as_f64()
             .unwrap_or_else(|| panic!("peak_gmacs_{isa} in {j}"));
         assert!(peak > 0.1, "{isa}: peak {peak}");
+        // Each run's `isa` is the name `--isa` took.
+        assert_eq!(j[format!("isa_{isa}")], *isa, "{j}");
         for s in shapes {
             let g = j[format!("gemm_{}_gmacs_{isa}", s.key)].as_f64().unwrap();
             let f = j[format!("gemm_{}_of_peak_{isa}", s.key)].as_f64().unwrap();

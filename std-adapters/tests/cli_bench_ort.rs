@@ -55,13 +55,18 @@ fn refused(args: &[&str], wanted: &[&str]) {
     );
 }
 
-#[test]
-fn a_good_transflower_json_is_printed_and_written() {
-    let input = tmp("good.json", &transflower_json().to_string());
-    let json = std::env::temp_dir().join(format!("duo-bench-ort-{}-out.json", std::process::id()));
+/// `bench [--family F] --dtypes --ort-json <v> --json OUT`: must succeed;
+/// returns the onnxruntime lines (those starting with `<Family> R step
+/// onnxruntime 1.32.0 f32`) and the JSON written.
+fn run_ort(family: &str, v: &serde_json::Value) -> (Vec<String>, serde_json::Value) {
+    let input = tmp(&format!("{family}-in.json"), &v.to_string());
+    let json = std::env::temp_dir().join(format!(
+        "duo-bench-ort-{}-{family}-out.json",
+        std::process::id()
+    ));
     let o = bench(&[
         "--family",
-        "transflower",
+        family,
         "--dtypes",
         "--ort-json",
         input.to_str().unwrap(),
@@ -74,11 +79,24 @@ fn a_good_transflower_json_is_printed_and_written() {
         "{out}\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let lines: Vec<&str> = out
+    let title = format!("{}{}", family[..1].to_uppercase(), &family[1..]);
+    let prefix = format!("{title} R step onnxruntime 1.32.0 f32");
+    let lines: Vec<String> = out
         .lines()
-        .filter(|l| l.starts_with("Transflower R step onnxruntime 1.32.0 f32"))
+        .filter(|l| l.starts_with(&prefix))
+        .map(str::to_owned)
         .collect();
     assert_eq!(lines.len(), 2, "{out}");
+    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let _ = std::fs::remove_file(&json);
+    let _ = std::fs::remove_file(&input);
+    assert_eq!(j["ort_family"], family);
+    (lines, j)
+}
+
+#[test]
+fn a_good_transflower_json_is_printed_and_written() {
+    let (lines, j) = run_ort("transflower", &transflower_json());
     assert!(
         lines[0].contains(" t1 (Test CPU 9000, load 0.25)")
             && lines[0].contains("median    812.5 ms")
@@ -93,15 +111,11 @@ fn a_good_transflower_json_is_printed_and_written() {
     );
     // Not this machine's CPU: said so.
     assert!(lines[0].contains("measured on another CPU"), "{}", lines[0]);
-    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
-    let _ = std::fs::remove_file(&json);
-    let _ = std::fs::remove_file(&input);
     assert_eq!(j["ort_r_step_ms_t1"], 812.5);
     assert_eq!(j["ort_r_step_p99_ms_t1"], 840.0);
     assert_eq!(j["ort_r_step_ms_t2"], 430.25);
     assert_eq!(j["ort_version"], "1.32.0");
     assert_eq!(j["ort_cpu"], "Test CPU 9000");
-    assert_eq!(j["ort_family"], "transflower");
     assert_eq!(j["ort_max_abs_err_vs_torch"], 3.1e-5);
 }
 
@@ -120,32 +134,9 @@ fn a_duolando_json_is_read_for_duolando() {
         ],
         "max_abs_err_vs_torch": 2.0e-6, "logit_scale": 1.5
     });
-    let input = tmp("duolando.json", &v.to_string());
-    let json = std::env::temp_dir().join(format!("duo-bench-ort-{}-duo-out.json", std::process::id()));
-    let o = bench(&[
-        "--dtypes",
-        "--ort-json",
-        input.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
-    let out = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{out}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let lines: Vec<&str> = out
-        .lines()
-        .filter(|l| l.starts_with("Duolando R step onnxruntime 1.32.0 f32"))
-        .collect();
-    assert_eq!(lines.len(), 2, "{out}");
+    let (lines, j) = run_ort("duolando", &v);
     assert!(lines[0].contains(" t1 ") && lines[0].contains("median    377.0 ms"), "{}", lines[0]);
     assert!(lines[1].contains(" t2 ") && lines[1].contains("median    201.5 ms"), "{}", lines[1]);
-    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
-    let _ = std::fs::remove_file(&json);
-    let _ = std::fs::remove_file(&input);
-    assert_eq!(j["ort_family"], "duolando");
     assert_eq!(j["ort_r_step_ms_t2"], 201.5);
     // A Duolando file is not a Bailando one.
     let input = tmp("duolando2.json", &v.to_string());
