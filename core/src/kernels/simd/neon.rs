@@ -408,7 +408,9 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(
     // [row m][even / odd blocks][rows 0-3 / 4-7].
     let mut acc = [[[vdupq_n_f32(0.0); 2]; 2]; K];
     for b in 0..nb {
-        super::prefetch_part(ahead, b, nb);
+        if !ahead.is_empty() {
+            super::prefetch_part(ahead, b, nb);
+        }
         let vb = &w.v[pv * b..pv * (b + 1)];
         let sb = &w.s[PS * b..PS * (b + 1)];
         // SAFETY: sb holds 8 f16 (16 bytes).
@@ -583,7 +585,9 @@ unsafe fn packed_i8mm<const K: usize, const Q4: bool>(
     let pair = |p: usize| [2 * p, (2 * p + 1).min(K - 1)];
     let mut acc = [[[vdupq_n_f32(0.0); 2]; 2]; K];
     for b in 0..nb {
-        super::prefetch_part(ahead, b, nb);
+        if !ahead.is_empty() {
+            super::prefetch_part(ahead, b, nb);
+        }
         let vb = &w.v[pv * b..pv * (b + 1)];
         let sb = &w.s[PS * b..PS * (b + 1)];
         // SAFETY: sb holds 8 f16 (16 bytes).
