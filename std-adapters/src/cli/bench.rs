@@ -601,7 +601,7 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
     let mut j = serde_json::Map::new();
     let isa = crate::simd::describe();
     // The JSON names the ISA as `--isa` and `DUOLANDO_ISA` spell it.
-    let isa_name = crate::simd::name(crate::simd::active());
+    j.insert("isa".into(), crate::simd::name(crate::simd::active()).into());
     if let Some(w) = weights {
         let rep = crate::kernel_bench::run(w, args.runs)?;
         for l in rep.lines("") {
@@ -610,7 +610,6 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
         rep.json(&mut j, "");
     }
     if args.dtypes.is_empty() {
-        j.insert("isa".into(), isa_name.into());
         // No model bench: onnxruntime's figure alone, no ratio.
         if let Some(o) = ort {
             o.print(&format!("{} R step", family_title(&args.family)));
@@ -626,11 +625,9 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
         args.threads
     );
     if args.family == "bailando" {
-        j.insert("isa".into(), isa_name.into());
         bench_bailando(args, ort, &mut j)?;
         return Ok(j);
     } else if args.family == "transflower" {
-        j.insert("isa".into(), isa_name.into());
         transflower::run(args, ort, &mut j)?;
         return Ok(j);
     } else if args.family != "duolando" {
@@ -750,7 +747,6 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
         j.insert("memcpy_gbps_t1".into(), memcpy.into());
         j.insert("memcpy_gbps_t2".into(), memcpy_t2.into());
         j.insert("read_gbps_t1".into(), read.into());
-        j.insert("isa".into(), isa_name.into());
         match &tract {
             Some((st, err)) => {
                 j.insert("tract_r_step_ms_t1".into(), st.median_ms.into());

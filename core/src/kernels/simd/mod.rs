@@ -314,6 +314,10 @@ pub(crate) use passes_of_four;
 /// queue): 14% of a streaming step's samples sat in the burst loop.
 #[inline(always)]
 pub(crate) fn prefetch_part(ahead: &[u8], i: usize, parts: usize) {
+    // Nothing to prefetch (most calls): no part arithmetic (two divisions).
+    if ahead.is_empty() {
+        return;
+    }
     let (b0, b1) = part_bytes(ahead.len(), i, parts);
     if b0 < b1 {
         prefetch_l2(&ahead[b0..b1]);

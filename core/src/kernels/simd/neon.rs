@@ -408,9 +408,7 @@ unsafe fn packed_dot<const K: usize, const Q4: bool>(
     // [row m][even / odd blocks][rows 0-3 / 4-7].
     let mut acc = [[[vdupq_n_f32(0.0); 2]; 2]; K];
     for b in 0..nb {
-        if !ahead.is_empty() {
-            super::prefetch_part(ahead, b, nb);
-        }
+        super::prefetch_part(ahead, b, nb);
         let vb = &w.v[pv * b..pv * (b + 1)];
         let sb = &w.s[PS * b..PS * (b + 1)];
         // SAFETY: sb holds 8 f16 (16 bytes).
@@ -585,9 +583,7 @@ unsafe fn packed_i8mm<const K: usize, const Q4: bool>(
     let pair = |p: usize| [2 * p, (2 * p + 1).min(K - 1)];
     let mut acc = [[[vdupq_n_f32(0.0); 2]; 2]; K];
     for b in 0..nb {
-        if !ahead.is_empty() {
-            super::prefetch_part(ahead, b, nb);
-        }
+        super::prefetch_part(ahead, b, nb);
         let vb = &w.v[pv * b..pv * (b + 1)];
         let sb = &w.s[PS * b..PS * (b + 1)];
         // SAFETY: sb holds 8 f16 (16 bytes).

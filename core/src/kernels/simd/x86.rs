@@ -1704,11 +1704,8 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(
     let mut acc = [_mm512_setzero_ps(); M];
     let mut b = 0;
     let pairs = nb.div_ceil(2);
-    let prefetch = !ahead.is_empty();
     while b + 1 < nb {
-        if prefetch {
-            super::prefetch_part(ahead, b / 2, pairs);
-        }
+        super::prefetch_part(ahead, b / 2, pairs);
         let (w0, s0) = block(b);
         let (w1, s1) = block(b + 1);
         // Lane 2n: s_n,b; lane 2n + 1: s_n,b+1.
@@ -1926,7 +1923,6 @@ unsafe fn packed_ymm<const K: usize, const Q4: bool, const VNNI: bool>(
     let qp: [*const i8; K] = core::array::from_fn(|m| xq[m].as_ptr());
     let dp_: [*const f32; K] = core::array::from_fn(|m| xd[m].as_ptr());
     let cp: [*const i32; K] = core::array::from_fn(|m| xc[m].as_ptr());
-    let prefetch = !ahead.is_empty();
     // SAFETY (every intrinsic and pointer offset below): the caller's
     // features (avx2, fma, f16c; avxvnni for `_mm256_dpbusd_avx_epi32`,
     // used only where VNNI); every offset is of block b < nb.
@@ -1939,9 +1935,7 @@ unsafe fn packed_ymm<const K: usize, const Q4: bool, const VNNI: bool>(
         // [row m][even / odd blocks]: lanes in `order`.
         let mut acc = [[_mm256_setzero_ps(); 2]; K];
         for b in 0..nb {
-            if prefetch {
-                super::prefetch_part(ahead, b, nb);
-            }
+            super::prefetch_part(ahead, b, nb);
             let (vb, sb) = (vp.add(pv * b), sp.add(PS * b));
             // sb holds 8 f16 (128 bits).
             let sv = _mm256_permutevar8x32_ps(
