@@ -55,7 +55,9 @@ CFLAGS="-std=c99 -Wall -Wextra -Werror -pedantic -g -Iinclude"
 # Native libraries a Rust staticlib needs on Linux (rustc --print native-static-libs).
 gcc $CFLAGS tests/c/test_duolando.c "$LIB/libduolando.a" -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc -o "$OUT/test_static"
 gcc $CFLAGS tests/c/test_duolando.c -L"$LIB" -lduolando -lpthread -lm -Wl,-rpath,"$LIB" -o "$OUT/test_dynamic"
-ldd "$OUT/test_dynamic" | grep -q libduolando.so
+# Captured first: `ldd | grep -q` under pipefail can fail by SIGPIPE (see .ci/size.sh).
+test_ldd=$(ldd "$OUT/test_dynamic")
+grep -q libduolando.so <<<"$test_ldd" || { echo "test_dynamic does not load libduolando.so:"; echo "$test_ldd"; exit 1; }
 "$OUT/test_static" "$ROOT"
 
 VALGRIND=(valgrind --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite,indirect,possible --show-leak-kinds=definite,indirect,possible)

@@ -43,9 +43,15 @@ echo "--- C host test against the stripped libraries (static link line of docs/C
 CFLAGS="-std=c99 -Wall -Wextra -Werror -pedantic -O2 -Iinclude"
 gcc $CFLAGS tests/c/test_duolando.c "$DIST/libduolando.a" -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc -o "$OUT/test_static"
 gcc $CFLAGS tests/c/test_duolando.c -L"$DIST" -lduolando -lpthread -lm -Wl,-rpath,"$DIST" -o "$OUT/test_dynamic"
-readelf -d "$DIST/libduolando.so" | grep -q 'SONAME.*\[libduolando.so\]' || { echo "libduolando.so has no SONAME libduolando.so"; exit 1; }
-readelf -d "$OUT/test_dynamic" | grep -q 'NEEDED.*\[libduolando.so\]' || { echo "test_dynamic does not need plain libduolando.so"; exit 1; }
-ldd "$OUT/test_dynamic" | grep -q "$DIST/libduolando.so"
+# Each tool's output is captured before grep reads it: `tool | grep -q` under
+# pipefail fails at random when grep exits at its first match and the tool's
+# next write meets a closed pipe (SIGPIPE; ld.so writes ldd's lines one by one).
+so_dyn=$(readelf -d "$DIST/libduolando.so")
+grep -q 'SONAME.*\[libduolando.so\]' <<<"$so_dyn" || { echo "libduolando.so has no SONAME libduolando.so"; exit 1; }
+test_dyn=$(readelf -d "$OUT/test_dynamic")
+grep -q 'NEEDED.*\[libduolando.so\]' <<<"$test_dyn" || { echo "test_dynamic does not need plain libduolando.so"; exit 1; }
+test_ldd=$(ldd "$OUT/test_dynamic")
+grep -qF "$DIST/libduolando.so" <<<"$test_ldd" || { echo "test_dynamic does not load $DIST/libduolando.so:"; echo "$test_ldd"; exit 1; }
 "$OUT/test_static" "$ROOT"
 "$OUT/test_dynamic" "$ROOT"
 echo "test executable, static link, stripped: $(strip -o "$OUT/s" "$OUT/test_static" && stat -c %s "$OUT/s") bytes"
