@@ -11,7 +11,9 @@
 //!   `Q4_FAST_COLS`), and within the int8 kernels' summation limit of the
 //!   exact block sums elsewhere (x8 takes the packed tile from one row on
 //!   under AVX512-VNNI, AVX-512, AVX2 and NEON dotprod);
-//! - an x8 row's output never depends on how many rows share the call.
+//! - an x8 row's output never depends on how many rows share the call (under
+//!   AVX512-VNNI, 16 and 17 rows take tile pairs and the 16-row kernel,
+//!   `simd::gemm_q8_pair`, against the 8-row kernel of a row alone).
 
 use duolando::duo_writer::{
     quantise_q4_block32, quantise_q4_block32x8, quantise_q8_block32, quantise_q8_block32x8,
@@ -145,7 +147,8 @@ fn x8_groups_compute_what_their_rows_compute_under_every_isa() {
                 }
                 let mx = Matrix::X8(packed);
                 assert_eq!(mx.weight_bytes(), bytes);
-                // Up to 17 rows: calls of 5 + 5 (10), 8 + 8 (16), 6 + 6 + 5 (17) under VNNI.
+                // Up to 17 rows: calls of 5 + 5 (10) under VNNI; 16 and 17 rows
+                // take tile pairs (calls of 8 + 8, 6 + 6 + 5) where a pair fits.
                 let rows = 17;
                 let x = r.vec(rows * i);
                 let bias = r.vec(o);

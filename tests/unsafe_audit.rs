@@ -24,6 +24,7 @@ const ALLOWED: &[&str] = &[
     "core/src/kernels/simd/mod.rs",
     "core/src/kernels/simd/x86.rs",
     "core/src/kernels/simd/amx.rs",
+    "core/src/kernels/simd/tile_pair.rs",
     "core/src/kernels/simd/i8mm.rs",
     "core/src/kernels/simd/neon.rs",
     "core/src/kernels/simd/peak.rs",

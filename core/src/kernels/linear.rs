@@ -745,10 +745,13 @@ fn q8_panel_tiles<W: Q8Source, const WB: usize>(
 /// [`q8_panel_tiles`] over packed tiles of 8 weight rows (stored packed,
 /// or packed once per tile: [`Q8Source::packed_tile`]) and activation
 /// tiles of up to [`PACKED_CALL_ROWS`] rows ([`simd::gemm_q8_packed`]).
-/// Where AMX runs ([`simd::amx_enabled`]) and the panel has at least
-/// [`AMX_MIN_ROWS`] rows, tiles go in pairs and their whole 8-row groups of
-/// activation rows take the AMX kernel, which gives the same values bit for
-/// bit; the rows after them stay on VNNI.
+/// Where the tile pair kernels run ([`simd::pair_enabled`]: AVX-512 VNNI)
+/// and the panel has at least [`PAIR_MIN_ROWS`] rows, tiles go in pairs,
+/// laid out once per pair as one 16-row operand ([`simd::TilePair`]): with
+/// AMX ([`simd::amx_enabled`], at least [`AMX_MIN_ROWS`] rows) the whole
+/// 8-row groups of activation rows take the AMX kernel, and the rows after
+/// them (all rows without AMX) the 16-row VNNI kernel
+/// ([`simd::gemm_q8_pair`]). Every route gives the same values bit for bit.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn q8_panel_packed<W: Q8Source>(
@@ -762,64 +765,73 @@ fn q8_panel_packed<W: Q8Source>(
     const R: usize = simd::PACK_ROWS;
     let nb = n_in / Q8_BLOCK;
     let (mut pack, mut buf) = (None, None);
-    let mut amx = (n_rows >= AMX_MIN_ROWS && simd::amx_enabled()).then(simd::AmxWeights::new);
+    let mut pair = (n_rows >= PAIR_MIN_ROWS && simd::pair_enabled()).then(simd::TilePair::new);
     // The AMX kernel's rows of this panel (whole 8-row groups; 0 if it would refuse the extents).
-    let amx_planned = simd::amx_rows(nb, n_rows * n_in, n_in, n_rows * nb, n_rows);
+    let amx_planned = if n_rows >= AMX_MIN_ROWS && simd::amx_enabled() {
+        simd::amx_rows(nb, n_rows * n_in, n_in, n_rows * nb, n_rows)
+    } else {
+        0
+    };
     let mut t0 = y.lo();
     while t0 < y.hi() {
         let nt = R.min(y.hi() - t0);
         let tile = w.packed_tile(t0, nb, &mut pack, &mut buf);
-        // The weights two tiles ahead stream into L2 while this one is
-        // multiplied, the prefetches spread over the kernel's blocks.
-        let ahead = if n_rows < AMX_MIN_ROWS && t0 + PREFETCH_TILES * R < y.hi() {
-            w.stored_rows(
-                t0 + PREFETCH_TILES * R,
-                (t0 + (PREFETCH_TILES + 1) * R).min(y.hi()),
-            )
-        } else {
-            &[]
+        let paired = pair.as_mut().is_some_and(|a| a.prepare(0, tile));
+        let a = match pair.as_mut() {
+            Some(a) if paired => a,
+            _ => {
+                // The weights two tiles ahead stream into L2 while this one is
+                // multiplied, the prefetches spread over the kernel's blocks.
+                let ahead = if n_rows < AMX_MIN_ROWS && t0 + PREFETCH_TILES * R < y.hi() {
+                    w.stored_rows(
+                        t0 + PREFETCH_TILES * R,
+                        (t0 + (PREFETCH_TILES + 1) * R).min(y.hi()),
+                    )
+                } else {
+                    &[]
+                };
+                vnni_rows(tile, p, 0, n_rows, n_in, ahead, |i, t| {
+                    put_row(&mut y, e, i, t0, nt, t)
+                });
+                t0 += nt;
+                continue;
+            }
         };
-        let prepared = amx_planned > 0 && amx.as_mut().is_some_and(|a| a.prepare(0, tile));
-        let Some(a) = amx.as_mut().filter(|_| prepared) else {
-            vnni_rows(tile, p, 0, n_rows, n_in, ahead, |i, t| {
-                put_row(&mut y, e, i, t0, nt, t)
-            });
-            t0 += nt;
-            continue;
-        };
-        // This tile's rows after the AMX rows, then the second tile's (or
-        // this one again as a second operand whose results are dropped).
-        vnni_rows(tile, p, amx_planned, n_rows, n_in, &[], |i, t| {
-            put_row(&mut y, e, i, t0, nt, t)
-        });
+        // The second tile (or this one again as a second operand whose results are dropped).
         let t1 = t0 + R;
         let nt1 = if t1 < y.hi() { R.min(y.hi() - t1) } else { 0 };
-        if nt1 > 0 {
-            let tile1 = w.packed_tile(t1, nb, &mut pack, &mut buf);
-            a.prepare(1, tile1);
-            vnni_rows(tile1, p, amx_planned, n_rows, n_in, &[], |i, t| {
-                put_row(&mut y, e, i, t1, nt1, t)
-            });
+        let prepared = if nt1 > 0 {
+            a.prepare(1, w.packed_tile(t1, nb, &mut pack, &mut buf))
         } else {
-            a.prepare(1, tile);
-        }
+            a.prepare(1, tile)
+        };
         // The next pair's weights stream in (into L2) while this pair is multiplied.
         let ahead = w.stored_rows(t0 + 2 * R, (t0 + 4 * R).min(y.hi()));
         // The two tiles' columns are adjacent (t1 = t0 + 8): one segment per row.
-        let done = amx_pair(a, p, amx_planned, n_in, ahead, &mut y, e, t0, nt + nt1);
-        if done < amx_planned {
-            // Not reached (the extents were checked for the plan); kept so a
+        let cols = nt + nt1;
+        let done = if prepared && amx_planned > 0 {
+            amx_pair(a, p, amx_planned, n_in, ahead, &mut y, e, t0, cols)
+        } else {
+            0
+        };
+        let rest = if done > 0 { &[][..] } else { ahead };
+        if !prepared
+            || !pair_rows(a, p, done, n_rows, n_in, rest, |i, t| {
+                put_row(&mut y, e, i, t0, cols, t)
+            })
+        {
+            // Not reached (both tiles have the panel's blocks); kept so a
             // refusal never leaves outputs unwritten.
             for (tt, ntt) in [(t0, nt), (t1, nt1)] {
                 if ntt > 0 {
                     let tile = w.packed_tile(tt, nb, &mut pack, &mut buf);
-                    vnni_rows(tile, p, done, amx_planned, n_in, &[], |i, t| {
+                    vnni_rows(tile, p, done, n_rows, n_in, &[], |i, t| {
                         put_row(&mut y, e, i, tt, ntt, t)
                     });
                 }
             }
         }
-        t0 += nt + nt1;
+        t0 += cols;
     }
 }
 
@@ -830,6 +842,11 @@ const PREFETCH_TILES: usize = 2;
 /// The fewest rows of a panel for which the AMX kernel runs (below it the
 /// VNNI rows with the next tile's prefetch are as fast: the S step's panels).
 const AMX_MIN_ROWS: usize = 16;
+
+/// The fewest rows of a panel for which tiles go in laid-out pairs
+/// ([`simd::gemm_q8_pair`]): below it, laying out the pair costs more than
+/// the 16-row kernel saves (the S step's panels of 1-3 rows).
+const PAIR_MIN_ROWS: usize = 16;
 
 /// `y[i][t0..t0 + nt]` = the epilogue of `t[..nt]` ([`Epilogue::put`]).
 #[inline]
@@ -866,14 +883,7 @@ fn vnni_rows(
     mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS]),
 ) {
     let nb = n_in / Q8_BLOCK;
-    let rows = r1.saturating_sub(r0);
-    let calls = rows.div_ceil(PACKED_CALL_ROWS);
-    let mut k = 0;
-    simd::even_passes(rows, PACKED_CALL_ROWS, &mut |m0, mt| {
-        let i0 = r0 + m0;
-        let (a0, a1) = simd::part_bytes(ahead.len(), k, calls);
-        let share = &ahead[a0..a1];
-        k += 1;
+    calls_of(r0, r1, PACKED_CALL_ROWS, ahead, |i0, mt, share| {
         let pr = |m: usize| i0 + m.min(mt - 1);
         let q = |m: usize| &p.q[pr(m) * n_in..(pr(m) + 1) * n_in];
         let d = |m: usize| &p.d[pr(m) * nb..(pr(m) + 1) * nb];
@@ -892,21 +902,77 @@ fn vnni_rows(
                 }
             }};
         }
-        match mt {
-            1 => run!(1),
-            2 => run!(2),
-            3 => run!(3),
-            4 => run!(4),
-            5 => run!(5),
-            6 => run!(6),
-            7 => run!(7),
-            8 => run!(8),
-            9 => run!(9),
-            10 => run!(10),
-            11 => run!(11),
-            _ => run!(12),
-        }
+        by_rows!(mt, run, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11], 12);
     });
+}
+
+/// Rows `r0..r1` in the fewest calls of at most `most` rows, shared evenly
+/// ([`simd::even_passes`]): `call(first row, rows, share)`, where the
+/// calls' shares split `ahead` in order ([`simd::part_bytes`]).
+#[inline(always)]
+fn calls_of(
+    r0: usize,
+    r1: usize,
+    most: usize,
+    ahead: &[u8],
+    mut call: impl FnMut(usize, usize, &[u8]),
+) {
+    let rows = r1.saturating_sub(r0);
+    let calls = rows.div_ceil(most);
+    let mut k = 0;
+    simd::even_passes(rows, most, &mut |m0, mt| {
+        let (a0, a1) = simd::part_bytes(ahead.len(), k, calls);
+        k += 1;
+        call(r0 + m0, mt, &ahead[a0..a1]);
+    });
+}
+
+/// `$run!(n)` for the row count `$mt` (a `const` per listed count; larger
+/// counts take `$last`).
+macro_rules! by_rows {
+    ($mt:expr, $run:ident, [$($n:literal),*], $last:literal) => {
+        match $mt {
+            $($n => $run!($n),)*
+            _ => $run!($last),
+        }
+    };
+}
+use by_rows;
+
+/// Activation rows `r0..r1` of a panel against the tile pair `a`
+/// ([`simd::gemm_q8_pair`]), in calls of up to [`simd::PAIR_CALL_ROWS`]
+/// rows shared evenly (`put(row, values)`: 16 columns), prefetching
+/// `ahead` (each call its share); false (rows from the refused call on not
+/// written) if the kernel refuses.
+#[inline]
+fn pair_rows(
+    a: &simd::TilePair,
+    p: &Q8Panel<'_>,
+    r0: usize,
+    r1: usize,
+    n_in: usize,
+    ahead: &[u8],
+    mut put: impl FnMut(usize, &[f32; simd::AMX_COLS]),
+) -> bool {
+    let nb = n_in / Q8_BLOCK;
+    let mut ok = true;
+    calls_of(r0, r1, simd::PAIR_CALL_ROWS, ahead, |i0, mt, share| {
+        let (q, d, c) = (&p.q[i0 * n_in..], &p.d[i0 * nb..], &p.c[2 * i0 * nb..]);
+        macro_rules! run {
+            ($m:literal) => {{
+                match simd::gemm_q8_pair::<$m>(a, q, d, c, n_in, share) {
+                    Some(t) if ok => {
+                        for (m, r) in t.iter().enumerate() {
+                            put(i0 + m, r);
+                        }
+                    }
+                    _ => ok = false,
+                }
+            }};
+        }
+        by_rows!(mt, run, [1, 2, 3, 4, 5, 6, 7], 8);
+    });
+    ok
 }
 
 /// The first `rows` activation rows of a panel (whole row groups:
@@ -916,7 +982,7 @@ fn vnni_rows(
 /// returns the rows done.
 #[allow(clippy::too_many_arguments)]
 fn amx_pair(
-    a: &simd::AmxWeights,
+    a: &simd::TilePair,
     p: &Q8Panel<'_>,
     rows: usize,
     n_in: usize,

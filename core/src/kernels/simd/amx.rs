@@ -11,7 +11,7 @@
 //! `A` row (32 bytes, natural order) and a weight operand (`B`: 8 rows of
 //! 16 four-byte columns, one column per weight row) whose row `2g + h` holds
 //! the four-byte halves `h` of the 16 rows' stored 8-byte groups `g`
-//! ([`AmxWeights::prepare`] lays that out once per packed tile). Per
+//! ([`TilePair::prepare`] lays that out once per packed tile). Per
 //! activation row, two blocks' result rows are interleaved into the VNNI
 //! lane order and the f32 steps after that are the VNNI kernel's, in the
 //! same order.
@@ -33,10 +33,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use crate::kernels::parallel::Window;
 
 use super::x86::gelu16;
-use super::{
-    Isa, PackedQ8, PACK_BLOCKS, PACK_BLOCK_NIBBLES, PACK_BLOCK_SCALES, PACK_BLOCK_VALUES,
-    PACK_ROWS, Q8_BLOCK,
-};
+use super::{Isa, PACK_BLOCKS, Q8_BLOCK};
 
 /// Activation rows per tile multiply: groups of 12, and of [`ROWS_SMALL`]
 /// where 12s leave 8-11 rows ([`groups`]). Measured (2026-12-03, the Xeon
@@ -63,11 +60,8 @@ pub fn groups(rows: usize) -> (usize, usize) {
 }
 
 /// Weight rows per tile multiply: two packed tiles (the `B` and `C` columns).
-pub const COLS: usize = 2 * PACK_ROWS;
-/// Bytes of one block's weight operand: 8 `B` rows of 64 bytes.
-const B_BLOCK: usize = 512;
-/// Block pairs of the widest prepared tile.
-const PAIRS: usize = PACK_BLOCKS.div_ceil(2);
+pub use super::tile_pair::COLS;
+use super::tile_pair::{TilePair, B_BLOCK, PAIRS};
 
 static ENABLED: AtomicBool = AtomicBool::new(false);
 
@@ -89,156 +83,12 @@ pub fn enabled() -> bool {
     ENABLED.load(Ordering::Relaxed) && super::isa() == Isa::Avx512Vnni
 }
 
-/// The `B` operands of two packed tiles of 8 weight rows (tile `t`: the
-/// operand columns `8t .. 8t + 8`), per block 8 rows of 64 bytes (row `2g +
-/// h`, column `8t + n`: bytes `8g + 4h .. 8g + 4h + 4` of row `n`'s block;
-/// 4-bit tiles widened to signed bytes first), and their scales as the
-/// kernel multiplies them (per block parity `h` and pair `p`, lane `8t +
-/// n`: tile `t`'s `s_n,2p+h`, the scale of the block whose sums column
-/// `8t + n` of the C tile holds). At most [`PACK_BLOCKS`] blocks.
-#[repr(C, align(64))]
-pub struct AmxWeights {
-    b: [u8; PACK_BLOCKS * B_BLOCK],
-    s: [[[f32; 16]; PAIRS]; 2],
-    nb: [usize; 2],
-}
-
-impl AmxWeights {
-    pub fn new() -> Self {
-        AmxWeights {
-            b: [0; PACK_BLOCKS * B_BLOCK],
-            s: [[[0.0; 16]; PAIRS]; 2],
-            nb: [0; 2],
-        }
-    }
-
-    /// Lays out `w` as tile `half` (0: weight rows 0-7 of the result, 1:
-    /// rows 8-15) of the operands; false (and nothing usable) if the kernel
-    /// does not run ([`enabled`]), `half > 1` or `w` has more than
-    /// [`PACK_BLOCKS`] blocks. Both tiles must be laid out, with the same
-    /// number of blocks, before [`gemm_q8_packed_amx`] runs.
-    pub fn prepare(&mut self, half: usize, w: PackedQ8<'_>) -> bool {
-        if half < 2 {
-            self.nb[half] = 0;
-        }
-        if !enabled() {
-            return false;
-        }
-        // SAFETY: `enabled` implies the Avx512Vnni ISA (avx512f/bw among its features).
-        unsafe { self.prepare_raw(half, w) }
-    }
-
-    /// [`Self::prepare`] without the [`enabled`] check.
-    ///
-    /// # Safety
-    /// The CPU must support avx512f, avx512bw and f16c.
-    pub unsafe fn prepare_raw(&mut self, half: usize, w: PackedQ8<'_>) -> bool {
-        if half > 1 {
-            return false;
-        }
-        self.nb[half] = 0;
-        let nb = w.blocks();
-        let per = if w.q4 {
-            PACK_BLOCK_NIBBLES
-        } else {
-            PACK_BLOCK_VALUES
-        };
-        if nb > PACK_BLOCKS || w.v.len() < nb * per || w.s.len() < nb * PACK_BLOCK_SCALES {
-            return false;
-        }
-        // SAFETY: the caller's features; the extents were checked above.
-        unsafe { prepare_b(w, nb, half, &mut self.b, &mut self.s) };
-        self.nb[half] = nb;
-        true
-    }
-}
-
-impl Default for AmxWeights {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-/// [`AmxWeights::prepare`]'s layout of tile `half`.
-///
-/// # Safety
-/// avx512f, avx512bw and f16c; `w.v` holds `nb` blocks, `w.s` their scales,
-/// `out` `nb * B_BLOCK` bytes, `nb <= PACK_BLOCKS`.
-#[target_feature(enable = "avx512f,avx512bw,f16c")]
-unsafe fn prepare_b(
-    w: PackedQ8<'_>,
-    nb: usize,
-    half: usize,
-    out: &mut [u8],
-    scales: &mut [[[f32; 16]; PAIRS]; 2],
-) {
-    let low = _mm512_set1_epi8(0x0f);
-    let eight = _mm512_set1_epi8(8);
-    // Low half: the even dwords (h = 0) of a stored line, high half: the odd ones.
-    let split = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
-    for (b, ob) in out.chunks_exact_mut(B_BLOCK).take(nb).enumerate() {
-        let lines: [__m512i; 4] = if w.q4 {
-            let vb = &w.v[PACK_BLOCK_NIBBLES * b..PACK_BLOCK_NIBBLES * (b + 1)];
-            // SAFETY: vb holds 2 x 64 bytes.
-            let h: [__m512i; 2] = core::array::from_fn(|k| unsafe {
-                _mm512_loadu_si512(vb.as_ptr().add(64 * k) as *const _)
-            });
-            [
-                _mm512_sub_epi8(_mm512_and_si512(h[0], low), eight),
-                _mm512_sub_epi8(_mm512_and_si512(h[1], low), eight),
-                _mm512_sub_epi8(_mm512_and_si512(_mm512_srli_epi16::<4>(h[0]), low), eight),
-                _mm512_sub_epi8(_mm512_and_si512(_mm512_srli_epi16::<4>(h[1]), low), eight),
-            ]
-        } else {
-            let vb = &w.v[PACK_BLOCK_VALUES * b..PACK_BLOCK_VALUES * (b + 1)];
-            // SAFETY: vb holds 4 x 64 bytes.
-            core::array::from_fn(|g| unsafe {
-                _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _)
-            })
-        };
-        for (g, line) in lines.iter().enumerate() {
-            let v = _mm512_permutexvar_epi32(split, *line);
-            // SAFETY: ob holds 8 x 64 bytes; 128g + 64 + 32 half + 32 <= 512.
-            unsafe {
-                _mm256_storeu_si256(
-                    ob.as_mut_ptr().add(128 * g + 32 * half) as *mut _,
-                    _mm512_castsi512_si256(v),
-                );
-                _mm256_storeu_si256(
-                    ob.as_mut_ptr().add(128 * g + 64 + 32 * half) as *mut _,
-                    _mm512_extracti64x4_epi64::<1>(v),
-                );
-            }
-        }
-    }
-    let scale = |b: usize| -> [f32; 8] {
-        let mut f = [0f32; 8];
-        if b < nb {
-            // SAFETY: block b's 8 f16 scales (16 bytes) lie in w.s; f holds 8 floats.
-            unsafe {
-                _mm256_storeu_ps(
-                    f.as_mut_ptr(),
-                    _mm256_cvtph_ps(_mm_loadu_si128(
-                        w.s[PACK_BLOCK_SCALES * b..].as_ptr() as *const __m128i
-                    )),
-                )
-            };
-        }
-        f
-    };
-    for p in 0..nb.div_ceil(2) {
-        for (h, sh) in scales.iter_mut().enumerate() {
-            sh[p][PACK_ROWS * half..PACK_ROWS * (half + 1)].copy_from_slice(&scale(2 * p + h));
-        }
-    }
-}
-
 /// Row `m` of `out`, column `8t + n` = `bias[8t + n] + y` (`0 + y`
 /// without a bias), then GELU of it where `gelu`
 /// ([`super::bias_act`]), with `y` what [`super::gemm_q8_packed`] gives on
 /// AVX512-VNNI for activation row `m` (`xq[m * stride..][..32 nb]`,
 /// `xd[m * nb..][..nb]`) and weight row `n` of tile `t` prepared in `w`
-/// ([`AmxWeights::prepare`]), bit for bit; for the first `out.cols()`
+/// ([`TilePair::prepare`]), bit for bit; for the first `out.cols()`
 /// (at most [`COLS`]) columns of the first whole row groups of `out`'s
 /// rows ([`amx_rows`]). The results go straight to `out` as each row group
 /// finishes, between the tile multiplies of the next (not in one burst
@@ -252,7 +102,7 @@ unsafe fn prepare_b(
 /// depends on it.
 #[allow(clippy::too_many_arguments)]
 pub fn gemm_q8_packed_amx(
-    w: &AmxWeights,
+    w: &TilePair,
     xq: &[i8],
     stride: usize,
     xd: &[f32],
@@ -299,7 +149,7 @@ pub fn amx_rows(nb: usize, xq_len: usize, stride: usize, xd_len: usize, rows: us
 /// ([`request_linux_permission`]).
 #[allow(clippy::too_many_arguments)]
 pub unsafe fn gemm_q8_packed_amx_raw(
-    w: &AmxWeights,
+    w: &TilePair,
     xq: &[i8],
     stride: usize,
     xd: &[f32],

@@ -27,11 +27,17 @@ pub mod scalar;
 #[cfg(test)]
 mod tests;
 #[cfg(target_arch = "x86_64")]
+pub mod tile_pair;
+#[cfg(target_arch = "x86_64")]
 pub mod x86;
 #[cfg(target_arch = "x86_64")]
-pub use amx::{amx_rows, gemm_q8_packed_amx, AmxWeights, COLS as AMX_COLS, ROWS as AMX_ROWS};
+pub use amx::{amx_rows, gemm_q8_packed_amx, COLS as AMX_COLS, ROWS as AMX_ROWS};
 #[cfg(not(target_arch = "x86_64"))]
-pub use no_amx::{amx_rows, gemm_q8_packed_amx, AmxWeights, COLS as AMX_COLS, ROWS as AMX_ROWS};
+pub use no_amx::{amx_rows, gemm_q8_packed_amx, COLS as AMX_COLS, ROWS as AMX_ROWS};
+#[cfg(not(target_arch = "x86_64"))]
+pub use no_amx::{gemm_q8_pair, TilePair, PAIR_CALL_ROWS};
+#[cfg(target_arch = "x86_64")]
+pub use tile_pair::{gemm_q8_pair, TilePair, PAIR_CALL_ROWS};
 #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
 pub mod neon;
 
@@ -997,7 +1003,9 @@ pub fn gemm_q8_packed_ahead<const M: usize>(
         Isa::AvxVnni => unsafe { x86::gemm_q8_packed_avxvnni_ahead(w, xq, xd, xc, ahead) },
         #[cfg(target_arch = "aarch64")]
         // SAFETY: as below, and `i8mm::enable`'s caller vouched for i8mm.
-        Isa::NeonDot if i8mm::enabled() => unsafe { neon::gemm_q8_packed_i8mm_ahead(w, xq, xd, xc, ahead) },
+        Isa::NeonDot if i8mm::enabled() => unsafe {
+            neon::gemm_q8_packed_i8mm_ahead(w, xq, xd, xc, ahead)
+        },
         #[cfg(target_arch = "aarch64")]
         // SAFETY: ISA holds NeonDot only via COMPILE_TIME_ISA or `set_isa`,
         // whose caller vouched for neon + dotprod.
@@ -1251,6 +1259,16 @@ pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
     }
 }
 
+/// Whether the tile pair kernels run ([`tile_pair::enabled`]: AVX-512
+/// VNNI; never off x86_64).
+#[inline]
+pub fn pair_enabled() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return tile_pair::enabled();
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// Whether the AMX int8 kernel runs ([`amx::enabled`]; never off x86_64).
 #[inline]
 pub fn amx_enabled() -> bool {
@@ -1260,29 +1278,43 @@ pub fn amx_enabled() -> bool {
     false
 }
 
-/// The AMX entry points on targets without AMX: nothing is prepared and no
-/// row is computed, so callers take [`gemm_q8_packed`] for every row.
+/// The AMX and tile pair entry points on targets without them: nothing is
+/// prepared and no row is computed, so callers take [`gemm_q8_packed`] for
+/// every row.
 #[cfg(not(target_arch = "x86_64"))]
 mod no_amx {
     /// As on x86_64.
     pub const ROWS: usize = 12;
     /// As on x86_64.
     pub const COLS: usize = 2 * super::PACK_ROWS;
+    /// As on x86_64.
+    pub const PAIR_CALL_ROWS: usize = 8;
     /// Holds nothing.
-    pub struct AmxWeights;
-    impl AmxWeights {
+    pub struct TilePair;
+    impl TilePair {
         pub fn new() -> Self {
-            AmxWeights
+            TilePair
         }
         /// Always false.
         pub fn prepare(&mut self, _: usize, _: super::PackedQ8<'_>) -> bool {
             false
         }
     }
-    impl Default for AmxWeights {
+    impl Default for TilePair {
         fn default() -> Self {
             Self::new()
         }
+    }
+    /// Always None.
+    pub fn gemm_q8_pair<const M: usize>(
+        _: &TilePair,
+        _: &[i8],
+        _: &[f32],
+        _: &[i32],
+        _: usize,
+        _: &[u8],
+    ) -> Option<[[f32; 2 * super::PACK_ROWS]; M]> {
+        None
     }
     /// Always 0 rows.
     pub fn amx_rows(_: usize, _: usize, _: usize, _: usize, _: usize) -> usize {
@@ -1291,7 +1323,7 @@ mod no_amx {
     /// Always 0 rows.
     #[allow(clippy::too_many_arguments)]
     pub fn gemm_q8_packed_amx(
-        _: &AmxWeights,
+        _: &TilePair,
         _: &[i8],
         _: usize,
         _: &[f32],

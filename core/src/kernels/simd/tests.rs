@@ -2475,7 +2475,11 @@ fn q4_groups_match_their_q8_expansion_in_the_packed_tile() {
                 let a: [[f32; 8]; 8] = a.try_into().unwrap();
                 let b: [[f32; 8]; 8] = b.try_into().unwrap();
                 assert_eq!(bits(a), bits(b), "{name} group vs packed expansion nb={nb}");
-                assert_eq!(bits(a), bits(dot), "{name} = neondot q4 bit for bit nb={nb}");
+                assert_eq!(
+                    bits(a),
+                    bits(dot),
+                    "{name} = neondot q4 bit for bit nb={nb}"
+                );
                 check_packed_rows(name, a, twin, &rows8, &qs, &ds, nb);
             }
         }
@@ -2644,8 +2648,9 @@ fn axpy_rows_equal_axpy_row_after_row() {
 #[test]
 #[allow(unsafe_code)]
 fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
-    use super::amx::{self, AmxWeights};
-    use super::{PackedQ8, Q8Pack8, PACK_BLOCKS, PACK_ROWS};
+    use super::amx;
+    use super::tile_pair::TilePair;
+    use super::{PackedQ8, PACK_BLOCKS};
     use crate::kernels::parallel::Cols;
     use std::is_x86_feature_detected as has;
     let vnni = has!("avx512f")
@@ -2668,62 +2673,14 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     for nb in [1usize, 2, 3, 24, 95, 96] {
         let n = nb * Q8_BLOCK;
         for q4 in [false, true] {
-            // Two tiles as the kernels read them: q8 rows packed on the stack, or stored 4-bit groups.
-            let rows: [Vec<Vec<u8>>; 2] = core::array::from_fn(|_| {
-                (0..PACK_ROWS)
-                    .map(|_| {
-                        if q4 {
-                            q4_bytes(&r.vec(n))
-                        } else {
-                            q8_bytes(&r.vec(n))
-                        }
-                    })
-                    .collect()
-            });
-            let mut packs = [Q8Pack8::new(), Q8Pack8::new()];
-            let groups: [Vec<u8>; 2] = core::array::from_fn(|t| {
-                if q4 {
-                    q4_group(&rows[t], nb)
-                } else {
-                    Vec::new()
-                }
-            });
-            for (t, pack) in packs.iter_mut().enumerate().filter(|_| !q4) {
-                scalar::q8_pack8(
-                    core::array::from_fn(|j| &rows[t][j][..]),
-                    nb,
-                    &mut pack.v,
-                    &mut pack.s,
-                );
-                pack.nb = nb;
-            }
-            let tile: [PackedQ8<'_>; 2] = core::array::from_fn(|t| {
-                if q4 {
-                    PackedQ8::from_q4_group(&groups[t], nb).unwrap()
-                } else {
-                    packs[t].view()
-                }
-            });
-            let mut w = AmxWeights::new();
+            let two = TwoTiles::new(&mut r, nb, q4);
+            let (rows, tile) = (&two.rows, two.tiles());
+            let mut w = TilePair::new();
             for (t, tl) in tile.iter().enumerate() {
                 assert!(unsafe { w.prepare_raw(t, *tl) }, "nb={nb}");
             }
             let m_rows = 64;
-            let mut qs = vec![0i8; m_rows * n];
-            let mut ds = vec![0f32; m_rows * nb];
-            let mut cs = vec![0i32; m_rows * 2 * nb];
-            for m in 0..m_rows {
-                let mut x = r.vec(n);
-                if m == 17 {
-                    x[n - 1] = 1e4;
-                }
-                scalar::quantise_q8_corr(
-                    &x,
-                    &mut qs[m * n..(m + 1) * n],
-                    &mut ds[m * nb..(m + 1) * nb],
-                    &mut cs[m * 2 * nb..(m + 1) * 2 * nb],
-                );
-            }
+            let (qs, ds, cs) = q8_panel(&mut r, m_rows, nb, 17);
             let row = |m: usize| {
                 (
                     &qs[m * n..(m + 1) * n],
@@ -2941,7 +2898,7 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
                     PackedQ8::from_group(&zeros, nb - 1)
                 }
                 .unwrap();
-                let mut w2 = AmxWeights::new();
+                let mut w2 = TilePair::new();
                 assert!(unsafe { w2.prepare_raw(0, tile[0]) && w2.prepare_raw(1, narrow) });
                 assert_eq!(
                     unsafe {
@@ -2963,7 +2920,7 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     }
     // Wider than the prepared room, or a third tile: refused.
     let wide = vec![0u8; (PACK_BLOCKS + 1) * (256 + 16)];
-    let mut w = AmxWeights::new();
+    let mut w = TilePair::new();
     assert!(!unsafe { w.prepare_raw(0, PackedQ8::from_group(&wide, PACK_BLOCKS + 1).unwrap()) });
     assert!(!unsafe { w.prepare_raw(2, PackedQ8::from_group(&wide, 1).unwrap()) });
     let qs = vec![0i8; 8 * (PACK_BLOCKS + 1) * 32];
@@ -3467,4 +3424,219 @@ fn prefetch_parts_cover_the_bytes_once() {
         }
         assert_eq!(super::part_bytes(len, 0, 0), (0, 0));
     }
+}
+
+/// `rows` random activation rows of `nb` blocks quantised one after
+/// another (values, block scales, 2 corrections per block), row `outlier`
+/// ending in 1e4.
+#[cfg(target_arch = "x86_64")]
+fn q8_panel(r: &mut Rng, rows: usize, nb: usize, outlier: usize) -> (Vec<i8>, Vec<f32>, Vec<i32>) {
+    let n = nb * Q8_BLOCK;
+    let mut qs = vec![0i8; rows * n];
+    let mut ds = vec![0f32; rows * nb];
+    let mut cs = vec![0i32; rows * 2 * nb];
+    for m in 0..rows {
+        let mut x = r.vec(n);
+        if m == outlier {
+            x[n - 1] = 1e4;
+        }
+        scalar::quantise_q8_corr(
+            &x,
+            &mut qs[m * n..(m + 1) * n],
+            &mut ds[m * nb..(m + 1) * nb],
+            &mut cs[m * 2 * nb..(m + 1) * 2 * nb],
+        );
+    }
+    (qs, ds, cs)
+}
+
+/// Two tiles of 8 random weight rows of `nb` blocks as the packed kernels
+/// read them: int8 rows packed on the stack, or stored 4-bit groups.
+#[cfg(target_arch = "x86_64")]
+struct TwoTiles {
+    rows: [Vec<Vec<u8>>; 2],
+    packs: [super::Q8Pack8; 2],
+    groups: [Vec<u8>; 2],
+    nb: usize,
+    q4: bool,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl TwoTiles {
+    fn new(r: &mut Rng, nb: usize, q4: bool) -> Box<Self> {
+        let n = nb * Q8_BLOCK;
+        let rows: [Vec<Vec<u8>>; 2] = core::array::from_fn(|_| {
+            (0..super::PACK_ROWS)
+                .map(|_| {
+                    if q4 {
+                        q4_bytes(&r.vec(n))
+                    } else {
+                        q8_bytes(&r.vec(n))
+                    }
+                })
+                .collect()
+        });
+        let groups: [Vec<u8>; 2] = core::array::from_fn(|t| {
+            if q4 {
+                q4_group(&rows[t], nb)
+            } else {
+                Vec::new()
+            }
+        });
+        let mut two = Box::new(TwoTiles {
+            rows,
+            packs: [super::Q8Pack8::new(), super::Q8Pack8::new()],
+            groups,
+            nb,
+            q4,
+        });
+        if !q4 {
+            let TwoTiles { rows, packs, .. } = &mut *two;
+            for (t, pack) in packs.iter_mut().enumerate() {
+                scalar::q8_pack8(
+                    core::array::from_fn(|j| &rows[t][j][..]),
+                    nb,
+                    &mut pack.v,
+                    &mut pack.s,
+                );
+                pack.nb = nb;
+            }
+        }
+        two
+    }
+
+    fn tiles(&self) -> [super::PackedQ8<'_>; 2] {
+        core::array::from_fn(|t| {
+            if self.q4 {
+                super::PackedQ8::from_q4_group(&self.groups[t], self.nb).unwrap()
+            } else {
+                self.packs[t].view()
+            }
+        })
+    }
+}
+
+/// The 16-row AVX-512 VNNI kernel over a prepared tile pair
+/// (`tile_pair::gemm_q8_pair_raw`) gives, per tile, what the 8-row VNNI
+/// kernel gives, bit for bit, and tracks the scalar twin within the named
+/// limit of every SIMD int8 GEMM: every row count it takes
+/// (1-8), odd and even block counts up to `PACK_BLOCKS`, int8 and 4-bit
+/// tiles, rows with an outlier, with and without a prefetch, and rows that
+/// hold fewer blocks than the tiles (the kernel cuts to them). It refuses 0
+/// or more than `PAIR_CALL_ROWS` rows and tiles laid out with different
+/// block counts.
+#[cfg(target_arch = "x86_64")]
+#[test]
+#[allow(unsafe_code)]
+fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
+    use super::tile_pair::{gemm_q8_pair_raw, TilePair, PAIR_CALL_ROWS};
+    use super::{Q8Pack8, PACK_BLOCKS, PACK_ROWS};
+    use std::is_x86_feature_detected as has;
+    let vnni = has!("avx512f")
+        && has!("avx512bw")
+        && has!("avx512dq")
+        && has!("avx512vl")
+        && has!("avx512vnni")
+        && has!("avx2")
+        && has!("fma")
+        && has!("f16c");
+    if !vnni {
+        eprintln!("skipped: this CPU has no AVX-512 VNNI");
+        return;
+    }
+    // SAFETY (whole test): every feature of the kernel and of `prepare_raw` was detected above.
+    let mut r = Rng(0x7e1e);
+    let mut checked = 0;
+    for nb in [1usize, 2, 3, 7, 24, 95, PACK_BLOCKS] {
+        let n = nb * Q8_BLOCK;
+        for q4 in [false, true] {
+            let two = TwoTiles::new(&mut r, nb, q4);
+            let (rows, tile) = (&two.rows, two.tiles());
+            let mut w = TilePair::new();
+            for (t, tl) in tile.iter().enumerate() {
+                assert!(unsafe { w.prepare_raw(t, *tl) }, "nb={nb}");
+            }
+            let m_rows = PAIR_CALL_ROWS;
+            let (qs, ds, cs) = q8_panel(&mut r, m_rows, nb, 3);
+            // The panel cut to its first `keep` blocks per row (rows `keep * 32` values apart).
+            let cut = |keep: usize| {
+                let (mut q, mut d, mut c) = (Vec::new(), Vec::new(), Vec::new());
+                for m in 0..m_rows {
+                    q.extend_from_slice(&qs[m * n..m * n + keep * Q8_BLOCK]);
+                    d.extend_from_slice(&ds[m * nb..m * nb + keep]);
+                    c.extend_from_slice(&cs[m * 2 * nb..m * 2 * nb + 2 * keep]);
+                }
+                (q, d, c)
+            };
+            let ahead = rows[1][0].as_slice();
+            macro_rules! check {
+                ($m:literal) => {{
+                    for (keep, pre) in [(nb, &[][..]), (nb, ahead), (nb.div_ceil(2), &[][..])] {
+                        let (pq, pd, pc) = cut(keep);
+                        let stride = keep * Q8_BLOCK;
+                        let got = unsafe { gemm_q8_pair_raw::<$m>(&w, &pq, &pd, &pc, stride, pre) }.expect("runs");
+                        let q: [&[i8]; $m] = core::array::from_fn(|m| &pq[m * stride..(m + 1) * stride]);
+                        let d: [&[f32]; $m] = core::array::from_fn(|m| &pd[m * keep..(m + 1) * keep]);
+                        let c: [&[i32]; $m] = core::array::from_fn(|m| &pc[2 * m * keep..2 * (m + 1) * keep]);
+                        for (t, tl) in tile.iter().enumerate() {
+                            let want = unsafe { super::x86::gemm_q8_packed_vnni::<$m>(*tl, q, d, c) };
+                            let twin = scalar::gemm_q8_packed::<$m>(*tl, q, d, c);
+                            for m in 0..$m {
+                                for j in 0..PACK_ROWS {
+                                    let what = format!("nb={nb} q4={q4} rows={} keep={keep} row {m} tile {t} column {j}", $m);
+                                    let g = got[m][PACK_ROWS * t + j];
+                                    assert_eq!(g.to_bits(), want[m][j].to_bits(), "{what}");
+                                    let mag: f64 = (0..q[m].len() / Q8_BLOCK)
+                                        .map(|bk| {
+                                            let a: i64 = (0..Q8_BLOCK)
+                                                .map(|i| (tl.value(bk, j, i) as i64 * q[m][bk * 32 + i] as i64).abs())
+                                                .sum();
+                                            (super::f16_to_f32(tl.scale_bits(bk, j)) as f64 * d[m][bk] as f64).abs()
+                                                * a as f64
+                                        })
+                                        .sum();
+                                    check(&what, g, twin[m][j], mag, SIMD_VS_SCALAR_GEMM_Q8);
+                                }
+                            }
+                        }
+                        checked += 1;
+                    }
+                }};
+            }
+            check!(1);
+            check!(2);
+            check!(3);
+            check!(4);
+            check!(5);
+            check!(6);
+            check!(7);
+            check!(8);
+            // Refusals: no rows, more rows than a call takes, operands short of
+            // the rows asked for, tiles of different widths.
+            assert!(unsafe { gemm_q8_pair_raw::<0>(&w, &qs, &ds, &cs, n, &[]) }.is_none());
+            let (q9, d9, c9) = (
+                [qs.clone(), qs.clone()].concat(),
+                [ds.clone(), ds.clone()].concat(),
+                [cs.clone(), cs.clone()].concat(),
+            );
+            assert!(unsafe { gemm_q8_pair_raw::<9>(&w, &q9, &d9, &c9, n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_raw::<8>(&w, &q9, &d9, &c9, n, &[]) }.is_some());
+            assert!(unsafe { gemm_q8_pair_raw::<8>(&w, &qs[1..], &ds, &cs, n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_raw::<8>(&w, &qs, &ds[1..], &cs, n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_raw::<8>(&w, &qs, &ds, &cs[1..], n, &[]) }.is_none());
+            if nb > 1 && !q4 {
+                let mut narrow = Q8Pack8::new();
+                scalar::q8_pack8(
+                    core::array::from_fn(|j| &rows[1][j][..]),
+                    nb - 1,
+                    &mut narrow.v,
+                    &mut narrow.s,
+                );
+                narrow.nb = nb - 1;
+                assert!(unsafe { w.prepare_raw(1, narrow.view()) });
+                assert!(unsafe { gemm_q8_pair_raw::<1>(&w, &qs, &ds, &cs, n, &[]) }.is_none());
+            }
+        }
+    }
+    assert_eq!(checked, 7 * 2 * 8 * 3);
 }

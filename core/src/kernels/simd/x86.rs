@@ -1659,9 +1659,8 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(
         let (vb, sb) = unsafe { (vp.add(pv * b), sp.add(PS * b)) };
         let wv: [__m512i; 4] = if Q4 {
             // SAFETY: vb holds 2 x 64 bytes.
-            let h: [__m512i; 2] = core::array::from_fn(|k| unsafe {
-                _mm512_loadu_si512(vb.add(64 * k) as *const _)
-            });
+            let h: [__m512i; 2] =
+                core::array::from_fn(|k| unsafe { _mm512_loadu_si512(vb.add(64 * k) as *const _) });
             [
                 _mm512_and_si512(h[0], low),
                 _mm512_and_si512(h[1], low),
@@ -1694,9 +1693,7 @@ unsafe fn packed_vnni<const M: usize, const Q4: bool>(
         }
         for (g, wg) in wv.iter().enumerate() {
             // SAFETY: 8g + 8 <= 32.
-            let xg = unsafe {
-                _mm512_set1_epi64((xs.add(8 * g) as *const i64).read_unaligned())
-            };
+            let xg = unsafe { _mm512_set1_epi64((xs.add(8 * g) as *const i64).read_unaligned()) };
             dp = _mm512_dpbusd_epi32(dp, *wg, xg);
         }
         dp
@@ -1959,9 +1956,7 @@ unsafe fn packed_ymm<const K: usize, const Q4: bool, const VNNI: bool>(
                 let wg: [__m256i; 2] = core::array::from_fn(|h| {
                     if Q4 {
                         // vb holds 2 x 64 bytes; 64 (g % 2) + 32 h + 32 <= 128.
-                        let v = _mm256_loadu_si256(
-                            vb.add(64 * (g % 2) + 32 * h) as *const __m256i
-                        );
+                        let v = _mm256_loadu_si256(vb.add(64 * (g % 2) + 32 * h) as *const __m256i);
                         if g < 2 {
                             _mm256_and_si256(v, low)
                         } else {
