@@ -16,7 +16,9 @@
 //! scale product, one FMA) serve 16 rows instead of 8. Measured in a
 //! scratch copy on an Intel Xeon with AVX-512 VNNI (2026-12-05, L1-resident
 //! operands): 174-189 GMAC/s at 4-8 rows against 123-144 for the 8-row
-//! kernel at 12.
+//! kernel at 12; in `linear` (`duolando bench --kernels`), the R step's,
+//! re-prefill's and batched sessions' GEMMs went from 24-29% of the VNNI
+//! peak to 37-40% (docs/PERFORMANCE.md, 2026-12-05 night).
 //!
 //! Why it is bit-identical: per weight row and block the i32 sum is exact
 //! in both (the stored unsigned form plus the activation's correction, or
