@@ -160,7 +160,11 @@ pub unsafe fn gemm_q8_packed_amx_raw(
 ) -> usize {
     let nb = w.nb[0];
     let rows = amx_rows(nb, xq.len(), stride, xd.len(), out.rows());
-    if rows == 0 || w.nb[1] != nb || out.cols() > COLS || bias.is_some_and(|b| b.len() < out.cols())
+    if rows == 0
+        || w.nb[1] != nb
+        || w.unsigned != [false; 2]
+        || out.cols() > COLS
+        || bias.is_some_and(|b| b.len() < out.cols())
     {
         return 0;
     }

@@ -2677,7 +2677,7 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
             let (rows, tile) = (&two.rows, two.tiles());
             let mut w = TilePair::new();
             for (t, tl) in tile.iter().enumerate() {
-                assert!(unsafe { w.prepare_raw(t, *tl) }, "nb={nb}");
+                assert!(unsafe { w.prepare_raw(t, *tl, false) }, "nb={nb}");
             }
             let m_rows = 64;
             let (qs, ds, cs) = q8_panel(&mut r, m_rows, nb, 17);
@@ -2899,7 +2899,9 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
                 }
                 .unwrap();
                 let mut w2 = TilePair::new();
-                assert!(unsafe { w2.prepare_raw(0, tile[0]) && w2.prepare_raw(1, narrow) });
+                assert!(unsafe {
+                    w2.prepare_raw(0, tile[0], false) && w2.prepare_raw(1, narrow, false)
+                });
                 assert_eq!(
                     unsafe {
                         amx::gemm_q8_packed_amx_raw(
@@ -2921,8 +2923,14 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     // Wider than the prepared room, or a third tile: refused.
     let wide = vec![0u8; (PACK_BLOCKS + 1) * (256 + 16)];
     let mut w = TilePair::new();
-    assert!(!unsafe { w.prepare_raw(0, PackedQ8::from_group(&wide, PACK_BLOCKS + 1).unwrap()) });
-    assert!(!unsafe { w.prepare_raw(2, PackedQ8::from_group(&wide, 1).unwrap()) });
+    assert!(!unsafe {
+        w.prepare_raw(
+            0,
+            PackedQ8::from_group(&wide, PACK_BLOCKS + 1).unwrap(),
+            false,
+        )
+    });
+    assert!(!unsafe { w.prepare_raw(2, PackedQ8::from_group(&wide, 1).unwrap(), false) });
     let qs = vec![0i8; 8 * (PACK_BLOCKS + 1) * 32];
     let ds = vec![0f32; 8 * (PACK_BLOCKS + 1)];
     let mut buf = vec![0f32; 8 * 16];
@@ -3552,9 +3560,12 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
         for q4 in [false, true] {
             let two = TwoTiles::new(&mut r, nb, q4);
             let (rows, tile) = (&two.rows, two.tiles());
-            let mut w = TilePair::new();
-            for (t, tl) in tile.iter().enumerate() {
-                assert!(unsafe { w.prepare_raw(t, *tl) }, "nb={nb}");
+            // The operand stored signed (as the AMX kernel takes it) and unsigned.
+            let mut pairs = [TilePair::new(), TilePair::new()];
+            for (p, unsigned) in pairs.iter_mut().zip([false, true]) {
+                for (t, tl) in tile.iter().enumerate() {
+                    assert!(unsafe { p.prepare_raw(t, *tl, unsigned) }, "nb={nb}");
+                }
             }
             let m_rows = PAIR_CALL_ROWS;
             let (qs, ds, cs) = q8_panel(&mut r, m_rows, nb, 3);
@@ -3574,7 +3585,8 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                     for (keep, pre) in [(nb, &[][..]), (nb, ahead), (nb.div_ceil(2), &[][..])] {
                         let (pq, pd, pc) = cut(keep);
                         let stride = keep * Q8_BLOCK;
-                        let got = unsafe { gemm_q8_pair_raw::<$m>(&w, &pq, &pd, &pc, stride, pre) }.expect("runs");
+                        for (w, unsigned) in pairs.iter().zip([false, true]) {
+                        let got = unsafe { gemm_q8_pair_raw::<$m>(w, &pq, &pd, &pc, stride, pre) }.expect("runs");
                         let q: [&[i8]; $m] = core::array::from_fn(|m| &pq[m * stride..(m + 1) * stride]);
                         let d: [&[f32]; $m] = core::array::from_fn(|m| &pd[m * keep..(m + 1) * keep]);
                         let c: [&[i32]; $m] = core::array::from_fn(|m| &pc[2 * m * keep..2 * (m + 1) * keep]);
@@ -3583,7 +3595,7 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                             let twin = scalar::gemm_q8_packed::<$m>(*tl, q, d, c);
                             for m in 0..$m {
                                 for j in 0..PACK_ROWS {
-                                    let what = format!("nb={nb} q4={q4} rows={} keep={keep} row {m} tile {t} column {j}", $m);
+                                    let what = format!("nb={nb} q4={q4} unsigned={unsigned} rows={} keep={keep} row {m} tile {t} column {j}", $m);
                                     let g = got[m][PACK_ROWS * t + j];
                                     assert_eq!(g.to_bits(), want[m][j].to_bits(), "{what}");
                                     let mag: f64 = (0..q[m].len() / Q8_BLOCK)
@@ -3600,6 +3612,7 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                             }
                         }
                         checked += 1;
+                        }
                     }
                 }};
             }
@@ -3612,18 +3625,22 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
             check!(7);
             check!(8);
             // Refusals: no rows, more rows than a call takes, operands short of
-            // the rows asked for, tiles of different widths.
-            assert!(unsafe { gemm_q8_pair_raw::<0>(&w, &qs, &ds, &cs, n, &[]) }.is_none());
+            // the rows asked for, tiles stored signed and unsigned, tiles of
+            // different widths.
+            let [w, mixed] = &mut pairs;
+            assert!(unsafe { mixed.prepare_raw(1, tile[1], false) });
+            assert!(unsafe { gemm_q8_pair_raw::<1>(mixed, &qs, &ds, &cs, n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_raw::<0>(w, &qs, &ds, &cs, n, &[]) }.is_none());
             let (q9, d9, c9) = (
                 [qs.clone(), qs.clone()].concat(),
                 [ds.clone(), ds.clone()].concat(),
                 [cs.clone(), cs.clone()].concat(),
             );
-            assert!(unsafe { gemm_q8_pair_raw::<9>(&w, &q9, &d9, &c9, n, &[]) }.is_none());
-            assert!(unsafe { gemm_q8_pair_raw::<8>(&w, &q9, &d9, &c9, n, &[]) }.is_some());
-            assert!(unsafe { gemm_q8_pair_raw::<8>(&w, &qs[1..], &ds, &cs, n, &[]) }.is_none());
-            assert!(unsafe { gemm_q8_pair_raw::<8>(&w, &qs, &ds[1..], &cs, n, &[]) }.is_none());
-            assert!(unsafe { gemm_q8_pair_raw::<8>(&w, &qs, &ds, &cs[1..], n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_raw::<9>(w, &q9, &d9, &c9, n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_raw::<8>(w, &q9, &d9, &c9, n, &[]) }.is_some());
+            assert!(unsafe { gemm_q8_pair_raw::<8>(w, &qs[1..], &ds, &cs, n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_raw::<8>(w, &qs, &ds[1..], &cs, n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_raw::<8>(w, &qs, &ds, &cs[1..], n, &[]) }.is_none());
             if nb > 1 && !q4 {
                 let mut narrow = Q8Pack8::new();
                 scalar::q8_pack8(
@@ -3633,10 +3650,10 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                     &mut narrow.s,
                 );
                 narrow.nb = nb - 1;
-                assert!(unsafe { w.prepare_raw(1, narrow.view()) });
-                assert!(unsafe { gemm_q8_pair_raw::<1>(&w, &qs, &ds, &cs, n, &[]) }.is_none());
+                assert!(unsafe { w.prepare_raw(1, narrow.view(), false) });
+                assert!(unsafe { gemm_q8_pair_raw::<1>(w, &qs, &ds, &cs, n, &[]) }.is_none());
             }
         }
     }
-    assert_eq!(checked, 7 * 2 * 8 * 3);
+    assert_eq!(checked, 7 * 2 * 8 * 3 * 2);
 }

@@ -22,7 +22,8 @@
 //!
 //! Why it is bit-identical: per weight row and block the i32 sum is exact
 //! in both (the stored unsigned form plus the activation's correction, or
-//! signed weights flipped to unsigned here with the same correction; 4-bit
+//! signed weights flipped to unsigned with the same correction: at layout
+//! time, or per call where the AMX kernel shares the signed operand; 4-bit
 //! tiles are widened to `q - 8`, whose sum equals the 8-row kernel's
 //! `q`-sum plus its shifted correction). The f32 steps are the same
 //! operations on the same values: `acc_h += f32(sum) * (s_b * xd_b)` into
@@ -63,6 +64,9 @@ pub struct TilePair {
     pub(super) b: [u8; PACK_BLOCKS * B_BLOCK],
     pub(super) s: [[[f32; 16]; PAIRS]; 2],
     pub(super) nb: [usize; 2],
+    /// Per tile: its bytes stored unsigned (`w + 128`, what `vpdpbusd`
+    /// multiplies) instead of signed (what the AMX kernel takes).
+    pub(super) unsigned: [bool; 2],
 }
 
 impl TilePair {
@@ -71,6 +75,7 @@ impl TilePair {
             b: [0; PACK_BLOCKS * B_BLOCK],
             s: [[[0.0; 16]; PAIRS]; 2],
             nb: [0; 2],
+            unsigned: [false; 2],
         }
     }
 
@@ -79,7 +84,9 @@ impl TilePair {
     /// takes them ([`enabled`]), `half > 1` or `w` has more than
     /// [`PACK_BLOCKS`] blocks. Both tiles must be laid out, with the same
     /// number of blocks, before a kernel ([`super::gemm_q8_packed_amx`],
-    /// [`gemm_q8_pair`]) runs on them.
+    /// [`gemm_q8_pair`]) runs on them. Stored signed where the AMX kernel
+    /// runs ([`super::amx::enabled`]), else unsigned, which saves the pair
+    /// kernel a flip per weight register per call.
     pub fn prepare(&mut self, half: usize, w: PackedQ8<'_>) -> bool {
         if half < 2 {
             self.nb[half] = 0;
@@ -87,15 +94,17 @@ impl TilePair {
         if !enabled() {
             return false;
         }
+        let unsigned = !super::amx::enabled();
         // SAFETY: `enabled` is the Avx512Vnni ISA (avx512f/bw among its features).
-        unsafe { self.prepare_raw(half, w) }
+        unsafe { self.prepare_raw(half, w, unsigned) }
     }
 
-    /// [`Self::prepare`] without the [`enabled`] check.
+    /// [`Self::prepare`] without the [`enabled`] check, the bytes stored
+    /// `unsigned` or signed as asked.
     ///
     /// # Safety
     /// The CPU must support avx512f, avx512bw and f16c.
-    pub unsafe fn prepare_raw(&mut self, half: usize, w: PackedQ8<'_>) -> bool {
+    pub unsafe fn prepare_raw(&mut self, half: usize, w: PackedQ8<'_>, unsigned: bool) -> bool {
         if half > 1 {
             return false;
         }
@@ -110,8 +119,9 @@ impl TilePair {
             return false;
         }
         // SAFETY: the caller's features; the extents were checked above.
-        unsafe { prepare_b(w, nb, half, &mut self.b, &mut self.s) };
+        unsafe { prepare_b(w, nb, half, unsigned, &mut self.b, &mut self.s) };
         self.nb[half] = nb;
+        self.unsigned[half] = unsigned;
         true
     }
 }
@@ -122,7 +132,7 @@ impl Default for TilePair {
     }
 }
 
-/// [`TilePair::prepare`]'s layout of tile `half`.
+/// [`TilePair::prepare`]'s layout of tile `half` (bytes `w + 128` where `unsigned`).
 ///
 /// # Safety
 /// avx512f, avx512bw and f16c; `w.v` holds `nb` blocks, `w.s` their scales,
@@ -132,10 +142,12 @@ unsafe fn prepare_b(
     w: PackedQ8<'_>,
     nb: usize,
     half: usize,
+    unsigned: bool,
     out: &mut [u8],
     scales: &mut [[[f32; 16]; PAIRS]; 2],
 ) {
     let low = _mm512_set1_epi8(0x0f);
+    let flip = _mm512_set1_epi8(if unsigned { -128 } else { 0 });
     let eight = _mm512_set1_epi8(8);
     // Low half: the even dwords (h = 0) of a stored line, high half: the odd ones.
     let split = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
@@ -160,7 +172,7 @@ unsafe fn prepare_b(
             })
         };
         for (g, line) in lines.iter().enumerate() {
-            let v = _mm512_permutexvar_epi32(split, *line);
+            let v = _mm512_xor_si512(_mm512_permutexvar_epi32(split, *line), flip);
             // SAFETY: ob holds 8 x 64 bytes; 128g + 64 + 32 half + 32 <= 512.
             unsafe {
                 _mm256_storeu_si256(
@@ -247,12 +259,20 @@ pub unsafe fn gemm_q8_pair_raw<const M: usize>(
         return None;
     }
     let nb = w.nb[0].min(PACK_BLOCKS).min(rb);
-    // SAFETY: the caller's features; every row holds `nb` blocks at its
-    // stride (above), both tiles were prepared with `w.nb[0] >= nb` blocks.
-    Some(unsafe { pair_vnni(w, nb, xq.as_ptr(), xd.as_ptr(), xc.as_ptr(), n_in, ahead) })
+    let (q, d, c) = (xq.as_ptr(), xd.as_ptr(), xc.as_ptr());
+    // Stored unsigned: no flip in the kernel; stored signed (for AMX): flipped per call.
+    match w.unsigned {
+        // SAFETY: the caller's features; every row holds `nb` blocks at its
+        // stride (above), both tiles were prepared with `w.nb[0] >= nb` blocks.
+        [true, true] => Some(unsafe { pair_vnni::<M, false>(w, nb, q, d, c, n_in, ahead) }),
+        // SAFETY: as above.
+        [false, false] => Some(unsafe { pair_vnni::<M, true>(w, nb, q, d, c, n_in, ahead) }),
+        _ => None,
+    }
 }
 
-/// [`gemm_q8_pair`] on `nb` blocks of rows `n_in` values apart.
+/// [`gemm_q8_pair`] on `nb` blocks of rows `n_in` values apart, the
+/// weights flipped to unsigned here (`FLIP`: stored signed) or stored so.
 ///
 /// # Safety
 /// avx512f/bw/dq/vl/vnni, avx2, fma, f16c; `nb <= PACK_BLOCKS`, both tiles
@@ -260,7 +280,7 @@ pub unsafe fn gemm_q8_pair_raw<const M: usize>(
 /// `xq`, `xd`, `xc` hold `M` rows of `n_in`, `n_in / Q8_BLOCK` and `2 *
 /// n_in / Q8_BLOCK` elements.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
-unsafe fn pair_vnni<const M: usize>(
+unsafe fn pair_vnni<const M: usize, const FLIP: bool>(
     w: &TilePair,
     nb: usize,
     xq: *const i8,
@@ -286,10 +306,12 @@ unsafe fn pair_vnni<const M: usize>(
             // Register k, lane j: bytes 4k .. 4k + 4 of weight row j, as unsigned (w + 128).
             let wv: [__m512i; 8] = core::array::from_fn(|k| {
                 // SAFETY: 64k + 64 <= B_BLOCK.
-                _mm512_xor_si512(
-                    unsafe { _mm512_loadu_si512(ob.add(64 * k) as *const _) },
-                    flip,
-                )
+                let v = unsafe { _mm512_loadu_si512(ob.add(64 * k) as *const _) };
+                if FLIP {
+                    _mm512_xor_si512(v, flip)
+                } else {
+                    v
+                }
             });
             // SAFETY: w.s[h] holds PAIRS >= b / 2 + 1 rows of 16 floats.
             let sv = unsafe { _mm512_loadu_ps(w.s[$h].as_ptr().add(b / 2) as *const f32) };
