@@ -747,11 +747,12 @@ fn q8_panel_tiles<W: Q8Source, const WB: usize>(
 /// tiles of up to [`PACKED_CALL_ROWS`] rows ([`simd::gemm_q8_packed`]).
 /// Where the tile pair kernels run ([`simd::pair_enabled`]: AVX-512 VNNI)
 /// and the panel has at least [`PAIR_MIN_ROWS`] rows, tiles go in pairs,
-/// laid out once per pair as one 16-row operand ([`simd::TilePair`]): with
+/// laid out once per pair as one 16-row operand ([`simd::TilePair`]). With
 /// AMX ([`simd::amx_enabled`], at least [`AMX_MIN_ROWS`] rows) the whole
-/// 8-row groups of activation rows take the AMX kernel, and the rows after
-/// them (all rows without AMX) the 16-row VNNI kernel
-/// ([`simd::gemm_q8_pair`]). Every route gives the same values bit for bit.
+/// 8-row groups of activation rows take the AMX kernel and the rows after
+/// them the 8-row kernel per tile; without AMX every row takes the 16-row
+/// VNNI kernel ([`simd::gemm_q8_pair`]). Every route gives the same values
+/// bit for bit.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn q8_panel_packed<W: Q8Source>(
@@ -815,13 +816,16 @@ fn q8_panel_packed<W: Q8Source>(
             0
         };
         let rest = if done > 0 { &[][..] } else { ahead };
-        if !prepared
-            || !pair_rows(a, p, done, n_rows, n_in, rest, |i, t| {
+        // The rows after the AMX rows (all of them without AMX) on the pair
+        // kernel where the pair is laid out for it (unsigned: no AMX), else
+        // (and if it refused: not reached, kept so that a refusal never
+        // leaves outputs unwritten) per tile on the 8-row kernel.
+        let on_pair = prepared
+            && a.unsigned()
+            && pair_rows(a, p, done, n_rows, n_in, rest, |i, t| {
                 put_row(&mut y, e, i, t0, cols, t)
-            })
-        {
-            // Not reached (both tiles have the panel's blocks); kept so a
-            // refusal never leaves outputs unwritten.
+            });
+        if !on_pair {
             for (tt, ntt) in [(t0, nt), (t1, nt1)] {
                 if ntt > 0 {
                     let tile = w.packed_tile(tt, nb, &mut pack, &mut buf);
@@ -845,7 +849,8 @@ const AMX_MIN_ROWS: usize = 16;
 
 /// The fewest rows of a panel for which tiles go in laid-out pairs
 /// ([`simd::gemm_q8_pair`]): below it, laying out the pair costs more than
-/// the 16-row kernel saves (the S step's panels of 1-3 rows).
+/// the 16-row kernel saves (a streaming step's panels of 1-10 rows lost 2-8
+/// points of peak: docs/PERFORMANCE.md).
 const PAIR_MIN_ROWS: usize = 16;
 
 /// `y[i][t0..t0 + nt]` = the epilogue of `t[..nt]` ([`Epilogue::put`]).

@@ -22,8 +22,7 @@
 //!
 //! Why it is bit-identical: per weight row and block the i32 sum is exact
 //! in both (the stored unsigned form plus the activation's correction, or
-//! signed weights flipped to unsigned with the same correction: at layout
-//! time, or per call where the AMX kernel shares the signed operand; 4-bit
+//! weights laid out unsigned, `w + 128`, with the same correction; 4-bit
 //! tiles are widened to `q - 8`, whose sum equals the 8-row kernel's
 //! `q`-sum plus its shifted correction). The f32 steps are the same
 //! operations on the same values: `acc_h += f32(sum) * (s_b * xd_b)` into
@@ -85,8 +84,8 @@ impl TilePair {
     /// [`PACK_BLOCKS`] blocks. Both tiles must be laid out, with the same
     /// number of blocks, before a kernel ([`super::gemm_q8_packed_amx`],
     /// [`gemm_q8_pair`]) runs on them. Stored signed where the AMX kernel
-    /// runs ([`super::amx::enabled`]), else unsigned, which saves the pair
-    /// kernel a flip per weight register per call.
+    /// runs ([`super::amx::enabled`]: its operand), else unsigned (the pair
+    /// kernel's: [`Self::unsigned`]).
     pub fn prepare(&mut self, half: usize, w: PackedQ8<'_>) -> bool {
         if half < 2 {
             self.nb[half] = 0;
@@ -97,6 +96,12 @@ impl TilePair {
         let unsigned = !super::amx::enabled();
         // SAFETY: `enabled` is the Avx512Vnni ISA (avx512f/bw among its features).
         unsafe { self.prepare_raw(half, w, unsigned) }
+    }
+
+    /// Whether both tiles are stored unsigned: the operand
+    /// [`gemm_q8_pair`] takes (signed pairs are the AMX kernel's).
+    pub fn unsigned(&self) -> bool {
+        self.unsigned == [true; 2]
     }
 
     /// [`Self::prepare`] without the [`enabled`] check, the bytes stored
@@ -218,7 +223,8 @@ unsafe fn prepare_b(
 /// `ahead` into L2, spread over the block pairs. None where the kernel does
 /// not run ([`enabled`]), `M` is 0 or over [`PAIR_CALL_ROWS`], the operands
 /// are shorter than `M` rows, or the two tiles were laid out with different
-/// block counts: the caller then takes the 8-row kernel per tile.
+/// block counts or signed (for AMX: [`TilePair::unsigned`]): the caller
+/// then takes the 8-row kernel per tile.
 #[inline]
 pub fn gemm_q8_pair<const M: usize>(
     w: &TilePair,
@@ -252,6 +258,7 @@ pub unsafe fn gemm_q8_pair_raw<const M: usize>(
     if M == 0
         || M > PAIR_CALL_ROWS
         || w.nb[0] != w.nb[1]
+        || !w.unsigned()
         || xq.len() < M * n_in
         || xd.len() < M * rb
         || xc.len() < 2 * M * rb
@@ -259,20 +266,13 @@ pub unsafe fn gemm_q8_pair_raw<const M: usize>(
         return None;
     }
     let nb = w.nb[0].min(PACK_BLOCKS).min(rb);
-    let (q, d, c) = (xq.as_ptr(), xd.as_ptr(), xc.as_ptr());
-    // Stored unsigned: no flip in the kernel; stored signed (for AMX): flipped per call.
-    match w.unsigned {
-        // SAFETY: the caller's features; every row holds `nb` blocks at its
-        // stride (above), both tiles were prepared with `w.nb[0] >= nb` blocks.
-        [true, true] => Some(unsafe { pair_vnni::<M, false>(w, nb, q, d, c, n_in, ahead) }),
-        // SAFETY: as above.
-        [false, false] => Some(unsafe { pair_vnni::<M, true>(w, nb, q, d, c, n_in, ahead) }),
-        _ => None,
-    }
+    // SAFETY: the caller's features; every row holds `nb` blocks at its
+    // stride (above), both tiles were prepared unsigned with `w.nb[0] >= nb` blocks.
+    Some(unsafe { pair_vnni(w, nb, xq.as_ptr(), xd.as_ptr(), xc.as_ptr(), n_in, ahead) })
 }
 
-/// [`gemm_q8_pair`] on `nb` blocks of rows `n_in` values apart, the
-/// weights flipped to unsigned here (`FLIP`: stored signed) or stored so.
+/// [`gemm_q8_pair`] on `nb` blocks of rows `n_in` values apart (both
+/// tiles stored unsigned).
 ///
 /// # Safety
 /// avx512f/bw/dq/vl/vnni, avx2, fma, f16c; `nb <= PACK_BLOCKS`, both tiles
@@ -280,7 +280,7 @@ pub unsafe fn gemm_q8_pair_raw<const M: usize>(
 /// `xq`, `xd`, `xc` hold `M` rows of `n_in`, `n_in / Q8_BLOCK` and `2 *
 /// n_in / Q8_BLOCK` elements.
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
-unsafe fn pair_vnni<const M: usize, const FLIP: bool>(
+unsafe fn pair_vnni<const M: usize>(
     w: &TilePair,
     nb: usize,
     xq: *const i8,
@@ -289,7 +289,6 @@ unsafe fn pair_vnni<const M: usize, const FLIP: bool>(
     n_in: usize,
     ahead: &[u8],
 ) -> [[f32; COLS]; M] {
-    let flip = _mm512_set1_epi8(-128);
     let rb = n_in / Q8_BLOCK;
     let bp = w.b.as_ptr();
     // acc[m][h]: row m's sums of the blocks of parity h, lane = weight row.
@@ -303,15 +302,10 @@ unsafe fn pair_vnni<const M: usize, const FLIP: bool>(
             let b: usize = $b;
             // SAFETY: b < nb <= PACK_BLOCKS: the operand holds B_BLOCK bytes of block b.
             let ob = unsafe { bp.add(B_BLOCK * b) };
-            // Register k, lane j: bytes 4k .. 4k + 4 of weight row j, as unsigned (w + 128).
+            // Register k, lane j: bytes 4k .. 4k + 4 of weight row j, stored unsigned (w + 128).
             let wv: [__m512i; 8] = core::array::from_fn(|k| {
                 // SAFETY: 64k + 64 <= B_BLOCK.
-                let v = unsafe { _mm512_loadu_si512(ob.add(64 * k) as *const _) };
-                if FLIP {
-                    _mm512_xor_si512(v, flip)
-                } else {
-                    v
-                }
+                unsafe { _mm512_loadu_si512(ob.add(64 * k) as *const _) }
             });
             // SAFETY: w.s[h] holds PAIRS >= b / 2 + 1 rows of 16 floats.
             let sv = unsafe { _mm512_loadu_ps(w.s[$h].as_ptr().add(b / 2) as *const f32) };
