@@ -1299,6 +1299,10 @@ mod no_amx {
         pub fn prepare(&mut self, _: usize, _: super::PackedQ8<'_>) -> bool {
             false
         }
+        /// Always false.
+        pub fn unsigned(&self) -> bool {
+            false
+        }
     }
     impl Default for TilePair {
         fn default() -> Self {
