@@ -873,6 +873,17 @@ fn put_row(y: &mut Cols<'_>, e: Epilogue<'_>, i: usize, t0: usize, nt: usize, t:
 /// kernels split a call into passes of at most 4 rows themselves.
 const PACKED_CALL_ROWS: usize = 12;
 
+/// `$run!(n)` for the row count `$mt` (a `const` per listed count; larger
+/// counts take `$last`).
+macro_rules! by_rows {
+    ($mt:expr, $run:ident, [$($n:literal),*], $last:literal) => {
+        match $mt {
+            $($n => $run!($n),)*
+            _ => $run!($last),
+        }
+    };
+}
+
 /// Activation rows `r0..r1` of a panel against one packed tile on
 /// [`simd::gemm_q8_packed_ahead`], in calls of up to [`PACKED_CALL_ROWS`]
 /// rows (`put(row, values)`), prefetching `ahead` (each call its share:
@@ -931,18 +942,6 @@ fn calls_of(
         call(r0 + m0, mt, &ahead[a0..a1]);
     });
 }
-
-/// `$run!(n)` for the row count `$mt` (a `const` per listed count; larger
-/// counts take `$last`).
-macro_rules! by_rows {
-    ($mt:expr, $run:ident, [$($n:literal),*], $last:literal) => {
-        match $mt {
-            $($n => $run!($n),)*
-            _ => $run!($last),
-        }
-    };
-}
-use by_rows;
 
 /// Activation rows `r0..r1` of a panel against the tile pair `a`
 /// ([`simd::gemm_q8_pair`]), in calls of up to [`simd::PAIR_CALL_ROWS`]

@@ -2652,15 +2652,7 @@ fn amx_tiles_equal_the_vnni_kernel_bit_for_bit() {
     use super::tile_pair::TilePair;
     use super::{PackedQ8, PACK_BLOCKS};
     use crate::kernels::parallel::Cols;
-    use std::is_x86_feature_detected as has;
-    let vnni = has!("avx512f")
-        && has!("avx512bw")
-        && has!("avx512dq")
-        && has!("avx512vl")
-        && has!("avx512vnni")
-        && has!("avx2")
-        && has!("fma")
-        && has!("f16c");
+    let vnni = cpu_runs_avx512_vnni();
     // SAFETY (whole test): the AMX calls run only where the CPU reports
     // amx-tile and amx-int8 and Linux granted the tile permission, plus
     // every VNNI feature detected above; the VNNI kernel only where `vnni`.
@@ -3434,6 +3426,21 @@ fn prefetch_parts_cover_the_bytes_once() {
     }
 }
 
+/// Whether this CPU has every feature of the AVX-512 VNNI kernels
+/// (avx512f/bw/dq/vl/vnni, avx2, fma, f16c).
+#[cfg(target_arch = "x86_64")]
+fn cpu_runs_avx512_vnni() -> bool {
+    use std::is_x86_feature_detected as has;
+    has!("avx512f")
+        && has!("avx512bw")
+        && has!("avx512dq")
+        && has!("avx512vl")
+        && has!("avx512vnni")
+        && has!("avx2")
+        && has!("fma")
+        && has!("f16c")
+}
+
 /// `rows` random activation rows of `nb` blocks quantised one after
 /// another (values, block scales, 2 corrections per block), row `outlier`
 /// ending in 1e4.
@@ -3540,15 +3547,7 @@ impl TwoTiles {
 fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
     use super::tile_pair::{gemm_q8_pair_raw, TilePair, PAIR_CALL_ROWS};
     use super::{Q8Pack8, PACK_BLOCKS, PACK_ROWS};
-    use std::is_x86_feature_detected as has;
-    let vnni = has!("avx512f")
-        && has!("avx512bw")
-        && has!("avx512dq")
-        && has!("avx512vl")
-        && has!("avx512vnni")
-        && has!("avx2")
-        && has!("fma")
-        && has!("f16c");
+    let vnni = cpu_runs_avx512_vnni();
     if !vnni {
         eprintln!("skipped: this CPU has no AVX-512 VNNI");
         return;
