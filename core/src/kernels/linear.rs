@@ -292,11 +292,21 @@ fn panel_rows(q: &[i8], d: &[f32], c: &[i32], n_in: usize) -> usize {
 
 /// Quantised activation rows of one panel (see [`Q8_PANEL`]): row `r`'s
 /// values `q[r * in..][..in]`, scales `d[r * in / 32..]`, corrections
-/// `c[2 r * in / 32..]`.
+/// `c[2 r * in / 32..]`; or, where `grouped`, the same memory as the tile
+/// pair kernel's call groups ([`pair_groups`], each laid out by
+/// [`simd::pair_group_index`] from its first row's offsets on).
 struct Q8Panel<'a> {
     q: &'a [i8],
     d: &'a [f32],
     c: &'a [i32],
+    grouped: bool,
+}
+
+/// The call groups of the tile pair kernel over a panel of `rows` rows:
+/// `f(first row, rows)` (the groups [`calls_of`] makes of `0..rows`).
+#[inline(always)]
+fn pair_groups(rows: usize, f: &mut impl FnMut(usize, usize)) {
+    simd::even_passes(rows, simd::PAIR_CALL_ROWS, f)
 }
 
 /// Widest Q4 row the int8 panel path takes (its rows are expanded to Q8
@@ -517,15 +527,6 @@ fn linear_q8_on<W: Q8Source + Sync, const N: usize>(
     let mut p0 = 0;
     while p0 < n {
         let p1 = (p0 + per_panel).min(n);
-        for i in p0..p1 {
-            let r = i - p0;
-            simd::quantise_q8_corr(
-                &x[i * n_in..(i + 1) * n_in],
-                &mut q[r * n_in..(r + 1) * n_in],
-                &mut d[r * nb..(r + 1) * nb],
-                &mut c[2 * r * nb..2 * (r + 1) * nb],
-            );
-        }
         // Packing 8 weight rows per call pays off from a few activation
         // rows on (measured: at 1 row the unpacked VNNI tile is faster);
         // stored packed tiles are faster from one row on.
@@ -534,10 +535,31 @@ fn linear_q8_on<W: Q8Source + Sync, const N: usize>(
                 || (simd::q8_packing_pays()
                     && p1 - p0 >= PACK_MIN_ROWS
                     && nb <= simd::PACK_BLOCKS));
+        // The tile pair kernel's panels (without AMX: it takes the rows
+        // one after another) are quantised straight into its call groups.
+        let grouped = packed
+            && p1 - p0 >= PAIR_MIN_ROWS
+            && nb <= simd::PACK_BLOCKS
+            && simd::pair_enabled()
+            && !simd::amx_enabled();
+        if grouped {
+            quantise_grouped(&x[p0 * n_in..p1 * n_in], n_in, q, d, c);
+        } else {
+            for i in p0..p1 {
+                let r = i - p0;
+                simd::quantise_q8_corr(
+                    &x[i * n_in..(i + 1) * n_in],
+                    &mut q[r * n_in..(r + 1) * n_in],
+                    &mut d[r * nb..(r + 1) * nb],
+                    &mut c[2 * r * nb..2 * (r + 1) * nb],
+                );
+            }
+        }
         let p = &Q8Panel {
             q: &*q,
             d: &*d,
             c: &*c,
+            grouped,
         };
         for ((w, e), y) in ws.iter().zip(es).zip(ys.iter_mut()) {
             let n_out = w.rows();
@@ -551,6 +573,87 @@ fn linear_q8_on<W: Q8Source + Sync, const N: usize>(
             });
         }
         p0 = p1;
+    }
+}
+
+/// One quantised row of at most [`simd::PACK_BLOCKS`] blocks (a grouped
+/// panel's rows pass through it: 4.6 KiB on the stack).
+struct RowRoom {
+    q: [i8; simd::PACK_BLOCKS * Q8_BLOCK],
+    d: [f32; simd::PACK_BLOCKS],
+    c: [i32; 2 * simd::PACK_BLOCKS],
+}
+
+impl RowRoom {
+    fn new() -> Self {
+        RowRoom {
+            q: [0; simd::PACK_BLOCKS * Q8_BLOCK],
+            d: [0.0; simd::PACK_BLOCKS],
+            c: [0; 2 * simd::PACK_BLOCKS],
+        }
+    }
+}
+
+/// The rows of `x` (`n_in` values each, at most [`simd::PACK_BLOCKS`]
+/// blocks; the panel memory holds them) quantised as
+/// [`simd::quantise_q8_corr`] does, each written into its place in the
+/// tile pair kernel's call groups ([`pair_groups`], [`simd::pair_group_index`]).
+#[inline(never)]
+fn quantise_grouped(x: &[f32], n_in: usize, q: &mut [i8], d: &mut [f32], c: &mut [i32]) {
+    let nb = n_in / Q8_BLOCK;
+    let mut row = RowRoom::new();
+    pair_groups(x.len() / n_in, &mut |i0, rows| {
+        let (gq, gd, gc) = (
+            &mut q[i0 * n_in..(i0 + rows) * n_in],
+            &mut d[i0 * nb..(i0 + rows) * nb],
+            &mut c[2 * i0 * nb..2 * (i0 + rows) * nb],
+        );
+        for m in 0..rows {
+            let i = i0 + m;
+            simd::quantise_q8_corr(
+                &x[i * n_in..(i + 1) * n_in],
+                &mut row.q[..n_in],
+                &mut row.d[..nb],
+                &mut row.c[..2 * nb],
+            );
+            for b in 0..nb {
+                let g = simd::pair_group_index(b, m, rows);
+                gq[Q8_BLOCK * g..Q8_BLOCK * (g + 1)]
+                    .copy_from_slice(&row.q[Q8_BLOCK * b..Q8_BLOCK * (b + 1)]);
+                gd[g] = row.d[b];
+                gc[2 * g..2 * g + 2].copy_from_slice(&row.c[2 * b..2 * b + 2]);
+            }
+        }
+    });
+}
+
+/// Row `r` of a grouped panel of `rows` rows back in one piece (in `row`).
+fn grouped_row<'r>(
+    p: &Q8Panel<'_>,
+    rows: usize,
+    r: usize,
+    n_in: usize,
+    row: &'r mut RowRoom,
+) -> Q8Panel<'r> {
+    let nb = n_in / Q8_BLOCK;
+    pair_groups(rows, &mut |i0, mt| {
+        if (i0..i0 + mt).contains(&r) {
+            let m = r - i0;
+            for b in 0..nb {
+                let g = simd::pair_group_index(b, m, mt);
+                let (o, go) = (Q8_BLOCK * b, i0 * n_in + Q8_BLOCK * g);
+                row.q[o..o + Q8_BLOCK].copy_from_slice(&p.q[go..go + Q8_BLOCK]);
+                row.d[b] = p.d[i0 * nb + g];
+                let gc = 2 * (i0 * nb + g);
+                row.c[2 * b..2 * b + 2].copy_from_slice(&p.c[gc..gc + 2]);
+            }
+        }
+    });
+    Q8Panel {
+        q: &row.q[..n_in],
+        d: &row.d[..nb],
+        c: &row.c[..2 * nb],
+        grouped: false,
     }
 }
 
@@ -791,7 +894,7 @@ fn q8_panel_packed<W: Q8Source>(
                 } else {
                     &[]
                 };
-                vnni_rows(tile, p, 0, n_rows, n_in, ahead, |i, t| {
+                tile_rows(tile, p, n_rows, 0, n_in, ahead, |i, t| {
                     put_row(&mut y, e, i, t0, nt, t)
                 });
                 t0 += nt;
@@ -817,9 +920,10 @@ fn q8_panel_packed<W: Q8Source>(
         };
         let rest = if done > 0 { &[][..] } else { ahead };
         // The rows after the AMX rows (all of them without AMX) on the pair
-        // kernel where the pair is laid out for it (unsigned: no AMX), else
-        // (and if it refused: not reached, kept so that a refusal never
-        // leaves outputs unwritten) per tile on the 8-row kernel.
+        // kernel where the pair and the panel are laid out for it
+        // (unsigned, grouped: no AMX), else (and if it refused: not
+        // reached, kept so that a refusal never leaves outputs unwritten)
+        // per tile on the 8-row kernel.
         let on_pair = prepared
             && a.unsigned()
             && pair_rows(a, p, done, n_rows, n_in, rest, |i, t| {
@@ -829,7 +933,7 @@ fn q8_panel_packed<W: Q8Source>(
             for (tt, ntt) in [(t0, nt), (t1, nt1)] {
                 if ntt > 0 {
                     let tile = w.packed_tile(tt, nb, &mut pack, &mut buf);
-                    vnni_rows(tile, p, done, n_rows, n_in, &[], |i, t| {
+                    tile_rows(tile, p, n_rows, done, n_in, &[], |i, t| {
                         put_row(&mut y, e, i, tt, ntt, t)
                     });
                 }
@@ -882,6 +986,43 @@ macro_rules! by_rows {
             _ => $run!($last),
         }
     };
+}
+
+/// [`vnni_rows`] from row `r0` to the end of a panel of `rows` rows in
+/// either layout: a grouped panel (only where the tile pair kernel refused)
+/// one row at a time, each gathered back into one piece.
+#[inline]
+fn tile_rows(
+    tile: simd::PackedQ8<'_>,
+    p: &Q8Panel<'_>,
+    rows: usize,
+    r0: usize,
+    n_in: usize,
+    ahead: &[u8],
+    mut put: impl FnMut(usize, &[f32; simd::PACK_ROWS]),
+) {
+    if !p.grouped {
+        return vnni_rows(tile, p, r0, rows, n_in, ahead, put);
+    }
+    grouped_tile_rows(tile, p, rows, r0, n_in, &mut put);
+}
+
+/// [`tile_rows`] on a grouped panel (one instance for every caller: it is
+/// not reached unless the pair kernel refused).
+#[inline(never)]
+fn grouped_tile_rows(
+    tile: simd::PackedQ8<'_>,
+    p: &Q8Panel<'_>,
+    rows: usize,
+    r0: usize,
+    n_in: usize,
+    put: &mut dyn FnMut(usize, &[f32; simd::PACK_ROWS]),
+) {
+    let mut room = RowRoom::new();
+    for r in r0..rows {
+        let one = grouped_row(p, rows, r, n_in, &mut room);
+        vnni_rows(tile, &one, 0, 1, n_in, &[], |_, t| put(r, t));
+    }
 }
 
 /// Activation rows `r0..r1` of a panel against one packed tile on
@@ -958,6 +1099,10 @@ fn pair_rows(
     ahead: &[u8],
     mut put: impl FnMut(usize, &[f32; simd::AMX_COLS]),
 ) -> bool {
+    // The kernel reads the panel's call groups: all of its rows.
+    if !p.grouped || r0 != 0 {
+        return false;
+    }
     let nb = n_in / Q8_BLOCK;
     let mut ok = true;
     calls_of(r0, r1, simd::PAIR_CALL_ROWS, ahead, |i0, mt, share| {
@@ -1008,4 +1153,102 @@ fn amx_pair(
         e.gelu,
         ahead,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A grouped panel holds every row's quantised blocks (written by
+    /// [`quantise_grouped`], read back by [`grouped_row`]: equal to the
+    /// row-major quantisation), and the refused-pair fallback over it
+    /// ([`tile_rows`]) gives what the row-major panel gives, bit for bit, for
+    /// panel sizes whose call groups are 8, 7 and mixed rows.
+    #[test]
+    fn grouped_panels_keep_every_row_and_the_fallback_reads_them() {
+        let (n_in, nb) = (96, 3);
+        let mut s = 0x2545_f491u32;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            (s % 2001) as f32 / 1000.0 - 1.0
+        };
+        // One packed tile of 8 weight rows.
+        let v: std::vec::Vec<u8> = (0..nb * simd::PACK_BLOCK_VALUES)
+            .map(|i| (i * 37 % 251) as u8)
+            .collect();
+        let mut group = v.clone();
+        for _ in 0..nb * simd::PACK_BLOCK_SCALES / 2 {
+            group.extend_from_slice(
+                &half::f16::from_f32(0.01 + next().abs() * 0.02)
+                    .to_bits()
+                    .to_le_bytes(),
+            );
+        }
+        let tile = simd::PackedQ8::from_group(&group, nb).expect("one group");
+        for rows in [16usize, 17, 21, 29] {
+            let x: std::vec::Vec<f32> = (0..rows * n_in).map(|_| next()).collect();
+            let (mut q, mut d, mut c) = (
+                vec![0i8; rows * n_in],
+                vec![0f32; rows * nb],
+                vec![0i32; 2 * rows * nb],
+            );
+            let (mut gq, mut gd, mut gc) = (q.clone(), d.clone(), c.clone());
+            for i in 0..rows {
+                simd::quantise_q8_corr(
+                    &x[i * n_in..(i + 1) * n_in],
+                    &mut q[i * n_in..(i + 1) * n_in],
+                    &mut d[i * nb..(i + 1) * nb],
+                    &mut c[2 * i * nb..2 * (i + 1) * nb],
+                );
+            }
+            quantise_grouped(&x, n_in, &mut gq, &mut gd, &mut gc);
+            let plain = Q8Panel {
+                q: &q,
+                d: &d,
+                c: &c,
+                grouped: false,
+            };
+            let grouped = Q8Panel {
+                q: &gq,
+                d: &gd,
+                c: &gc,
+                grouped: true,
+            };
+            let mut room = RowRoom::new();
+            for r in 0..rows {
+                let one = grouped_row(&grouped, rows, r, n_in, &mut room);
+                assert_eq!(
+                    one.q,
+                    &q[r * n_in..(r + 1) * n_in],
+                    "rows {rows} row {r} values"
+                );
+                assert_eq!(
+                    one.d,
+                    &d[r * nb..(r + 1) * nb],
+                    "rows {rows} row {r} scales"
+                );
+                assert_eq!(
+                    one.c,
+                    &c[2 * r * nb..2 * (r + 1) * nb],
+                    "rows {rows} row {r} corrections"
+                );
+            }
+            // Grouped memory is a permutation within each call group, not a copy.
+            assert_ne!(gq, q, "rows {rows}");
+            let (mut want, mut got) = (vec![f32::NAN; rows * 8], vec![f32::NAN; rows * 8]);
+            vnni_rows(tile, &plain, 3, rows, n_in, &[], |i, t| {
+                want[8 * i..8 * i + 8].copy_from_slice(t)
+            });
+            tile_rows(tile, &grouped, rows, 3, n_in, &[], |i, t| {
+                got[8 * i..8 * i + 8].copy_from_slice(t)
+            });
+            let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<std::vec::Vec<_>>();
+            assert_eq!(bits(&got), bits(&want), "rows {rows}");
+            assert!(
+                got[..24].iter().all(|v| v.is_nan()) && got[24..].iter().all(|v| v.is_finite())
+            );
+        }
+    }
 }

@@ -271,6 +271,18 @@ pub(crate) fn even_passes(m: usize, most: usize, f: &mut impl FnMut(usize, usize
     }
 }
 
+/// Where row `m` of a call group of `rows` activation rows keeps its block
+/// `b` in the layout [`gemm_q8_pair`] reads: its 32 values at `32 i`, its
+/// scale at `i` and its two corrections at `2 i`, `2 i + 1` of the group's
+/// slices, for `i = b rows + m` (per block the group's rows one after
+/// another: the kernel walks one pointer per operand with the rows at fixed
+/// offsets). A group of `rows` rows of `n_in` values takes as much memory
+/// as the same rows one after another.
+#[inline(always)]
+pub const fn pair_group_index(b: usize, m: usize, rows: usize) -> usize {
+    b * rows + m
+}
+
 /// `[[f32; PACK_ROWS]; $m]` from a packed kernel of at most 4 activation
 /// rows per pass (AVX2, NEON dotprod): `$m` rows in the fewest passes,
 /// shared evenly ([`even_passes`]); `$body` gives rows `$m0 .. $m0 + $k`

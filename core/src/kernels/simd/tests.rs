@@ -3535,7 +3535,8 @@ impl TwoTiles {
 /// (`tile_pair::gemm_q8_pair_raw`) gives, per tile, what the 8-row VNNI
 /// kernel gives, bit for bit, and tracks the scalar twin within the named
 /// limit of every SIMD int8 GEMM: every row count it takes
-/// (1-8), odd and even block counts up to `PACK_BLOCKS`, int8 and 4-bit
+/// (1-8, each call group laid out by `pair_group_index`), odd and even
+/// block counts up to `PACK_BLOCKS`, int8 and 4-bit
 /// tiles, rows with an outlier, with and without a prefetch, and rows that
 /// hold fewer blocks than the tiles (the kernel cuts to them). It refuses 0
 /// or more than `PAIR_CALL_ROWS` rows, operands short of the rows, pairs
@@ -3580,6 +3581,27 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                 }
                 (q, d, c)
             };
+            // The first `rows` rows of a row-major panel of `keep` blocks per
+            // row as the kernel reads one call group: block b of row m at
+            // index b * rows + m (values x32, scales, corrections x2).
+            let grouped = |q: &[i8], d: &[f32], c: &[i32], rows: usize, keep: usize| {
+                let (mut gq, mut gd, mut gc) = (
+                    vec![0i8; rows * keep * Q8_BLOCK],
+                    vec![0f32; rows * keep],
+                    vec![0i32; 2 * rows * keep],
+                );
+                for m in 0..rows {
+                    for b in 0..keep {
+                        let i = b * rows + m;
+                        assert_eq!(i, super::pair_group_index(b, m, rows));
+                        let src = (m * keep + b) * Q8_BLOCK;
+                        gq[i * Q8_BLOCK..(i + 1) * Q8_BLOCK].copy_from_slice(&q[src..src + Q8_BLOCK]);
+                        gd[i] = d[m * keep + b];
+                        gc[2 * i..2 * i + 2].copy_from_slice(&c[2 * (m * keep + b)..2 * (m * keep + b) + 2]);
+                    }
+                }
+                (gq, gd, gc)
+            };
             let ahead = rows[1][0].as_slice();
             macro_rules! check {
                 ($m:literal) => {{
@@ -3588,7 +3610,8 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                         let stride = keep * Q8_BLOCK;
                         {
  let w = &pairs[1];
-                        let got = unsafe { gemm_q8_pair_raw::<$m>(w, &pq, &pd, &pc, stride, pre) }.expect("runs");
+                        let (gq, gd, gc) = grouped(&pq, &pd, &pc, $m, keep);
+                        let got = unsafe { gemm_q8_pair_raw::<$m>(w, &gq, &gd, &gc, stride, pre) }.expect("runs");
                         let q: [&[i8]; $m] = core::array::from_fn(|m| &pq[m * stride..(m + 1) * stride]);
                         let d: [&[f32]; $m] = core::array::from_fn(|m| &pd[m * keep..(m + 1) * keep]);
                         let c: [&[i32]; $m] = core::array::from_fn(|m| &pc[2 * m * keep..2 * (m + 1) * keep]);

@@ -18,7 +18,9 @@
 //! operands): 174-189 GMAC/s at 4-8 rows against 123-144 for the 8-row
 //! kernel at 12; in `linear` (`duolando bench --kernels`), the R step's,
 //! re-prefill's and batched sessions' GEMMs went from 24-29% of the VNNI
-//! peak to 37-40% (docs/PERFORMANCE.md, 2026-12-05 night).
+//! peak to 37-40% (docs/PERFORMANCE.md, 2026-12-05 night), and to 45-52%
+//! with the activation rows laid out in call groups
+//! ([`super::pair_group_index`], 2026-12-06: see [`pair_vnni`]).
 //!
 //! Why it is bit-identical: per weight row and block the i32 sum is exact
 //! in both (the stored unsigned form plus the activation's correction, or
@@ -213,18 +215,19 @@ unsafe fn prepare_b(
     }
 }
 
-/// `M` activation rows of a quantised panel against the prepared pair `w`:
-/// row `m`'s `n_in` values at `xq[m * n_in..]`, its `n_in / 32` block
-/// scales at `xd[m * n_in / 32..]` and its `2 * n_in / 32` corrections at
-/// `xc[2 * m * n_in / 32..]` (what [`super::gemm_q8_packed`] takes per row,
-/// stored one row after another). Row `m`, column `8t + n` of the result is
-/// what [`super::gemm_q8_packed`] gives for row `n` of tile `t`, bit for
-/// bit, over the blocks that both tiles and the rows hold. Prefetches
-/// `ahead` into L2, spread over the block pairs. None where the kernel does
-/// not run ([`enabled`]), `M` is 0 or over [`PAIR_CALL_ROWS`], the operands
-/// are shorter than `M` rows, or the two tiles were laid out with different
-/// block counts or signed (for AMX: [`TilePair::unsigned`]): the caller
-/// then takes the 8-row kernel per tile.
+/// `M` activation rows of a quantised panel against the prepared pair `w`,
+/// the rows laid out as one call group ([`super::pair_group_index`]: per
+/// block, the `M` rows' 32 values one after another, likewise their block
+/// scales and their two corrections each), `n_in` values per row (what
+/// [`super::gemm_q8_packed`] takes per row, interleaved by block). Row `m`,
+/// column `8t + n` of the result is what [`super::gemm_q8_packed`] gives for
+/// row `n` of tile `t`, bit for bit, over the blocks that both tiles and
+/// the rows hold. Prefetches `ahead` into L2, spread over the block pairs.
+/// None where the kernel does not run ([`enabled`]), `M` is 0 or over
+/// [`PAIR_CALL_ROWS`], the operands are shorter than `M` rows, or the two
+/// tiles were laid out with different block counts or signed (for AMX:
+/// [`TilePair::unsigned`]): the caller then takes the 8-row kernel per
+/// tile.
 #[inline]
 pub fn gemm_q8_pair<const M: usize>(
     w: &TilePair,
@@ -266,19 +269,28 @@ pub unsafe fn gemm_q8_pair_raw<const M: usize>(
         return None;
     }
     let nb = w.nb[0].min(PACK_BLOCKS).min(rb);
-    // SAFETY: the caller's features; every row holds `nb` blocks at its
-    // stride (above), both tiles were prepared unsigned with `w.nb[0] >= nb` blocks.
-    Some(unsafe { pair_vnni(w, nb, xq.as_ptr(), xd.as_ptr(), xc.as_ptr(), n_in, ahead) })
+    // SAFETY: the caller's features; the group holds `nb <= rb` blocks of
+    // its `M` rows (above), both tiles were prepared unsigned with
+    // `w.nb[0] >= nb` blocks.
+    Some(unsafe { pair_vnni(w, nb, xq.as_ptr(), xd.as_ptr(), xc.as_ptr(), ahead) })
 }
 
-/// [`gemm_q8_pair`] on `nb` blocks of rows `n_in` values apart (both
-/// tiles stored unsigned).
+/// [`gemm_q8_pair`] on the first `nb` blocks of a call group of `M` rows
+/// (both tiles stored unsigned).
+///
+/// Every operand is walked with one pointer that moves on per block, the
+/// rows and the 4-byte pieces at fixed offsets from it: every memory
+/// operand is `[register + constant]`. With row-major rows (an index
+/// register per row) each `vpdpbusd` with a broadcast operand took two
+/// micro-ops and the kernel ran at 48-53% of the VNNI peak in L1; this way
+/// 63-67% (Intel Xeon, AVX-512 VNNI, 2026-12-06, 768 and 3072 values per
+/// row, 8 rows).
 ///
 /// # Safety
 /// avx512f/bw/dq/vl/vnni, avx2, fma, f16c; `nb <= PACK_BLOCKS`, both tiles
-/// of `w` prepared with at least `nb` blocks, `nb <= n_in / Q8_BLOCK`, and
-/// `xq`, `xd`, `xc` hold `M` rows of `n_in`, `n_in / Q8_BLOCK` and `2 *
-/// n_in / Q8_BLOCK` elements.
+/// of `w` prepared with at least `nb` blocks, and `xq`, `xd`, `xc` hold
+/// `nb` blocks of `M` rows as [`super::pair_group_index`] lays them out
+/// (`32 M nb` values, `M nb` scales, `2 M nb` corrections).
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx512vnni,avx2,fma,f16c")]
 unsafe fn pair_vnni<const M: usize>(
     w: &TilePair,
@@ -286,76 +298,65 @@ unsafe fn pair_vnni<const M: usize>(
     xq: *const i8,
     xd: *const f32,
     xc: *const i32,
-    n_in: usize,
     ahead: &[u8],
 ) -> [[f32; COLS]; M] {
-    let rb = n_in / Q8_BLOCK;
-    let bp = w.b.as_ptr();
+    // Block b's operand, values, scales and corrections (moved on per block).
+    let (mut ob, mut xs, mut ds, mut cs) = (w.b.as_ptr(), xq, xd, xc);
     // acc[m][h]: row m's sums of the blocks of parity h, lane = weight row.
     let mut acc = [[_mm512_setzero_ps(); 2]; M];
-    // Block $b (parity $h, a literal: the accumulators stay in registers)
-    // into the accumulators. The rows are walked with one pointer each for
-    // values, scales and corrections (row pointers of 8 rows would not fit
-    // the general registers).
+    // The next block of parity $h (a literal: the accumulators stay in
+    // registers) into the accumulators, its pair's scales `$sv`.
     macro_rules! block {
-        ($b:expr, $h:literal) => {{
-            let b: usize = $b;
-            // SAFETY: b < nb <= PACK_BLOCKS: the operand holds B_BLOCK bytes of block b.
-            let ob = unsafe { bp.add(B_BLOCK * b) };
+        ($h:literal, $sv:expr) => {{
             // Register k, lane j: bytes 4k .. 4k + 4 of weight row j, stored unsigned (w + 128).
             let wv: [__m512i; 8] = core::array::from_fn(|k| {
-                // SAFETY: 64k + 64 <= B_BLOCK.
+                // SAFETY: the block's B_BLOCK operand bytes (fewer than nb blocks walked); 64k + 64 <= B_BLOCK.
                 unsafe { _mm512_loadu_si512(ob.add(64 * k) as *const _) }
             });
-            // SAFETY: w.s[h] holds PAIRS >= b / 2 + 1 rows of 16 floats.
-            let sv = unsafe { _mm512_loadu_ps(w.s[$h].as_ptr().add(b / 2) as *const f32) };
-            // SAFETY: b < nb <= rb: block b of row 0 lies in each operand.
-            let (mut xs, mut cs, mut ds) =
-                unsafe { (xq.add(Q8_BLOCK * b), xc.add(2 * b), xd.add(b)) };
+            let sv: __m512 = $sv;
             for (m, am) in acc.iter_mut().enumerate() {
-                // SAFETY: row m < M: its block b lies at these pointers (the caller's extents).
-                let (c0, c1, xdb) = unsafe { (*cs, *cs.add(1), *ds) };
+                // SAFETY: row m < M's corrections and scale of this block (the group's extents).
+                let (c0, c1, xdb) = unsafe { (*cs.add(2 * m), *cs.add(2 * m + 1), *ds.add(m)) };
                 // Two chains of 4: the even and odd 4-byte pieces of the block,
                 // each starting from one of the block's two corrections
                 // (broadcasts from memory: no shuffle-port work).
                 let mut d0 = _mm512_set1_epi32(c0);
                 let mut d1 = _mm512_set1_epi32(c1);
                 for g in 0..4 {
-                    // SAFETY: 8g + 8 <= Q8_BLOCK.
+                    // SAFETY: row m's 32 values of this block; 8g + 8 <= Q8_BLOCK.
                     let (x0, x1) = unsafe {
-                        (
-                            (xs.add(8 * g) as *const i32).read_unaligned(),
-                            (xs.add(8 * g + 4) as *const i32).read_unaligned(),
-                        )
+                        let xm = xs.add(Q8_BLOCK * m + 8 * g);
+                        ((xm as *const i32).read_unaligned(), (xm.add(4) as *const i32).read_unaligned())
                     };
                     d0 = _mm512_dpbusd_epi32(d0, wv[2 * g], _mm512_set1_epi32(x0));
                     d1 = _mm512_dpbusd_epi32(d1, wv[2 * g + 1], _mm512_set1_epi32(x1));
                 }
                 let sum = _mm512_cvtepi32_ps(_mm512_add_epi32(d0, d1));
                 am[$h] = _mm512_fmadd_ps(sum, _mm512_mul_ps(sv, _mm512_set1_ps(xdb)), am[$h]);
-                if m + 1 < M {
-                    // SAFETY: row m + 1 < M lies one stride further (the caller's extents).
-                    unsafe {
-                        xs = xs.add(n_in);
-                        cs = cs.add(2 * rb);
-                        ds = ds.add(rb);
-                    }
-                }
+            }
+            // SAFETY: one block on: at most one past the last of the nb blocks.
+            unsafe {
+                ob = ob.add(B_BLOCK);
+                xs = xs.add(Q8_BLOCK * M);
+                ds = ds.add(M);
+                cs = cs.add(2 * M);
             }
         }};
     }
     let pairs = nb.div_ceil(2);
-    let mut b = 0;
-    while b + 1 < nb {
-        super::prefetch_part(ahead, b / 2, pairs);
-        block!(b, 0);
-        block!(b + 1, 1);
-        b += 2;
+    // SAFETY: w.s[h] holds PAIRS >= pairs rows of 16 floats (p < pairs below).
+    let scales = |h: usize, p: usize| unsafe { _mm512_loadu_ps(w.s[h][p].as_ptr()) };
+    for p in 0..nb / 2 {
+        super::prefetch_part(ahead, p, pairs);
+        block!(0, scales(0, p));
+        block!(1, scales(1, p));
     }
-    if b < nb {
-        super::prefetch_part(ahead, b / 2, pairs);
-        block!(b, 0);
+    if nb % 2 == 1 {
+        super::prefetch_part(ahead, nb / 2, pairs);
+        block!(0, scales(0, nb / 2));
     }
+    // The pointers end one block past the last (not read again).
+    let _ = (ob, xs, ds, cs);
     let mut out = [[0.0f32; COLS]; M];
     for (o, a) in out.iter_mut().zip(acc) {
         // SAFETY: o holds 16 floats.
