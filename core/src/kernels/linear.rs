@@ -1119,7 +1119,16 @@ fn pair_rows(
                 }
             }};
         }
-        by_rows!(mt, run, [1, 2, 3, 4, 5, 6, 7], 8);
+        // Panels of PAIR_MIN_ROWS = 16 rows or more are shared into calls of
+        // 5-8 rows (`even_passes`, checked for 16-20000 rows): no kernel
+        // instance for 1-4 rows (C library size); such a call would refuse.
+        match mt {
+            5 => run!(5),
+            6 => run!(6),
+            7 => run!(7),
+            8 => run!(8),
+            _ => ok = false,
+        }
     });
     ok
 }
@@ -1158,6 +1167,25 @@ fn amx_pair(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `pair_rows` has kernel instances for calls of 5-8 rows only: every
+    /// panel that takes tile pairs (>= PAIR_MIN_ROWS rows) is shared into
+    /// such calls.
+    #[test]
+    fn pair_panels_make_calls_of_five_to_eight_rows() {
+        for rows in PAIR_MIN_ROWS..=8192 {
+            let mut next = 0;
+            pair_groups(rows, &mut |i0, mt| {
+                assert_eq!(i0, next, "{rows} rows");
+                assert!(
+                    (5..=simd::PAIR_CALL_ROWS).contains(&mt),
+                    "{rows} rows: a call of {mt}"
+                );
+                next += mt;
+            });
+            assert_eq!(next, rows);
+        }
+    }
 
     /// A grouped panel holds every row's quantised blocks (written by
     /// [`quantise_grouped`], read back by [`grouped_row`]: equal to the
