@@ -36,12 +36,16 @@ fn stream(file: &ModelFile, frames: usize) -> Vec<FollowerFrame> {
     out
 }
 
+/// The thread count is process-wide: the tests of this file take turns.
+static POOL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 fn bits(v: &[f32]) -> Vec<u32> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
 #[test]
 fn split_gemms_are_bit_identical_to_one_thread() {
+    let _turn = POOL.lock().unwrap_or_else(|e| e.into_inner());
     duolando::simd::init();
     let f16 = demo_model();
     let int8 = restore_as(&f16, &|spec| storage_for(StoreAs::Q8Block32, spec));
@@ -106,4 +110,38 @@ fn split_gemms_are_bit_identical_to_one_thread() {
         "int8 session beside another thread differs"
     );
     assert_eq!(workers::threads(), 1);
+}
+
+/// `kernels::matmul` (attention as per-head GEMMs: Transflower's encoder
+/// layers) split over 2 and 3 threads by output columns gives the bits of
+/// one thread, on the scores' and the output's shapes of the paper config
+/// (inner lengths 80 and 260) and on odd ones.
+#[test]
+fn split_matmul_is_bit_identical_to_one_thread() {
+    let _turn = POOL.lock().unwrap_or_else(|e| e.into_inner());
+    duolando::simd::init();
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut rnd = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+    };
+    for &(m, k, n) in &[(260, 80, 260), (260, 260, 80), (37, 19, 131)] {
+        let a: Vec<f32> = (0..m * k).map(|_| rnd()).collect();
+        let b: Vec<f32> = (0..k * n).map(|_| rnd()).collect();
+        workers::set_threads(1).unwrap();
+        let mut c1 = vec![0f32; m * n];
+        duolando_core::kernels::matmul(&a, &b, m, k, n, &mut c1);
+        for t in [2, 3] {
+            workers::set_threads(t).unwrap();
+            let jobs = workers::split_jobs();
+            let mut ct = vec![0f32; m * n];
+            duolando_core::kernels::matmul(&a, &b, m, k, n, &mut ct);
+            let split = workers::split_jobs() - jobs;
+            workers::set_threads(1).unwrap();
+            assert!(split >= 1, "({m},{k},{n}) on {t} threads: not split");
+            assert_eq!(bits(&ct), bits(&c1), "({m},{k},{n}) on {t} threads");
+        }
+    }
 }

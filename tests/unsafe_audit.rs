@@ -26,6 +26,7 @@ const ALLOWED: &[&str] = &[
     "core/src/kernels/simd/amx.rs",
     "core/src/kernels/simd/tile_pair.rs",
     "core/src/kernels/simd/i8mm.rs",
+    "core/src/kernels/simd/matmul.rs",
     "core/src/kernels/simd/neon.rs",
     "core/src/kernels/simd/peak.rs",
     "core/src/kernels/simd/tests.rs",

@@ -15,6 +15,7 @@ pub mod attention;
 pub mod conv;
 pub mod kv_rows;
 pub mod linear;
+pub mod matmul;
 pub mod norm;
 pub mod parallel;
 pub mod simd;
@@ -30,6 +31,7 @@ pub use kv_rows::{KvRows, RowData};
 pub use linear::{
     linear, linear_each, linear_each_with, linear_gelu_with, linear_with, linear_xw, Q8Room,
 };
+pub use matmul::matmul;
 pub use norm::{layernorm, LN_EPS};
 pub use weights::{
     dot, expand_q4, DenseElem, DenseRows, ExpandsToQ8, F16Rows, F32Rows, Matrix, Q4Rows, Q8Rows,

@@ -15,8 +15,7 @@
 
 use crate::arena::{ArenaError, Carve};
 use crate::kernels::simd;
-use crate::kernels::{layernorm, linear, relu_inplace, RowData};
-use crate::kernels::{F32Rows, Matrix};
+use crate::kernels::{layernorm, linear, matmul, relu_inplace, RowData};
 use crate::nn::bind::{BindError, Binder, TensorSource};
 use crate::nn::kv_store::{KvBuf, KvType};
 use crate::nn::names::{name, Emit, Role, SchemaError};
@@ -373,18 +372,23 @@ fn add(y: &mut [f32], x: &[f32]) {
 }
 
 /// [`self_attention`] without a bias as GEMMs: per head, the scores
-/// (keep, n) = q_h k_h^T and the output (keep, hd) = p_h v_h through the
-/// f32 `linear` kernel (register tiles, threads), the softmax between as
-/// [`self_attention`] does it. Keys go head-major into `sum` (n, hd per
-/// head), values transposed into `hid` (hd, n per head), queries into `q`
-/// (keep, hd per head), where each head's output then lands; `att`
-/// (keep, d) gets them back row-major. `qkv` is left as it was
-/// ([`EncoderLayerScratch::qkv`]).
+/// (keep, n) = q_h k_h^T and the output (keep, hd) = p_h v_h through
+/// [`matmul`] (the right operand row-major, one running sum per value,
+/// threads), the softmax between as [`self_attention`] does it. Keys go
+/// transposed into `hid` (hd, n per head), values head-major into `sum`
+/// (n, hd per head), queries into `q` (keep, hd per head), where each
+/// head's output then lands; `att` (keep, d) gets them back row-major.
+/// `qkv` is left as it was ([`EncoderLayerScratch::qkv`]).
+///
+/// Until 2026-12-06 both products ran as `linear` dot-product tiles over
+/// head-major keys and transposed values: with a head's 80 values as the
+/// inner length, the tiles' end-of-row reductions cost as much as the
+/// products (28% of Transflower's R step, docs/TRANSFLOWER.md).
 fn attention_gemm(n: usize, d: usize, n_head: usize, keep: usize, s: &mut EncoderLayerScratch<'_>) {
     let hd = d / n_head;
     let scale = 1.0 / libm::sqrtf(hd as f32);
     let qkv = &s.qkv[..3 * n * d];
-    let (q, k, vt) = (
+    let (q, v, kt) = (
         &mut s.q[..keep * d],
         &mut s.sum[..n * d],
         &mut s.hid[..n * d],
@@ -399,22 +403,20 @@ fn attention_gemm(n: usize, d: usize, n_head: usize, keep: usize, s: &mut Encode
             if j < keep {
                 q[(h * keep + j) * hd..][..hd].copy_from_slice(qh);
             }
-            k[(h * n + j) * hd..][..hd].copy_from_slice(kh);
-            for (t, &v) in vh.iter().enumerate() {
-                vt[(h * hd + t) * n + j] = v;
+            v[(h * n + j) * hd..][..hd].copy_from_slice(vh);
+            for (t, &x) in kh.iter().enumerate() {
+                kt[(h * hd + t) * n + j] = x;
             }
         }
     }
     let probs = &mut s.probs[..keep * n];
     for h in 0..n_head {
-        let (Some(kh), Some(vth)) = (
-            F32Rows::new(&k[h * n * hd..(h + 1) * n * hd], n, hd),
-            F32Rows::new(&vt[h * hd * n..(h + 1) * hd * n], hd, n),
-        ) else {
-            return;
-        };
+        let (kth, vh) = (
+            &kt[h * hd * n..(h + 1) * hd * n],
+            &v[h * n * hd..(h + 1) * n * hd],
+        );
         let qh = &mut q[h * keep * hd..(h + 1) * keep * hd];
-        linear(qh, &Matrix::F32(kh), None, probs);
+        matmul(qh, kth, keep, hd, n, probs);
         for p in probs.chunks_exact_mut(n) {
             let max = simd::scale_max(p, scale, f32::NEG_INFINITY);
             let sum = simd::exp_shifted_sum(p, max);
@@ -423,7 +425,7 @@ fn attention_gemm(n: usize, d: usize, n_head: usize, keep: usize, s: &mut Encode
                 *v *= inv;
             }
         }
-        linear(probs, &Matrix::F32(vth), None, qh);
+        matmul(probs, vh, keep, n, hd, qh);
     }
     for i in 0..keep {
         for h in 0..n_head {

@@ -22,6 +22,7 @@ use core::sync::atomic::{AtomicU8, Ordering};
 #[cfg(target_arch = "x86_64")]
 pub mod amx;
 pub mod i8mm;
+pub mod matmul;
 pub mod peak;
 pub mod scalar;
 #[cfg(test)]
