@@ -4,7 +4,9 @@
 //! rows, with enough distinct weight matrices that the small-batch cases
 //! read their weights from memory (bandwidth-bound), and the attention
 //! kernel at the R step's coordinated-attention shape and at one streaming
-//! append (10 rows against a full f16 cache), and the VQ decoders'
+//! append (10 rows against a full f16 cache), attention as per-head GEMMs
+//! (Transflower's encoder layers: `matmul` against the dot-product tiles
+//! it replaced, alternated call by call), and the VQ decoders'
 //! conv-transpose `z` from f16 rows against int8 in GEMM order.
 //! int8 is measured in both stored layouts: `Q8Block32` rows (`int8`) and
 //! `Q8Block32x8` row groups (`int8x8`, what `convert --dtype int8` writes).
@@ -317,6 +319,62 @@ fn main() {
             s * 1e3,
             alone * 1e3,
             s / alone
+        );
+    }
+    println!("{line}");
+    // Attention as per-head GEMMs (Transflower's encoder layers: 260 rows,
+    // width 800, 10 heads of 80): the scores q_h k_h^T (inner length 80) and
+    // the output p_h v_h (inner length 260), through `matmul` (the right
+    // operand row-major: k_h^T, v_h) against the dot-product tiles of
+    // `linear` (k_h and v_h^T as the "weights"), what ran until 2026-12-06.
+    // The two forms alternate call by call, so both see the same machine.
+    let (n_tf, hd, heads) = (260usize, 80usize, 10usize);
+    let (qh, kh, vh) = (r.vec(n_tf * hd), r.vec(n_tf * hd), r.vec(n_tf * hd));
+    let transpose = |x: &[f32], rows: usize, cols: usize| {
+        let mut t = vec![0.0f32; rows * cols];
+        for i in 0..rows {
+            for j in 0..cols {
+                t[j * rows + i] = x[i * cols + j];
+            }
+        }
+        t
+    };
+    let (kt, vt) = (transpose(&kh, n_tf, hd), transpose(&vh, n_tf, hd));
+    let probs: Vec<f32> = r.vec(n_tf * n_tf).iter().map(|x| x.abs() / n_tf as f32).collect();
+    let (mut s_out, mut o_out) = (vec![0.0f32; n_tf * n_tf], vec![0.0f32; n_tf * hd]);
+    let mut line = format!("attention as GEMMs {n_tf} rows, {heads} heads of {hd}:");
+    for isa in &isas {
+        // SAFETY: as above.
+        unsafe { simd::set_isa(*isa) };
+        let (mut tiles, mut mm) = (Vec::new(), Vec::new());
+        for _ in 0..3 * reps {
+            let t0 = Instant::now();
+            for _ in 0..heads {
+                linear(&qh, &Matrix::F32(F32Rows::new(&kh, n_tf, hd).unwrap()), None, &mut s_out);
+                linear(&probs, &Matrix::F32(F32Rows::new(&vt, hd, n_tf).unwrap()), None, &mut o_out);
+            }
+            tiles.push(t0.elapsed().as_secs_f64());
+            let t0 = Instant::now();
+            for _ in 0..heads {
+                duolando_core::kernels::matmul(&qh, &kt, n_tf, hd, n_tf, &mut s_out);
+                duolando_core::kernels::matmul(&probs, &vh, n_tf, n_tf, hd, &mut o_out);
+            }
+            mm.push(t0.elapsed().as_secs_f64());
+            std::hint::black_box((&s_out, &o_out));
+        }
+        let med = |v: &mut Vec<f64>| {
+            v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+            v[v.len() / 2]
+        };
+        let (tt, tm) = (med(&mut tiles), med(&mut mm));
+        let macs = (heads * 2 * n_tf * n_tf * hd) as f64;
+        line += &format!(
+            "  [{isa:?}] matmul {:.2} ms ({:.1} GMAC/s), dot tiles {:.2} ms ({:.1} GMAC/s): {:.2}x",
+            tm * 1e3,
+            macs / tm / 1e9,
+            tt * 1e3,
+            macs / tt / 1e9,
+            tt / tm
         );
     }
     println!("{line}");

@@ -18,7 +18,7 @@
 use core::arch::x86_64::*;
 
 /// Rows of `A` per call of [`rows_times`].
-pub const ROWS: usize = 4;
+pub const ROWS: usize = 6;
 /// Most columns of `B` per call of [`rows_times`].
 pub const COLS: usize = 64;
 
@@ -97,19 +97,21 @@ pub fn scalar_rows(
     out: &mut [[f32; COLS]; ROWS],
 ) {
     for (o, ar) in out.iter_mut().zip(a) {
-        for (j, oj) in o.iter_mut().enumerate().take(cols) {
-            let mut acc = 0.0f32;
-            for (t, &at) in ar.iter().enumerate().take(k) {
-                acc += at * b[t * ldb + j0 + j];
+        let acc = &mut o[..cols];
+        acc.fill(0.0);
+        // Row t of B against all the columns at once: each column's sum
+        // still takes its terms in order of t.
+        for (t, &at) in ar.iter().enumerate().take(k) {
+            for (y, &bj) in acc.iter_mut().zip(&b[t * ldb + j0..t * ldb + j0 + cols]) {
+                *y += at * bj;
             }
-            *oj = acc;
         }
     }
 }
 
 /// [`rows_times`] on `V` 16-lane vectors of columns (the last masked to
-/// `cols`): 4 x `V` accumulators, per `t` `V` loads of `B` and 4
-/// broadcasts of `A`.
+/// `cols`): `ROWS` x `V` accumulators, per `t` `V` loads of `B` and
+/// `ROWS` broadcasts of `A`.
 ///
 /// # Safety
 /// avx512f/vl and fma; `k` values in each row of `a`; `b` holds row `k - 1`
@@ -161,7 +163,7 @@ unsafe fn avx512<const V: usize>(
     }
 }
 
-/// [`rows_times`] on 8-lane vectors, 16 columns at a time (4 x 2
+/// [`rows_times`] on 8-lane vectors, 16 columns at a time (`ROWS` x 2
 /// accumulators), the last vector masked to `cols`.
 ///
 /// # Safety
@@ -189,12 +191,20 @@ unsafe fn avx2(
             );
             _mm256_cmpgt_epi32(_mm256_set1_epi32(cols as i32), idx)
         });
+        // A whole chunk takes plain loads (a masked load costs more).
+        let full = c0 + 16 <= cols;
         let mut acc = [[_mm256_setzero_ps(); 2]; ROWS];
         let mut bp = b.as_ptr().wrapping_add(j0 + c0);
         for t in 0..k {
-            // SAFETY: masked loads of row t's columns inside j0 .. j0 + cols.
-            let bv: [__m256; 2] =
-                core::array::from_fn(|v| unsafe { _mm256_maskload_ps(bp.add(8 * v), mask[v]) });
+            // SAFETY: row t's columns c0 .. c0 + 16 inside j0 .. j0 + cols
+            // where `full`, else masked to them.
+            let bv: [__m256; 2] = core::array::from_fn(|v| unsafe {
+                if full {
+                    _mm256_loadu_ps(bp.add(8 * v))
+                } else {
+                    _mm256_maskload_ps(bp.add(8 * v), mask[v])
+                }
+            });
             for (r, ar) in acc.iter_mut().enumerate() {
                 // SAFETY: t < k <= a[r].len().
                 let x = _mm256_set1_ps(unsafe { *ap[r].add(t) });
@@ -214,7 +224,7 @@ unsafe fn avx2(
     }
 }
 
-/// [`rows_times`] on 4-lane vectors, 16 columns at a time (4 x 4
+/// [`rows_times`] on 4-lane vectors, 16 columns at a time (`ROWS` x 4
 /// accumulators); a column tail of fewer than 4 goes through a zero-padded
 /// copy of its lanes.
 ///
