@@ -24,6 +24,7 @@ pub fn matmul(a: &[f32], b: &[f32], m: usize, k: usize, n: usize, c: &mut [f32])
     let work = m.saturating_mul(k).saturating_mul(n).saturating_mul(4);
     parallel::split_cols_aligned(c, n, 16, work, |mut cols| {
         let (lo, hi) = (cols.lo(), cols.hi());
+        let mut t = [[0.0f32; COLS]; ROWS];
         // Column chunks outside, rows inside: a chunk of B (k x 64) is
         // read from L1 by every row group after the first.
         let mut j0 = lo;
@@ -36,7 +37,7 @@ pub fn matmul(a: &[f32], b: &[f32], m: usize, k: usize, n: usize, c: &mut [f32])
                     let i = i0 + r.min(rows - 1);
                     &a[i * k..(i + 1) * k]
                 });
-                let t = rows_times(ar, b, n, j0, w);
+                rows_times(ar, b, n, j0, w, &mut t);
                 for (r, tr) in t.iter().enumerate().take(rows) {
                     cols.seg(i0 + r, j0, j0 + w).copy_from_slice(&tr[..w]);
                 }

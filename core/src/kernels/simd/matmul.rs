@@ -27,6 +27,7 @@ pub const COLS: usize = 64;
 /// against columns `j0 .. j0 + cols` of `B`, whose row `t` starts at `t *
 /// ldb`. The inner length is the shortest row of `a`, cut to the rows of
 /// `B` that hold the columns (a short `b` is never read past its end).
+/// `out` is the caller's (one tile for many calls: nothing to zero per call).
 #[inline]
 pub fn rows_times(
     a: [&[f32]; ROWS],
@@ -34,12 +35,13 @@ pub fn rows_times(
     ldb: usize,
     j0: usize,
     cols: usize,
-) -> [[f32; COLS]; ROWS] {
+    out: &mut [[f32; COLS]; ROWS],
+) {
     let cols = cols.min(COLS);
     let k = inner_len(&a, b, ldb, j0, cols);
-    let mut out = [[0.0f32; COLS]; ROWS];
     if k == 0 || cols == 0 {
-        return out;
+        *out = [[0.0; COLS]; ROWS];
+        return;
     }
     match super::isa() {
         #[cfg(target_arch = "x86_64")]
@@ -47,29 +49,27 @@ pub fn rows_times(
         // fma; `k` rows of `a` and of `b` (columns j0..j0 + cols) exist.
         super::Isa::Avx512 | super::Isa::Avx512Vnni => unsafe {
             match cols.div_ceil(16) {
-                1 => avx512::<1>(&a, b, ldb, j0, cols, k, &mut out),
-                2 => avx512::<2>(&a, b, ldb, j0, cols, k, &mut out),
-                3 => avx512::<3>(&a, b, ldb, j0, cols, k, &mut out),
-                _ => avx512::<4>(&a, b, ldb, j0, cols, k, &mut out),
+                1 => avx512::<1>(&a, b, ldb, j0, cols, k, out),
+                2 => avx512::<2>(&a, b, ldb, j0, cols, k, out),
+                3 => avx512::<3>(&a, b, ldb, j0, cols, k, out),
+                _ => avx512::<4>(&a, b, ldb, j0, cols, k, out),
             }
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: every x86 ISA implies avx2 and fma; extents as above.
-        super::Isa::Avx2 | super::Isa::AvxVnni => unsafe {
-            avx2(&a, b, ldb, j0, cols, k, &mut out)
-        },
+        super::Isa::Avx2 | super::Isa::AvxVnni => unsafe { avx2(&a, b, ldb, j0, cols, k, out) },
         #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
         // SAFETY: NEON is enabled for this build; extents as above.
-        super::Isa::Neon | super::Isa::NeonDot => unsafe {
-            neon(&a, b, ldb, j0, cols, k, &mut out)
-        },
-        _ => scalar_rows(&a, b, ldb, j0, cols, k, &mut out),
+        super::Isa::Neon | super::Isa::NeonDot => unsafe { neon(&a, b, ldb, j0, cols, k, out) },
+        _ => scalar_rows(&a, b, ldb, j0, cols, k, out),
     }
-    // Lanes past `cols` were computed against zeros (0 x NaN is NaN): cleared.
-    for o in out.iter_mut() {
-        o[cols..].fill(0.0);
+    // Lanes past `cols` (computed against zeros: 0 x NaN is NaN, or not
+    // written at all): cleared.
+    if cols < COLS {
+        for o in out.iter_mut() {
+            o[cols..].fill(0.0);
+        }
     }
-    out
 }
 
 /// The inner length [`rows_times`] uses: the shortest row of `a`, cut to
@@ -406,14 +406,15 @@ mod tests {
         let a = [f32::INFINITY; 8];
         let ar: [&[f32]; ROWS] = [&a; ROWS];
         let b = [1.0f32; 8 * 10];
-        let out = rows_times(ar, &b, 10, 0, 5);
+        let mut out = [[f32::NAN; COLS]; ROWS];
+        rows_times(ar, &b, 10, 0, 5, &mut out);
         for o in &out {
             assert!(o[..5].iter().all(|&x| x == f32::INFINITY));
             assert!(o[5..].iter().all(|&x| x == 0.0));
         }
         // b holds 3 whole rows of 10 (and part of a 4th): k = 3.
         let ones = [1.0f32; 8];
-        let out = rows_times([&ones; ROWS], &b[..35], 10, 0, 10);
+        rows_times([&ones; ROWS], &b[..35], 10, 0, 10, &mut out);
         assert!(out.iter().all(|o| o[..10].iter().all(|&x| x == 3.0)));
         assert_eq!(inner_len(&[&ones; ROWS], &b[..35], 10, 0, 10), 3);
         assert_eq!(inner_len(&[&ones; ROWS], &b[..5], 10, 0, 10), 0);
