@@ -12,7 +12,7 @@ use duolando::npy::read_f32_2d;
 use duolando::workers;
 use duolando_core::duolando::model::Model;
 use duolando_core::duolando::session::{FollowerFrame, Session, SessionConfig};
-use duolando_tests::{assets_dir, demo_model, restore_as, run_demo_clip};
+use duolando_tests::{assets_dir, demo_model, restore_as, run_demo_clip, Rng};
 
 /// Every follower frame of a streaming session over the first `frames`
 /// frames of the demo clip (the music preloaded).
@@ -120,16 +120,9 @@ fn split_gemms_are_bit_identical_to_one_thread() {
 fn split_matmul_is_bit_identical_to_one_thread() {
     let _turn = POOL.lock().unwrap_or_else(|e| e.into_inner());
     duolando::simd::init();
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    let mut rnd = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-    };
+    let mut rng = Rng(0x2545_f491_4f6c_dd1d);
     for &(m, k, n) in &[(260, 80, 260), (260, 260, 80), (37, 19, 131)] {
-        let a: Vec<f32> = (0..m * k).map(|_| rnd()).collect();
-        let b: Vec<f32> = (0..k * n).map(|_| rnd()).collect();
+        let (a, b) = (rng.vec(m * k), rng.vec(k * n));
         workers::set_threads(1).unwrap();
         let mut c1 = vec![0f32; m * n];
         duolando_core::kernels::matmul(&a, &b, m, k, n, &mut c1);
