@@ -31,7 +31,9 @@ if ! command -v valgrind >/dev/null; then
 fi
 
 echo "--- build libduolando (static + dynamic)"
-cargo build -p duolando-ffi
+# The workspace's libraries in the test profile, as `cargo test --workspace`
+# builds them (same features): after that (.ci/run) nothing is rebuilt.
+cargo build --profile test --workspace --lib
 ls -la "$LIB/libduolando.a" "$LIB/libduolando.so"
 
 echo "--- header functions == exported duo_* symbols"
@@ -61,10 +63,15 @@ grep -q libduolando.so <<<"$test_ldd" || { echo "test_dynamic does not load libd
 "$OUT/test_static" "$ROOT"
 
 VALGRIND=(valgrind --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite,indirect,possible --show-leak-kinds=definite,indirect,possible)
-echo "--- valgrind: static"
-"${VALGRIND[@]}" "$OUT/test_static" "$ROOT"
-echo "--- valgrind: dynamic"
-"${VALGRIND[@]}" "$OUT/test_dynamic" "$ROOT"
+# valgrind runs one thread at a time (~3.5 min per run here): the two runs
+# side by side, one per core, each log printed whole once both are done.
+echo "--- valgrind: static and dynamic, side by side"
+"${VALGRIND[@]}" "$OUT/test_static" "$ROOT" >"$OUT/valgrind_static.log" 2>&1 & vg_static=$!
+"${VALGRIND[@]}" "$OUT/test_dynamic" "$ROOT" >"$OUT/valgrind_dynamic.log" 2>&1 & vg_dynamic=$!
+rc_static=0; wait "$vg_static" || rc_static=$?
+rc_dynamic=0; wait "$vg_dynamic" || rc_dynamic=$?
+for kind in static dynamic; do echo "--- valgrind: $kind"; cat "$OUT/valgrind_$kind.log"; done
+[ "$rc_static" -eq 0 ] && [ "$rc_dynamic" -eq 0 ] || { echo "valgrind: static exit $rc_static, dynamic exit $rc_dynamic"; exit 1; }
 
 UE=integrations/unreal
 UEMOD=$UE/Source/Duolando
@@ -72,11 +79,15 @@ echo "--- Unreal plugin: the engine-independent runners and step batch (C++17, t
 RUNNER_TESTS="tests/c/test_runner.cpp tests/unreal/test_transflower_runner.cpp"
 g++ -std=c++17 -Wall -Wextra -Werror -pedantic -g -Iinclude -I$UEMOD/Public \
     $RUNNER_TESTS -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_runner"
-"${VALGRIND[@]}" "$OUT/test_runner" "$ROOT"
-# Memcheck sees no races: the runners' own C++ again, instrumented (the library is not).
+"${VALGRIND[@]}" "$OUT/test_runner" "$ROOT" >"$OUT/valgrind_runner.log" 2>&1 & vg_runner=$!
+# Memcheck sees no races: the runners' own C++ again, instrumented (the library is not),
+# built and run while valgrind runs on the other core.
 g++ -std=c++17 -Wall -Wextra -Werror -pedantic -g -O1 -fsanitize=thread -Iinclude -I$UEMOD/Public \
     $RUNNER_TESTS -L"$LIB" -lduolando -lpthread -Wl,-rpath,"$LIB" -o "$OUT/test_runner_tsan"
 TSAN_OPTIONS=halt_on_error=1 "$OUT/test_runner_tsan" "$ROOT" > /dev/null
+rc_runner=0; wait "$vg_runner" || rc_runner=$?
+cat "$OUT/valgrind_runner.log"
+[ "$rc_runner" -eq 0 ] || { echo "valgrind: runners exit $rc_runner"; exit 1; }
 
 echo "--- Unreal plugin: module + component compiled against TEST STUB engine headers (tests/unreal/stub) and run"
 # Not Unreal Engine: the stubs only let g++ check and run the plugin's own C++.

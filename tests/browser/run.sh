@@ -41,8 +41,12 @@ fi
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
 frames=300
-say "building the fixture page"
-(cd "$root" && cargo run -q -p duolando --example viewer_fixture -- "$tmp/page" --frames "$frames")
+# The workspace in the test profile (into target/debug), as `cargo test
+# --workspace` builds it: after that (.ci/run) nothing is rebuilt.
+say "building duolando and the fixture page"
+(cd "$root" && cargo build -q --profile test --workspace --bins --examples)
+bin="${CARGO_TARGET_DIR:-$root/target}/debug"
+(cd "$root" && "$bin/examples/viewer_fixture" "$tmp/page" --frames "$frames")
 
 say "testing $tmp/page/index.html in headless Chromium"
 shot=()
@@ -56,13 +60,12 @@ node "$here/viewer_test.mjs" --page "$tmp/page/index.html" --frames "$frames" --
 dance=(); [ -f "$root/assets/demo.duo" ] || dance=(--model tests/fixtures/tiny/model.duo \
   --leader tests/fixtures/rollout_tiny_long/leader_pos3d.npy --music tests/fixtures/rollout_tiny_long/music.npy)
 say "duolando dance ${dance[*]} (follower.glb): gltf-validator, then a three.js viewer in headless Chromium"
-(cd "$root" && cargo run -q -p duolando -- dance "${dance[@]}" --out "$tmp/dance" 2>"$tmp/dance.log") || { cat "$tmp/dance.log" >&2; exit 1; }
+(cd "$root" && "$bin/duolando" dance "${dance[@]}" --out "$tmp/dance" 2>"$tmp/dance.log") || { cat "$tmp/dance.log" >&2; exit 1; }
 node "$here/validate_glb.mjs" "$tmp/dance/follower.glb"
 node "$here/glb_test.mjs" --glb "$tmp/dance/follower.glb"
 say "done"
 
 # The live page of `duolando live` (docs/VIEWER.md, "The live page"): the server streams the demo at 30 fps.
-say "building duolando; testing the live page in headless Chromium"
-(cd "$root" && cargo build -q -p duolando --bin duolando)
-node "$here/live_test.mjs" --bin "${CARGO_TARGET_DIR:-$root/target}/debug/duolando"
+say "testing the live page in headless Chromium"
+node "$here/live_test.mjs" --bin "$bin/duolando"
 say "done (live)"
