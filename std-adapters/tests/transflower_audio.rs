@@ -462,6 +462,76 @@ fn dance_runs_features_then_generate() {
     std::fs::remove_dir_all(d).ok();
 }
 
+/// `M.audio_scaler.json`, `M.motion_scaler.json` and `M.motion_seed.npy`
+/// beside `M.duo` stand in for the three flags (the bundled demo's layout);
+/// a flag given wins over the file beside the model.
+#[test]
+fn dance_reads_the_files_beside_the_model() {
+    let d = tmp("dance-beside");
+    let model = seeded_85_model(&d); // d/tf85.duo
+    let flac = fixtures().join("music/stereo_44k.flac");
+    let (asc, msc, seed) = (
+        d.join("tf85.audio_scaler.json"),
+        d.join("tf85.motion_scaler.json"),
+        d.join("tf85.motion_seed.npy"),
+    );
+    std::fs::write(&asc, scaler_json(FEATURE_DIM)).unwrap();
+    std::fs::write(&msc, motion_scaler_json(67)).unwrap();
+    let rows: Vec<f32> = (0..12 * 67).map(|i| ((i % 13) as f32 - 6.0) * 0.05).collect();
+    duolando::npy::write_f32(&seed, &rows, &[12, 67]).unwrap();
+    let run = |out: &Path, extra: &[&str]| {
+        let mut a = vec![
+            "dance",
+            "--model",
+            model.to_str().unwrap(),
+            "--music",
+            flac.to_str().unwrap(),
+            "--seed",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        a.extend_from_slice(extra);
+        let (code, err) = cli(&a);
+        assert_eq!(code, Some(0), "{err}");
+        err
+    };
+    let (beside, explicit) = (d.join("beside"), d.join("explicit"));
+    let err = run(&beside, &[]);
+    for what in ["audio scaler", "motion scaler", "motion seed"] {
+        assert!(err.contains(&format!("{what}: ")) && err.contains("(beside the model)"), "{what}: {err}");
+    }
+    run(
+        &explicit,
+        &[
+            "--audio-scaler",
+            asc.to_str().unwrap(),
+            "--scaler",
+            msc.to_str().unwrap(),
+            "--motion-seed",
+            seed.to_str().unwrap(),
+        ],
+    );
+    for f in ["audio_features.npy", "motion_seed.npy", "output.npy", "positions.npy"] {
+        assert_eq!(
+            std::fs::read(beside.join(f)).unwrap(),
+            std::fs::read(explicit.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    let s = read_f32_2d(&beside.join("motion_seed.npy"), Some(67), "s").unwrap();
+    assert_eq!(s.data, rows);
+    assert!(beside.join("dancer.glb").exists());
+    // a flag wins: a zero seed file given explicitly changes the seed
+    let zero = d.join("zero_seed.npy");
+    duolando::npy::write_f32(&zero, &vec![0.0; 12 * 67], &[12, 67]).unwrap();
+    let flagged = d.join("flagged");
+    run(&flagged, &["--motion-seed", zero.to_str().unwrap()]);
+    let s = read_f32_2d(&flagged.join("motion_seed.npy"), Some(67), "s").unwrap();
+    assert!(s.data.iter().all(|&v| v == 0.0));
+    std::fs::remove_dir_all(d).ok();
+}
+
 #[test]
 fn dance_refuses_what_does_not_fit() {
     let d = tmp("dance-refuse");

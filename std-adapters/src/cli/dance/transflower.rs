@@ -11,6 +11,11 @@
 //! --input AUDIO=DIR/audio_features.npy --input MOTION=DIR/motion_seed.npy
 //! --seed N [--scaler M.json] --out DIR` runs (R mode): `output.npy`, and
 //! with `--scaler` the skeleton, glb, bvh and viewer.
+//!
+//! Files beside the model stand in for absent flags: for `M.duo`,
+//! `M.audio_scaler.json` (`--audio-scaler`), `M.motion_scaler.json`
+//! (`--scaler`) and `M.motion_seed.npy` (`--motion-seed`), as the bundled
+//! demo ships them ([`Sidecars`]).
 
 use std::path::Path;
 
@@ -48,6 +53,37 @@ pub fn refuse_flags(args: &Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The files a Transflower `.duo` may carry beside it (`M.duo` ->
+/// `M.<suffix>`): what a trained model needs besides its weights.
+pub struct Sidecars;
+
+impl Sidecars {
+    pub const AUDIO_SCALER: &'static str = "audio_scaler.json";
+    pub const MOTION_SCALER: &'static str = "motion_scaler.json";
+    pub const MOTION_SEED: &'static str = "motion_seed.npy";
+
+    /// `M.<suffix>` beside `model` when it is a file.
+    pub fn find(model: &Path, suffix: &str) -> Option<std::path::PathBuf> {
+        let stem = model.file_stem()?.to_str()?;
+        let p = model.with_file_name(format!("{stem}.{suffix}"));
+        p.is_file().then_some(p)
+    }
+
+    /// The flag's path, else the file beside the model (said on stderr).
+    fn or_beside(
+        flag: &Option<std::path::PathBuf>,
+        model: &Path,
+        suffix: &str,
+        what: &str,
+    ) -> Option<std::path::PathBuf> {
+        flag.clone().or_else(|| {
+            let p = Self::find(model, suffix)?;
+            eprintln!("{what}: {} (beside the model)", p.display());
+            Some(p)
+        })
+    }
 }
 
 /// `duolando generate`'s flags, parsed from the command line `run` builds.
@@ -112,8 +148,11 @@ pub fn run(args: &Args) -> Result<()> {
             model_path.display()
         )
     })?;
+    let audio_scaler_path = Sidecars::or_beside(&args.audio_scaler, model_path, Sidecars::AUDIO_SCALER, "audio scaler");
+    let motion_scaler_path = Sidecars::or_beside(&args.scaler, model_path, Sidecars::MOTION_SCALER, "motion scaler");
+    let motion_seed_path = Sidecars::or_beside(&args.motion_seed, model_path, Sidecars::MOTION_SEED, "motion seed");
     // Read every file before writing anything.
-    let audio_scaler = match &args.audio_scaler {
+    let audio_scaler = match &audio_scaler_path {
         Some(p) => {
             let s = Scaler::read(p)?;
             if s.width() != tfa::FEATURE_DIM {
@@ -123,7 +162,7 @@ pub fn run(args: &Args) -> Result<()> {
         }
         None => None,
     };
-    let seed_rows = match &args.motion_seed {
+    let seed_rows = match &motion_seed_path {
         Some(p) => {
             let a = read_f32_2d(p, Some(channels), &format!("motion seed (T, {channels}), scaled features"))?;
             if a.rows < window {
@@ -155,7 +194,7 @@ pub fn run(args: &Args) -> Result<()> {
         f.frames,
         if audio_scaler.is_some() { "scaled" } else { "UNSCALED: give --audio-scaler for a trained model" },
         t.elapsed().as_secs_f64(),
-        match &args.motion_seed {
+        match &motion_seed_path {
             Some(p) => p.display().to_string(),
             None => format!("zeros ({window} rows: the mean pose)"),
         }
@@ -173,7 +212,7 @@ pub fn run(args: &Args) -> Result<()> {
         "--out".into(),
         args.out.display().to_string(),
     ];
-    if let Some(s) = &args.scaler {
+    if let Some(s) = &motion_scaler_path {
         cl.extend(["--scaler".into(), s.display().to_string()]);
     }
     let g = Generate::try_parse_from(&cl).map_err(|e| anyhow::anyhow!("internal generate command line: {e}"))?;
