@@ -35,9 +35,10 @@ BatchNorm's running statistics with momentum `glow_bn_momentum` (0.1) and then u
 Optimiser: AdamW (decay on weight matrices only), linear warm-up then cosine decay to
 `--min-lr-ratio`, gradient-norm clipping 0.5 (the YAML's gradient_clip_val). With
 `--minutes` the step count is calibrated from the first steps and the evaluation time
-(printed as `steps N`); `--steps N` gives a run that is reproducible exactly for a seed
-and thread count (the calibrated run equals `--steps N` with the N it printed, as long as
-it is not cut by the wall-clock budget).
+(printed as `steps N`) and re-fitted to the remaining time at every evaluation (printed as
+`steps N -> M`: the machine's speed changes with other jobs), so such a run depends on the
+timing; `--steps N` (with a large enough `--minutes`) is reproducible exactly for a seed and
+thread count.
 
 Writes OUT/: model.safetensors (best held-out NLL; the authors' state-dict names, buffers
 included, as tools/transflower_ckpt_to_safetensors.py writes), hparams.yaml (every option
@@ -435,14 +436,14 @@ def main(argv=None):
     total = a.steps if a.steps > 0 else 10 ** 9
     step, recent, skipped, t_calib = 0, [], 0, None
     eval_in_calib = [0.0]
+    t_seg = [None, 0]  # start time and step of the current evaluation period
     while step < total:
         if a.steps <= 0 and step == a.calib_steps:
             # steps that fit: the remaining budget over (step time + evaluation time / eval_every)
             per_step = (time.time() - t_calib - eval_in_calib[0]) / (a.calib_steps - 1)
             remaining = budget - (time.time() - t_start) - eval_s  # the final evaluation
             total = max(step + 1, int(0.9 * remaining / (per_step + eval_s / a.eval_every)) + step)
-            print(f"steps {total} (calibrated: {per_step:.2f} s a step, {eval_s:.1f} s an evaluation; "
-                  f"--steps {total} reproduces this run)", flush=True)
+            print(f"steps {total} (calibrated: {per_step:.2f} s a step, {eval_s:.1f} s an evaluation)", flush=True)
         if step == 1:
             t_calib = time.time()
         lr = lr_at(step, a, total)
@@ -472,6 +473,16 @@ def main(argv=None):
                 eval_in_calib[0] += time.time() - t_ev
             record(step, float(np.mean(recent)), te, lr)
             recent = []
+            now = time.time()
+            if a.steps <= 0 and step > a.calib_steps and t_seg[0] is not None and not over:
+                # --minutes: re-fit the step count to the remaining time at the speed of the last
+                # evaluation period (other jobs on the machine change it)
+                per = (now - t_seg[0]) / (step - t_seg[1])
+                new_total = max(step + 1, int(0.95 * (budget - (now - t_start) - eval_s) / per) + step)
+                if abs(new_total - total) > 0.02 * total:
+                    print(f"steps {total} -> {new_total} ({per:.2f} s a step with evaluations)", flush=True)
+                    total = new_total
+            t_seg[:] = [now, step]
             if te < best:
                 best, best_step, best_state = te, step, copy.deepcopy(model.state_dict())
                 save_best()
