@@ -105,3 +105,47 @@ fn not_a_model_prints_its_magic_in_hex() {
         "{e}"
     );
 }
+
+#[test]
+fn synth_puts_beats_on_the_grid_it_is_given_and_refuses_a_bad_one() {
+    let d = tmp("synth-grid");
+    let out = d.join("s");
+    let (code, e) = run(&[
+        "synth",
+        "--minutes",
+        "0.5",
+        "--seed",
+        "2",
+        "--beat-grid-frames",
+        "4",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{e}");
+    let index: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("takes.json")).unwrap()).unwrap();
+    let grid = index["beat_grid_s"].as_f64().unwrap();
+    assert!((grid - 4.0 / 30.0).abs() < 1e-6, "{grid}");
+    let takes = index["takes"].as_array().unwrap();
+    assert!(!takes.is_empty());
+    for t in takes {
+        for b in t["beats_s"].as_array().unwrap() {
+            let k = b.as_f64().unwrap() / grid;
+            assert!(
+                (k - k.round()).abs() < 1e-3,
+                "{}: beat {b} off the grid",
+                t["name"]
+            );
+        }
+    }
+    let (code, e) = run(&[
+        "synth",
+        "--beat-grid-frames",
+        "0",
+        "--out",
+        d.join("bad").to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{e}");
+    assert!(e.contains("--beat-grid-frames must be 1 to 48"), "{e}");
+    let _ = std::fs::remove_dir_all(&d);
+}

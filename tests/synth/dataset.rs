@@ -7,9 +7,9 @@ use duolando::synth::dataset::{plan_takes, write_dataset};
 fn dataset_layout_shapes_split_and_determinism() {
     let dir = std::env::temp_dir().join(format!("duo-synth-{}", std::process::id()));
     let minutes = 4.0;
-    let summary = write_dataset(&dir, minutes, 3, |_, _| {}).unwrap();
+    let summary = write_dataset(&dir, minutes, 3, None, |_, _| {}).unwrap();
     assert!(summary.seconds >= minutes * 60.0, "{} s", summary.seconds);
-    let entries = plan_takes(minutes, 3);
+    let entries = plan_takes(minutes, 3, None);
     assert_eq!(entries.len(), summary.takes);
     assert!(
         entries.iter().any(|e| e.split == "test") && entries.iter().any(|e| e.split == "train")
@@ -57,7 +57,7 @@ fn dataset_layout_shapes_split_and_determinism() {
         .join(some.split)
         .join(format!("{}_00.npy", some.stem));
     let bytes = std::fs::read(&p).unwrap();
-    write_dataset(&dir, minutes, 3, |_, _| {}).unwrap();
+    write_dataset(&dir, minutes, 3, None, |_, _| {}).unwrap();
     assert_eq!(std::fs::read(dir.join("takes.json")).unwrap(), first);
     assert_eq!(std::fs::read(&p).unwrap(), bytes);
     std::fs::remove_dir_all(&dir).ok();

@@ -88,6 +88,7 @@ fn every_genre_is_plausible() {
             genre: *g,
             seconds: 30.0,
             bpm: None,
+            beat_grid: None,
             choreo_seed: 100 + i as u64,
             take_seed: 7,
         });
@@ -155,6 +156,7 @@ fn joined_hands_stay_together_in_closed_hold() {
         genre: Genre::Waltz,
         seconds: 30.0,
         bpm: Some(90.0),
+        beat_grid: None,
         choreo_seed: 5,
         take_seed: 5,
     });
@@ -188,6 +190,7 @@ fn follower_answers_are_not_a_function_of_the_leader() {
         genre: Genre::Rumba,
         seconds: 40.0,
         bpm: None,
+        beat_grid: None,
         choreo_seed: 9,
         take_seed,
     };
@@ -232,5 +235,48 @@ fn music_beat_channel_matches_the_beat_grid() {
             0.0
         };
         assert!(o > before, "onset at beat frame {f}: {o} <= {before}");
+    }
+}
+
+#[test]
+fn a_beat_grid_puts_every_beat_on_a_bailando_token() {
+    // 4 frames at 30 fps = one Bailando token (8 frames at 60 fps).
+    let grid = 4.0 / 30.0;
+    for (i, g) in Genre::ALL.iter().enumerate() {
+        let spec = TakeSpec {
+            genre: *g,
+            seconds: 25.0,
+            bpm: None,
+            beat_grid: Some(grid),
+            choreo_seed: 300 + i as u64,
+            take_seed: 3,
+        };
+        let take = generate_take(&spec);
+        let free = generate_take(&TakeSpec {
+            beat_grid: None,
+            ..spec
+        });
+        assert!(
+            [150.0f32, 112.5, 90.0, 75.0]
+                .iter()
+                .any(|b| (take.bpm - b).abs() < 1e-3),
+            "{}: {} BPM is not on the token grid",
+            g.name(),
+            take.bpm
+        );
+        // The tempo on the grid nearest the drawn one (one token per beat apart at most).
+        let tokens = |bpm: f32| 60.0 / bpm / grid;
+        assert!((tokens(take.bpm) - tokens(free.bpm)).abs() <= 0.5 + 1e-4);
+        for b in &take.beats {
+            let k = b / grid;
+            assert!(
+                (k - k.round()).abs() < 1e-3,
+                "{}: beat at {b} s is off the grid",
+                g.name()
+            );
+        }
+        // The same figures, danced at the grid's tempo.
+        let names = |t: &Take| t.figures.iter().map(|f| f.name).collect::<Vec<_>>();
+        assert_eq!(names(&take)[..2], names(&free)[..2]);
     }
 }

@@ -97,14 +97,39 @@ pub fn ease(s: f32) -> f32 {
     s * s * (3.0 - 2.0 * s)
 }
 
+/// The tempo range of every take (beats per minute).
+pub const MIN_BPM: f32 = 72.0;
+pub const MAX_BPM: f32 = 163.0;
+
+/// `bpm` moved to the nearest tempo in [`MIN_BPM`, `MAX_BPM`] whose beat
+/// lasts a whole number of `grid` seconds, and `first_beat` to the nearest
+/// positive multiple of `grid`: every beat then falls on the grid (for
+/// Bailando's 8-frame tokens at 60 fps, a grid of 2/15 s gives 150, 112.5,
+/// 90 or 75 BPM). A grid too coarse for the range leaves the tempo as it is.
+pub fn snap_to_grid(bpm: f32, first_beat: f32, grid: f32) -> (f32, f32) {
+    if !(grid.is_finite() && grid > 0.0) {
+        return (bpm, first_beat);
+    }
+    let lo = (60.0 / MAX_BPM / grid).ceil().max(1.0);
+    let hi = (60.0 / MIN_BPM / grid).floor();
+    if lo > hi {
+        return (bpm, first_beat);
+    }
+    let n = (60.0 / bpm / grid).round().clamp(lo, hi);
+    let first = ((first_beat / grid).round().max(1.0) * grid).min(n * grid);
+    (60.0 / (n * grid), first)
+}
+
 impl Plan {
     /// Plans a take of `seconds` for `genre` (tempo drawn in the genre's
-    /// range unless `bpm` is given). `choreo` draws the figure sequence;
-    /// `take` draws the follower's hidden responses, so two takes of one
-    /// choreography share the leader's figures but not her answers.
+    /// range unless `bpm` is given; on `grid` when given, see
+    /// [`snap_to_grid`]). `choreo` draws the figure sequence; `take` draws
+    /// the follower's hidden responses, so two takes of one choreography
+    /// share the leader's figures but not her answers.
     pub fn new(
         genre: Genre,
         bpm: Option<f32>,
+        grid: Option<f32>,
         seconds: f32,
         choreo: &mut Rng,
         take: &mut Rng,
@@ -112,9 +137,13 @@ impl Plan {
         let (lo, hi) = genre.bpm_range();
         let bpm = bpm
             .unwrap_or_else(|| choreo.range(lo, hi))
-            .clamp(72.0, 163.0);
+            .clamp(MIN_BPM, MAX_BPM);
+        let first_beat = choreo.range(0.05, 60.0 / bpm);
+        let (bpm, first_beat) = match grid {
+            Some(q) => snap_to_grid(bpm, first_beat, q),
+            None => (bpm, first_beat),
+        };
         let period = 60.0 / bpm;
-        let first_beat = choreo.range(0.05, period);
         let n_beats = ((seconds - first_beat) / period).ceil().max(1.0) as usize + 1;
         let beats: Vec<f32> = (0..n_beats)
             .map(|k| first_beat + k as f32 * period)
@@ -271,5 +300,35 @@ pub fn dancer_foot(leader_foot: Foot, follower: bool) -> usize {
     match (leader_foot, follower) {
         (Foot::Left, false) | (Foot::Right, true) => 0,
         _ => 1,
+    }
+}
+
+#[cfg(test)]
+mod grid_tests {
+    use super::snap_to_grid;
+
+    #[test]
+    fn tempi_and_first_beats_land_on_the_grid() {
+        let q = 2.0 / 15.0;
+        let bpm = |b: f32| snap_to_grid(b, 0.3, q).0;
+        for (drawn, on_grid) in [
+            (120.0, 112.5),
+            (160.0, 150.0),
+            (72.0, 75.0),
+            (92.0, 90.0),
+            (100.0, 90.0),
+        ] {
+            assert!(
+                (bpm(drawn) - on_grid).abs() < 1e-3,
+                "{drawn} -> {}",
+                bpm(drawn)
+            );
+        }
+        // First beat: the nearest positive multiple, at most one beat in.
+        assert!((snap_to_grid(120.0, 0.3, q).1 - 2.0 * q).abs() < 1e-6);
+        assert!((snap_to_grid(120.0, 0.01, q).1 - q).abs() < 1e-6);
+        // A grid coarser than any beat in range leaves the tempo alone.
+        assert_eq!(snap_to_grid(120.0, 0.3, 2.0), (120.0, 0.3));
+        assert_eq!(snap_to_grid(120.0, 0.3, f32::NAN), (120.0, 0.3));
     }
 }

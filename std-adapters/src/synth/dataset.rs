@@ -46,8 +46,8 @@ pub struct TakeEntry {
 /// The take list for `minutes` of data from `seed`: takes of 20-45 s,
 /// genres in rotation, half of the choreographies danced twice (the
 /// second take shares the leader's figures and tempo, not the follower's
-/// hidden answers).
-pub fn plan_takes(minutes: f32, seed: u64) -> Vec<TakeEntry> {
+/// hidden answers). `beat_grid` (seconds): see [`TakeSpec::beat_grid`].
+pub fn plan_takes(minutes: f32, seed: u64, beat_grid: Option<f32>) -> Vec<TakeEntry> {
     let mut rng = Rng::new(seed, 10);
     let mut out = Vec::new();
     let mut total = 0.0f32;
@@ -67,6 +67,7 @@ pub fn plan_takes(minutes: f32, seed: u64) -> Vec<TakeEntry> {
                 genre,
                 seconds,
                 bpm: None,
+                beat_grid,
                 choreo_seed,
                 take_seed: rng.next_u64(),
             };
@@ -123,16 +124,18 @@ fn hold_name(h: Hold) -> &'static str {
     }
 }
 
-/// Generates `minutes` of duets from `seed` into `dir`. `progress` is
-/// called after each take with (done, total).
+/// Generates `minutes` of duets from `seed` into `dir` (every beat on
+/// `beat_grid` seconds when given). `progress` is called after each take
+/// with (done, total).
 pub fn write_dataset(
     dir: &Path,
     minutes: f32,
     seed: u64,
+    beat_grid: Option<f32>,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<DatasetSummary> {
     mkdirs(dir)?;
-    let entries = plan_takes(minutes, seed);
+    let entries = plan_takes(minutes, seed, beat_grid);
     let mut files = Vec::new();
     let mut meta = Vec::new();
     let mut frames = 0;
@@ -156,6 +159,7 @@ pub fn write_dataset(
     }
     let index = json!({
         "generator": "duolando synth", "seed": seed, "minutes_requested": minutes, "fps": FPS,
+        "beat_grid_s": beat_grid,
         "layout": {
             "motion/pos3d/<split>/<name>_00.npy": "follower world joint positions, float32 (T, 165) = 55 SMPL-X joints x xyz, metres, y up",
             "motion/pos3d/<split>/<name>_01.npy": "leader, same layout",

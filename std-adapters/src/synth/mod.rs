@@ -27,6 +27,7 @@ pub fn demo_take(seed: u64, seconds: f32) -> Take {
         genre,
         seconds,
         bpm: None,
+        beat_grid: None,
         choreo_seed: seed,
         take_seed: seed ^ 0x5eed,
     })

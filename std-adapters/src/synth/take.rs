@@ -69,6 +69,10 @@ pub struct TakeSpec {
     pub seconds: f32,
     /// Tempo; drawn from the genre's range when `None`.
     pub bpm: Option<f32>,
+    /// Beat grid (seconds): when set, the tempo is moved to the nearest one
+    /// whose beat lasts a whole number of these and every beat falls on a
+    /// multiple of it (`duolando synth --beat-grid-frames`).
+    pub beat_grid: Option<f32>,
     /// Seeds the leader's choreography, tempo, body sizes and music.
     pub choreo_seed: u64,
     /// Seeds the follower's hidden responses.
@@ -99,6 +103,7 @@ pub fn generate(spec: &TakeSpec) -> Take {
     let plan = Plan::new(
         spec.genre,
         spec.bpm,
+        spec.beat_grid,
         spec.seconds,
         &mut choreo,
         &mut take_rng,
