@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Bailando demo: how predictable the VQ token streams are, and the shipping bar's token figures.
 
-  token_stats.py --data DATA --vqvae WORK/vqvae.pt            # the real dances' token streams
+  token_stats.py --data DATA --vqvae WORK/vqvae.pt [--synth SYNTH]   # the real dances' token streams
   token_stats.py --eval WORK/eval                               # evaluate.py's generated tokens
 
 Real streams (every dance encoded once, as danced): share of steps where the code changes, mean
@@ -73,12 +73,33 @@ def predictability(tr, te):
     return out
 
 
+def beat_lags(names, seqs, synth):
+    """Mean of t == t - p per stream at p = one beat and one bar in tokens (7.5 a second), over the
+    dances (name = <take>_<dancer>) whose beat is a whole number of tokens."""
+    takes = {t["name"]: t for t in json.load(open(os.path.join(synth, "takes.json")))["takes"]}
+    out = {"beat": [[], []], "bar": [[], []]}
+    for name, t in zip(names, seqs):
+        take = takes[name.rsplit("_", 1)[0]]
+        beat = 60.0 / take["bpm"] * 7.5
+        if abs(beat - round(beat)) > 1e-3:
+            continue
+        for key, p in (("beat", round(beat)), ("bar", round(beat) * take["beats_per_bar"])):
+            for s in (0, 1):
+                if len(t) > p:
+                    out[key][s].append(float((t[p:, s] == t[:-p, s]).mean()))
+    return {"dances": len(out["beat"][0]),
+            **{f"{k}_{nm}": (float(np.mean(v[s])) if v[s] else None) for k, v in out.items() for s, nm in ((0, "up"), (1, "down"))}}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data")
     ap.add_argument("--vqvae")
     ap.add_argument("--checkout", default="/tmp/bailando")
     ap.add_argument("--eval", help="an evaluate.py --out folder")
+    ap.add_argument("--synth", help="the `duolando synth` folder of DATA: adds t == t - p at p = one beat and "
+                    "one bar in tokens, over the training dances whose beat is a whole number of tokens "
+                    "(`synth --beat-grid-frames 4`)")
     args = ap.parse_args()
     res = {}
     if args.eval:
@@ -92,7 +113,10 @@ def main():
         vq, _ = C.build(C.load_authors(args.checkout), train=False)
         vq.load_state_dict(torch.load(args.vqvae, weights_only=False)["model"])
         vq.eval()
-        sets = {sp: [np.stack(encode(vq, d), 1) for _, d, _ in C.load_split(args.data, sp)] for sp in ("train", "test")}
+        loaded = {sp: C.load_split(args.data, sp) for sp in ("train", "test")}
+        sets = {sp: [np.stack(encode(vq, d), 1) for _, d, _ in v] for sp, v in loaded.items()}
+        if args.synth:
+            res["beat_lags"] = beat_lags([n for n, _, _ in loaded["train"]], sets["train"], args.synth)
         res["real_test_bar"] = bar(sets["test"])
         res["real_streams"] = predictability(sets["train"], sets["test"])
     print(json.dumps(res, indent=1, default=float))

@@ -9,7 +9,8 @@
 # /work/venv/bin/python), BIN (the duolando binary; default $CARGO_TARGET_DIR or target,
 # /release/duolando, built if missing), CHECKOUT (lisiyao21/Bailando checkout with models/;
 # default /tmp/bailando, extracted from MIRROR=/work/.mirror/lisiyao21+Bailando/repo if absent),
-# MINUTES / SEED (synthetic data; default 40 / 1), SYNTH, DATA, WORK (default /tmp/bailando_*
+# MINUTES / SEED (synthetic data; default 40 / 1), SYNTH_ARGS (more `synth` flags, e.g.
+# "--beat-grid-frames 4"), SYNTH, DATA, WORK (default /tmp/bailando_*
 # names that include minutes and seed), VQ_STEPS / ROOT_STEPS / GPT_STEPS, GPT_ARGS (more
 # train_gpt.py options, e.g. "--skip-start 16 --repeat-weight 0.1,0.1"), DEMO_TAKE (held-out
 # take whose first 20 s of music ship as the demo music; default ChaCha_30_01), EVAL=0 to skip
@@ -38,7 +39,7 @@ if [ ! -f "$CHECKOUT/models/cross_cond_gpt2_ac.py" ]; then
     mkdir -p "$CHECKOUT"
     git -C "$MIRROR" archive HEAD models configs | tar -x -C "$CHECKOUT"
 fi
-[ -d "$SYNTH/motion" ] || "$BIN" synth --minutes "$MINUTES" --seed "$SEED" --out "$SYNTH"
+[ -d "$SYNTH/motion" ] || "$BIN" synth --minutes "$MINUTES" --seed "$SEED" ${SYNTH_ARGS:-} --out "$SYNTH"
 [ -f "$DATA/index.json" ] || "$PY" "$T/prepare_data.py" --synth "$SYNTH" --out "$DATA" --bin "$BIN" > "$WORK/prepare.log"
 stamp "data ready: $DATA"
 

@@ -331,6 +331,9 @@ def main(argv=None):
     ap.add_argument("--input-noise", type=float, default=0.02,
                     help="std of Gaussian noise added to the motion input window (scaled units)")
     ap.add_argument("--init-batch", type=int, default=256, help="windows of the data-dependent norm init")
+    ap.add_argument("--init", metavar="SAFETENSORS",
+                    help="start from these weights (a previous run's model.safetensors, same sizes) instead of "
+                         "a fresh model: training goes on with a new schedule (warm-up, cosine) from --lr")
     ap.add_argument("--minutes", type=float, default=25.0, help="wall-clock budget (init, training, evaluations)")
     ap.add_argument("--steps", type=int, default=0, help="step count (0: calibrated from --minutes)")
     ap.add_argument("--calib-steps", type=int, default=15)
@@ -401,6 +404,11 @@ def main(argv=None):
     with torch.no_grad(), env.quiet():
         init = noised(wtr.batch(rng.integers(0, wtr.total, size=a.init_batch)), noise_gen)
         model.training_step(init, 0)
+    if a.init:
+        # a previous run's weights over the freshly initialised model: every key must match
+        state = load_safetensors(a.init)
+        missing = model.load_state_dict(state, strict=True)
+        print(f"weights from {a.init} ({len(state)} tensors; {missing})", flush=True)
     flags = [float(t) for k, t in model.state_dict().items() if k.endswith("is_initialized")]
     assert flags and all(f == 1.0 for f in flags), flags
 
