@@ -848,13 +848,13 @@ fn q8_panel_tiles<W: Q8Source, const WB: usize>(
 /// [`q8_panel_tiles`] over packed tiles of 8 weight rows (stored packed,
 /// or packed once per tile: [`Q8Source::packed_tile`]) and activation
 /// tiles of up to [`PACKED_CALL_ROWS`] rows ([`simd::gemm_q8_packed`]).
-/// Where the tile pair kernels run ([`simd::pair_enabled`]: AVX-512 VNNI)
+/// Where the tile pair kernels run ([`simd::pair_enabled`]: AVX-512 VNNI, AVX-VNNI)
 /// and the panel has at least [`PAIR_MIN_ROWS`] rows, tiles go in pairs,
 /// laid out once per pair as one 16-row operand ([`simd::TilePair`]). With
 /// AMX ([`simd::amx_enabled`], at least [`AMX_MIN_ROWS`] rows) the whole
 /// 8-row groups of activation rows take the AMX kernel and the rows after
 /// them the 8-row kernel per tile; without AMX every row takes the 16-row
-/// VNNI kernel ([`simd::gemm_q8_pair`]). Every route gives the same values
+/// VNNI kernels ([`simd::gemm_q8_pair`]). Every route gives the same values
 /// bit for bit.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]

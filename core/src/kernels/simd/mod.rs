@@ -1273,7 +1273,7 @@ pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
 }
 
 /// Whether the tile pair kernels run ([`tile_pair::enabled`]: AVX-512
-/// VNNI; never off x86_64).
+/// VNNI or AVX-VNNI; never off x86_64).
 #[inline]
 pub fn pair_enabled() -> bool {
     #[cfg(target_arch = "x86_64")]

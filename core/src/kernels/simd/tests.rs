@@ -3531,9 +3531,11 @@ impl TwoTiles {
     }
 }
 
-/// The 16-row AVX-512 VNNI kernel over a prepared tile pair
-/// (`tile_pair::gemm_q8_pair_raw`) gives, per tile, what the 8-row VNNI
-/// kernel gives, bit for bit, and tracks the scalar twin within the named
+/// The 16-row kernels over a prepared tile pair (AVX-512 VNNI:
+/// `tile_pair::gemm_q8_pair_raw`; AVX-VNNI on 32-byte vectors:
+/// `gemm_q8_pair_avxvnni_raw`, its operand laid out by `prepare_raw_avx2`,
+/// byte for byte the AVX-512 layout where the CPU has both) give, per tile,
+/// what the 8-row kernel of their ISA gives, bit for bit, and tracks the scalar twin within the named
 /// limit of every SIMD int8 GEMM: every row count it takes
 /// (1-8, each call group laid out by `pair_group_index`), odd and even
 /// block counts up to `PACK_BLOCKS`, int8 and 4-bit
@@ -3546,16 +3548,41 @@ impl TwoTiles {
 #[test]
 #[allow(unsafe_code)]
 fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
-    use super::tile_pair::{gemm_q8_pair_raw, TilePair, PAIR_CALL_ROWS};
+    use super::tile_pair::{gemm_q8_pair_avxvnni_raw, gemm_q8_pair_raw, TilePair, PAIR_CALL_ROWS};
     use super::{Q8Pack8, PACK_BLOCKS, PACK_ROWS};
-    let vnni = cpu_runs_avx512_vnni();
-    if !vnni {
-        eprintln!("skipped: this CPU has no AVX-512 VNNI");
+    use std::is_x86_feature_detected as has;
+    let avxvnni = has!("avx2") && has!("fma") && has!("f16c") && has!("avxvnni");
+    // The kernels this CPU runs: 0 AVX-512 VNNI, 1 AVX-VNNI.
+    let kinds: Vec<(usize, &str)> = [(0, "avx512vnni"), (1, "avxvnni")]
+        .into_iter()
+        .filter(|&(k, _)| if k == 0 { cpu_runs_avx512_vnni() } else { avxvnni })
+        .collect();
+    if kinds.is_empty() {
+        eprintln!("skipped: this CPU has neither AVX-512 VNNI nor AVX-VNNI");
         return;
     }
-    // SAFETY (whole test): every feature of the kernel and of `prepare_raw` was detected above.
-    let mut r = Rng(0x7e1e);
+    // SAFETY (whole test): every feature of each kernel and of its layout
+    // (`prepare_raw`, `prepare_raw_avx2`) was detected above, and a kind
+    // runs only where its features are.
+    let prepare = |kind: usize, p: &mut TilePair, t: usize, tl: super::PackedQ8<'_>, unsigned: bool| unsafe {
+        if kind == 0 {
+            p.prepare_raw(t, tl, unsigned)
+        } else {
+            p.prepare_raw_avx2(t, tl, unsigned)
+        }
+    };
+    macro_rules! pair {
+        ($kind:expr, $m:literal, $w:expr, $q:expr, $d:expr, $c:expr, $n:expr, $pre:expr) => {
+            if $kind == 0 {
+                unsafe { gemm_q8_pair_raw::<$m>($w, $q, $d, $c, $n, $pre) }
+            } else {
+                unsafe { gemm_q8_pair_avxvnni_raw::<$m>($w, $q, $d, $c, $n, $pre) }
+            }
+        };
+    }
     let mut checked = 0;
+    for &(kind, isa) in &kinds {
+    let mut r = Rng(0x7e1e);
     for nb in [1usize, 2, 3, 7, 24, 95, PACK_BLOCKS] {
         let n = nb * Q8_BLOCK;
         for q4 in [false, true] {
@@ -3566,7 +3593,16 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
             let mut pairs = [TilePair::new(), TilePair::new()];
             for (p, unsigned) in pairs.iter_mut().zip([false, true]) {
                 for (t, tl) in tile.iter().enumerate() {
-                    assert!(unsafe { p.prepare_raw(t, *tl, unsigned) }, "nb={nb}");
+                    assert!(prepare(kind, p, t, *tl, unsigned), "nb={nb}");
+                }
+                if kind > 0 && kinds[0].0 == 0 {
+                    // Both layouts on this CPU: the same operand, byte for byte.
+                    let mut other = TilePair::new();
+                    for (t, tl) in tile.iter().enumerate() {
+                        assert!(prepare(0, &mut other, t, *tl, unsigned));
+                    }
+                    assert!(other.b[..nb * 512] == p.b[..nb * 512], "layouts nb={nb} q4={q4}");
+                    assert_eq!(other.s.map(|h| h.map(|v| v.map(f32::to_bits))), p.s.map(|h| h.map(|v| v.map(f32::to_bits))));
                 }
             }
             let m_rows = PAIR_CALL_ROWS;
@@ -3611,16 +3647,20 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                         {
  let w = &pairs[1];
                         let (gq, gd, gc) = grouped(&pq, &pd, &pc, $m, keep);
-                        let got = unsafe { gemm_q8_pair_raw::<$m>(w, &gq, &gd, &gc, stride, pre) }.expect("runs");
+                        let got = pair!(kind, $m, w, &gq, &gd, &gc, stride, pre).expect("runs");
                         let q: [&[i8]; $m] = core::array::from_fn(|m| &pq[m * stride..(m + 1) * stride]);
                         let d: [&[f32]; $m] = core::array::from_fn(|m| &pd[m * keep..(m + 1) * keep]);
                         let c: [&[i32]; $m] = core::array::from_fn(|m| &pc[2 * m * keep..2 * (m + 1) * keep]);
                         for (t, tl) in tile.iter().enumerate() {
-                            let want = unsafe { super::x86::gemm_q8_packed_vnni::<$m>(*tl, q, d, c) };
+                            let want = if kind == 0 {
+                                unsafe { super::x86::gemm_q8_packed_vnni::<$m>(*tl, q, d, c) }
+                            } else {
+                                unsafe { super::x86::gemm_q8_packed_avxvnni::<$m>(*tl, q, d, c) }
+                            };
                             let twin = scalar::gemm_q8_packed::<$m>(*tl, q, d, c);
                             for m in 0..$m {
                                 for j in 0..PACK_ROWS {
-                                    let what = format!("nb={nb} q4={q4} rows={} keep={keep} row {m} tile {t} column {j}", $m);
+                                    let what = format!("{isa} nb={nb} q4={q4} rows={} keep={keep} row {m} tile {t} column {j}", $m);
                                     let g = got[m][PACK_ROWS * t + j];
                                     assert_eq!(g.to_bits(), want[m][j].to_bits(), "{what}");
                                     let mag: f64 = (0..q[m].len() / Q8_BLOCK)
@@ -3654,24 +3694,22 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
             // different widths.
             let [signed, w] = &mut pairs;
             let one = (&qs[..n], &ds[..nb], &cs[..2 * nb]);
-            assert!(
-                unsafe { gemm_q8_pair_raw::<1>(signed, one.0, one.1, one.2, n, &[]) }.is_none()
-            );
-            assert!(unsafe { w.prepare_raw(1, tile[1], false) });
+            assert!(pair!(kind, 1, signed, one.0, one.1, one.2, n, &[]).is_none());
+            assert!(prepare(kind, w, 1, tile[1], false));
             assert!(!w.unsigned());
-            assert!(unsafe { gemm_q8_pair_raw::<1>(w, one.0, one.1, one.2, n, &[]) }.is_none());
-            assert!(unsafe { w.prepare_raw(1, tile[1], true) } && w.unsigned());
-            assert!(unsafe { gemm_q8_pair_raw::<0>(w, &qs, &ds, &cs, n, &[]) }.is_none());
+            assert!(pair!(kind, 1, w, one.0, one.1, one.2, n, &[]).is_none());
+            assert!(prepare(kind, w, 1, tile[1], true) && w.unsigned());
+            assert!(pair!(kind, 0, w, &qs, &ds, &cs, n, &[]).is_none());
             let (q9, d9, c9) = (
                 [qs.clone(), qs.clone()].concat(),
                 [ds.clone(), ds.clone()].concat(),
                 [cs.clone(), cs.clone()].concat(),
             );
-            assert!(unsafe { gemm_q8_pair_raw::<9>(w, &q9, &d9, &c9, n, &[]) }.is_none());
-            assert!(unsafe { gemm_q8_pair_raw::<8>(w, &q9, &d9, &c9, n, &[]) }.is_some());
-            assert!(unsafe { gemm_q8_pair_raw::<8>(w, &qs[1..], &ds, &cs, n, &[]) }.is_none());
-            assert!(unsafe { gemm_q8_pair_raw::<8>(w, &qs, &ds[1..], &cs, n, &[]) }.is_none());
-            assert!(unsafe { gemm_q8_pair_raw::<8>(w, &qs, &ds, &cs[1..], n, &[]) }.is_none());
+            assert!(pair!(kind, 9, w, &q9, &d9, &c9, n, &[]).is_none());
+            assert!(pair!(kind, 8, w, &q9, &d9, &c9, n, &[]).is_some());
+            assert!(pair!(kind, 8, w, &qs[1..], &ds, &cs, n, &[]).is_none());
+            assert!(pair!(kind, 8, w, &qs, &ds[1..], &cs, n, &[]).is_none());
+            assert!(pair!(kind, 8, w, &qs, &ds, &cs[1..], n, &[]).is_none());
             if nb > 1 && !q4 {
                 let mut narrow = Q8Pack8::new();
                 scalar::q8_pack8(
@@ -3681,10 +3719,11 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                     &mut narrow.s,
                 );
                 narrow.nb = nb - 1;
-                assert!(unsafe { w.prepare_raw(1, narrow.view(), true) });
-                assert!(unsafe { gemm_q8_pair_raw::<1>(w, &qs, &ds, &cs, n, &[]) }.is_none());
+                assert!(prepare(kind, w, 1, narrow.view(), true));
+                assert!(pair!(kind, 1, w, &qs, &ds, &cs, n, &[]).is_none());
             }
         }
     }
-    assert_eq!(checked, 7 * 2 * 8 * 3);
+    }
+    assert_eq!(checked, kinds.len() * 7 * 2 * 8 * 3);
 }

@@ -1,9 +1,14 @@
 //! Two packed tiles of 8 weight rows as one operand of 16 four-byte
 //! columns ([`TilePair`]), laid out once per tile pair of a GEMM, and the
-//! AVX-512 VNNI kernel over it ([`gemm_q8_pair`]): up to
+//! VNNI kernels over it ([`gemm_q8_pair`]: AVX-512 VNNI, and AVX-VNNI on
+//! 32-byte vectors, two activation rows at a time): up to
 //! [`PAIR_CALL_ROWS`] activation rows x 16 weight rows per call,
 //! bit-identical to [`super::gemm_q8_packed`] on each tile. The AMX kernel
 //! ([`super::amx`]) takes the same operand as its `B` tiles.
+//!
+//! On AVX-VNNI the pair kernel took the R step's GEMMs from 32-50% of the
+//! `vpdpbusd ymm` peak to 59-63% (`bench --isa avxvnni --kernels`, Intel
+//! Xeon capped to AVX-VNNI, 2026-12-06; docs/PERFORMANCE.md).
 //!
 //! Why the pair kernel is faster than the 8-row one
 //! ([`super::x86::gemm_q8_packed_vnni`]): there a block's four 64-byte
@@ -47,10 +52,15 @@ pub const COLS: usize = 2 * PACK_ROWS;
 /// block's 8 weight registers and the temporaries fit the 32 registers.
 pub const PAIR_CALL_ROWS: usize = 8;
 
-/// Whether the tile pair kernels run: the selected ISA is AVX-512 VNNI.
+/// Whether the tile pair kernels run: the selected ISA is AVX-512 VNNI
+/// ([`gemm_q8_pair_raw`]) or AVX-VNNI ([`gemm_q8_pair_avxvnni_raw`], the
+/// same operand on 32-byte vectors). Not AVX2: the same kernel with
+/// `vpmaddubsw` and the sign trick (4 instructions per 32 products, the
+/// operand stored signed) was no faster than the 8-row kernel there (42-50%
+/// of the AVX2 peak against 43-54%, Intel Xeon capped to AVX2, 2026-12-06).
 #[inline]
 pub fn enabled() -> bool {
-    super::isa() == Isa::Avx512Vnni
+    matches!(super::isa(), Isa::Avx512Vnni | Isa::AvxVnni)
 }
 
 /// The `B` operands of two packed tiles of 8 weight rows (tile `t`: the
@@ -96,12 +106,16 @@ impl TilePair {
             return false;
         }
         let unsigned = !super::amx::enabled();
-        // SAFETY: `enabled` is the Avx512Vnni ISA (avx512f/bw among its features).
+        if super::isa() == Isa::AvxVnni {
+            // SAFETY: the AvxVnni ISA's `set_isa` contract covers avx2 and f16c.
+            return unsafe { self.prepare_raw_avx2(half, w, unsigned) };
+        }
+        // SAFETY: `enabled` and not AvxVnni: the Avx512Vnni ISA (avx512f/bw among its features).
         unsafe { self.prepare_raw(half, w, unsigned) }
     }
 
-    /// Whether both tiles are stored unsigned: the operand
-    /// [`gemm_q8_pair`] takes (signed pairs are the AMX kernel's).
+    /// Whether both tiles are stored unsigned: the operand the pair
+    /// kernels take (signed pairs are the AMX kernel's).
     pub fn unsigned(&self) -> bool {
         self.unsigned == [true; 2]
     }
@@ -112,8 +126,42 @@ impl TilePair {
     /// # Safety
     /// The CPU must support avx512f, avx512bw and f16c.
     pub unsafe fn prepare_raw(&mut self, half: usize, w: PackedQ8<'_>, unsigned: bool) -> bool {
-        if half > 1 {
+        let Some(nb) = self.checked_blocks(half, w) else {
             return false;
+        };
+        // SAFETY: the caller's features; the extents were checked above.
+        unsafe { prepare_b(w, nb, half, unsigned, &mut self.b, &mut self.s) };
+        self.nb[half] = nb;
+        self.unsigned[half] = unsigned;
+        true
+    }
+
+    /// [`Self::prepare_raw`] on 32-byte vectors: the same bytes and scales.
+    ///
+    /// # Safety
+    /// The CPU must support avx2 and f16c.
+    pub unsafe fn prepare_raw_avx2(
+        &mut self,
+        half: usize,
+        w: PackedQ8<'_>,
+        unsigned: bool,
+    ) -> bool {
+        let Some(nb) = self.checked_blocks(half, w) else {
+            return false;
+        };
+        // SAFETY: the caller's features; the extents were checked above.
+        unsafe { prepare_b_avx2(w, nb, half, unsigned, &mut self.b, &mut self.s) };
+        self.nb[half] = nb;
+        self.unsigned[half] = unsigned;
+        true
+    }
+
+    /// Tile `half` emptied, and `w`'s block count where it fits the pair
+    /// (`half` 0 or 1, at most [`PACK_BLOCKS`] blocks, its values and
+    /// scales all there).
+    fn checked_blocks(&mut self, half: usize, w: PackedQ8<'_>) -> Option<usize> {
+        if half > 1 {
+            return None;
         }
         self.nb[half] = 0;
         let nb = w.blocks();
@@ -122,14 +170,8 @@ impl TilePair {
         } else {
             PACK_BLOCK_VALUES
         };
-        if nb > PACK_BLOCKS || w.v.len() < nb * per || w.s.len() < nb * PACK_BLOCK_SCALES {
-            return false;
-        }
-        // SAFETY: the caller's features; the extents were checked above.
-        unsafe { prepare_b(w, nb, half, unsigned, &mut self.b, &mut self.s) };
-        self.nb[half] = nb;
-        self.unsigned[half] = unsigned;
-        true
+        (nb <= PACK_BLOCKS && w.v.len() >= nb * per && w.s.len() >= nb * PACK_BLOCK_SCALES)
+            .then_some(nb)
     }
 }
 
@@ -193,6 +235,21 @@ unsafe fn prepare_b(
             }
         }
     }
+    // SAFETY: the caller's features include f16c; the extents are the caller's.
+    unsafe { prepare_scales(w, nb, half, scales) };
+}
+
+/// The scales of tile `half` as the kernels multiply them (see [`TilePair`]).
+///
+/// # Safety
+/// avx and f16c; `w.s` holds the scales of `nb <= PACK_BLOCKS` blocks.
+#[target_feature(enable = "avx,f16c")]
+unsafe fn prepare_scales(
+    w: PackedQ8<'_>,
+    nb: usize,
+    half: usize,
+    scales: &mut [[[f32; 16]; PAIRS]; 2],
+) {
     let scale = |b: usize| -> [f32; 8] {
         let mut f = [0f32; 8];
         if b < nb {
@@ -213,6 +270,72 @@ unsafe fn prepare_b(
             sh[p][PACK_ROWS * half..PACK_ROWS * (half + 1)].copy_from_slice(&scale(2 * p + h));
         }
     }
+}
+
+/// [`prepare_b`] on 32-byte vectors (for CPUs without AVX-512): the same
+/// bytes and scales.
+///
+/// # Safety
+/// avx2 and f16c; as [`prepare_b`] otherwise.
+#[target_feature(enable = "avx2,f16c")]
+unsafe fn prepare_b_avx2(
+    w: PackedQ8<'_>,
+    nb: usize,
+    half: usize,
+    unsigned: bool,
+    out: &mut [u8],
+    scales: &mut [[[f32; 16]; PAIRS]; 2],
+) {
+    let low = _mm256_set1_epi8(0x0f);
+    let flip = _mm256_set1_epi8(if unsigned { -128 } else { 0 });
+    let eight = _mm256_set1_epi8(8);
+    // A stored line's 32-byte half holds 4 rows' (h = 0, h = 1) dword pairs:
+    // the even dwords (h = 0) to its low 128 bits, the odd ones to its high.
+    let split = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+    for (b, ob) in out.chunks_exact_mut(B_BLOCK).take(nb).enumerate() {
+        // lines[g][i]: bytes 32i .. 32i + 32 of line g (rows 4i .. 4i + 4).
+        let lines: [[__m256i; 2]; 4] = if w.q4 {
+            let vb = &w.v[PACK_BLOCK_NIBBLES * b..PACK_BLOCK_NIBBLES * (b + 1)];
+            // SAFETY: vb holds 4 x 32 bytes.
+            let h: [__m256i; 4] = core::array::from_fn(|k| unsafe {
+                _mm256_loadu_si256(vb.as_ptr().add(32 * k) as *const _)
+            });
+            let lo = |v: __m256i| _mm256_sub_epi8(_mm256_and_si256(v, low), eight);
+            let hi = |v: __m256i| {
+                _mm256_sub_epi8(_mm256_and_si256(_mm256_srli_epi16::<4>(v), low), eight)
+            };
+            [
+                [lo(h[0]), lo(h[1])],
+                [lo(h[2]), lo(h[3])],
+                [hi(h[0]), hi(h[1])],
+                [hi(h[2]), hi(h[3])],
+            ]
+        } else {
+            let vb = &w.v[PACK_BLOCK_VALUES * b..PACK_BLOCK_VALUES * (b + 1)];
+            // SAFETY: vb holds 8 x 32 bytes.
+            core::array::from_fn(|g| {
+                core::array::from_fn(|i| unsafe {
+                    _mm256_loadu_si256(vb.as_ptr().add(64 * g + 32 * i) as *const _)
+                })
+            })
+        };
+        for (g, [l0, l1]) in lines.iter().enumerate() {
+            let (a, c) = (
+                _mm256_permutevar8x32_epi32(*l0, split),
+                _mm256_permutevar8x32_epi32(*l1, split),
+            );
+            // h = 0 of rows 0-7, then h = 1.
+            let even = _mm256_xor_si256(_mm256_permute2x128_si256::<0x20>(a, c), flip);
+            let odd = _mm256_xor_si256(_mm256_permute2x128_si256::<0x31>(a, c), flip);
+            // SAFETY: ob holds 8 x 64 bytes; 128g + 64 + 32 half + 32 <= 512.
+            unsafe {
+                _mm256_storeu_si256(ob.as_mut_ptr().add(128 * g + 32 * half) as *mut _, even);
+                _mm256_storeu_si256(ob.as_mut_ptr().add(128 * g + 64 + 32 * half) as *mut _, odd);
+            }
+        }
+    }
+    // SAFETY: the caller's features include f16c; the extents are the caller's.
+    unsafe { prepare_scales(w, nb, half, scales) };
 }
 
 /// `M` activation rows of a quantised panel against the prepared pair `w`,
@@ -237,12 +360,191 @@ pub fn gemm_q8_pair<const M: usize>(
     n_in: usize,
     ahead: &[u8],
 ) -> Option<[[f32; COLS]; M]> {
-    if !enabled() {
+    match super::isa() {
+        // SAFETY: the Avx512Vnni ISA's `set_isa` contract covers the kernel's features.
+        Isa::Avx512Vnni => unsafe { gemm_q8_pair_raw(w, xq, xd, xc, n_in, ahead) },
+        // SAFETY: the AvxVnni ISA's `set_isa` contract covers the kernel's features.
+        Isa::AvxVnni => unsafe { gemm_q8_pair_avxvnni_raw(w, xq, xd, xc, n_in, ahead) },
+        _ => None,
+    }
+}
+
+/// The blocks [`gemm_q8_pair`] runs over, or None where it refuses (see there).
+fn call_blocks<const M: usize>(
+    w: &TilePair,
+    xq: &[i8],
+    xd: &[f32],
+    xc: &[i32],
+    n_in: usize,
+) -> Option<usize> {
+    let rb = n_in / Q8_BLOCK;
+    if M == 0
+        || M > PAIR_CALL_ROWS
+        || w.nb[0] != w.nb[1]
+        || !w.unsigned()
+        || xq.len() < M * n_in
+        || xd.len() < M * rb
+        || xc.len() < 2 * M * rb
+    {
         return None;
     }
-    // SAFETY: `enabled` is the Avx512Vnni ISA, whose `set_isa` contract
-    // covers the kernel's features.
-    unsafe { gemm_q8_pair_raw(w, xq, xd, xc, n_in, ahead) }
+    Some(w.nb[0].min(PACK_BLOCKS).min(rb))
+}
+
+/// [`gemm_q8_pair`] on AVX-VNNI (32-byte vectors) without the ISA check:
+/// the same values as [`gemm_q8_pair_raw`], bit for bit.
+///
+/// # Safety
+/// The CPU must support avx2, avxvnni, fma and f16c.
+pub unsafe fn gemm_q8_pair_avxvnni_raw<const M: usize>(
+    w: &TilePair,
+    xq: &[i8],
+    xd: &[f32],
+    xc: &[i32],
+    n_in: usize,
+    ahead: &[u8],
+) -> Option<[[f32; COLS]; M]> {
+    let nb = call_blocks::<M>(w, xq, xd, xc, n_in)?;
+    // SAFETY: the caller's features; the extents were checked above.
+    Some(unsafe { ymm_rows::<M, 2>(w, nb, xq, xd, xc, ahead) })
+}
+
+/// The call group's `M` rows, `R` at a time (what the 16 registers hold),
+/// on [`pair_avxvnni`]; the group's prefetch spread over the passes.
+///
+/// # Safety
+/// As [`pair_avxvnni`] for every pass.
+#[inline(always)]
+unsafe fn ymm_rows<const M: usize, const R: usize>(
+    w: &TilePair,
+    nb: usize,
+    xq: &[i8],
+    xd: &[f32],
+    xc: &[i32],
+    ahead: &[u8],
+) -> [[f32; COLS]; M] {
+    let mut out = [[0.0f32; COLS]; M];
+    let passes = M.div_ceil(R);
+    let (q, d, c) = (xq.as_ptr(), xd.as_ptr(), xc.as_ptr());
+    let mut m = 0;
+    while m < M {
+        let (a0, a1) = super::part_bytes(ahead.len(), m / R, passes);
+        let share = &ahead[a0..a1];
+        // SAFETY: the caller's; rows m .. m + r of the group (m + r <= M).
+        unsafe {
+            if m + R <= M {
+                out[m..m + R].copy_from_slice(&pair_avxvnni::<R>(w, nb, M, m, q, d, c, share));
+            } else {
+                let [t] = pair_avxvnni::<1>(w, nb, M, m, q, d, c, share);
+                out[m] = t;
+            }
+        }
+        m += R;
+    }
+    out
+}
+
+/// Rows `m0 .. m0 + R` of a call group of `rows` rows ([`pair_vnni`]'s
+/// layout) against the prepared pair, on 32-byte vectors: per block and
+/// row, the even and odd 4-byte pieces in one `vpdpbusd` chain per 8
+/// columns from the row's two corrections (an exact i32 sum: the same as
+/// [`pair_vnni`]'s two chains added), then the same f32 steps in the same
+/// order.
+///
+/// # Safety
+/// avx2, avxvnni, fma, f16c; `nb <= PACK_BLOCKS`, both tiles of `w`
+/// prepared unsigned with at least `nb` blocks, `m0 + R <= rows`, and `xq`,
+/// `xd`, `xc` hold `nb` blocks of `rows` rows as
+/// [`super::pair_group_index`] lays them out.
+#[allow(clippy::too_many_arguments)]
+#[target_feature(enable = "avx2,avxvnni,fma,f16c")]
+unsafe fn pair_avxvnni<const R: usize>(
+    w: &TilePair,
+    nb: usize,
+    rows: usize,
+    m0: usize,
+    xq: *const i8,
+    xd: *const f32,
+    xc: *const i32,
+    ahead: &[u8],
+) -> [[f32; COLS]; R] {
+    // Block b's operand, values, scales and corrections (moved on per block).
+    // SAFETY (pointer offsets): row m0's entries of block 0 (m0 < rows).
+    let (mut ob, mut xs, mut ds, mut cs) = unsafe {
+        (
+            w.b.as_ptr(),
+            xq.add(Q8_BLOCK * m0),
+            xd.add(m0),
+            xc.add(2 * m0),
+        )
+    };
+    // acc[m][h][t]: row m's sums of the blocks of parity h, tile t (lane = weight row).
+    let mut acc = [[[_mm256_setzero_ps(); 2]; 2]; R];
+    macro_rules! block {
+        ($h:literal, $p:expr) => {{
+            // SAFETY: w.s[h] holds PAIRS >= pairs rows of 16 floats (p < pairs).
+            let sv: [__m256; 2] =
+                core::array::from_fn(|t| unsafe { _mm256_loadu_ps(w.s[$h][$p].as_ptr().add(8 * t)) });
+            // d[m][t]: row m's block sum against tile t, from its two corrections.
+            let mut d: [[__m256i; 2]; R] = core::array::from_fn(|m| {
+                // SAFETY: row m's two corrections of this block (the group's extents).
+                let c = unsafe { (*cs.add(2 * m)).wrapping_add(*cs.add(2 * m + 1)) };
+                [_mm256_set1_epi32(c); 2]
+            });
+            for k in 0..8 {
+                // Register k, lane j of tile t: bytes 4k .. 4k + 4 of weight row 8t + j (w + 128).
+                // SAFETY: the block's B_BLOCK operand bytes; 64k + 32t + 32 <= B_BLOCK.
+                let wv: [__m256i; 2] =
+                    core::array::from_fn(|t| unsafe { _mm256_loadu_si256(ob.add(64 * k + 32 * t) as *const _) });
+                for (m, dm) in d.iter_mut().enumerate() {
+                    // Register k holds piece k / 2 of parity k % 2: bytes 8(k/2) + 4(k%2) of the row's block.
+                    // SAFETY: row m's 32 values of this block; 4k + 4 <= Q8_BLOCK.
+                    let x = unsafe { (xs.add(Q8_BLOCK * m + 4 * k) as *const i32).read_unaligned() };
+                    let xb = _mm256_set1_epi32(x);
+                    for t in 0..2 {
+                        dm[t] = _mm256_dpbusd_avx_epi32(dm[t], wv[t], xb);
+                    }
+                }
+            }
+            for (m, am) in acc.iter_mut().enumerate() {
+                // SAFETY: row m's scale of this block.
+                let xdb = _mm256_set1_ps(unsafe { *ds.add(m) });
+                for t in 0..2 {
+                    am[$h][t] = _mm256_fmadd_ps(
+                        _mm256_cvtepi32_ps(d[m][t]),
+                        _mm256_mul_ps(sv[t], xdb),
+                        am[$h][t],
+                    );
+                }
+            }
+            // SAFETY: one block on: at most one past the last of the nb blocks.
+            unsafe {
+                ob = ob.add(B_BLOCK);
+                xs = xs.add(Q8_BLOCK * rows);
+                ds = ds.add(rows);
+                cs = cs.add(2 * rows);
+            }
+        }};
+    }
+    let pairs = nb.div_ceil(2);
+    for p in 0..nb / 2 {
+        super::prefetch_part(ahead, p, pairs);
+        block!(0, p);
+        block!(1, p);
+    }
+    if nb % 2 == 1 {
+        super::prefetch_part(ahead, nb / 2, pairs);
+        block!(0, nb / 2);
+    }
+    let _ = (ob, xs, ds, cs);
+    let mut out = [[0.0f32; COLS]; R];
+    for (o, a) in out.iter_mut().zip(acc) {
+        for t in 0..2 {
+            // SAFETY: o holds 16 floats; 8t + 8 <= 16.
+            unsafe { _mm256_storeu_ps(o.as_mut_ptr().add(8 * t), _mm256_add_ps(a[0][t], a[1][t])) };
+        }
+    }
+    out
 }
 
 /// [`gemm_q8_pair`] without the [`enabled`] check.
@@ -257,18 +559,7 @@ pub unsafe fn gemm_q8_pair_raw<const M: usize>(
     n_in: usize,
     ahead: &[u8],
 ) -> Option<[[f32; COLS]; M]> {
-    let rb = n_in / Q8_BLOCK;
-    if M == 0
-        || M > PAIR_CALL_ROWS
-        || w.nb[0] != w.nb[1]
-        || !w.unsigned()
-        || xq.len() < M * n_in
-        || xd.len() < M * rb
-        || xc.len() < 2 * M * rb
-    {
-        return None;
-    }
-    let nb = w.nb[0].min(PACK_BLOCKS).min(rb);
+    let nb = call_blocks::<M>(w, xq, xd, xc, n_in)?;
     // SAFETY: the caller's features; the group holds `nb <= rb` blocks of
     // its `M` rows (above), both tiles were prepared unsigned with
     // `w.nb[0] >= nb` blocks.
