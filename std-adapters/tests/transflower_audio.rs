@@ -574,3 +574,78 @@ fn dance_refuses_what_does_not_fit() {
     assert!(err.contains("--seed is for a Transflower model"), "{err}");
     std::fs::remove_dir_all(d).ok();
 }
+
+/// The bundled Transflower demo (assets/transflower_demo.*, docs/DEMO_MODEL.md)
+/// dances to its bundled music with nothing but `--model` and `--music`:
+/// its scalers and seed are read beside it, every frame is finite, the
+/// dancer moves (a frozen one has a per-channel spread near 0) without
+/// flying apart (pelvis near standing height, joints relative to it moving
+/// at most 0.4 m a frame at 20 fps), and `--seed` repeats or changes the
+/// dance.
+#[test]
+fn the_bundled_transflower_demo_dances_to_its_music() {
+    let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    let (model, music) = (
+        assets.join("transflower_demo.duo"),
+        assets.join("transflower_demo_music.ogg"),
+    );
+    let d = tmp("bundled-demo");
+    let run = |out: &Path, seed: &str| {
+        let (code, err) = cli(&[
+            "dance",
+            "--model",
+            model.to_str().unwrap(),
+            "--music",
+            music.to_str().unwrap(),
+            "--seed",
+            seed,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(code, Some(0), "{err}");
+        assert!(err.contains("(beside the model)"), "{err}");
+        read_f32_2d(&out.join("output.npy"), None, "output").unwrap()
+    };
+    let (a, b, c) = (
+        run(&d.join("a"), "1"),
+        run(&d.join("b"), "1"),
+        run(&d.join("c"), "2"),
+    );
+    assert_eq!(a.data, b.data, "the same seed, the same dance");
+    assert_ne!(a.data, c.data, "another seed, another dance");
+    let (t, w) = (a.rows, a.cols);
+    // 20 s of music: 400 rows, the first frame at row 3, the audio window 40 rows.
+    assert_eq!((t, w), (361, 69));
+    assert!(a.data.iter().all(|v| v.is_finite()));
+    let spread: f32 = (0..w)
+        .map(|j| {
+            let col: Vec<f32> = (0..t).map(|i| a.data[i * w + j]).collect();
+            let m = col.iter().sum::<f32>() / t as f32;
+            (col.iter().map(|v| (v - m) * (v - m)).sum::<f32>() / t as f32).sqrt()
+        })
+        .sum::<f32>()
+        / w as f32;
+    assert!(spread > 0.2, "per-channel spread {spread}: the dancer hardly moves");
+    let p = read_f32_2d(&d.join("a/dancer_pos3d.npy"), Some(165), "pos").unwrap();
+    let joint = |i: usize, j: usize| &p.data[i * 165 + 3 * j..i * 165 + 3 * j + 3];
+    let mut fastest = 0f32;
+    for i in 0..p.rows {
+        let h = joint(i, 0)[1];
+        assert!((0.6..1.3).contains(&h), "pelvis height {h} at frame {i}");
+        if i > 0 {
+            for j in 1..55 {
+                let v: f32 = (0..3)
+                    .map(|k| {
+                        let now = joint(i, j)[k] - joint(i, 0)[k];
+                        let before = joint(i - 1, j)[k] - joint(i - 1, 0)[k];
+                        (now - before).powi(2)
+                    })
+                    .sum::<f32>()
+                    .sqrt();
+                fastest = fastest.max(v);
+            }
+        }
+    }
+    assert!(fastest < 0.4, "a joint moved {fastest} m in one frame");
+    let _ = std::fs::remove_dir_all(&d);
+}
