@@ -12,15 +12,14 @@ spread against the real one's. Not the authors' sampling below scale 1: a diagno
 """
 import argparse
 import os
-import subprocess
 import sys
-import tempfile
 
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import train as T  # noqa: E402
+from freerun import BIN, HeldOut  # noqa: E402
 
 
 def main(argv=None):
@@ -30,32 +29,17 @@ def main(argv=None):
     ap.add_argument("--prep", default="/work/tfdata/prep")
     ap.add_argument("--scales", default="1,0.5,0")
     ap.add_argument("--steps", type=int, default=160)
-    ap.add_argument("--bin", default=os.path.join(HERE, "..", "..", "..", "target", "release", "duolando"))
+    ap.add_argument("--bin", default=BIN)
     a = ap.parse_args(argv)
-    import yaml
-    hp = yaml.safe_load(open(a.hparams))
-    lm, la = (int(x) for x in str(hp["input_lengths"]).split(","))
-    h = int(hp.get("output_lengths", 3))
-    mods = str(hp["input_modalities"]).split(",")
-    ms = T.read_scaler(os.path.join(a.prep, "motion_scaler.json"), T.MOTION_DIM)
-    asc = T.read_scaler(os.path.join(a.prep, "audio_scaler.json"), T.AUDIO_DIM)
-    test, _ = T.load_split(a.prep, "test", ms, asc, max(la, lm + a.steps) + 1)
-    test = test[::max(1, len(test) // 6)][:6]
-    train, _ = T.load_split(a.prep, "train", ms, asc, 2)
+    d = HeldOut(a.hparams, a.prep, a.steps)
+    train, _ = T.load_split(a.prep, "train", d.ms, d.asc, 2)
     smooth = np.where(np.concatenate([m for _, m, _ in train]).std(0) > 0.1)[0]
     rng = np.random.default_rng(0)
-    w = tempfile.mkdtemp(prefix="tf_noise_")
     for scale in (float(s) for s in a.scales.split(",")):
         jit, real, dist, spread, tspread = [], [], [], [], []
-        for _, m, au in test:
-            np.save(f"{w}/m.npy", m[:lm].astype(np.float32))
-            np.save(f"{w}/a.npy", au[:la + a.steps - 1].astype(np.float32))
-            np.save(f"{w}/z.npy", (rng.standard_normal((a.steps, T.MOTION_DIM, h)) * scale).astype(np.float32))
-            subprocess.run([a.bin, "generate", "--model", a.model, "--input", f"{mods[0]}={w}/m.npy",
-                            "--input", f"{mods[1]}={w}/a.npy", "--noise", f"{w}/z.npy", "--out", f"{w}/o"],
-                           check=True, capture_output=True)
-            o = np.load(f"{w}/o/output.npy").reshape(a.steps, -1)[:, smooth]
-            t = m[lm:lm + a.steps][:, smooth]
+        for _, m, au in d.test:
+            o = d.generate(a.bin, a.model, m, au, d.noise(rng) * scale)[:, smooth]
+            t = m[d.lm:d.lm + a.steps][:, smooth]
             jit.append(np.abs(np.diff(o, axis=0)).sum(1).mean())
             real.append(np.abs(np.diff(t, axis=0)).sum(1).mean())
             dist.append(np.abs(o[:20] - t[:20]).sum(1).mean())

@@ -12,15 +12,13 @@ comparable figure after the first frames).
 """
 import argparse
 import os
-import subprocess
 import sys
-import tempfile
 
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-import train as T  # noqa: E402
+from freerun import BIN, HeldOut  # noqa: E402
 
 
 def main(argv=None):
@@ -30,36 +28,18 @@ def main(argv=None):
     ap.add_argument("--prep", default="/work/tfdata/prep")
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--presets", default="exact,reference,realtime")
-    ap.add_argument("--bin", default=os.path.join(HERE, "..", "..", "..", "target", "release", "duolando"))
+    ap.add_argument("--bin", default=BIN)
     a = ap.parse_args(argv)
-    import yaml
-    hp = yaml.safe_load(open(a.hparams))
-    lm, la = (int(x) for x in str(hp["input_lengths"]).split(","))
-    h = int(hp.get("output_lengths", 3))
-    mods = str(hp["input_modalities"]).split(",")
-    ms = T.read_scaler(os.path.join(a.prep, "motion_scaler.json"), T.MOTION_DIM)
-    asc = T.read_scaler(os.path.join(a.prep, "audio_scaler.json"), T.AUDIO_DIM)
-    test, _ = T.load_split(a.prep, "test", ms, asc, max(la + a.steps, lm + a.steps))
-    test = test[::max(1, len(test) // 6)][:6]
-    w = tempfile.mkdtemp(prefix="tf_svr_")
+    d = HeldOut(a.hparams, a.prep, a.steps)
     rng = np.random.default_rng(5)
     res = {}
-    for _, m, au in test:
-        np.save(f"{w}/m.npy", m[:lm].astype(np.float32))
-        np.save(f"{w}/a.npy", au[:la + a.steps - 1].astype(np.float32))
-        np.save(f"{w}/z.npy", rng.standard_normal((a.steps, T.MOTION_DIM, h)).astype(np.float32))
-
-        def gen(flags):
-            subprocess.run([a.bin, "generate", "--model", a.model, "--input", f"{mods[0]}={w}/m.npy",
-                            "--input", f"{mods[1]}={w}/a.npy", "--noise", f"{w}/z.npy", "--out", f"{w}/o"] + flags,
-                           check=True, capture_output=True)
-            return np.load(f"{w}/o/output.npy").reshape(a.steps, -1)
-
-        r = gen(["--mode", "exact"])
+    for _, m, au in d.test:
+        z = d.noise(rng)
+        r = d.generate(a.bin, a.model, m, au, z, ["--mode", "exact"])
         scale = max(1.0, float(np.abs(r).max()))
         rspeed = np.abs(np.diff(r, axis=0)).sum(1).mean()
         for p in a.presets.split(","):
-            s = gen(["--mode", "streaming", "--preset", p])
+            s = d.generate(a.bin, a.model, m, au, z, ["--mode", "streaming", "--preset", p])
             res.setdefault(p, []).append((np.abs(s - r).max() / scale, np.abs(s[0] - r[0]).max() / scale,
                                           np.abs(np.diff(s, axis=0)).sum(1).mean() / rspeed))
     for p, v in res.items():
