@@ -5,7 +5,6 @@
 //! fraction of it. `--dtypes` with no value skips the (full-size) model
 //! benches, so these runs take seconds.
 
-
 mod common;
 use common::bench;
 
@@ -134,4 +133,25 @@ fn an_isa_this_cpu_lacks_is_refused_by_name_before_anything_runs() {
     let o = bench(&["--dtypes", "--isa", "avx9"]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown ISA 'avx9'"));
+}
+
+#[test]
+fn zero_runs_steps_threads_or_sessions_are_refused_by_name_not_a_panic() {
+    // `--s-steps 0` used to reach the timing summary with no samples and
+    // panic (exit 101) after building the model.
+    for (flag, value) in [
+        ("--runs", "0"),
+        ("--s-steps", "0"),
+        ("--threads", "1,0"),
+        ("--batch", "0"),
+    ] {
+        let o = bench(&["--dtypes", flag, value]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(
+            err.contains(flag) && err.contains("0"),
+            "{flag} {value}: {err}"
+        );
+        assert!(o.stdout.is_empty(), "{flag} {value}: ran before refusing");
+    }
 }

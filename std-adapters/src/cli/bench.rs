@@ -59,14 +59,14 @@ mod ort;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Timed R steps per weight type (after the warm-up).
-    #[arg(long, default_value_t = 7)]
+    #[arg(long, default_value_t = 7, value_parser = at_least_one)]
     pub runs: usize,
     /// Timed S steps per weight type (after the warm-up steps).
-    #[arg(long, default_value_t = 40)]
+    #[arg(long, default_value_t = 40, value_parser = at_least_one)]
     pub s_steps: usize,
     /// Thread counts to measure (comma separated): the large GEMMs of one
     /// step split over that many threads.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 2])]
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 2], value_parser = at_least_one)]
     pub threads: Vec<usize>,
     /// Untimed warm-up R steps per weight type.
     #[arg(long, default_value_t = 1)]
@@ -102,7 +102,7 @@ pub struct Args {
     pub family: String,
     /// Session counts stepped together with `Session::step_many` (int8
     /// only; comma separated; `--batch` with no value skips them).
-    #[arg(long, value_delimiter = ',', num_args = 0.., default_values_t = vec![1usize, 4, 16])]
+    #[arg(long, value_delimiter = ',', num_args = 0.., default_values_t = vec![1usize, 4, 16], value_parser = at_least_one)]
     pub batch: Vec<usize>,
     /// onnxruntime's time for the family's R step, measured right before
     /// by tools/<family>_ort_r_step.py (its JSON, checked before anything
@@ -118,6 +118,16 @@ pub struct Args {
     /// Also write the figures as one flat JSON object.
     #[arg(long)]
     pub json: Option<PathBuf>,
+}
+
+/// A count flag's value: a whole number of at least 1 (0 runs, steps,
+/// threads or sessions would leave nothing to time).
+fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(format!("not a whole number: {e}")),
+    }
 }
 
 /// Timing summary of repeated runs.
