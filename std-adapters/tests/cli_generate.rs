@@ -580,3 +580,61 @@ fn generate_bailando_matches_the_goldens_on_both_paths() {
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+#[test]
+fn exact_mode_refuses_streaming_flags_by_name_instead_of_ignoring_them() {
+    // `generate --mode exact --topk 3` used to run greedy R and say nothing.
+    let fx = fixtures();
+    let roll = fx.join("rollout_tiny_short");
+    let out = tmp("exact-flags");
+    let duo_model = fx.join("tiny/model.duo");
+    let (leader, music) = (roll.join("leader_pos3d.npy"), roll.join("music.npy"));
+    let duo_base = [
+        "generate",
+        "--model",
+        p(&duo_model),
+        "--leader",
+        p(&leader),
+        "--music",
+        p(&music),
+        "--seed-tokens",
+        "1,2,3,4,5",
+        "--out",
+        p(&out),
+    ];
+    let broll = fx.join("bailando_rollout_btiny_demo_odd");
+    let solo_model = fx.join("bailando_btiny/model.duo");
+    let solo_music = broll.join("music.npy");
+    let solo_base = [
+        "generate",
+        "--model",
+        p(&solo_model),
+        "--music",
+        p(&solo_music),
+        "--seed-tokens",
+        "1,2",
+        "--out",
+        p(&out),
+    ];
+    for base in [&duo_base[..], &solo_base[..]] {
+        for (flags, named) in [
+            (&["--topk", "3"][..], "--topk"),
+            (&["--rng-seed", "7"][..], "--rng-seed"),
+            (&["--preset", "minimum"][..], "--preset"),
+            (&["--shift", "4"][..], "--shift"),
+            (&["--spread"][..], "--spread"),
+            (&["--kv", "f16"][..], "--kv"),
+        ] {
+            let mut args = base.to_vec();
+            args.extend(["--mode", "exact"]);
+            args.extend(flags);
+            expect_failure(&args, &[named, "--mode streaming"]);
+        }
+    }
+    let mut args = duo_base.to_vec();
+    args.push("--no-drain");
+    expect_failure(&args, &["--no-drain", "--mode streaming"]);
+    // Without them, exact mode runs (the default mode too).
+    let o = duolando(&duo_base);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}

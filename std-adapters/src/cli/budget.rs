@@ -107,6 +107,28 @@ fn whose_preset(name: &str) -> String {
 }
 
 impl BudgetArgs {
+    /// The first streaming flag given, if any (`--preset` counts when it is
+    /// not the default): R mode (`--mode exact`) refuses them by name rather
+    /// than ignoring them.
+    pub fn first_given(&self) -> Option<&'static str> {
+        [
+            (self.preset != "reference", "preset"),
+            (self.lookahead.is_some(), "lookahead"),
+            (self.enc_future.is_some(), "enc-future"),
+            (self.dec_future.is_some(), "dec-future"),
+            (self.shift.is_some(), "shift"),
+            (self.music_lookahead.is_some(), "music-lookahead"),
+            (self.topk.is_some(), "topk"),
+            (self.rng_seed != 0, "rng-seed"),
+            (self.staggered, "staggered"),
+            (self.spread, "spread"),
+            (self.kv.is_some(), "kv"),
+            (self.refresh.is_some(), "refresh"),
+        ]
+        .into_iter()
+        .find_map(|(given, name)| given.then_some(name))
+    }
+
     /// The session configuration for `cfg`, checked.
     pub fn config(&self, cfg: &ModelConfig) -> Result<SessionConfig> {
         let Some(preset) = Preset::from_name(&self.preset) else {

@@ -251,6 +251,15 @@ pub fn run(args: Args) -> Result<()> {
     let file = ModelFile::open(&args.model)?;
     super::print_kernels();
     let duo = file.duo()?;
+    if matches!(args.mode, Mode::Exact) && duo.config().family() != duolando_core::family::Family::Transflower {
+        // (Transflower names its own streaming flags below.)
+        if let Some(flag) = args.budget.first_given() {
+            bail!("--{flag} sets a streaming session (--mode streaming); --mode exact runs the authors' evaluation: greedy, over R's window, with no budget");
+        }
+        if args.no_drain {
+            bail!("--no-drain is a streaming flag (--mode streaming); --mode exact outputs every frame R generates");
+        }
+    }
     match duo.config().family() {
         duolando_core::family::Family::Bailando => {
             refuse_transflower_flags(&args, "Bailando")?;
