@@ -152,7 +152,7 @@ def prepare(gpt, vqvae, transl_vqvae, leader, music, seed_tokens=None, follower_
 
 @torch.no_grad()
 def generate_exact(gpt, vqvae, transl_vqvae, leader, music, seed_tokens=None,
-                   follower_start=None, shift=None, margins=None):
+                   follower_start=None, shift=None, margins=None, pick=None):
     """Greedy R rollout.
 
     leader (T, 165) raw world joints; music (>= T, 54); exactly one of
@@ -161,6 +161,8 @@ def generate_exact(gpt, vqvae, transl_vqvae, leader, music, seed_tokens=None,
       the first 4 frames, transl token = code 0 of the translation encoder over all F frames
       (the original encodes the whole follower sequence; F = 4 uses only the first 4 frames).
     shift: the original sample(shift=...) chunked window (None = the authors' eval).
+    pick: the next token from a head's last logits (V,) -> int; None = greedy (the authors'
+      `sample`; the training recipe's RL stage passes their `samplek`'s uniform top-k draw).
     Returns dict: tokens (K+1, 5) int64, follower_pos3d (4(K+1), 165) in the leader's input
     coordinates, follower_rotmat (4(K+1), 495), leader_tokens (T4/4, 4), T4, K.
     """
@@ -182,7 +184,7 @@ def generate_exact(gpt, vqvae, transl_vqvae, leader, music, seed_tokens=None,
             last = lg[0, -1]
             if margins is not None:
                 margins.logits(last)
-            nxt.append(torch.argmax(last).view(1, 1))
+            nxt.append((torch.argmax(last) if pick is None else torch.as_tensor(pick(last))).view(1, 1))
         xs = [torch.cat([x, n], dim=1) for x, n in zip(xs, nxt)]
 
     tokens = torch.cat(xs, dim=0).t().contiguous()  # (K+1, 5)

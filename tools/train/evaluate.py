@@ -16,6 +16,10 @@
      exp(-d^2 / 18) with d the distance in frames to the nearest follower beat, averaged).
    Baselines: root = leader root + the initial offset held constant; BED of a follower taken
    from another test take (chance level); the true follower's own figures.
+3. Issue #41's liveliness targets on the same rollouts: up / down codes used over the test set,
+   the largest share of one up / down token in any 10 s window (75 tokens) per take, model and
+   true follower (max and mean over takes), and the share of frames whose pelvises (leader and
+   follower, 3-D) are closer than 0.25 m, model and true follower, with the smallest distance.
 """
 import argparse
 import json
@@ -105,8 +109,10 @@ def python_rollout(gpt, vq, tr):
     return run
 
 
-def rust_rollout(binary, duo):
-    """`duolando generate --mode exact` on the converted model (what ships)."""
+def rust_rollout(binary, duo, stream=()):
+    """`duolando generate --mode exact` on the converted model (what ships); with `stream`
+    flags, `--mode streaming` with them instead (e.g. `--topk 3 --rng-seed 1`: S mode at the
+    reference preset, top-k sampling)."""
     import os
     import subprocess
     import tempfile
@@ -115,9 +121,10 @@ def rust_rollout(binary, duo):
         with tempfile.TemporaryDirectory() as d:
             for k, a in (("leader", tk["leader"]), ("music", tk["music"]), ("start", tk["follower"][:4])):
                 np.save(os.path.join(d, k + ".npy"), np.ascontiguousarray(a, dtype=np.float32))
-            subprocess.run([binary, "generate", "--mode", "exact", "--model", duo,
+            subprocess.run([binary, "generate", "--mode", "streaming" if stream else "exact", "--model", duo,
                             "--leader", os.path.join(d, "leader.npy"), "--music", os.path.join(d, "music.npy"),
-                            "--follower-start", os.path.join(d, "start.npy"), "--out", os.path.join(d, "out")],
+                            "--follower-start", os.path.join(d, "start.npy"), "--out", os.path.join(d, "out"),
+                            *stream],
                            check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             return (np.load(os.path.join(d, "out", "tokens.npy")),
                     np.load(os.path.join(d, "out", "follower_pos3d.npy")))
@@ -136,10 +143,12 @@ def rollout_metrics(generate, vq, tr, takes):
         base_d = np.linalg.norm(base - true[:, :3], axis=1).mean() * 1000
         mpjpe = np.linalg.norm((pred - true).reshape(n, 55, 3), axis=2).mean() * 1000
         outs.append(tokens)
+        truth = true_tokens(vq, tr, tk, len(tokens))
         rows.append(dict(name=tk["name"], frames=n, root_mm=root_d, root_baseline_mm=base_d, mpjpe_mm=mpjpe,
                          skate=foot_skating(pred), skate_true=foot_skating(true), skate_leader=foot_skating(lead),
                          bed=bed(lead, pred), bed_true=bed(lead, true),
-                         token_agreement=float((tokens[1:] == true_tokens(vq, tr, tk, len(tokens))[1:]).mean())))
+                         token_agreement=float((tokens[1:] == truth[1:]).mean()),
+                         **liveliness(tokens, truth, pred, true, lead)))
     # chance BED: each leader against the true follower of the next test take
     for i, r in enumerate(rows):
         other = takes[(i + 1) % len(takes)]["follower"]
@@ -147,6 +156,30 @@ def rollout_metrics(generate, vq, tr, takes):
         m = min(len(other), len(lead))
         r["bed_other_take"] = bed(lead[:m], other[:m])
     return rows, outs
+
+
+WINDOW_TOKENS = 75  # 10 s of rows: 300 frames at 30 fps, 4 frames per token
+
+
+def max_window_share(seq, w=WINDOW_TOKENS):
+    """Largest share of one token in any window of `w` consecutive tokens (the whole
+    sequence when shorter): 1.0 = one token held for 10 s."""
+    seq = np.asarray(seq)
+    w = min(w, len(seq))
+    return max(float(np.bincount(seq[i:i + w]).max()) / w for i in range(len(seq) - w + 1))
+
+
+def liveliness(tokens, truth, pred, true, lead):
+    """Issue #41's targets per take: the up and down tokens used, the largest share of one up /
+    down token in a 10 s window (model and true follower), and the frames whose pelvises are
+    closer than 0.25 m (3-D, model and true follower)."""
+    pd = np.linalg.norm(pred[:, :3] - lead[:, :3], axis=1)
+    td = np.linalg.norm(true[:, :3] - lead[:, :3], axis=1)
+    return dict(used_up=sorted(set(tokens[:, 0].tolist())), used_down=sorted(set(tokens[:, 1].tolist())),
+                share10_up=max_window_share(tokens[:, 0]), share10_down=max_window_share(tokens[:, 1]),
+                share10_up_true=max_window_share(truth[:, 0]), share10_down_true=max_window_share(truth[:, 1]),
+                pelvis_close=[int((pd < 0.25).sum()), len(pd)], pelvis_close_true=[int((td < 0.25).sum()), len(td)],
+                pelvis_min_m=float(pd.min()))
 
 
 @torch.no_grad()
@@ -191,6 +224,15 @@ def summarise(rows):
                 skate_ratio_leader=sk("skate_leader"),
                 bed=float(np.mean([r["bed"] for r in rows])), bed_true_follower=float(np.mean([r["bed_true"] for r in rows])),
                 bed_other_take=float(np.mean([r["bed_other_take"] for r in rows])),
+                codes_used_up=len(set().union(*[r["used_up"] for r in rows])),
+                codes_used_down=len(set().union(*[r["used_down"] for r in rows])),
+                share10_up_max=max(r["share10_up"] for r in rows), share10_down_max=max(r["share10_down"] for r in rows),
+                share10_up_mean=float(np.mean([r["share10_up"] for r in rows])),
+                share10_down_mean=float(np.mean([r["share10_down"] for r in rows])),
+                share10_up_true_mean=float(np.mean([r["share10_up_true"] for r in rows])),
+                share10_down_true_mean=float(np.mean([r["share10_down_true"] for r in rows])),
+                pelvis_close_ratio=sk("pelvis_close"), pelvis_close_ratio_true=sk("pelvis_close_true"),
+                pelvis_min_m=min(r["pelvis_min_m"] for r in rows),
                 frames=int(w.sum()), takes=len(rows))
 
 
@@ -202,6 +244,9 @@ def main(argv=None):
     ap.add_argument("--recon-only", action="store_true")
     ap.add_argument("--duo", default=None, help="also roll out this .duo with the Rust CLI")
     ap.add_argument("--bin", default="../../target/release/duolando")
+    ap.add_argument("--stream", default=None,
+                    help="roll the .duo out in S mode with these `generate` flags (e.g. \"--topk 3 --rng-seed 1\": "
+                         "top-k sampling at the reference preset) instead of R mode; the Python rollouts stay R")
     args = ap.parse_args(argv)
     setup_threads()
     clock = Clock()
@@ -225,10 +270,12 @@ def main(argv=None):
     print("python f32 R:", json.dumps(summ, indent=1), flush=True)
     result = dict(reconstruction=rec, token_accuracy=acc, rollout_python_f32=summ, per_take_python=rows)
     if args.duo:
-        rows_rs, toks_rs = rollout_metrics(rust_rollout(args.bin, args.duo), vq, tr, test)
+        stream = tuple(args.stream.split()) if args.stream else ()
+        rows_rs, toks_rs = rollout_metrics(rust_rollout(args.bin, args.duo, stream), vq, tr, test)
         summ_rs = summarise(rows_rs)
         same = [float(np.mean(a == b)) for a, b in zip(toks_py, toks_rs)]
         summ_rs["token_agreement_with_python_f32"] = float(np.mean(same))
+        summ_rs["mode"] = "streaming " + " ".join(stream) if stream else "exact"
         print("rust R (" + args.duo + "):", json.dumps(summ_rs, indent=1), flush=True)
         result.update(rollout_rust=summ_rs, per_take_rust=rows_rs)
     with open(args.json, "w") as f:

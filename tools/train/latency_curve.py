@@ -77,6 +77,10 @@ def rows_spec(args):
                      ["--mode", "streaming", "--preset", "interactive", "--lookahead", str(l), "--enc-future", e,
                       "--dec-future", dd, "--music-lookahead", str(l)]))
         spec.append((f"{l} R", trained[l], l, None, ["--mode", "exact"]))
+    if args.sample:
+        # every S row samples (R is greedy by definition: `generate --mode exact` refuses --topk)
+        spec = [(lab, m, lf, a, mode + args.sample.split() if "streaming" in mode else mode)
+                for lab, m, lf, a, mode in spec]
     return spec
 
 
@@ -90,6 +94,8 @@ def main(argv=None):
     ap.add_argument("--lookaheads", default="1,4,8")
     ap.add_argument("--enc-future", type=int, default=2)
     ap.add_argument("--dec-future", type=int, default=2)
+    ap.add_argument("--sample", default=None,
+                    help="extra `generate` flags for every S row, e.g. \"--topk 3 --rng-seed 1\" (top-k sampling)")
     ap.add_argument("--only", default=None, help="comma-separated row labels to run (default: all)")
     ap.add_argument("--json", required=True)
     ap.add_argument("--table", action="store_true", help="only print the markdown table of an existing --json")

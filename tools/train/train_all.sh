@@ -10,6 +10,7 @@
 # /tmp/duo_train_m$MINUTES_s$SEED), VQ_STEPS / TR_STEPS / GPT_STEPS / GPT2_STEPS, EVAL=0 to skip
 # evaluation, LOOK_FORWARD (the follower GPT's leader/music look-ahead in tokens, default 29 as the
 # original; the latency knob, docs/DEMO_MODEL.md "Latency chosen at training time"),
+# RL_EPOCHS / RL_ARGS (the reinforcement stage after the GPT: epochs, more train_rl.py flags; off),
 # DEMO_TAKE (test take of the demo clip; default Quickstep_20_01, empty = the longest),
 # INSTALL=1 to replace assets/demo.duo and the demo clip, BIN (the duolando binary,
 # default $CARGO_TARGET_DIR or target, /release/duolando).
@@ -43,6 +44,13 @@ if [ "${GPT2_STEPS:-0}" != 0 ]; then
     $NICE "$PY" train_gpt.py --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
                              --init "$WORK/follower_gpt_a.pt" --out "$WORK/follower_gpt.pt" \
                              --steps "$GPT2_STEPS" --batch 16 --lr 5e-4 --look-forward "${LOOK_FORWARD:-29}"
+fi
+# Optional: the paper's reinforcement stage on top (train_rl.py; off by default, RL_EPOCHS=N turns
+# it on; docs/DEMO_MODEL.md "The reinforcement stage").
+if [ "${RL_EPOCHS:-0}" != 0 ]; then
+    mv "$WORK/follower_gpt.pt" "$WORK/follower_gpt_supervised.pt"
+    $NICE "$PY" train_rl.py --data "$DATA" --ckpt "$WORK" --gpt "$WORK/follower_gpt_supervised.pt" \
+                            --out "$WORK/follower_gpt.pt" --epochs "$RL_EPOCHS" ${RL_ARGS:-}
 fi
 $NICE "$PY" export.py --ckpt "$WORK" --out "$WORK/export" --data "$DATA" --assets "$WORK/assets" \
     ${DEMO_TAKE:+--take "$DEMO_TAKE"}
