@@ -153,7 +153,7 @@ def prepare(gpt, vqvae, transl_vqvae, leader, music, seed_tokens=None, follower_
 @torch.no_grad()
 def generate_exact(gpt, vqvae, transl_vqvae, leader, music, seed_tokens=None,
                    follower_start=None, shift=None, margins=None, pick=None):
-    """Greedy R rollout.
+    """R rollout, greedy (or `pick`).
 
     leader (T, 165) raw world joints; music (>= T, 54); exactly one of
       seed_tokens (5,) ints (up, down, lhand, rhand, transl), or

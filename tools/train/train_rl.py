@@ -109,7 +109,7 @@ def main(argv=None):
                                                   "(the supervised stage)")
     ap.add_argument("--gpt", default=None, help="the supervised GPT checkpoint (default: CKPT/follower_gpt.pt)")
     ap.add_argument("--out", required=True, help="the fine-tuned follower GPT checkpoint")
-    ap.add_argument("--epochs", type=int, default=6)
+    ap.add_argument("--epochs", type=int, default=10)
     ap.add_argument("--takes", type=int, default=24, help="training takes rolled out per epoch")
     ap.add_argument("--updates", type=int, default=60, help="optimiser steps per epoch")
     ap.add_argument("--batch", type=int, default=32)
