@@ -942,3 +942,72 @@ fn solo_dance_to_music_alone() {
         stderr(&o)
     );
 }
+
+#[test]
+fn topk_samples_the_follower_in_a_streaming_session_repeatably() {
+    let r = roll();
+    let (leader, music) = (r.join("leader_pos3d.npy"), r.join("music.npy"));
+    let start = r.join("follower_start.npy");
+    let seed = ["--follower-start", p(&start)];
+    let run = |name: &str, extra: &[&str]| {
+        let out = tmp(name);
+        let o = dance_tiny(&out, &leader, &music, &[&seed[..], extra].concat());
+        let e = stderr(&o);
+        assert!(o.status.success(), "{name}: {e}");
+        let tokens = read_i64_2d(&out.join("tokens.npy"), Some(5), "tokens").unwrap();
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+        (tokens, summary["mode"].as_str().unwrap().to_string(), e)
+    };
+    let (greedy, mode, _) = run("topk-greedy", &[]);
+    assert_eq!(mode, "exact (R)");
+    let (a, mode, e) = run("topk-a", &["--topk", "4", "--rng-seed", "1"]);
+    assert!(
+        mode.contains("streaming") && mode.contains("top-4"),
+        "{mode}"
+    );
+    assert!(e.contains("top-4 sampling"), "{e}");
+    let (b, _, _) = run("topk-b", &["--topk", "4", "--rng-seed", "1"]);
+    let (c, _, _) = run("topk-c", &["--topk", "4", "--rng-seed", "2"]);
+    // The session drains: R's token rows; the seed row is the seed.
+    assert_eq!(a.rows, greedy.rows);
+    assert_eq!(a.data[..5], greedy.data[..5]);
+    assert_eq!(a, b, "the same seed gives the same dance");
+    assert_ne!(a.data, c.data, "another seed another dance");
+    assert_ne!(a.data, greedy.data, "sampling is not greedy R");
+
+    // Refused by name: a k the sampler does not take, a seed without --topk,
+    // and --topk for a solo (Bailando) dance.
+    let out = tmp("topk-bad");
+    let o = dance_tiny(&out, &leader, &music, &["--topk", "0"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--topk"), "{}", stderr(&o));
+    let o = dance_tiny(&out, &leader, &music, &["--topk", "1000"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--topk 1000 is outside its range"),
+        "{}",
+        stderr(&o)
+    );
+    let o = dance_tiny(&out, &leader, &music, &["--rng-seed", "3"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--topk"), "{}", stderr(&o));
+    let solo = fixtures().join("bailando_btiny/model.duo");
+    let bmusic = fixtures().join("bailando_rollout_btiny_demo_odd/music.npy");
+    let o = dance(&[
+        "--model",
+        p(&solo),
+        "--music",
+        p(&bmusic),
+        "--topk",
+        "2",
+        "--out",
+        p(&out),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--topk is for a duet"),
+        "{}",
+        stderr(&o)
+    );
+}

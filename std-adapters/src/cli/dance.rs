@@ -1,5 +1,6 @@
 //! `duolando dance`: one command from a leader clip and music to a watchable
-//! result. Runs R mode (the authors' evaluation pipeline) and writes, into
+//! result. Runs R mode (the authors' evaluation pipeline; with `--topk K` a
+//! streaming session that samples instead) and writes, into
 //! `--out DIR`, the browser viewer `index.html`, `follower.glb` (both
 //! dancers), `leader.bvh`, `follower.bvh`, npy arrays and `summary.json`.
 //! See docs/CLI.md for every flag, default and file.
@@ -20,10 +21,11 @@ use anyhow::{bail, Context, Result};
 use duolando_core::duolando::config::{ModelConfig, POSE_DIM, ROT_DIM};
 use duolando_core::duolando::exact::{self, Seed};
 use duolando_core::duolando::model::Model;
+use duolando_core::duolando::session::{Preset, Sampling, SessionConfig};
 use serde_json::json;
 
 use self::inputs::{Leader, Music, SeedChoice};
-use crate::cli::generate::{generate_exact, Generated};
+use crate::cli::generate::{generate_exact, generate_streaming, seed_tokens, Generated};
 use crate::npy::read_f32_2d;
 use crate::export::{as_frames, write_all, GroupErrors, Motion};
 use crate::skeleton::body::{interpenetration, radius_scale, CLOSE_PELVIS_M};
@@ -74,6 +76,15 @@ pub struct Args {
     /// depend on it). Default: every core, at most 8.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub threads: Option<u32>,
+    /// Duet: sample each follower token uniformly among the K most probable
+    /// (the authors' `samplek`) in a streaming session at the reference
+    /// preset, instead of R's greedy evaluation: a livelier follower that
+    /// jitters more (docs/DEMO_MODEL.md "Sampling instead of greedy decoding").
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    pub topk: Option<u32>,
+    /// Duet: seed of --topk's sampling (the same seed gives the same dance).
+    #[arg(long, requires = "topk")]
+    pub rng_seed: Option<u64>,
     /// Transflower: seed of the engine's base-sample RNG (default 0).
     #[arg(long)]
     pub seed: Option<u64>,
@@ -113,6 +124,17 @@ impl FollowerRotations {
 /// An export farther than this (metres, worst joint) from the positions the
 /// viewer shows is pointed out on stderr.
 const FIT_WARN_M: f32 = 0.05;
+
+/// The session of `--topk k`: the reference preset (the model's whole
+/// look-ahead and conv futures), top-k sampling seeded by `rng_seed`.
+fn sampling_session(cfg: &ModelConfig, k: u32, rng_seed: u64, model_path: &Path) -> Result<SessionConfig> {
+    let mut sc = SessionConfig::preset(cfg, Preset::Reference);
+    sc.sampling = Sampling::TopK { k, rng_seed };
+    if let Err((_, value, max)) = sc.check(cfg) {
+        bail!("--topk {value} is outside its range for {} (largest allowed: {max})", model_path.display());
+    }
+    Ok(sc)
+}
 
 /// Prints a numbered stage line on stderr.
 fn stage(n: usize, what: &str) {
@@ -266,13 +288,28 @@ pub fn run(args: Args) -> Result<()> {
     );
     let t_inputs = t.elapsed().as_secs_f64();
 
-    stage(3, &format!("generating {} steps (R mode, whole clip)", shape.steps));
-    let t = Instant::now();
     let seed_ref = match &seed {
         SeedChoice::Tokens(t) => Seed::Tokens(*t),
         SeedChoice::Frames(f) => Seed::FollowerFrames(f),
     };
-    let g = generate_exact(&model, &leader.pos3d, &music.features, seed_ref)?;
+    let sampled = match args.topk {
+        None => None,
+        Some(k) => Some((sampling_session(&cfg, k, args.rng_seed.unwrap_or(0), &model_path)?, k)),
+    };
+    let mode = match &sampled {
+        None => "R mode, whole clip".to_string(),
+        Some((_, k)) => format!("S mode at the reference preset, top-{k} sampling, seed {}", args.rng_seed.unwrap_or(0)),
+    };
+    stage(3, &format!("generating {} steps ({mode})", shape.steps));
+    let t = Instant::now();
+    let g = match &sampled {
+        None => generate_exact(&model, &leader.pos3d, &music.features, seed_ref)?,
+        Some((sc, _)) => {
+            let t4 = leader.frames / cfg.hop() * cfg.hop();
+            let tokens = seed_tokens(&model, seed_ref, &leader.pos3d[..t4 * POSE_DIM])?;
+            generate_streaming(&model, &leader.pos3d[..t4 * POSE_DIM], &music.features, sc, tokens, true)?
+        }
+    };
     let t_generate = t.elapsed().as_secs_f64();
 
     stage(4, "exporting glTF, BVH and npy");
@@ -389,7 +426,7 @@ pub fn run(args: Args) -> Result<()> {
     files.extend(audio_name.clone());
     let summary = json!({
         "model": model_path.display().to_string(),
-        "mode": "exact (R)",
+        "mode": match &sampled { None => "exact (R)".to_string(), Some(_) => format!("streaming ({mode})") },
         "kernels": crate::simd::describe(),
         "threads": threads,
         "fps": 30,

@@ -68,7 +68,11 @@ fn load_music(path: &Path, n_music: usize, model: &Path) -> Result<SoloMusic> {
 /// The solo dance of `args` (no leader) with the model at `model_path`.
 pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usize, t_all: Instant) -> Result<()> {
     let Some(music_path) = &args.music else { bail!("a solo dance needs --music (an audio file or Bailando features .npy)") };
-    for (given, flag) in [(args.follower_start.is_some(), "--follower-start"), (args.true_follower.is_some(), "--true-follower")] {
+    for (given, flag) in [
+        (args.follower_start.is_some(), "--follower-start"),
+        (args.true_follower.is_some(), "--true-follower"),
+        (args.topk.is_some(), "--topk"),
+    ] {
         if given {
             bail!("{flag} is for a duet (a Duolando model with --leader); {} dances solo", model_path.display());
         }

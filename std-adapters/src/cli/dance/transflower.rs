@@ -100,6 +100,7 @@ pub fn run(args: &Args) -> Result<()> {
         (args.follower_start.is_some(), "--follower-start"),
         (args.seed_tokens.is_some(), "--seed-tokens"),
         (args.true_follower.is_some(), "--true-follower"),
+        (args.topk.is_some(), "--topk"),
     ] {
         if set {
             bail!("{flag}: {} is a Transflower model (a solo dancer from music and a motion seed); it takes --music, --audio-scaler, --scaler, --motion-seed, --seed", model_path.display());
