@@ -111,6 +111,12 @@ impl BudgetArgs {
     /// not the default): R mode (`--mode exact`) refuses them by name rather
     /// than ignoring them.
     pub fn first_given(&self) -> Option<&'static str> {
+        self.flags().into_iter().find_map(|(given, name)| given.then_some(name))
+    }
+
+    /// Every session flag's name and whether it was given (`--preset`: not
+    /// the default), in `--help` order.
+    fn flags(&self) -> [(bool, &'static str); 12] {
         [
             (self.preset != "reference", "preset"),
             (self.lookahead.is_some(), "lookahead"),
@@ -125,8 +131,6 @@ impl BudgetArgs {
             (self.kv.is_some(), "kv"),
             (self.refresh.is_some(), "refresh"),
         ]
-        .into_iter()
-        .find_map(|(given, name)| given.then_some(name))
     }
 
     /// The session configuration for `cfg`, checked.
@@ -262,17 +266,9 @@ impl BudgetArgs {
                 TfPreset::ALL.map(TfPreset::name).join(", ")
             );
         };
-        for (given, name) in [
-            (self.lookahead.is_some(), "lookahead"),
-            (self.enc_future.is_some(), "enc-future"),
-            (self.dec_future.is_some(), "dec-future"),
-            (self.shift.is_some(), "shift"),
-            (self.music_lookahead.is_some(), "music-lookahead"),
-            (self.topk.is_some(), "topk"),
-            (self.rng_seed != 0, "rng-seed"),
-            (self.staggered, "staggered"),
-            (self.spread, "spread"),
-        ] {
+        // Transflower's own settings are --preset, --refresh and --kv.
+        let others = self.flags().into_iter().filter(|(_, n)| !matches!(*n, "preset" | "refresh" | "kv"));
+        for (given, name) in others {
             if given {
                 bail!("--{name} is a Duolando / Bailando setting; a Transflower session's settings are --preset, --refresh, --kv (its base samples: --seed N or --noise FILE.npy)");
             }
