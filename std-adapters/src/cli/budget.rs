@@ -111,7 +111,9 @@ impl BudgetArgs {
     /// not the default): R mode (`--mode exact`) refuses them by name rather
     /// than ignoring them.
     pub fn first_given(&self) -> Option<&'static str> {
-        self.flags().into_iter().find_map(|(given, name)| given.then_some(name))
+        self.flags()
+            .into_iter()
+            .find_map(|(given, name)| given.then_some(name))
     }
 
     /// Every session flag's name and whether it was given (`--preset`: not
@@ -267,7 +269,10 @@ impl BudgetArgs {
             );
         };
         // Transflower's own settings are --preset, --refresh and --kv.
-        let others = self.flags().into_iter().filter(|(_, n)| !matches!(*n, "preset" | "refresh" | "kv"));
+        let others = self
+            .flags()
+            .into_iter()
+            .filter(|(_, n)| !matches!(*n, "preset" | "refresh" | "kv"));
         for (given, name) in others {
             if given {
                 bail!("--{name} is a Duolando / Bailando setting; a Transflower session's settings are --preset, --refresh, --kv (its base samples: --seed N or --noise FILE.npy)");
