@@ -21,6 +21,7 @@ use duolando_core::bailando::gpt::{logits_len, max_context, window_logits, GptSc
 use duolando_core::bailando::model::Model;
 use duolando_core::bailando::session::{
     dec_future_max, window_rows, CacheSchedule, Preset, Session, SessionConfig, StepBatch,
+    PREFILL_CHUNK,
 };
 use duolando_core::error::{Buffer, Error, Setting};
 use duolando_core::nn::conv_stack::ConvScratch;
@@ -484,6 +485,68 @@ fn batched_sessions_equal_sessions_alone_without_allocating() {
         }
     });
     assert_eq!(allocs, 0, "allocations while stepping");
+}
+
+/// A session's own scratch holds a whole re-prefill, so a window jump runs
+/// its missing rows with the new row in one pass; a batch of one holds 9
+/// window rows, so the same jumps (10 rows at the exact preset here) run in
+/// chunks first. Both give the same tokens and frames, bit for bit.
+#[test]
+fn a_jump_in_one_pass_equals_the_jump_in_chunks() {
+    let (cfg, file) = model_file("btiny2", "actor_critic_demo.yaml");
+    let duo = file.duo().unwrap();
+    let m = Model::from_duo(&duo).unwrap();
+    let g = golden("btiny2_demo_slide", &cfg);
+    let nm = cfg.gpt.n_music as usize;
+    let win = window_rows(&cfg) as u32;
+    assert!(win as usize > 1 + PREFILL_CHUNK, "the fixture's window must outgrow a chunk");
+    for sc in [
+        SessionConfig::with(dec_future_max(&cfg), win),
+        SessionConfig {
+            kv: KvType::F16,
+            ..SessionConfig::with(2, win - 1)
+        },
+        SessionConfig::with(0, win / 2),
+    ] {
+        let mut arena = vec![0u8; m.session_bytes(&sc).unwrap()];
+        let mut alone = Session::new(&m, &mut arena, &sc, g.seed).unwrap();
+        let (toks_alone, frames_alone) = run(&mut alone, &g.music, nm, MusicPadding::Demo, true);
+
+        let mut arena = vec![0u8; m.batched_session_bytes(&sc).unwrap()];
+        let mut s = Session::new_batched(&m, &mut arena, &sc, g.seed).unwrap();
+        let mut batch_arena = vec![0u8; StepBatch::bytes(&cfg, 1).unwrap()];
+        let mut batch = StepBatch::new(&cfg, 1, &mut batch_arena).unwrap();
+        let mut frames = Vec::new();
+        let mut f = [0f32; POSE_DIM];
+        let rows = g.music.len() / nm;
+        for r in 0..rows {
+            s.push_music(&g.music[r * nm..(r + 1) * nm]).unwrap();
+            if r + 1 == rows {
+                s.finish(MusicPadding::Demo).unwrap();
+            }
+            while batch.step(&mut [&mut s]).unwrap() > 0 {
+                while s.pull(&mut f).unwrap().is_some() {
+                    frames.extend_from_slice(&f);
+                }
+            }
+        }
+        assert!(s.done());
+        let toks: Vec<u32> = (0..s.tokens())
+            .flat_map(|i| s.token(i).map(|t| t.to_vec()).unwrap_or_default())
+            .collect();
+        let shift = sc.shift;
+        assert!(alone.prefilled > 0, "shift {shift}: the window never jumped");
+        assert_eq!(s.prefilled, alone.prefilled, "shift {shift}: rows re-run");
+        assert_eq!(toks, toks_alone, "shift {shift}: tokens");
+        assert_eq!(frames.len(), frames_alone.len(), "shift {shift}: frames");
+        assert!(
+            frames
+                .iter()
+                .zip(&frames_alone)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "shift {shift}: chunked jumps give other frames"
+        );
+    }
 }
 
 /// Bad input: a named error and the session unchanged.

@@ -81,14 +81,14 @@ pub fn window_logits(
     check_len(Buffer::Music, music.len(), t * nm)?;
     check_len(Buffer::Logits, logits.len(), logits_len(cfg))?;
     let x = &mut s.x[..N_STREAMS * t * c];
-    for p in 0..t {
-        linear(
-            &music[p * nm..(p + 1) * nm],
-            &model.gpt.cond_emb.w,
-            model.gpt.cond_emb.b,
-            &mut x[p * c..(p + 1) * c],
-        );
-    }
+    // The music stream's t rows in one call (one read of `cond_emb`; rows
+    // are computed independently, so the same numbers as row by row).
+    linear(
+        music,
+        &model.gpt.cond_emb.w,
+        model.gpt.cond_emb.b,
+        &mut x[..t * c],
+    );
     for (j, table) in model.gpt.tok_emb.iter().enumerate() {
         for p in 0..t {
             let tok = tokens[2 * p + j];

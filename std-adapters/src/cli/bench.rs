@@ -278,6 +278,11 @@ impl RandomModel {
     fn weight_bytes(&self) -> usize {
         self.table.values().map(|(_, _, _, r)| r.len()).sum()
     }
+
+    /// Bytes of the stored tensors whose names `keep` accepts.
+    fn weight_bytes_of(&self, keep: impl Fn(&str) -> bool) -> usize {
+        self.table.iter().filter(|(n, _)| keep(n)).map(|(_, (_, _, _, r))| r.len()).sum()
+    }
 }
 
 impl<'a> TensorSource<'a> for &'a RandomModel {
@@ -635,7 +640,7 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
         args.threads
     );
     if args.family == "bailando" {
-        bench_bailando(args, ort, &mut j)?;
+        bench_bailando(args, ort, memcpy, &mut j)?;
         return Ok(j);
     } else if args.family == "transflower" {
         transflower::run(args, ort, &mut j)?;
@@ -818,7 +823,7 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
 /// `block_size - 1` = 28 tokens and their music rows, as `AC.eval` runs it
 /// once the window slides) per thread count, against real time (one token
 /// per 8 frames at 60 fps: 133.3 ms) and against f32 in the same run.
-fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, j: &mut serde_json::Map<String, serde_json::Value>) -> anyhow::Result<()> {
+fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, memcpy: f64, j: &mut serde_json::Map<String, serde_json::Value>) -> anyhow::Result<()> {
     use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as SoloConfig};
     use duolando_core::bailando::config::published;
     use duolando_core::bailando::gpt::{logits_len, max_context, window_logits, GptScratch};
@@ -846,6 +851,13 @@ fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, j: &mut serde_jso
         let rm = RandomModel::build(&cfg.into(), store_as, 0xba11_0000 ^ store_as as u64)?;
         let model = BModel::bind(&cfg, &&rm).map_err(|e: BindError| anyhow!("bind: {e:?}"))?;
         eprintln!("Bailando {d}: model built and bound in {:.1} s ({:.1} MB of weights)", t0.elapsed().as_secs_f64(), rm.weight_bytes() as f64 / 1e6);
+        // What an S step between window jumps reads: every GPT block (one
+        // pass for the 3 new rows), ln_f and the heads, and the three
+        // streaming decoders (up, down, root) for one token.
+        let gpt_bytes = rm.weight_bytes_of(|n| n.contains(".blocks.") || n.starts_with("gpt.gpt_head.head_") || n.starts_with("gpt.gpt_head.ln_f"));
+        let dec_bytes = rm.weight_bytes_of(|n| n.contains(".decoders"));
+        let step_bytes = gpt_bytes + dec_bytes;
+        say!("Bailando S step {d:>4}: an S step between window jumps reads {:.1} MB of weights (GPT blocks and heads {:.1} MB, the three decoders {:.1} MB)", step_bytes as f64 / 1e6, gpt_bytes as f64 / 1e6, dec_bytes as f64 / 1e6);
         for &t in &args.threads {
             let times = on_threads(t, || {
                 let mut bytes = vec![0u8; duolando_core::bailando::exact::sample_scratch_bytes(&cfg).unwrap_or(0)];
@@ -884,8 +896,10 @@ fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, j: &mut serde_jso
             let st = stats(times);
             let setting = format!("{}{}", preset.name(), if spread { "_spread" } else { "" });
             s_step_json(j, d, 1, &setting, &st, bytes);
+            let gbps = step_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
+            j.insert(format!("s_step_gbps_{d}_t1_{setting}"), gbps.into());
             say!(
-                "Bailando S step {d:>4} t1 {:<11} {:<9} (dec_future {:>2}, shift {}, f16 K/V): median {:8.2} ms  p99 {:8.2} ms  p99/median {:.1}  mean {:8.2} ms  {:.0}x real time  arena {:.2} MB",
+                "Bailando S step {d:>4} t1 {:<11} {:<9} (dec_future {:>2}, shift {}, f16 K/V): median {:8.2} ms  p99 {:8.2} ms  p99/median {:.1}  mean {:8.2} ms  {:.0}x real time  arena {:.2} MB  median reads {gbps:.1} GB/s ({:.0}% of memcpy)",
                 preset.name(),
                 if spread { "spread" } else { "reprefill" },
                 sc.dec_future,
@@ -895,7 +909,8 @@ fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, j: &mut serde_jso
                 st.p99_ms / st.median_ms,
                 st.mean_ms,
                 real_time_ms / st.median_ms,
-                bytes as f64 / 1e6
+                bytes as f64 / 1e6,
+                100.0 * gbps / memcpy
             );
         }
     }

@@ -37,7 +37,7 @@ pub fn session_bytes_for(model: &BailandoConfig, cfg: &SessionConfig) -> Result<
     check_config(model, cfg)?;
     let mut p = Planner::new();
     State::carve(&mut p, model, cfg)?;
-    StepScratch::carve(&mut p, model, 1)?;
+    StepScratch::carve_own(&mut p, model, cfg)?;
     p.total_for_any_base()
         .ok_or(Error::Arena(ArenaError::Overflow))
 }
@@ -201,7 +201,7 @@ impl<'a> Session<'a> {
         let mut a = Arena::new(arena);
         let st = State::carve(&mut a, &model.cfg, cfg)?;
         let own = if own {
-            Some(StepScratch::carve(&mut a, &model.cfg, 1)?)
+            Some(StepScratch::carve_own(&mut a, &model.cfg, cfg)?)
         } else {
             None
         };

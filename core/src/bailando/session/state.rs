@@ -12,8 +12,8 @@ use crate::nn::gpt_cache::GptCache;
 use crate::nn::ring::{RowRing, TokenRing};
 use crate::nn::stream_conv::{ScratchNeed, StackKind, StreamScratch, StreamStack};
 
-/// Window rows a re-prefill runs at once (the block scratch holds this
-/// many, or a batch's new rows if more).
+/// Rows of its next window a spread session appends in one step at most;
+/// also a batch's scratch rows per session (`1 + PREFILL_CHUNK`).
 pub const PREFILL_CHUNK: usize = 8;
 
 /// Decoders of a session: the up half, the down half, the root velocity.
@@ -118,11 +118,14 @@ impl<'s> State<'s> {
 pub struct StepScratch<'s> {
     /// Sessions a step may hold.
     pub n: usize,
-    /// (3 n (1 + PREFILL_CHUNK), C) the GPT's new rows (position-major:
-    /// row `i * 3 + s`, stream s of new window row i): each session's new
-    /// row and up to PREFILL_CHUNK rows of its next window (spread), or a
-    /// re-prefill chunk; after the GPT the first `2 n` rows hold the up and
-    /// down streams' final hidden states.
+    /// (3 r, C) the GPT's new rows, `r` window rows (`n (1 + PREFILL_CHUNK)`
+    /// for a batch; a re-prefilling session's own scratch holds its whole
+    /// re-prefill, `shift` rows), position-major: row `i * 3 + s`, stream s
+    /// of new window row i: each session's new row, the window rows its
+    /// cache lacks (after a jump) where they fit, and up to PREFILL_CHUNK
+    /// rows of its next window (spread); or a re-prefill chunk; after the
+    /// GPT the first `2 n` rows hold the up and down streams' final hidden
+    /// states.
     pub x: &'s mut [f32],
     pub block: BlockScratch<'s>,
     /// (C) one row after `ln_f`.
@@ -136,13 +139,41 @@ pub struct StepScratch<'s> {
 }
 
 impl<'s> StepScratch<'s> {
+    /// A batch's scratch for up to `n` sessions: `n (1 + PREFILL_CHUNK)`
+    /// window rows at once.
     pub fn carve<A: Carve<'s>>(a: &mut A, cfg: &BailandoConfig, n: usize) -> Result<Self, Error> {
+        let rows = n.checked_mul(1 + PREFILL_CHUNK).ok_or(ov())?;
+        Self::carve_rows(a, cfg, n, rows)
+    }
+
+    /// A session's own scratch: with the re-prefill schedule it holds the
+    /// whole re-prefill of a jump and the new row (`shift` window rows), so
+    /// that a jump reads the weights once, not once per chunk.
+    pub fn carve_own<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &BailandoConfig,
+        sc: &SessionConfig,
+    ) -> Result<Self, Error> {
+        let rows = match sc.schedule {
+            CacheSchedule::Reprefill => (sc.shift as usize).max(1 + PREFILL_CHUNK),
+            // (Staggered is refused by `SessionConfig::check`.)
+            CacheSchedule::Spread | CacheSchedule::Staggered => 1 + PREFILL_CHUNK,
+        };
+        Self::carve_rows(a, cfg, 1, rows)
+    }
+
+    /// `window_rows_per_call` window rows of new GPT rows per call, for `n` sessions.
+    fn carve_rows<A: Carve<'s>>(
+        a: &mut A,
+        cfg: &BailandoConfig,
+        n: usize,
+        window_rows_per_call: usize,
+    ) -> Result<Self, Error> {
         let g = &cfg.gpt;
         let c = g.n_embd as usize;
         let m = window_rows(cfg);
-        let rows = n
-            .checked_mul(1 + PREFILL_CHUNK)
-            .and_then(|r| r.checked_mul(N_STREAMS))
+        let rows = window_rows_per_call
+            .checked_mul(N_STREAMS)
             .ok_or(ov())?;
         let emb = cfg
             .parts

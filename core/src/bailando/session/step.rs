@@ -115,10 +115,12 @@ pub fn step_many(
     let w = N_STREAMS * c;
     let blocks = || model.gpt.base.iter().chain(model.gpt.head.iter());
 
-    // Each ready session's window cache (re-prefilled where the window
-    // jumped) and, with the spread schedule, the rows of its next window
-    // appended in this step: (cache, next cache, first row, rows, start).
-    let mut plan: Vec<(usize, Option<(usize, usize, usize, usize)>), MAX_BATCH> = Vec::new();
+    // Each ready session's window cache and the first of its rows not yet
+    // cached (a jump restarts it), and with the spread schedule the rows of
+    // its next window appended in this step: (cache, from, next: (next
+    // cache, first row, rows, start)).
+    let mut plan: Vec<(usize, usize, Option<(usize, usize, usize, usize)>), MAX_BATCH> =
+        Vec::new();
     for &i in ready.iter() {
         let s = &mut *ss[i];
         let k = s.steps;
@@ -139,29 +141,9 @@ pub fn step_many(
         };
         // Rows of this window not yet in its cache (all of them after a jump,
         // the rest of them where the spread fell behind).
-        let mut from = lo + s.st.gpt[cur].rows();
+        let from = lo + s.st.gpt[cur].rows();
         if from > k {
             return Err((i, Error::State));
-        }
-        while from < k {
-            let to = (from + PREFILL_CHUNK).min(k);
-            embed_rows(s, lo, from, to, &mut sc.x[..(to - from) * w]).map_err(at(i))?;
-            let mut items = [GptItem {
-                cache: &mut s.st.gpt[cur],
-                rows: to - from,
-                need_output: false,
-            }];
-            GptCache::append_many(
-                blocks(),
-                nh,
-                2,
-                &mut items,
-                &mut sc.x[..(to - from) * w],
-                &mut sc.block,
-            )
-            .map_err(at(i))?;
-            s.prefilled += to - from;
-            from = to;
         }
         let next = if s.st.gpt.len() == 2 {
             let (k2, lo2) = next_window(k, m, shift);
@@ -180,18 +162,62 @@ pub fn step_many(
         } else {
             None
         };
-        plan.push((cur, next)).map_err(|_| (i, Error::State))?;
+        plan.push((cur, from, next)).map_err(|_| (i, Error::State))?;
+    }
+
+    // Missing window rows ride with the new rows in one pass over the
+    // weights while the scratch holds them all (a session's own scratch
+    // holds a whole re-prefill); a session whose rows do not fit runs
+    // them first, alone, in chunks of the scratch's size. The same numbers
+    // either way: rows attend the rows cached before them and themselves.
+    let cap = sc.x.len() / w;
+    let mut main: usize = plan
+        .iter()
+        .map(|&(_, _, next)| 1 + next.map_or(0, |(_, _, q, _)| q))
+        .sum();
+    for (&i, p) in ready.iter().zip(plan.iter_mut()) {
+        let s = &mut *ss[i];
+        let k = s.steps;
+        let (cur, mut from) = (p.0, p.1);
+        if main + (k - from) <= cap {
+            main += k - from;
+            continue;
+        }
+        let lo = s.st.gpt[cur].window_start().ok_or((i, Error::State))?;
+        while from < k {
+            let to = (from + cap).min(k);
+            embed_rows(s, lo, from, to, &mut sc.x[..(to - from) * w]).map_err(at(i))?;
+            let mut items = [GptItem {
+                cache: &mut s.st.gpt[cur],
+                rows: to - from,
+                need_output: false,
+            }];
+            GptCache::append_many(
+                blocks(),
+                nh,
+                2,
+                &mut items,
+                &mut sc.x[..(to - from) * w],
+                &mut sc.block,
+            )
+            .map_err(at(i))?;
+            s.prefilled += to - from;
+            from = to;
+        }
+        p.1 = from;
     }
 
     // The new row of every ready session (and its next window's rows),
     // through the GPT together.
     let mut rows = 0;
-    for (&i, &(cur, next)) in ready.iter().zip(plan.iter()) {
-        let s = &*ss[i];
+    for (&i, &(cur, from, next)) in ready.iter().zip(plan.iter()) {
+        let s = &mut *ss[i];
         let k = s.steps;
         let lo = s.st.gpt[cur].window_start().ok_or((i, Error::State))?;
-        embed_rows(s, lo, k, k + 1, &mut sc.x[rows * w..(rows + 1) * w]).map_err(at(i))?;
-        rows += 1;
+        let n_new = k + 1 - from;
+        embed_rows(s, lo, from, k + 1, &mut sc.x[rows * w..(rows + n_new) * w]).map_err(at(i))?;
+        s.prefilled += n_new - 1;
+        rows += n_new;
         if let Some((_, from, q, lo2)) = next {
             embed_rows(s, lo2, from, from + q, &mut sc.x[rows * w..(rows + q) * w])
                 .map_err(at(i))?;
@@ -205,7 +231,7 @@ pub fn step_many(
             if !ready.contains(&i) {
                 continue;
             }
-            let (cur, next) = plan[p];
+            let (cur, from, next) = plan[p];
             p += 1;
             let (a, b) = s.st.gpt.split_at_mut(1);
             let (c, n) = if cur == 0 {
@@ -213,10 +239,11 @@ pub fn step_many(
             } else {
                 (&mut b[0], a.first_mut())
             };
+            let n_new = s.steps + 1 - from;
             items
                 .push(GptItem {
                     cache: c,
-                    rows: 1,
+                    rows: n_new,
                     need_output: true,
                 })
                 .map_err(|_| (i, Error::State))?;
