@@ -499,7 +499,10 @@ fn a_jump_in_one_pass_equals_the_jump_in_chunks() {
     let g = golden("btiny2_demo_slide", &cfg);
     let nm = cfg.gpt.n_music as usize;
     let win = window_rows(&cfg) as u32;
-    assert!(win as usize > 1 + PREFILL_CHUNK, "the fixture's window must outgrow a chunk");
+    assert!(
+        win as usize > 1 + PREFILL_CHUNK,
+        "the fixture's window must outgrow a chunk"
+    );
     for sc in [
         SessionConfig::with(dec_future_max(&cfg), win),
         SessionConfig {
@@ -535,7 +538,10 @@ fn a_jump_in_one_pass_equals_the_jump_in_chunks() {
             .flat_map(|i| s.token(i).map(|t| t.to_vec()).unwrap_or_default())
             .collect();
         let shift = sc.shift;
-        assert!(alone.prefilled > 0, "shift {shift}: the window never jumped");
+        assert!(
+            alone.prefilled > 0,
+            "shift {shift}: the window never jumped"
+        );
         assert_eq!(s.prefilled, alone.prefilled, "shift {shift}: rows re-run");
         assert_eq!(toks, toks_alone, "shift {shift}: tokens");
         assert_eq!(frames.len(), frames_alone.len(), "shift {shift}: frames");

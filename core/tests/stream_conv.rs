@@ -754,3 +754,84 @@ fn published_bytes_and_speed() {
         );
     }
 }
+
+/// `push_output` (each unit's tail computed in the same pass as its
+/// settled columns) gives what `push` then `output` give, bit for bit, at
+/// every lag, alone and for two stacks at once (`push_output_many`); a
+/// request beyond the prefix is refused before anything changes.
+#[test]
+fn push_output_equals_push_then_output_bit_for_bit() {
+    for name in ["tiny", "tiny2"] {
+        let m = model(name);
+        for (part, vq, stream) in vqs(m) {
+            let cfg = &vq.cfg;
+            let (hop, emb) = (cfg.hop().unwrap() as usize, cfg.emb_width as usize);
+            let c_out = vq.pos.out.c_out;
+            let w = StackW::Decoder(&vq.pos);
+            let fmax = future_max(cfg, StackKind::Decoder);
+            for lag in lags(fmax) {
+                let mut mem = vec![0u8; 1 << 23];
+                let mut a = Arena::new(&mut mem);
+                let mut s = StreamScratch::carve(
+                    &mut a,
+                    duolando_core::nn::stream_conv::ScratchNeed::for_model(&m.cfg).unwrap(),
+                    2,
+                )
+                .unwrap();
+                let mut st: Vec<StreamStack<'_>> = (0..4)
+                    .map(|_| StreamStack::carve(&mut a, cfg, StackKind::Decoder, lag).unwrap())
+                    .collect();
+                let mut rng = Rng(31 + lag as u64);
+                let n_push = pushes(fmax, lag);
+                let (mut z, mut z2) = (vec![0f32; emb], vec![0f32; emb]);
+                let mut tails = 0;
+                for p in 1..=n_push {
+                    let code = [(rng.next() % cfg.l_bins as u64) as u32];
+                    let code2 = [(rng.next() % cfg.l_bins as u64) as u32];
+                    dequantise(&vq.codebook, &code, stream, &mut z).unwrap();
+                    dequantise(&vq.codebook, &code2, stream, &mut z2).unwrap();
+                    // The oldest token the carved lag serves after this push.
+                    let q = p - 1 - lag.min(p - 1);
+                    let (t, n) = (hop * q, hop);
+                    let (mut want, mut want2) = (vec![0f32; n * c_out], vec![0f32; n * c_out]);
+                    let (mut got, mut got2) = (vec![0f32; n * c_out], vec![0f32; n * c_out]);
+                    let (s0, rest) = st.split_at_mut(1);
+                    let (s1, rest) = rest.split_at_mut(1);
+                    let (s2, s3) = rest.split_at_mut(1);
+                    // A refused request (beyond the prefix) changes nothing.
+                    let far = s2[0].len() + 2 * hop;
+                    assert!(s2[0].push_output(w, &z, far, n, &mut s, &mut got).is_err());
+                    s0[0].push(w, &z, &mut s).unwrap();
+                    s0[0].output(w, t, n, &mut s, &mut want).unwrap();
+                    s1[0].push(w, &z2, &mut s).unwrap();
+                    s1[0].output(w, t, n, &mut s, &mut want2).unwrap();
+                    tails += usize::from(p > lag && t + n > s0[0].settled());
+                    StreamStack::push_output_many(
+                        &mut [&mut s2[0], &mut s3[0]],
+                        w,
+                        &[&z, &z2],
+                        &[t, t],
+                        n,
+                        &mut s,
+                        &mut [&mut got, &mut got2],
+                    )
+                    .unwrap_or_else(|e| panic!("{name} {part} lag {lag} push {p}: {e:?}"));
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got), bits(&want), "{name} {part} lag {lag} push {p}");
+                    assert_eq!(
+                        bits(&got2),
+                        bits(&want2),
+                        "{name} {part} lag {lag} push {p} (2nd)"
+                    );
+                    assert_eq!(s2[0].settled(), s0[0].settled());
+                    assert_eq!(s2[0].len(), s0[0].len());
+                }
+                assert_eq!(
+                    tails > 0,
+                    lag < fmax,
+                    "{name} {part} lag {lag}: tails {tails}"
+                );
+            }
+        }
+    }
+}

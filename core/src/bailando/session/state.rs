@@ -4,7 +4,7 @@
 //! step ([`StepScratch`]: a session's own, or a batch's for several).
 
 use crate::arena::{ArenaError, Carve};
-use crate::bailando::config::{BailandoConfig, N_STREAMS, POSE_DIM, UP_JOINTS};
+use crate::bailando::config::{BailandoConfig, DOWN_JOINTS, N_STREAMS, POSE_DIM, UP_JOINTS};
 use crate::bailando::session::config::{window_rows, CacheSchedule, SessionConfig};
 use crate::error::Error;
 use crate::nn::block::BlockScratch;
@@ -34,7 +34,8 @@ pub struct State<'s> {
     pub gpt: heapless::Vec<GptCache<'s>, 2>,
     /// Streaming decoders: up, down (positions), root velocity.
     pub dec: [StreamStack<'s>; DECODERS],
-    /// (hop, 45) one decoder's frames (the up half is the widest).
+    /// (hop, 45), (hop, 27), (hop, 3) one token's frames from the up and
+    /// down decoders and the root velocity from the root decoder.
     pub dec_out: &'s mut [f32],
     /// (hop, 72) the frames of one token being assembled.
     pub frames: &'s mut [f32],
@@ -88,7 +89,10 @@ impl<'s> State<'s> {
             toks,
             gpt,
             dec: [up, down, root],
-            dec_out: a.f32(hop.checked_mul(UP_JOINTS.len() * 3).ok_or(ov())?)?,
+            dec_out: a.f32(
+                hop.checked_mul((UP_JOINTS.len() + DOWN_JOINTS.len()) * 3 + 3)
+                    .ok_or(ov())?,
+            )?,
             frames: a.f32(hop.checked_mul(POSE_DIM).ok_or(ov())?)?,
             pending: RowRing::carve(
                 a,
@@ -172,9 +176,7 @@ impl<'s> StepScratch<'s> {
         let g = &cfg.gpt;
         let c = g.n_embd as usize;
         let m = window_rows(cfg);
-        let rows = window_rows_per_call
-            .checked_mul(N_STREAMS)
-            .ok_or(ov())?;
+        let rows = window_rows_per_call.checked_mul(N_STREAMS).ok_or(ov())?;
         let emb = cfg
             .parts
             .iter()

@@ -119,8 +119,7 @@ pub fn step_many(
     // cached (a jump restarts it), and with the spread schedule the rows of
     // its next window appended in this step: (cache, from, next: (next
     // cache, first row, rows, start)).
-    let mut plan: Vec<(usize, usize, Option<(usize, usize, usize, usize)>), MAX_BATCH> =
-        Vec::new();
+    let mut plan: Vec<(usize, usize, Option<(usize, usize, usize, usize)>), MAX_BATCH> = Vec::new();
     for &i in ready.iter() {
         let s = &mut *ss[i];
         let k = s.steps;
@@ -162,7 +161,8 @@ pub fn step_many(
         } else {
             None
         };
-        plan.push((cur, from, next)).map_err(|_| (i, Error::State))?;
+        plan.push((cur, from, next))
+            .map_err(|_| (i, Error::State))?;
     }
 
     // Missing window rows ride with the new rows in one pass over the
@@ -298,8 +298,11 @@ pub fn step_many(
 /// Feeds the session's tokens not yet in its decoders one at a time,
 /// assembling the frames of every token that became final as soon as it
 /// is (token q's frames from the tokens `..=q + d`, S's truncated prefix).
+/// Where a token's push makes frames final, each decoder computes them in
+/// the same pass over its weights as the push (`push_output`).
 pub(super) fn decode(s: &mut Session<'_>, sc: &mut StepScratch<'_>) -> Result<(), Error> {
     let model = s.model;
+    let hop = model.cfg.hop();
     loop {
         while s.frames_final() {
             frames_of(s, sc)?;
@@ -309,39 +312,68 @@ pub(super) fn decode(s: &mut Session<'_>, sc: &mut StepScratch<'_>) -> Result<()
         }
         let tok = s.st.toks.row(s.dec_fed)?;
         let tok = [tok[0], tok[1]];
-        for h in 0..2 {
+        s.dec_fed += 1;
+        let fused = s.frames_final();
+        s.dec_fed -= 1;
+        let t = s.decoded;
+        let (up, rest) = s.st.dec_out.split_at_mut(hop * UP_JOINTS.len() * 3);
+        let (down, vel) = rest.split_at_mut(hop * DOWN_JOINTS.len() * 3);
+        for (h, out) in [up, down].into_iter().enumerate() {
             let vq = &model.parts[h];
             let emb = vq.cfg.emb_width as usize;
             dequantise(&vq.codebook, &tok[h..h + 1], h as u8, &mut sc.feat[..emb])?;
-            s.st.dec[h].push(StackW::Decoder(&vq.pos), &sc.feat[..emb], &mut sc.conv)?;
+            let feat = &sc.feat[..emb];
+            let dec = StackW::Decoder(&vq.pos);
+            if fused {
+                s.st.dec[h].push_output(dec, feat, t, hop, &mut sc.conv, out)?;
+            } else {
+                s.st.dec[h].push(dec, feat, &mut sc.conv)?;
+            }
             if h == 1 {
-                s.st.dec[2].push(StackW::Decoder(&model.root), &sc.feat[..emb], &mut sc.conv)?;
+                let root = StackW::Decoder(&model.root);
+                if fused {
+                    s.st.dec[2].push_output(root, feat, t, hop, &mut sc.conv, &mut vel[..])?;
+                } else {
+                    s.st.dec[2].push(root, feat, &mut sc.conv)?;
+                }
             }
         }
         s.dec_fed += 1;
+        if fused {
+            assemble(s)?;
+        }
     }
 }
 
 /// The `hop` frames of the session's next token from its decoders'
-/// current prefix, assembled as R's `decode` does (the down half's pelvis
-/// slot replaced by the integrated root velocity, added to every joint),
-/// into the pending ring.
+/// current prefix, assembled as R's `decode` does, into the pending ring.
 fn frames_of(s: &mut Session<'_>, sc: &mut StepScratch<'_>) -> Result<(), Error> {
     let model = s.model;
     let hop = model.cfg.hop();
     let t = s.decoded;
     let st = &mut s.st;
+    let (up, rest) = st.dec_out.split_at_mut(hop * UP_JOINTS.len() * 3);
+    let (down, vel) = rest.split_at_mut(hop * DOWN_JOINTS.len() * 3);
+    for (h, out) in [up, down].into_iter().enumerate() {
+        let w = StackW::Decoder(&model.parts[h].pos);
+        st.dec[h].output(w, t, hop, &mut sc.conv, out)?;
+    }
+    st.dec[2].output(StackW::Decoder(&model.root), t, hop, &mut sc.conv, vel)?;
+    assemble(s)
+}
+
+/// The frames of the next token from the three decoders' outputs in
+/// `dec_out` (up, down, root velocity) as R's `decode` assembles them (the
+/// down half's pelvis slot replaced by the integrated root velocity, added
+/// to every joint), into the pending ring.
+fn assemble(s: &mut Session<'_>) -> Result<(), Error> {
+    let hop = s.model.cfg.hop();
+    let st = &mut s.st;
     let frames = &mut st.frames[..hop * POSE_DIM];
-    for (h, joints) in [&UP_JOINTS[..], &DOWN_JOINTS[..]].into_iter().enumerate() {
+    let (up, rest) = st.dec_out.split_at(hop * UP_JOINTS.len() * 3);
+    let (down, vel) = rest.split_at(hop * DOWN_JOINTS.len() * 3);
+    for (joints, out) in [(&UP_JOINTS[..], up), (&DOWN_JOINTS[..], down)] {
         let w = joints.len() * 3;
-        let out = &mut st.dec_out[..hop * w];
-        st.dec[h].output(
-            StackW::Decoder(&model.parts[h].pos),
-            t,
-            hop,
-            &mut sc.conv,
-            out,
-        )?;
         for f in 0..hop {
             for (i, &j) in joints.iter().enumerate() {
                 let j = j as usize;
@@ -349,8 +381,6 @@ fn frames_of(s: &mut Session<'_>, sc: &mut StepScratch<'_>) -> Result<(), Error>
             }
         }
     }
-    let vel = &mut st.dec_out[..hop * 3];
-    st.dec[2].output(StackW::Decoder(&model.root), t, hop, &mut sc.conv, vel)?;
     for f in 0..hop {
         let r = s.root;
         let row = &mut frames[f * POSE_DIM..(f + 1) * POSE_DIM];
