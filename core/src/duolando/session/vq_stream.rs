@@ -121,7 +121,9 @@ pub(super) fn encode(
 /// Feeds follower token `toks[j]` of session `chunk[j]` (at most
 /// `sc.dims.n` sessions, increasing indices) to its 9 decoders; once token
 /// `q + d` is in, the `hop` frames of token `q` are final and wait for
-/// pulling.
+/// pulling. The sessions whose frames become final with this token push it
+/// and compute those frames in one pass over each conv unit's weights
+/// (`StreamStack::push_output_many`); the others push only.
 pub(super) fn decode(
     ss: &mut [&mut Session<'_>],
     chunk: &[usize],
@@ -134,64 +136,159 @@ pub(super) fn decode(
     if toks.len() != chunk.len() || chunk.len() > sc.dims.n {
         return Err((g, Error::State));
     }
+    let hop = ss[g].model.cfg.hop();
+    let conv = &mut conv_scratch(sc.pool, &sc.dims).map_err(at(g))?;
+    // Token q = dec_fed - d becomes final with this one: frames from t = hop q.
+    let (mut ready, mut ready_toks, mut ts) = (
+        Vec::<usize, MAX_BATCH>::new(),
+        Vec::<[u32; 5], MAX_BATCH>::new(),
+        Vec::<usize, MAX_BATCH>::new(),
+    );
+    let (mut rest, mut rest_toks) = (
+        Vec::<usize, MAX_BATCH>::new(),
+        Vec::<[u32; 5], MAX_BATCH>::new(),
+    );
+    for (&i, t) in chunk.iter().zip(toks) {
+        let s = &ss[i];
+        let pushed = match s.dec_fed.checked_sub(s.cfg.dec_future as usize) {
+            Some(q) => {
+                ready.push(i).is_ok() && ready_toks.push(*t).is_ok() && ts.push(hop * q).is_ok()
+            }
+            None => rest.push(i).is_ok() && rest_toks.push(*t).is_ok(),
+        };
+        if !pushed {
+            return Err((i, Error::State));
+        }
+    }
+    push_tokens(ss, &rest, &rest_toks, None, conv)?;
+    push_tokens(ss, &ready, &ready_toks, Some(&ts), conv)?;
+    for &i in chunk {
+        ss[i].dec_fed += 1;
+    }
+    pend_frames(ss, &ready)
+}
+
+/// Token `toks[j]` into the 9 decoders of session `group[j]`; with `ts`,
+/// each decoder's frames `[ts[j], ts[j] + hop)` after the push, in the same
+/// pass, scattered into the session's `frames` rows.
+fn push_tokens(
+    ss: &mut [&mut Session<'_>],
+    group: &[usize],
+    toks: &[[u32; 5]],
+    ts: Option<&[usize]>,
+    conv: &mut crate::nn::stream_conv::StreamScratch<'_>,
+) -> Result<(), BatchError> {
+    let Some(&g) = group.first() else {
+        return Ok(());
+    };
     let model = ss[g].model;
     let hop = model.cfg.hop();
-    let conv = &mut conv_scratch(sc.pool, &sc.dims).map_err(at(g))?;
-    {
-        let mut sts = states(ss, chunk)?;
-        for p in 0..5 {
-            let vq = if p < 4 {
-                &model.parts[p]
-            } else {
-                &model.transl
+    let mut sts = states(ss, group)?;
+    if ts.is_some() {
+        for st in sts.iter_mut() {
+            st.frames[..hop * FRAME_WIDTH].fill(0.0);
+        }
+    }
+    for p in 0..5 {
+        let vq = if p < 4 {
+            &model.parts[p]
+        } else {
+            &model.transl
+        };
+        let emb = vq.cfg.emb_width as usize;
+        for (st, t) in sts.iter_mut().zip(toks) {
+            dequantise(&vq.codebook, &t[p..p + 1], p as u8, &mut st.feat[..emb]).map_err(at(g))?;
+        }
+        for rot in [false, true] {
+            let Some(w) = (if rot { vq.rot.as_ref() } else { Some(&vq.pos) }) else {
+                continue;
             };
-            let emb = vq.cfg.emb_width as usize;
-            for (st, t) in sts.iter_mut().zip(toks) {
-                dequantise(&vq.codebook, &t[p..p + 1], p as u8, &mut st.feat[..emb])
-                    .map_err(at(g))?;
-            }
+            let ch = if rot {
+                vq.cfg.rot_channels
+            } else {
+                vq.cfg.in_channels
+            } as usize;
             let mut stacks: Vec<&mut StreamStack<'_>, MAX_BATCH> = Vec::new();
-            let mut rots: Vec<&mut StreamStack<'_>, MAX_BATCH> = Vec::new();
             let mut cols: Vec<&[f32], MAX_BATCH> = Vec::new();
+            let mut outs: Vec<&mut [f32], MAX_BATCH> = Vec::new();
             for st in sts.iter_mut() {
                 let State {
                     dec_pos,
                     dec_rot,
                     feat,
+                    dec_out,
                     ..
                 } = &mut **st;
+                let stack = if rot {
+                    dec_rot.get_mut(p).and_then(|r| r.as_mut())
+                } else {
+                    dec_pos.get_mut(p)
+                };
                 stacks
-                    .push(&mut dec_pos[p])
+                    .push(stack.ok_or((g, Error::State))?)
                     .map_err(|_| (g, Error::State))?;
-                if vq.rot.is_some() {
-                    let r = dec_rot
-                        .get_mut(p)
-                        .and_then(|r| r.as_mut())
-                        .ok_or((g, Error::State))?;
-                    rots.push(r).map_err(|_| (g, Error::State))?;
-                }
                 cols.push(&feat[..emb]).map_err(|_| (g, Error::State))?;
+                outs.push(&mut dec_out[..hop * ch])
+                    .map_err(|_| (g, Error::State))?;
             }
-            StreamStack::push_many(&mut stacks, StackW::Decoder(&vq.pos), &cols, conv)
-                .map_err(at(g))?;
-            if let Some(rot) = vq.rot.as_ref() {
-                StreamStack::push_many(&mut rots, StackW::Decoder(rot), &cols, conv)
-                    .map_err(at(g))?;
+            let w = StackW::Decoder(w);
+            match ts {
+                Some(ts) => {
+                    StreamStack::push_output_many(&mut stacks, w, &cols, ts, hop, conv, &mut outs)
+                        .map_err(at(g))?
+                }
+                None => StreamStack::push_many(&mut stacks, w, &cols, conv).map_err(at(g))?,
+            }
+            drop((stacks, cols, outs));
+            if ts.is_some() {
+                for st in sts.iter_mut() {
+                    put_decoded(st, p, rot, hop, ch);
+                }
             }
         }
     }
-    // Sessions whose token q's frames are now final, and t = hop q.
-    let mut ready: Vec<usize, MAX_BATCH> = Vec::new();
-    let mut ts: Vec<usize, MAX_BATCH> = Vec::new();
-    for &i in chunk {
+    Ok(())
+}
+
+/// Decoder `p`'s (rotation decoder's, if `rot`) `hop` frames in `dec_out`
+/// (hop, ch) into their columns of the session's `frames` rows: a part's
+/// positions (normalised pose) or rotations, or the translation (p = 4).
+fn put_decoded(st: &mut State<'_>, p: usize, rot: bool, hop: usize, ch: usize) {
+    let State {
+        frames, dec_out, ..
+    } = st;
+    for f in 0..hop {
+        let row = &mut frames[f * FRAME_WIDTH..(f + 1) * FRAME_WIDTH];
+        let out = &dec_out[f * ch..(f + 1) * ch];
+        match Part::ALL.get(p) {
+            Some(&part) if rot => {
+                scatter_part(part, 9, out, &mut row[POSE_DIM..POSE_DIM + ROT_DIM])
+            }
+            Some(&part) => scatter_part(part, 3, out, &mut row[..POSE_DIM]),
+            None => row[POSE_DIM + ROT_DIM..POSE_DIM + ROT_DIM + 3].copy_from_slice(&out[..3]),
+        }
+    }
+}
+
+/// The assembled frames of every session of `ready` into its pending ring.
+fn pend_frames(ss: &mut [&mut Session<'_>], ready: &[usize]) -> Result<(), BatchError> {
+    let Some(&g) = ready.first() else {
+        return Ok(());
+    };
+    let hop = ss[g].model.cfg.hop();
+    for &i in ready {
         let s = &mut *ss[i];
-        s.dec_fed += 1;
-        if let Some(q) = s.dec_fed.checked_sub(1 + s.cfg.dec_future as usize) {
-            ready.push(i).map_err(|_| (i, Error::State))?;
-            ts.push(hop * q).map_err(|_| (i, Error::State))?;
+        let State {
+            frames, pending, ..
+        } = &mut s.st;
+        for f in 0..hop {
+            pending
+                .push(&frames[f * FRAME_WIDTH..(f + 1) * FRAME_WIDTH])
+                .map_err(at(i))?;
         }
+        s.decoded += hop;
     }
-    frames_of(ss, &ready, &ts, conv)
+    Ok(())
 }
 
 /// The `hop` frames `[ts[j], ts[j] + hop)` of session `ready[j]` from its 9
@@ -207,88 +304,45 @@ fn frames_of(
     };
     let model = ss[g].model;
     let hop = model.cfg.hop();
-    let mut sts = states(ss, ready)?;
-    // (hop, FRAME_WIDTH) rows: normalised pose (165) | rotations (495) | translation (3).
-    for st in sts.iter_mut() {
-        st.frames[..hop * FRAME_WIDTH].fill(0.0);
-    }
-    for (p, part) in Part::ALL.iter().enumerate() {
-        let vq = &model.parts[p];
-        let w = vq.cfg.in_channels as usize;
-        decoder_frames(
-            &mut sts,
-            p,
-            false,
-            StackW::Decoder(&vq.pos),
-            ts,
-            hop,
-            hop * w,
-            conv,
-        )
-        .map_err(at(ready[0]))?;
+    {
+        let mut sts = states(ss, ready)?;
+        // (hop, FRAME_WIDTH) rows: normalised pose (165) | rotations (495) | translation (3).
         for st in sts.iter_mut() {
-            for f in 0..hop {
-                scatter_part(
-                    *part,
-                    3,
-                    &st.dec_out[f * w..(f + 1) * w],
-                    &mut st.frames[f * FRAME_WIDTH..f * FRAME_WIDTH + POSE_DIM],
-                );
-            }
+            st.frames[..hop * FRAME_WIDTH].fill(0.0);
         }
-        if let Some(rot) = vq.rot.as_ref() {
-            let r = vq.cfg.rot_channels as usize;
-            decoder_frames(
-                &mut sts,
-                p,
-                true,
-                StackW::Decoder(rot),
-                ts,
-                hop,
-                hop * r,
-                conv,
-            )
-            .map_err(at(ready[0]))?;
-            for st in sts.iter_mut() {
-                for f in 0..hop {
-                    let dst = &mut st.frames
-                        [f * FRAME_WIDTH + POSE_DIM..f * FRAME_WIDTH + POSE_DIM + ROT_DIM];
-                    scatter_part(*part, 9, &st.dec_out[f * r..(f + 1) * r], dst);
+        for p in 0..5 {
+            let vq = if p < 4 {
+                &model.parts[p]
+            } else {
+                &model.transl
+            };
+            for rot in [false, true] {
+                let Some(w) = (if rot { vq.rot.as_ref() } else { Some(&vq.pos) }) else {
+                    continue;
+                };
+                let ch = if rot {
+                    vq.cfg.rot_channels
+                } else {
+                    vq.cfg.in_channels
+                } as usize;
+                decoder_frames(
+                    &mut sts,
+                    p,
+                    rot,
+                    StackW::Decoder(w),
+                    ts,
+                    hop,
+                    hop * ch,
+                    conv,
+                )
+                .map_err(at(ready[0]))?;
+                for st in sts.iter_mut() {
+                    put_decoded(st, p, rot, hop, ch);
                 }
             }
         }
     }
-    decoder_frames(
-        &mut sts,
-        4,
-        false,
-        StackW::Decoder(&model.transl.pos),
-        ts,
-        hop,
-        hop * 3,
-        conv,
-    )
-    .map_err(at(ready[0]))?;
-    for (st, &i) in sts.iter_mut().zip(ready.iter()) {
-        let State {
-            frames,
-            dec_out,
-            pending,
-            ..
-        } = &mut **st;
-        for f in 0..hop {
-            let base = f * FRAME_WIDTH + POSE_DIM + ROT_DIM;
-            frames[base..base + 3].copy_from_slice(&dec_out[f * 3..f * 3 + 3]);
-            pending
-                .push(&frames[f * FRAME_WIDTH..(f + 1) * FRAME_WIDTH])
-                .map_err(at(i))?;
-        }
-    }
-    drop(sts);
-    for &i in ready.iter() {
-        ss[i].decoded += hop;
-    }
-    Ok(())
+    pend_frames(ss, ready)
 }
 
 /// A drained session ([`Session::finish`]): leader code `codes` (the
