@@ -31,83 +31,29 @@ pub(super) fn encode(
     let due = |s: &Session<'_>| s.frames / s.model.cfg.hop() > s.st.enc[0].pushed();
     for_chunks(ss, sc.dims.n, due, |ss, chunk| {
         let g = chunk[0];
-        let model = ss[g].model;
-        let hop = model.cfg.hop();
+        let hop = ss[g].model.cfg.hop();
         let conv = &mut conv_scratch(sc.pool, &sc.dims).map_err(at(g))?;
-        {
-            let mut sts = states(ss, chunk)?;
-            // The pelvis channel is zeroed for encoding (R's leader input).
-            for st in sts.iter_mut() {
-                for f in 0..hop {
-                    st.block[f * POSE_DIM..f * POSE_DIM + 3].fill(0.0);
-                }
-            }
-            for (p, part) in Part::ALL.iter().enumerate() {
-                let vq = &model.parts[p];
-                let w = vq.cfg.in_channels as usize;
-                let mut stacks: Vec<&mut StreamStack<'_>, MAX_BATCH> = Vec::new();
-                let mut cols: Vec<&[f32], MAX_BATCH> = Vec::new();
-                for st in sts.iter_mut() {
-                    let State {
-                        block,
-                        part_in,
-                        enc,
-                        ..
-                    } = &mut **st;
-                    gather_part(*part, &block[..hop * POSE_DIM], &mut part_in[..hop * w]);
-                    stacks.push(&mut enc[p]).map_err(|_| (g, Error::State))?;
-                    cols.push(&part_in[..hop * w])
-                        .map_err(|_| (g, Error::State))?;
-                }
-                StreamStack::push_many(&mut stacks, StackW::Encoder(&vq.encoder), &cols, conv)
-                    .map_err(at(g))?;
-            }
-        }
-        // Sessions whose code `q = tokens - 1 - e` is now computable.
-        let mut ready: Vec<usize, MAX_BATCH> = Vec::new();
-        let mut qs: Vec<usize, MAX_BATCH> = Vec::new();
+        // Sessions whose code `q = tokens - 1 - e` is computable after this
+        // push: they push and encode in one pass over each conv unit's
+        // weights (`push_output_many`); the others push only.
+        let (mut ready, mut qs, mut rest) = (
+            Vec::<usize, MAX_BATCH>::new(),
+            Vec::<usize, MAX_BATCH>::new(),
+            Vec::<usize, MAX_BATCH>::new(),
+        );
         for &i in chunk {
             let s = &ss[i];
-            if let Some(q) = (s.frames / hop).checked_sub(1 + s.cfg.enc_future as usize) {
-                ready.push(i).map_err(|_| (i, Error::State))?;
-                qs.push(q).map_err(|_| (i, Error::State))?;
+            let pushed = match (s.frames / hop).checked_sub(1 + s.cfg.enc_future as usize) {
+                Some(q) => ready.push(i).is_ok() && qs.push(q).is_ok(),
+                None => rest.push(i).is_ok(),
+            };
+            if !pushed {
+                return Err((i, Error::State));
             }
         }
-        if ready.is_empty() {
-            return Ok(());
-        }
-        let mut codes = [[0u32; 4]; MAX_BATCH];
-        {
-            let mut sts = states(ss, &ready)?;
-            for p in 0..4 {
-                let vq = &model.parts[p];
-                let emb = vq.cfg.emb_width as usize;
-                let mut stacks: Vec<&StreamStack<'_>, MAX_BATCH> = Vec::new();
-                let mut outs: Vec<&mut [f32], MAX_BATCH> = Vec::new();
-                for st in sts.iter_mut() {
-                    let State { enc, feat, .. } = &mut **st;
-                    stacks.push(&enc[p]).map_err(|_| (g, Error::State))?;
-                    outs.push(&mut feat[..emb]).map_err(|_| (g, Error::State))?;
-                }
-                StreamStack::output_many(
-                    &stacks,
-                    StackW::Encoder(&vq.encoder),
-                    &qs,
-                    1,
-                    conv,
-                    &mut outs,
-                )
-                .map_err(at(ready[0]))?;
-                drop((stacks, outs));
-                for (j, st) in sts.iter().enumerate() {
-                    codes[j][p] = nearest(
-                        &vq.codebook,
-                        &st.kk[p * st.kk_stride..(p + 1) * st.kk_stride],
-                        &st.feat[..emb],
-                    );
-                }
-            }
-        }
+        let codes = push_blocks(ss, &rest, None, conv)?;
+        debug_assert!(codes.is_empty());
+        let codes = push_blocks(ss, &ready, Some(&qs), conv)?;
         for (j, &i) in ready.iter().enumerate() {
             let s = &mut *ss[i];
             s.codes += 1;
@@ -116,6 +62,75 @@ pub(super) fn encode(
         }
         Ok(())
     })
+}
+
+/// The token's `hop` leader frames in each session's `block` into its 4
+/// part encoders; with `qs`, each part's code `qs[j]` of session
+/// `group[j]` after the push, in the same pass (the nearest codebook row
+/// to the encoder's feature column), returned per session.
+fn push_blocks(
+    ss: &mut [&mut Session<'_>],
+    group: &[usize],
+    qs: Option<&[usize]>,
+    conv: &mut crate::nn::stream_conv::StreamScratch<'_>,
+) -> Result<Vec<[u32; 4], MAX_BATCH>, BatchError> {
+    let mut codes: Vec<[u32; 4], MAX_BATCH> = Vec::new();
+    let Some(&g) = group.first() else {
+        return Ok(codes);
+    };
+    let model = ss[g].model;
+    let hop = model.cfg.hop();
+    let mut sts = states(ss, group)?;
+    // The pelvis channel is zeroed for encoding (R's leader input).
+    for st in sts.iter_mut() {
+        for f in 0..hop {
+            st.block[f * POSE_DIM..f * POSE_DIM + 3].fill(0.0);
+        }
+        if qs.is_some() {
+            codes.push([0; 4]).map_err(|_| (g, Error::State))?;
+        }
+    }
+    for (p, part) in Part::ALL.iter().enumerate() {
+        let vq = &model.parts[p];
+        let w = vq.cfg.in_channels as usize;
+        let emb = vq.cfg.emb_width as usize;
+        let mut stacks: Vec<&mut StreamStack<'_>, MAX_BATCH> = Vec::new();
+        let mut cols: Vec<&[f32], MAX_BATCH> = Vec::new();
+        let mut outs: Vec<&mut [f32], MAX_BATCH> = Vec::new();
+        for st in sts.iter_mut() {
+            let State {
+                block,
+                part_in,
+                enc,
+                feat,
+                ..
+            } = &mut **st;
+            gather_part(*part, &block[..hop * POSE_DIM], &mut part_in[..hop * w]);
+            stacks.push(&mut enc[p]).map_err(|_| (g, Error::State))?;
+            cols.push(&part_in[..hop * w])
+                .map_err(|_| (g, Error::State))?;
+            outs.push(&mut feat[..emb]).map_err(|_| (g, Error::State))?;
+        }
+        let enc = StackW::Encoder(&vq.encoder);
+        match qs {
+            Some(qs) => {
+                StreamStack::push_output_many(&mut stacks, enc, &cols, qs, 1, conv, &mut outs)
+                    .map_err(at(g))?
+            }
+            None => StreamStack::push_many(&mut stacks, enc, &cols, conv).map_err(at(g))?,
+        }
+        drop((stacks, cols, outs));
+        if qs.is_some() {
+            for (j, st) in sts.iter().enumerate() {
+                codes[j][p] = nearest(
+                    &vq.codebook,
+                    &st.kk[p * st.kk_stride..(p + 1) * st.kk_stride],
+                    &st.feat[..emb],
+                );
+            }
+        }
+    }
+    Ok(codes)
 }
 
 /// Feeds follower token `toks[j]` of session `chunk[j]` (at most
