@@ -976,8 +976,7 @@ fn topk_samples_the_follower_in_a_streaming_session_repeatably() {
     assert_ne!(a.data, c.data, "another seed another dance");
     assert_ne!(a.data, greedy.data, "sampling is not greedy R");
 
-    // Refused by name: a k the sampler does not take, a seed without --topk,
-    // and --topk for a solo (Bailando) dance.
+    // Refused by name: a k the sampler does not take, a seed without --topk.
     let out = tmp("topk-bad");
     let o = dance_tiny(&out, &leader, &music, &["--topk", "0"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
@@ -992,21 +991,69 @@ fn topk_samples_the_follower_in_a_streaming_session_repeatably() {
     let o = dance_tiny(&out, &leader, &music, &["--rng-seed", "3"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--topk"), "{}", stderr(&o));
+}
+
+/// `--topk K` on a solo (Bailando) dance: a streaming session at the
+/// reference preset that samples; drained to R's token rows, repeatable by
+/// `--rng-seed`, another seed another dance; a k out of range is refused.
+#[test]
+fn topk_samples_a_solo_dancer_repeatably() {
     let solo = fixtures().join("bailando_btiny/model.duo");
     let bmusic = fixtures().join("bailando_rollout_btiny_demo_odd/music.npy");
+    let run = |name: &str, extra: &[&str]| {
+        let out = tmp(name);
+        let base = [
+            "--model",
+            p(&solo),
+            "--music",
+            p(&bmusic),
+            "--seed-tokens",
+            "15,14",
+            "--out",
+            p(&out),
+        ];
+        let o = dance(&[&base[..], extra].concat());
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let tokens = read_i64_2d(&out.join("tokens.npy"), Some(2), "tokens").unwrap();
+        let frames = read_f32_2d(&out.join("dancer_smpl24.npy"), Some(72), "solo").unwrap();
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+        (
+            tokens,
+            frames,
+            summary["mode"].as_str().unwrap().to_string(),
+        )
+    };
+    let (greedy, greedy_frames, mode) = run("solo-topk-greedy", &[]);
+    assert!(mode.starts_with("exact (R)"), "{mode}");
+    let (a, a_frames, mode) = run("solo-topk-a", &["--topk", "3", "--rng-seed", "1"]);
+    assert!(
+        mode.contains("streaming") && mode.contains("top-3"),
+        "{mode}"
+    );
+    let (b, _, _) = run("solo-topk-b", &["--topk", "3", "--rng-seed", "1"]);
+    let (c, _, _) = run("solo-topk-c", &["--topk", "3", "--rng-seed", "2"]);
+    assert_eq!(a.rows, greedy.rows, "drained to R's token rows");
+    assert_eq!(a_frames.rows, greedy_frames.rows, "and R's frames");
+    assert_eq!(a.data[..2], [15, 14], "row 0 is the seed");
+    assert_eq!(a, b, "the same seed gives the same dance");
+    assert_ne!(a.data, c.data, "another seed another dance");
+    assert_ne!(a.data, greedy.data, "sampling is not greedy R");
+    assert!(a_frames.data.iter().all(|v| v.is_finite()));
+    let out = tmp("solo-topk-bad");
     let o = dance(&[
         "--model",
         p(&solo),
         "--music",
         p(&bmusic),
         "--topk",
-        "2",
+        "1000",
         "--out",
         p(&out),
     ]);
     assert!(!o.status.success());
     assert!(
-        stderr(&o).contains("--topk is for a duet"),
+        stderr(&o).contains("--topk 1000 is outside its range"),
         "{}",
         stderr(&o)
     );

@@ -76,13 +76,14 @@ pub struct Args {
     /// depend on it). Default: every core, at most 8.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub threads: Option<u32>,
-    /// Duet: sample each follower token uniformly among the K most probable
-    /// (the authors' `samplek`) in a streaming session at the reference
-    /// preset, instead of R's greedy evaluation: a livelier follower that
-    /// jitters more (docs/DEMO_MODEL.md "Sampling instead of greedy decoding").
+    /// Duet or solo (Bailando): sample each token uniformly among the K most
+    /// probable (the authors' `samplek`) in a streaming session at the
+    /// reference preset, instead of R's greedy evaluation: a livelier dancer
+    /// that jitters more (docs/DEMO_MODEL.md "Sampling instead of greedy
+    /// decoding"). Not for Transflower (it samples already: --seed).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub topk: Option<u32>,
-    /// Duet: seed of --topk's sampling (the same seed gives the same dance).
+    /// Seed of --topk's sampling (the same seed gives the same dance).
     #[arg(long, requires = "topk")]
     pub rng_seed: Option<u64>,
     /// Transflower: seed of the engine's base-sample RNG (default 0).

@@ -189,9 +189,30 @@ pub fn bailando_streaming(
         seed,
         path,
     } = solo_inputs(model, music_path, dance, seed_tokens, model_path)?;
+    let mut run = streaming_rows(model, &music.data, music.cols, padding, seed, sc)
+        .map_err(|e| anyhow::anyhow!("{}: {e:#}", music_path.display()))?;
+    run.path = path;
+    Ok(run)
+}
+
+/// S mode on music rows in memory (`music` (R, cols), the first `n_music`
+/// columns read): a session is given the whole track, told the music ended
+/// (`padding`, as R's path), and pulled to the end.
+pub fn streaming_rows(
+    model: &Model<'_>,
+    music: &[f32],
+    cols: usize,
+    padding: MusicPadding,
+    seed: [u32; 2],
+    sc: &SessionConfig,
+) -> Result<SoloRun> {
     let nm = model.cfg.gpt.n_music as usize;
+    let n_rows = music.len() / cols.max(1);
+    if cols < nm {
+        bail!("music rows of {cols} values; the model reads {nm}");
+    }
     let sc = SessionConfig {
-        music_buffer_rows: (music.rows as u32).max(1),
+        music_buffer_rows: (n_rows as u32).max(1),
         ..*sc
     };
     let mut arena = vec![
@@ -203,13 +224,10 @@ pub fn bailando_streaming(
     let mut s = Session::new(model, &mut arena, &sc, seed)
         .map_err(|e| anyhow::anyhow!("session: {}", describe(&e)))?;
     let rows: Vec<f32> = music
-        .data
-        .chunks_exact(music.cols)
+        .chunks_exact(cols)
         .flat_map(|r| r[..nm].iter().copied())
         .collect();
-    let err = |e: duolando_core::error::Error| {
-        anyhow::anyhow!("{}: {}", music_path.display(), describe(&e))
-    };
+    let err = |e: duolando_core::error::Error| anyhow::anyhow!("{}", describe(&e));
     s.push_music(&rows).map_err(err)?;
     s.finish(padding).map_err(err)?;
     let mut tokens = seed.to_vec();
@@ -237,8 +255,11 @@ pub fn bailando_streaming(
         frames: pos.len() / POSE_DIM,
         pos3d: pos,
         steps: k,
-        music_rows: music.rows,
-        path,
+        music_rows: n_rows,
+        path: match padding {
+            MusicPadding::Aist => "AIST++ test path",
+            MusicPadding::Demo => "demo path (seed given)",
+        },
     })
 }
 

@@ -1,7 +1,9 @@
 //! `duolando dance --music SONG` without a leader: a solo dancer (a
 //! Bailando model, by default the bundled `assets/bailando_demo.duo`) to a
 //! song. R mode on the authors' music-only path (the music padded to whole
-//! tokens, the seed tokens given), then the same outputs as the duet:
+//! tokens, the seed tokens given; with `--topk K` a streaming session at
+//! the reference preset that samples each token among the K most probable),
+//! then the same outputs as the duet:
 //! `index.html` (one dancer, with the audio), `dancer.glb`, `dancer.bvh`,
 //! npy arrays and `summary.json`, at the model's 60 fps. Bailando's SMPL
 //! 24 joints are shown and exported on the SMPL-X rig
@@ -17,7 +19,9 @@ use duolando_core::bailando::model::Model;
 use serde_json::json;
 
 use super::inputs::{check_finite, extension};
-use crate::cli::generate_solo::{exact_rows, parse_seed};
+use crate::cli::generate_solo::{exact_rows, parse_seed, streaming_rows};
+use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as SoloConfig};
+use duolando_core::nn::sampler::{Sampling, MAX_TOP_K};
 use crate::export::{write_dancers, GroupErrors, Motion};
 use crate::model_file::ModelFile;
 use crate::music::bailando::{BEAT_COL, FEATURE_DIM, FRAME_RATE, SAMPLE_RATE};
@@ -71,7 +75,6 @@ pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usi
     for (given, flag) in [
         (args.follower_start.is_some(), "--follower-start"),
         (args.true_follower.is_some(), "--true-follower"),
-        (args.topk.is_some(), "--topk"),
     ] {
         if given {
             bail!("{flag} is for a duet (a Duolando model with --leader); {} dances solo", model_path.display());
@@ -99,8 +102,25 @@ pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usi
     );
 
     let t = Instant::now();
-    let run = exact_rows(&model, &music.rows, music.cols, MusicPadding::Demo, seed).map_err(|e| anyhow::anyhow!("{}: {e:#}", music_path.display()))?;
-    eprintln!("[3/4] generated {} steps (R mode, the authors' music-only path) in {:.1} s", run.steps, t.elapsed().as_secs_f64());
+    let (run, mode) = match args.topk {
+        None => (exact_rows(&model, &music.rows, music.cols, MusicPadding::Demo, seed), "exact (R), music-only path".to_string()),
+        Some(k) => {
+            // `--topk K`: a streaming session at the reference preset (the
+            // decoders' whole future: R's frames for its tokens), each token
+            // drawn among the K most probable (the authors' `samplek`).
+            let rng_seed = args.rng_seed.unwrap_or(0);
+            let sc = SoloConfig { sampling: Sampling::TopK { k, rng_seed }, ..SoloConfig::preset(&cfg, SoloPreset::Reference) };
+            if let Err((_, value, max)) = sc.check(&cfg) {
+                bail!("--topk {value} is outside its range for {} (largest allowed: {max})", model_path.display());
+            }
+            if k as usize > MAX_TOP_K {
+                bail!("--topk {k} is outside its range (largest allowed: {MAX_TOP_K})");
+            }
+            (streaming_rows(&model, &music.rows, music.cols, MusicPadding::Demo, seed, &sc), format!("streaming (S), reference preset, top-{k} sampling, rng seed {rng_seed}"))
+        }
+    };
+    let run = run.map_err(|e| anyhow::anyhow!("{}: {e:#}", music_path.display()))?;
+    eprintln!("[3/4] generated {} steps ({mode}) in {:.1} s", run.steps, t.elapsed().as_secs_f64());
     let t_generate = t.elapsed().as_secs_f64();
 
     eprintln!("[4/4] exporting glTF, BVH, npy and the viewer");
@@ -136,7 +156,7 @@ pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usi
     let summary = json!({
         "model": model_path.display().to_string(),
         "family": "bailando",
-        "mode": "exact (R), music-only path",
+        "mode": mode,
         "kernels": crate::simd::describe(),
         "threads": threads,
         "fps": FPS,
