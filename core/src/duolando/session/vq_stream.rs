@@ -10,6 +10,7 @@
 use heapless::Vec;
 
 use crate::duolando::config::{Part, POSE_DIM, ROT_DIM};
+use crate::duolando::model::Model;
 use crate::duolando::motion::{gather_part, scatter_part};
 use crate::duolando::session::batch::{
     at, conv_scratch, for_chunks, states, BatchError, StepScratch, MAX_BATCH,
@@ -19,6 +20,7 @@ use crate::duolando::session::Session;
 use crate::error::Error;
 use crate::nn::quantizer::{dequantise, nearest};
 use crate::nn::stream_conv::{StackW, StreamStack};
+use crate::nn::weights::{DecoderW, VqW};
 
 /// Every session holding a complete token its encoders have not seen:
 /// pushes the token's `hop` frames into the 4 part encoders and, once
@@ -205,24 +207,15 @@ fn push_tokens(
         }
     }
     for p in 0..5 {
-        let vq = if p < 4 {
-            &model.parts[p]
-        } else {
-            &model.transl
-        };
+        let vq = vq_of(model, p);
         let emb = vq.cfg.emb_width as usize;
         for (st, t) in sts.iter_mut().zip(toks) {
             dequantise(&vq.codebook, &t[p..p + 1], p as u8, &mut st.feat[..emb]).map_err(at(g))?;
         }
         for rot in [false, true] {
-            let Some(w) = (if rot { vq.rot.as_ref() } else { Some(&vq.pos) }) else {
+            let Some((w, ch)) = decoder_of(vq, rot) else {
                 continue;
             };
-            let ch = if rot {
-                vq.cfg.rot_channels
-            } else {
-                vq.cfg.in_channels
-            } as usize;
             let mut stacks: Vec<&mut StreamStack<'_>, MAX_BATCH> = Vec::new();
             let mut cols: Vec<&[f32], MAX_BATCH> = Vec::new();
             let mut outs: Vec<&mut [f32], MAX_BATCH> = Vec::new();
@@ -285,6 +278,25 @@ fn put_decoded(st: &mut State<'_>, p: usize, rot: bool, hop: usize, ch: usize) {
     }
 }
 
+/// A model's VQ-VAEs in decoding order: the 4 parts, then the translation.
+fn vq_of<'m, 'a>(model: &'m Model<'a>, p: usize) -> &'m VqW<'a> {
+    if p < 4 {
+        &model.parts[p]
+    } else {
+        &model.transl
+    }
+}
+
+/// Decoder `rot` (rotation if true, else position) of `vq` and its output
+/// channels; `None` where the VQ-VAE has no rotation decoder.
+fn decoder_of<'m, 'a>(vq: &'m VqW<'a>, rot: bool) -> Option<(&'m DecoderW<'a>, usize)> {
+    if rot {
+        vq.rot.as_ref().map(|d| (d, vq.cfg.rot_channels as usize))
+    } else {
+        Some((&vq.pos, vq.cfg.in_channels as usize))
+    }
+}
+
 /// The assembled frames of every session of `ready` into its pending ring.
 fn pend_frames(ss: &mut [&mut Session<'_>], ready: &[usize]) -> Result<(), BatchError> {
     let Some(&g) = ready.first() else {
@@ -326,20 +338,11 @@ fn frames_of(
             st.frames[..hop * FRAME_WIDTH].fill(0.0);
         }
         for p in 0..5 {
-            let vq = if p < 4 {
-                &model.parts[p]
-            } else {
-                &model.transl
-            };
+            let vq = vq_of(model, p);
             for rot in [false, true] {
-                let Some(w) = (if rot { vq.rot.as_ref() } else { Some(&vq.pos) }) else {
+                let Some((w, ch)) = decoder_of(vq, rot) else {
                     continue;
                 };
-                let ch = if rot {
-                    vq.cfg.rot_channels
-                } else {
-                    vq.cfg.in_channels
-                } as usize;
                 decoder_frames(
                     &mut sts,
                     p,
