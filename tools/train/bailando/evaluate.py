@@ -85,6 +85,9 @@ def main():
     ap.add_argument("--bin", default="/work/bin/duolando")
     ap.add_argument("--out", required=True)
     ap.add_argument("--json", required=True)
+    ap.add_argument("--stream", default="",
+                    help="generate in a streaming session with these flags instead of R mode, e.g. "
+                         "\"--preset reference --topk 3 --rng-seed 1\" (sampling: the authors' `samplek`)")
     args = ap.parse_args()
     shutil.rmtree(args.out, ignore_errors=True)
     dirs = {k: os.path.join(args.out, k) for k in ("gen", "real", "train", "recon", "music", "raw")}
@@ -103,8 +106,9 @@ def main():
     for take in takes:
         out = os.path.join(dirs["raw"], take)
         music = os.path.join(args.data, "wav", take + ".npy")
+        mode = ["--mode", "streaming"] + args.stream.split() if args.stream else ["--mode", "exact"]
         subprocess.run([args.bin, "generate", "--model", args.duo, "--music", music, "--seed-tokens", args.seed_tokens,
-                        "--mode", "exact", "--out", out], check=True, capture_output=True)
+                        *mode, "--out", out], check=True, capture_output=True)
         tok = np.load(os.path.join(out, "tokens.npy"))
         pos = np.load(os.path.join(out, "pos3d.npy"))
         t60 = len(real[take + "_00"])

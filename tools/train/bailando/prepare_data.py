@@ -56,6 +56,35 @@ def to_60fps(d30):
     return out
 
 
+def fold_heading(d60, window=31):
+    """Each frame's body turned about the pelvis so that it faces +z: the heading is the ground
+    projection of the left-minus-right hip vector (SMPL joints 1, 2) turned a quarter, smoothed
+    over `window` frames (0.5 s at 60 fps: a turn of the body, not the hips' twist within a
+    step). The pelvis travels by the same steps measured in the body's frame (each frame's
+    horizontal pelvis step turned by the same angle, summed from the first frame): a step forward
+    is a step towards +z at any heading, so the root decoder sees travel the codes can predict;
+    turning figures become straight paths."""
+    p = d60.reshape(len(d60), 24, 3).astype(np.float64)
+    hip = p[:, 1] - p[:, 2]
+    k = np.ones(window) / window
+    hx = np.convolve(np.pad(hip[:, 0], window // 2, mode="edge"), k, "valid")
+    hz = np.convolve(np.pad(hip[:, 2], window // 2, mode="edge"), k, "valid")
+    # facing = hip vector turned by +90 degrees about y; rotate so facing -> +z
+    ang = np.arctan2(hx, hz) - np.pi / 2  # heading angle of the facing direction from +z
+    c, s_ = np.cos(-ang)[:, None], np.sin(-ang)[:, None]
+    rel = p - p[:, :1]
+    x0, z0 = rel[..., 0].copy(), rel[..., 2].copy()
+    rel[..., 0] = c * x0 + s_ * z0
+    rel[..., 2] = -s_ * x0 + c * z0
+    step = np.diff(p[:, 0], axis=0)
+    sx, sz = step[:, 0].copy(), step[:, 2].copy()
+    c1, s1 = c[:-1, 0], s_[:-1, 0]
+    step[:, 0] = c1 * sx + s1 * sz
+    step[:, 2] = -s1 * sx + c1 * sz
+    root = np.concatenate([p[:1, 0], p[0, 0] + np.cumsum(step, axis=0)])
+    return (rel + root[:, None]).reshape(len(d60), 72).astype(np.float32)
+
+
 def midi_hz(m):
     return 440.0 * 2 ** ((m - 69) / 12)
 
@@ -125,6 +154,9 @@ def main():
     ap.add_argument("--synth", required=True, help="a `duolando synth` output folder")
     ap.add_argument("--out", required=True)
     ap.add_argument("--bin", default="/work/bin/duolando")
+    ap.add_argument("--fold-heading", action="store_true",
+                    help="turn every frame's body to face +z (smoothed heading) and its travel with it: "
+                         "codes of the same step at any heading are one code")
     args = ap.parse_args()
     meta = json.load(open(os.path.join(args.synth, "takes.json")))
     os.makedirs(os.path.join(args.out, "wav"), exist_ok=True)
@@ -143,6 +175,8 @@ def main():
         music = np.load(feat).astype(np.float32)
         for k, d in zip(("00", "01"), d30):
             dance = to_60fps(smplx_to_smpl24(d))
+            if args.fold_heading:
+                dance = fold_heading(dance)
             np.savez(os.path.join(args.out, split, f"{name}_{k}.npz"), dance=dance, music=music)
             index[split].append(f"{name}_{k}")
         print(f"{split} {name}: {t30} frames at 30 fps -> {2 * t30} at 60, music {music.shape}", flush=True)

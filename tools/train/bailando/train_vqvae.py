@@ -24,16 +24,24 @@ import torch
 import common as C
 
 
+FIXED_HEADING = False
+FLAT_ROOT_Y = False
+
+
 def windows(clips, rng, batch, vel):
     xs = []
     for _ in range(batch):
         d = clips[rng.integers(len(clips))]
         s = rng.integers(0, len(d) - C.WINDOW + 1)
-        w = C.yaw(d[s:s + C.WINDOW], rng.uniform(0, 2 * np.pi))
+        w = d[s:s + C.WINDOW]
+        if not FIXED_HEADING:
+            w = C.yaw(w, rng.uniform(0, 2 * np.pi))
         w = C.loader_dance(w)
         if vel:
             w[:-1, :3] = w[1:, :3] - w[:-1, :3]
             w[-1, :3] = w[-2, :3]
+            if FLAT_ROOT_Y:
+                w[:, 1] = 0.0
         else:
             w[:, :3] = 0
         xs.append(w)
@@ -50,7 +58,18 @@ def main():
     ap.add_argument("--batch", type=int, default=16)
     ap.add_argument("--lr", type=float, default=6e-4)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--flat-root-y", action="store_true",
+                    help="the root decoder learns no vertical velocity (the pelvis keeps its height; the "
+                         "legs carry the bounce): a sampled dance cannot drift up or down")
+    ap.add_argument("--root-only", metavar="CKPT",
+                    help="start from CKPT and train the root decoder alone (the codebooks frozen: the "
+                         "codes, and a GPT trained on them, stay valid)")
+    ap.add_argument("--no-yaw", action="store_true",
+                    help="no random heading per window (data made with prepare_data.py --fold-heading)")
     args = ap.parse_args()
+    global FIXED_HEADING, FLAT_ROOT_Y
+    FIXED_HEADING = args.no_yaw
+    FLAT_ROOT_Y = args.flat_root_y
     torch.set_num_threads(1)
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
@@ -62,11 +81,14 @@ def main():
     up, down = auth.smpl_up, auth.smpl_down
     timer = C.Timer()
 
+    if args.root_only:
+        vq.load_state_dict(torch.load(args.root_only, weights_only=False)["model"])
+        args.steps = 0
     # stage 1: both halves
     params = list(vq.vqvae_up.parameters()) + [p for n, p in vq.vqvae_down.named_parameters()
                                                if not n.startswith("decoders_root")]
     opt = torch.optim.Adam(params, lr=args.lr)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=args.lr, total_steps=args.steps, pct_start=0.1)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=args.lr, total_steps=max(args.steps, 1), pct_start=0.1)
     vq.train()
     for step in range(args.steps):
         x = windows(clips, rng, args.batch, vel=False).view(args.batch, C.WINDOW, 24, 3)
@@ -87,6 +109,8 @@ def main():
     params = list(vq.vqvae_down.decoders_root.parameters())
     opt = torch.optim.Adam(params, lr=args.lr)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=args.lr, total_steps=args.root_steps, pct_start=0.1)
+    if args.root_only:
+        vq.vqvae_down.bottleneck.eval()  # codebook frozen (no EMA update)
     for step in range(args.root_steps):
         x = windows(clips, rng, args.batch, vel=True).view(args.batch, C.WINDOW, 24, 3)
         xd = x[:, :, down].reshape(args.batch, C.WINDOW, -1)

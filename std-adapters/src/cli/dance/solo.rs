@@ -33,9 +33,14 @@ use crate::viewer::{write_index_html, ViewerData};
 /// The bundled solo model.
 pub const DEMO_SOLO_MODEL: &str = "bailando_demo.duo";
 /// Seed tokens (up, down) of the bundled solo model (tools/train/bailando:
-/// a standing pose it starts well from). The authors' demo uses (423, 12)
-/// for their published model.
-pub const DEMO_SOLO_SEED: [u32; 2] = [0, 0];
+/// its most common pair after the first 2 s of a training take). The
+/// authors' demo uses (423, 12) for their published model.
+pub const DEMO_SOLO_SEED: [u32; 2] = [217, 94];
+/// `--topk` of the bundled solo model when none is given: greedy decoding
+/// holds one pose on it, top-3 sampling dances (docs/DEMO_MODEL.md,
+/// "Bailando demo model"); `--model assets/bailando_demo.duo` without
+/// `--topk` runs greedy R mode as for any other model.
+pub const DEMO_SOLO_TOPK: u32 = 3;
 
 /// Music rows of a solo model: (R, n_music) at 7.5 per second.
 struct SoloMusic {
@@ -102,7 +107,11 @@ pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usi
     );
 
     let t = Instant::now();
-    let (run, mode) = match args.topk {
+    let topk = args.topk.or(demo_model.then_some(DEMO_SOLO_TOPK));
+    if demo_model && args.topk.is_none() {
+        eprintln!("      sampling: top-{DEMO_SOLO_TOPK} (the demo model's default; greedy holds one pose on it)");
+    }
+    let (run, mode) = match topk {
         None => (exact_rows(&model, &music.rows, music.cols, MusicPadding::Demo, seed), "exact (R), music-only path".to_string()),
         Some(k) => {
             // `--topk K`: a streaming session at the reference preset (the
