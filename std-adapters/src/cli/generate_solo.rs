@@ -158,10 +158,7 @@ pub fn exact_rows(
         vec![0u8; exact::decode_scratch_bytes(&cfg, k + 1).context("too many tokens")?];
     exact::decode(model, &tokens, &mut scratch, &mut pos)
         .map_err(|e| anyhow::anyhow!("decoding: {}", describe(&e)))?;
-    let path = match padding {
-        MusicPadding::Aist => "AIST++ test path",
-        MusicPadding::Demo => "demo path (seed given)",
-    };
+    let path = path_name(padding);
     Ok(SoloRun {
         tokens,
         pos3d: pos,
@@ -256,11 +253,16 @@ pub fn streaming_rows(
         pos3d: pos,
         steps: k,
         music_rows: n_rows,
-        path: match padding {
-            MusicPadding::Aist => "AIST++ test path",
-            MusicPadding::Demo => "demo path (seed given)",
-        },
+        path: path_name(padding),
     })
+}
+
+/// Which of the authors' eval paths a music padding is.
+fn path_name(padding: MusicPadding) -> &'static str {
+    match padding {
+        MusicPadding::Aist => "AIST++ test path",
+        MusicPadding::Demo => "demo path (seed given)",
+    }
 }
 
 /// The inputs of a solo run, read and checked, every error naming its file.
