@@ -246,6 +246,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             beats: Some(&beats),
             tokens: Some(&tokens),
             audio_file,
+            see_also: None,
         },
     )?;
     println!("{}", page.display());

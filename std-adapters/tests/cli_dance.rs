@@ -662,6 +662,51 @@ fn within_export_tolerance(e: &GroupErrors) -> bool {
         && e.all.mean <= EXPORT_ALL_MEAN_TOL_M
 }
 
+/// The bare demo (`dance --out DIR`, no inputs, no model) writes the duet
+/// and then the bundled solo dancer into `DIR/solo/`: the same dance as
+/// `dance --music assets/bailando_demo_music.wav` (top-3, rng seed 0), the
+/// two pages linked both ways; naming the duet's model keeps it a duet.
+fn bare_demo_also_dances_solo(out: &Path, duet_html: &str, log: &str) {
+    let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    assert!(
+        duet_html.contains("<a id=\"see-also\" href=\"solo/index.html\">"),
+        "the duet links to the solo dancer"
+    );
+    assert!(log.contains("solo dancer (Bailando)"), "{log}");
+    let solo = out.join("solo");
+    let solo_html = std::fs::read_to_string(solo.join("index.html")).unwrap();
+    assert!(solo_html.contains("<a id=\"see-also\" href=\"../index.html\">"));
+    assert!(solo.join("music.wav").is_file() && solo.join("dancer.glb").is_file());
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["solo"], "solo/summary.json");
+    let alone = tmp("demo-solo-alone");
+    let music = assets.join("bailando_demo_music.wav");
+    let o = dance(&["--music", p(&music), "--out", p(&alone)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let tokens = |d: &Path| {
+        read_i64_2d(&d.join("tokens.npy"), Some(2), "tokens")
+            .unwrap()
+            .data
+    };
+    assert_eq!(
+        tokens(&solo),
+        tokens(&alone),
+        "the bundled solo dancer's default dance"
+    );
+    assert!(!std::fs::read_to_string(alone.join("index.html"))
+        .unwrap()
+        .contains("see-also\""));
+
+    let named = tmp("demo-named-model");
+    let o = dance(&["--model", p(&assets.join("demo.duo")), "--out", p(&named)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!named.join("solo").exists(), "--model: the duet only");
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(named.join("summary.json")).unwrap()).unwrap();
+    assert!(s["solo"].is_null());
+}
+
 #[test]
 fn demo_export_matches_the_viewer_positions() {
     let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
@@ -677,9 +722,11 @@ fn demo_export_matches_the_viewer_positions() {
         !e.contains("untrained"),
         "the trained demo is not blamed as untrained: {e}"
     );
-    let shown = viewer_follower(&std::fs::read_to_string(out.join("index.html")).unwrap());
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let shown = viewer_follower(&html);
     let pos = read_f32_2d(&out.join("follower_pos3d.npy"), Some(165), "follower_pos3d").unwrap();
     assert_eq!(shown, pos.data, "the viewer shows follower_pos3d.npy");
+    bare_demo_also_dances_solo(&out, &html, &e);
 
     let from_bvh = GroupErrors::between(&bvh_positions(&out.join("follower.bvh")), &shown);
     let (doc, bin) = glb::parse(

@@ -63,6 +63,14 @@ say "duolando dance ${dance[*]} (follower.glb): gltf-validator, then a three.js 
 (cd "$root" && "$bin/duolando" dance "${dance[@]}" --out "$tmp/dance" 2>"$tmp/dance.log") || { cat "$tmp/dance.log" >&2; exit 1; }
 node "$here/validate_glb.mjs" "$tmp/dance/follower.glb"
 node "$here/glb_test.mjs" --glb "$tmp/dance/follower.glb"
+# The bare demo also wrote the bundled solo dancer into solo/, the pages linked both ways.
+if [ -d "$tmp/dance/solo" ]; then
+  say "the bare demo's solo dancer: gltf-validator on solo/dancer.glb, both pages in headless Chromium"
+  node "$here/validate_glb.mjs" "$tmp/dance/solo/dancer.glb"
+  node "$here/demo_pages_test.mjs" --dir "$tmp/dance"
+elif [ -f "$root/assets/bailando_demo.duo" ]; then
+  echo "the bare demo wrote no solo/ although assets/bailando_demo.duo exists" >&2; cat "$tmp/dance.log" >&2; exit 1
+fi
 say "done"
 
 # The live page of `duolando live` (docs/VIEWER.md, "The live page"): the server streams the demo at 30 fps.

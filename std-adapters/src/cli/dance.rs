@@ -5,9 +5,11 @@
 //! dancers), `leader.bvh`, `follower.bvh`, npy arrays and `summary.json`.
 //! See docs/CLI.md for every flag, default and file.
 //!
-//! With no flags but `--out`, it dances the bundled demo clip with the
-//! bundled demo model (`assets/`, found under the current directory, then
-//! under the workspace the binary was compiled in).
+//! With no `--leader`, `--music` or `--model`, it dances the bundled demo
+//! clip with the bundled demo model (`assets/`, found under the current
+//! directory, then under the workspace the binary was compiled in), and
+//! then the bundled solo dancer (a Bailando model) to its music into
+//! `DIR/solo/`; the two pages link to each other.
 
 pub mod inputs;
 pub mod leader_bvh;
@@ -33,7 +35,7 @@ use crate::skeleton::retarget::measure_skeleton;
 use crate::skeleton::Skeleton;
 use crate::model_file::ModelFile;
 use crate::npy::write_f32;
-use crate::viewer::{write_index_html, ViewerData};
+use crate::viewer::{write_index_html, ViewerData, ViewerLink};
 
 pub use inputs::{find_asset, face_to_face_start, COMPILED_ASSETS, DEFAULT_SEED_DISTANCE_M};
 
@@ -235,9 +237,12 @@ pub fn run(args: Args) -> Result<()> {
         };
         let threads = args.threads.map_or_else(crate::workers::default_threads, |n| n as usize);
         crate::workers::set_threads(threads).with_context(|| format!("starting {threads} threads"))?;
-        return solo::run(&args, &model_path, demo_model, threads, t_all);
+        return solo::run(&args, &model_path, demo_model, threads, t_all, None);
     }
     let demo = args.leader.is_none();
+    // No inputs and no model: the bundled duet, then the bundled solo
+    // dancer (both demos in one command; a missing solo asset skips it).
+    let solo_demo = (demo && args.model.is_none()).then(solo_demo_inputs).flatten();
     let model_path = match &args.model {
         Some(m) => m.clone(),
         None => inputs::require_asset(inputs::DEMO_MODEL, "model")?,
@@ -412,6 +417,7 @@ pub fn run(args: Args) -> Result<()> {
             beats: beats.as_deref(),
             tokens: Some(&g.tokens),
             audio_file: audio_name.as_deref(),
+            see_also: solo_demo.as_ref().map(|_| ViewerLink { href: "solo/index.html", text: "the solo dancer (Bailando) \u{2192}" }),
         },
     )
     .with_context(|| format!("cannot write the viewer into {}", dir.display()))?;
@@ -425,8 +431,12 @@ pub fn run(args: Args) -> Result<()> {
     .map(String::from)
     .collect::<Vec<_>>();
     files.extend(audio_name.clone());
+    if solo_demo.is_some() {
+        files.push(format!("{SOLO_DIR}/"));
+    }
     let summary = json!({
         "model": model_path.display().to_string(),
+        "solo": solo_demo.as_ref().map(|_| format!("{SOLO_DIR}/summary.json")),
         "mode": match &sampled { None => "exact (R)".to_string(), Some(_) => format!("streaming ({mode})") },
         "kernels": crate::simd::describe(),
         "threads": threads,
@@ -478,5 +488,47 @@ pub fn run(args: Args) -> Result<()> {
     );
     eprintln!("wrote {}: {}", dir.display(), files.join(", "));
     eprintln!("open the viewer: {} (double-click it, or `xdg-open {0}` / `chromium {0}`)", page.display());
+    if let Some((model, music)) = solo_demo {
+        let solo_dir = dir.join(SOLO_DIR);
+        eprintln!("\nthe bundled solo dancer (Bailando) to {} into {}:", music.display(), solo_dir.display());
+        let solo_args = Args {
+            leader: None,
+            music: Some(music),
+            model: None,
+            follower_start: None,
+            seed_tokens: None,
+            out: solo_dir,
+            follower_rotations: FollowerRotations::Fitted,
+            true_follower: None,
+            threads: args.threads,
+            topk: None,
+            rng_seed: None,
+            seed: None,
+            audio_scaler: None,
+            scaler: None,
+            motion_seed: None,
+        };
+        let back = ViewerLink { href: "../index.html", text: "\u{2190} the duet (Duolando)" };
+        solo::run(&solo_args, &model, true, threads, Instant::now(), Some(back))?;
+    }
     Ok(())
+}
+
+/// Where the bare demo (`dance --out DIR`) writes its solo dancer: `DIR/solo/`.
+pub const SOLO_DIR: &str = "solo";
+
+/// The bundled solo model and its music, when both are there (else a note:
+/// the duet is the demo's main job, and it runs without them).
+fn solo_demo_inputs() -> Option<(PathBuf, PathBuf)> {
+    match (inputs::find_asset(solo::DEMO_SOLO_MODEL), inputs::find_asset(solo::DEMO_SOLO_MUSIC)) {
+        (Ok(model), Ok(music)) => Some((model, music)),
+        _ => {
+            eprintln!(
+                "      note: assets/{} or assets/{} is missing: the demo's solo dancer is skipped",
+                solo::DEMO_SOLO_MODEL,
+                solo::DEMO_SOLO_MUSIC
+            );
+            None
+        }
+    }
 }

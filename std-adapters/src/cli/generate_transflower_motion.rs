@@ -110,6 +110,7 @@ pub fn write(
             beats: None,
             tokens: None,
             audio_file: None,
+            see_also: None,
         },
     )
     .with_context(|| format!("cannot write the viewer into {}", dir.display()))?;

@@ -55,7 +55,7 @@ commands! {
     Features => features,
     /// Speed of the engine on a full-size model built from seeded random weights (f32/f16/int8).
     Bench => bench,
-    /// Dance with a leader to music: the follower as a browser viewer, glTF, BVH and npy (defaults to the bundled demo).
+    /// Dance with a leader to music, or solo to music alone: a browser viewer, glTF, BVH and npy (defaults to the bundled demos: a duet, then a solo dancer).
     Dance => dance,
     /// Show a `.duo` model's config, sizes, dtypes, scratch memory and latency.
     Inspect => inspect,

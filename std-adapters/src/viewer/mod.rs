@@ -21,6 +21,7 @@
 //!     beats: None,               // (T,) per-frame 0/1
 //!     tokens: None,              // (K, 5) follower tokens
 //!     audio_file: None,          // e.g. Some("music.wav"), a file in `out/`
+//!     see_also: None,            // e.g. a link to solo/index.html
 //! })?;
 //! # Ok::<(), std::io::Error>(())
 //! ```
@@ -77,6 +78,17 @@ pub struct ViewerData<'a> {
     pub tokens: Option<&'a [u32]>,
     /// Audio file name relative to the output directory (a sibling of index.html).
     pub audio_file: Option<&'a str>,
+    /// A link in the page's header to a related page (the bundled demo's
+    /// duet and solo dancer point at each other).
+    pub see_also: Option<ViewerLink<'a>>,
+}
+
+/// A link shown in the viewer's header: `href` a relative path of plain
+/// names (`solo/index.html`, `../index.html`), `text` any text (escaped).
+#[derive(Clone, Copy, Debug)]
+pub struct ViewerLink<'a> {
+    pub href: &'a str,
+    pub text: &'a str,
 }
 
 /// Why [`ViewerData`] cannot be shown. Returned inside an [`io::Error`] of kind
@@ -106,6 +118,8 @@ pub enum ViewerDataError {
     BadAudioName { name: String, why: &'static str },
     #[error("audio_file {path:?} does not exist; write the audio before the page")]
     MissingAudio { path: PathBuf },
+    #[error("see_also href {href:?} must be a relative path of plain names ({why})")]
+    BadLink { href: String, why: &'static str },
 }
 
 impl From<ViewerDataError> for io::Error {
@@ -173,6 +187,34 @@ fn check_audio_name(name: &str) -> Result<(), ViewerDataError> {
     Ok(())
 }
 
+/// A [`ViewerLink::href`]: `/`-separated segments, each `..` or a plain
+/// file name ([`check_audio_name`]'s rules: no scheme, no backslash, no
+/// control character), not absolute, not empty.
+fn check_link(href: &str) -> Result<(), ViewerDataError> {
+    let bad = |why| {
+        Err(ViewerDataError::BadLink {
+            href: href.to_owned(),
+            why,
+        })
+    };
+    if href.is_empty() {
+        return bad("empty");
+    }
+    for seg in href.split('/') {
+        match seg {
+            "" => return bad("absolute or an empty segment"),
+            "." => return bad("a '.' segment"),
+            ".." => {}
+            _ => {
+                if let Err(ViewerDataError::BadAudioName { why, .. }) = check_audio_name(seg) {
+                    return bad(why);
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 impl ViewerData<'_> {
     /// Checks every shape and value the page relies on (does not touch the file system).
     pub fn validate(&self) -> Result<ViewerDims, ViewerDataError> {
@@ -213,6 +255,9 @@ impl ViewerData<'_> {
         };
         if let Some(a) = self.audio_file {
             check_audio_name(a)?;
+        }
+        if let Some(l) = self.see_also {
+            check_link(l.href)?;
         }
         Ok(ViewerDims {
             leader_frames,
@@ -255,6 +300,17 @@ pub fn render_index_html(data: &ViewerData) -> Result<String, ViewerDataError> {
         ),
         None => String::new(),
     };
+    let link = match data.see_also {
+        Some(l) => {
+            let href: Vec<String> = l.href.split('/').map(percent_encode_file_name).collect();
+            format!(
+                "<a id=\"see-also\" href=\"{}\">{}</a>",
+                escape_html(&href.join("/")),
+                escape_html(l.text)
+            )
+        }
+        None => String::new(),
+    };
     let mut out = String::with_capacity(
         TEMPLATE_HTML.len() + VIEWER_JS.len() + VIEWER_CSS.len() + json.len() + 256,
     );
@@ -278,6 +334,10 @@ pub fn render_index_html(data: &ViewerData) -> Result<String, ViewerDataError> {
         }
         "AUDIO" => {
             out.push_str(&audio);
+            true
+        }
+        "LINK" => {
+            out.push_str(&link);
             true
         }
         _ => false,
@@ -478,6 +538,7 @@ mod tests {
             beats: None,
             tokens: None,
             audio_file: None,
+            see_also: None,
         }
     }
 
@@ -601,6 +662,46 @@ mod tests {
     }
 
     #[test]
+    fn see_also_links_are_relative_encoded_and_escaped() {
+        let l = motion(2);
+        let link = |href, text| ViewerData {
+            see_also: Some(ViewerLink { href, text }),
+            ..data(&l, &l)
+        };
+        assert!(!render_index_html(&data(&l, &l))
+            .unwrap()
+            .contains("see-also\""));
+        let html = render_index_html(&link("solo/my dance.html", "a <solo> & more")).unwrap();
+        assert!(
+            html.contains(
+                "<a id=\"see-also\" href=\"solo/my%20dance.html\">a &lt;solo&gt; &amp; more</a>"
+            ),
+            "{}",
+            &html[..600]
+        );
+        assert!(render_index_html(&link("../index.html", "the duet")).is_ok());
+        for href in [
+            "",
+            "/etc/passwd",
+            "a//b",
+            "./x",
+            "javascript:alert(1)",
+            "http://x/y",
+            "a\\b",
+            "solo/\n.html",
+            "solo/",
+        ] {
+            assert!(
+                matches!(
+                    link(href, "x").validate(),
+                    Err(ViewerDataError::BadLink { .. })
+                ),
+                "{href:?}"
+            );
+        }
+    }
+
+    #[test]
     fn title_cannot_break_out_of_the_page() {
         let l = motion(2);
         let title = "</script><script>alert(1)</script><!-- & \u{2028} \"q\" {{DATA}}";
@@ -623,7 +724,13 @@ mod tests {
         );
         // The placeholder inside the title is not expanded a second time.
         assert_eq!(html.matches("\"leader\":").count(), 1);
-        for name in ["{{TITLE}}", "{{STYLE}}", "{{SCRIPT}}", "{{AUDIO}}"] {
+        for name in [
+            "{{TITLE}}",
+            "{{STYLE}}",
+            "{{SCRIPT}}",
+            "{{AUDIO}}",
+            "{{LINK}}",
+        ] {
             assert!(!html.contains(name), "{name} is filled");
         }
     }

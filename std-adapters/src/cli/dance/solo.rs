@@ -28,10 +28,13 @@ use crate::music::bailando::{BEAT_COL, FEATURE_DIM, FRAME_RATE, SAMPLE_RATE};
 use crate::music::extractor::Extractor;
 use crate::npy::{read_f32_2d, write_f32, write_i64};
 use crate::skeleton::smpl24::to_smplx;
-use crate::viewer::{write_index_html, ViewerData};
+use crate::viewer::{write_index_html, ViewerData, ViewerLink};
 
 /// The bundled solo model.
 pub const DEMO_SOLO_MODEL: &str = "bailando_demo.duo";
+/// Its music (the first 20 s of a held-out take, 3840 Hz), which the bare
+/// demo (`dance --out DIR`) dances to after the duet.
+pub const DEMO_SOLO_MUSIC: &str = "bailando_demo_music.wav";
 /// Seed tokens (up, down) of the bundled solo model (tools/train/bailando:
 /// its most common pair after the first 2 s of a training take). The
 /// authors' demo uses (423, 12) for their published model.
@@ -75,7 +78,8 @@ fn load_music(path: &Path, n_music: usize, model: &Path) -> Result<SoloMusic> {
 }
 
 /// The solo dance of `args` (no leader) with the model at `model_path`.
-pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usize, t_all: Instant) -> Result<()> {
+/// `see_also`: a link in the page's header (the bare demo's back to its duet).
+pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usize, t_all: Instant, see_also: Option<ViewerLink<'_>>) -> Result<()> {
     let Some(music_path) = &args.music else { bail!("a solo dance needs --music (an audio file or Bailando features .npy)") };
     for (given, flag) in [
         (args.follower_start.is_some(), "--follower-start"),
@@ -151,7 +155,7 @@ pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usi
     let title = format!("duolando: solo dance to {}", music_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default());
     let page = write_index_html(
         dir,
-        &ViewerData { title: &title, fps: FPS as f32, leader_pos3d: None, follower_pos3d: &smplx, beats: beats.as_deref(), tokens: None, audio_file: audio_name.as_deref() },
+        &ViewerData { title: &title, fps: FPS as f32, leader_pos3d: None, follower_pos3d: &smplx, beats: beats.as_deref(), tokens: None, audio_file: audio_name.as_deref(), see_also },
     )
     .with_context(|| format!("cannot write the viewer into {}", dir.display()))?;
     let distinct = |h: usize| {
