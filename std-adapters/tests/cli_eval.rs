@@ -324,3 +324,106 @@ fn bvh_clips_give_the_features_of_their_npy() {
     assert!(geo <= GEOMETRIC_ABS, "geometric features npy vs BVH: {geo}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A geometric feature that never fires in the real set (a rigid spine:
+/// the chest never moves along belly->chest) but does in the generated one
+/// (the chest jitters 1 cm along the spine) is divided by 1e-10 by the
+/// papers' normalisation and owns FID_g: `eval` keeps that figure, names the
+/// feature (`fid_g_flat_in_real`, a warning) and adds FID_g / Div_g
+/// without it. (Found on the Bailando demo: FID_g 3.3e14, 78.4 without.)
+#[test]
+fn a_geometric_feature_flat_in_the_real_set_is_named_and_left_out_of_a_second_figure() {
+    let dir = tmp("flat");
+    build(&dir);
+    let base = duolando::npy::read_f32_2d(
+        &dir.join("real").join(
+            std::fs::read_dir(dir.join("real"))
+                .unwrap()
+                .map(|e| e.unwrap().file_name())
+                .find(|n| n.to_string_lossy().ends_with("_00.npy"))
+                .unwrap(),
+        ),
+        Some(165),
+        "pose",
+    )
+    .unwrap();
+    let pose = &base.data[..165];
+    let frames = 60;
+    for (sub, jitter) in [("real2", 0.0f32), ("gen2", 0.01)] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+        for k in 0..6 {
+            let mut m = Vec::with_capacity(frames * 165);
+            let speed = 0.002 * (k + 1) as f32;
+            for t in 0..frames {
+                let mut p = pose.to_vec();
+                for j in 0..55 {
+                    p[3 * j] += speed * t as f32;
+                }
+                if t % 2 == 1 {
+                    // The chest (joint 9) along the belly (3) -> chest direction.
+                    let d: Vec<f32> = (0..3).map(|c| pose[27 + c] - pose[9 + c]).collect();
+                    let n = d.iter().map(|v| v * v).sum::<f32>().sqrt();
+                    for c in 0..3 {
+                        p[27 + c] += jitter * d[c] / n;
+                    }
+                }
+                m.extend(p);
+            }
+            duolando::npy::write_f32(
+                &dir.join(sub).join(format!("C{k}_00.npy")),
+                &m,
+                &[frames, 165],
+            )
+            .unwrap();
+        }
+    }
+    let json = dir.join("flat.json");
+    let out = duolando(&[
+        "eval",
+        "--gen",
+        s(&dir.join("gen2")),
+        "--real",
+        s(&dir.join("real2")),
+        "--json",
+        s(&json),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(out.status.success(), "{err}");
+    let v: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let flats = v["fid_g_flat_in_real"]
+        .as_array()
+        .expect("flat geometric features reported");
+    let ids: Vec<u64> = flats
+        .iter()
+        .map(|f| f["feature"].as_u64().unwrap())
+        .collect();
+    assert!(ids.contains(&4) && ids.contains(&5), "{ids:?}");
+    assert!(
+        flats[0]["name"]
+            .as_str()
+            .is_some_and(|n| n.contains("chest")),
+        "{flats:?}"
+    );
+    assert!(
+        v["fid_g"].as_f64().unwrap() > 1e10,
+        "the papers' figure is kept: {}",
+        v["fid_g"]
+    );
+    let kept = v["fid_g_without_flat"].as_f64().unwrap();
+    assert!(kept.is_finite() && kept < 1e6, "{kept}");
+    assert!(
+        err.contains("warning: FID_g/Div_g") && err.contains("fid_g_without_flat"),
+        "{err}"
+    );
+    assert!(v["warnings"].as_array().is_some_and(|w| !w.is_empty()));
+    // The same set against itself: nothing flat, no warning.
+    let out = duolando(&[
+        "eval",
+        "--gen",
+        s(&dir.join("real2")),
+        "--real",
+        s(&dir.join("real2")),
+    ]);
+    assert!(out.status.success());
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("warning"));
+}

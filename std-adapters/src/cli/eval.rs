@@ -39,6 +39,52 @@ fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
+/// FID_`tag`'s features that are constant over the real set but not over
+/// the generated one ([`fid::flat_in_real`]): the authors' normalisation
+/// divides them by 1e-10, so they own the FID and the Div. Names them
+/// (`fid_<tag>_flat_in_real`) and adds the figures without them
+/// (`fid_<tag>_without_flat`, `div_<tag>_without_flat`: ours, not the
+/// papers'), with a warning.
+fn flat_features(tag: &str, r: &Features, g: &Features, out: &mut Map<String, Value>, warnings: &mut Vec<String>) -> Result<()> {
+    let flats = fid::flat_in_real(r, g).with_context(|| format!("FID_{tag}"))?;
+    if flats.is_empty() {
+        return Ok(());
+    }
+    let name = |i: usize| match tag {
+        "g" => crate::eval::manual::feature_name(i),
+        _ => None,
+    };
+    let drop: Vec<usize> = flats.iter().map(|f| f.index).collect();
+    let kept = fid::scores(&fid::without(r, &drop), &fid::without(g, &drop)).with_context(|| format!("FID_{tag} without its flat features"))?;
+    out.insert(
+        format!("fid_{tag}_flat_in_real"),
+        json!(flats
+            .iter()
+            .map(|f| json!({"feature": f.index, "name": name(f.index), "real": f.real, "gen_mean": f.gen_mean, "gen_std": f.gen_std}))
+            .collect::<Vec<_>>()),
+    );
+    out.insert(format!("fid_{tag}_without_flat"), json!(kept.fid));
+    out.insert(format!("div_{tag}_without_flat"), json!(kept.div_gen));
+    out.insert(format!("div_{tag}_real_without_flat"), json!(kept.div_real));
+    let listed: Vec<String> = flats
+        .iter()
+        .map(|f| match name(f.index) {
+            Some(n) => format!("{} ({n}: {} in every real clip, generated mean {:.3e})", f.index, f.real, f.gen_mean),
+            None => format!("{} ({} in every real clip, generated mean {:.3e})", f.index, f.real, f.gen_mean),
+        })
+        .collect();
+    warnings.push(format!(
+        "FID_{tag}/Div_{tag}: feature(s) {} are constant over the real set and vary over the generated one; \
+         the papers' normalisation divides them by 1e-10, so they own fid_{tag} and div_{tag} (the authors' code gives the same). \
+         Without them (ours, not the papers'): fid_{tag}_without_flat {:.3}, div_{tag}_without_flat {:.3} (real {:.3})",
+        listed.join("; "),
+        kept.fid,
+        kept.div_gen,
+        kept.div_real
+    ));
+    Ok(())
+}
+
 /// Runs `duolando eval`.
 pub fn run(args: Args) -> Result<()> {
     let real = match (&args.real, &args.real_stats) {
@@ -56,22 +102,27 @@ pub fn run(args: Args) -> Result<()> {
     let (gen, extra) = sets::compute(&args.gen, args.music.as_deref(), true)?;
     let mut out = Map::new();
     let mut notes = Vec::new();
+    let mut warnings = Vec::new();
     out.insert("clips_gen".into(), json!(gen.clips.len()));
     out.insert("duets_gen".into(), json!(gen.duets.len()));
     if let Some(real) = &real {
         out.insert("clips_real".into(), json!(real.clips.len()));
         out.insert("duets_real".into(), json!(real.duets.len()));
         for (tag, r, g) in [("k", &real.kinetic, &gen.kinetic), ("g", &real.geometric, &gen.geometric)] {
-            let s = fid::scores(&Features::from_f32(r), &Features::from_f32(g)).with_context(|| format!("FID_{tag}"))?;
+            let (r, g) = (Features::from_f32(r), Features::from_f32(g));
+            let s = fid::scores(&r, &g).with_context(|| format!("FID_{tag}"))?;
             out.insert(format!("fid_{tag}"), json!(s.fid));
             out.insert(format!("div_{tag}"), json!(s.div_gen));
             out.insert(format!("div_{tag}_real"), json!(s.div_real));
+            flat_features(tag, &r, &g, &mut out, &mut warnings)?;
         }
         if real.cd.len() >= 2 && gen.cd.len() >= 2 {
-            let s = fid::scores(&Features::from_f32(&real.cd), &Features::from_f32(&gen.cd)).context("FID_cd")?;
+            let (r, g) = (Features::from_f32(&real.cd), Features::from_f32(&gen.cd));
+            let s = fid::scores(&r, &g).context("FID_cd")?;
             out.insert("fid_cd".into(), json!(s.fid));
             out.insert("div_cd".into(), json!(s.div_gen));
             out.insert("div_cd_real".into(), json!(s.div_real));
+            flat_features("cd", &r, &g, &mut out, &mut warnings)?;
         } else {
             notes.push(format!(
                 "FID_cd/Div_cd need two duets (<name>_01 leaders) in each set: real {}, generated {}",
@@ -111,9 +162,13 @@ pub fn run(args: Args) -> Result<()> {
     for n in &notes {
         eprintln!("not computed: {n}");
     }
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     if let Some(path) = &args.json {
         let mut doc = out.clone();
         doc.insert("not_computed".into(), json!(notes));
+        doc.insert("warnings".into(), json!(warnings));
         std::fs::write(path, serde_json::to_string_pretty(&Value::Object(doc))?)
             .with_context(|| format!("cannot write {}", path.display()))?;
     }

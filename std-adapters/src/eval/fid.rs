@@ -261,6 +261,59 @@ pub fn diversity(set: &Features) -> f64 {
     total / ((n * n - n) as f64 / 2.0)
 }
 
+/// A feature that does not vary over the real set but does over (or
+/// differs in) the generated one: the authors' normalisation divides it by
+/// [`STD_EPS`], so its generated values reach ~1e7-1e10 and the FID is
+/// that feature's alone (the Bailando demo's FID_g of 3e14:
+/// docs/DEMO_MODEL.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Flat {
+    /// Column of the feature vector.
+    pub index: usize,
+    /// Its value in every real clip.
+    pub real: f64,
+    /// Its mean and population standard deviation over the generated clips.
+    pub gen_mean: f64,
+    pub gen_std: f64,
+}
+
+/// The features whose real standard deviation is 0 while some generated
+/// clip holds another value (see [`Flat`]), in column order. Both sets as
+/// [`scores`] checks them.
+pub fn flat_in_real(real: &Features, gen: &Features) -> Result<Vec<Flat>, EvalError> {
+    let d = real.width();
+    check(real, "real", d)?;
+    check(gen, "generated", d)?;
+    let (rm, rs) = mean_std(real);
+    let (gm, gs) = mean_std(gen);
+    Ok((0..d)
+        .filter(|&i| rs[i] == 0.0 && gen.rows.iter().any(|r| r[i] != rm[i]))
+        .map(|i| Flat {
+            index: i,
+            real: rm[i],
+            gen_mean: gm[i],
+            gen_std: gs[i],
+        })
+        .collect())
+}
+
+/// Both sets without the columns `drop` (sorted or not; out of range ignored).
+pub fn without(set: &Features, drop: &[usize]) -> Features {
+    Features {
+        rows: set
+            .rows
+            .iter()
+            .map(|r| {
+                r.iter()
+                    .enumerate()
+                    .filter(|(i, _)| !drop.contains(i))
+                    .map(|(_, v)| *v)
+                    .collect()
+            })
+            .collect(),
+    }
+}
+
 /// FID and both diversities, with the real set's normalisation.
 pub fn scores(real: &Features, gen: &Features) -> Result<Scores, EvalError> {
     let d = real.width();
@@ -300,6 +353,34 @@ mod tests {
         let s = scores(&f, &f).unwrap();
         assert!(s.fid.abs() < 1e-9, "{}", s.fid);
         assert_eq!(s.div_gen, s.div_real);
+    }
+
+    /// A feature constant in the real set that moves in the generated set
+    /// owns the FID (divided by 1e-10, as the authors normalise); it is
+    /// found by name, and the FID without it is the FID of the other
+    /// columns. A feature constant in both sets is not reported.
+    #[test]
+    fn a_feature_flat_in_the_real_set_is_found_and_can_be_left_out() {
+        let real = Features::new(
+            (0..8)
+                .map(|i| vec![i as f64, 0.0, (i % 3) as f64, 0.5])
+                .collect(),
+        );
+        let gen = Features::new(
+            (0..6)
+                .map(|i| vec![i as f64 + 0.5, 0.001 * (i % 2) as f64, (i % 2) as f64, 0.5])
+                .collect(),
+        );
+        let flats = flat_in_real(&real, &gen).unwrap();
+        assert_eq!(flats.len(), 1, "{flats:?}");
+        assert_eq!((flats[0].index, flats[0].real), (1, 0.0));
+        assert!((flats[0].gen_mean - 0.0005).abs() < 1e-12);
+        let all = scores(&real, &gen).unwrap();
+        let kept = scores(&without(&real, &[1]), &without(&gen, &[1])).unwrap();
+        assert!(all.fid > 1e10, "the flat feature owns the FID: {}", all.fid);
+        assert!(kept.fid > 0.0 && kept.fid < 100.0, "{}", kept.fid);
+        // Nothing flat: nothing reported.
+        assert!(flat_in_real(&real, &real).unwrap().is_empty());
     }
 
     #[test]

@@ -133,6 +133,91 @@ const TESTS: [Test; DIM] = [
     Fast(J(ROOT), 2.3, Humerus),
 ];
 
+/// What geometric feature `i` tests, in words (`None` past [`DIM`]): the
+/// test and its points as the authors' table names them, e.g. feature 4,
+/// "velocity of chest relative to belly along belly->chest > 1.8
+/// humerus/s" (the table's fourth point, never read, is left out).
+pub fn feature_name(i: usize) -> Option<String> {
+    let p = |p: P| -> String {
+        match p {
+            J(j) => match j {
+                ROOT => "root",
+                LHIP => "lhip",
+                RHIP => "rhip",
+                BELLY => "belly",
+                LKNEE => "lknee",
+                RKNEE => "rknee",
+                LANKLE => "lankle",
+                RANKLE => "rankle",
+                CHEST => "chest",
+                LTOES => "ltoes",
+                RTOES => "rtoes",
+                NECK => "neck",
+                LSHOULDER => "lshoulder",
+                RSHOULDER => "rshoulder",
+                LELBOW => "lelbow",
+                RELBOW => "relbow",
+                LWRIST => "lwrist",
+                RWRIST => "rwrist",
+                _ => "joint",
+            }
+            .to_string(),
+            P::Zero => "origin".into(),
+            P::YUp => "+y".into(),
+            P::YDown => "-y".into(),
+            P::Floor => "floor".into(),
+        }
+    };
+    let u = |u: U| match u {
+        Humerus => "humerus",
+        Shoulders => "shoulder width",
+        Hips => "hip width",
+    };
+    Some(match *TESTS.get(i)? {
+        Along(a, b, c, _, k, un) => format!(
+            "velocity of {} relative to {} along {}->{} > {k} {}/s",
+            p(c),
+            p(a),
+            p(a),
+            p(b),
+            u(un)
+        ),
+        AlongNormal(a, b, c, d, k, un) => format!(
+            "velocity of {} relative to {} along the normal of ({}, {}, {}) > {k} {}/s",
+            p(d),
+            p(a),
+            p(a),
+            p(b),
+            p(c),
+            u(un)
+        ),
+        Plane(a, b, c, d, k, un) => format!(
+            "{} in front of the plane ({}, {}, {}) by > {k} {}",
+            p(d),
+            p(a),
+            p(b),
+            p(c),
+            u(un)
+        ),
+        NormalPlane(a, b, c, d, k, un) => format!(
+            "{} past the plane through {} normal to {}->{} by > {k} {}",
+            p(d),
+            p(c),
+            p(a),
+            p(b),
+            u(un)
+        ),
+        Angle(a, b, c, d, lo, hi) => format!(
+            "angle of {}->{} and {}->{} in ({lo}, {hi}) degrees",
+            p(a),
+            p(b),
+            p(c),
+            p(d)
+        ),
+        Fast(a, k, un) => format!("speed of {} > {k} {}/s", p(a), u(un)),
+    })
+}
+
 struct Units {
     humerus: f64,
     shoulders: f64,
@@ -244,6 +329,20 @@ mod tests {
         assert!((u.humerus - 0.2560).abs() < 1e-3, "{}", u.humerus);
         assert!((u.shoulders - 0.3908).abs() < 1e-3, "{}", u.shoulders);
         assert!((u.hips - 0.1192).abs() < 1e-3, "{}", u.hips);
+    }
+
+    #[test]
+    fn features_are_named_after_their_tests() {
+        assert_eq!(
+            feature_name(4).as_deref(),
+            Some("velocity of chest relative to belly along belly->chest > 1.8 humerus/s")
+        );
+        assert_eq!(
+            feature_name(12).as_deref(),
+            Some("speed of rwrist > 2.5 humerus/s")
+        );
+        assert!((0..DIM).all(|i| feature_name(i).is_some()));
+        assert_eq!(feature_name(DIM), None);
     }
 
     #[test]
