@@ -327,3 +327,61 @@ fn compare_bailando_models() {
         assert!(e.contains(want), "{e}");
     }
 }
+
+/// `compare` reports the papers' per-clip metrics of both runs (BAS
+/// against the music's beats, BED against the leader, the foot-skating
+/// ratio) over the frames both runs have: each equals the metric computed
+/// on what `generate` writes for that run (R: `--mode exact`; S: the same
+/// budget without a drain), cut to those frames.
+#[test]
+fn compare_reports_the_papers_clip_metrics_of_s_beside_r() {
+    use duolando::eval::{bas, bed, footskate};
+    let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    if !assets.join("demo.duo").is_file() {
+        eprintln!("skipped: no assets/demo.duo");
+        return;
+    }
+    let dir = tmp("metrics");
+    let json = dir.join("cmp.json");
+    let o = duolando(&["compare".into(), "--json".into(), s(&json)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let frames = v["joint_err_frames"].as_u64().unwrap() as usize;
+    let leader = read_f32_2d(&assets.join("demo_leader_pos3d.npy"), Some(165), "leader").unwrap();
+    let music = read_f32_2d(&assets.join("demo_music.npy"), Some(54), "music").unwrap();
+    for (who, mode) in [("r", "exact"), ("s", "streaming")] {
+        let out = dir.join(mode);
+        let mut args: Vec<String> = ["generate", "--mode", mode].map(String::from).to_vec();
+        for (flag, file) in [
+            ("--model", "demo.duo"),
+            ("--leader", "demo_leader_pos3d.npy"),
+            ("--music", "demo_music.npy"),
+            ("--follower-start", "demo_follower_start.npy"),
+        ] {
+            args.push(flag.into());
+            args.push(s(&assets.join(file)));
+        }
+        if mode == "streaming" {
+            args.push("--no-drain".into());
+        }
+        args.extend(["--out".into(), s(&out)]);
+        let o = duolando(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let f = read_f32_2d(&out.join("follower_pos3d.npy"), Some(165), "follower").unwrap();
+        assert!(f.rows >= frames, "{who}: {} frames", f.rows);
+        let (f, l) = (&f.data[..frames * 165], &leader.data[..frames * 165]);
+        let want = [
+            ("bas", bas::clip_score(f, &music.data, 54).unwrap()),
+            ("bed", bed::duet_score(f, l).unwrap()),
+            (
+                "fsr",
+                footskate::ratio(&[footskate::clip_counts(f).unwrap()]),
+            ),
+        ];
+        for (m, w) in want {
+            let got = v[format!("{who}_{m}")].as_f64().unwrap_or(f64::NAN);
+            assert_eq!(got, w, "{who}_{m}");
+        }
+    }
+    assert!(v.get("r_metrics_not_computed").is_none(), "{v}");
+}

@@ -68,6 +68,33 @@ fn agreement_fields(out: &mut Map<String, Value>, prefix: &str, a: &TokenAgreeme
     }
 }
 
+/// The papers' per-clip metrics of one run's follower (docs/EVAL.md), as
+/// `<who>_bas` (beat align score against the music's beat column),
+/// `<who>_bed` (beat echo degree against the leader of the same frames)
+/// and `<who>_fsr` (foot-skating ratio, percent); a metric that cannot be
+/// computed on this clip (no beats, too short, not 54 music columns) is
+/// null and named in `<who>_metrics_not_computed`. FID and Div compare
+/// sets, not one clip: `eval` on folders (docs/EVAL.md). Over the first
+/// `frames` frames (the two runs' common length: S without a drain stops
+/// earlier than R).
+#[allow(clippy::too_many_arguments)]
+fn clip_metrics(out: &mut Map<String, Value>, who: &str, frames: usize, follower: &[f32], leader: &[f32], music: &[f32], music_cols: usize) {
+    use crate::eval::{bas, bed, footskate};
+    let frames = frames.min(follower.len() / POSE_DIM).min(leader.len() / POSE_DIM);
+    let (f, l) = (&follower[..frames * POSE_DIM], &leader[..frames * POSE_DIM]);
+    let mut missing = Vec::new();
+    let mut put = |name: &str, v: Result<f64, crate::eval::EvalError>| {
+        let v = v.map_err(|e| missing.push(format!("{name}: {e}"))).ok();
+        out.insert(format!("{who}_{name}"), json!(v));
+    };
+    put("bas", bas::clip_score(f, music, music_cols));
+    put("bed", bed::duet_score(f, l));
+    put("fsr", footskate::clip_counts(f).map(|c| footskate::ratio(&[c])));
+    if !missing.is_empty() {
+        out.insert(format!("{who}_metrics_not_computed"), json!(missing));
+    }
+}
+
 fn open(path: &PathBuf) -> Result<ModelFile> {
     ModelFile::open(path).with_context(|| format!("cannot open the model {}", path.display()))
 }
@@ -142,6 +169,9 @@ pub fn run(args: Args) -> Result<()> {
             out.insert("free_run_steps".into(), json!(fr.rows));
             out.insert("joint_err_frames".into(), json!(frames));
             out.insert("arena_bytes".into(), json!(free.arena_bytes));
+            // Both over the frames both runs have (`joint_err_frames`).
+            clip_metrics(&mut out, "r", frames, &r.follower_pos3d, leader, &music.data, music.cols);
+            clip_metrics(&mut out, "s", frames, &free.pos, leader, &music.data, music.cols);
             println!("streaming (S) vs exact (R), {} on {} ({} frames)", model_path.display(), leader_path.display(), t4);
         }
         Some(b_path) => {
@@ -176,6 +206,8 @@ pub fn run(args: Args) -> Result<()> {
             out.insert("max_joint_err_mm".into(), json!(max));
             out.insert("free_run_steps".into(), json!(fr.rows));
             out.insert("joint_err_frames".into(), json!(frames));
+            clip_metrics(&mut out, "a", frames, &ga.follower_pos3d, leader, &music.data, music.cols);
+            clip_metrics(&mut out, "b", frames, &gb.follower_pos3d, leader, &music.data, music.cols);
             println!("{} vs {} ({:?} mode) on {} ({} frames)", model_path.display(), b_path.display(), args.mode, leader_path.display(), t4);
         }
     }
