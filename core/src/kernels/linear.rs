@@ -926,8 +926,8 @@ fn q8_panel_packed<W: Q8Source>(
         // per tile on the 8-row kernel.
         let on_pair = prepared
             && a.unsigned()
-            && pair_rows(a, p, done, n_rows, n_in, rest, |i, t| {
-                put_row(&mut y, e, i, t0, cols, t)
+            && pair_rows(a, p, done, n_rows, n_in, rest, |i0, rows| {
+                put_rows(&mut y, e, i0, t0, cols, rows)
             });
         if !on_pair {
             for (tt, ntt) in [(t0, nt), (t1, nt1)] {
@@ -956,6 +956,36 @@ const AMX_MIN_ROWS: usize = 16;
 /// the 16-row kernel saves (a streaming step's panels of 1-10 rows lost 2-8
 /// points of peak: docs/PERFORMANCE.md).
 const PAIR_MIN_ROWS: usize = 16;
+
+/// `y[i0 + m][t0..t0 + nt]` = the epilogue of `rows[m][..nt]`, every row of
+/// a tile pair call at once ([`simd::bias_act_rows`]: the rows' GELUs
+/// interleaved), then copied out: the values [`put_row`] gives, bit for bit.
+#[inline]
+fn put_rows(
+    y: &mut Cols<'_>,
+    e: Epilogue<'_>,
+    i0: usize,
+    t0: usize,
+    nt: usize,
+    rows: &mut [[f32; simd::AMX_COLS]],
+) {
+    const C: usize = simd::AMX_COLS;
+    let nt = nt.min(C);
+    // The bias of the call's columns (0 past them: those lanes are dropped).
+    let mut b = [0f32; C];
+    let bias = e.bias.map(|bias| {
+        b[..nt].copy_from_slice(&bias[t0..t0 + nt]);
+        &b
+    });
+    simd::bias_act_rows(rows, bias, e.gelu);
+    for (m, r) in rows.iter().enumerate() {
+        let seg = y.seg(i0 + m, t0, t0 + nt);
+        match <&mut [f32; C]>::try_from(&mut *seg) {
+            Ok(full) => *full = *r,
+            Err(_) => seg.copy_from_slice(&r[..nt]),
+        }
+    }
+}
 
 /// `y[i][t0..t0 + nt]` = the epilogue of `t[..nt]` ([`Epilogue::put`]).
 #[inline]
@@ -1097,7 +1127,7 @@ fn pair_rows(
     r1: usize,
     n_in: usize,
     ahead: &[u8],
-    mut put: impl FnMut(usize, &[f32; simd::AMX_COLS]),
+    mut put: impl FnMut(usize, &mut [[f32; simd::AMX_COLS]]),
 ) -> bool {
     // The kernel reads the panel's call groups: all of its rows.
     if !p.grouped || r0 != 0 {
@@ -1110,11 +1140,7 @@ fn pair_rows(
         macro_rules! run {
             ($m:literal) => {{
                 match simd::gemm_q8_pair::<$m>(a, q, d, c, n_in, share) {
-                    Some(t) if ok => {
-                        for (m, r) in t.iter().enumerate() {
-                            put(i0 + m, r);
-                        }
-                    }
+                    Some(mut t) if ok => put(i0, &mut t),
                     _ => ok = false,
                 }
             }};

@@ -1508,6 +1508,59 @@ fn gelu_matches_scalar_twin_and_libm() {
     }
 }
 
+/// `bias_act_rows` (AVX-512: four rows' GELUs interleaved; the dispatcher
+/// under every ISA this CPU runs) equals the twin row by row, bit for bit,
+/// for 0-9 rows, with and without a bias and GELU.
+#[test]
+#[allow(unsafe_code)]
+fn bias_act_rows_equal_the_twin_row_by_row() {
+    let mut r = Rng(0xb1a6);
+    let xs: std::vec::Vec<f32> = exp_inputs().into_iter().filter(|v| v.is_finite()).collect();
+    let b: [f32; 16] = core::array::from_fn(|_| r.vec(1)[0]);
+    for n in 0..=9 {
+        let rows: std::vec::Vec<[f32; 16]> = (0..n)
+            .map(|m| core::array::from_fn(|j| xs[(37 * m + 5 * j) % xs.len()]))
+            .collect();
+        for (bias, gelu) in [
+            (None, false),
+            (Some(&b), false),
+            (Some(&b), true),
+            (None, true),
+        ] {
+            let want: std::vec::Vec<[f32; 16]> = rows
+                .iter()
+                .map(|t| {
+                    let mut y = [0.0f32; 16];
+                    scalar::bias_act(t, bias.map(|b| &b[..]), gelu, &mut y);
+                    y
+                })
+                .collect();
+            let bits =
+                |v: &[[f32; 16]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let mut got = rows.clone();
+            super::bias_act_rows(&mut got, bias, gelu);
+            assert_eq!(
+                bits(&got),
+                bits(&want),
+                "dispatch rows={n} bias={} gelu={gelu}",
+                bias.is_some()
+            );
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx512f") {
+                let mut got = rows.clone();
+                // SAFETY: avx512f detected.
+                unsafe { super::x86::bias_act_rows_512(&mut got, bias, gelu) };
+                assert_eq!(
+                    bits(&got),
+                    bits(&want),
+                    "avx512 rows={n} bias={} gelu={gelu}",
+                    bias.is_some()
+                );
+            }
+        }
+    }
+}
+
 /// The GEMM epilogue `bias_act` (AVX-512: the sum and GELU on 16 lanes,
 /// masked tails; the dispatcher on every variant this CPU runs) is
 /// bit-identical to its twin, with and without a bias and GELU, and

@@ -2858,6 +2858,41 @@ pub unsafe fn gelu_inplace_512(x: &mut [f32]) {
     }
 }
 
+/// See [`super::bias_act_rows`]: four rows' sums and [`gelu16`]s at a
+/// time (four independent chains: the divisions and polynomials of one
+/// overlap the others'), each the twin's operations, so bit-identical to
+/// it.
+///
+/// # Safety
+/// The CPU must support avx512f.
+#[target_feature(enable = "avx512f")]
+pub unsafe fn bias_act_rows_512(rows: &mut [[f32; 16]], b: Option<&[f32; 16]>, gelu: bool) {
+    // SAFETY: b holds 16 floats.
+    let bv = b.map_or(_mm512_setzero_ps(), |b| unsafe {
+        _mm512_loadu_ps(b.as_ptr())
+    });
+    let mut quads = rows.chunks_exact_mut(4);
+    for q in &mut quads {
+        // SAFETY: each row holds 16 floats.
+        let mut v: [__m512; 4] =
+            core::array::from_fn(|m| _mm512_add_ps(bv, unsafe { _mm512_loadu_ps(q[m].as_ptr()) }));
+        if gelu {
+            // Unrolled by hand: four independent chains in one block.
+            v = [gelu16(v[0]), gelu16(v[1]), gelu16(v[2]), gelu16(v[3])];
+        }
+        for (r, v) in q.iter_mut().zip(v) {
+            // SAFETY: r holds 16 floats.
+            unsafe { _mm512_storeu_ps(r.as_mut_ptr(), v) };
+        }
+    }
+    for r in quads.into_remainder() {
+        // SAFETY: r holds 16 floats.
+        let v = _mm512_add_ps(bv, unsafe { _mm512_loadu_ps(r.as_ptr()) });
+        // SAFETY: as above.
+        unsafe { _mm512_storeu_ps(r.as_mut_ptr(), if gelu { gelu16(v) } else { v }) };
+    }
+}
+
 /// See [`super::bias_act`]: 16 lanes at a time, the tail masked; the sum
 /// and [`gelu16`] as the twin's operations, so bit-identical to it.
 ///
