@@ -427,3 +427,51 @@ fn a_geometric_feature_flat_in_the_real_set_is_named_and_left_out_of_a_second_fi
     assert!(out.status.success());
     assert!(!String::from_utf8_lossy(&out.stderr).contains("warning"));
 }
+
+/// The demo models' bundled reference statistics (assets/) load with
+/// --real-stats and score a set: the recipe's generated clips against each,
+/// every FID and Div finite (20 Duolando duets; 26 Bailando solo dancers).
+#[test]
+fn the_bundled_reference_statistics_score_a_set() {
+    let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    let dir = tmp("bundled");
+    build(&dir);
+    for (file, clips, duets) in [
+        ("demo_real_stats.json", 20, 20),
+        ("bailando_demo_real_stats.json", 26, 0),
+    ] {
+        let stats = assets.join(file);
+        let doc: Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+        assert_eq!(doc["clips"].as_array().unwrap().len(), clips, "{file}");
+        assert_eq!(doc["duets"].as_array().unwrap().len(), duets, "{file}");
+        let json = dir.join(format!("{file}.out.json"));
+        let v = run_json(
+            &[
+                "eval",
+                "--gen",
+                &s(&dir.join("gen")),
+                "--real-stats",
+                &s(&stats),
+                "--json",
+                &s(&json),
+            ],
+            &json,
+        );
+        assert_eq!(v["clips_real"].as_u64(), Some(clips as u64), "{file}");
+        for k in [
+            "fid_k",
+            "fid_g",
+            "div_k",
+            "div_g",
+            "div_k_real",
+            "div_g_real",
+        ] {
+            assert!(
+                v[k].as_f64().is_some_and(f64::is_finite),
+                "{file}: {k} = {}",
+                v[k]
+            );
+        }
+        assert_eq!(v["fid_cd"].is_number(), duets >= 2, "{file}");
+    }
+}

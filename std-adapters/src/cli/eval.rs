@@ -131,7 +131,11 @@ pub fn run(args: Args) -> Result<()> {
             ));
         }
     } else {
-        notes.push("FID and Div need --real DIR or --real-stats FILE".to_string());
+        notes.push(
+            "FID and Div need --real DIR or --real-stats FILE (the demo models' held-out dances: \
+             assets/demo_real_stats.json, assets/bailando_demo_real_stats.json)"
+                .to_string(),
+        );
     }
     match (&extra.bas_error, mean(&extra.bas)) {
         (Some(e), _) => notes.push(format!("BAS: {e}")),

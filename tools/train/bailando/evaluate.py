@@ -14,6 +14,8 @@ the head; the metrics' SMPL-24 view (`smpl24_rooted`: the mean of the five finge
 the SMPL-24 dance itself. Real set: both dancers of each held-out take, the leader renamed
 <Genre>_<CC>_<TT+50> (music copied under that name for BAS). BAS uses the synth's (T, 54) music
 features (beat column 53: the synth's beat grid, the beats the audio's clicks were rendered on).
+The real set's features are saved as <out>/real_stats.json (`duolando eval --save-real`): the
+bundled assets/bailando_demo_real_stats.json is that file of the demo model's evaluation.
 Also: the reference figures of training dances against the same real set (what a perfect
 copy of the training distribution scores) and of the VQ-VAE round trip of the held-out dances.
 """
@@ -66,8 +68,8 @@ def foot_stats(d72):
     return float(v[low].mean()) if low.any() else 0.0
 
 
-def eval_dir(binary, gen, real, music, js):
-    cmd = [binary, "eval", "--gen", gen, "--real", real, "--music", music, "--json", js]
+def eval_dir(binary, gen, real, music, js, extra=()):
+    cmd = [binary, "eval", "--gen", gen, "--real", real, "--music", music, "--json", js, *extra]
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode:
         raise RuntimeError(r.stderr)
@@ -171,7 +173,8 @@ def main():
         np.save(os.path.join(dirs["train"], n[:-3] + "_00.npy"), to_smplx30(d))
         shutil.copy(os.path.join(args.synth, "music", "feature", "train", n[:-3] + ".npy"), os.path.join(dirs["music"], n[:-3] + ".npy"))
     res["eval_train_vs_real"], _ = eval_dir(args.bin, dirs["train"], dirs["real"], dirs["music"], os.path.join(args.out, "eval_train.json"))
-    res["eval_real_bas"], _ = eval_dir(args.bin, dirs["real"], dirs["real"], dirs["music"], os.path.join(args.out, "eval_real.json"))
+    res["eval_real_bas"], _ = eval_dir(args.bin, dirs["real"], dirs["real"], dirs["music"], os.path.join(args.out, "eval_real.json"),
+                                       ["--save-real", os.path.join(args.out, "real_stats.json")])
     if args.vqvae:
         import torch
         auth = C.load_authors(args.checkout)
