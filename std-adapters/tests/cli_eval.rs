@@ -449,11 +449,11 @@ fn the_bundled_reference_statistics_score_a_set() {
             &[
                 "eval",
                 "--gen",
-                &s(&dir.join("gen")),
+                s(&dir.join("gen")),
                 "--real-stats",
-                &s(&stats),
+                s(&stats),
                 "--json",
-                &s(&json),
+                s(&json),
             ],
             &json,
         );
