@@ -360,6 +360,13 @@ trait Q8Source: RowMatrix {
     }
     /// The stored bytes of rows `r0..r1` (for [`simd::prefetch`]).
     fn stored_rows(&self, r0: usize, r1: usize) -> &[u8];
+    /// The packed tile of rows `t0..t0 + 8` as stored, where the source
+    /// stores its tiles packed (no buffer: two tiles can be read at once);
+    /// None otherwise.
+    #[inline]
+    fn stored_tile(&self, _t0: usize) -> Option<simd::PackedQ8<'_>> {
+        None
+    }
 }
 
 impl Q8Source for Q8Rows<'_> {
@@ -446,6 +453,10 @@ impl Q8Source for X8Rows<'_> {
     #[inline]
     fn stored_rows(&self, r0: usize, r1: usize) -> &[u8] {
         self.rows_bytes(r0, r1)
+    }
+    #[inline]
+    fn stored_tile(&self, t0: usize) -> Option<simd::PackedQ8<'_>> {
+        Some(self.group(t0 / Q8X8_ROWS))
     }
 }
 
@@ -879,8 +890,17 @@ fn q8_panel_packed<W: Q8Source>(
     let mut t0 = y.lo();
     while t0 < y.hi() {
         let nt = R.min(y.hi() - t0);
+        // The second tile (or, at the end, this one again as a second operand whose results are dropped).
+        let t1 = t0 + R;
+        let nt1 = if t1 < y.hi() { R.min(y.hi() - t1) } else { 0 };
+        // Two tiles stored packed: laid out together in one pass.
+        let second = if nt1 > 0 { w.stored_tile(t1) } else { None };
+        let both = match (pair.as_mut(), w.stored_tile(t0), second) {
+            (Some(a), Some(s0), Some(s1)) => Some(a.prepare_both(s0, s1)),
+            _ => None,
+        };
         let tile = w.packed_tile(t0, nb, &mut pack, &mut buf);
-        let paired = pair.as_mut().is_some_and(|a| a.prepare(0, tile));
+        let paired = both.unwrap_or_else(|| pair.as_mut().is_some_and(|a| a.prepare(0, tile)));
         let a = match pair.as_mut() {
             Some(a) if paired => a,
             _ => {
@@ -901,13 +921,10 @@ fn q8_panel_packed<W: Q8Source>(
                 continue;
             }
         };
-        // The second tile (or this one again as a second operand whose results are dropped).
-        let t1 = t0 + R;
-        let nt1 = if t1 < y.hi() { R.min(y.hi() - t1) } else { 0 };
-        let prepared = if nt1 > 0 {
-            a.prepare(1, w.packed_tile(t1, nb, &mut pack, &mut buf))
-        } else {
-            a.prepare(1, tile)
+        let prepared = match both {
+            Some(ok) => ok,
+            None if nt1 > 0 => a.prepare(1, w.packed_tile(t1, nb, &mut pack, &mut buf)),
+            None => a.prepare(1, tile),
         };
         // The next pair's weights stream in (into L2) while this pair is multiplied.
         let ahead = w.stored_rows(t0 + 2 * R, (t0 + 4 * R).min(y.hi()));

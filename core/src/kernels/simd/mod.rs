@@ -1333,6 +1333,10 @@ mod no_amx {
             false
         }
         /// Always false.
+        pub fn prepare_both(&mut self, _: super::PackedQ8<'_>, _: super::PackedQ8<'_>) -> bool {
+            false
+        }
+        /// Always false.
         pub fn unsigned(&self) -> bool {
             false
         }

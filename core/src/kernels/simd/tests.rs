@@ -3648,6 +3648,16 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                 for (t, tl) in tile.iter().enumerate() {
                     assert!(prepare(kind, p, t, *tl, unsigned), "nb={nb}");
                 }
+                if kind == 0 {
+                    // Both tiles in one pass (`prepare_both_raw`): the same operand
+                    // and scales as the two halves, byte for byte.
+                    let mut one = TilePair::new();
+                    // SAFETY: kind 0 runs where AVX-512 VNNI (and f16c) was detected.
+                    assert!(unsafe { one.prepare_both_raw(tile[0], tile[1], unsigned) }, "nb={nb}");
+                    assert!(one.b[..nb * 512] == p.b[..nb * 512], "one pass nb={nb} q4={q4} unsigned={unsigned}");
+                    assert_eq!(one.s.map(|h| h.map(|v| v.map(f32::to_bits))), p.s.map(|h| h.map(|v| v.map(f32::to_bits))));
+                    assert_eq!((one.nb, one.unsigned()), (p.nb, p.unsigned()));
+                }
                 if kind > 0 && kinds[0].0 == 0 {
                     // Both layouts on this CPU: the same operand, byte for byte.
                     let mut other = TilePair::new();

@@ -114,6 +114,45 @@ impl TilePair {
         unsafe { self.prepare_raw(half, w, unsigned) }
     }
 
+    /// [`Self::prepare`] of both tiles, `w0` as tile 0 and `w1` as tile 1,
+    /// in one pass on AVX-512 (each 64-byte operand row written once, whole,
+    /// from both tiles' lines: half the stores of two passes, and no second
+    /// visit of rows that left L1): the same bytes and scales as the two
+    /// calls (test `tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit`). False where either
+    /// call would be; on AVX-VNNI (no AVX-512) the two calls.
+    pub fn prepare_both(&mut self, w0: PackedQ8<'_>, w1: PackedQ8<'_>) -> bool {
+        if !enabled() || super::isa() == Isa::AvxVnni || w0.blocks() != w1.blocks() {
+            return self.prepare(0, w0) && self.prepare(1, w1);
+        }
+        let unsigned = !super::amx::enabled();
+        // SAFETY: `enabled` and not AvxVnni: the Avx512Vnni ISA (avx512f/bw, f16c among its features).
+        unsafe { self.prepare_both_raw(w0, w1, unsigned) }
+    }
+
+    /// [`Self::prepare_both`] without the ISA checks, the bytes stored
+    /// `unsigned` or signed as asked (both tiles need the same block count).
+    ///
+    /// # Safety
+    /// The CPU must support avx512f, avx512bw and f16c.
+    pub unsafe fn prepare_both_raw(
+        &mut self,
+        w0: PackedQ8<'_>,
+        w1: PackedQ8<'_>,
+        unsigned: bool,
+    ) -> bool {
+        let (Some(nb), Some(nb1)) = (self.checked_blocks(0, w0), self.checked_blocks(1, w1)) else {
+            return false;
+        };
+        if nb != nb1 {
+            return false;
+        }
+        // SAFETY: the caller's features; the extents were checked above.
+        unsafe { prepare_b_both(w0, w1, nb, unsigned, &mut self.b, &mut self.s) };
+        self.nb = [nb; 2];
+        self.unsigned = [unsigned; 2];
+        true
+    }
+
     /// Whether both tiles are stored unsigned: the operand the pair
     /// kernels take (signed pairs are the AMX kernel's).
     pub fn unsigned(&self) -> bool {
@@ -181,6 +220,77 @@ impl Default for TilePair {
     }
 }
 
+/// Block `b`'s four 64-byte lines of a packed tile as signed bytes (4-bit
+/// tiles widened to `q - 8`).
+///
+/// # Safety
+/// avx512f and avx512bw; `w.v` holds block `b`.
+#[inline]
+#[target_feature(enable = "avx512f,avx512bw")]
+unsafe fn block_lines(w: PackedQ8<'_>, b: usize) -> [__m512i; 4] {
+    if w.q4 {
+        let (low, eight) = (_mm512_set1_epi8(0x0f), _mm512_set1_epi8(8));
+        let vb = &w.v[PACK_BLOCK_NIBBLES * b..PACK_BLOCK_NIBBLES * (b + 1)];
+        // SAFETY: vb holds 2 x 64 bytes.
+        let h: [__m512i; 2] = core::array::from_fn(|k| unsafe {
+            _mm512_loadu_si512(vb.as_ptr().add(64 * k) as *const _)
+        });
+        [
+            _mm512_sub_epi8(_mm512_and_si512(h[0], low), eight),
+            _mm512_sub_epi8(_mm512_and_si512(h[1], low), eight),
+            _mm512_sub_epi8(_mm512_and_si512(_mm512_srli_epi16::<4>(h[0]), low), eight),
+            _mm512_sub_epi8(_mm512_and_si512(_mm512_srli_epi16::<4>(h[1]), low), eight),
+        ]
+    } else {
+        let vb = &w.v[PACK_BLOCK_VALUES * b..PACK_BLOCK_VALUES * (b + 1)];
+        // SAFETY: vb holds 4 x 64 bytes.
+        core::array::from_fn(|g| unsafe { _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _) })
+    }
+}
+
+/// [`prepare_b`] of both tiles at once: line `g` of each tile split into
+/// its even and odd dwords as there, then operand row `2g` = (tile 0's
+/// even | tile 1's even) and row `2g + 1` = (tile 0's odd | tile 1's odd),
+/// each one 64-byte store; the scales as [`prepare_scales`] per tile.
+///
+/// # Safety
+/// avx512f, avx512bw and f16c; `w0.v`, `w1.v` hold `nb` blocks, their `s`
+/// the blocks' scales, `out` `nb * B_BLOCK` bytes, `nb <= PACK_BLOCKS`.
+#[target_feature(enable = "avx512f,avx512bw,f16c")]
+unsafe fn prepare_b_both(
+    w0: PackedQ8<'_>,
+    w1: PackedQ8<'_>,
+    nb: usize,
+    unsigned: bool,
+    out: &mut [u8],
+    scales: &mut [[[f32; 16]; PAIRS]; 2],
+) {
+    let flip = _mm512_set1_epi8(if unsigned { -128 } else { 0 });
+    // Low half: the even dwords (h = 0) of a stored line, high half: the odd ones.
+    let split = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
+    for (b, ob) in out.chunks_exact_mut(B_BLOCK).take(nb).enumerate() {
+        // SAFETY: both tiles hold block b < nb.
+        let (l0, l1) = unsafe { (block_lines(w0, b), block_lines(w1, b)) };
+        for g in 0..4 {
+            let v0 = _mm512_xor_si512(_mm512_permutexvar_epi32(split, l0[g]), flip);
+            let v1 = _mm512_xor_si512(_mm512_permutexvar_epi32(split, l1[g]), flip);
+            // (v0 low 256 | v1 low 256) and (v0 high 256 | v1 high 256).
+            let even = _mm512_inserti64x4::<1>(v0, _mm512_castsi512_si256(v1));
+            let odd = _mm512_shuffle_i64x2::<0xEE>(v0, v1);
+            // SAFETY: ob holds 8 x 64 bytes; 128g + 64 + 64 <= 512.
+            unsafe {
+                _mm512_storeu_si512(ob.as_mut_ptr().add(128 * g) as *mut _, even);
+                _mm512_storeu_si512(ob.as_mut_ptr().add(128 * g + 64) as *mut _, odd);
+            }
+        }
+    }
+    // SAFETY: the caller's features include f16c; the extents are the caller's.
+    unsafe {
+        prepare_scales(w0, nb, 0, scales);
+        prepare_scales(w1, nb, 1, scales);
+    }
+}
+
 /// [`TilePair::prepare`]'s layout of tile `half` (bytes `w + 128` where `unsigned`).
 ///
 /// # Safety
@@ -195,31 +305,12 @@ unsafe fn prepare_b(
     out: &mut [u8],
     scales: &mut [[[f32; 16]; PAIRS]; 2],
 ) {
-    let low = _mm512_set1_epi8(0x0f);
     let flip = _mm512_set1_epi8(if unsigned { -128 } else { 0 });
-    let eight = _mm512_set1_epi8(8);
     // Low half: the even dwords (h = 0) of a stored line, high half: the odd ones.
     let split = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
     for (b, ob) in out.chunks_exact_mut(B_BLOCK).take(nb).enumerate() {
-        let lines: [__m512i; 4] = if w.q4 {
-            let vb = &w.v[PACK_BLOCK_NIBBLES * b..PACK_BLOCK_NIBBLES * (b + 1)];
-            // SAFETY: vb holds 2 x 64 bytes.
-            let h: [__m512i; 2] = core::array::from_fn(|k| unsafe {
-                _mm512_loadu_si512(vb.as_ptr().add(64 * k) as *const _)
-            });
-            [
-                _mm512_sub_epi8(_mm512_and_si512(h[0], low), eight),
-                _mm512_sub_epi8(_mm512_and_si512(h[1], low), eight),
-                _mm512_sub_epi8(_mm512_and_si512(_mm512_srli_epi16::<4>(h[0]), low), eight),
-                _mm512_sub_epi8(_mm512_and_si512(_mm512_srli_epi16::<4>(h[1]), low), eight),
-            ]
-        } else {
-            let vb = &w.v[PACK_BLOCK_VALUES * b..PACK_BLOCK_VALUES * (b + 1)];
-            // SAFETY: vb holds 4 x 64 bytes.
-            core::array::from_fn(|g| unsafe {
-                _mm512_loadu_si512(vb.as_ptr().add(64 * g) as *const _)
-            })
-        };
+        // SAFETY: w holds block b < nb.
+        let lines = unsafe { block_lines(w, b) };
         for (g, line) in lines.iter().enumerate() {
             let v = _mm512_xor_si512(_mm512_permutexvar_epi32(split, *line), flip);
             // SAFETY: ob holds 8 x 64 bytes; 128g + 64 + 32 half + 32 <= 512.
