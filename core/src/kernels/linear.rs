@@ -1133,7 +1133,7 @@ fn calls_of(
 
 /// Activation rows `r0..r1` of a panel against the tile pair `a`
 /// ([`simd::gemm_q8_pair`]), in calls of up to [`simd::PAIR_CALL_ROWS`]
-/// rows shared evenly (`put(row, values)`: 16 columns), prefetching
+/// rows shared evenly (`put(first row, rows)`: each call's rows of 16 columns, to be finished in place), prefetching
 /// `ahead` (each call its share); false (rows from the refused call on not
 /// written) if the kernel refuses.
 #[inline]
