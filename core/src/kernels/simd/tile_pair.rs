@@ -220,6 +220,22 @@ impl Default for TilePair {
     }
 }
 
+/// Block `b`'s four 64-byte lines of a packed tile as the operand takes
+/// them: signed bytes (4-bit tiles widened to `q - 8`), `+ 128` where
+/// `unsigned`, each line's even dwords (`h = 0`) in its low 256 bits and its
+/// odd ones in the high 256 bits.
+///
+/// # Safety
+/// avx512f and avx512bw; `w.v` holds block `b`.
+#[inline]
+#[target_feature(enable = "avx512f,avx512bw")]
+unsafe fn block_halves(w: PackedQ8<'_>, b: usize, unsigned: bool) -> [__m512i; 4] {
+    let flip = _mm512_set1_epi8(if unsigned { -128 } else { 0 });
+    let split = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
+    // SAFETY: the caller's.
+    unsafe { block_lines(w, b) }.map(|l| _mm512_xor_si512(_mm512_permutexvar_epi32(split, l), flip))
+}
+
 /// Block `b`'s four 64-byte lines of a packed tile as signed bytes (4-bit
 /// tiles widened to `q - 8`).
 ///
@@ -265,15 +281,10 @@ unsafe fn prepare_b_both(
     out: &mut [u8],
     scales: &mut [[[f32; 16]; PAIRS]; 2],
 ) {
-    let flip = _mm512_set1_epi8(if unsigned { -128 } else { 0 });
-    // Low half: the even dwords (h = 0) of a stored line, high half: the odd ones.
-    let split = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
     for (b, ob) in out.chunks_exact_mut(B_BLOCK).take(nb).enumerate() {
         // SAFETY: both tiles hold block b < nb.
-        let (l0, l1) = unsafe { (block_lines(w0, b), block_lines(w1, b)) };
-        for g in 0..4 {
-            let v0 = _mm512_xor_si512(_mm512_permutexvar_epi32(split, l0[g]), flip);
-            let v1 = _mm512_xor_si512(_mm512_permutexvar_epi32(split, l1[g]), flip);
+        let (h0, h1) = unsafe { (block_halves(w0, b, unsigned), block_halves(w1, b, unsigned)) };
+        for (g, (&v0, &v1)) in h0.iter().zip(&h1).enumerate() {
             // (v0 low 256 | v1 low 256) and (v0 high 256 | v1 high 256).
             let even = _mm512_inserti64x4::<1>(v0, _mm512_castsi512_si256(v1));
             let odd = _mm512_shuffle_i64x2::<0xEE>(v0, v1);
@@ -305,14 +316,10 @@ unsafe fn prepare_b(
     out: &mut [u8],
     scales: &mut [[[f32; 16]; PAIRS]; 2],
 ) {
-    let flip = _mm512_set1_epi8(if unsigned { -128 } else { 0 });
-    // Low half: the even dwords (h = 0) of a stored line, high half: the odd ones.
-    let split = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
     for (b, ob) in out.chunks_exact_mut(B_BLOCK).take(nb).enumerate() {
         // SAFETY: w holds block b < nb.
-        let lines = unsafe { block_lines(w, b) };
-        for (g, line) in lines.iter().enumerate() {
-            let v = _mm512_xor_si512(_mm512_permutexvar_epi32(split, *line), flip);
+        let halves = unsafe { block_halves(w, b, unsigned) };
+        for (g, &v) in halves.iter().enumerate() {
             // SAFETY: ob holds 8 x 64 bytes; 128g + 64 + 32 half + 32 <= 512.
             unsafe {
                 _mm256_storeu_si256(
