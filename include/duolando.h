@@ -258,7 +258,7 @@ typedef struct duo_model_info {
  *     uses 423, 12 for their model); duo_model_seed_tokens is Duolando's.
  *   - duo_session_config: dec_future, shift, pending_frames,
  *     music_buffer_frames (music ROWS that may wait unread), sampling,
- *     top_k, kv, rng_seed and staggered (0 or 2: two caches, spread) apply;
+ *     top_k, temperature_milli, kv, rng_seed and staggered (0 or 2: two caches, spread) apply;
  *     lookahead, enc_future, music_lookahead and lat_past must be 0
  *     (DUO_INVALID_ARGUMENT naming the field). Presets: "exact" (the
  *     offline model's numbers), "reference", "interactive", "minimum".
@@ -353,7 +353,13 @@ typedef enum duo_sampling {
   DUO_SAMPLING_GREEDY = 0,
   /* Uniform among the top_k most likely tokens; a fixed rng_seed gives a
    * reproducible dance. */
-  DUO_SAMPLING_TOP_K = 1
+  DUO_SAMPLING_TOP_K = 1,
+  /* Among the top_k most likely tokens (1..64), each with its probability
+   * under softmax(logits / T), T = temperature_milli / 1000 (1..100000):
+   * the likely tokens most of the time (small T: near greedy; 1000: the
+   * model's own distribution). One draw per token, the same bits on every
+   * CPU; a fixed rng_seed gives a reproducible dance. */
+  DUO_SAMPLING_SOFTMAX = 2
 } duo_sampling;
 
 /* duo_session_config.kv: element type of the session's keys and values
@@ -366,7 +372,8 @@ typedef enum duo_kv {
 
 /* The latency budget and buffers of a session. Start from
  * duo_session_config_reference or _minimum and change fields. Counts are
- * tokens (4 frames) unless named frames. 56 bytes, no padding. */
+ * tokens (4 frames) unless named frames. 64 bytes, no padding (56 before
+ * DUO_SAMPLING_SOFTMAX: rebuild hosts against this header). */
 typedef struct duo_session_config {
   uint32_t lookahead;           /* leader look-ahead, 0..look_forward */
   uint32_t enc_future;          /* encoder future context */
@@ -380,7 +387,7 @@ typedef struct duo_session_config {
   uint32_t music_buffer_frames; /* music frames that may wait before
                                    DUO_BACKLOG */
   uint32_t sampling;            /* a duo_sampling value */
-  uint32_t top_k;               /* for DUO_SAMPLING_TOP_K */
+  uint32_t top_k;               /* for DUO_SAMPLING_TOP_K and _SOFTMAX */
   uint32_t staggered;           /* 0: one GPT cache, re-filled when the window
                                    jumps (least memory, a cost spike every
                                    chunk); 1: one cache per live window (flat
@@ -389,7 +396,11 @@ typedef struct duo_session_config {
                                    (flat cost at 0's mean, 2 caches). Same
                                    output. */
   uint32_t kv;                  /* a duo_kv value */
-  uint64_t rng_seed;            /* for DUO_SAMPLING_TOP_K */
+  uint64_t rng_seed;            /* for DUO_SAMPLING_TOP_K and _SOFTMAX */
+  uint32_t temperature_milli;   /* for DUO_SAMPLING_SOFTMAX: the temperature
+                                   in thousandths, 1..100000 (ignored by the
+                                   other rules) */
+  uint32_t reserved;            /* 0 (DUO_INVALID_ARGUMENT otherwise) */
 } duo_session_config;
 
 /* The configuration closest to the offline model (long latency: about

@@ -146,6 +146,8 @@ pub enum Setting {
     MusicLookahead,
     LatPast,
     TopK,
+    /// [`crate::nn::sampler::Sampling::Softmax`]'s temperature, in thousandths.
+    Temperature,
     PendingFrames,
     MusicBuffer,
     /// GPT caches a staggered schedule needs (value) above the session's

@@ -37,15 +37,16 @@ pub const MAX_POSITION_M: f32 = duolando_core::input::MAX_POSITION_M;
 /// Largest accepted |value| of a music feature (`DUO_MAX_MUSIC_FEATURE`).
 pub const MAX_MUSIC_FEATURE: f32 = duolando_core::input::MAX_MUSIC_FEATURE;
 
-/// `DUO_SAMPLING_GREEDY` / `DUO_SAMPLING_TOP_K`.
+/// `DUO_SAMPLING_GREEDY` / `DUO_SAMPLING_TOP_K` / `DUO_SAMPLING_SOFTMAX`.
 pub const SAMPLING_GREEDY: u32 = 0;
 pub const SAMPLING_TOP_K: u32 = 1;
+pub const SAMPLING_SOFTMAX: u32 = 2;
 /// `DUO_KV_F32` / `DUO_KV_F16`.
 pub const KV_F32: u32 = 0;
 pub const KV_F16: u32 = 1;
 
 /// `duo_session_config`: mirrors `duolando_core::duolando::session::SessionConfig`
-/// (counts in tokens of 4 frames unless named frames). 56 bytes.
+/// (counts in tokens of 4 frames unless named frames). 64 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct DuoSessionConfig {
@@ -66,16 +67,31 @@ pub struct DuoSessionConfig {
     /// K/V cache element type: `KV_F32` or `KV_F16`.
     pub kv: u32,
     pub rng_seed: u64,
+    /// `DUO_SAMPLING_SOFTMAX`'s temperature in thousandths, 1..=100 000
+    /// (ignored by the other rules).
+    pub temperature_milli: u32,
+    /// 0 (refused otherwise: room for a later field).
+    pub reserved: u32,
 }
 
-const _: () = assert!(std::mem::size_of::<DuoSessionConfig>() == 56);
+const _: () = assert!(std::mem::size_of::<DuoSessionConfig>() == 64);
+
+/// The C fields of a sampling rule: `(sampling, top_k, temperature_milli, rng_seed)`.
+fn sampling_fields(s: Sampling) -> (u32, u32, u32, u64) {
+    match s {
+        Sampling::Greedy => (SAMPLING_GREEDY, 0, 0, 0),
+        Sampling::TopK { k, rng_seed } => (SAMPLING_TOP_K, k, 0, rng_seed),
+        Sampling::Softmax {
+            k,
+            temperature_milli,
+            rng_seed,
+        } => (SAMPLING_SOFTMAX, k, temperature_milli, rng_seed),
+    }
+}
 
 impl DuoSessionConfig {
     fn from_core(c: &SessionConfig) -> Self {
-        let (sampling, top_k, rng_seed) = match c.sampling {
-            Sampling::Greedy => (SAMPLING_GREEDY, 0, 0),
-            Sampling::TopK { k, rng_seed } => (SAMPLING_TOP_K, k, rng_seed),
-        };
+        let (sampling, top_k, temperature_milli, rng_seed) = sampling_fields(c.sampling);
         DuoSessionConfig {
             lookahead: c.lookahead,
             enc_future: c.enc_future,
@@ -97,6 +113,8 @@ impl DuoSessionConfig {
                 KvType::F16 => KV_F16,
             },
             rng_seed,
+            temperature_milli,
+            reserved: 0,
         }
     }
 
@@ -137,10 +155,7 @@ pub(crate) enum AnyConfig {
 
 impl DuoSessionConfig {
     fn from_solo(c: &SoloConfig) -> Self {
-        let (sampling, top_k, rng_seed) = match c.sampling {
-            Sampling::Greedy => (SAMPLING_GREEDY, 0, 0),
-            Sampling::TopK { k, rng_seed } => (SAMPLING_TOP_K, k, rng_seed),
-        };
+        let (sampling, top_k, temperature_milli, rng_seed) = sampling_fields(c.sampling);
         DuoSessionConfig {
             dec_future: c.dec_future,
             shift: c.shift,
@@ -158,6 +173,7 @@ impl DuoSessionConfig {
                 KvType::F16 => KV_F16,
             },
             rng_seed,
+            temperature_milli,
             ..DuoSessionConfig::default()
         }
     }
@@ -197,15 +213,26 @@ impl DuoSessionConfig {
     }
 
     fn to_core_fields(self) -> Result<(Sampling, KvType), Failure> {
+        if self.reserved != 0 {
+            return Err(Failure::invalid(format!(
+                "config.reserved is {}: it must be 0 (start from duo_session_config_preset)",
+                self.reserved
+            )));
+        }
         let sampling = match self.sampling {
             SAMPLING_GREEDY => Sampling::Greedy,
             SAMPLING_TOP_K => Sampling::TopK {
                 k: self.top_k,
                 rng_seed: self.rng_seed,
             },
+            SAMPLING_SOFTMAX => Sampling::Softmax {
+                k: self.top_k,
+                temperature_milli: self.temperature_milli,
+                rng_seed: self.rng_seed,
+            },
             s => {
                 return Err(Failure::invalid(format!(
-                    "config.sampling {s} is not a duo_sampling value (0 greedy, 1 top-k)"
+                    "config.sampling {s} is not a duo_sampling value (0 greedy, 1 top-k, 2 softmax)"
                 )))
             }
         };

@@ -193,7 +193,7 @@ fn config(u: &mut Unstructured<'_>, m: &Model<'_>) -> AResult<SessionConfig> {
     let kmax = m.cfg.gpt.vocab[0].min(m.cfg.gpt.vocab[1]);
     let dec_future = u.int_in_range(0..=dmax)?;
     let shift = u.int_in_range(1..=win)?;
-    let sampling = if u.arbitrary()? { Sampling::Greedy } else { Sampling::TopK { k: u.int_in_range(1..=kmax)?, rng_seed: u.arbitrary()? } };
+    let sampling = if u.arbitrary()? { Sampling::Greedy } else { duolando_gen::session::sampling_of(u.int_in_range(1..=kmax)?, u.arbitrary()?) };
     let pending_frames = u.int_in_range(0..=24)?;
     // The schedule (the same numbers either way) from a bit already drawn,
     // so that the committed seeds decode as before: odd pending sizes spread.

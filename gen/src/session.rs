@@ -84,10 +84,7 @@ impl ConfigGen {
         s.lat_past = self.lat_past.get(0, lf);
         s.sampling = match self.top_k {
             None => Sampling::Greedy,
-            Some((k, rng_seed)) => Sampling::TopK {
-                k: k.get(1, MAX_TOP_K as u32),
-                rng_seed,
-            },
+            Some((k, rng_seed)) => sampling_of(k.get(1, MAX_TOP_K as u32), rng_seed),
         };
         s.pending_frames = self.pending_frames.get(0, 512.min(MAX_BUFFER_FRAMES));
         s.music_buffer_frames = self.music_buffer_frames.get(min_music, 512.max(min_music));
@@ -97,6 +94,20 @@ impl ConfigGen {
             CacheSchedule::Reprefill
         };
         s
+    }
+}
+
+/// Top-k or, where the seed's top bit is set, softmax sampling at a
+/// temperature from its bits 32-48 (1..=100 000 thousandths), drawn from
+/// the seed so that committed inputs decode as before.
+pub fn sampling_of(k: u32, rng_seed: u64) -> Sampling {
+    if rng_seed >> 63 == 0 {
+        return Sampling::TopK { k, rng_seed };
+    }
+    Sampling::Softmax {
+        k,
+        temperature_milli: 1 + ((rng_seed >> 32) as u32 & 0x1_ffff) % 100_000,
+        rng_seed,
     }
 }
 

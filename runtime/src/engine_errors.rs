@@ -249,6 +249,7 @@ fn setting_name(s: duolando_core::duolando::session::Setting) -> &'static str {
         MusicLookahead => "music_lookahead",
         LatPast => "lat_past",
         TopK => "top_k",
+        Temperature => "temperature_milli",
         PendingFrames => "pending_frames",
         MusicBuffer => "music_buffer_frames",
         Windows => "staggered (GPT caches needed)",

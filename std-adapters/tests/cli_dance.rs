@@ -990,22 +990,28 @@ fn solo_dance_to_music_alone() {
     );
 }
 
+/// The tiny duet danced from the rollout fixture's follower start with
+/// `extra` flags: its tokens, `summary.json`'s `"mode"` and the stderr.
+fn sampled_duet(name: &str, extra: &[&str]) -> (duolando::npy::Array2<i64>, String, String) {
+    let r = roll();
+    let (leader, music) = (r.join("leader_pos3d.npy"), r.join("music.npy"));
+    let start = r.join("follower_start.npy");
+    let out = tmp(name);
+    let seed = ["--follower-start", p(&start)];
+    let o = dance_tiny(&out, &leader, &music, &[&seed[..], extra].concat());
+    let e = stderr(&o);
+    assert!(o.status.success(), "{name}: {e}");
+    let tokens = read_i64_2d(&out.join("tokens.npy"), Some(5), "tokens").unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    (tokens, summary["mode"].as_str().unwrap().to_string(), e)
+}
+
 #[test]
 fn topk_samples_the_follower_in_a_streaming_session_repeatably() {
     let r = roll();
     let (leader, music) = (r.join("leader_pos3d.npy"), r.join("music.npy"));
-    let start = r.join("follower_start.npy");
-    let seed = ["--follower-start", p(&start)];
-    let run = |name: &str, extra: &[&str]| {
-        let out = tmp(name);
-        let o = dance_tiny(&out, &leader, &music, &[&seed[..], extra].concat());
-        let e = stderr(&o);
-        assert!(o.status.success(), "{name}: {e}");
-        let tokens = read_i64_2d(&out.join("tokens.npy"), Some(5), "tokens").unwrap();
-        let summary: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
-        (tokens, summary["mode"].as_str().unwrap().to_string(), e)
-    };
+    let run = sampled_duet;
     let (greedy, mode, _) = run("topk-greedy", &[]);
     assert_eq!(mode, "exact (R)");
     let (a, mode, e) = run("topk-a", &["--topk", "4", "--rng-seed", "1"]);
@@ -1038,6 +1044,51 @@ fn topk_samples_the_follower_in_a_streaming_session_repeatably() {
     let o = dance_tiny(&out, &leader, &music, &["--rng-seed", "3"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--topk"), "{}", stderr(&o));
+}
+
+/// `--temperature T`: each token drawn by its tempered probability among
+/// the K best, in the same streaming session as `--topk`: repeatable by
+/// `--rng-seed`, another seed another dance, not greedy; a temperature out
+/// of range refused by name (the distribution itself: core's
+/// `softmax_sampling_follows_the_tempered_distribution`).
+#[test]
+fn temperature_samples_the_follower_by_its_probability() {
+    let r = roll();
+    let (leader, music) = (r.join("leader_pos3d.npy"), r.join("music.npy"));
+    let run = |name: &str, extra: &[&str]| {
+        let (tokens, mode, _) = sampled_duet(name, extra);
+        (tokens, mode)
+    };
+    let (greedy, _) = run("temp-greedy", &[]);
+    let (a, mode) = run("temp-a", &["--temperature", "1.5", "--rng-seed", "1"]);
+    assert!(
+        mode.contains("streaming")
+            && mode.contains("softmax sampling at temperature 1.5 among the 64 best"),
+        "{mode}"
+    );
+    let (b, _) = run("temp-b", &["--temperature", "1.5", "--rng-seed", "1"]);
+    let (c, _) = run("temp-c", &["--temperature", "1.5", "--rng-seed", "2"]);
+    let (k4, mode) = run(
+        "temp-k4",
+        &["--temperature", "1.5", "--topk", "4", "--rng-seed", "1"],
+    );
+    assert!(mode.contains("among the 4 best"), "{mode}");
+    assert_eq!(a.rows, greedy.rows, "drained to R's token rows");
+    assert_eq!(a, b, "the same seed gives the same dance");
+    assert_ne!(a.data, c.data, "another seed another dance");
+    assert_ne!(a.data, greedy.data, "sampling is not greedy R");
+    assert!(k4.data.iter().all(|&t| t >= 0));
+    for bad in ["0", "0.0004", "100.5", "NaN", "-1"] {
+        let out = tmp("temp-bad");
+        let flag = format!("--temperature={bad}");
+        let o = dance_tiny(&out, &leader, &music, &[&flag]);
+        assert!(!o.status.success(), "{bad}");
+        assert!(
+            stderr(&o).contains("--temperature") && stderr(&o).contains("outside 0.001..=100"),
+            "{bad}: {}",
+            stderr(&o)
+        );
+    }
 }
 
 /// `--topk K` on a solo (Bailando) dance: a streaming session at the
@@ -1104,6 +1155,28 @@ fn topk_samples_a_solo_dancer_repeatably() {
         "{}",
         stderr(&o)
     );
+    // Softmax sampling in the same session: repeatable, seeded, not greedy.
+    let (t, t_frames, mode) = run(
+        "solo-temp-a",
+        &["--temperature", "1.2", "--topk", "3", "--rng-seed", "1"],
+    );
+    assert!(
+        mode.contains("softmax sampling at temperature 1.2 among the 3 best"),
+        "{mode}"
+    );
+    let (t2, _, _) = run(
+        "solo-temp-b",
+        &["--temperature", "1.2", "--topk", "3", "--rng-seed", "1"],
+    );
+    let (t3, _, _) = run(
+        "solo-temp-c",
+        &["--temperature", "1.2", "--topk", "3", "--rng-seed", "2"],
+    );
+    assert_eq!(t, t2);
+    assert_ne!(t.data, t3.data);
+    assert_ne!(t.data, greedy.data);
+    assert_eq!(t_frames.rows, greedy_frames.rows);
+    assert!(t_frames.data.iter().all(|v| v.is_finite()));
 }
 
 /// The bundled solo model (`assets/bailando_demo.duo`, tools/train/bailando)

@@ -619,6 +619,7 @@ fn exact_mode_refuses_streaming_flags_by_name_instead_of_ignoring_them() {
     for base in [&duo_base[..], &solo_base[..]] {
         for (flags, named) in [
             (&["--topk", "3"][..], "--topk"),
+            (&["--temperature", "0.8"][..], "--temperature"),
             (&["--rng-seed", "7"][..], "--rng-seed"),
             (&["--preset", "minimum"][..], "--preset"),
             (&["--shift", "4"][..], "--shift"),

@@ -7,7 +7,7 @@
 
 static_assert(sizeof(duo_leader_frame) == 660, "duo_leader_frame layout");
 static_assert(sizeof(duo_follower_frame) == 1560, "duo_follower_frame layout");
-static_assert(sizeof(duo_session_config) == 56, "duo_session_config layout");
+static_assert(sizeof(duo_session_config) == 64, "duo_session_config layout");
 static_assert(std::is_trivially_copyable<duo_follower_frame>::value, "blittable");
 
 int main() {

@@ -179,7 +179,7 @@ static void test_errors_and_version(void) {
   CHECK(buf[7] == '\0' && strlen(buf) == 7); /* truncated */
   CHECK(sizeof(duo_leader_frame) == 660);
   CHECK(sizeof(duo_follower_frame) == 1560);
-  CHECK(sizeof(duo_session_config) == 56);
+  CHECK(sizeof(duo_session_config) == 64);
   CHECK(sizeof(duo_model_info) == 32);
 }
 
@@ -564,6 +564,7 @@ static void test_sessions(duo_model *m) {
   duo_session *s = NULL, *t = NULL;
   size_t bytes = 0, n;
   unsigned char *mem;
+  char msg[512];
   duo_follower_frame *out = (duo_follower_frame *)malloc(n_frames * sizeof *out);
 
   EXPECT(duo_session_config_minimum(m, &c), DUO_OK);
@@ -590,6 +591,32 @@ static void test_sessions(duo_model *m) {
   c.sampling = DUO_SAMPLING_TOP_K;
   c.top_k = 3;
   c.rng_seed = 7;
+  EXPECT(duo_session_new(m, &c, seed, &s), DUO_OK);
+  n = drive(s, out, n_frames, 0);
+  CHECK(n == reference_n);
+  {
+    duo_follower_frame *again = (duo_follower_frame *)malloc(n_frames * sizeof *again);
+    EXPECT(duo_session_reset(s, seed), DUO_OK);
+    CHECK(drive(s, again, n_frames, 0) == n && same_frames(out, again, n));
+    free(again);
+  }
+  duo_session_free(s);
+
+  /* A softmax session: finite and reproducible too; its temperature and
+   * the reserved field are checked by name. */
+  c.sampling = DUO_SAMPLING_SOFTMAX;
+  c.top_k = 8;
+  c.temperature_milli = 0;
+  s = NULL;
+  EXPECT(duo_session_new(m, &c, seed, &s), DUO_INVALID_ARGUMENT);
+  duo_last_error_message(msg, sizeof msg);
+  CHECK(s == NULL && strstr(msg, "temperature_milli") != NULL);
+  c.temperature_milli = 1000;
+  c.reserved = 1;
+  EXPECT(duo_session_new(m, &c, seed, &s), DUO_INVALID_ARGUMENT);
+  duo_last_error_message(msg, sizeof msg);
+  CHECK(s == NULL && strstr(msg, "reserved") != NULL);
+  c.reserved = 0;
   EXPECT(duo_session_new(m, &c, seed, &s), DUO_OK);
   n = drive(s, out, n_frames, 0);
   CHECK(n == reference_n);

@@ -38,7 +38,7 @@ static class TestUnity
         string root = args[0];
         Check(Marshal.SizeOf(typeof(LeaderFrame)) == 660, "LeaderFrame is 660 bytes");
         Check(Marshal.SizeOf(typeof(FollowerFrame)) == 1560, "FollowerFrame is 1560 bytes");
-        Check(Marshal.SizeOf(typeof(SessionConfig)) == 56, "SessionConfig is 56 bytes");
+        Check(Marshal.SizeOf(typeof(SessionConfig)) == 64, "SessionConfig is 64 bytes");
         Check(Marshal.SizeOf(typeof(ModelInfo)) == 32, "ModelInfo is 32 bytes");
         Check(Model.Version == "0.1.0", "version");
         Check(Model.Threads == 1, "one thread by default");
@@ -64,8 +64,11 @@ static class TestUnity
             ModelInfo info = model.Info;
             Check(info.Joints == 55 && info.MusicFeatures == 54 && info.Mapped == 1, "info");
             SessionConfig config = model.MinimumConfig();
-            config.Sampling = SamplingMode.TopK;
-            config.TopK = 2;
+            // Softmax sampling: the temperature is the struct's last field
+            // but one, so a C# layout that disagrees with the header's is refused.
+            config.Sampling = SamplingMode.Softmax;
+            config.TopK = 8;
+            config.TemperatureMilli = 900;
             config.RngSeed = 3;
             uint[] seed = model.SeedTokens(SubArray(leader, 0, 8 * 165), SubArray(leader, 0, 8 * 165));
             using (Session session = new Session(model, config, seed))

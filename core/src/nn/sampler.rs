@@ -107,6 +107,53 @@ pub fn top_k_by_id(logits: &[f32], k: usize, rng: &mut Rng) -> u32 {
     set[r.min(n - 1)]
 }
 
+/// Largest temperature of [`Sampling::Softmax`], in thousandths (100.0).
+pub const MAX_TEMPERATURE_MILLI: u32 = 100_000;
+
+/// The `k` largest logits (the lower id ranks first on equal logits), in
+/// ASCENDING id order, one chosen with probability `softmax(logit / t)`
+/// over the set (`t = temperature_milli / 1000`): `exp((l - l_max) / t)`
+/// by the engine's own [`crate::kernels::simd::scalar::exp`] (plain IEEE
+/// operations: the same bits on every target), summed in id order, and
+/// exactly one draw (24 bits of `rng`). `k` is clamped to
+/// `1..=min(MAX_TOP_K, logits.len())`, the temperature to at least 0.001.
+/// A large `k` and `t = 1` is plain sampling from the model's distribution
+/// (restricted to its [`MAX_TOP_K`] best tokens); a small `t` approaches
+/// greedy.
+pub fn softmax_top_k(logits: &[f32], k: usize, temperature_milli: u32, rng: &mut Rng) -> u32 {
+    let k = k.clamp(1, MAX_TOP_K).min(logits.len().max(1));
+    let (mut idx, n) = top_ids(logits, k);
+    let u = (rng.next_u64() >> 40) as f32 * (1.0 / (1u32 << 24) as f32);
+    if n == 0 {
+        return 0;
+    }
+    // top_ids' first id holds the largest logit.
+    let max = logits[idx[0] as usize];
+    let set = &mut idx[..n];
+    set.sort_unstable();
+    let inv_t = 1000.0 / temperature_milli.max(1) as f32;
+    let mut w = [0f32; MAX_TOP_K];
+    let mut total = 0f32;
+    for (wi, &id) in w.iter_mut().zip(set.iter()) {
+        *wi = crate::kernels::simd::scalar::exp((logits[id as usize] - max) * inv_t);
+        total += *wi;
+    }
+    let target = u * total;
+    let mut acc = 0f32;
+    for (&wi, &id) in w.iter().zip(set.iter()) {
+        acc += wi;
+        if target < acc {
+            return id;
+        }
+    }
+    // Rounding left `target` at the sum: the last id with any weight.
+    set.iter()
+        .zip(w.iter())
+        .rev()
+        .find(|(_, &wi)| wi > 0.0)
+        .map_or(set[n - 1], |(&id, _)| id)
+}
+
 /// How a session chooses the token of each head.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Sampling {
@@ -116,4 +163,72 @@ pub enum Sampling {
     /// set sorted by id (docs/STREAMING.md §3.6); SplitMix64 seeded with
     /// `rng_seed`, one draw per head per step (Duolando 5, Bailando 2).
     TopK { k: u32, rng_seed: u64 },
+    /// Over the `k` largest logits, each with its probability under
+    /// `softmax(logits / t)`, `t = temperature_milli / 1000`
+    /// ([`softmax_top_k`]): the model's likely tokens most of the time,
+    /// a near-equal one as often as the model rates it (where `TopK`
+    /// picks the k-th best as often as the best). The same RNG and one
+    /// draw per head per step as `TopK`.
+    Softmax {
+        k: u32,
+        temperature_milli: u32,
+        rng_seed: u64,
+    },
+}
+
+impl Sampling {
+    /// The token of one head from its logits (`rng`: the session's).
+    #[inline]
+    pub fn choose(&self, logits: &[f32], rng: &mut Rng) -> u32 {
+        match *self {
+            Sampling::Greedy => argmax(logits),
+            Sampling::TopK { k, .. } => top_k_by_id(logits, k as usize, rng),
+            Sampling::Softmax {
+                k,
+                temperature_milli,
+                ..
+            } => softmax_top_k(logits, k as usize, temperature_milli, rng),
+        }
+    }
+
+    /// The seed of the session's RNG (0 for greedy, which draws nothing).
+    pub fn rng_seed(&self) -> u64 {
+        match *self {
+            Sampling::Greedy => 0,
+            Sampling::TopK { rng_seed, .. } | Sampling::Softmax { rng_seed, .. } => rng_seed,
+        }
+    }
+
+    /// The `k` of a sampling rule that draws among the best tokens.
+    pub fn k(&self) -> Option<u32> {
+        match *self {
+            Sampling::Greedy => None,
+            Sampling::TopK { k, .. } | Sampling::Softmax { k, .. } => Some(k),
+        }
+    }
+
+    /// The setting out of its range, with its value and largest allowed
+    /// value: `k` in `1..=MAX_TOP_K`, the temperature in
+    /// `1..=MAX_TEMPERATURE_MILLI` thousandths.
+    pub fn check(&self) -> Result<(), (crate::error::Setting, u32, u32)> {
+        use crate::error::Setting;
+        let (k, t) = match *self {
+            Sampling::Greedy => return Ok(()),
+            Sampling::TopK { k, .. } => (k, None),
+            Sampling::Softmax {
+                k,
+                temperature_milli,
+                ..
+            } => (k, Some(temperature_milli)),
+        };
+        if !(1..=MAX_TOP_K as u32).contains(&k) {
+            return Err((Setting::TopK, k, MAX_TOP_K as u32));
+        }
+        match t {
+            Some(t) if !(1..=MAX_TEMPERATURE_MILLI).contains(&t) => {
+                Err((Setting::Temperature, t, MAX_TEMPERATURE_MILLI))
+            }
+            _ => Ok(()),
+        }
+    }
 }

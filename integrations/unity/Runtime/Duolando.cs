@@ -53,6 +53,8 @@ namespace Duolando
     {
         Greedy = 0,
         TopK = 1,
+        /// <summary>Among the TopK best, by softmax(logits / (TemperatureMilli / 1000)).</summary>
+        Softmax = 2,
     }
 
     [StructLayout(LayoutKind.Sequential)]
@@ -215,7 +217,7 @@ namespace Duolando
         F16 = 1,
     }
 
-    /// <summary>duo_session_config (56 bytes). Start from Model.MinimumConfig() / ReferenceConfig().</summary>
+    /// <summary>duo_session_config (64 bytes). Start from Model.MinimumConfig() / ReferenceConfig().</summary>
     [StructLayout(LayoutKind.Sequential)]
     public struct SessionConfig
     {
@@ -225,6 +227,10 @@ namespace Duolando
         public uint Staggered;
         public KvType Kv;
         public ulong RngSeed;
+        /// <summary>SamplingMode.Softmax's temperature in thousandths, 1..100000.</summary>
+        public uint TemperatureMilli;
+        /// <summary>0.</summary>
+        public uint Reserved;
     }
 
     public sealed class DuolandoException : Exception

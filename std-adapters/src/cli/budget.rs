@@ -5,6 +5,7 @@ use anyhow::{bail, Result};
 use clap::ValueEnum;
 use duolando_core::duolando::config::ModelConfig;
 use duolando_core::duolando::session::{CacheSchedule, Sampling, SessionConfig};
+use duolando_core::nn::sampler::{MAX_TEMPERATURE_MILLI, MAX_TOP_K};
 // One list of presets for every command and the C ABI (core/src/duolando/session/config.rs).
 use duolando_core::bailando::config::BailandoConfig;
 use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as SoloConfig};
@@ -56,6 +57,12 @@ pub struct BudgetArgs {
     /// Top-k sampling (uniform over the k best tokens) instead of greedy.
     #[arg(long)]
     pub topk: Option<u32>,
+    /// Sample each token with its probability under softmax(logits / T)
+    /// among the --topk best (64 without --topk) instead of uniformly:
+    /// the likely tokens most of the time (T: 0.001..=100; small T is
+    /// near greedy, 1 the model's own distribution).
+    #[arg(long)]
+    pub temperature: Option<f32>,
     /// RNG seed of top-k sampling (deterministic for a given seed).
     #[arg(long, default_value_t = 0)]
     pub rng_seed: u64,
@@ -118,7 +125,7 @@ impl BudgetArgs {
 
     /// Every session flag's name and whether it was given (`--preset`: not
     /// the default), in `--help` order.
-    fn flags(&self) -> [(bool, &'static str); 12] {
+    fn flags(&self) -> [(bool, &'static str); 13] {
         [
             (self.preset != "reference", "preset"),
             (self.lookahead.is_some(), "lookahead"),
@@ -127,6 +134,7 @@ impl BudgetArgs {
             (self.shift.is_some(), "shift"),
             (self.music_lookahead.is_some(), "music-lookahead"),
             (self.topk.is_some(), "topk"),
+            (self.temperature.is_some(), "temperature"),
             (self.rng_seed != 0, "rng-seed"),
             (self.staggered, "staggered"),
             (self.spread, "spread"),
@@ -168,11 +176,8 @@ impl BudgetArgs {
             Kv::F32 => duolando_core::duolando::session::KvType::F32,
             Kv::F16 => duolando_core::duolando::session::KvType::F16,
         };
-        if let Some(k) = self.topk {
-            sc.sampling = Sampling::TopK {
-                k,
-                rng_seed: self.rng_seed,
-            };
+        if let Some(s) = sampling(self.topk, self.temperature, self.rng_seed)? {
+            sc.sampling = s;
         }
         if let Err((setting, value, max)) = sc.check(cfg) {
             bail!(
@@ -222,11 +227,8 @@ impl BudgetArgs {
             Kv::F32 => duolando_core::nn::kv_store::KvType::F32,
             Kv::F16 => duolando_core::nn::kv_store::KvType::F16,
         };
-        if let Some(k) = self.topk {
-            sc.sampling = Sampling::TopK {
-                k,
-                rng_seed: self.rng_seed,
-            };
+        if let Some(s) = sampling(self.topk, self.temperature, self.rng_seed)? {
+            sc.sampling = s;
         }
         if let Err((setting, value, max)) = sc.check(cfg) {
             bail!(
@@ -238,7 +240,31 @@ impl BudgetArgs {
     }
 }
 
-fn flag(s: duolando_core::duolando::session::Setting) -> &'static str {
+/// The sampling rule of `--topk K`, `--temperature T` and `--rng-seed`:
+/// uniform among the K best (the authors' `samplek`) without a
+/// temperature, softmax(logits / T) among the K best (64 without `--topk`)
+/// with one; None (the preset's: greedy) without either. Shared by every
+/// command that runs a session (`generate`, `dance`, `compare`).
+pub fn sampling(
+    topk: Option<u32>,
+    temperature: Option<f32>,
+    rng_seed: u64,
+) -> Result<Option<Sampling>> {
+    let Some(t) = temperature else {
+        return Ok(topk.map(|k| Sampling::TopK { k, rng_seed }));
+    };
+    let milli = t * 1000.0;
+    if !milli.is_finite() || milli.round() < 1.0 || milli.round() > MAX_TEMPERATURE_MILLI as f32 {
+        bail!("--temperature {t} is outside 0.001..=100");
+    }
+    Ok(Some(Sampling::Softmax {
+        k: topk.unwrap_or(MAX_TOP_K as u32),
+        temperature_milli: milli.round() as u32,
+        rng_seed,
+    }))
+}
+
+pub fn flag(s: duolando_core::duolando::session::Setting) -> &'static str {
     use duolando_core::duolando::session::Setting::*;
     match s {
         Lookahead => "lookahead",
@@ -248,6 +274,7 @@ fn flag(s: duolando_core::duolando::session::Setting) -> &'static str {
         MusicLookahead => "music-lookahead",
         LatPast => "lat-past",
         TopK => "topk",
+        Temperature => "temperature (in thousandths)",
         PendingFrames => "pending-frames",
         MusicBuffer => "music-buffer-frames",
         Windows => "staggered",

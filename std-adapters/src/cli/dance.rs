@@ -41,6 +41,7 @@ pub use inputs::{find_asset, face_to_face_start, COMPILED_ASSETS, DEFAULT_SEED_D
 
 /// Flags of `duolando dance`.
 #[derive(clap::Args, Debug)]
+#[command(group(clap::ArgGroup::new("sampling").multiple(true).args(["topk", "temperature"])))]
 pub struct Args {
     /// Leader motion: (T, 165) float .npy (world joint positions, metres, 30 fps) or a 30 fps .bvh
     /// with the SMPL-X joint names. Default: the bundled demo clip.
@@ -85,8 +86,16 @@ pub struct Args {
     /// decoding"). Not for Transflower (it samples already: --seed).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub topk: Option<u32>,
-    /// Seed of --topk's sampling (the same seed gives the same dance).
-    #[arg(long, requires = "topk")]
+    /// Duet or solo: sample each token with its probability under
+    /// softmax(logits / T) among the --topk best (64 without --topk), in
+    /// the same streaming session: the likely tokens most of the time, a
+    /// near-equal one as often as the model rates it (T: 0.001..=100;
+    /// docs/DEMO_MODEL.md "Tempered sampling").
+    #[arg(long)]
+    pub temperature: Option<f32>,
+    /// Seed of --topk's or --temperature's sampling (the same seed gives
+    /// the same dance).
+    #[arg(long, requires = "sampling")]
     pub rng_seed: Option<u64>,
     /// Transflower: seed of the engine's base-sample RNG (default 0).
     #[arg(long)]
@@ -128,13 +137,31 @@ impl FollowerRotations {
 /// viewer shows is pointed out on stderr.
 const FIT_WARN_M: f32 = 0.05;
 
-/// The session of `--topk k`: the reference preset (the model's whole
-/// look-ahead and conv futures), top-k sampling seeded by `rng_seed`.
-fn sampling_session(cfg: &ModelConfig, k: u32, rng_seed: u64, model_path: &Path) -> Result<SessionConfig> {
+/// The sampling rule of `--topk`, `--temperature` and `--rng-seed`
+/// ([`crate::cli::budget::sampling`]); None (R's greedy evaluation)
+/// without the first two (`--rng-seed` alone is a usage error).
+fn chosen_sampling(args: &Args) -> Result<Option<Sampling>> {
+    crate::cli::budget::sampling(args.topk, args.temperature, args.rng_seed.unwrap_or(0))
+}
+
+/// The rule in words, for the stage lines and `summary.json`.
+fn describe(s: &Sampling) -> String {
+    match *s {
+        Sampling::Greedy => "greedy".into(),
+        Sampling::TopK { k, rng_seed } => format!("top-{k} sampling, seed {rng_seed}"),
+        Sampling::Softmax { k, temperature_milli, rng_seed } => {
+            format!("softmax sampling at temperature {} among the {k} best, seed {rng_seed}", temperature_milli as f32 / 1000.0)
+        }
+    }
+}
+
+/// The session of a sampling rule: the reference preset (the model's
+/// whole look-ahead and conv futures), `s` as its sampling.
+fn sampling_session(cfg: &ModelConfig, s: Sampling, model_path: &Path) -> Result<SessionConfig> {
     let mut sc = SessionConfig::preset(cfg, Preset::Reference);
-    sc.sampling = Sampling::TopK { k, rng_seed };
-    if let Err((_, value, max)) = sc.check(cfg) {
-        bail!("--topk {value} is outside its range for {} (largest allowed: {max})", model_path.display());
+    sc.sampling = s;
+    if let Err((setting, value, max)) = sc.check(cfg) {
+        bail!("--{} {value} is outside its range for {} (largest allowed: {max})", crate::cli::budget::flag(setting), model_path.display());
     }
     Ok(sc)
 }
@@ -298,13 +325,13 @@ pub fn run(args: Args) -> Result<()> {
         SeedChoice::Tokens(t) => Seed::Tokens(*t),
         SeedChoice::Frames(f) => Seed::FollowerFrames(f),
     };
-    let sampled = match args.topk {
+    let sampled = match chosen_sampling(&args)? {
         None => None,
-        Some(k) => Some((sampling_session(&cfg, k, args.rng_seed.unwrap_or(0), &model_path)?, k)),
+        Some(s) => Some((sampling_session(&cfg, s, &model_path)?, s)),
     };
     let mode = match &sampled {
         None => "R mode, whole clip".to_string(),
-        Some((_, k)) => format!("S mode at the reference preset, top-{k} sampling, seed {}", args.rng_seed.unwrap_or(0)),
+        Some((_, s)) => format!("S mode at the reference preset, {}", describe(s)),
     };
     stage(3, &format!("generating {} steps ({mode})", shape.steps));
     let t = Instant::now();
@@ -502,6 +529,7 @@ pub fn run(args: Args) -> Result<()> {
             true_follower: None,
             threads: args.threads,
             topk: None,
+            temperature: None,
             rng_seed: None,
             seed: None,
             audio_scaler: None,

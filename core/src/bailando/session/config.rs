@@ -139,9 +139,10 @@ impl SessionConfig {
         };
         range(Setting::DecFuture, self.dec_future, 0, dec_future_max(cfg))?;
         range(Setting::Shift, self.shift, 1, window_rows(cfg) as u32)?;
-        if let Sampling::TopK { k, .. } = self.sampling {
+        if let Some(k) = self.sampling.k() {
             range(Setting::TopK, k, 1, cfg.gpt.vocab[0].min(cfg.gpt.vocab[1]))?;
         }
+        self.sampling.check()?;
         range(Setting::PendingFrames, self.pending_frames, 0, MAX_BUFFER)?;
         range(Setting::MusicBuffer, self.music_buffer_rows, 1, MAX_BUFFER)?;
         if self.schedule == CacheSchedule::Staggered {

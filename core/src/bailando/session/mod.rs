@@ -24,7 +24,7 @@ use crate::bailando::exact::{padded_rows, MusicPadding};
 use crate::bailando::model::Model;
 use crate::error::{check_len, Buffer, Error};
 use crate::input;
-use crate::nn::sampler::{Rng, Sampling, MAX_TOP_K};
+use crate::nn::sampler::{Rng, MAX_TOP_K};
 
 pub use config::{dec_future_max, window_rows, CacheSchedule, Preset, SessionConfig};
 pub use state::{StepScratch, PREFILL_CHUNK};
@@ -65,7 +65,7 @@ fn check_config(model: &BailandoConfig, cfg: &SessionConfig) -> Result<(), Error
             value,
             max,
         })?;
-    if let Sampling::TopK { k, .. } = cfg.sampling {
+    if let Some(k) = cfg.sampling.k() {
         if k as usize > MAX_TOP_K {
             return Err(Error::Setting {
                 setting: crate::error::Setting::TopK,
@@ -230,10 +230,7 @@ impl<'a> Session<'a> {
         self.st.reset();
         self.st.toks.push(&seed)?;
         self.seed = seed;
-        self.rng = Rng(match self.cfg.sampling {
-            Sampling::TopK { rng_seed, .. } => rng_seed,
-            Sampling::Greedy => 0,
-        });
+        self.rng = Rng(self.cfg.sampling.rng_seed());
         (
             self.steps,
             self.rows,

@@ -18,7 +18,6 @@ use crate::error::Error;
 use crate::kernels::{layernorm, linear};
 use crate::nn::gpt_cache::{GptCache, GptItem, MAX_BATCH, MAX_ITEMS};
 use crate::nn::quantizer::dequantise;
-use crate::nn::sampler::{argmax, top_k_by_id, Sampling};
 use crate::nn::stream_conv::StackW;
 use crate::nn::window::{next_window, window_start};
 
@@ -283,10 +282,7 @@ pub fn step_many(
                 &mut sc.logits[vu..]
             };
             linear(sc.ln, &model.gpt.heads[h], None, logits);
-            tok[h] = match s.cfg.sampling {
-                Sampling::Greedy => argmax(logits),
-                Sampling::TopK { k, .. } => top_k_by_id(logits, k as usize, &mut s.rng),
-            };
+            tok[h] = s.cfg.sampling.choose(logits, &mut s.rng);
         }
         s.st.toks.push(&tok).map_err(at(i))?;
         s.steps += 1;

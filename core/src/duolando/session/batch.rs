@@ -24,8 +24,7 @@ use crate::duolando::coordinated_attention::{
 use crate::duolando::gpt::{head_rows, logits_len};
 use crate::duolando::model::Model;
 use crate::duolando::session::config::{
-    for_each_live_window, next_window, window_context, CacheSchedule, Sampling, Setting,
-    MAX_WINDOWS,
+    for_each_live_window, next_window, window_context, CacheSchedule, Setting, MAX_WINDOWS,
 };
 use crate::duolando::session::lat_stream::{max_keys, LatInputs, LatStepScratch, LatStream};
 use crate::duolando::session::state::State;
@@ -34,7 +33,6 @@ use crate::error::Error;
 use crate::kernels::{linear, Q8Room};
 use crate::nn::block::BlockScratch;
 use crate::nn::gpt_cache::{GptCache, GptItem};
-use crate::nn::sampler::{argmax, top_k_by_id};
 use crate::nn::stream_conv::{ScratchNeed, StreamScratch};
 
 /// Most sessions stepped together (and most LAT pushes / GPT windows in
@@ -925,10 +923,7 @@ fn gpt_step(
         let mut off = 0;
         for (h, &rows) in hr.iter().enumerate() {
             let lg = &mut sc.logits[off + qi * rows..off + (qi + 1) * rows];
-            pred[h] = match s.cfg.sampling {
-                Sampling::Greedy => argmax(lg),
-                Sampling::TopK { k: tk, .. } => top_k_by_id(lg, tk as usize, &mut s.rng),
-            };
+            pred[h] = s.cfg.sampling.choose(lg, &mut s.rng);
             off += nr * rows;
         }
         tokens[qi] = s.finish_step(pred).map_err(at(i))?;

@@ -134,9 +134,7 @@ impl SessionConfig {
         range(Setting::Shift, self.shift, 1, m)?;
         range(Setting::MusicLookahead, self.music_lookahead, 0, lf)?;
         range(Setting::LatPast, self.lat_past, 0, lf)?;
-        if let Sampling::TopK { k, .. } = self.sampling {
-            range(Setting::TopK, k, 1, crate::nn::sampler::MAX_TOP_K as u32)?;
-        }
+        self.sampling.check()?;
         range(
             Setting::PendingFrames,
             self.pending_frames,

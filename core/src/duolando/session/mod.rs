@@ -324,10 +324,7 @@ impl<'a> Session<'a> {
 
     fn restart(&mut self) -> Result<(), Error> {
         self.st.reset();
-        self.rng = Rng(match self.cfg.sampling {
-            Sampling::TopK { rng_seed, .. } => rng_seed,
-            Sampling::Greedy => 0,
-        });
+        self.rng = Rng(self.cfg.sampling.rng_seed());
         self.frames = 0;
         self.music_frames = 0;
         self.codes = 0;

@@ -111,25 +111,26 @@ pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usi
     );
 
     let t = Instant::now();
-    let topk = args.topk.or(demo_model.then_some(DEMO_SOLO_TOPK));
-    if demo_model && args.topk.is_none() {
+    let chosen = super::chosen_sampling(args)?;
+    let sampling = chosen.or(demo_model.then_some(Sampling::TopK { k: DEMO_SOLO_TOPK, rng_seed: 0 }));
+    if demo_model && chosen.is_none() {
         eprintln!("      sampling: top-{DEMO_SOLO_TOPK} (the demo model's default; greedy holds one pose on it)");
     }
-    let (run, mode) = match topk {
+    let (run, mode) = match sampling {
         None => (exact_rows(&model, &music.rows, music.cols, MusicPadding::Demo, seed), "exact (R), music-only path".to_string()),
-        Some(k) => {
-            // `--topk K`: a streaming session at the reference preset (the
-            // decoders' whole future: R's frames for its tokens), each token
-            // drawn among the K most probable (the authors' `samplek`).
-            let rng_seed = args.rng_seed.unwrap_or(0);
-            let sc = SoloConfig { sampling: Sampling::TopK { k, rng_seed }, ..SoloConfig::preset(&cfg, SoloPreset::Reference) };
-            if let Err((_, value, max)) = sc.check(&cfg) {
-                bail!("--topk {value} is outside its range for {} (largest allowed: {max})", model_path.display());
+        Some(s) => {
+            // `--topk K` / `--temperature T`: a streaming session at the
+            // reference preset (the decoders' whole future: R's frames for
+            // its tokens), each token drawn among the K most probable
+            // (uniformly: the authors' `samplek`; or by its tempered probability).
+            let sc = SoloConfig { sampling: s, ..SoloConfig::preset(&cfg, SoloPreset::Reference) };
+            if let Err((setting, value, max)) = sc.check(&cfg) {
+                bail!("--{} {value} is outside its range for {} (largest allowed: {max})", crate::cli::budget::flag(setting), model_path.display());
             }
-            if k as usize > MAX_TOP_K {
-                bail!("--topk {k} is outside its range (largest allowed: {MAX_TOP_K})");
+            if s.k().is_some_and(|k| k as usize > MAX_TOP_K) {
+                bail!("--topk {} is outside its range (largest allowed: {MAX_TOP_K})", s.k().unwrap_or(0));
             }
-            (streaming_rows(&model, &music.rows, music.cols, MusicPadding::Demo, seed, &sc), format!("streaming (S), reference preset, top-{k} sampling, rng seed {rng_seed}"))
+            (streaming_rows(&model, &music.rows, music.cols, MusicPadding::Demo, seed, &sc), format!("streaming (S), reference preset, {}", super::describe(&s)))
         }
     };
     let run = run.map_err(|e| anyhow::anyhow!("{}: {e:#}", music_path.display()))?;

@@ -101,6 +101,8 @@ pub fn run(args: &Args) -> Result<()> {
         (args.seed_tokens.is_some(), "--seed-tokens"),
         (args.true_follower.is_some(), "--true-follower"),
         (args.topk.is_some(), "--topk"),
+        (args.temperature.is_some(), "--temperature"),
+        (args.rng_seed.is_some(), "--rng-seed"),
     ] {
         if set {
             bail!("{flag}: {} is a Transflower model (a solo dancer from music and a motion seed); it takes --music, --audio-scaler, --scaler, --motion-seed, --seed", model_path.display());
