@@ -670,6 +670,9 @@ pub fn scale_max(s: &mut [f32], scale: f32, max: f32) -> f32 {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx512* imply avx512f).
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::scale_max_512(s, scale, max) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::scale_max_avx2(s, scale, max) },
         _ => scalar::scale_max(s, scale, max),
     }
 }
@@ -740,14 +743,18 @@ pub fn bias_act(t: &[f32], b: Option<&[f32]>, gelu: bool, y: &mut [f32]) {
 /// [`bias_act`] on whole rows of 16 values in place: `rows[m][j] = b[j] +
 /// rows[m][j]` (`0 + ...` without a bias), then GELU where `gelu`; the
 /// same values as [`bias_act`] row by row, bit for bit. On AVX-512 four
-/// rows at a time, their GELUs interleaved (the tile pair kernel's call
-/// hands over 5-8 rows of 16 columns: the MLP's first layer in R mode).
+/// rows at a time, on AVX2 / AVX-VNNI two (four 8-lane vectors), their
+/// GELUs interleaved (the tile pair kernel's call hands over 5-8 rows of
+/// 16 columns: the MLP's first layer in R mode).
 #[inline]
 pub fn bias_act_rows(rows: &mut [[f32; 16]], b: Option<&[f32; 16]>, gelu: bool) {
     match isa() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as in `dot_f32` (Avx512* imply avx512f).
         Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::bias_act_rows_512(rows, b, gelu) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::bias_act_rows_avx2(rows, b, gelu) },
         _ => {
             for r in rows {
                 let t = *r;

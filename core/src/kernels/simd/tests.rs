@@ -1546,6 +1546,18 @@ fn bias_act_rows_equal_the_twin_row_by_row() {
                 bias.is_some()
             );
             #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx2") {
+                let mut got = rows.clone();
+                // SAFETY: avx2 detected.
+                unsafe { super::x86::bias_act_rows_avx2(&mut got, bias, gelu) };
+                assert_eq!(
+                    bits(&got),
+                    bits(&want),
+                    "avx2 rows={n} bias={} gelu={gelu}",
+                    bias.is_some()
+                );
+            }
+            #[cfg(target_arch = "x86_64")]
             if std::is_x86_feature_detected!("avx512f") {
                 let mut got = rows.clone();
                 // SAFETY: avx512f detected.
@@ -3349,6 +3361,10 @@ fn scale_max_equals_the_twin() {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx512f") {
         v.push(("avx512", super::x86::scale_max_512));
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        v.push(("avx2", super::x86::scale_max_avx2));
     }
     for n in (0..=40).chain([290, 1000]) {
         for start in [f32::NEG_INFINITY, 0.0, 100.0] {

@@ -2689,6 +2689,36 @@ pub unsafe fn scale_max_512(s: &mut [f32], scale: f32, max: f32) -> f32 {
     max.max(_mm512_reduce_max_ps(vm))
 }
 
+/// See [`super::scale_max`]: 8 lanes at a time, the tail as the twin's; the
+/// lane maxima by `vmaxps` with the running maximum as its second operand
+/// (a NaN score leaves it as it was, as `f32::max` does).
+///
+/// # Safety
+/// The CPU must support avx2.
+#[target_feature(enable = "avx2")]
+pub unsafe fn scale_max_avx2(s: &mut [f32], scale: f32, max: f32) -> f32 {
+    let n = s.len();
+    let (body, tail) = s.split_at_mut(n - n % 8);
+    let (sc, mut vm) = (_mm256_set1_ps(scale), _mm256_set1_ps(f32::NEG_INFINITY));
+    for c in body.chunks_exact_mut(8) {
+        // SAFETY: c holds 8 floats.
+        unsafe {
+            let v = _mm256_mul_ps(_mm256_loadu_ps(c.as_ptr()), sc);
+            _mm256_storeu_ps(c.as_mut_ptr(), v);
+            vm = _mm256_max_ps(v, vm);
+        }
+    }
+    let mut lanes = [0f32; 8];
+    // SAFETY: lanes holds 8 floats.
+    unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), vm) };
+    let mut max = lanes.iter().fold(max, |a, &b| a.max(b));
+    for x in tail {
+        *x *= scale;
+        max = max.max(*x);
+    }
+    max
+}
+
 /// See [`super::exp_shifted_sum`] (8 lane sums, reduced as the twin does).
 ///
 /// # Safety
@@ -2788,37 +2818,85 @@ pub unsafe fn layernorm_row(x: &[f32], w: &[f32], b: &[f32], eps: f32, y: &mut [
 /// The CPU must support avx2.
 #[target_feature(enable = "avx2")]
 pub unsafe fn gelu_inplace(x: &mut [f32]) {
-    use super::scalar::erf_c::*;
     let n = x.len();
     let (body, tail) = x.split_at_mut(n - n % 8);
-    let sign = _mm256_set1_ps(-0.0);
     for c in body.chunks_exact_mut(8) {
         // SAFETY: c holds 8 floats.
-        unsafe {
-            let xv = _mm256_loadu_ps(c.as_ptr());
-            let u = _mm256_mul_ps(xv, _mm256_set1_ps(core::f32::consts::FRAC_1_SQRT_2));
-            let neg = _mm256_cmp_ps::<_CMP_LT_OQ>(u, _mm256_setzero_ps());
-            let a = _mm256_blendv_ps(u, _mm256_xor_ps(u, sign), neg);
-            let t = _mm256_div_ps(
-                _mm256_set1_ps(1.0),
-                _mm256_add_ps(_mm256_set1_ps(1.0), _mm256_mul_ps(_mm256_set1_ps(P), a)),
-            );
-            let mut y = _mm256_set1_ps(A[0]);
-            for &cf in &A[1..] {
-                y = _mm256_add_ps(_mm256_mul_ps(y, t), _mm256_set1_ps(cf));
-            }
-            let e = exp8(_mm256_xor_ps(_mm256_mul_ps(a, a), sign));
-            let e = _mm256_sub_ps(_mm256_set1_ps(1.0), _mm256_mul_ps(_mm256_mul_ps(y, t), e));
-            let erf = _mm256_blendv_ps(e, _mm256_xor_ps(e, sign), neg);
-            let g = _mm256_mul_ps(
-                _mm256_mul_ps(_mm256_set1_ps(0.5), xv),
-                _mm256_add_ps(_mm256_set1_ps(1.0), erf),
-            );
-            _mm256_storeu_ps(c.as_mut_ptr(), g);
-        }
+        unsafe { _mm256_storeu_ps(c.as_mut_ptr(), gelu8(_mm256_loadu_ps(c.as_ptr()))) };
     }
     for v in tail {
         *v = super::scalar::gelu(*v);
+    }
+}
+
+/// [`super::scalar::gelu`] on 8 lanes, operation for operation.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn gelu8(xv: __m256) -> __m256 {
+    use super::scalar::erf_c::*;
+    let sign = _mm256_set1_ps(-0.0);
+    let u = _mm256_mul_ps(xv, _mm256_set1_ps(core::f32::consts::FRAC_1_SQRT_2));
+    let neg = _mm256_cmp_ps::<_CMP_LT_OQ>(u, _mm256_setzero_ps());
+    let a = _mm256_blendv_ps(u, _mm256_xor_ps(u, sign), neg);
+    let t = _mm256_div_ps(
+        _mm256_set1_ps(1.0),
+        _mm256_add_ps(_mm256_set1_ps(1.0), _mm256_mul_ps(_mm256_set1_ps(P), a)),
+    );
+    let mut y = _mm256_set1_ps(A[0]);
+    for &cf in &A[1..] {
+        y = _mm256_add_ps(_mm256_mul_ps(y, t), _mm256_set1_ps(cf));
+    }
+    // SAFETY: avx2 is enabled here (exp8's contract).
+    let e = unsafe { exp8(_mm256_xor_ps(_mm256_mul_ps(a, a), sign)) };
+    let e = _mm256_sub_ps(_mm256_set1_ps(1.0), _mm256_mul_ps(_mm256_mul_ps(y, t), e));
+    let erf = _mm256_blendv_ps(e, _mm256_xor_ps(e, sign), neg);
+    _mm256_mul_ps(
+        _mm256_mul_ps(_mm256_set1_ps(0.5), xv),
+        _mm256_add_ps(_mm256_set1_ps(1.0), erf),
+    )
+}
+
+/// See [`super::bias_act_rows`] (AVX2 and AVX-VNNI): two rows' sums and
+/// [`gelu8`]s at a time in one call (four independent chains of 8 lanes),
+/// each the twin's operations, so bit-identical to it; a call's rows
+/// once, where row by row each took two calls.
+///
+/// # Safety
+/// The CPU must support avx2.
+#[target_feature(enable = "avx2")]
+pub unsafe fn bias_act_rows_avx2(rows: &mut [[f32; 16]], b: Option<&[f32; 16]>, gelu: bool) {
+    // SAFETY: b holds 16 floats.
+    let bv = b.map_or([_mm256_setzero_ps(); 2], |b| unsafe {
+        [
+            _mm256_loadu_ps(b.as_ptr()),
+            _mm256_loadu_ps(b.as_ptr().add(8)),
+        ]
+    });
+    let mut pairs = rows.chunks_exact_mut(2);
+    for q in &mut pairs {
+        // Lanes 0-7 and 8-15 of the two rows. SAFETY: each row holds 16 floats.
+        let mut v: [__m256; 4] = core::array::from_fn(|i| {
+            _mm256_add_ps(bv[i % 2], unsafe {
+                _mm256_loadu_ps(q[i / 2].as_ptr().add(8 * (i % 2)))
+            })
+        });
+        if gelu {
+            // Unrolled by hand: four independent chains in one block.
+            v = [gelu8(v[0]), gelu8(v[1]), gelu8(v[2]), gelu8(v[3])];
+        }
+        for (i, v) in v.into_iter().enumerate() {
+            // SAFETY: as above.
+            unsafe { _mm256_storeu_ps(q[i / 2].as_mut_ptr().add(8 * (i % 2)), v) };
+        }
+    }
+    for r in pairs.into_remainder() {
+        for (h, bh) in bv.into_iter().enumerate() {
+            // SAFETY: r holds 16 floats.
+            unsafe {
+                let v = _mm256_add_ps(bh, _mm256_loadu_ps(r.as_ptr().add(8 * h)));
+                _mm256_storeu_ps(r.as_mut_ptr().add(8 * h), if gelu { gelu8(v) } else { v });
+            }
+        }
     }
 }
 
