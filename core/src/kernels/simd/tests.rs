@@ -267,11 +267,26 @@ fn quantiser_is_bit_identical_to_scalar_twin() {
                 .sum::<i32>()
         );
     }
-    // Every block count up to the whole input (odd counts end on a lone block).
+    // Every block count up to the whole input (odd counts end on a lone block;
+    // counts of 16k + 4 .. 16k + 15 end on a partial group of the AVX-512
+    // kernel), each output followed by sentinels no kernel may write.
     for v in variants() {
         for n in 0..=nb {
-            let (mut q, mut d, mut c) = (vec![0i8; 32 * n], vec![0f32; n], vec![0i32; 2 * n]);
-            (v.quantise)(&x[..32 * n], &mut q, &mut d, &mut c);
+            let (mut qs, mut ds, mut cs) = (
+                vec![0x55i8; 32 * n + 64],
+                vec![-7.0f32; n + 16],
+                vec![12345i32; 2 * n + 32],
+            );
+            let (q, d, c) = (&mut qs[..32 * n], &mut ds[..n], &mut cs[..2 * n]);
+            (v.quantise)(&x[..32 * n], q, d, c);
+            let (q, d, c) = (q.to_vec(), d.to_vec(), c.to_vec());
+            assert!(
+                qs[32 * n..].iter().all(|&s| s == 0x55)
+                    && ds[n..].iter().all(|&s| s == -7.0)
+                    && cs[2 * n..].iter().all(|&s| s == 12345),
+                "{} ({n} blocks): a write past the outputs",
+                v.name
+            );
             assert_eq!(q, q0[..32 * n], "{} ({n} blocks): quantised values", v.name);
             let bits = |d: &[f32]| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(&d), bits(&d0[..n]), "{} ({n} blocks): scales", v.name);

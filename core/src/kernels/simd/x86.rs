@@ -661,8 +661,9 @@ pub unsafe fn quantise_q8_corr(x: &[f32], q: &mut [i8], d: &mut [f32], c: &mut [
 /// lane: [`super::q8_scale`]'s zero and overflow rules as masks); each block
 /// is then scaled, rounded half away from zero ([`round_away_512`]),
 /// narrowed with signed saturation in order, and its parity corrections
-/// summed (exact integer sums). The last `blocks % 16` blocks take
-/// [`quantise_q8_corr`]. Bit for bit the AVX2 kernel and the scalar twin.
+/// summed (exact integer sums). A last group of 4-15 blocks runs the same
+/// way on its blocks' lanes (a 768-wide row is 16 + 8 blocks); one of 1-3
+/// takes [`quantise_q8_corr`]. Bit for bit the AVX2 kernel and the scalar twin.
 ///
 /// # Safety
 /// The CPU must support avx512f, avx2 and fma.
@@ -672,14 +673,25 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
         .min(q.len() / Q8_BLOCK)
         .min(d.len())
         .min(c.len() / 2);
-    let whole = nb - nb % 16;
+    // A last group of at least PARTIAL_MIN blocks (a 768-wide row: 16 + 8)
+    // runs here too, its missing blocks' lanes zero and never stored.
+    const PARTIAL_MIN: usize = 4;
+    let whole = if nb % 16 >= PARTIAL_MIN {
+        nb
+    } else {
+        nb - nb % 16
+    };
     let zero = _mm512_setzero_ps();
     for b0 in (0..whole).step_by(16) {
+        let valid = (whole - b0).min(16);
         // Lane maxima of |x| per block (a NaN lane keeps the running maximum, f32::max's
         // rule: `vmaxps` returns its second operand where either is NaN), then the 16
         // blocks' maxima in one vector by a transposing tree: no NaN is left, so any
         // order of maxima gives the same bits.
         let lane_max: [__m512; 16] = core::array::from_fn(|b| {
+            if b >= valid {
+                return zero;
+            }
             // SAFETY: blocks b0 + b < nb: 32 floats each in `x`.
             let (v0, v1) = unsafe {
                 (
@@ -702,12 +714,15 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
             _mm512_maskz_mov_ps(keep, scale),
             _mm512_maskz_mov_ps(keep, inv),
         );
-        // SAFETY: d holds blocks b0 .. b0 + 16.
-        unsafe { _mm512_storeu_ps(d.as_mut_ptr().add(b0), scale) };
+        // SAFETY: d holds blocks b0 .. b0 + valid (the masked lanes).
+        unsafe { _mm512_mask_storeu_ps(d.as_mut_ptr().add(b0), lanes16(valid), scale) };
         let mut invs = [0f32; 16];
         // SAFETY: invs holds 16 floats.
         unsafe { _mm512_storeu_ps(invs.as_mut_ptr(), inv) };
         let sums: [__m512i; 16] = core::array::from_fn(|b| {
+            if b >= valid {
+                return _mm512_setzero_si512();
+            }
             let at = 32 * (b0 + b);
             let ib = _mm512_set1_ps(invs[b]);
             // SAFETY: block b0 + b: 32 floats of `x`, 32 bytes of `q`.
@@ -733,14 +748,18 @@ pub unsafe fn quantise_q8_corr_512(x: &[f32], q: &mut [i8], d: &mut [f32], c: &m
         // (c[2b], c[2b + 1]) for 8 blocks per vector (integer sums: any order is exact).
         let [lo, hi, ..] = fold16_epi32(sums);
         let k = _mm512_set1_epi32(-128);
-        // SAFETY: c holds the 32 corrections of blocks b0 .. b0 + 16.
+        // Blocks 0-7 of the group in `lo`, 8-15 in `hi`, two corrections each.
+        let (n_lo, n_hi) = ((2 * valid).min(16), (2 * valid).saturating_sub(16));
+        // SAFETY: c holds the 2 * valid corrections of blocks b0 .. b0 + valid (the masked lanes).
         unsafe {
-            _mm512_storeu_si512(
-                c.as_mut_ptr().add(2 * b0) as *mut _,
+            _mm512_mask_storeu_epi32(
+                c.as_mut_ptr().add(2 * b0),
+                lanes16(n_lo),
                 _mm512_mullo_epi32(lo, k),
             );
-            _mm512_storeu_si512(
-                c.as_mut_ptr().add(2 * b0 + 16) as *mut _,
+            _mm512_mask_storeu_epi32(
+                c.as_mut_ptr().add(2 * b0 + 16),
+                lanes16(n_hi),
                 _mm512_mullo_epi32(hi, k),
             );
         }
