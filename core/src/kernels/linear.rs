@@ -988,12 +988,20 @@ fn put_rows(
 ) {
     const C: usize = simd::AMX_COLS;
     let nt = nt.min(C);
-    // The bias of the call's columns (0 past them: those lanes are dropped).
+    // The bias of the call's columns: the model's own 16 values where the
+    // call has 16 columns (no copy: it was a `memcpy` call per pair call),
+    // else copied, 0 past them (those lanes are dropped).
     let mut b = [0f32; C];
-    let bias = e.bias.map(|bias| {
-        b[..nt].copy_from_slice(&bias[t0..t0 + nt]);
-        &b
-    });
+    let bias: Option<&[f32; C]> = match e.bias {
+        None => None,
+        Some(bias) => Some(match <&[f32; C]>::try_from(&bias[t0..t0 + nt]) {
+            Ok(full) => full,
+            Err(_) => {
+                b[..nt].copy_from_slice(&bias[t0..t0 + nt]);
+                &b
+            }
+        }),
+    };
     simd::bias_act_rows(rows, bias, e.gelu);
     for (m, r) in rows.iter().enumerate() {
         let seg = y.seg(i0 + m, t0, t0 + nt);
