@@ -24,7 +24,7 @@ use crate::bailando::exact::{padded_rows, MusicPadding};
 use crate::bailando::model::Model;
 use crate::error::{check_len, Buffer, Error};
 use crate::input;
-use crate::nn::sampler::{Rng, MAX_TOP_K};
+use crate::nn::sampler::Rng;
 
 pub use config::{dec_future_max, window_rows, CacheSchedule, Preset, SessionConfig};
 pub use state::{StepScratch, PREFILL_CHUNK};
@@ -65,15 +65,8 @@ fn check_config(model: &BailandoConfig, cfg: &SessionConfig) -> Result<(), Error
             value,
             max,
         })?;
-    if let Some(k) = cfg.sampling.k() {
-        if k as usize > MAX_TOP_K {
-            return Err(Error::Setting {
-                setting: crate::error::Setting::TopK,
-                value: k,
-                max: MAX_TOP_K as u32,
-            });
-        }
-    }
+    // `SessionConfig::check` bounds k by the vocabularies and by MAX_TOP_K
+    // (`Sampling::check`).
     Ok(())
 }
 

@@ -21,7 +21,7 @@ use serde_json::json;
 use super::inputs::{check_finite, extension};
 use crate::cli::generate_solo::{exact_rows, parse_seed, streaming_rows};
 use duolando_core::bailando::session::{Preset as SoloPreset, SessionConfig as SoloConfig};
-use duolando_core::nn::sampler::{Sampling, MAX_TOP_K};
+use duolando_core::nn::sampler::Sampling;
 use crate::export::{write_dancers, GroupErrors, Motion};
 use crate::model_file::ModelFile;
 use crate::music::bailando::{BEAT_COL, FEATURE_DIM, FRAME_RATE, SAMPLE_RATE};
@@ -126,9 +126,6 @@ pub fn run(args: &super::Args, model_path: &Path, demo_model: bool, threads: usi
             let sc = SoloConfig { sampling: s, ..SoloConfig::preset(&cfg, SoloPreset::Reference) };
             if let Err((setting, value, max)) = sc.check(&cfg) {
                 bail!("--{} {value} is outside its range for {} (largest allowed: {max})", crate::cli::budget::flag(setting), model_path.display());
-            }
-            if s.k().is_some_and(|k| k as usize > MAX_TOP_K) {
-                bail!("--topk {} is outside its range (largest allowed: {MAX_TOP_K})", s.k().unwrap_or(0));
             }
             (streaming_rows(&model, &music.rows, music.cols, MusicPadding::Demo, seed, &sc), format!("streaming (S), reference preset, {}", super::describe(&s)))
         }
