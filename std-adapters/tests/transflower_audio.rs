@@ -649,3 +649,71 @@ fn the_bundled_transflower_demo_dances_to_its_music() {
     assert!(fastest < 0.4, "a joint moved {fastest} m in one frame");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+// ---- madmom's networks for columns 81, 82 (`--madmom`) ----
+
+/// Two random networks of madmom's downbeat architecture (tools/madmom_goldens.py).
+fn madmom_networks() -> PathBuf {
+    fixtures().join("madmom/random_downbeats.bin")
+}
+
+#[test]
+fn madmom_networks_make_the_beat_columns() {
+    use duolando::music::madmom::{signal_44k, DownbeatRnn};
+    use duolando::music::transflower::Beats;
+    let d = tmp("madmom");
+    let flac = fixtures().join("music/stereo_44k.flac");
+    let nets = madmom_networks();
+    let (with, without) = (d.join("with.npy"), d.join("without.npy"));
+    let (code, err) = cli(&["features", "--for", "transflower", "--madmom", nets.to_str().unwrap(), flac.to_str().unwrap(), with.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("beat/downbeat from madmom's 2 networks"), "{err}");
+    let (code, err) = cli(&["features", "--for", "transflower", flac.to_str().unwrap(), without.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("substitute beat tracker (no --madmom)"), "{err}");
+    let (a, b) = (
+        read_f32_2d(&with, Some(FEATURE_DIM), "with").unwrap(),
+        read_f32_2d(&without, Some(FEATURE_DIM), "without").unwrap(),
+    );
+    assert_eq!(a.rows, b.rows);
+    let rnn = DownbeatRnn::from_bytes(&std::fs::read(&nets).unwrap()).unwrap();
+    let rows = rnn.activations(&signal_44k(&duolando::audio::decode(&flac).unwrap()), 20.0);
+    assert!(rows.len() >= a.rows);
+    for t in 0..a.rows {
+        let (ra, rb) = (&a.data[t * FEATURE_DIM..][..FEATURE_DIM], &b.data[t * FEATURE_DIM..][..FEATURE_DIM]);
+        assert_eq!(ra[..BEAT_COL], rb[..BEAT_COL], "row {t}: mel/envelope changed");
+        assert_eq!([ra[BEAT_COL], ra[DOWNBEAT_COL]], rows[t], "row {t}: not madmom's row {t}");
+        assert_eq!(ra[PCA_COLS.start..], [0.0, 0.0]);
+    }
+    assert_ne!(a.data, b.data, "the substitute's columns were kept");
+    // the library gives the same; fewer madmom rows than mel rows cut every part
+    let y = duolando::audio::load_mono(&flac, SAMPLE_RATE).unwrap();
+    let lib = TfAudio::new().features_with(&y, Beats::Madmom(&rows)).unwrap();
+    assert_eq!(lib.data, a.data);
+    let short = TfAudio::new().features_with(&y, Beats::Madmom(&rows[..10])).unwrap();
+    assert_eq!((short.frames, &short.data[..], short.tempo_bpm), (10, &a.data[..10 * FEATURE_DIM], 0.0));
+
+    // refusals: --madmom for another family, a file that is not a network file
+    let out = d.join("x.npy");
+    let (code, err) = cli(&["features", "--madmom", nets.to_str().unwrap(), flac.to_str().unwrap(), out.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--madmom") && err.contains("--for transflower"), "{err}");
+    let bad = d.join("scaler.json");
+    std::fs::write(&bad, scaler_json(FEATURE_DIM)).unwrap();
+    let (code, err) = cli(&["features", "--for", "transflower", "--madmom", bad.to_str().unwrap(), flac.to_str().unwrap(), out.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("scaler.json") && err.contains("DUOMMRNN") && err.contains("tools/madmom_weights.py"), "{err}");
+    assert!(!out.exists());
+
+    // dance: the same columns in the model's input
+    let model = seeded_85_model(&d);
+    let dance_out = d.join("dance");
+    let (code, err) = cli(&["dance", "--model", model.to_str().unwrap(), "--music", flac.to_str().unwrap(), "--madmom", nets.to_str().unwrap(), "--out", dance_out.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("madmom's 2 networks"), "{err}");
+    assert_eq!(read_f32_2d(&dance_out.join("audio_features.npy"), Some(FEATURE_DIM), "a").unwrap().data, a.data);
+    let (code, err) = cli(&["dance", "--music", flac.to_str().unwrap(), "--madmom", nets.to_str().unwrap(), "--out", d.join("duet").to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--madmom is for a Transflower model"), "{err}");
+    std::fs::remove_dir_all(d).ok();
+}

@@ -16,7 +16,11 @@ use std::path::Path;
 /// Decodes `path`, mixes it to mono and resamples it to `target_sr` Hz.
 pub fn load_mono(path: impl AsRef<Path>, target_sr: u32) -> Result<Vec<f32>, AudioError> {
     let path = path.as_ref();
-    let d = decode(path)?;
+    mono_at(&decode(path)?, path, target_sr)
+}
+
+/// [`load_mono`] of an already decoded file (`path` names it in errors).
+pub fn mono_at(d: &Decoded, path: &Path, target_sr: u32) -> Result<Vec<f32>, AudioError> {
     let mono = d.mono();
     if mono.is_empty() {
         return Err(AudioError::Empty {

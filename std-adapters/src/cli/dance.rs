@@ -104,6 +104,12 @@ pub struct Args {
     /// `audio_feats_scaled_20_scaler.pkl` through tools/transflower_scalers.py, 85 columns).
     #[arg(long)]
     pub audio_scaler: Option<PathBuf>,
+    /// Transflower: madmom's downbeat networks (converted from a madmom
+    /// install by tools/madmom_weights.py) for the audio's beat/downbeat
+    /// columns, as the authors computed them; without it the engine's beat
+    /// tracker stands in.
+    #[arg(long, value_name = "NETWORKS")]
+    pub madmom: Option<PathBuf>,
     /// Transflower: the motion features' scaler; with it the dancer is placed
     /// on a skeleton (glb, bvh, viewer), as `generate --scaler`.
     #[arg(long)]
@@ -533,6 +539,7 @@ pub fn run(args: Args) -> Result<()> {
             rng_seed: None,
             seed: None,
             audio_scaler: None,
+            madmom: None,
             scaler: None,
             motion_seed: None,
         };

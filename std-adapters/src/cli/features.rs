@@ -3,12 +3,13 @@
 //! default, Bailando's (T, 438) at 7.5 frames/s with `--for bailando`
 //! (see `crate::music`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
-use crate::music::transflower::{self, TfAudio};
-use crate::music::{Extractor, FeatureSet};
+use crate::music::madmom::{self, DownbeatRnn};
+use crate::music::transflower::{self, Beats, TfAudio};
+use crate::music::{Extractor, FeatureSet, Features};
 use crate::transflower_motion::scaler::Scaler;
 
 /// Which model's features `--for` names.
@@ -20,7 +21,8 @@ pub enum For {
     /// (T, 438) at 7.5 frames/s from audio at 3840 Hz (Bailando, CVPR 2022).
     Bailando,
     /// (T, 85) at 20 frames/s from audio at 96 kHz (Transflower: mel 80,
-    /// onset envelope; beat/downbeat and 2 PCA columns substituted).
+    /// onset envelope, beat/downbeat from madmom's networks with --madmom
+    /// or substituted, 2 PCA columns substituted).
     Transflower,
 }
 
@@ -43,6 +45,12 @@ pub struct Args {
     /// tools/transflower_scalers.py writes it; 85 columns).
     #[arg(long)]
     pub scaler: Option<PathBuf>,
+    /// With --for transflower: madmom's downbeat networks (converted from a
+    /// madmom install by tools/madmom_weights.py) compute columns 81, 82 as
+    /// the authors' madmom call does; without it the engine's beat tracker
+    /// stands in (docs/TRANSFLOWER.md "Audio features").
+    #[arg(long, value_name = "NETWORKS")]
+    pub madmom: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -51,10 +59,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let set = match args.for_model {
         For::Duolando => FeatureSet::Duolando,
         For::Bailando => FeatureSet::Bailando,
-        For::Transflower => return run_transflower(&args.input, &out, args.scaler.as_deref(), t0),
+        For::Transflower => return run_transflower(&args.input, &out, args.scaler.as_deref(), args.madmom.as_deref(), t0),
     };
     if let Some(s) = &args.scaler {
         anyhow::bail!("--scaler {}: only Transflower's features are standardised (give --for transflower)", s.display());
+    }
+    if let Some(m) = &args.madmom {
+        anyhow::bail!("--madmom {}: madmom's beat networks make Transflower's features only (give --for transflower)", m.display());
     }
     let sr = set.sample_rate();
     let y = crate::audio::load_mono(&args.input, sr)?;
@@ -76,45 +87,87 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// `--for transflower`: (T, 85) at 20 fps, standardised with `scaler` if given.
 fn run_transflower(
-    input: &std::path::Path,
-    out: &std::path::Path,
-    scaler: Option<&std::path::Path>,
+    input: &Path,
+    out: &Path,
+    scaler: Option<&Path>,
+    madmom: Option<&Path>,
     t0: std::time::Instant,
 ) -> anyhow::Result<()> {
     let scaler = match scaler {
-        Some(p) => {
-            let s = Scaler::read(p)?;
-            if s.width() != transflower::FEATURE_DIM {
-                anyhow::bail!(
-                    "scaler {}: {} columns, Transflower's audio features have {}: it is the scaler of another feature set",
-                    p.display(),
-                    s.width(),
-                    transflower::FEATURE_DIM
-                );
-            }
-            Some(s)
-        }
+        Some(p) => Some(read_audio_scaler(p, "scaler")?),
         None => None,
     };
-    let sr = transflower::SAMPLE_RATE;
-    let y = crate::audio::load_mono(input, sr)?;
-    let a = TfAudio::new();
-    let f = match &scaler {
-        Some(s) => a.features_scaled(&y, &s.mean, &s.scale),
-        None => a.features(&y),
-    }
-    .with_context(|| format!("{}: transflower feature extraction", input.display()))?;
+    let tf = transflower_file_features(input, madmom, scaler.as_ref())?;
+    let f = &tf.features;
     crate::npy::write_f32(out, &f.data, &[f.frames, f.dim]).with_context(|| format!("{}: cannot write", out.display()))?;
     eprintln!(
-        "{}: {:.1} s of audio -> ({}, {}) transflower features at {} fps ({}), substitute beat tracker tempo {:.1} BPM, {:.2} s",
+        "{}: {:.1} s of audio -> ({}, {}) transflower features at {} fps ({}), {}, {:.2} s",
         input.display(),
-        y.len() as f64 / sr as f64,
+        tf.seconds,
         f.frames,
         f.dim,
         transflower::FPS,
         if scaler.is_some() { "scaled" } else { "unscaled" },
-        f.tempo_bpm,
+        tf.beats_said(),
         t0.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// A Transflower audio scaler file (85 columns), `flag` naming it in errors.
+pub(crate) fn read_audio_scaler(p: &Path, flag: &str) -> anyhow::Result<Scaler> {
+    let s = Scaler::read(p)?;
+    if s.width() != transflower::FEATURE_DIM {
+        anyhow::bail!(
+            "--{flag} {}: {} columns, Transflower's audio features have {}: it is the scaler of another feature set",
+            p.display(),
+            s.width(),
+            transflower::FEATURE_DIM
+        );
+    }
+    Ok(s)
+}
+
+/// Transflower features of one audio file and where their beat columns came from.
+pub(crate) struct TfFileFeatures {
+    pub features: Features,
+    pub seconds: f64,
+    /// madmom's networks in the ensemble; None: the substitute beat tracker.
+    pub madmom_networks: Option<usize>,
+}
+
+impl TfFileFeatures {
+    /// "beat/downbeat from madmom's 8 networks" or the substitute's tempo.
+    pub fn beats_said(&self) -> String {
+        match self.madmom_networks {
+            Some(n) => format!("beat/downbeat from madmom's {n} networks"),
+            None => format!("substitute beat tracker (no --madmom) tempo {:.1} BPM", self.features.tempo_bpm),
+        }
+    }
+}
+
+/// Transflower's (T, 85) features of the audio file `input`: decoded once,
+/// mel and envelope from it at 96 kHz, columns 81, 82 from madmom's
+/// networks (`madmom`, read first) on its 44.1 kHz int16 signal or the
+/// substitute, standardised by `scaler` if given.
+pub(crate) fn transflower_file_features(input: &Path, madmom: Option<&Path>, scaler: Option<&Scaler>) -> anyhow::Result<TfFileFeatures> {
+    let rnn = madmom.map(DownbeatRnn::read).transpose()?;
+    let d = crate::audio::decode(input)?;
+    let y = crate::audio::mono_at(&d, input, transflower::SAMPLE_RATE)?;
+    let rows = rnn.as_ref().map(|r| r.activations(&madmom::signal_44k(&d), transflower::FPS));
+    let beats = match &rows {
+        Some(r) => Beats::Madmom(r),
+        None => Beats::Substitute,
+    };
+    let a = TfAudio::new();
+    let features = match scaler {
+        Some(s) => a.features_scaled_with(&y, beats, &s.mean, &s.scale),
+        None => a.features_with(&y, beats),
+    }
+    .with_context(|| format!("{}: transflower feature extraction", input.display()))?;
+    Ok(TfFileFeatures {
+        features,
+        seconds: y.len() as f64 / transflower::SAMPLE_RATE as f64,
+        madmom_networks: rnn.as_ref().map(|r| r.networks()),
+    })
 }

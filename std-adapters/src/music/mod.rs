@@ -19,6 +19,7 @@ pub mod cqt;
 mod error;
 pub mod extractor;
 pub mod hpss;
+pub mod madmom;
 pub mod median;
 pub mod mel;
 pub mod mfcc;

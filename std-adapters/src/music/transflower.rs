@@ -21,9 +21,11 @@
 //!   8 BLSTMs, called with `fps=20` so its 100-fps-trained networks see
 //!   20-fps spectral features; its rows are NOT shifted by `[1:]`, so
 //!   madmom row k is at k/20 s while the mel/envelope row k is at
-//!   (k+1)/20 s). NOT reproduced: [`beat_substitute`] puts the engine's
-//!   own beat tracker there instead, at madmom's rough 20-fps levels and
-//!   with madmom's one-row offset.
+//!   (k+1)/20 s). Reproduced by `music::madmom` where the user gives
+//!   madmom's networks ([`Beats::Madmom`]: they are CC BY-NC-SA, the engine
+//!   ships none); without them [`beat_substitute`] puts the engine's own
+//!   beat tracker there instead, at madmom's rough 20-fps levels and with
+//!   madmom's one-row offset.
 //! - 83, 84 `ddcpca`: 2 PCA components of a Beat Saber step-placement
 //!   network's hidden states (the checkpoint and the fitted PCA are not
 //!   available). NOT reproduced: 0, the PCA components' mean by
@@ -161,8 +163,23 @@ impl TfAudio {
     /// columns 81..85 (see the module docs). `tempo_bpm` is the substitute
     /// beat tracker's tempo.
     pub fn features(&self, y: &[f32]) -> Result<Features, MusicError> {
-        let me = self.mel_envelope(y)?;
-        let (beat, downbeat, tempo_bpm) = beat_substitute(&me.envelope);
+        self.features_with(y, Beats::Substitute)
+    }
+
+    /// The (T, 85) unscaled features of `y` (mono, 96 kHz), columns 81, 82
+    /// from `beats`, the PCA columns 0. With madmom's rows, T is the
+    /// shorter of the two parts (the authors truncate every part to the
+    /// shortest); `tempo_bpm` is 0 (no tempo is estimated).
+    pub fn features_with(&self, y: &[f32], beats: Beats<'_>) -> Result<Features, MusicError> {
+        let mut me = self.mel_envelope(y)?;
+        let (beat, downbeat, tempo_bpm) = match beats {
+            Beats::Substitute => beat_substitute(&me.envelope),
+            Beats::Madmom(rows) => {
+                me.truncate(rows.len());
+                let (b, d) = rows[..me.frames].iter().map(|r| (r[0], r[1])).unzip();
+                (b, d, 0.0)
+            }
+        };
         Ok(assemble(&me, &beat, &downbeat, [0.0, 0.0], tempo_bpm))
     }
 
@@ -177,11 +194,20 @@ impl TfAudio {
         mean: &[f64],
         scale: &[f64],
     ) -> Result<Features, MusicError> {
+        self.features_scaled_with(y, Beats::Substitute, mean, scale)
+    }
+
+    /// [`TfAudio::features_with`], then standardised as [`TfAudio::features_scaled`].
+    pub fn features_scaled_with(
+        &self,
+        y: &[f32],
+        beats: Beats<'_>,
+        mean: &[f64],
+        scale: &[f64],
+    ) -> Result<Features, MusicError> {
         assert_eq!(mean.len(), FEATURE_DIM, "scaler width");
         assert_eq!(scale.len(), FEATURE_DIM, "scaler width");
-        let me = self.mel_envelope(y)?;
-        let (beat, downbeat, tempo_bpm) = beat_substitute(&me.envelope);
-        let mut f = assemble(&me, &beat, &downbeat, [0.0, 0.0], tempo_bpm);
+        let mut f = self.features_with(y, beats)?;
         for row in f.data.chunks_exact_mut(FEATURE_DIM) {
             for ((v, &m), &s) in row.iter_mut().zip(mean).zip(scale) {
                 *v = ((*v as f64 - m) / s) as f32;
@@ -189,6 +215,28 @@ impl TfAudio {
             row[PCA_COLS].fill(0.0);
         }
         Ok(f)
+    }
+}
+
+/// Where the beat and downbeat columns (81, 82) come from.
+#[derive(Clone, Copy, Debug)]
+pub enum Beats<'a> {
+    /// The engine's beat tracker at madmom's levels ([`beat_substitute`]).
+    Substitute,
+    /// madmom's `RNNDownBeatProcessor` rows at 20 fps (beat, downbeat), as
+    /// `music::madmom::DownbeatRnn::activations` gives them: row k is at
+    /// k/20 s, not shifted like the mel rows (the authors' alignment).
+    Madmom(&'a [[f32; 2]]),
+}
+
+impl MelEnvelope {
+    /// Keeps the first `frames` rows (no-op if there are fewer).
+    pub fn truncate(&mut self, frames: usize) {
+        if frames < self.frames {
+            self.frames = frames;
+            self.mel.truncate(frames * N_MELS);
+            self.envelope.truncate(frames);
+        }
     }
 }
 

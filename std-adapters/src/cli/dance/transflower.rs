@@ -1,6 +1,6 @@
 //! `duolando dance --model transflower.duo --music song.mp3 --out DIR
-//! [--audio-scaler A.json] [--scaler M.json] [--motion-seed S.npy]
-//! [--seed N]`: a Transflower dancer to an audio file, in one command.
+//! [--audio-scaler A.json] [--madmom NETWORKS] [--scaler M.json]
+//! [--motion-seed S.npy] [--seed N]`: a Transflower dancer to an audio file, in one command.
 //!
 //! The audio becomes the model's 85-d input (`music::transflower`,
 //! standardised with `--audio-scaler`: docs/TRANSFLOWER.md "Audio
@@ -27,9 +27,9 @@ use duolando_core::transflower::model::Model;
 use super::Args;
 use crate::engine_errors::describe_transflower_model;
 use crate::model_file::ModelFile;
-use crate::music::transflower::{self as tfa, TfAudio};
+use crate::cli::features::{read_audio_scaler, transflower_file_features};
+use crate::music::transflower as tfa;
 use crate::npy::{read_f32_2d, write_f32};
-use crate::transflower_motion::scaler::Scaler;
 
 /// Whether `path` is a Transflower `.duo` (false for another family; errors
 /// for an unreadable file are left to the caller's own open).
@@ -47,6 +47,7 @@ pub fn refuse_flags(args: &Args) -> Result<()> {
         (args.audio_scaler.is_some(), "--audio-scaler"),
         (args.scaler.is_some(), "--scaler"),
         (args.motion_seed.is_some(), "--motion-seed"),
+        (args.madmom.is_some(), "--madmom"),
     ] {
         if set {
             bail!("{flag} is for a Transflower model (--model M.duo of family Transflower)");
@@ -105,7 +106,7 @@ pub fn run(args: &Args) -> Result<()> {
         (args.rng_seed.is_some(), "--rng-seed"),
     ] {
         if set {
-            bail!("{flag}: {} is a Transflower model (a solo dancer from music and a motion seed); it takes --music, --audio-scaler, --scaler, --motion-seed, --seed", model_path.display());
+            bail!("{flag}: {} is a Transflower model (a solo dancer from music and a motion seed); it takes --music, --audio-scaler, --madmom, --scaler, --motion-seed, --seed", model_path.display());
         }
     }
     let Some(music) = &args.music else {
@@ -156,13 +157,7 @@ pub fn run(args: &Args) -> Result<()> {
     let motion_seed_path = Sidecars::or_beside(&args.motion_seed, model_path, Sidecars::MOTION_SEED, "motion seed");
     // Read every file before writing anything.
     let audio_scaler = match &audio_scaler_path {
-        Some(p) => {
-            let s = Scaler::read(p)?;
-            if s.width() != tfa::FEATURE_DIM {
-                bail!("--audio-scaler {}: {} columns, Transflower's audio features have {}", p.display(), s.width(), tfa::FEATURE_DIM);
-            }
-            Some(s)
-        }
+        Some(p) => Some(read_audio_scaler(p, "audio-scaler")?),
         None => None,
     };
     let seed_rows = match &motion_seed_path {
@@ -179,23 +174,19 @@ pub fn run(args: &Args) -> Result<()> {
         None => vec![0.0; window * channels],
     };
     let t = std::time::Instant::now();
-    let y = crate::audio::load_mono(music, tfa::SAMPLE_RATE)?;
-    let a = TfAudio::new();
-    let f = match &audio_scaler {
-        Some(s) => a.features_scaled(&y, &s.mean, &s.scale),
-        None => a.features(&y),
-    }
-    .with_context(|| format!("{}: transflower feature extraction", music.display()))?;
+    let tf = transflower_file_features(music, args.madmom.as_deref(), audio_scaler.as_ref())?;
+    let f = &tf.features;
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let audio_npy = args.out.join("audio_features.npy");
     let seed_npy = args.out.join("motion_seed.npy");
     write_f32(&audio_npy, &f.data, &[f.frames, f.dim])?;
     write_f32(&seed_npy, &seed_rows, &[seed_rows.len() / channels, channels])?;
     eprintln!(
-        "{}: ({}, 85) audio features at 20 fps ({}), {:.2} s; motion seed {}",
+        "{}: ({}, 85) audio features at 20 fps ({}; {}), {:.2} s; motion seed {}",
         music.display(),
         f.frames,
         if audio_scaler.is_some() { "scaled" } else { "UNSCALED: give --audio-scaler for a trained model" },
+        tf.beats_said(),
         t.elapsed().as_secs_f64(),
         match &motion_seed_path {
             Some(p) => p.display().to_string(),
