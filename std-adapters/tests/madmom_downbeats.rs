@@ -93,7 +93,7 @@ fn activations_equal_madmoms_random_networks() {
         (100.0, "stereo_44k_fps100.act.npy"),
     ] {
         let g = read_f32_2d(&fixtures().join("madmom").join(golden), Some(2), "golden").unwrap();
-        let a: Vec<f32> = rnn.activations(&s, fps).concat();
+        let a: Vec<f32> = rnn.activations(&s, fps).unwrap().concat();
         assert_eq!(a.len(), g.data.len(), "fps {fps}: rows");
         let (d, i) = max_diff(&a, &g.data);
         eprintln!("fps {fps}: activations within {d:e} of madmom's");
@@ -186,6 +186,53 @@ fn a_bad_network_file_is_refused_by_name() {
         DownbeatRnn::from_bytes(&nan),
         Err(RnnFileError::NonFinite { index: 1000, .. })
     ));
+    // finite weights that overflow f32 on real audio: refused when run, by name
+    let mut huge = network_file(1, 314, 1, 1);
+    for c in huge[32..].chunks_exact_mut(4) {
+        c.copy_from_slice(&f32::MAX.to_le_bytes());
+    }
+    let r = DownbeatRnn::from_bytes(&huge).unwrap();
+    match r.activations(&stereo_signal(), 20.0) {
+        Err(RnnFileError::NonFiniteOutput { frame: 0 }) => {}
+        other => panic!("{other:?}"),
+    }
+    // random corruptions: refused or parsed, never a panic; a parsed one runs
+    let mut state = 0x9e3779b97f4a7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let signal: Vec<i16> = (0..8820).map(|i| ((i * 37) % 2000) as i16 - 1000).collect();
+    let (mut parsed, mut refused) = (0, 0);
+    for _ in 0..300 {
+        let mut v = good.clone();
+        for _ in 0..1 + next() % 4 {
+            let at = (next() % 64) as usize
+                + if next() % 2 == 0 {
+                    0
+                } else {
+                    (next() as usize) % v.len()
+                };
+            let at = at.min(v.len() - 1);
+            v[at] = next() as u8;
+        }
+        match DownbeatRnn::from_bytes(&v) {
+            Ok(r) => {
+                parsed += 1;
+                match r.activations(&signal, 20.0) {
+                    Ok(a) => assert!(a.len() == 4 && a.iter().flatten().all(|v| v.is_finite())),
+                    Err(e) => assert!(matches!(e, RnnFileError::NonFiniteOutput { .. }), "{e}"),
+                }
+            }
+            Err(_) => refused += 1,
+        }
+    }
+    assert!(
+        parsed > 0 && refused > 0,
+        "{parsed} parsed, {refused} refused"
+    );
     // every truncation of the file is refused, none panics
     for n in (0..good.len()).step_by(997) {
         assert!(DownbeatRnn::from_bytes(&good[..n]).is_err(), "{n} bytes");
@@ -209,7 +256,7 @@ fn trained_networks_equal_madmom_where_given() {
         "golden",
     )
     .unwrap();
-    let a = rnn.activations(&stereo_signal(), 20.0);
+    let a = rnn.activations(&stereo_signal(), 20.0).unwrap();
     assert!(a.len() >= g.rows);
     let mut worst = 0f32;
     for (t, row) in g.data.chunks_exact(83).enumerate() {

@@ -677,7 +677,7 @@ fn madmom_networks_make_the_beat_columns() {
     );
     assert_eq!(a.rows, b.rows);
     let rnn = DownbeatRnn::from_bytes(&std::fs::read(&nets).unwrap()).unwrap();
-    let rows = rnn.activations(&signal_44k(&duolando::audio::decode(&flac).unwrap()), 20.0);
+    let rows = rnn.activations(&signal_44k(&duolando::audio::decode(&flac).unwrap()), 20.0).unwrap();
     assert!(rows.len() >= a.rows);
     for t in 0..a.rows {
         let (ra, rb) = (&a.data[t * FEATURE_DIM..][..FEATURE_DIM], &b.data[t * FEATURE_DIM..][..FEATURE_DIM]);

@@ -154,7 +154,13 @@ pub(crate) fn transflower_file_features(input: &Path, madmom: Option<&Path>, sca
     let rnn = madmom.map(DownbeatRnn::read).transpose()?;
     let d = crate::audio::decode(input)?;
     let y = crate::audio::mono_at(&d, input, transflower::SAMPLE_RATE)?;
-    let rows = rnn.as_ref().map(|r| r.activations(&madmom::signal_44k(&d), transflower::FPS));
+    let rows = match (&rnn, madmom) {
+        (Some(r), Some(p)) => Some(
+            r.activations(&madmom::signal_44k(&d), transflower::FPS)
+                .with_context(|| format!("{}: madmom's networks ({}) on this audio", input.display(), p.display()))?,
+        ),
+        _ => None,
+    };
     let beats = match &rows {
         Some(r) => Beats::Madmom(r),
         None => Beats::Substitute,

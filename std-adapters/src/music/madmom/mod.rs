@@ -66,8 +66,8 @@ impl DownbeatRnn {
     /// Beat and downbeat activations of `signal` (mono, 44.1 kHz, int16) at
     /// `fps` frames per second (madmom's `ceil(len * fps / 44100)` rows;
     /// Transflower calls it with fps 20 although the networks were trained
-    /// at 100).
-    pub fn activations(&self, signal: &[i16], fps: f64) -> Vec<[f32; 2]> {
+    /// at 100). Refused if the networks overflow f32 on it.
+    pub fn activations(&self, signal: &[i16], fps: f64) -> Result<Vec<[f32; 2]>, RnnFileError> {
         self.nets.activations(&self.inputs(signal, fps))
     }
 

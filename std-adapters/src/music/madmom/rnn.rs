@@ -41,6 +41,9 @@ pub enum RnnFileError {
     Length { got: usize, expected: usize },
     #[error("network file: weight {index} is {value} (not finite)")]
     NonFinite { index: usize, value: f32 },
+    /// Finite weights can still overflow f32 (a hostile or corrupt file).
+    #[error("the networks' output at frame {frame} is not finite (weights that overflow f32)")]
+    NonFiniteOutput { frame: usize },
 }
 
 /// One gate's weights: W (in, hidden), bias, recurrent (hidden, hidden), peephole.
@@ -125,10 +128,24 @@ impl Ensemble {
         let hidden = field(4, "hidden", 1, MAX_HIDDEN)?;
         field(5, "outputs", OUTPUTS, OUTPUTS)?;
         let out = OUTPUTS as usize;
-        // per direction: 4 gates of (in + hidden + 1) x hidden, 3 peepholes
-        let dir = |width: usize| 4 * (width + hidden + 1) * hidden + 3 * hidden;
-        let per_net = 2 * dir(inputs) + (layers - 1) * 2 * dir(2 * hidden) + 2 * hidden * out + out;
-        let expected = HEADER + nets * per_net * 4; // bounded by the limits: no overflow
+        // per direction: 4 gates of (in + hidden + 1) x hidden, 3 peepholes;
+        // checked: the limits' product overflows a 32-bit usize
+        let dir = |width: usize| -> Option<usize> {
+            (width + hidden + 1)
+                .checked_mul(hidden)?
+                .checked_mul(4)?
+                .checked_add(3 * hidden)
+        };
+        let per_net = (|| {
+            let first = dir(inputs)?.checked_mul(2)?;
+            let upper = dir(2 * hidden)?.checked_mul(2)?.checked_mul(layers - 1)?;
+            first
+                .checked_add(upper)?
+                .checked_add(2 * hidden * out + out)
+        })();
+        let expected = per_net
+            .and_then(|p| p.checked_mul(nets)?.checked_mul(4)?.checked_add(HEADER))
+            .unwrap_or(usize::MAX);
         if bytes.len() != expected {
             return Err(RnnFileError::Length {
                 got: bytes.len(),
@@ -192,8 +209,9 @@ impl Ensemble {
     /// Beat and downbeat activations of `x` (frames, inputs): the mean of
     /// the networks' softmax outputs without the non-beat column.
     ///
+    /// Refused if a value is not finite (weights that overflow f32).
     /// Panics if `x` is not a whole number of rows of [`Self::inputs`].
-    pub fn activations(&self, x: &[f32]) -> Vec<[f32; 2]> {
+    pub fn activations(&self, x: &[f32]) -> Result<Vec<[f32; 2]>, RnnFileError> {
         assert_eq!(x.len() % self.inputs, 0, "rows of {} inputs", self.inputs);
         let frames = x.len() / self.inputs;
         let mut sum = vec![[0f32; 3]; frames];
@@ -206,7 +224,10 @@ impl Ensemble {
             }
         }
         let n = self.nets.len() as f32;
-        sum.iter().map(|s| [s[1] / n, s[2] / n]).collect()
+        if let Some(frame) = sum.iter().position(|s| !s.iter().all(|v| v.is_finite())) {
+            return Err(RnnFileError::NonFiniteOutput { frame });
+        }
+        Ok(sum.iter().map(|s| [s[1] / n, s[2] / n]).collect())
     }
 }
 
