@@ -712,6 +712,13 @@ fn madmom_networks_make_the_beat_columns() {
     assert_eq!(code, Some(0), "{err}");
     assert!(err.contains("madmom's 2 networks"), "{err}");
     assert_eq!(read_f32_2d(&dance_out.join("audio_features.npy"), Some(FEATURE_DIM), "a").unwrap().data, a.data);
+    // M.madmom_downbeats.bin beside M.duo stands in for --madmom (said on stderr)
+    std::fs::copy(&nets, model.with_file_name("tf85.madmom_downbeats.bin")).unwrap();
+    let beside = d.join("dance-beside");
+    let (code, err) = cli(&["dance", "--model", model.to_str().unwrap(), "--music", flac.to_str().unwrap(), "--out", beside.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("madmom networks: ") && err.contains("(beside the model)") && err.contains("madmom's 2 networks"), "{err}");
+    assert_eq!(read_f32_2d(&beside.join("audio_features.npy"), Some(FEATURE_DIM), "a").unwrap().data, a.data);
     let (code, err) = cli(&["dance", "--music", flac.to_str().unwrap(), "--madmom", nets.to_str().unwrap(), "--out", d.join("duet").to_str().unwrap()]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("--madmom is for a Transflower model"), "{err}");

@@ -15,7 +15,8 @@
 //! Files beside the model stand in for absent flags: for `M.duo`,
 //! `M.audio_scaler.json` (`--audio-scaler`), `M.motion_scaler.json`
 //! (`--scaler`) and `M.motion_seed.npy` (`--motion-seed`), as the bundled
-//! demo ships them ([`Sidecars`]).
+//! demo ships them, and `M.madmom_downbeats.bin` (`--madmom`: a user's
+//! converted copy, for a model trained on madmom's beat columns) ([`Sidecars`]).
 
 use std::path::Path;
 
@@ -64,6 +65,9 @@ impl Sidecars {
     pub const AUDIO_SCALER: &'static str = "audio_scaler.json";
     pub const MOTION_SCALER: &'static str = "motion_scaler.json";
     pub const MOTION_SEED: &'static str = "motion_seed.npy";
+    /// madmom's downbeat networks (`--madmom`), for a model trained on
+    /// madmom's beat columns: the user's own converted copy (never shipped).
+    pub const MADMOM: &'static str = "madmom_downbeats.bin";
 
     /// `M.<suffix>` beside `model` when it is a file.
     pub fn find(model: &Path, suffix: &str) -> Option<std::path::PathBuf> {
@@ -155,6 +159,7 @@ pub fn run(args: &Args) -> Result<()> {
     let audio_scaler_path = Sidecars::or_beside(&args.audio_scaler, model_path, Sidecars::AUDIO_SCALER, "audio scaler");
     let motion_scaler_path = Sidecars::or_beside(&args.scaler, model_path, Sidecars::MOTION_SCALER, "motion scaler");
     let motion_seed_path = Sidecars::or_beside(&args.motion_seed, model_path, Sidecars::MOTION_SEED, "motion seed");
+    let madmom_path = Sidecars::or_beside(&args.madmom, model_path, Sidecars::MADMOM, "madmom networks");
     // Read every file before writing anything.
     let audio_scaler = match &audio_scaler_path {
         Some(p) => Some(read_audio_scaler(p, "audio-scaler")?),
@@ -174,7 +179,7 @@ pub fn run(args: &Args) -> Result<()> {
         None => vec![0.0; window * channels],
     };
     let t = std::time::Instant::now();
-    let tf = transflower_file_features(music, args.madmom.as_deref(), audio_scaler.as_ref())?;
+    let tf = transflower_file_features(music, madmom_path.as_deref(), audio_scaler.as_ref())?;
     let f = &tf.features;
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let audio_npy = args.out.join("audio_features.npy");
