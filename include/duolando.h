@@ -51,7 +51,7 @@ extern "C" {
 #endif
 
 #define DUOLANDO_VERSION_MAJOR 0
-#define DUOLANDO_VERSION_MINOR 1
+#define DUOLANDO_VERSION_MINOR 2
 #define DUOLANDO_VERSION_PATCH 0
 
 /* Joints per pose (SMPL-X body, jaw, eyes, hands). */
@@ -129,7 +129,7 @@ const char *duo_result_name(int32_t result);
  * successful calls leave it unchanged. Thread-safe (per-thread storage). */
 size_t duo_last_error_message(char *buf, size_t len);
 
-/* The library version, e.g. "0.1.0": a static NUL-terminated string.
+/* The library version, e.g. "0.2.0": a static NUL-terminated string.
  * Never NULL; do not free it. Thread-safe. */
 const char *duo_version(void);
 

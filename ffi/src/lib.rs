@@ -30,13 +30,13 @@ pub use session::{DuoSession, DuoSessionConfig};
 /// Major version, as in Cargo.toml (`DUOLANDO_VERSION_MAJOR` in the header).
 pub const VERSION_MAJOR: u32 = 0;
 /// Minor version (`DUOLANDO_VERSION_MINOR`).
-pub const VERSION_MINOR: u32 = 1;
+pub const VERSION_MINOR: u32 = 2;
 /// Patch version (`DUOLANDO_VERSION_PATCH`).
 pub const VERSION_PATCH: u32 = 0;
 
 static VERSION: &[u8] = concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes();
 
-/// The library version as a static NUL-terminated string ("0.1.0").
+/// The library version as a static NUL-terminated string ("0.2.0").
 /// Never NULL; the caller must not free it. Thread-safe.
 #[no_mangle]
 pub extern "C" fn duo_version() -> *const c_char {

@@ -162,7 +162,7 @@ static size_t drive(duo_session *s, duo_follower_frame *out, size_t cap, int noi
 static void test_errors_and_version(void) {
   char buf[8];
   size_t n;
-  CHECK(strcmp(duo_version(), "0.1.0") == 0);
+  CHECK(strcmp(duo_version(), "0.2.0") == 0);
   CHECK(duo_get_threads() == 1);
   EXPECT(duo_set_threads(2), DUO_OK);
   CHECK(duo_get_threads() == 2);

@@ -40,7 +40,7 @@ static class TestUnity
         Check(Marshal.SizeOf(typeof(FollowerFrame)) == 1560, "FollowerFrame is 1560 bytes");
         Check(Marshal.SizeOf(typeof(SessionConfig)) == 64, "SessionConfig is 64 bytes");
         Check(Marshal.SizeOf(typeof(ModelInfo)) == 32, "ModelInfo is 32 bytes");
-        Check(Model.Version == "0.1.0", "version");
+        Check(Model.Version == "0.2.0", "version");
         Check(Model.Threads == 1, "one thread by default");
         Model.Threads = 2;
         Check(Model.Threads == 2, "two threads");
