@@ -142,16 +142,20 @@ try {
 
   await page.goto(url, { waitUntil: "load" });
   await page.waitForFunction(() => window.__duolandoLive && window.__duolandoLive.ready, null, { timeout: 10_000 });
-  const live = () => page.evaluate(() => {
+  // One snapshot of the state and the overlay, taken in an animation frame
+  // right after the page's own (which redraws the overlay from the state):
+  // read between two frames, an event that arrived after the last redraw
+  // makes the overlay look stale (a race of the test, not of the page).
+  const live = () => page.evaluate(() => new Promise((resolve) => requestAnimationFrame(() => {
     const d = window.__duolandoLive;
     const t = (id) => document.getElementById(id).textContent;
-    return {
+    resolve({
       status: d.status, events: d.events, drainEvents: d.drainEvents, outOfOrder: d.outOfOrder, leaderFrame: d.leaderFrame, followerFrame: d.followerFrame,
       latencyFrames: d.latencyFrames, hello: d.hello, end: d.end,
       overlay: { latencyFrames: t("live-latency-frames"), latencyMs: t("live-latency-ms"), latencyWall: t("live-latency-wall"),
         stepMs: t("live-step-ms"), stepMean: t("live-step-mean"), stepMax: t("live-step-max"), leader: t("live-leader"), follower: t("live-follower") },
-    };
-  });
+    });
+  })));
 
   // The follower appears (after the latency) while the clip streams.
   await page.waitForFunction((n) => window.__duolandoLive.followerFrame >= n, LIMITS.minFollowerFrames, { timeout: 60_000 });
