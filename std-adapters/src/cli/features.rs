@@ -151,15 +151,15 @@ impl TfFileFeatures {
 /// networks (`madmom`, read first) on its 44.1 kHz int16 signal or the
 /// substitute, standardised by `scaler` if given.
 pub(crate) fn transflower_file_features(input: &Path, madmom: Option<&Path>, scaler: Option<&Scaler>) -> anyhow::Result<TfFileFeatures> {
-    let rnn = madmom.map(DownbeatRnn::read).transpose()?;
+    let rnn = madmom.map(|p| DownbeatRnn::read(p).map(|r| (r, p))).transpose()?;
     let d = crate::audio::decode(input)?;
     let y = crate::audio::mono_at(&d, input, transflower::SAMPLE_RATE)?;
-    let rows = match (&rnn, madmom) {
-        (Some(r), Some(p)) => Some(
+    let rows = match &rnn {
+        Some((r, p)) => Some(
             r.activations(&madmom::signal_44k(&d), transflower::FPS)
                 .with_context(|| format!("{}: madmom's networks ({}) on this audio", input.display(), p.display()))?,
         ),
-        _ => None,
+        None => None,
     };
     let beats = match &rows {
         Some(r) => Beats::Madmom(r),
@@ -174,6 +174,6 @@ pub(crate) fn transflower_file_features(input: &Path, madmom: Option<&Path>, sca
     Ok(TfFileFeatures {
         features,
         seconds: y.len() as f64 / transflower::SAMPLE_RATE as f64,
-        madmom_networks: rnn.as_ref().map(|r| r.networks()),
+        madmom_networks: rnn.as_ref().map(|(r, _)| r.networks()),
     })
 }

@@ -301,14 +301,18 @@ impl Lstm {
 
 impl Network {
     fn forward(&self, x: &[f32], frames: usize, inputs: usize, hidden: usize) -> Vec<[f32; 3]> {
-        let mut cur = x.to_vec();
-        let mut width = inputs;
-        for (fwd, bwd) in &self.layers {
+        // (frames, 2 hidden) outputs of the last layer run; the first reads `x` in place
+        let mut cur: Vec<f32> = Vec::new();
+        for (l, (fwd, bwd)) in self.layers.iter().enumerate() {
+            let (input, width) = if l == 0 {
+                (x, inputs)
+            } else {
+                (&cur[..], 2 * hidden)
+            };
             let mut next = vec![0f32; frames * 2 * hidden];
-            fwd.run(&cur, width, hidden, false, &mut next, 0);
-            bwd.run(&cur, width, hidden, true, &mut next, hidden);
+            fwd.run(input, width, hidden, false, &mut next, 0);
+            bwd.run(input, width, hidden, true, &mut next, hidden);
             cur = next;
-            width = 2 * hidden;
         }
         cur.chunks_exact(2 * hidden)
             .map(|h| {
