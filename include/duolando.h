@@ -388,13 +388,14 @@ typedef struct duo_session_config {
                                    DUO_BACKLOG */
   uint32_t sampling;            /* a duo_sampling value */
   uint32_t top_k;               /* for DUO_SAMPLING_TOP_K and _SOFTMAX */
-  uint32_t staggered;           /* 0: one GPT cache, re-filled when the window
+  uint32_t staggered;           /* 2 (every preset): two caches, the next
+                                   window filled a few rows per step (a flat
+                                   cost per step after the first jump); 0:
+                                   one GPT cache, re-filled when the window
                                    jumps (least memory, a cost spike every
-                                   chunk); 1: one cache per live window (flat
-                                   cost per step, more memory); 2: two caches,
-                                   the next window filled a few rows per step
-                                   (flat cost at 0's mean, 2 caches). Same
-                                   output. */
+                                   chunk: most of an R step); 1: one cache
+                                   per live window (flat cost, more memory).
+                                   Same output. */
   uint32_t kv;                  /* a duo_kv value */
   uint64_t rng_seed;            /* for DUO_SAMPLING_TOP_K and _SOFTMAX */
   uint32_t temperature_milli;   /* for DUO_SAMPLING_SOFTMAX: the temperature

@@ -503,6 +503,7 @@ fn a_jump_in_one_pass_equals_the_jump_in_chunks() {
         win as usize > 1 + PREFILL_CHUNK,
         "the fixture's window must outgrow a chunk"
     );
+    // The re-prefill schedule (the presets' spread one re-prefills once).
     for sc in [
         SessionConfig::with(dec_future_max(&cfg), win),
         SessionConfig {
@@ -511,6 +512,10 @@ fn a_jump_in_one_pass_equals_the_jump_in_chunks() {
         },
         SessionConfig::with(0, win / 2),
     ] {
+        let sc = SessionConfig {
+            schedule: CacheSchedule::Reprefill,
+            ..sc
+        };
         let mut arena = vec![0u8; m.session_bytes(&sc).unwrap()];
         let mut alone = Session::new(&m, &mut arena, &sc, g.seed).unwrap();
         let (toks_alone, frames_alone) = run(&mut alone, &g.music, nm, MusicPadding::Demo, true);

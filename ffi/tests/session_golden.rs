@@ -480,6 +480,18 @@ fn staggered_cache_and_f16_cache_settings() {
         MOTION_ABS,
         "spread",
     );
+    // The presets' schedule is spread (2); one cache re-prefilled at each
+    // jump (0) gives the same frames.
+    assert_eq!(base.staggered, 2, "the presets take the spread schedule");
+    check_within(
+        &run(DuoSessionConfig {
+            staggered: 0,
+            ..base
+        }),
+        &g,
+        MOTION_ABS,
+        "re-prefill",
+    );
     // f16 K/V: same tokens on this golden; motion within a looser bound.
     check_within(
         &run(DuoSessionConfig { kv: KV_F16, ..base }),

@@ -624,6 +624,7 @@ fn exact_mode_refuses_streaming_flags_by_name_instead_of_ignoring_them() {
             (&["--preset", "minimum"][..], "--preset"),
             (&["--shift", "4"][..], "--shift"),
             (&["--spread"][..], "--spread"),
+            (&["--reprefill"][..], "--reprefill"),
             (&["--kv", "f16"][..], "--kv"),
         ] {
             let mut args = base.to_vec();
@@ -638,4 +639,94 @@ fn exact_mode_refuses_streaming_flags_by_name_instead_of_ignoring_them() {
     // Without them, exact mode runs (the default mode too).
     let o = duolando(&duo_base);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// The presets keep the GPT cache with the spread schedule; `--reprefill`
+/// (one cache, re-filled at each window jump) and `--spread` write the same
+/// files, for a Duolando and a Bailando model, and `--reprefill` with
+/// another schedule flag is refused.
+#[test]
+fn reprefill_and_the_presets_spread_schedule_write_the_same_files() {
+    let fx = fixtures();
+    let roll = fx.join("rollout_tiny_long");
+    let broll = fx.join("bailando_rollout_btiny_demo_odd");
+    let (model, leader, music, start) = (
+        fx.join("tiny/model.duo"),
+        roll.join("leader_pos3d.npy"),
+        roll.join("music.npy"),
+        roll.join("follower_start.npy"),
+    );
+    let (solo_model, solo_music) = (fx.join("bailando_btiny/model.duo"), broll.join("music.npy"));
+    let cases: [(&str, Vec<&str>, &str, usize); 2] = [
+        (
+            "duo",
+            vec![
+                "--model",
+                p(&model),
+                "--leader",
+                p(&leader),
+                "--music",
+                p(&music),
+                "--follower-start",
+                p(&start),
+                "--shift",
+                "4",
+            ],
+            "follower_pos3d.npy",
+            165,
+        ),
+        (
+            "solo",
+            vec![
+                "--model",
+                p(&solo_model),
+                "--music",
+                p(&solo_music),
+                "--seed-tokens",
+                "1,2",
+                "--shift",
+                "3",
+            ],
+            "pos3d.npy",
+            72,
+        ),
+    ];
+    for (name, base, pos, width) in cases {
+        let mut outs = Vec::new();
+        for flag in [None, Some("--spread"), Some("--reprefill")] {
+            let out = tmp(&format!(
+                "sched-{name}-{}",
+                flag.unwrap_or("preset").trim_start_matches('-')
+            ));
+            let mut args = vec!["generate", "--mode", "streaming", "--out", p(&out)];
+            args.extend(&base);
+            args.extend(flag);
+            let o = duolando(&args);
+            assert!(
+                o.status.success(),
+                "{name} {flag:?}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+            let toks = std::fs::read(out.join("tokens.npy")).unwrap();
+            let frames = read_f32_2d(&out.join(pos), Some(width), "pos").unwrap();
+            assert!(frames.rows > 0, "{name} {flag:?}: no frames");
+            outs.push((
+                toks,
+                frames.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            ));
+        }
+        assert_eq!(
+            outs[0], outs[1],
+            "{name}: the presets' schedule is not --spread's"
+        );
+        assert_eq!(
+            outs[0], outs[2],
+            "{name}: --reprefill gives other tokens or frames"
+        );
+        let out = tmp(&format!("sched-{name}-both"));
+        let mut args = vec!["generate", "--mode", "streaming", "--out", p(&out)];
+        args.extend(&base);
+        args.extend(["--reprefill", "--spread"]);
+        expect_failure(&args, &["--reprefill", "--spread"]);
+    }
 }

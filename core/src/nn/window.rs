@@ -65,11 +65,14 @@ pub fn window_pool(m: usize, s: usize) -> usize {
 }
 
 /// How a session keeps the GPT window's keys and values as the window moves.
+/// The presets take `Spread` (the default): a streaming step must not miss
+/// its deadline, and the re-prefill's step costs most of an R step (12x a
+/// step's median at full size, docs/PERFORMANCE.md). `Reprefill` is the
+/// memory-lean choice.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum CacheSchedule {
     /// One cache, re-prefilled when the window jumps (least memory, a spike
     /// of `shift` rows every chunk).
-    #[default]
     Reprefill,
     /// One cache per live window, each fed one row per step (flat cost,
     /// [`window_pool`] caches).
@@ -77,6 +80,7 @@ pub enum CacheSchedule {
     /// Two caches, the next window's rows appended a few per step over the
     /// steps before its jump (flat cost at the re-prefill schedule's mean,
     /// twice its cache memory; one re-prefill at step `m`, the first jump).
+    #[default]
     Spread,
 }
 

@@ -72,9 +72,16 @@ pub struct BudgetArgs {
     pub staggered: bool,
     /// Two GPT caches, the next window filled a few rows per step ahead of
     /// its jump: a flat cost per step at the re-prefill schedule's mean
-    /// (twice its cache memory; one re-prefill at the first jump).
+    /// (twice its cache memory; one re-prefill at the first jump). The
+    /// presets' schedule: this flag only names it.
     #[arg(long, conflicts_with = "staggered")]
     pub spread: bool,
+    /// One GPT cache, re-prefilled at every window jump: the least memory
+    /// (one cache less than the presets' spread schedule), the same
+    /// numbers, but that step costs most of an R step (a spike every
+    /// chunk).
+    #[arg(long, conflicts_with_all = ["staggered", "spread"])]
+    pub reprefill: bool,
     /// Element type of the session's keys and values (GPT cache, LAT rings;
     /// Transflower: the kept rows of the stale-rows mode). Default: the
     /// preset's (f32, but f16 for Transflower's `realtime`).
@@ -125,7 +132,7 @@ impl BudgetArgs {
 
     /// Every session flag's name and whether it was given (`--preset`: not
     /// the default), in `--help` order.
-    fn flags(&self) -> [(bool, &'static str); 13] {
+    fn flags(&self) -> [(bool, &'static str); 14] {
         [
             (self.preset != "reference", "preset"),
             (self.lookahead.is_some(), "lookahead"),
@@ -138,6 +145,7 @@ impl BudgetArgs {
             (self.rng_seed != 0, "rng-seed"),
             (self.staggered, "staggered"),
             (self.spread, "spread"),
+            (self.reprefill, "reprefill"),
             (self.kv.is_some(), "kv"),
             (self.refresh.is_some(), "refresh"),
         ]
@@ -167,11 +175,13 @@ impl BudgetArgs {
         if let Some(m) = self.music_lookahead {
             sc.music_lookahead = m;
         }
-        sc.schedule = match (self.staggered, self.spread) {
-            (true, _) => CacheSchedule::Staggered,
-            (false, true) => CacheSchedule::Spread,
-            (false, false) => CacheSchedule::Reprefill,
-        };
+        if self.staggered {
+            sc.schedule = CacheSchedule::Staggered;
+        } else if self.spread {
+            sc.schedule = CacheSchedule::Spread;
+        } else if self.reprefill {
+            sc.schedule = CacheSchedule::Reprefill;
+        }
         sc.kv = match self.kv.unwrap_or(Kv::F32) {
             Kv::F32 => duolando_core::duolando::session::KvType::F32,
             Kv::F16 => duolando_core::duolando::session::KvType::F16,
@@ -202,7 +212,7 @@ impl BudgetArgs {
             );
         };
         if self.refresh.is_some() {
-            bail!("--refresh is a Transflower setting; a Bailando model's settings are --preset, --dec-future, --shift, --spread, --topk, --kv");
+            bail!("--refresh is a Transflower setting; a Bailando model's settings are --preset, --dec-future, --shift, --spread, --reprefill, --topk, --kv");
         }
         for (given, name) in [
             (self.lookahead.is_some(), "lookahead"),
@@ -211,7 +221,7 @@ impl BudgetArgs {
             (self.staggered, "staggered"),
         ] {
             if given {
-                bail!("--{name} is a Duolando setting: a Bailando model has no leader and reads no music ahead (its settings: --preset, --dec-future, --shift, --spread, --topk, --kv)");
+                bail!("--{name} is a Duolando setting: a Bailando model has no leader and reads no music ahead (its settings: --preset, --dec-future, --shift, --spread, --reprefill, --topk, --kv)");
             }
         }
         let base = SoloConfig::preset(cfg, preset);
@@ -222,6 +232,8 @@ impl BudgetArgs {
         };
         if self.spread {
             sc.schedule = duolando_core::nn::window::CacheSchedule::Spread;
+        } else if self.reprefill {
+            sc.schedule = duolando_core::nn::window::CacheSchedule::Reprefill;
         }
         sc.kv = match self.kv.unwrap_or(Kv::F32) {
             Kv::F32 => duolando_core::nn::kv_store::KvType::F32,

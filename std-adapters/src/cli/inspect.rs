@@ -17,7 +17,7 @@ use duolando_core::family::FamilyConfig;
 use duolando_core::nn::vq_config::VqConfig;
 use duolando_core::duolando::exact;
 use duolando_core::duolando::model::Model;
-use duolando_core::duolando::session::{dec_future_max, enc_future_max, Preset, SessionConfig};
+use duolando_core::duolando::session::{dec_future_max, enc_future_max, CacheSchedule, Preset, SessionConfig};
 use duolando_core::tensor::DType;
 use duolando_core::transflower::config::TransflowerConfig;
 use serde_json::{json, Value};
@@ -354,7 +354,7 @@ fn bailando_text(r: &Value, cfg: &BailandoConfig) -> String {
     for p in st["presets"].as_array().into_iter().flatten() {
         let b = |k: &str| p[k].as_u64().map(mib).unwrap_or_else(|| "-".into());
         line(format!(
-            "  {:<11} dec_future {:>2} shift {:>2}: latency {:>3} frames; arena {} (f32 K/V), {} (f16), {} (f16, spread)",
+            "  {:<11} dec_future {:>2} shift {:>2}: latency {:>3} frames; arena {} (f32 K/V, --reprefill), {} (f16, --reprefill), {} (f16, spread: the preset's schedule)",
             p["preset"].as_str().unwrap_or("?"),
             p["dec_future"],
             p["shift"],
@@ -420,6 +420,8 @@ fn streaming(duo: &duolando_core::format::DuoFile<'_>) -> Result<Value> {
                 "latency_seconds": lat as f64 / FPS as f64,
                 "live_latency_frames": sc.live_latency_frames(hop),
                 "arena_bytes": model.session_bytes(&sc).ok(),
+                // The same budget with one GPT cache (`--reprefill`): the least memory.
+                "arena_bytes_reprefill": model.session_bytes(&SessionConfig { schedule: CacheSchedule::Reprefill, ..sc }).ok(),
             })
         })
         .collect();
@@ -546,7 +548,7 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
     ));
     for b in st["budgets"].as_array().into_iter().flatten() {
         line(format!(
-            "  {:<12} a {} e {} d {} shift {}: latency {} frames ({:.2} s), session arena {}; music look-ahead {}, latency with music pushed live {} frames",
+            "  {:<12} a {} e {} d {} shift {}: latency {} frames ({:.2} s), session arena {} ({} with --reprefill); music look-ahead {}, latency with music pushed live {} frames",
             b["budget"].as_str().unwrap_or(""),
             b["lookahead"],
             b["enc_future"],
@@ -555,6 +557,7 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
             b["latency_frames"],
             b["latency_seconds"].as_f64().unwrap_or(0.0),
             b["arena_bytes"].as_u64().map(mib).unwrap_or_else(|| "?".into()),
+            b["arena_bytes_reprefill"].as_u64().map(mib).unwrap_or_else(|| "?".into()),
             b["music_lookahead"],
             b["live_latency_frames"]
         ));

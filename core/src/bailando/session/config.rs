@@ -103,7 +103,9 @@ pub fn dec_future_max(cfg: &BailandoConfig) -> u32 {
 
 impl SessionConfig {
     /// A budget: decoder future `dec_future`, window shift `shift`, greedy,
-    /// f32 K/V, 64 pending frames, 64 music rows ahead.
+    /// f32 K/V, the spread schedule (no re-prefill spike after the first
+    /// jump; the same numbers as `Reprefill`, which holds one cache less),
+    /// 64 pending frames, 64 music rows ahead.
     pub fn with(dec_future: u32, shift: u32) -> Self {
         SessionConfig {
             dec_future,
@@ -112,7 +114,7 @@ impl SessionConfig {
             pending_frames: 64,
             music_buffer_rows: 64,
             kv: KvType::F32,
-            schedule: CacheSchedule::Reprefill,
+            schedule: CacheSchedule::Spread,
         }
     }
 
@@ -121,7 +123,12 @@ impl SessionConfig {
         let dmax = dec_future_max(cfg);
         let shift = ((21 * m + 14) / 28).clamp(1, m.max(1));
         match preset {
-            Preset::Exact => Self::with(dmax, m.max(1)),
+            // The window slides every step: every step re-prefills (R's
+            // cost), so a second cache would spread nothing.
+            Preset::Exact => SessionConfig {
+                schedule: CacheSchedule::Reprefill,
+                ..Self::with(dmax, m.max(1))
+            },
             Preset::Reference => Self::with(dmax, shift),
             Preset::Interactive => Self::with(2.min(dmax), shift),
             Preset::Minimum => Self::with(0, shift),

@@ -34,7 +34,9 @@ pub struct SessionConfig {
     /// Music frames that may wait in the session (pushed, not yet read by
     /// the music LAT) before `push_music_frame` answers `Backlog`.
     pub music_buffer_frames: u32,
-    /// GPT cache schedule (the same values under each, docs/STREAMING.md §3.5).
+    /// GPT cache schedule (the same values under each, docs/STREAMING.md
+    /// §3.5). Every preset: `Spread` (no step carries a window's re-prefill
+    /// after the first jump); `Reprefill` holds one cache less.
     pub schedule: CacheSchedule,
     /// Element type of the GPT K/V cache (f16: half the cache bytes).
     pub kv: KvType,
@@ -112,7 +114,9 @@ impl SessionConfig {
             sampling: Sampling::Greedy,
             pending_frames: 64,
             music_buffer_frames: 4 * (2 * lf + 2 * enc_future_max(cfg) + 8),
-            schedule: CacheSchedule::Reprefill,
+            // No step over the re-prefill's spike (docs/STREAMING.md §3.5):
+            // the same numbers as `Reprefill`, which holds one cache less.
+            schedule: CacheSchedule::Spread,
             kv: KvType::F32,
         }
     }
@@ -289,7 +293,12 @@ mod published {
     #[test]
     fn published_session_arena() {
         let cfg = crate::duolando::presets::duolando_published();
-        let r = SessionConfig::reference(&cfg);
+        // The preset's schedule (spread) and the lean one (one cache).
+        let spread = session_bytes_for(&cfg, &SessionConfig::reference(&cfg)).unwrap();
+        let r = SessionConfig {
+            schedule: CacheSchedule::Reprefill,
+            ..SessionConfig::reference(&cfg)
+        };
         let f32kv = session_bytes_for(&cfg, &r).unwrap();
         let f16kv = session_bytes_for(
             &cfg,
@@ -322,6 +331,12 @@ mod published {
         assert!(f32kv > cache && f32kv < cache + 40_000_000, "{f32kv}");
         assert!(f16kv < f32kv - cache / 3, "{f16kv} vs {f32kv}");
         assert!(stag > f32kv + 3 * cache, "{stag}");
-        std::println!("published arena: reference f32 KV {f32kv} B, f16 KV {f16kv} B (state alone, Session::new_batched: {batched} B), staggered f32 {stag} B, minimum {min} B");
+        // Spread: one more cache of m - 1 = 28 rows and its one-row tail.
+        let cache_28 = cache / 29 * 28;
+        assert!(
+            spread > f32kv + cache_28 && spread < f32kv + cache,
+            "{spread} vs {f32kv}"
+        );
+        std::println!("published arena: reference f32 KV {f32kv} B (spread, the preset's schedule: {spread} B), f16 KV {f16kv} B (state alone, Session::new_batched: {batched} B), staggered f32 {stag} B, minimum {min} B");
     }
 }
