@@ -224,6 +224,8 @@ namespace Duolando
         public uint Lookahead, EncFuture, DecFuture, Shift, MusicLookahead, LatPast, PendingFrames, MusicBufferFrames;
         public SamplingMode Sampling;
         public uint TopK;
+        /// <summary>GPT cache schedule: 2 (every preset's) two caches, the next window filled ahead (no step re-prefills a window);
+        /// 0 one cache re-filled at each window jump (least memory, a costly step every chunk); 1 one cache per live window.</summary>
         public uint Staggered;
         public KvType Kv;
         public ulong RngSeed;
