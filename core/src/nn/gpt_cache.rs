@@ -148,6 +148,42 @@ impl<'s> GptCache<'s> {
         self.lo = Some(lo);
     }
 
+    /// Window rows this cache holds before its tail (`m - 1` of the `m` it
+    /// was carved for).
+    pub fn capacity_rows(&self) -> usize {
+        self.m.saturating_sub(1)
+    }
+
+    /// Moves `other`'s window (start and rows, none in its tail) into this
+    /// cache, each head's stretch copied unchanged, and empties `other`.
+    /// The spread schedule's second cache holds the next window's first
+    /// rows in fewer rows than a window; at the jump they move here. Both
+    /// caches of one GPT and storage type.
+    pub fn take_window(&mut self, other: &mut GptCache<'_>) -> Result<(), Error> {
+        let (c, hd, cap, ocap) = (self.c, self.hd, self.cap(), other.cap());
+        let r = other.rows * other.streams;
+        if other.layers != self.layers
+            || other.streams != self.streams
+            || other.c != c
+            || other.hd != hd
+            || r > ocap
+            || r > cap
+        {
+            return Err(Error::Context { c: r, max: cap.min(ocap) });
+        }
+        for l in 0..self.layers {
+            for h in 0..c / hd {
+                let (at, from) = (l * cap * c + h * cap * hd, l * ocap * c + h * ocap * hd);
+                self.k.copy_from(at, &other.k, from, r * hd)?;
+                self.v.copy_from(at, &other.v, from, r * hd)?;
+            }
+        }
+        self.rows = other.rows;
+        self.lo = other.lo;
+        other.reset();
+        Ok(())
+    }
+
     /// This cache's K/V of layer `l`, rows `..r1` (streams-rows), read in
     /// place (f32 or f16): head-major, the layer's stretch from its first
     /// head's row 0 to its last head's row `min(r1, cap)`, then the tail's
@@ -358,6 +394,61 @@ mod tests {
 
     use super::RowCausal;
     use crate::kernels::{attention, KvRows, RowData, Ungrouped};
+
+    /// `take_window` moves a smaller cache's rows into a window-sized one:
+    /// every layer's keys and values read back as the rows stored (f32 and
+    /// f16), the start and row count move, the source empties; rows past
+    /// the destination's capacity or another geometry are refused.
+    #[test]
+    fn take_window_moves_every_layer_and_head() {
+        use super::{GptCache, KvType};
+        use crate::arena::Arena;
+        let (layers, streams, c, heads) = (2usize, 3usize, 8usize, 2usize);
+        for kv in [KvType::F32, KvType::F16] {
+            let mut mem = std::vec![0u8; 1 << 16];
+            let mut a = Arena::new(&mut mem);
+            let mut main = GptCache::carve(&mut a, kv, layers, streams, 6, c, heads).unwrap();
+            let mut ahead = GptCache::carve(&mut a, kv, layers, streams, 4, c, heads).unwrap();
+            assert_eq!((main.capacity_rows(), ahead.capacity_rows()), (5, 3));
+            ahead.restart(7);
+            // Three window rows, values that f16 holds exactly.
+            let val = |l: usize, r: usize, j: usize, v: usize| (l * 1000 + r * 40 + j + v * 500) as f32 / 8.0;
+            for l in 0..layers {
+                let k: Vec<f32> = (0..3 * streams * c).map(|i| val(l, i / c, i % c, 0)).collect();
+                let v: Vec<f32> = (0..3 * streams * c).map(|i| val(l, i / c, i % c, 1)).collect();
+                ahead.store(l, 0, 3 * streams, &k, &v).unwrap();
+            }
+            ahead.rows = 3;
+            main.restart(0);
+            main.take_window(&mut ahead).unwrap();
+            assert_eq!((main.window_start(), main.rows()), (Some(7), 3));
+            assert_eq!((ahead.window_start(), ahead.rows()), (None, 0));
+            let (hd, cap) = (c / heads, main.cap());
+            for l in 0..layers {
+                for (buf, which) in [(&main.k, 0), (&main.v, 1)] {
+                    for r in 0..3 * streams {
+                        for j in 0..c {
+                            let at = l * cap * c + ((j / hd) * cap + r) * hd + j % hd;
+                            let got = match buf.view(at, at + 1).unwrap() {
+                                RowData::F32(d) => d[0],
+                                RowData::F16(d) => half::f16::from_bits(d[0]).to_f32(),
+                            };
+                            assert_eq!(got, val(l, r, j, which), "{kv:?} layer {l} row {r} lane {j}");
+                        }
+                    }
+                }
+            }
+            // Four rows do not fit a cache of three; another geometry is refused.
+            let mut big = GptCache::carve(&mut a, kv, layers, streams, 6, c, heads).unwrap();
+            big.restart(1);
+            big.rows = 4;
+            let mut small = GptCache::carve(&mut a, kv, layers, streams, 4, c, heads).unwrap();
+            assert!(small.take_window(&mut big).is_err());
+            let mut other = GptCache::carve(&mut a, kv, layers + 1, streams, 6, c, heads).unwrap();
+            assert!(other.take_window(&mut main).is_err());
+            assert_eq!(main.rows(), 3, "a refusal changes nothing");
+        }
+    }
 
     /// The window-row causal mask's closed-form key runs equal the scan.
     #[test]

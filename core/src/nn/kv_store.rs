@@ -78,6 +78,22 @@ impl<'s> KvBuf<'s> {
         Ok(())
     }
 
+    /// Copies `n` elements of `src` from `from` to `at` (the same storage
+    /// type: the values move unchanged).
+    pub fn copy_from(&mut self, at: usize, src: &KvBuf<'_>, from: usize, n: usize) -> Result<(), Error> {
+        let (end, src_end) = (at.checked_add(n), from.checked_add(n));
+        let end = end.filter(|&e| e <= self.len()).ok_or(out_of_range(at, self.len()))?;
+        let src_end = src_end
+            .filter(|&e| e <= src.len())
+            .ok_or(out_of_range(from, src.len()))?;
+        match (self, src) {
+            (KvBuf::F32(d), KvBuf::F32(s)) => d[at..end].copy_from_slice(&s[from..src_end]),
+            (KvBuf::F16(d), KvBuf::F16(s)) => d[at..end].copy_from_slice(&s[from..src_end]),
+            _ => return Err(Error::State),
+        }
+        Ok(())
+    }
+
     /// Elements `a..b` for the attention.
     pub fn view(&self, a: usize, b: usize) -> Result<RowData<'_>, Error> {
         if a > b || b > self.len() {

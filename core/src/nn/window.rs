@@ -78,8 +78,9 @@ pub enum CacheSchedule {
     /// [`window_pool`] caches).
     Staggered,
     /// Two caches, the next window's rows appended a few per step over the
-    /// steps before its jump (flat cost at the re-prefill schedule's mean,
-    /// twice its cache memory; one re-prefill at step `m`, the first jump).
+    /// steps before its jump into the second (`shift - 1` rows), moved into
+    /// the first at the jump (flat cost at the re-prefill schedule's mean;
+    /// at start-up the first full window's other rows at its jump).
     #[default]
     Spread,
 }

@@ -72,7 +72,8 @@ pub struct BudgetArgs {
     pub staggered: bool,
     /// Two GPT caches, the next window filled a few rows per step ahead of
     /// its jump: a flat cost per step at the re-prefill schedule's mean
-    /// (twice its cache memory; one re-prefill at the first jump). The
+    /// (a second cache of `shift - 1` rows; at start-up, part of the first
+    /// full window at its jump). The
     /// presets' schedule: this flag only names it.
     #[arg(long, conflicts_with = "staggered")]
     pub spread: bool,

@@ -648,46 +648,47 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
                 .map_err(|_| Error::State)?;
         }
     } else if s.cfg.schedule == CacheSchedule::Spread && st.gpt.len() >= 2 {
-        // The cache of this window (filled ahead), or a restart in the
-        // cache that does not hold it.
-        let slot = match st.gpt.iter().position(|c| c.window_start() == Some(lo)) {
-            Some(i) => i,
-            None => {
-                let i = st
-                    .gpt
-                    .iter()
-                    .position(|c| c.window_start().is_none_or(|x| x < lo))
-                    .ok_or(Error::State)?;
-                st.gpt[i].restart(lo);
-                i
+        // The window's own cache is the first; the second holds the next
+        // window's first rows (at most its `shift - 1`), which move into
+        // the first at the jump. A window the second could not hold whole
+        // (the first full window, at start-up) has its other rows computed
+        // at its jump.
+        if st.gpt[0].window_start() != Some(lo) {
+            let (main, ahead) = st.gpt.split_at_mut(1);
+            if ahead[0].window_start() == Some(lo) {
+                main[0].take_window(&mut ahead[0])?;
+            } else {
+                main[0].restart(lo);
             }
-        };
+        }
         s.appends
             .push(Append {
-                slot,
+                slot: 0,
                 lo,
-                first: lo + st.gpt[slot].rows(),
+                first: lo + st.gpt[0].rows(),
                 last: k,
                 need_output: true,
             })
             .map_err(|_| Error::State)?;
-        // The next window (start `nlo`, first used at step `k2`) in the other
-        // cache: rows `nlo..k2` must be there by the end of step `k2 - 1`;
-        // this step appends its share of the rows still missing.
+        // The next window (start `nlo`, first used at step `k2`) in the
+        // second cache: rows `nlo..k2` (as many as it holds) must be there
+        // by the end of step `k2 - 1`; this step appends its share of the
+        // rows still missing.
         let (k2, nlo) = next_window(k, m, shift);
         if nlo > lo {
-            let other = 1 - slot.min(1);
-            if st.gpt[other].window_start() != Some(nlo) {
-                st.gpt[other].restart(nlo);
+            let ahead = &mut st.gpt[1];
+            if ahead.window_start() != Some(nlo) {
+                ahead.restart(nlo);
             }
-            let fill = nlo + st.gpt[other].rows();
-            let missing = k2.saturating_sub(fill);
+            let fill = nlo + ahead.rows();
+            let end = k2.min(nlo + ahead.capacity_rows());
+            let missing = end.saturating_sub(fill);
             let share = missing.div_ceil(k2 - k);
             if share > 0 && fill <= k {
                 let last = (fill + share - 1).min(k);
                 s.appends
                     .push(Append {
-                        slot: other,
+                        slot: 1,
                         lo: nlo,
                         first: fill,
                         last,

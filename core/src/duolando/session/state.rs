@@ -6,7 +6,7 @@ use crate::arena::{ArenaError, Carve};
 use crate::duolando::config::{ModelConfig, POSE_DIM, ROT_DIM};
 use crate::duolando::model::Model;
 use crate::duolando::session::batch::music_burst;
-use crate::duolando::session::config::{SessionConfig, MAX_WINDOWS};
+use crate::duolando::session::config::{CacheSchedule, SessionConfig, MAX_WINDOWS};
 use crate::duolando::session::lat_stream::{LatIn, LatStream};
 use crate::error::Error;
 use crate::nn::gpt_cache::GptCache;
@@ -155,13 +155,20 @@ impl<'s> State<'s> {
 
         let n_caches = sc.schedule.caches(m, sc.shift as usize);
         let mut gpt = Vec::new();
-        for _ in 0..n_caches.min(MAX_WINDOWS) {
+        for i in 0..n_caches.min(MAX_WINDOWS) {
+            // The spread schedule's second cache holds the next window's
+            // rows before its jump: at most `shift - 1` of them (the jump's
+            // own row goes to the first cache, which takes them over).
+            let rows = match sc.schedule {
+                CacheSchedule::Spread if i == 1 => (sc.shift as usize).clamp(1, m),
+                _ => m,
+            };
             let cache = GptCache::carve(
                 a,
                 sc.kv,
                 g.n_layer_base as usize + g.n_layer_head as usize,
                 streams,
-                m,
+                rows,
                 c,
                 g.n_head as usize,
             )?;
