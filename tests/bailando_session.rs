@@ -697,6 +697,31 @@ fn published_session_arena() {
             f16kv > 12 * 2 * 3 * 27 * 768 * 2 && f16kv < f32kv,
             "{f16kv}"
         );
+        // Every preset's session within 8 MB with f16 K/V (issue #38 §5).
+        assert!(f16kv <= 8_000_000, "{}: {f16kv} B", p.name());
+        // A spread preset's second cache holds `shift - 1` window rows (the
+        // next window's rows before its jump) and its one-row tail, no more
+        // (the state alone: a session's own step scratch differs too).
+        let lean = duolando_core::bailando::session::batched_session_bytes_for(
+            &cfg,
+            &SessionConfig {
+                kv: KvType::F16,
+                schedule: CacheSchedule::Reprefill,
+                ..sc
+            },
+        )
+        .unwrap();
+        if sc.schedule == CacheSchedule::Spread {
+            let row = 12 * 2 * 3 * 768 * 2;
+            let ahead = (sc.shift as usize - 1) * row;
+            assert!(
+                batched >= lean + ahead && batched < lean + ahead + row,
+                "{}: spread {batched} B, reprefill {lean} B",
+                p.name()
+            );
+        } else {
+            assert_eq!(batched, lean, "{}", p.name());
+        }
     }
 }
 

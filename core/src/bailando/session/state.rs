@@ -30,7 +30,8 @@ pub struct State<'s> {
     /// (m + 1, 2) token history (up, down): the window's tokens.
     pub toks: TokenRing<'s>,
     /// K/V of the current GPT window (re-prefilled when it jumps), and
-    /// with the spread schedule the next window's, filled ahead.
+    /// with the spread schedule the next window's first `shift - 1` rows,
+    /// filled ahead and moved into the first at the jump.
     pub gpt: heapless::Vec<GptCache<'s>, 2>,
     /// Streaming decoders: up, down (positions), root velocity.
     pub dec: [StreamStack<'s>; DECODERS],
@@ -64,18 +65,28 @@ impl<'s> State<'s> {
             g.n_music as usize,
         )?;
         let toks = TokenRing::carve(a, m + 1, 2)?;
+        // The window's own cache, and with the spread schedule a second one
+        // for the next window's rows before its jump: at most `shift - 1`
+        // of them (the jump's own row goes to the first cache, which takes
+        // them over).
         let mut gpt = heapless::Vec::new();
-        for _ in 0..if sc.schedule == CacheSchedule::Spread {
+        let caches = if sc.schedule == CacheSchedule::Spread {
             2
         } else {
             1
-        } {
+        };
+        for i in 0..caches {
+            let rows = if i == 1 {
+                (sc.shift as usize).clamp(1, m)
+            } else {
+                m
+            };
             gpt.push(GptCache::carve(
                 a,
                 sc.kv,
                 layers,
                 N_STREAMS,
-                m,
+                rows,
                 c,
                 g.n_head as usize,
             )?)

@@ -117,43 +117,46 @@ pub fn step_many(
     // Each ready session's window cache and the first of its rows not yet
     // cached (a jump restarts it), and with the spread schedule the rows of
     // its next window appended in this step: (cache, from, next: (next
-    // cache, first row, rows, start)).
+    // cache, first row, rows, start)). The window's own cache is the first;
+    // the second holds the next window's first rows (at most `shift - 1`),
+    // which move into the first at the jump. A window the second could not
+    // hold whole (the first full window, at start-up) has its other rows
+    // computed at its jump.
     let mut plan: Vec<(usize, usize, Option<(usize, usize, usize, usize)>), MAX_BATCH> = Vec::new();
     for &i in ready.iter() {
         let s = &mut *ss[i];
         let k = s.steps;
         let shift = s.cfg.shift as usize;
         let lo = window_start(k, m, shift);
-        let cur = match s.st.gpt.iter().position(|g| g.window_start() == Some(lo)) {
-            Some(c) => c,
-            None => {
-                // The cache of an older window (or an empty one) starts this one.
-                let c =
-                    s.st.gpt
-                        .iter()
-                        .position(|g| g.window_start().is_none_or(|x| x < lo))
-                        .ok_or((i, Error::State))?;
-                s.st.gpt[c].restart(lo);
-                c
+        if s.st.gpt[0].window_start() != Some(lo) {
+            let (main, ahead) = s.st.gpt.split_at_mut(1);
+            match ahead.first_mut() {
+                Some(a) if a.window_start() == Some(lo) => {
+                    main[0].take_window(a).map_err(at(i))?;
+                }
+                _ => main[0].restart(lo),
             }
-        };
-        // Rows of this window not yet in its cache (all of them after a jump,
-        // the rest of them where the spread fell behind).
+        }
+        let cur = 0;
+        // Rows of this window not yet in its cache (all of them after a jump
+        // without the spread, the rest of them where the spread fell short).
         let from = lo + s.st.gpt[cur].rows();
         if from > k {
             return Err((i, Error::State));
         }
         let next = if s.st.gpt.len() == 2 {
             let (k2, lo2) = next_window(k, m, shift);
-            let nx = 1 - cur;
+            let nx = 1;
             if s.st.gpt[nx].window_start() != Some(lo2) {
                 s.st.gpt[nx].restart(lo2);
             }
-            // Rows lo2..k2 are wanted before step k2; rows <= k exist.
+            // Rows lo2..k2 (as many as the cache holds) are wanted before
+            // step k2; rows <= k exist.
             let have = lo2 + s.st.gpt[nx].rows();
-            let quota = k2.saturating_sub(have).div_ceil(k2 - k);
+            let end = k2.min(lo2 + s.st.gpt[nx].capacity_rows());
+            let quota = end.saturating_sub(have).div_ceil(k2 - k);
             let q = quota
-                .min((k + 1).min(k2).saturating_sub(have))
+                .min((k + 1).min(end).saturating_sub(have))
                 .min(PREFILL_CHUNK);
             s.spread_rows += q;
             (q > 0).then_some((nx, have, q, lo2))
@@ -232,12 +235,11 @@ pub fn step_many(
             }
             let (cur, from, next) = plan[p];
             p += 1;
+            // The window's own cache is the first (`cur` is 0), the next
+            // window's the second.
+            debug_assert_eq!(cur, 0);
             let (a, b) = s.st.gpt.split_at_mut(1);
-            let (c, n) = if cur == 0 {
-                (&mut a[0], b.first_mut())
-            } else {
-                (&mut b[0], a.first_mut())
-            };
+            let (c, n) = (&mut a[0], b.first_mut());
             let n_new = s.steps + 1 - from;
             items
                 .push(GptItem {
