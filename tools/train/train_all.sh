@@ -11,6 +11,8 @@
 # evaluation, LOOK_FORWARD (the follower GPT's leader/music look-ahead in tokens, default 29 as the
 # original; the latency knob, docs/DEMO_MODEL.md "Latency chosen at training time"),
 # RL_EPOCHS / RL_ARGS (the reinforcement stage after the GPT: epochs, more train_rl.py flags; off),
+# TOKEN_NOISE (train_gpt.py --token-noise: the share of follower input tokens replaced by random
+# ones in training; default 0, the recipe's; docs/DEMO_MODEL.md "Token noise"),
 # DEMO_TAKE (test take of the demo clip; default Quickstep_20_01, empty = the longest),
 # INSTALL=1 to replace assets/demo.duo and the demo clip, BIN (the duolando binary,
 # default $CARGO_TARGET_DIR or target, /release/duolando).
@@ -36,7 +38,7 @@ $NICE "$PY" train_vqvae.py  --data "$DATA" --out "$WORK/motion_vqvae.pt" --steps
 $NICE "$PY" train_transl.py --data "$DATA" --out "$WORK/transl_vqvae.pt" --steps "${TR_STEPS:-1500}"
 $NICE "$PY" train_gpt.py    --data "$DATA" --vqvae "$WORK/motion_vqvae.pt" --transl "$WORK/transl_vqvae.pt" \
                             --out "$WORK/follower_gpt.pt" --steps "${GPT_STEPS:-1800}" --batch 16 \
-                            --look-forward "${LOOK_FORWARD:-29}"
+                            --look-forward "${LOOK_FORWARD:-29}" --token-noise "${TOKEN_NOISE:-0}"
 # Optional second one-cycle run from the first (original `init_weight`). Off by default: with
 # 20 min of data, 600 more steps at lr 5e-4 overfit (held-out figures got worse; DEMO_MODEL.md).
 if [ "${GPT2_STEPS:-0}" != 0 ]; then

@@ -68,6 +68,12 @@ def batch_windows(items):
             [lead[:, j] for j in range(4)])
 
 
+def corrupt(tokens, vocab, p):
+    """`tokens` with each entry replaced, with probability p, by a uniform draw from [0, vocab)."""
+    mask = torch.rand(tokens.shape) < p
+    return torch.where(mask, torch.randint(0, vocab, tokens.shape), tokens)
+
+
 def init_weights(gpt):
     """Original GPT2nt._init_weights: Linear/Embedding N(0, 0.02), biases 0, LayerNorm 1/0;
     position embeddings start at zero."""
@@ -101,6 +107,11 @@ def main(argv=None):
     ap.add_argument("--dropout", type=float, default=0.1)
     ap.add_argument("--seed", type=int, default=44)
     ap.add_argument("--init", default=None, help="continue from this GPT checkpoint (original init_weight)")
+    ap.add_argument("--token-noise", type=float, default=0.0,
+                    help="probability that a follower INPUT token is replaced by a uniformly drawn token of its "
+                         "stream's codebook (targets unchanged): against exposure bias, where the model learns "
+                         "to copy its previous token and greedy decoding then holds one token (not the "
+                         "original's; 0 = off, the recipe's default)")
     ap.add_argument("--look-forward", type=int, default=DEMO["look_forward"],
                     help="leader and music look-ahead in tokens (4 frames each; default 29 as the original): "
                          "the windows take leader tokens [s, s+bs+lf); R and S modes then need lf tokens "
@@ -130,9 +141,14 @@ def main(argv=None):
     n_params = sum(p.numel() for p in gpt.parameters())
     print(f"[gpt] {n_params} parameters, look_forward {lf}, {len(starts)} training windows", flush=True)
     run = None
+    # Input streams' codebook sizes (up, down, lhand, rhand, transl), for --token-noise.
+    vocabs = [e.num_embeddings for e in (gpt.tok_emb_up, gpt.tok_emb_down, gpt.tok_emb_lhand,
+                                         gpt.tok_emb_rhand, gpt.tok_emb_transl)]
     for step in range(1, args.steps + 1):
         pick = rng.integers(len(starts), size=args.batch)
         fin, tgt, music, lead = batch_windows([window(train[starts[j][0]], starts[j][1], bs, lf) for j in pick])
+        if args.token_noise > 0:
+            fin = [corrupt(f, vocab, args.token_noise) for f, vocab in zip(fin, vocabs)]
         logits = gpt(fin, music, lead)
         losses = [F.cross_entropy(lg.reshape(-1, lg.shape[-1]), t.reshape(-1)) for lg, t in zip(logits, tgt)]
         loss = sum(losses)
