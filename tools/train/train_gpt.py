@@ -119,6 +119,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.look_forward < 1:
         ap.error("--look-forward must be >= 1")
+    if not 0.0 <= args.token_noise <= 1.0:
+        ap.error("--token-noise must be in [0, 1]")
     setup_threads()
     torch.manual_seed(args.seed)
     gpt, vq, tr = build_models(args.look_forward)

@@ -1,6 +1,9 @@
 //! The streaming stack: push columns, settle them unit by unit, and read
 //! outputs (settled, or the tail cone computed on request).
 
+// Fixed-capacity vectors (no allocation: core has no alloc crate).
+use heapless::Vec;
+
 use super::*;
 
 /// State of one streaming stack: a ring of settled input columns per unit
