@@ -184,6 +184,48 @@ impl<'s> GptCache<'s> {
         Ok(())
     }
 
+    /// The spread schedule's jump, shared by every family: makes
+    /// `caches[0]` (the window's own cache) hold the window starting at
+    /// `lo`, taking over the rows `caches[1]` (the next window's, where
+    /// there is one) gathered ahead for it, or else empty. Nothing changes
+    /// where `caches[0]` already holds that window.
+    pub fn enter_window(caches: &mut [GptCache<'_>], lo: usize) -> Result<(), Error> {
+        let Some((main, rest)) = caches.split_first_mut() else {
+            return Err(Error::State);
+        };
+        if main.window_start() == Some(lo) {
+            return Ok(());
+        }
+        match rest.first_mut() {
+            Some(ahead) if ahead.window_start() == Some(lo) => main.take_window(ahead),
+            _ => {
+                main.restart(lo);
+                Ok(())
+            }
+        }
+    }
+
+    /// The spread schedule's share of step `k` in this (second) cache,
+    /// which gathers the next window (start `nlo`, first used at step
+    /// `k2 > k`; restarted here if it held another): the window rows
+    /// `nlo..k2` it holds (at most [`Self::capacity_rows`]) must be cached
+    /// by the end of step `k2 - 1`, so each step to then appends an equal
+    /// share of those still missing, of rows that exist (`<= k`). Returns
+    /// `(first row, rows)` to append at this step, or `None`.
+    pub fn ahead_share(&mut self, k: usize, k2: usize, nlo: usize) -> Option<(usize, usize)> {
+        if k2 <= k {
+            return None;
+        }
+        if self.window_start() != Some(nlo) {
+            self.restart(nlo);
+        }
+        let first = nlo + self.rows;
+        let end = k2.min(nlo + self.capacity_rows());
+        let share = end.saturating_sub(first).div_ceil(k2 - k);
+        let rows = share.min((k + 1).saturating_sub(first));
+        (rows > 0).then_some((first, rows))
+    }
+
     /// This cache's K/V of layer `l`, rows `..r1` (streams-rows), read in
     /// place (f32 or f16): head-major, the layer's stretch from its first
     /// head's row 0 to its last head's row `min(r1, cap)`, then the tail's
@@ -447,6 +489,62 @@ mod tests {
             let mut other = GptCache::carve(&mut a, kv, layers + 1, streams, 6, c, heads).unwrap();
             assert!(other.take_window(&mut main).is_err());
             assert_eq!(main.rows(), 3, "a refusal changes nothing");
+        }
+    }
+
+    /// The spread schedule run by `enter_window` and `ahead_share` over
+    /// many steps, with the second cache carved as the sessions carve it
+    /// (`shift - 1` rows): each step appends rows that exist, right after
+    /// those cached, no row twice; at every jump the window's cache holds
+    /// every row the second could gather (`min(k2 - lo, shift - 1)`), so a
+    /// step computes only its new row (and its share of the next window,
+    /// spread evenly over the steps between jumps).
+    #[test]
+    fn spread_shares_gather_the_next_window_by_its_jump() {
+        use super::{GptCache, KvType};
+        use crate::arena::Arena;
+        use crate::nn::window::{next_window, window_start};
+        for (m, shift) in [(30usize, 22usize), (30, 21), (30, 29), (8, 2), (8, 1), (8, 8), (5, 3)] {
+            let mut mem = std::vec![0u8; 1 << 16];
+            let mut a = Arena::new(&mut mem);
+            let main = GptCache::carve(&mut a, KvType::F32, 1, 1, m, 4, 1).unwrap();
+            let ahead = GptCache::carve(&mut a, KvType::F32, 1, 1, shift.clamp(1, m), 4, 1).unwrap();
+            let mut caches = [main, ahead];
+            for k in 0..6 * m {
+                let lo = window_start(k, m, shift);
+                let jump = caches[0].window_start() != Some(lo);
+                let had = caches[1].window_start().filter(|&x| x == lo).map(|_| caches[1].rows());
+                GptCache::enter_window(&mut caches, lo).unwrap();
+                assert_eq!(caches[0].window_start(), Some(lo));
+                if jump {
+                    assert_eq!(caches[0].rows(), had.unwrap_or(0), "m {m} shift {shift} step {k}");
+                    if k >= m && shift > 1 {
+                        assert_eq!(caches[0].rows(), (k - lo).min(shift - 1), "m {m} shift {shift} step {k}");
+                    }
+                }
+                // The step appends rows first..=k to the window's cache.
+                let first = lo + caches[0].rows();
+                assert!(first <= k);
+                caches[0].rows += k + 1 - first;
+                let (k2, nlo) = next_window(k, m, shift);
+                if nlo > lo {
+                    let before = match caches[1].window_start() {
+                        Some(x) if x == nlo => nlo + caches[1].rows(),
+                        _ => nlo,
+                    };
+                    if let Some((f, n)) = caches[1].ahead_share(k, k2, nlo) {
+                        assert_eq!(f, before, "right after the cached rows");
+                        assert!(n > 0 && f + n - 1 <= k, "rows that exist");
+                        assert!(f + n <= k2 && caches[1].rows() + n <= caches[1].capacity_rows());
+                        // Spread evenly over the steps between jumps, not left to the last.
+                        let period = m + 1 - shift;
+                        if k >= m + period {
+                            assert!(n <= (shift - 1).div_ceil(period), "m {m} shift {shift} step {k}: {n} rows");
+                        }
+                        caches[1].rows += n;
+                    }
+                }
+            }
         }
     }
 

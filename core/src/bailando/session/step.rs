@@ -85,6 +85,15 @@ fn embed_rows(
     Ok(())
 }
 
+/// A ready session's GPT rows in one step: window rows `from..=k` go to
+/// its window's cache, and with the spread schedule `ahead` = (first row,
+/// rows, window start) of the next window's to the second cache.
+#[derive(Clone, Copy)]
+struct Rows {
+    from: usize,
+    ahead: Option<(usize, usize, usize)>,
+}
+
 /// Steps every ready session of `ss` once (at most `sc.n` of them; the
 /// rest wait for the next call) and decodes the frames that became final.
 /// Returns how many sessions stepped.
@@ -114,56 +123,33 @@ pub fn step_many(
     let w = N_STREAMS * c;
     let blocks = || model.gpt.base.iter().chain(model.gpt.head.iter());
 
-    // Each ready session's window cache and the first of its rows not yet
-    // cached (a jump restarts it), and with the spread schedule the rows of
-    // its next window appended in this step: (cache, from, next: (next
-    // cache, first row, rows, start)). The window's own cache is the first;
-    // the second holds the next window's first rows (at most `shift - 1`),
-    // which move into the first at the jump. A window the second could not
-    // hold whole (the first full window, at start-up) has its other rows
-    // computed at its jump.
-    let mut plan: Vec<(usize, usize, Option<(usize, usize, usize, usize)>), MAX_BATCH> = Vec::new();
+    // Each ready session's rows this step (its window's own cache is the
+    // first, the next window's the second, [`GptCache::enter_window`]).
+    let mut plan: Vec<Rows, MAX_BATCH> = Vec::new();
     for &i in ready.iter() {
         let s = &mut *ss[i];
         let k = s.steps;
         let shift = s.cfg.shift as usize;
         let lo = window_start(k, m, shift);
-        if s.st.gpt[0].window_start() != Some(lo) {
-            let (main, ahead) = s.st.gpt.split_at_mut(1);
-            match ahead.first_mut() {
-                Some(a) if a.window_start() == Some(lo) => {
-                    main[0].take_window(a).map_err(at(i))?;
-                }
-                _ => main[0].restart(lo),
-            }
-        }
-        let cur = 0;
+        GptCache::enter_window(&mut s.st.gpt, lo).map_err(at(i))?;
         // Rows of this window not yet in its cache (all of them after a jump
         // without the spread, the rest of them where the spread fell short).
-        let from = lo + s.st.gpt[cur].rows();
+        let from = lo + s.st.gpt[0].rows();
         if from > k {
             return Err((i, Error::State));
         }
-        let next = if s.st.gpt.len() == 2 {
-            let (k2, lo2) = next_window(k, m, shift);
-            let nx = 1;
-            if s.st.gpt[nx].window_start() != Some(lo2) {
-                s.st.gpt[nx].restart(lo2);
+        let ahead = match s.st.gpt.get_mut(1) {
+            Some(next) => {
+                let (k2, lo2) = next_window(k, m, shift);
+                next.ahead_share(k, k2, lo2).map(|(have, q)| {
+                    let q = q.min(PREFILL_CHUNK);
+                    s.spread_rows += q;
+                    (have, q, lo2)
+                })
             }
-            // Rows lo2..k2 (as many as the cache holds) are wanted before
-            // step k2; rows <= k exist.
-            let have = lo2 + s.st.gpt[nx].rows();
-            let end = k2.min(lo2 + s.st.gpt[nx].capacity_rows());
-            let quota = end.saturating_sub(have).div_ceil(k2 - k);
-            let q = quota
-                .min((k + 1).min(end).saturating_sub(have))
-                .min(PREFILL_CHUNK);
-            s.spread_rows += q;
-            (q > 0).then_some((nx, have, q, lo2))
-        } else {
-            None
+            None => None,
         };
-        plan.push((cur, from, next))
+        plan.push(Rows { from, ahead })
             .map_err(|_| (i, Error::State))?;
     }
 
@@ -175,22 +161,22 @@ pub fn step_many(
     let cap = sc.x.len() / w;
     let mut main: usize = plan
         .iter()
-        .map(|&(_, _, next)| 1 + next.map_or(0, |(_, _, q, _)| q))
+        .map(|p| 1 + p.ahead.map_or(0, |(_, q, _)| q))
         .sum();
     for (&i, p) in ready.iter().zip(plan.iter_mut()) {
         let s = &mut *ss[i];
         let k = s.steps;
-        let (cur, mut from) = (p.0, p.1);
+        let mut from = p.from;
         if main + (k - from) <= cap {
             main += k - from;
             continue;
         }
-        let lo = s.st.gpt[cur].window_start().ok_or((i, Error::State))?;
+        let lo = s.st.gpt[0].window_start().ok_or((i, Error::State))?;
         while from < k {
             let to = (from + cap).min(k);
             embed_rows(s, lo, from, to, &mut sc.x[..(to - from) * w]).map_err(at(i))?;
             let mut items = [GptItem {
-                cache: &mut s.st.gpt[cur],
+                cache: &mut s.st.gpt[0],
                 rows: to - from,
                 need_output: false,
             }];
@@ -206,21 +192,21 @@ pub fn step_many(
             s.prefilled += to - from;
             from = to;
         }
-        p.1 = from;
+        p.from = from;
     }
 
     // The new row of every ready session (and its next window's rows),
     // through the GPT together.
     let mut rows = 0;
-    for (&i, &(cur, from, next)) in ready.iter().zip(plan.iter()) {
+    for (&i, &Rows { from, ahead }) in ready.iter().zip(plan.iter()) {
         let s = &mut *ss[i];
         let k = s.steps;
-        let lo = s.st.gpt[cur].window_start().ok_or((i, Error::State))?;
+        let lo = s.st.gpt[0].window_start().ok_or((i, Error::State))?;
         let n_new = k + 1 - from;
         embed_rows(s, lo, from, k + 1, &mut sc.x[rows * w..(rows + n_new) * w]).map_err(at(i))?;
         s.prefilled += n_new - 1;
         rows += n_new;
-        if let Some((_, from, q, lo2)) = next {
+        if let Some((from, q, lo2)) = ahead {
             embed_rows(s, lo2, from, from + q, &mut sc.x[rows * w..(rows + q) * w])
                 .map_err(at(i))?;
             rows += q;
@@ -233,11 +219,8 @@ pub fn step_many(
             if !ready.contains(&i) {
                 continue;
             }
-            let (cur, from, next) = plan[p];
+            let Rows { from, ahead } = plan[p];
             p += 1;
-            // The window's own cache is the first (`cur` is 0), the next
-            // window's the second.
-            debug_assert_eq!(cur, 0);
             let (a, b) = s.st.gpt.split_at_mut(1);
             let (c, n) = (&mut a[0], b.first_mut());
             let n_new = s.steps + 1 - from;
@@ -248,7 +231,7 @@ pub fn step_many(
                     need_output: true,
                 })
                 .map_err(|_| (i, Error::State))?;
-            if let (Some((_, _, q, _)), Some(n)) = (next, n) {
+            if let (Some((_, q, _)), Some(n)) = (ahead, n) {
                 items
                     .push(GptItem {
                         cache: n,

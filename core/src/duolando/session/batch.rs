@@ -653,14 +653,7 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
         // the first at the jump. A window the second could not hold whole
         // (the first full window, at start-up) has its other rows computed
         // at its jump.
-        if st.gpt[0].window_start() != Some(lo) {
-            let (main, ahead) = st.gpt.split_at_mut(1);
-            if ahead[0].window_start() == Some(lo) {
-                main[0].take_window(&mut ahead[0])?;
-            } else {
-                main[0].restart(lo);
-            }
-        }
+        GptCache::enter_window(&mut st.gpt, lo)?;
         s.appends
             .push(Append {
                 slot: 0,
@@ -671,27 +664,16 @@ fn plan(s: &mut Session<'_>) -> Result<(), Error> {
             })
             .map_err(|_| Error::State)?;
         // The next window (start `nlo`, first used at step `k2`) in the
-        // second cache: rows `nlo..k2` (as many as it holds) must be there
-        // by the end of step `k2 - 1`; this step appends its share of the
-        // rows still missing.
+        // second cache: this step's share of its rows.
         let (k2, nlo) = next_window(k, m, shift);
         if nlo > lo {
-            let ahead = &mut st.gpt[1];
-            if ahead.window_start() != Some(nlo) {
-                ahead.restart(nlo);
-            }
-            let fill = nlo + ahead.rows();
-            let end = k2.min(nlo + ahead.capacity_rows());
-            let missing = end.saturating_sub(fill);
-            let share = missing.div_ceil(k2 - k);
-            if share > 0 && fill <= k {
-                let last = (fill + share - 1).min(k);
+            if let Some((first, rows)) = st.gpt[1].ahead_share(k, k2, nlo) {
                 s.appends
                     .push(Append {
                         slot: 1,
                         lo: nlo,
-                        first: fill,
-                        last,
+                        first,
+                        last: first + rows - 1,
                         need_output: false,
                     })
                     .map_err(|_| Error::State)?;
