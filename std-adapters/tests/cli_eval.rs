@@ -176,6 +176,23 @@ fn eval_matches_the_authors_figures_and_saved_stats_give_the_same() {
     ] {
         assert_eq!(again[key], got[key], "{key} from --real-stats");
     }
+    // Each FID's mean term is part of it (the covariance part is >= 0), and
+    // its largest per-feature shifts come largest first, their squares
+    // within the term; the kinetic ones are named.
+    for tag in ["k", "g", "cd"] {
+        let fid = got[format!("fid_{tag}")].as_f64().unwrap();
+        let term = got[format!("fid_{tag}_mean_term")].as_f64().unwrap();
+        assert!(term >= 0.0 && term <= fid * (1.0 + 1e-9) + 1e-9, "{tag}: mean term {term}, FID {fid}");
+        let top = got[format!("fid_{tag}_largest_shifts")].as_array().unwrap();
+        assert_eq!(top.len(), 6, "{tag}");
+        let sd: Vec<f64> = top.iter().map(|e| e["shift_sd"].as_f64().unwrap()).collect();
+        assert!(sd.windows(2).all(|w| w[0].abs() >= w[1].abs()), "{tag}: {sd:?}");
+        assert!(sd.iter().map(|v| v * v).sum::<f64>() <= term * (1.0 + 1e-12), "{tag}");
+        if tag == "k" {
+            assert!(top.iter().all(|e| e["name"].as_str().is_some_and(|n| n.contains("kinetic") || n.contains("expenditure"))));
+        }
+        assert_eq!(again[format!("fid_{tag}_mean_term")], got[format!("fid_{tag}_mean_term")], "{tag} from --real-stats");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -85,6 +85,35 @@ fn flat_features(tag: &str, r: &Features, g: &Features, out: &mut Map<String, Va
     Ok(())
 }
 
+/// Features listed by [`mean_shift_report`].
+const LARGEST_SHIFTS: usize = 6;
+
+/// Where FID_`tag`'s mean term comes from ([`fid::mean_shifts`]): the term
+/// itself (`fid_<tag>_mean_term`; the rest of the FID is the
+/// covariances') and the features whose generated mean lies furthest from
+/// the real one, in real standard deviations, signed, largest first
+/// (`fid_<tag>_largest_shifts`, named where the features have names).
+fn mean_shift_report(tag: &str, r: &Features, g: &Features, out: &mut Map<String, Value>) -> Result<()> {
+    let shifts = fid::mean_shifts(r, g).with_context(|| format!("FID_{tag}"))?;
+    let name = |i: usize| match tag {
+        "k" => crate::eval::kinetic::feature_name(i),
+        "g" => crate::eval::manual::feature_name(i),
+        _ => None,
+    };
+    let mut order: Vec<usize> = (0..shifts.len()).collect();
+    order.sort_by(|&a, &b| shifts[b].abs().total_cmp(&shifts[a].abs()).then(a.cmp(&b)));
+    out.insert(format!("fid_{tag}_mean_term"), json!(shifts.iter().map(|v| v * v).sum::<f64>()));
+    out.insert(
+        format!("fid_{tag}_largest_shifts"),
+        json!(order
+            .iter()
+            .take(LARGEST_SHIFTS)
+            .map(|&i| json!({"feature": i, "name": name(i), "shift_sd": shifts[i]}))
+            .collect::<Vec<_>>()),
+    );
+    Ok(())
+}
+
 /// Runs `duolando eval`.
 pub fn run(args: Args) -> Result<()> {
     let real = match (&args.real, &args.real_stats) {
@@ -114,6 +143,7 @@ pub fn run(args: Args) -> Result<()> {
             out.insert(format!("fid_{tag}"), json!(s.fid));
             out.insert(format!("div_{tag}"), json!(s.div_gen));
             out.insert(format!("div_{tag}_real"), json!(s.div_real));
+            mean_shift_report(tag, &r, &g, &mut out)?;
             flat_features(tag, &r, &g, &mut out, &mut warnings)?;
         }
         if real.cd.len() >= 2 && gen.cd.len() >= 2 {
@@ -122,6 +152,7 @@ pub fn run(args: Args) -> Result<()> {
             out.insert("fid_cd".into(), json!(s.fid));
             out.insert("div_cd".into(), json!(s.div_gen));
             out.insert("div_cd_real".into(), json!(s.div_real));
+            mean_shift_report("cd", &r, &g, &mut out)?;
             flat_features("cd", &r, &g, &mut out, &mut warnings)?;
         } else {
             notes.push(format!(

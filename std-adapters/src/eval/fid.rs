@@ -314,6 +314,21 @@ pub fn without(set: &Features, drop: &[usize]) -> Features {
     }
 }
 
+/// The FID's mean term split by feature: for each column, the generated
+/// mean's distance from the real mean in units of the real set's standard
+/// deviation (plus [`STD_EPS`]), signed (`(mu_g - mu_r) / (sd_r + eps)`).
+/// The squares sum to the term `|mu_g - mu_r|^2` of [`frechet`] on the
+/// normalised sets; the rest of the FID is the covariances'. Both sets as
+/// [`scores`] checks them.
+pub fn mean_shifts(real: &Features, gen: &Features) -> Result<Vec<f64>, EvalError> {
+    let d = real.width();
+    check(real, "real", d)?;
+    check(gen, "generated", d)?;
+    let (rm, rs) = mean_std(real);
+    let (gm, _) = mean_std(gen);
+    Ok((0..d).map(|i| (gm[i] - rm[i]) / (rs[i] + STD_EPS)).collect())
+}
+
 /// FID and both diversities, with the real set's normalisation.
 pub fn scores(real: &Features, gen: &Features) -> Result<Scores, EvalError> {
     let d = real.width();
@@ -330,6 +345,37 @@ pub fn scores(real: &Features, gen: &Features) -> Result<Scores, EvalError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A generated set that is the real one shifted by a constant per
+    /// feature has the real covariance, so its FID is the mean term alone:
+    /// the squared shifts sum to it, and each is the shift over the real
+    /// population standard deviation, signed.
+    #[test]
+    fn mean_shifts_split_the_mean_term() {
+        let real = Features::new(vec![
+            vec![1.0, 10.0, -3.0],
+            vec![2.0, 14.0, -1.0],
+            vec![4.0, 11.0, -2.5],
+            vec![3.0, 9.0, 0.5],
+        ]);
+        let shift = [0.5, -6.0, 0.0];
+        let gen = Features::new(
+            real.rows
+                .iter()
+                .map(|r| r.iter().zip(shift).map(|(v, s)| v + s).collect())
+                .collect(),
+        );
+        let m = mean_shifts(&real, &gen).unwrap();
+        let (_, sd) = mean_std(&real);
+        for i in 0..3 {
+            assert!((m[i] - shift[i] / (sd[i] + STD_EPS)).abs() < 1e-12, "feature {i}: {}", m[i]);
+        }
+        assert!(m[0] > 0.0 && m[1] < 0.0 && m[2] == 0.0);
+        let fid = scores(&real, &gen).unwrap().fid;
+        let term: f64 = m.iter().map(|v| v * v).sum();
+        assert!((fid - term).abs() < 1e-6 * term, "FID {fid} mean term {term}");
+        assert!(mean_shifts(&real, &Features::new(vec![vec![1.0, 2.0]; 2])).is_err());
+    }
 
     #[test]
     fn jacobi_diagonalises() {

@@ -25,6 +25,24 @@ pub const DIM: usize = 72;
 /// Shortest clip with a defined acceleration window everywhere.
 pub const MIN_FRAMES: usize = 3;
 
+/// What each of the three features of a joint measures, in column order.
+pub const KINDS: [&str; 3] = ["horizontal kinetic energy", "vertical kinetic energy", "energy expenditure"];
+
+/// Name of kinetic feature `i` (joint `i / 3` of SMPL's 24, kind `i % 3`),
+/// e.g. "pelvis horizontal kinetic energy"; `None` past [`DIM`]. Joints 22
+/// and 23 are the hands (the means of the finger bases, as the extractor's
+/// SMPL-24 takes them).
+pub fn feature_name(i: usize) -> Option<String> {
+    const HANDS: [&str; 2] = ["left_hand", "right_hand"];
+    let j = i / 3;
+    let joint = match j {
+        0..22 => crate::skeleton::JOINT_NAMES[j],
+        22 | 23 => HANDS[j - 22],
+        _ => return None,
+    };
+    Some(format!("{joint} {}", KINDS[i % 3]))
+}
+
 /// Kinetic features of one SMPL-X clip ((T, 165) positions).
 pub fn features(pos: &[f32]) -> Result<Vec<f32>, EvalError> {
     let joints = smpl24_rooted(pos)?;
@@ -94,6 +112,15 @@ pub fn features_smpl24(p: &[[V3; 24]]) -> Result<Vec<f32>, EvalError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn feature_names_follow_the_columns() {
+        assert_eq!(feature_name(0).as_deref(), Some("pelvis horizontal kinetic energy"));
+        assert_eq!(feature_name(4).as_deref(), Some("left_hip vertical kinetic energy"));
+        assert_eq!(feature_name(65).as_deref(), Some("right_wrist energy expenditure"));
+        assert_eq!(feature_name(71).as_deref(), Some("right_hand energy expenditure"));
+        assert_eq!(feature_name(DIM), None);
+    }
 
     fn still(t: usize) -> Vec<f32> {
         let mut v = vec![0.0f32; t * 165];
