@@ -68,6 +68,10 @@ def batch_windows(items):
             [lead[:, j] for j in range(4)])
 
 
+# The follower's input streams, in the GPT's order.
+FOLLOWER_STREAMS = ("up", "down", "lhand", "rhand", "transl")
+
+
 def corrupt(tokens, vocab, p):
     """`tokens` with each entry replaced, with probability p, by a uniform draw from [0, vocab)."""
     mask = torch.rand(tokens.shape) < p
@@ -112,6 +116,9 @@ def main(argv=None):
                          "stream's codebook (targets unchanged): against exposure bias, where the model learns "
                          "to copy its previous token and greedy decoding then holds one token (not the "
                          "original's; 0 = off, the recipe's default)")
+    ap.add_argument("--token-noise-streams", default="up,down,lhand,rhand,transl",
+                    help="the follower input streams --token-noise corrupts (comma separated, of "
+                         "up,down,lhand,rhand,transl; default all)")
     ap.add_argument("--look-forward", type=int, default=DEMO["look_forward"],
                     help="leader and music look-ahead in tokens (4 frames each; default 29 as the original): "
                          "the windows take leader tokens [s, s+bs+lf); R and S modes then need lf tokens "
@@ -121,6 +128,9 @@ def main(argv=None):
         ap.error("--look-forward must be >= 1")
     if not 0.0 <= args.token_noise <= 1.0:
         ap.error("--token-noise must be in [0, 1]")
+    noised = args.token_noise_streams.split(",")
+    if not noised or any(n not in FOLLOWER_STREAMS for n in noised) or len(set(noised)) != len(noised):
+        ap.error(f"--token-noise-streams takes distinct names of {','.join(FOLLOWER_STREAMS)}")
     setup_threads()
     torch.manual_seed(args.seed)
     gpt, vq, tr = build_models(args.look_forward)
@@ -150,7 +160,8 @@ def main(argv=None):
         pick = rng.integers(len(starts), size=args.batch)
         fin, tgt, music, lead = batch_windows([window(train[starts[j][0]], starts[j][1], bs, lf) for j in pick])
         if args.token_noise > 0:
-            fin = [corrupt(f, vocab, args.token_noise) for f, vocab in zip(fin, vocabs)]
+            fin = [corrupt(f, vocab, args.token_noise) if name in noised else f
+                   for f, vocab, name in zip(fin, vocabs, FOLLOWER_STREAMS)]
         logits = gpt(fin, music, lead)
         losses = [F.cross_entropy(lg.reshape(-1, lg.shape[-1]), t.reshape(-1)) for lg, t in zip(logits, tgt)]
         loss = sum(losses)
