@@ -165,8 +165,8 @@ const SPLIT_SCORES: usize = 2 * SPLIT_MAX_KEYS;
 
 /// `out = softmax(mask(q k^T / sqrt(hd))) v`, per head. `q`: (nq, C);
 /// `k`, `v`: (nk, C) ([`KvRows`]: a plain f32 slice, or a cache's one or
-/// two runs of f32 / f16 rows); `out`: (nq, C); `scores`: >= nk scratch; `C = n_head
-/// * hd`. Masked keys are skipped (= -inf before softmax). A query that
+/// two runs of f32 / f16 rows); `out`: (nq, C); `scores`: >= nk scratch;
+/// `C = n_head * hd`. Masked keys are skipped (= -inf before softmax). A query that
 /// sees no key gets zeros (cannot happen with the model's masks).
 ///
 /// Per query the mask is read once into runs of consecutive allowed keys;

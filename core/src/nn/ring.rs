@@ -107,11 +107,7 @@ impl<'s> TokenRing<'s> {
         self.len == 0
     }
     fn cap(&self) -> usize {
-        if self.width == 0 {
-            0
-        } else {
-            self.data.len() / self.width
-        }
+        self.data.len().checked_div(self.width).unwrap_or(0)
     }
     pub fn push(&mut self, row: &[u32]) -> Result<(), Error> {
         let (cap, w) = (self.cap(), self.width);

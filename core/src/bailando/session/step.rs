@@ -288,7 +288,7 @@ pub(super) fn decode(s: &mut Session<'_>, sc: &mut StepScratch<'_>) -> Result<()
         while s.frames_final() {
             frames_of(s, sc)?;
         }
-        if s.dec_fed >= s.steps + 1 {
+        if s.dec_fed > s.steps {
             return Ok(());
         }
         let tok = s.st.toks.row(s.dec_fed)?;

@@ -284,11 +284,7 @@ pub(crate) fn whole_rows(coef: usize, len: usize, stride: usize, n: usize) -> us
     if len < n {
         return 0;
     }
-    coef.min(if stride == 0 {
-        usize::MAX
-    } else {
-        (len - n) / stride + 1
-    })
+    coef.min((len - n).checked_div(stride).map_or(usize::MAX, |r| r + 1))
 }
 
 /// Twin of [`super::axpy_rows_f32`]: [`axpy_f32`] row after row.

@@ -6,6 +6,7 @@ use super::*;
 /// and every lag `0..=future_max`), for up to `n` stacks computed together
 /// ([`StreamStack::push_many`]); carve once per session (`n = 1`) or per
 /// batch of sessions.
+#[derive(Default)]
 pub struct StreamScratch<'s> {
     /// (cols, c_in) input columns of one unit, gathered contiguous.
     pub(super) g: &'s mut [f32],
@@ -50,15 +51,3 @@ impl<'s> StreamScratch<'s> {
     }
 }
 
-impl Default for StreamScratch<'_> {
-    fn default() -> Self {
-        StreamScratch {
-            g: &mut [],
-            h: &mut [],
-            r: &mut [],
-            ta: &mut [],
-            tb: &mut [],
-            tile: &mut [],
-        }
-    }
-}
