@@ -91,7 +91,6 @@ pub fn parse(name: &str) -> Option<Isa> {
 /// AMX tiles where [`amx_usable`] (unless `DUOLANDO_ISA` names another ISA
 /// than `avx512amx`); returns the ISA.
 pub fn init() -> Isa {
-    SELECTED.store(true, Ordering::Release);
     let isa = detect();
     // SAFETY: `detect` returned `isa` only from `supported`, which checked
     // that this CPU supports every feature its kernels are compiled for.
@@ -121,6 +120,10 @@ pub fn init() -> Isa {
             simd::i8mm::enable(isa == Isa::NeonDot && wanted && i8mm_usable())
         };
     }
+    // Only now: a concurrent `ensure_init` that sees the flag must find the
+    // selection complete (stored first, a model opened on another thread ran
+    // its first GEMMs on the kernels in place before).
+    SELECTED.store(true, Ordering::Release);
     isa
 }
 
