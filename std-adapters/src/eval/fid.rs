@@ -97,6 +97,15 @@ fn mean_std(set: &Features) -> (Vec<f64>, Vec<f64>) {
     (mean, var.into_iter().map(|s| (s / n).sqrt()).collect())
 }
 
+/// Both sets checked as [`scores`] checks them, then each one's
+/// per-feature mean and population standard deviation: `[real, gen]`.
+fn checked_mean_std(real: &Features, gen: &Features) -> Result<[(Vec<f64>, Vec<f64>); 2], EvalError> {
+    let d = real.width();
+    check(real, "real", d)?;
+    check(gen, "generated", d)?;
+    Ok([mean_std(real), mean_std(gen)])
+}
+
 /// Both sets normalised by the real set's statistics (the authors' `normalize`).
 pub fn normalize(real: &Features, gen: &Features) -> (Features, Features) {
     let (mean, std) = mean_std(real);
@@ -281,12 +290,8 @@ pub struct Flat {
 /// clip holds another value (see [`Flat`]), in column order. Both sets as
 /// [`scores`] checks them.
 pub fn flat_in_real(real: &Features, gen: &Features) -> Result<Vec<Flat>, EvalError> {
-    let d = real.width();
-    check(real, "real", d)?;
-    check(gen, "generated", d)?;
-    let (rm, rs) = mean_std(real);
-    let (gm, gs) = mean_std(gen);
-    Ok((0..d)
+    let [(rm, rs), (gm, gs)] = checked_mean_std(real, gen)?;
+    Ok((0..real.width())
         .filter(|&i| rs[i] == 0.0 && gen.rows.iter().any(|r| r[i] != rm[i]))
         .map(|i| Flat {
             index: i,
@@ -321,12 +326,8 @@ pub fn without(set: &Features, drop: &[usize]) -> Features {
 /// normalised sets; the rest of the FID is the covariances'. Both sets as
 /// [`scores`] checks them.
 pub fn mean_shifts(real: &Features, gen: &Features) -> Result<Vec<f64>, EvalError> {
-    let d = real.width();
-    check(real, "real", d)?;
-    check(gen, "generated", d)?;
-    let (rm, rs) = mean_std(real);
-    let (gm, _) = mean_std(gen);
-    Ok((0..d).map(|i| (gm[i] - rm[i]) / (rs[i] + STD_EPS)).collect())
+    let [(rm, rs), (gm, _)] = checked_mean_std(real, gen)?;
+    Ok((0..real.width()).map(|i| (gm[i] - rm[i]) / (rs[i] + STD_EPS)).collect())
 }
 
 /// FID and both diversities, with the real set's normalisation.
