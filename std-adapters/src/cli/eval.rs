@@ -39,6 +39,17 @@ fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
+/// The name of column `i` of FID_`tag`'s features, where they have names
+/// (the kinetic features of FID_k, the geometric ones of FID_g; the
+/// cross-distance features of FID_cd are unnamed).
+fn feature_name(tag: &str, i: usize) -> Option<String> {
+    match tag {
+        "k" => crate::eval::kinetic::feature_name(i),
+        "g" => crate::eval::manual::feature_name(i),
+        _ => None,
+    }
+}
+
 /// FID_`tag`'s features that are constant over the real set but not over
 /// the generated one ([`fid::flat_in_real`]): the authors' normalisation
 /// divides them by 1e-10, so they own the FID and the Div. Names them
@@ -50,10 +61,7 @@ fn flat_features(tag: &str, r: &Features, g: &Features, out: &mut Map<String, Va
     if flats.is_empty() {
         return Ok(());
     }
-    let name = |i: usize| match tag {
-        "g" => crate::eval::manual::feature_name(i),
-        _ => None,
-    };
+    let name = |i: usize| feature_name(tag, i);
     let drop: Vec<usize> = flats.iter().map(|f| f.index).collect();
     let kept = fid::scores(&fid::without(r, &drop), &fid::without(g, &drop)).with_context(|| format!("FID_{tag} without its flat features"))?;
     out.insert(
@@ -95,11 +103,7 @@ const LARGEST_SHIFTS: usize = 6;
 /// (`fid_<tag>_largest_shifts`, named where the features have names).
 fn mean_shift_report(tag: &str, r: &Features, g: &Features, out: &mut Map<String, Value>) -> Result<()> {
     let shifts = fid::mean_shifts(r, g).with_context(|| format!("FID_{tag}"))?;
-    let name = |i: usize| match tag {
-        "k" => crate::eval::kinetic::feature_name(i),
-        "g" => crate::eval::manual::feature_name(i),
-        _ => None,
-    };
+    let name = |i: usize| feature_name(tag, i);
     let mut order: Vec<usize> = (0..shifts.len()).collect();
     order.sort_by(|&a, &b| shifts[b].abs().total_cmp(&shifts[a].abs()).then(a.cmp(&b)));
     out.insert(format!("fid_{tag}_mean_term"), json!(shifts.iter().map(|v| v * v).sum::<f64>()));
