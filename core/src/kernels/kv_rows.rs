@@ -1,6 +1,7 @@
 //! Key and value rows as the attention reads them: `n` rows of width `C`
-//! in key order, stored as one or two runs (a ring's older rows up to the
-//! wrap, then the rest) of f32 or binary16 (an f16 cache, widened exactly
+//! in key order, stored as up to three runs (a ring's older rows up to the
+//! wrap, then the rest, then a tail of the newest rows kept elsewhere) of
+//! f32 or binary16 (an f16 cache, widened exactly
 //! lane by lane inside the kernels). Reading a cache in place this way
 //! needs no mirrored copy and no widened copy: the session's rings and
 //! K/V caches are stored once, in their own element type.
@@ -28,12 +29,15 @@ impl RowData<'_> {
     }
 }
 
-/// `n` rows of width `C`: the rows of `parts[0]`, then those of `parts[1]`
-/// (row-major: row `j` at `j C`; `parts[0]` may be head-major instead:
-/// [`KvRows::head_major`], [`KvRows::head_major_then`]).
+/// Most runs of one [`KvRows`].
+const RUNS: usize = 3;
+
+/// `n` rows of width `C`: the rows of `parts[0]`, then those of `parts[1]`,
+/// then those of `parts[2]` (row-major: row `j` at `j C`; `parts[0]` may be
+/// head-major instead: [`KvRows::head_major`], [`KvRows::head_major_then`]).
 #[derive(Clone, Copy, Debug)]
 pub struct KvRows<'a> {
-    parts: [RowData<'a>; 2],
+    parts: [RowData<'a>; RUNS],
     heads: Option<HeadMajor>,
 }
 
@@ -50,7 +54,7 @@ impl<'a> KvRows<'a> {
     /// One run.
     pub fn one(d: RowData<'a>) -> Self {
         KvRows {
-            parts: [d, RowData::F32(&[])],
+            parts: [d, RowData::F32(&[]), RowData::F32(&[])],
             heads: None,
         }
     }
@@ -58,9 +62,29 @@ impl<'a> KvRows<'a> {
     /// `first`'s rows, then `second`'s (each a whole number of rows).
     pub fn two(first: RowData<'a>, second: RowData<'a>) -> Self {
         KvRows {
-            parts: [first, second],
+            parts: [first, second, RowData::F32(&[])],
             heads: None,
         }
+    }
+
+    /// These rows, then `tail`'s (whole rows of the width): a ring's rows
+    /// (one or two runs) followed by its newest rows kept apart, read as
+    /// one set. None if every run is taken.
+    pub fn then(self, tail: RowData<'a>) -> Option<Self> {
+        // The run after the last one holding anything (a head-major first
+        // run counts as held).
+        let free = self
+            .parts
+            .iter()
+            .enumerate()
+            .rposition(|(i, p)| p.len() > 0 || (i == 0 && self.heads.is_some()))
+            .map_or(0, |i| i + 1);
+        if free >= RUNS {
+            return None;
+        }
+        let mut parts = self.parts;
+        parts[free] = tail;
+        Some(KvRows { parts, ..self })
     }
 
     /// One head-major run: head `h`'s `hd` lanes of row `j` at `(h cap +
@@ -72,7 +96,7 @@ impl<'a> KvRows<'a> {
     /// is 0 for a width `c` with more. None if `hd == 0` or `rows > cap`.
     pub fn head_major(d: RowData<'a>, rows: usize, cap: usize, hd: usize) -> Option<Self> {
         (hd > 0 && rows <= cap).then_some(KvRows {
-            parts: [d, RowData::F32(&[])],
+            parts: [d, RowData::F32(&[]), RowData::F32(&[])],
             heads: Some(HeadMajor { rows, cap, hd }),
         })
     }
@@ -88,7 +112,7 @@ impl<'a> KvRows<'a> {
         tail: RowData<'a>,
     ) -> Option<Self> {
         Self::head_major(d, rows, cap, hd).map(|k| KvRows {
-            parts: [k.parts[0], tail],
+            parts: [k.parts[0], tail, RowData::F32(&[])],
             ..k
         })
     }
@@ -101,14 +125,14 @@ impl<'a> KvRows<'a> {
             return 0;
         }
         match self.heads {
-            None => self.parts[0].len() / c + self.parts[1].len() / c,
+            None => self.parts.iter().map(|p| p.len() / c).sum(),
             Some(hm) => {
                 let heads = c / hm.hd;
                 let whole = c % hm.hd == 0
                     && heads > 0
                     && (heads - 1) * hm.cap * hm.hd + hm.rows * hm.hd <= self.parts[0].len();
                 if whole {
-                    hm.rows + self.parts[1].len() / c
+                    hm.rows + self.parts[1..].iter().map(|p| p.len() / c).sum::<usize>()
                 } else {
                     0
                 }
@@ -116,11 +140,11 @@ impl<'a> KvRows<'a> {
         }
     }
 
-    /// Rows of the first run.
-    fn split(&self, c: usize) -> usize {
+    /// Rows of run `run`.
+    fn run_rows(&self, run: usize, c: usize) -> usize {
         match self.heads {
-            None => self.parts[0].len() / c,
-            Some(hm) => hm.rows,
+            Some(hm) if run == 0 => hm.rows,
+            _ => self.parts[run].len() / c,
         }
     }
 
@@ -134,21 +158,20 @@ impl<'a> KvRows<'a> {
         }
     }
 
-    /// Rows `a..b` as at most two pieces, one per run: `(run, lo, hi, at)`,
-    /// rows `lo..hi` of `run` being rows `a + at ..` of the range (empty
-    /// pieces have `lo == hi`).
-    fn pieces(&self, a: usize, b: usize, c: usize) -> [(&RowData<'a>, usize, usize, usize); 2] {
-        let n0 = self.split(c);
-        let mid = b.min(n0).max(a);
-        [
-            (&self.parts[0], a, mid, 0),
-            (
-                &self.parts[1],
-                mid - n0.min(mid),
-                b.saturating_sub(n0),
-                mid - a,
-            ),
-        ]
+    /// Rows `a..b` as at most three pieces, one per run: `(part, lo, hi,
+    /// at)`, rows `lo..hi` of the run being rows `a + at ..` of the range
+    /// (empty pieces have `lo == hi`).
+    fn pieces(&self, a: usize, b: usize, c: usize) -> [(&RowData<'a>, usize, usize, usize); RUNS] {
+        let mut start = 0;
+        core::array::from_fn(|run| {
+            let n = self.run_rows(run, c);
+            let lo = a.clamp(start, start + n) - start;
+            let hi = b.clamp(start, start + n).max(a.clamp(start, start + n)) - start;
+            // Within 0..=b - a also for the empty pieces (callers slice by it).
+            let at = (start + lo).clamp(a, b.max(a)) - a;
+            start += n;
+            (&self.parts[run], lo, hi, at)
+        })
     }
 
     /// `out[j - a] = qh . row j [h_off .. h_off + qh.len()]` for keys

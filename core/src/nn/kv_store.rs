@@ -24,6 +24,37 @@ pub enum KvBuf<'s> {
     F16(&'s mut [u16]),
 }
 
+/// `x` in binary16, rounded to nearest; a finite value beyond binary16's
+/// range is kept as the largest finite one of its sign, not infinity (an
+/// infinite key makes the softmax NaN): post-LN layers (Transflower) store
+/// keys of unnormalised rows. `d`: as long as `x`.
+fn narrow_saturating(x: &[f32], d: &mut [u16]) {
+    crate::kernels::simd::narrow_f16(x, d);
+    for (h, &v) in d.iter_mut().zip(x) {
+        if *h & 0x7fff == 0x7c00 && v.is_finite() {
+            *h = (*h & 0x8000) | 0x7bff;
+        }
+    }
+}
+
+impl KvType {
+    /// Rounds `x` in place to what a row stored in this type reads back
+    /// as ([`KvBuf::store`]; f32: unchanged), so that rows kept apart for
+    /// a moment (a LAT push's newest keys, [`KvRows::then`]) give the
+    /// attention the values their ring will hold.
+    pub fn round_as_stored(self, x: &mut [f32]) {
+        if self == KvType::F32 {
+            return;
+        }
+        let mut h = [0u16; 64];
+        for chunk in x.chunks_mut(64) {
+            let h = &mut h[..chunk.len()];
+            narrow_saturating(chunk, h);
+            crate::kernels::simd::widen_f16(h, chunk);
+        }
+    }
+}
+
 fn out_of_range(at: usize, len: usize) -> Error {
     Error::Length {
         buffer: Buffer::Output,
@@ -61,19 +92,7 @@ impl<'s> KvBuf<'s> {
             .ok_or(out_of_range(at, self.len()))?;
         match self {
             KvBuf::F32(d) => d[at..end].copy_from_slice(x),
-            KvBuf::F16(d) => {
-                let d = &mut d[at..end];
-                crate::kernels::simd::narrow_f16(x, d);
-                // A finite value beyond binary16's range is kept as the
-                // largest finite one of its sign, not infinity (an
-                // infinite key makes the softmax NaN): post-LN layers
-                // (Transflower) store keys of unnormalised rows.
-                for (h, &v) in d.iter_mut().zip(x) {
-                    if *h & 0x7fff == 0x7c00 && v.is_finite() {
-                        *h = (*h & 0x8000) | 0x7bff;
-                    }
-                }
-            }
+            KvBuf::F16(d) => narrow_saturating(x, &mut d[at..end]),
         }
         Ok(())
     }
@@ -151,6 +170,14 @@ impl<'s> KvRing<'s> {
 
     pub fn capacity(&self) -> usize {
         self.cap
+    }
+
+    /// The element type the rows are stored in.
+    pub fn kv_type(&self) -> KvType {
+        match self.data {
+            KvBuf::F32(_) => KvType::F32,
+            KvBuf::F16(_) => KvType::F16,
+        }
     }
 
     /// Appends one row; the oldest falls out once `cap` are held.

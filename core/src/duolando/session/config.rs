@@ -326,6 +326,10 @@ mod published {
         )
         .unwrap();
         assert!(batched + 1_000_000 < f16kv, "{batched} vs {f16kv}");
+        // Issue #37's 16 MB (10^6 bytes each): met by a session stepped only
+        // in a batch (15,994,815 B since the LATs' push rows left their
+        // rings), not by one with its own step memory (17,500,159 B).
+        assert!(batched <= 16_000_000, "{batched}");
         // One f32 cache is 12 layers x 2 x (10 x 29 x 768) floats = 21.4 MB (§4).
         let cache = 12 * 2 * 10 * 29 * 768 * 4;
         assert!(f32kv > cache && f32kv < cache + 40_000_000, "{f32kv}");
@@ -338,6 +342,14 @@ mod published {
             spread > f32kv + 21 * row && spread < f32kv + 22 * row,
             "{spread} vs {f32kv}"
         );
-        std::println!("published arena: reference f32 KV {f32kv} B (spread, the preset's schedule: {spread} B), f16 KV {f16kv} B (state alone, Session::new_batched: {batched} B), staggered f32 {stag} B, minimum {min} B");
+        let spread16 = session_bytes_for(
+            &cfg,
+            &SessionConfig {
+                kv: KvType::F16,
+                ..SessionConfig::reference(&cfg)
+            },
+        )
+        .unwrap();
+        std::println!("published arena: reference f32 KV {f32kv} B (spread, the preset's schedule: {spread} B; with f16 KV {spread16} B), f16 KV {f16kv} B (state alone, Session::new_batched: {batched} B), staggered f32 {stag} B, minimum {min} B");
     }
 }

@@ -24,7 +24,7 @@ use crate::arena::{ArenaError, Carve};
 use crate::duolando::model::LatW;
 use crate::duolando::session::MAX_BATCH;
 use crate::error::{check_len, Buffer, Error};
-use crate::kernels::{linear, Mask, Matrix};
+use crate::kernels::{linear, KvRows, Mask, Matrix, RowData};
 use crate::limits::MAX_LAT_LAYERS;
 use crate::nn::block::{block_attend_groups, block_kv, BlockScratch};
 use crate::nn::kv_store::{KvRing, KvType};
@@ -142,6 +142,40 @@ enum Held<'s> {
     Residuals(RowRing<'s>),
 }
 
+/// A ring's rows, then rows `t0..t1` of `t` (rows of width `c`).
+fn with_tail<'x>(
+    ring: KvRows<'x>,
+    t: &'x [f32],
+    t0: usize,
+    t1: usize,
+    c: usize,
+) -> Result<KvRows<'x>, Error> {
+    let tail = t.get(t0 * c..t1 * c).ok_or(Error::State)?;
+    ring.then(RowData::F32(tail)).ok_or(Error::State)
+}
+
+/// Appends to layer `l`'s rings of each LAT `i` its `counts[i]` rows of
+/// `k` / `v` starting at row `tails[i]` (a push's rows, read by its
+/// queries from the step scratch, kept once they ran).
+fn append_tails(
+    lats: &mut [&mut LatStream<'_>],
+    counts: &[usize],
+    tails: &[usize],
+    l: usize,
+    k: &[f32],
+    v: &[f32],
+    c: usize,
+) -> Result<(), Error> {
+    for ((lat, &cnt), &t) in lats.iter_mut().zip(counts).zip(tails) {
+        for j in t..t + cnt {
+            let r = j * c..(j + 1) * c;
+            lat.k[l].push(k.get(r.clone()).ok_or(Error::State)?)?;
+            lat.v[l].push(v.get(r).ok_or(Error::State)?)?;
+        }
+    }
+    Ok(())
+}
+
 /// Keys a query of one LAT may see at most (the attention scratch size).
 pub fn max_keys(past: usize, fut: usize) -> usize {
     past + fut + 1
@@ -149,8 +183,10 @@ pub fn max_keys(past: usize, fut: usize) -> usize {
 
 /// State of one LAT in a session.
 pub struct LatStream<'s> {
-    /// Per layer: keys and values of the last `past + 1` positions (layer
-    /// 1: `past + fut + 1`), rings of (cap, C) in the session's `KvType`.
+    /// Per layer: keys and values of the last `past` positions (layer 1:
+    /// `past + fut`; at least 1) before a push's, rings of (cap, C) in the
+    /// session's `KvType`. A push's own rows are read from the step
+    /// scratch (rounded as stored) and appended once its queries ran.
     k: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
     v: Vec<KvRing<'s>, { MAX_LAT_LAYERS as usize }>,
     /// The last `fut + burst` positions' layer-1 inputs (a query waits
@@ -160,7 +196,8 @@ pub struct LatStream<'s> {
     /// runs, row by row the same numbers), else (fut + burst, C) the
     /// residual rows `cond_emb(x)` themselves.
     h0: Held<'s>,
-    /// (ds, C) last-layer outputs of the output row being assembled.
+    /// (ds - 1, C) last-layer outputs of the output row being assembled
+    /// (its last position's goes straight into the downsample's input).
     last: &'s mut [f32],
     past: usize,
     fut: usize,
@@ -195,7 +232,10 @@ impl<'s> LatStream<'s> {
         let mut k = Vec::new();
         let mut v = Vec::new();
         for l in 0..w_layers {
-            let cap = past + burst + if l == 0 { fut } else { 0 };
+            // A push's own rows are read from the step scratch
+            // (`push_many`), so a ring holds only the rows before them
+            // that a query of the push may see.
+            let cap = (past + if l == 0 { fut } else { 0 }).max(1);
             k.push(KvRing::carve(a, kv, cap, c)?)
                 .map_err(|_| ArenaError::Overflow)?;
             v.push(KvRing::carve(a, kv, cap, c)?)
@@ -211,7 +251,11 @@ impl<'s> LatStream<'s> {
                 }
                 LatIn::Rows(_) => Held::Residuals(RowRing::carve(a, fut + burst, c)?),
             },
-            last: a.f32(ds.checked_mul(c).ok_or(ArenaError::Overflow)?)?,
+            last: a.f32(
+                ds.saturating_sub(1)
+                    .checked_mul(c)
+                    .ok_or(ArenaError::Overflow)?,
+            )?,
             past,
             fut,
             ds,
@@ -403,21 +447,25 @@ impl<'s> LatStream<'s> {
             &mut s.k[..tc],
             &mut s.v[..tc],
         );
+        // Per LAT: where its rows of the layer being run start in `s.k` /
+        // `s.v` (layer 1: its new positions; later layers: its ready ones).
+        let mut tails: Vec<usize, MAX_BATCH> = Vec::new();
         let mut row = 0;
         for (lat, &cnt) in lats.iter_mut().zip(counts) {
+            tails.push(row).map_err(|_| Error::State)?;
+            let kv = lat.k[0].kv_type();
+            kv.round_as_stored(&mut s.k[row * c..(row + cnt) * c]);
+            kv.round_as_stored(&mut s.v[row * c..(row + cnt) * c]);
             for _ in 0..cnt {
-                let r = row * c..(row + 1) * c;
-                lat.k[0].push(&s.k[r.clone()])?;
-                lat.v[0].push(&s.v[r.clone()])?;
                 if let Held::Residuals(h0) = &mut lat.h0 {
-                    h0.push(&s.h[r])?;
+                    h0.push(&s.h[row * c..(row + 1) * c])?;
                 }
                 row += 1;
             }
         }
         let r = ready.len();
         if r == 0 {
-            return Ok(());
+            return append_tails(lats, counts, &tails, 0, &s.k[..tc], &s.v[..tc], c);
         }
         // (r, C) the ready positions, one row (= one attention group) each,
         // moved to the front in order. Row g comes from row total + (its
@@ -436,6 +484,13 @@ impl<'s> LatStream<'s> {
         for g in 0..=r {
             bounds.push(g).map_err(|_| Error::State)?;
         }
+        // Ready positions per LAT (each LAT's are consecutive in `ready`).
+        let mut readies: Vec<usize, MAX_BATCH> = Vec::new();
+        for i in 0..n {
+            readies
+                .push(ready.iter().filter(|&&(j, _)| j == i).count())
+                .map_err(|_| Error::State)?;
+        }
         for (l, b) in w.blocks.iter().enumerate() {
             if l > 0 {
                 block_kv(
@@ -445,20 +500,46 @@ impl<'s> LatStream<'s> {
                     &mut s.k[..rc],
                     &mut s.v[..rc],
                 );
-                for (g, &(i, _)) in ready.iter().enumerate() {
-                    lats[i].k[l].push(&s.k[g * c..(g + 1) * c])?;
-                    lats[i].v[l].push(&s.v[g * c..(g + 1) * c])?;
+                tails.clear();
+                let mut g = 0;
+                for (lat, &ri) in lats.iter().zip(&readies) {
+                    tails.push(g).map_err(|_| Error::State)?;
+                    let kv = lat.k[l].kv_type();
+                    kv.round_as_stored(&mut s.k[g * c..(g + ri) * c]);
+                    kv.round_as_stored(&mut s.v[g * c..(g + ri) * c]);
+                    g += ri;
                 }
             }
-            let lats_ro: &[&mut LatStream<'_>] = lats;
-            let keys = |g: usize| {
-                let (i, p) = ready[g];
-                let lat = &lats_ro[i];
-                let lo = p.saturating_sub(lat.past);
-                let hi = p + 1 + if l == 0 { lat.fut } else { 0 };
-                Ok((lat.k[l].rows(lo, hi)?, lat.v[l].rows(lo, hi)?, Visible))
-            };
-            block_attend_groups(b, &mut s.h[..rc], &bounds, c, n_head, keys, blk)?;
+            // The layer's new rows: `s.k` / `s.v` rows `tails[i]..` of LAT i
+            // (layer 1: `total` of them; later layers: `r`).
+            let nt = if l == 0 { total } else { r };
+            {
+                let lats_ro: &[&mut LatStream<'_>] = lats;
+                let (tk, tv) = (&s.k[..nt * c], &s.v[..nt * c]);
+                let tails = &tails;
+                let keys = |g: usize| {
+                    let (i, p) = ready[g];
+                    let lat = &lats_ro[i];
+                    let lo = p.saturating_sub(lat.past);
+                    let hi = p + 1 + if l == 0 { lat.fut } else { 0 };
+                    // Rows before the ring's end from the ring, the rest
+                    // from this push's rows.
+                    let held = lat.k[l].len();
+                    let (a, e) = (lo.min(held), hi.min(held));
+                    let (t0, t1) = (
+                        tails[i] + lo.max(held) - held,
+                        tails[i] + hi.max(held) - held,
+                    );
+                    Ok((
+                        with_tail(lat.k[l].rows(a, e)?, tk, t0, t1, c)?,
+                        with_tail(lat.v[l].rows(a, e)?, tv, t0, t1, c)?,
+                        Visible,
+                    ))
+                };
+                block_attend_groups(b, &mut s.h[..rc], &bounds, c, n_head, keys, blk)?;
+            }
+            let counts_l: &[usize] = if l == 0 { counts } else { &readies };
+            append_tails(lats, counts_l, &tails, l, &s.k[..nt * c], &s.v[..nt * c], c)?;
         }
         // Last-layer rows into each LAT's output row; the complete ones,
         // (ds, C) viewed as one row of ds*C, go through the downsample.
@@ -473,14 +554,19 @@ impl<'s> LatStream<'s> {
                 });
             }
             let slot = p % ds;
-            lat.last[slot * c..(slot + 1) * c].copy_from_slice(&s.h[g * c..(g + 1) * c]);
-            if slot + 1 == ds {
+            let h = &s.h[g * c..(g + 1) * c];
+            if slot + 1 < ds {
+                lat.last[slot * c..(slot + 1) * c].copy_from_slice(h);
+            } else {
                 if done.contains(&i) {
                     // Two output rows from one push (counts above `ds`).
                     return Err(Error::State);
                 }
                 let d = done.len();
-                s.cat[d * ds * c..(d + 1) * ds * c].copy_from_slice(lat.last);
+                let cat = &mut s.cat[d * ds * c..(d + 1) * ds * c];
+                let (held, own) = cat.split_at_mut(slot * c);
+                held.copy_from_slice(lat.last);
+                own.copy_from_slice(h);
                 done.push(i).map_err(|_| Error::State)?;
             }
         }

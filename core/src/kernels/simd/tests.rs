@@ -2263,7 +2263,41 @@ fn attention_over_split_and_f16_rows_equals_contiguous() {
                     hmt(RowData::F32(&hv[split]), RowData::F32(&v[cut..])),
                 ),
             ];
-            for (name, kr, vr) in cases {
+            // Three runs: a wrapped ring's two runs (the first `split` rows
+            // cut in two), then the newest rows kept apart as f32 (a LAT's
+            // ring and its push's rows: `KvRows::then`).
+            let half = (split / 2) * c;
+            fn three<'x>(a: RowData<'x>, b: RowData<'x>, t: &'x [f32]) -> KvRows<'x> {
+                KvRows::two(a, b).then(RowData::F32(t)).unwrap()
+            }
+            let ring_then = [
+                (
+                    "f16 ring (two runs) then f32 rows",
+                    three(RowData::F16(&k16[..half]), RowData::F16(&k16[half..cut]), &k[cut..]),
+                    three(RowData::F16(&v16[..half]), RowData::F16(&v16[half..cut]), &v[cut..]),
+                ),
+                (
+                    "f32 ring (two runs) then f32 rows",
+                    three(RowData::F32(&k[..half]), RowData::F32(&k[half..cut]), &k[cut..]),
+                    three(RowData::F32(&v[..half]), RowData::F32(&v[half..cut]), &v[cut..]),
+                ),
+                (
+                    "f16 ring (one run) then f32 rows",
+                    KvRows::one(RowData::F16(&k16[..cut]))
+                        .then(RowData::F32(&k[cut..]))
+                        .unwrap(),
+                    KvRows::one(RowData::F16(&v16[..cut]))
+                        .then(RowData::F32(&v[cut..]))
+                        .unwrap(),
+                ),
+            ];
+            if half > 0 && cut < k.len() {
+                assert!(
+                    ring_then[0].1.then(RowData::F32(&k[cut..])).is_none(),
+                    "a fourth run is refused"
+                );
+            }
+            for (name, kr, vr) in cases.into_iter().chain(ring_then) {
                 assert_eq!(kr.rows(c), nk);
                 let mut got = vec![f32::NAN; nq * c];
                 m(&q, kr, vr, &mut scores, &mut got);
