@@ -15,8 +15,8 @@
 //! music LAT takes a step's 4 frames at once): every weight matrix is then
 //! read once for all of them, and each position computes what it computes
 //! pushed alone (row-independent kernels; a position's queries only see
-//! keys of its band, which the rings still hold: they keep `burst - 1`
-//! extra rows).
+//! keys of its band: the rows before the push from the rings, the push's
+//! own from the step scratch, appended to the rings once the queries ran).
 
 use heapless::Vec;
 
