@@ -154,6 +154,31 @@ fn with_tail<'x>(
     ring.then(RowData::F32(tail)).ok_or(Error::State)
 }
 
+/// A push's rows of layer `l` kept apart in `k` / `v` (each LAT `i`'s
+/// `counts[i]` rows one after another): their first rows into `tails`,
+/// the rows rounded in place to what the LAT's rings store.
+fn hold_tails(
+    lats: &[&mut LatStream<'_>],
+    counts: &[usize],
+    l: usize,
+    k: &mut [f32],
+    v: &mut [f32],
+    c: usize,
+    tails: &mut Vec<usize, MAX_BATCH>,
+) -> Result<(), Error> {
+    tails.clear();
+    let mut row = 0;
+    for (lat, &cnt) in lats.iter().zip(counts) {
+        tails.push(row).map_err(|_| Error::State)?;
+        let rows = row * c..(row + cnt) * c;
+        let kv = lat.k[l].kv_type();
+        kv.round_as_stored(k.get_mut(rows.clone()).ok_or(Error::State)?);
+        kv.round_as_stored(v.get_mut(rows).ok_or(Error::State)?);
+        row += cnt;
+    }
+    Ok(())
+}
+
 /// Appends to layer `l`'s rings of each LAT `i` its `counts[i]` rows of
 /// `k` / `v` starting at row `tails[i]` (a push's rows, read by its
 /// queries from the step scratch, kept once they ran).
@@ -450,12 +475,17 @@ impl<'s> LatStream<'s> {
         // Per LAT: where its rows of the layer being run start in `s.k` /
         // `s.v` (layer 1: its new positions; later layers: its ready ones).
         let mut tails: Vec<usize, MAX_BATCH> = Vec::new();
+        hold_tails(
+            lats,
+            counts,
+            0,
+            &mut s.k[..tc],
+            &mut s.v[..tc],
+            c,
+            &mut tails,
+        )?;
         let mut row = 0;
         for (lat, &cnt) in lats.iter_mut().zip(counts) {
-            tails.push(row).map_err(|_| Error::State)?;
-            let kv = lat.k[0].kv_type();
-            kv.round_as_stored(&mut s.k[row * c..(row + cnt) * c]);
-            kv.round_as_stored(&mut s.v[row * c..(row + cnt) * c]);
             for _ in 0..cnt {
                 if let Held::Residuals(h0) = &mut lat.h0 {
                     h0.push(&s.h[row * c..(row + 1) * c])?;
@@ -500,15 +530,15 @@ impl<'s> LatStream<'s> {
                     &mut s.k[..rc],
                     &mut s.v[..rc],
                 );
-                tails.clear();
-                let mut g = 0;
-                for (lat, &ri) in lats.iter().zip(&readies) {
-                    tails.push(g).map_err(|_| Error::State)?;
-                    let kv = lat.k[l].kv_type();
-                    kv.round_as_stored(&mut s.k[g * c..(g + ri) * c]);
-                    kv.round_as_stored(&mut s.v[g * c..(g + ri) * c]);
-                    g += ri;
-                }
+                hold_tails(
+                    lats,
+                    &readies,
+                    l,
+                    &mut s.k[..rc],
+                    &mut s.v[..rc],
+                    c,
+                    &mut tails,
+                )?;
             }
             // The layer's new rows: `s.k` / `s.v` rows `tails[i]..` of LAT i
             // (layer 1: `total` of them; later layers: `r`).
