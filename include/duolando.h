@@ -766,9 +766,51 @@ duo_result duo_step_batch_step(duo_step_batch *batch, duo_session *const *sessio
                                size_t *out_stepped, size_t *failed_session);
 
 /* Frees a batch of either family; its sessions are untouched (a
- * Transflower batch drops its model reference). NULL is ignored. For a
- * batch made in caller memory (_new_in), release the memory afterwards. */
+ * Transflower batch drops its model reference). NULL is ignored. Sessions
+ * bound to a Duolando batch (below) keep it: it goes with the last of
+ * them. For a batch made in caller memory (_new_in), release the memory
+ * once the batch and the sessions bound to it are freed. */
 void duo_step_batch_free(duo_step_batch *batch);
+
+/* Duolando sessions bound to a batch: a session that holds its state alone
+ * (the full model with f16 K/V, one GPT cache: 15,994,815 bytes + the
+ * handle, 1.5 MB less than duo_session_bytes) and borrows the step memory
+ * of its Duolando batch for every call that runs the model: its creation,
+ * duo_session_push_leader, _push_music, _set_music_track, _finish,
+ * _pull_follower / _pull_positions (a finished session steps in its
+ * pulls) and _reset. duo_step_batch_push_leader steps it with the batch it
+ * is given, as any session. Its frames are those of a session made by
+ * duo_session_new, bit for bit. The batch's step memory is behind a lock:
+ * sessions bound to one batch may be used on different threads (one
+ * thread per session, as always), their calls then running one at a time.
+ * A bound session holds a reference on its batch, as on its model. */
+
+/* Bytes duo_session_new_batched_in needs for `config` (any address): the
+ * state alone. DUO_NULL_PARAMETER, DUO_INVALID_ARGUMENT (a setting out of
+ * range; a model of another family). Thread-safe. */
+duo_result duo_session_batched_bytes(const duo_model *model, const duo_session_config *config,
+                                     size_t *out_bytes);
+
+/* A session bound to `batch` (a Duolando batch whose configuration needs at
+ * least the step memory `config` needs), in library memory (one
+ * allocation, here). Refusals in this order: model NULL, a model of another
+ * family, config NULL or a setting out of range, seed_tokens NULL, batch
+ * NULL or of another family or holding less step memory than `config`
+ * needs (made for a smaller configuration or another model), out_session
+ * NULL, a seed token outside its vocabulary. Thread-safe for the model;
+ * the batch's lock is taken for the seed's decoding. */
+duo_result duo_session_new_batched(const duo_model *model, const duo_session_config *config,
+                                   const uint32_t *seed_tokens, duo_step_batch *batch,
+                                   duo_session **out_session);
+
+/* As duo_session_new_batched, entirely inside caller memory: `memory` (any
+ * alignment), `len` >= duo_session_batched_bytes(); it must stay valid,
+ * unmoved and untouched until duo_session_free. No allocation. Also
+ * DUO_BUFFER_TOO_SMALL (NULL/0 included) and DUO_NULL_PARAMETER (memory
+ * NULL with len > 0). */
+duo_result duo_session_new_batched_in(const duo_model *model, const duo_session_config *config,
+                                      const uint32_t *seed_tokens, duo_step_batch *batch,
+                                      void *memory, size_t len, duo_session **out_session);
 
 #ifdef __cplusplus
 }

@@ -16,14 +16,21 @@
 //!   weights of one model, its sessions stepped one after another through it.
 //!
 //! Sessions keep their own handles and every other call (input, pulls,
-//! reset) as before. This file: the handle, its placement (library or
-//! caller memory) and release, the checks every batch call makes in the
-//! header's one order, and the Duolando calls.
+//! reset) as before. A Duolando session may also be bound to a batch
+//! (`duo_session_new_batched`, [`crate::batched_session`]): it holds no
+//! step memory and borrows the batch's for each of its calls. This file:
+//! the handle, its placement (library or caller memory), its references
+//! (the handle's and one per bound session; the last frees it), the checks
+//! every batch call makes in the header's one order, and the Duolando calls.
 //!
 //! Thread rule: a batch is used by one thread at a time, and the sessions
-//! of a call are not used by any other thread during it.
+//! of a call are not used by any other thread during it. Its step memory is
+//! behind a lock, so sessions bound to it may live on other threads (their
+//! calls then wait for each other and for the batch's).
 
-use std::sync::Arc;
+use std::ptr::NonNull;
+use std::sync::atomic::{fence, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use duolando_core::duolando::session::{Session, SessionConfig, StepBatch, StepDims, MAX_BATCH};
 use duolando_core::family::Family;
@@ -45,12 +52,14 @@ pub const NO_SESSION: usize = usize::MAX;
 /// The step memory of one family.
 pub(crate) enum Kind {
     Duolando {
-        batch: StepBatch<'static>,
+        /// Locked by each call that steps in it (a batch call, or a call
+        /// of a session bound to the batch).
+        batch: Mutex<StepBatch<'static>>,
         /// The step memory it holds (what a session's `dims` must fit in).
         dims: StepDims,
     },
     Transflower {
-        batch: TfStepBatch<'static>,
+        batch: Mutex<TfStepBatch<'static>>,
         /// The model the batch's reverse weights come from: kept alive (its
         /// address is what a session's model is compared with).
         model: Arc<ModelInner>,
@@ -68,10 +77,16 @@ impl Kind {
     /// Most sessions one call steps.
     fn capacity(&self) -> usize {
         match self {
-            Kind::Duolando { batch, .. } => batch.capacity(),
+            Kind::Duolando { dims, .. } => dims.n,
             Kind::Transflower { .. } => MAX_BATCH,
         }
     }
+}
+
+/// The step memory behind `m`, for this call (a panic that poisoned the
+/// lock left no state in it: a batch holds scratch only).
+pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// What a `duo_step_batch *` points to.
@@ -82,10 +97,83 @@ pub struct StepBatchInner {
     _arena: Option<Box<[u8]>>,
     /// True when this struct lives in caller memory (`_new_in`).
     in_caller_memory: bool,
+    /// References: the handle's (until `duo_step_batch_free`) and one per
+    /// session bound to the batch; the last one released frees it.
+    refs: AtomicUsize,
 }
 
 /// Opaque `duo_step_batch`.
 pub type DuoStepBatch = StepBatchInner;
+
+/// Drops one reference to the batch at `p`; the last one frees it (in
+/// place in caller memory, else the box).
+///
+/// # Safety
+/// `p` NULL or a live batch, each reference released once.
+unsafe fn release(p: *mut StepBatchInner) {
+    // SAFETY: NULL or live (contract).
+    let Some(b) = (unsafe { p.as_ref() }) else {
+        return;
+    };
+    if b.refs.fetch_sub(1, Ordering::Release) != 1 {
+        return;
+    }
+    // Every other reference's use happens before the free.
+    fence(Ordering::Acquire);
+    // SAFETY: the last reference: nothing else uses the batch.
+    unsafe { drop_handle(p, |b| b.in_caller_memory) };
+}
+
+/// A session's reference to the Duolando batch whose step memory it
+/// borrows (`duo_session_new_batched`): keeps the batch alive until the
+/// session is freed.
+pub(crate) struct BoundBatch(NonNull<StepBatchInner>);
+
+// SAFETY: the batch is only read through this reference, its step memory
+// behind a lock, and its count of references is atomic.
+unsafe impl Send for BoundBatch {}
+// SAFETY: as above.
+unsafe impl Sync for BoundBatch {}
+
+impl BoundBatch {
+    /// A new reference to the batch at `p`, with the step memory it holds,
+    /// or a refusal where it is NULL or not a Duolando batch.
+    ///
+    /// # Safety
+    /// `p` NULL or a live batch.
+    pub(crate) unsafe fn new(
+        p: *mut StepBatchInner,
+        what: &str,
+    ) -> Result<(Self, StepDims), Failure> {
+        let ptr = NonNull::new(p).ok_or_else(|| Failure::null("batch"))?;
+        // SAFETY: live (contract).
+        let b = unsafe { ptr.as_ref() };
+        let Kind::Duolando { dims, .. } = &b.kind else {
+            return Err(Failure::invalid(format!(
+                "{what}: this batch is a {} model's; a session borrows the step memory of a Duolando batch (duo_step_batch_new)",
+                b.kind.family().name()
+            )));
+        };
+        b.refs.fetch_add(1, Ordering::Relaxed);
+        Ok((BoundBatch(ptr), *dims))
+    }
+
+    /// The batch's step memory, locked for the caller's call.
+    pub(crate) fn lock(&self) -> MutexGuard<'_, StepBatch<'static>> {
+        // SAFETY: the batch lives while this reference does.
+        match &unsafe { self.0.as_ref() }.kind {
+            Kind::Duolando { batch, .. } => lock(batch),
+            Kind::Transflower { .. } => unreachable!("BoundBatch::new takes Duolando batches only"),
+        }
+    }
+}
+
+impl Drop for BoundBatch {
+    fn drop(&mut self) {
+        // SAFETY: this reference, counted by `new`, released once.
+        unsafe { release(self.0.as_ptr()) };
+    }
+}
 
 /// Alignment slack and size of the handle placed at the start of caller memory.
 pub(crate) const HANDLE_BYTES: usize = handle_bytes::<StepBatchInner>();
@@ -127,6 +215,7 @@ pub(crate) unsafe fn place(
                 kind,
                 _arena: Some(arena),
                 in_caller_memory: false,
+                refs: AtomicUsize::new(1),
             }))
         }
         Some((ptr, len)) => {
@@ -141,6 +230,7 @@ pub(crate) unsafe fn place(
                     kind,
                     _arena: None,
                     in_caller_memory: true,
+                    refs: AtomicUsize::new(1),
                 })
             };
             slot
@@ -187,7 +277,7 @@ unsafe fn make_duolando(
     unsafe {
         place(n, memory, "duo_step_batch_bytes", out_batch, |arena| {
             Ok(Kind::Duolando {
-                batch: StepBatch::new(model_cfg, &cfg, max_sessions, arena)?,
+                batch: Mutex::new(StepBatch::new(model_cfg, &cfg, max_sessions, arena)?),
                 dims: StepDims::new(model_cfg, &cfg, max_sessions).map_err(Error::Arena)?,
             })
         })
@@ -260,16 +350,17 @@ pub unsafe extern "C" fn duo_step_batch_new_in(
 }
 
 /// Frees a batch of either family. NULL is ignored. The sessions it
-/// stepped are untouched. For a batch in caller memory, the memory may be
-/// released afterwards.
+/// stepped are untouched. Sessions bound to it keep it alive: it goes
+/// with the last of them. For a batch in caller memory, the memory may be
+/// released once it and its bound sessions are freed.
 ///
 /// # Safety
 /// `batch` NULL or a live handle, freed once, not used afterwards.
 #[no_mangle]
 pub unsafe extern "C" fn duo_step_batch_free(batch: *mut DuoStepBatch) {
     let _ = guard("duo_step_batch_free", || {
-        // SAFETY: NULL or a live handle, freed once (contract).
-        unsafe { drop_handle(batch, |b| b.in_caller_memory) };
+        // SAFETY: NULL or a live handle, its own reference released once (contract).
+        unsafe { release(batch) };
         Ok(DuoResult::Ok)
     });
 }
@@ -304,9 +395,10 @@ pub(crate) unsafe fn the_call<'x>(
     what: &str,
     sessions: *const *mut DuoSession,
     n: usize,
-) -> Result<Option<(&'x mut Kind, &'x [*mut DuoSession])>, Failure> {
-    // SAFETY: NULL or a live handle used by one thread at a time (contract).
-    let b = &mut unsafe { batch.as_mut() }
+) -> Result<Option<(&'x Kind, &'x [*mut DuoSession])>, Failure> {
+    // SAFETY: NULL or a live handle (contract); shared with the sessions
+    // bound to it, its step memory behind a lock.
+    let b = &unsafe { batch.as_ref() }
         .ok_or_else(|| Failure::null("batch"))?
         .kind;
     if b.family() != family {
@@ -492,7 +584,7 @@ unsafe fn push_leader_many(
     }?;
     // 4. Backlog: `step_many` checks every session (model, step memory,
     // frame, backlog: the first three passed above) before it changes any.
-    Session::step_many(&mut refs, &rows, batch).map_err(|(i, e)| {
+    Session::step_many(&mut refs, &rows, &mut lock(batch)).map_err(|(i, e)| {
         *failed = i;
         match e {
             // Caught above; kept should core's checks ever be wider.

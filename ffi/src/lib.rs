@@ -13,6 +13,7 @@ use std::ffi::c_char;
 use std::panic::catch_unwind;
 
 pub mod batch;
+pub mod batched_session;
 pub mod frames;
 mod handle;
 pub mod model;

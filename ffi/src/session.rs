@@ -25,6 +25,7 @@ use duolando_core::duolando::session::{
     CacheSchedule, FollowerFrame, KvType, Preset, Sampling, Session, SessionConfig, StepDims,
 };
 
+use crate::batch::BoundBatch;
 use crate::frames::{quat_of_raw, DuoFollowerFrame, DuoLeaderFrame, DuoVec3};
 use crate::handle::{buffer, buffer_mut, caller_slot, drop_handle, handle_bytes};
 use crate::model::{share, transflower_refusal, AnyModel, DuoModel, ModelInner};
@@ -263,6 +264,10 @@ pub(crate) enum AnySession {
         /// The step memory the session needs (`StepDims::new(.., 1)`): what
         /// a `duo_step_batch` must hold to step it.
         dims: StepDims,
+        /// The batch whose step memory the session borrows for each call
+        /// (`duo_session_new_batched`: it has none of its own); None: its
+        /// own. Dropped after the session.
+        bound: Option<BoundBatch>,
     },
     Bailando(SoloSession<'static>),
     Transflower(TfSession<'static>),
@@ -307,13 +312,31 @@ impl SessionInner {
         }
     }
 
-    /// The Duolando session, or a refusal naming the solo family for `what`.
-    pub(crate) fn duolando(&mut self, what: &str) -> Result<&mut Session<'static>, Failure> {
+    /// Runs `f` on the Duolando session with step memory ([`with_step_memory`]),
+    /// or refuses a session of another family for `what`.
+    pub(crate) fn duolando<R>(
+        &mut self,
+        what: &str,
+        f: impl FnOnce(&mut Session<'static>) -> Result<R, duolando_core::Error>,
+    ) -> Result<R, Failure> {
         match &mut self.session {
-            AnySession::Duolando { session, .. } => Ok(session),
+            AnySession::Duolando { session, bound, .. } => Ok(with_step_memory(session, bound, f)?),
             AnySession::Bailando(_) => Err(solo_refusal(what)),
             AnySession::Transflower(_) => Err(transflower_refusal(what)),
         }
+    }
+}
+
+/// Runs `f` on a Duolando session with step memory: its own, or the
+/// memory of the batch it is bound to, locked for the call.
+pub(crate) fn with_step_memory<R>(
+    session: &mut Session<'static>,
+    bound: &Option<BoundBatch>,
+    f: impl FnOnce(&mut Session<'static>) -> Result<R, duolando_core::Error>,
+) -> Result<R, duolando_core::Error> {
+    match bound {
+        None => f(session),
+        Some(b) => session.with_batch(&mut b.lock(), f)?,
     }
 }
 
@@ -572,12 +595,14 @@ pub unsafe extern "C" fn duo_session_bytes(
 }
 
 /// Builds the core session over `arena` (which must outlive it: the
-/// caller of this function guarantees it).
-fn start(
+/// caller of this function guarantees it); a Duolando session bound to a
+/// batch where `bound` is given (its state alone in `arena`).
+pub(crate) fn start(
     model: &Arc<ModelInner>,
     arena: &'static mut [u8],
     cfg: &AnyConfig,
     seed: AnySeed,
+    bound: Option<BoundBatch>,
 ) -> Result<AnySession, Failure> {
     // SAFETY: the model lives in the Arc, which the SessionInner keeps
     // (and drops after the session).
@@ -585,12 +610,19 @@ fn start(
     Ok(match (m.any(), cfg, seed) {
         (AnyModel::Duolando(model), AnyConfig::Duolando(c), AnySeed::Duolando(seed)) => {
             let dims = StepDims::new(model.config(), c, 1).map_err(duolando_core::Error::Arena)?;
+            let session = match &bound {
+                None => Session::new(model, arena, c, seed)?,
+                Some(b) => Session::new_batched(model, arena, c, seed, &mut b.lock())?,
+            };
             AnySession::Duolando {
-                session: Session::new(model, arena, c, seed)?,
+                session,
                 dims,
+                bound,
             }
         }
-        (AnyModel::Bailando(model), AnyConfig::Bailando(c), AnySeed::Bailando(seed)) => {
+        (AnyModel::Bailando(model), AnyConfig::Bailando(c), AnySeed::Bailando(seed))
+            if bound.is_none() =>
+        {
             AnySession::Bailando(SoloSession::new(model, arena, c, seed)?)
         }
         _ => return Err(Failure::invalid("configuration or seed of another family")),
@@ -624,7 +656,7 @@ pub unsafe extern "C" fn duo_session_new(
             unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
         // SAFETY: `model` is a live handle (contract).
         let arc = unsafe { share(model) };
-        let session = start(&arc, bytes, &cfg, seed)?;
+        let session = start(&arc, bytes, &cfg, seed, None)?;
         let inner = Box::new(SessionInner {
             session,
             model: arc,
@@ -665,7 +697,7 @@ pub unsafe extern "C" fn duo_session_new_in(
         let (slot, arena) = caller_slot::<SessionInner>(memory, need, "duo_session_bytes")?;
         // SAFETY: `model` is a live handle (contract).
         let arc = unsafe { share(model) };
-        let session = start(&arc, arena, &cfg, seed)?;
+        let session = start(&arc, arena, &cfg, seed, None)?;
         // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
         unsafe {
             slot.write(SessionInner {
@@ -783,8 +815,8 @@ pub unsafe extern "C" fn duo_session_push_leader(
         let s = session_mut(session)?;
         // SAFETY: NULL or valid (contract).
         let f = unsafe { frame.as_ref() }.ok_or_else(|| Failure::null("frame"))?;
-        s.duolando("duo_session_push_leader")?
-            .push_leader_frame(leader_pos3d(f)?)?;
+        let pos = leader_pos3d(f)?;
+        s.duolando("duo_session_push_leader", |s| s.push_leader_frame(pos))?;
         Ok(DuoResult::Ok)
     })
 }
@@ -802,7 +834,9 @@ pub unsafe extern "C" fn duo_session_finish(session: *mut DuoSession) -> DuoResu
     guard("duo_session_finish", || {
         let s = session_mut(session)?;
         match &mut s.session {
-            AnySession::Duolando { session, .. } => session.finish()?,
+            AnySession::Duolando { session, bound, .. } => {
+                with_step_memory(session, bound, |s| s.finish())?
+            }
             // The music-only path's end padding (copies of the last row to a
             // whole number of tokens, at least one); again: nothing to do.
             AnySession::Bailando(session) => match session.finish(MusicPadding::Demo) {
@@ -838,7 +872,9 @@ pub unsafe extern "C" fn duo_session_push_music(
         // Core checks state, then the length, then the values: a frame of
         // the wrong length is refused as such whatever it holds.
         match &mut s.session {
-            AnySession::Duolando { session, .. } => session.push_music_frame(x),
+            AnySession::Duolando { session, bound, .. } => {
+                with_step_memory(session, bound, |s| s.push_music_frame(x))
+            }
             AnySession::Bailando(session) => session.push_music(x),
             AnySession::Transflower(session) => {
                 let audio = session.config_model().inputs().len() - 1;
@@ -869,7 +905,9 @@ pub unsafe extern "C" fn duo_session_set_music_track(
         // which drop the borrow (contract).
         let x: &'static [f32] = unsafe { buffer(track, n_floats, "track") }?;
         match &mut s.session {
-            AnySession::Duolando { session, .. } => session.set_music_track(x),
+            AnySession::Duolando { session, bound, .. } => {
+                with_step_memory(session, bound, |s| s.set_music_track(x))
+            }
             // A solo session copies the rows into its music buffer.
             AnySession::Bailando(session) if x.is_empty() => {
                 let _ = session;
@@ -929,10 +967,9 @@ pub unsafe extern "C" fn duo_session_pull_follower(
             return Err(Failure::null("out_frame"));
         }
         let mut f = FollowerFrame::default();
-        if !s
-            .duolando("duo_session_pull_follower")?
-            .pull_follower_frame(&mut f)?
-        {
+        if !s.duolando("duo_session_pull_follower", |s| {
+            s.pull_follower_frame(&mut f)
+        })? {
             return Ok(DuoResult::NotReady);
         }
         let mut c = DuoFollowerFrame::default();
@@ -980,9 +1017,9 @@ pub unsafe extern "C" fn duo_session_pull_positions(
         let dst =
             unsafe { std::slice::from_raw_parts_mut(dst.as_mut_ptr().cast::<f32>(), n_floats) };
         let index = match &mut s.session {
-            AnySession::Duolando { session, .. } => {
+            AnySession::Duolando { session, bound, .. } => {
                 let mut f = FollowerFrame::default();
-                if !session.pull_follower_frame(&mut f)? {
+                if !with_step_memory(session, bound, |s| s.pull_follower_frame(&mut f))? {
                     return Ok(DuoResult::NotReady);
                 }
                 dst.copy_from_slice(&f.positions);
@@ -1028,8 +1065,8 @@ pub unsafe extern "C" fn duo_session_reset(
         }
         let seed = any_seed_ref(&s.model, seed_tokens)?;
         match (&mut s.session, seed) {
-            (AnySession::Duolando { session, .. }, AnySeed::Duolando(seed)) => {
-                session.reset(seed)?
+            (AnySession::Duolando { session, bound, .. }, AnySeed::Duolando(seed)) => {
+                with_step_memory(session, bound, |s| s.reset(seed))?
             }
             (AnySession::Bailando(session), AnySeed::Bailando(seed)) => session.reset(seed)?,
             _ => return Err(Failure::invalid("seed of another family")),

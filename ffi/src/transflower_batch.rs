@@ -52,7 +52,10 @@ unsafe fn make(
                     return Err(Failure::invalid("not a Transflower model"));
                 };
                 let batch = StepBatch::new(tm, arena)?;
-                Ok(Kind::Transflower { batch, model: arc })
+                Ok(Kind::Transflower {
+                    batch: std::sync::Mutex::new(batch),
+                    model: arc,
+                })
             },
         )
     }
@@ -216,8 +219,10 @@ unsafe fn step_many(
         }
     }
     // Model and backlog checked: core steps the ready ones.
-    batch.step(&mut refs).map_err(|e| match e {
-        Error::State => Failure::invalid("a session of another model than the batch's"),
-        e => Failure::from(e),
-    })
+    crate::batch::lock(batch)
+        .step(&mut refs)
+        .map_err(|e| match e {
+            Error::State => Failure::invalid("a session of another model than the batch's"),
+            e => Failure::from(e),
+        })
 }

@@ -2,7 +2,8 @@
 //! allocator (this test binary only) checks it over whole runs of the tiny
 //! fixture: leader pushes, pulls and resets of a session alone, and pushes
 //! of sessions stepped together through a `duo_step_batch` (refused calls
-//! excepted: a failure writes its message); Transflower sessions and their
+//! excepted: a failure writes its message), one of them bound to the batch
+//! (`duo_session_new_batched`) and driven alone too; Transflower sessions and their
 //! step batch in caller memory, from creation on.
 
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -101,13 +102,23 @@ fn pushes_pulls_and_batched_steps_allocate_nothing() {
         unsafe { duo_step_batch_new(m, &c, N, &mut batch) },
         DuoResult::Ok
     );
+    // Session 1 is bound to the batch (its step memory the batch's).
     let sessions: Vec<*mut DuoSession> = (0..N)
-        .map(|_| {
+        .map(|k| {
             let mut s = ptr::null_mut();
-            assert_eq!(
-                unsafe { duo_session_new(m, &c, seed.as_ptr(), &mut s) },
-                DuoResult::Ok
-            );
+            let r = match k {
+                1 => unsafe {
+                    duolando::batched_session::duo_session_new_batched(
+                        m,
+                        &c,
+                        seed.as_ptr(),
+                        batch,
+                        &mut s,
+                    )
+                },
+                _ => unsafe { duo_session_new(m, &c, seed.as_ptr(), &mut s) },
+            };
+            assert_eq!(r, DuoResult::Ok);
             assert_eq!(
                 unsafe { duo_session_set_music_track(s, music.as_ptr(), music.len()) },
                 DuoResult::Ok
@@ -141,30 +152,32 @@ fn pushes_pulls_and_batched_steps_allocate_nothing() {
         during += allocations() - mark;
         mark = allocations();
     }
-    // A session alone, after a reset.
-    let s = sessions[0];
-    mark = allocations();
-    assert_eq!(
-        unsafe { duo_session_reset(s, seed.as_ptr()) },
-        DuoResult::Ok
-    );
-    assert_eq!(
-        unsafe { duo_session_set_music_track(s, music.as_ptr(), music.len()) },
-        DuoResult::Ok
-    );
-    for frame in &leader {
-        if unsafe { duo_session_push_leader(s, frame) } != DuoResult::Ok {
-            break;
-        }
-        while unsafe { duo_session_pull_follower(s, &mut f) } == DuoResult::Ok {
-            alone += 1;
-        }
-        during += allocations() - mark;
+    // A session alone, after a reset: one with its own step memory, one
+    // bound to the batch (each call borrows the batch's, under its lock).
+    for s in [sessions[0], sessions[1]] {
         mark = allocations();
+        assert_eq!(
+            unsafe { duo_session_reset(s, seed.as_ptr()) },
+            DuoResult::Ok
+        );
+        assert_eq!(
+            unsafe { duo_session_set_music_track(s, music.as_ptr(), music.len()) },
+            DuoResult::Ok
+        );
+        for frame in &leader {
+            if unsafe { duo_session_push_leader(s, frame) } != DuoResult::Ok {
+                break;
+            }
+            while unsafe { duo_session_pull_follower(s, &mut f) } == DuoResult::Ok {
+                alone += 1;
+            }
+            during += allocations() - mark;
+            mark = allocations();
+        }
     }
 
     assert!(
-        pulled > N * frames / 2 && alone > frames / 2,
+        pulled > N * frames / 2 && alone > 2 * frames / 2,
         "{pulled} / {alone} frames"
     );
     assert_eq!(

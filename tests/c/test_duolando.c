@@ -1113,6 +1113,67 @@ static void test_transflower_batch(duo_model *duo) {
   free(audio);
 }
 
+/* Sessions bound to a batch (duo_session_new_batched): their state alone
+ * in their memory (smaller than duo_session_bytes), the batch's step
+ * memory borrowed for every call; frames equal to a session with its own
+ * memory, byte for byte: one in caller memory driven alone, then three on
+ * three threads at once sharing one batch whose handle was freed before
+ * they start (the sessions keep it). */
+struct bound_worker {
+  duo_session *s;
+  int ok;
+};
+
+static void *bound_main(void *arg) {
+  struct bound_worker *w = (struct bound_worker *)arg;
+  duo_follower_frame *out = (duo_follower_frame *)malloc(n_frames * sizeof *out);
+  size_t n = drive(w->s, out, n_frames, 1);
+  w->ok = n == reference_n && same_frames(out, reference, n);
+  duo_session_free(w->s);
+  free(out);
+  return NULL;
+}
+
+static void test_batched_sessions(duo_model *m) {
+  duo_session_config c;
+  duo_step_batch *b = NULL;
+  duo_session *s = NULL;
+  size_t own = 0, bytes = 0, n;
+  unsigned char *mem;
+  duo_follower_frame *out = (duo_follower_frame *)malloc(n_frames * sizeof *out);
+  pthread_t th[3];
+  struct bound_worker w[3];
+  int i;
+
+  EXPECT(duo_session_config_minimum(m, &c), DUO_OK);
+  EXPECT(duo_step_batch_new(m, &c, 1, &b), DUO_OK);
+  EXPECT(duo_session_bytes(m, &c, &own), DUO_OK);
+  EXPECT(duo_session_batched_bytes(m, &c, &bytes), DUO_OK);
+  CHECK(bytes < own);
+  mem = (unsigned char *)malloc(bytes + 7);
+  EXPECT(duo_session_new_batched_in(m, &c, seed, b, mem + 7, bytes - 1, &s), DUO_BUFFER_TOO_SMALL);
+  CHECK(s == NULL);
+  EXPECT(duo_session_new_batched(m, &c, seed, NULL, &s), DUO_NULL_PARAMETER);
+  EXPECT(duo_session_new_batched_in(m, &c, seed, b, mem + 7, bytes, &s), DUO_OK);
+  n = drive(s, out, n_frames, 1);
+  CHECK(n == reference_n && same_frames(out, reference, n));
+  duo_session_free(s);
+  free(mem);
+
+  for (i = 0; i < 3; i++) {
+    w[i].s = NULL;
+    w[i].ok = 0;
+    EXPECT(duo_session_new_batched(m, &c, seed, b, &w[i].s), DUO_OK);
+  }
+  duo_step_batch_free(b);
+  for (i = 0; i < 3; i++) CHECK(pthread_create(&th[i], NULL, bound_main, &w[i]) == 0);
+  for (i = 0; i < 3; i++) {
+    CHECK(pthread_join(th[i], NULL) == 0);
+    CHECK(w[i].ok);
+  }
+  free(out);
+}
+
 int main(int argc, char **argv) {
   duo_model *m = NULL;
   if (argc < 2 || strlen(argv[1]) > 1000) {
@@ -1135,6 +1196,7 @@ int main(int argc, char **argv) {
   test_sessions(m);
   test_step_batch(m);
   test_threads(m);
+  test_batched_sessions(m);
   test_model_freed_first();
   test_solo();
   test_transflower();

@@ -3,6 +3,8 @@
 //! through the C entry point.
 #![allow(dead_code)] // each test crate uses its own subset
 
+pub mod golden;
+
 use std::ffi::{c_char, CStr, CString};
 use std::path::{Path, PathBuf};
 use std::ptr;

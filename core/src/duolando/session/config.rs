@@ -330,6 +330,8 @@ mod published {
         // in a batch (15,994,815 B since the LATs' push rows left their
         // rings), not by one with its own step memory (17,500,159 B).
         assert!(batched <= 16_000_000, "{batched}");
+        // The figures docs/STREAMING.md §4, docs/C_API.md and the header quote.
+        assert_eq!((batched, f16kv), (15_994_815, 17_500_159));
         // One f32 cache is 12 layers x 2 x (10 x 29 x 768) floats = 21.4 MB (§4).
         let cache = 12 * 2 * 10 * 29 * 768 * 4;
         assert!(f32kv > cache && f32kv < cache + 40_000_000, "{f32kv}");
