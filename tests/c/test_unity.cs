@@ -128,9 +128,10 @@ static class TestUnity
                     alone[k] = got.ToArray();
                 }
             }
+            // Session b is bound to the batch (duo_session_new_batched: no step memory of its own).
             using (StepBatch batch = new StepBatch(model, greedy, 2))
             using (Session a = new Session(model, greedy, seed))
-            using (Session b = new Session(model, greedy, seed))
+            using (Session b = new Session(model, greedy, seed, batch))
             {
                 Session[] both = { a, b };
                 var got = new[] { new System.Collections.Generic.List<FollowerFrame>(), new System.Collections.Generic.List<FollowerFrame>() };
