@@ -1116,7 +1116,8 @@ static void test_transflower_batch(duo_model *duo) {
 /* Sessions bound to a batch (duo_session_new_batched): their state alone
  * in their memory (smaller than duo_session_bytes), the batch's step
  * memory borrowed for every call; frames equal to a session with its own
- * memory, byte for byte: one in caller memory driven alone, then three on
+ * memory, byte for byte: one in caller memory driven alone, one bound to a
+ * batch in caller memory whose handle is freed first, then three on
  * three threads at once sharing one batch whose handle was freed before
  * they start (the sessions keep it). */
 struct bound_worker {
@@ -1159,6 +1160,26 @@ static void test_batched_sessions(duo_model *m) {
   CHECK(n == reference_n && same_frames(out, reference, n));
   duo_session_free(s);
   free(mem);
+
+  /* Session and batch both in caller memory; the batch's handle freed
+   * first: the session drops it in place at its own free, then both
+   * blocks go. */
+  {
+    size_t batch_bytes = 0;
+    unsigned char *batch_mem;
+    duo_step_batch *cb = NULL;
+    EXPECT(duo_step_batch_bytes(m, &c, 1, &batch_bytes), DUO_OK);
+    batch_mem = (unsigned char *)malloc(batch_bytes + 3);
+    mem = (unsigned char *)malloc(bytes);
+    EXPECT(duo_step_batch_new_in(m, &c, 1, batch_mem + 3, batch_bytes, &cb), DUO_OK);
+    EXPECT(duo_session_new_batched_in(m, &c, seed, cb, mem, bytes, &s), DUO_OK);
+    duo_step_batch_free(cb);
+    n = drive(s, out, n_frames, 0);
+    CHECK(n == reference_n && same_frames(out, reference, n));
+    duo_session_free(s);
+    free(mem);
+    free(batch_mem);
+  }
 
   for (i = 0; i < 3; i++) {
     w[i].s = NULL;
