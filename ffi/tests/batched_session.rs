@@ -406,3 +406,98 @@ fn batched_session_refusals() {
         unsafe { duo_model_free(model.0) };
     }
 }
+
+/// Random call sequences (three seeds) on a session with its own memory
+/// and its twin bound to a batch: music pushes, leader frames (the bound
+/// one's through its own call or the batch's, at random), pulls, resets
+/// and finishes, the batch's handle freed at a random call. Every result
+/// and every frame of the two are the same.
+#[test]
+fn random_call_sequences_agree_with_the_twin() {
+    // SAFETY: every C entry point below is called with pointers to live
+    // locals of the documented sizes; handles come from the library and
+    // are freed once.
+    let g = golden();
+    let m = open();
+    let c = config(&m, &g);
+    let music = music_frames(&g);
+    for seed in [1u64, 2, 3] {
+        let mut rng = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut next = |n: u64| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng % n
+        };
+        let own = new_own(&m, &c, &g.seed);
+        let mut batch = new_batch(&m, &c, 1);
+        let bound = new_bound(&m, &c, &g.seed, batch);
+        let free_at = next(600);
+        let (mut li, mut mi) = (0usize, 0usize);
+        let (mut frames, mut calls) = (0usize, 0usize);
+        for call in 0..600u64 {
+            if call == free_at {
+                unsafe { duo_step_batch_free(batch) };
+                batch = ptr::null_mut();
+            }
+            let op = next(100);
+            let (a, b) = match op {
+                0..=29 if mi < music.len() => {
+                    let x = music[mi];
+                    mi += 1;
+                    unsafe {
+                        (
+                            duo_session_push_music(own, x.as_ptr(), x.len()),
+                            duo_session_push_music(bound, x.as_ptr(), x.len()),
+                        )
+                    }
+                }
+                0..=69 => {
+                    let f = g.leader[li % g.leader.len()];
+                    li += 1;
+                    let a = unsafe { duo_session_push_leader(own, &f) };
+                    let b = if !batch.is_null() && next(2) == 0 {
+                        let mut failed = 0usize;
+                        unsafe { duo_step_batch_push_leader(batch, &bound, &f, 1, &mut failed) }
+                    } else {
+                        unsafe { duo_session_push_leader(bound, &f) }
+                    };
+                    (a, b)
+                }
+                70..=96 => {
+                    let (mut fa, mut fb) =
+                        (DuoFollowerFrame::default(), DuoFollowerFrame::default());
+                    let r = unsafe {
+                        (
+                            duo_session_pull_follower(own, &mut fa),
+                            duo_session_pull_follower(bound, &mut fb),
+                        )
+                    };
+                    assert!(fa == fb, "seed {seed} call {call}: pulled frames differ");
+                    frames += (r.0 == DuoResult::Ok) as usize;
+                    r
+                }
+                97 => unsafe { (duo_session_finish(own), duo_session_finish(bound)) },
+                _ => {
+                    (li, mi) = (0, 0);
+                    unsafe {
+                        (
+                            duo_session_reset(own, g.seed.as_ptr()),
+                            duo_session_reset(bound, g.seed.as_ptr()),
+                        )
+                    }
+                }
+            };
+            assert_eq!(a, b, "seed {seed} call {call} (op {op}): {}", last_error());
+            calls += 1;
+        }
+        eprintln!("seed {seed}: {frames} frames in {calls} calls");
+        assert!(frames > 0, "seed {seed}: no frame in {calls} calls");
+        unsafe {
+            duo_session_free(own);
+            duo_session_free(bound);
+            duo_step_batch_free(batch);
+        }
+    }
+    unsafe { duo_model_free(m.0) };
+}
