@@ -6,7 +6,8 @@
 //! track, finish and the drained pulls, reset; alone and in
 //! `duo_step_batch_push_leader`), on one thread or several sharing the
 //! batch, and the batch outlives `duo_step_batch_free` while a session is
-//! bound to it.
+//! bound to it; random call sequences give the twin's results and frames
+//! call for call.
 
 mod common;
 use common::golden::*;
