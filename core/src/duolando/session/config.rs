@@ -332,6 +332,13 @@ mod published {
         assert!(batched <= 16_000_000, "{batched}");
         // The figures docs/STREAMING.md §4, docs/C_API.md and the header quote.
         assert_eq!((batched, f16kv), (15_994_815, 17_500_159));
+        // And a 16-session StepBatch for that configuration (docs/STREAMING.md §4).
+        let kv16 = SessionConfig {
+            kv: KvType::F16,
+            ..r
+        };
+        let batch16 = crate::duolando::session::StepBatch::bytes(&cfg, &kv16, 16).unwrap();
+        assert_eq!(batch16, 5_027_391);
         // One f32 cache is 12 layers x 2 x (10 x 29 x 768) floats = 21.4 MB (§4).
         let cache = 12 * 2 * 10 * 29 * 768 * 4;
         assert!(f32kv > cache && f32kv < cache + 40_000_000, "{f32kv}");
