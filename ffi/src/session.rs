@@ -815,8 +815,15 @@ pub unsafe extern "C" fn duo_session_push_leader(
         let s = session_mut(session)?;
         // SAFETY: NULL or valid (contract).
         let f = unsafe { frame.as_ref() }.ok_or_else(|| Failure::null("frame"))?;
+        // The family first, then the frame's values (as before bound sessions).
+        let what = "duo_session_push_leader";
+        let (session, bound) = match &mut s.session {
+            AnySession::Duolando { session, bound, .. } => (session, bound),
+            AnySession::Bailando(_) => return Err(solo_refusal(what)),
+            AnySession::Transflower(_) => return Err(transflower_refusal(what)),
+        };
         let pos = leader_pos3d(f)?;
-        s.duolando("duo_session_push_leader", |s| s.push_leader_frame(pos))?;
+        with_step_memory(session, bound, |s| s.push_leader_frame(pos))?;
         Ok(DuoResult::Ok)
     })
 }

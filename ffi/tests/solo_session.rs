@@ -256,6 +256,13 @@ fn duolando_only_calls_are_named_refusals() {
             "{}",
             last_error()
         );
+        // The family is refused before the frame's values are read.
+        let mut nan = DuoLeaderFrame::default();
+        nan.joints[0].x = f32::NAN;
+        assert_eq!(
+            duo_session_push_leader(s, &nan),
+            DuoResult::InvalidArgument
+        );
         let mut ff = DuoFollowerFrame::default();
         assert_eq!(
             duo_session_pull_follower(s, &mut ff),
