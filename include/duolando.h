@@ -15,6 +15,9 @@
  *   duo_step_batch  step memory several sessions of one model share
  *                (Duolando: stepped together, one weight read for all of
  *                them; Transflower: stepped one after another through it).
+ *                A Duolando session may be bound to one
+ *                (duo_session_new_batched): it then holds its state alone
+ *                and keeps the batch alive.
  *
  * Conventions (rustls-ffi style)
  *   - Fallible functions return duo_result. DUO_OK is success; on any
@@ -672,7 +675,9 @@ duo_result duo_transflower_session_reset(duo_session *session, uint64_t rng_seed
  * A batch of one family refuses the other family's call and sessions
  * (DUO_INVALID_ARGUMENT naming both families).
  * Thread rule: one thread at a time; the sessions of a call must not be
- * used by another thread during it.
+ * used by another thread during it. (The calls of sessions bound to a
+ * Duolando batch, below, may come from other threads: they take the
+ * batch's lock.)
  *
  * The refusals of duo_step_batch_push_leader and duo_step_batch_step, in
  * this one order; the first refusal answers, before any session changes,
