@@ -115,6 +115,18 @@ fn inspect_json_parses_and_agrees_with_the_file() {
         b[0]["arena_bytes"].as_u64(),
         Some(model.session_bytes(&sc).unwrap() as u64)
     );
+    // One GPT cache, and that session bound to a step batch (its state alone).
+    let one = duolando_core::duolando::session::SessionConfig {
+        schedule: duolando_core::duolando::session::CacheSchedule::Reprefill,
+        ..sc
+    };
+    let (own, bound) = (
+        b[0]["arena_bytes_reprefill"].as_u64().unwrap(),
+        b[0]["arena_bytes_reprefill_bound"].as_u64().unwrap(),
+    );
+    assert_eq!(own, model.session_bytes(&one).unwrap() as u64);
+    assert_eq!(bound, model.batched_session_bytes(&one).unwrap() as u64);
+    assert!(bound < own, "{bound} vs {own}");
 }
 
 #[test]

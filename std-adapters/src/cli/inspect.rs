@@ -422,6 +422,9 @@ fn streaming(duo: &duolando_core::format::DuoFile<'_>) -> Result<Value> {
                 "arena_bytes": model.session_bytes(&sc).ok(),
                 // The same budget with one GPT cache (`--reprefill`): the least memory.
                 "arena_bytes_reprefill": model.session_bytes(&SessionConfig { schedule: CacheSchedule::Reprefill, ..sc }).ok(),
+                // That one bound to a step batch (its state alone: `Session::new_batched`,
+                // C `duo_session_new_batched`).
+                "arena_bytes_reprefill_bound": model.batched_session_bytes(&SessionConfig { schedule: CacheSchedule::Reprefill, ..sc }).ok(),
             })
         })
         .collect();
@@ -548,7 +551,7 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
     ));
     for b in st["budgets"].as_array().into_iter().flatten() {
         line(format!(
-            "  {:<12} a {} e {} d {} shift {}: latency {} frames ({:.2} s), session arena {} ({} with --reprefill); music look-ahead {}, latency with music pushed live {} frames",
+            "  {:<12} a {} e {} d {} shift {}: latency {} frames ({:.2} s), session arena {} ({} with --reprefill, {} bound to a step batch); music look-ahead {}, latency with music pushed live {} frames",
             b["budget"].as_str().unwrap_or(""),
             b["lookahead"],
             b["enc_future"],
@@ -558,6 +561,7 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
             b["latency_seconds"].as_f64().unwrap_or(0.0),
             b["arena_bytes"].as_u64().map(mib).unwrap_or_else(|| "?".into()),
             b["arena_bytes_reprefill"].as_u64().map(mib).unwrap_or_else(|| "?".into()),
+            b["arena_bytes_reprefill_bound"].as_u64().map(mib).unwrap_or_else(|| "?".into()),
             b["music_lookahead"],
             b["live_latency_frames"]
         ));
