@@ -15,17 +15,14 @@
 //! drops the caller's; the batch goes with the last session), as every
 //! session holds one on its model.
 
-use std::sync::Arc;
-
 use duolando_core::duolando::session::StepDims;
 
 use crate::batch::{BoundBatch, DuoStepBatch};
-use crate::handle::{buffer_mut, caller_slot};
-use crate::model::{share, DuoModel};
+use crate::model::DuoModel;
 use crate::result::{guard, DuoResult, Failure};
 use crate::session::{
-    config_ref, model_ref, start, AnyConfig, AnySeed, DuoSession, DuoSessionConfig, SessionInner,
-    HANDLE_BYTES,
+    config_ref, model_ref, place_session, seed_ref, start, AnyConfig, AnySeed, DuoSession,
+    DuoSessionConfig, HANDLE_BYTES,
 };
 
 /// What every constructor checks and builds, in the header's order: the
@@ -48,11 +45,7 @@ unsafe fn make(
     let m = model_ref(model)?;
     let dm = m.duolando(what)?;
     let cfg = config_ref(m, config)?;
-    if seed_tokens.is_null() {
-        return Err(Failure::null("seed_tokens"));
-    }
-    // SAFETY: the contract: 5 readable u32.
-    let seed = unsafe { std::ptr::read_unaligned(seed_tokens.cast::<[u32; 5]>()) };
+    let seed = seed_ref(seed_tokens)?;
     // SAFETY: NULL or a live batch (contract).
     let (bound, held) = unsafe { BoundBatch::new(batch, what) }?;
     let need = StepDims::new(dm.config(), &cfg, 1).map_err(duolando_core::Error::Arena)?;
@@ -65,39 +58,14 @@ unsafe fn make(
         return Err(Failure::null("out_session"));
     }
     let n = dm.batched_session_bytes(&cfg)?;
-    let cfg = AnyConfig::Duolando(cfg);
-    let seed = AnySeed::Duolando(seed);
-    let handle = match memory {
-        None => {
-            let mut arena = vec![0u8; n].into_boxed_slice();
-            // SAFETY: the boxed bytes stay at one address until the
-            // SessionInner drops them, after the session.
-            let bytes: &'static mut [u8] =
-                unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
-            // SAFETY: `model` is a live handle (contract).
-            let arc = unsafe { share(model) };
-            let session = start(&arc, bytes, &cfg, seed, Some(bound))?;
-            Box::into_raw(SessionInner::owned(session, arc, arena))
-        }
-        Some((ptr, len)) => {
-            // SAFETY: NULL or `len` writable bytes kept for the session (contract).
-            let memory = unsafe { buffer_mut(ptr, len, "memory") }?;
-            let (slot, arena) = caller_slot::<SessionInner>(
-                memory,
-                n.saturating_add(HANDLE_BYTES),
-                "duo_session_batched_bytes",
-            )?;
-            // SAFETY: `model` is a live handle (contract).
-            let arc: Arc<_> = unsafe { share(model) };
-            let session = start(&arc, arena, &cfg, seed, Some(bound))?;
-            // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
-            unsafe { slot.write(SessionInner::in_caller(session, arc)) };
-            slot
-        }
-    };
-    // SAFETY: checked non-NULL.
-    unsafe { *out_session = handle };
-    Ok(DuoResult::Ok)
+    let (cfg, seed) = (AnyConfig::Duolando(cfg), AnySeed::Duolando(seed));
+    let bytes_fn = "duo_session_batched_bytes";
+    // SAFETY: the caller's contract; `out_session` checked non-NULL.
+    unsafe {
+        place_session(n, memory, bytes_fn, model, out_session, |arc, arena| {
+            start(arc, arena, &cfg, seed, Some(bound))
+        })
+    }
 }
 
 /// Bytes `duo_session_new_batched_in` needs for `config` (any address):

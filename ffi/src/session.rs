@@ -420,7 +420,7 @@ fn any_seed_ref(model: &ModelInner, seed: *const u32) -> Result<AnySeed, Failure
     })
 }
 
-fn seed_ref(seed: *const u32) -> Result<[u32; 5], Failure> {
+pub(crate) fn seed_ref(seed: *const u32) -> Result<[u32; 5], Failure> {
     if seed.is_null() {
         return Err(Failure::null("seed_tokens"));
     }
@@ -568,6 +568,55 @@ pub unsafe extern "C" fn duo_session_config_preset(
 /// Alignment slack and size of the handle placed at the start of caller memory.
 pub(crate) const HANDLE_BYTES: usize = handle_bytes::<SessionInner>();
 
+/// Every session constructor's end: an `n`-byte arena allocated here
+/// (`memory` None) or taken from caller memory (`memory` = pointer and
+/// length, the handle first; `bytes_fn` names the size function), `make`
+/// building the session over it with the model reference the handle
+/// keeps, and the handle written to `*out_session` (checked non-NULL by the
+/// caller, in its order of refusals).
+///
+/// # Safety
+/// `model` a live handle; `memory` None, or NULL or `len` writable bytes
+/// that stay valid, unmoved and otherwise untouched until
+/// `duo_session_free`; `out_session` writable.
+pub(crate) unsafe fn place_session(
+    n: usize,
+    memory: Option<(*mut u8, usize)>,
+    bytes_fn: &str,
+    model: *const DuoModel,
+    out_session: *mut *mut DuoSession,
+    make: impl FnOnce(&Arc<ModelInner>, &'static mut [u8]) -> Result<AnySession, Failure>,
+) -> Result<DuoResult, Failure> {
+    let handle = match memory {
+        None => {
+            let mut arena = vec![0u8; n].into_boxed_slice();
+            // SAFETY: the boxed bytes stay at one address until the
+            // SessionInner drops them, after the session.
+            let bytes: &'static mut [u8] =
+                unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
+            // SAFETY: `model` is a live handle (contract).
+            let arc = unsafe { share(model) };
+            let session = make(&arc, bytes)?;
+            Box::into_raw(SessionInner::owned(session, arc, arena))
+        }
+        Some((ptr, len)) => {
+            // SAFETY: NULL or `len` writable bytes kept for the session (contract).
+            let memory = unsafe { buffer_mut(ptr, len, "memory") }?;
+            let (slot, arena) =
+                caller_slot::<SessionInner>(memory, n.saturating_add(HANDLE_BYTES), bytes_fn)?;
+            // SAFETY: `model` is a live handle (contract).
+            let arc = unsafe { share(model) };
+            let session = make(&arc, arena)?;
+            // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
+            unsafe { slot.write(SessionInner::in_caller(session, arc)) };
+            slot
+        }
+    };
+    // SAFETY: writable (contract).
+    unsafe { *out_session = handle };
+    Ok(DuoResult::Ok)
+}
+
 /// Bytes `duo_session_new_in` needs for `config` (any address).
 ///
 /// # Safety
@@ -649,23 +698,17 @@ pub unsafe extern "C" fn duo_session_new(
             return Err(Failure::null("out_session"));
         }
         let n = any_session_bytes(m, &cfg)?;
-        let mut arena = vec![0u8; n].into_boxed_slice();
-        // SAFETY: the boxed bytes stay at one address until the
-        // SessionInner drops them, after the session.
-        let bytes: &'static mut [u8] =
-            unsafe { std::slice::from_raw_parts_mut(arena.as_mut_ptr(), arena.len()) };
-        // SAFETY: `model` is a live handle (contract).
-        let arc = unsafe { share(model) };
-        let session = start(&arc, bytes, &cfg, seed, None)?;
-        let inner = Box::new(SessionInner {
-            session,
-            model: arc,
-            _arena: Some(arena),
-            in_caller_memory: false,
-        });
-        // SAFETY: checked non-NULL.
-        unsafe { *out_session = Box::into_raw(inner) };
-        Ok(DuoResult::Ok)
+        // SAFETY: the caller's contract; `out_session` checked non-NULL.
+        unsafe {
+            place_session(
+                n,
+                None,
+                "duo_session_bytes",
+                model,
+                out_session,
+                |arc, arena| start(arc, arena, &cfg, seed, None),
+            )
+        }
     })
 }
 
@@ -691,24 +734,18 @@ pub unsafe extern "C" fn duo_session_new_in(
         if out_session.is_null() {
             return Err(Failure::null("out_session"));
         }
-        // SAFETY: NULL or `len` writable bytes kept for the session (contract).
-        let memory = unsafe { buffer_mut(memory, len, "memory") }?;
-        let need = any_session_bytes(m, &cfg)?.saturating_add(HANDLE_BYTES);
-        let (slot, arena) = caller_slot::<SessionInner>(memory, need, "duo_session_bytes")?;
-        // SAFETY: `model` is a live handle (contract).
-        let arc = unsafe { share(model) };
-        let session = start(&arc, arena, &cfg, seed, None)?;
-        // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
+        let n = any_session_bytes(m, &cfg)?;
+        // SAFETY: the caller's contract; `out_session` checked non-NULL.
         unsafe {
-            slot.write(SessionInner {
-                session,
-                model: arc,
-                _arena: None,
-                in_caller_memory: true,
-            });
-            *out_session = slot;
+            place_session(
+                n,
+                Some((memory, len)),
+                "duo_session_bytes",
+                model,
+                out_session,
+                |arc, arena| start(arc, arena, &cfg, seed, None),
+            )
         }
-        Ok(DuoResult::Ok)
     })
 }
 

@@ -15,10 +15,12 @@ use duolando_core::transflower::session::{
     batched_session_bytes, lookahead_rows, session_bytes, Preset, Session, SessionConfig,
 };
 
-use crate::handle::{buffer, buffer_mut, caller_slot};
-use crate::model::{share, AnyModel, DuoModel, ModelInner};
+use crate::handle::{buffer, buffer_mut};
+use crate::model::{AnyModel, DuoModel, ModelInner};
 use crate::result::{guard, DuoResult, Failure};
-use crate::session::{model_ref, session_mut, AnySession, DuoSession, SessionInner, HANDLE_BYTES};
+use crate::session::{
+    model_ref, place_session, session_mut, AnySession, DuoSession, SessionInner, HANDLE_BYTES,
+};
 
 /// `duo_transflower_info`: the sizes a host needs (48 bytes).
 #[repr(C)]
@@ -347,13 +349,6 @@ fn arena_bytes(
     }
 }
 
-/// Where a new session lives: a library allocation, or a slot at the
-/// start of caller memory.
-enum Home {
-    Boxed(Box<[u8]>),
-    Caller(*mut SessionInner),
-}
-
 /// Both constructors: the checks in the header's order, the arena
 /// (allocated, or `memory` = (pointer, len) of caller memory: handle
 /// first), the session, `*out_session`.
@@ -382,49 +377,31 @@ unsafe fn make_session(
         return Err(Failure::null("out_session"));
     }
     let n = arena_bytes(&t.cfg, (c, batched))?;
-    let (arena, home): (&'static mut [u8], Home) = match memory {
-        None => {
-            let mut boxed = vec![0u8; n].into_boxed_slice();
-            // SAFETY: the boxed bytes stay at one address until the
-            // SessionInner drops them, after the session.
-            let bytes = unsafe { std::slice::from_raw_parts_mut(boxed.as_mut_ptr(), boxed.len()) };
-            (bytes, Home::Boxed(boxed))
-        }
-        Some((ptr, len)) => {
-            // SAFETY: NULL or `len` writable bytes kept for the session (contract).
-            let memory = unsafe { buffer_mut(ptr, len, "memory") }?;
-            let need = n.saturating_add(HANDLE_BYTES);
-            let (slot, arena) =
-                caller_slot::<SessionInner>(memory, need, "duo_transflower_session_bytes")?;
-            (arena, Home::Caller(slot))
-        }
-    };
-    // SAFETY: `model` is a live handle (contract).
-    let arc: Arc<ModelInner> = unsafe { share(model) };
-    // SAFETY: the model lives in the Arc, which the SessionInner keeps
-    // (and drops after the session).
-    let tm: &'static duolando_core::transflower::model::Model<'static> =
-        match unsafe { &*Arc::as_ptr(&arc) }.any() {
-            AnyModel::Transflower(t) => t,
-            _ => return Err(Failure::invalid("not a Transflower model")),
+    let make = |arc: &Arc<ModelInner>, arena: &'static mut [u8]| {
+        // SAFETY: the model lives in the Arc, which the SessionInner keeps
+        // (and drops after the session).
+        let tm: &'static duolando_core::transflower::model::Model<'static> =
+            match unsafe { &*Arc::as_ptr(arc) }.any() {
+                AnyModel::Transflower(t) => t,
+                _ => return Err(Failure::invalid("not a Transflower model")),
+            };
+        let new = if batched {
+            Session::new_batched
+        } else {
+            Session::new
         };
-    let new = if batched {
-        Session::new_batched
-    } else {
-        Session::new
+        Ok(AnySession::Transflower(new(
+            tm,
+            &c,
+            seed,
+            lab,
+            cc.rng_seed,
+            arena,
+        )?))
     };
-    let session = AnySession::Transflower(new(tm, &c, seed, lab, cc.rng_seed, arena)?);
-    let handle = match home {
-        Home::Boxed(boxed) => Box::into_raw(SessionInner::owned(session, arc, boxed)),
-        Home::Caller(slot) => {
-            // SAFETY: `slot` is aligned, in bounds, and holds no value yet.
-            unsafe { slot.write(SessionInner::in_caller(session, arc)) };
-            slot
-        }
-    };
-    // SAFETY: checked non-NULL.
-    unsafe { *out_session = handle };
-    Ok(DuoResult::Ok)
+    let bytes_fn = "duo_transflower_session_bytes";
+    // SAFETY: the caller's contract; `out_session` checked non-NULL.
+    unsafe { place_session(n, memory, bytes_fn, model, out_session, make) }
 }
 
 /// As duo_transflower_session_new, placed entirely in caller memory
