@@ -407,8 +407,11 @@ typedef struct duo_session_config {
   uint32_t reserved;            /* 0 (DUO_INVALID_ARGUMENT otherwise) */
 } duo_session_config;
 
-/* The configuration closest to the offline model (long latency: about
- * 9.7 s for the full model). DUO_NULL_PARAMETER. Thread-safe. */
+/* The full look-ahead and conv context (R's leader codes and frames; long
+ * latency: about 9.7 s for the full model) and the presets' window shift,
+ * the largest whose step computes at most two GPT rows (15 for the full
+ * model; 22 until 2026-12-07: closer to the offline model, twice the GPT
+ * work a step; set `shift` for it). DUO_NULL_PARAMETER. Thread-safe. */
 duo_result duo_session_config_reference(const duo_model *model, duo_session_config *out_config);
 
 /* The named preset `name` (NUL-terminated; the list `duolando inspect`

@@ -295,8 +295,7 @@ fn check_schedule(name: &str, schedule: Schedule) {
     );
     if schedule == Schedule::Spread && run.steps() > m + 2 {
         let s = cfg.shift as usize;
-        let p = m + 1 - s;
-        let bound = 1 + (s - 1).div_ceil(p.min(s - 1).max(1));
+        let bound = duolando_core::nn::window::spread_rows(m, s);
         assert!(most <= bound, "{name} (spread): {most} window rows in one step after start-up, bound {bound} (m {m}, s {s})");
     }
 }

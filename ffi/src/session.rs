@@ -477,8 +477,8 @@ unsafe fn config_default(
     Ok(DuoResult::Ok)
 }
 
-/// The reference-quality configuration (closest to the offline model;
-/// about 9.7 s of latency for the full model).
+/// The reference preset: full look-ahead and conv context (about 9.7 s of
+/// latency for the full model), the presets' window shift (15 at full size).
 ///
 /// # Safety
 /// `model` NULL or live; `out_config` NULL or writable.

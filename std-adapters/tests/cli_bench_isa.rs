@@ -155,3 +155,21 @@ fn zero_runs_steps_threads_or_sessions_are_refused_by_name_not_a_panic() {
         assert!(o.stdout.is_empty(), "{flag} {value}: ran before refusing");
     }
 }
+
+#[test]
+fn a_shift_outside_the_window_or_for_another_family_is_refused_before_anything_runs() {
+    for (args, want) in [
+        (&["--dtypes", "--shift", "0"][..], "--shift"),
+        (&["--dtypes", "--shift", "30"][..], "window shift is 1..=29"),
+        (
+            &["--dtypes", "--family", "bailando", "--shift", "15"][..],
+            "not for --family bailando",
+        ),
+    ] {
+        let o = bench(args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} accepted");
+        assert!(err.contains(want), "{args:?}: {err}");
+        assert!(o.stdout.is_empty(), "{args:?}: ran before refusing");
+    }
+}

@@ -29,8 +29,8 @@ fn inspect_prints_the_tiny_config() {
         "dtype f32",
         "parameters",
         "R mode is offline",
-        "reference    a 29 e 22 d 22 shift 22: latency 291 frames (9.70 s)",
-        "minimum      a 0 e 0 d 0 shift 22: latency 0 frames (0.00 s)",
+        "reference    a 29 e 22 d 22 shift 15: latency 291 frames (9.70 s)",
+        "minimum      a 0 e 0 d 0 shift 15: latency 0 frames (0.00 s)",
     ] {
         assert!(s.contains(want), "missing '{want}' in:\n{s}");
     }

@@ -52,6 +52,24 @@ pub fn for_each_live_window(k: usize, m: usize, s: usize, mut f: impl FnMut(usiz
     }
 }
 
+/// Window rows a spread step computes after start-up at shift `s`: its
+/// own and its share of the next window's `s - 1` rows, which exist one
+/// per step over the `m + 1 - s` steps of a chunk (docs/STREAMING.md §3.5).
+pub fn spread_rows(m: usize, s: usize) -> usize {
+    let ahead = s.saturating_sub(1);
+    let chunk = (m + 1).saturating_sub(s).max(1);
+    1 + ahead.div_ceil(chunk.min(ahead).max(1))
+}
+
+/// The largest shift whose spread step computes at most two window rows
+/// (its own and one of the next window's): `s - 1 <= m + 1 - s`, 15 at
+/// `m = 29`. The presets' shift: a larger one costs a row more per step for
+/// every row the next window keeps (4 at 22), and the GPT's rows are what
+/// a step beyond the weights' read pays for (docs/PERFORMANCE.md).
+pub fn two_row_shift(m: usize) -> usize {
+    ((m + 2) / 2).clamp(1, m.max(1))
+}
+
 /// Caches a staggered schedule needs: the most windows live at one step
 /// (the schedule is periodic after step `m`, so `3m + 2` steps cover it).
 pub fn window_pool(m: usize, s: usize) -> usize {
@@ -99,6 +117,25 @@ impl CacheSchedule {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_two_row_shift_is_the_largest_with_two_rows_a_step() {
+        // docs/STREAMING.md §3.5's table: 2 rows at s = 8 and 15, 4 at 22, 10 at 27.
+        let r: [usize; 4] = [8, 15, 22, 27].map(|s| spread_rows(29, s));
+        assert_eq!(r, [2, 2, 4, 10]);
+        assert_eq!(spread_rows(29, 1), 1);
+        for m in 1..64 {
+            let s = two_row_shift(m);
+            assert!((1..=m).contains(&s), "m {m}: {s}");
+            assert!(spread_rows(m, s) <= 2, "m {m} s {s}");
+            assert!(
+                s == m || spread_rows(m, s + 1) > 2,
+                "m {m}: {s} is not the largest"
+            );
+        }
+        assert_eq!(two_row_shift(29), 15);
+        assert_eq!(two_row_shift(5), 3);
+    }
 
     #[test]
     fn next_window_finds_each_jump() {

@@ -115,6 +115,11 @@ pub struct Args {
     /// default: /tmp/duolando_full/full_r_step.onnx when it exists.
     #[arg(long)]
     pub tract_onnx: Option<PathBuf>,
+    /// The GPT window shift of every S budget measured (`--family
+    /// duolando`; `1..=block_size - 1`). Default: the presets' (15 at full
+    /// size; 22 until 2026-12-07), so one run can time another shift's cost.
+    #[arg(long, value_parser = at_least_one)]
+    pub shift: Option<usize>,
     /// Also write the figures as one flat JSON object.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -400,14 +405,18 @@ fn schedule_label(schedule: &str) -> &'static str {
 
 /// The session configuration measured: reference budget (the interactive
 /// preset for "interactive", with the presets' schedule), f16 K/V, the GPT
-/// cache `schedule` ("reprefill" or one of [`SCHEDULES`]).
-fn s_config(model: &Model<'_>, schedule: &str) -> SessionConfig {
+/// cache `schedule` ("reprefill" or one of [`SCHEDULES`]), the window
+/// `shift` if given (`--shift`).
+fn s_config(model: &Model<'_>, schedule: &str, shift: Option<usize>) -> SessionConfig {
     let mut cfg = if schedule == "interactive" {
         SessionConfig::preset(&model.cfg, duolando_core::duolando::session::Preset::Interactive)
     } else {
         SessionConfig::reference(&model.cfg)
     };
     cfg.kv = KvType::F16;
+    if let Some(s) = shift {
+        cfg.shift = s as u32;
+    }
     cfg.schedule = match schedule {
         "staggered" => CacheSchedule::Staggered,
         "spread" => CacheSchedule::Spread,
@@ -420,8 +429,8 @@ fn s_config(model: &Model<'_>, schedule: &str) -> SessionConfig {
 /// Streams pseudo-random leader and music frames into a fresh session and
 /// times each `push_leader_frame` that runs a GPT step; the first
 /// `warmup` steps are dropped, then `steps` are kept (one thread).
-fn s_steps(model: &Model<'_>, schedule: &str, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
-    let cfg = s_config(model, schedule);
+fn s_steps(model: &Model<'_>, schedule: &str, shift: Option<usize>, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
+    let cfg = s_config(model, schedule, shift);
     let mut arena = vec![0u8; model.session_bytes(&cfg).map_err(|e| anyhow!("session bytes: {e:?}"))?];
     let mut sess = Session::new(model, &mut arena, &cfg, [0; 5]).map_err(|e| anyhow!("session: {e:?}"))?;
     let n_music = model.cfg.gpt.music.n_in as usize;
@@ -467,8 +476,8 @@ fn s_steps(model: &Model<'_>, schedule: &str, warmup: usize, steps: usize) -> an
 /// `n` sessions stepped together: per frame, music pushed into each, then
 /// one `Session::step_many` with a pseudo-random leader frame per session;
 /// times the calls that run a step in every session (one thread).
-fn batched_steps(model: &Model<'_>, schedule: &str, n: usize, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
-    let cfg = s_config(model, schedule);
+fn batched_steps(model: &Model<'_>, schedule: &str, shift: Option<usize>, n: usize, warmup: usize, steps: usize) -> anyhow::Result<Vec<Duration>> {
+    let cfg = s_config(model, schedule, shift);
     let mut batch_arena = vec![0u8; StepBatch::bytes(&model.cfg, &cfg, n).map_err(|e| anyhow!("batch bytes: {e:?}"))?];
     let mut batch = StepBatch::new(&model.cfg, &cfg, n, &mut batch_arena).map_err(|e| anyhow!("batch: {e:?}"))?;
     // Sessions stepped only together hold their state alone (`new_batched`):
@@ -560,11 +569,11 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
     for &t in &args.threads {
         let times = on_threads(t, || r_steps(&model, &inp, args.warmup, args.runs)).with_context(|| format!("{name} R step, {t} threads"))?;
         r.push((t, stats(times)));
-        let times = on_threads(t, || s_steps(&model, "reprefill", 3, args.s_steps)).with_context(|| format!("{name} S step, {t} threads"))?;
+        let times = on_threads(t, || s_steps(&model, "reprefill", args.shift, 3, args.s_steps)).with_context(|| format!("{name} S step, {t} threads"))?;
         s.push((t, stats(times)));
     }
-    let arena_bytes = model.session_bytes(&s_config(&model, "reprefill")).map_err(|e| anyhow!("{e:?}"))?;
-    let state_bytes = model.batched_session_bytes(&s_config(&model, "reprefill")).map_err(|e| anyhow!("{e:?}"))?;
+    let arena_bytes = model.session_bytes(&s_config(&model, "reprefill", args.shift)).map_err(|e| anyhow!("{e:?}"))?;
+    let state_bytes = model.batched_session_bytes(&s_config(&model, "reprefill", args.shift)).map_err(|e| anyhow!("{e:?}"))?;
     let mut batch = Vec::new();
     let mut schedules = Vec::new();
     let mut batch_spread = Vec::new();
@@ -573,17 +582,17 @@ fn bench_dtype(name: &'static str, store_as: StoreAs, args: &Args) -> anyhow::Re
         // one re-prefill): the steady state.
         let steady = model.cfg.gpt.block_size as usize + 2;
         for sched in SCHEDULES {
-            let times = s_steps(&model, sched, steady, args.s_steps).with_context(|| format!("{name} S step, {sched} caches"))?;
-            schedules.push((sched, stats(times), model.session_bytes(&s_config(&model, sched)).map_err(|e| anyhow!("{e:?}"))?));
+            let times = s_steps(&model, sched, args.shift, steady, args.s_steps).with_context(|| format!("{name} S step, {sched} caches"))?;
+            schedules.push((sched, stats(times), model.session_bytes(&s_config(&model, sched, args.shift)).map_err(|e| anyhow!("{e:?}"))?));
         }
         for &n in &args.batch {
-            let times = batched_steps(&model, "reprefill", n, 3, args.s_steps).with_context(|| format!("{name}, {n} sessions stepped together"))?;
+            let times = batched_steps(&model, "reprefill", args.shift, n, 3, args.s_steps).with_context(|| format!("{name}, {n} sessions stepped together"))?;
             batch.push((n, stats(times)));
         }
         // The batch with spread caches, after start-up: no step where every
         // session re-prefills at once.
         for &n in &args.batch {
-            let times = batched_steps(&model, "spread", n, steady, args.s_steps).with_context(|| format!("{name}, {n} spread sessions stepped together"))?;
+            let times = batched_steps(&model, "spread", args.shift, n, steady, args.s_steps).with_context(|| format!("{name}, {n} spread sessions stepped together"))?;
             batch_spread.push((n, stats(times)));
         }
     }
@@ -596,6 +605,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Refuse every ISA this CPU lacks before anything runs.
     for name in &args.isa {
         crate::simd::select(name).map_err(|e| anyhow!("{e} [{cpu}]"))?;
+    }
+    // A shift is Duolando's and within its window: refused before anything runs.
+    if let Some(sh) = args.shift {
+        anyhow::ensure!(args.family == "duolando", "--shift is the Duolando S budget's window shift; not for --family {}", args.family);
+        let m = duolando_published().gpt.block_size as usize - 1;
+        anyhow::ensure!(sh <= m, "--shift {sh}: the published model's window shift is 1..={m}");
     }
     // A missing or wrong onnxruntime JSON is refused before anything runs.
     let ort = ort::from_args(args.ort_json.as_deref(), &args.family)?;
@@ -680,6 +695,8 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
     }
     let mut medians = ort::RStepMedians::default();
     let mut results = Vec::new();
+    // The window shift of every S budget below (the presets' unless --shift).
+    let shift = args.shift.unwrap_or(SessionConfig::reference(&duolando_published()).shift as usize);
     for d in &args.dtypes {
         let (name, store_as) = match d.as_str() {
             "f32" => ("f32", StoreAs::F32),
@@ -706,7 +723,7 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
         for (t, st) in &r.s {
             let gbps = r.model_bytes as f64 / (st.median_ms * 1e-3) / 1e9;
             say!(
-                "S step {:>4} t{t} (reference budget, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy, {:.0}% of read)  arena {:.2} MB ({:.2} MB stepped only in a StepBatch)",
+                "S step {:>4} t{t} (reference budget, shift {shift}, f16 K/V):   median {:8.2} ms  p99 {:8.2} ms  p99/median {:.2}  mean {:8.2} ms  weights {:7.1} MB/step  {:5.2} GB/s ({:.0}% of memcpy, {:.0}% of read)  arena {:.2} MB ({:.2} MB stepped only in a StepBatch)",
                 r.name,
                 st.median_ms,
                 st.p99_ms,
@@ -787,6 +804,7 @@ fn run_one(args: &Args, weights: Option<&crate::kernel_bench::Weights>, ort: Opt
         ] {
             j.insert(k.into(), null.clone());
         }
+        j.insert("s_shift".into(), shift.into());
         j.insert("memcpy_gbps_t1".into(), memcpy.into());
         j.insert("memcpy_gbps_t2".into(), memcpy_t2.into());
         j.insert("read_gbps_t1".into(), read.into());

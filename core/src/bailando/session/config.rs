@@ -55,8 +55,11 @@ pub enum Preset {
     /// R's numbers: sliding window, full decoder future (the slowest S:
     /// every step re-runs the window, as R's step does).
     Exact,
-    /// Full decoder future, the window shift scaled from Duolando's 22 of
-    /// 29 (21 of 28 at the published size).
+    /// Full decoder future, window shift `round(21 m / 28)` (21 of 28 at
+    /// the published size; Duolando's presets took 22 of 29 until
+    /// 2026-12-07, now 15). Bailando keeps the closer shift: its GPT rows
+    /// are cheap next to its step's weight read (the spread step's 3 rows
+    /// beyond its own cost 4.4 ms of 16 ms, docs/BAILANDO.md).
     Reference,
     /// Decoder future 2 tokens (a token's frames come 2 tokens later).
     Interactive,

@@ -49,7 +49,8 @@ pub const MAX_WINDOWS: usize = 16;
 
 pub use crate::error::Setting;
 pub use crate::nn::window::{
-    for_each_live_window, next_window, window_context, window_pool, window_start,
+    for_each_live_window, next_window, spread_rows, two_row_shift, window_context, window_pool,
+    window_start,
 };
 
 /// Largest `pending_frames` / `music_buffer_frames` (keeps every size far
@@ -77,12 +78,16 @@ pub fn dec_future_max(cfg: &ModelConfig) -> u32 {
 }
 
 impl SessionConfig {
-    /// The reference-quality budget (closest to R): `a = a_m = look_forward`,
-    /// `e`, `d` at their maxima, shift 22 for block size 30 (scaled as
-    /// `round(22 (bs-1) / 29)` for other block sizes).
+    /// The reference budget: `a = a_m = look_forward`, `e`, `d` at their
+    /// maxima (R's leader codes and frames), and the largest window shift
+    /// whose spread step computes at most two GPT rows (15 for block size
+    /// 30, [`two_row_shift`]; 22 until 2026-12-07, which computes four:
+    /// docs/STREAMING.md §7.3 has both shifts' agreement with R). A larger
+    /// `shift` (up to `block_size - 1`, R's sliding window) is closer to R
+    /// and costs more per step.
     pub fn reference(cfg: &ModelConfig) -> Self {
         let m = cfg.gpt.block_size.saturating_sub(1).max(1);
-        let shift = ((22 * m + 14) / 29).clamp(1, m);
+        let shift = two_row_shift(m as usize) as u32;
         let lf = cfg.gpt.look_forward;
         Self::with(cfg, lf, enc_future_max(cfg), dec_future_max(cfg), shift)
     }
@@ -207,7 +212,7 @@ impl SessionConfig {
 /// inspect`, `generate`, `compare`, the C ABI's `duo_session_config_preset`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Preset {
-    /// Closest to R: full look-ahead and conv context (291 frames = 9.7 s
+    /// R's leader codes and frames: full look-ahead and conv context (291 frames = 9.7 s
     /// on the published model), music known ahead (a track).
     Reference,
     /// An example interactive budget: `a = 4`, `e = d = 2` (31 frames,
@@ -343,12 +348,18 @@ mod published {
         let cache = 12 * 2 * 10 * 29 * 768 * 4;
         assert!(f32kv > cache && f32kv < cache + 40_000_000, "{f32kv}");
         assert!(f16kv < f32kv - cache / 3, "{f16kv} vs {f32kv}");
-        assert!(stag > f32kv + 3 * cache, "{stag}");
-        // Spread: a second cache of shift - 1 = 21 rows (the next window's
-        // rows before its jump) and its one-row tail.
         let row = cache / 29;
+        // Staggered: window_pool(29, 15) = 3 caches of 28 rows and a tail,
+        // two more than the lean one.
+        assert_eq!(r.shift, 15);
         assert!(
-            spread > f32kv + 21 * row && spread < f32kv + 22 * row,
+            stag > f32kv + 2 * 28 * row && stag < f32kv + 2 * 29 * row,
+            "{stag}"
+        );
+        // Spread: a second cache of shift - 1 = 14 rows (the next window's
+        // rows before its jump) and its one-row tail.
+        assert!(
+            spread > f32kv + 14 * row && spread < f32kv + 15 * row,
             "{spread} vs {f32kv}"
         );
         let spread16 = session_bytes_for(
