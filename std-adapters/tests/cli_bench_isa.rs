@@ -157,13 +157,17 @@ fn zero_runs_steps_threads_or_sessions_are_refused_by_name_not_a_panic() {
 }
 
 #[test]
-fn a_shift_outside_the_window_or_for_another_family_is_refused_before_anything_runs() {
+fn a_shift_outside_the_window_or_for_transflower_is_refused_before_anything_runs() {
     for (args, want) in [
         (&["--dtypes", "--shift", "0"][..], "--shift"),
         (&["--dtypes", "--shift", "30"][..], "window shift is 1..=29"),
         (
-            &["--dtypes", "--family", "bailando", "--shift", "15"][..],
-            "not for --family bailando",
+            &["--dtypes", "--family", "bailando", "--shift", "29"][..],
+            "bailando model's window shift is 1..=28",
+        ),
+        (
+            &["--dtypes", "--family", "transflower", "--shift", "15"][..],
+            "not for --family transflower",
         ),
     ] {
         let o = bench(args);

@@ -115,9 +115,9 @@ pub struct Args {
     /// default: /tmp/duolando_full/full_r_step.onnx when it exists.
     #[arg(long)]
     pub tract_onnx: Option<PathBuf>,
-    /// The GPT window shift of every S budget measured (`--family
-    /// duolando`; `1..=block_size - 1`). Default: the presets' (15 at full
-    /// size; 22 until 2026-12-07), so one run can time another shift's cost.
+    /// The GPT window shift of every S budget measured (`--family duolando`
+    /// or `bailando`; `1..=block_size - 1`). Default: the presets' (Duolando 15 at full
+    /// size, 22 until 2026-12-07), so one run can time another shift's cost.
     #[arg(long, value_parser = at_least_one)]
     pub shift: Option<usize>,
     /// Also write the figures as one flat JSON object.
@@ -606,11 +606,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for name in &args.isa {
         crate::simd::select(name).map_err(|e| anyhow!("{e} [{cpu}]"))?;
     }
-    // A shift is Duolando's and within its window: refused before anything runs.
+    // A shift is a GPT window's (Duolando, Bailando) and within it:
+    // refused before anything runs.
     if let Some(sh) = args.shift {
-        anyhow::ensure!(args.family == "duolando", "--shift is the Duolando S budget's window shift; not for --family {}", args.family);
-        let m = duolando_published().gpt.block_size as usize - 1;
-        anyhow::ensure!(sh <= m, "--shift {sh}: the published model's window shift is 1..={m}");
+        let m = match args.family.as_str() {
+            "duolando" => duolando_published().gpt.block_size as usize - 1,
+            "bailando" => duolando_core::bailando::session::window_rows(&duolando_core::bailando::config::published()),
+            other => anyhow::bail!("--shift is the S budget's GPT window shift (duolando, bailando); not for --family {other}"),
+        };
+        anyhow::ensure!(sh <= m, "--shift {sh}: the published {} model's window shift is 1..={m}", args.family);
     }
     // A missing or wrong onnxruntime JSON is refused before anything runs.
     let ort = ort::from_args(args.ort_json.as_deref(), &args.family)?;
@@ -933,7 +937,10 @@ fn bench_bailando(args: &Args, ort: Option<&ort::OrtBaseline>, memcpy: f64, j: &
         let schedules = [(SoloPreset::Reference, false), (SoloPreset::Reference, true), (SoloPreset::Interactive, false), (SoloPreset::Interactive, true), (SoloPreset::Minimum, false)];
         for (preset, spread) in schedules {
             let schedule = if spread { duolando_core::nn::window::CacheSchedule::Spread } else { duolando_core::nn::window::CacheSchedule::Reprefill };
-            let sc = SoloConfig { kv: duolando_core::nn::kv_store::KvType::F16, schedule, ..SoloConfig::preset(&cfg, preset) };
+            let mut sc = SoloConfig { kv: duolando_core::nn::kv_store::KvType::F16, schedule, ..SoloConfig::preset(&cfg, preset) };
+            if let Some(sh) = args.shift {
+                sc.shift = sh as u32;
+            }
             let bytes = duolando_core::bailando::session::session_bytes_for(&cfg, &sc).map_err(|e| anyhow!("{e:?}"))?;
             // At least four window jumps (every block_size - shift steps), so p99 sees the re-prefills.
             let period = (c + 1 - sc.shift as usize).max(1);

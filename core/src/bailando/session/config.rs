@@ -58,8 +58,9 @@ pub enum Preset {
     /// Full decoder future, window shift `round(21 m / 28)` (21 of 28 at
     /// the published size; Duolando's presets took 22 of 29 until
     /// 2026-12-07, now 15). Bailando keeps the closer shift: its GPT rows
-    /// are cheap next to its step's weight read (the spread step's 3 rows
-    /// beyond its own cost 4.4 ms of 16 ms, docs/BAILANDO.md).
+    /// are cheap next to its step's weight read (at 15 the spread step is
+    /// 22 % faster), and at 15 the demo clip's one-step agreement with R
+    /// fell from 0.997 to 0.957 (docs/BAILANDO.md).
     Reference,
     /// Decoder future 2 tokens (a token's frames come 2 tokens later).
     Interactive,
