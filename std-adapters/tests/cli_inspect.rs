@@ -31,6 +31,7 @@ fn inspect_prints_the_tiny_config() {
         "R mode is offline",
         "reference    a 29 e 22 d 22 shift 15: latency 291 frames (9.70 s)",
         "minimum      a 0 e 0 d 0 shift 15: latency 0 frames (0.00 s)",
+        "latency with music pushed live 291 frames; 2 GPT window rows a step",
     ] {
         assert!(s.contains(want), "missing '{want}' in:\n{s}");
     }
@@ -127,6 +128,12 @@ fn inspect_json_parses_and_agrees_with_the_file() {
     assert_eq!(own, model.session_bytes(&one).unwrap() as u64);
     assert_eq!(bound, model.batched_session_bytes(&one).unwrap() as u64);
     assert!(bound < own, "{bound} vs {own}");
+    // Every preset's spread step computes two GPT window rows (shift 15 of a
+    // 29-row window: its own and one of the next window's).
+    for x in b.as_array().unwrap() {
+        assert_eq!(x["shift"].as_u64(), Some(15), "{x}");
+        assert_eq!(x["gpt_rows_per_step"].as_u64(), Some(2), "{x}");
+    }
 }
 
 #[test]

@@ -425,6 +425,9 @@ fn streaming(duo: &duolando_core::format::DuoFile<'_>) -> Result<Value> {
                 // That one bound to a step batch (its state alone: `Session::new_batched`,
                 // C `duo_session_new_batched`).
                 "arena_bytes_reprefill_bound": model.batched_session_bytes(&SessionConfig { schedule: CacheSchedule::Reprefill, ..sc }).ok(),
+                // GPT window rows a spread step computes after start-up (its own
+                // and its share of the next window's): what a larger shift costs.
+                "gpt_rows_per_step": duolando_core::nn::window::spread_rows(cfg.gpt.block_size as usize - 1, sc.shift as usize),
             })
         })
         .collect();
@@ -551,7 +554,7 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
     ));
     for b in st["budgets"].as_array().into_iter().flatten() {
         line(format!(
-            "  {:<12} a {} e {} d {} shift {}: latency {} frames ({:.2} s), session arena {} ({} with --reprefill, {} bound to a step batch); music look-ahead {}, latency with music pushed live {} frames",
+            "  {:<12} a {} e {} d {} shift {}: latency {} frames ({:.2} s), session arena {} ({} with --reprefill, {} bound to a step batch); music look-ahead {}, latency with music pushed live {} frames; {} GPT window rows a step",
             b["budget"].as_str().unwrap_or(""),
             b["lookahead"],
             b["enc_future"],
@@ -563,7 +566,8 @@ fn text(r: &Value, cfg: &ModelConfig) -> String {
             b["arena_bytes_reprefill"].as_u64().map(mib).unwrap_or_else(|| "?".into()),
             b["arena_bytes_reprefill_bound"].as_u64().map(mib).unwrap_or_else(|| "?".into()),
             b["music_lookahead"],
-            b["live_latency_frames"]
+            b["live_latency_frames"],
+            b["gpt_rows_per_step"]
         ));
     }
     s
