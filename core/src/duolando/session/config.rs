@@ -49,8 +49,7 @@ pub const MAX_WINDOWS: usize = 16;
 
 pub use crate::error::Setting;
 pub use crate::nn::window::{
-    for_each_live_window, next_window, spread_rows, two_row_shift, window_context, window_pool,
-    window_start,
+    for_each_live_window, next_window, two_row_shift, window_context, window_pool, window_start,
 };
 
 /// Largest `pending_frames` / `music_buffer_frames` (keeps every size far
