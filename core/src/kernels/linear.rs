@@ -548,11 +548,8 @@ fn linear_q8_on<W: Q8Source + Sync, const N: usize>(
                     && nb <= simd::PACK_BLOCKS));
         // The tile pair kernel's panels (without AMX: it takes the rows
         // one after another) are quantised straight into its call groups.
-        let grouped = packed
-            && p1 - p0 >= PAIR_MIN_ROWS
-            && nb <= simd::PACK_BLOCKS
-            && simd::pair_enabled()
-            && !simd::amx_enabled();
+        let grouped =
+            packed && p1 - p0 >= PAIR_MIN_ROWS && simd::pair_takes(nb) && !simd::amx_enabled();
         if grouped {
             quantise_grouped(&x[p0 * n_in..p1 * n_in], n_in, q, d, c);
         } else {
@@ -859,8 +856,8 @@ fn q8_panel_tiles<W: Q8Source, const WB: usize>(
 /// [`q8_panel_tiles`] over packed tiles of 8 weight rows (stored packed,
 /// or packed once per tile: [`Q8Source::packed_tile`]) and activation
 /// tiles of up to [`PACKED_CALL_ROWS`] rows ([`simd::gemm_q8_packed`]).
-/// Where the tile pair kernels run ([`simd::pair_enabled`]: AVX-512 VNNI, AVX-VNNI)
-/// and the panel has at least [`PAIR_MIN_ROWS`] rows, tiles go in pairs,
+/// Where the tile pair kernels run ([`simd::pair_takes`]: AVX-512 VNNI, AVX-VNNI,
+/// AVX2 up to 1536 values a row) and the panel has at least [`PAIR_MIN_ROWS`] rows, tiles go in pairs,
 /// laid out once per pair as one 16-row operand ([`simd::TilePair`]). With
 /// AMX ([`simd::amx_enabled`], at least [`AMX_MIN_ROWS`] rows) the whole
 /// 8-row groups of activation rows take the AMX kernel and the rows after
@@ -880,7 +877,7 @@ fn q8_panel_packed<W: Q8Source>(
     const R: usize = simd::PACK_ROWS;
     let nb = n_in / Q8_BLOCK;
     let (mut pack, mut buf) = (None, None);
-    let mut pair = (n_rows >= PAIR_MIN_ROWS && simd::pair_enabled()).then(simd::TilePair::new);
+    let mut pair = (n_rows >= PAIR_MIN_ROWS && simd::pair_takes(nb)).then(simd::TilePair::new);
     // The AMX kernel's rows of this panel (whole 8-row groups; 0 if it would refuse the extents).
     let amx_planned = if n_rows >= AMX_MIN_ROWS && simd::amx_enabled() {
         simd::amx_rows(nb, n_rows * n_in, n_in, n_rows * nb, n_rows)
@@ -942,7 +939,7 @@ fn q8_panel_packed<W: Q8Source>(
         // reached, kept so that a refusal never leaves outputs unwritten)
         // per tile on the 8-row kernel.
         let on_pair = prepared
-            && a.unsigned()
+            && a.ready()
             && pair_rows(a, p, done, n_rows, n_in, rest, |i0, rows| {
                 put_rows(&mut y, e, i0, t0, cols, rows)
             });

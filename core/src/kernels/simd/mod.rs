@@ -1300,13 +1300,28 @@ pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
 }
 
 /// Whether the tile pair kernels run ([`tile_pair::enabled`]: AVX-512
-/// VNNI or AVX-VNNI; never off x86_64).
+/// VNNI, AVX-VNNI, AVX2; never off x86_64).
 #[inline]
 pub fn pair_enabled() -> bool {
     #[cfg(target_arch = "x86_64")]
     return tile_pair::enabled();
     #[cfg(not(target_arch = "x86_64"))]
     false
+}
+
+/// Whether the tile pair kernels run ([`pair_enabled`]) on rows of `nb`
+/// blocks: at most [`PACK_BLOCKS`], and on AVX2, whose operand holds its
+/// values as i16, at most [`tile_pair::WIDE_BLOCKS`].
+#[inline]
+pub fn pair_takes(nb: usize) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return tile_pair::enabled()
+        && nb <= if tile_pair::wide_isa() { tile_pair::WIDE_BLOCKS } else { PACK_BLOCKS };
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = nb;
+        false
+    }
 }
 
 /// Whether the AMX int8 kernel runs ([`amx::enabled`]; never off x86_64).
@@ -1345,6 +1360,10 @@ mod no_amx {
         }
         /// Always false.
         pub fn unsigned(&self) -> bool {
+            false
+        }
+        /// Always false.
+        pub fn ready(&self) -> bool {
             false
         }
     }

@@ -3583,6 +3583,125 @@ fn q8_panel(r: &mut Rng, rows: usize, nb: usize, outlier: usize) -> (Vec<i8>, Ve
     (qs, ds, cs)
 }
 
+/// The magnitude scale of weight row `j` of a packed tile dotted with one
+/// quantised activation row: `sum_b |s_j,b xd_b| sum_i |w x|` (the bound
+/// the scalar-twin comparisons scale by).
+#[cfg(target_arch = "x86_64")]
+fn tile_row_mag(tl: super::PackedQ8<'_>, j: usize, q: &[i8], d: &[f32]) -> f64 {
+    (0..q.len() / Q8_BLOCK)
+        .map(|bk| {
+            let a: i64 = (0..Q8_BLOCK).map(|i| (tl.value(bk, j, i) as i64 * q[bk * 32 + i] as i64).abs()).sum();
+            (super::f16_to_f32(tl.scale_bits(bk, j)) as f64 * d[bk] as f64).abs() * a as f64
+        })
+        .sum()
+}
+
+/// The first `rows` rows of a row-major panel of `keep` blocks per row as
+/// the pair kernels read one call group: block b of row m at index b * rows
+/// + m (values x32, scales, corrections x2).
+#[cfg(target_arch = "x86_64")]
+fn group_panel(q: &[i8], d: &[f32], c: &[i32], rows: usize, keep: usize) -> (Vec<i8>, Vec<f32>, Vec<i32>) {
+    let (mut gq, mut gd, mut gc) = (
+        vec![0i8; rows * keep * Q8_BLOCK],
+        vec![0f32; rows * keep],
+        vec![0i32; 2 * rows * keep],
+    );
+    for m in 0..rows {
+        for b in 0..keep {
+            let i = b * rows + m;
+            assert_eq!(i, super::pair_group_index(b, m, rows));
+            let src = (m * keep + b) * Q8_BLOCK;
+            gq[i * Q8_BLOCK..(i + 1) * Q8_BLOCK].copy_from_slice(&q[src..src + Q8_BLOCK]);
+            gd[i] = d[m * keep + b];
+            gc[2 * i..2 * i + 2].copy_from_slice(&c[2 * (m * keep + b)..2 * (m * keep + b) + 2]);
+        }
+    }
+    (gq, gd, gc)
+}
+
+/// The AVX2 pair kernel over the wide layout (`gemm_q8_pair_avx2_raw`)
+/// against the AVX2 8-row kernel per tile, bit for bit, and the scalar
+/// twin, for 1-8 rows, int8 and 4-bit tiles, every width up to
+/// `WIDE_BLOCKS` blocks; and its refusals (wider tiles, tiles not laid out
+/// wide, 0 or 9 rows, short operands).
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn wide_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
+    use super::tile_pair::{gemm_q8_pair_avx2_raw, TilePair, WIDE_BLOCKS};
+    use super::PACK_ROWS;
+    use std::is_x86_feature_detected as has;
+    if !(has!("avx2") && has!("fma") && has!("f16c")) {
+        eprintln!("skipped: this CPU has no AVX2");
+        return;
+    }
+    // SAFETY (whole test): avx2, fma and f16c were detected above.
+    let mut r = Rng(0x31de);
+    let mut checked = 0;
+    for nb in [1usize, 2, 3, 7, 24, WIDE_BLOCKS - 1, WIDE_BLOCKS] {
+        let n = nb * Q8_BLOCK;
+        for q4 in [false, true] {
+            let two = TwoTiles::new(&mut r, nb, q4);
+            let tile = two.tiles();
+            let mut w = TilePair::new();
+            for (t, tl) in tile.iter().enumerate() {
+                assert!(unsafe { w.prepare_raw_wide(t, *tl) } && !w.unsigned(), "nb={nb}");
+            }
+            assert!(w.wide());
+            let (qs, ds, cs) = q8_panel(&mut r, PAIR_CALL_ROWS_MAX, nb, 2);
+            macro_rules! check {
+                ($m:literal) => {{
+                    let (gq, gd, _) = group_panel(&qs, &ds, &cs, $m, nb);
+                    let ahead = two.rows[1][0].as_slice();
+                    let got = unsafe { gemm_q8_pair_avx2_raw::<$m>(&w, &gq, &gd, n, ahead) }.expect("runs");
+                    let q: [&[i8]; $m] = core::array::from_fn(|m| &qs[m * n..(m + 1) * n]);
+                    let d: [&[f32]; $m] = core::array::from_fn(|m| &ds[m * nb..(m + 1) * nb]);
+                    let c: [&[i32]; $m] = core::array::from_fn(|m| &cs[2 * m * nb..2 * (m + 1) * nb]);
+                    for (t, tl) in tile.iter().enumerate() {
+                        let want = unsafe { super::x86::gemm_q8_packed_avx2::<$m>(*tl, q, d, c) };
+                        let twin = scalar::gemm_q8_packed::<$m>(*tl, q, d, c);
+                        for m in 0..$m {
+                            for j in 0..PACK_ROWS {
+                                let what = format!("nb={nb} q4={q4} rows={} row {m} tile {t} column {j}", $m);
+                                let g = got[m][PACK_ROWS * t + j];
+                                assert_eq!(g.to_bits(), want[m][j].to_bits(), "{what}");
+                                check(&what, g, twin[m][j], tile_row_mag(*tl, j, q[m], d[m]), SIMD_VS_SCALAR_GEMM_Q8);
+                            }
+                        }
+                    }
+                    checked += 1;
+                }};
+            }
+            check!(1);
+            check!(2);
+            check!(3);
+            check!(4);
+            check!(5);
+            check!(6);
+            check!(7);
+            check!(8);
+            // Refusals: no rows, more rows than a call takes, operands short of the rows asked for.
+            let (gq, gd, _) = group_panel(&qs, &ds, &cs, 8, nb);
+            assert!(unsafe { gemm_q8_pair_avx2_raw::<0>(&w, &gq, &gd, n, &[]) }.is_none());
+            let (q9, d9) = ([gq.clone(), gq.clone()].concat(), [gd.clone(), gd.clone()].concat());
+            assert!(unsafe { gemm_q8_pair_avx2_raw::<9>(&w, &q9, &d9, n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_avx2_raw::<8>(&w, &gq[1..], &gd, n, &[]) }.is_none());
+            assert!(unsafe { gemm_q8_pair_avx2_raw::<8>(&w, &gq, &gd[1..], n, &[]) }.is_none());
+            // A tile laid out for the VNNI kernels is not taken.
+            assert!(unsafe { w.prepare_raw_avx2(1, tile[1], true) } && !w.wide());
+            assert!(unsafe { gemm_q8_pair_avx2_raw::<8>(&w, &gq, &gd, n, &[]) }.is_none());
+        }
+    }
+    assert_eq!(checked, 7 * 2 * 8);
+    // Wider than the operand holds as i16: refused.
+    let two = TwoTiles::new(&mut r, WIDE_BLOCKS + 1, false);
+    let mut w = TilePair::new();
+    assert!(!unsafe { w.prepare_raw_wide(0, two.tiles()[0]) });
+}
+
+/// The most rows of a pair call (`tile_pair::PAIR_CALL_ROWS`).
+#[cfg(target_arch = "x86_64")]
+const PAIR_CALL_ROWS_MAX: usize = super::tile_pair::PAIR_CALL_ROWS;
+
 /// Two tiles of 8 random weight rows of `nb` blocks as the packed kernels
 /// read them: int8 rows packed on the stack, or stored 4-bit groups.
 #[cfg(target_arch = "x86_64")]
@@ -3745,27 +3864,7 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                 }
                 (q, d, c)
             };
-            // The first `rows` rows of a row-major panel of `keep` blocks per
-            // row as the kernel reads one call group: block b of row m at
-            // index b * rows + m (values x32, scales, corrections x2).
-            let grouped = |q: &[i8], d: &[f32], c: &[i32], rows: usize, keep: usize| {
-                let (mut gq, mut gd, mut gc) = (
-                    vec![0i8; rows * keep * Q8_BLOCK],
-                    vec![0f32; rows * keep],
-                    vec![0i32; 2 * rows * keep],
-                );
-                for m in 0..rows {
-                    for b in 0..keep {
-                        let i = b * rows + m;
-                        assert_eq!(i, super::pair_group_index(b, m, rows));
-                        let src = (m * keep + b) * Q8_BLOCK;
-                        gq[i * Q8_BLOCK..(i + 1) * Q8_BLOCK].copy_from_slice(&q[src..src + Q8_BLOCK]);
-                        gd[i] = d[m * keep + b];
-                        gc[2 * i..2 * i + 2].copy_from_slice(&c[2 * (m * keep + b)..2 * (m * keep + b) + 2]);
-                    }
-                }
-                (gq, gd, gc)
-            };
+            let grouped = group_panel;
             let ahead = rows[1][0].as_slice();
             macro_rules! check {
                 ($m:literal) => {{
@@ -3791,16 +3890,7 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                                     let what = format!("{isa} nb={nb} q4={q4} rows={} keep={keep} row {m} tile {t} column {j}", $m);
                                     let g = got[m][PACK_ROWS * t + j];
                                     assert_eq!(g.to_bits(), want[m][j].to_bits(), "{what}");
-                                    let mag: f64 = (0..q[m].len() / Q8_BLOCK)
-                                        .map(|bk| {
-                                            let a: i64 = (0..Q8_BLOCK)
-                                                .map(|i| (tl.value(bk, j, i) as i64 * q[m][bk * 32 + i] as i64).abs())
-                                                .sum();
-                                            (super::f16_to_f32(tl.scale_bits(bk, j)) as f64 * d[m][bk] as f64).abs()
-                                                * a as f64
-                                        })
-                                        .sum();
-                                    check(&what, g, twin[m][j], mag, SIMD_VS_SCALAR_GEMM_Q8);
+                                    check(&what, g, twin[m][j], tile_row_mag(*tl, j, q[m], d[m]), SIMD_VS_SCALAR_GEMM_Q8);
                                 }
                             }
                         }

@@ -1,7 +1,8 @@
 //! Two packed tiles of 8 weight rows as one operand of 16 four-byte
 //! columns ([`TilePair`]), laid out once per tile pair of a GEMM, and the
 //! VNNI kernels over it ([`gemm_q8_pair`]: AVX-512 VNNI, and AVX-VNNI on
-//! 32-byte vectors, two activation rows at a time): up to
+//! 32-byte vectors, two activation rows at a time; on AVX2 without VNNI a
+//! layout of its own, [`TilePair::wide`], and `vpmaddwd`): up to
 //! [`PAIR_CALL_ROWS`] activation rows x 16 weight rows per call,
 //! bit-identical to [`super::gemm_q8_packed`] on each tile. The AMX kernel
 //! ([`super::amx`]) takes the same operand as its `B` tiles.
@@ -44,6 +45,8 @@ use super::{
 
 /// Bytes of one block's operand: 8 rows of 64 bytes (16 columns x 4 bytes).
 pub(super) const B_BLOCK: usize = 512;
+/// Blocks of the widest pair laid out wide (its i16 values fill the operand).
+pub const WIDE_BLOCKS: usize = PACK_BLOCKS / 2;
 /// Block pairs of the widest prepared tile.
 pub(super) const PAIRS: usize = PACK_BLOCKS.div_ceil(2);
 /// Weight rows of a prepared pair: the kernels' output columns.
@@ -53,14 +56,22 @@ pub const COLS: usize = 2 * PACK_ROWS;
 pub const PAIR_CALL_ROWS: usize = 8;
 
 /// Whether the tile pair kernels run: the selected ISA is AVX-512 VNNI
-/// ([`gemm_q8_pair_raw`]) or AVX-VNNI ([`gemm_q8_pair_avxvnni_raw`], the
-/// same operand on 32-byte vectors). Not AVX2: the same kernel with
-/// `vpmaddubsw` and the sign trick (4 instructions per 32 products, the
-/// operand stored signed) was no faster than the 8-row kernel there (42-50%
-/// of the AVX2 peak against 43-54%, Intel Xeon capped to AVX2, 2026-12-06).
+/// ([`gemm_q8_pair_raw`]), AVX-VNNI ([`gemm_q8_pair_avxvnni_raw`], the
+/// same operand on 32-byte vectors) or AVX2 / AVX-512 without VNNI
+/// ([`gemm_q8_pair_avx2_raw`] over the wide layout: [`wide_isa`]).
 #[inline]
 pub fn enabled() -> bool {
-    matches!(super::isa(), Isa::Avx512Vnni | Isa::AvxVnni)
+    matches!(super::isa(), Isa::Avx512Vnni | Isa::AvxVnni) || wide_isa()
+}
+
+/// Whether the selected ISA takes the wide layout ([`TilePair::wide`]):
+/// AVX2, and AVX-512 without VNNI (its kernel on 32-byte vectors). The VNNI
+/// operand with `vpmaddubsw` and the sign trick instead (4 instructions per
+/// 32 products) was no faster than the 8-row kernel there (42-50% of the
+/// AVX2 peak against 43-54%, Intel Xeon capped to AVX2, 2026-12-06).
+#[inline]
+pub fn wide_isa() -> bool {
+    matches!(super::isa(), Isa::Avx2 | Isa::Avx512)
 }
 
 /// The `B` operands of two packed tiles of 8 weight rows (tile `t`: the
@@ -78,6 +89,11 @@ pub struct TilePair {
     /// Per tile: its bytes stored unsigned (`w + 128`, what `vpdpbusd`
     /// multiplies) instead of signed (what the AMX kernel takes).
     pub(super) unsigned: [bool; 2],
+    /// Per tile: laid out wide (the AVX2 kernel's operand,
+    /// [`prepare_b_wide`]: per block, 1024 bytes, and pair `j` of values,
+    /// the tile's 8 rows' values `2j, 2j + 1` as i16 at byte `64 j + 32 t`;
+    /// at most [`WIDE_BLOCKS`] blocks) instead of in 4-byte pieces.
+    pub(super) wide: [bool; 2],
 }
 
 impl TilePair {
@@ -87,6 +103,7 @@ impl TilePair {
             s: [[[0.0; 16]; PAIRS]; 2],
             nb: [0; 2],
             unsigned: [false; 2],
+            wide: [false; 2],
         }
     }
 
@@ -105,6 +122,10 @@ impl TilePair {
         if !enabled() {
             return false;
         }
+        if wide_isa() {
+            // SAFETY: the Avx2 and Avx512 ISAs' `set_isa` contract covers avx2 and f16c.
+            return unsafe { self.prepare_raw_wide(half, w) };
+        }
         let unsigned = !super::amx::enabled();
         if super::isa() == Isa::AvxVnni {
             // SAFETY: the AvxVnni ISA's `set_isa` contract covers avx2 and f16c.
@@ -121,7 +142,7 @@ impl TilePair {
     /// calls (test `tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit`). False where either
     /// call would be; on AVX-VNNI (no AVX-512) the two calls.
     pub fn prepare_both(&mut self, w0: PackedQ8<'_>, w1: PackedQ8<'_>) -> bool {
-        if !enabled() || super::isa() == Isa::AvxVnni || w0.blocks() != w1.blocks() {
+        if !enabled() || super::isa() == Isa::AvxVnni || wide_isa() || w0.blocks() != w1.blocks() {
             return self.prepare(0, w0) && self.prepare(1, w1);
         }
         let unsigned = !super::amx::enabled();
@@ -150,6 +171,7 @@ impl TilePair {
         unsafe { prepare_b_both(w0, w1, nb, unsigned, &mut self.b, &mut self.s) };
         self.nb = [nb; 2];
         self.unsigned = [unsigned; 2];
+        self.wide = [false; 2];
         true
     }
 
@@ -157,6 +179,38 @@ impl TilePair {
     /// kernels take (signed pairs are the AMX kernel's).
     pub fn unsigned(&self) -> bool {
         self.unsigned == [true; 2]
+    }
+
+    /// Whether both tiles are laid out wide: the operand the AVX2 pair
+    /// kernel takes ([`gemm_q8_pair_avx2_raw`]).
+    pub fn wide(&self) -> bool {
+        self.wide == [true; 2]
+    }
+
+    /// Whether the pair kernel of the selected ISA takes this operand as
+    /// laid out ([`gemm_q8_pair`]; false for the AMX kernel's signed pairs).
+    pub fn ready(&self) -> bool {
+        if wide_isa() {
+            self.wide()
+        } else {
+            self.unsigned()
+        }
+    }
+
+    /// Tile `half` laid out wide ([`Self::wide`]) without the ISA check.
+    ///
+    /// # Safety
+    /// The CPU must support avx2 and f16c.
+    pub unsafe fn prepare_raw_wide(&mut self, half: usize, w: PackedQ8<'_>) -> bool {
+        let Some(nb) = self.checked_blocks(half, w).filter(|&nb| nb <= WIDE_BLOCKS) else {
+            return false;
+        };
+        // SAFETY: the caller's features; the extents were checked above.
+        unsafe { prepare_b_wide(w, nb, half, &mut self.b, &mut self.s) };
+        self.nb[half] = nb;
+        self.unsigned[half] = false;
+        self.wide[half] = true;
+        true
     }
 
     /// [`Self::prepare`] without the [`enabled`] check, the bytes stored
@@ -172,6 +226,7 @@ impl TilePair {
         unsafe { prepare_b(w, nb, half, unsigned, &mut self.b, &mut self.s) };
         self.nb[half] = nb;
         self.unsigned[half] = unsigned;
+        self.wide[half] = false;
         true
     }
 
@@ -192,6 +247,7 @@ impl TilePair {
         unsafe { prepare_b_avx2(w, nb, half, unsigned, &mut self.b, &mut self.s) };
         self.nb[half] = nb;
         self.unsigned[half] = unsigned;
+        self.wide[half] = false;
         true
     }
 
@@ -370,6 +426,99 @@ unsafe fn prepare_scales(
     }
 }
 
+/// Block `b`'s four 64-byte lines of a packed tile as signed bytes (4-bit
+/// tiles widened to `q - 8`), on 32-byte vectors: `[g][i]` = bytes `32 i ..
+/// 32 i + 32` of line `g` (rows `4 i .. 4 i + 4`, 8 bytes each).
+///
+/// # Safety
+/// avx2; `w.v` holds block `b`.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn block_lines_avx2(w: PackedQ8<'_>, b: usize) -> [[__m256i; 2]; 4] {
+    if w.q4 {
+        let (low, eight) = (_mm256_set1_epi8(0x0f), _mm256_set1_epi8(8));
+        let vb = &w.v[PACK_BLOCK_NIBBLES * b..PACK_BLOCK_NIBBLES * (b + 1)];
+        // SAFETY: vb holds 4 x 32 bytes.
+        let h: [__m256i; 4] = core::array::from_fn(|k| unsafe {
+            _mm256_loadu_si256(vb.as_ptr().add(32 * k) as *const _)
+        });
+        let lo = |v: __m256i| _mm256_sub_epi8(_mm256_and_si256(v, low), eight);
+        let hi =
+            |v: __m256i| _mm256_sub_epi8(_mm256_and_si256(_mm256_srli_epi16::<4>(v), low), eight);
+        [
+            [lo(h[0]), lo(h[1])],
+            [lo(h[2]), lo(h[3])],
+            [hi(h[0]), hi(h[1])],
+            [hi(h[2]), hi(h[3])],
+        ]
+    } else {
+        let vb = &w.v[PACK_BLOCK_VALUES * b..PACK_BLOCK_VALUES * (b + 1)];
+        // SAFETY: vb holds 8 x 32 bytes.
+        core::array::from_fn(|g| {
+            core::array::from_fn(|i| unsafe {
+                _mm256_loadu_si256(vb.as_ptr().add(64 * g + 32 * i) as *const _)
+            })
+        })
+    }
+}
+
+/// [`TilePair::prepare_raw_wide`]'s layout of tile `half`: per block (1024
+/// bytes), line `g` (8 rows x 8 bytes) transposed at 2-byte grain into the
+/// four pairs `j = 4 g .. 4 g + 4` (row `n`'s bytes `2j, 2j + 1` at `2n`),
+/// each widened to 16 i16 (`vpmovsxbw`, exact) and stored at byte `64 j +
+/// 32 half`; the scales as [`prepare_scales`].
+///
+/// # Safety
+/// avx2 and f16c; `w.v` holds `nb` blocks, `w.s` their scales, `out` `nb *
+/// 2 B_BLOCK` bytes, `nb <= WIDE_BLOCKS`.
+#[target_feature(enable = "avx2,f16c")]
+unsafe fn prepare_b_wide(
+    w: PackedQ8<'_>,
+    nb: usize,
+    half: usize,
+    out: &mut [u8],
+    scales: &mut [[[f32; 16]; PAIRS]; 2],
+) {
+    for (b, ob) in out.chunks_exact_mut(2 * B_BLOCK).take(nb).enumerate() {
+        // SAFETY: w holds block b < nb (the caller's); the caller's features.
+        let lines = unsafe { block_lines_avx2(w, b) };
+        for (g, [l0, l1]) in lines.iter().enumerate() {
+            // 16-bit words: row r's pair p of this line is word 4r + p.
+            let (r01, r23) = (
+                _mm256_castsi256_si128(*l0),
+                _mm256_extracti128_si256::<1>(*l0),
+            );
+            let (r45, r67) = (
+                _mm256_castsi256_si128(*l1),
+                _mm256_extracti128_si256::<1>(*l1),
+            );
+            // [r0p0 r2p0 r0p1 r2p1 ..], [r1p0 r3p0 ..], likewise rows 4-7.
+            let (t0, t1) = (_mm_unpacklo_epi16(r01, r23), _mm_unpackhi_epi16(r01, r23));
+            let (t2, t3) = (_mm_unpacklo_epi16(r45, r67), _mm_unpackhi_epi16(r45, r67));
+            // [r0p0 r1p0 r2p0 r3p0 r0p1 r1p1 r2p1 r3p1], then p2, p3; likewise rows 4-7.
+            let (u0, u1) = (_mm_unpacklo_epi16(t0, t1), _mm_unpackhi_epi16(t0, t1));
+            let (u2, u3) = (_mm_unpacklo_epi16(t2, t3), _mm_unpackhi_epi16(t2, t3));
+            let pairs = [
+                _mm_unpacklo_epi64(u0, u2),
+                _mm_unpackhi_epi64(u0, u2),
+                _mm_unpacklo_epi64(u1, u3),
+                _mm_unpackhi_epi64(u1, u3),
+            ];
+            for (p, v) in pairs.into_iter().enumerate() {
+                // SAFETY: ob holds 2 B_BLOCK = 1024 bytes; 64 (4g + p) + 32 half + 32 <= 1024.
+                unsafe {
+                    _mm256_storeu_si256(
+                        ob.as_mut_ptr().add(64 * (4 * g + p) + 32 * half) as *mut _,
+                        _mm256_cvtepi8_epi16(v),
+                    )
+                };
+            }
+        }
+    }
+    // SAFETY: the caller's features include f16c; the extents are the caller's.
+    unsafe { prepare_scales(w, nb, half, scales) };
+}
+
 /// [`prepare_b`] on 32-byte vectors (for CPUs without AVX-512): the same
 /// bytes and scales.
 ///
@@ -384,39 +533,13 @@ unsafe fn prepare_b_avx2(
     out: &mut [u8],
     scales: &mut [[[f32; 16]; PAIRS]; 2],
 ) {
-    let low = _mm256_set1_epi8(0x0f);
     let flip = _mm256_set1_epi8(if unsigned { -128 } else { 0 });
-    let eight = _mm256_set1_epi8(8);
     // A stored line's 32-byte half holds 4 rows' (h = 0, h = 1) dword pairs:
     // the even dwords (h = 0) to its low 128 bits, the odd ones to its high.
     let split = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
     for (b, ob) in out.chunks_exact_mut(B_BLOCK).take(nb).enumerate() {
-        // lines[g][i]: bytes 32i .. 32i + 32 of line g (rows 4i .. 4i + 4).
-        let lines: [[__m256i; 2]; 4] = if w.q4 {
-            let vb = &w.v[PACK_BLOCK_NIBBLES * b..PACK_BLOCK_NIBBLES * (b + 1)];
-            // SAFETY: vb holds 4 x 32 bytes.
-            let h: [__m256i; 4] = core::array::from_fn(|k| unsafe {
-                _mm256_loadu_si256(vb.as_ptr().add(32 * k) as *const _)
-            });
-            let lo = |v: __m256i| _mm256_sub_epi8(_mm256_and_si256(v, low), eight);
-            let hi = |v: __m256i| {
-                _mm256_sub_epi8(_mm256_and_si256(_mm256_srli_epi16::<4>(v), low), eight)
-            };
-            [
-                [lo(h[0]), lo(h[1])],
-                [lo(h[2]), lo(h[3])],
-                [hi(h[0]), hi(h[1])],
-                [hi(h[2]), hi(h[3])],
-            ]
-        } else {
-            let vb = &w.v[PACK_BLOCK_VALUES * b..PACK_BLOCK_VALUES * (b + 1)];
-            // SAFETY: vb holds 8 x 32 bytes.
-            core::array::from_fn(|g| {
-                core::array::from_fn(|i| unsafe {
-                    _mm256_loadu_si256(vb.as_ptr().add(64 * g + 32 * i) as *const _)
-                })
-            })
-        };
+        // SAFETY: w holds block b < nb (the caller's); the caller's features.
+        let lines = unsafe { block_lines_avx2(w, b) };
         for (g, [l0, l1]) in lines.iter().enumerate() {
             let (a, c) = (
                 _mm256_permutevar8x32_epi32(*l0, split),
@@ -463,30 +586,185 @@ pub fn gemm_q8_pair<const M: usize>(
         Isa::Avx512Vnni => unsafe { gemm_q8_pair_raw(w, xq, xd, xc, n_in, ahead) },
         // SAFETY: the AvxVnni ISA's `set_isa` contract covers the kernel's features.
         Isa::AvxVnni => unsafe { gemm_q8_pair_avxvnni_raw(w, xq, xd, xc, n_in, ahead) },
+        // SAFETY: the Avx2 and Avx512 ISAs' `set_isa` contract covers avx2, fma and f16c.
+        Isa::Avx2 | Isa::Avx512 => unsafe { gemm_q8_pair_avx2_raw(w, xq, xd, n_in, ahead) },
         _ => None,
     }
 }
 
-/// The blocks [`gemm_q8_pair`] runs over, or None where it refuses (see there).
+/// The blocks [`gemm_q8_pair`] runs over, or None where it refuses (see
+/// there): for the VNNI kernels (`wide` false) both tiles stored unsigned,
+/// for the AVX2 kernel both laid out wide (it reads no corrections: pass
+/// `&[]`).
 fn call_blocks<const M: usize>(
     w: &TilePair,
     xq: &[i8],
     xd: &[f32],
     xc: &[i32],
     n_in: usize,
+    wide: bool,
 ) -> Option<usize> {
     let rb = n_in / Q8_BLOCK;
     if M == 0
         || M > PAIR_CALL_ROWS
         || w.nb[0] != w.nb[1]
-        || !w.unsigned()
+        || (if wide { !w.wide() } else { !w.unsigned() })
         || xq.len() < M * n_in
         || xd.len() < M * rb
-        || xc.len() < 2 * M * rb
+        || (!wide && xc.len() < 2 * M * rb)
     {
         return None;
     }
     Some(w.nb[0].min(PACK_BLOCKS).min(rb))
+}
+
+/// `$block!(h, p)` for blocks `0..$nb` in order (block `2p + h`: parity
+/// `h` as a literal, so that a kernel's accumulators stay in registers), the
+/// prefetch of `$ahead` spread over the block pairs.
+macro_rules! each_block {
+    ($nb:expr, $ahead:expr, $block:ident) => {{
+        let pairs = $nb.div_ceil(2);
+        for p in 0..$nb / 2 {
+            super::prefetch_part($ahead, p, pairs);
+            $block!(0, p);
+            $block!(1, p);
+        }
+        if $nb % 2 == 1 {
+            super::prefetch_part($ahead, $nb / 2, pairs);
+            $block!(0, $nb / 2);
+        }
+    }};
+}
+
+/// [`gemm_q8_pair`] on AVX2 (and AVX-512 without VNNI) without the ISA
+/// check, over the wide layout ([`TilePair::wide`]): the same values as the
+/// 8-row kernels per tile, bit for bit. The rows go in passes of at most 4
+/// ([`super::even_passes`]: 5 = 3 + 2), each on [`pair_avx2`].
+///
+/// # Safety
+/// The CPU must support avx2, fma and f16c.
+pub unsafe fn gemm_q8_pair_avx2_raw<const M: usize>(
+    w: &TilePair,
+    xq: &[i8],
+    xd: &[f32],
+    n_in: usize,
+    ahead: &[u8],
+) -> Option<[[f32; COLS]; M]> {
+    let nb = call_blocks::<M>(w, xq, xd, &[], n_in, true)?;
+    let mut out = [[0.0f32; COLS]; M];
+    let passes = M.div_ceil(4).max(1);
+    let (q, d) = (xq.as_ptr(), xd.as_ptr());
+    let mut k = 0;
+    super::even_passes(M, 4, &mut |m0, r| {
+        let (a0, a1) = super::part_bytes(ahead.len(), k, passes);
+        k += 1;
+        let share = &ahead[a0..a1];
+        macro_rules! pass {
+            ($r:literal) => {
+                // SAFETY: the caller's features; rows m0 .. m0 + r of the
+                // group (even_passes stays inside M), whose extents and the
+                // pair's were checked by call_blocks.
+                out[m0..m0 + $r]
+                    .copy_from_slice(&unsafe { pair_avx2::<$r>(w, nb, M, m0, q, d, share) })
+            };
+        }
+        match r {
+            1 => pass!(1),
+            2 => pass!(2),
+            3 => pass!(3),
+            _ => pass!(4),
+        }
+    });
+    Some(out)
+}
+
+/// Rows `m0 .. m0 + R` (`R <= 4`) of a call group of `rows` rows
+/// ([`pair_vnni`]'s layout, corrections unused) against the pair laid out
+/// wide: per block, each row's 32 values widened to i16 once; per pair `j`
+/// of values, each tile's 16 i16 (lane `n` = weight row `n`'s values `2j,
+/// 2j + 1`) multiplied by the row's pair broadcast (`vpmaddwd`) and added
+/// into the row's sums: lane `n` ends as row `n`'s exact block sum, with no
+/// sign trick and no horizontal adds. Then the f32 steps of every other
+/// pair kernel, in the same order.
+///
+/// Why: the 8-row AVX2 kernel's sign trick takes a third multiply-pipe
+/// instruction per 32 products (on the AMD EPYC, Zen 4, a register-only
+/// loop of it ran at 73.5 GMAC/s, one of `vpmaddwd` + `vpaddd` at 94). In
+/// `linear` there (`bench --isa avx2 --kernels`, 2026-12-08): the R step's
+/// fc and q/k/v/proj GEMMs 59-61 GMAC/s against 49-53 (50-52% of the AVX2
+/// peak against 42-45%). With the weights stored as i8 and widened in the
+/// kernel instead it was no faster than the 8-row kernel; stored as i16
+/// they fill the operand at [`WIDE_BLOCKS`] blocks, so rows of 3072 values
+/// (fc_out) keep the 8-row kernel.
+///
+/// # Safety
+/// avx2, fma, f16c; `nb <= PACK_BLOCKS`, both tiles of `w` laid out wide
+/// with at least `nb` blocks, `m0 + R <= rows`, and `xq`, `xd` hold `nb`
+/// blocks of `rows` rows as [`super::pair_group_index`] lays them out.
+#[allow(clippy::too_many_arguments)]
+#[target_feature(enable = "avx2,fma,f16c")]
+unsafe fn pair_avx2<const R: usize>(
+    w: &TilePair,
+    nb: usize,
+    rows: usize,
+    m0: usize,
+    xq: *const i8,
+    xd: *const f32,
+    ahead: &[u8],
+) -> [[f32; COLS]; R] {
+    // Block b's operand, values and scales (moved on per block).
+    // SAFETY (pointer offsets): row m0's entries of block 0 (m0 < rows).
+    let (mut ob, mut xs, mut ds) = unsafe { (w.b.as_ptr(), xq.add(Q8_BLOCK * m0), xd.add(m0)) };
+    // acc[m][h][t]: row m's sums of the blocks of parity h, tile t (lane = weight row).
+    let mut acc = [[[_mm256_setzero_ps(); 2]; 2]; R];
+    // xw[m]: row m's 32 values of the block, widened.
+    let mut xw = [[0i16; Q8_BLOCK]; R];
+    macro_rules! block {
+        ($h:literal, $p:expr) => {{
+            for (m, xm) in xw.iter_mut().enumerate() {
+                // SAFETY: row m's 32 values of this block (the group's extents); xm holds 32 i16.
+                unsafe {
+                    let x = xs.add(Q8_BLOCK * m) as *const __m128i;
+                    let xp = xm.as_mut_ptr() as *mut __m256i;
+                    _mm256_storeu_si256(xp, _mm256_cvtepi8_epi16(_mm_loadu_si128(x)));
+                    _mm256_storeu_si256(xp.add(1), _mm256_cvtepi8_epi16(_mm_loadu_si128(x.add(1))));
+                }
+            }
+            // d[m][t]: row m's block sums against tile t.
+            let mut d = [[_mm256_setzero_si256(); 2]; R];
+            for j in 0..Q8_BLOCK / 2 {
+                // Tile t's pair j: 16 i16 (lane n = weight row n's values 2j, 2j + 1).
+                // SAFETY: the block's 2 B_BLOCK operand bytes (i16); 64j + 32t + 32 <= 2 B_BLOCK.
+                let wv: [__m256i; 2] = core::array::from_fn(|t| unsafe {
+                    _mm256_loadu_si256(ob.add(64 * j + 32 * t) as *const _)
+                });
+                for (m, dm) in d.iter_mut().enumerate() {
+                    // SAFETY: values 2j, 2j + 1 of xw[m] (2j + 2 <= 32).
+                    let x = unsafe { (xw[m].as_ptr().add(2 * j) as *const i32).read_unaligned() };
+                    let xb = _mm256_set1_epi32(x);
+                    for t in 0..2 {
+                        dm[t] = _mm256_add_epi32(dm[t], _mm256_madd_epi16(wv[t], xb));
+                    }
+                }
+            }
+            // SAFETY: w.s[h] holds PAIRS >= pairs rows of 16 floats (p < pairs).
+            let sv: [__m256; 2] = core::array::from_fn(|t| unsafe {
+                _mm256_loadu_ps(w.s[$h][$p].as_ptr().add(8 * t))
+            });
+            // SAFETY: rows m < R's scales of this block (the group's extents).
+            unsafe { ymm_block_sums::<R, $h>(&mut acc, &sv, &d, ds) };
+            // SAFETY: one block on: at most one past the last of the nb blocks.
+            unsafe {
+                ob = ob.add(2 * B_BLOCK);
+                xs = xs.add(Q8_BLOCK * rows);
+                ds = ds.add(rows);
+            }
+        }};
+    }
+    each_block!(nb, ahead, block);
+    let _ = (ob, xs, ds);
+    // SAFETY: the caller's features (avx).
+    unsafe { ymm_pair_out(acc) }
 }
 
 /// [`gemm_q8_pair`] on AVX-VNNI (32-byte vectors) without the ISA check:
@@ -502,7 +780,7 @@ pub unsafe fn gemm_q8_pair_avxvnni_raw<const M: usize>(
     n_in: usize,
     ahead: &[u8],
 ) -> Option<[[f32; COLS]; M]> {
-    let nb = call_blocks::<M>(w, xq, xd, xc, n_in)?;
+    let nb = call_blocks::<M>(w, xq, xd, xc, n_in, false)?;
     // SAFETY: the caller's features; the extents were checked above.
     Some(unsafe { ymm_rows::<M, 2>(w, nb, xq, xd, xc, ahead) })
 }
@@ -604,17 +882,8 @@ unsafe fn pair_avxvnni<const R: usize>(
                     }
                 }
             }
-            for (m, am) in acc.iter_mut().enumerate() {
-                // SAFETY: row m's scale of this block.
-                let xdb = _mm256_set1_ps(unsafe { *ds.add(m) });
-                for t in 0..2 {
-                    am[$h][t] = _mm256_fmadd_ps(
-                        _mm256_cvtepi32_ps(d[m][t]),
-                        _mm256_mul_ps(sv[t], xdb),
-                        am[$h][t],
-                    );
-                }
-            }
+            // SAFETY: rows m < R's scales of this block (the group's extents).
+            unsafe { ymm_block_sums::<R, $h>(&mut acc, &sv, &d, ds) };
             // SAFETY: one block on: at most one past the last of the nb blocks.
             unsafe {
                 ob = ob.add(B_BLOCK);
@@ -624,21 +893,51 @@ unsafe fn pair_avxvnni<const R: usize>(
             }
         }};
     }
-    let pairs = nb.div_ceil(2);
-    for p in 0..nb / 2 {
-        super::prefetch_part(ahead, p, pairs);
-        block!(0, p);
-        block!(1, p);
-    }
-    if nb % 2 == 1 {
-        super::prefetch_part(ahead, nb / 2, pairs);
-        block!(0, nb / 2);
-    }
+    each_block!(nb, ahead, block);
     let _ = (ob, xs, ds, cs);
+    // SAFETY: the caller's features (avx).
+    unsafe { ymm_pair_out(acc) }
+}
+
+/// The f32 steps of one block for the 32-byte pair kernels: per row `m`
+/// and tile `t`, `acc[m][H][t] += f32(d[m][t]) * (sv[t] * xd_m)`, `xd_m` =
+/// `*ds.add(m)` (the row's block scale).
+///
+/// # Safety
+/// avx and fma (inlined into callers that have them); `ds` holds `R` scales.
+#[inline(always)]
+unsafe fn ymm_block_sums<const R: usize, const H: usize>(
+    acc: &mut [[[__m256; 2]; 2]; R],
+    sv: &[__m256; 2],
+    d: &[[__m256i; 2]; R],
+    ds: *const f32,
+) {
+    for (m, am) in acc.iter_mut().enumerate() {
+        // SAFETY: row m's scale of this block (the caller's extents); the caller's features.
+        unsafe {
+            let xdb = _mm256_set1_ps(*ds.add(m));
+            for t in 0..2 {
+                am[H][t] = _mm256_fmadd_ps(
+                    _mm256_cvtepi32_ps(d[m][t]),
+                    _mm256_mul_ps(sv[t], xdb),
+                    am[H][t],
+                );
+            }
+        }
+    }
+}
+
+/// The 32-byte pair kernels' result: per row, each tile's even and odd
+/// block sums added (`acc[m][0][t] + acc[m][1][t]` into columns `8t ..`).
+///
+/// # Safety
+/// avx (inlined into callers that have it).
+#[inline(always)]
+unsafe fn ymm_pair_out<const R: usize>(acc: [[[__m256; 2]; 2]; R]) -> [[f32; COLS]; R] {
     let mut out = [[0.0f32; COLS]; R];
     for (o, a) in out.iter_mut().zip(acc) {
         for t in 0..2 {
-            // SAFETY: o holds 16 floats; 8t + 8 <= 16.
+            // SAFETY: o holds 16 floats (8t + 8 <= 16); the caller's features.
             unsafe { _mm256_storeu_ps(o.as_mut_ptr().add(8 * t), _mm256_add_ps(a[0][t], a[1][t])) };
         }
     }
@@ -657,7 +956,7 @@ pub unsafe fn gemm_q8_pair_raw<const M: usize>(
     n_in: usize,
     ahead: &[u8],
 ) -> Option<[[f32; COLS]; M]> {
-    let nb = call_blocks::<M>(w, xq, xd, xc, n_in)?;
+    let nb = call_blocks::<M>(w, xq, xd, xc, n_in, false)?;
     // SAFETY: the caller's features; the group holds `nb <= rb` blocks of
     // its `M` rows (above), both tiles were prepared unsigned with
     // `w.nb[0] >= nb` blocks.
