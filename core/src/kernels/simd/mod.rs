@@ -1300,18 +1300,9 @@ pub fn axpy_f16(a: f32, w: &[u16], y: &mut [f32]) {
 }
 
 /// Whether the tile pair kernels run ([`tile_pair::enabled`]: AVX-512
-/// VNNI, AVX-VNNI, AVX2; never off x86_64).
-#[inline]
-pub fn pair_enabled() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return tile_pair::enabled();
-    #[cfg(not(target_arch = "x86_64"))]
-    false
-}
-
-/// Whether the tile pair kernels run ([`pair_enabled`]) on rows of `nb`
-/// blocks: at most [`PACK_BLOCKS`], and on AVX2, whose operand holds its
-/// values as i16, at most [`tile_pair::WIDE_BLOCKS`].
+/// VNNI, AVX-VNNI, AVX2; never off x86_64) on rows of `nb` blocks: at most
+/// [`PACK_BLOCKS`], and on AVX2, whose operand holds its values as i16, at
+/// most [`tile_pair::WIDE_BLOCKS`].
 #[inline]
 pub fn pair_takes(nb: usize) -> bool {
     #[cfg(target_arch = "x86_64")]

@@ -3583,6 +3583,32 @@ fn q8_panel(r: &mut Rng, rows: usize, nb: usize, outlier: usize) -> (Vec<i8>, Ve
     (qs, ds, cs)
 }
 
+/// One pair call's rows `got` against the 8-row kernel `want` per tile, bit
+/// for bit, and within [`SIMD_VS_SCALAR_GEMM_Q8`] of the scalar twin.
+#[cfg(target_arch = "x86_64")]
+fn assert_pair_call<const M: usize>(
+    got: &[[f32; 2 * super::PACK_ROWS]; M],
+    tile: [super::PackedQ8<'_>; 2],
+    q: [&[i8]; M],
+    d: [&[f32]; M],
+    c: [&[i32]; M],
+    what: &str,
+    want: impl Fn(super::PackedQ8<'_>) -> [[f32; super::PACK_ROWS]; M],
+) {
+    use super::PACK_ROWS;
+    for (t, tl) in tile.into_iter().enumerate() {
+        let (want, twin) = (want(tl), scalar::gemm_q8_packed::<M>(tl, q, d, c));
+        for m in 0..M {
+            for j in 0..PACK_ROWS {
+                let what = format!("{what} row {m} tile {t} column {j}");
+                let g = got[m][PACK_ROWS * t + j];
+                assert_eq!(g.to_bits(), want[m][j].to_bits(), "{what}");
+                check(&what, g, twin[m][j], tile_row_mag(tl, j, q[m], d[m]), SIMD_VS_SCALAR_GEMM_Q8);
+            }
+        }
+    }
+}
+
 /// The magnitude scale of weight row `j` of a packed tile dotted with one
 /// quantised activation row: `sum_b |s_j,b xd_b| sum_i |w x|` (the bound
 /// the scalar-twin comparisons scale by).
@@ -3628,7 +3654,6 @@ fn group_panel(q: &[i8], d: &[f32], c: &[i32], rows: usize, keep: usize) -> (Vec
 #[test]
 fn wide_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
     use super::tile_pair::{gemm_q8_pair_avx2_raw, TilePair, WIDE_BLOCKS};
-    use super::PACK_ROWS;
     use std::is_x86_feature_detected as has;
     if !(has!("avx2") && has!("fma") && has!("f16c")) {
         eprintln!("skipped: this CPU has no AVX2");
@@ -3656,18 +3681,10 @@ fn wide_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                     let q: [&[i8]; $m] = core::array::from_fn(|m| &qs[m * n..(m + 1) * n]);
                     let d: [&[f32]; $m] = core::array::from_fn(|m| &ds[m * nb..(m + 1) * nb]);
                     let c: [&[i32]; $m] = core::array::from_fn(|m| &cs[2 * m * nb..2 * (m + 1) * nb]);
-                    for (t, tl) in tile.iter().enumerate() {
-                        let want = unsafe { super::x86::gemm_q8_packed_avx2::<$m>(*tl, q, d, c) };
-                        let twin = scalar::gemm_q8_packed::<$m>(*tl, q, d, c);
-                        for m in 0..$m {
-                            for j in 0..PACK_ROWS {
-                                let what = format!("nb={nb} q4={q4} rows={} row {m} tile {t} column {j}", $m);
-                                let g = got[m][PACK_ROWS * t + j];
-                                assert_eq!(g.to_bits(), want[m][j].to_bits(), "{what}");
-                                check(&what, g, twin[m][j], tile_row_mag(*tl, j, q[m], d[m]), SIMD_VS_SCALAR_GEMM_Q8);
-                            }
-                        }
-                    }
+                    let what = format!("nb={nb} q4={q4} rows={}", $m);
+                    assert_pair_call(&got, tile, q, d, c, &what, |tl| unsafe {
+                        super::x86::gemm_q8_packed_avx2::<$m>(tl, q, d, c)
+                    });
                     checked += 1;
                 }};
             }
@@ -3786,7 +3803,7 @@ impl TwoTiles {
 #[allow(unsafe_code)]
 fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
     use super::tile_pair::{gemm_q8_pair_avxvnni_raw, gemm_q8_pair_raw, TilePair, PAIR_CALL_ROWS};
-    use super::{Q8Pack8, PACK_BLOCKS, PACK_ROWS};
+    use super::{Q8Pack8, PACK_BLOCKS};
     use std::is_x86_feature_detected as has;
     let avxvnni = has!("avx2") && has!("fma") && has!("f16c") && has!("avxvnni");
     // The kernels this CPU runs: 0 AVX-512 VNNI, 1 AVX-VNNI.
@@ -3878,22 +3895,14 @@ fn tile_pair_kernel_equals_the_8_row_kernel_bit_for_bit() {
                         let q: [&[i8]; $m] = core::array::from_fn(|m| &pq[m * stride..(m + 1) * stride]);
                         let d: [&[f32]; $m] = core::array::from_fn(|m| &pd[m * keep..(m + 1) * keep]);
                         let c: [&[i32]; $m] = core::array::from_fn(|m| &pc[2 * m * keep..2 * (m + 1) * keep]);
-                        for (t, tl) in tile.iter().enumerate() {
-                            let want = if kind == 0 {
-                                unsafe { super::x86::gemm_q8_packed_vnni::<$m>(*tl, q, d, c) }
+                        let what = format!("{isa} nb={nb} q4={q4} rows={} keep={keep}", $m);
+                        assert_pair_call(&got, tile, q, d, c, &what, |tl| unsafe {
+                            if kind == 0 {
+                                super::x86::gemm_q8_packed_vnni::<$m>(tl, q, d, c)
                             } else {
-                                unsafe { super::x86::gemm_q8_packed_avxvnni::<$m>(*tl, q, d, c) }
-                            };
-                            let twin = scalar::gemm_q8_packed::<$m>(*tl, q, d, c);
-                            for m in 0..$m {
-                                for j in 0..PACK_ROWS {
-                                    let what = format!("{isa} nb={nb} q4={q4} rows={} keep={keep} row {m} tile {t} column {j}", $m);
-                                    let g = got[m][PACK_ROWS * t + j];
-                                    assert_eq!(g.to_bits(), want[m][j].to_bits(), "{what}");
-                                    check(&what, g, twin[m][j], tile_row_mag(*tl, j, q[m], d[m]), SIMD_VS_SCALAR_GEMM_Q8);
-                                }
+                                super::x86::gemm_q8_packed_avxvnni::<$m>(tl, q, d, c)
                             }
-                        }
+                        });
                         checked += 1;
                         }
                     }
