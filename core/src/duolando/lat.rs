@@ -14,7 +14,7 @@ use crate::duolando::config::{ModelConfig, Part};
 use crate::duolando::model::{LatW, Model};
 use crate::error::{check_len, Buffer, Error};
 use crate::kernels::{linear, BandMask, Matrix};
-use crate::nn::block::{block_forward, BlockScratch};
+use crate::nn::block::{block_forward, block_forward_prefix, BlockScratch};
 
 /// What a LAT reads.
 #[derive(Clone, Copy)]
@@ -133,11 +133,24 @@ pub fn lat_forward(
         q_pos0: 0,
         k_pos0: 0,
     };
-    for b in &w.blocks {
-        block_forward(b, x, c, w.cfg.n_head as usize, &mask, block);
-    }
-    // (n, C) viewed as (n/ds, ds*C); only the first n/ds - look_forward rows are kept.
-    linear(&x[..rows * ds * c], &w.downsample.w, w.downsample.b, out);
+    let n_head = w.cfg.n_head as usize;
+    let kept = rows * ds;
+    // The last block only for the rows the downsample reads (the others
+    // only give it keys and values): its output (kept, C) over `emb`, dead
+    // once the first projection has read it. No block: `x` itself.
+    let last = match w.blocks.split_last() {
+        Some((b, others)) => {
+            for b in others {
+                block_forward(b, x, c, n_head, &mask, block);
+            }
+            let y = &mut s.emb[..kept * c];
+            block_forward_prefix(b, x, kept, c, n_head, &mask, block, y);
+            &*y
+        }
+        None => &*x,
+    };
+    // (kept, C) viewed as (n/ds - look_forward, ds*C).
+    linear(&last[..kept * c], &w.downsample.w, w.downsample.b, out);
     Ok(rows)
 }
 

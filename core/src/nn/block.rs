@@ -173,6 +173,7 @@ fn mlp(w: &BlockW<'_>, x: &mut [f32], s: &mut BlockScratch<'_>, nc: usize) {
 /// every row of `x` (n, C)): `out` (rows.len(), C). `mask` relates query
 /// `i` (index into `rows`) to key row `j` of `x`. Used for the last GPT
 /// layer, where only the last position of each follower stream is read.
+#[allow(clippy::too_many_arguments)]
 pub fn block_forward_rows<M: Mask>(
     w: &BlockW<'_>,
     x: &[f32],
@@ -183,9 +184,43 @@ pub fn block_forward_rows<M: Mask>(
     s: &mut BlockScratch<'_>,
     out: &mut [f32],
 ) {
+    block_forward_selected(w, x, rows.len(), |i| rows[i], c, n_head, mask, s, out)
+}
+
+/// [`block_forward_rows`] for the first `r` rows of `x` (a LAT's last
+/// layer, whose rows past the kept outputs only serve as keys and values):
+/// each kept row's numbers are [`block_forward`]'s, bit for bit (every
+/// GEMM, LayerNorm and attention query is row by row).
+#[allow(clippy::too_many_arguments)]
+pub fn block_forward_prefix<M: Mask>(
+    w: &BlockW<'_>,
+    x: &[f32],
+    r: usize,
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    s: &mut BlockScratch<'_>,
+    out: &mut [f32],
+) {
+    block_forward_selected(w, x, r, |i| i, c, n_head, mask, s, out)
+}
+
+/// The body of [`block_forward_rows`] / [`block_forward_prefix`]: query
+/// row `i < r` is row `row(i)` of `x`.
+#[allow(clippy::too_many_arguments)]
+fn block_forward_selected<M: Mask>(
+    w: &BlockW<'_>,
+    x: &[f32],
+    r: usize,
+    row: impl Fn(usize) -> usize,
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    s: &mut BlockScratch<'_>,
+    out: &mut [f32],
+) {
     let nc = x.len();
     let n = nc / c;
-    let r = rows.len();
     let rc = r * c;
     let mut p = s.qkv();
     let (ln, q, k, v, att) = (
@@ -204,8 +239,8 @@ pub fn block_forward_rows<M: Mask>(
         &mut p.panel,
     );
     // Gather the selected rows of ln1(x) and of x.
-    for (i, &row) in rows.iter().enumerate() {
-        let (a, b) = (row * c, (row + 1) * c);
+    for i in 0..r {
+        let (a, b) = (row(i) * c, (row(i) + 1) * c);
         att[i * c..(i + 1) * c].copy_from_slice(&ln[a..b]);
         out[i * c..(i + 1) * c].copy_from_slice(&x[a..b]);
     }

@@ -318,3 +318,95 @@ fn short_sequences_decode_the_seed_only() {
     }
     assert!(output_shape(&cfg, 3).is_none());
 }
+
+/// A LAT's last block runs only for the rows its downsample reads
+/// (`block_forward_prefix`); its output must be what every block over every
+/// row then the downsample give, bit for bit: the music LAT with two
+/// blocks (the others full, the last trimmed) and a leader LAT with one.
+#[test]
+fn lat_last_block_for_kept_rows_only_is_bit_identical() {
+    use crate::arena::Arena;
+    use crate::duolando::config::Part;
+    use crate::duolando::lat::{leader_lat, music_lat, scratch_bytes};
+    use crate::duolando::model::LatW;
+    use crate::kernels::{linear, BandMask};
+    use crate::nn::block::{block_forward, BlockScratch};
+
+    let mut cfg = tiny();
+    cfg.gpt.music.n_layer = 2;
+    let fake = Fake::new(&cfg);
+    let src = &fake;
+    let model = Model::bind(&cfg, &src).unwrap();
+    let (e, lf) = (cfg.gpt.n_embd as usize, cfg.gpt.look_forward as usize);
+    // Every block over every row, then the downsample of the kept rows.
+    let full = |w: &LatW<'_>, x0: Vec<f32>, n: usize| -> Vec<f32> {
+        let ds = w.cfg.downsample_rate as usize;
+        let rows = n / ds - lf;
+        let mut x = x0;
+        let mut bytes = vec![0u8; 1 << 20];
+        let mut a = Arena::new(&mut bytes);
+        let mut bs = BlockScratch::carve(&mut a, n, e).unwrap();
+        let mask = BandMask {
+            radius: lf * ds,
+            q_pos0: 0,
+            k_pos0: 0,
+        };
+        for b in &w.blocks {
+            block_forward(b, &mut x, e, w.cfg.n_head as usize, &mask, &mut bs);
+        }
+        let mut out = vec![0f32; rows * e];
+        linear(
+            &x[..rows * ds * e],
+            &w.downsample.w,
+            w.downsample.b,
+            &mut out,
+        );
+        out
+    };
+    for c in [1usize, 4, 9] {
+        let mut scratch = vec![0u8; scratch_bytes(&cfg, c).unwrap()];
+        // Music: (c + lf) * 4 frames of 5 features.
+        let n = (c + lf) * 4;
+        let music: Vec<f32> = (0..n * 5)
+            .map(|i| ((i * 13 % 29) as f32 / 29.0) - 0.5)
+            .collect();
+        let mut got = vec![0f32; c * e];
+        assert_eq!(
+            music_lat(&model, &music, &mut scratch, &mut got).unwrap(),
+            c
+        );
+        let w = &model.gpt.music;
+        let mut x0 = vec![0f32; n * e];
+        linear(&music, &w.cond_emb.w, w.cond_emb.b, &mut x0);
+        let want = full(w, x0, n);
+        assert!(
+            got.iter()
+                .zip(&want)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "music LAT, c = {c}"
+        );
+        // Leader (up): c + lf tokens.
+        let n = c + lf;
+        let tokens: Vec<u32> = (0..n as u32).map(|i| (i * 5 + 3) % 8).collect();
+        let mut got = vec![0f32; c * e];
+        assert_eq!(
+            leader_lat(&model, Part::Up, &tokens, &mut scratch, &mut got).unwrap(),
+            c
+        );
+        let w = &model.gpt.leaders[Part::Up as usize];
+        let table = &model.gpt.tok_emb[Part::Up as usize];
+        let mut emb = vec![0f32; n * e];
+        for (i, &t) in tokens.iter().enumerate() {
+            table.row_into(t as usize, &mut emb[i * e..(i + 1) * e]);
+        }
+        let mut x0 = vec![0f32; n * e];
+        linear(&emb, &w.cond_emb.w, w.cond_emb.b, &mut x0);
+        let want = full(w, x0, n);
+        assert!(
+            got.iter()
+                .zip(&want)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "leader LAT, c = {c}"
+        );
+    }
+}
