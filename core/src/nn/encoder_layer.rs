@@ -395,17 +395,25 @@ fn attention_gemm(n: usize, d: usize, n_head: usize, keep: usize, s: &mut Encode
     );
     for (j, row) in qkv.chunks_exact(3 * d).take(n).enumerate() {
         for h in 0..n_head {
-            let (qh, kh, vh) = (
-                &row[h * hd..][..hd],
-                &row[d + h * hd..][..hd],
-                &row[2 * d + h * hd..][..hd],
-            );
+            let (qh, vh) = (&row[h * hd..][..hd], &row[2 * d + h * hd..][..hd]);
             if j < keep {
                 q[(h * keep + j) * hd..][..hd].copy_from_slice(qh);
             }
             v[(h * n + j) * hd..][..hd].copy_from_slice(vh);
-            for (t, &x) in kh.iter().enumerate() {
-                kt[(h * hd + t) * n + j] = x;
+        }
+    }
+    // The keys transposed 16 rows at a time: each (head, lane) row of `kt`
+    // gets 16 consecutive values per pass (one cache line), not one value
+    // per row of `qkv` (a line written 16 times, evicted in between: the
+    // whole `kt` is larger than L2 at full size).
+    for j0 in (0..n).step_by(16) {
+        let rows = &qkv[j0 * 3 * d..(j0 + 16).min(n) * 3 * d];
+        for h in 0..n_head {
+            for t in 0..hd {
+                let dst = &mut kt[(h * hd + t) * n + j0..][..rows.len() / (3 * d)];
+                for (x, row) in dst.iter_mut().zip(rows.chunks_exact(3 * d)) {
+                    *x = row[d + h * hd + t];
+                }
             }
         }
     }
