@@ -436,22 +436,9 @@ fn attend_group<M: Mask>(
                 share(ahead[0], r),
             );
         }
+        // A query that sees no key (or only zero weights) keeps zeros.
         for (row, sum) in scores.chunks_exact_mut(nk).zip(&mut sums) {
-            let mut max = f32::NEG_INFINITY;
-            for &(a, b) in runs {
-                max = simd::scale_max(&mut row[a..b], scale, max);
-            }
-            *sum = 0.0;
-            for &(a, b) in runs {
-                *sum += simd::exp_shifted_sum(&mut row[a..b], max);
-            }
-            // A query that sees no key (or only zero weights) keeps zeros.
-            let inv = if *sum == 0.0 { 0.0 } else { 1.0 / *sum };
-            for &(a, b) in runs {
-                for s in row[a..b].iter_mut() {
-                    *s *= inv;
-                }
-            }
+            *sum = simd::softmax_runs(row, runs, scale);
         }
         for m in 0..g {
             oh[m * rs..m * rs + hd].fill(0.0);

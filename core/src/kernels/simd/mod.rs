@@ -658,6 +658,56 @@ pub fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
     }
 }
 
+/// The softmax of one attention row over its runs of allowed keys
+/// (`runs`: ascending `(start, end)` pairs within `row`): the scores
+/// scaled by `scale` and their maximum ([`scale_max`] run after run), the
+/// shifted exponentials and their sum ([`exp_shifted_sum`] per run, the
+/// runs' sums added in order), then each probability times `1 / sum` (0
+/// when the sum is 0: such a row keeps zeros). Returns the sum. One call
+/// per row where the attention made three per run (a query of the R
+/// step's coordinated attention sees 10 runs): the same operations, so
+/// bit for bit what those calls give.
+#[inline]
+pub fn softmax_runs(row: &mut [f32], runs: &[(usize, usize)], scale: f32) -> f32 {
+    match isa() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32` (Avx512* imply avx512f and avx2).
+        Isa::Avx512 | Isa::Avx512Vnni => unsafe { x86::softmax_runs_512(row, runs, scale) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `dot_f32`.
+        Isa::Avx2 | Isa::AvxVnni => unsafe { x86::softmax_runs_avx2(row, runs, scale) },
+        _ => softmax_runs_with(row, runs, scale, scale_max, exp_shifted_sum),
+    }
+}
+
+/// The body of [`softmax_runs`] over given [`scale_max`] and
+/// [`exp_shifted_sum`] variants (inlined into each ISA's caller, so the
+/// pieces inline too).
+#[inline(always)]
+pub(crate) fn softmax_runs_with(
+    row: &mut [f32],
+    runs: &[(usize, usize)],
+    scale: f32,
+    scale_max: impl Fn(&mut [f32], f32, f32) -> f32,
+    exp_shifted_sum: impl Fn(&mut [f32], f32) -> f32,
+) -> f32 {
+    let mut max = f32::NEG_INFINITY;
+    for &(a, b) in runs {
+        max = scale_max(&mut row[a..b], scale, max);
+    }
+    let mut sum = 0.0f32;
+    for &(a, b) in runs {
+        sum += exp_shifted_sum(&mut row[a..b], max);
+    }
+    let inv = if sum == 0.0 { 0.0 } else { 1.0 / sum };
+    for &(a, b) in runs {
+        for s in row[a..b].iter_mut() {
+            *s *= inv;
+        }
+    }
+    sum
+}
+
 /// `s[i] *= scale`, and the largest of `max` and the scaled values
 /// (`f32::max`: NaN scores are skipped; `max` itself is not NaN): the
 /// attention's scaled scores and softmax shift. The maximum of a set is

@@ -1476,6 +1476,59 @@ fn exp_matches_scalar_twin_and_libm() {
     }
 }
 
+/// `softmax_runs` (AVX2, AVX-512: one call per row) gives the bits of its
+/// scalar twin (the same body over the scalar pieces), probabilities and
+/// sum, for the coordinated attention's run layouts (10 runs of 1..29 keys
+/// in rows of 290), one run, no run, runs that only see zero weights, and a
+/// planted score far above the others (a sum of one).
+#[test]
+#[allow(unsafe_code)]
+fn softmax_runs_match_the_scalar_twin() {
+    let mut r = Rng(7);
+    let mut layouts: Vec<(usize, Vec<(usize, usize)>)> = (1..=29)
+        .map(|seen| (290, (0..10).map(|s| (29 * s, 29 * s + seen)).collect()))
+        .collect();
+    layouts.push((290, vec![(0, 290)]));
+    layouts.push((40, vec![]));
+    layouts.push((40, vec![(3, 3), (5, 21), (21, 40)]));
+    for (n, runs) in &layouts {
+        for case in 0..3 {
+            let mut row: Vec<f32> = (0..*n).map(|_| r.f() * 8.0).collect();
+            if case == 1 {
+                row.iter_mut().for_each(|v| *v = -1.0e30);
+            }
+            if case == 2 && *n > 6 {
+                row[6] = 1.0e4;
+            }
+            let scale = 0.125f32;
+            let mut want = row.clone();
+            let ws = super::softmax_runs_with(&mut want, runs, scale, scalar::scale_max, scalar::exp_shifted_sum);
+            let mut check = |name: &str, got: &[f32], gs: f32| {
+                assert_eq!(ws.to_bits(), gs.to_bits(), "{name} sum, n={n} runs={runs:?} case {case}");
+                for (i, (p, q)) in want.iter().zip(got).enumerate() {
+                    assert_eq!(p.to_bits(), q.to_bits(), "{name} n={n} i={i} case {case}");
+                }
+            };
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx2") {
+                let mut got = row.clone();
+                // SAFETY: avx2 detected.
+                let gs = unsafe { super::x86::softmax_runs_avx2(&mut got, runs, scale) };
+                check("avx2", &got, gs);
+                if std::is_x86_feature_detected!("avx512f") {
+                    let mut got = row.clone();
+                    // SAFETY: avx512f (and avx2) detected.
+                    let gs = unsafe { super::x86::softmax_runs_512(&mut got, runs, scale) };
+                    check("avx512", &got, gs);
+                }
+            }
+            let mut got = row.clone();
+            let gs = super::softmax_runs(&mut got, runs, scale);
+            check("dispatched", &got, gs);
+        }
+    }
+}
+
 /// GELU (AVX2, AVX-512: whole 32-value pairs, a 16-value rest, a masked
 /// tail) is bit-identical to its scalar twin; the twin is within
 /// 1e-7 (1 + |x|) of `0.5 x (1 + libm::erff(x / sqrt 2))`.

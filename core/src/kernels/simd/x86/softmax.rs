@@ -78,6 +78,7 @@ pub(super) unsafe fn exp16(x: __m512) -> __m512 {
 ///
 /// # Safety
 /// The CPU must support avx512f and avx2.
+#[inline]
 #[target_feature(enable = "avx512f,avx2")]
 pub unsafe fn exp_shifted_sum_512(s: &mut [f32], max: f32) -> f32 {
     let n = s.len();
@@ -129,6 +130,7 @@ pub unsafe fn exp_shifted_sum_512(s: &mut [f32], max: f32) -> f32 {
 ///
 /// # Safety
 /// The CPU must support avx512f.
+#[inline]
 #[target_feature(enable = "avx512f")]
 pub unsafe fn scale_max_512(s: &mut [f32], scale: f32, max: f32) -> f32 {
     let (sc, mut vm) = (_mm512_set1_ps(scale), _mm512_set1_ps(f32::NEG_INFINITY));
@@ -150,6 +152,7 @@ pub unsafe fn scale_max_512(s: &mut [f32], scale: f32, max: f32) -> f32 {
 ///
 /// # Safety
 /// The CPU must support avx2.
+#[inline]
 #[target_feature(enable = "avx2")]
 pub unsafe fn scale_max_avx2(s: &mut [f32], scale: f32, max: f32) -> f32 {
     let n = s.len();
@@ -178,6 +181,7 @@ pub unsafe fn scale_max_avx2(s: &mut [f32], scale: f32, max: f32) -> f32 {
 ///
 /// # Safety
 /// The CPU must support avx2.
+#[inline]
 #[target_feature(enable = "avx2")]
 pub unsafe fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
     let n = s.len();
@@ -214,4 +218,40 @@ pub unsafe fn exp_shifted_sum(s: &mut [f32], max: f32) -> f32 {
         }
     }
     simd::scalar::reduce8(a, t)
+}
+
+/// See [`simd::softmax_runs`]: its body over [`scale_max_512`] and
+/// [`exp_shifted_sum_512`] (inlined), so bit for bit their calls run by run.
+///
+/// # Safety
+/// The CPU must support avx512f and avx2.
+#[target_feature(enable = "avx512f,avx2")]
+pub unsafe fn softmax_runs_512(row: &mut [f32], runs: &[(usize, usize)], scale: f32) -> f32 {
+    simd::softmax_runs_with(
+        row,
+        runs,
+        scale,
+        // SAFETY: this fn's features.
+        |s, sc, m| unsafe { scale_max_512(s, sc, m) },
+        // SAFETY: as above.
+        |s, m| unsafe { exp_shifted_sum_512(s, m) },
+    )
+}
+
+/// See [`simd::softmax_runs`]: its body over [`scale_max_avx2`] and
+/// [`exp_shifted_sum`] (inlined), so bit for bit their calls run by run.
+///
+/// # Safety
+/// The CPU must support avx2.
+#[target_feature(enable = "avx2")]
+pub unsafe fn softmax_runs_avx2(row: &mut [f32], runs: &[(usize, usize)], scale: f32) -> f32 {
+    simd::softmax_runs_with(
+        row,
+        runs,
+        scale,
+        // SAFETY: this fn's features.
+        |s, sc, m| unsafe { scale_max_avx2(s, sc, m) },
+        // SAFETY: as above.
+        |s, m| unsafe { exp_shifted_sum(s, m) },
+    )
 }
