@@ -69,6 +69,7 @@ const ALLOWED: &[&str] = &[
     "tests/amx.rs",
     "tests/int8_layouts.rs",
     "tests/linear_fused.rs",
+    "tests/attention_isas.rs",
 ];
 
 /// Crate roots and the lint level they must set for `unsafe_code`.

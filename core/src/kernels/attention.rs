@@ -30,6 +30,13 @@ pub trait Mask: Sync {
         let _ = (qi, nk, runs);
         None
     }
+    /// `Some(t)` when the mask is a whole window's coordinated attention
+    /// (streams of `t` positions, queries and keys the same rows from
+    /// position 0): [`super::attention_staircase`] computes it as GEMMs.
+    /// `None` (the default): the key-by-key [`attention`].
+    fn staircase(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// Writes the single run `[a, b)` (none if empty); returns the count.
@@ -107,6 +114,10 @@ impl Mask for TiledCausalMask {
     /// The streams' rows at one position (`t_q` apart) see the same keys.
     fn period(&self) -> Option<usize> {
         (self.t_q > 0).then_some(self.t_q)
+    }
+    /// A whole window from position 0 (R mode's blocks).
+    fn staircase(&self) -> Option<usize> {
+        (self.t_q > 0 && self.t_q == self.t_k && self.q_pos0 == 0).then_some(self.t_q)
     }
     /// The first `pos + 1` keys of every stream of `t_k` (one run when
     /// that is all of them).

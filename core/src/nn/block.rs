@@ -5,8 +5,8 @@
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
 use crate::kernels::{
-    attention, attention_ahead, layernorm, linear_each, linear_each_with, linear_gelu_with,
-    linear_with, KvRows, Mask, Q8Room,
+    attention, attention_ahead, attention_staircase, layernorm, linear_each, linear_each_with,
+    linear_gelu_with, linear_with, KvRows, Mask, Q8Room,
 };
 use crate::nn::weights::{BlockW, Linear};
 
@@ -150,7 +150,14 @@ pub fn block_forward<M: Mask>(
         [q, k, v],
         &mut p.panel,
     );
-    attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att);
+    // A whole window's coordinated attention as GEMMs, over `ln` (dead
+    // until the projection writes it).
+    let staircase = mask
+        .staircase()
+        .is_some_and(|t| attention_staircase(q, k, v, c, n_head, t, ln, att));
+    if !staircase {
+        attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att);
+    }
     lin(att, &w.proj, ln, &mut p.panel);
     add(x, ln);
     mlp(w, x, s, nc);

@@ -491,6 +491,120 @@ fn attention_band_and_tiled_causal() {
     assert_close(&one, &want[qi * c..(qi + 1) * c], CLOSE);
 }
 
+/// The coordinated attention of a whole window as per-head GEMMs
+/// (`attention_staircase`) against the f64 reference and the key-by-key
+/// kernel: 1, 3 and 10 streams (fewer and more than a GEMM call's 6 rows),
+/// windows of 1-29 positions, heads of 8, 20, 64 and 96 lanes (96: two
+/// column chunks of the output GEMM); shapes that are not a whole window
+/// or a short `work` are refused (false, `out` untouched); room for
+/// several heads at a time gives the same bits. The same bits on
+/// every SIMD ISA: tests/attention_isas.rs.
+#[test]
+fn staircase_attention_matches_the_reference() {
+    let mut r = Lcg(19);
+    for (c, nh) in [(32, 4), (40, 2), (128, 2), (96, 1)] {
+        for (streams, t) in [(10, 29), (10, 3), (3, 7), (1, 5), (10, 1), (7, 13)] {
+            let n = streams * t;
+            let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
+            let want = naive_attention(&q, &k, &v, c, nh, &|i, j| j % t <= i % t);
+            let mut work = vec![0.0f32; staircase_work(n, c / nh).unwrap()];
+            let mut out = vec![f32::NAN; n * c];
+            assert!(attention_staircase(
+                &q, &k, &v, c, nh, t, &mut work, &mut out
+            ));
+            assert_close(&out, &want, CLOSE);
+            // Room for 3 heads at a time (a last wave of fewer): the same bits.
+            let mut wide = vec![0.0f32; 3 * work.len() + 5];
+            let mut again = vec![f32::NAN; n * c];
+            assert!(attention_staircase(
+                &q, &k, &v, c, nh, t, &mut wide, &mut again
+            ));
+            assert!(again
+                .iter()
+                .zip(&out)
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+            let mut keywise = vec![0.0f32; n * c];
+            let mut scores = vec![0.0f32; n];
+            let m = TiledCausalMask {
+                t_q: t,
+                t_k: t,
+                q_pos0: 0,
+            };
+            assert_eq!(m.staircase(), Some(t));
+            attention(&q, &k[..], &v[..], c, nh, &m, &mut scores, &mut keywise);
+            assert_close(
+                &out,
+                &keywise.iter().map(|&x| x as f64).collect::<Vec<_>>(),
+                CLOSE,
+            );
+            // Refusals: a short work buffer, rows that are not a whole window.
+            let mut untouched = vec![7.0f32; n * c];
+            let short = staircase_work(n, c / nh).unwrap() - 1;
+            assert!(!attention_staircase(
+                &q,
+                &k,
+                &v,
+                c,
+                nh,
+                t,
+                &mut work[..short],
+                &mut untouched
+            ));
+            if t > 1 {
+                assert!(!attention_staircase(
+                    &q[..(n - 1) * c],
+                    &k,
+                    &v,
+                    c,
+                    nh,
+                    t,
+                    &mut work,
+                    &mut untouched
+                ));
+            }
+            assert!(!attention_staircase(
+                &q,
+                &k,
+                &v,
+                c,
+                0,
+                t,
+                &mut work,
+                &mut untouched
+            ));
+            assert!(untouched.iter().all(|&x| x == 7.0));
+        }
+    }
+    // Masks that are not a whole window from position 0 take the key-by-key kernel.
+    assert_eq!(
+        TiledCausalMask {
+            t_q: 1,
+            t_k: 4,
+            q_pos0: 3
+        }
+        .staircase(),
+        None
+    );
+    assert_eq!(
+        TiledCausalMask {
+            t_q: 4,
+            t_k: 4,
+            q_pos0: 1
+        }
+        .staircase(),
+        None
+    );
+    assert_eq!(
+        BandMask {
+            radius: 2,
+            q_pos0: 0,
+            k_pos0: 0
+        }
+        .staircase(),
+        None
+    );
+}
+
 /// A band that claims every query sees the same keys (it does not): the
 /// group's check of the members' key runs must take each query alone.
 struct FalsePeriod(BandMask);
