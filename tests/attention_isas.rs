@@ -1,14 +1,14 @@
-//! R mode's coordinated attention as per-head GEMMs
-//! (`attention_staircase`) gives the same bits on every SIMD ISA of this
+//! R mode's coordinated attention and a LAT's band as per-head GEMMs
+//! (`attention_staircase`, `attention_band`) give the same bits on every SIMD ISA of this
 //! CPU: its GEMM (`simd::matmul::rows_times`) sums each value in the same
 //! order on each. One test in its own binary: it switches the process's ISA.
 
 use duolando_core::kernels::simd::{self, Isa};
-use duolando_core::kernels::{attention_staircase, staircase_work};
+use duolando_core::kernels::{attention_band, attention_staircase, gemm_attention_work};
 
 #[test]
 #[allow(unsafe_code)]
-fn staircase_attention_is_bit_identical_across_simd_isas() {
+fn gemm_attention_is_bit_identical_across_simd_isas() {
     let mut seed = 0x2468_ace1u64;
     let mut rnd = move || {
         seed = seed
@@ -27,7 +27,7 @@ fn staircase_attention_is_bit_identical_across_simd_isas() {
             (0..n * c).map(|_| rnd()).collect(),
             (0..n * c).map(|_| rnd()).collect(),
         );
-        let mut work = vec![0.0f32; staircase_work(n, c / nh).unwrap()];
+        let mut work = vec![0.0f32; gemm_attention_work(n, n, c / nh).unwrap()];
         let mut first: Option<(Isa, Vec<f32>)> = None;
         for &isa in &isas {
             // SAFETY: `supported` lists only ISAs this CPU has.

@@ -30,13 +30,22 @@ pub trait Mask: Sync {
         let _ = (qi, nk, runs);
         None
     }
-    /// `Some(t)` when the mask is a whole window's coordinated attention
-    /// (streams of `t` positions, queries and keys the same rows from
-    /// position 0): [`super::attention_staircase`] computes it as GEMMs.
-    /// `None` (the default): the key-by-key [`attention`].
-    fn staircase(&self) -> Option<usize> {
+    /// How [`super::attention_gemm`] computes this mask as per-head GEMMs
+    /// (every query sees one run of keys in a layout), where it can; `None`
+    /// (the default): the key-by-key [`attention`].
+    fn gemm(&self) -> Option<GemmMask> {
         None
     }
+}
+
+/// A mask [`super::attention_gemm`] computes as per-head GEMMs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GemmMask {
+    /// The coordinated attention of a whole window of `t` positions
+    /// ([`super::attention_staircase`]).
+    Staircase(usize),
+    /// A band of this radius from row 0 ([`super::attention_band`]).
+    Band(usize),
 }
 
 /// Writes the single run `[a, b)` (none if empty); returns the count.
@@ -73,6 +82,10 @@ impl Mask for BandMask {
             None => 0,
         };
         Some(one_run(lo, hi, runs))
+    }
+    /// From row 0 on both sides (a LAT over its window, R mode).
+    fn gemm(&self) -> Option<GemmMask> {
+        (self.q_pos0 == 0 && self.k_pos0 == 0).then_some(GemmMask::Band(self.radius))
     }
 }
 
@@ -116,8 +129,9 @@ impl Mask for TiledCausalMask {
         (self.t_q > 0).then_some(self.t_q)
     }
     /// A whole window from position 0 (R mode's blocks).
-    fn staircase(&self) -> Option<usize> {
-        (self.t_q > 0 && self.t_q == self.t_k && self.q_pos0 == 0).then_some(self.t_q)
+    fn gemm(&self) -> Option<GemmMask> {
+        (self.t_q > 0 && self.t_q == self.t_k && self.q_pos0 == 0)
+            .then_some(GemmMask::Staircase(self.t_q))
     }
     /// The first `pos + 1` keys of every stream of `t_k` (one run when
     /// that is all of them).

@@ -12,7 +12,7 @@
 
 pub mod activation;
 pub mod attention;
-pub mod attention_staircase;
+pub mod attention_gemm;
 pub mod conv;
 pub mod kv_rows;
 pub mod linear;
@@ -23,8 +23,10 @@ pub mod simd;
 pub mod weights;
 
 pub use activation::{gelu_inplace, relu_inplace, relu_into};
-pub use attention::{attention, attention_ahead, BandMask, Mask, TiledCausalMask, Ungrouped};
-pub use attention_staircase::{attention_staircase, staircase_work};
+pub use attention::{
+    attention, attention_ahead, BandMask, GemmMask, Mask, TiledCausalMask, Ungrouped,
+};
+pub use attention_gemm::{attention_band, attention_staircase, gemm_attention_work};
 pub use conv::{
     conv1d, conv1d_col_len, conv1d_segs, conv_transpose1d, conv_transpose1d_segs, convt_z_len,
     ConvGeom, ConvSeg, ConvTWeight, CONV_TILE,

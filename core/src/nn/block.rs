@@ -5,8 +5,8 @@
 use crate::arena::{ArenaError, Carve};
 use crate::error::{Buffer, Error};
 use crate::kernels::{
-    attention, attention_ahead, attention_staircase, layernorm, linear_each, linear_each_with,
-    linear_gelu_with, linear_with, KvRows, Mask, Q8Room,
+    attention, attention_ahead, attention_band, attention_staircase, layernorm, linear_each,
+    linear_each_with, linear_gelu_with, linear_with, GemmMask, KvRows, Mask, Q8Room,
 };
 use crate::nn::weights::{BlockW, Linear};
 
@@ -112,6 +112,27 @@ impl<'s> BlockScratch<'s> {
     }
 }
 
+/// R mode's attention as per-head GEMMs where the mask allows
+/// ([`Mask::gemm`]: a whole window's coordinated attention, a LAT's band),
+/// over `work`; false: the caller runs [`attention`].
+#[allow(clippy::too_many_arguments)]
+fn attention_as_gemms<M: Mask>(
+    q: &[f32],
+    k: &[f32],
+    v: &[f32],
+    c: usize,
+    n_head: usize,
+    mask: &M,
+    work: &mut [f32],
+    out: &mut [f32],
+) -> bool {
+    match mask.gemm() {
+        Some(GemmMask::Staircase(t)) => attention_staircase(q, k, v, c, n_head, t, work, out),
+        Some(GemmMask::Band(r)) => attention_band(q, k, v, c, n_head, r, work, out),
+        None => false,
+    }
+}
+
 fn lin(x: &[f32], l: &Linear<'_>, y: &mut [f32], panel: &mut Q8Room<'_>) {
     linear_with(x, &l.w, l.b, y, panel);
 }
@@ -150,12 +171,9 @@ pub fn block_forward<M: Mask>(
         [q, k, v],
         &mut p.panel,
     );
-    // A whole window's coordinated attention as GEMMs, over `ln` (dead
-    // until the projection writes it).
-    let staircase = mask
-        .staircase()
-        .is_some_and(|t| attention_staircase(q, k, v, c, n_head, t, ln, att));
-    if !staircase {
+    // As GEMMs where the mask allows, over `ln` (dead until the projection
+    // writes it).
+    if !attention_as_gemms(q, k, v, c, n_head, mask, ln, att) {
         attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att);
     }
     lin(att, &w.proj, ln, &mut p.panel);
@@ -191,7 +209,18 @@ pub fn block_forward_rows<M: Mask>(
     s: &mut BlockScratch<'_>,
     out: &mut [f32],
 ) {
-    block_forward_selected(w, x, rows.len(), |i| rows[i], c, n_head, mask, s, out)
+    block_forward_selected(
+        w,
+        x,
+        rows.len(),
+        |i| rows[i],
+        false,
+        c,
+        n_head,
+        mask,
+        s,
+        out,
+    )
 }
 
 /// [`block_forward_rows`] for the first `r` rows of `x` (a LAT's last
@@ -209,17 +238,19 @@ pub fn block_forward_prefix<M: Mask>(
     s: &mut BlockScratch<'_>,
     out: &mut [f32],
 ) {
-    block_forward_selected(w, x, r, |i| i, c, n_head, mask, s, out)
+    block_forward_selected(w, x, r, |i| i, true, c, n_head, mask, s, out)
 }
 
 /// The body of [`block_forward_rows`] / [`block_forward_prefix`]: query
-/// row `i < r` is row `row(i)` of `x`.
+/// row `i < r` is row `row(i)` of `x` (`prefix`: `row(i) = i`, so the
+/// attention may run as GEMMs, [`attention_as_gemms`]).
 #[allow(clippy::too_many_arguments)]
 fn block_forward_selected<M: Mask>(
     w: &BlockW<'_>,
     x: &[f32],
     r: usize,
     row: impl Fn(usize) -> usize,
+    prefix: bool,
     c: usize,
     n_head: usize,
     mask: &M,
@@ -253,7 +284,10 @@ fn block_forward_selected<M: Mask>(
     }
     lin(&att[..rc], &w.query, q, &mut p.panel);
     let att_sel = &mut att[..rc];
-    attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att_sel);
+    // `ln` is dead until the projection writes it (its rows are in `att`).
+    if !(prefix && attention_as_gemms(q, k, v, c, n_head, mask, ln, att_sel)) {
+        attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att_sel);
+    }
     let proj = &mut ln[..rc];
     lin(att_sel, &w.proj, proj, &mut p.panel);
     add(&mut out[..rc], proj);

@@ -507,7 +507,7 @@ fn staircase_attention_matches_the_reference() {
             let n = streams * t;
             let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
             let want = naive_attention(&q, &k, &v, c, nh, &|i, j| j % t <= i % t);
-            let mut work = vec![0.0f32; staircase_work(n, c / nh).unwrap()];
+            let mut work = vec![0.0f32; gemm_attention_work(n, n, c / nh).unwrap()];
             let mut out = vec![f32::NAN; n * c];
             assert!(attention_staircase(
                 &q, &k, &v, c, nh, t, &mut work, &mut out
@@ -530,7 +530,7 @@ fn staircase_attention_matches_the_reference() {
                 t_k: t,
                 q_pos0: 0,
             };
-            assert_eq!(m.staircase(), Some(t));
+            assert_eq!(m.gemm(), Some(GemmMask::Staircase(t)));
             attention(&q, &k[..], &v[..], c, nh, &m, &mut scores, &mut keywise);
             assert_close(
                 &out,
@@ -539,7 +539,7 @@ fn staircase_attention_matches_the_reference() {
             );
             // Refusals: a short work buffer, rows that are not a whole window.
             let mut untouched = vec![7.0f32; n * c];
-            let short = staircase_work(n, c / nh).unwrap() - 1;
+            let short = gemm_attention_work(n, n, c / nh).unwrap() - 1;
             assert!(!attention_staircase(
                 &q,
                 &k,
@@ -576,33 +576,112 @@ fn staircase_attention_matches_the_reference() {
         }
     }
     // Masks that are not a whole window from position 0 take the key-by-key kernel.
-    assert_eq!(
-        TiledCausalMask {
-            t_q: 1,
-            t_k: 4,
-            q_pos0: 3
-        }
-        .staircase(),
-        None
-    );
-    assert_eq!(
-        TiledCausalMask {
-            t_q: 4,
-            t_k: 4,
-            q_pos0: 1
-        }
-        .staircase(),
-        None
-    );
-    assert_eq!(
+    let off = |t_q, t_k, q_pos0| TiledCausalMask { t_q, t_k, q_pos0 }.gemm();
+    assert_eq!(off(1, 4, 3), None);
+    assert_eq!(off(4, 4, 1), None);
+    let band = |radius, q_pos0, k_pos0| {
         BandMask {
-            radius: 2,
-            q_pos0: 0,
-            k_pos0: 0
+            radius,
+            q_pos0,
+            k_pos0,
         }
-        .staircase(),
-        None
-    );
+        .gemm()
+    };
+    assert_eq!(band(2, 0, 0), Some(GemmMask::Band(2)));
+    assert_eq!(band(2, 1, 0), None);
+    assert_eq!(band(2, 0, 3), None);
+}
+
+/// A LAT's band as per-head GEMMs (`attention_band`) against the f64
+/// reference and the key-by-key kernel, radii 0-40 over 1-70 rows, heads
+/// of 8, 20 and 96 lanes; the first `nq` queries alone (a LAT's last
+/// block) give the bits of the same rows of all of them; a short `work`
+/// or more queries than keys are refused.
+#[test]
+fn band_attention_matches_the_reference() {
+    let mut r = Lcg(23);
+    for (c, nh) in [(32, 4), (40, 2), (96, 1)] {
+        for (n, radius) in [
+            (1, 0),
+            (7, 0),
+            (20, 4),
+            (70, 9),
+            (58, 29),
+            (40, 40),
+            (13, 100),
+        ] {
+            let (q, k, v) = (r.vec(n * c), r.vec(n * c), r.vec(n * c));
+            let want = naive_attention(&q, &k, &v, c, nh, &|i, j| i.abs_diff(j) <= radius);
+            let mut work = vec![0.0f32; gemm_attention_work(n, n, c / nh).unwrap()];
+            let mut out = vec![f32::NAN; n * c];
+            assert!(attention_band(
+                &q, &k, &v, c, nh, radius, &mut work, &mut out
+            ));
+            assert_close(&out, &want, CLOSE);
+            let mut keywise = vec![0.0f32; n * c];
+            let mut scores = vec![0.0f32; n];
+            let m = BandMask {
+                radius,
+                q_pos0: 0,
+                k_pos0: 0,
+            };
+            attention(&q, &k[..], &v[..], c, nh, &m, &mut scores, &mut keywise);
+            assert_close(
+                &out,
+                &keywise.iter().map(|&x| x as f64).collect::<Vec<_>>(),
+                CLOSE,
+            );
+            // The first nq queries alone: the same bits as in the whole.
+            for nq in [1, n / 2, n.saturating_sub(1)]
+                .into_iter()
+                .filter(|&m| m >= 1)
+            {
+                let mut w = vec![0.0f32; gemm_attention_work(nq, n, c / nh).unwrap()];
+                let mut part = vec![f32::NAN; nq * c];
+                assert!(attention_band(
+                    &q[..nq * c],
+                    &k,
+                    &v,
+                    c,
+                    nh,
+                    radius,
+                    &mut w,
+                    &mut part
+                ));
+                assert!(
+                    part.iter()
+                        .zip(&out)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "first {nq} of {n} rows, radius {radius}"
+                );
+                let short = w.len() - 1;
+                assert!(!attention_band(
+                    &q[..nq * c],
+                    &k,
+                    &v,
+                    c,
+                    nh,
+                    radius,
+                    &mut w[..short],
+                    &mut part
+                ));
+            }
+            if n > 1 {
+                let mut untouched = vec![7.0f32; n * c];
+                assert!(!attention_band(
+                    &q,
+                    &k[..(n - 1) * c],
+                    &v,
+                    c,
+                    nh,
+                    radius,
+                    &mut work,
+                    &mut untouched
+                ));
+                assert!(untouched.iter().all(|&x| x == 7.0));
+            }
+        }
+    }
 }
 
 /// A band that claims every query sees the same keys (it does not): the
