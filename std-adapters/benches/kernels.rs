@@ -30,7 +30,7 @@ use std::time::Instant;
 use duolando::duo_writer::{quantise_q8_block32, quantise_q8_block32x8};
 use duolando_core::kernels::simd::{self, Isa};
 use duolando_core::kernels::{
-    attention, attention_ahead, linear, linear_xw, F16Rows, F32Rows, KvRows, Matrix, Q8Rows,
+    attention, attention_ahead, attention_staircase, gemm_attention_work, linear, linear_xw, F16Rows, F32Rows, KvRows, Matrix, Q8Rows,
     RowData, TiledCausalMask, Ungrouped, X8Rows,
 };
 
@@ -314,11 +314,19 @@ fn main() {
                 &mut out,
             )
         });
+        // What R mode runs for these layers since 2026-12-08: per-head GEMMs
+        // over the position-major staircase (`attention_staircase`).
+        let mut work = vec![0.0f32; gemm_attention_work(n, n, c / nh).unwrap()];
+        let gemm = time(reps, || {
+            assert!(attention_staircase(&q, &k, &v, c, nh, t, &mut work, &mut out));
+        });
         line += &format!(
-            "  [{isa:?}] {:.2} ms (queries alone {:.2} ms: {:.2}x)",
+            "  [{isa:?}] {:.2} ms (queries alone {:.2} ms: {:.2}x; as GEMMs, attention_staircase, {:.2} ms: {:.2}x)",
             s * 1e3,
             alone * 1e3,
-            s / alone
+            s / alone,
+            gemm * 1e3,
+            gemm / s
         );
     }
     println!("{line}");
