@@ -209,18 +209,7 @@ pub fn block_forward_rows<M: Mask>(
     s: &mut BlockScratch<'_>,
     out: &mut [f32],
 ) {
-    block_forward_selected(
-        w,
-        x,
-        rows.len(),
-        |i| rows[i],
-        false,
-        c,
-        n_head,
-        mask,
-        s,
-        out,
-    )
+    block_forward_selected(w, x, Queried::Rows(rows), c, n_head, mask, s, out)
 }
 
 /// [`block_forward_rows`] for the first `r` rows of `x` (a LAT's last
@@ -238,19 +227,40 @@ pub fn block_forward_prefix<M: Mask>(
     s: &mut BlockScratch<'_>,
     out: &mut [f32],
 ) {
-    block_forward_selected(w, x, r, |i| i, true, c, n_head, mask, s, out)
+    block_forward_selected(w, x, Queried::First(r), c, n_head, mask, s, out)
 }
 
-/// The body of [`block_forward_rows`] / [`block_forward_prefix`]: query
-/// row `i < r` is row `row(i)` of `x` (`prefix`: `row(i) = i`, so the
-/// attention may run as GEMMs, [`attention_as_gemms`]).
+/// The query rows of [`block_forward_selected`].
+#[derive(Clone, Copy)]
+enum Queried<'r> {
+    /// Rows `0..r` (the attention may run as GEMMs, [`attention_as_gemms`]).
+    First(usize),
+    /// These rows, in this order.
+    Rows(&'r [usize]),
+}
+
+impl Queried<'_> {
+    fn len(self) -> usize {
+        match self {
+            Queried::First(r) => r,
+            Queried::Rows(rows) => rows.len(),
+        }
+    }
+    /// The row of `x` of query `i`.
+    fn row(self, i: usize) -> usize {
+        match self {
+            Queried::First(_) => i,
+            Queried::Rows(rows) => rows[i],
+        }
+    }
+}
+
+/// The body of [`block_forward_rows`] / [`block_forward_prefix`].
 #[allow(clippy::too_many_arguments)]
 fn block_forward_selected<M: Mask>(
     w: &BlockW<'_>,
     x: &[f32],
-    r: usize,
-    row: impl Fn(usize) -> usize,
-    prefix: bool,
+    queried: Queried<'_>,
     c: usize,
     n_head: usize,
     mask: &M,
@@ -259,6 +269,7 @@ fn block_forward_selected<M: Mask>(
 ) {
     let nc = x.len();
     let n = nc / c;
+    let r = queried.len();
     let rc = r * c;
     let mut p = s.qkv();
     let (ln, q, k, v, att) = (
@@ -278,14 +289,15 @@ fn block_forward_selected<M: Mask>(
     );
     // Gather the selected rows of ln1(x) and of x.
     for i in 0..r {
-        let (a, b) = (row(i) * c, (row(i) + 1) * c);
+        let (a, b) = (queried.row(i) * c, (queried.row(i) + 1) * c);
         att[i * c..(i + 1) * c].copy_from_slice(&ln[a..b]);
         out[i * c..(i + 1) * c].copy_from_slice(&x[a..b]);
     }
     lin(&att[..rc], &w.query, q, &mut p.panel);
     let att_sel = &mut att[..rc];
     // `ln` is dead until the projection writes it (its rows are in `att`).
-    if !(prefix && attention_as_gemms(q, k, v, c, n_head, mask, ln, att_sel)) {
+    let first = matches!(queried, Queried::First(_));
+    if !(first && attention_as_gemms(q, k, v, c, n_head, mask, ln, att_sel)) {
         attention(q, k, v, c, n_head, mask, &mut p.scores[..n], att_sel);
     }
     let proj = &mut ln[..rc];
