@@ -1503,7 +1503,7 @@ fn softmax_runs_match_the_scalar_twin() {
             let scale = 0.125f32;
             let mut want = row.clone();
             let ws = super::softmax_runs_with(&mut want, runs, scale, scalar::scale_max, scalar::exp_shifted_sum);
-            let mut check = |name: &str, got: &[f32], gs: f32| {
+            let check = |name: &str, got: &[f32], gs: f32| {
                 assert_eq!(ws.to_bits(), gs.to_bits(), "{name} sum, n={n} runs={runs:?} case {case}");
                 for (i, (p, q)) in want.iter().zip(got).enumerate() {
                     assert_eq!(p.to_bits(), q.to_bits(), "{name} n={n} i={i} case {case}");
